@@ -1,0 +1,5 @@
+import sys
+
+from foveatrack.cli import main
+
+sys.exit(main())

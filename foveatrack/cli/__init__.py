@@ -1,0 +1,47 @@
+"""The ``foveatrack`` command: one entry point for everything users run.
+
+Each command group lives in its own module with a ``register(subparsers)`` function; this module only
+assembles them.  Errors a user can cause are raised as :class:`UserError` and printed as one clear
+line (exit status 2), never as a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from foveatrack.errors import UserError
+
+# Command-group modules, in the order `foveatrack --help` lists them.
+COMMAND_MODULES = (
+    "foveatrack.cli.lidar_cmd",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="foveatrack",
+        description="Foveal UAV-intruder tracking with a retina-like lidar on a pan/tilt head.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except UserError as exc:
+        print(f"foveatrack: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("foveatrack: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
