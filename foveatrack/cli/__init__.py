@@ -15,6 +15,7 @@ from foveatrack.errors import UserError
 
 # Command-group modules, in the order `foveatrack --help` lists them.
 COMMAND_MODULES = (
+    "foveatrack.cli.demo_cmd",
     "foveatrack.cli.lidar_cmd",
 )
 
@@ -38,6 +39,9 @@ def main(argv: list[str] | None = None) -> int:
     except UserError as exc:
         print(f"foveatrack: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into `head` and closed: not an error of ours
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print("foveatrack: interrupted", file=sys.stderr)
         return 130

@@ -1,0 +1,322 @@
+"""``foveatrack lidar ...``: the scan model's analyses (paper Fig. 4-9, Appendix B, C).
+
+``PRESET`` is a preset name (``prototype``, ``mid40``, ``horizon``) or a TOML file whose ``[lidar]``
+table (or top level) describes custom optics: ``point_rate_hz``, ``channel_offsets_deg``,
+``beam_divergence_deg`` and ``[[lidar.prisms]]`` with ``wedge_deg``, ``index``, ``tilted_face``,
+``rpm``, ``phase_deg``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+from foveatrack.errors import UserError
+
+
+def register(sub) -> None:
+    lidar = sub.add_parser("lidar", help="scan-model analyses: FoV, pattern, density, coverage")
+    lsub = lidar.add_subparsers(dest="lidar_command", metavar="ANALYSIS", required=True)
+
+    def common(p, duration: float | None = None):
+        p.add_argument("preset", metavar="PRESET", help="prototype | mid40 | horizon | optics.toml")
+        p.add_argument("--model", choices=("exact", "paraxial"), default="exact",
+                       help="exact refraction (default) or the paraxial vector sum")
+        if duration is not None:
+            p.add_argument("--duration", type=_positive, default=duration, metavar="S",
+                           help=f"accumulation time in seconds (default {duration:g})")
+            p.add_argument("--noise", type=float, default=None, metavar="FRAC",
+                           help="motor speed noise, 1-sigma relative (paper: 0.01); default none")
+            p.add_argument("--seed", type=int, default=0, help="seed of the speed noise")
+        p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+        p.add_argument("--plot", metavar="FILE.png", help="write a plot")
+
+    p = lsub.add_parser("info", help="FoV, point rate, channels (paraxial model reported alongside)")
+    common(p)
+    p.set_defaults(func=cmd_info)
+
+    p = lsub.add_parser("pattern", help="the scan pattern (paper Fig. 4, 8, 9c)")
+    common(p, duration=0.1)
+    p.set_defaults(func=cmd_pattern)
+
+    p = lsub.add_parser("density", help="radial density vs the analytic eq. (4) (paper Fig. 5)")
+    common(p, duration=2.0)
+    p.add_argument("--bins", type=int, default=60)
+    p.set_defaults(func=cmd_density)
+
+    p = lsub.add_parser("coverage", help="coverage vs accumulation time (paper Fig. 6e)")
+    common(p, duration=2.0)
+    p.add_argument("--method", choices=("voxel", "footprint"), default="voxel",
+                   help="voxel: paper Appendix C 100x100 grid; footprint: Livox's illuminated area")
+    p.set_defaults(func=cmd_coverage)
+
+    p = lsub.add_parser("coverage-map", help="time to 90%% coverage over the two prism speeds (paper Fig. 7)")
+    p.add_argument("preset", metavar="PRESET", help="a two-prism scanner: prototype | mid40 | optics.toml")
+    p.add_argument("--rpm1", default="1000:12000", metavar="LO:HI", help="prism 1 speed range [rpm]")
+    p.add_argument("--rpm2", default="-12000:-1000", metavar="LO:HI", help="prism 2 speed range [rpm]")
+    p.add_argument("--grid", type=int, default=30, metavar="N", help="N x N speeds (default 30)")
+    p.add_argument("--cap", type=_positive, default=5.0, metavar="S", help="time cap in seconds (paper: 5)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (tcp://host:port)")
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--plot", metavar="FILE.png")
+    p.set_defaults(func=cmd_coverage_map)
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number")
+    return v
+
+
+def load_optics(spec: str):
+    """A preset name or a TOML file of custom optics -> RisleyOptics (errors name the file and key)."""
+    from sim.scan.optics import OpticsError, optics_from_table
+    from sim.scan.presets import PRESETS
+
+    if spec in PRESETS:
+        return PRESETS[spec]
+    path = Path(spec)
+    if path.suffix != ".toml":
+        raise UserError(f"unknown preset {spec!r}: allowed {sorted(PRESETS)} or a .toml optics file")
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise UserError(f"{path}: no such optics file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{path}: cannot read ({exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{path}: not valid TOML ({exc})") from None
+    table = data.get("lidar", data)
+    table = {k: v for k, v in table.items() if k not in ("preset", "mount")}
+    try:
+        return optics_from_table(table, where=f"{path} [lidar]")
+    except OpticsError as exc:
+        raise UserError(str(exc)) from None
+
+
+def _scan_model(args, optics):
+    import numpy as np
+
+    from sim.scan.model import ScanModel
+    from sim.scan.optics import OpticsError, SpeedNoise
+
+    noise = getattr(args, "noise", None)
+    if noise is None:
+        return ScanModel(optics, model=args.model)
+    try:
+        sn = SpeedNoise(sigma_frac=noise)
+    except OpticsError as exc:
+        raise UserError(f"--noise: {exc}") from None
+    return ScanModel(optics, model=args.model, speed_noise=sn, rng=np.random.default_rng(args.seed))
+
+
+def _emit(args, result: dict, lines: list[str]) -> None:
+    if args.json:
+        json.dump(result, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        print("\n".join(lines))
+
+
+def info_dict(optics, model: str) -> dict:
+    from sim.scan.fov import field_of_view_deg
+
+    fov = field_of_view_deg(optics, model=model)
+    other = "paraxial" if model == "exact" else "exact"
+    fov_other = field_of_view_deg(optics, model=other)
+    exact, paraxial = (fov, fov_other) if model == "exact" else (fov_other, fov)
+    period = optics.repeat_period_s()
+    return {
+        "name": optics.name,
+        "model": model,
+        "fov_deg": [round(fov[0], 4), round(fov[1], 4)],
+        "point_rate_hz": optics.point_rate_hz,
+        "channels": optics.channels,
+        "paraxial_fov_deg": [round(paraxial[0], 4), round(paraxial[1], 4)],
+        "paraxial_error_deg": [round(paraxial[0] - exact[0], 4), round(paraxial[1] - exact[1], 4)],
+        "repeat_period_s": period,
+        "prisms": [
+            {"wedge_deg": p.wedge_deg, "index": p.index, "tilted_face": p.tilted_face, "rpm": p.rpm, "phase_deg": p.phase_deg}
+            for p in optics.prisms
+        ],
+        "channel_offsets_deg": [list(c) for c in optics.channel_offsets_deg],
+        "beam_divergence_deg": list(optics.beam_divergence_deg),
+    }
+
+
+def cmd_info(args) -> int:
+    optics = load_optics(args.preset)
+    info = info_dict(optics, args.model)
+    err = info["paraxial_error_deg"]
+    _emit(args, info, [
+        f"{info['name']}: FoV {info['fov_deg'][0]:.2f} x {info['fov_deg'][1]:.2f} deg ({args.model} model)",
+        f"  paraxial model of the same optics: {info['paraxial_fov_deg'][0]:.2f} x {info['paraxial_fov_deg'][1]:.2f} deg "
+        f"(error {err[0]:+.2f} / {err[1]:+.2f} deg)",
+        f"  {info['point_rate_hz']} points/s, {info['channels']} channel(s), {len(optics.prisms)} prisms, "
+        f"pattern repeats every {info['repeat_period_s']} s (noise-free)",
+    ])
+    if args.plot:
+        from foveatrack.cli.lidar_cmd import _pattern_plot
+
+        _pattern_plot(optics, args.model, 0.1, args.plot)
+    return 0
+
+
+def _pattern_plot(optics, model, duration, path, noise=None, seed=0):
+    import numpy as np
+
+    from foveatrack.cli.scan_plots import plot_pattern
+    from sim.scan.fov import az_el_deg
+    from sim.scan.model import ScanModel
+
+    scan = ScanModel(optics, model=model) if noise is None else noise
+    chunk = scan.scan(0, int(round(duration * optics.point_rate_hz)))
+    az, el = az_el_deg(chunk.direction[chunk.valid])
+    plot_pattern(az, el, chunk.channel[chunk.valid].astype(np.int64),
+                 f"{optics.name}: {duration * 1000:g} ms, {scan.model} model", path)
+    return az, el
+
+
+def cmd_pattern(args) -> int:
+    optics = load_optics(args.preset)
+    scan = _scan_model(args, optics)
+    chunk = scan.scan(0, int(round(args.duration * optics.point_rate_hz)))
+    from sim.scan.fov import az_el_deg
+
+    az, el = az_el_deg(chunk.direction[chunk.valid])
+    if args.plot:
+        _pattern_plot(optics, args.model, args.duration, args.plot, noise=scan)
+    result = {
+        "name": optics.name, "model": args.model, "duration_s": args.duration, "points": len(chunk),
+        "valid_points": int(chunk.valid.sum()),
+        "az_range_deg": [float(az.min()), float(az.max())], "el_range_deg": [float(el.min()), float(el.max())],
+    }
+    _emit(args, result, [f"{optics.name}: {len(chunk)} points in {args.duration:g} s, "
+                         f"az {az.min():.2f}..{az.max():.2f} deg, el {el.min():.2f}..{el.max():.2f} deg"
+                         + (f"; plot: {args.plot}" if args.plot else "")])
+    return 0
+
+
+def cmd_density(args) -> int:
+    import numpy as np
+
+    from sim.scan.density import radial_density
+    from sim.scan.model import ScanModel
+
+    optics = load_optics(args.preset)
+    if len(optics.prisms) != 2:
+        raise UserError(f"{optics.name}: eq. (4) describes two-prism patterns; this scanner has {len(optics.prisms)}")
+    dens = radial_density(_scan_model(args, optics), args.duration, bins=args.bins)
+    # The other model is always computed alongside so the departure is visible.
+    other = "paraxial" if args.model == "exact" else "exact"
+    dens_other = radial_density(ScanModel(optics, model=other), args.duration, bins=args.bins)
+    x = dens.centers_deg / dens.r_scale_deg
+    sel = (x >= 0.1) & (x <= 1.8)
+    worst = float(np.max(np.abs(dens.relative_error[sel])))
+    result = {
+        "name": optics.name, "model": args.model, "duration_s": args.duration, "points": dens.points,
+        "r_scale_deg": dens.r_scale_deg,
+        "radius_edges_deg": dens.edges_deg.tolist(),
+        "radius_centers_deg": dens.centers_deg.tolist(),
+        "simulated": dens.simulated.tolist(),
+        "analytic": dens.analytic.tolist(),
+        "units": "fraction of all points per deg^2 of solid angle (small-angle annulus area)",
+        "max_relative_error_0.1R_1.8R": worst,
+        other: {"simulated": dens_other.simulated.tolist(),
+                "max_relative_error_0.1R_1.8R": float(np.max(np.abs(dens_other.relative_error[sel])))},
+    }
+    if args.plot:
+        from foveatrack.cli.scan_plots import plot_density
+
+        para, exact = (dens, dens_other) if args.model == "paraxial" else (dens_other, dens)
+        plot_density(para, exact, f"{optics.name}: radial density, {args.duration:g} s", args.plot)
+    _emit(args, result, [f"{optics.name}: {dens.points} points; {args.model} model vs eq. (4) between 0.1R and 1.8R: "
+                         f"max relative error {worst:.2%}; {other}: {result[other]['max_relative_error_0.1R_1.8R']:.2%}"])
+    return 0
+
+
+def coverage_curve(optics, scan, method, duration):
+    from sim.scan.coverage import footprint_coverage, voxel_coverage
+
+    if method == "voxel":
+        return voxel_coverage(scan, duration)
+    return footprint_coverage(scan, duration)
+
+
+def cmd_coverage(args) -> int:
+    optics = load_optics(args.preset)
+    scan = _scan_model(args, optics)
+    t0 = time.perf_counter()
+    curve = coverage_curve(optics, scan, args.method, args.duration)
+    result = {
+        "name": optics.name, "model": args.model, "method": args.method, "duration_s": args.duration,
+        "speed_noise": args.noise, "cells": curve.cells,
+        "times_s": [round(t, 6) for t in curve.times_s.tolist()], "coverage": curve.coverage.tolist(),
+        "t50_s": curve.t50_s, "t90_s": curve.t90_s, "wall_s": round(time.perf_counter() - t0, 3),
+    }
+    if args.plot:
+        from foveatrack.cli.scan_plots import plot_coverage
+
+        plot_coverage([(f"{args.method}, noise {args.noise or 0:g}", curve)],
+                      f"{optics.name}: coverage ({args.method} definition)", args.plot)
+    _emit(args, result, [f"{optics.name}: {args.method} coverage after {args.duration:g} s: {curve.coverage[-1]:.1%} "
+                         f"of {curve.cells} cells; 50 % at {curve.t50_s} s, 90 % at {curve.t90_s} s"])
+    return 0
+
+
+def _range(text: str, name: str):
+    try:
+        lo, hi = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise UserError(f"{name} {text!r}: expected LO:HI in rpm, e.g. 1000:12000") from None
+    return lo, hi
+
+
+def cmd_coverage_map(args) -> int:
+    import numpy as np
+
+    from sim.scan.coverage_map import coverage_map
+    from sim.sweep import make_executor
+
+    optics = load_optics(args.preset)
+    if len(optics.prisms) != 2:
+        raise UserError(f"{optics.name}: the speed map varies two prisms; this scanner has {len(optics.prisms)}")
+    if args.grid < 2:
+        raise UserError(f"--grid {args.grid}: at least 2")
+    r1 = np.linspace(*_range(args.rpm1, "--rpm1"), args.grid)
+    r2 = np.linspace(*_range(args.rpm2, "--rpm2"), args.grid)
+    t0 = time.perf_counter()
+    with make_executor(args.scheduler, args.workers) as ex:
+        cmap = coverage_map(optics, r1, r2, args.cap, ex, seed=args.seed, progress=not args.no_progress)
+    wall = time.perf_counter() - t0
+
+    def clean(a):
+        return [[None if not math.isfinite(v) else round(v, 4) for v in row] for row in a.tolist()]
+
+    result = {
+        "name": optics.name, "rpm1": cmap.rpm1.tolist(), "rpm2": cmap.rpm2.tolist(), "cap_s": args.cap,
+        "level": cmap.level, "t90_noise_s": clean(cmap.t90_noise_s), "t90_clean_s": clean(cmap.t90_clean_s),
+        "note": "rows follow rpm2, columns rpm1; null = not reached within the cap",
+        "wall_s": round(wall, 2), "scheduler": args.scheduler or "local processes",
+    }
+    if args.plot:
+        from foveatrack.cli.scan_plots import plot_coverage_map
+
+        plot_coverage_map(cmap, f"{optics.name}: time to 90 % voxel coverage", args.plot)
+    frac_noise = float(np.mean(cmap.t90_noise_s < args.cap))
+    frac_clean = float(np.mean(cmap.t90_clean_s < args.cap))
+    _emit(args, result, [f"{optics.name}: {args.grid}x{args.grid} speeds, cap {args.cap:g} s, {wall:.1f} s wall: "
+                         f"90 % reached in {frac_noise:.0%} of cells with 1 % noise, {frac_clean:.0%} without"])
+    return 0

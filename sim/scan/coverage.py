@@ -1,0 +1,215 @@
+"""FoV coverage versus accumulation time (paper Fig. 6e, Appendix C eq. 9; Fig. 7).
+
+Two definitions, named wherever a figure is shown, because they answer different questions:
+
+* ``voxel`` — the paper's Appendix C: the FoV is cut into a 100 x 100 grid (here over azimuth and
+  elevation, the lidar's spherical coordinates); a cell counts once a point falls in it; cells the
+  scanner can never reach (outside the circular FoV, inside a central hole) are not counted.
+* ``footprint`` — Livox's: the area the beam has illuminated, i.e. every ray painted with its
+  elliptical divergence footprint (Mid-40: 0.28 x 0.03 deg; the ellipse is kept aligned with
+  azimuth/elevation, a simplification), on a grid of half the footprint's minor axis, with the
+  trajectory sub-sampled between points so the swept path is painted, not just the spots.
+
+"Can be reached" is decided from the optics, not from the run being measured: rays at uniformly
+random prism phases (prisms driven as a locked counter-rotating pair share one phase) sample every
+direction the scanner can produce; the long-time pattern of incommensurable speeds fills exactly
+that set.  So a commensurable (repeating) pattern is measured against the same FoV and plateaus.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.scan import kernels
+from sim.scan.fov import az_el_deg
+from sim.scan.model import ScanModel
+from sim.scan.optics import RisleyOptics
+
+COVERAGE_METHODS = ("voxel", "footprint")
+VOXEL_GRID = 100  # paper Appendix C
+
+
+def locked_pairs(optics: RisleyOptics) -> dict[int, int]:
+    """Prisms driven as a locked counter-rotating pair (paper Fig. 9a): ``{follower: leader}``.
+
+    Prism j follows prism i (i < j) when their speeds are exactly opposite and their start phases
+    mirrored (``phase_j = -phase_i`` mod 360), so ``theta_j = -theta_i`` at all times.
+    """
+    pairs: dict[int, int] = {}
+    ps = optics.prisms
+    for j in range(len(ps)):
+        for i in range(j):
+            if i not in pairs and ps[j].rpm == -ps[i].rpm and (ps[j].phase_deg + ps[i].phase_deg) % 360 == 0:
+                pairs[j] = i
+                break
+    return pairs
+
+
+def reachable_directions(model: ScanModel, count: int, rng: np.random.Generator) -> np.ndarray:
+    """``count`` valid directions per channel at random prism phases (see module docstring)."""
+    optics = model.optics
+    pairs = locked_pairs(optics)
+    out = []
+    for c in range(optics.channels):
+        revs = rng.random((count, model.prism_count))
+        for j, i in pairs.items():
+            revs[:, j] = (-revs[:, i]) % 1.0
+        d, st = model.directions_from_revs(revs, np.full(count, c, dtype=np.int64))
+        out.append(d[st == kernels.RAY_OK])
+    return np.concatenate(out)
+
+
+@dataclass(frozen=True)
+class CoverageGrid:
+    """A grid over azimuth/elevation and the cells the scanner can reach."""
+
+    az_min_deg: float
+    el_min_deg: float
+    cell_az_deg: float
+    cell_el_deg: float
+    reachable: np.ndarray  # (n_el, n_az) bool
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.reachable.shape
+
+    def cells(self, direction: np.ndarray) -> np.ndarray:
+        """Flat cell index of each direction, -1 outside the grid or outside the reachable set."""
+        az, el = az_el_deg(direction)
+        n_el, n_az = self.shape
+        i = np.floor((az - self.az_min_deg) / self.cell_az_deg).astype(np.int64)
+        r = np.floor((el - self.el_min_deg) / self.cell_el_deg).astype(np.int64)
+        inside = (i >= 0) & (i < n_az) & (r >= 0) & (r < n_el)
+        flat = np.where(inside, r * n_az + i, -1)
+        ok = flat >= 0
+        ok[ok] = self.reachable.ravel()[flat[ok]]
+        return np.where(ok, flat, -1)
+
+
+def voxel_grid(optics: RisleyOptics, model: str = "exact", n: int = VOXEL_GRID, reference_rays: int = 2_000_000, seed: int = 0) -> CoverageGrid:
+    """The paper's n x n grid over the FoV's az/el box, with its reachable cells."""
+    ref = ScanModel(optics, model=model)
+    d = reachable_directions(ref, reference_rays // optics.channels, np.random.default_rng(seed))
+    az, el = az_el_deg(d)
+    az0, az1, el0, el1 = az.min(), az.max(), el.min(), el.max()
+    # A hair of margin so the extreme rays fall inside the last cell.
+    pad_az, pad_el = 1e-9 * (az1 - az0), 1e-9 * (el1 - el0)
+    grid = CoverageGrid(az0 - pad_az, el0 - pad_el, (az1 - az0 + 2 * pad_az) / n, (el1 - el0 + 2 * pad_el) / n,
+                        np.ones((n, n), dtype=bool))
+    hit = np.zeros(n * n, dtype=bool)
+    cells = grid.cells(d)
+    hit[cells[cells >= 0]] = True
+    return CoverageGrid(grid.az_min_deg, grid.el_min_deg, grid.cell_az_deg, grid.cell_el_deg, hit.reshape(n, n))
+
+
+@dataclass(frozen=True)
+class CoverageCurve:
+    """Coverage (0-1) of the reachable FoV against accumulation time."""
+
+    method: str
+    times_s: np.ndarray
+    coverage: np.ndarray
+    cells: int
+    stopped_early: bool
+
+    def time_to(self, level: float) -> float | None:
+        """First time coverage reaches ``level``, or None if it never did within the run."""
+        idx = np.flatnonzero(self.coverage >= level)
+        return round(float(self.times_s[idx[0]]), 9) if idx.size else None
+
+    @property
+    def t50_s(self) -> float | None:
+        return self.time_to(0.5)
+
+    @property
+    def t90_s(self) -> float | None:
+        return self.time_to(0.9)
+
+
+def _curve(method, first_hit_k, mask, rate_hz, duration_s, stopped_early, samples=400) -> CoverageCurve:
+    k = first_hit_k[mask]
+    hits = np.sort(k[k >= 0])
+    times = np.linspace(0.0, duration_s, samples + 1)[1:]
+    # A point fired at t_k = k / rate counts for every t >= t_k.
+    counts = np.searchsorted(hits, np.floor(times * rate_hz + 1e-9), side="right")
+    return CoverageCurve(method, times, counts / max(int(mask.sum()), 1), int(mask.sum()), stopped_early)
+
+
+def voxel_coverage(model: ScanModel, duration_s: float, grid: CoverageGrid | None = None, stop_at: float | None = None,
+                   chunk_points: int = 20_000) -> CoverageCurve:
+    """Paper Appendix C coverage of ``model``'s scan over ``duration_s`` (eq. 9).
+
+    ``stop_at`` (0-1) ends the run as soon as that coverage is reached (the Fig. 7 map only needs
+    the time to 90 %); the curve then ends at the stopping time.
+    """
+    if grid is None:
+        grid = voxel_grid(model.optics, model.model)
+    mask = grid.reachable.ravel()
+    first_hit = np.full(mask.size, -1, dtype=np.int64)
+    target = math.inf if stop_at is None else stop_at * mask.sum()
+    hit = 0
+    end_k = int(round(duration_s * model.optics.point_rate_hz))
+    stopped = False
+    for chunk in model.iter_chunks(duration_s, chunk_points=chunk_points):
+        cells = grid.cells(chunk.direction[:, :])
+        cells[~chunk.valid] = -1
+        hit += kernels.first_hit_kernel(cells, chunk.k0, first_hit)
+        if hit >= target:
+            end_k = chunk.k0 + len(chunk)
+            stopped = True
+            break
+    run_s = end_k / model.optics.point_rate_hz
+    return _curve("voxel", first_hit, mask, model.optics.point_rate_hz, run_s, stopped)
+
+
+def footprint_coverage(model: ScanModel, duration_s: float, substeps: int | None = None,
+                       reference_rays: int = 1_000_000, seed: int = 0, chunk_points: int = 20_000) -> CoverageCurve:
+    """Livox-style coverage: the illuminated fraction of the reachable FoV (see module docstring)."""
+    optics = model.optics
+    div_az, div_el = optics.beam_divergence_deg
+    half_az, half_el = div_az / 2, div_el / 2
+    cell = min(div_az, div_el) / 2
+    if substeps is None:
+        # Keep sub-sample spacing below the footprint's minor semi-axis: bound the beam's angular
+        # speed by the sum of the prisms' (deviation x angular rate), doubled for exact refraction.
+        w = sum(2 * p.thin_prism_deviation_deg * abs(p.rpm) / 60 * 2 * math.pi for p in optics.prisms)
+        substeps = max(1, math.ceil(w / optics.point_rate_hz / half_el))
+    ref = reachable_directions(ScanModel(optics, model=model.model), reference_rays // optics.channels,
+                               np.random.default_rng(seed))
+    az, el = az_el_deg(ref)
+    az0, el0 = az.min() - half_az, el.min() - half_el
+    n_az = int(math.ceil((az.max() + half_az - az0) / cell))
+    n_el = int(math.ceil((el.max() + half_el - el0) / cell))
+    reach = np.full((n_el, n_az), -1, dtype=np.int64)
+    kernels.paint_footprint_kernel(az, el, 0, half_az, half_el, az0, el0, cell, reach)
+    mask = reach.ravel() >= 0
+    # The scan's trajectory at substeps x the point rate: the same noise process in time (its draws
+    # depend on time segments only), each channel traced from the shared prism angles.
+    fine_rate = optics.point_rate_hz * substeps
+    fine = ScanModel(optics.with_(point_rate_hz=fine_rate), model=model.model,
+                     speed_noise=model.speed_noise, rng=model._rng)
+    first_hit = np.full((n_el, n_az), -1, dtype=np.int64)
+    total = int(round(duration_s * fine_rate))
+    for k in range(0, total, chunk_points):
+        n = min(chunk_points, total - k)
+        revs = fine.prism_revs(k, n)
+        for c in range(optics.channels):
+            d, st = model.directions_from_revs(revs, np.full(n, c, dtype=np.int64))
+            ok = st == kernels.RAY_OK
+            a, e = az_el_deg(d[ok])
+            kidx = np.flatnonzero(ok).astype(np.int64) + k
+            # Paint in sample order; the kernel takes k0 + j, so paint ray by ray index blocks.
+            _paint_indexed(a, e, kidx, half_az, half_el, az0, el0, cell, first_hit)
+    return _curve("footprint", first_hit.ravel(), mask, fine_rate, duration_s, False)
+
+
+def _paint_indexed(a, e, kidx, half_az, half_el, az0, el0, cell, first_hit):
+    # Contiguous runs of valid rays keep the kernel's k0 + j indexing exact.
+    if kidx.size == 0:
+        return
+    breaks = np.flatnonzero(np.diff(kidx) != 1) + 1
+    for lo, hi in zip(np.r_[0, breaks], np.r_[breaks, kidx.size]):
+        kernels.paint_footprint_kernel(a[lo:hi], e[lo:hi], int(kidx[lo]), half_az, half_el, az0, el0, cell, first_hit)

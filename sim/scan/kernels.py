@@ -1,0 +1,317 @@
+"""Numba kernels of the scan model: every hot loop of ``sim.scan`` and nothing else.
+
+Each kernel takes arrays and scalars only, writes into caller-provided outputs, and has a plain-numpy
+twin in ``tests/scan/twins.py``; the tests compare the two to 1e-12 (stumpy's layout, see
+``shared/DESIGN.md``).  ``NUMBA_DISABLE_JIT=1`` runs them as Python so coverage can see inside.
+
+Ray status codes (per ray, never a silent NaN):
+
+* ``RAY_OK`` (0): the ray left the last prism; its direction is valid.
+* ``RAY_TIR`` (1): total internal reflection at some face: the radicand
+  :math:`1 - \\eta^2 (1 - \\cos^2\\theta_i)` was negative.  Direction is set to (0, 0, 0).
+* ``RAY_GRAZING`` (2): the ray met a face at or past grazing incidence
+  (:math:`\\cos\\theta_i \\le 0`): it does not reach that face from the right side.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+RAY_OK = 0
+RAY_TIR = 1
+RAY_GRAZING = 2
+
+TWO_PI = 2.0 * math.pi
+_SPLIT_BITS = 26
+_SPLIT_MASK = (1 << _SPLIT_BITS) - 1
+_TWO_26 = float(1 << _SPLIT_BITS)
+
+
+@njit(cache=True)
+def _frac(x):
+    return x - math.floor(x)
+
+
+@njit(cache=True)
+def phase_revs_kernel(k0, r_h1, r_h2, r_lo, phase0_rev, out):
+    """Exact fractional revolutions of each prism at points ``k0 .. k0 + len(out) - 1``.
+
+    .. math:: \\phi_p(k) = \\operatorname{frac}(\\phi_{0,p} + k\\,r_p), \\qquad
+              r_p = \\frac{\\mathrm{rpm}_p}{60\\,f_\\mathrm{pt}}
+
+    ``r_p`` arrives as a double-double ``r_h1 + r_h2 + r_lo``: ``r_h1`` holds 26 significant bits,
+    ``r_h2`` the next 26, ``r_lo`` the rounding remainder of the exact rational.  ``k`` is split as
+    ``a 2^26 + b`` with ``a, b < 2^26``, so every partial product ``a r_h1`` ... ``b r_h2`` is exact
+    in float64 and only its fractional part is kept.  The phase error therefore stays ~1e-15 rev
+    for any ``k < 2^52`` (over 400 years at 300 kHz), instead of growing like ``eps * omega * t``.
+
+    Parameters
+    ----------
+    k0 : int >= 0            index of the first point
+    r_h1, r_h2, r_lo : (P,) float64   split revolutions per point
+    phase0_rev : (P,) float64          phase at k = 0 [rev]
+    out : (P, N) float64               result in [0, 1) [rev], one row per prism
+    """
+    p_count, n = out.shape
+    for p in range(p_count):
+        for j in range(n):
+            k = k0 + j
+            a = float(k >> _SPLIT_BITS)
+            b = float(k & _SPLIT_MASK)
+            kf = float(k)
+            s = (
+                _frac(a * r_h1[p] * _TWO_26)
+                + _frac(a * r_h2[p] * _TWO_26)
+                + _frac(b * r_h1[p])
+                + _frac(b * r_h2[p])
+                + kf * r_lo[p]
+                + phase0_rev[p]
+            )
+            out[p, j] = _frac(s)
+
+
+# Kernels that trace rays are written as branch-free inner loops over a block of rays, one prism at a
+# time, so LLVM turns them into SIMD code (AVX2: 4 rays per instruction).  ``fastmath`` allows
+# contraction and reassociation but NOT "no NaNs / no infs": the status logic must stay exact.
+_FAST = {"contract", "arcp", "nsz", "afn", "reassoc"}
+_BLOCK = 256
+
+# Taylor coefficients of sin and cos on [-pi/4, pi/4]: the first omitted term is < 1e-19.
+_S3, _S5, _S7, _S9 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0
+_S11, _S13, _S15, _S17 = -1.0 / 39916800.0, 1.0 / 6227020800.0, -1.0 / 1307674368000.0, 1.0 / 355687428096000.0
+_C2, _C4, _C6, _C8 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0
+_C10, _C12, _C14, _C16 = -1.0 / 3628800.0, 1.0 / 479001600.0, -1.0 / 87178291200.0, 1.0 / 20922789888000.0
+_C18 = -1.0 / 6402373705728000.0
+_HALF_PI = 0.5 * math.pi
+
+
+@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+def _sincos_rev(rev):
+    """``(sin, cos)`` of ``2 pi rev`` for an angle given in revolutions, branch-free.
+
+    The argument reduction is exact: ``4 rev`` is exact, its nearest integer ``q`` picks the quadrant
+    and ``r = 4 rev - q`` in [-1/2, 1/2] is exact, so only ``r pi / 2`` rounds (1 ulp).  The
+    polynomials are Taylor series to x^17 / x^18 (error < 1e-19 on [-pi/4, pi/4]).
+    """
+    u = 4.0 * rev
+    q = math.floor(u + 0.5)
+    a = (u - q) * _HALF_PI
+    z = a * a
+    s = a + a * z * (_S3 + z * (_S5 + z * (_S7 + z * (_S9 + z * (_S11 + z * (_S13 + z * (_S15 + z * _S17)))))))
+    c = 1.0 + z * (_C2 + z * (_C4 + z * (_C6 + z * (_C8 + z * (_C10 + z * (_C12 + z * (_C14 + z * (_C16 + z * _C18))))))))
+    qi = np.int64(q) & 3
+    swap = qi & 1
+    sn = c if swap == 1 else s
+    cn = s if swap == 1 else c
+    sin_sign = 1.0 - float(qi & 2)
+    cos_sign = 1.0 - float((qi + 1) & 2)
+    return sn * sin_sign, cn * cos_sign
+
+
+@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+def _refract(dx, dy, dz, mx, my, mz, eta, st):
+    """Vector Snell at a face with unit normal ``m`` pointing along the ray (N = -m).
+
+    .. math:: \\cos\\theta_i = d\\cdot m, \\quad
+              \\cos\\theta_t = \\sqrt{1 - \\eta^2 (1 - \\cos^2\\theta_i)}, \\quad
+              t = \\eta d - (\\eta \\cos\\theta_i - \\cos\\theta_t)\\, m
+
+    Branch-free: ``st`` keeps the first failure of the ray (grazing before TIR at one face); after
+    a failure the direction is meaningless and is zeroed by the caller.
+    """
+    ci = dx * mx + dy * my + dz * mz
+    k = 1.0 - eta * eta * (1.0 - ci * ci)
+    fail = RAY_GRAZING if ci <= 0.0 else (RAY_TIR if k < 0.0 else RAY_OK)
+    st = fail if st == RAY_OK else st
+    g = eta * ci - math.sqrt(max(k, 0.0))
+    return eta * dx - g * mx, eta * dy - g * my, eta * dz - g * mz, st
+
+
+@njit(cache=True, fastmath=_FAST, error_model="numpy")
+def trace_exact_kernel(revs, channel, incident, sin_wedge, cos_wedge, index, exit_tilted, out_dir, status):
+    """Exact refraction of each ray through all prisms (direction only), paper Appendix B.
+
+    Each prism is a flat face (normal +z) and a face tilted by the wedge angle ``alpha`` whose normal
+    turns with the prism angle ``theta``:
+
+    * exit face tilted:  ``m = (-sin a cos t, -sin a sin t, cos a)``
+    * entry face tilted: ``m = (+sin a cos t, +sin a sin t, cos a)``
+
+    Both signs make a single prism at ``theta = 0`` deflect toward ``+x``.  Air -> glass uses
+    ``eta = 1/n``, glass -> air ``eta = n``.  Beam offset and prism thickness are dropped (far field),
+    as in HELIOS++'s ``RisleyBeamDeflector``.
+
+    Parameters
+    ----------
+    revs : (P, N) float64      prism angles [rev], one row per prism (C-contiguous)
+    channel : (N,) int64       channel of each ray, indexes ``incident``
+    incident : (C, 3) float64  unit incident direction of each channel (optics frame)
+    sin_wedge, cos_wedge, index : (P,) float64
+    exit_tilted : (P,) bool
+    out_dir : (N, 3) float64   unit direction in the LIDAR frame (X fwd, Y left, Z up); 0 if invalid
+    status : (N,) uint8        RAY_OK / RAY_TIR / RAY_GRAZING (the first failure along the ray)
+    """
+    p_count, n = revs.shape
+    bx = np.empty(_BLOCK)
+    by = np.empty(_BLOCK)
+    bz = np.empty(_BLOCK)
+    bs = np.empty(_BLOCK, dtype=np.uint8)
+    for j0 in range(0, n, _BLOCK):
+        m = min(_BLOCK, n - j0)
+        for i in range(m):
+            c = channel[j0 + i]
+            bx[i] = incident[c, 0]
+            by[i] = incident[c, 1]
+            bz[i] = incident[c, 2]
+            bs[i] = RAY_OK
+        for p in range(p_count):
+            row = revs[p]
+            sa = sin_wedge[p]
+            ca = cos_wedge[p]
+            n_p = index[p]
+            inv_n = 1.0 / n_p
+            if exit_tilted[p]:
+                for i in range(m):
+                    s_t, c_t = _sincos_rev(row[j0 + i])
+                    dx, dy, dz, st = _refract(bx[i], by[i], bz[i], 0.0, 0.0, 1.0, inv_n, bs[i])
+                    dx, dy, dz, st = _refract(dx, dy, dz, -sa * c_t, -sa * s_t, ca, n_p, st)
+                    bx[i] = dx
+                    by[i] = dy
+                    bz[i] = dz
+                    bs[i] = st
+            else:
+                for i in range(m):
+                    s_t, c_t = _sincos_rev(row[j0 + i])
+                    dx, dy, dz, st = _refract(bx[i], by[i], bz[i], sa * c_t, sa * s_t, ca, inv_n, bs[i])
+                    dx, dy, dz, st = _refract(dx, dy, dz, 0.0, 0.0, 1.0, n_p, st)
+                    bx[i] = dx
+                    by[i] = dy
+                    bz[i] = dz
+                    bs[i] = st
+        for i in range(m):
+            keep = 1.0 if bs[i] == RAY_OK else 0.0
+            out_dir[j0 + i, 0] = bz[i] * keep
+            out_dir[j0 + i, 1] = bx[i] * keep
+            out_dir[j0 + i, 2] = by[i] * keep
+            status[j0 + i] = bs[i]
+
+
+@njit(cache=True, fastmath=_FAST, error_model="numpy")
+def trace_paraxial_kernel(revs, channel, offset_rad, deviation_rad, out_dir):
+    """First-order (paraxial) model: the beam's angular offset is the vector sum of the prisms'.
+
+    .. math:: \\vec v = \\vec o_c + \\sum_p \\delta_p (\\cos\\theta_p, \\sin\\theta_p),
+              \\qquad \\delta_p = (n_p - 1)\\alpha_p
+
+    (paper Section III.A, Fig. 3), and the direction is the one at angle :math:`|\\vec v|` from the
+    axis toward :math:`\\vec v`.  Always valid: the paraxial model has no total internal reflection.
+
+    Parameters
+    ----------
+    revs : (P, N) float64          prism angles [rev]
+    channel : (N,) int64
+    offset_rad : (C, 2) float64    channel offsets [rad]
+    deviation_rad : (P,) float64   thin-prism deviations [rad]
+    out_dir : (N, 3) float64       unit direction, lidar frame
+    """
+    p_count, n = revs.shape
+    for j in range(n):
+        c = channel[j]
+        vx = offset_rad[c, 0]
+        vy = offset_rad[c, 1]
+        for p in range(p_count):
+            s_t, c_t = _sincos_rev(revs[p, j])
+            vx += deviation_rad[p] * c_t
+            vy += deviation_rad[p] * s_t
+        g = math.sqrt(vx * vx + vy * vy)
+        s = math.sin(g) / g if g > 0.0 else 1.0
+        out_dir[j, 0] = math.cos(g)
+        out_dir[j, 1] = vx * s
+        out_dir[j, 2] = vy * s
+
+
+@njit(cache=True)
+def point_times_ns_kernel(k0, rate_hz, out):
+    """Exact point times ``floor(k * 1e9 / rate)`` [ns] without int64 overflow for huge ``k``."""
+    for j in range(out.shape[0]):
+        k = k0 + j
+        q = k // rate_hz
+        r = k - q * rate_hz
+        out[j] = q * 1_000_000_000 + (r * 1_000_000_000) // rate_hz
+
+
+@njit(cache=True)
+def first_hit_kernel(cell, k0, first_hit):
+    """For each grid cell, the smallest point index that fell in it (coverage, paper Appendix C).
+
+    ``cell`` holds a flat cell index per point, or -1 for points outside the grid; ``first_hit``
+    holds -1 for cells not yet hit and is updated in place.  Returns how many cells were newly hit.
+    """
+    new = 0
+    for j in range(cell.shape[0]):
+        c = cell[j]
+        if c >= 0 and first_hit[c] < 0:
+            first_hit[c] = k0 + j
+            new += 1
+    return new
+
+
+def split_revs_per_point(exact) -> tuple[float, float, float]:
+    """Split an exact rational (``fractions.Fraction``) into ``(h1, h2, lo)`` for the phase kernel.
+
+    ``h1 + h2`` is the float64 nearest to ``exact``, split (Veltkamp) so that ``h1`` and ``h2``
+    each carry at most 26 significant bits; ``lo`` is the float64 nearest the remaining error.
+    """
+    from fractions import Fraction
+
+    hi = float(exact)
+    c = 134217729.0 * hi  # 2^27 + 1
+    h1 = c - (c - hi)
+    h2 = hi - h1
+    lo = float(Fraction(exact) - Fraction(h1) - Fraction(h2))
+    return h1, h2, lo
+
+
+__all__ = [
+    "RAY_OK",
+    "RAY_TIR",
+    "RAY_GRAZING",
+    "phase_revs_kernel",
+    "trace_exact_kernel",
+    "trace_paraxial_kernel",
+    "point_times_ns_kernel",
+    "first_hit_kernel",
+    "split_revs_per_point",
+]
+
+
+@njit(cache=True)
+def paint_footprint_kernel(az_deg, el_deg, k0, half_az_deg, half_el_deg, az_min, el_min, cell_deg, first_hit):
+    """Paint each beam's elliptical footprint into a fine az/el grid (Livox's coverage definition).
+
+    Ray ``j`` covers the cells whose centre lies inside the ellipse of semi-axes ``half_az_deg`` x
+    ``half_el_deg`` around ``(az_deg[j], el_deg[j])``; a cell not yet painted records ``k0 + j``.
+    ``first_hit`` is (n_el, n_az) int64, -1 where unpainted.  Returns how many cells were newly painted.
+    """
+    n_el, n_az = first_hit.shape
+    new = 0
+    inv_a2 = 1.0 / (half_az_deg * half_az_deg)
+    inv_b2 = 1.0 / (half_el_deg * half_el_deg)
+    for j in range(az_deg.shape[0]):
+        a0 = az_deg[j]
+        e0 = el_deg[j]
+        i_lo = max(0, int(math.ceil((a0 - half_az_deg - az_min) / cell_deg - 0.5)))
+        i_hi = min(n_az - 1, int(math.floor((a0 + half_az_deg - az_min) / cell_deg - 0.5)))
+        r_lo = max(0, int(math.ceil((e0 - half_el_deg - el_min) / cell_deg - 0.5)))
+        r_hi = min(n_el - 1, int(math.floor((e0 + half_el_deg - el_min) / cell_deg - 0.5)))
+        for r in range(r_lo, r_hi + 1):
+            de = el_min + (r + 0.5) * cell_deg - e0
+            for i in range(i_lo, i_hi + 1):
+                da = az_min + (i + 0.5) * cell_deg - a0
+                if da * da * inv_a2 + de * de * inv_b2 <= 1.0 and first_hit[r, i] < 0:
+                    first_hit[r, i] = k0 + j
+                    new += 1
+    return new
