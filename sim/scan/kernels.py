@@ -86,6 +86,9 @@ _C2, _C4, _C6, _C8 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0
 _C10, _C12, _C14, _C16 = -1.0 / 3628800.0, 1.0 / 479001600.0, -1.0 / 87178291200.0, 1.0 / 20922789888000.0
 _C18 = -1.0 / 6402373705728000.0
 _HALF_PI = 0.5 * math.pi
+# Ray status as float64 inside the SIMD loops (mixed-width integer selects would not vectorise).
+_F_TIR = float(RAY_TIR)
+_F_GRAZING = float(RAY_GRAZING)
 
 
 @njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
@@ -102,12 +105,13 @@ def _sincos_rev(rev):
     z = a * a
     s = a + a * z * (_S3 + z * (_S5 + z * (_S7 + z * (_S9 + z * (_S11 + z * (_S13 + z * (_S15 + z * _S17)))))))
     c = 1.0 + z * (_C2 + z * (_C4 + z * (_C6 + z * (_C8 + z * (_C10 + z * (_C12 + z * (_C14 + z * (_C16 + z * _C18))))))))
-    qi = np.int64(q) & 3
-    swap = qi & 1
-    sn = c if swap == 1 else s
-    cn = s if swap == 1 else c
-    sin_sign = 1.0 - float(qi & 2)
-    cos_sign = 1.0 - float((qi + 1) & 2)
+    # Quadrant q mod 4 in floating point (AVX2 has no vector float64 -> int64 conversion).
+    qm = q - 4.0 * math.floor(0.25 * q)
+    odd = qm - 2.0 * math.floor(0.5 * qm)
+    sn = c if odd == 1.0 else s
+    cn = s if odd == 1.0 else c
+    sin_sign = -1.0 if qm >= 2.0 else 1.0
+    cos_sign = -1.0 if (qm == 1.0 or qm == 2.0) else 1.0
     return sn * sin_sign, cn * cos_sign
 
 
@@ -119,15 +123,25 @@ def _refract(dx, dy, dz, mx, my, mz, eta, st):
               \\cos\\theta_t = \\sqrt{1 - \\eta^2 (1 - \\cos^2\\theta_i)}, \\quad
               t = \\eta d - (\\eta \\cos\\theta_i - \\cos\\theta_t)\\, m
 
-    Branch-free: ``st`` keeps the first failure of the ray (grazing before TIR at one face); after
+    Branch-free: ``st`` (a float copy of the status code) keeps the first failure of the ray (grazing before TIR at one face); after
     a failure the direction is meaningless and is zeroed by the caller.
     """
     ci = dx * mx + dy * my + dz * mz
     k = 1.0 - eta * eta * (1.0 - ci * ci)
-    fail = RAY_GRAZING if ci <= 0.0 else (RAY_TIR if k < 0.0 else RAY_OK)
-    st = fail if st == RAY_OK else st
+    fail = _F_GRAZING if ci <= 0.0 else (_F_TIR if k < 0.0 else 0.0)
+    st = fail if st == 0.0 else st
     g = eta * ci - math.sqrt(max(k, 0.0))
     return eta * dx - g * mx, eta * dy - g * my, eta * dz - g * mz, st
+
+
+@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+def _refract_flat(dx, dy, dz, eta, st):
+    """:func:`_refract` for the face perpendicular to the axis (m = +z), with the zeros folded in:
+    ``t = (eta dx, eta dy, cos theta_t)``."""
+    k = 1.0 - eta * eta * (1.0 - dz * dz)
+    fail = _F_GRAZING if dz <= 0.0 else (_F_TIR if k < 0.0 else 0.0)
+    st = fail if st == 0.0 else st
+    return eta * dx, eta * dy, math.sqrt(max(k, 0.0)), st
 
 
 @njit(cache=True, fastmath=_FAST, error_model="numpy")
@@ -158,7 +172,7 @@ def trace_exact_kernel(revs, channel, incident, sin_wedge, cos_wedge, index, exi
     bx = np.empty(_BLOCK)
     by = np.empty(_BLOCK)
     bz = np.empty(_BLOCK)
-    bs = np.empty(_BLOCK, dtype=np.uint8)
+    bs = np.empty(_BLOCK)
     for j0 in range(0, n, _BLOCK):
         m = min(_BLOCK, n - j0)
         for i in range(m):
@@ -166,7 +180,7 @@ def trace_exact_kernel(revs, channel, incident, sin_wedge, cos_wedge, index, exi
             bx[i] = incident[c, 0]
             by[i] = incident[c, 1]
             bz[i] = incident[c, 2]
-            bs[i] = RAY_OK
+            bs[i] = 0.0
         for p in range(p_count):
             row = revs[p]
             sa = sin_wedge[p]
@@ -176,7 +190,7 @@ def trace_exact_kernel(revs, channel, incident, sin_wedge, cos_wedge, index, exi
             if exit_tilted[p]:
                 for i in range(m):
                     s_t, c_t = _sincos_rev(row[j0 + i])
-                    dx, dy, dz, st = _refract(bx[i], by[i], bz[i], 0.0, 0.0, 1.0, inv_n, bs[i])
+                    dx, dy, dz, st = _refract_flat(bx[i], by[i], bz[i], inv_n, bs[i])
                     dx, dy, dz, st = _refract(dx, dy, dz, -sa * c_t, -sa * s_t, ca, n_p, st)
                     bx[i] = dx
                     by[i] = dy
@@ -186,17 +200,17 @@ def trace_exact_kernel(revs, channel, incident, sin_wedge, cos_wedge, index, exi
                 for i in range(m):
                     s_t, c_t = _sincos_rev(row[j0 + i])
                     dx, dy, dz, st = _refract(bx[i], by[i], bz[i], sa * c_t, sa * s_t, ca, inv_n, bs[i])
-                    dx, dy, dz, st = _refract(dx, dy, dz, 0.0, 0.0, 1.0, n_p, st)
+                    dx, dy, dz, st = _refract_flat(dx, dy, dz, n_p, st)
                     bx[i] = dx
                     by[i] = dy
                     bz[i] = dz
                     bs[i] = st
         for i in range(m):
-            keep = 1.0 if bs[i] == RAY_OK else 0.0
+            keep = 1.0 if bs[i] == 0.0 else 0.0
             out_dir[j0 + i, 0] = bz[i] * keep
             out_dir[j0 + i, 1] = bx[i] * keep
             out_dir[j0 + i, 2] = by[i] * keep
-            status[j0 + i] = bs[i]
+            status[j0 + i] = np.uint8(bs[i])
 
 
 @njit(cache=True, fastmath=_FAST, error_model="numpy")

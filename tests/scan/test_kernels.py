@@ -1,0 +1,149 @@
+"""The numba kernels against their plain-numpy twins (tests/scan/twins.py), to 1e-12."""
+
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from scan_twins import (
+    first_hit_twin,
+    phase_revs_twin,
+    point_times_ns_twin,
+    trace_exact_twin,
+    trace_paraxial_twin,
+)
+from sim.scan import kernels as K
+from sim.scan.model import ScanModel
+from sim.scan.optics import Prism, RisleyOptics
+from sim.scan.presets import PRESETS
+
+
+def _random_optics_arrays(rng, p_count, c_count, max_offset_deg):
+    wedge = np.radians(rng.uniform(15, 45, p_count))
+    index = rng.uniform(1.4, 2.2, p_count)
+    exit_tilted = rng.random(p_count) < 0.5
+    off = np.radians(rng.uniform(-max_offset_deg, max_offset_deg, (c_count, 2)))
+    inc = np.column_stack([np.tan(off[:, 0]), np.tan(off[:, 1]), np.ones(c_count)])
+    inc /= np.linalg.norm(inc, axis=1, keepdims=True)
+    return np.sin(wedge), np.cos(wedge), index, exit_tilted, inc
+
+
+@pytest.mark.parametrize("p_count", [2, 3])
+def test_exact_trace_matches_twin_on_random_rays_including_tir(p_count):
+    seen = np.zeros(3, dtype=np.int64)
+    for seed in range(12):
+        rng = np.random.default_rng([p_count, seed])
+        n = 4_000
+        # Steep wedges, high indices and large incident offsets: many optics hit TIR on some rays.
+        sw, cw, idx, ex, inc = _random_optics_arrays(rng, p_count, 8, 19.0)
+        revs = rng.random((n, p_count))
+        ch = rng.integers(0, 8, n)
+        out = np.empty((n, 3))
+        st = np.empty(n, dtype=np.uint8)
+        K.trace_exact_kernel(np.ascontiguousarray(revs.T), ch, inc, sw, cw, idx, ex, out, st)
+        ref, ref_st = trace_exact_twin(revs, ch, inc, sw, cw, idx, ex)
+        assert np.array_equal(st, ref_st)
+        np.testing.assert_allclose(out, ref, rtol=0, atol=1e-12)
+        ok = st == K.RAY_OK
+        np.testing.assert_allclose(np.linalg.norm(out[ok], axis=1), 1.0, atol=1e-12)
+        assert np.all(out[~ok] == 0.0), "invalid rays carry a zero direction, never NaN"
+        seen += np.bincount(st, minlength=3)[:3]
+    assert seen[K.RAY_OK] > 1000 and seen[K.RAY_TIR] > 1000, f"the random set must exercise both: {seen}"
+
+
+def test_exact_trace_just_short_of_and_just_past_tir():
+    """One prism, exit face tilted: TIR at the exit face when n sin(theta_inside) > 1.  Bisect the
+    incidence offset at which that happens and probe 1e-9 deg either side."""
+    n_glass, wedge = 1.5, np.radians(40.0)
+    sw, cw = np.array([np.sin(wedge)]), np.array([np.cos(wedge)])
+
+    def status_at(offset_deg):
+        off = np.radians(offset_deg)
+        inc = np.array([[np.tan(off), 0.0, 1.0]])
+        inc /= np.linalg.norm(inc)
+        revs = np.zeros((1, 1))
+        out, st = np.empty((1, 3)), np.empty(1, dtype=np.uint8)
+        K.trace_exact_kernel(revs, np.zeros(1, dtype=np.int64), inc, sw, cw, np.array([n_glass]), np.array([True]), out, st)
+        ref, ref_st = trace_exact_twin(revs.T, np.zeros(1, dtype=np.int64), inc, sw, cw, np.array([n_glass]), np.array([True]))
+        return st[0], out[0], ref_st[0], ref[0]
+
+    lo, hi = -30.0, 30.0  # the ray is refracted at lo and reflected at hi (offset toward +x raises incidence)
+    assert status_at(lo)[0] == K.RAY_OK and status_at(hi)[0] == K.RAY_TIR
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if status_at(mid)[0] == K.RAY_OK:
+            lo = mid
+        else:
+            hi = mid
+    for offset in (lo - 1e-9, hi + 1e-9):
+        st, out, ref_st, ref = status_at(offset)
+        assert st == ref_st
+        np.testing.assert_allclose(out, ref, atol=1e-12)
+    st, out, _, _ = status_at(lo - 1e-9)
+    # Just short of TIR the ray leaves at grazing: ~90 deg from the exit-face normal, still unit.
+    assert st == K.RAY_OK and abs(np.linalg.norm(out) - 1) < 1e-12
+
+
+def test_paraxial_trace_matches_twin():
+    rng = np.random.default_rng(7)
+    n = 10_000
+    revs = rng.random((n, 3))
+    ch = rng.integers(0, 6, n)
+    off = np.radians(rng.uniform(-3, 3, (6, 2)))
+    dev = np.radians(rng.uniform(1, 15, 3))
+    out = np.empty((n, 3))
+    K.trace_paraxial_kernel(np.ascontiguousarray(revs.T), ch, off, dev, out)
+    np.testing.assert_allclose(out, trace_paraxial_twin(revs, ch, off, dev), atol=1e-12)
+
+
+@pytest.mark.parametrize("k0", [0, 123_456_789, 8_640_000_000, 2**45 + 12345])
+def test_phase_kernel_is_exact_at_any_index(k0):
+    optics = PRESETS["horizon"]
+    model = ScanModel(optics)
+    count = 64
+    got = model.prism_revs(k0, count)
+    exact = phase_revs_twin(k0, [optics.revs_per_point(i) for i in range(3)], model._phase0_rev, count)
+    diff = (got - exact + 0.5) % 1.0 - 0.5
+    assert np.max(np.abs(diff)) * 2 * np.pi < 1e-12
+
+
+def test_beam_direction_after_24_hours_agrees_with_exact_reference_to_1e9_rad():
+    optics = PRESETS["prototype"]
+    model = ScanModel(optics)
+    k = 24 * 3600 * optics.point_rate_hz + 7  # a point 24 h into the run
+    chunk = model.scan(k, 4)
+    # Reference: prism angles from exact rational arithmetic, then one float trace.
+    revs = np.array([[float((Fraction(k + j) * optics.revs_per_point(p)) % 1) for p in range(2)] for j in range(4)])
+    ref, _ = trace_exact_twin(revs, np.zeros(4, dtype=np.int64), model._incident, model._sin_wedge,
+                              model._cos_wedge, model._index, model._exit_tilted)
+    angle = np.linalg.norm(chunk.direction - ref, axis=1)  # chord = angle for tiny angles; arccos would lose 1e-8
+    assert np.max(angle) < 1e-9
+    assert chunk.t_ns[0] == (k * 10**9) // optics.point_rate_hz
+
+
+def test_point_times_are_exact_integers():
+    for rate in (100_000, 240_000, 300_000):
+        for k0 in (0, 10**12 + 3):
+            got = np.empty(100, dtype=np.int64)
+            K.point_times_ns_kernel(k0, rate, got)
+            assert np.array_equal(got, point_times_ns_twin(k0, rate, 100))
+
+
+def test_first_hit_matches_twin():
+    rng = np.random.default_rng(3)
+    first = np.full(500, -1, dtype=np.int64)
+    first[:50] = 7  # already hit earlier
+    cells = rng.integers(-1, 500, 5_000)
+    ref, ref_new = first_hit_twin(cells, 1000, first)
+    new = K.first_hit_kernel(cells, 1000, first)
+    assert new == ref_new and np.array_equal(first, ref)
+
+
+def test_single_prism_deviation_matches_facts():
+    """shared/facts/risley-optics.md: one 18 deg, n 1.51 prism deviates 9.81 (exit) / 9.37 (entry)."""
+    for face, expected in (("exit", 9.81), ("entry", 9.37)):
+        optics = RisleyOptics(prisms=(Prism(18, 1.51, face), Prism(1e-9, 1.0001, "exit")))
+        d, st = ScanModel(optics).directions_from_revs(np.zeros((1, 2)), np.zeros(1, dtype=np.int64))
+        assert st[0] == K.RAY_OK
+        assert abs(np.degrees(np.arccos(d[0, 0])) - expected) < 0.005
+        assert d[0, 1] > 0, "phase 0 deflects toward +x_opt = lidar +Y (left)"

@@ -1,0 +1,78 @@
+"""`foveatrack lidar ...` as a user runs it: JSON contracts, plots, errors, the Fig. 7 sweep."""
+
+import json
+
+import pytest
+
+from foveatrack.cli import main
+
+
+def run_json(capsys, *argv):
+    assert main(list(argv)) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_info_json_and_model_switch(capsys):
+    info = run_json(capsys, "lidar", "info", "mid40", "--json")
+    assert info["model"] == "exact" and info["channels"] == 1 and info["point_rate_hz"] == 100_000
+    assert abs(info["fov_deg"][0] - 38.4) < 0.15
+    assert info["paraxial_error_deg"][0] == pytest.approx(info["paraxial_fov_deg"][0] - info["fov_deg"][0], abs=1e-3)
+    para = run_json(capsys, "lidar", "info", "mid40", "--json", "--model", "paraxial")
+    assert para["model"] == "paraxial" and para["fov_deg"] == info["paraxial_fov_deg"]
+
+
+def test_density_and_coverage_json_and_plots(capsys, tmp_path):
+    d = run_json(capsys, "lidar", "density", "prototype", "--duration", "0.5", "--json", "--plot", str(tmp_path / "d.png"))
+    assert len(d["radius_edges_deg"]) == len(d["simulated"]) + 1 == len(d["analytic"]) + 1
+    c = run_json(capsys, "lidar", "coverage", "prototype", "--duration", "1", "--noise", "0.01", "--json",
+                 "--plot", str(tmp_path / "c.png"))
+    assert c["method"] == "voxel" and len(c["times_s"]) == len(c["coverage"])
+    assert 0 < c["t50_s"] < c["t90_s"] < 1.0
+    assert (tmp_path / "d.png").stat().st_size > 10_000 and (tmp_path / "c.png").stat().st_size > 10_000
+
+
+def test_pattern_plot(tmp_path, capsys):
+    assert main(["lidar", "pattern", "horizon", "--duration", "0.02", "--plot", str(tmp_path / "p.png")]) == 0
+    assert (tmp_path / "p.png").exists()
+
+
+def test_custom_optics_file_and_its_errors(tmp_path, capsys):
+    good = tmp_path / "optics.toml"
+    good.write_text('[lidar]\npoint_rate_hz = 50000\n[[lidar.prisms]]\nwedge_deg = 18\nindex = 1.51\nrpm = 3000\n'
+                    '[[lidar.prisms]]\nwedge_deg = 18\nindex = 1.51\ntilted_face = "entry"\nrpm = -2000\n')
+    info = run_json(capsys, "lidar", "info", str(good), "--json")
+    assert info["point_rate_hz"] == 50_000
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[lidar]\n[[lidar.prisms]]\nwedge_deg = 18\nindex = 1.51\nspin = 3\n')
+    assert main(["lidar", "info", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.toml" in err and "spin" in err
+    assert main(["lidar", "info", "nosuch"]) == 2
+    assert "prototype" in capsys.readouterr().err
+    assert main(["lidar", "info", str(tmp_path / "missing.toml")]) == 2
+
+
+def test_coverage_map_local_processes(capsys, tmp_path):
+    m = run_json(capsys, "lidar", "coverage-map", "prototype", "--grid", "3", "--cap", "0.3", "--workers", "2",
+                 "--no-progress", "--json", "--plot", str(tmp_path / "m.png"))
+    assert len(m["t90_noise_s"]) == 3 and len(m["t90_noise_s"][0]) == 3
+    assert (tmp_path / "m.png").exists()
+
+
+@pytest.mark.slow
+def test_coverage_map_runs_on_a_local_dask_cluster(capsys):
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        on_dask = run_json(capsys, "lidar", "coverage-map", "prototype", "--grid", "3", "--cap", "0.3",
+                           "--scheduler", cluster.scheduler_address, "--no-progress", "--json")
+    local = run_json(capsys, "lidar", "coverage-map", "prototype", "--grid", "3", "--cap", "0.3", "--workers", "1",
+                     "--no-progress", "--json")
+    assert on_dask["scheduler"].startswith("tcp://")
+    assert on_dask["t90_noise_s"] == local["t90_noise_s"] and on_dask["t90_clean_s"] == local["t90_clean_s"]
+
+
+def test_unreachable_scheduler_is_a_clear_error(capsys):
+    pytest.importorskip("distributed")
+    assert main(["lidar", "coverage-map", "prototype", "--grid", "2", "--cap", "0.1", "--no-progress",
+                 "--scheduler", "tcp://127.0.0.1:9"]) == 2
+    assert "Dask scheduler" in capsys.readouterr().err
