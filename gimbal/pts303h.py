@@ -520,30 +520,31 @@ class PTS303H:
     def angles_at(self, t_s) -> tuple[np.ndarray, np.ndarray]:
         """True (pan_deg, tilt_deg) at each time in ``t_s`` (vectorised; any shape).
 
-        Times may go back ``params.history_s`` before the latest time asked; asking advances the
-        model to ``max(t_s)``.  Pan is wrapped to (-180, 180].
+        Times may go back ``params.history_s`` before the latest time the model was advanced to
+        or asked about; asking advances the model to ``max(t_s)`` (after answering).  Pan is wrapped to (-180, 180].
         """
         t = np.asarray(t_s, dtype=float)
-        if t.size:
-            self.advance_to(float(t.max()))
         flat = t.reshape(-1)
         pan, _ = self._pan.eval(flat)
         tilt, _ = self._tilt.eval(flat)
+        if t.size:
+            self.advance_to(float(t.max()))
         return wrap_pan_deg(pan).reshape(t.shape), tilt.reshape(t.shape)
 
     def rates_at(self, t_s) -> tuple[np.ndarray, np.ndarray]:
         """True (pan_speed_deg_s, tilt_speed_deg_s) at each time (vectorised, ripple included)."""
         t = np.asarray(t_s, dtype=float)
+        flat = t.reshape(-1)
+        out = self._pan.eval(flat)[1].reshape(t.shape), self._tilt.eval(flat)[1].reshape(t.shape)
         if t.size:
             self.advance_to(float(t.max()))
-        flat = t.reshape(-1)
-        return self._pan.eval(flat)[1].reshape(t.shape), self._tilt.eval(flat)[1].reshape(t.shape)
+        return out
 
     def state_at(self, t_s: float) -> HeadState:
         t = np.array([float(t_s)])
-        self.advance_to(float(t_s))
         pan, vp = self._pan.eval(t)
         tilt, vt = self._tilt.eval(t)
+        self.advance_to(float(t_s))
         return HeadState(float(t_s), float(wrap_pan_deg(pan[0])), float(tilt[0]),
                          float(vp[0]), float(vt[0]))
 
