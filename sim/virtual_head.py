@@ -198,3 +198,52 @@ def read_truth(path: str) -> list[dict]:
             except json.JSONDecodeError:
                 continue
     return rows
+
+
+class ManualClock:
+    """A clock the caller moves by hand (``t += dt``): runs the server in virtual time, e.g. for
+    measuring a head from the outside deterministically."""
+
+    def __init__(self, t: float = 0.0) -> None:
+        self.t = float(t)
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def estimate_step_response(
+    rows: list[dict], t_arrival_s: float, axis: str = "pan", window_s: float = 1.0
+) -> dict:
+    """Measure a speed step from truth rows, as an outside observer would.
+
+    rows : truth JSON rows (``t_s``, ``<axis>_deg``, ``<axis>_speed_deg_s``), after one step
+           command from rest whose last byte arrived at ``t_arrival_s``; the head must have
+           settled before the last ``window_s`` of rows
+    Returns ``speed_deg_s`` (angle change / time over the last ``window_s``), ``accel_deg_s2``
+    (least-squares slope of speed over the 10-90 % part of the ramp; the ripple biases it by up
+    to ~``ripple_rel``), ``dead_time_s`` (first row with nonzero speed minus ``t_arrival_s``: an
+    upper bound, late by less than one truth period) and ``ramp_dead_time_s`` (where the ramp line
+    crosses zero, minus ``t_arrival_s``).
+    """
+    import numpy as np
+
+    t = np.array([r["t_s"] for r in rows])
+    ang = np.array([r[f"{axis}_deg"] for r in rows])
+    v = np.array([r[f"{axis}_speed_deg_s"] for r in rows])
+    if axis == "pan":
+        ang = np.unwrap(np.radians(ang)) * 180.0 / np.pi
+    last = t >= t[-1] - window_s
+    speed = (ang[last][-1] - ang[last][0]) / (t[last][-1] - t[last][0])
+    ramp = (t > t_arrival_s) & (np.abs(v) > 0.1 * abs(speed)) & (np.abs(v) < 0.9 * abs(speed))
+    moving = np.flatnonzero((t > t_arrival_s) & (v != 0))
+    out = {
+        "speed_deg_s": float(speed),
+        "accel_deg_s2": float("nan"),
+        "dead_time_s": float(t[moving[0]] - t_arrival_s) if moving.size else float("nan"),
+        "ramp_dead_time_s": float("nan"),
+    }
+    if ramp.sum() >= 3:
+        slope, icept = np.polyfit(t[ramp], v[ramp], 1)
+        out["accel_deg_s2"] = float(abs(slope))
+        out["ramp_dead_time_s"] = float(-icept / slope - t_arrival_s)
+    return out
