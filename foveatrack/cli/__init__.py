@@ -17,6 +17,7 @@ from foveatrack.errors import UserError
 COMMAND_MODULES = (
     "foveatrack.cli.demo_cmd",
     "foveatrack.cli.lidar_cmd",
+    "foveatrack.cli.gimbal_cmd",
 )
 
 

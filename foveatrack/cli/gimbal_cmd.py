@@ -1,0 +1,153 @@
+"""``foveatrack gimbal ...``: the virtual PTS-303H head and its speed curves.
+
+* ``foveatrack gimbal serve``: serve a virtual head on a pseudo-terminal.  The first line on stdout
+  is the device path; open it with any Pelco-D/P controller (pyserial:
+  ``serial.serial_for_url(path, 9600)``).  ``--truth FILE`` receives the true state as JSON lines.
+  Stops cleanly on SIGINT / SIGTERM (exit status 0).
+* ``foveatrack gimbal curves --plot F.png``: speed vs speed byte for two (or more) unit seeds, the
+  reason the tracker must calibrate (paper, Appendix D, "Gimbal angle calibration").
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+from foveatrack.errors import UserError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "gimbal", help="the virtual PTS-303H pan/tilt head (serve on a pty, plot speed curves)"
+    )
+    sub = p.add_subparsers(dest="gimbal_command", metavar="GIMBAL_COMMAND", required=True)
+
+    s = sub.add_parser("serve", help="serve a virtual head on a pseudo-terminal")
+    s.add_argument("--baud", type=int, default=9600, help="line speed for byte pacing [bit/s]")
+    s.add_argument("--address", type=int, default=1, help="Pelco address (DIP switch), 1-255")
+    s.add_argument("--unit-seed", type=int, default=0, help="which unit (speed curve, ripple)")
+    s.add_argument("--feedback", choices=("none", "at-rest", "always"), default="none",
+                   help="position-query answers: none (the paper's head), at-rest, always")
+    s.add_argument("--family", default="pts-303", help="head family: pts-303 or heavy-worm")
+    s.add_argument("--truth", metavar="FILE", help="write the true state as JSON lines here")
+    s.add_argument("--truth-period-s", type=float, default=0.02, help="truth line period [s]")
+    s.add_argument("--link", metavar="PATH", help="also make a symlink PATH to the pty")
+    s.add_argument("--pan0-deg", type=float, default=0.0)
+    s.add_argument("--tilt0-deg", type=float, default=0.0)
+    s.set_defaults(func=cmd_serve)
+
+    c = sub.add_parser("curves", help="plot true speed vs speed byte for unit seeds")
+    c.add_argument("--plot", metavar="F.png", required=True, help="output PNG")
+    c.add_argument("--unit-seeds", type=int, nargs="+", default=[0, 1])
+    c.add_argument("--family", default="pts-303")
+    c.set_defaults(func=cmd_curves)
+
+
+def _head(args, unit_seed: int, feedback: str = "none", address: int = 1, **kw):
+    from gimbal.errors import GimbalError
+    from gimbal.pts303h import PTS303H, HeadParams
+
+    try:
+        params = HeadParams.for_family(args.family)
+        return PTS303H(params, unit_seed=unit_seed, feedback=feedback, address=address, **kw)
+    except GimbalError as exc:
+        raise UserError(str(exc)) from exc
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    import time
+
+    from sim.virtual_head import VirtualHeadServer
+
+    if not 1 <= args.address <= 255:
+        raise UserError(f"--address {args.address} is not allowed; use 1-255")
+    if args.baud <= 0:
+        raise UserError(f"--baud {args.baud} is not allowed; use a positive rate such as 9600")
+    if args.truth_period_s <= 0:
+        raise UserError("--truth-period-s must be > 0")
+    head = _head(args, args.unit_seed, args.feedback, args.address,
+                 pan0_deg=args.pan0_deg, tilt0_deg=args.tilt0_deg)
+    stop = {"flag": False}
+
+    def _on_signal(signum, frame):  # noqa: ARG001
+        stop["flag"] = True
+
+    old = {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    truth = None
+    try:
+        if args.truth:
+            try:
+                truth = open(args.truth, "w", buffering=1)
+            except OSError as exc:
+                raise UserError(f"--truth {args.truth}: cannot write ({exc.strerror})") from exc
+        server = VirtualHeadServer(head, time.monotonic, baud=args.baud, truth=truth,
+                                   truth_period_s=args.truth_period_s, link_path=args.link)
+        try:
+            path = server.open()
+        except OSError as exc:
+            raise UserError(f"cannot create the pty or --link {args.link}: {exc}") from exc
+        print(path, flush=True)
+        print(f"virtual PTS-303H ({args.family}, unit {args.unit_seed}, address {args.address}, "
+              f"{args.baud} baud, feedback {args.feedback}) on {server.path}; Ctrl-C stops",
+              file=sys.stderr, flush=True)
+        try:
+            server.run(lambda: stop["flag"])
+        finally:
+            server.close()
+    finally:
+        if truth is not None:
+            truth.close()
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+    return 0
+
+
+def cmd_curves(args: argparse.Namespace) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    b = np.arange(0x40)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    for seed in args.unit_seeds:
+        head = _head(args, seed)
+        for ax, axis in zip(axes, ("pan", "tilt")):
+            table = head.speed_table(axis)
+            (line,) = ax.plot(b, table[b], marker=".", ms=3, label=f"unit seed {seed}")
+            if axis == "pan":
+                ax.axhline(table[0xFF], color=line.get_color(), ls=":", lw=1)
+    for ax, axis in zip(axes, ("pan", "tilt")):
+        ax.set_xlabel(f"{axis} speed byte (Pelco d{1 if axis == 'pan' else 2})")
+        ax.set_ylabel("true speed [deg/s]")
+        ax.set_title(f"{axis}" + (" (dotted: turbo 0xFF)" if axis == "pan" else ""))
+        ax.grid(alpha=0.3)
+        ax.legend()
+    fig.suptitle(f"PTS-303H model ({args.family}): speed vs speed byte")
+    try:
+        fig.savefig(args.plot, dpi=120)
+    except OSError as exc:
+        raise UserError(f"--plot {args.plot}: cannot write ({exc.strerror})") from exc
+    finally:
+        plt.close(fig)
+    print(args.plot)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run just the ``gimbal`` group (``python -m foveatrack.cli.gimbal_cmd serve ...``),
+    with the same error handling as ``foveatrack``; useful where other groups are absent."""
+    parser = argparse.ArgumentParser(prog="foveatrack gimbal")
+    register(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["gimbal", *(sys.argv[1:] if argv is None else argv)])
+    try:
+        return int(args.func(args) or 0)
+    except UserError as exc:
+        print(f"foveatrack: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
