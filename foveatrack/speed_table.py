@@ -305,7 +305,7 @@ def _parse_byte(v, where: str, axis: str) -> int:
     if isinstance(v, str):
         s = v.strip().lower()
         if s == "turbo":
-            return TURBO
+            s = str(TURBO)
         try:
             v = int(s, 0)
         except ValueError:
