@@ -14,6 +14,8 @@ The commanded rate is
 
 .. math:: v = \\hat\\omega + \\operatorname{deadband\\_p}(\\hat\\theta(t_a) - \\hat h(t_a))
 
+with the dead band ``pred_deadband_deg`` (0.3 deg default; the paper's 2 deg would park the target
+at the band's edge, since the feed-forward already keeps the head turning), and
 where ``t_a`` is when the command will act (frame end + send delay + latency + dead time) and
 ``h`` the head angle predicted by the reconstruction.  The dead band applies to the *corrective*
 term only: inside it the head still turns at the target's rate.  Pan innovations are wrapped to

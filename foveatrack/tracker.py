@@ -86,6 +86,9 @@ class TrackerConfig:
     pan0_deg, tilt0_deg : [deg]              head angles at start
     lidar_offset_m : (x, y, z) [m]           lidar origin in tilt-stage coordinates
     pred_q_deg2_s3, pred_r_deg2 : > 0        predictive filter noise (see foveatrack.predictive)
+    pred_deadband_deg : >= 0 [deg]           dead band of the predictive controller's corrective
+                                             term (the feed-forward rate keeps the head moving, so
+                                             the paper's 2 deg would park the target at the edge)
     """
 
     rate_hz: float = 10.0
@@ -119,6 +122,7 @@ class TrackerConfig:
     lidar_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     pred_q_deg2_s3: float = 4.0
     pred_r_deg2: float = 0.04
+    pred_deadband_deg: float = 0.3
 
     CONTROLLERS = ("paper", "predictive")
     ERROR_FRAMES = ("lidar", "head")
@@ -142,7 +146,7 @@ class TrackerConfig:
             elif k == "gain_1_s":
                 kw["gain_pan_1_s"] = kw["gain_tilt_1_s"] = f(k, lo=0, lo_open=True)
             elif k in ("deadband_pan_deg", "deadband_tilt_deg", "tilt_margin_deg", "hold_s", "send_delay_s",
-                       "latency_s", "timing_sigma_s"):
+                       "latency_s", "timing_sigma_s", "pred_deadband_deg"):
                 kw[k] = f(k, lo=0)
             elif k in ("rate_hz", "gain_pan_1_s", "gain_tilt_1_s", "stop_lookahead_s", "search_pan_speed_deg_s",
                        "pred_q_deg2_s3", "pred_r_deg2"):
@@ -312,8 +316,8 @@ class Tracker:
             om_p = om_t = 0.0
         v_pan, v_tilt = om_p, om_t
         if corrective:
-            v_pan += deadband_p(wrap_deg(th_p - hp_a), cfg.deadband_pan_deg, cfg.gain_pan_1_s)
-            v_tilt += deadband_p(th_t - ht_a, cfg.deadband_tilt_deg, cfg.gain_tilt_1_s)
+            v_pan += deadband_p(wrap_deg(th_p - hp_a), cfg.pred_deadband_deg, cfg.gain_pan_1_s)
+            v_tilt += deadband_p(th_t - ht_a, cfg.pred_deadband_deg, cfg.gain_tilt_1_s)
         return v_pan, v_tilt
 
     def _lost(self, t_now: float, send_t: float, tilt_est: float) -> tuple[float, float]:
