@@ -1,0 +1,53 @@
+"""Small helpers to validate user mappings (scene ``[tracker]`` tables, daemon configs).
+
+Every error names *where* the mapping came from, the key, and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+from foveatrack.errors import UserError
+
+
+def check_keys(data: Mapping, allowed: Sequence[str], where: str) -> None:
+    if not isinstance(data, Mapping):
+        raise UserError(f"{where}: expected a table/mapping, got {type(data).__name__}")
+    unknown = sorted(set(data) - set(allowed))
+    if unknown:
+        raise UserError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; "
+                        f"allowed keys: {', '.join(sorted(allowed))}")
+
+
+def as_float(value, key: str, where: str, *, lo: float | None = None, hi: float | None = None,
+             lo_open: bool = False, allow_none: bool = False) -> float | None:
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise UserError(f"{where}: {key} must be a finite number, got {value!r}")
+    v = float(value)
+    if lo is not None and (v < lo or (lo_open and v <= lo)):
+        rel = ">" if lo_open else ">="
+        raise UserError(f"{where}: {key} must be {rel} {lo}, got {v!r}")
+    if hi is not None and v > hi:
+        raise UserError(f"{where}: {key} must be <= {hi}, got {v!r}")
+    return v
+
+
+def as_choice(value, key: str, where: str, choices: Sequence[str]) -> str:
+    if value not in choices:
+        raise UserError(f"{where}: {key} must be one of {', '.join(map(repr, choices))}, got {value!r}")
+    return value
+
+
+def as_bool(value, key: str, where: str) -> bool:
+    if not isinstance(value, bool):
+        raise UserError(f"{where}: {key} must be true or false, got {value!r}")
+    return value
+
+
+def as_vec(value, key: str, where: str, n: int) -> tuple[float, ...]:
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != n:
+        raise UserError(f"{where}: {key} must be a list of {n} numbers, got {value!r}")
+    return tuple(as_float(v, f"{key}[{i}]", where) for i, v in enumerate(value))

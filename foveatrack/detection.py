@@ -1,0 +1,96 @@
+"""Algorithm 1 of the paper (Appendix D.2): intruder detection by the per-axis median.
+
+.. math::  p_d = [\\operatorname{med}_i x_i,\\ \\operatorname{med}_i y_i,\\ \\operatorname{med}_i z_i]^T,
+           \\quad i \\in \\{ p_i \\in P : p_i \\in \\mathcal{D} \\}
+
+Points that are not finite (NaN/inf) and exact (0, 0, 0) "no return" points (Livox) are dropped
+first.  An empty result is "no detection" (``None``).  With an even number of points the median is
+the mean of the two middle values (numpy), so one point gives that point and two give their midpoint.
+
+The detection time ``t_s`` is the *median timestamp of the retained points* (not the frame's
+mid-time): it is when the target was actually seen, which matters when the target occupies only
+part of the 100 ms frame, and it is what the controller and reconstruction use as the observation time.
+
+Bearings use ``atan2`` (the paper's ``arctan(y/x)`` breaks behind the sensor and at x -> 0):
+
+.. math:: az = \\operatorname{atan2}(y, x) \\in (-180, 180],\\qquad
+          el = \\operatorname{atan2}(z, \\sqrt{x^2 + y^2}) \\in [-90, 90]  \\quad [deg]
+
+Positive azimuth = target to the LEFT (+Y), positive elevation = target UP (+Z).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from foveatrack.frames import Frame
+
+
+def wrap_deg(a):
+    """Wrap angles to (-180, 180] degrees."""
+    w = np.mod(np.asarray(a, dtype=float) + 180.0, 360.0) - 180.0
+    w = np.where(w == -180.0, 180.0, w)
+    return float(w) if np.ndim(w) == 0 else w
+
+
+def bearing_deg(x: float, y: float, z: float) -> tuple[float, float]:
+    """Azimuth and elevation [deg] of a point (lidar or any right-handed X-fwd/Y-left/Z-up frame)."""
+    az = wrap_deg(np.degrees(np.arctan2(y, x)))
+    el = float(np.degrees(np.arctan2(z, np.hypot(x, y))))
+    return az, el
+
+
+@dataclass(frozen=True)
+class Detection:
+    """The output of Algorithm 1 for one frame.
+
+    t_s : float [s]        median timestamp of the retained points
+    xyz : (3,) float [m]   per-axis median position in the lidar frame
+    n_points : int >= 1    number of retained points
+    az_deg, el_deg : float bearing of ``xyz`` (see module docstring)
+    range_m : float        ``|xyz|``
+    """
+
+    t_s: float
+    xyz: np.ndarray
+    n_points: int
+    az_deg: float
+    el_deg: float
+    range_m: float
+
+
+def valid_points(xyz: np.ndarray) -> np.ndarray:
+    """Mask of points that are finite and not the exact (0,0,0) no-return marker."""
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    return np.all(np.isfinite(xyz), axis=1) & np.any(xyz != 0.0, axis=1)
+
+
+def detect_points(xyz: np.ndarray, t_ns: np.ndarray, space=None, *, test_xyz: np.ndarray | None = None
+                  ) -> Detection | None:
+    """Algorithm 1 on raw arrays.
+
+    ``space`` (anything with ``contains(xyz) -> bool mask``; ``None`` = everything) is tested on
+    ``test_xyz`` if given (the same points expressed in D's frame, e.g. the world), otherwise on ``xyz``.
+    """
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    t_ns = np.asarray(t_ns, dtype=np.int64).reshape(-1)
+    keep = valid_points(xyz)
+    if space is not None and keep.any():
+        sel = np.flatnonzero(keep)
+        pts = xyz[sel] if test_xyz is None else np.asarray(test_xyz, dtype=np.float64).reshape(-1, 3)[sel]
+        inside = np.asarray(space.contains(pts), dtype=bool)
+        keep[sel[~inside]] = False
+    n = int(keep.sum())
+    if n == 0:
+        return None
+    p = np.median(xyz[keep], axis=0)
+    t_s = float(np.median(t_ns[keep].astype(np.float64))) * 1e-9
+    az, el = bearing_deg(*p)
+    return Detection(t_s=t_s, xyz=p, n_points=n, az_deg=az, el_deg=el, range_m=float(np.linalg.norm(p)))
+
+
+def detect(frame: Frame, space=None, *, test_xyz: np.ndarray | None = None) -> Detection | None:
+    """Algorithm 1 on a :class:`~foveatrack.frames.Frame`."""
+    return detect_points(frame.xyz, frame.t_ns, space, test_xyz=test_xyz)

@@ -1,0 +1,234 @@
+"""Head-angle dead reckoning and world-frame trajectory reconstruction (paper Fig. 14c, App. D.4).
+
+The head reports no orientation, so its angles are estimated by integrating the calibrated speed of
+each command actually sent: "the rotation speed is determined from the command and then integrated
+to produce the angle estimate" (App. D.4).
+
+Timing model (per axis)
+-----------------------
+A command written at ``t_s`` takes effect at ``t_s + latency_s + dead_time_s`` (latency: the link,
+e.g. 7.29 ms for a Pelco-D frame at 9600 baud, plus adapter delays; dead time: the head's own).
+From then the speed ramps to the table speed of the new byte at ``accel_deg_s2`` (None: at once),
+integrated exactly (piecewise constant acceleration).  Tilt stops at ``tilt_limits_deg`` (the head
+physically stops there).
+
+Uncertainty growth (1 sigma, per axis, independent axes)
+--------------------------------------------------------
+.. math:: \\sigma^2(t) = \\sigma_0^2 + \\sum_b \\big(\\sigma_b\\, S_b(t)\\big)^2
+          + \\sum_i (\\Delta v_i\\, \\sigma_t)^2 + q\\,(t - t_0)
+
+* ``S_b`` = signed time spent at byte ``b`` (direction x duration): a table error of byte ``b`` is a
+  *systematic* bias that repeats every time the byte is used, so it adds linearly in time at that
+  byte and cancels between left and right (the table is direction-symmetric);
+* ``sigma_t`` = timing uncertainty of each speed change ``Delta v_i`` (``timing_sigma_s``);
+* ``q`` = random-walk rate [deg^2/s] for speed ripple (``random_walk_deg2_s``).
+
+World frame convention
+----------------------
+The world frame is the head's base: origin at the head centre (intersection of the axes), Z up,
+X = the direction of pan 0 / tilt 0.  The lidar sits on the tilt stage with its axes parallel to the
+stage's and its origin at ``lidar_offset_m`` from the head centre (stage coordinates).  Then
+
+.. math:: p_{world} = R_z(pan)\\, R_y(-tilt)\\, (p_{lidar} + o)
+
+i.e. pan about world Z, then tilt about the pan-rotated Y axis; tilt up turns the optical axis to
+``(cos t cos p, cos t sin p, sin t)``.  R is rebuilt from the (wrapped) angles each time, never
+accumulated as a product, so it stays orthonormal to machine precision over any duration.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from foveatrack.control import HeadCommand
+from foveatrack.detection import Detection, wrap_deg
+from foveatrack.speed_table import TURBO, AxisTable, SpeedTable
+
+
+def rotation_matrix(pan_deg: float, tilt_deg: float) -> np.ndarray:
+    """``R_z(pan) @ R_y(-tilt)``: head (tilt-stage) coordinates -> world (see module docstring)."""
+    p = math.radians(wrap_deg(pan_deg))
+    t = math.radians(tilt_deg)
+    cp, sp, ct, st = math.cos(p), math.sin(p), math.cos(t), math.sin(t)
+    return np.array([[cp * ct, -sp, -cp * st],
+                     [sp * ct, cp, -sp * st],
+                     [st, 0.0, ct]])
+
+
+@dataclass
+class _Knot:
+    t: float            # effect time [s]
+    angle: float        # angle at t [deg] (pan kept wrapped)
+    v: float            # actual speed at t [deg/s]
+    v_tgt: float        # target speed from t on [deg/s, signed]
+    idx: int            # byte index 0..64 of the target (64 = turbo), -1 = stop
+    direction: int
+    S: np.ndarray       # signed time per byte index up to t [s]
+    var_timing: float   # accumulated sum (dv sigma_t)^2 [deg^2]
+
+
+class _AxisIntegrator:
+    def __init__(self, table: AxisTable, angle0: float, sigma0: float, t0: float, accel: float | None,
+                 limits: tuple[float, float] | None, wrap: bool, timing_sigma_s: float, q: float,
+                 history_s: float):
+        self.table = table
+        self.accel = accel
+        self.limits = limits
+        self.wrap = wrap
+        self.sig_b = np.nan_to_num(table.speeds_array()[1], nan=0.0)
+        self.sigma0 = sigma0
+        self.timing_sigma_s = timing_sigma_s
+        self.q = q
+        self.t0 = t0
+        self.history_s = history_s
+        self.knots = [_Knot(t0, angle0, 0.0, 0.0, -1, 0, np.zeros(65), 0.0)]
+        self.times = [t0]
+
+    def _advance(self, k: _Knot, t: float) -> tuple[float, float]:
+        """Angle and speed at time t >= k.t."""
+        tau = t - k.t
+        dv = k.v_tgt - k.v
+        if self.accel is None or dv == 0.0:
+            ang, v = k.angle + k.v_tgt * tau, k.v_tgt
+            if self.accel is None and k.v != k.v_tgt and tau == 0.0:
+                v = k.v
+        else:
+            a = math.copysign(self.accel, dv)
+            T = abs(dv) / self.accel
+            if tau <= T:
+                ang, v = k.angle + k.v * tau + 0.5 * a * tau * tau, k.v + a * tau
+            else:
+                ang = k.angle + k.v * T + 0.5 * a * T * T + k.v_tgt * (tau - T)
+                v = k.v_tgt
+        if self.limits is not None:
+            lo, hi = self.limits
+            if ang > hi or ang < lo:
+                ang, v = min(max(ang, lo), hi), 0.0
+        return ang, v
+
+    def _knot_before(self, t: float) -> _Knot | None:
+        i = bisect.bisect_right(self.times, t) - 1
+        return self.knots[i] if i >= 0 else None
+
+    def state(self, t: float) -> tuple[float, float, float]:
+        """(angle, speed, sigma) at t."""
+        k = self._knot_before(t)
+        if k is None:   # before all retained history: the earliest knot's angle
+            k = self.knots[0]
+            t = k.t
+        ang, v = self._advance(k, t)
+        S = k.S.copy()
+        if k.idx >= 0:
+            S[k.idx] += k.direction * (t - k.t)
+        var = (self.sigma0 ** 2 + float(np.sum((self.sig_b * S) ** 2)) + k.var_timing
+               + self.q * max(t - self.t0, 0.0))
+        if self.wrap:
+            ang = wrap_deg(ang)
+        return ang, v, math.sqrt(var)
+
+    def command(self, t_eff: float, direction: int, byte: int) -> None:
+        last = self.knots[-1]
+        if t_eff < last.t:
+            raise ValueError(f"commands must come in time order (effect time {t_eff} < {last.t})")
+        idx = -1 if direction == 0 else (64 if byte == TURBO else byte)
+        v_tgt = 0.0 if direction == 0 else direction * self.table.speed_deg_s(byte)
+        if not math.isfinite(v_tgt):
+            raise ValueError(f"byte {byte} has no known speed in the {self.table.axis} table")
+        if idx == last.idx and direction == last.direction:
+            return
+        ang, v = self._advance(last, t_eff)
+        S = last.S.copy()
+        if last.idx >= 0:
+            S[last.idx] += last.direction * (t_eff - last.t)
+        dv = v_tgt - last.v_tgt
+        var_t = last.var_timing + (dv * self.timing_sigma_s) ** 2
+        if self.wrap:
+            ang = wrap_deg(ang)
+        self.knots.append(_Knot(t_eff, ang, v, v_tgt, idx, direction, S, var_t))
+        self.times.append(t_eff)
+        # bound memory: keep knots within history_s of the newest (always >= 2)
+        cut = bisect.bisect_left(self.times, t_eff - self.history_s) - 1
+        if cut > 0:
+            del self.knots[:cut]
+            del self.times[:cut]
+
+
+class Reconstructor:
+    """Estimate the head angles from the commands sent, and place detections in the world.
+
+    Parameters
+    ----------
+    speed_table : SpeedTable          calibrated (or nominal) speeds and per-byte sigma
+    pan0_deg, tilt0_deg : float       head angles at ``t0_s`` (e.g. after homing) [deg]
+    sigma0_deg : float >= 0           their uncertainty [deg]
+    latency_s : float >= 0            link latency from send to arrival of the frame [s]
+    dead_time_s, accel_deg_s2         head timing; default: the table's values
+    tilt_limits_deg : (lo, hi)        the tilt stops [deg]
+    timing_sigma_s : float >= 0       uncertainty of each command's effect time [s]
+    random_walk_deg2_s : float >= 0   speed-ripple random walk [deg^2/s]
+    lidar_offset_m : (3,)             lidar origin in tilt-stage coordinates [m]
+    history_s : float > 0             how far back ``angles_at`` can look precisely [s]
+    """
+
+    def __init__(self, speed_table: SpeedTable, *, pan0_deg: float = 0.0, tilt0_deg: float = 0.0,
+                 sigma0_deg: float = 0.0, t0_s: float = 0.0, latency_s: float = 0.0,
+                 dead_time_s: float | None = None, accel_deg_s2: float | None = None,
+                 tilt_limits_deg: tuple[float, float] = (-90.0, 90.0), timing_sigma_s: float = 0.002,
+                 random_walk_deg2_s: float = 0.0, lidar_offset_m=(0.0, 0.0, 0.0), history_s: float = 60.0):
+        self.table = speed_table
+        self.latency_s = latency_s
+        self.dead_time_s = speed_table.dead_time_s if dead_time_s is None else dead_time_s
+        accel = speed_table.accel_deg_s2 if accel_deg_s2 is None else accel_deg_s2
+        self.lidar_offset_m = np.asarray(lidar_offset_m, float)
+        self.pan = _AxisIntegrator(speed_table.pan, wrap_deg(pan0_deg), sigma0_deg, t0_s, accel, None, True,
+                                   timing_sigma_s, random_walk_deg2_s, history_s)
+        self.tilt = _AxisIntegrator(speed_table.tilt, tilt0_deg, sigma0_deg, t0_s, accel,
+                                    tuple(tilt_limits_deg), False, timing_sigma_s, random_walk_deg2_s, history_s)
+        self.last_command: HeadCommand | None = None
+        self.last_send_t_s: float | None = None
+
+    @property
+    def effect_delay_s(self) -> float:
+        return self.latency_s + self.dead_time_s
+
+    def on_command(self, t_s: float, cmd: HeadCommand) -> None:
+        """Record that ``cmd`` was written to the head at ``t_s`` (commands in time order)."""
+        t_eff = t_s + self.effect_delay_s
+        self.pan.command(t_eff, cmd.pan_dir, cmd.pan_byte)
+        self.tilt.command(t_eff, cmd.tilt_dir, cmd.tilt_byte)
+        self.last_command = cmd
+        self.last_send_t_s = t_s
+
+    def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
+        """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180]."""
+        p, _, sp = self.pan.state(t_s)
+        t, _, st = self.tilt.state(t_s)
+        return p, t, sp, st
+
+    def speeds_at(self, t_s: float) -> tuple[float, float]:
+        """Estimated actual (pan, tilt) speeds [deg/s] at ``t_s``."""
+        return self.pan.state(t_s)[1], self.tilt.state(t_s)[1]
+
+    def rotation_at(self, t_s: float) -> np.ndarray:
+        p, t, _, _ = self.angles_at(t_s)
+        return rotation_matrix(p, t)
+
+    def lidar_to_world(self, xyz: np.ndarray, t_s: float) -> np.ndarray:
+        """Points (N, 3) in the lidar frame at one time -> world frame."""
+        return (np.asarray(xyz, float).reshape(-1, 3) + self.lidar_offset_m) @ self.rotation_at(t_s).T
+
+    def to_world(self, detection: Detection) -> tuple[np.ndarray, float]:
+        """World position of a detection and its 1-sigma position uncertainty [m] from the head-angle
+        uncertainty: ``sigma^2 = (rho sigma_pan)^2 + (r sigma_tilt)^2`` with ``rho`` the horizontal
+        distance from the pan axis and ``r`` the distance from the head centre (radians inside)."""
+        p, t, sp, st = self.angles_at(detection.t_s)
+        q = np.asarray(detection.xyz, float) + self.lidar_offset_m
+        w = rotation_matrix(p, t) @ q
+        rho = math.hypot(w[0], w[1])
+        r = float(np.linalg.norm(q))
+        sigma = math.hypot(rho * math.radians(sp), r * math.radians(st))
+        return w, sigma

@@ -1,0 +1,323 @@
+"""The head's speed table: Pelco-D speed byte -> actual rotation speed, per axis (paper App. D.4).
+
+"The calibration builds a lookup table mapping the command to actual rotation speed.  Then during the
+actual intruder tracking, the rotation speed is determined from the command and then integrated to
+produce the angle estimate."
+
+Bytes: pan ``0x00..0x3F`` and ``0xFF`` (turbo: the device's fastest, *not* a step after 0x3F);
+tilt ``0x00..0x3F``.  Speeds are magnitudes [deg/s], assumed equal in both directions of an axis
+(the calibrator measures both directions and reports their asymmetry).
+
+Interpolation: the table's *knots* are the entries with a finite speed (measured, or nominal).  A
+byte between two knots gets the piecewise-linear interpolation in byte number (which is monotone
+whenever the knots are, and never overshoots them); its uncertainty is the larger of its two
+neighbours'.  A byte outside the knots' span has no known speed (NaN) and is never commanded.
+Turbo is only known from its own entry.
+
+Inverse (:meth:`AxisTable.byte_for_speed`): among the bytes with a known speed > 0, the one whose
+speed is nearest to the request (ties -> the slower).  This works on non-monotone measured tables
+(it searches all bytes, not a bisection), and a request beyond the table gets the fastest byte.
+
+File (JSON)::
+
+    {"format": "foveatrack-speed-table", "version": 1, "unit": "deg/s",
+     "date": "2025-01-01T12:00:00Z", "head": "PTS-303H", "source": "calibration ...",
+     "dead_time_s": 0.05, "accel_deg_s2": null,
+     "axes": {"pan":  {"entries": [{"byte": 0, "speed": 0.0, "sigma": 0.01, "measured": true}, ...]},
+              "tilt": {"entries": [...]}}}
+
+``unit`` may be ``"deg/s"`` or ``"rad/s"`` (converted to deg/s on load).  ``byte`` may be an
+integer or a string such as ``"0x3F"``/``"turbo"``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from foveatrack.errors import UserError
+
+TURBO = 0xFF
+AXES = ("pan", "tilt")
+UNITS = {"deg/s": 1.0, "rad/s": 180.0 / math.pi}
+FORMAT = "foveatrack-speed-table"
+
+
+def axis_bytes(axis: str) -> tuple[int, ...]:
+    """The speed bytes an axis accepts: 0..63, plus turbo 0xFF for pan."""
+    return tuple(range(64)) + ((TURBO,) if axis == "pan" else ())
+
+
+@dataclass(frozen=True)
+class SpeedEntry:
+    """One table entry.  ``speed_deg_s`` NaN = unknown; ``measured`` False = not measured
+    (nominal, interpolated or failed); ``delay_s`` = effective start delay seen when measuring."""
+
+    byte: int
+    speed_deg_s: float
+    sigma_deg_s: float
+    measured: bool = True
+    delay_s: float | None = None
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class AxisTable:
+    axis: str
+    entries: tuple[SpeedEntry, ...]
+    _speed: np.ndarray = field(init=False, repr=False, compare=False)   # over bytes 0..64 (64 = turbo)
+    _sigma: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.axis not in AXES:
+            raise ValueError(f"axis must be one of {AXES}")
+        seen = set()
+        for e in self.entries:
+            if e.byte not in axis_bytes(self.axis):
+                raise UserError(f"{self.axis}: speed byte {e.byte!r} is not allowed "
+                                f"(0..63{' or 0xFF turbo' if self.axis == 'pan' else ''})")
+            if e.byte in seen:
+                raise UserError(f"{self.axis}: speed byte {e.byte} is listed twice")
+            seen.add(e.byte)
+        speed = np.full(65, np.nan)
+        sigma = np.full(65, np.nan)
+        knots = sorted((e for e in self.entries if math.isfinite(e.speed_deg_s) and e.byte != TURBO),
+                       key=lambda e: e.byte)
+        if knots:
+            kb = np.array([e.byte for e in knots], float)
+            ks = np.array([e.speed_deg_s for e in knots])
+            kg = np.array([e.sigma_deg_s if math.isfinite(e.sigma_deg_s) else abs(e.speed_deg_s) for e in knots])
+            b = np.arange(64, dtype=float)
+            inside = (b >= kb[0]) & (b <= kb[-1])
+            speed[:64][inside] = np.interp(b[inside], kb, ks)
+            # sigma: the larger of the two neighbouring knots (exact at the knots)
+            j = np.clip(np.searchsorted(kb, b[inside], side="left"), 0, len(kb) - 1)
+            i = np.clip(j - 1, 0, len(kb) - 1)
+            at_knot = kb[j] == b[inside]
+            sigma[:64][inside] = np.where(at_knot, kg[j], np.maximum(kg[i], kg[j]))
+        for e in self.entries:
+            if e.byte == TURBO and math.isfinite(e.speed_deg_s):
+                speed[64] = e.speed_deg_s
+                sigma[64] = e.sigma_deg_s if math.isfinite(e.sigma_deg_s) else abs(e.speed_deg_s)
+        object.__setattr__(self, "_speed", speed)
+        object.__setattr__(self, "_sigma", sigma)
+
+    @staticmethod
+    def _idx(byte: int) -> int:
+        return 64 if byte == TURBO else int(byte)
+
+    def speed_deg_s(self, byte: int) -> float:
+        """Speed magnitude [deg/s] of a byte (NaN if unknown)."""
+        return float(self._speed[self._idx(byte)])
+
+    def sigma_deg_s(self, byte: int) -> float:
+        return float(self._sigma[self._idx(byte)])
+
+    def entry(self, byte: int) -> SpeedEntry | None:
+        for e in self.entries:
+            if e.byte == byte:
+                return e
+        return None
+
+    def is_measured(self, byte: int) -> bool:
+        e = self.entry(byte)
+        return bool(e is not None and e.measured and math.isfinite(e.speed_deg_s))
+
+    @property
+    def unmeasured_bytes(self) -> tuple[int, ...]:
+        return tuple(b for b in axis_bytes(self.axis) if not self.is_measured(b))
+
+    def _candidates(self, allow_turbo: bool) -> tuple[np.ndarray, np.ndarray]:
+        idx = np.arange(65 if allow_turbo else 64)
+        s = self._speed[idx]
+        ok = np.isfinite(s) & (s > 0)
+        bytes_ = np.where(idx == 64, TURBO, idx)
+        return bytes_[ok], s[ok]
+
+    def max_speed_deg_s(self, allow_turbo: bool = False) -> float:
+        _, s = self._candidates(allow_turbo)
+        return float(s.max()) if s.size else 0.0
+
+    def min_speed_deg_s(self) -> float:
+        _, s = self._candidates(False)
+        return float(s.min()) if s.size else 0.0
+
+    def byte_for_speed(self, speed_deg_s: float, allow_turbo: bool = False) -> int:
+        """Inverse: the byte whose known speed (> 0) is nearest to ``|speed_deg_s|`` (ties: slower)."""
+        b, s = self._candidates(allow_turbo)
+        if b.size == 0:
+            raise UserError(f"speed table: the {self.axis} axis has no byte with a known speed > 0")
+        target = abs(float(speed_deg_s))
+        d = np.abs(s - target)
+        best = np.flatnonzero(d <= d.min() + 1e-12)
+        k = best[np.argmin(s[best])]
+        return int(b[k])
+
+    def speeds_array(self) -> tuple[np.ndarray, np.ndarray]:
+        """(speed, sigma) over bytes 0..63 and turbo at index 64 [deg/s]; NaN = unknown."""
+        return self._speed.copy(), self._sigma.copy()
+
+
+@dataclass(frozen=True)
+class SpeedTable:
+    """Both axes' tables plus the head timing the reconstruction needs.
+
+    dead_time_s : float >= 0 [s]   command-to-motion delay of the head (after the bytes arrived)
+    accel_deg_s2 : float > 0 or None [deg/s^2]  acceleration limit (None: speed changes at once)
+    """
+
+    pan: AxisTable
+    tilt: AxisTable
+    unit: str = "deg/s"
+    date: str = ""
+    head: str = ""
+    source: str = ""
+    dead_time_s: float = 0.0
+    accel_deg_s2: float | None = None
+
+    def axis(self, name: str) -> AxisTable:
+        if name == "pan":
+            return self.pan
+        if name == "tilt":
+            return self.tilt
+        raise ValueError(f"axis must be 'pan' or 'tilt', got {name!r}")
+
+    @property
+    def unmeasured(self) -> dict[str, tuple[int, ...]]:
+        return {a: self.axis(a).unmeasured_bytes for a in AXES}
+
+    # ---- defaults ------------------------------------------------------------------------------
+    @classmethod
+    def nominal(cls, pan_max_deg_s: float = 15.0, tilt_max_deg_s: float = 2.0,
+                pan_turbo_deg_s: float | None = 20.0, rel_sigma: float = 0.3) -> "SpeedTable":
+        """A documented table for an *uncalibrated* head: linear ``(b + 1) / 64 * max`` (the FLIR
+        D300E rule in the facts file), pan 15 deg/s and tilt 2 deg/s at 0x3F (the PTS family
+        datasheet figures), turbo 20 deg/s (a guess), every entry ``measured = False`` with 30 %
+        uncertainty.  Good enough to start tracking; calibrate before trusting reconstruction."""
+        def axis(name, vmax, turbo):
+            es = [SpeedEntry(b, (b + 1) / 64.0 * vmax, rel_sigma * (b + 1) / 64.0 * vmax, False, note="nominal")
+                  for b in range(64)]
+            if turbo is not None:
+                es.append(SpeedEntry(TURBO, turbo, rel_sigma * turbo, False, note="nominal"))
+            return AxisTable(name, tuple(es))
+        return cls(axis("pan", pan_max_deg_s, pan_turbo_deg_s), axis("tilt", tilt_max_deg_s, None),
+                   date="", head="nominal", source="SpeedTable.nominal(): uncalibrated, linear (b+1)/64*max")
+
+    # ---- files -------------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        def ent(e: SpeedEntry) -> dict:
+            d = {"byte": "turbo" if e.byte == TURBO else e.byte,
+                 "speed": None if not math.isfinite(e.speed_deg_s) else e.speed_deg_s,
+                 "sigma": None if not math.isfinite(e.sigma_deg_s) else e.sigma_deg_s,
+                 "measured": bool(e.measured)}
+            if e.delay_s is not None:
+                d["delay_s"] = e.delay_s
+            if e.note:
+                d["note"] = e.note
+            return d
+        return {"format": FORMAT, "version": 1, "unit": "deg/s", "date": self.date, "head": self.head,
+                "source": self.source, "dead_time_s": self.dead_time_s, "accel_deg_s2": self.accel_deg_s2,
+                "axes": {a: {"entries": [ent(e) for e in self.axis(a).entries]} for a in AXES}}
+
+    def save(self, path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+
+    @classmethod
+    def load(cls, path) -> "SpeedTable":
+        p = Path(path)
+        try:
+            text = p.read_text()
+        except OSError as exc:
+            raise UserError(f"speed table {p}: cannot read ({exc.strerror or exc})") from None
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise UserError(f"speed table {p}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+        return cls.from_dict(data, where=f"speed table {p}")
+
+    @classmethod
+    def from_dict(cls, data, where: str = "speed table") -> "SpeedTable":
+        if not isinstance(data, dict):
+            raise UserError(f"{where}: expected a JSON object at the top level")
+        allowed = {"format", "version", "unit", "date", "head", "source", "dead_time_s", "accel_deg_s2", "axes"}
+        unknown = sorted(set(data) - allowed)
+        if unknown:
+            raise UserError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+        if data.get("format") != FORMAT:
+            raise UserError(f"{where}: format must be {FORMAT!r}, got {data.get('format')!r}")
+        if data.get("version") != 1:
+            raise UserError(f"{where}: version must be 1, got {data.get('version')!r}")
+        unit = data.get("unit", "deg/s")
+        if unit not in UNITS:
+            raise UserError(f"{where}: unit must be one of {list(UNITS)}, got {unit!r}")
+        k = UNITS[unit]
+        axes = data.get("axes")
+        if not isinstance(axes, dict) or set(axes) != set(AXES):
+            raise UserError(f"{where}: axes must be an object with exactly the keys 'pan' and 'tilt'")
+        tables = {}
+        for a in AXES:
+            ax = axes[a]
+            if not isinstance(ax, dict) or not isinstance(ax.get("entries"), list) or set(ax) - {"entries"}:
+                raise UserError(f"{where}: axes.{a} must be {{\"entries\": [...]}}")
+            entries = []
+            for i, e in enumerate(ax["entries"]):
+                w = f"{where}: axes.{a}.entries[{i}]"
+                if not isinstance(e, dict):
+                    raise UserError(f"{w} must be an object")
+                bad = sorted(set(e) - {"byte", "speed", "sigma", "measured", "delay_s", "note"})
+                if bad:
+                    raise UserError(f"{w}: unknown key(s) {bad}; allowed: byte, speed, sigma, measured, delay_s, note")
+                b = _parse_byte(e.get("byte"), w, a)
+                sp = _num_or_nan(e.get("speed"), w + ".speed")
+                sg = _num_or_nan(e.get("sigma"), w + ".sigma")
+                if math.isfinite(sp) and sp < 0:
+                    raise UserError(f"{w}.speed must be >= 0 (a magnitude), got {sp}")
+                if math.isfinite(sg) and sg < 0:
+                    raise UserError(f"{w}.sigma must be >= 0, got {sg}")
+                meas = e.get("measured", True)
+                if not isinstance(meas, bool):
+                    raise UserError(f"{w}.measured must be true or false")
+                dl = e.get("delay_s")
+                if dl is not None:
+                    dl = _num_or_nan(dl, w + ".delay_s")
+                entries.append(SpeedEntry(b, sp * k, sg * k, meas, dl, str(e.get("note", ""))))
+            tables[a] = AxisTable(a, tuple(entries))
+            if tables[a].max_speed_deg_s(allow_turbo=True) <= 0:
+                raise UserError(f"{where}: axes.{a} has no entry with a known speed > 0; it cannot be used")
+        dt = _num_or_nan(data.get("dead_time_s", 0.0), where + ": dead_time_s")
+        if not (math.isfinite(dt) and dt >= 0):
+            raise UserError(f"{where}: dead_time_s must be a number >= 0")
+        acc = data.get("accel_deg_s2")
+        if acc is not None:
+            acc = _num_or_nan(acc, where + ": accel_deg_s2") * k
+            if not (math.isfinite(acc) and acc > 0):
+                raise UserError(f"{where}: accel_deg_s2 must be a number > 0 or null")
+        return cls(tables["pan"], tables["tilt"], unit="deg/s", date=str(data.get("date", "")),
+                   head=str(data.get("head", "")), source=str(data.get("source", "")),
+                   dead_time_s=dt, accel_deg_s2=acc)
+
+
+def _parse_byte(v, where: str, axis: str) -> int:
+    if isinstance(v, str):
+        s = v.strip().lower()
+        if s == "turbo":
+            s = str(TURBO)
+        try:
+            v = int(s, 0)
+        except ValueError:
+            raise UserError(f"{where}.byte must be 0..63, '0x3F' style or 'turbo', got {v!r}") from None
+    if isinstance(v, bool) or not isinstance(v, int) or v not in axis_bytes(axis):
+        raise UserError(f"{where}.byte must be 0..63{' or turbo' if axis == 'pan' else ''}, got {v!r}")
+    return v
+
+
+def _num_or_nan(v, where: str) -> float:
+    if v is None:
+        return float("nan")
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise UserError(f"{where} must be a number or null, got {v!r}")
+    return float(v)

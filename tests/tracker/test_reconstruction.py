@@ -1,0 +1,107 @@
+import math
+
+import numpy as np
+import pytest
+
+from fakes import FakeHead
+from foveatrack.control import HeadCommand
+from foveatrack.detection import Detection, wrap_deg
+from foveatrack.reconstruction import Reconstructor, rotation_matrix
+from foveatrack.speed_table import AxisTable, SpeedEntry, SpeedTable
+
+
+def test_rotation_convention_hand_cases():
+    assert np.allclose(rotation_matrix(0, 0), np.eye(3))
+    assert np.allclose(rotation_matrix(90, 0) @ [1, 0, 0], [0, 1, 0])       # pan left 90: X -> +Y
+    assert np.allclose(rotation_matrix(0, 90) @ [1, 0, 0], [0, 0, 1])       # tilt up 90: X -> +Z
+    p, t = math.radians(30), math.radians(20)
+    assert np.allclose(rotation_matrix(30, 20) @ [1, 0, 0],
+                       [math.cos(t) * math.cos(p), math.cos(t) * math.sin(p), math.sin(t)])
+    assert np.allclose(rotation_matrix(30, 20) @ [0, 1, 0], [-math.sin(p), math.cos(p), 0])  # tilt axis horizontal
+
+
+def test_integration_matches_fake_head_with_dead_time_and_accel():
+    table = SpeedTable.nominal()
+    sp = lambda b: table.pan.speed_deg_s(b)   # noqa: E731
+    st = lambda b: table.tilt.speed_deg_s(b)  # noqa: E731
+    head = FakeHead(sp, st, dead_time_s=0.05, accel_deg_s2=40.0, pan0=170.0, tilt0=5.0)
+    rec = Reconstructor(table, pan0_deg=170.0, tilt0_deg=5.0, latency_s=0.01, dead_time_s=0.05,
+                        accel_deg_s2=40.0)
+    rng = np.random.default_rng(3)
+    t = 0.0
+    for _ in range(200):
+        cmd = HeadCommand(int(rng.integers(-1, 2)), 0, int(rng.integers(-1, 2)), 0)
+        cmd = HeadCommand(cmd.pan_dir, int(rng.integers(0, 64)) if cmd.pan_dir else 0,
+                          cmd.tilt_dir, int(rng.integers(0, 64)) if cmd.tilt_dir else 0)
+        rec.on_command(t, cmd)
+        head.command(t + 0.01, cmd)      # arrives after the link latency
+        t += float(rng.uniform(0.05, 0.5))
+        head.advance(t)
+        p, ti, spn, stn = rec.angles_at(t)
+        assert wrap_deg(p - head.ang["pan"]) == pytest.approx(0.0, abs=1e-9)
+        assert ti == pytest.approx(min(max(head.ang["tilt"], -90), 90), abs=1e-9)
+        assert spn > 0 or t < 0.1
+
+
+def test_uncertainty_bounds_drift_over_hours_and_rotation_stays_orthonormal():
+    # true head speeds differ from the table by per-byte errors drawn from the table's sigma
+    rng = np.random.default_rng(7)
+    rel = 0.01
+    table = SpeedTable(
+        AxisTable("pan", tuple(SpeedEntry(b, 0.2 * (b + 1), rel * 0.2 * (b + 1)) for b in range(64))),
+        AxisTable("tilt", tuple(SpeedEntry(b, 0.05 * (b + 1), rel * 0.05 * (b + 1)) for b in range(64))))
+    errs_p = rng.normal(0, rel, 64)
+    errs_t = rng.normal(0, rel, 64)
+    head = FakeHead(lambda b: table.pan.speed_deg_s(b) * (1 + errs_p[b]),
+                    lambda b: table.tilt.speed_deg_s(b) * (1 + errs_t[b]))
+    rec = Reconstructor(table, timing_sigma_s=0.0)
+    t, hours = 0.0, 3.0
+    # a biased random command sequence: the pan keeps turning (wraps many times)
+    zs = []
+    while t < hours * 3600:
+        b = int(rng.integers(0, 64))
+        pd = 1 if rng.random() < 0.7 else -1
+        td = int(rng.choice([-1, 1]))
+        cmd = HeadCommand(pd, b, td, int(rng.integers(0, 64)))
+        rec.on_command(t, cmd)
+        head.command(t, cmd)
+        t += 2.0
+        head.advance(t)
+        p, ti, s_p, s_t = rec.angles_at(t)
+        zs.append((wrap_deg(p - head.ang["pan"]) / s_p, (ti - head.ang["tilt"]) / s_t))
+        R = rotation_matrix(p, ti)
+        assert np.allclose(R.T @ R, np.eye(3), atol=1e-12) and abs(np.linalg.det(R) - 1) < 1e-12
+    zs = np.array(zs)
+    assert head.ang["pan"] > 10 * 360          # it really turned round many times
+    assert np.abs(zs).max() < 4.0               # drift bounded by the stated uncertainty
+
+
+def test_stated_uncertainty_is_calibrated_across_units():
+    # many units (independent per-byte speed errors), same commands: final error / sigma ~ N(0, 1)
+    rel = 0.02
+    table = SpeedTable(
+        AxisTable("pan", tuple(SpeedEntry(b, 0.2 * (b + 1), rel * 0.2 * (b + 1)) for b in range(64))),
+        AxisTable("tilt", tuple(SpeedEntry(b, 0.05 * (b + 1), rel * 0.05 * (b + 1)) for b in range(64))))
+    rng = np.random.default_rng(11)
+    cmds = [HeadCommand(int(rng.choice([-1, 1])), int(rng.integers(0, 64)), 0, 0) for _ in range(200)]
+    z = []
+    for unit in range(40):
+        e = rng.normal(0, rel, 64)
+        head = FakeHead(lambda b: table.pan.speed_deg_s(b) * (1 + e[b]), table.tilt.speed_deg_s)
+        rec = Reconstructor(table, timing_sigma_s=0.0)
+        for i, c in enumerate(cmds):
+            rec.on_command(i * 1.0, c)
+            head.command(i * 1.0, c)
+        head.advance(len(cmds) * 1.0)
+        p, _, s_p, _ = rec.angles_at(len(cmds) * 1.0)
+        z.append(wrap_deg(p - head.ang["pan"]) / s_p)
+    assert 0.6 < np.std(z) < 1.5 and abs(np.mean(z)) < 0.6
+
+
+def test_to_world_places_a_detection():
+    table = SpeedTable.nominal()
+    rec = Reconstructor(table, pan0_deg=90.0, tilt0_deg=0.0, sigma0_deg=0.1)
+    det = Detection(0.0, np.array([10.0, 0.0, 0.0]), 5, 0.0, 0.0, 10.0)
+    w, s = rec.to_world(det)
+    assert np.allclose(w, [0, 10, 0])
+    assert s == pytest.approx(math.hypot(10 * math.radians(0.1), 10 * math.radians(0.1)))
