@@ -91,6 +91,11 @@ class VirtualHeadServer:
         self._t0 = self.clock()
         return self.link_path or self.path
 
+    @property
+    def clock_zero(self) -> float:
+        """The ``clock()`` reading that is virtual time 0 (truth ``t_s`` = clock() - this)."""
+        return self._t0
+
     def now(self) -> float:
         """Virtual time of the head [s]."""
         return self.clock() - self._t0

@@ -89,7 +89,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
             raise UserError(f"cannot create the pty or --link {args.link}: {exc}") from exc
         print(path, flush=True)
         print(f"virtual PTS-303H ({args.family}, unit {args.unit_seed}, address {args.address}, "
-              f"{args.baud} baud, feedback {args.feedback}) on {server.path}; Ctrl-C stops",
+              f"{args.baud} baud, feedback {args.feedback}) on {server.path}; truth t_s = 0 at "
+              f"time.monotonic() = {server.clock_zero:.6f}; Ctrl-C stops",
               file=sys.stderr, flush=True)
         try:
             server.run(lambda: stop["flag"])
