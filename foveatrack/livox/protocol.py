@@ -400,38 +400,42 @@ def decode_packets_array(arr: np.ndarray, point_rate_hz: float, keep_no_return: 
             ts[utc] = _utc_ns(raw[utc])
         except (ValueError, OverflowError) as exc:
             raise PacketError("data_bad_timestamp", str(exc)) from None
-    t = ts[:, None] + point_offsets_ns(n_pt, point_rate_hz)[None, :]
-    if data_type in (0, 2):
-        xyz = np.stack([pts["x"], pts["y"], pts["z"]], axis=-1).reshape(-1, 3) * 1e-3
-        refl = pts["reflectivity"].reshape(-1)
-        tag = pts["tag"].reshape(-1) if data_type == 2 else np.zeros(n_pk * n_pt, np.uint8)
-        t = t.reshape(-1)
+    t = (ts[:, None] + point_offsets_ns(n_pt, point_rate_hz)[None, :]).reshape(-1)
+    pdt = POINT_DTYPES[data_type]
+    if data_type in (0, 2, 4):
+        # x, y, z (and x2, y2, z2) as one strided int32 view of the packed bytes: a single copy
+        per = 2 if data_type == 4 else 1
+        step = pdt.itemsize // per
+        mm = np.ndarray(
+            (n_pk, n_pt, per, 3), "<i4", buffer=arr, offset=HEADER_LEN, strides=(arr.dtype.itemsize, pdt.itemsize, step, 4)
+        ).reshape(-1, 3)
+        raw = np.ndarray((n_pk, n_pt, per, step), "u1", buffer=arr, offset=HEADER_LEN,
+                         strides=(arr.dtype.itemsize, pdt.itemsize, step, 1))
+        refl = raw[..., 12].reshape(-1)
+        tag = raw[..., 13].reshape(-1) if data_type != 0 else np.zeros(n_pk * n_pt, np.uint8)
+        if per == 2:
+            t = np.repeat(t, 2)
+        ok = None if keep_no_return else (mm[:, 0] | mm[:, 1] | mm[:, 2]) != 0
+        if ok is not None:
+            keep = np.flatnonzero(ok)  # take() with indices is ~5x faster than a 2-D boolean mask
+            mm, refl, tag, t = mm.take(keep, axis=0), refl.take(keep), tag.take(keep), t.take(keep)
+        xyz = mm * 1e-3
     elif data_type in (1, 3):
-        r = pts["depth"].reshape(-1) * 1e-3
-        th = np.deg2rad(pts["zenith"].reshape(-1) * 0.01)
-        ph = np.deg2rad(pts["azimuth"].reshape(-1) * 0.01)
-        st = np.sin(th)
-        xyz = np.stack([r * st * np.cos(ph), r * st * np.sin(ph), r * np.cos(th)], axis=-1)
-        xyz[r == 0] = 0.0
+        depth = pts["depth"].reshape(-1)
         refl = pts["reflectivity"].reshape(-1)
         tag = pts["tag"].reshape(-1) if data_type == 3 else np.zeros(n_pk * n_pt, np.uint8)
-        t = t.reshape(-1)
-    elif data_type == 4:
-        # interleave the two returns of each slot: (packet, slot, return)
-        xyz = np.stack(
-            [np.stack([pts["x1"], pts["y1"], pts["z1"]], -1), np.stack([pts["x2"], pts["y2"], pts["z2"]], -1)], axis=2
-        ).reshape(-1, 3) * 1e-3
-        refl = np.stack([pts["reflectivity1"], pts["reflectivity2"]], axis=2).reshape(-1)
-        tag = np.stack([pts["tag1"], pts["tag2"]], axis=2).reshape(-1)
-        t = np.repeat(t.reshape(-1), 2)
+        zen, azi = pts["zenith"].reshape(-1), pts["azimuth"].reshape(-1)
+        ok = None if keep_no_return else depth != 0
+        if ok is not None:
+            depth, refl, tag, t, zen, azi = depth[ok], refl[ok], tag[ok], t[ok], zen[ok], azi[ok]
+        r = depth * 1e-3
+        th = np.deg2rad(zen * 0.01)
+        ph = np.deg2rad(azi * 0.01)
+        st = np.sin(th)
+        xyz = np.stack([r * st * np.cos(ph), r * st * np.sin(ph), r * np.cos(th)], axis=-1)
     else:
         raise ValueError(f"data type {data_type} carries no points")
-    n_removed = 0
-    if not keep_no_return:
-        ok = np.any(xyz != 0.0, axis=1)
-        n_removed = int(ok.size - np.count_nonzero(ok))
-        if n_removed:
-            xyz, refl, t, tag = xyz[ok], refl[ok], t[ok], tag[ok]
+    n_removed = 0 if ok is None else int(ok.size - np.count_nonzero(ok))
     return PointBatch(xyz, np.ascontiguousarray(refl), np.ascontiguousarray(t), np.ascontiguousarray(tag)), n_removed
 
 
