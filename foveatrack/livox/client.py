@@ -70,7 +70,8 @@ class LivoxClient:
     clock : callable returning monotonic seconds (tests may pass a fake)
 
     Attributes: ``state`` (discovering / handshaking / connected), ``sampling`` (acknowledged),
-    ``counters`` (packets, points, foreign_source, dropped_<reason>, link_lost, ...), ``dropped``.
+    ``counters`` (flat dict: packets, points, foreign_source, dropped_<reason>, link_lost, ...),
+    ``dropped`` (Counter by reason), ``device_broadcast_code``, ``device_type``.
     """
 
     def __init__(
@@ -110,7 +111,7 @@ class LivoxClient:
         self.imu_port = imu_port
         self._fixed_rate = point_rate_hz
         self.decoder = P.DataDecoder(point_rate_hz or 240_000.0, keep_no_return)
-        self.counters: Counter = Counter()
+        self._counters: Counter = Counter()
 
         self._sel = selectors.DefaultSelector()
         self._data = _udp_socket(self.host_ip, data_port, rcvbuf=8 << 20)
@@ -167,21 +168,25 @@ class LivoxClient:
     def dropped(self) -> Counter:
         """Datagrams dropped, by reason (control and data reasons and ``foreign_source``)."""
         out = Counter(self.decoder.dropped)
-        for k, v in self.counters.items():
+        for k, v in self._counters.items():
             if k.startswith("ctrl_") or k == "foreign_source":
                 out[k] += v
         return out
 
-    def stats(self) -> dict:
-        """One flat dict of counters: packets, points, imu_packets, no_return_points, dropped_*, ..."""
-        d = dict(self.counters)
+    @property
+    def counters(self) -> dict:
+        """All counters in one flat dict: packets, points, no_return_points, imu_packets,
+        foreign_source, dropped_<reason>, dropped_total, handshakes, heartbeat_acks, link_lost, ..."""
+        d = dict(self._counters)
         d.update(self.decoder.counters)
         for k, v in self.dropped.items():
             d[f"dropped_{k}"] = v
         d["dropped_total"] = sum(self.dropped.values())
-        d["state"] = self.state
-        d["sampling"] = self.sampling
         return d
+
+    def stats(self) -> dict:
+        """:attr:`counters` plus ``state`` and ``sampling``."""
+        return {**self.counters, "state": self.state, "sampling": self.sampling}
 
     # ------------------------------------------------------------------ commands
 
@@ -198,9 +203,9 @@ class LivoxClient:
             self._pending.pop(next(iter(self._pending)))
         try:
             self._cmd.sendto(P.make_cmd(cmd_id, seq, payload), (self.sensor_ip, self.sensor_cmd_port))
-            self.counters["cmd_sent"] += 1
+            self._counters["cmd_sent"] += 1
         except OSError:
-            self.counters["cmd_send_errors"] += 1
+            self._counters["cmd_send_errors"] += 1
 
     def _send_handshake(self, now: float) -> None:
         self._last_handshake_tx = now
@@ -264,10 +269,10 @@ class LivoxClient:
             except (BlockingIOError, InterruptedError):
                 return
             except OSError:
-                self.counters["recv_errors"] += 1
+                self._counters["recv_errors"] += 1
                 return
             if addr[0] != self.sensor_ip:
-                self.counters["foreign_source"] += 1
+                self._counters["foreign_source"] += 1
                 continue
             if kind == "data":
                 data.append(buf)
@@ -277,19 +282,19 @@ class LivoxClient:
     def _on_control(self, buf: bytes, addr) -> None:
         frame, reason = P.parse_control_safe(buf)
         if frame is None:
-            self.counters[reason] += 1
+            self._counters[reason] += 1
             return
         now = self._clock()
         if frame.cmd_type == P.CMD_TYPE_MSG and frame.key == (P.CMD_SET_GENERAL, P.CMD_ID_BROADCAST):
             try:
                 code, dev_type = P.parse_broadcast(frame.payload)
             except P.PacketError as exc:
-                self.counters[exc.reason] += 1
+                self._counters[exc.reason] += 1
                 return
             if self.broadcast_code and code != self.broadcast_code:
-                self.counters["other_broadcast_code"] += 1
+                self._counters["other_broadcast_code"] += 1
                 return
-            self.counters["broadcasts"] += 1
+            self._counters["broadcasts"] += 1
             self.device_broadcast_code, self.device_type = code, dev_type
             if self._fixed_rate is None:
                 self.decoder.point_rate_hz = float(P.DEVICE_POINT_RATE_HZ.get(dev_type, 240_000))
@@ -300,27 +305,27 @@ class LivoxClient:
                 self._send_handshake(now)
             return
         if frame.cmd_type != P.CMD_TYPE_ACK:
-            self.counters["ctrl_other"] += 1
+            self._counters["msgs_ignored"] += 1
             return
         pending = self._pending.pop(frame.seq, None)
         if pending is None or pending[0] != frame.cmd_id:
-            self.counters["ctrl_unmatched_ack"] += 1
+            self._counters["acks_unmatched"] += 1
             return
         self._last_rx = now
         if P.ret_code(frame.payload) != 0:
-            self.counters["nacks"] += 1
+            self._counters["nacks"] += 1
             return
         if frame.cmd_id == P.CMD_ID_HANDSHAKE:
             if self.state != CONNECTED:
                 self.state = CONNECTED
-                self.counters["handshakes"] += 1
+                self._counters["handshakes"] += 1
                 self._last_heartbeat_tx = now
                 self.sampling = False
                 if self._want_sampling:
                     self._last_sampling_tx = now
                     self._send_cmd(P.CMD_ID_SAMPLING, P.sampling_payload(True))
         elif frame.cmd_id == P.CMD_ID_HEARTBEAT:
-            self.counters["heartbeat_acks"] += 1
+            self._counters["heartbeat_acks"] += 1
         elif frame.cmd_id == P.CMD_ID_SAMPLING:
             self.sampling = pending[1] == P.sampling_payload(True)
 
@@ -329,7 +334,7 @@ class LivoxClient:
             self._send_handshake(now)
         elif self.state == CONNECTED:
             if now - self._last_rx > self.link_timeout_s:
-                self.counters["link_lost"] += 1
+                self._counters["link_lost"] += 1
                 self.sampling = False
                 self._pending.clear()
                 self.state = HANDSHAKING if self._fixed_sensor_port else DISCOVERING

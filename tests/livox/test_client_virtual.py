@@ -66,7 +66,7 @@ def check_against_truth(b: PointBatch):
     return i
 
 
-@pytest.mark.parametrize("packet_type", [0, 2])
+@pytest.mark.parametrize("packet_type", [0, 2, 4])
 def test_discovery_handshake_sampling_and_points(packet_type):
     client, lidar = make_pair(packet_type=packet_type)
     with client, lidar:
@@ -184,3 +184,13 @@ def test_subprocess_entry_point_serves_and_stops_on_sigterm():
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_stream_clock_follows_time_scale():
+    lidar = VirtualLivox(analytic_source, cmd_port=0, broadcast_addr=("127.0.0.1", 9), time_scale=2.5, t_start_ns=1000)
+    try:
+        assert lidar.stream_time_ns(123.0) == 1000  # not started: the start time
+        lidar._mono0 = 100.0
+        assert lidar.stream_time_ns(100.4) == 1000 + 1_000_000_000
+    finally:
+        lidar._close()
