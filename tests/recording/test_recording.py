@@ -223,3 +223,20 @@ def test_export_trajectory_csv_and_npz(tmp_path):
     np.testing.assert_allclose(z["head.pan_deg"], [0.0, 0.1, 0.2, 0.3])
     np.testing.assert_array_equal(z["head.t_ns"], [f[0] + 3000 for f in frames])
     assert np.isnan(z["detections.xyz_m[0]"][1])
+
+
+def test_damaged_byte_stops_reading_at_the_damaged_chunk(tmp_path):
+    p = tmp_path / "r.mcap"
+    with RecordingWriter(p, {}) as w:
+        for k in range(3):
+            w.write_points(10 + k, k, np.full((50, 3), float(k)), [10 + k] * 50, np.zeros(50))
+            w.flush()
+            if k == 1:
+                start_last = p.stat().st_size
+    data = bytearray(p.read_bytes())
+    data[start_last + 80] ^= 0xFF  # inside the third chunk's compressed records
+    q = tmp_path / "bad.mcap"
+    q.write_bytes(data)
+    r = RecordingReader(q)
+    assert [f.frame_index for f in r.points()] == [0, 1]
+    assert not r.complete and "damaged" in r.problem
