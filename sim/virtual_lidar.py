@@ -34,6 +34,7 @@ from typing import Callable
 
 import numpy as np
 
+from foveatrack.errors import UserError
 from foveatrack.livox import protocol as P
 
 Source = Callable[[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]
@@ -92,12 +93,17 @@ class VirtualLivox:
         self.counters: Counter = Counter()
 
         self._cmd = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._cmd.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-        self._cmd.bind((bind_ip, cmd_port))
-        self._cmd.setblocking(False)
         self._data = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._data.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4 << 20)
-        self._data.bind((bind_ip, 0))
+        try:
+            self._cmd.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+            self._cmd.bind((bind_ip, cmd_port))
+            self._data.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4 << 20)
+            self._data.bind((bind_ip, 0))
+        except OSError as exc:
+            self._cmd.close()
+            self._data.close()
+            raise UserError(f"virtual lidar cannot bind UDP {bind_ip}:{cmd_port}: {exc.strerror or exc}") from None
+        self._cmd.setblocking(False)
         self._sel = selectors.DefaultSelector()
         self._sel.register(self._cmd, selectors.EVENT_READ)
 

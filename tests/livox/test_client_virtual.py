@@ -194,3 +194,9 @@ def test_stream_clock_follows_time_scale():
         assert lidar.stream_time_ns(100.4) == 1000 + 1_000_000_000
     finally:
         lidar._close()
+
+
+def test_port_in_use_is_a_user_error():
+    with VirtualLivox(analytic_source, cmd_port=0, broadcast_addr=("127.0.0.1", 9)) as a:
+        with pytest.raises(UserError, match=f"cannot bind UDP 127.0.0.1:{a.cmd_port}"):
+            VirtualLivox(analytic_source, cmd_port=a.cmd_port)
