@@ -1,0 +1,242 @@
+"""Recordings: round trip, crash safety (kill -9, every truncation offset), clear errors, export."""
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from foveatrack.errors import UserError
+from foveatrack.recording import (
+    RecordingReader,
+    RecordingWriter,
+    export_points,
+    export_trajectory,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+META = {"scene_toml": "[scene]\nname = 'x'\n", "seed": 42, "params": {"deadband_deg": 0.5}}
+
+
+def frame(rng, k, n):
+    t = 1_000_000_000 + k * 100_000_000
+    xyz = rng.normal(0, 50, (n, 3))
+    tp = t - 100_000_000 + np.sort(rng.integers(0, 100_000_000, n))
+    refl = rng.integers(0, 256, n).astype(np.uint8)
+    return t, xyz, tp, refl
+
+
+def write_sample(path, n_frames=5, n_points=200, **kw):
+    rng = np.random.default_rng(0)
+    frames = []
+    with RecordingWriter(path, META, **kw) as w:
+        for k in range(n_frames):
+            t, xyz, tp, refl = frame(rng, k, n_points)
+            frames.append((t, xyz, tp, refl))
+            w.write_points(t, k, xyz, tp, refl)
+            w.write_detection(t + 1000, k, k % 2 == 0, xyz_m=[1.0, 2.0, k] if k % 2 == 0 else None, n_points=3)
+            w.write_command(t + 2000, b"\xff\x01\x00\x04\x20\x00\x25", note="left")
+            w.write_head_estimate(t + 3000, pan_deg=0.1 * k, tilt_deg=-0.2 * k)
+            w.write_truth(t, target_xyz_m=[100.0, 1.0, 2.0], pan_deg=0.0)
+            w.write_metric(t + 4000, "proc_ms", 1.5 + k)
+    return frames
+
+
+def test_round_trip_is_exact(tmp_path):
+    p = tmp_path / "r.mcap"
+    frames = write_sample(p)
+    r = RecordingReader(p)
+    assert r.meta == META
+    assert r.info["format_version"] == "1" and "numpy_version" in r.info
+    got = list(r.points())
+    assert r.complete and r.problem is None
+    assert len(got) == len(frames)
+    for f, (t, xyz, tp, refl) in zip(got, frames):
+        assert f.t_ns == t
+        np.testing.assert_array_equal(f.xyz, xyz)  # float64: bit-exact
+        np.testing.assert_array_equal(f.t_ns_points, tp)
+        np.testing.assert_array_equal(f.reflectivity, refl)
+    assert [f.frame_index for f in got] == list(range(5))
+    dets = r.records("detections")
+    assert dets[0]["xyz_m"] == [1.0, 2.0, 0.0] and dets[1]["xyz_m"] is None and dets[1]["detected"] is False
+    cmd = r.records("commands")[0]
+    assert bytes.fromhex(cmd["raw_hex"]) == b"\xff\x01\x00\x04\x20\x00\x25" and cmd["note"] == "left"
+    assert cmd["t_ns"] == frames[0][0] + 2000
+    assert r.channels() == {"points": 5, "detections": 5, "commands": 5, "head": 5, "truth": 5, "metrics": 5}
+    # messages come back in the order they were written
+    assert [m.channel for m in r.messages()][:6] == ["points", "detections", "commands", "head", "truth", "metrics"]
+
+
+def test_float32_points_and_zstd(tmp_path):
+    p = tmp_path / "r.mcap"
+    frames = write_sample(p, points_dtype="float32", compression="zstd")
+    got = list(RecordingReader(p).points())
+    for f, (_, xyz, tp, _) in zip(got, frames):
+        np.testing.assert_allclose(f.xyz, xyz, rtol=1e-7, atol=1e-5)
+        np.testing.assert_array_equal(f.t_ns_points, tp)
+
+
+def test_existing_file_is_not_overwritten(tmp_path):
+    p = tmp_path / "r.mcap"
+    p.write_text("precious")
+    with pytest.raises(UserError, match="already exists"):
+        RecordingWriter(p, {})
+    assert p.read_text() == "precious"
+    RecordingWriter(p, {}, overwrite=True).close()
+    assert RecordingReader(p).meta == {}
+
+
+def test_every_truncation_reads_a_prefix_of_whole_frames(tmp_path):
+    p = tmp_path / "full.mcap"
+    with RecordingWriter(p, {"seed": 3}) as w:  # three chunks of one frame + its detection
+        for k in range(3):
+            w.write_points(10 + k, k, np.full((2, 3), k), [10 + k] * 2, [7, 8])
+            w.write_detection(11 + k, k, True, xyz_m=[k, 0, 0])
+        w.flush()
+        size_before_close = p.stat().st_size
+    data = p.read_bytes()
+    full = [(m.channel, m.t_ns, m.record if m.channel != "points" else m.record.t_ns)
+            for m in RecordingReader(p).messages()]
+    cut_path = tmp_path / "cut.mcap"
+    last_n = 0
+    meta_end = incomplete_upto = None
+    for cut in range(len(data) + 1):
+        cut_path.write_bytes(data[:cut])
+        try:
+            r = RecordingReader(cut_path)
+        except UserError as exc:
+            assert str(cut_path) in str(exc)
+            assert meta_end is None, f"metadata readable at {meta_end} but not at {cut}"
+            continue
+        if meta_end is None:
+            meta_end = cut
+        got = [(m.channel, m.t_ns, m.record if m.channel != "points" else m.record.t_ns) for m in r.messages()]
+        assert got == full[: len(got)], cut
+        assert len(got) >= last_n  # more file never gives fewer messages
+        last_n = len(got)
+        # whole frames only: a points message always comes with everything written after it
+        n_points = sum(1 for g in got if g[0] == "points")
+        assert len(got) == 2 * n_points, cut
+        if not r.complete:
+            assert r.problem and "byte" in r.problem
+            incomplete_upto = cut
+    assert last_n == len(full) and r.complete
+    assert incomplete_upto >= size_before_close  # only close() marks the data complete
+    assert meta_end is not None and meta_end < 400
+
+
+WRITER_SCRIPT = textwrap.dedent(
+    """
+    import sys, numpy as np
+    from foveatrack.recording import RecordingWriter
+    w = RecordingWriter(sys.argv[1], {"seed": 1})
+    rng = np.random.default_rng(0)
+    k = 0
+    while True:
+        xyz = rng.normal(0, 10, (2000, 3))
+        t = 1_000 + k * 100_000_000
+        w.write_points(t, k, xyz, np.full(2000, t), np.zeros(2000, np.uint8))
+        w.write_detection(t, k, True, xyz_m=xyz.mean(0))
+        w.flush()
+        print(k, flush=True)
+        k += 1
+    """
+)
+
+
+def test_readable_after_kill_9(tmp_path):
+    p = tmp_path / "killed.mcap"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, "-c", WRITER_SCRIPT, str(p)], stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        done = -1
+        while done < 8:
+            done = int(proc.stdout.readline())
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(5)
+    r = RecordingReader(p)
+    frames = list(r.points())
+    dets = r.records("detections")
+    assert not r.complete
+    assert len(frames) >= done + 1  # every frame reported flushed is there
+    assert [f.frame_index for f in frames] == list(range(len(frames)))
+    assert len(dets) == len(frames)
+    for f, d in zip(frames, dets):
+        np.testing.assert_allclose(d["xyz_m"], f.xyz.mean(0))
+
+
+def test_non_recordings_give_clear_errors(tmp_path):
+    missing = tmp_path / "nope.mcap"
+    with pytest.raises(UserError, match="nope.mcap.*does not exist"):
+        RecordingReader(missing)
+    txt = tmp_path / "notes.txt"
+    txt.write_text("hello, I am not a recording\n")
+    with pytest.raises(UserError, match=r"notes.txt is not a foveatrack recording.*MCAP magic"):
+        RecordingReader(txt)
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    with pytest.raises(UserError, match="empty"):
+        RecordingReader(empty)
+    from mcap.writer import Writer
+
+    other = tmp_path / "other.mcap"
+    with open(other, "wb") as fh:
+        w = Writer(fh)
+        w.start()
+        w.add_metadata("something", {"a": "b"})
+        w.finish()
+    with pytest.raises(UserError, match="other.mcap is not a foveatrack recording"):
+        RecordingReader(other)
+
+
+def test_export_points_csv_and_npz(tmp_path):
+    p = tmp_path / "r.mcap"
+    frames = write_sample(p, n_frames=3, n_points=10)
+    assert export_points(p, tmp_path / "pts.npz") == 30
+    z = np.load(tmp_path / "pts.npz")
+    np.testing.assert_array_equal(z["x_m"], np.concatenate([f[1][:, 0] for f in frames]))
+    np.testing.assert_array_equal(z["t_ns"], np.concatenate([f[2] for f in frames]))
+    np.testing.assert_array_equal(z["frame_index"], np.repeat([0, 1, 2], 10))
+    assert export_points(p, tmp_path / "pts.csv") == 30
+    rows = list(csv.DictReader(open(tmp_path / "pts.csv")))
+    assert len(rows) == 30 and float(rows[3]["y_m"]) == frames[0][1][3, 1]
+    with pytest.raises(UserError, match=r"\.csv or \.npz"):
+        export_points(p, tmp_path / "pts.txt")
+
+
+def test_export_trajectory_csv_and_npz(tmp_path):
+    p = tmp_path / "r.mcap"
+    frames = write_sample(p, n_frames=4, n_points=5)
+    n = export_trajectory(p, tmp_path / "traj.csv")
+    assert n == 16  # detections, head, truth, commands
+    rows = list(csv.DictReader(open(tmp_path / "traj.csv")))
+    det = [r for r in rows if r["channel"] == "detections"]
+    assert det[2]["xyz_m[2]"] == "2.0" and det[1]["xyz_m[0]"] == ""
+    export_trajectory(p, tmp_path / "traj.npz", channels=("head", "detections"))
+    z = np.load(tmp_path / "traj.npz")
+    np.testing.assert_allclose(z["head.pan_deg"], [0.0, 0.1, 0.2, 0.3])
+    np.testing.assert_array_equal(z["head.t_ns"], [f[0] + 3000 for f in frames])
+    assert np.isnan(z["detections.xyz_m[0]"][1])
+
+
+def test_damaged_byte_stops_reading_at_the_damaged_chunk(tmp_path):
+    p = tmp_path / "r.mcap"
+    with RecordingWriter(p, {}) as w:
+        for k in range(3):
+            w.write_points(10 + k, k, np.full((50, 3), float(k)), [10 + k] * 50, np.zeros(50))
+            w.flush()
+            if k == 1:
+                start_last = p.stat().st_size
+    data = bytearray(p.read_bytes())
+    data[start_last + 80] ^= 0xFF  # inside the third chunk's compressed records
+    q = tmp_path / "bad.mcap"
+    q.write_bytes(data)
+    r = RecordingReader(q)
+    assert [f.frame_index for f in r.points()] == [0, 1]
+    assert not r.complete and "damaged" in r.problem
