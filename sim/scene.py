@@ -1,0 +1,307 @@
+"""Scene files: TOML loaded into frozen dataclasses, validated on load.
+
+A scene lists everything a closed-loop run simulates, and nothing else: an effect that is not in
+``[scene] effects`` draws no random numbers and costs no time.  Every error names the file, the key
+and what is allowed.  Tables::
+
+    [scene]      name, duration_s, seed, effects = [...]
+    [effects]    parameters of the listed effects (optional; documented defaults)
+    [lidar]      preset = "mid40" | "prototype" | "horizon" (or custom optics: point_rate_hz,
+                 prisms, ...), model = "exact" | "paraxial"
+    [gimbal]     family, unit_seed, baud, feedback, address, pan0_deg, tilt0_deg,
+                 frozen (true: the head never moves; the tracker still runs),
+                 speed_table = "truth" | "nominal" | "path/to/table.json", send_delay_s
+    [[target]]   geometry = "quadrotor" | "sphere" | "box", span_m / radius_m / size_m,
+                 reflectivity, [target.trajectory] type = straight | circle | figure8 |
+                 waypoints | manual (+ its parameters)
+    [[background]] type = ground | wall | room | box (+ its parameters), reflectivity
+    [tracker]    foveatrack.tracker.TrackerConfig keys
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
+from foveatrack.errors import UserError
+
+# Effects a scene can ask for, with their parameters and defaults (sources in the docstring of
+# sim.effects).  Head/link effects act in gimbal/ and sim/virtual_uart.py.
+EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
+    "range_noise": {"range_noise_m": 0.02},
+    "angular_noise": {"angular_noise_deg": 0.03},
+    "return_probability": {"range_80pct_m": 260.0},
+    "beam_footprint": {"footprint_subrays": 7},
+    "sunlight": {"sunlight_rate": 5e-5, "sunlight_max_range_m": 60.0},
+    "motor_speed_noise": {"speed_noise_frac": 0.01, "speed_noise_segment_s": 0.01},
+    "dropouts": {"dropout_rate": 0.01},
+    "uart_bit_errors": {"uart_bit_error_rate": 1e-4},
+    "uart_drops": {"uart_drop_rate": 1e-3},
+    "uart_echo": {},
+    "head_ripple": {},
+}
+TRAJECTORY_TYPES = ("straight", "circle", "figure8", "waypoints", "manual")
+GEOMETRIES = ("quadrotor", "sphere", "box")
+BACKGROUND_TYPES = ("ground", "wall", "room", "box")
+
+
+@dataclass(frozen=True)
+class TargetSpec:
+    body: Any  # sim.world.bodies.Body
+    trajectory: Any  # a sim.world.trajectories object
+
+
+@dataclass(frozen=True)
+class GimbalSpec:
+    family: str = "pts-303"
+    unit_seed: int = 0
+    baud: int = 9600
+    feedback: str = "none"
+    address: int = 1
+    pan0_deg: float = 0.0
+    tilt0_deg: float = 0.0
+    frozen: bool = False
+    speed_table: str = "truth"
+    send_delay_s: float = 0.002
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    path: str
+    text: str
+    duration_s: float
+    seed: int
+    effects: frozenset[str]
+    effect_params: Mapping[str, Any]
+    optics: Any  # RisleyOptics
+    scan_model: str
+    gimbal: GimbalSpec
+    targets: tuple[TargetSpec, ...]
+    background_prims: np.ndarray = field(repr=False)
+    background_reflectivity: np.ndarray = field(repr=False)
+    tracker: Any = None  # TrackerConfig
+    tracker_table: Mapping[str, Any] = field(default_factory=dict)
+
+    def has(self, effect: str) -> bool:
+        return effect in self.effects
+
+    def param(self, key: str):
+        return self.effect_params[key]
+
+
+def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None) -> Scene:
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise UserError(f"{path}: no such scene file (shipped scenes are in scenes/)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{path}: cannot read the scene ({exc})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{path}: not valid TOML ({exc})") from None
+    return scene_from_mapping(data, str(path), text)
+
+
+def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str = "") -> Scene:
+    from foveatrack.tracker import TrackerConfig
+
+    check_keys(data, ["scene", "effects", "lidar", "gimbal", "target", "background", "tracker"], where)
+    sc = data.get("scene", {})
+    w = f"{where} [scene]"
+    check_keys(sc, ["name", "duration_s", "seed", "effects", "description"], w)
+    duration = as_float(sc.get("duration_s", 10.0), "duration_s", w, lo=0, lo_open=True, hi=86400 * 2)
+    seed = sc.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise UserError(f"{w}: seed must be an integer >= 0, got {seed!r}")
+    effects = sc.get("effects", [])
+    if not isinstance(effects, list):
+        raise UserError(f"{w}: effects must be a list of names from {sorted(EFFECT_DEFAULTS)}")
+    for e in effects:
+        if e not in EFFECT_DEFAULTS:
+            raise UserError(f"{w}: unknown effect {e!r}; allowed: {', '.join(sorted(EFFECT_DEFAULTS))}")
+    params: dict[str, Any] = {}
+    for e in effects:
+        params.update(EFFECT_DEFAULTS[e])
+    ep = data.get("effects", {})
+    we = f"{where} [effects]"
+    check_keys(ep, sorted({k for e in EFFECT_DEFAULTS for k in EFFECT_DEFAULTS[e]}), we)
+    for k, v in ep.items():
+        owner = next(e for e in EFFECT_DEFAULTS if k in EFFECT_DEFAULTS[e])
+        if owner not in effects:
+            raise UserError(f"{we}: {k} belongs to effect {owner!r}, which [scene] effects does not list")
+        if k == "footprint_subrays":
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 64:
+                raise UserError(f"{we}: footprint_subrays must be an integer in [1, 64], got {v!r}")
+            params[k] = v
+        else:
+            params[k] = as_float(v, k, we, lo=0)
+
+    optics, scan_model = _lidar(data.get("lidar", {"preset": "mid40"}), f"{where} [lidar]")
+    gimbal = _gimbal(data.get("gimbal", {}), f"{where} [gimbal]")
+    targets = data.get("target", [])
+    if not isinstance(targets, list):
+        raise UserError(f"{where}: [[target]] must be an array of tables")
+    target_specs = tuple(_target(t, f"{where} [[target]] #{i + 1}", duration, seed + i) for i, t in enumerate(targets))
+    bg = data.get("background", [])
+    if not isinstance(bg, list):
+        raise UserError(f"{where}: [[background]] must be an array of tables")
+    prims, refl = [], []
+    for i, b in enumerate(bg):
+        p, r = _background(b, f"{where} [[background]] #{i + 1}")
+        prims.extend(p)
+        refl.extend([r] * len(p))
+    tracker_table = dict(data.get("tracker", {}))
+    tracker = TrackerConfig.from_mapping(tracker_table, where=f"{where} [tracker]")
+    return Scene(
+        name=str(sc.get("name", Path(where).stem)), path=where, text=text, duration_s=duration, seed=seed,
+        effects=frozenset(effects), effect_params=params, optics=optics, scan_model=scan_model, gimbal=gimbal,
+        targets=target_specs,
+        background_prims=np.array(prims).reshape(-1, 13), background_reflectivity=np.array(refl, dtype=float),
+        tracker=tracker, tracker_table=tracker_table,
+    )
+
+
+def _lidar(t: Mapping, w: str):
+    from sim.scan.optics import OpticsError, optics_from_table
+    from sim.scan.presets import PRESETS
+
+    check_keys(t, ["preset", "model", "point_rate_hz", "prisms", "channel_offsets_deg", "beam_divergence_deg", "name"], w)
+    model = as_choice(t.get("model", "exact"), "model", w, ("exact", "paraxial"))
+    rest = {k: v for k, v in t.items() if k not in ("preset", "model")}
+    try:
+        if "prisms" in t:
+            if "preset" in t:
+                raise UserError(f"{w}: give either preset or prisms, not both")
+            return optics_from_table(rest, where=w), model
+        preset = t.get("preset", "mid40")
+        if preset not in PRESETS:
+            raise UserError(f"{w}: preset {preset!r} unknown; allowed: {', '.join(PRESETS)} (or give prisms)")
+        optics = PRESETS[preset]
+        if rest:
+            optics = optics.with_(**{k: (tuple(map(tuple, v)) if k == "channel_offsets_deg" else
+                                         tuple(v) if k == "beam_divergence_deg" else v) for k, v in rest.items()})
+        return optics, model
+    except OpticsError as exc:
+        raise UserError(f"{w}: {exc}") from None
+
+
+def _gimbal(t: Mapping, w: str) -> GimbalSpec:
+    from gimbal.pts303h import FEEDBACK_MODES, HEAD_FAMILIES
+
+    check_keys(t, ["family", "unit_seed", "baud", "feedback", "address", "pan0_deg", "tilt0_deg", "frozen",
+                   "speed_table", "send_delay_s"], w)
+    kw: dict[str, Any] = {}
+    if "family" in t:
+        kw["family"] = as_choice(t["family"], "family", w, tuple(HEAD_FAMILIES))
+    for k in ("unit_seed", "baud", "address"):
+        if k in t:
+            v = t[k]
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise UserError(f"{w}: {k} must be an integer >= 0, got {v!r}")
+            kw[k] = v
+    if "baud" in kw and kw["baud"] not in (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200):
+        raise UserError(f"{w}: baud {kw['baud']} is not a standard rate (2400, 4800, 9600, 19200, ...)")
+    if "feedback" in t:
+        kw["feedback"] = as_choice(t["feedback"], "feedback", w, tuple(FEEDBACK_MODES))
+    for k in ("pan0_deg", "tilt0_deg"):
+        if k in t:
+            kw[k] = as_float(t[k], k, w, lo=-180, hi=180)
+    if "send_delay_s" in t:
+        kw["send_delay_s"] = as_float(t["send_delay_s"], "send_delay_s", w, lo=0, hi=0.1)
+    if "frozen" in t:
+        kw["frozen"] = as_bool(t["frozen"], "frozen", w)
+    if "speed_table" in t:
+        v = t["speed_table"]
+        if not isinstance(v, str) or not v:
+            raise UserError(f"{w}: speed_table must be 'truth', 'nominal' or a path to a table JSON")
+        kw["speed_table"] = v
+    return GimbalSpec(**kw)
+
+
+def _target(t: Mapping, w: str, duration_s: float, seed: int) -> TargetSpec:
+    from sim.world import bodies, trajectories as tr
+
+    check_keys(t, ["geometry", "span_m", "radius_m", "size_m", "reflectivity", "trajectory"], w)
+    geom = as_choice(t.get("geometry", "quadrotor"), "geometry", w, GEOMETRIES)
+    refl = as_float(t.get("reflectivity", 0.3), "reflectivity", w, lo=0, lo_open=True, hi=1)
+    if geom == "quadrotor":
+        body = bodies.quadrotor(as_float(t.get("span_m", 0.35), "span_m", w, lo=0.05, hi=5), refl)
+    elif geom == "sphere":
+        body = bodies.sphere_body(as_float(t.get("radius_m", 0.2), "radius_m", w, lo=0.01, hi=10), refl)
+    else:
+        body = bodies.box_body(as_vec(t.get("size_m", [0.3, 0.3, 0.1]), "size_m", w, 3), refl)
+    traj = t.get("trajectory")
+    wt = f"{w}.trajectory"
+    if not isinstance(traj, Mapping):
+        raise UserError(f"{w}: missing [target.trajectory] table (type = {' | '.join(TRAJECTORY_TYPES)})")
+    kind = as_choice(traj.get("type"), "type", wt, TRAJECTORY_TYPES)
+    keys = {
+        "straight": ["start_m", "velocity_m_s"],
+        "circle": ["centre_m", "radius_m", "speed_m_s", "start_deg"],
+        "figure8": ["centre_m", "size_m", "period_s"],
+        "waypoints": ["points_m", "speed_m_s"],
+        "manual": ["centre_m", "radius_m", "max_speed_m_s", "max_accel_m_s2", "tau_s"],
+    }[kind]
+    check_keys(traj, ["type"] + keys, wt)
+    required = [k for k in keys if k not in ("start_deg", "tau_s")]
+    missing = [k for k in required if k not in traj]
+    if missing:
+        raise UserError(f"{wt}: type {kind!r} needs {', '.join(missing)}")
+    v3 = lambda k: as_vec(traj[k], k, wt, 3)  # noqa: E731
+    pos = lambda k, **a: as_float(traj[k], k, wt, lo=0, lo_open=True, **a)  # noqa: E731
+    if kind == "straight":
+        trajectory = tr.Straight(v3("start_m"), v3("velocity_m_s"))
+    elif kind == "circle":
+        trajectory = tr.Circle(v3("centre_m"), pos("radius_m"), as_float(traj["speed_m_s"], "speed_m_s", wt),
+                               as_float(traj.get("start_deg", 0.0), "start_deg", wt))
+    elif kind == "figure8":
+        trajectory = tr.FigureEight(v3("centre_m"), pos("size_m"), pos("period_s"))
+    elif kind == "waypoints":
+        pts = traj["points_m"]
+        if not isinstance(pts, list) or len(pts) < 2:
+            raise UserError(f"{wt}: points_m must be a list of at least 2 [x, y, z] points")
+        trajectory = tr.Waypoints(tuple(as_vec(p, f"points_m[{i}]", wt, 3) for i, p in enumerate(pts)), pos("speed_m_s"))
+    else:
+        trajectory = tr.Manual(v3("centre_m"), pos("radius_m"), pos("max_speed_m_s", hi=20), pos("max_accel_m_s2"),
+                               duration_s, seed, as_float(traj.get("tau_s", 1.5), "tau_s", wt, lo=0, lo_open=True))
+    if trajectory.max_speed_m_s > 20.0 + 1e-9:
+        raise UserError(f"{wt}: the target flies at up to {trajectory.max_speed_m_s:.1f} m/s; the model covers <= 20 m/s")
+    return TargetSpec(body, trajectory)
+
+
+def _background(b: Mapping, w: str):
+    from sim.world import bodies
+
+    kind = as_choice(b.get("type") if isinstance(b, Mapping) else None, "type", w, BACKGROUND_TYPES)
+    keys = {"ground": ["height_m"], "wall": ["centre_m", "normal", "width_m", "height_m"],
+            "room": ["size_m", "centre_m"], "box": ["centre_m", "size_m", "yaw_deg"]}[kind]
+    check_keys(b, ["type", "reflectivity"] + keys, w)
+    refl = as_float(b.get("reflectivity", 0.5), "reflectivity", w, lo=0, lo_open=True, hi=1)
+    need = [k for k in keys if k not in b and k not in ("centre_m", "yaw_deg")]
+    if need:
+        raise UserError(f"{w}: type {kind!r} needs {', '.join(need)}")
+    if kind == "ground":
+        return [bodies.ground(as_float(b["height_m"], "height_m", w, lo=0, lo_open=True))], refl
+    if kind == "wall":
+        n = as_vec(b["normal"], "normal", w, 3)
+        if math.hypot(*n) == 0:
+            raise UserError(f"{w}: normal must not be zero")
+        return [bodies.wall(as_vec(b["centre_m"], "centre_m", w, 3), n, as_float(b["width_m"], "width_m", w, lo=0, lo_open=True),
+                            as_float(b["height_m"], "height_m", w, lo=0, lo_open=True))], refl
+    if kind == "room":
+        size = as_vec(b["size_m"], "size_m", w, 3)
+        if min(size) <= 0:
+            raise UserError(f"{w}: size_m must be positive, got {list(size)}")
+        return bodies.room(size, as_vec(b.get("centre_m", [0, 0, 0]), "centre_m", w, 3)), refl
+    size = as_vec(b["size_m"], "size_m", w, 3)
+    return [bodies.box(as_vec(b["centre_m"], "centre_m", w, 3), tuple(s / 2 for s in size),
+                       math.radians(as_float(b.get("yaw_deg", 0.0), "yaw_deg", w)))], refl

@@ -1,0 +1,196 @@
+"""Numba kernels of the virtual world: beam rotation by the head, and exact ray-primitive intersection.
+
+Every kernel takes arrays and scalars only and has a plain-numpy twin in ``tests/world_twins.py``.
+Rays start at the origin of the frame they are given in (the lidar's optical centre, at the head's
+rotation centre); ranges are in metres, ``inf`` where nothing is hit.
+
+Primitive table (one row per primitive, body frame of its owner), ``prims`` (M, 13) float64:
+
+=====  ==========================================================================================
+col    meaning
+=====  ==========================================================================================
+0      kind: 0 sphere, 1 box (oriented), 2 disk (one-sided flat circle), 3 plane (infinite),
+       4 rectangle (finite plane patch)
+1-3    centre (sphere, box, disk, rectangle) or a point on the plane [m]
+4-6    sphere: (radius, 0, 0); box: half extents along its axes u, v, w [m];
+       disk: (radius, 0, 0); rectangle: (half_u, half_v, 0) [m]; plane: unused
+7-9    box: axis u (unit); disk/plane/rectangle: unit normal
+10-12  box: axis v (unit; w = u x v); rectangle: axis u (unit; v = n x u)
+=====  ==========================================================================================
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+SPHERE, BOX, DISK, PLANE, RECT = 0, 1, 2, 3, 4
+PRIM_COLUMNS = 13
+_EPS = 1e-12
+
+
+@njit(cache=True)
+def rotate_pan_tilt_kernel(d_lidar, pan_rad, tilt_rad, out):
+    """World direction of each beam: :math:`R_z(\\mathrm{pan})\\,R_y(-\\mathrm{tilt})\\,d`.
+
+    Pan turns about world +Z (positive = left, counter-clockwise from above); tilt raises the lidar's
+    +X toward +Z (positive = up), i.e. a rotation of ``-tilt`` about the panned +Y axis.  At pan =
+    tilt = 0 the lidar frame is the world frame (X forward, Y left, Z up).
+    """
+    for j in range(d_lidar.shape[0]):
+        x = d_lidar[j, 0]
+        y = d_lidar[j, 1]
+        z = d_lidar[j, 2]
+        ct = math.cos(tilt_rad[j])
+        st = math.sin(tilt_rad[j])
+        # R_y(-tilt): x' = x cos t - z sin t ; z' = x sin t + z cos t
+        x1 = x * ct - z * st
+        z1 = x * st + z * ct
+        cp = math.cos(pan_rad[j])
+        sp = math.sin(pan_rad[j])
+        out[j, 0] = x1 * cp - y * sp
+        out[j, 1] = x1 * sp + y * cp
+        out[j, 2] = z1
+
+
+@njit(cache=True, inline="always")
+def _hit_prim(prims, m, ox, oy, oz, dx, dy, dz):
+    """Smallest positive distance along the ray (o, d) to primitive ``m``; inf if missed."""
+    kind = int(prims[m, 0])
+    cx = prims[m, 1] - ox
+    cy = prims[m, 2] - oy
+    cz = prims[m, 3] - oz
+    if kind == SPHERE:
+        r = prims[m, 4]
+        b = cx * dx + cy * dy + cz * dz
+        c = cx * cx + cy * cy + cz * cz - r * r
+        disc = b * b - c
+        if disc < 0.0:
+            return math.inf
+        s = math.sqrt(disc)
+        t = b - s
+        if t > _EPS:
+            return t
+        t = b + s
+        return t if t > _EPS else math.inf
+    if kind == BOX:
+        ux, uy, uz = prims[m, 7], prims[m, 8], prims[m, 9]
+        vx, vy, vz = prims[m, 10], prims[m, 11], prims[m, 12]
+        wx = uy * vz - uz * vy
+        wy = uz * vx - ux * vz
+        wz = ux * vy - uy * vx
+        t_near = -math.inf
+        t_far = math.inf
+        for axis in range(3):
+            if axis == 0:
+                ax, ay, az, h = ux, uy, uz, prims[m, 4]
+            elif axis == 1:
+                ax, ay, az, h = vx, vy, vz, prims[m, 5]
+            else:
+                ax, ay, az, h = wx, wy, wz, prims[m, 6]
+            e = ax * cx + ay * cy + az * cz  # centre offset along the axis
+            f = ax * dx + ay * dy + az * dz  # ray direction along the axis
+            if abs(f) > _EPS:
+                t1 = (e - h) / f
+                t2 = (e + h) / f
+                if t1 > t2:
+                    t1, t2 = t2, t1
+                if t1 > t_near:
+                    t_near = t1
+                if t2 < t_far:
+                    t_far = t2
+                if t_near > t_far or t_far < _EPS:
+                    return math.inf
+            elif -e - h > 0.0 or -e + h < 0.0:
+                return math.inf
+        return t_near if t_near > _EPS else (t_far if t_far > _EPS else math.inf)
+    # Flat kinds: plane through the centre with normal n.
+    nx, ny, nz = prims[m, 7], prims[m, 8], prims[m, 9]
+    den = nx * dx + ny * dy + nz * dz
+    if abs(den) < _EPS:
+        return math.inf
+    t = (nx * cx + ny * cy + nz * cz) / den
+    if t <= _EPS:
+        return math.inf
+    if kind == PLANE:
+        return t
+    px = dx * t - cx
+    py = dy * t - cy
+    pz = dz * t - cz
+    if kind == DISK:
+        r = prims[m, 4]
+        return t if px * px + py * py + pz * pz <= r * r else math.inf
+    # RECT
+    ux, uy, uz = prims[m, 10], prims[m, 11], prims[m, 12]
+    vx = ny * uz - nz * uy
+    vy = nz * ux - nx * uz
+    vz = nx * uy - ny * ux
+    a = px * ux + py * uy + pz * uz
+    b = px * vx + py * vy + pz * vz
+    return t if (abs(a) <= prims[m, 4] and abs(b) <= prims[m, 5]) else math.inf
+
+
+@njit(cache=True)
+def cast_static_kernel(d_world, prims, out_range, out_prim):
+    """Nearest hit of rays from the origin against static primitives (the background).
+
+    ``out_range``/``out_prim`` are updated only where a primitive is nearer than the value already
+    there (so targets and background can be cast in either order).
+    """
+    for j in range(d_world.shape[0]):
+        dx = d_world[j, 0]
+        dy = d_world[j, 1]
+        dz = d_world[j, 2]
+        for m in range(prims.shape[0]):
+            t = _hit_prim(prims, m, 0.0, 0.0, 0.0, dx, dy, dz)
+            if t < out_range[j]:
+                out_range[j] = t
+                out_prim[j] = m
+
+
+@njit(cache=True)
+def cast_moving_kernel(idx, d_world, pos, yaw, prims, prim_offset, out_range, out_prim):
+    """Nearest hit of rays ``idx`` against a moving rigid body, each ray at its own time.
+
+    The body is at ``pos[i]`` with heading ``yaw[i]`` [rad] (rotation about +Z) for ray ``idx[i]``;
+    the ray is moved into the body frame, :math:`o' = R^T(0 - p)`, :math:`d' = R^T d`, and traced
+    against the body's primitives.  Hits record ``prim_offset + m``.
+    """
+    for i in range(idx.shape[0]):
+        j = idx[i]
+        c = math.cos(yaw[i])
+        s = math.sin(yaw[i])
+        px = -pos[i, 0]
+        py = -pos[i, 1]
+        pz = -pos[i, 2]
+        ox = c * px + s * py
+        oy = -s * px + c * py
+        oz = pz
+        wx = d_world[j, 0]
+        wy = d_world[j, 1]
+        dx = c * wx + s * wy
+        dy = -s * wx + c * wy
+        dz = d_world[j, 2]
+        for m in range(prims.shape[0]):
+            t = _hit_prim(prims, m, ox, oy, oz, dx, dy, dz)
+            if t < out_range[j]:
+                out_range[j] = t
+                out_prim[j] = prim_offset + m
+
+
+@njit(cache=True)
+def cone_candidates_kernel(d_world, cx, cy, cz, radius, out):
+    """Rays passing within ``radius`` of the point c (and in front of the origin): the cheap cull
+    that keeps a one-UAV scene from tracing the whole cloud.  Returns how many were marked."""
+    n = 0
+    r2 = radius * radius
+    c2 = cx * cx + cy * cy + cz * cz
+    for j in range(d_world.shape[0]):
+        b = d_world[j, 0] * cx + d_world[j, 1] * cy + d_world[j, 2] * cz
+        hit = (c2 - b * b <= r2) and (b > -radius)
+        out[j] = hit
+        if hit:
+            n += 1
+    return n

@@ -1,0 +1,175 @@
+"""Target trajectories, evaluated at every point's own time (a 100 ms frame is not a snapshot).
+
+Each trajectory is a frozen dataclass with vectorised ``position(t_s) -> (N, 3)`` [m] and
+``velocity(t_s) -> (N, 3)`` [m/s] in the world frame (x forward from the head, y left, z up; the head's
+rotation centre is the origin), and ``max_speed_m_s`` (used to bound the per-frame cull).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+
+def _col(t_s) -> np.ndarray:
+    return np.asarray(t_s, dtype=np.float64).reshape(-1, 1)
+
+
+@dataclass(frozen=True)
+class Straight:
+    """Constant-velocity pass: ``p(t) = start + velocity * t``."""
+
+    start_m: tuple[float, float, float]
+    velocity_m_s: tuple[float, float, float]
+
+    def position(self, t_s):
+        return np.asarray(self.start_m) + _col(t_s) * np.asarray(self.velocity_m_s)
+
+    def velocity(self, t_s):
+        return np.broadcast_to(np.asarray(self.velocity_m_s, float), (_col(t_s).shape[0], 3)).copy()
+
+    @property
+    def max_speed_m_s(self) -> float:
+        return float(np.linalg.norm(self.velocity_m_s))
+
+
+@dataclass(frozen=True)
+class Circle:
+    """Orbit at constant speed in a horizontal circle; positive speed = counter-clockwise from above."""
+
+    centre_m: tuple[float, float, float]
+    radius_m: float
+    speed_m_s: float
+    start_deg: float = 0.0
+
+    def _phase(self, t_s):
+        return math.radians(self.start_deg) + _col(t_s) * (self.speed_m_s / self.radius_m)
+
+    def position(self, t_s):
+        ph = self._phase(t_s)
+        return np.asarray(self.centre_m) + self.radius_m * np.hstack([np.cos(ph), np.sin(ph), np.zeros_like(ph)])
+
+    def velocity(self, t_s):
+        ph = self._phase(t_s)
+        return self.speed_m_s * np.hstack([-np.sin(ph), np.cos(ph), np.zeros_like(ph)])
+
+    @property
+    def max_speed_m_s(self) -> float:
+        return abs(self.speed_m_s)
+
+
+@dataclass(frozen=True)
+class FigureEight:
+    """Lemniscate of Gerono in a vertical plane facing the head (y-z), ``size_m`` half-width."""
+
+    centre_m: tuple[float, float, float]
+    size_m: float
+    period_s: float
+
+    def position(self, t_s):
+        w = 2 * math.pi / self.period_s
+        ph = w * _col(t_s)
+        return np.asarray(self.centre_m) + self.size_m * np.hstack([np.zeros_like(ph), np.sin(ph), np.sin(ph) * np.cos(ph)])
+
+    def velocity(self, t_s):
+        w = 2 * math.pi / self.period_s
+        ph = w * _col(t_s)
+        return self.size_m * w * np.hstack([np.zeros_like(ph), np.cos(ph), np.cos(2 * ph)])
+
+    @property
+    def max_speed_m_s(self) -> float:
+        return self.size_m * 2 * math.pi / self.period_s * math.sqrt(2)
+
+
+@dataclass(frozen=True)
+class Waypoints:
+    """Smooth path through waypoints at a nominal speed (a clamped cubic spline in time); the target
+    holds the last waypoint after arriving."""
+
+    points_m: tuple[tuple[float, float, float], ...]
+    speed_m_s: float
+    _spline: CubicSpline = field(init=False, repr=False, compare=False)
+    _t_end: float = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        pts = np.asarray(self.points_m, float)
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        t = np.concatenate([[0.0], np.cumsum(seg / self.speed_m_s)])
+        object.__setattr__(self, "_spline", CubicSpline(t, pts, axis=0, bc_type="clamped"))
+        object.__setattr__(self, "_t_end", float(t[-1]))
+
+    def position(self, t_s):
+        return self._spline(np.clip(_col(t_s)[:, 0], 0.0, self._t_end))
+
+    def velocity(self, t_s):
+        t = _col(t_s)[:, 0]
+        v = self._spline(np.clip(t, 0.0, self._t_end), 1)
+        v[(t < 0) | (t > self._t_end)] = 0.0
+        return v
+
+    @property
+    def max_speed_m_s(self) -> float:
+        t = np.linspace(0, self._t_end, 2000)
+        return float(np.max(np.linalg.norm(self._spline(t, 1), axis=1)))
+
+
+@dataclass(frozen=True)
+class Manual:
+    """A "manually flown" path: random but bounded acceleration and speed, seeded.
+
+    Acceleration is an Ornstein-Uhlenbeck process (time constant ``tau_s``) clipped to
+    ``max_accel_m_s2``, plus a spring toward ``centre_m`` beyond ``radius_m``; velocity is clipped
+    to ``max_speed_m_s``.  Integrated on a 20 ms grid over ``duration_s`` once, then a cubic spline
+    gives position and velocity at any time, so every run with one seed flies the same path.
+    """
+
+    centre_m: tuple[float, float, float]
+    radius_m: float
+    max_speed_m_s: float
+    max_accel_m_s2: float
+    duration_s: float
+    seed: int
+    tau_s: float = 1.5
+    _spline: CubicSpline = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        dt = 0.02
+        n = int(math.ceil(self.duration_s / dt)) + 2
+        rng = np.random.default_rng(np.random.SeedSequence(self.seed))
+        c = np.asarray(self.centre_m, float)
+        p = c.copy()
+        v = np.zeros(3)
+        a = np.zeros(3)
+        pos = np.empty((n, 3))
+        for i in range(n):
+            pos[i] = p
+            a += -a * dt / self.tau_s + self.max_accel_m_s2 * math.sqrt(2 * dt / self.tau_s) * rng.standard_normal(3)
+            off = p - c
+            dist = np.linalg.norm(off)
+            pull = -off / dist * (dist - self.radius_m) * 2.0 if dist > self.radius_m else 0.0
+            acc = a + pull
+            na = np.linalg.norm(acc)
+            if na > self.max_accel_m_s2:
+                acc *= self.max_accel_m_s2 / na
+            v = v + acc * dt
+            nv = np.linalg.norm(v)
+            if nv > self.max_speed_m_s:
+                v *= self.max_speed_m_s / nv
+            p = p + v * dt
+        object.__setattr__(self, "_spline", CubicSpline(np.arange(n) * dt, pos, axis=0))
+
+    def position(self, t_s):
+        return self._spline(_col(t_s)[:, 0])
+
+    def velocity(self, t_s):
+        return self._spline(_col(t_s)[:, 0], 1)
+
+
+def heading_rad(velocity: np.ndarray, default: float = 0.0) -> np.ndarray:
+    """Yaw of the body (x forward along the horizontal velocity); ``default`` when hovering."""
+    vx, vy = velocity[:, 0], velocity[:, 1]
+    moving = vx * vx + vy * vy > 1e-8
+    return np.where(moving, np.arctan2(vy, vx), default)
