@@ -94,6 +94,17 @@ def world_to_lidar(w, pan, tilt):
     return rotation_matrix(pan, tilt).T @ np.asarray(w, float)
 
 
+def world_to_lidar_many(w, pan_deg, tilt_deg):
+    """Vectorised R(pan_i, tilt_i)^T w_i for arrays (n,3), (n,), (n,)."""
+    p, t = np.radians(pan_deg), np.radians(tilt_deg)
+    cp, sp, ct, st = np.cos(p), np.sin(p), np.cos(t), np.sin(t)
+    x, y, z = w[:, 0], w[:, 1], w[:, 2]
+    # R = [[cp ct, -sp, -cp st], [sp ct, cp, -sp st], [st, 0, ct]]; R^T w:
+    return np.column_stack([cp * ct * x + sp * ct * y + st * z,
+                            -sp * x + cp * y,
+                            -cp * st * x - sp * st * y + ct * z])
+
+
 def target_frame(head: FakeHead, target_fn, t0, t1, rng, n=40, spread_m=0.1):
     """Points on a small target (gaussian blob) whose world centre is target_fn(t), seen by the
     head; returns (xyz_lidar (n,3), t_ns (n,)).  Times evenly spread in [t0, t1)."""
@@ -117,17 +128,14 @@ def corner_frame(head: FakeHead, corner, normals, t0, t1, rng, n=900, size_m=0.6
     t_ns = np.sort(rng.integers(int(round(t0 * 1e9)), int(round(t1 * 1e9)), n)).astype(np.int64)
     ang = head.angles_at_times(t_ns * 1e-9)
     face = rng.integers(0, 3, n)
-    u = rng.uniform(0, size_m, n)
-    v = rng.uniform(0, size_m, n)
-    pts = np.empty((n, 3))
-    for i in range(n):
-        a, b = [N[j] for j in range(3) if j != face[i]]
-        pts[i] = corner + u[i] * a + v[i] * b   # into the room along the other two normals
-    xyz = np.empty((n, 3))
-    for i in range(n):
-        p = world_to_lidar(pts[i], ang[i, 0], ang[i, 1])
-        r = np.linalg.norm(p)
-        xyz[i] = p * (1 + rng.normal(0, noise_m) / r)
+    u = rng.uniform(0, size_m, n)[:, None]
+    v = rng.uniform(0, size_m, n)[:, None]
+    A = np.array([N[1], N[0], N[0]])[face]
+    B = np.array([N[2], N[2], N[1]])[face]
+    pts = corner + u * A + v * B          # into the room along the other two normals
+    p = world_to_lidar_many(pts, ang[:, 0], ang[:, 1])
+    r = np.linalg.norm(p, axis=1)
+    xyz = p * (1 + rng.normal(0, noise_m, n) / r)[:, None]
     off = np.degrees(np.arccos(np.clip(xyz[:, 0] / np.linalg.norm(xyz, axis=1), -1, 1)))
     keep = off <= fov_deg / 2
     return xyz[keep], t_ns[keep]

@@ -1,0 +1,516 @@
+"""Speed-table calibration by tracking a room corner (paper Appendix D.4).
+
+"We calibrate the gimbal's rotation speed by tracking a pre-known feature point (e.g. a room corner)
+in the lidar point cloud.  The calibration builds a lookup table mapping the command to actual
+rotation speed."
+
+Driver-agnostic state machine: the driver feeds every lidar frame to :meth:`Calibrator.step`, sends
+the returned :class:`HeadCommand` (``None`` = keep the current, latched, command) and stops when
+:attr:`Calibrator.done`; :meth:`Calibrator.result` returns the :class:`SpeedTable` and
+:attr:`Calibrator.report` says what could not be measured and why.
+
+Procedure
+---------
+1. Reference: head stopped, ``reference_s`` of frames locate the corner near ``FeatureSpec.approx_xyz``.
+2. For each axis, for each byte of the plan, two legs: OUT (direction +1) until ``dwell_s`` has passed
+   or the feature has turned ``max_excursion_deg`` from the reference, stop, rest ``rest_s``; BACK
+   (direction -1, same byte) until the feature is back at the reference (or as long as OUT lasted),
+   stop, rest.  Both directions are measured and the head stays near its start.
+3. Return: the slowest usable byte brings each axis back to the reference, then stop; done.
+
+Feature (per frame): points within ``radius_m`` of the predicted corner; three planes by sequential
+RANSAC (seeded generator) refined by least squares (SVD); the corner is their intersection (solve
+``N c = d``), accepted only if the normals are well separated.  Points are first de-rotated to the
+frame's mean time with the leg's current rate estimate, so fast legs do not smear the planes.
+
+Estimate (batch, in :meth:`result`): the rotation axis of each head axis *in the lidar frame* is the
+direction in which the corner positions do not move (smallest eigenvector of the pooled, per-leg
+centred scatter of corner positions; falls back to the prior -- lidar Y for tilt, ``R_y(t0) z`` for pan
+-- if the legs are too short to tell).  This makes pan calibration independent of the unknown start
+tilt (an error of cos(tilt) otherwise).  The angle of the corner about that axis is fitted against the
+corner's time by least squares over the steady part of each leg (after ``settle_s``):
+
+.. math:: \\theta(t) = a + b\\,t,\\quad \\hat v = \\mp b,\\quad
+          \\sigma_{\\hat v} = \\sqrt{\\frac{\\sum r_i^2/(n-2)}{\\sum (t_i-\\bar t)^2}}
+
+(pan: the corner turns the opposite way about world-up in lidar coordinates).  The two legs are
+combined by inverse-variance weighting; half their difference (direction asymmetry) is added in
+quadrature to the uncertainty.  The line's crossing of the reference angle, minus the command time,
+is the entry's effective delay ``dead_time + v / (2 a)``; a line through those delays gives the dead
+time and acceleration written into the table.  Lidar origin is assumed on (or near, relative to the
+corner distance) the rotation axes only for the *online* excursion check; the estimate itself does
+not depend on it.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from foveatrack.control import STOP, HeadCommand
+from foveatrack.detection import valid_points
+from foveatrack.errors import UserError
+from foveatrack.frames import Frame
+from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable, axis_bytes
+
+DEFAULT_BYTES = (0, 1, 2, 3, 4, 6, 8, 10, 12, 16, 20, 24, 28, 32, 40, 48, 56, 63)
+
+
+@dataclass(frozen=True)
+class FeatureSpec:
+    """The known feature: an inside room corner (three planes).
+
+    approx_xyz : (3,) [m]  where the corner is in the lidar frame at the start (within radius_m)
+    radius_m : > 0 [m]     points this close to the predicted corner are used
+    plane_tol_m : > 0 [m]  RANSAC inlier distance
+    min_plane_points : int minimum inliers per plane
+    ransac_iters : int     hypotheses per plane
+    """
+
+    approx_xyz: tuple[float, float, float]
+    radius_m: float = 0.6
+    plane_tol_m: float = 0.03
+    min_plane_points: int = 25
+    ransac_iters: int = 80
+
+
+@dataclass(frozen=True)
+class CalibrationPlan:
+    """Which bytes and how long.  Bytes not listed are interpolated by the table (documented subset).
+
+    dwell_s [s] max per leg; settle_s [s] discarded after each command (dead time + acceleration);
+    rest_s [s] stopped between legs; max_excursion_deg keeps the corner inside the FoV;
+    reference_s [s] static frames at the start; min_samples per leg fit; start_tilt_deg prior for
+    the pan axis if the legs cannot tell it; latency_s subtracted from the measured delays (the link
+    part, which the Reconstructor adds itself); return_tol_deg for the final return.
+    """
+
+    pan_bytes: tuple[int, ...] = DEFAULT_BYTES + (TURBO,)
+    tilt_bytes: tuple[int, ...] = DEFAULT_BYTES
+    dwell_s: float = 6.0
+    settle_s: float = 0.5
+    rest_s: float = 0.5
+    max_excursion_deg: float = 15.0
+    reference_s: float = 1.0
+    min_samples: int = 4
+    start_tilt_deg: float = 0.0
+    latency_s: float = 0.0
+    return_tol_deg: float = 0.3
+
+    def __post_init__(self) -> None:
+        for axis, bs in (("pan", self.pan_bytes), ("tilt", self.tilt_bytes)):
+            bad = [b for b in bs if b not in axis_bytes(axis)]
+            if bad:
+                raise UserError(f"calibration plan: {axis} bytes {bad} not allowed (0..63"
+                                f"{', 255 = turbo' if axis == 'pan' else ''})")
+        if not (self.dwell_s > self.settle_s >= 0 and self.max_excursion_deg > 0):
+            raise UserError("calibration plan: need dwell_s > settle_s >= 0 and max_excursion_deg > 0")
+
+
+@dataclass
+class LegRecord:
+    axis: str
+    byte: int
+    direction: int
+    t_cmd_s: float
+    t_stop_s: float | None = None
+    ref_q: np.ndarray | None = None          # corner position at rest before the leg (lidar)
+    samples: list = field(default_factory=list)   # (t_s, q (3,))
+
+
+@dataclass
+class CalibrationReport:
+    unmeasured: dict            # axis -> {byte: reason}
+    axis_lidar: dict            # axis -> unit vector (rotation axis in lidar coords)
+    implied_start_tilt_deg: float | None
+    asymmetry: dict             # axis -> {byte: (v_out, v_back)}
+    dead_time_s: float
+    accel_deg_s2: float | None
+    frames: int
+    frames_with_feature: int
+
+
+def _fit_plane(p: np.ndarray) -> tuple[np.ndarray, float]:
+    c = p.mean(axis=0)
+    _, _, vt = np.linalg.svd(p - c, full_matrices=False)
+    n = vt[-1]
+    return n, float(n @ c)
+
+
+def find_corner(xyz: np.ndarray, center: np.ndarray, spec: FeatureSpec, rng: np.random.Generator
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Corner (intersection of three planes) near ``center``; returns (corner, inlier mask) or None.
+
+    Sequential RANSAC for three planes (inliers within ``plane_tol_m``), each refined by SVD; then
+    each plane is refitted on the points near it but away from the other two."""
+    d = np.linalg.norm(xyz - center, axis=1)
+    sel = np.flatnonzero(d <= spec.radius_m)
+    if sel.size < 3 * spec.min_plane_points:
+        return None
+    pts = xyz[sel]
+    remaining = np.arange(len(pts))
+    planes, used = [], np.zeros(len(pts), bool)
+    for _ in range(3):
+        P = pts[remaining]
+        if len(P) < spec.min_plane_points:
+            return None
+        idx = rng.integers(0, len(P), size=(spec.ransac_iters, 3))
+        a, b, c = P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]]
+        n = np.cross(b - a, c - a)
+        nn = np.linalg.norm(n, axis=1)
+        ok = nn > 1e-9
+        n = n[ok] / nn[ok, None]
+        off = np.einsum("ij,ij->i", n, a[ok])
+        dist = np.abs(P @ n.T - off)                      # (len(P), hyps)
+        counts = (dist < spec.plane_tol_m).sum(axis=0)
+        if counts.size == 0:
+            return None
+        best = int(np.argmax(counts))
+        inl = dist[:, best] < spec.plane_tol_m
+        if inl.sum() < spec.min_plane_points:
+            return None
+        nrm, o = _fit_plane(P[inl])
+        inl = np.abs(P @ nrm - o) < spec.plane_tol_m          # re-select with the refined plane
+        nrm, o = _fit_plane(P[inl])
+        planes.append((nrm, o))
+        used[remaining[inl]] = True
+        remaining = remaining[~inl]
+    # final refinement: each plane from the points near it and away from the other two (points along
+    # the corner's edges would otherwise pull a plane toward its neighbours)
+    N = np.array([p[0] for p in planes])
+    D = np.array([p[1] for p in planes])
+    dist = np.abs(pts @ N.T - D)                          # (n, 3)
+    for i in range(3):
+        own = (dist[:, i] < spec.plane_tol_m) & np.all(np.delete(dist, i, axis=1) > spec.plane_tol_m, axis=1)
+        if own.sum() >= spec.min_plane_points:
+            N[i], D[i] = _fit_plane(pts[own])
+    # normals well separated (a corner, not two parallel walls)
+    g = np.abs(N @ N.T)[np.triu_indices(3, 1)]
+    if g.max() > 0.5 or abs(np.linalg.det(N)) < 0.3:
+        return None
+    corner = np.linalg.solve(N, D)
+    if np.linalg.norm(corner - center) > spec.radius_m:
+        return None
+    mask = np.zeros(len(xyz), bool)
+    mask[sel[used]] = True
+    return corner, mask
+
+
+def _rotate_about(p: np.ndarray, axis: np.ndarray, ang_rad: np.ndarray) -> np.ndarray:
+    """Rodrigues rotation of points p (n,3) about a unit axis by per-point angles."""
+    c, s = np.cos(ang_rad)[:, None], np.sin(ang_rad)[:, None]
+    k = axis[None, :]
+    return p * c + np.cross(k, p) * s + k * (p @ axis)[:, None] * (1 - c)
+
+
+def _angle_about(q: np.ndarray, axis: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    e1 = ref - (ref @ axis) * axis
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    return np.degrees(np.arctan2(q @ e2, q @ e1))
+
+
+_SIGN = {"pan": -1.0, "tilt": +1.0}   # head speed = sign * d(angle of corner about axis)/dt
+
+
+class Calibrator:
+    """State machine for Appendix D.4 (see module docstring).
+
+    ``step(frame) -> HeadCommand | None``; ``done``; ``result() -> SpeedTable``; ``report``.
+    """
+
+    def __init__(self, plan: CalibrationPlan, feature: FeatureSpec, *, seed: int = 0, head: str = "",
+                 date: str | None = None):
+        self.plan = plan
+        self.feature = feature
+        self.rng = np.random.default_rng(seed)
+        self.head = head
+        self.date = date
+        self.frames = 0
+        self.frames_with_feature = 0
+        self.legs: list[LegRecord] = []
+        self._queue = [(a, b, d) for a, bs in (("pan", plan.pan_bytes), ("tilt", plan.tilt_bytes))
+                       for b in bs for d in (+1, -1)]
+        self._phase = "reference"
+        self._phase_t0: float | None = None
+        self._ref_samples: list = []
+        self._ref_q: np.ndarray | None = None      # corner at the very start
+        self._last_q: np.ndarray | None = None
+        self._rest_samples: list = []
+        self._leg: LegRecord | None = None
+        self._out_duration = 0.0
+        self._missed = 0
+        self._return_axis = None
+        self.report: CalibrationReport | None = None
+        self.failure: str | None = None
+        self._pan_prior = np.array([math.sin(math.radians(plan.start_tilt_deg)), 0.0,
+                                    math.cos(math.radians(plan.start_tilt_deg))])
+
+    @property
+    def done(self) -> bool:
+        return self._phase == "done"
+
+    # ---- online helpers --------------------------------------------------------------------
+    def _online_angle(self, axis: str, q: np.ndarray) -> float:
+        """Head rotation since the start reference, approximately (for the excursion check)."""
+        ax = self._pan_prior if axis == "pan" else np.array([0.0, 1.0, 0.0])
+        return _SIGN[axis] * float(_angle_about(q[None, :], ax, self._ref_q)[0])
+
+    def _measure(self, frame: Frame) -> tuple[float, np.ndarray] | None:
+        if self._last_q is None:
+            center = np.asarray(self.feature.approx_xyz, float)
+        else:
+            center = self._last_q
+        ok = valid_points(frame.xyz)
+        xyz, t_s = frame.xyz[ok], frame.t_ns[ok] * 1e-9
+        if xyz.shape[0] == 0:
+            return None
+        t_mid = float(t_s.mean())
+        leg = self._leg
+        if leg is not None and self._phase == "move" and len(leg.samples) >= 2:
+            # de-rotate points to t_mid with the leg's current rate about the prior axis
+            (ta, qa), (tb, qb) = leg.samples[-2], leg.samples[-1]
+            ax = self._pan_prior if leg.axis == "pan" else np.array([0.0, 1.0, 0.0])
+            w = (_angle_about(qb[None], ax, qa)[0]) / max(tb - ta, 1e-6)   # deg/s of the corner
+            xyz = _rotate_about(xyz, ax, np.radians(-w * (t_s - t_mid)))
+            center = _rotate_about(center[None], ax, np.radians([w * (t_mid - tb)]))[0]
+        found = find_corner(xyz, center, self.feature, self.rng)
+        if found is None and self._missed >= 1 and self._ref_q is not None:
+            found = find_corner(xyz, self._ref_q, self.feature, self.rng)   # lost: look near home
+        if found is None:
+            return None
+        corner, _ = found
+        return t_mid, corner
+
+    # ---- the state machine -------------------------------------------------------------------
+    def step(self, frame: Frame) -> HeadCommand | None:
+        if self.done:
+            return None
+        self.frames += 1
+        now = frame.t_end_s
+        m = self._measure(frame)
+        if m is not None:
+            self.frames_with_feature += 1
+            self._last_q = m[1]
+            self._missed = 0
+        else:
+            self._missed += 1
+        if self._phase_t0 is None:
+            self._phase_t0 = now
+        elapsed = now - self._phase_t0
+        p = self.plan
+
+        if self._phase == "reference":
+            if m is not None:
+                self._ref_samples.append(m[1])
+            if elapsed >= p.reference_s and len(self._ref_samples) >= 3:
+                self._ref_q = np.median(np.array(self._ref_samples), axis=0)
+                self._rest_samples = list(self._ref_samples)
+                return self._start_next_leg(now)
+            if elapsed >= 5 * p.reference_s + 1.0:
+                self.failure = (f"the corner was not found near {tuple(self.feature.approx_xyz)} "
+                                f"(within {self.feature.radius_m} m) in {self.frames} frames")
+                self._phase = "done"
+                return STOP
+            return None
+
+        if self._phase == "rest":
+            if m is not None:
+                self._rest_samples.append(m[1])
+            if elapsed >= p.rest_s:
+                return self._start_next_leg(now)
+            return None
+
+        if self._phase == "move":
+            leg = self._leg
+            if m is not None:
+                leg.samples.append(m)
+            ang = self._online_angle(leg.axis, self._last_q) if self._last_q is not None else 0.0
+            rate = 0.0
+            if len(leg.samples) >= 2:
+                (ta, qa), (tb, qb) = leg.samples[-2], leg.samples[-1]
+                rate = (self._online_angle(leg.axis, qb) - self._online_angle(leg.axis, qa)) / max(tb - ta, 1e-6)
+            if leg.direction > 0:
+                # stop early enough that dead time + deceleration + one frame stay inside the excursion
+                coast = abs(rate) * (frame.duration_s + 0.15) + rate * rate / (2 * 100.0)
+                end = (self._missed >= 3 or elapsed >= p.dwell_s
+                       or abs(ang) + coast >= p.max_excursion_deg)
+            else:
+                # back at the start reference (predicted one frame ahead), or as long as OUT took
+                # (time-symmetric return when the feature is out of sight)
+                end = ((self._missed == 0 and ang + rate * frame.duration_s <= 0.0)
+                       or elapsed >= self._out_duration)
+            if end:
+                leg.t_stop_s = now
+                if leg.direction > 0:
+                    self._out_duration = elapsed
+                self._phase, self._phase_t0 = "rest", now
+                self._rest_samples = []
+                return STOP
+            return None
+
+        if self._phase == "return":
+            axis = self._return_axis
+            ang = self._online_angle(axis, self._last_q) if self._last_q is not None else 0.0
+            if abs(ang) <= p.return_tol_deg or elapsed > 30.0 or self._missed >= 5:
+                if axis == "pan":
+                    self._return_axis, self._phase_t0 = "tilt", now
+                    return STOP
+                self._phase = "done"
+                self._finish()
+                return STOP
+            byte = self._return_byte(axis)
+            d = -1 if ang > 0 else 1
+            return HeadCommand(d, byte, 0, 0) if axis == "pan" else HeadCommand(0, 0, d, byte)
+        return None
+
+    def _return_byte(self, axis: str) -> int:
+        bs = [b for b in (self.plan.pan_bytes if axis == "pan" else self.plan.tilt_bytes) if b != TURBO]
+        return sorted(bs)[len(bs) // 3] if bs else 8
+
+    def _start_next_leg(self, now: float) -> HeadCommand | None:
+        ref = np.median(np.array(self._rest_samples), axis=0) if self._rest_samples else self._last_q
+        if not self._queue:
+            self._phase, self._phase_t0, self._return_axis = "return", now, "pan"
+            return None
+        axis, byte, d = self._queue.pop(0)
+        self._leg = LegRecord(axis, byte, d, now, ref_q=ref)
+        self.legs.append(self._leg)
+        self._phase, self._phase_t0 = "move", now
+        return HeadCommand(d, byte, 0, 0) if axis == "pan" else HeadCommand(0, 0, d, byte)
+
+    # ---- batch estimate ---------------------------------------------------------------------
+    def _steady(self, leg: LegRecord) -> tuple[np.ndarray, np.ndarray]:
+        if leg.t_stop_s is None:
+            return np.empty(0), np.empty((0, 3))
+        s = [(t, q) for t, q in leg.samples if leg.t_cmd_s < t <= leg.t_stop_s]
+        if not s:
+            return np.empty(0), np.empty((0, 3))
+        t = np.array([x for x, _ in s])
+        Q = np.array([q for _, q in s])
+        start = leg.t_cmd_s + self.plan.settle_s
+        if len(t) >= 4:
+            # adaptive: a fast leg is steady once its frame-to-frame rate matches its final rate
+            ax = self._pan_prior if leg.axis == "pan" else np.array([0.0, 1.0, 0.0])
+            ang = _angle_about(Q, ax, Q[-1])
+            r = np.diff(ang) / np.diff(t)
+            r_f = float(np.median(r[-2:]))
+            noise = 2 * 0.05 / float(np.median(np.diff(t)))   # ~0.05 deg corner noise per frame
+            if abs(r_f) > 10 * noise:
+                bad = np.flatnonzero(np.abs(r - r_f) > max(0.05 * abs(r_f), noise))
+                t_steady = t[bad[-1] + 1] if bad.size else t[0]
+                start = min(start, t_steady)
+        keep = t >= start
+        return t[keep], Q[keep]
+
+    def _axis_estimate(self, axis: str) -> np.ndarray:
+        prior = self._pan_prior if axis == "pan" else np.array([0.0, 1.0, 0.0])
+        C = np.zeros((3, 3))
+        n = 0
+        for leg in self.legs:
+            if leg.axis != axis:
+                continue
+            _, Q = self._steady(leg)
+            if len(Q) >= self.plan.min_samples:
+                Qc = Q - Q.mean(axis=0)
+                C += Qc.T @ Qc
+                n += len(Q)
+        if n < 10:
+            return prior
+        w, v = np.linalg.eigh(C)
+        a = v[:, 0]
+        if w[1] <= 0 or w[0] / w[1] > 0.25 or abs(a @ prior) < math.cos(math.radians(30)):
+            return prior            # legs too short / noisy to tell the axis
+        return a if a @ prior > 0 else -a
+
+    def _finish(self) -> None:
+        self._table, self.report = self._estimate()
+
+    def _estimate(self) -> tuple[SpeedTable, CalibrationReport]:
+        axes = {a: self._axis_estimate(a) for a in ("pan", "tilt")}
+        per = {"pan": {}, "tilt": {}}
+        for leg in self.legs:
+            t, Q = self._steady(leg)
+            if len(t) < self.plan.min_samples:
+                per[leg.axis].setdefault(leg.byte, []).append(None)
+                continue
+            ang = _angle_about(Q, axes[leg.axis], leg.ref_q)
+            ang = np.unwrap(np.radians(ang))
+            ang = np.degrees(ang)
+            tm = t.mean()
+            stt = float(np.sum((t - tm) ** 2))
+            b = float(np.sum((t - tm) * (ang - ang.mean())) / stt)
+            a0 = ang.mean() - b * tm
+            res = ang - (a0 + b * t)
+            se = math.sqrt(float(np.sum(res ** 2)) / max(len(t) - 2, 1) / stt)
+            v = _SIGN[leg.axis] * leg.direction * b
+            delay = None
+            if abs(b) > 1e-6:
+                delay = (0.0 - a0) / b - leg.t_cmd_s - self.plan.latency_s   # reference angle is 0
+            per[leg.axis].setdefault(leg.byte, []).append((v, se, delay))
+        tables, unmeasured, asym = {}, {"pan": {}, "tilt": {}}, {"pan": {}, "tilt": {}}
+        delays = []
+        for axis in ("pan", "tilt"):
+            entries = []
+            plan_bytes = self.plan.pan_bytes if axis == "pan" else self.plan.tilt_bytes
+            for byte in axis_bytes(axis):
+                fits = [f for f in per[axis].get(byte, []) if f is not None]
+                if byte not in plan_bytes:
+                    unmeasured[axis][byte] = "not in the plan (interpolated)"
+                    continue
+                if not fits:
+                    unmeasured[axis][byte] = ("feature lost or too few steady frames "
+                                              f"(< {self.plan.min_samples}); try a longer dwell or excursion")
+                    entries.append(SpeedEntry(byte, float("nan"), float("nan"), False, note="not measured"))
+                    continue
+                vs = np.array([f[0] for f in fits])
+                ses = np.array([max(f[1], 1e-9) for f in fits])
+                w = 1 / ses ** 2
+                v = float(np.sum(w * vs) / np.sum(w))
+                sig = math.sqrt(1 / float(np.sum(w)))
+                if len(fits) == 2:
+                    asym[axis][byte] = (float(vs[0]), float(vs[1]))
+                    sig = math.hypot(sig, (vs[0] - vs[1]) / 2)
+                v = max(v, 0.0)
+                dl = [f[2] for f in fits if f[2] is not None and abs(f[0]) > 3 * max(f[1], 1e-9)]
+                d = float(np.median(dl)) if dl else None
+                if d is not None:
+                    delays.append((v, d))
+                entries.append(SpeedEntry(byte, v, sig, True, d))
+            tables[axis] = AxisTable(axis, tuple(entries))
+        dead, accel = 0.0, None
+        if len(delays) >= 3:
+            V = np.array([x[0] for x in delays])
+            Dl = np.array([x[1] for x in delays])
+            A = np.column_stack([np.ones_like(V), V])
+            (c0, c1), *_ = np.linalg.lstsq(A, Dl, rcond=None)
+            if c1 > 1e-6:
+                accel = 1.0 / (2.0 * c1)
+                dead = max(float(c0), 0.0)
+            else:
+                dead = max(float(np.median(Dl)), 0.0)
+        pa = axes["pan"]
+        implied = math.degrees(math.atan2(pa[0], pa[2]))
+        date = self.date or _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        table = SpeedTable(tables["pan"], tables["tilt"], date=date, head=self.head,
+                           source=f"foveatrack calibration: corner feature, {self.frames} frames, "
+                                  f"{len(self.legs)} legs", dead_time_s=dead, accel_deg_s2=accel)
+        report = CalibrationReport({a: dict(sorted(u.items())) for a, u in unmeasured.items()},
+                                   {a: tuple(map(float, v)) for a, v in axes.items()}, implied, asym,
+                                   dead, accel, self.frames, self.frames_with_feature)
+        return table, report
+
+    def result(self) -> SpeedTable:
+        """The measured table (call when :attr:`done`)."""
+        if self.failure:
+            raise UserError(f"calibration failed: {self.failure}")
+        if not self.done:
+            raise RuntimeError("Calibrator.result() before done")
+        t = self._table
+        if all(not math.isfinite(t.axis(a).max_speed_deg_s(True)) or t.axis(a).max_speed_deg_s(True) <= 0
+               for a in ("pan", "tilt")):
+            raise UserError("calibration measured no usable speed: the corner was lost in every leg")
+        return t

@@ -1,0 +1,136 @@
+"""Tracking metrics from per-frame truth and estimates, and the regression comparison.
+
+Definitions (the ones ``foveatrack simulate --json`` and the regression baseline use)
+--------------------------------------------------------------------------------------
+* ``tracking_error_deg`` per frame: the angle between the optical axis and the true direction to the
+  target (``arccos`` of the unit vectors' dot product, computed as ``atan2(|a x b|, a . b)`` so it is
+  accurate near 0), in degrees.
+* acquisition: the first frame from which the error stays below ``acquired_deg`` (default: the dead
+  band + 1 deg) for ``hold_frames`` consecutive frames; ``acquisition_s`` = its time minus the time
+  the target was first inside the FoV (or the start).  ``None`` if never acquired.
+* ``rms``, ``p95``, ``max`` of the error over frames *after acquisition* (NaN frames -- no truth --
+  skipped).
+* ``reconstruction_error_m`` (rms/p95/max) and ``reconstruction_error_rel`` (error / range) when world
+  estimates are given.
+
+Regression: :func:`compare_to_baseline` flags a metric that got *worse* than its baseline by more than
+its tolerance (absolute ``abs`` plus relative ``rel``: ``new > base + abs + rel * |base|``; for metrics
+where larger is better, listed in ``HIGHER_IS_BETTER``, the sign flips), and returns a printable table.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+HIGHER_IS_BETTER = frozenset({"frames_with_detection", "points_on_target_per_frame", "realtime_factor"})
+
+
+def angle_between_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle [deg] between rows of a and b (N, 3)."""
+    a = np.asarray(a, float).reshape(-1, 3)
+    b = np.asarray(b, float).reshape(-1, 3)
+    return np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b)))
+
+
+def _stats(x: np.ndarray) -> dict:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return {"rms": None, "p95": None, "max": None}
+    return {"rms": float(np.sqrt(np.mean(x ** 2))), "p95": float(np.percentile(x, 95)), "max": float(x.max())}
+
+
+def tracking_metrics(t_s, error_deg, *, detected=None, in_fov=None, acquired_deg: float = 3.0,
+                     hold_frames: int = 5, world_est=None, world_true=None) -> dict:
+    """Metrics of one run from per-frame arrays.
+
+    t_s : (F,) frame times [s]; error_deg : (F,) true tracking error [deg] (NaN = no truth);
+    detected : (F,) bool, a detection this frame; in_fov : (F,) bool, target inside the FoV (for
+    acquisition time); world_est, world_true : (F, 3) world positions (NaN rows skipped).
+    """
+    t = np.asarray(t_s, float)
+    e = np.asarray(error_deg, float)
+    F = len(t)
+    ok = np.isfinite(e) & (e < acquired_deg)
+    acq_idx = None
+    run = 0
+    for i in range(F):
+        run = run + 1 if ok[i] else 0
+        if run >= hold_frames:
+            acq_idx = i - hold_frames + 1
+            break
+    t_ref = t[0] if F else 0.0
+    if in_fov is not None and np.any(in_fov):
+        t_ref = t[int(np.argmax(np.asarray(in_fov, bool)))]
+    out = {
+        "frames": int(F),
+        "frames_with_detection": int(np.sum(detected)) if detected is not None else None,
+        "acquisition_s": None if acq_idx is None else float(t[acq_idx] - t_ref),
+        "tracking_error_deg": _stats(e[acq_idx:]) if acq_idx is not None else {"rms": None, "p95": None, "max": None},
+    }
+    if world_est is not None and world_true is not None:
+        we = np.asarray(world_est, float).reshape(-1, 3)
+        wt = np.asarray(world_true, float).reshape(-1, 3)
+        d = np.linalg.norm(we - wt, axis=1)
+        r = np.linalg.norm(wt, axis=1)
+        out["reconstruction_error_m"] = _stats(d)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out["reconstruction_error_rel"] = _stats(d / r)
+    return out
+
+
+def flatten(metrics: Mapping, prefix: str = "") -> dict:
+    """{"tracking_error_deg": {"rms": 1}} -> {"tracking_error_deg.rms": 1}."""
+    out = {}
+    for k, v in metrics.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def compare_to_baseline(metrics: Mapping, baseline: Mapping, tolerances: Mapping) -> tuple[str, list[str]]:
+    """Compare a run's metrics with the baseline.
+
+    tolerances : {"tracking_error_deg.rms": {"abs": 0.1, "rel": 0.1}, ...}; a key ``"*"`` is the
+    default for every numeric baseline metric without its own entry; metrics without a tolerance
+    are printed but not checked.  Returns (table text, failures); a metric missing from the run, or
+    None where the baseline had a number (e.g. never acquired), is a failure.
+    """
+    m, b = flatten(metrics), flatten(baseline)
+    default = tolerances.get("*")
+    rows, failures = [], []
+    for key in sorted(b):
+        base = b[key]
+        if isinstance(base, bool) or not isinstance(base, (int, float)) or base is None:
+            continue
+        tol = tolerances.get(key, default)
+        new = m.get(key)
+        status = "-"
+        if tol is not None:
+            limit_abs = float(tol.get("abs", 0.0)) + float(tol.get("rel", 0.0)) * abs(base)
+            if new is None or (isinstance(new, float) and math.isnan(new)):
+                status = "FAIL"
+                failures.append(f"{key}: baseline {base:.4g}, now missing")
+            else:
+                worse = (base - new) if key.split(".")[0] in HIGHER_IS_BETTER else (new - base)
+                if worse > limit_abs + 1e-12 * max(1.0, abs(base)):   # float slack at the edge
+                    status = "FAIL"
+                    failures.append(f"{key}: {new:.4g} vs baseline {base:.4g} (allowed +{limit_abs:.3g})")
+                else:
+                    status = "ok"
+            tol_txt = f"+{limit_abs:.3g}"
+        else:
+            tol_txt = "n/a"
+        new_txt = "missing" if new is None else (f"{new:.4g}" if isinstance(new, (int, float)) else str(new))
+        rows.append((key, f"{base:.4g}", new_txt, tol_txt, status))
+    w = [max(len(r[i]) for r in rows + [("metric", "baseline", "now", "tolerance", "status")]) for i in range(5)]
+    head = ("metric", "baseline", "now", "tolerance", "status")
+    lines = ["  ".join(h.ljust(w[i]) for i, h in enumerate(head)), "  ".join("-" * x for x in w)]
+    lines += ["  ".join(c.ljust(w[i]) for i, c in enumerate(r)) for r in rows]
+    return "\n".join(lines), failures
