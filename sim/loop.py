@@ -127,6 +127,7 @@ class ClosedLoop:
         self._bg_refl = scene.background_reflectivity
         self.log = FrameLog()
         self.bytes_sent = 0
+        self.last_sent: tuple[float, bytes] | None = None  # (time, Pelco-D bytes) of this frame's command
 
     # ----------------------------------------------------------------------------------------------
     def run(self, progress=None) -> dict[str, np.ndarray]:
@@ -208,11 +209,13 @@ class ClosedLoop:
         # 6. the tracker and the link.
         send_t = t1 + scene.gimbal.send_delay_s
         out = self.tracker.process(frame, send_t_s=send_t)
+        self.last_sent = None
         if not scene.gimbal.frozen:
             c = out.command
             data = encode_pan_tilt(scene.gimbal.address, c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte)
             self._pending.extend(self.uart.send(data, send_t))
             self.bytes_sent += len(data)
+            self.last_sent = (send_t, data)
         self._log(t0, t1, frame, int(on_target.sum()), out)
         if self.frame_hook is not None:
             self.frame_hook(frame, out, self)

@@ -1,0 +1,82 @@
+"""Record a closed-loop run into the one recording format (MCAP, :mod:`foveatrack.recording`).
+
+Channels and fields, shared with the daemon so ``foveatrack replay`` reads both:
+
+* points: per frame, ``t_ns`` = frame end, xyz in the lidar frame, per-point ``t_ns``, reflectivity
+* detections: ``detected``, ``xyz_m`` (lidar frame), ``n_points``, ``az_deg``, ``el_deg``, ``state``,
+  ``error_pan_deg``, ``error_tilt_deg``
+* commands: ``raw_hex`` as written (Pelco-D), ``t_ns`` = send time, plus the decoded speeds
+* head: the tracker's reconstruction (``pan_deg``, ``tilt_deg``, sigmas, ``world_xyz_m``)
+* truth (simulation only): true head pose and target position at frame mid, true error
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from foveatrack.recording import RecordingWriter
+
+
+def _ns(t_s: float) -> int:
+    return int(round(t_s * 1e9))
+
+
+def _opt(v):
+    return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
+
+
+def recording_meta(scene, loop) -> dict:
+    from dataclasses import asdict
+
+    return {
+        "source": "simulator",
+        "scene_name": scene.name,
+        "scene_path": scene.path,
+        "scene_text": scene.text,
+        "seed": scene.seed,
+        "effects": sorted(scene.effects),
+        "tracker_table": json.loads(json.dumps(scene.tracker_table, default=str)),
+        "speed_table": loop.tracker.table.to_dict(),
+        "rate_hz": loop.tracker.config.rate_hz,
+        "point_rate_hz": scene.optics.point_rate_hz,
+        "gimbal": asdict(scene.gimbal),
+    }
+
+
+class SimRecorder:
+    """A ``frame_hook`` for :class:`sim.loop.ClosedLoop` that writes every frame."""
+
+    def __init__(self, writer: RecordingWriter):
+        self.writer = writer
+        self.frame_id = 0
+
+    def __call__(self, frame, out, loop) -> None:
+        w = self.writer
+        fid = self.frame_id
+        t_end = _ns(frame.t_end_s)
+        w.write_points(t_end, fid, frame.xyz, frame.t_ns, frame.reflectivity)
+        d = out.detection
+        w.write_detection(
+            t_end, fid, d is not None, None if d is None else [float(v) for v in d.xyz],
+            0 if d is None else int(d.n_points),
+            t_s=None if d is None else float(d.t_s), az_deg=None if d is None else float(d.az_deg),
+            el_deg=None if d is None else float(d.el_deg), state=str(out.state.value),
+            error_pan_deg=_opt(out.error_pan_deg), error_tilt_deg=_opt(out.error_tilt_deg))
+        c = out.command
+        if loop.last_sent is not None:
+            t_send, data = loop.last_sent
+            w.write_command(_ns(t_send), data, frame_id=fid, pan_dir=c.pan_dir, pan_byte=c.pan_byte,
+                            tilt_dir=c.tilt_dir, tilt_byte=c.tilt_byte)
+        w.write_head_estimate(
+            t_end, out.head_pan_deg, out.head_tilt_deg, frame_id=fid, sigma_pan_deg=out.head_sigma_pan_deg,
+            sigma_tilt_deg=out.head_sigma_tilt_deg,
+            world_xyz_m=None if out.world_xyz is None else [float(v) for v in out.world_xyz],
+            world_sigma_m=_opt(out.world_sigma_m))
+        L = loop.log
+        w.write_truth(t_end, frame_id=fid, pan_deg=L.head_pan_deg[-1], tilt_deg=L.head_tilt_deg[-1],
+                      target_xyz_m=[float(v) for v in np.asarray(L.target_xyz[-1])],
+                      true_error_deg=_opt(L.true_error_deg[-1]), points_on_target=L.points_on_target[-1])
+        self.frame_id += 1
