@@ -184,9 +184,12 @@ class Reconstructor:
         self.dead_time_s = speed_table.dead_time_s if dead_time_s is None else dead_time_s
         accel = speed_table.accel_deg_s2 if accel_deg_s2 is None else accel_deg_s2
         self.lidar_offset_m = np.asarray(lidar_offset_m, float)
-        self.pan = _AxisIntegrator(speed_table.pan, wrap_deg(pan0_deg), sigma0_deg, t0_s, accel, None, True,
+        # A per-axis acceleration in the table wins over the table-wide one (unless overridden here).
+        acc_pan = accel if accel_deg_s2 is not None else (speed_table.pan.accel_deg_s2 or accel)
+        acc_tilt = accel if accel_deg_s2 is not None else (speed_table.tilt.accel_deg_s2 or accel)
+        self.pan = _AxisIntegrator(speed_table.pan, wrap_deg(pan0_deg), sigma0_deg, t0_s, acc_pan, None, True,
                                    timing_sigma_s, random_walk_deg2_s, history_s)
-        self.tilt = _AxisIntegrator(speed_table.tilt, tilt0_deg, sigma0_deg, t0_s, accel,
+        self.tilt = _AxisIntegrator(speed_table.tilt, tilt0_deg, sigma0_deg, t0_s, acc_tilt,
                                     tuple(tilt_limits_deg), False, timing_sigma_s, random_walk_deg2_s, history_s)
         self.last_command: HeadCommand | None = None
         self.last_send_t_s: float | None = None

@@ -67,8 +67,12 @@ class SpeedEntry:
 
 @dataclass(frozen=True)
 class AxisTable:
+    """One axis's entries; ``accel_deg_s2`` (optional) overrides the table-wide acceleration for
+    this axis (heads accelerate their two axes differently)."""
+
     axis: str
     entries: tuple[SpeedEntry, ...]
+    accel_deg_s2: float | None = None
     _speed: np.ndarray = field(init=False, repr=False, compare=False)   # over bytes 0..64 (64 = turbo)
     _sigma: np.ndarray = field(init=False, repr=False, compare=False)
 
@@ -221,7 +225,9 @@ class SpeedTable:
             return d
         return {"format": FORMAT, "version": 1, "unit": "deg/s", "date": self.date, "head": self.head,
                 "source": self.source, "dead_time_s": self.dead_time_s, "accel_deg_s2": self.accel_deg_s2,
-                "axes": {a: {"entries": [ent(e) for e in self.axis(a).entries]} for a in AXES}}
+                "axes": {a: {"entries": [ent(e) for e in self.axis(a).entries],
+                             **({"accel_deg_s2": self.axis(a).accel_deg_s2} if self.axis(a).accel_deg_s2 else {})}
+                         for a in AXES}}
 
     def save(self, path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
@@ -261,8 +267,13 @@ class SpeedTable:
         tables = {}
         for a in AXES:
             ax = axes[a]
-            if not isinstance(ax, dict) or not isinstance(ax.get("entries"), list) or set(ax) - {"entries"}:
-                raise UserError(f"{where}: axes.{a} must be {{\"entries\": [...]}}")
+            if not isinstance(ax, dict) or not isinstance(ax.get("entries"), list) or set(ax) - {"entries", "accel_deg_s2"}:
+                raise UserError(f"{where}: axes.{a} must be {{\"entries\": [...], \"accel_deg_s2\": optional}}")
+            ax_acc = ax.get("accel_deg_s2")
+            if ax_acc is not None:
+                ax_acc = _num_or_nan(ax_acc, f"{where}: axes.{a}.accel_deg_s2") * k
+                if not (math.isfinite(ax_acc) and ax_acc > 0):
+                    raise UserError(f"{where}: axes.{a}.accel_deg_s2 must be a number > 0 or absent")
             entries = []
             for i, e in enumerate(ax["entries"]):
                 w = f"{where}: axes.{a}.entries[{i}]"
@@ -285,7 +296,7 @@ class SpeedTable:
                 if dl is not None:
                     dl = _num_or_nan(dl, w + ".delay_s")
                 entries.append(SpeedEntry(b, sp * k, sg * k, meas, dl, str(e.get("note", ""))))
-            tables[a] = AxisTable(a, tuple(entries))
+            tables[a] = AxisTable(a, tuple(entries), ax_acc)
             if tables[a].max_speed_deg_s(allow_turbo=True) <= 0:
                 raise UserError(f"{where}: axes.{a} has no entry with a known speed > 0; it cannot be used")
         dt = _num_or_nan(data.get("dead_time_s", 0.0), where + ": dead_time_s")

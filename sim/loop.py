@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from foveatrack.control import STOP
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable
@@ -44,8 +45,9 @@ def truth_speed_table(head: PTS303H) -> SpeedTable:
     """The unit's true speed curve as a table: what a perfect calibration would produce."""
     def axis(name):
         bytes_ = list(range(64)) + ([TURBO] if name == "pan" else [])
+        accel = head.params.pan_accel_deg_s2 if name == "pan" else head.params.tilt_accel_deg_s2
         return AxisTable(name, tuple(SpeedEntry(b, head.true_speed_deg_s(name, b), 0.0, True, note="truth")
-                                     for b in bytes_))
+                                     for b in bytes_), accel)
     return SpeedTable(axis("pan"), axis("tilt"), head=f"PTS-303H unit {head.unit_seed} (simulated)",
                       source="truth: the simulated unit's own curve", dead_time_s=head.params.dead_time_s)
 
@@ -210,6 +212,10 @@ class ClosedLoop:
         send_t = t1 + scene.gimbal.send_delay_s
         out = self.tracker.process(frame, send_t_s=send_t)
         self.last_sent = None
+        if scene.gimbal.frozen:
+            # The head is frozen (paper Fig. 13/14a): nothing is sent, and the tracker's dead reckoning
+            # must know that its command never left.
+            self.tracker.command_sent(send_t, STOP)
         if not scene.gimbal.frozen:
             c = out.command
             data = encode_pan_tilt(scene.gimbal.address, c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte)

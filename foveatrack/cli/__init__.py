@@ -16,6 +16,7 @@ from foveatrack.errors import UserError
 # Command-group modules, in the order `foveatrack --help` lists them.
 COMMAND_MODULES = (
     "foveatrack.cli.demo_cmd",
+    "foveatrack.cli.simulate_cmd",
     "foveatrack.cli.lidar_cmd",
     "foveatrack.cli.gimbal_cmd",
 )

@@ -1,0 +1,95 @@
+"""``foveatrack simulate SCENE.toml``: run a scene's closed loop in virtual time."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from foveatrack.errors import UserError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("simulate", help="run a scene's closed loop (lidar, UAV, head over UART, tracker)")
+    p.add_argument("scene", metavar="SCENE.toml", help="a scene file (see scenes/)")
+    p.add_argument("--out", metavar="DIR", help="write the recording (run.mcap), summary.json and plots here")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--plot", action="store_true", help="write the Fig. 14 a/b/c plots into --out")
+    p.add_argument("--seed", type=int, help="override the scene's seed")
+    p.add_argument("--duration", type=float, metavar="S", help="override the scene's duration")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=cmd_simulate)
+
+
+def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
+                   quiet=False) -> dict:
+    from dataclasses import replace
+
+    from tqdm import tqdm
+
+    from foveatrack.recording import RecordingWriter
+    from sim.loop import ClosedLoop
+    from sim.recorder import SimRecorder, recording_meta
+    from sim.scene import load_scene
+    from sim.summary import summarize
+    import time
+
+    scene = load_scene(scene_path)
+    if seed is not None:
+        scene = replace(scene, seed=seed)
+    if duration is not None:
+        if not duration > 0:
+            raise UserError(f"--duration {duration}: must be > 0")
+        scene = replace(scene, duration_s=duration)
+    if plot and out is None:
+        raise UserError("--plot needs --out DIR")
+    out_dir = Path(out) if out else None
+    writer = None
+    t0 = time.perf_counter()
+    loop = ClosedLoop(scene)
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        writer = RecordingWriter(out_dir / "run.mcap", meta=recording_meta(scene, loop), overwrite=True)
+        loop.frame_hook = SimRecorder(writer)
+    n = int(round(scene.duration_s * scene.tracker.rate_hz))
+    bar = tqdm(total=n, desc=scene.name, unit="frame", disable=not progress, file=sys.stderr)
+    try:
+        log = loop.run(lambda k, total: bar.update(1))
+    finally:
+        bar.close()
+        if writer is not None:
+            writer.close()
+    wall = time.perf_counter() - t0
+    summary = summarize(scene, log, wall)
+    if out_dir is not None:
+        (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    if plot:
+        from foveatrack.cli import sim_plots
+
+        db = max(scene.tracker.deadband_pan_deg, scene.tracker.deadband_tilt_deg)
+        sim_plots.plot_error_vs_time(log, db, f"{scene.name}: tracking error (paper Fig. 14b)", out_dir / "error.png")
+        sim_plots.plot_points_vs_position(log, f"{scene.name}: points on the UAV per frame (paper Fig. 14a)",
+                                          out_dir / "points_on_target.png")
+        sim_plots.plot_trajectory(log, f"{scene.name}: reconstructed trajectory (paper Fig. 14c)", out_dir / "trajectory.png")
+        sim_plots.plot_head(log, f"{scene.name}: head angles", out_dir / "head.png")
+    if want_json:
+        json.dump(summary, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    elif not quiet:
+        e = summary["tracking_error_deg"]
+        fmt = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
+        print(f"{scene.name}: {summary['frames']} frames, {summary['frames_with_detection']} with a detection, "
+              f"{summary['points_on_target_per_frame']:.1f} points on target per frame")
+        print(f"  tracking error after acquisition [deg]: rms {fmt(e['rms'])}  p95 {fmt(e['p95'])}  max {fmt(e['max'])};"
+              f" acquisition {fmt(summary['acquisition_s'])} s")
+        if "reconstruction_error_m" in summary:
+            r = summary["reconstruction_error_m"]
+            print(f"  reconstructed position error [m]: rms {fmt(r['rms'])}  max {fmt(r['max'])}")
+        print(f"  {summary['wall_s']:.2f} s wall, {summary['realtime_factor']:.1f}x real time"
+              + (f"; recording and plots in {out_dir}/" if out_dir else ""))
+    return summary
+
+
+def cmd_simulate(args) -> int:
+    run_and_report(args.scene, args.out, args.json, args.plot, args.seed, args.duration, not args.no_progress)
+    return 0

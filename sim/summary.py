@@ -1,0 +1,39 @@
+"""The metrics a closed-loop run prints (``foveatrack simulate --json``), from its per-frame log."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from foveatrack.metrics import tracking_metrics
+
+
+def summarize(scene, log: dict, wall_s: float) -> dict:
+    """Tracking error after acquisition, acquisition time, detections, points on target, speed.
+
+    "In the FoV" (the acquisition clock's start) is the first frame whose true off-axis angle is
+    inside the scanner's half-FoV; acquisition uses the dead band + 1 deg (``foveatrack.metrics``).
+    """
+    half_fov = _half_fov_deg(scene)
+    err = log["true_error_deg"].astype(float)
+    cfg = scene.tracker
+    acquired = max(cfg.deadband_pan_deg, cfg.deadband_tilt_deg) + 1.0
+    m = tracking_metrics(log["t_end_s"], err, detected=log["detected"], in_fov=err < half_fov,
+                         acquired_deg=acquired, world_est=log["estimate_xyz"], world_true=log["target_xyz"])
+    pts = log["points_on_target"]
+    m["points_on_target_per_frame"] = float(np.mean(pts)) if len(pts) else 0.0
+    m["points_per_frame"] = float(np.mean(log["points"])) if len(pts) else 0.0
+    m["wall_s"] = round(wall_s, 3)
+    m["realtime_factor"] = round(scene.duration_s / wall_s, 2) if wall_s > 0 else math.inf
+    m["scene"] = scene.name
+    m["seed"] = scene.seed
+    m["effects"] = sorted(scene.effects)
+    return m
+
+
+def _half_fov_deg(scene) -> float:
+    from sim.scan.fov import field_of_view_deg
+
+    h, v = field_of_view_deg(scene.optics, model=scene.scan_model, samples=100_000)
+    return 0.5 * min(h, v)
