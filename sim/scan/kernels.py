@@ -329,3 +329,21 @@ def paint_footprint_kernel(az_deg, el_deg, k0, half_az_deg, half_el_deg, az_min,
                     first_hit[r, i] = k0 + j
                     new += 1
     return new
+
+
+@njit(cache=True)
+def add_speed_noise_kernel(k0, rate_hz, segment_s, noise_cum, noise_eps, rev_per_s, revs):
+    """Add the phase error of piecewise-constant relative speed errors to ``revs`` (P, N) [rev].
+
+    Point ``k0 + j`` is at ``t = (k0 + j) / rate``, in segment ``s = floor(t / T)``; its phase error
+    is ``rev_per_s[p] * (noise_cum[s, p] + noise_eps[s, p] * (t - s T))`` (the integral of the
+    relative error), wrapped back into [0, 1).
+    """
+    p_count, n = revs.shape
+    for j in range(n):
+        t = (k0 + j) / rate_hz
+        s = int(math.floor(t / segment_s))
+        dt = t - s * segment_s
+        for p in range(p_count):
+            v = revs[p, j] + rev_per_s[p] * (noise_cum[s, p] + noise_eps[s, p] * dt)
+            revs[p, j] = v - math.floor(v)

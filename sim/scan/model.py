@@ -123,9 +123,15 @@ class ScanModel:
         out = np.empty((self.prism_count, count))
         kernels.phase_revs_kernel(int(k0), self._r_h1, self._r_h2, self._r_lo, self._phase0_rev, out)
         if self.speed_noise is not None and count:
-            t_s = (np.arange(count, dtype=np.float64) + float(k0)) / self.optics.point_rate_hz
-            out += self._noise_revs(t_s).T
-            np.mod(out, 1.0, out=out)
+            noise = self.speed_noise
+            t_last = (k0 + count - 1) / self.optics.point_rate_hz
+            self._grow_noise(int(math.floor(t_last / noise.segment_s)) + 2)
+            kernels.add_speed_noise_kernel(int(k0), float(self.optics.point_rate_hz), noise.segment_s,
+                                           self._noise_cum, self._noise_eps, self._rev_per_s, out)
+            if noise.drift_frac > 0:
+                t_s = (np.arange(count, dtype=np.float64) + float(k0)) / self.optics.point_rate_hz
+                out += self._drift_revs(t_s).T
+                np.mod(out, 1.0, out=out)
         return out.T
 
     def channels(self, k0: int, count: int) -> np.ndarray:
@@ -184,29 +190,24 @@ class ScanModel:
             k += n
 
     # ----------------------------------------------------------------------------------------------
-    def _noise_revs(self, t_s: np.ndarray) -> np.ndarray:
-        """Phase error [rev] from integrating the speed error up to each time, shape (N, P).
+    def _drift_revs(self, t_s: np.ndarray) -> np.ndarray:
+        """Phase error [rev] of the slow sinusoidal speed drift, shape (N, P).
 
-        Piecewise-constant relative speed errors :math:`\\varepsilon_j` on segments of length T,
-        plus a sinusoidal drift :math:`A \\sin(2\\pi t / P_d + \\varphi_p)`; integrated exactly:
+        Together with the segment errors added by :func:`sim.scan.kernels.add_speed_noise_kernel`
+        (piecewise-constant relative errors :math:`\\varepsilon_j` on segments of length T), the
+        phase error integrates the relative speed error exactly:
 
         .. math:: \\Delta\\phi_p(t) = \\frac{\\mathrm{rpm}_p}{60}\\Big[T\\sum_{i<j}\\varepsilon_{i,p}
                   + \\varepsilon_{j,p}(t - jT) + \\frac{A P_d}{2\\pi}
                   \\big(\\cos\\varphi_p - \\cos(2\\pi t/P_d + \\varphi_p)\\big)\\Big]
         """
         noise = self.speed_noise
-        assert noise is not None and self._rng is not None
-        seg = np.floor(t_s / noise.segment_s).astype(np.int64)
-        self._grow_noise(int(seg.max()) + 1)
-        frac_s = self._noise_cum[seg] + self._noise_eps[seg] * (t_s - seg * noise.segment_s)[:, None]
-        if noise.drift_frac > 0:
-            if self._drift_phase is None:
-                self._drift_phase = self._rng.uniform(0, 2 * math.pi, self.prism_count)
-                self.noise_draws += self.prism_count
-            w = 2 * math.pi / noise.drift_period_s
-            frac_s = frac_s + noise.drift_frac / w * (
-                np.cos(self._drift_phase)[None, :] - np.cos(w * t_s[:, None] + self._drift_phase[None, :])
-            )
+        if self._drift_phase is None:
+            self._drift_phase = self._rng.uniform(0, 2 * math.pi, self.prism_count)
+            self.noise_draws += self.prism_count
+        w = 2 * math.pi / noise.drift_period_s
+        frac_s = noise.drift_frac / w * (
+            np.cos(self._drift_phase)[None, :] - np.cos(w * t_s[:, None] + self._drift_phase[None, :]))
         return frac_s * self._rev_per_s[None, :]
 
     def _grow_noise(self, segments: int) -> None:
