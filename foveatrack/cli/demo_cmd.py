@@ -1,19 +1,33 @@
 """``foveatrack demo``: the main job of the README quick start.
 
-Until the closed-loop tracker lands this is the scan-model demo: the prototype's FoV (exact and
-paraxial), its pattern, its radial density against eq. (4) and its coverage curve, printed and
-plotted into ``--out``.
+A closed-loop tracking run of the default scene (``scenes/fig12-tracking.toml``: a Mid-40 on a
+PTS-303H head tracking a quadrotor that enters the FoV off-centre), printing its metrics and writing
+its recording and plots, followed by the scan model's own figures (pattern, radial density against
+eq. 4, coverage) for the same lidar.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
+
+from foveatrack.errors import UserError
+
+DEFAULT_SCENE = "fig12-tracking.toml"
+
+
+def shipped_scene(name: str) -> Path:
+    """Path of a scene shipped in the repository's ``scenes/`` folder."""
+    path = Path(__file__).resolve().parents[2] / "scenes" / name
+    if not path.is_file():
+        raise UserError(f"shipped scene {name} not found at {path}; run from a checkout (pip install -e .)")
+    return path
 
 
 def register(sub) -> None:
-    p = sub.add_parser("demo", help="the quick-start demo: run the default scene, print metrics, write plots")
-    p.add_argument("--out", default="out/demo", help="directory for plots and the JSON summary")
+    p = sub.add_parser("demo", help="the quick-start demo: a closed-loop tracking run, metrics and plots")
+    p.add_argument("--out", default="out/demo", help="directory for the recording, plots and summary")
+    p.add_argument("--scene", default=None, help=f"scene file (default: scenes/{DEFAULT_SCENE})")
+    p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=cmd_demo)
 
 
@@ -22,27 +36,32 @@ def cmd_demo(args) -> int:
 
     from foveatrack.cli.lidar_cmd import _pattern_plot, info_dict
     from foveatrack.cli.scan_plots import plot_coverage, plot_density
+    from foveatrack.cli.simulate_cmd import run_and_report
     from sim.scan.coverage import voxel_coverage
     from sim.scan.density import radial_density
     from sim.scan.model import ScanModel
     from sim.scan.optics import SpeedNoise
-    from sim.scan.presets import PRESETS
+    from sim.scene import load_scene
 
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    optics = PRESETS["prototype"]
+    scene_path = args.scene or shipped_scene(DEFAULT_SCENE)
+    run_and_report(scene_path, out, plot=True, progress=not args.no_progress)
+
+    optics = load_scene(scene_path).optics
+    scan_dir = out / "scan"
+    scan_dir.mkdir(parents=True, exist_ok=True)
     info = info_dict(optics, "exact")
-    print(f"prototype (paper Appendix B): FoV {info['fov_deg'][0]:.2f} deg exact, "
-          f"{info['paraxial_fov_deg'][0]:.2f} deg paraxial")
-    _pattern_plot(optics, "exact", 0.1, out / "pattern.png")
-    exact = radial_density(ScanModel(optics), 2.0)
-    para = radial_density(ScanModel(optics, model="paraxial"), 2.0)
-    plot_density(para, exact, "prototype: radial density, 2 s", out / "density.png")
+    print(f"lidar {optics.name}: FoV {info['fov_deg'][0]:.2f} x {info['fov_deg'][1]:.2f} deg exact "
+          f"({info['paraxial_fov_deg'][0]:.2f} paraxial), {optics.point_rate_hz} points/s")
+    _pattern_plot(optics, "exact", 0.1, scan_dir / "pattern.png")
+    if len(optics.prisms) == 2:
+        exact = radial_density(ScanModel(optics), 1.0)
+        para = radial_density(ScanModel(optics, model="paraxial"), 1.0)
+        plot_density(para, exact, f"{optics.name}: radial density, 1 s", scan_dir / "density.png")
     noisy = ScanModel(optics, speed_noise=SpeedNoise(), rng=np.random.default_rng(0))
     curve = voxel_coverage(noisy, 2.0)
-    plot_coverage([("voxel, 1 % speed noise", curve)], "prototype: coverage (paper Appendix C)", out / "coverage.png")
-    print(f"coverage (voxel, 1 % speed noise): 50 % at {curve.t50_s:.3f} s, 90 % at {curve.t90_s:.3f} s")
-    summary = {"info": info, "coverage_t50_s": curve.t50_s, "coverage_t90_s": curve.t90_s}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    print(f"plots and summary.json written to {out}/")
+    plot_coverage([("voxel, 1 % speed noise", curve)], f"{optics.name}: coverage (paper Appendix C)",
+                  scan_dir / "coverage.png")
+    print(f"  coverage (voxel, 1 % speed noise): 50 % at {curve.t50_s:.2f} s, 90 % at {curve.t90_s:.2f} s")
+    print(f"plots: {out}/error.png, points_on_target.png, trajectory.png, head.png, scan/*.png")
     return 0

@@ -1,0 +1,135 @@
+"""World kernels against their numpy twins, and exact-intersection properties."""
+
+import math
+
+import numpy as np
+import pytest
+
+from world_twins import add_speed_noise_twin, cast_moving_twin, cast_static_twin, rotate_twin
+from sim.scan import kernels as SK
+from sim.world import bodies
+from sim.world import kernels as K
+
+
+def _unit(rng, n):
+    v = rng.normal(size=(n, 3))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_rotation_kernel_matches_matrix_twin_and_conventions():
+    rng = np.random.default_rng(0)
+    d = _unit(rng, 500)
+    pan = rng.uniform(-np.pi, np.pi, 500)
+    tilt = rng.uniform(-1.2, 1.2, 500)
+    out = np.empty_like(d)
+    K.rotate_pan_tilt_kernel(d, pan, tilt, out)
+    np.testing.assert_allclose(out, rotate_twin(d, pan, tilt), atol=1e-14)
+    # pan +90 deg turns the lidar's X (forward) to world +Y (left); tilt +90 deg turns it to +Z (up).
+    x = np.array([[1.0, 0, 0]])
+    for p, t, want in ((np.pi / 2, 0.0, [0, 1, 0]), (0.0, np.pi / 2, [0, 0, 1])):
+        o = np.empty_like(x)
+        K.rotate_pan_tilt_kernel(x, np.array([p]), np.array([t]), o)
+        np.testing.assert_allclose(o[0], want, atol=1e-15)
+
+
+def test_grid_rotation_matches_exact_rotation_of_interpolated_pose():
+    rng = np.random.default_rng(1)
+    n = 2000
+    d = _unit(rng, n)
+    t = np.sort(rng.uniform(0, 0.1, n))
+    grid_t = np.arange(0, 0.1 + 0.0015, 0.001)
+    pan_g = np.cumsum(rng.uniform(-0.0003, 0.0003, grid_t.size)) + 3.1  # crosses +pi: unwrapped
+    tilt_g = np.cumsum(rng.uniform(-0.0003, 0.0003, grid_t.size)) + 0.3
+    out = np.empty_like(d)
+    K.rotate_pan_tilt_grid_kernel(d, t, 0.0, 0.001, pan_g, tilt_g, out)
+    pan = np.interp(t, grid_t, pan_g)
+    tilt = np.interp(t, grid_t, tilt_g)
+    np.testing.assert_allclose(out, rotate_twin(d, pan, tilt), atol=1e-13)
+
+
+def _scene_prims():
+    return np.array([
+        bodies.sphere((5, 1, 0), 0.7), bodies.box((6, -1, 0.5), (0.3, 0.5, 0.2), 0.4),
+        bodies.disk((4, 0, -1), 0.5, (0.2, 0.1, 1.0)), bodies.plane((0, 0, -3), (0, 0, 1)),
+        bodies.rect((8, 0, 0), (-1, 0, 0), (0, 1, 0), 2.0, 1.5),
+    ])
+
+
+def test_static_cast_matches_twin_for_every_primitive_kind():
+    rng = np.random.default_rng(2)
+    d = _unit(rng, 20_000)
+    d[:, 0] = np.abs(d[:, 0]) + 0.2  # mostly forward, toward the primitives
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    prims = _scene_prims()
+    r = np.full(len(d), np.inf)
+    p = np.full(len(d), -1, dtype=np.int64)
+    K.cast_static_kernel(d, prims, r, p)
+    rt, pt = cast_static_twin(d, prims)
+    assert set(np.unique(p)) == {-1, 0, 1, 2, 3, 4}, "every kind is hit by some rays"
+    assert np.array_equal(p, pt)
+    finite = np.isfinite(r)
+    np.testing.assert_allclose(r[finite], rt[finite], rtol=1e-12)
+
+
+def test_hit_points_lie_on_the_surfaces():
+    rng = np.random.default_rng(3)
+    d = _unit(rng, 20_000)
+    d[:, 0] = np.abs(d[:, 0]) + 0.2
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    prims = _scene_prims()
+    r = np.full(len(d), np.inf)
+    p = np.full(len(d), -1, dtype=np.int64)
+    K.cast_static_kernel(d, prims, r, p)
+    x = d * np.where(np.isfinite(r), r, 0)[:, None]
+    sph = p == 0
+    np.testing.assert_allclose(np.linalg.norm(x[sph] - prims[0, 1:4], axis=1), 0.7, atol=1e-12)
+    pl = p == 3
+    np.testing.assert_allclose(x[pl, 2], -3.0, atol=1e-12)
+
+
+def test_moving_body_cast_matches_twin():
+    rng = np.random.default_rng(4)
+    quad = bodies.quadrotor()
+    n = 20_000
+    pos = np.column_stack([np.full(n, 10.0), rng.uniform(-0.2, 0.2, n), rng.uniform(-0.2, 0.2, n)])
+    target = pos + rng.normal(0, 0.12, (n, 3))
+    d = target / np.linalg.norm(target, axis=1, keepdims=True)
+    yaw = rng.uniform(-np.pi, np.pi, n)
+    r = np.full(n, np.inf)
+    p = np.full(n, -1, dtype=np.int64)
+    K.cast_moving_kernel(np.arange(n, dtype=np.int64), d, pos, yaw, quad.prims, 0, r, p)
+    rt, pt = cast_moving_twin(d, pos, yaw, quad.prims)
+    assert (p >= 0).mean() > 0.1 and len(set(p[p >= 0])) >= 5, "body, arms and rotors are all hit"
+    assert np.array_equal(p, pt)
+    f = np.isfinite(r)
+    np.testing.assert_allclose(r[f], rt[f], rtol=1e-12)
+
+
+def test_cone_cull_keeps_every_ray_that_can_hit():
+    rng = np.random.default_rng(5)
+    d = _unit(rng, 50_000)
+    c = np.array([6.0, 1.0, 0.5])
+    mark = np.empty(len(d), dtype=np.bool_)
+    K.cone_candidates_kernel(d, *c, 0.8, mark)
+    r = np.full(len(d), np.inf)
+    p = np.full(len(d), -1, dtype=np.int64)
+    K.cast_static_kernel(d, np.array([bodies.sphere(c, 0.8)]), r, p)
+    assert np.all(mark[p >= 0]), "no ray that hits the bounding sphere is culled"
+    assert mark.mean() < 0.01
+
+
+def test_speed_noise_kernel_matches_twin():
+    rng = np.random.default_rng(6)
+    cum = np.vstack([np.zeros((1, 2)), np.cumsum(rng.normal(0, 0.01, (50, 2)), axis=0) * 0.01])
+    eps = rng.normal(0, 0.01, (51, 2))
+    revs = rng.random((2, 3000))
+    want = add_speed_noise_twin(12_345, 100_000.0, 0.01, cum, eps, np.array([121.6, -77.7]), revs)
+    SK.add_speed_noise_kernel(12_345, 100_000.0, 0.01, cum, eps, np.array([121.6, -77.7]), revs)
+    d = (revs - want + 0.5) % 1 - 0.5
+    assert np.max(np.abs(d)) < 1e-12
+
+
+def test_quadrotor_size_and_bound():
+    q = bodies.quadrotor(0.35)
+    assert 0.3 < 2 * q.bounding_radius_m < 0.6
+    assert math.isinf(bodies.Body("g", np.array([bodies.plane((0, 0, 0), (0, 0, 1))]), np.ones(1)).bounding_radius_m)

@@ -1,0 +1,94 @@
+"""Plain-numpy twins of the kernels in :mod:`sim.world.kernels` (written independently, vectorised)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim.world.kernels import BOX, DISK, PLANE, RECT, SPHERE
+
+EPS = 1e-12
+
+
+def rotate_twin(d, pan, tilt):
+    ct, st, cp, sp = np.cos(tilt), np.sin(tilt), np.cos(pan), np.sin(pan)
+    out = np.empty_like(d)
+    for j in range(len(d)):
+        ry = np.array([[ct[j], 0, -st[j]], [0, 1, 0], [st[j], 0, ct[j]]])  # R_y(-tilt)
+        rz = np.array([[cp[j], -sp[j], 0], [sp[j], cp[j], 0], [0, 0, 1]])
+        out[j] = rz @ ry @ d[j]
+    return out
+
+
+def hit_twin(prim, o, d):
+    """Distances (N,) along rays o + t d (arrays (N,3)) to one primitive, inf when missed."""
+    kind = int(prim[0])
+    c = prim[1:4] - o
+    n_rays = len(d)
+    inf = np.full(n_rays, np.inf)
+    if kind == SPHERE:
+        b = np.einsum("ij,ij->i", c, d)
+        disc = b * b - (np.einsum("ij,ij->i", c, c) - prim[4] ** 2)
+        s = np.sqrt(np.maximum(disc, 0))
+        t1, t2 = b - s, b + s
+        t = np.where(t1 > EPS, t1, np.where(t2 > EPS, t2, np.inf))
+        return np.where(disc >= 0, t, inf)
+    if kind == BOX:
+        u, v = prim[7:10], prim[10:13]
+        axes = np.stack([u, v, np.cross(u, v)])
+        lo = np.full(n_rays, -np.inf)
+        hi = np.full(n_rays, np.inf)
+        ok = np.ones(n_rays, bool)
+        for a, h in zip(axes, prim[4:7]):
+            e = c @ a
+            f = d @ a
+            par = np.abs(f) <= EPS
+            ok &= ~(par & ((-e - h > 0) | (-e + h < 0)))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t1 = np.where(par, -np.inf, (e - h) / f)
+                t2 = np.where(par, np.inf, (e + h) / f)
+            lo = np.maximum(lo, np.minimum(t1, t2))
+            hi = np.minimum(hi, np.maximum(t1, t2))
+        ok &= (lo <= hi) & (hi >= EPS)
+        t = np.where(lo > EPS, lo, np.where(hi > EPS, hi, np.inf))
+        return np.where(ok, t, inf)
+    nrm = prim[7:10]
+    den = d @ nrm
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(np.abs(den) < EPS, np.inf, (c @ nrm) / den)
+    t = np.where(t > EPS, t, np.inf)
+    if kind == PLANE:
+        return t
+    p = d * np.where(np.isfinite(t), t, 0)[:, None] - c
+    if kind == DISK:
+        return np.where(np.einsum("ij,ij->i", p, p) <= prim[4] ** 2, t, inf)
+    assert kind == RECT
+    u = prim[10:13]
+    v = np.cross(nrm, u)
+    return np.where((np.abs(p @ u) <= prim[4]) & (np.abs(p @ v) <= prim[5]), t, inf)
+
+
+def cast_static_twin(d, prims):
+    o = np.zeros_like(d)
+    ts = np.stack([hit_twin(p, o, d) for p in prims], axis=1)
+    best = np.argmin(ts, axis=1)
+    rng = ts[np.arange(len(d)), best]
+    return rng, np.where(np.isfinite(rng), best, -1)
+
+
+def cast_moving_twin(d, pos, yaw, prims):
+    c, s = np.cos(yaw), np.sin(yaw)
+    rt = np.stack([np.stack([c, s, np.zeros_like(c)], 1), np.stack([-s, c, np.zeros_like(c)], 1),
+                   np.tile([0.0, 0.0, 1.0], (len(c), 1))], 1)  # R^T per ray
+    o = np.einsum("nij,nj->ni", rt, -pos)
+    dl = np.einsum("nij,nj->ni", rt, d)
+    ts = np.stack([hit_twin(p, o, dl) for p in prims], axis=1)
+    best = np.argmin(ts, axis=1)
+    rng = ts[np.arange(len(d)), best]
+    return rng, np.where(np.isfinite(rng), best, -1)
+
+
+def add_speed_noise_twin(k0, rate_hz, segment_s, cum, eps, rev_per_s, revs):
+    t = (k0 + np.arange(revs.shape[1])) / rate_hz
+    s = np.floor(t / segment_s).astype(int)
+    v = revs + (rev_per_s[:, None] * (cum[s].T + eps[s].T * (t - s * segment_s)[None, :]))
+    return v - np.floor(v)
