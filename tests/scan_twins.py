@@ -82,3 +82,22 @@ def first_hit_twin(cell, k0, first_hit):
     fresh = first_hit[cells] < 0
     first_hit[cells[fresh]] = k0 + idx[first[fresh]]
     return first_hit, int(fresh.sum())
+
+
+def paint_footprint_twin(az, el, k0, half_az, half_el, az_min, el_min, cell, shape):
+    """Cell centres inside each ray's ellipse, first ray index per cell (brute force over cells)."""
+    n_el, n_az = shape
+    ca = az_min + (np.arange(n_az) + 0.5) * cell
+    ce = el_min + (np.arange(n_el) + 0.5) * cell
+    first = np.full(shape, -1, dtype=np.int64)
+    for j in range(len(az) - 1, -1, -1):  # later rays first, so earlier ones overwrite
+        inside = ((ca[None, :] - az[j]) ** 2 / half_az**2 + (ce[:, None] - el[j]) ** 2 / half_el**2) <= 1.0
+        first[inside] = k0 + j
+    return first
+
+
+def add_speed_noise_twin(k0, rate_hz, segment_s, cum, eps, rev_per_s, revs):
+    t = (k0 + np.arange(revs.shape[1])) / rate_hz
+    s = np.floor(t / segment_s).astype(int)
+    v = revs + (rev_per_s[:, None] * (cum[s].T + eps[s].T * (t - s * segment_s)[None, :]))
+    return v - np.floor(v)

@@ -85,10 +85,3 @@ def cast_moving_twin(d, pos, yaw, prims):
     best = np.argmin(ts, axis=1)
     rng = ts[np.arange(len(d)), best]
     return rng, np.where(np.isfinite(rng), best, -1)
-
-
-def add_speed_noise_twin(k0, rate_hz, segment_s, cum, eps, rev_per_s, revs):
-    t = (k0 + np.arange(revs.shape[1])) / rate_hz
-    s = np.floor(t / segment_s).astype(int)
-    v = revs + (rev_per_s[:, None] * (cum[s].T + eps[s].T * (t - s * segment_s)[None, :]))
-    return v - np.floor(v)

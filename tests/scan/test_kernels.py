@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from scan_twins import (
+    add_speed_noise_twin,
+    paint_footprint_twin,
     first_hit_twin,
     phase_revs_twin,
     point_times_ns_twin,
@@ -147,3 +149,25 @@ def test_single_prism_deviation_matches_facts():
         assert st[0] == K.RAY_OK
         assert abs(np.degrees(np.arccos(d[0, 0])) - expected) < 0.005
         assert d[0, 1] > 0, "phase 0 deflects toward +x_opt = lidar +Y (left)"
+
+
+def test_footprint_painting_matches_twin():
+    rng = np.random.default_rng(11)
+    az = rng.uniform(-1, 1, 300)
+    el = rng.uniform(-0.5, 0.5, 300)
+    shape = (80, 150)
+    first = np.full(shape, -1, dtype=np.int64)
+    new = K.paint_footprint_kernel(az, el, 50, 0.14, 0.015, -1.1, -0.6, 0.015, first)
+    ref = paint_footprint_twin(az, el, 50, 0.14, 0.015, -1.1, -0.6, 0.015, shape)
+    assert np.array_equal(first, ref) and new == int((ref >= 0).sum()) > 0
+
+
+def test_speed_noise_kernel_matches_twin():
+    rng = np.random.default_rng(6)
+    cum = np.vstack([np.zeros((1, 2)), np.cumsum(rng.normal(0, 0.01, (50, 2)), axis=0) * 0.01])
+    eps = rng.normal(0, 0.01, (51, 2))
+    revs = rng.random((2, 3000))
+    want = add_speed_noise_twin(12_345, 100_000.0, 0.01, cum, eps, np.array([121.6, -77.7]), revs)
+    K.add_speed_noise_kernel(12_345, 100_000.0, 0.01, cum, eps, np.array([121.6, -77.7]), revs)
+    d = (revs - want + 0.5) % 1 - 0.5
+    assert np.max(np.abs(d)) < 1e-12

@@ -5,8 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from world_twins import add_speed_noise_twin, cast_moving_twin, cast_static_twin, rotate_twin
-from sim.scan import kernels as SK
+from world_twins import cast_moving_twin, cast_static_twin, rotate_twin
 from sim.world import bodies
 from sim.world import kernels as K
 
@@ -116,17 +115,6 @@ def test_cone_cull_keeps_every_ray_that_can_hit():
     K.cast_static_kernel(d, np.array([bodies.sphere(c, 0.8)]), r, p)
     assert np.all(mark[p >= 0]), "no ray that hits the bounding sphere is culled"
     assert mark.mean() < 0.01
-
-
-def test_speed_noise_kernel_matches_twin():
-    rng = np.random.default_rng(6)
-    cum = np.vstack([np.zeros((1, 2)), np.cumsum(rng.normal(0, 0.01, (50, 2)), axis=0) * 0.01])
-    eps = rng.normal(0, 0.01, (51, 2))
-    revs = rng.random((2, 3000))
-    want = add_speed_noise_twin(12_345, 100_000.0, 0.01, cum, eps, np.array([121.6, -77.7]), revs)
-    SK.add_speed_noise_kernel(12_345, 100_000.0, 0.01, cum, eps, np.array([121.6, -77.7]), revs)
-    d = (revs - want + 0.5) % 1 - 0.5
-    assert np.max(np.abs(d)) < 1e-12
 
 
 def test_quadrotor_size_and_bound():
