@@ -142,7 +142,10 @@ class RecordingWriter:
         points_dtype: str = "float64",
         fsync: bool = False,
         overwrite: bool = False,
+        created_utc: str | None = None,
     ):
+        # created_utc: None stamps the wall-clock time; the simulator passes a fixed text so that
+        # one scene and seed give the same file to the bit.
         from mcap.writer import CompressionType, Writer
 
         comp = {"lz4": CompressionType.LZ4, "zstd": CompressionType.ZSTD, "none": CompressionType.NONE}
@@ -180,7 +183,8 @@ class RecordingWriter:
                 "foveatrack_version": __version__,
                 "numpy_version": np.__version__,
                 "python_version": platform.python_version(),
-                "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                "created_utc": created_utc if created_utc is not None
+                else _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             },
         )
         self._channels: dict[str, int] = {}

@@ -150,6 +150,10 @@ class ClosedLoop:
         self._bg = scene.background_prims
         self._bg_refl = scene.background_reflectivity
         self.log = FrameLog()
+        # Work counters (timing-free evidence that a scene costs only what it holds).
+        self.rays_total = 0
+        self.rays_cast_targets = 0
+        self.rays_cast_background = 0
         self.bytes_sent = 0
         self.last_sent: tuple[float, bytes] | None = None  # (time, Pelco-D bytes) of this frame's command
 
@@ -197,7 +201,9 @@ class ClosedLoop:
             refl_of.append(spec.body.reflectivity)
             offset += spec.body.prims.shape[0]
         target_prim_end = offset
+        self.rays_total += n
         if self._bg.shape[0]:
+            self.rays_cast_background += n
             bg_prim = np.full(n, -1, dtype=np.int64)
             bg_rng = rng_m.copy()
             wk.cast_static_kernel(d_world, self._bg, bg_rng, bg_prim)
@@ -272,6 +278,7 @@ class ClosedLoop:
         wk.cone_candidates_kernel(d_world, c[0], c[1], c[2], reach, cand)
         cand &= ok
         idx = np.flatnonzero(cand)
+        self.rays_cast_targets += idx.size
         if idx.size == 0:
             return
         pos = traj.position(t_s[idx])

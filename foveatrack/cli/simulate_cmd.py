@@ -49,7 +49,8 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     loop = ClosedLoop(scene)
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-        writer = RecordingWriter(out_dir / "run.mcap", meta=recording_meta(scene, loop), overwrite=True)
+        writer = RecordingWriter(out_dir / "run.mcap", meta=recording_meta(scene, loop), overwrite=True,
+                                 created_utc="virtual time (simulation)")
         loop.frame_hook = SimRecorder(writer)
     n = int(round(scene.duration_s * scene.tracker.rate_hz))
     bar = tqdm(total=n, desc=scene.name, unit="frame", disable=not progress, file=sys.stderr)

@@ -121,8 +121,9 @@ class Manual:
     """A "manually flown" path: random but bounded acceleration and speed, seeded.
 
     Acceleration is an Ornstein-Uhlenbeck process (time constant ``tau_s``) clipped to
-    ``max_accel_m_s2``, plus a spring toward ``centre_m`` beyond ``radius_m``; velocity is clipped
-    to ``max_speed_m_s``.  Integrated on a 20 ms grid over ``duration_s`` once, then a cubic spline
+    ``max_accel_m_s2``; beyond ``radius_m`` from ``centre_m`` the pilot brakes toward the centre at
+    full acceleration, so the flight stays within ``radius_m + v_max^2 / (2 a_max)``; velocity is
+    clipped to ``max_speed_m_s``.  Integrated on a 20 ms grid over ``duration_s`` once, then a cubic spline
     gives position and velocity at any time, so every run with one seed flies the same path.
     """
 
@@ -149,11 +150,13 @@ class Manual:
             a += -a * dt / self.tau_s + self.max_accel_m_s2 * math.sqrt(2 * dt / self.tau_s) * rng.standard_normal(3)
             off = p - c
             dist = np.linalg.norm(off)
-            pull = -off / dist * (dist - self.radius_m) * 2.0 if dist > self.radius_m else 0.0
-            acc = a + pull
-            na = np.linalg.norm(acc)
-            if na > self.max_accel_m_s2:
-                acc *= self.max_accel_m_s2 / na
+            if dist > self.radius_m:
+                acc = -off / dist * self.max_accel_m_s2
+            else:
+                acc = a.copy()
+                na = np.linalg.norm(acc)
+                if na > self.max_accel_m_s2:
+                    acc *= self.max_accel_m_s2 / na
             v = v + acc * dt
             nv = np.linalg.norm(v)
             if nv > self.max_speed_m_s:

@@ -124,3 +124,11 @@ def test_every_shipped_scene_loads():
     assert {"fig12-tracking", "fig14a-frozen-pass"} <= set(names)
     for p in SCENES.glob("*.toml"):
         load_scene(p)
+
+
+def test_a_one_uav_scene_traces_only_the_rays_near_the_uav():
+    loop, _ = _run(short("fig14a-frozen-pass", 2.0))
+    assert loop.rays_cast_background == 0, "no background listed: nothing traced against a world"
+    assert 0 < loop.rays_cast_targets < 0.02 * loop.rays_total
+    loop_bg, _ = _run(short("fig12-tracking", 1.0))
+    assert loop_bg.rays_cast_background == loop_bg.rays_total
