@@ -168,20 +168,20 @@ def cmd_info(args) -> int:
         f"pattern repeats every {info['repeat_period_s']} s (noise-free)",
     ])
     if args.plot:
-        from foveatrack.cli.lidar_cmd import _pattern_plot
-
         _pattern_plot(optics, args.model, 0.1, args.plot)
     return 0
 
 
-def _pattern_plot(optics, model, duration, path, noise=None, seed=0):
+def _pattern_plot(optics, model, duration, path, scan=None):
+    """Plot ``duration`` seconds of the pattern; ``scan`` (a ScanModel, e.g. with speed noise)
+    overrides the noise-free model built from ``optics`` and ``model``."""
     import numpy as np
 
     from foveatrack.cli.scan_plots import plot_pattern
     from sim.scan.fov import az_el_deg
     from sim.scan.model import ScanModel
 
-    scan = ScanModel(optics, model=model) if noise is None else noise
+    scan = ScanModel(optics, model=model) if scan is None else scan
     chunk = scan.scan(0, int(round(duration * optics.point_rate_hz)))
     az, el = az_el_deg(chunk.direction[chunk.valid])
     plot_pattern(az, el, chunk.channel[chunk.valid].astype(np.int64),
@@ -197,7 +197,7 @@ def cmd_pattern(args) -> int:
 
     az, el = az_el_deg(chunk.direction[chunk.valid])
     if args.plot:
-        _pattern_plot(optics, args.model, args.duration, args.plot, noise=scan)
+        _pattern_plot(optics, args.model, args.duration, args.plot, scan=scan)
     result = {
         "name": optics.name, "model": args.model, "duration_s": args.duration, "points": len(chunk),
         "valid_points": int(chunk.valid.sum()),
