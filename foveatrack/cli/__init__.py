@@ -18,6 +18,8 @@ COMMAND_MODULES = (
     "foveatrack.cli.demo_cmd",
     "foveatrack.cli.lidar_cmd",
     "foveatrack.cli.gimbal_cmd",
+    "foveatrack.cli.daemon_cmd",
+    "foveatrack.cli.replay_cmd",
 )
 
 
