@@ -286,7 +286,8 @@ class Daemon:
                 old[sig] = signal.signal(sig, lambda *_: self.stop_ev.set())
         c = self.cfg
         self.log.event("start", config=c.path, recording=str(self.recording_path) if self.recording_path else None,
-                       lidar=asdict(c.lidar), head_port=c.head.port, rate_hz=c.tracker.rate_hz,
+                       lidar=asdict(c.lidar), head_port=c.head.port, head_open=self.head.connected,
+                       rate_hz=c.tracker.rate_hz,
                        host_ports={"cmd": self.client.cmd_port, "data": self.client.data_port,
                                    "broadcast": self.client.broadcast_port})
         self.head.stop()
