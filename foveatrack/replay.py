@@ -260,6 +260,7 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
                point_rate_hz: float | None = None) -> ReplayResult:
     """Run the tracker over a Livox Viewer ``.lvx`` file (lidar only, head frozen: after every frame
     the reconstruction is told the head stopped, so the commands are what it would have sent)."""
+    from foveatrack.daemon.support import strip_no_return
     from foveatrack.livox.lvx import LvxReader
 
     cfg = TrackerConfig.from_mapping(tracker_table or {}, where=f"{config_name or 'default'} [tracker]")
@@ -271,6 +272,7 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
     def run(frames):
         nonlocal tracker, fid
         for fr in frames:
+            fr = strip_no_return(fr)
             if tracker is None:
                 tracker = Tracker(cfg, SpeedTable.nominal(), t0_s=fr.t_start_s)
             send_t = fr.t_end_s + cfg.send_delay_s
@@ -279,7 +281,8 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
             F.add(fid, fr, out, out.command)
             fid += 1
 
-    with LvxReader(path, point_rate_hz=point_rate_hz) as r:
+    # no-return points are kept for their times (frames keep coming over the sky), then stripped
+    with LvxReader(path, point_rate_hz=point_rate_hz, keep_no_return=True) as r:
         for lf in r.frames():
             b = lf.points
             run(slicer.push(b.xyz, b.t_ns, b.reflectivity))

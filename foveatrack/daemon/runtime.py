@@ -47,7 +47,8 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.daemon.config import DaemonConfig
-from foveatrack.daemon.support import JsonLog, Limits, RecordingThread, StatusLine, format_status
+from foveatrack.daemon.support import (JsonLog, Limits, RecordingThread, StatusLine, format_status,
+                                       strip_no_return)
 from foveatrack.frames import Frame, FrameSlicer
 from foveatrack.tracker import Tracker
 
@@ -249,11 +250,7 @@ class Daemon:
 
     # -------------------------------------------------------------------------------- the frame
     def _process(self, frame: Frame, t_arrival: float) -> None:
-        if frame.n_points:
-            ret = np.any(frame.xyz != 0.0, axis=1)
-            if not ret.all():
-                frame = Frame(frame.t_start_s, frame.t_end_s, frame.xyz[ret], frame.t_ns[ret],
-                              None if frame.reflectivity is None else frame.reflectivity[ret])
+        frame = strip_no_return(frame)
         now_s = self.sensor_now_s()
         send_t = (frame.t_end_s if now_s is None else max(now_s, frame.t_end_s)) + self._proc_ewma_s
         out = self.tracker.process(frame, send_t_s=send_t)

@@ -17,6 +17,21 @@ from foveatrack.control import HeadCommand
 from foveatrack.speed_table import TURBO
 
 
+def strip_no_return(frame):
+    """The frame without Livox "no return" points (0, 0, 0).  Drivers keep them on the wire so that
+    time keeps moving while the lidar sees only sky (frames still come every period), then strip
+    them here before detection and recording."""
+    from foveatrack.frames import Frame
+
+    if not frame.n_points:
+        return frame
+    ret = np.any(frame.xyz != 0.0, axis=1)
+    if ret.all():
+        return frame
+    return Frame(frame.t_start_s, frame.t_end_s, frame.xyz[ret], frame.t_ns[ret],
+                 None if frame.reflectivity is None else frame.reflectivity[ret])
+
+
 # ----------------------------------------------------------------------------------------- safety
 @dataclass(frozen=True)
 class Limits:
@@ -51,10 +66,6 @@ class Limits:
             td, tb, why = 0, 0, why + ["tilt_stop_up"]
         elif td < 0 and tilt_deg - s2 <= lo + self.tilt_margin_deg:
             td, tb, why = 0, 0, why + ["tilt_stop_down"]
-        if pd != 0 and pb == 0:
-            pd = 0
-        if td != 0 and tb == 0:
-            td = 0
         return HeadCommand(pd, pb if pd else 0, td, tb if td else 0), why
 
 
