@@ -97,3 +97,21 @@ def test_limits_never_let_a_forbidden_command_out(cmd, tilt, sigma, max_pan, max
     assert (out == cmd) == (not why)
     # never adds motion: a stopped axis stays stopped, a direction is never reversed
     assert out.pan_dir in (0, cmd.pan_dir) and out.tilt_dir in (0, cmd.tilt_dir)
+
+
+def test_status_line_only_on_a_terminal():
+    import io
+
+    from foveatrack.daemon.support import StatusLine, format_status
+
+    text = format_status(10.0, 9980, "tracking", 1.2, -0.3, 11.0, 0, True)
+    assert "10.0 Hz" in text and "9980 pts/frame" in text and "tracking" in text and "+1.2/ -0.3" in text
+    pipe = io.StringIO()
+    StatusLine(pipe).show(text)          # StringIO is not a TTY: nothing written
+    assert pipe.getvalue() == ""
+    tty = io.StringIO()
+    s = StatusLine(tty, enabled=True)
+    s.show(text)
+    s.show(text)
+    s.done()
+    assert tty.getvalue() == ("\r" + text + "\x1b[K") * 2 + "\n"

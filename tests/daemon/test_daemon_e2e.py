@@ -56,6 +56,7 @@ def test_three_processes_track_and_replay(tmp_path):
     try:
         time.sleep(6.0)
         assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
+        time.sleep(0.6)     # the head decelerates after the shutdown STOP (dead time + ramp)
     finally:
         _stop_all(procs)
     stats = event(log, "stop")["stats"]
@@ -75,6 +76,7 @@ def test_three_processes_track_and_replay(tmp_path):
     assert stats["lidar_dropped_total"] == 0
     sources = [c.get("source") for c in r.records("commands")]
     assert sources[-1] == "shutdown" and sources.count("tracker") == stats["frames"]
+    assert r.records("commands")[-1]["raw_hex"] == "ff010000000001"   # Pelco-D stop, address 1
     lat = [m["value"] for m in r.records("metrics") if m["name"] == "latency_ms"]
     assert len(lat) == stats["frames"] and np.median(lat) < 100.0
     # replay: the same detections and commands, bit for bit
