@@ -69,6 +69,10 @@ def register(sub) -> None:
     p.add_argument("--plot", metavar="FILE.png")
     p.set_defaults(func=cmd_coverage_map)
 
+    from foveatrack.cli.lidar_serve import add_serve_parser  # the virtual lidar (issue 6)
+
+    add_serve_parser(lsub)
+
 
 def _positive(text: str) -> float:
     try:

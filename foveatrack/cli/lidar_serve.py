@@ -1,0 +1,62 @@
+"""``foveatrack lidar serve SCENE.toml``: the scene's lidar in real time as a Livox on UDP.
+
+Registered by :func:`foveatrack.cli.lidar_cmd.register` through :func:`add_serve_parser`; the
+simulator (:mod:`sim.lidar_server`) is imported only when the command runs.  The first stdout line is
+``READY <ip> <cmd_port>``; on SIGINT/SIGTERM it prints its counters as one JSON line and exits 0.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from foveatrack.errors import UserError
+
+
+def add_serve_parser(lsub) -> None:
+    """Add ``serve`` to the ``foveatrack lidar`` sub-commands."""
+    p = lsub.add_parser("serve", help="run a scene's lidar in real time as a Livox (SDK v1 over UDP)")
+    p.add_argument("scene", metavar="SCENE.toml")
+    p.add_argument("--bind-ip", "--host-ip", dest="bind_ip", default="127.0.0.1",
+                   help="the virtual lidar's own address (default 127.0.0.1)")
+    p.add_argument("--cmd-port", type=int, default=65000, help="its command port (65000 as a real Livox; 0 = any)")
+    p.add_argument("--broadcast-ip", default="127.0.0.1", help="where discovery broadcasts go")
+    p.add_argument("--broadcast-port", type=int, default=55000, help="host port of the broadcasts (55000)")
+    p.add_argument("--packet-type", type=int, default=None, choices=(0, 1, 2, 3, 4),
+                   help="data type (default: 0 for mid40/prototype, 2 for horizon)")
+    p.add_argument("--time-scale", type=float, default=1.0, help="stream seconds per wall second")
+    p.add_argument("--loss-rate", type=float, default=0.0, help="fraction of data packets dropped")
+    p.add_argument("--seed", type=int, default=0, help="seed of the packet loss")
+    p.add_argument("--head-truth", metavar="FILE",
+                   help="follow the head served by 'foveatrack gimbal serve --truth FILE'")
+    p.add_argument("--head-clock-zero", type=float, default=None, metavar="MONO",
+                   help="that head's time.monotonic() at t_s = 0 (printed by gimbal serve; default: estimated)")
+    p.add_argument("--duration-s", type=float, default=None, help="stop after this many seconds")
+    p.set_defaults(func=cmd_serve)
+
+
+def cmd_serve(args) -> int:
+    from sim.lidar_server import serve_scene
+    from sim.scene import load_scene
+
+    scene = load_scene(args.scene)
+    if not args.time_scale > 0:
+        raise UserError(f"--time-scale must be > 0, got {args.time_scale}")
+    if not 0 <= args.loss_rate < 1:
+        raise UserError(f"--loss-rate must be in [0, 1), got {args.loss_rate}")
+    if not 0 <= args.cmd_port <= 65535 or not 0 < args.broadcast_port <= 65535:
+        raise UserError("--cmd-port must be in 0..65535 and --broadcast-port in 1..65535")
+
+    def ready(lidar):
+        print(f"READY {lidar.address[0]} {lidar.cmd_port}", flush=True)
+        print(f"virtual {scene.optics.name} lidar for scene {scene.name!r} ({scene.optics.point_rate_hz:g} pts/s) "
+              f"on {lidar.address[0]}:{lidar.cmd_port}, broadcasting to {args.broadcast_ip}:{args.broadcast_port}"
+              f"{'; following head truth ' + args.head_truth if args.head_truth else ''}; Ctrl-C stops",
+              file=sys.stderr, flush=True)
+
+    counters = serve_scene(
+        scene, bind_ip=args.bind_ip, cmd_port=args.cmd_port, broadcast_addr=(args.broadcast_ip, args.broadcast_port),
+        time_scale=args.time_scale, loss_rate=args.loss_rate, seed=args.seed, packet_type=args.packet_type,
+        head_truth=args.head_truth, head_clock_zero=args.head_clock_zero, duration_s=args.duration_s, ready=ready)
+    print(json.dumps({k: int(v) for k, v in sorted(counters.items())}), flush=True)
+    return 0

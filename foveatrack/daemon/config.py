@@ -1,0 +1,295 @@
+"""The daemon's TOML configuration, validated on load (every error names the file, the key and
+what is allowed).  Example: ``examples/daemon-virtual.toml``; reference: ``docs/daemon.md``.
+
+Tables::
+
+    [lidar]      sensor_ip, host_ip, cmd_port, data_port, broadcast_port (0 = any; false = no
+                 discovery, then sensor_cmd_port), sensor_cmd_port, point_rate_hz, broadcast_code
+    [head]       port (device path or pyserial URL), baud, address, protocol ("D" | "P"),
+                 speed_table ("nominal" | path to a calibrated table JSON, relative to this file),
+                 pan_speed_max_deg_s, tilt_speed_max_deg_s, pan_turbo_deg_s (the nominal table),
+                 max_pan_byte, max_tilt_byte, allow_turbo, tilt_limits_deg, tilt_margin_deg,
+                 pan0_deg, tilt0_deg (the pose at start, e.g. after homing)
+    [tracker]    foveatrack.tracker.TrackerConfig keys (rate_hz is the loop rate)
+    [recording]  path ("{time}" becomes the UTC start time), flush_every_frames, compression,
+                 points_dtype, queue_frames, overwrite
+    [daemon]     watchdog_s, max_frame_backlog, batch_queue, status_period_s, log
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import ipaddress
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Mapping
+
+from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
+from foveatrack.errors import UserError
+from foveatrack.speed_table import SpeedTable
+from foveatrack.tracker import TrackerConfig
+
+
+@dataclass(frozen=True)
+class LidarConfig:
+    sensor_ip: str = "192.168.1.50"
+    host_ip: str = "192.168.1.5"
+    cmd_port: int = 56001
+    data_port: int = 56000
+    broadcast_port: int | None = 55000
+    sensor_cmd_port: int | None = None
+    point_rate_hz: float | None = None
+    broadcast_code: str | None = None
+
+
+@dataclass(frozen=True)
+class HeadConfig:
+    port: str = "/dev/ttyUSB0"
+    baud: int = 9600
+    address: int = 1
+    protocol: str = "D"
+    speed_table: str = "nominal"
+    pan_speed_max_deg_s: float = 15.0
+    tilt_speed_max_deg_s: float = 2.0
+    pan_turbo_deg_s: float = 20.0
+    max_pan_byte: int = 0x3F
+    max_tilt_byte: int = 0x3F
+    allow_turbo: bool = False
+    tilt_limits_deg: tuple[float, float] = (-30.0, 60.0)
+    tilt_margin_deg: float = 2.0
+    pan0_deg: float = 0.0
+    tilt0_deg: float = 0.0
+
+    @property
+    def frame_time_s(self) -> float:
+        """One 7-byte Pelco frame on the wire (10 bits per byte) [s]."""
+        return 7 * 10 / self.baud
+
+
+@dataclass(frozen=True)
+class RecordingConfig:
+    path: str | None = None
+    flush_every_frames: int = 1
+    compression: str = "lz4"
+    points_dtype: str = "float64"
+    queue_frames: int = 50
+    overwrite: bool = False
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    watchdog_s: float = 0.5
+    max_frame_backlog: int = 3
+    batch_queue: int = 2000
+    status_period_s: float = 0.5
+    log: str | None = None
+
+
+@dataclass(frozen=True)
+class DaemonConfig:
+    path: str
+    text: str
+    lidar: LidarConfig
+    head: HeadConfig
+    tracker_table: Mapping[str, Any]
+    tracker: TrackerConfig
+    recording: RecordingConfig
+    loop: LoopConfig
+
+    @property
+    def tracker_overrides(self) -> dict:
+        """What the daemon sets on top of ``[tracker]`` (from ``[head]``), kept for replay."""
+        t = self.tracker_table
+        out = {}
+        if "pan0_deg" not in t:
+            out["pan0_deg"] = self.head.pan0_deg
+        if "tilt0_deg" not in t:
+            out["tilt0_deg"] = self.head.tilt0_deg
+        if "tilt_limits_deg" not in t:
+            out["tilt_limits_deg"] = list(self.head.tilt_limits_deg)
+        if "latency_s" not in t:
+            out["latency_s"] = self.head.frame_time_s
+        return out
+
+    def speed_table(self) -> SpeedTable:
+        h = self.head
+        if h.speed_table == "nominal":
+            return SpeedTable.nominal(h.pan_speed_max_deg_s, h.tilt_speed_max_deg_s, h.pan_turbo_deg_s)
+        p = Path(h.speed_table)
+        if not p.is_absolute():
+            p = Path(self.path).parent / p
+        return SpeedTable.load(p)
+
+    def recording_path(self, now: _dt.datetime | None = None) -> Path | None:
+        if self.recording.path is None:
+            return None
+        now = now or _dt.datetime.now(_dt.timezone.utc)
+        p = Path(self.recording.path.replace("{time}", now.strftime("%Y%m%dT%H%M%SZ")))
+        return p if p.is_absolute() else Path(self.path).parent / p
+
+
+def _int(v, key, where, lo, hi):
+    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+        raise UserError(f"{where}: {key} must be an integer in [{lo}, {hi}], got {v!r}")
+    return v
+
+
+def _ip(v, key, where):
+    try:
+        return str(ipaddress.IPv4Address(v))
+    except (ValueError, TypeError):
+        raise UserError(f"{where}: {key} must be a dotted IPv4 address like 192.168.1.50, got {v!r}") from None
+
+
+def _lidar(t: Mapping, w: str) -> LidarConfig:
+    check_keys(t, ["sensor_ip", "host_ip", "cmd_port", "data_port", "broadcast_port", "sensor_cmd_port",
+                   "point_rate_hz", "broadcast_code"], w)
+    kw: dict = {}
+    for k in ("sensor_ip", "host_ip"):
+        if k in t:
+            kw[k] = _ip(t[k], k, w)
+    for k in ("cmd_port", "data_port"):
+        if k in t:
+            kw[k] = _int(t[k], k, w, 0, 65535)
+    if "broadcast_port" in t:
+        v = t["broadcast_port"]
+        kw["broadcast_port"] = None if v is False else _int(v, "broadcast_port", w, 0, 65535)
+    if "sensor_cmd_port" in t:
+        kw["sensor_cmd_port"] = _int(t["sensor_cmd_port"], "sensor_cmd_port", w, 1, 65535)
+    if "point_rate_hz" in t:
+        kw["point_rate_hz"] = as_float(t["point_rate_hz"], "point_rate_hz", w, lo=0, lo_open=True, hi=2e6)
+    if "broadcast_code" in t:
+        v = t["broadcast_code"]
+        if not isinstance(v, str) or not 0 < len(v) <= 16:
+            raise UserError(f"{w}: broadcast_code must be a string of 1-16 characters, got {v!r}")
+        kw["broadcast_code"] = v
+    cfg = LidarConfig(**kw)
+    if cfg.broadcast_port is None and cfg.sensor_cmd_port is None:
+        raise UserError(f"{w}: broadcast_port = false (no discovery) needs sensor_cmd_port (65000 on a Livox)")
+    return cfg
+
+
+def _head(t: Mapping, w: str) -> HeadConfig:
+    check_keys(t, [f for f in HeadConfig.__dataclass_fields__], w)
+    kw: dict = {}
+    if "port" in t:
+        if not isinstance(t["port"], str) or not t["port"]:
+            raise UserError(f"{w}: port must be a device path (/dev/ttyUSB0) or a pyserial URL (socket://host:port)")
+        kw["port"] = t["port"]
+    if "baud" in t:
+        kw["baud"] = _int(t["baud"], "baud", w, 300, 115200)
+    if "address" in t:
+        kw["address"] = _int(t["address"], "address", w, 1, 255)
+    if "protocol" in t:
+        kw["protocol"] = as_choice(t["protocol"], "protocol", w, ("D", "P"))
+    if "speed_table" in t:
+        v = t["speed_table"]
+        if not isinstance(v, str) or not v:
+            raise UserError(f"{w}: speed_table must be 'nominal' or the path of a calibrated table JSON")
+        kw["speed_table"] = v
+    for k in ("pan_speed_max_deg_s", "tilt_speed_max_deg_s", "pan_turbo_deg_s"):
+        if k in t:
+            kw[k] = as_float(t[k], k, w, lo=0, lo_open=True, hi=360)
+    for k in ("max_pan_byte", "max_tilt_byte"):
+        if k in t:
+            kw[k] = _int(t[k], k, w, 0, 0x3F)
+    if "allow_turbo" in t:
+        kw["allow_turbo"] = as_bool(t["allow_turbo"], "allow_turbo", w)
+    if "tilt_limits_deg" in t:
+        lo, hi = as_vec(t["tilt_limits_deg"], "tilt_limits_deg", w, 2)
+        if not -90 <= lo < hi <= 90:
+            raise UserError(f"{w}: tilt_limits_deg must be [lo, hi] with -90 <= lo < hi <= 90, got {t['tilt_limits_deg']!r}")
+        kw["tilt_limits_deg"] = (lo, hi)
+    if "tilt_margin_deg" in t:
+        kw["tilt_margin_deg"] = as_float(t["tilt_margin_deg"], "tilt_margin_deg", w, lo=0, hi=45)
+    if "pan0_deg" in t:
+        kw["pan0_deg"] = as_float(t["pan0_deg"], "pan0_deg", w, lo=-180, hi=180)
+    if "tilt0_deg" in t:
+        kw["tilt0_deg"] = as_float(t["tilt0_deg"], "tilt0_deg", w, lo=-90, hi=90)
+    cfg = HeadConfig(**kw)
+    lo, hi = cfg.tilt_limits_deg
+    if not lo <= cfg.tilt0_deg <= hi:
+        raise UserError(f"{w}: tilt0_deg {cfg.tilt0_deg} is outside tilt_limits_deg {list(cfg.tilt_limits_deg)}")
+    return cfg
+
+
+def _recording(t: Mapping, w: str) -> RecordingConfig:
+    check_keys(t, [f for f in RecordingConfig.__dataclass_fields__], w)
+    kw: dict = {}
+    if "path" in t:
+        if not isinstance(t["path"], str) or not t["path"]:
+            raise UserError(f"{w}: path must be a file name (e.g. 'runs/{{time}}.mcap')")
+        kw["path"] = t["path"]
+    if "flush_every_frames" in t:
+        kw["flush_every_frames"] = _int(t["flush_every_frames"], "flush_every_frames", w, 1, 1000)
+    if "compression" in t:
+        kw["compression"] = as_choice(t["compression"], "compression", w, ("lz4", "zstd", "none"))
+    if "points_dtype" in t:
+        kw["points_dtype"] = as_choice(t["points_dtype"], "points_dtype", w, ("float64", "float32"))
+    if "queue_frames" in t:
+        kw["queue_frames"] = _int(t["queue_frames"], "queue_frames", w, 1, 10_000)
+    if "overwrite" in t:
+        kw["overwrite"] = as_bool(t["overwrite"], "overwrite", w)
+    return RecordingConfig(**kw)
+
+
+def _loop(t: Mapping, w: str) -> LoopConfig:
+    check_keys(t, [f for f in LoopConfig.__dataclass_fields__], w)
+    kw: dict = {}
+    if "watchdog_s" in t:
+        kw["watchdog_s"] = as_float(t["watchdog_s"], "watchdog_s", w, lo=0.05, hi=60)
+    if "max_frame_backlog" in t:
+        kw["max_frame_backlog"] = _int(t["max_frame_backlog"], "max_frame_backlog", w, 1, 100)
+    if "batch_queue" in t:
+        kw["batch_queue"] = _int(t["batch_queue"], "batch_queue", w, 10, 1_000_000)
+    if "status_period_s" in t:
+        kw["status_period_s"] = as_float(t["status_period_s"], "status_period_s", w, lo=0.05, hi=60)
+    if "log" in t:
+        if not isinstance(t["log"], str) or not t["log"]:
+            raise UserError(f"{w}: log must be a file name for JSON lines")
+        kw["log"] = t["log"]
+    return LoopConfig(**kw)
+
+
+def config_from_mapping(data: Mapping, where: str = "daemon config", text: str = "") -> DaemonConfig:
+    check_keys(data, ["lidar", "head", "tracker", "recording", "daemon"], where)
+    for k in ("lidar", "head"):
+        if k not in data:
+            raise UserError(f"{where}: missing [{k}] table (see examples/daemon-virtual.toml)")
+    lidar = _lidar(data["lidar"], f"{where} [lidar]")
+    head = _head(data["head"], f"{where} [head]")
+    tt = dict(data.get("tracker", {}))
+    tracker = TrackerConfig.from_mapping(tt, where=f"{where} [tracker]")
+    cfg = DaemonConfig(where, text, lidar, head, tt, tracker,
+                       _recording(data.get("recording", {}), f"{where} [recording]"),
+                       _loop(data.get("daemon", {}), f"{where} [daemon]"))
+    eff = replace(tracker, **{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.tracker_overrides.items()})
+    lo, hi = eff.tilt_limits_deg
+    if not lo + eff.tilt_margin_deg < hi - eff.tilt_margin_deg or not lo <= eff.tilt0_deg <= hi:
+        raise UserError(f"{where}: [tracker]/[head] tilt settings leave no room: tilt_limits_deg {list(eff.tilt_limits_deg)}, "
+                        f"tilt_margin_deg {eff.tilt_margin_deg}, tilt0_deg {eff.tilt0_deg}")
+    cfg = replace(cfg, tracker=eff)
+    if head.speed_table != "nominal":
+        p = Path(head.speed_table)
+        p = p if p.is_absolute() else Path(where).parent / p
+        if not p.is_file():
+            raise UserError(f"{where} [head]: speed_table {head.speed_table!r} is not a file "
+                            f"(looked for {p}); use 'nominal' or a table from 'foveatrack calibrate'")
+    return cfg
+
+
+def load_config(path: str | Path) -> DaemonConfig:
+    """Read and validate a daemon config file; UserError naming the file and key on any problem."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise UserError(f"{path}: no such daemon config file (example: examples/daemon-virtual.toml)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{path}: cannot read the daemon config ({exc})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{path}: not valid TOML ({exc})") from None
+    return config_from_mapping(data, str(path), text)

@@ -1,0 +1,440 @@
+"""The real-time daemon: Livox lidar in, Pelco-D out, at the tracker's 10 Hz (paper Appendix D).
+
+Threads and queues::
+
+    receiver thread:  LivoxClient.poll -> (host time, points) -> bounded batch queue (drops counted)
+    control loop:     batch queue -> FrameSlicer -> Tracker.process -> Limits.apply -> HeadClient
+                      (the main thread; a monotonic 10 Hz tick runs the watchdog and the status)
+    recording thread: bounded job queue -> RecordingWriter (drops counted; never blocks the loop)
+
+Each frame is processed as soon as it is complete (the first point at or after its end has
+arrived), so the loop is paced by the lidar's clock; the monotonic tick keeps the watchdog and the
+status line going when the lidar is silent.  If more than ``max_frame_backlog`` frames are waiting
+(the loop fell behind, or the lidar came back after a gap) the oldest are skipped and counted
+(``frames_skipped``): commands for stale frames would be wrong.
+
+Time.  Point times are the sensor's clock (``t_ns``; no sync: ns since power-on).  Host time of a
+sensor time is ``t_sensor + offset`` with ``offset = min over packets (host receive time - time of
+the packet's last point)``: the offset at the first packet, lowered whenever a packet arrives
+sooner than it predicts.  So the mapping is exact up to the smallest transit delay seen (on loopback
+well under 1 ms; on Ethernet ~0.1 ms) and drifts with the sensor's clock error (ppm: 0.1 ms per
+100 s at 1 ppm); for long runs sync the lidar (PTP) or restart.  The tracker runs in sensor time:
+``send_t_s`` handed to :meth:`Tracker.process` is the host's "now" mapped to sensor time plus the
+expected processing time (an EWMA of the measured one).
+
+Figures recorded per frame (``/metrics``): ``processing_ms`` = from the arrival of the batch that
+completed the frame to the command bytes written (slicing, detection, control, encoding, write);
+``latency_ms`` = end to end, host time of the frame's last point -> command bytes written.
+
+Safety: a command leaves only through :class:`~foveatrack.daemon.support.Limits` (speed bytes,
+turbo, tilt stops against the reconstructed tilt); the watchdog sends STOP when no lidar packet has
+arrived for ``watchdog_s`` (and repeats it every second while silent); SIGINT/SIGTERM stop the
+head, close the recording and return 0.  The serial link reconnects by itself
+(:class:`gimbal.client.HeadClient`).
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import signal
+import threading
+import time
+from collections import Counter, deque
+from dataclasses import asdict
+
+import numpy as np
+
+from foveatrack.control import STOP, HeadCommand
+from foveatrack.daemon.config import DaemonConfig
+from foveatrack.daemon.support import (JsonLog, Limits, RecordingThread, StatusLine, format_status,
+                                       strip_no_return)
+from foveatrack.frames import Frame, FrameSlicer
+from foveatrack.tracker import Tracker
+
+FORMAT_SOURCE = "daemon"
+
+
+def _ns(t_s: float) -> int:
+    return int(round(t_s * 1e9))
+
+
+def _opt(v):
+    return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
+
+
+# ----------------------------------------------------------------------------------------- record jobs
+def _job_frame(w, fid, frame, out, cmd_rec, proc_ms, lat_ms):
+    """Write one processed frame with the channels and fields of :class:`sim.recorder.SimRecorder`."""
+    t_end = _ns(frame.t_end_s)
+    w.write_points(t_end, fid, frame.xyz, frame.t_ns, frame.reflectivity)
+    d = out.detection
+    w.write_detection(
+        t_end, fid, d is not None, None if d is None else [float(v) for v in d.xyz],
+        0 if d is None else int(d.n_points),
+        t_s=None if d is None else float(d.t_s), az_deg=None if d is None else float(d.az_deg),
+        el_deg=None if d is None else float(d.el_deg), state=str(out.state.value),
+        error_pan_deg=_opt(out.error_pan_deg), error_tilt_deg=_opt(out.error_tilt_deg))
+    if cmd_rec is not None:
+        _job_command(w, cmd_rec)
+    w.write_head_estimate(
+        t_end, out.head_pan_deg, out.head_tilt_deg, frame_id=fid, sigma_pan_deg=out.head_sigma_pan_deg,
+        sigma_tilt_deg=out.head_sigma_tilt_deg,
+        world_xyz_m=None if out.world_xyz is None else [float(v) for v in out.world_xyz],
+        world_sigma_m=_opt(out.world_sigma_m))
+    w.write_metric(t_end, "processing_ms", proc_ms, frame_id=fid)
+    if lat_ms is not None:
+        w.write_metric(t_end, "latency_ms", lat_ms, frame_id=fid)
+
+
+def _job_command(w, rec: dict):
+    rec = dict(rec)
+    raw = rec.pop("raw")
+    w.write_command(_ns(rec["send_t_s"]), raw, **rec)
+
+
+def _job_event(w, t_ns, rec: dict):
+    w.write("daemon", t_ns, rec)
+
+
+class _Receiver(threading.Thread):
+    """Owns the LivoxClient; hands (host time, xyz, t_ns, reflectivity) to the control loop."""
+
+    def __init__(self, client, q: queue.Queue, stop: threading.Event):
+        super().__init__(name="livox-receiver", daemon=True)
+        self.client, self.q, self.stop_ev = client, q, stop
+        self.offset_s: float | None = None
+        self.last_packet_mono: float | None = None
+        self.dropped_batches = 0
+        self.dropped_points = 0
+        self.points_in = 0
+        self.first_t_ns: int | None = None
+        self.last_t_ns: int | None = None
+        self.error: BaseException | None = None
+        self.counters: dict = {}
+
+    def run(self) -> None:
+        try:
+            self.client.start_sampling()
+            packets = 0
+            while not self.stop_ev.is_set():
+                batches = self.client.poll(0.02)
+                now = time.monotonic()
+                c = self.client.counters
+                if c.get("packets", 0) != packets:
+                    packets = c.get("packets", 0)
+                    self.last_packet_mono = now
+                self.counters = c
+                for b in batches:
+                    if not len(b):
+                        continue
+                    t_last = int(b.t_ns[-1])
+                    off = now - t_last * 1e-9
+                    self.offset_s = off if self.offset_s is None else min(self.offset_s, off)
+                    if self.first_t_ns is None:
+                        self.first_t_ns = int(b.t_ns[0])
+                    self.last_t_ns = t_last
+                    self.points_in += len(b)
+                    xyz, t_ns, refl = b.xyz, b.t_ns, b.reflectivity
+                    ret = np.any(xyz != 0.0, axis=1)
+                    if not ret.all():
+                        # no-return points carry no data, but the last one carries the time, so
+                        # frames keep coming while the lidar sees only sky (stripped in the loop)
+                        ret[-1] = True
+                        xyz, t_ns, refl = xyz[ret], t_ns[ret], refl[ret]
+                    try:
+                        self.q.put_nowait((now, xyz, t_ns, refl))
+                    except queue.Full:
+                        self.dropped_batches += 1
+                        self.dropped_points += len(t_ns)
+        except BaseException as exc:  # noqa: BLE001 - reported by the control loop
+            self.error = exc
+
+
+class Daemon:
+    """One run of the daemon (see module docstring).  ``run()`` returns the exit status (0).
+
+    config : DaemonConfig; log_path : JSON-lines log (overrides ``[daemon] log``);
+    status : show the status line (None = if stderr is a TTY); duration_s : stop after this long
+    """
+
+    def __init__(self, config: DaemonConfig, log_path: str | None = None, status: bool | None = None,
+                 duration_s: float | None = None, install_signals: bool = True):
+        self.cfg = config
+        self.log = JsonLog(log_path or config.loop.log)
+        self.status = StatusLine(enabled=status)
+        self.duration_s = duration_s
+        self.install_signals = install_signals
+        self.stop_ev = threading.Event()
+        h = config.head
+        self.limits = Limits(h.max_pan_byte, h.max_tilt_byte, h.allow_turbo, h.tilt_limits_deg, h.tilt_margin_deg)
+        self.table = config.speed_table()
+        self.tracker = Tracker(config.tracker, self.table)
+        self.slicer = FrameSlicer(config.tracker.rate_hz)
+        self.counters: Counter = Counter()
+        self.proc_ms: list[float] = []
+        self.lat_ms: list[float] = []
+        self.frame_id = 0
+        self.last_out = None
+        self._proc_ewma_s = 0.002
+        self.recorder: RecordingThread | None = None
+        self.recording_path = None
+
+    # -------------------------------------------------------------------------------- setup
+    def _meta(self) -> dict:
+        c = self.cfg
+        return {"source": FORMAT_SOURCE, "config_path": c.path, "config_text": c.text,
+                "tracker_table": dict(c.tracker_table), "tracker_overrides": c.tracker_overrides,
+                "tracker_t0_s": 0.0, "speed_table": self.table.to_dict(), "rate_hz": c.tracker.rate_hz,
+                "point_rate_hz": c.lidar.point_rate_hz, "head": asdict(c.head), "lidar": asdict(c.lidar),
+                "limits": asdict(self.limits)}
+
+    def _open(self):
+        from gimbal.client import HeadClient
+        from gimbal.errors import GimbalError
+
+        from foveatrack.errors import UserError
+        from foveatrack.livox.client import LivoxClient
+        from foveatrack.recording import RecordingWriter
+
+        c = self.cfg
+        path = c.recording_path()
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            r = c.recording
+            writer = RecordingWriter(path, self._meta(), flush_every_frames=r.flush_every_frames,
+                                     compression=r.compression, points_dtype=r.points_dtype, overwrite=r.overwrite)
+            # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
+            self.recorder = RecordingThread(writer, r.queue_frames)
+            self.recording_path = path
+        L = c.lidar
+        self.client = LivoxClient(L.sensor_ip, L.host_ip, cmd_port=L.cmd_port, data_port=L.data_port,
+                                  broadcast_port=L.broadcast_port, sensor_cmd_port=L.sensor_cmd_port,
+                                  point_rate_hz=L.point_rate_hz, broadcast_code=L.broadcast_code,
+                                  keep_no_return=True)
+        try:
+            self.head = HeadClient(c.head.port, baud=c.head.baud, address=c.head.address, protocol=c.head.protocol)
+        except GimbalError as exc:
+            self.client.close()
+            raise UserError(f"{c.path} [head]: {exc}") from None
+        self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
+        self.rx = _Receiver(self.client, self.q, self.stop_ev)
+
+    # -------------------------------------------------------------------------------- helpers
+    def sensor_now_s(self, mono: float | None = None) -> float | None:
+        off = self.rx.offset_s
+        if off is None:
+            return None
+        return (time.monotonic() if mono is None else mono) - off
+
+    def _send(self, cmd: HeadCommand, source: str, send_t_s: float, fid=None, tracker_cmd=None, why=()):
+        from gimbal.pelco import encode_pan_tilt
+
+        raw = encode_pan_tilt(self.cfg.head.address, cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte,
+                              self.cfg.head.protocol)
+        ok = self.head.send_frame(raw)
+        t_written = time.monotonic()
+        self.counters["commands_written" if ok else "commands_failed"] += 1
+        rec = {"raw": raw, "frame_id": fid, "source": source, "send_t_s": float(send_t_s), "written": bool(ok),
+               "host_written_s": t_written, "pan_dir": cmd.pan_dir, "pan_byte": cmd.pan_byte,
+               "tilt_dir": cmd.tilt_dir, "tilt_byte": cmd.tilt_byte}
+        if why:
+            rec["limited"] = list(why)
+            rec["tracker_command"] = [tracker_cmd.pan_dir, tracker_cmd.pan_byte, tracker_cmd.tilt_dir,
+                                      tracker_cmd.tilt_byte]
+        return rec, t_written
+
+    def _record(self, fn, *args):
+        if self.recorder is not None:
+            self.recorder.submit(fn, *args)
+
+    # -------------------------------------------------------------------------------- the frame
+    def _process(self, frame: Frame, t_arrival: float) -> None:
+        frame = strip_no_return(frame)
+        now_s = self.sensor_now_s()
+        send_t = (frame.t_end_s if now_s is None else max(now_s, frame.t_end_s)) + self._proc_ewma_s
+        out = self.tracker.process(frame, send_t_s=send_t)
+        fid = self.frame_id
+        self.frame_id += 1
+        cmd, why = self.limits.apply(out.command, out.head_tilt_deg, out.head_sigma_tilt_deg)
+        if why:
+            self.counters["commands_limited"] += 1
+            self.tracker.command_sent(send_t, cmd)
+        rec, t_written = self._send(cmd, "tracker", send_t, fid, out.command, why)
+        proc = t_written - t_arrival
+        self._proc_ewma_s += 0.2 * (proc - self._proc_ewma_s)
+        lat = None
+        if self.rx.offset_s is not None:
+            t_last = frame.t_ns[-1] * 1e-9 if frame.n_points else frame.t_end_s
+            lat = (t_written - (t_last + self.rx.offset_s)) * 1e3
+            self.lat_ms.append(lat)
+        self.proc_ms.append(proc * 1e3)
+        self.counters["frames"] += 1
+        self.counters["frames_detected"] += out.detection is not None
+        self.last_out, self.last_pts = out, frame.n_points
+        self._record(_job_frame, fid, frame, out, rec, proc * 1e3, lat)
+
+    # -------------------------------------------------------------------------------- the loop
+    def run(self) -> int:
+        self._open()
+        old = {}
+        if self.install_signals and threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                old[sig] = signal.signal(sig, lambda *_: self.stop_ev.set())
+        c = self.cfg
+        self.log.event("start", config=c.path, recording=str(self.recording_path) if self.recording_path else None,
+                       lidar=asdict(c.lidar), head_port=c.head.port, head_open=self.head.connected,
+                       rate_hz=c.tracker.rate_hz,
+                       host_ports={"cmd": self.client.cmd_port, "data": self.client.data_port,
+                                   "broadcast": self.client.broadcast_port})
+        self.head.stop()
+        self.rx.start()
+        period = 1.0 / c.tracker.rate_hz
+        t_start = time.monotonic()
+        next_tick = t_start + period
+        next_status = t_start
+        watchdog_tripped = False
+        last_watchdog_stop = -1e9
+        head_up = self.head.connected
+        lidar_up = False
+        frame_times = deque(maxlen=50)
+        pending: deque = deque()
+        try:
+            while not self.stop_ev.is_set():
+                if self.duration_s is not None and time.monotonic() - t_start >= self.duration_s:
+                    break
+                if self.rx.error is not None:
+                    raise self.rx.error
+                try:
+                    item = self.q.get(timeout=max(0.0, next_tick - time.monotonic()))
+                    items = [item]
+                    while True:
+                        try:
+                            items.append(self.q.get_nowait())
+                        except queue.Empty:
+                            break
+                except queue.Empty:
+                    items = []
+                for t_rx, xyz, t_ns, refl in items:
+                    for fr in self.slicer.push(xyz, t_ns, refl):
+                        pending.append((fr, t_rx))
+                while len(pending) > c.loop.max_frame_backlog:
+                    pending.popleft()
+                    self.counters["frames_skipped"] += 1
+                while pending:
+                    fr, t_rx = pending.popleft()
+                    self._process(fr, t_rx)
+                    frame_times.append(time.monotonic())
+                now = time.monotonic()
+                if now < next_tick:
+                    continue
+                # ---- the 10 Hz tick: watchdog, link events, status
+                next_tick += period
+                if next_tick < now:
+                    self.counters["ticks_late"] += 1
+                    next_tick = now + period
+                last_pkt = self.rx.last_packet_mono
+                silent = last_pkt is None or now - last_pkt > c.loop.watchdog_s
+                if last_pkt is not None and not lidar_up:
+                    lidar_up = True
+                    self.log.event("lidar_data", offset_s=self.rx.offset_s, device=self.client.device_broadcast_code)
+                if silent and lidar_up and not watchdog_tripped:
+                    watchdog_tripped = True
+                    self.counters["watchdog_trips"] += 1
+                    self.log.event("watchdog_stop", silent_s=now - last_pkt)
+                if silent and (watchdog_tripped or last_pkt is None) and now - last_watchdog_stop >= 1.0:
+                    last_watchdog_stop = now
+                    t_s = self.sensor_now_s(now)
+                    if t_s is not None and watchdog_tripped:
+                        rec, _ = self._send(STOP, "watchdog", t_s)
+                        self.tracker.command_sent(t_s, STOP)
+                        self._record(_job_command, rec)
+                    else:
+                        self.head.stop()
+                if not silent and watchdog_tripped:
+                    watchdog_tripped = False
+                    self.log.event("lidar_resumed")
+                if self.head.connected != head_up:
+                    head_up = self.head.connected
+                    self.counters["head_link_up" if head_up else "head_link_down"] += 1
+                    self.log.event("head_connected" if head_up else "head_disconnected", stats=asdict(self.head.stats))
+                if now >= next_status:
+                    next_status = now + c.loop.status_period_s
+                    self._show_status(frame_times, watchdog_tripped)
+        finally:
+            self._shutdown(old)
+        return 0
+
+    def stats(self) -> dict:
+        """All counters in one flat dict (loop, lidar, head, recording)."""
+        d = dict(self.counters)
+        rx = getattr(self, "rx", None)
+        if rx is not None:
+            d.update({f"lidar_{k}": v for k, v in rx.counters.items()})
+            d["queue_dropped_batches"] = rx.dropped_batches
+            d["queue_dropped_points"] = rx.dropped_points
+            if rx.first_t_ns is not None and rate_known(self):
+                span = (rx.last_t_ns - rx.first_t_ns) * 1e-9
+                expected = span * self.client.decoder.point_rate_hz
+                if expected > 0:
+                    d["lidar_points_missing_pct"] = round(max(0.0, 100.0 * (1 - rx.points_in / expected)), 3)
+        if getattr(self, "head", None) is not None:
+            d.update({f"head_{k}": v for k, v in asdict(self.head.stats).items()})
+        d["slicer_late_points"] = self.slicer.late_points
+        if self.recorder is not None:
+            d["recording_dropped"] = self.recorder.dropped
+            d["recording_jobs"] = self.recorder.written
+        for name, xs in (("processing_ms", self.proc_ms), ("latency_ms", self.lat_ms)):
+            if xs:
+                a = np.asarray(xs)
+                d[f"{name}_p50"] = round(float(np.percentile(a, 50)), 3)
+                d[f"{name}_p99"] = round(float(np.percentile(a, 99)), 3)
+                d[f"{name}_max"] = round(float(a.max()), 3)
+        return d
+
+    def drops(self) -> int:
+        rx = self.rx
+        c = rx.counters
+        return (c.get("dropped_total", 0) + rx.dropped_batches + self.counters["frames_skipped"]
+                + (self.recorder.dropped if self.recorder else 0))
+
+    def _show_status(self, frame_times, watchdog) -> None:
+        rate = 0.0
+        if len(frame_times) >= 2 and frame_times[-1] > frame_times[0]:
+            rate = (len(frame_times) - 1) / (frame_times[-1] - frame_times[0])
+        out = self.last_out
+        state = "watchdog" if watchdog else ("no lidar" if out is None else out.state.value)
+        self.status.show(format_status(rate, getattr(self, "last_pts", 0), state,
+                                       None if out is None else out.error_pan_deg,
+                                       None if out is None else out.error_tilt_deg,
+                                       self.lat_ms[-1] if self.lat_ms else None, self.drops(), self.head.connected))
+
+    def _shutdown(self, old_handlers) -> None:
+        self.stop_ev.set()
+        t_s = self.sensor_now_s()
+        if t_s is not None:
+            rec, _ = self._send(STOP, "shutdown", t_s)
+            self.tracker.command_sent(t_s, STOP)
+            self._record(_job_command, rec)
+        else:
+            self.head.stop()
+        self.rx.join(2.0)
+        self.client.close()
+        self.head.close()
+        stats = self.stats()
+        if self.recorder is not None:
+            self._record(_job_event, _ns(t_s or 0.0), {"event": "stop", "stats": stats})
+            self.recorder.close()
+            stats["recording_dropped"] = self.recorder.dropped
+            if self.recorder.error is not None:
+                self.log.event("recording_error", error=repr(self.recorder.error))
+        self.status.done()
+        self.log.event("stop", stats=stats, recording=str(self.recording_path) if self.recording_path else None)
+        self.log.close()
+        self.final_stats = stats
+        for sig, h in old_handlers.items():
+            signal.signal(sig, h)
+
+
+def rate_known(d: Daemon) -> bool:
+    return getattr(d, "client", None) is not None and d.client.decoder.point_rate_hz > 0

@@ -1,0 +1,190 @@
+"""Daemon helpers: the last safety gate before bytes leave, the status line, JSON logs, and the
+recording thread.  No I/O of the lidar or the head here."""
+
+from __future__ import annotations
+
+import json
+import math
+import queue
+import sys
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from foveatrack.control import HeadCommand
+from foveatrack.speed_table import TURBO
+
+
+def strip_no_return(frame):
+    """The frame without Livox "no return" points (0, 0, 0).  Drivers keep them on the wire so that
+    time keeps moving while the lidar sees only sky (frames still come every period), then strip
+    them here before detection and recording."""
+    from foveatrack.frames import Frame
+
+    if not frame.n_points:
+        return frame
+    ret = np.any(frame.xyz != 0.0, axis=1)
+    if ret.all():
+        return frame
+    return Frame(frame.t_start_s, frame.t_end_s, frame.xyz[ret], frame.t_ns[ret],
+                 None if frame.reflectivity is None else frame.reflectivity[ret])
+
+
+# ----------------------------------------------------------------------------------------- safety
+@dataclass(frozen=True)
+class Limits:
+    """Hard limits applied to every command after the tracker, before it is encoded.
+
+    max_pan_byte, max_tilt_byte : 0..63       highest speed byte allowed per axis
+    allow_turbo : bool                        may pan use 0xFF (else it becomes max_pan_byte)
+    tilt_limits_deg : (lo, hi) [deg]          the head's tilt stops
+    tilt_margin_deg : >= 0 [deg]              no tilt motion toward a stop once the estimated tilt
+                                              (+ its 2 sigma) is within this of it
+    """
+
+    max_pan_byte: int = 0x3F
+    max_tilt_byte: int = 0x3F
+    allow_turbo: bool = False
+    tilt_limits_deg: tuple[float, float] = (-30.0, 60.0)
+    tilt_margin_deg: float = 2.0
+
+    def apply(self, cmd: HeadCommand, tilt_deg: float, tilt_sigma_deg: float = 0.0) -> tuple[HeadCommand, list[str]]:
+        """The command that may leave, and the reasons it was changed (empty if unchanged)."""
+        why = []
+        pd, pb, td, tb = cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte
+        if pb == TURBO and not self.allow_turbo:
+            pb, why = self.max_pan_byte, why + ["turbo"]
+        elif pb != TURBO and pb > self.max_pan_byte:
+            pb, why = self.max_pan_byte, why + ["pan_speed"]
+        if tb > self.max_tilt_byte:
+            tb, why = self.max_tilt_byte, why + ["tilt_speed"]
+        lo, hi = self.tilt_limits_deg
+        s2 = 2.0 * max(tilt_sigma_deg, 0.0)
+        if td > 0 and tilt_deg + s2 >= hi - self.tilt_margin_deg:
+            td, tb, why = 0, 0, why + ["tilt_stop_up"]
+        elif td < 0 and tilt_deg - s2 <= lo + self.tilt_margin_deg:
+            td, tb, why = 0, 0, why + ["tilt_stop_down"]
+        return HeadCommand(pd, pb if pd else 0, td, tb if td else 0), why
+
+
+# ----------------------------------------------------------------------------------------- logs
+class JsonLog:
+    """Structured log: one JSON object per line (``t_utc``, ``t_mono_s``, ``event``, fields)."""
+
+    def __init__(self, path: str | None):
+        self._fh = None
+        if path:
+            from foveatrack.errors import UserError
+
+            try:
+                self._fh = open(path, "a", buffering=1)
+            except OSError as exc:
+                raise UserError(f"--log {path}: cannot write ({exc.strerror})") from None
+        self._lock = threading.Lock()
+
+    def event(self, event: str, **fields) -> None:
+        if self._fh is None:
+            return
+        import datetime as _dt
+
+        rec = {"t_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds"),
+               "t_mono_s": round(time.monotonic(), 6), "event": event, **fields}
+        with self._lock:
+            self._fh.write(json.dumps(rec, default=_plain) + "\n")
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+def _plain(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return str(x)
+
+
+class StatusLine:
+    """One live line on a terminal (``\\r`` + clear to end of line); silent when not a TTY."""
+
+    def __init__(self, stream=None, enabled: bool | None = None):
+        self.stream = stream or sys.stderr
+        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self._shown = False
+
+    def show(self, text: str) -> None:
+        if self.enabled:
+            self.stream.write("\r" + text + "\x1b[K")
+            self.stream.flush()
+            self._shown = True
+
+    def done(self) -> None:
+        if self.enabled and self._shown:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def format_status(rate_hz, pts, state, err_pan, err_tilt, latency_ms, drops, head_ok) -> str:
+    err = "   -/-   " if err_pan is None else f"{err_pan:+5.1f}/{err_tilt:+5.1f}"
+    lat = "-" if latency_ms is None or not math.isfinite(latency_ms) else f"{latency_ms:4.0f}"
+    return (f"foveatrack daemon  {rate_hz:4.1f} Hz  {pts:6d} pts/frame  {state:<9}  err {err} deg  "
+            f"lat {lat} ms  drops {drops}  head {'ok' if head_ok else 'DOWN'}")
+
+
+# ----------------------------------------------------------------------------------------- recording
+class RecordingThread:
+    """Writes to a :class:`foveatrack.recording.RecordingWriter` from its own thread.
+
+    ``submit(fn, *args)`` queues one write job (a callable taking the writer); when the bounded
+    queue is full the job is dropped and counted in :attr:`dropped` (the control loop never waits
+    for the disk).  ``close()`` writes everything queued, then closes the file.
+    """
+
+    def __init__(self, writer, max_jobs: int):
+        self.writer = writer
+        self.q: queue.Queue = queue.Queue(maxsize=max_jobs)
+        self.dropped = 0
+        self.written = 0
+        self.error: BaseException | None = None
+        self.busy_s = 0.0
+        self._thread = threading.Thread(target=self._run, name="recording", daemon=True)
+        self._thread.start()
+
+    def submit(self, fn, *args) -> bool:
+        if self.error is not None:
+            self.dropped += 1
+            return False
+        try:
+            self.q.put_nowait((fn, args))
+            return True
+        except queue.Full:
+            self.dropped += 1
+            return False
+
+    def _run(self) -> None:
+        while True:
+            job = self.q.get()
+            if job is None:
+                return
+            fn, args = job
+            if self.error is not None:
+                continue
+            t = time.perf_counter()
+            try:
+                fn(self.writer, *args)
+                self.written += 1
+            except BaseException as exc:  # noqa: BLE001 - reported by the daemon, recording stops
+                self.error = exc
+            self.busy_s += time.perf_counter() - t
+
+    def close(self, timeout_s: float = 30.0) -> None:
+        self.q.put(None)
+        self._thread.join(timeout_s)
+        try:
+            self.writer.close()
+        except Exception as exc:  # noqa: BLE001
+            self.error = self.error or exc

@@ -1,0 +1,447 @@
+"""Replay: re-run detection and control offline over recorded point frames (deterministic).
+
+One tracker object for every driver (DESIGN.md): :func:`replay_recording` pushes the recorded frames
+of a simulator or daemon recording (:mod:`foveatrack.recording`) through a fresh
+:class:`foveatrack.tracker.Tracker` with the recorded configuration -- or another one -- and the
+recorded send times, so with the recorded configuration the detections and commands come out
+identical (to the bit) to the recorded ones.  :func:`replay_lvx` runs the tracker over a Livox Viewer
+``.lvx`` file (lidar only: the head is taken as frozen, so the commands are what the tracker *would*
+have sent).
+
+How a recording's tracker is rebuilt (``meta``):
+
+* simulator (``sim.recorder.recording_meta``): ``[tracker]`` table + what
+  :class:`sim.loop.ClosedLoop` sets from ``[gimbal]`` (start pose, the family's tilt stops,
+  ``latency_s = 70 / baud``, ``send_delay_s``); frame ``k`` is ``[k, k+1) / rate_hz`` and its command
+  was written at ``t_end + send_delay_s``.
+* daemon (:mod:`foveatrack.daemon.runtime`): ``[tracker]`` table + ``tracker_overrides``; frames end
+  at the recorded ``t_ns``; the send time is the command's ``send_t_s``; commands the safety gate
+  limited, and the watchdog's and shutdown's STOPs, are registered where they happened.
+
+Replay is open loop: the points are what the lidar saw while the head moved as it did, so a
+different configuration shows which detections and commands would have differed on the same data,
+not where the head would have gone.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from foveatrack.control import STOP, HeadCommand
+from foveatrack.errors import UserError
+from foveatrack.frames import Frame, FrameSlicer
+from foveatrack.metrics import tracking_metrics
+from foveatrack.speed_table import SpeedTable
+from foveatrack.tracker import TrackerConfig, Tracker
+
+
+@dataclass
+class ReplayResult:
+    """Per-frame arrays of the replay (``frames``), of the recording (``recorded``), truth (or None),
+    the comparison and the metrics."""
+
+    source: str
+    path: str
+    config: str
+    frames: dict[str, np.ndarray]
+    recorded: dict[str, np.ndarray] | None
+    truth: dict[str, np.ndarray] | None
+    comparison: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)
+    recorded_metrics: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        return {"source": self.source, "path": self.path, "config": self.config, "frames": len(self.frames["t_end_s"]),
+                "metrics": self.metrics, "comparison": self.comparison, "recorded_metrics": self.recorded_metrics}
+
+
+def load_tracker_table(path: str | os.PathLike) -> dict:
+    """The ``[tracker]`` table of a TOML file (a scene, a daemon config, or a bare tracker table)."""
+    import tomllib
+
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text())
+    except FileNotFoundError:
+        raise UserError(f"--tracker-config {p}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"--tracker-config {p}: cannot read ({exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"--tracker-config {p}: not valid TOML ({exc})") from None
+    return dict(data.get("tracker", data))
+
+
+def _overrides(meta: dict) -> dict:
+    src = meta.get("source")
+    if src == "daemon":
+        return dict(meta.get("tracker_overrides", {}))
+    if src == "simulator":
+        from gimbal.pts303h import HeadParams
+
+        g = meta["gimbal"]
+        params = HeadParams.for_family(g["family"])
+        tilt0 = min(max(g["tilt0_deg"], params.tilt_min_deg), params.tilt_max_deg)
+        return {"pan0_deg": g["pan0_deg"], "tilt0_deg": tilt0,
+                "tilt_limits_deg": (params.tilt_min_deg, params.tilt_max_deg),
+                "latency_s": 7 * 10 / g["baud"], "send_delay_s": g["send_delay_s"]}
+    raise UserError(f"recording source {src!r} is not 'simulator' or 'daemon'")
+
+
+def tracker_config(meta: dict, table: dict | None = None, where: str = "recorded [tracker]") -> TrackerConfig:
+    """The effective tracker configuration of a recording (or of ``table`` applied to its setup)."""
+    recorded = table is None
+    table = dict(meta.get("tracker_table", {})) if recorded else dict(table)
+    cfg = TrackerConfig.from_mapping(table, where=where)
+    ov = _overrides(meta)
+    if meta.get("source") == "daemon" and not recorded:
+        ov = {k: v for k, v in ov.items() if k not in table}
+    ov = {k: tuple(v) if isinstance(v, list) else v for k, v in ov.items()}
+    return replace(cfg, **ov)
+
+
+def _cmd_tuple(rec: dict) -> tuple:
+    return (rec.get("pan_dir"), rec.get("pan_byte"), rec.get("tilt_dir"), rec.get("tilt_byte"))
+
+
+class _Frames:
+    """Per-frame arrays built frame by frame."""
+
+    KEYS = ("frame_index", "t_end_s", "n_points", "detected", "det_xyz", "det_n_points", "state", "error_pan_deg",
+            "error_tilt_deg", "command", "head_pan_deg", "head_tilt_deg", "world_xyz")
+
+    def __init__(self):
+        self.d = {k: [] for k in self.KEYS}
+
+    def add(self, fid, frame, out, cmd):
+        d = self.d
+        det = out.detection
+        d["frame_index"].append(fid)
+        d["t_end_s"].append(frame.t_end_s)
+        d["n_points"].append(frame.n_points)
+        d["detected"].append(det is not None)
+        d["det_xyz"].append(np.full(3, np.nan) if det is None else np.asarray(det.xyz, float))
+        d["det_n_points"].append(0 if det is None else int(det.n_points))
+        d["state"].append(out.state.value)
+        d["error_pan_deg"].append(np.nan if out.error_pan_deg is None else out.error_pan_deg)
+        d["error_tilt_deg"].append(np.nan if out.error_tilt_deg is None else out.error_tilt_deg)
+        d["command"].append((cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte))
+        d["head_pan_deg"].append(out.head_pan_deg)
+        d["head_tilt_deg"].append(out.head_tilt_deg)
+        d["world_xyz"].append(np.full(3, np.nan) if out.world_xyz is None else np.asarray(out.world_xyz, float))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        out = {k: np.asarray(v) for k, v in self.d.items()}
+        for k in ("det_xyz", "world_xyz"):
+            out[k] = out[k].reshape(-1, 3)
+        out["command"] = out["command"].reshape(-1, 4)
+        return out
+
+
+def _groups(reader):
+    """Yield (points record, {channel: [records]}, [non-frame commands after it]) per frame."""
+    cur = None
+    for m in reader.messages():
+        if m.channel == "points":
+            if cur is not None:
+                yield cur
+            cur = (m.record, {}, [])
+        elif cur is None:
+            continue
+        elif m.channel == "commands" and m.record.get("frame_id") is None:
+            cur[2].append(m.record)
+        else:
+            cur[1].setdefault(m.channel, []).append(m.record)
+    if cur is not None:
+        yield cur
+
+
+def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
+                     config_name: str | None = None) -> ReplayResult:
+    """Re-run the tracker over a foveatrack recording (simulator or daemon)."""
+    from foveatrack.recording import RecordingReader
+
+    reader = RecordingReader(path)
+    meta = reader.meta
+    source = meta.get("source", "?")
+    where = f"{config_name} [tracker]" if config_name else "recorded [tracker]"
+    cfg = tracker_config(meta, tracker_table, where)
+    rec_cfg = tracker_config(meta)
+    table = SpeedTable.from_dict(meta["speed_table"], where=f"{path}: recorded speed table")
+    tracker = Tracker(cfg, table, t0_s=float(meta.get("tracker_t0_s", 0.0)))
+    limits = None
+    if source == "daemon" and meta.get("limits"):
+        from foveatrack.daemon.support import Limits
+
+        L = dict(meta["limits"])
+        L["tilt_limits_deg"] = tuple(L["tilt_limits_deg"])
+        limits = Limits(**L)
+    period = rec_cfg.period_s
+    period_ns = int(round(1e9 / rec_cfg.rate_hz))
+    send_delay_sim = rec_cfg.send_delay_s
+    F = _Frames()
+    R = {k: [] for k in ("detected", "det_xyz", "det_n_points", "command", "error_pan_deg", "error_tilt_deg",
+                         "processing_ms", "latency_ms")}
+    T = {k: [] for k in ("true_error_deg", "target_xyz_m", "points_on_target", "pan_deg", "tilt_deg")}
+    has_truth = False
+    for pts, ch, after in _groups(reader):
+        k = int(pts.frame_index)
+        if source == "simulator":
+            t0, t1 = k * period, (k + 1) * period
+            if abs(int(round(t1 * 1e9)) - pts.t_ns) > 1:   # not the simulator's frame grid: trust t_ns
+                t1 = pts.t_ns * 1e-9
+                t0 = t1 - period
+            send_t = t1 + send_delay_sim
+        else:
+            t1 = pts.t_ns * 1e-9
+            t0 = (pts.t_ns - period_ns) * 1e-9
+            cmds = [c for c in ch.get("commands", []) if c.get("source", "tracker") == "tracker"]
+            send_t = float(cmds[0]["send_t_s"]) if cmds and "send_t_s" in cmds[0] else t1 + cfg.send_delay_s
+        frame = Frame(t0, t1, pts.xyz, pts.t_ns_points, pts.reflectivity)
+        out = tracker.process(frame, send_t_s=send_t)
+        cmd = out.command
+        if limits is not None:
+            cmd, why = limits.apply(out.command, out.head_tilt_deg, out.head_sigma_tilt_deg)
+            if why:
+                tracker.command_sent(send_t, cmd)
+        F.add(k, frame, out, cmd)
+        dets = ch.get("detections", [])
+        d = dets[0] if dets else {}
+        R["detected"].append(bool(d.get("detected", False)))
+        R["det_xyz"].append(np.full(3, np.nan) if d.get("xyz_m") is None else np.asarray(d["xyz_m"], float))
+        R["det_n_points"].append(int(d.get("n_points", 0)))
+        R["error_pan_deg"].append(np.nan if d.get("error_pan_deg") is None else d["error_pan_deg"])
+        R["error_tilt_deg"].append(np.nan if d.get("error_tilt_deg") is None else d["error_tilt_deg"])
+        cm = [c for c in ch.get("commands", []) if c.get("source", "tracker") == "tracker"]
+        R["command"].append(_cmd_tuple(cm[0]) if cm else (None,) * 4)
+        mets = {m["name"]: m["value"] for m in ch.get("metrics", [])}
+        R["processing_ms"].append(mets.get("processing_ms", np.nan))
+        R["latency_ms"].append(np.nan if mets.get("latency_ms") is None else mets["latency_ms"])
+        tr = ch.get("truth", [])
+        if tr:
+            has_truth = True
+            t = tr[0]
+            T["true_error_deg"].append(np.nan if t.get("true_error_deg") is None else t["true_error_deg"])
+            T["target_xyz_m"].append(np.asarray(t.get("target_xyz_m", [np.nan] * 3), float))
+            T["points_on_target"].append(int(t.get("points_on_target", 0)))
+            T["pan_deg"].append(t.get("pan_deg", np.nan))
+            T["tilt_deg"].append(t.get("tilt_deg", np.nan))
+        else:
+            T["true_error_deg"].append(np.nan)
+            T["target_xyz_m"].append(np.full(3, np.nan))
+            T["points_on_target"].append(0)
+            T["pan_deg"].append(np.nan)
+            T["tilt_deg"].append(np.nan)
+        for c in after:   # watchdog / shutdown STOPs, in the order they were sent
+            tracker.command_sent(float(c["send_t_s"]), HeadCommand(c["pan_dir"], c["pan_byte"], c["tilt_dir"],
+                                                                    c["tilt_byte"]))
+    frames = F.arrays()
+    recorded = {k: np.asarray(v) for k, v in R.items()}
+    recorded["det_xyz"] = recorded["det_xyz"].reshape(-1, 3)
+    truth = None
+    if has_truth:
+        truth = {k: np.asarray(v) for k, v in T.items()}
+        truth["target_xyz_m"] = truth["target_xyz_m"].reshape(-1, 3)
+    res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth)
+    res.comparison = compare(frames, recorded)
+    res.metrics = replay_metrics(frames, truth, cfg)
+    res.recorded_metrics = _recorded_metrics(recorded, truth, rec_cfg, frames)
+    if reader.problem:
+        res.comparison["recording_problem"] = reader.problem
+    res.comparison["recording_complete"] = bool(reader.complete)
+    return res
+
+
+def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, config_name: str | None = None,
+               point_rate_hz: float | None = None) -> ReplayResult:
+    """Run the tracker over a Livox Viewer ``.lvx`` file (lidar only, head frozen: after every frame
+    the reconstruction is told the head stopped, so the commands are what it would have sent)."""
+    from foveatrack.daemon.support import strip_no_return
+    from foveatrack.livox.lvx import LvxReader
+
+    cfg = TrackerConfig.from_mapping(tracker_table or {}, where=f"{config_name or 'default'} [tracker]")
+    tracker = None
+    slicer = FrameSlicer(cfg.rate_hz)
+    F = _Frames()
+    fid = 0
+
+    def run(frames):
+        nonlocal tracker, fid
+        for fr in frames:
+            fr = strip_no_return(fr)
+            if tracker is None:
+                tracker = Tracker(cfg, SpeedTable.nominal(), t0_s=fr.t_start_s)
+            send_t = fr.t_end_s + cfg.send_delay_s
+            out = tracker.process(fr, send_t_s=send_t)
+            tracker.command_sent(send_t, STOP)   # the head is frozen
+            F.add(fid, fr, out, out.command)
+            fid += 1
+
+    # no-return points are kept for their times (frames keep coming over the sky), then stripped
+    with LvxReader(path, point_rate_hz=point_rate_hz, keep_no_return=True) as r:
+        for lf in r.frames():
+            b = lf.points
+            run(slicer.push(b.xyz, b.t_ns, b.reflectivity))
+        run(slicer.flush())
+        problem = r.problem
+    frames = F.arrays()
+    res = ReplayResult("lvx", str(path), config_name or "default", frames, None, None)
+    res.metrics = replay_metrics(frames, None, cfg)
+    if problem:
+        res.comparison["recording_problem"] = problem
+    return res
+
+
+def replay(path: str | os.PathLike, tracker_config_path: str | None = None) -> ReplayResult:
+    """Replay a recording (``.mcap``) or a Livox Viewer file (``.lvx``), by content."""
+    p = Path(path)
+    if not p.is_file():
+        raise UserError(f"{p}: no such recording")
+    table = load_tracker_table(tracker_config_path) if tracker_config_path else None
+    with open(p, "rb") as fh:
+        head = fh.read(16)
+    if head.startswith(b"livox_tech"):
+        return replay_lvx(p, table, tracker_config_path)
+    return replay_recording(p, table, tracker_config_path)
+
+
+# ----------------------------------------------------------------------------------------- figures
+def _stats(x) -> dict:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return {"rms": None, "p95": None, "max": None}
+    return {"rms": float(np.sqrt(np.mean(x ** 2))), "p95": float(np.percentile(x, 95)), "max": float(np.max(np.abs(x)))}
+
+
+def bearing_metrics(frames: dict) -> dict:
+    """Detection-based figures (no truth needed): bearing error of the detections off the lidar axis."""
+    det = frames["detected"]
+    ep, et = frames["error_pan_deg"], frames["error_tilt_deg"]
+    states, counts = np.unique(frames["state"], return_counts=True) if len(det) else ([], [])
+    return {"frames": int(len(det)), "frames_with_detection": int(det.sum()),
+            "points_per_frame_mean": float(frames["n_points"].mean()) if len(det) else None,
+            "detection_points_mean": float(frames["det_n_points"][det].mean()) if det.any() else None,
+            "bearing_error_pan_deg": _stats(ep[det]), "bearing_error_tilt_deg": _stats(et[det]),
+            "bearing_error_deg": _stats(np.hypot(ep[det], et[det])),
+            "states": {str(s): int(c) for s, c in zip(states, counts)}}
+
+
+def replay_metrics(frames: dict, truth: dict | None, cfg: TrackerConfig) -> dict:
+    out = {"detection": bearing_metrics(frames)}
+    if truth is not None:
+        out["tracking"] = tracking_metrics(
+            frames["t_end_s"], truth["true_error_deg"], detected=frames["detected"],
+            in_fov=truth["points_on_target"] > 0, acquired_deg=cfg.deadband_pan_deg + 1.0,
+            world_est=frames["world_xyz"], world_true=truth["target_xyz_m"])
+    return out
+
+
+def _recorded_metrics(rec: dict, truth, cfg, frames) -> dict:
+    out = {}
+    for k in ("processing_ms", "latency_ms"):
+        x = np.asarray(rec[k], float)
+        x = x[np.isfinite(x)]
+        if x.size:
+            out[k] = {"p50": float(np.percentile(x, 50)), "p99": float(np.percentile(x, 99)), "max": float(x.max())}
+    return out
+
+
+def compare(frames: dict, rec: dict) -> dict:
+    """Which frames' detections and commands differ between the replay and the recording."""
+    a_det, b_det = frames["detected"], rec["detected"]
+    xyz_a, xyz_b = frames["det_xyz"], rec["det_xyz"]
+    both = a_det & b_det
+    dx = np.abs(xyz_a[both] - xyz_b[both]).max(axis=1) if both.any() else np.zeros(0)
+    differ = (a_det != b_det) | (frames["det_n_points"] != rec["det_n_points"])
+    differ[np.flatnonzero(both)[dx > 0]] = True
+    has_cmd = np.array([c[0] is not None for c in rec["command"]], bool) if len(rec["command"]) else np.zeros(0, bool)
+    cmd_differ = np.zeros(len(a_det), bool)
+    if has_cmd.any():
+        rc = np.array([c if c[0] is not None else (0, 0, 0, 0) for c in rec["command"]], dtype=np.int64)
+        cmd_differ = has_cmd & np.any(frames["command"] != rc, axis=1)
+    idx = np.flatnonzero(differ)
+    cidx = np.flatnonzero(cmd_differ)
+    return {"detections_equal": bool(not differ.any()), "frames_detection_differs": int(differ.sum()),
+            "first_frames_detection_differs": frames["frame_index"][idx[:10]].tolist(),
+            "max_detection_xyz_diff_m": float(dx.max()) if dx.size else 0.0,
+            "detected_recorded": int(b_det.sum()), "detected_replayed": int(a_det.sum()),
+            "commands_compared": int(has_cmd.sum()), "commands_equal": bool(not cmd_differ.any()),
+            "frames_command_differs": int(cmd_differ.sum()),
+            "first_frames_command_differs": frames["frame_index"][cidx[:10]].tolist()}
+
+
+def format_report(res: ReplayResult) -> str:
+    """The printed summary (the figures ``--json`` gives in full)."""
+    L = [f"replay of {res.path} ({res.source}, {len(res.frames['t_end_s'])} frames, tracker config: {res.config})"]
+    m = res.metrics
+    tr = m.get("tracking")
+    if tr is not None:
+        te = tr["tracking_error_deg"]
+        fmt = lambda v: "n/a" if v is None else f"{v:.3f}"  # noqa: E731
+        L.append(f"  tracking error after acquisition [deg]: rms {fmt(te['rms'])}, p95 {fmt(te['p95'])}, "
+                 f"max {fmt(te['max'])}; acquisition {fmt(tr['acquisition_s'])} s; "
+                 f"frames with detection {tr['frames_with_detection']}/{tr['frames']}")
+        if "reconstruction_error_m" in tr and tr["reconstruction_error_m"]["rms"] is not None:
+            re_ = tr["reconstruction_error_m"]
+            L.append(f"  reconstructed target position error [m]: rms {re_['rms']:.3f}, p95 {re_['p95']:.3f}, "
+                     f"max {re_['max']:.3f}")
+    d = m["detection"]
+    be = d["bearing_error_deg"]
+    L.append(f"  detections: {d['frames_with_detection']}/{d['frames']} frames"
+             + (f", bearing error off the lidar axis [deg]: rms {be['rms']:.3f}, p95 {be['p95']:.3f}, max {be['max']:.3f}"
+                if be["rms"] is not None else "")
+             + f"; states {d['states']}")
+    c = res.comparison
+    if "detections_equal" in c:
+        if c["detections_equal"] and c["commands_equal"]:
+            L.append(f"  same as recorded: all {d['frames']} detections and {c['commands_compared']} commands identical")
+        else:
+            L.append(f"  differs from the recording: {c['frames_detection_differs']} frames' detections "
+                     f"(recorded {c['detected_recorded']} detected, replayed {c['detected_replayed']}; first "
+                     f"{c['first_frames_detection_differs']}), {c['frames_command_differs']} of "
+                     f"{c['commands_compared']} commands (first {c['first_frames_command_differs']}); "
+                     f"open loop: same points, the head moved as recorded")
+    for k, v in res.recorded_metrics.items():
+        L.append(f"  recorded {k}: p50 {v['p50']:.2f}, p99 {v['p99']:.2f}, max {v['max']:.2f}")
+    if c.get("recording_problem"):
+        L.append(f"  note: {c['recording_problem']}")
+    return "\n".join(L)
+
+
+def export_replay_trajectory(res: ReplayResult, out_path: str | os.PathLike) -> int:
+    """Write the replay's per-frame arrays (and truth) to CSV or NPZ (by suffix); returns rows."""
+    out_path = Path(out_path)
+    suf = out_path.suffix.lower()
+    if suf not in (".csv", ".npz"):
+        raise UserError(f"export to {out_path}: the file name must end in .csv or .npz")
+    f = res.frames
+    cols = {"frame_index": f["frame_index"], "t_end_s": f["t_end_s"], "n_points": f["n_points"],
+            "detected": f["detected"].astype(int), "state": f["state"],
+            "det_x_m": f["det_xyz"][:, 0], "det_y_m": f["det_xyz"][:, 1], "det_z_m": f["det_xyz"][:, 2],
+            "error_pan_deg": f["error_pan_deg"], "error_tilt_deg": f["error_tilt_deg"],
+            "head_pan_deg": f["head_pan_deg"], "head_tilt_deg": f["head_tilt_deg"],
+            "world_x_m": f["world_xyz"][:, 0], "world_y_m": f["world_xyz"][:, 1], "world_z_m": f["world_xyz"][:, 2],
+            "pan_dir": f["command"][:, 0], "pan_byte": f["command"][:, 1], "tilt_dir": f["command"][:, 2],
+            "tilt_byte": f["command"][:, 3]}
+    if res.truth is not None:
+        t = res.truth
+        cols.update({"true_error_deg": t["true_error_deg"], "true_x_m": t["target_xyz_m"][:, 0],
+                     "true_y_m": t["target_xyz_m"][:, 1], "true_z_m": t["target_xyz_m"][:, 2],
+                     "points_on_target": t["points_on_target"], "true_pan_deg": t["pan_deg"],
+                     "true_tilt_deg": t["tilt_deg"]})
+    if suf == ".npz":
+        np.savez_compressed(out_path, **cols)
+    else:
+        import csv
+
+        with open(out_path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(cols.keys())
+            for row in zip(*(np.asarray(c).tolist() for c in cols.values())):
+                w.writerow(["" if isinstance(v, float) and math.isnan(v) else v for v in row])
+    return len(f["t_end_s"])

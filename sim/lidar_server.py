@@ -1,0 +1,369 @@
+"""The scene's lidar in real time on UDP (``foveatrack lidar serve SCENE.toml``).
+
+A :class:`SceneSource` turns a scene into the ``source(t0_ns, t1_ns)`` that
+:class:`sim.virtual_lidar.VirtualLivox` streams: for the slots of ``[t0_ns, t1_ns)`` it runs the
+scene's scan model (:class:`sim.scan.model.ScanModel` with ``scene.optics``), turns the beams into the
+world at the head pose of each point's own time (:func:`sim.world.kernels.rotate_pan_tilt_kernel`),
+casts them against the targets (culled by :func:`~sim.world.kernels.cone_candidates_kernel`, each
+target at the point's own time, :func:`~sim.world.kernels.cast_moving_kernel`) and the background
+(:func:`~sim.world.kernels.cast_static_kernel`), and applies the effects the scene lists -- the
+same steps 2-5 as :meth:`sim.loop.ClosedLoop.step` (DESIGN.md "How data flows").  Stream time 0 is
+scene time 0.  The random streams are the scene's (:func:`sim.effects.effect_rng`), so two serves
+of one scene with the same batches give the same points; the batches follow the wall clock, so a
+served run is not bit-identical to the closed-loop simulator (which is what replay is for).
+
+Head pose ("follows the virtual head's pose if the scene's gimbal is served too")
+---------------------------------------------------------------------------------
+``foveatrack gimbal serve --truth FILE`` writes the head's true state as JSON lines every
+``--truth-period-s`` (20 ms).  :class:`TruthTail` follows that file: it reads the complete new lines
+at every source call, maps head time to the lidar's stream time through ``time.monotonic`` (the
+head's ``t_s`` = monotonic − its clock zero, printed by ``gimbal serve``; without ``--head-clock-zero``
+it is estimated as the smallest ``read time − newest t_s`` seen, which is late by at most the
+file's write-to-read delay), and interpolates pan (unwrapped) and tilt between lines.
+
+Latency that implies: the source is called for points up to "now" (every 10 ms batch), so the
+newest truth line is up to one truth period (20 ms) plus the batch period (10 ms) old.  Past the
+newest line the pose is extrapolated with the line's own speeds (at most ``extrapolate_s`` = 0.1 s,
+then held), so the pose error is ``|accel| × lag² / 2`` while the head ramps (40 deg/s² × 30 ms² / 2
+≈ 0.02 deg for the PTS-303 pan) and ~0 at constant speed; a head that was killed holds its last pose.
+A restarted head (file truncated, ``t_s`` starting again) is detected and followed afresh.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+
+import numpy as np
+
+from sim import effects as fx
+from sim.scan.kernels import RAY_OK
+from sim.scan.model import ScanModel
+from sim.scan.optics import SpeedNoise
+from sim.world import kernels as wk
+from sim.world.trajectories import heading_rad
+
+# Livox device type and packet type per scanner preset (facts: livox.md, "SDK v1 data packets").
+PRESET_DEVICE = {"mid40": ("mid40", 0), "prototype": ("mid40", 0), "horizon": ("horizon", 2)}
+
+
+class TruthTail:
+    """The head pose from a ``gimbal serve --truth`` JSON-lines file that is still being written.
+
+    path : the truth file (it may not exist yet: the pose is then the fallback)
+    clock_zero : float or None, ``time.monotonic()`` at head time 0 (printed by ``gimbal serve``);
+        None = estimate it (see module docstring)
+    fallback : (pan_deg, tilt_deg) before any line has been read
+    extrapolate_s : float >= 0 [s], how far past the newest line the pose is extrapolated
+    keep_s : float > 0 [s], how much history is kept for interpolation
+    """
+
+    def __init__(self, path: str, clock_zero: float | None = None, fallback=(0.0, 0.0),
+                 extrapolate_s: float = 0.1, keep_s: float = 3.0):
+        self.path = path
+        self.fixed_zero = clock_zero
+        self.zero = clock_zero
+        self.fallback = (float(fallback[0]), float(fallback[1]))
+        self.extrapolate_s = extrapolate_s
+        self.keep_s = keep_s
+        self._fh = None
+        self._ino = None
+        self._pos = 0
+        self._partial = b""
+        self.rows = np.zeros((0, 5))  # t_s, pan_deg (unwrapped), tilt_deg, pan_speed, tilt_speed
+        self.restarts = 0
+        self.lines = 0
+
+    def _reset(self) -> None:
+        self.rows = np.zeros((0, 5))
+        self._partial = b""
+        self._pos = 0
+        self.zero = self.fixed_zero
+
+    def poll(self, now_mono: float) -> None:
+        """Read the complete lines written since the last call (``now_mono``: time of this read)."""
+        try:
+            st = os.stat(self.path)
+        except OSError:
+            return
+        if self._fh is None or st.st_ino != self._ino or st.st_size < self._pos:
+            if self._fh is not None:
+                self._fh.close()
+                self.restarts += 1
+                pan, tilt = self.pose_at_head_time(np.array([math.inf]))
+                self.fallback = (float(pan[0]), float(tilt[0]))  # a dead head holds its last pose
+            try:
+                self._fh = open(self.path, "rb")
+            except OSError:
+                self._fh = None
+                return
+            self._ino = st.st_ino
+            self._reset()
+        self._fh.seek(self._pos)
+        data = self._fh.read()
+        self._pos += len(data)
+        if not data:
+            return
+        buf = self._partial + data
+        *lines, self._partial = buf.split(b"\n")
+        new = []
+        for line in lines:
+            try:
+                r = json.loads(line)
+                new.append((float(r["t_s"]), float(r["pan_deg"]), float(r["tilt_deg"]),
+                            float(r.get("pan_speed_deg_s", 0.0)), float(r.get("tilt_speed_deg_s", 0.0))))
+            except (ValueError, KeyError, TypeError):
+                continue
+        if not new:
+            return
+        arr = np.array(new)
+        if self.rows.shape[0] and arr[0, 0] < self.rows[-1, 0] - 1e-9:   # t_s went back: a new head
+            self.restarts += 1
+            self._reset()
+        self.lines += len(new)
+        # unwrap pan continuing from the previous rows
+        prev = self.rows[-1, 1] if self.rows.shape[0] else None
+        pan = np.degrees(np.unwrap(np.radians(arr[:, 1])))
+        if prev is not None:
+            pan += 360.0 * np.round((prev - pan[0]) / 360.0)
+        arr[:, 1] = pan
+        self.rows = np.vstack([self.rows, arr])
+        self.rows = self.rows[self.rows[:, 0] >= self.rows[-1, 0] - self.keep_s]
+        if self.fixed_zero is None:
+            est = now_mono - float(arr[-1, 0])
+            self.zero = est if self.zero is None else min(self.zero, est)
+
+    def pose_at_head_time(self, t_head_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(pan_deg wrapped to (-180, 180], tilt_deg) at head times ``t_head_s``."""
+        t = np.asarray(t_head_s, float)
+        R = self.rows
+        if R.shape[0] == 0:
+            return np.full(t.shape, self.fallback[0]), np.full(t.shape, self.fallback[1])
+        pan = np.interp(t, R[:, 0], R[:, 1])
+        tilt = np.interp(t, R[:, 0], R[:, 2])
+        late = t > R[-1, 0]
+        if late.any():
+            dt = np.clip(t[late] - R[-1, 0], 0.0, self.extrapolate_s)
+            pan[late] = R[-1, 1] + R[-1, 3] * dt
+            tilt[late] = R[-1, 2] + R[-1, 4] * dt
+        pan = (pan + 180.0) % 360.0 - 180.0
+        pan[pan == -180.0] = 180.0
+        return pan, tilt
+
+    def pose_at_mono(self, mono: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.zero is None:
+            return self.pose_at_head_time(np.full(np.shape(mono), -math.inf))
+        return self.pose_at_head_time(np.asarray(mono) - self.zero)
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+class SceneSource:
+    """The returns of a scene's lidar for stream-time intervals (``VirtualLivox`` source).
+
+    scene : sim.scene.Scene
+    pose : callable(t_s array) -> (pan_deg array, tilt_deg array), the head pose at point times;
+        None = the scene's fixed start pose ``[gimbal] pan0_deg, tilt0_deg``
+    """
+
+    def __init__(self, scene, pose=None):
+        self.scene = scene
+        seed = scene.seed
+        noise = None
+        if scene.has("motor_speed_noise"):
+            noise = SpeedNoise(sigma_frac=scene.param("speed_noise_frac"), segment_s=scene.param("speed_noise_segment_s"))
+        self.scan = ScanModel(scene.optics, scene.scan_model, speed_noise=noise,
+                              rng=fx.effect_rng(seed, "motor_speed_noise") if noise else None)
+        self.rate_hz = float(scene.optics.point_rate_hz)
+        g = scene.gimbal
+        self.pose = pose or (lambda t: (np.full(np.shape(t), g.pan0_deg), np.full(np.shape(t), g.tilt0_deg)))
+        self.rngs = {name: fx.effect_rng(seed, name) for name in
+                     ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")}
+        self._bg = np.ascontiguousarray(scene.background_prims)
+        refl = [spec.body.reflectivity for spec in scene.targets]
+        if self._bg.shape[0]:
+            refl.append(scene.background_reflectivity)
+        self._refl_table = np.concatenate(refl) if refl else np.zeros(0)
+        self._target_prim_end = sum(spec.body.prims.shape[0] for spec in scene.targets)
+        self.points_on_target = 0
+        self.points_out = 0
+
+    def __call__(self, t0_ns: int, t1_ns: int):
+        k0 = int(math.ceil(t0_ns * self.rate_hz / 1e9 - 1e-6))
+        k1 = int(math.ceil(t1_ns * self.rate_hz / 1e9 - 1e-6))
+        chunk = self.scan.scan(max(k0, 0), max(0, k1 - max(k0, 0)))
+        t_s = chunk.t_ns * 1e-9
+        pan, tilt = self.pose(t_s)
+        return self.returns(chunk, np.asarray(pan, float), np.asarray(tilt, float))
+
+    def returns(self, chunk, pan_deg: np.ndarray, tilt_deg: np.ndarray):
+        """Steps 3-5 of the closed loop for one scan chunk at the given per-point head pose.
+
+        Returns (xyz (n,3) [m] lidar frame, reflectivity (n,) u8, t_ns (n,) int64), time-ordered.
+        """
+        scene = self.scene
+        n = len(chunk)
+        t_s = chunk.t_ns * 1e-9
+        ok = chunk.status == RAY_OK
+        d_lidar = chunk.direction
+        d_world = np.empty_like(d_lidar)
+        wk.rotate_pan_tilt_kernel(d_lidar, np.radians(pan_deg), np.radians(tilt_deg), d_world)
+        rng_m = np.full(n, np.inf)
+        prim = np.full(n, -1, dtype=np.int64)
+        offset = 0
+        if n:
+            t0, t1 = float(t_s[0]), float(t_s[-1]) + 1e-9
+            for spec in scene.targets:
+                self._cast_target(spec, t0, t1, t_s, d_world, ok, rng_m, prim, offset)
+                offset += spec.body.prims.shape[0]
+            if self._bg.shape[0]:
+                bg_prim = np.full(n, -1, dtype=np.int64)
+                bg_rng = rng_m.copy()
+                wk.cast_static_kernel(d_world, self._bg, bg_rng, bg_prim)
+                nearer = bg_prim >= 0
+                rng_m[nearer] = bg_rng[nearer]
+                prim[nearer] = bg_prim[nearer] + offset
+        idx = np.flatnonzero((prim >= 0) & ok)
+        r = rng_m[idx]
+        refl = self._refl_table[prim[idx]] if idx.size else np.zeros(0)
+        d_pts = d_lidar[idx]
+        on_target = prim[idx] < self._target_prim_end
+        keep = np.ones(idx.size, dtype=bool)
+        if scene.has("return_probability"):
+            keep &= fx.keep_with_probability(self.rngs["return_probability"],
+                                             fx.detection_probability(r, refl, scene.param("range_80pct_m")))
+        if scene.has("dropouts"):
+            keep &= self.rngs["dropouts"].random(idx.size) >= scene.param("dropout_rate")
+        if scene.has("range_noise"):
+            r = fx.range_noise(self.rngs["range_noise"], r, scene.param("range_noise_m"))
+        if scene.has("angular_noise") and idx.size:
+            d_pts = fx.angular_noise(self.rngs["angular_noise"], d_pts, scene.param("angular_noise_deg"))
+        xyz = d_pts * r[:, None]
+        pt_ns = chunk.t_ns[idx]
+        refl_byte = np.clip(np.round(refl * 100), 0, 255).astype(np.uint8)
+        if scene.has("sunlight") and n:
+            rng = self.rngs["sunlight"]
+            n_false = rng.binomial(int(ok.sum()), scene.param("sunlight_rate"))
+            if n_false:
+                pick = rng.choice(np.flatnonzero(ok), n_false, replace=False)
+                rr = rng.uniform(0.5, scene.param("sunlight_max_range_m"), n_false)
+                xyz = np.vstack([xyz, chunk.direction[pick] * rr[:, None]])
+                pt_ns = np.concatenate([pt_ns, chunk.t_ns[pick]])
+                refl_byte = np.concatenate([refl_byte, np.ones(n_false, np.uint8)])
+                keep = np.concatenate([keep, np.ones(n_false, bool)])
+                on_target = np.concatenate([on_target, np.zeros(n_false, bool)])
+        xyz, pt_ns, refl_byte = xyz[keep], pt_ns[keep], refl_byte[keep]
+        self.points_on_target += int(on_target[keep].sum())
+        self.points_out += int(keep.sum())
+        order = np.argsort(pt_ns, kind="stable")
+        return xyz[order], refl_byte[order], pt_ns[order]
+
+    def _cast_target(self, spec, t0, t1, t_s, d_world, ok, rng_m, prim, offset):
+        traj = spec.trajectory
+        c = traj.position(np.array([0.5 * (t0 + t1)]))[0]
+        reach = spec.body.bounding_radius_m + traj.max_speed_m_s * 0.5 * (t1 - t0) * 1.01 + 1e-3
+        footprint = self.scene.has("beam_footprint")
+        if footprint:
+            reach += np.linalg.norm(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
+        cand = np.empty(t_s.size, dtype=np.bool_)
+        wk.cone_candidates_kernel(d_world, c[0], c[1], c[2], reach, cand)
+        idx = np.flatnonzero(cand & ok)
+        if idx.size == 0:
+            return
+        pos = np.ascontiguousarray(traj.position(t_s[idx]))
+        yaw = np.ascontiguousarray(heading_rad(traj.velocity(t_s[idx])))
+        prims = spec.body.prims
+        if not footprint:
+            wk.cast_moving_kernel(idx.astype(np.int64), d_world, pos, yaw, prims, offset, rng_m, prim)
+            return
+        # beam footprint: as sim.loop.ClosedLoop._cast_target (half of the sub-rays must hit)
+        offs = fx.footprint_offsets(self.scene.optics.beam_divergence_deg, self.scene.param("footprint_subrays"))
+        d = d_world[idx]
+        e_az = np.cross(np.array([0.0, 0.0, 1.0]), d)
+        e_az /= np.maximum(np.linalg.norm(e_az, axis=1, keepdims=True), 1e-12)
+        e_el = np.cross(d, e_az)
+        hits = np.zeros(idx.size, dtype=np.int64)
+        best = np.full(idx.size, np.inf)
+        best_prim = np.full(idx.size, -1, dtype=np.int64)
+        local = np.arange(idx.size, dtype=np.int64)
+        for a, b in offs:
+            sub = d + a * e_az + b * e_el
+            sub /= np.linalg.norm(sub, axis=1, keepdims=True)
+            r = np.full(idx.size, np.inf)
+            p = np.full(idx.size, -1, dtype=np.int64)
+            wk.cast_moving_kernel(local, sub, pos, yaw, prims, offset, r, p)
+            hits += p >= 0
+            nearer = r < best
+            best[nearer] = r[nearer]
+            best_prim[nearer] = p[nearer]
+        take = (hits * 2 >= len(offs)) & (best < rng_m[idx])
+        rng_m[idx[take]] = best[take]
+        prim[idx[take]] = best_prim[take]
+
+
+class _FollowingSource:
+    """SceneSource whose pose comes from a :class:`TruthTail`, mapped from stream time to monotonic."""
+
+    def __init__(self, scene, tail: TruthTail, time_scale: float):
+        self.tail = tail
+        self.time_scale = time_scale
+        self.mono0: float | None = None  # monotonic at stream time 0 (set by serve_scene)
+        self.inner = SceneSource(scene, pose=self._pose)
+
+    def _pose(self, t_s):
+        mono0 = self.mono0 if self.mono0 is not None else 0.0
+        return self.tail.pose_at_mono(mono0 + np.asarray(t_s) / self.time_scale)
+
+    def __call__(self, t0_ns, t1_ns):
+        self.tail.poll(time.monotonic())
+        return self.inner(t0_ns, t1_ns)
+
+
+def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("127.0.0.1", 55000),
+                time_scale=1.0, loss_rate=0.0, seed=0, packet_type=None, head_truth=None,
+                head_clock_zero=None, duration_s=None, ready=None) -> dict:
+    """Serve ``scene``'s lidar until SIGINT/SIGTERM or ``duration_s``; returns the counters.
+
+    ``ready(lidar)`` is called once the sockets are bound (the CLI prints ``READY ip port``).
+    """
+    from foveatrack.errors import UserError
+    from foveatrack.livox import protocol as P
+    from sim.virtual_lidar import VirtualLivox, run_virtual_lidar
+
+    dev_name, default_type = PRESET_DEVICE.get(scene.optics.name, ("horizon", 2))
+    ptype = default_type if packet_type is None else packet_type
+    if head_truth is not None and time_scale != 1.0:
+        raise UserError("--head-truth follows a head served in real time; use --time-scale 1")
+    tail = None
+    if head_truth is not None:
+        tail = TruthTail(head_truth, head_clock_zero, fallback=(scene.gimbal.pan0_deg, scene.gimbal.tilt0_deg))
+        source = _FollowingSource(scene, tail, time_scale)
+    else:
+        source = SceneSource(scene)
+
+    def _ready(lidar: VirtualLivox):
+        if tail is not None:
+            # VirtualLivox sets its monotonic origin when serve() starts, right after this call.
+            source.mono0 = time.monotonic()
+        if ready is not None:
+            ready(lidar)
+
+    counters = run_virtual_lidar(
+        source, duration_s=duration_s, ready=_ready, bind_ip=bind_ip, cmd_port=cmd_port,
+        broadcast_addr=broadcast_addr, point_rate_hz=float(scene.optics.point_rate_hz), packet_type=ptype,
+        dev_type=P.DEVICE_TYPES[dev_name], time_scale=time_scale, loss_rate=loss_rate, seed=seed)
+    inner = source.inner if tail is not None else source
+    counters["points_on_target"] = inner.points_on_target
+    if tail is not None:
+        counters["head_truth_lines"] = tail.lines
+        counters["head_restarts"] = tail.restarts
+        tail.close()
+    return counters
+
+
+__all__ = ["SceneSource", "TruthTail", "serve_scene", "PRESET_DEVICE"]

@@ -1,0 +1,118 @@
+"""Helpers for the multi-process daemon tests: free ports, subprocesses of ``foveatrack``, log reading."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+HERE = Path(__file__).resolve().parent
+SCENE = HERE / "scene_track.toml"
+
+
+def free_udp_port(ip: str = "127.0.0.1") -> int:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind((ip, 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def env() -> dict:
+    e = dict(os.environ)
+    e["PYTHONPATH"] = str(ROOT) + os.pathsep + e.get("PYTHONPATH", "")
+    e["PYTHONUNBUFFERED"] = "1"
+    return e
+
+
+def start(args: list[str], out: Path, err: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "foveatrack", *args], cwd=ROOT, env=env(),
+                            stdout=open(out, "w"), stderr=open(err, "w"), start_new_session=True)
+
+
+def wait_for(pred, timeout_s: float, what: str, procs=()):
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        v = pred()
+        if v:
+            return v
+        for p in procs:
+            if p.poll() is not None:
+                raise AssertionError(f"a process exited (rc {p.returncode}) while waiting for {what}")
+        time.sleep(0.05)
+    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+
+
+def first_line(path: Path) -> str | None:
+    try:
+        txt = path.read_text()
+    except OSError:
+        return None
+    return txt.split("\n", 1)[0] if "\n" in txt else None
+
+
+def log_events(path: Path) -> list[dict]:
+    out = []
+    try:
+        for line in path.read_text().splitlines():
+            try:
+                out.append(json.loads(line))
+            except ValueError:
+                pass
+    except OSError:
+        pass
+    return out
+
+
+def event(path: Path, name: str) -> dict | None:
+    return next((e for e in log_events(path) if e["event"] == name), None)
+
+
+def terminate(p: subprocess.Popen, timeout_s: float = 10.0) -> int:
+    if p.poll() is None:
+        p.send_signal(signal.SIGTERM)
+    try:
+        return p.wait(timeout_s)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.wait()
+        raise AssertionError(f"{p.args} did not stop within {timeout_s} s of SIGTERM")
+
+
+def write_config(path: Path, head_link: Path, recording: Path, broadcast_port: int, cmd_port: int = 0,
+                 data_port: int = 0, watchdog_s: float = 0.5) -> Path:
+    path.write_text(f"""
+[lidar]
+sensor_ip = "127.0.0.1"
+host_ip = "127.0.0.1"
+cmd_port = {cmd_port}
+data_port = {data_port}
+broadcast_port = {broadcast_port}
+
+[head]
+port = "{head_link}"
+speed_table = "nominal"
+
+[tracker]
+deadband_deg = 2.0
+gain_1_s = 2.0
+
+[tracker.space]
+kind = "box"
+frame = "world"
+min_xyz = [1.0, -60.0, -0.7]
+max_xyz = [60.0, 60.0, 40.0]
+
+[recording]
+path = "{recording}"
+
+[daemon]
+watchdog_s = {watchdog_s}
+""")
+    return path
