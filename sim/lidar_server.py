@@ -39,11 +39,10 @@ import time
 import numpy as np
 
 from sim import effects as fx
-from sim.scan.kernels import RAY_OK
 from sim.scan.model import ScanModel
 from sim.scan.optics import SpeedNoise
+from sim.sensor import SceneSensor
 from sim.world import kernels as wk
-from sim.world.trajectories import heading_rad
 
 # Livox device type and packet type per scanner preset (facts: livox.md, "SDK v1 data packets").
 PRESET_DEVICE = {"mid40": ("mid40", 0), "prototype": ("mid40", 0), "horizon": ("horizon", 2)}
@@ -182,14 +181,7 @@ class SceneSource:
         self.rate_hz = float(scene.optics.point_rate_hz)
         g = scene.gimbal
         self.pose = pose or (lambda t: (np.full(np.shape(t), g.pan0_deg), np.full(np.shape(t), g.tilt0_deg)))
-        self.rngs = {name: fx.effect_rng(seed, name) for name in
-                     ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")}
-        self._bg = np.ascontiguousarray(scene.background_prims)
-        refl = [spec.body.reflectivity for spec in scene.targets]
-        if self._bg.shape[0]:
-            refl.append(scene.background_reflectivity)
-        self._refl_table = np.concatenate(refl) if refl else np.zeros(0)
-        self._target_prim_end = sum(spec.body.prims.shape[0] for spec in scene.targets)
+        self.sensor = SceneSensor(scene)
         self.points_on_target = 0
         self.points_out = 0
 
@@ -202,108 +194,20 @@ class SceneSource:
         return self.returns(chunk, np.asarray(pan, float), np.asarray(tilt, float))
 
     def returns(self, chunk, pan_deg: np.ndarray, tilt_deg: np.ndarray):
-        """Steps 3-5 of the closed loop for one scan chunk at the given per-point head pose.
+        """Steps 3-5 of the closed loop for one scan chunk at the given per-point head pose
+        (the ray casting and effects are :class:`sim.sensor.SceneSensor`'s, shared with the loop).
 
         Returns (xyz (n,3) [m] lidar frame, reflectivity (n,) u8, t_ns (n,) int64), time-ordered.
         """
-        scene = self.scene
         n = len(chunk)
-        t_s = chunk.t_ns * 1e-9
-        ok = chunk.status == RAY_OK
-        d_lidar = chunk.direction
-        d_world = np.empty_like(d_lidar)
-        wk.rotate_pan_tilt_kernel(d_lidar, np.radians(pan_deg), np.radians(tilt_deg), d_world)
-        rng_m = np.full(n, np.inf)
-        prim = np.full(n, -1, dtype=np.int64)
-        offset = 0
-        if n:
-            t0, t1 = float(t_s[0]), float(t_s[-1]) + 1e-9
-            for spec in scene.targets:
-                self._cast_target(spec, t0, t1, t_s, d_world, ok, rng_m, prim, offset)
-                offset += spec.body.prims.shape[0]
-            if self._bg.shape[0]:
-                bg_prim = np.full(n, -1, dtype=np.int64)
-                bg_rng = rng_m.copy()
-                wk.cast_static_kernel(d_world, self._bg, bg_rng, bg_prim)
-                nearer = bg_prim >= 0
-                rng_m[nearer] = bg_rng[nearer]
-                prim[nearer] = bg_prim[nearer] + offset
-        idx = np.flatnonzero((prim >= 0) & ok)
-        r = rng_m[idx]
-        refl = self._refl_table[prim[idx]] if idx.size else np.zeros(0)
-        d_pts = d_lidar[idx]
-        on_target = prim[idx] < self._target_prim_end
-        keep = np.ones(idx.size, dtype=bool)
-        if scene.has("return_probability"):
-            keep &= fx.keep_with_probability(self.rngs["return_probability"],
-                                             fx.detection_probability(r, refl, scene.param("range_80pct_m")))
-        if scene.has("dropouts"):
-            keep &= self.rngs["dropouts"].random(idx.size) >= scene.param("dropout_rate")
-        if scene.has("range_noise"):
-            r = fx.range_noise(self.rngs["range_noise"], r, scene.param("range_noise_m"))
-        if scene.has("angular_noise") and idx.size:
-            d_pts = fx.angular_noise(self.rngs["angular_noise"], d_pts, scene.param("angular_noise_deg"))
-        xyz = d_pts * r[:, None]
-        pt_ns = chunk.t_ns[idx]
-        refl_byte = np.clip(np.round(refl * 100), 0, 255).astype(np.uint8)
-        if scene.has("sunlight") and n:
-            rng = self.rngs["sunlight"]
-            n_false = rng.binomial(int(ok.sum()), scene.param("sunlight_rate"))
-            if n_false:
-                pick = rng.choice(np.flatnonzero(ok), n_false, replace=False)
-                rr = rng.uniform(0.5, scene.param("sunlight_max_range_m"), n_false)
-                xyz = np.vstack([xyz, chunk.direction[pick] * rr[:, None]])
-                pt_ns = np.concatenate([pt_ns, chunk.t_ns[pick]])
-                refl_byte = np.concatenate([refl_byte, np.ones(n_false, np.uint8)])
-                keep = np.concatenate([keep, np.ones(n_false, bool)])
-                on_target = np.concatenate([on_target, np.zeros(n_false, bool)])
-        xyz, pt_ns, refl_byte = xyz[keep], pt_ns[keep], refl_byte[keep]
-        self.points_on_target += int(on_target[keep].sum())
-        self.points_out += int(keep.sum())
-        order = np.argsort(pt_ns, kind="stable")
-        return xyz[order], refl_byte[order], pt_ns[order]
-
-    def _cast_target(self, spec, t0, t1, t_s, d_world, ok, rng_m, prim, offset):
-        traj = spec.trajectory
-        c = traj.position(np.array([0.5 * (t0 + t1)]))[0]
-        reach = spec.body.bounding_radius_m + traj.max_speed_m_s * 0.5 * (t1 - t0) * 1.01 + 1e-3
-        footprint = self.scene.has("beam_footprint")
-        if footprint:
-            reach += np.linalg.norm(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
-        cand = np.empty(t_s.size, dtype=np.bool_)
-        wk.cone_candidates_kernel(d_world, c[0], c[1], c[2], reach, cand)
-        idx = np.flatnonzero(cand & ok)
-        if idx.size == 0:
-            return
-        pos = np.ascontiguousarray(traj.position(t_s[idx]))
-        yaw = np.ascontiguousarray(heading_rad(traj.velocity(t_s[idx])))
-        prims = spec.body.prims
-        if not footprint:
-            wk.cast_moving_kernel(idx.astype(np.int64), d_world, pos, yaw, prims, offset, rng_m, prim)
-            return
-        # beam footprint: as sim.loop.ClosedLoop._cast_target (half of the sub-rays must hit)
-        offs = fx.footprint_offsets(self.scene.optics.beam_divergence_deg, self.scene.param("footprint_subrays"))
-        d = d_world[idx]
-        e_az = np.cross(np.array([0.0, 0.0, 1.0]), d)
-        e_az /= np.maximum(np.linalg.norm(e_az, axis=1, keepdims=True), 1e-12)
-        e_el = np.cross(d, e_az)
-        hits = np.zeros(idx.size, dtype=np.int64)
-        best = np.full(idx.size, np.inf)
-        best_prim = np.full(idx.size, -1, dtype=np.int64)
-        local = np.arange(idx.size, dtype=np.int64)
-        for a, b in offs:
-            sub = d + a * e_az + b * e_el
-            sub /= np.linalg.norm(sub, axis=1, keepdims=True)
-            r = np.full(idx.size, np.inf)
-            p = np.full(idx.size, -1, dtype=np.int64)
-            wk.cast_moving_kernel(local, sub, pos, yaw, prims, offset, r, p)
-            hits += p >= 0
-            nearer = r < best
-            best[nearer] = r[nearer]
-            best_prim[nearer] = p[nearer]
-        take = (hits * 2 >= len(offs)) & (best < rng_m[idx])
-        rng_m[idx[take]] = best[take]
-        prim[idx[take]] = best_prim[take]
+        d_world = np.empty_like(chunk.direction)
+        wk.rotate_pan_tilt_kernel(chunk.direction, np.radians(pan_deg), np.radians(tilt_deg), d_world)
+        t0 = float(chunk.t_ns[0]) * 1e-9 if n else 0.0
+        t1 = float(chunk.t_ns[-1]) * 1e-9 + 1e-9 if n else 0.0
+        xyz, t_ns, refl_byte, on_target = self.sensor.returns(chunk, d_world, t0, t1)
+        self.points_on_target += int(on_target.sum())
+        self.points_out += int(t_ns.size)
+        return xyz, refl_byte, t_ns
 
 
 class _FollowingSource:

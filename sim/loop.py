@@ -32,13 +32,12 @@ from foveatrack.tracker import Tracker
 from gimbal.pelco import encode_pan_tilt
 from gimbal.pts303h import PTS303H, HeadParams
 from sim import effects as fx
-from sim.scan.kernels import RAY_OK
 from sim.scan.model import ScanModel
 from sim.scan.optics import SpeedNoise
 from sim.scene import Scene
+from sim.sensor import SceneSensor
 from sim.virtual_uart import VirtualUart
 from sim.world import kernels as wk
-from sim.world.trajectories import heading_rad
 
 
 def truth_speed_table(head: PTS303H) -> SpeedTable:
@@ -104,21 +103,17 @@ class FrameLog:
 class ClosedLoop:
     """One run of a scene.  ``frame_hook(frame, output, loop)`` sees every frame (recording).
 
-    ``target_motion``: see ``__init__``.  ``head_grid_s``: the head pose is evaluated exactly on this time grid and interpolated to each
+    ``head_grid_s``: the head pose is evaluated exactly on this time grid and interpolated to each
     point (see :func:`sim.world.kernels.rotate_pan_tilt_grid_kernel` for the error bound); 0 evaluates
-    it exactly at every point (about 10x slower; the accuracy-vs-time study compares the two).
+    it exactly at every point (slower; the accuracy-vs-time study compares the two).
+    ``target_motion``: see :class:`sim.sensor.SceneSensor`.
     """
 
     def __init__(self, scene: Scene, frame_hook=None, head_grid_s: float = 0.001, controller=None,
                  target_motion: str = "per_point"):
-        if target_motion not in ("per_point", "per_frame"):
-            raise ValueError(f"target_motion {target_motion!r}: 'per_point' or 'per_frame'")
         self.scene = scene
         self.head_grid_s = head_grid_s
-        # "per_point": each point sees the target where it is at the point's own time (default);
-        # "per_frame": the target is frozen at the frame's mid-time (the cheaper snapshot model the
-        # accuracy-vs-time study compares against).
-        self.target_motion = target_motion
+        self.sensor = SceneSensor(scene, target_motion)
         # Another driver of the head instead of the tracker (e.g. the calibration procedure):
         # controller(frame, send_t_s) -> HeadCommand or None (stop).
         self.controller = controller
@@ -150,19 +145,31 @@ class ClosedLoop:
                       tilt_limits_deg=(params.tilt_min_deg, params.tilt_max_deg),
                       latency_s=7 * 10 / g.baud, send_delay_s=g.send_delay_s)  # a 7-byte Pelco-D frame on the wire
         self.tracker = Tracker(cfg, table)
-        self.rngs = {name: fx.effect_rng(seed, name) for name in
-                     ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")}
-        self.draw_calls = {name: 0 for name in self.rngs}
         self._pending: list[tuple[float, bytes]] = []
-        self._bg = scene.background_prims
-        self._bg_refl = scene.background_reflectivity
         self.log = FrameLog()
-        # Work counters (timing-free evidence that a scene costs only what it holds).
-        self.rays_total = 0
-        self.rays_cast_targets = 0
-        self.rays_cast_background = 0
         self.bytes_sent = 0
         self.last_sent: tuple[float, bytes] | None = None  # (time, Pelco-D bytes) of this frame's command
+
+    # Effect streams and work counters live in the sensor; these keep the loop's own view of them.
+    @property
+    def rngs(self):
+        return self.sensor.rngs
+
+    @property
+    def draw_calls(self):
+        return self.sensor.draw_calls
+
+    @property
+    def rays_total(self):
+        return self.sensor.rays_total
+
+    @property
+    def rays_cast_targets(self):
+        return self.sensor.rays_cast_targets
+
+    @property
+    def rays_cast_background(self):
+        return self.sensor.rays_cast_background
 
     # ----------------------------------------------------------------------------------------------
     def run(self, progress=None) -> dict[str, np.ndarray]:
@@ -183,9 +190,7 @@ class ClosedLoop:
             self.head.receive(b"".join(b for _, b in due), [t for t, _ in due])
         # 2. the scan.
         chunk = self.scan.scan_time(t0, t1)
-        n = len(chunk)
         t_s = chunk.t_ns * 1e-9
-        ok = chunk.status == RAY_OK
         d_lidar = chunk.direction
         # 3. beams in the world at each point's own head pose.
         d_world = np.empty_like(d_lidar)
@@ -197,58 +202,9 @@ class ClosedLoop:
         else:
             pan, tilt = self.head.angles_at(t_s)
             wk.rotate_pan_tilt_kernel(d_lidar, np.radians(pan), np.radians(tilt), d_world)
-        # 4. ray casting: targets (culled) then background.
-        rng_m = np.full(n, np.inf)
-        prim = np.full(n, -1, dtype=np.int64)
-        refl_of = []
-        offset = 0
-        target_prim_end = 0
-        for spec in scene.targets:
-            self._cast_target(spec, t0, t1, t_s, d_world, ok, rng_m, prim, offset)
-            refl_of.append(spec.body.reflectivity)
-            offset += spec.body.prims.shape[0]
-        target_prim_end = offset
-        self.rays_total += n
-        if self._bg.shape[0]:
-            self.rays_cast_background += n
-            bg_prim = np.full(n, -1, dtype=np.int64)
-            bg_rng = rng_m.copy()
-            wk.cast_static_kernel(d_world, self._bg, bg_rng, bg_prim)
-            nearer = bg_prim >= 0
-            rng_m[nearer] = bg_rng[nearer]
-            prim[nearer] = bg_prim[nearer] + offset
-            refl_of.append(self._bg_refl)
-        refl_table = np.concatenate(refl_of) if refl_of else np.zeros(0)
-        hit = (prim >= 0) & ok
-        idx = np.flatnonzero(hit)
-        r = rng_m[idx]
-        refl = refl_table[prim[idx]]
-        d_pts = d_lidar[idx]
-        on_target = prim[idx] < target_prim_end
-        # 5. effects, each only if listed.
-        keep = np.ones(idx.size, dtype=bool)
-        if scene.has("return_probability"):
-            self.draw_calls["return_probability"] += 1
-            keep &= fx.keep_with_probability(self.rngs["return_probability"],
-                                             fx.detection_probability(r, refl, scene.param("range_80pct_m")))
-        if scene.has("dropouts"):
-            self.draw_calls["dropouts"] += 1
-            keep &= self.rngs["dropouts"].random(idx.size) >= scene.param("dropout_rate")
-        if scene.has("range_noise"):
-            self.draw_calls["range_noise"] += 1
-            r = fx.range_noise(self.rngs["range_noise"], r, scene.param("range_noise_m"))
-        if scene.has("angular_noise"):
-            self.draw_calls["angular_noise"] += 1
-            d_pts = fx.angular_noise(self.rngs["angular_noise"], d_pts, scene.param("angular_noise_deg"))
-        xyz = d_pts * r[:, None]
-        pt_ns = chunk.t_ns[idx]
-        refl_byte = np.clip(np.round(refl * 100), 0, 255).astype(np.uint8)
-        if scene.has("sunlight"):
-            self.draw_calls["sunlight"] += 1
-            xyz, pt_ns, refl_byte, keep, on_target = self._sunlight(chunk, ok, xyz, pt_ns, refl_byte, keep, on_target)
-        xyz, pt_ns, refl_byte, on_target = xyz[keep], pt_ns[keep], refl_byte[keep], on_target[keep]
-        order = np.argsort(pt_ns, kind="stable")
-        frame = Frame(t0, t1, xyz[order], pt_ns[order], refl_byte[order])
+        # 4-5. ray casting and the effects the scene lists.
+        xyz, pt_ns, refl_byte, on_target = self.sensor.returns(chunk, d_world, t0, t1)
+        frame = Frame(t0, t1, xyz, pt_ns, refl_byte)
         # 6. the tracker and the link.
         send_t = t1 + scene.gimbal.send_delay_s
         if self.controller is not None:
@@ -273,69 +229,6 @@ class ClosedLoop:
         return frame, out
 
     # ----------------------------------------------------------------------------------------------
-    def _cast_target(self, spec, t0, t1, t_s, d_world, ok, rng_m, prim, offset):
-        traj = spec.trajectory
-        t_mid = 0.5 * (t0 + t1)
-        c = traj.position(np.array([t_mid]))[0]
-        reach = spec.body.bounding_radius_m + traj.max_speed_m_s * 0.5 * (t1 - t0) * 1.01 + 1e-3
-        # Beam divergence can catch a body just outside the central ray's path.
-        if self.scene.has("beam_footprint"):
-            reach += np.linalg.norm(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
-        cand = np.empty(t_s.size, dtype=np.bool_)
-        wk.cone_candidates_kernel(d_world, c[0], c[1], c[2], reach, cand)
-        cand &= ok
-        idx = np.flatnonzero(cand)
-        self.rays_cast_targets += idx.size
-        if idx.size == 0:
-            return
-        t_pose = t_s[idx] if self.target_motion == "per_point" else np.full(idx.size, t_mid)
-        pos = traj.position(t_pose)
-        yaw = heading_rad(traj.velocity(t_pose))
-        prims = spec.body.prims
-        if not self.scene.has("beam_footprint"):
-            wk.cast_moving_kernel(idx.astype(np.int64), d_world, pos, yaw, prims, offset, rng_m, prim)
-            return
-        # Beam footprint: sub-rays over the divergence ellipse; the return is the nearest sub-ray
-        # range if at least half of the sub-rays hit (a partial hit on a thin arm may still return).
-        offs = fx.footprint_offsets(self.scene.optics.beam_divergence_deg, self.scene.param("footprint_subrays"))
-        d = d_world[idx]
-        up = np.array([0.0, 0.0, 1.0])
-        e_az = np.cross(up, d)
-        e_az /= np.maximum(np.linalg.norm(e_az, axis=1, keepdims=True), 1e-12)
-        e_el = np.cross(d, e_az)
-        hits = np.zeros(idx.size, dtype=np.int64)
-        best = np.full(idx.size, np.inf)
-        best_prim = np.full(idx.size, -1, dtype=np.int64)
-        local = np.arange(idx.size, dtype=np.int64)
-        for a, b in offs:
-            sub = d + a * e_az + b * e_el
-            sub /= np.linalg.norm(sub, axis=1, keepdims=True)
-            r = np.full(idx.size, np.inf)
-            p = np.full(idx.size, -1, dtype=np.int64)
-            wk.cast_moving_kernel(local, sub, pos, yaw, prims, offset, r, p)
-            hits += p >= 0
-            nearer = r < best
-            best[nearer] = r[nearer]
-            best_prim[nearer] = p[nearer]
-        ret = hits * 2 >= len(offs)
-        take = ret & (best < rng_m[idx])
-        rng_m[idx[take]] = best[take]
-        prim[idx[take]] = best_prim[take]
-
-    def _sunlight(self, chunk, ok, xyz, pt_ns, refl_byte, keep, on_target):
-        rng = self.rngs["sunlight"]
-        n_false = rng.binomial(int(ok.sum()), self.scene.param("sunlight_rate"))
-        if n_false == 0:
-            return xyz, pt_ns, refl_byte, keep, on_target
-        pick = rng.choice(np.flatnonzero(ok), n_false, replace=False)
-        r = rng.uniform(0.5, self.scene.param("sunlight_max_range_m"), n_false)
-        xyz = np.vstack([xyz, chunk.direction[pick] * r[:, None]])
-        pt_ns = np.concatenate([pt_ns, chunk.t_ns[pick]])
-        refl_byte = np.concatenate([refl_byte, np.full(n_false, 1, dtype=np.uint8)])
-        keep = np.concatenate([keep, np.ones(n_false, dtype=bool)])
-        on_target = np.concatenate([on_target, np.zeros(n_false, dtype=bool)])
-        return xyz, pt_ns, refl_byte, keep, on_target
-
     def _log(self, t0, t1, frame, n_on_target, out):
         L = self.log
         t_mid = 0.5 * (t0 + t1)
