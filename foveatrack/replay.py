@@ -78,9 +78,9 @@ def load_tracker_table(path: str | os.PathLike) -> dict:
 
 def _overrides(meta: dict) -> dict:
     src = meta.get("source")
-    if src == "daemon":
-        return dict(meta.get("tracker_overrides", {}))
-    if src == "simulator":
+    if "tracker_overrides" in meta:  # written by the daemon and by the simulator
+        return {k: tuple(v) if isinstance(v, list) else v for k, v in meta["tracker_overrides"].items()}
+    if src == "simulator":  # recordings made before the simulator wrote its overrides
         from gimbal.pts303h import HeadParams
 
         g = meta["gimbal"]

@@ -141,10 +141,12 @@ class ClosedLoop:
             bit_error_rate=scene.effect_params.get("uart_bit_error_rate", 0.0),
             drop_rate=scene.effect_params.get("uart_drop_rate", 0.0))
         table = load_tracker_table(g.speed_table, self.head, f"{scene.path} [gimbal] speed_table")
-        cfg = replace(scene.tracker, pan0_deg=g.pan0_deg, tilt0_deg=tilt0,
-                      tilt_limits_deg=(params.tilt_min_deg, params.tilt_max_deg),
-                      latency_s=7 * 10 / g.baud, send_delay_s=g.send_delay_s)  # a 7-byte Pelco-D frame on the wire
-        self.tracker = Tracker(cfg, table)
+        # What the loop sets in the tracker's config from the scene's head and link (recorded, so
+        # that replay rebuilds exactly this tracker).  Latency: a 7-byte Pelco-D frame on the wire.
+        self.tracker_overrides = {"pan0_deg": g.pan0_deg, "tilt0_deg": tilt0,
+                                  "tilt_limits_deg": (params.tilt_min_deg, params.tilt_max_deg),
+                                  "latency_s": 7 * 10 / g.baud, "send_delay_s": g.send_delay_s}
+        self.tracker = Tracker(replace(scene.tracker, **self.tracker_overrides), table)
         self._pending: list[tuple[float, bytes]] = []
         self.log = FrameLog()
         self.bytes_sent = 0

@@ -39,6 +39,7 @@ def recording_meta(scene, loop) -> dict:
         "seed": scene.seed,
         "effects": sorted(scene.effects),
         "tracker_table": json.loads(json.dumps(scene.tracker_table, default=str)),
+        "tracker_overrides": {k: list(v) if isinstance(v, tuple) else v for k, v in loop.tracker_overrides.items()},
         "speed_table": loop.tracker.table.to_dict(),
         "rate_hz": loop.tracker.config.rate_hz,
         "point_rate_hz": scene.optics.point_rate_hz,
