@@ -2,6 +2,8 @@
 
 Channels and fields, shared with the daemon so ``foveatrack replay`` reads both:
 
+The per-frame layout is :mod:`foveatrack.track_log`'s (the daemon writes the same):
+
 * points: per frame, ``t_ns`` = frame end, xyz in the lidar frame, per-point ``t_ns``, reflectivity
 * detections: ``detected``, ``xyz_m`` (lidar frame), ``n_points``, ``az_deg``, ``el_deg``, ``state``,
   ``error_pan_deg``, ``error_tilt_deg``
@@ -13,19 +15,11 @@ Channels and fields, shared with the daemon so ``foveatrack replay`` reads both:
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 
 from foveatrack.recording import RecordingWriter
-
-
-def _ns(t_s: float) -> int:
-    return int(round(t_s * 1e9))
-
-
-def _opt(v):
-    return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
+from foveatrack.track_log import finite_or_none, ns, write_tracker_frame
 
 
 def recording_meta(scene, loop) -> dict:
@@ -57,27 +51,14 @@ class SimRecorder:
     def __call__(self, frame, out, loop) -> None:
         w = self.writer
         fid = self.frame_id
-        t_end = _ns(frame.t_end_s)
-        w.write_points(t_end, fid, frame.xyz, frame.t_ns, frame.reflectivity)
-        d = out.detection
-        w.write_detection(
-            t_end, fid, d is not None, None if d is None else [float(v) for v in d.xyz],
-            0 if d is None else int(d.n_points),
-            t_s=None if d is None else float(d.t_s), az_deg=None if d is None else float(d.az_deg),
-            el_deg=None if d is None else float(d.el_deg), state=str(out.state.value),
-            error_pan_deg=_opt(out.error_pan_deg), error_tilt_deg=_opt(out.error_tilt_deg))
+        t_end = write_tracker_frame(w, fid, frame, out)
         c = out.command
         if loop.last_sent is not None:
             t_send, data = loop.last_sent
-            w.write_command(_ns(t_send), data, frame_id=fid, pan_dir=c.pan_dir, pan_byte=c.pan_byte,
+            w.write_command(ns(t_send), data, frame_id=fid, pan_dir=c.pan_dir, pan_byte=c.pan_byte,
                             tilt_dir=c.tilt_dir, tilt_byte=c.tilt_byte)
-        w.write_head_estimate(
-            t_end, out.head_pan_deg, out.head_tilt_deg, frame_id=fid, sigma_pan_deg=out.head_sigma_pan_deg,
-            sigma_tilt_deg=out.head_sigma_tilt_deg,
-            world_xyz_m=None if out.world_xyz is None else [float(v) for v in out.world_xyz],
-            world_sigma_m=_opt(out.world_sigma_m))
         L = loop.log
         w.write_truth(t_end, frame_id=fid, pan_deg=L.head_pan_deg[-1], tilt_deg=L.head_tilt_deg[-1],
                       target_xyz_m=[float(v) for v in np.asarray(L.target_xyz[-1])],
-                      true_error_deg=_opt(L.true_error_deg[-1]), points_on_target=L.points_on_target[-1])
+                      true_error_deg=finite_or_none(L.true_error_deg[-1]), points_on_target=L.points_on_target[-1])
         self.frame_id += 1

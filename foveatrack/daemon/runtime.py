@@ -35,7 +35,6 @@ head, close the recording and return 0.  The serial link reconnects by itself
 
 from __future__ import annotations
 
-import math
 import queue
 import signal
 import threading
@@ -50,38 +49,18 @@ from foveatrack.daemon.config import DaemonConfig
 from foveatrack.daemon.support import (JsonLog, Limits, RecordingThread, StatusLine, format_status,
                                        strip_no_return)
 from foveatrack.frames import Frame, FrameSlicer
+from foveatrack.track_log import ns, write_tracker_frame
 from foveatrack.tracker import Tracker
 
 FORMAT_SOURCE = "daemon"
 
 
-def _ns(t_s: float) -> int:
-    return int(round(t_s * 1e9))
-
-
-def _opt(v):
-    return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
-
-
 # ----------------------------------------------------------------------------------------- record jobs
 def _job_frame(w, fid, frame, out, cmd_rec, proc_ms, lat_ms):
-    """Write one processed frame with the channels and fields of :class:`sim.recorder.SimRecorder`."""
-    t_end = _ns(frame.t_end_s)
-    w.write_points(t_end, fid, frame.xyz, frame.t_ns, frame.reflectivity)
-    d = out.detection
-    w.write_detection(
-        t_end, fid, d is not None, None if d is None else [float(v) for v in d.xyz],
-        0 if d is None else int(d.n_points),
-        t_s=None if d is None else float(d.t_s), az_deg=None if d is None else float(d.az_deg),
-        el_deg=None if d is None else float(d.el_deg), state=str(out.state.value),
-        error_pan_deg=_opt(out.error_pan_deg), error_tilt_deg=_opt(out.error_tilt_deg))
+    """Write one processed frame in the layout of :mod:`foveatrack.track_log` (shared with the simulator)."""
+    t_end = write_tracker_frame(w, fid, frame, out)
     if cmd_rec is not None:
         _job_command(w, cmd_rec)
-    w.write_head_estimate(
-        t_end, out.head_pan_deg, out.head_tilt_deg, frame_id=fid, sigma_pan_deg=out.head_sigma_pan_deg,
-        sigma_tilt_deg=out.head_sigma_tilt_deg,
-        world_xyz_m=None if out.world_xyz is None else [float(v) for v in out.world_xyz],
-        world_sigma_m=_opt(out.world_sigma_m))
     w.write_metric(t_end, "processing_ms", proc_ms, frame_id=fid)
     if lat_ms is not None:
         w.write_metric(t_end, "latency_ms", lat_ms, frame_id=fid)
@@ -90,7 +69,7 @@ def _job_frame(w, fid, frame, out, cmd_rec, proc_ms, lat_ms):
 def _job_command(w, rec: dict):
     rec = dict(rec)
     raw = rec.pop("raw")
-    w.write_command(_ns(rec["send_t_s"]), raw, **rec)
+    w.write_command(ns(rec["send_t_s"]), raw, **rec)
 
 
 def _job_event(w, t_ns, rec: dict):
@@ -423,7 +402,7 @@ class Daemon:
         self.head.close()
         stats = self.stats()
         if self.recorder is not None:
-            self._record(_job_event, _ns(t_s or 0.0), {"event": "stop", "stats": stats})
+            self._record(_job_event, ns(t_s or 0.0), {"event": "stop", "stats": stats})
             self.recorder.close()
             stats["recording_dropped"] = self.recorder.dropped
             if self.recorder.error is not None:
