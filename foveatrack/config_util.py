@@ -51,3 +51,25 @@ def as_vec(value, key: str, where: str, n: int) -> tuple[float, ...]:
     if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != n:
         raise UserError(f"{where}: {key} must be a list of {n} numbers, got {value!r}")
     return tuple(as_float(v, f"{key}[{i}]", where) for i, v in enumerate(value))
+
+
+def read_toml(path, what: str, hint: str = "") -> tuple[dict, str]:
+    """Read a user's TOML file: ``(data, text)``, or a UserError naming the file and the problem.
+
+    ``what`` names the kind of file in messages ("scene", "daemon config", ...); ``hint`` is added
+    when the file does not exist (e.g. where examples are).
+    """
+    import tomllib
+    from pathlib import Path
+
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise UserError(f"{path}: no such {what} file{f' ({hint})' if hint else ''}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{path}: cannot read the {what} ({exc})") from None
+    try:
+        return tomllib.loads(text), text
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{path}: not valid TOML ({exc})") from None

@@ -62,17 +62,9 @@ class ReplayResult:
 
 def load_tracker_table(path: str | os.PathLike) -> dict:
     """The ``[tracker]`` table of a TOML file (a scene, a daemon config, or a bare tracker table)."""
-    import tomllib
+    from foveatrack.config_util import read_toml
 
-    p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text())
-    except FileNotFoundError:
-        raise UserError(f"--tracker-config {p}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"--tracker-config {p}: cannot read ({exc})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"--tracker-config {p}: not valid TOML ({exc})") from None
+    data, _ = read_toml(path, "tracker config (--tracker-config)")
     return dict(data.get("tracker", data))
 
 

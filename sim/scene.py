@@ -21,14 +21,13 @@ and what is allowed.  Tables::
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 
-from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
+from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys, read_toml
 from foveatrack.errors import UserError
 
 # Effects a scene can ask for, with their parameters and defaults (sources in the docstring of
@@ -96,18 +95,8 @@ class Scene:
         return self.effect_params[key]
 
 
-def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None) -> Scene:
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise UserError(f"{path}: no such scene file (shipped scenes are in scenes/)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"{path}: cannot read the scene ({exc})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: not valid TOML ({exc})") from None
+def load_scene(path: str | Path) -> Scene:
+    data, text = read_toml(path, "scene", "shipped scenes are in scenes/")
     return scene_from_mapping(data, str(path), text)
 
 

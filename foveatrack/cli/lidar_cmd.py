@@ -13,7 +13,6 @@ import json
 import math
 import sys
 import time
-import tomllib
 from pathlib import Path
 
 from foveatrack.errors import UserError
@@ -86,6 +85,7 @@ def _positive(text: str) -> float:
 
 def load_optics(spec: str):
     """A preset name or a TOML file of custom optics -> RisleyOptics (errors name the file and key)."""
+    from foveatrack.config_util import read_toml
     from sim.scan.optics import OpticsError, optics_from_table
     from sim.scan.presets import PRESETS
 
@@ -94,14 +94,7 @@ def load_optics(spec: str):
     path = Path(spec)
     if path.suffix != ".toml":
         raise UserError(f"unknown preset {spec!r}: allowed {sorted(PRESETS)} or a .toml optics file")
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise UserError(f"{path}: no such optics file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"{path}: cannot read ({exc})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: not valid TOML ({exc})") from None
+    data, _ = read_toml(path, "optics")
     table = data.get("lidar", data)
     table = {k: v for k, v in table.items() if k not in ("preset", "mount")}
     try:

@@ -20,12 +20,11 @@ from __future__ import annotations
 
 import datetime as _dt
 import ipaddress
-import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
 
-from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
+from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys, read_toml
 from foveatrack.errors import UserError
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig
@@ -281,15 +280,5 @@ def config_from_mapping(data: Mapping, where: str = "daemon config", text: str =
 
 def load_config(path: str | Path) -> DaemonConfig:
     """Read and validate a daemon config file; UserError naming the file and key on any problem."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise UserError(f"{path}: no such daemon config file (example: examples/daemon-virtual.toml)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"{path}: cannot read the daemon config ({exc})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: not valid TOML ({exc})") from None
+    data, text = read_toml(path, "daemon config", "example: examples/daemon-virtual.toml")
     return config_from_mapping(data, str(path), text)
