@@ -38,10 +38,7 @@ import time
 
 import numpy as np
 
-from sim import effects as fx
-from sim.scan.model import ScanModel
-from sim.scan.optics import SpeedNoise
-from sim.sensor import SceneSensor
+from sim.sensor import SceneSensor, scene_scan_model
 from sim.world import kernels as wk
 
 # Livox device type and packet type per scanner preset (facts: livox.md, "SDK v1 data packets").
@@ -172,12 +169,7 @@ class SceneSource:
 
     def __init__(self, scene, pose=None):
         self.scene = scene
-        seed = scene.seed
-        noise = None
-        if scene.has("motor_speed_noise"):
-            noise = SpeedNoise(sigma_frac=scene.param("speed_noise_frac"), segment_s=scene.param("speed_noise_segment_s"))
-        self.scan = ScanModel(scene.optics, scene.scan_model, speed_noise=noise,
-                              rng=fx.effect_rng(seed, "motor_speed_noise") if noise else None)
+        self.scan = scene_scan_model(scene)
         self.rate_hz = float(scene.optics.point_rate_hz)
         g = scene.gimbal
         self.pose = pose or (lambda t: (np.full(np.shape(t), g.pan0_deg), np.full(np.shape(t), g.tilt0_deg)))

@@ -32,10 +32,8 @@ from foveatrack.tracker import Tracker
 from gimbal.pelco import encode_pan_tilt
 from gimbal.pts303h import PTS303H, HeadParams
 from sim import effects as fx
-from sim.scan.model import ScanModel
-from sim.scan.optics import SpeedNoise
 from sim.scene import Scene
-from sim.sensor import SceneSensor
+from sim.sensor import SceneSensor, scene_scan_model
 from sim.virtual_uart import VirtualUart
 from sim.world import kernels as wk
 
@@ -120,11 +118,7 @@ class ClosedLoop:
         self.frame_hook = frame_hook
         seed = scene.seed
         g = scene.gimbal
-        noise = None
-        if scene.has("motor_speed_noise"):
-            noise = SpeedNoise(sigma_frac=scene.param("speed_noise_frac"), segment_s=scene.param("speed_noise_segment_s"))
-        self.scan = ScanModel(scene.optics, scene.scan_model, speed_noise=noise,
-                              rng=fx.effect_rng(seed, "motor_speed_noise") if noise else None)
+        self.scan = scene_scan_model(scene)
         params = HeadParams.for_family(g.family, **({} if scene.has("head_ripple") else {"ripple_rel": 0.0}))
         tilt0 = min(max(g.tilt0_deg, params.tilt_min_deg), params.tilt_max_deg)
         self.head = PTS303H(params, unit_seed=g.unit_seed, feedback=g.feedback, address=g.address,

@@ -14,10 +14,21 @@ import numpy as np
 
 from sim import effects as fx
 from sim.scan.kernels import RAY_OK
+from sim.scan.model import ScanModel
+from sim.scan.optics import SpeedNoise
 from sim.world import kernels as wk
 from sim.world.trajectories import heading_rad
 
 EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")
+
+
+def scene_scan_model(scene) -> ScanModel:
+    """The scene's scanner, with motor speed noise only if the scene lists it (its own stream)."""
+    noise = None
+    if scene.has("motor_speed_noise"):
+        noise = SpeedNoise(sigma_frac=scene.param("speed_noise_frac"), segment_s=scene.param("speed_noise_segment_s"))
+    return ScanModel(scene.optics, scene.scan_model, speed_noise=noise,
+                     rng=fx.effect_rng(scene.seed, "motor_speed_noise") if noise else None)
 
 
 class SceneSensor:
