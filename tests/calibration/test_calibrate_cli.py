@@ -1,0 +1,76 @@
+"""`foveatrack calibrate` and the driver adapter (fast cases)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from calib_fixture import ROOT
+from foveatrack.cli import main
+from foveatrack.cli.calibrate_cmd import CalibrationDriver, drive_calibration, ranges
+from foveatrack.control import STOP, HeadCommand
+from foveatrack.frames import Frame
+from foveatrack.reconstruction import rotation_matrix
+
+SCENE = str(ROOT / "scenes" / "calibration-room.toml")
+
+
+class _Script:
+    """A calibrator stand-in: returns scripted commands (None = keep) and is done after them."""
+
+    def __init__(self, script):
+        self.script = list(script)
+        self.done = False
+
+    def step(self, frame):
+        cmd = self.script.pop(0)
+        self.done = not self.script
+        return cmd
+
+
+def _frames(n):
+    for k in range(n):
+        yield Frame(k * 0.1, (k + 1) * 0.1, np.zeros((0, 3)), np.zeros(0, np.int64))
+
+
+def test_driver_latches_none_and_ends_with_stop():
+    left = HeadCommand(1, 20, 0, 0)
+    sent = []
+    drv = drive_calibration(_Script([None, left, None, None, HeadCommand(0, 0, 1, 5)]), _frames(100),
+                            lambda t, c: sent.append(c), send_delay_s=0.002)
+    assert [c for c in sent] == [STOP, left, left, left, STOP]        # done -> STOP, frames not consumed further
+    assert drv.finished and [c for _, c in drv.sent] == [left, STOP]
+    assert CalibrationDriver(_Script([None, None]))(next(_frames(1)), 0.1) == STOP
+
+
+def test_the_room_corner_is_found_from_the_scene():
+    from sim.calibration_run import room_corner_in_view
+    from sim.scene import load_scene
+
+    q = room_corner_in_view(load_scene(SCENE))
+    # room x in [-3, 5], y in [-3, 3], z in [-1.5, 1.5]: the (5, 3, 1.5) corner, seen from pan 23, tilt 6.5
+    assert np.allclose(rotation_matrix(23.0, 6.5) @ q, [5.0, 3.0, 1.5], atol=1e-9)
+
+
+def test_ranges():
+    assert ranges([0, 1, 2, 5, 7, 8, 255]) == "0-2, 5, 7-8, turbo"
+
+
+def test_real_hardware_mode_is_a_clear_error(capsys):
+    assert main(["calibrate", "--serial", "/dev/ttyUSB0", "--lidar", "192.168.1.50"]) == 2
+    assert "real-hardware calibration" in capsys.readouterr().err
+    assert main(["calibrate"]) == 2
+    assert main(["calibrate", "--scene", SCENE, "--pan-bytes", "12,x"]) == 2
+
+
+def test_calibrate_cli_writes_the_table_and_reports(tmp_path, capsys):
+    out, png = tmp_path / "t.json", tmp_path / "t.png"
+    rc = main(["calibrate", "--scene", SCENE, "--unit-seed", "4343", "--pan-bytes", "24,40", "--tilt-bytes", "63",
+               "--dwell-s", "3", "--out", str(out), "--plot", str(png), "--json"])
+    assert rc == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["measured"] == 3 and s["within_tolerance"] == 3
+    assert 0 in s["unmeasured"]["pan"]["not in the plan (interpolated)"]
+    t = json.loads(out.read_text())
+    assert t["format"] == "foveatrack-speed-table" and "4343" in t["head"]
+    assert png.stat().st_size > 10_000
