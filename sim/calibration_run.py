@@ -145,7 +145,8 @@ def run_calibration(scene: Scene, plan: CalibrationPlan | None = None, feature: 
     start_tilt_sigma_deg : how well the start tilt is known (see ``PriorAxisCalibrator``).
     seed : the Calibrator's RANSAC seed.  ``progress(t_s, budget_s)`` is called every frame.
     """
-    from foveatrack.cli.calibrate_cmd import CalibrationDriver, PriorAxisCalibrator
+    from foveatrack.calibration import PriorAxisCalibrator
+    from foveatrack.calibration_drive import CalibrationDriver
     from sim.loop import ClosedLoop, truth_speed_table
 
     if unit_seed is not None:

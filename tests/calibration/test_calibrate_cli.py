@@ -7,7 +7,8 @@ import pytest
 
 from calib_fixture import ROOT
 from foveatrack.cli import main
-from foveatrack.cli.calibrate_cmd import CalibrationDriver, drive_calibration, ranges
+from foveatrack.calibration_drive import CalibrationDriver, drive_calibration
+from foveatrack.cli.calibrate_cmd import ranges
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_matrix
