@@ -86,7 +86,7 @@ def terminate(p: subprocess.Popen, timeout_s: float = 10.0) -> int:
 
 
 def write_config(path: Path, head_link: Path, recording: Path, broadcast_port: int, cmd_port: int = 0,
-                 data_port: int = 0, watchdog_s: float = 0.5) -> Path:
+                 data_port: int = 0, watchdog_s: float = 0.5, speed_table: str = "nominal") -> Path:
     path.write_text(f"""
 [lidar]
 sensor_ip = "127.0.0.1"
@@ -97,7 +97,7 @@ broadcast_port = {broadcast_port}
 
 [head]
 port = "{head_link}"
-speed_table = "nominal"
+speed_table = "{speed_table}"
 
 [tracker]
 deadband_deg = 2.0
