@@ -21,6 +21,8 @@ Positive azimuth = target to the LEFT (+Y), positive elevation = target UP (+Z).
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +32,10 @@ from foveatrack.frames import Frame
 
 def wrap_deg(a):
     """Wrap angles to (-180, 180] degrees."""
+    if isinstance(a, (float, int)):  # the per-frame scalar path, without numpy's overhead
+        w = math.fmod(float(a) + 180.0, 360.0)
+        w = (w + 360.0 if w < 0.0 else w) - 180.0
+        return 180.0 if w == -180.0 else w
     w = np.mod(np.asarray(a, dtype=float) + 180.0, 360.0) - 180.0
     w = np.where(w == -180.0, 180.0, w)
     return float(w) if np.ndim(w) == 0 else w
