@@ -37,7 +37,8 @@ def wrap_deg(a):
 
 def bearing_deg(x: float, y: float, z: float) -> tuple[float, float]:
     """Azimuth and elevation [deg] of a point (lidar or any right-handed X-fwd/Y-left/Z-up frame)."""
-    az = wrap_deg(np.degrees(np.arctan2(y, x)))
+    # x + 0.0 turns -0.0 into +0.0: straight overhead (x = y = 0) has az 0, not atan2(0, -0.0) = 180
+    az = wrap_deg(np.degrees(np.arctan2(y, x + 0.0)))
     el = float(np.degrees(np.arctan2(z, np.hypot(x, y))))
     return az, el
 
