@@ -30,8 +30,10 @@ from foveatrack.frames import Frame
 
 def wrap_deg(a):
     """Wrap angles to (-180, 180] degrees."""
-    w = np.mod(np.asarray(a, dtype=float) + 180.0, 360.0) - 180.0
+    a = np.asarray(a, dtype=float)
+    w = np.mod(a + 180.0, 360.0) - 180.0
     w = np.where(w == -180.0, 180.0, w)
+    w = np.where((a > -180.0) & (a <= 180.0), a, w)  # in range: unchanged (the +-180 shift rounds)
     return float(w) if np.ndim(w) == 0 else w
 
 
