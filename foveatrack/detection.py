@@ -33,17 +33,23 @@ from foveatrack.frames import Frame
 def wrap_deg(a):
     """Wrap angles to (-180, 180] degrees."""
     if isinstance(a, (float, int)):  # the per-frame scalar path, without numpy's overhead
-        w = math.fmod(float(a) + 180.0, 360.0)
+        a = float(a)
+        if -180.0 < a <= 180.0:
+            return a  # in range: unchanged (the +-180 shift would round)
+        w = math.fmod(a + 180.0, 360.0)
         w = (w + 360.0 if w < 0.0 else w) - 180.0
         return 180.0 if w == -180.0 else w
-    w = np.mod(np.asarray(a, dtype=float) + 180.0, 360.0) - 180.0
+    a = np.asarray(a, dtype=float)
+    w = np.mod(a + 180.0, 360.0) - 180.0
     w = np.where(w == -180.0, 180.0, w)
+    w = np.where((a > -180.0) & (a <= 180.0), a, w)  # in range: unchanged (the +-180 shift rounds)
     return float(w) if np.ndim(w) == 0 else w
 
 
 def bearing_deg(x: float, y: float, z: float) -> tuple[float, float]:
     """Azimuth and elevation [deg] of a point (lidar or any right-handed X-fwd/Y-left/Z-up frame)."""
-    az = wrap_deg(np.degrees(np.arctan2(y, x)))
+    # x + 0.0 turns -0.0 into +0.0: straight overhead (x = y = 0) has az 0, not atan2(0, -0.0) = 180
+    az = wrap_deg(np.degrees(np.arctan2(y, x + 0.0)))
     el = float(np.degrees(np.arctan2(z, np.hypot(x, y))))
     return az, el
 

@@ -155,7 +155,7 @@ class AxisTable:
         b, s = self._candidates(allow_turbo)
         if b.size == 0:
             raise UserError(f"speed table: the {self.axis} axis has no byte with a known speed > 0")
-        target = abs(float(speed_deg_s))
+        target = min(abs(float(speed_deg_s)), float(s.max()))  # beyond the table: the fastest (|s - 1e17| ties)
         d = np.abs(s - target)
         best = np.flatnonzero(d <= d.min() + 1e-12)
         k = best[np.argmin(s[best])]

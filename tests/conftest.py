@@ -1,5 +1,25 @@
+import os
 import sys
 from pathlib import Path
 
+from hypothesis import HealthCheck, settings
+
 # tests/scan/twins.py and friends are imported as plain modules by the tests beside them.
 sys.path.insert(0, str(Path(__file__).parent))
+
+# Hypothesis profiles (select with HYPOTHESIS_PROFILE=long or pytest's --hypothesis-profile=long).
+# "ci": reproducible (derandomize: the same examples on every run, no example database) and sized to
+# run the stability suite in a few minutes on 2 shared cores; no per-example deadline and no
+# too-slow health check, since a shared CI machine's timing says nothing about correctness.
+# "long": 20x the examples, random seeds, for hunting new counterexamples before a release.
+# max_examples = 100 in "ci" is hypothesis's own default, so tests elsewhere keep their size; the
+# stability suite scales its per-test counts by max_examples / 100 (tests/stability/stability_util.py).
+settings.register_profile(
+    "ci", max_examples=100, deadline=None, derandomize=True, database=None, print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.register_profile(
+    "long", max_examples=2000, deadline=None, derandomize=False, print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
