@@ -88,7 +88,7 @@ class FrameLog:
     estimate_sigma_m: list = field(default_factory=list)
     head_pan_deg: list = field(default_factory=list)  # true, at frame mid
     head_tilt_deg: list = field(default_factory=list)
-    est_pan_deg: list = field(default_factory=list)  # reconstruction
+    est_pan_deg: list = field(default_factory=list)  # dead reckoning, at frame mid like the truth
     est_tilt_deg: list = field(default_factory=list)
     command: list = field(default_factory=list)  # (pan_dir, pan_byte, tilt_dir, tilt_byte)
     target_range_m: list = field(default_factory=list)
@@ -236,8 +236,13 @@ class ClosedLoop:
         L.state.append(out.state.value if hasattr(out.state, "value") else str(out.state))
         L.head_pan_deg.append(float(pan[0]))
         L.head_tilt_deg.append(float(tilt[0]))
-        L.est_pan_deg.append(out.head_pan_deg)
-        L.est_tilt_deg.append(out.head_tilt_deg)
+        # The tracker's dead reckoning at the same instant as the truth above (frame mid).
+        if self.controller is None:
+            est_pan, est_tilt = self.tracker.recon.angles_at(t_mid)[:2]
+        else:
+            est_pan, est_tilt = math.nan, math.nan
+        L.est_pan_deg.append(est_pan)
+        L.est_tilt_deg.append(est_tilt)
         c = out.command
         L.command.append((c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte))
         if self.scene.targets:
