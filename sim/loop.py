@@ -191,9 +191,12 @@ class ClosedLoop:
         # 3. beams in the world at each point's own head pose.
         d_world = np.empty_like(d_lidar)
         if self.head_grid_s > 0:
-            grid = np.arange(t0, t1 + 1.5 * self.head_grid_s, self.head_grid_s)
-            pan, tilt = self.head.angles_at(grid)
-            wk.rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0, self.head_grid_s, np.unwrap(np.radians(pan)),
+            # Nodes from t0 to exactly t1 (the step shrinks to divide the frame): the head is never
+            # asked about a time past t1, which a command sent at t1 could still affect.
+            n_steps = max(1, math.ceil((t1 - t0) / self.head_grid_s - 1e-9))
+            step = (t1 - t0) / n_steps
+            pan, tilt = self.head.angles_at(t0 + step * np.arange(n_steps + 1))
+            wk.rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0, step, np.unwrap(np.radians(pan)),
                                            np.radians(tilt), d_world)
         else:
             pan, tilt = self.head.angles_at(t_s)
