@@ -19,6 +19,7 @@ COMMAND_MODULES = (
     "foveatrack.cli.simulate_cmd",
     "foveatrack.cli.lidar_cmd",
     "foveatrack.cli.gimbal_cmd",
+    "foveatrack.cli.study_cmd",
 )
 
 
