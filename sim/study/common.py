@@ -46,7 +46,7 @@ class StudySize:
 
 
 FULL = StudySize(
-    name="full", seeds=3, fidelity_duration_s={"fig12": 15.0, "crossing": 3.0},
+    name="full", seeds=5, fidelity_duration_s={"fig12": 15.0, "crossing": 3.0},
     scan_rays=400_000, scan_repeats=5, interp_steps=(2, 4, 8, 16),
     windows_ms=(25, 50, 100, 200, 400), sensing_duration_s={"near": 15.0, "mid": 15.0, "far": 15.0}, sensing_seeds=4,
     coverage_s=1.0, coverage_rays=1_000_000,

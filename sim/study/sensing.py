@@ -140,6 +140,7 @@ class CoverageTask:
     optics_name: str
     duration_s: float
     reference_rays: int
+    windows_ms: tuple = ()
 
     axis = "coverage"
 
@@ -156,15 +157,12 @@ class CoverageTask:
         grid = voxel_grid(optics, reference_rays=self.reference_rays)
         with Timer() as t:
             curve = voxel_coverage(ScanModel(optics), self.duration_s, grid)
+        # exactly at each window: a run of that length ends on it (the curve's samples need not)
+        at = {str(int(w)): float(voxel_coverage(ScanModel(optics), w / 1000, grid).coverage[-1])
+              for w in self.windows_ms}
         return {"optics": self.optics_name, "cells": curve.cells, "times_s": curve.times_s.tolist(),
                 "coverage": curve.coverage.tolist(), "t50_s": curve.t50_s, "t90_s": curve.t90_s,
-                "cpu_s": t.cpu_s}
-
-
-def coverage_at(times_s, coverage, t_s: float) -> float:
-    """Coverage reached by ``t_s`` (the last curve sample at or before it; 0 before the first)."""
-    i = np.searchsorted(np.asarray(times_s), t_s + 1e-12, side="right") - 1
-    return float(coverage[i]) if i >= 0 else 0.0
+                "cpu_s": t.cpu_s, "at_windows": at}
 
 
 def tasks(size) -> list:
@@ -175,7 +173,7 @@ def tasks(size) -> list:
             for w in size.windows_ms:
                 out.append(SensingTask(target, float(w), seed, with_window(replace(base, seed=seed), w)))
     for name in ("mid40", "horizon"):
-        out.append(CoverageTask(name, size.coverage_s, size.coverage_rays))
+        out.append(CoverageTask(name, size.coverage_s, size.coverage_rays, tuple(size.windows_ms)))
     return out
 
 
@@ -205,8 +203,6 @@ def collect(results, windows_ms) -> dict:
     cov = {}
     for t, r in results:
         if getattr(t, "axis", "") == "coverage":
-            r = dict(r)
-            r["at_windows"] = {str(int(w)): coverage_at(r["times_s"], r["coverage"], w / 1000) for w in windows_ms}
             cov[t.optics_name] = r
     return {"targets": rows, "coverage": cov}
 
