@@ -204,15 +204,28 @@ class CalibrationTask:
         if table is None:
             out["failure"] = cal.failure or f"not done after {MAX_CAL_S} s"
             return out
-        out.update(table_errors(table, truth_speed_table(loop.head), {"pan": pan_b, "tilt": tilt_b}))
+        truth = truth_speed_table(loop.head)
+        out.update(table_errors(table, truth, {"pan": pan_b, "tilt": tilt_b}))
+        out.update(table_dead_time_s=table.dead_time_s, table_accel_deg_s2=table.accel_deg_s2,
+                   true_dead_time_s=truth.dead_time_s, true_accel_pan_deg_s2=truth.pan.accel_deg_s2,
+                   true_accel_tilt_deg_s2=truth.tilt.accel_deg_s2)
+        out.update(self._check(table))
+        # Diagnostic: the measured speeds with the head's true timing (dead time, per-axis
+        # acceleration), to separate what the speed entries cost from what the timing costs.
+        timed = replace(table, dead_time_s=truth.dead_time_s, accel_deg_s2=truth.accel_deg_s2,
+                        pan=replace(table.pan, accel_deg_s2=truth.pan.accel_deg_s2),
+                        tilt=replace(table.tilt, accel_deg_s2=truth.tilt.accel_deg_s2))
+        out["pointing_rms_true_timing_deg"] = self._check(timed)["pointing_rms_deg"]
+        return out
+
+    def _check(self, table) -> dict:
         fd, path = tempfile.mkstemp(suffix=".json", prefix="study-table-")
         os.close(fd)
         try:
             table.save(path)
-            out.update(tracking_check(path, self.check_s, self.seed))
+            return tracking_check(path, self.check_s, self.seed)
         finally:
             os.unlink(path)
-        return out
 
 
 UNIT_SEED = 3   # fig12-tracking's head unit: the table is checked on the unit it was measured on
@@ -236,7 +249,9 @@ def tasks(size) -> list[CalibrationTask]:
 
 
 KEYS = ("cal_virtual_s", "cal_cpu_s", "table_err_measured_pct", "table_err_all_pct", "table_err_max_pct",
-        "table_abs_pan_deg_s", "table_abs_tilt_deg_s", "implied_start_tilt_deg",
+        "table_abs_pan_deg_s", "table_abs_tilt_deg_s", "implied_start_tilt_deg", "table_dead_time_s",
+        "table_accel_deg_s2", "true_dead_time_s", "true_accel_pan_deg_s2", "true_accel_tilt_deg_s2",
+        "pointing_rms_true_timing_deg",
         "pointing_rms_deg", "pointing_max_deg", "recon_rms_m", "error_rms_all_deg")
 
 

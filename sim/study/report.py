@@ -171,14 +171,24 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
           "; ".join(f"{name}: pan {', '.join(map(str, PLANS[name][0]))}, tilt {', '.join(map(str, PLANS[name][1]))}"
                     for name in dict.fromkeys(r["plan"] for r in cal["rows"]) if name in PLANS) + ".", ""]
     L += _table(["plan", "dwell [s]", "start-tilt prior", "runs", "calibration time [s]", "table err, measured bytes [%]",
-                 "table err, all bytes [%]", "abs err pan / tilt [deg/s]", "pointing rms [deg]", "pointing max [deg]",
-                 "world position rms [m]"],
+                 "table err, all bytes [%]", "abs err pan / tilt [deg/s]", "dead time [ms]", "accel [deg/s²]",
+                 "pointing rms [deg]", "pointing max [deg]", "pointing rms, true timing [deg]", "world position rms [m]"],
                 [[r["plan"], _f(r["dwell_s"], "{:g}") if r["plan"] not in ("nominal", "truth") else "-",
                   "yes" if r["tilt_prior"] else "no", f"{r['runs'] - r['failed']}/{r['runs']}",
                   _f(r["cal_virtual_s"], "{:.0f}", none="inf" if r["plan"] == "truth" else "-"),
                   _f(r["table_err_measured_pct"]), _f(r["table_err_all_pct"]),
                   f"{_f(r['table_abs_pan_deg_s'])} / {_f(r['table_abs_tilt_deg_s'])}",
-                  _f(r["pointing_rms_deg"]), _f(r["pointing_max_deg"]), _f(r["recon_rms_m"])] for r in cal["rows"]])
+                  _f(None if r.get("table_dead_time_s") is None else 1000 * r["table_dead_time_s"], "{:.0f}"),
+                  _f(r.get("table_accel_deg_s2")),
+                  _f(r["pointing_rms_deg"]), _f(r["pointing_max_deg"]), _f(r.get("pointing_rms_true_timing_deg")),
+                  _f(r["recon_rms_m"])] for r in cal["rows"]])
+    tim = next((r for r in cal["rows"] if r.get("true_dead_time_s") is not None), None)
+    if tim is not None:
+        L += [f"The head's true timing: dead time {_f(1000 * tim['true_dead_time_s'], '{:.0f}')} ms, acceleration "
+              f"pan {_f(tim['true_accel_pan_deg_s2'])} / tilt {_f(tim['true_accel_tilt_deg_s2'])} deg/s² (the "
+              "calibrator estimates one dead time and one acceleration for both axes from the legs' start delays).  "
+              "`pointing rms, true timing` reruns the check with the measured speeds but the true timing: the "
+              "difference to `pointing rms` is what the timing estimate costs, the rest is the speed entries.", ""]
     noprior = [r for r in cal["rows"] if not r["tilt_prior"]]
     if noprior:
         r = noprior[0]
