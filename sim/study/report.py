@@ -217,7 +217,15 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
     # Pareto --------------------------------------------------------------------------------------
     L += ["## Pareto front: for a target accuracy, the cheapest settings", "",
           "Per axis and scene/target, the measured settings that no other beats on both cost and error, then for "
-          "each target accuracy the cheapest setting that meets it (\"-\": none measured does).", ""]
+          "each target accuracy the cheapest setting that meets it (\"-\": none measured does).  Read the "
+          "simulation-fidelity fronts with the seed-to-seed spreads of section 2 beside them: a deviation below the "
+          "spread is not a measurable effect, and CPU costs within ~10 % of each other are timing noise.", ""]
+    cheaper = [o["optics"] for o in ax["scan"]["optics"]
+               if next(r for r in o["rows"] if r["model"] == "exact")["ns_per_ray"]
+               < next(r for r in o["rows"] if r["model"] == "paraxial")["ns_per_ray"]]
+    if cheaper:
+        L += [f"Scan model ({', '.join(cheaper)}): exact refraction is measured both cheaper per ray and exact, so "
+              "no approximation of the scan model is on the front.", ""]
     names = {
         "scan": ("p95 angular error [deg]", "ns per ray"),
         "fidelity": ("abs Δ tracking error rms vs all-exact [deg]", "CPU s per virtual s"),
