@@ -1,0 +1,92 @@
+"""Build every axis's tasks, run them through :mod:`sim.sweep`'s executor, assemble the results.
+
+All tasks of all axes go into one pool (one progress bar), the expensive ones first so that two
+workers finish together.  Tasks are picklable frozen dataclasses and :func:`execute` is a top-level
+function, so the same study runs on local processes or a Dask cluster (``--scheduler``).
+"""
+
+from __future__ import annotations
+
+import math
+
+from sim.study import calibration_time, pareto, point_rate, scan_fidelity, sensing, sim_fidelity
+from sim.study.common import SIZES, StudySize, warm_up
+from sim.sweep import run_tasks
+
+AXES = ("scan", "fidelity", "sensing", "calibration", "rate")
+
+# Target accuracies of the closing Pareto table, per axis (in that axis's error unit).
+TARGETS = {
+    "scan": (1.0, 0.1, 0.01, 0.001),
+    "fidelity": (0.5, 0.25, 0.1, 0.05),
+    "sensing": (0.5, 0.25, 0.1, 0.05),
+    "sensing_detect": (0.5, 0.8, 0.95),
+    "calibration": (25.0, 10.0, 5.0, 2.0),
+    "rate": (5.0, 3.0, 2.0, 1.0),
+}
+
+
+def execute(task) -> dict:
+    """Run one task in a worker (after warming the numba cache of that process)."""
+    warm_up()
+    return task.run()
+
+
+def build_tasks(size: StudySize) -> list:
+    tasks = (scan_fidelity.tasks(size) + sim_fidelity.tasks(size) + sensing.tasks(size)
+             + calibration_time.tasks(size) + point_rate.tasks(size))
+    return sorted(tasks, key=lambda t: -t.cost_hint)
+
+
+def assemble(size: StudySize, results: list[tuple[object, dict]]) -> dict:
+    """The study's results (JSON-ready apart from non-finite floats) from ``(task, result)`` pairs."""
+    by = {a: [(t, r) for t, r in results if t.axis == a] for a in ("scan", "fidelity", "sensing", "coverage",
+                                                                 "calibration", "rate")}
+    axes = {
+        "scan": scan_fidelity.collect(by["scan"]),
+        "fidelity": sim_fidelity.collect(by["fidelity"]),
+        "sensing": sensing.collect(by["sensing"] + by["coverage"], size.windows_ms),
+        "calibration": calibration_time.collect(by["calibration"]),
+        "rate": point_rate.collect(by["rate"]),
+    }
+    points = {
+        "scan": scan_fidelity.pareto_points(axes["scan"]),
+        "fidelity": sim_fidelity.pareto_points(axes["fidelity"]),
+        "sensing": sensing.pareto_points(axes["sensing"]),
+        "calibration": calibration_time.pareto_points(axes["calibration"]),
+        "rate": point_rate.pareto_points(axes["rate"]),
+    }
+    points["sensing_detect"] = [dict(p, error=None if p["p_detect"] is None else 1.0 - p["p_detect"])
+                                for p in points["sensing"]]
+    front = {}
+    for axis, pts in points.items():
+        front[axis] = {}
+        for group, gp in pareto.groups(pts).items():
+            targets = TARGETS[axis]
+            cheapest = []
+            for target in targets:
+                err = 1.0 - target if axis == "sensing_detect" else target
+                c = pareto.cheapest_for(gp, err)
+                cheapest.append({"target": target, "label": c["label"] if c else None,
+                                 "cost": c["cost"] if c else None, "error": c["error"] if c else None})
+            front[axis][group] = {"front": pareto.pareto_front(gp), "cheapest": cheapest, "points": gp}
+    cpu = sum(r.get("cpu_s", 0.0) + r.get("cal_cpu_s", 0.0) for _, r in results)
+    return {"size": size.name, "tasks": len(results), "task_cpu_s": cpu, "axes": axes, "pareto": front}
+
+
+def run_study(size: str | StudySize, executor, progress: bool = True) -> dict:
+    """Run the whole study on ``executor`` (see :func:`sim.sweep.make_executor`)."""
+    size = SIZES[size] if isinstance(size, str) else size
+    results = run_tasks(execute, build_tasks(size), executor, desc="accuracy-vs-time", progress=progress)
+    return assemble(size, results)
+
+
+def json_ready(obj):
+    """Non-finite floats -> None, tuples -> lists (strict JSON)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    return obj

@@ -1,0 +1,99 @@
+"""Pieces of the study checked on their own: Pareto front, table errors, interpolation, CLI errors."""
+
+import math
+
+import numpy as np
+import pytest
+
+from foveatrack.cli import main
+from foveatrack.speed_table import AxisTable, SpeedEntry, SpeedTable
+from sim.study.pareto import cheapest_for, pareto_front
+
+
+def _pts(rng, n):
+    return [{"group": "g", "label": str(i), "cost": float(c), "error": float(e)}
+            for i, (c, e) in enumerate(rng.integers(0, 8, size=(n, 2)))]
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_pareto_front_is_exactly_the_non_dominated_set(seed):
+    pts = _pts(np.random.default_rng(seed), 15)
+    front = pareto_front(pts)
+
+    def dominates(q, p):
+        return q["cost"] <= p["cost"] and q["error"] <= p["error"] and (q["cost"], q["error"]) != (p["cost"], p["error"])
+
+    for p in pts:
+        assert (p in front) == (not any(dominates(q, p) for q in pts))
+    assert [p["cost"] for p in front] == sorted(p["cost"] for p in front)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_cheapest_for_a_target_is_the_brute_force_minimum(seed):
+    pts = _pts(np.random.default_rng(seed), 10)
+    for target in range(-1, 9):
+        got = cheapest_for(pts, target)
+        ok = [p for p in pts if p["error"] <= target]
+        if not ok:
+            assert got is None
+        else:
+            assert got["error"] <= target and got["cost"] == min(p["cost"] for p in ok)
+            assert got in pareto_front(pts)   # the cheapest meeting a target is always on the front
+
+
+def test_pareto_ignores_points_without_a_number():
+    pts = [{"label": "a", "cost": None, "error": 0.0}, {"label": "b", "cost": 1.0, "error": math.nan},
+           {"label": "c", "cost": 2.0, "error": 1.0}]
+    assert [p["label"] for p in pareto_front(pts)] == ["c"]
+
+
+def _table(f_pan, f_tilt):
+    from foveatrack.speed_table import TURBO
+
+    def axis(name, f):
+        bs = list(range(64)) + ([TURBO] if name == "pan" else [])
+        return AxisTable(name, tuple(SpeedEntry(b, f(b), 0.0, True) for b in bs))
+    return SpeedTable(axis("pan", f_pan), axis("tilt", f_tilt))
+
+
+def test_table_errors_measure_a_known_scale_error():
+    from sim.study.calibration_time import table_errors
+
+    truth = _table(lambda b: 0.2 * b, lambda b: 0.03 * b)
+    scaled = _table(lambda b: 0.2 * b * 1.05, lambda b: 0.03 * b)   # pan 5 % fast, tilt exact
+    e = table_errors(truth, truth, {"pan": (8,), "tilt": (8,)})
+    assert e["table_err_all_pct"] == 0 and e["table_abs_pan_deg_s"] == 0 and e["unknown_bytes"] == 0
+    e = table_errors(scaled, truth, {"pan": (32,), "tilt": ()})
+    assert e["table_err_measured_pct"] == pytest.approx(5.0)
+    assert e["table_err_max_pct"] == pytest.approx(5.0)
+    moving_pan = [b for b in range(1, 64) if b >= 0.1 * 63]
+    moving = len(moving_pan) * 2
+    assert e["table_err_all_pct"] == pytest.approx(5.0 * math.sqrt(len(moving_pan) / moving))
+    assert e["table_abs_pan_deg_s"] == pytest.approx(math.sqrt(np.mean([(0.01 * b) ** 2 for b in range(1, 64)])))
+
+
+def test_interpolating_every_point_is_the_exact_model():
+    from sim.scan.model import ScanModel
+    from sim.scan.presets import HORIZON
+    from sim.study.scan_fidelity import interpolated_exact
+
+    m = ScanModel(HORIZON)
+    revs = m.prism_revs(1000, 600)
+    ch = m.channels(1000, 600)
+    d, _ = m.directions_from_revs(revs, ch)
+    np.testing.assert_allclose(interpolated_exact(m, revs, ch, 1, HORIZON.channels), d, atol=1e-15)
+    # knots are exact at every step-th point of each channel
+    d4 = interpolated_exact(m, revs, ch, 4, HORIZON.channels)
+    for c in range(HORIZON.channels):
+        idx = np.arange(c, 600, HORIZON.channels)[::4]
+        np.testing.assert_allclose(d4[idx], d[idx], atol=1e-15)
+
+
+def test_user_errors(tmp_path, capsys):
+    assert main(["study", "accuracy-vs-time", "--out", str(tmp_path), "--workers", "0"]) == 2
+    assert "--workers 0" in capsys.readouterr().err
+    assert main(["study", "accuracy-vs-time", "--out", str(tmp_path), "--from-json", str(tmp_path / "nope.json")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    (tmp_path / "x.json").write_text("[1, 2]")
+    assert main(["study", "accuracy-vs-time", "--out", str(tmp_path), "--from-json", str(tmp_path / "x.json")]) == 2
+    assert "not a study result" in capsys.readouterr().err
