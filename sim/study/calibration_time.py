@@ -2,7 +2,7 @@
 
 The shape of paper Fig. 11(b) (calibration error vs accumulation time at each pose), for the head
 instead of the IMU: the speed table is calibrated by tracking a room corner (paper Appendix D.4,
-:class:`foveatrack.calibration.Calibrator`) in a simulated room, with the head driven through the
+:class:`foveatrack.calibration.PriorAxisCalibrator`, the estimator ``foveatrack calibrate`` uses) in a simulated room, with the head driven through the
 virtual UART by the calibrator (``ClosedLoop(controller=...)``), for several dwell times per leg
 and two byte plans.  Then the table it produced drives the tracker's dead reckoning in
 ``fig12-tracking`` on the *same* head unit.
@@ -18,8 +18,8 @@ and two byte plans.  Then the table it produced drives the tracker's dead reckon
 Reference points: ``nominal`` (no calibration: the linear nominal table, time 0) and ``truth`` (the
 unit's own curve: an infinitely long calibration).
 
-The simulated calibration run is built here (``ClosedLoop(controller=...)`` + ``Calibrator``);
-``sim/calibration_run.py`` was not on main when this was written.
+The study's room (the head pointed at one corner) is its own, so the axis is self-contained; the
+procedure and its driver are the product's (``CalibrationDriver``).
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from foveatrack.calibration import DEFAULT_BYTES, CalibrationPlan, Calibrator, FeatureSpec
-from foveatrack.control import STOP
+from foveatrack.calibration import DEFAULT_BYTES, CalibrationPlan, FeatureSpec, PriorAxisCalibrator
+from foveatrack.calibration_drive import CalibrationDriver
 from foveatrack.metrics import angle_between_deg
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO
@@ -66,30 +66,16 @@ def room_scene(unit_seed: int, seed: int):
     return scene_from_mapping(data, "study calibration room"), pan0, tilt0
 
 
-class LatchedController:
-    """Adapts the calibrator (``None`` = keep the latched command) to the loop's controller hook
-    (``None`` = stop): re-sends the latched command, which the head treats as a no-op."""
-
-    def __init__(self, calibrator: Calibrator):
-        self.cal = calibrator
-        self.last = STOP
-
-    def __call__(self, frame, send_t_s):
-        cmd = self.cal.step(frame)
-        if cmd is not None:
-            self.last = cmd
-        return self.last
-
-
 def calibrate(plan: CalibrationPlan, unit_seed: int, seed: int):
     """Run the procedure in the simulated room; (table, calibrator, loop, virtual seconds)."""
     from sim.loop import ClosedLoop
 
     scene, pan0, tilt0 = room_scene(unit_seed, seed)
     corner_lidar = rotation_matrix(pan0, tilt0).T @ np.asarray(CORNER_M)
-    cal = Calibrator(plan, FeatureSpec(tuple(float(v) for v in corner_lidar)), seed=seed,
-                     head=f"PTS-303H unit {unit_seed} (simulated)", date="virtual time (simulation)")
-    loop = ClosedLoop(scene, controller=LatchedController(cal))
+    # The estimator `foveatrack calibrate` uses (mounting priors on the rotation axes).
+    cal = PriorAxisCalibrator(plan, FeatureSpec(tuple(float(v) for v in corner_lidar)), seed=seed,
+                              head=f"PTS-303H unit {unit_seed} (simulated)", date="virtual time (simulation)")
+    loop = ClosedLoop(scene, controller=CalibrationDriver(cal))
     period = loop.tracker.config.period_s
     k = 0
     while not cal.done and (k + 1) * period <= MAX_CAL_S:
