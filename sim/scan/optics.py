@@ -141,10 +141,10 @@ class RisleyOptics:
         return Fraction(self.prisms[i].rpm) / (60 * self.point_rate_hz)
 
     def repeat_period_s(self) -> float | None:
-        """Exact repeat period of the noise-free pattern (paper eq. 5-7), or None if > 1e9 s.
+        """Exact repeat period of the noise-free continuous pattern (paper eq. 5-7), or None if > 1e9 s.
 
-        The pattern repeats when every prism has turned a whole number of revolutions *and* the
-        sample clock is back in step: T = smallest t with rpm_i t / 60 integer for all i.
+        T = the smallest t with rpm_i t / 60 an integer for every prism.  The sampled points repeat
+        only if, in addition, T x point_rate_hz is a whole number of points.
         """
         rates = [Fraction(p.rpm) / 60 for p in self.prisms if p.rpm != 0]
         if not rates:
