@@ -61,7 +61,8 @@ def test_coverage_map_local_processes(capsys, tmp_path):
 
 @pytest.mark.slow
 def test_coverage_map_runs_on_a_local_dask_cluster(capsys):
-    distributed = pytest.importorskip("distributed")
+    import distributed  # in the [test] extra: this test must run, never skip
+
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         on_dask = run_json(capsys, "lidar", "coverage-map", "prototype", "--grid", "3", "--cap", "0.3",
                            "--scheduler", cluster.scheduler_address, "--no-progress", "--json")
@@ -72,7 +73,6 @@ def test_coverage_map_runs_on_a_local_dask_cluster(capsys):
 
 
 def test_unreachable_scheduler_is_a_clear_error(capsys):
-    pytest.importorskip("distributed")
     assert main(["lidar", "coverage-map", "prototype", "--grid", "2", "--cap", "0.1", "--no-progress",
                  "--scheduler", "tcp://127.0.0.1:9"]) == 2
     assert "Dask scheduler" in capsys.readouterr().err
