@@ -186,17 +186,18 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
     if tim is not None:
         L += [f"The head's true timing: dead time {_f(1000 * tim['true_dead_time_s'], '{:.0f}')} ms, acceleration "
               f"pan {_f(tim['true_accel_pan_deg_s2'])} / tilt {_f(tim['true_accel_tilt_deg_s2'])} deg/s² (the "
-              "calibrator estimates one dead time and one acceleration for both axes from the legs' start delays).  "
+              "calibrator, `PriorAxisCalibrator`, refits each leg's angle history with one dead time and one "
+              "acceleration per axis; the `accel` column is the table-wide value).  "
               "`pointing rms, true timing` reruns the check with the measured speeds but the true timing: the "
               "difference to `pointing rms` is what the timing estimate costs, the rest is the speed entries.", ""]
     noprior = [r for r in cal["rows"] if not r["tilt_prior"]]
     if noprior:
         r = noprior[0]
         L += [f"Start-tilt prior: the calibrator finds the pan axis in the lidar frame from the corner's motion, "
-              f"and falls back to the prior `CalibrationPlan.start_tilt_deg` when the legs cannot tell it.  In this "
-              f"room it fell back (implied start tilt {_f(r['implied_start_tilt_deg'], '{:.1f}')} deg without the "
-              f"prior, true {_f(math.degrees(math.atan2(cal['corner_m'][2], math.hypot(*cal['corner_m'][:2]))), '{:.1f}')} "
-              "deg), which scales every pan speed by cos(tilt); the row without the prior shows what that costs.", ""]
+              f"blended with the prior `CalibrationPlan.start_tilt_deg` by their uncertainties.  Without the prior "
+              f"(implied start tilt {_f(r['implied_start_tilt_deg'], '{:.1f}')} deg, "
+              f"true {_f(math.degrees(math.atan2(cal['corner_m'][2], math.hypot(*cal['corner_m'][:2]))), '{:.1f}')} "
+              "deg) every pan speed is scaled by cos(tilt error); the row without the prior shows what that costs.", ""]
     L += _img(images, "calibration", "calibration time")
 
     # 5 ----------------------------------------------------------------------------------------
