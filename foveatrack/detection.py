@@ -92,10 +92,11 @@ def detect_points(xyz: np.ndarray, t_ns: np.ndarray, space=None, *, test_xyz: np
     t_ns = np.asarray(t_ns, dtype=np.int64).reshape(-1)
     keep = valid_points(xyz)
     if space is not None and keep.any():
-        sel = np.flatnonzero(keep)
-        pts = xyz[sel] if test_xyz is None else np.asarray(test_xyz, dtype=np.float64).reshape(-1, 3)[sel]
-        inside = np.asarray(space.contains(pts), dtype=bool)
-        keep[sel[~inside]] = False
+        # Test every point and mask after: cheaper than gathering the valid ones first.  Invalid
+        # points may give NaN comparisons (False) inside ``contains``; they are masked out anyway.
+        pts = xyz if test_xyz is None else np.asarray(test_xyz, dtype=np.float64).reshape(-1, 3)
+        with np.errstate(invalid="ignore", over="ignore"):
+            keep &= np.asarray(space.contains(pts), dtype=bool)
     n = int(keep.sum())
     if n == 0:
         return None
