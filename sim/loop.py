@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from foveatrack.control import STOP
+from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable
@@ -55,7 +56,10 @@ def load_tracker_table(spec: str, head: PTS303H, where: str) -> SpeedTable:
     if spec == "nominal":
         p = head.params
         return SpeedTable.nominal(p.pan_speed_max_deg_s, p.tilt_speed_max_deg_s, p.pan_turbo_deg_s)
-    return SpeedTable.load(spec)
+    try:
+        return SpeedTable.load(spec)
+    except UserError as exc:
+        raise UserError(f"{where}: {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -144,6 +148,7 @@ class ClosedLoop:
         self._pending: list[tuple[float, bytes]] = []
         self.log = FrameLog()
         self.bytes_sent = 0
+        self.echo_bytes = 0
         self.last_sent: tuple[float, bytes] | None = None  # (time, Pelco-D bytes) of this frame's command
 
     # Effect streams and work counters live in the sensor; these keep the loop's own view of them.
@@ -221,6 +226,10 @@ class ClosedLoop:
             data = encode_pan_tilt(scene.gimbal.address, c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte)
             self._pending.extend(self.uart.send(data, send_t))
             self.bytes_sent += len(data)
+            if "echo" in self.uart.effects:
+                # RS-485 echo: the host hears its own bytes.  The tracker reads no replies (the head
+                # reports nothing), so here they are only counted; a reply parser must skip them.
+                self.echo_bytes += sum(len(b) for _, b in self.uart.pop_echo())
             self.last_sent = (send_t, data)
         self._log(t0, t1, frame, int(on_target.sum()), out)
         if self.frame_hook is not None:

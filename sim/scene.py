@@ -21,7 +21,7 @@ and what is allowed.  Tables::
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -95,6 +95,25 @@ class Scene:
         return self.effect_params[key]
 
 
+def with_run_overrides(scene: Scene, duration_s: float | None = None, seed: int | None = None) -> Scene:
+    """The scene with another duration and/or seed, rebuilt from its text so that everything
+    derived from them (a manual flight's path is drawn from the seed over the duration) follows."""
+    import tomllib
+
+    if duration_s is None and seed is None:
+        return scene
+    data = tomllib.loads(scene.text) if scene.text else None
+    if data is None:  # built from a mapping without text: only plain fields can change
+        return replace(scene, **{k: v for k, v in (("duration_s", duration_s), ("seed", seed)) if v is not None})
+    sc = dict(data.get("scene", {}))
+    if duration_s is not None:
+        sc["duration_s"] = duration_s
+    if seed is not None:
+        sc["seed"] = seed
+    data["scene"] = sc
+    return scene_from_mapping(data, scene.path, scene.text)
+
+
 def load_scene(path: str | Path) -> Scene:
     data, text = read_toml(path, "scene", "shipped scenes are in scenes/")
     return scene_from_mapping(data, str(path), text)
@@ -115,7 +134,7 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
     if not isinstance(effects, list):
         raise UserError(f"{w}: effects must be a list of names from {sorted(EFFECT_DEFAULTS)}")
     for e in effects:
-        if e not in EFFECT_DEFAULTS:
+        if not isinstance(e, str) or e not in EFFECT_DEFAULTS:
             raise UserError(f"{w}: unknown effect {e!r}; allowed: {', '.join(sorted(EFFECT_DEFAULTS))}")
     params: dict[str, Any] = {}
     for e in effects:
@@ -135,7 +154,8 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
             params[k] = as_float(v, k, we, lo=0)
 
     optics, scan_model = _lidar(data.get("lidar", {"preset": "mid40"}), f"{where} [lidar]")
-    gimbal = _gimbal(data.get("gimbal", {}), f"{where} [gimbal]")
+    base_dir = Path(where).parent if Path(where).is_file() else None
+    gimbal = _gimbal(data.get("gimbal", {}), f"{where} [gimbal]", base_dir)
     targets = data.get("target", [])
     if not isinstance(targets, list):
         raise UserError(f"{where}: [[target]] must be an array of tables")
@@ -148,7 +168,10 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         p, r = _background(b, f"{where} [[background]] #{i + 1}")
         prims.extend(p)
         refl.extend([r] * len(p))
-    tracker_table = dict(data.get("tracker", {}))
+    tracker_raw = data.get("tracker", {})
+    if not isinstance(tracker_raw, Mapping):
+        raise UserError(f"{where}: [tracker] must be a table of tracker keys, got {tracker_raw!r}")
+    tracker_table = dict(tracker_raw)
     tracker = TrackerConfig.from_mapping(tracker_table, where=f"{where} [tracker]")
     return Scene(
         name=str(sc.get("name", Path(where).stem)), path=where, text=text, duration_s=duration, seed=seed,
@@ -160,7 +183,7 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
 
 
 def _lidar(t: Mapping, w: str):
-    from sim.scan.optics import OpticsError, optics_from_table
+    from sim.scan.optics import OpticsError, optics_from_table, optics_overrides
     from sim.scan.presets import PRESETS
 
     check_keys(t, ["preset", "model", "point_rate_hz", "prisms", "channel_offsets_deg", "beam_divergence_deg", "name"], w)
@@ -176,14 +199,14 @@ def _lidar(t: Mapping, w: str):
             raise UserError(f"{w}: preset {preset!r} unknown; allowed: {', '.join(PRESETS)} (or give prisms)")
         optics = PRESETS[preset]
         if rest:
-            optics = optics.with_(**{k: (tuple(map(tuple, v)) if k == "channel_offsets_deg" else
-                                         tuple(v) if k == "beam_divergence_deg" else v) for k, v in rest.items()})
+            optics = optics.with_(**optics_overrides(rest, w))
         return optics, model
     except OpticsError as exc:
-        raise UserError(f"{w}: {exc}") from None
+        msg = str(exc)
+        raise UserError(msg if msg.startswith(w) else f"{w}: {msg}") from None
 
 
-def _gimbal(t: Mapping, w: str) -> GimbalSpec:
+def _gimbal(t: Mapping, w: str, base_dir: Path | None = None) -> GimbalSpec:
     from gimbal.pts303h import FEEDBACK_MODES, HEAD_FAMILIES
 
     check_keys(t, ["family", "unit_seed", "baud", "feedback", "address", "pan0_deg", "tilt0_deg", "frozen",
@@ -197,6 +220,8 @@ def _gimbal(t: Mapping, w: str) -> GimbalSpec:
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise UserError(f"{w}: {k} must be an integer >= 0, got {v!r}")
             kw[k] = v
+    if "address" in kw and not 1 <= kw["address"] <= 255:
+        raise UserError(f"{w}: address must be a Pelco-D address 1-255, got {kw['address']}")
     if "baud" in kw and kw["baud"] not in (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200):
         raise UserError(f"{w}: baud {kw['baud']} is not a standard rate (2400, 4800, 9600, 19200, ...)")
     if "feedback" in t:
@@ -212,6 +237,8 @@ def _gimbal(t: Mapping, w: str) -> GimbalSpec:
         v = t["speed_table"]
         if not isinstance(v, str) or not v:
             raise UserError(f"{w}: speed_table must be 'truth', 'nominal' or a path to a table JSON")
+        if v not in ("truth", "nominal") and base_dir is not None and not Path(v).is_absolute():
+            v = str(base_dir / v)  # a table file next to the scene, wherever the run starts from
         kw["speed_table"] = v
     return GimbalSpec(**kw)
 
@@ -227,7 +254,10 @@ def _target(t: Mapping, w: str, duration_s: float, seed: int) -> TargetSpec:
     elif geom == "sphere":
         body = bodies.sphere_body(as_float(t.get("radius_m", 0.2), "radius_m", w, lo=0.01, hi=10), refl)
     else:
-        body = bodies.box_body(as_vec(t.get("size_m", [0.3, 0.3, 0.1]), "size_m", w, 3), refl)
+        size = as_vec(t.get("size_m", [0.3, 0.3, 0.1]), "size_m", w, 3)
+        if min(size) <= 0:
+            raise UserError(f"{w}: size_m must be positive, got {list(size)}")
+        body = bodies.box_body(size, refl)
     traj = t.get("trajectory")
     wt = f"{w}.trajectory"
     if not isinstance(traj, Mapping):
@@ -258,7 +288,11 @@ def _target(t: Mapping, w: str, duration_s: float, seed: int) -> TargetSpec:
         pts = traj["points_m"]
         if not isinstance(pts, list) or len(pts) < 2:
             raise UserError(f"{wt}: points_m must be a list of at least 2 [x, y, z] points")
-        trajectory = tr.Waypoints(tuple(as_vec(p, f"points_m[{i}]", wt, 3) for i, p in enumerate(pts)), pos("speed_m_s"))
+        pts3 = tuple(as_vec(p, f"points_m[{i}]", wt, 3) for i, p in enumerate(pts))
+        for i in range(1, len(pts3)):
+            if pts3[i] == pts3[i - 1]:
+                raise UserError(f"{wt}: points_m[{i}] repeats points_m[{i - 1}]; consecutive waypoints must differ")
+        trajectory = tr.Waypoints(pts3, pos("speed_m_s"))
     else:
         trajectory = tr.Manual(v3("centre_m"), pos("radius_m"), pos("max_speed_m_s", hi=20), pos("max_accel_m_s2"),
                                duration_s, seed, as_float(traj.get("tau_s", 1.5), "tau_s", wt, lo=0, lo_open=True))
@@ -275,7 +309,8 @@ def _background(b: Mapping, w: str):
             "room": ["size_m", "centre_m"], "box": ["centre_m", "size_m", "yaw_deg"]}[kind]
     check_keys(b, ["type", "reflectivity"] + keys, w)
     refl = as_float(b.get("reflectivity", 0.5), "reflectivity", w, lo=0, lo_open=True, hi=1)
-    need = [k for k in keys if k not in b and k not in ("centre_m", "yaw_deg")]
+    optional = ("yaw_deg", "centre_m") if kind == "room" else ("yaw_deg",)
+    need = [k for k in keys if k not in b and k not in optional]
     if need:
         raise UserError(f"{w}: type {kind!r} needs {', '.join(need)}")
     if kind == "ground":
@@ -292,5 +327,7 @@ def _background(b: Mapping, w: str):
             raise UserError(f"{w}: size_m must be positive, got {list(size)}")
         return bodies.room(size, as_vec(b.get("centre_m", [0, 0, 0]), "centre_m", w, 3)), refl
     size = as_vec(b["size_m"], "size_m", w, 3)
+    if min(size) <= 0:
+        raise UserError(f"{w}: size_m must be positive, got {list(size)}")
     return [bodies.box(as_vec(b["centre_m"], "centre_m", w, 3), tuple(s / 2 for s in size),
                        math.radians(as_float(b.get("yaw_deg", 0.0), "yaw_deg", w)))], refl

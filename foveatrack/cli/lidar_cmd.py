@@ -57,7 +57,8 @@ def register(sub) -> None:
     p = lsub.add_parser("coverage-map", help="time to 90%% coverage over the two prism speeds (paper Fig. 7)")
     p.add_argument("preset", metavar="PRESET", help="a two-prism scanner: prototype | mid40 | optics.toml")
     p.add_argument("--rpm1", default="1000:12000", metavar="LO:HI", help="prism 1 speed range [rpm]")
-    p.add_argument("--rpm2", default="-12000:-1000", metavar="LO:HI", help="prism 2 speed range [rpm]")
+    p.add_argument("--rpm2", default="-12000:-1000", metavar="LO:HI",
+                   help="prism 2 speed range [rpm]; negative ranges need '=': --rpm2=-12000:-1000")
     p.add_argument("--grid", type=int, default=30, metavar="N", help="N x N speeds (default 30)")
     p.add_argument("--cap", type=_positive, default=5.0, metavar="S", help="time cap in seconds (paper: 5)")
     p.add_argument("--seed", type=int, default=0)
@@ -96,6 +97,8 @@ def load_optics(spec: str):
         raise UserError(f"unknown preset {spec!r}: allowed {sorted(PRESETS)} or a .toml optics file")
     data, _ = read_toml(path, "optics")
     table = data.get("lidar", data)
+    if not isinstance(table, dict):
+        raise UserError(f"{path}: [lidar] must be a table of optics keys (prisms, point_rate_hz, ...)")
     table = {k: v for k, v in table.items() if k not in ("preset", "mount")}
     try:
         return optics_from_table(table, where=f"{path} [lidar]")
@@ -189,7 +192,10 @@ def _pattern_plot(optics, model, duration, path, scan=None):
 def cmd_pattern(args) -> int:
     optics = load_optics(args.preset)
     scan = _scan_model(args, optics)
-    chunk = scan.scan(0, int(round(args.duration * optics.point_rate_hz)))
+    count = int(round(args.duration * optics.point_rate_hz))
+    if count < 2:
+        raise UserError(f"--duration {args.duration:g}: holds no points at {optics.point_rate_hz} points/s")
+    chunk = scan.scan(0, count)
     from sim.scan.fov import az_el_deg
 
     az, el = az_el_deg(chunk.direction[chunk.valid])
@@ -215,6 +221,11 @@ def cmd_density(args) -> int:
     optics = load_optics(args.preset)
     if len(optics.prisms) != 2:
         raise UserError(f"{optics.name}: eq. (4) describes two-prism patterns; this scanner has {len(optics.prisms)}")
+    if args.bins < 1:
+        raise UserError(f"--bins {args.bins}: at least 1")
+    if args.duration * optics.point_rate_hz < 1000:
+        raise UserError(f"--duration {args.duration:g}: too short for a density (< 1000 points at "
+                        f"{optics.point_rate_hz} points/s)")
     dens = radial_density(_scan_model(args, optics), args.duration, bins=args.bins)
     # The other model is always computed alongside so the departure is visible.
     other = "paraxial" if args.model == "exact" else "exact"
@@ -278,6 +289,8 @@ def _range(text: str, name: str):
         lo, hi = (float(v) for v in text.split(":"))
     except ValueError:
         raise UserError(f"{name} {text!r}: expected LO:HI in rpm, e.g. 1000:12000") from None
+    if not all(math.isfinite(v) and abs(v) <= 60000 for v in (lo, hi)):
+        raise UserError(f"{name} {text!r}: speeds must be finite and within +-60000 rpm")
     return lo, hi
 
 

@@ -23,27 +23,32 @@ def register(sub) -> None:
 
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
                    quiet=False) -> dict:
-    from dataclasses import replace
-
     from tqdm import tqdm
 
     from foveatrack.recording import RecordingWriter
     from sim.loop import ClosedLoop
     from sim.recorder import SimRecorder, recording_meta
-    from sim.scene import load_scene
+    from sim.scene import load_scene, with_run_overrides
     from sim.summary import summarize
     import time
 
-    scene = load_scene(scene_path)
-    if seed is not None:
-        scene = replace(scene, seed=seed)
-    if duration is not None:
-        if not duration > 0:
-            raise UserError(f"--duration {duration}: must be > 0")
-        scene = replace(scene, duration_s=duration)
+    if seed is not None and seed < 0:
+        raise UserError(f"--seed {seed}: must be an integer >= 0")
+    if duration is not None and not (0 < duration <= 2 * 86400):
+        raise UserError(f"--duration {duration}: must be > 0 and at most 172800 s (2 days of virtual time)")
+    scene = with_run_overrides(load_scene(scene_path), duration, seed)
+    frames = int(round(scene.duration_s * scene.tracker.rate_hz))
+    if frames < 1:
+        raise UserError(f"{scene.path}: duration {scene.duration_s} s is shorter than one tracker frame "
+                        f"({1 / scene.tracker.rate_hz:g} s)")
     if plot and out is None:
         raise UserError("--plot needs --out DIR")
     out_dir = Path(out) if out else None
+    if out_dir is not None:
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UserError(f"--out {out_dir}: cannot create the output directory ({exc})") from None
     writer = None
     t0 = time.perf_counter()
     loop = ClosedLoop(scene)

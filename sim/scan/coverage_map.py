@@ -29,6 +29,8 @@ class MapCell:
     cap_s: float
     seed: int
     level: float = 0.9
+    row: int = 0  # position in the map (speeds may repeat after rounding to whole rpm)
+    col: int = 0
 
 
 def time_to_level(cell: MapCell) -> float:
@@ -64,13 +66,12 @@ def coverage_map(optics: RisleyOptics, rpm1: np.ndarray, rpm2: np.ndarray, cap_s
     for j, r2 in enumerate(rpm2):
         for i, r1 in enumerate(rpm1):
             for noise in (True, False):
-                cells.append(MapCell(optics, grid, float(r1), float(r2), noise, cap_s, int(seeds[j * rpm1.size + i]), level))
+                cells.append(MapCell(optics, grid, float(r1), float(r2), noise, cap_s, int(seeds[j * rpm1.size + i]),
+                                     level, row=j, col=i))
     results = run_tasks(time_to_level, cells, executor, desc="coverage map", progress=progress)
     t_noise = np.full((rpm2.size, rpm1.size), np.nan)
     t_clean = np.full((rpm2.size, rpm1.size), np.nan)
-    index1 = {v: i for i, v in enumerate(rpm1)}
-    index2 = {v: j for j, v in enumerate(rpm2)}
     for cell, t in results:
         target = t_noise if cell.noise else t_clean
-        target[index2[cell.rpm2], index1[cell.rpm1]] = t
+        target[cell.row, cell.col] = t
     return CoverageMap(rpm1, rpm2, t_noise, t_clean, cap_s, level)

@@ -190,11 +190,15 @@ def optics_from_table(table: Mapping[str, Any], where: str = "optics") -> Risley
         tilted_face = "exit"
         rpm = 7294
     """
+    if not isinstance(table, Mapping):
+        raise OpticsError(f"{where}: must be a table of optics keys {sorted(_OPTICS_KEYS)}")
     unknown = set(table) - _OPTICS_KEYS
     if unknown:
         raise OpticsError(f"{where}: unknown key(s) {sorted(unknown)}; allowed {sorted(_OPTICS_KEYS)}")
     if "prisms" not in table:
         raise OpticsError(f"{where}: missing 'prisms' (a list of 2 or 3 prism tables)")
+    if not isinstance(table["prisms"], (list, tuple)):
+        raise OpticsError(f"{where}: prisms must be a list of 2 or 3 prism tables ([[lidar.prisms]])")
     prisms = []
     for i, p in enumerate(table["prisms"]):
         pw = f"{where}.prisms[{i}]"
@@ -210,18 +214,40 @@ def optics_from_table(table: Mapping[str, Any], where: str = "optics") -> Risley
             prisms.append(Prism(**{k: (v if k == "tilted_face" else float(v)) for k, v in p.items()}))
         except (OpticsError, TypeError, ValueError) as exc:
             raise OpticsError(f"{pw}: {exc}") from None
-    kwargs: dict[str, Any] = {"prisms": tuple(prisms)}
-    if "point_rate_hz" in table:
-        kwargs["point_rate_hz"] = table["point_rate_hz"]
-    if "channel_offsets_deg" in table:
-        kwargs["channel_offsets_deg"] = tuple(tuple(float(v) for v in c) for c in table["channel_offsets_deg"])
-    if "beam_divergence_deg" in table:
-        kwargs["beam_divergence_deg"] = tuple(float(v) for v in table["beam_divergence_deg"])
-    kwargs["name"] = str(table.get("name", "custom"))
+    kwargs = optics_overrides({k: v for k, v in table.items() if k != "prisms"}, where)
+    kwargs["prisms"] = tuple(prisms)
+    kwargs.setdefault("name", "custom")
     try:
         return RisleyOptics(**kwargs)
     except OpticsError as exc:
         raise OpticsError(f"{where}: {exc}") from None
+
+
+def _numbers(value, n: int | None, key: str, where: str) -> tuple[float, ...]:
+    bad = OpticsError(f"{where}: {key} must be a list of {n if n else 'some'} numbers, got {value!r}")
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)) or (n is not None and len(value) != n):
+        raise bad
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        raise bad
+    return tuple(float(v) for v in value)
+
+
+def optics_overrides(table: Mapping[str, Any], where: str) -> dict[str, Any]:
+    """Type-checked optics fields other than prisms (for custom optics and preset overrides)."""
+    kwargs: dict[str, Any] = {}
+    if "point_rate_hz" in table:
+        kwargs["point_rate_hz"] = table["point_rate_hz"]
+    if "channel_offsets_deg" in table:
+        offs = table["channel_offsets_deg"]
+        if isinstance(offs, (str, bytes)) or not isinstance(offs, (list, tuple)) or not offs:
+            raise OpticsError(f"{where}: channel_offsets_deg must be a list of [x_deg, y_deg] pairs, got {offs!r}")
+        kwargs["channel_offsets_deg"] = tuple(_numbers(c, 2, f"channel_offsets_deg[{i}]", where)
+                                              for i, c in enumerate(offs))
+    if "beam_divergence_deg" in table:
+        kwargs["beam_divergence_deg"] = _numbers(table["beam_divergence_deg"], 2, "beam_divergence_deg", where)
+    if "name" in table:
+        kwargs["name"] = str(table["name"])
+    return kwargs
 
 
 @dataclass(frozen=True)

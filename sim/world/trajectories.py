@@ -165,10 +165,14 @@ class Manual:
         object.__setattr__(self, "_spline", CubicSpline(np.arange(n) * dt, pos, axis=0))
 
     def position(self, t_s):
-        return self._spline(_col(t_s)[:, 0])
+        # Hover where the flight ends (never extrapolate the spline past the flown path).
+        return self._spline(np.clip(_col(t_s)[:, 0], 0.0, self.duration_s))
 
     def velocity(self, t_s):
-        return self._spline(_col(t_s)[:, 0], 1)
+        t = _col(t_s)[:, 0]
+        v = self._spline(np.clip(t, 0.0, self.duration_s), 1)
+        v[(t < 0) | (t > self.duration_s)] = 0.0
+        return v
 
 
 def heading_rad(velocity: np.ndarray, default: float = 0.0) -> np.ndarray:

@@ -76,3 +76,39 @@ def test_unreachable_scheduler_is_a_clear_error(capsys):
     assert main(["lidar", "coverage-map", "prototype", "--grid", "2", "--cap", "0.1", "--no-progress",
                  "--scheduler", "tcp://127.0.0.1:9"]) == 2
     assert "Dask scheduler" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [
+    ["lidar", "coverage-map", "prototype", "--rpm1", "1000:70000", "--grid", "2", "--no-progress"],
+    ["lidar", "coverage-map", "prototype", "--rpm1", "nan:5", "--grid", "2", "--no-progress"],
+    ["lidar", "pattern", "mid40", "--duration", "1e-9"],
+    ["lidar", "density", "mid40", "--bins", "0"],
+    ["lidar", "density", "mid40", "--duration", "1e-6"],
+])
+def test_lidar_cli_mistakes_exit_2_with_a_message(capsys, argv):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("foveatrack: error:") and "Traceback" not in err
+
+
+def test_optics_files_with_wrong_types_are_clear_errors(tmp_path, capsys):
+    for text in ("lidar = 5\n", "[lidar]\nprisms = 3\n",
+                 "[lidar]\nchannel_offsets_deg = 5\n[[lidar.prisms]]\nwedge_deg = 18\nindex = 1.5\n"
+                 "[[lidar.prisms]]\nwedge_deg = 18\nindex = 1.5\n"):
+        path = tmp_path / "o.toml"
+        path.write_text(text)
+        assert main(["lidar", "info", str(path)]) == 2
+        err = capsys.readouterr().err
+        assert "o.toml" in err and "Traceback" not in err
+
+
+def test_coverage_map_keeps_cells_whose_speeds_repeat_after_rounding():
+    import numpy as np
+
+    from sim.scan.coverage_map import coverage_map
+    from sim.scan.presets import PRESETS
+    from sim.sweep import make_executor
+
+    with make_executor(workers=1) as ex:
+        m = coverage_map(PRESETS["prototype"], np.linspace(7000, 7001, 3), np.array([-4664.0]), 0.05, ex, progress=False)
+    assert not np.isnan(m.t90_clean_s).any() and not np.isnan(m.t90_noise_s).any()

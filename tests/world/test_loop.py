@@ -132,3 +132,54 @@ def test_a_one_uav_scene_traces_only_the_rays_near_the_uav():
     assert 0 < loop.rays_cast_targets < 0.02 * loop.rays_total
     loop_bg, _ = _run(short("fig12-tracking", 1.0))
     assert loop_bg.rays_cast_background == loop_bg.rays_total
+
+
+@pytest.mark.parametrize("text, words", [
+    ("[[background]]\ntype = \"wall\"\nnormal = [1, 0, 0]\nwidth_m = 3\nheight_m = 2\n", ["centre_m"]),
+    ("[lidar]\npreset = \"mid40\"\nbeam_divergence_deg = 5\n", ["beam_divergence_deg"]),
+    ("[lidar]\npreset = \"mid40\"\nchannel_offsets_deg = [1, 2]\n", ["channel_offsets_deg"]),
+    ("tracker = 5\n", ["[tracker]"]),
+    ("[scene]\neffects = [[\"x\"]]\n", ["unknown effect"]),
+    ("[gimbal]\naddress = 300\n", ["address", "1-255"]),
+    ("[[target]]\n[target.trajectory]\ntype = \"waypoints\"\npoints_m = [[10, 0, 0], [10, 0, 0]]\nspeed_m_s = 2\n",
+     ["points_m[1]"]),
+    ("[[target]]\ngeometry = \"box\"\nsize_m = [1, 0, 1]\n[target.trajectory]\ntype = \"straight\"\n"
+     "start_m = [1, 2, 3]\nvelocity_m_s = [0, 0, 0]\n", ["size_m", "positive"]),
+])
+def test_more_scene_mistakes_are_clear_errors(tmp_path, text, words):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(UserError) as exc:
+        load_scene(path)
+    for w in ["bad.toml"] + words:
+        assert w in str(exc.value), str(exc.value)
+
+
+def test_speed_table_path_is_relative_to_the_scene_and_errors_name_it(tmp_path, capsys, monkeypatch):
+    path = tmp_path / "s.toml"
+    path.write_text('[gimbal]\nspeed_table = "missing.json"\n')
+    assert str(tmp_path / "missing.json") == load_scene(path).gimbal.speed_table
+    monkeypatch.chdir(SCENES)
+    assert main(["simulate", str(path), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "s.toml [gimbal] speed_table" in err and "missing.json" in err
+
+
+def test_run_overrides_rebuild_a_manual_flight(tmp_path, capsys):
+    path = tmp_path / "m.toml"
+    path.write_text("[scene]\nduration_s = 2\nseed = 1\n[[target]]\n[target.trajectory]\ntype = \"manual\"\n"
+                    "centre_m = [20, 0, 2]\nradius_m = 5\nmax_speed_m_s = 5\nmax_accel_m_s2 = 3\n")
+    from sim.scene import with_run_overrides
+
+    base = load_scene(path)
+    longer = with_run_overrides(base, duration_s=20.0)
+    traj = longer.targets[0].trajectory
+    t = np.linspace(0, 20, 2001)
+    assert np.linalg.norm(traj.velocity(t), axis=1).max() <= 5.0 * 1.02  # no extrapolated spline
+    other = with_run_overrides(base, seed=2).targets[0].trajectory
+    assert not np.allclose(other.position(t[:100]), base.targets[0].trajectory.position(t[:100]))
+    for argv in (["--seed", "-1"], ["--duration", "inf"], ["--duration", "0.01"]):
+        assert main(["simulate", str(path), "--no-progress", *argv]) == 2
+        assert "Traceback" not in capsys.readouterr().err
+    (tmp_path / "file").write_text("x")
+    assert main(["simulate", str(path), "--no-progress", "--out", str(tmp_path / "file")]) == 2
