@@ -79,12 +79,7 @@ class SceneSensor:
         self.rays_total += n
         if self._bg.shape[0]:
             self.rays_cast_background += n
-            bg_prim = np.full(n, -1, dtype=np.int64)
-            bg_rng = rng_m.copy()
-            wk.cast_static_kernel(d_world, self._bg, bg_rng, bg_prim)
-            nearer = bg_prim >= 0
-            rng_m[nearer] = bg_rng[nearer]
-            prim[nearer] = bg_prim[nearer] + offset
+            wk.cast_static_kernel(d_world, self._bg, offset, rng_m, prim)
         hit = (prim >= 0) & ok
         idx = np.flatnonzero(hit)
         r = rng_m[idx]
@@ -109,10 +104,14 @@ class SceneSensor:
         xyz = d_pts * r[:, None]
         pt_ns = chunk.t_ns[idx]
         refl_byte = np.clip(np.round(refl * 100), 0, 255).astype(np.uint8)
+        sunlit = False
         if scene.has("sunlight") and n:
             self.draw_calls["sunlight"] += 1
             xyz, pt_ns, refl_byte, keep, on_target = self._sunlight(chunk, ok, xyz, pt_ns, refl_byte, keep, on_target)
+            sunlit = True
         xyz, pt_ns, refl_byte, on_target = xyz[keep], pt_ns[keep], refl_byte[keep], on_target[keep]
+        if not sunlit:  # returns are already in scan order; only appended false alarms need sorting
+            return xyz, pt_ns, refl_byte, on_target
         order = np.argsort(pt_ns, kind="stable")
         return xyz[order], pt_ns[order], refl_byte[order], on_target[order]
 

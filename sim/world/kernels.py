@@ -133,11 +133,11 @@ def _hit_prim(prims, m, ox, oy, oz, dx, dy, dz):
 
 
 @njit(cache=True)
-def cast_static_kernel(d_world, prims, out_range, out_prim):
+def cast_static_kernel(d_world, prims, prim_offset, out_range, out_prim):
     """Nearest hit of rays from the origin against static primitives (the background).
 
     ``out_range``/``out_prim`` are updated only where a primitive is nearer than the value already
-    there (so targets and background can be cast in either order).
+    there (so targets and background can be cast in either order); hits record ``prim_offset + m``.
     """
     for j in range(d_world.shape[0]):
         dx = d_world[j, 0]
@@ -147,7 +147,7 @@ def cast_static_kernel(d_world, prims, out_range, out_prim):
             t = _hit_prim(prims, m, 0.0, 0.0, 0.0, dx, dy, dz)
             if t < out_range[j]:
                 out_range[j] = t
-                out_prim[j] = m
+                out_prim[j] = prim_offset + m
 
 
 @njit(cache=True)

@@ -62,12 +62,21 @@ def test_static_cast_matches_twin_for_every_primitive_kind():
     prims = _scene_prims()
     r = np.full(len(d), np.inf)
     p = np.full(len(d), -1, dtype=np.int64)
-    K.cast_static_kernel(d, prims, r, p)
+    K.cast_static_kernel(d, prims, 0, r, p)
     rt, pt = cast_static_twin(d, prims)
     assert set(np.unique(p)) == {-1, 0, 1, 2, 3, 4}, "every kind is hit by some rays"
     assert np.array_equal(p, pt)
     finite = np.isfinite(r)
     np.testing.assert_allclose(r[finite], rt[finite], rtol=1e-12)
+    # Cast after something nearer: only nearer hits replace it, and ids carry the offset.
+    r2 = np.where(finite, r * 0.5, np.inf)
+    p2 = np.where(finite, 99, -1)
+    K.cast_static_kernel(d, prims, 7, r2, p2)
+    assert np.all(p2[finite] == 99) and np.all(p2[~finite] == -1)
+    r3 = np.full(len(d), np.inf)
+    p3 = np.full(len(d), -1, dtype=np.int64)
+    K.cast_static_kernel(d, prims, 7, r3, p3)
+    assert np.array_equal(p3, np.where(p >= 0, p + 7, -1))
 
 
 def test_hit_points_lie_on_the_surfaces():
@@ -78,7 +87,7 @@ def test_hit_points_lie_on_the_surfaces():
     prims = _scene_prims()
     r = np.full(len(d), np.inf)
     p = np.full(len(d), -1, dtype=np.int64)
-    K.cast_static_kernel(d, prims, r, p)
+    K.cast_static_kernel(d, prims, 0, r, p)
     x = d * np.where(np.isfinite(r), r, 0)[:, None]
     sph = p == 0
     np.testing.assert_allclose(np.linalg.norm(x[sph] - prims[0, 1:4], axis=1), 0.7, atol=1e-12)
@@ -112,7 +121,7 @@ def test_cone_cull_keeps_every_ray_that_can_hit():
     K.cone_candidates_kernel(d, *c, 0.8, mark)
     r = np.full(len(d), np.inf)
     p = np.full(len(d), -1, dtype=np.int64)
-    K.cast_static_kernel(d, np.array([bodies.sphere(c, 0.8)]), r, p)
+    K.cast_static_kernel(d, np.array([bodies.sphere(c, 0.8)]), 0, r, p)
     assert np.all(mark[p >= 0]), "no ray that hits the bounding sphere is culled"
     assert mark.mean() < 0.01
 
