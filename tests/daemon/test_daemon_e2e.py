@@ -69,7 +69,11 @@ def test_three_processes_track_and_replay(tmp_path):
     stats = event(log, "stop")["stats"]
     # tracking: the UAV starts 11 deg left of the axis; the head turns and keeps it near the axis
     dets = _detections(rec)
-    assert stats["frames"] >= 40 and stats["frames_detected"] >= 0.9 * stats["frames"]
+    detected = np.array([d["detected"] for d in dets])
+    # Misses belong to acquisition (the first ~1.2 s: the UAV 11 deg off-axis, where a 100 ms rosette
+    # frame lays few points on it; 4-7 of the first 15 frames across runs); once on axis, every frame.
+    assert stats["frames"] >= 40 and stats["frames_detected"] >= 0.8 * stats["frames"]
+    assert detected[15:].mean() >= 0.95, np.flatnonzero(~detected)
     pan_err = np.array([d["error_pan_deg"] for d in dets if d["detected"]])
     assert pan_err[0] > 8.0
     assert np.all(np.abs(pan_err[-10:]) < 4.5), pan_err[-10:]
