@@ -152,6 +152,11 @@ def _groups(reader):
         yield cur
 
 
+def _sent_stale(channels: dict, tag: str) -> bool:
+    return any(tag in c.get("limited", ()) for c in channels.get("commands", [])
+               if c.get("source", "tracker") == "tracker")
+
+
 def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
                      config_name: str | None = None) -> ReplayResult:
     """Re-run the tracker over a foveatrack recording (simulator or daemon)."""
@@ -167,7 +172,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     tracker = Tracker(cfg, table, t0_s=float(meta.get("tracker_t0_s", 0.0)))
     limits = None
     if source == "daemon" and meta.get("limits"):
-        from foveatrack.daemon.support import Limits
+        from foveatrack.daemon.support import STALE_FRAME, Limits
 
         L = dict(meta["limits"])
         L["tilt_limits_deg"] = tuple(L["tilt_limits_deg"])
@@ -198,6 +203,8 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
         cmd = out.command
         if limits is not None:
             cmd, why = limits.apply(out.command, out.head_tilt_deg, out.head_sigma_tilt_deg)
+            if _sent_stale(ch, STALE_FRAME):       # the daemon found this frame stale (wall clock): it sent STOP
+                cmd, why = STOP, why + [STALE_FRAME]
             if why:
                 tracker.command_sent(send_t, cmd)
         F.add(k, frame, out, cmd)

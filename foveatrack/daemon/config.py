@@ -13,7 +13,7 @@ Tables::
     [tracker]    foveatrack.tracker.TrackerConfig keys (rate_hz is the loop rate)
     [recording]  path ("{time}" becomes the UTC start time), flush_every_frames, compression,
                  points_dtype, queue_frames, overwrite
-    [daemon]     watchdog_s, max_frame_backlog, batch_queue, status_period_s, log
+    [daemon]     watchdog_s, max_frame_backlog, stale_frame_s, batch_queue, status_period_s, log
 """
 
 from __future__ import annotations
@@ -80,6 +80,7 @@ class RecordingConfig:
 class LoopConfig:
     watchdog_s: float = 0.5
     max_frame_backlog: int = 3
+    stale_frame_s: float = 0.2
     batch_queue: int = 2000
     status_period_s: float = 0.5
     log: str | None = None
@@ -240,6 +241,8 @@ def _loop(t: Mapping, w: str) -> LoopConfig:
         kw["watchdog_s"] = as_float(t["watchdog_s"], "watchdog_s", w, lo=0.05, hi=60)
     if "max_frame_backlog" in t:
         kw["max_frame_backlog"] = _int(t["max_frame_backlog"], "max_frame_backlog", w, 1, 100)
+    if "stale_frame_s" in t:
+        kw["stale_frame_s"] = as_float(t["stale_frame_s"], "stale_frame_s", w, lo=0.01, hi=10)
     if "batch_queue" in t:
         kw["batch_queue"] = _int(t["batch_queue"], "batch_queue", w, 10, 1_000_000)
     if "status_period_s" in t:

@@ -35,6 +35,7 @@ head, close the recording and return 0.  The serial link reconnects by itself
 
 from __future__ import annotations
 
+import math
 import queue
 import signal
 import threading
@@ -46,7 +47,7 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.daemon.config import DaemonConfig
-from foveatrack.daemon.support import (JsonLog, Limits, RecordingThread, StatusLine, format_status,
+from foveatrack.daemon.support import (STALE_FRAME, JsonLog, Limits, RecordingThread, StatusLine, format_status,
                                        strip_no_return)
 from foveatrack.frames import Frame, FrameSlicer
 from foveatrack.track_log import ns, write_tracker_frame
@@ -150,12 +151,13 @@ class Daemon:
         self.table = config.speed_table()
         self.tracker = Tracker(config.tracker, self.table)
         self.slicer = FrameSlicer(config.tracker.rate_hz)
-        self.counters: Counter = Counter()
+        self.counters: Counter = Counter(frames_stale=0)
         self.proc_ms: list[float] = []
         self.lat_ms: list[float] = []
         self.frame_id = 0
         self.last_out = None
         self._proc_ewma_s = 0.002
+        self._last_send_t = -math.inf
         self.recorder: RecordingThread | None = None
         self.recording_path = None
 
@@ -206,6 +208,17 @@ class Daemon:
             return None
         return (time.monotonic() if mono is None else mono) - off
 
+    def _send_time(self, t_s: float) -> float:
+        """``t_s`` [sensor s], never before the previous command's send time.
+
+        The dead reckoning needs commands in time order, but estimates can step back: a frame's send
+        time adds the processing-time EWMA, which shrinks after a slow frame, and a watchdog or
+        shutdown STOP right after a frame uses the bare clock.
+        """
+        t_s = max(t_s, self._last_send_t)
+        self._last_send_t = t_s
+        return t_s
+
     def _send(self, cmd: HeadCommand, source: str, send_t_s: float, fid=None, tracker_cmd=None, why=()):
         from gimbal.pelco import encode_pan_tilt
 
@@ -231,11 +244,18 @@ class Daemon:
     def _process(self, frame: Frame, t_arrival: float) -> None:
         frame = strip_no_return(frame)
         now_s = self.sensor_now_s()
-        send_t = (frame.t_end_s if now_s is None else max(now_s, frame.t_end_s)) + self._proc_ewma_s
+        send_t = self._send_time((frame.t_end_s if now_s is None else max(now_s, frame.t_end_s))
+                                 + self._proc_ewma_s)
         out = self.tracker.process(frame, send_t_s=send_t)
         fid = self.frame_id
         self.frame_id += 1
         cmd, why = self.limits.apply(out.command, out.head_tilt_deg, out.head_sigma_tilt_deg)
+        # A frame this old steers nothing: its bearing is stale, and while the loop is catching up
+        # (a stall, a start-up burst) the clock offset may still be settling, which would misplace
+        # the command in the dead reckoning.  STOP is sent and recorded instead (replay repeats it).
+        if now_s is not None and now_s - frame.t_end_s > self.cfg.loop.stale_frame_s:
+            cmd, why = STOP, why + [STALE_FRAME]
+            self.counters["frames_stale"] += 1
         if why:
             self.counters["commands_limited"] += 1
             self.tracker.command_sent(send_t, cmd)
@@ -325,6 +345,7 @@ class Daemon:
                     last_watchdog_stop = now
                     t_s = self.sensor_now_s(now)
                     if t_s is not None and watchdog_tripped:
+                        t_s = self._send_time(t_s)
                         rec, _ = self._send(STOP, "watchdog", t_s)
                         self.tracker.command_sent(t_s, STOP)
                         self._record(_job_command, rec)
@@ -392,6 +413,7 @@ class Daemon:
         self.stop_ev.set()
         t_s = self.sensor_now_s()
         if t_s is not None:
+            t_s = self._send_time(t_s)
             rec, _ = self._send(STOP, "shutdown", t_s)
             self.tracker.command_sent(t_s, STOP)
             self._record(_job_command, rec)

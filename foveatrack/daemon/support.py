@@ -33,6 +33,11 @@ def strip_no_return(frame):
 
 
 # ----------------------------------------------------------------------------------------- safety
+# Recorded in a command's ``limited`` list when the daemon sent STOP because the frame was older
+# than ``stale_frame_s`` when processed (wall-clock, so replay reads it from the recording).
+STALE_FRAME = "stale_frame"
+
+
 @dataclass(frozen=True)
 class Limits:
     """Hard limits applied to every command after the tracker, before it is encoded.
