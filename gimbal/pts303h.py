@@ -285,15 +285,30 @@ class _Axis:
 
     def eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         t0, p0, v0, a, r = self.arrays()
-        idx = np.searchsorted(t0, t, side="right") - 1
-        if np.any(idx < 0):
-            raise ValueError(
-                f"{self.name}: times before the kept history (starts {t0[0]}) were asked for"
-            )
+        idx = self._segment_of(t0, t)
         args = (t0[idx], v0[idx], a[idx], r[idx])
         p = _pos(t0[idx], p0[idx], v0[idx], a[idx], r[idx], self.omega, self.phi, t)
         v = _speed(*args, self.omega, self.phi, t)
         return p, v
+
+    def eval_position(self, t: np.ndarray) -> np.ndarray:
+        """:meth:`eval`'s position alone; without ripple on the segments the ripple terms (two
+        trigonometric arrays) are skipped: they are multiplied by zero there (the closed loop asks
+        this for every frame)."""
+        t0, p0, v0, a, r = self.arrays()
+        idx = self._segment_of(t0, t)
+        if r[idx[0]:idx[-1] + 1].any():
+            return _pos(t0[idx], p0[idx], v0[idx], a[idx], r[idx], self.omega, self.phi, t)
+        d = t - t0[idx]
+        return p0[idx] + v0[idx] * d + 0.5 * a[idx] * d * d   # _pos's order: the same bits
+
+    def _segment_of(self, t0: np.ndarray, t: np.ndarray) -> np.ndarray:
+        idx = np.searchsorted(t0, t, side="right") - 1
+        if idx.size and idx.min() < 0:
+            raise ValueError(
+                f"{self.name}: times before the kept history (starts {t0[0]}) were asked for"
+            )
+        return idx
 
     def prune(self, t_keep: float) -> None:
         while len(self.segs) > 1 and self.segs[1].t0 <= t_keep and self.segs[0].t1 < t_keep:
@@ -517,19 +532,22 @@ class PTS303H:
         self._pan.prune(keep)
         self._tilt.prune(keep)
 
-    def angles_at(self, t_s) -> tuple[np.ndarray, np.ndarray]:
+    def angles_at(self, t_s, wrap_pan: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """True (pan_deg, tilt_deg) at each time in ``t_s`` (vectorised; any shape).
 
         Times may go back ``params.history_s`` before the latest time the model was advanced to
-        or asked about; asking advances the model to ``max(t_s)`` (after answering).  Pan is wrapped to (-180, 180].
+        or asked about; asking advances the model to ``max(t_s)`` (after answering).  Pan is wrapped
+        to (-180, 180], or with ``wrap_pan=False`` continuous (no jump at +-180: what an
+        interpolation between times needs).
         """
         t = np.asarray(t_s, dtype=float)
         flat = t.reshape(-1)
-        pan, _ = self._pan.eval(flat)
-        tilt, _ = self._tilt.eval(flat)
-        if t.size:
-            self.advance_to(float(t.max()))
-        return wrap_pan_deg(pan).reshape(t.shape), tilt.reshape(t.shape)
+        if not flat.size:
+            return flat.reshape(t.shape), flat.reshape(t.shape)
+        pan = self._pan.eval_position(flat)
+        tilt = self._tilt.eval_position(flat)
+        self.advance_to(float(flat.max()))
+        return (wrap_pan_deg(pan) if wrap_pan else pan).reshape(t.shape), tilt.reshape(t.shape)
 
     def rates_at(self, t_s) -> tuple[np.ndarray, np.ndarray]:
         """True (pan_speed_deg_s, tilt_speed_deg_s) at each time (vectorised, ripple included)."""

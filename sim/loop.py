@@ -30,7 +30,7 @@ from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable
 from foveatrack.tracker import Tracker
-from gimbal.pelco import encode_pan_tilt
+from gimbal.pelco import encode_pan_tilt, wrap_pan_deg
 from gimbal.pts303h import PTS303H, HeadParams
 from sim import effects as fx
 from sim.scene import Scene
@@ -195,17 +195,21 @@ class ClosedLoop:
         d_lidar = chunk.direction
         # 3. beams in the world at each point's own head pose.
         d_world = np.empty_like(d_lidar)
+        t_mid = 0.5 * (t0 + t1)
         if self.head_grid_s > 0:
             # Nodes from t0 to exactly t1 (the step shrinks to divide the frame): the head is never
-            # asked about a time past t1, which a command sent at t1 could still affect.
+            # asked about a time past t1, which a command sent at t1 could still affect.  The frame's
+            # mid-time rides along (the log's truth).  Pan unwrapped: continuous between nodes.
             n_steps = max(1, math.ceil((t1 - t0) / self.head_grid_s - 1e-9))
             step = (t1 - t0) / n_steps
-            pan, tilt = self.head.angles_at(t0 + step * np.arange(n_steps + 1))
-            wk.rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0, step, np.unwrap(np.radians(pan)),
-                                           np.radians(tilt), d_world)
+            times = np.append(t0 + step * np.arange(n_steps + 1), t_mid)
+            pan, tilt = self.head.angles_at(times, wrap_pan=False)
+            rad = np.radians(np.stack([pan[:-1], tilt[:-1]]))
+            wk.rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0, step, rad[0], rad[1], d_world)
         else:
-            pan, tilt = self.head.angles_at(t_s)
-            wk.rotate_pan_tilt_kernel(d_lidar, np.radians(pan), np.radians(tilt), d_world)
+            pan, tilt = self.head.angles_at(np.append(t_s, t_mid), wrap_pan=False)
+            wk.rotate_pan_tilt_kernel(d_lidar, np.radians(pan[:-1]), np.radians(tilt[:-1]), d_world)
+        self._mid_pose_deg = (float(wrap_pan_deg(pan[-1])), float(tilt[-1]))
         # 4-5. ray casting and the effects the scene lists.
         xyz, pt_ns, refl_byte, on_target = self.sensor.returns(chunk, d_world, t0, t1)
         frame = Frame(t0, t1, xyz, pt_ns, refl_byte)
@@ -240,14 +244,14 @@ class ClosedLoop:
     def _log(self, t0, t1, frame, n_on_target, out):
         L = self.log
         t_mid = 0.5 * (t0 + t1)
-        pan, tilt = self.head.angles_at(np.array([t_mid]))
+        pan, tilt = self._mid_pose_deg   # the true pose at t_mid, from step 3
         L.t_end_s.append(t1)
         L.points.append(frame.n_points)
         L.points_on_target.append(n_on_target)
         L.detected.append(out.detection is not None)
         L.state.append(out.state.value if hasattr(out.state, "value") else str(out.state))
-        L.head_pan_deg.append(float(pan[0]))
-        L.head_tilt_deg.append(float(tilt[0]))
+        L.head_pan_deg.append(pan)
+        L.head_tilt_deg.append(tilt)
         # The tracker's dead reckoning at the same instant as the truth above (frame mid).
         if self.controller is None:
             est_pan, est_tilt = self.tracker.recon.angles_at(t_mid)[:2]
@@ -260,7 +264,7 @@ class ClosedLoop:
         if self.scene.targets:
             traj = self.scene.targets[0].trajectory
             p = traj.position(np.array([t_mid]))[0]
-            R = rotation_matrix(float(pan[0]), float(tilt[0]))
+            R = rotation_matrix(pan, tilt)
             q = R.T @ p
             L.true_error_deg.append(math.degrees(math.atan2(math.hypot(q[1], q[2]), q[0])))
             L.true_az_deg.append(math.degrees(math.atan2(q[1], q[0])))

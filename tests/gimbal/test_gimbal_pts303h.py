@@ -112,6 +112,24 @@ def test_vectorised_angles_match_state_at_and_accept_any_shape():
         assert tilt[i, j] == pytest.approx(s.tilt_deg, abs=1e-12)
 
 
+@pytest.mark.parametrize("ripple", [0.0, PARAMS.ripple_rel])
+def test_position_only_path_equals_the_full_evaluation_and_unwrapped_pan_is_continuous(ripple):
+    # angles_at takes the position-only path (no speed, no ripple terms when there is no ripple);
+    # it must give the very bits of the full evaluation, and wrap_pan=False must not jump at 180.
+    h = PTS303H(replace(PARAMS, ripple_rel=ripple, history_s=100.0), unit_seed=3, pan0_deg=170.0)
+    h.receive(P.encode_pan_tilt(1, 1, 0x3F, 1, 0x20), 0.5)
+    h.receive(P.encode_pan_tilt(1, 0, 0, -1, 0x10), 2.5)
+    t = np.linspace(0.0, 4.0, 401)
+    full_pan, _ = h._pan.eval(t)
+    full_tilt, _ = h._tilt.eval(t)
+    pan_c, tilt = h.angles_at(t, wrap_pan=False)
+    assert np.array_equal(pan_c, full_pan) and np.array_equal(tilt, full_tilt)
+    pan_w, _ = h.angles_at(t)
+    assert pan_c.max() > 180.0 and pan_w.max() <= 180.0          # it crossed the wrap ...
+    assert np.max(np.abs(np.diff(pan_c))) < 1.0                    # ... continuously when unwrapped
+    assert np.allclose(P.wrap_pan_deg(pan_w - pan_c), 0.0, atol=1e-9)
+
+
 # dynamics from the parameters ---------------------------------------------------------------
 def test_dead_time_then_acceleration_limit_then_commanded_speed():
     p = replace(PARAMS, ripple_rel=0.0)
