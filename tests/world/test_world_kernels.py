@@ -95,6 +95,19 @@ def test_hit_points_lie_on_the_surfaces():
     np.testing.assert_allclose(x[pl, 2], -3.0, atol=1e-12)
 
 
+def test_rays_parallel_to_a_plane_or_away_from_it_miss_it():
+    # The plane loop divides before it tests the denominator: den = 0 must give a miss, not an error.
+    prims = np.array([bodies.ground(1.5)])
+    d = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.0, -0.8], [0.0, 0.0, -1.0]])
+    r = np.full(len(d), np.inf)
+    p = np.full(len(d), -1, dtype=np.int64)
+    K.cast_static_kernel(d, prims, 4, r, p)
+    assert list(p) == [-1, -1, -1, 4, 4]
+    np.testing.assert_allclose(r[3:], [1.5 / 0.8, 1.5], rtol=1e-15)
+    rt, pt = cast_static_twin(d, prims)
+    np.testing.assert_array_equal(np.where(pt >= 0, pt + 4, -1), p)
+
+
 def test_moving_body_cast_matches_twin():
     rng = np.random.default_rng(4)
     quad = bodies.quadrotor()
