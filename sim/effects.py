@@ -27,24 +27,40 @@ def effect_rng(seed: int, name: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([seed, zlib.crc32(name.encode())]))
 
 
-def range_noise(rng, rng_m: np.ndarray, sigma_m: float) -> np.ndarray:
-    return rng_m + rng.normal(0.0, sigma_m, rng_m.shape)
+# The draws of the per-hit effects, one call per frame and effect (``n_hits`` = rays that hit
+# something).  :func:`sim.sensor_kernels.assemble_returns_kernel` applies them.
+
+def return_draws(rng, n_hits: int) -> np.ndarray:
+    """Uniforms for the return probability: hit ``h`` returns if ``u[h] < detection_probability``."""
+    return rng.random(n_hits)
 
 
-def angular_noise(rng, d: np.ndarray, sigma_deg: float) -> np.ndarray:
-    """Perturb unit directions by a small isotropic angle (sigma per axis), renormalised."""
-    out = d + rng.normal(0.0, math.radians(sigma_deg), d.shape)
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
+def dropout_draws(rng, n_hits: int) -> np.ndarray:
+    """Uniforms for point dropouts: hit ``h`` is dropped if ``u[h] < dropout_rate``."""
+    return rng.random(n_hits)
+
+
+def range_noise_draws(rng, n_hits: int, sigma_m: float) -> np.ndarray:
+    """Range errors [m], gaussian."""
+    return rng.normal(0.0, sigma_m, n_hits)
+
+
+def angular_noise_draws(rng, n_hits: int, sigma_deg: float) -> np.ndarray:
+    """Direction errors (n_hits, 3) [rad], gaussian per axis: a small isotropic angle once the
+    direction is renormalised."""
+    return rng.normal(0.0, math.radians(sigma_deg), (n_hits, 3))
+
+
+def range_limit_m(reflectivity: np.ndarray, range_80pct_m: float) -> np.ndarray:
+    """Range [m] of 50 % detection probability: ``range_80pct_m * sqrt(reflectivity / 0.8)``."""
+    return range_80pct_m * np.sqrt(np.clip(reflectivity, 1e-6, 1.0) / 0.8)
 
 
 def detection_probability(range_m: np.ndarray, reflectivity: np.ndarray, range_80pct_m: float) -> np.ndarray:
-    r_max = range_80pct_m * np.sqrt(np.clip(reflectivity, 1e-6, 1.0) / 0.8)
+    """Probability of a return (the kernel computes the same per hit; this is for plots and twins)."""
+    r_max = range_limit_m(reflectivity, range_80pct_m)
     z = (range_m - r_max) / (0.03 * r_max)
     return 1.0 / (1.0 + np.exp(np.clip(z, -50, 50)))
-
-
-def keep_with_probability(rng, p: np.ndarray) -> np.ndarray:
-    return rng.random(p.shape) < p
 
 
 def footprint_offsets(divergence_deg: tuple[float, float], subrays: int) -> np.ndarray:

@@ -13,12 +13,15 @@ import math
 import numpy as np
 
 from sim import effects as fx
+from sim import sensor_kernels as sk
 from sim.scan.kernels import RAY_OK
 from sim.scan.model import ScanModel
 from sim.scan.optics import SpeedNoise
 from sim.world import kernels as wk
 from sim.world.trajectories import heading_rad
 
+_NONE = np.zeros(0)          # an effect that is off: no draws
+_NONE_3 = np.zeros((0, 3))
 EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")
 
 
@@ -51,7 +54,12 @@ class SceneSensor:
         if self._bg.shape[0]:
             refl.append(scene.background_reflectivity)
         self._refl_table = np.concatenate(refl) if refl else np.zeros(0)
+        self._refl_byte_table = np.clip(np.round(self._refl_table * 100), 0, 255).astype(np.uint8)
+        self._range_limit_m = (fx.range_limit_m(self._refl_table, scene.param("range_80pct_m"))
+                               if scene.has("return_probability") else np.zeros(self._refl_table.size))
         self._target_prim_end = sum(spec.body.prims.shape[0] for spec in scene.targets)
+        # Per target, what sizes its per-frame cull (computed once: both walk Python objects).
+        self._cull = [(spec.body.bounding_radius_m, spec.trajectory.max_speed_m_s) for spec in scene.targets]
         # Work counters (timing-free evidence that a scene costs only what it holds).
         self.rays_total = 0
         self.rays_cast_targets = 0
@@ -68,58 +76,64 @@ class SceneSensor:
         n = len(chunk)
         t_s = chunk.t_ns * 1e-9
         ok = chunk.status == RAY_OK
-        d_lidar = chunk.direction
         # 4. ray casting: targets (culled) then background.
         rng_m = np.full(n, np.inf)
         prim = np.full(n, -1, dtype=np.int64)
         offset = 0
-        for spec in scene.targets:
-            self._cast_target(spec, t0, t1, t_s, d_world, ok, rng_m, prim, offset)
+        for spec, cull in zip(scene.targets, self._cull):
+            self._cast_target(spec, cull, t0, t1, t_s, d_world, ok, rng_m, prim, offset)
             offset += spec.body.prims.shape[0]
         self.rays_total += n
         if self._bg.shape[0]:
             self.rays_cast_background += n
             wk.cast_static_kernel(d_world, self._bg, offset, rng_m, prim)
-        hit = (prim >= 0) & ok
-        idx = np.flatnonzero(hit)
-        r = rng_m[idx]
-        refl = self._refl_table[prim[idx]] if idx.size else np.zeros(0)
-        d_pts = d_lidar[idx]
-        on_target = prim[idx] < self._target_prim_end
-        # 5. effects, each only if listed.
-        keep = np.ones(idx.size, dtype=bool)
+        # 5. effects, each only if listed (draws in a fixed order, one call per effect and frame),
+        # applied to the hits and gathered in scan order in one pass.
+        n_hit = sk.count_hits_kernel(prim, chunk.status)
+        draws = {}
         if scene.has("return_probability"):
-            self.draw_calls["return_probability"] += 1
-            keep &= fx.keep_with_probability(self.rngs["return_probability"],
-                                             fx.detection_probability(r, refl, scene.param("range_80pct_m")))
+            draws["return_probability"] = fx.return_draws(self._stream("return_probability"), n_hit)
         if scene.has("dropouts"):
-            self.draw_calls["dropouts"] += 1
-            keep &= self.rngs["dropouts"].random(idx.size) >= scene.param("dropout_rate")
+            draws["dropouts"] = fx.dropout_draws(self._stream("dropouts"), n_hit)
         if scene.has("range_noise"):
-            self.draw_calls["range_noise"] += 1
-            r = fx.range_noise(self.rngs["range_noise"], r, scene.param("range_noise_m"))
-        if scene.has("angular_noise") and idx.size:
-            self.draw_calls["angular_noise"] += 1
-            d_pts = fx.angular_noise(self.rngs["angular_noise"], d_pts, scene.param("angular_noise_deg"))
-        xyz = d_pts * r[:, None]
-        pt_ns = chunk.t_ns[idx]
-        refl_byte = np.clip(np.round(refl * 100), 0, 255).astype(np.uint8)
-        sunlit = False
-        if scene.has("sunlight") and n:
-            self.draw_calls["sunlight"] += 1
-            xyz, pt_ns, refl_byte, keep, on_target = self._sunlight(chunk, ok, xyz, pt_ns, refl_byte, keep, on_target)
-            sunlit = True
-        xyz, pt_ns, refl_byte, on_target = xyz[keep], pt_ns[keep], refl_byte[keep], on_target[keep]
-        if not sunlit:  # returns are already in scan order; only appended false alarms need sorting
+            draws["range_noise"] = fx.range_noise_draws(self._stream("range_noise"), n_hit,
+                                                        scene.param("range_noise_m"))
+        if scene.has("angular_noise") and n_hit:
+            draws["angular_noise"] = fx.angular_noise_draws(self._stream("angular_noise"), n_hit,
+                                                            scene.param("angular_noise_deg"))
+        xyz = np.empty((n_hit, 3))
+        pt_ns = np.empty(n_hit, dtype=np.int64)
+        refl_byte = np.empty(n_hit, dtype=np.uint8)
+        on_target = np.empty(n_hit, dtype=np.bool_)
+        k = sk.assemble_returns_kernel(
+            prim, chunk.status, rng_m, chunk.direction, chunk.t_ns, self._range_limit_m, self._refl_byte_table,
+            self._target_prim_end, draws.get("return_probability", _NONE),
+            draws.get("dropouts", _NONE), self._param_if("dropouts", "dropout_rate"),
+            draws.get("range_noise", _NONE), draws.get("angular_noise", _NONE_3),
+            xyz, pt_ns, refl_byte, on_target)
+        xyz, pt_ns, refl_byte, on_target = xyz[:k], pt_ns[:k], refl_byte[:k], on_target[:k]
+        if not (scene.has("sunlight") and n):
             return xyz, pt_ns, refl_byte, on_target
+        # Sunlight false alarms are appended, then the frame is put back in time order (stable:
+        # a false alarm after a real return of the same instant).
+        xyz, pt_ns, refl_byte, on_target = self._sunlight(chunk, ok, xyz, pt_ns, refl_byte, on_target)
         order = np.argsort(pt_ns, kind="stable")
         return xyz[order], pt_ns[order], refl_byte[order], on_target[order]
 
-    def _cast_target(self, spec, t0, t1, t_s, d_world, ok, rng_m, prim, offset):
+    def _param_if(self, effect: str, key: str) -> float:
+        return float(self.scene.param(key)) if self.scene.has(effect) else 0.0
+
+    def _stream(self, effect: str) -> np.random.Generator:
+        """The effect's random stream, counting the call (tests check unlisted effects draw nothing)."""
+        self.draw_calls[effect] += 1
+        return self.rngs[effect]
+
+    def _cast_target(self, spec, cull, t0, t1, t_s, d_world, ok, rng_m, prim, offset):
         traj = spec.trajectory
         t_mid = 0.5 * (t0 + t1)
         c = traj.position(np.array([t_mid]))[0]
-        reach = spec.body.bounding_radius_m + traj.max_speed_m_s * 0.5 * (t1 - t0) * 1.01 + 1e-3
+        radius_m, v_max = cull
+        reach = radius_m + v_max * 0.5 * (t1 - t0) * 1.01 + 1e-3
         # Beam divergence can catch a body just outside the central ray's path.
         if self.scene.has("beam_footprint"):
             reach += np.linalg.norm(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
@@ -164,16 +178,15 @@ class SceneSensor:
         rng_m[idx[take]] = best[take]
         prim[idx[take]] = best_prim[take]
 
-    def _sunlight(self, chunk, ok, xyz, pt_ns, refl_byte, keep, on_target):
-        rng = self.rngs["sunlight"]
+    def _sunlight(self, chunk, ok, xyz, pt_ns, refl_byte, on_target):
+        rng = self._stream("sunlight")
         n_false = rng.binomial(int(ok.sum()), self.scene.param("sunlight_rate"))
         if n_false == 0:
-            return xyz, pt_ns, refl_byte, keep, on_target
+            return xyz, pt_ns, refl_byte, on_target
         pick = rng.choice(np.flatnonzero(ok), n_false, replace=False)
         r = rng.uniform(0.5, self.scene.param("sunlight_max_range_m"), n_false)
         xyz = np.vstack([xyz, chunk.direction[pick] * r[:, None]])
         pt_ns = np.concatenate([pt_ns, chunk.t_ns[pick]])
         refl_byte = np.concatenate([refl_byte, np.full(n_false, 1, dtype=np.uint8)])
-        keep = np.concatenate([keep, np.ones(n_false, dtype=bool)])
         on_target = np.concatenate([on_target, np.zeros(n_false, dtype=bool)])
-        return xyz, pt_ns, refl_byte, keep, on_target
+        return xyz, pt_ns, refl_byte, on_target

@@ -45,7 +45,7 @@ def test_unlisted_effects_draw_nothing_and_cost_nothing(monkeypatch):
     assert all(v == 0 for v in loop_a.draw_calls.values())
     assert loop_a.scan.noise_draws == 0 and loop_a.uart.rng is None
     # With the effects' code paths removed altogether, the run is identical.
-    for name in ("range_noise", "angular_noise", "keep_with_probability", "footprint_offsets", "detection_probability"):
+    for name in ("return_draws", "dropout_draws", "range_noise_draws", "angular_noise_draws", "footprint_offsets"):
         monkeypatch.setattr(fx, name, lambda *a, **k: pytest.fail("an unlisted effect was called"))
     loop_b, log_b = _run(scene)
     for k in log_a:
