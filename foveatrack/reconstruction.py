@@ -69,6 +69,7 @@ class _Knot:
     direction: int
     S: np.ndarray       # signed time per byte index up to t [s]
     var_timing: float   # accumulated sum (dv sigma_t)^2 [deg^2]
+    var_bytes: float = 0.0  # sum over bytes (sigma_b S_b)^2 at t [deg^2] (set by the integrator)
 
 
 class _AxisIntegrator:
@@ -121,11 +122,12 @@ class _AxisIntegrator:
             k = self.knots[0]
             t = k.t
         ang, v = self._advance(k, t)
-        S = k.S.copy()
-        if k.idx >= 0:
-            S[k.idx] += k.direction * (t - k.t)
-        var = (self.sigma0 ** 2 + float(np.sum((self.sig_b * S) ** 2)) + k.var_timing
-               + self.q * max(t - self.t0, 0.0))
+        var_b = k.var_bytes
+        if k.idx >= 0:   # only the running byte's time has grown since the knot
+            sb = self.sig_b[k.idx]
+            s0 = k.S[k.idx]
+            var_b += (sb * (s0 + k.direction * (t - k.t))) ** 2 - (sb * s0) ** 2
+        var = max(self.sigma0 ** 2 + var_b + k.var_timing + self.q * max(t - self.t0, 0.0), 0.0)
         if self.wrap:
             ang = wrap_deg(ang)
         return ang, v, math.sqrt(var)
@@ -148,7 +150,8 @@ class _AxisIntegrator:
         var_t = last.var_timing + (dv * self.timing_sigma_s) ** 2
         if self.wrap:
             ang = wrap_deg(ang)
-        self.knots.append(_Knot(t_eff, ang, v, v_tgt, idx, direction, S, var_t))
+        self.knots.append(_Knot(t_eff, ang, v, v_tgt, idx, direction, S, var_t,
+                                float(np.sum((self.sig_b * S) ** 2))))
         self.times.append(t_eff)
         # bound memory: keep knots within history_s of the newest (always >= 2)
         cut = bisect.bisect_left(self.times, t_eff - self.history_s) - 1
@@ -193,6 +196,7 @@ class Reconstructor:
                                     tuple(tilt_limits_deg), False, timing_sigma_s, random_walk_deg2_s, history_s)
         self.last_command: HeadCommand | None = None
         self.last_send_t_s: float | None = None
+        self._memo = None
 
     @property
     def effect_delay_s(self) -> float:
@@ -201,6 +205,7 @@ class Reconstructor:
     def on_command(self, t_s: float, cmd: HeadCommand) -> None:
         """Record that ``cmd`` was written to the head at ``t_s`` (commands in time order)."""
         t_eff = t_s + self.effect_delay_s
+        self._memo = None
         self.pan.command(t_eff, cmd.pan_dir, cmd.pan_byte)
         self.tilt.command(t_eff, cmd.tilt_dir, cmd.tilt_byte)
         self.last_command = cmd
@@ -208,8 +213,13 @@ class Reconstructor:
 
     def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
         """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180]."""
+        # A frame asks about the same instant several times (D's frame, the controller, the world
+        # position); the answer only changes with a new command.
+        if self._memo is not None and self._memo[0] == t_s:
+            return self._memo[1]
         p, _, sp = self.pan.state(t_s)
         t, _, st = self.tilt.state(t_s)
+        self._memo = (t_s, (p, t, sp, st))
         return p, t, sp, st
 
     def speeds_at(self, t_s: float) -> tuple[float, float]:
