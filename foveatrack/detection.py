@@ -97,13 +97,30 @@ def detect_points(xyz: np.ndarray, t_ns: np.ndarray, space=None, *, test_xyz: np
         pts = xyz if test_xyz is None else np.asarray(test_xyz, dtype=np.float64).reshape(-1, 3)
         with np.errstate(invalid="ignore", over="ignore"):
             keep &= np.asarray(space.contains(pts), dtype=bool)
-    n = int(keep.sum())
+    if not keep.any():
+        return None
+    return _median_detection(xyz[keep], t_ns[keep])
+
+
+def detect_in_box(xyz: np.ndarray, t_ns: np.ndarray, box, rot: np.ndarray, offset: np.ndarray) -> Detection | None:
+    """Algorithm 1 with a box D, in one pass (:func:`foveatrack.kernels.box_members_kernel`): the
+    same detection as :func:`detect_points` with ``test_xyz = (xyz + offset) @ rot.T``."""
+    from foveatrack.kernels import box_members_kernel
+
+    xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
+    idx = np.empty(xyz.shape[0], dtype=np.int64)
+    n = box_members_kernel(xyz, np.ascontiguousarray(rot, dtype=np.float64), np.asarray(offset, dtype=np.float64),
+                           np.asarray(box.min_xyz, dtype=np.float64), np.asarray(box.max_xyz, dtype=np.float64), idx)
     if n == 0:
         return None
-    p = np.median(xyz[keep], axis=0)
-    t_s = float(np.median(t_ns[keep].astype(np.float64))) * 1e-9
+    return _median_detection(xyz[idx[:n]], np.asarray(t_ns, dtype=np.int64)[idx[:n]])
+
+
+def _median_detection(pts: np.ndarray, t_ns: np.ndarray) -> Detection:
+    p = np.median(pts, axis=0)
+    t_s = float(np.median(t_ns.astype(np.float64))) * 1e-9
     az, el = bearing_deg(*p)
-    return Detection(t_s=t_s, xyz=p, n_points=n, az_deg=az, el_deg=el, range_m=float(np.linalg.norm(p)))
+    return Detection(t_s=t_s, xyz=p, n_points=int(pts.shape[0]), az_deg=az, el_deg=el, range_m=float(np.linalg.norm(p)))
 
 
 def detect(frame: Frame, space=None, *, test_xyz: np.ndarray | None = None) -> Detection | None:

@@ -38,13 +38,17 @@ import numpy as np
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
 from foveatrack.control import (STOP, HeadCommand, deadband_p, head_errors_deg, lidar_errors_deg,
                                 limit_for_stops, speed_to_axis)
-from foveatrack.detection import Detection, detect, wrap_deg
+from foveatrack.detection import Detection, detect, detect_in_box, wrap_deg
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.predictive import BearingFilter
 from foveatrack.reconstruction import Reconstructor
-from foveatrack.space_of_interest import SpaceOfInterest, space_from_mapping
+from foveatrack.space_of_interest import Box, SpaceOfInterest, space_from_mapping
 from foveatrack.speed_table import SpeedTable
+
+
+_IDENTITY = np.eye(3)
+_ZERO3 = np.zeros(3)
 
 
 class TrackState(enum.Enum):
@@ -289,9 +293,17 @@ class Tracker:
     def _detect(self, frame: Frame) -> Detection | None:
         space = self.config.space
         test_xyz = None
-        if space is not None and getattr(space, "frame", "lidar") == "world" and frame.n_points:
-            test_xyz = self.recon.lidar_to_world(frame.xyz, frame.t_mid_s)
-        det = detect(frame, space, test_xyz=test_xyz)
+        in_world = space is not None and getattr(space, "frame", "lidar") == "world"
+        if isinstance(space, Box):   # the common D, in one pass
+            if in_world:
+                rot, offset = self.recon.rotation_at(frame.t_mid_s), self.recon.lidar_offset_m
+            else:
+                rot, offset = _IDENTITY, _ZERO3
+            det = detect_in_box(frame.xyz, frame.t_ns, space, rot, offset)
+        else:
+            if in_world and frame.n_points:
+                test_xyz = self.recon.lidar_to_world(frame.xyz, frame.t_mid_s)
+            det = detect(frame, space, test_xyz=test_xyz)
         if det is not None and det.n_points < self.config.min_points:
             return None
         return det
