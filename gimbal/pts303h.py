@@ -278,9 +278,9 @@ class _Axis:
         return p, s.v0 + s.a * (t - s.t0), s
 
     def arrays(self):
-        if self._arrays is None:
-            f = lambda k: np.array([getattr(s, k) for s in self.segs], dtype=float)  # noqa: E731
-            self._arrays = tuple(f(k) for k in ("t0", "p0", "v0", "a", "r"))
+        if self._arrays is None:   # rebuilt after every command: one pass over the segments
+            table = np.array([(s.t0, s.p0, s.v0, s.a, s.r) for s in self.segs], dtype=float)
+            self._arrays = tuple(table.T.copy())
         return self._arrays
 
     def eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -83,3 +83,14 @@ def test_background_map_extension():
     assert not mask[:10].any() and mask[10]
     d = detect_points(pts, t(11), bg)
     assert d.n_points == 1 and np.allclose(d.xyz, [5, 0, 1.5])
+
+
+def test_median_of_rows_equals_numpys_median():
+    from foveatrack.detection import _median_rows
+
+    rng = np.random.default_rng(0)
+    for n in range(1, 120):
+        a = rng.normal(size=(n, 3)) * 10 ** rng.uniform(-3, 3)
+        assert np.array_equal(_median_rows(a), np.median(a, axis=0)), n
+        t = rng.integers(0, 10**17, n).astype(np.float64)   # timestamps [ns] as floats
+        assert _median_rows(t) == np.median(t), n
