@@ -1,58 +1,108 @@
 """Real-time factor of the closed loop (issue 4 target: >= 200x for fig12-tracking on one core).
 
-Runs a scene twice (the first run also warms numba's cache) and prints the wall time, the real-time
-factor and where the time goes (cProfile, top functions).  Also runs the same scene with the head
-pose evaluated exactly at every point (``head_grid_s = 0``) to show what that accuracy costs.
+Runs, on one numba thread, each after a warm-up run (numba's cache, first-call costs):
 
-Usage: python scripts/bench_closed_loop.py [SCENE.toml] [--duration S]
+* the scene as shipped (fig12-tracking: a Mid-40 at 100 k points/s, a quadrotor, the ground);
+* the same scene inside a room (a 60 x 40 x 8 m hall: six rectangles instead of the ground plane),
+  the issue's "quadrotor plus room background";
+* the shipped scene with the head pose evaluated exactly at every point (``head_grid_s = 0``),
+  to show what that accuracy costs;
+
+and prints wall time, real-time factor and where the time of one frame goes (each stage of
+:meth:`sim.loop.ClosedLoop.step` timed by a wrapper; best of the repetitions).
+
+Usage: python scripts/bench_closed_loop.py [SCENE.toml] [--duration S] [--repeat N]
 """
 
 from __future__ import annotations
 
 import argparse
-import cProfile
 import os
-import pstats
 import time
+import tomllib
+from collections import defaultdict
 from dataclasses import replace
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
+import sim.loop as loop_mod  # noqa: E402
 from sim.loop import ClosedLoop  # noqa: E402
-from sim.scene import load_scene  # noqa: E402
+from sim.scene import load_scene, scene_from_mapping  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+HALL = {"type": "room", "size_m": [60.0, 40.0, 8.0], "centre_m": [20.0, 0.0, 2.5], "reflectivity": 0.2}
+# D inside the hall, clear of its floor, walls and ceiling (else the walls would be the "intruder")
+HALL_D = {"kind": "box", "frame": "world", "min_xyz": [1.0, -19.0, -0.7], "max_xyz": [49.0, 19.0, 6.0]}
 
 
-def timed(scene, **kw):
+def timed_run(scene, **kw) -> float:
     t = time.perf_counter()
     ClosedLoop(scene, **kw).run()
     return time.perf_counter() - t
+
+
+def stage_breakdown(scene) -> dict[str, float]:
+    """Seconds per stage of one run (wrappers around the loop's collaborators)."""
+    T: dict[str, float] = defaultdict(float)
+
+    def wrap(name, fn):
+        def w(*a, **k):
+            t = time.perf_counter()
+            r = fn(*a, **k)
+            T[name] += time.perf_counter() - t
+            return r
+        return w
+
+    loop = ClosedLoop(scene)
+    loop.head.receive = wrap("head model: commands arrive", loop.head.receive)
+    loop.scan.scan_time = wrap("scan (phases, exact refraction)", loop.scan.scan_time)
+    loop.head.angles_at = wrap("head model: pose on the grid", loop.head.angles_at)
+    loop.sensor.returns = wrap("ray casting + effects", loop.sensor.returns)
+    loop.tracker.process = wrap("tracker (Algorithms 1, 2, dead reckoning)", loop.tracker.process)
+    loop.uart.send = wrap("virtual UART", loop.uart.send)
+    loop._log = wrap("per-frame log (truth, metrics)", loop._log)
+    rotate = loop_mod.wk.rotate_pan_tilt_grid_kernel
+    loop_mod.wk.rotate_pan_tilt_grid_kernel = wrap("beams into the world (head pose)", rotate)
+    step = wrap("whole step", loop.step)
+    try:
+        period = loop.tracker.config.period_s
+        for k in range(int(round(scene.duration_s / period))):
+            step(k * period, (k + 1) * period)
+    finally:
+        loop_mod.wk.rotate_pan_tilt_grid_kernel = rotate
+    T["rest of the step (glue)"] = T["whole step"] - sum(v for k, v in T.items() if k != "whole step")
+    return T
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scene", nargs="?", default=str(ROOT / "scenes" / "fig12-tracking.toml"))
     ap.add_argument("--duration", type=float, default=30.0)
+    ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
     scene = replace(load_scene(args.scene), duration_s=args.duration)
-    timed(replace(scene, duration_s=1.0))
-    wall = min(timed(scene) for _ in range(2))
-    exact = timed(scene, head_grid_s=0.0)
-    print(f"{scene.name}: {scene.duration_s:g} s of virtual time, {scene.optics.point_rate_hz} points/s, "
-          f"effects {sorted(scene.effects)}")
-    print(f"  head pose on a 1 ms grid (default): {wall:.2f} s wall -> {scene.duration_s / wall:.1f}x real time")
-    print(f"  head pose exact at every point:     {exact:.2f} s wall -> {scene.duration_s / exact:.1f}x real time")
-    prof = cProfile.Profile()
-    prof.enable()
-    ClosedLoop(scene).run()
-    prof.disable()
-    print("  where the time goes (tottime, top 10):")
-    stats = pstats.Stats(prof)
-    stats.sort_stats("tottime")
-    for (file, line, fn), (cc, nc, tt, ct, callers) in sorted(stats.stats.items(), key=lambda kv: -kv[1][2])[:10]:
-        print(f"    {tt:6.3f} s  {Path(file).name}:{line} {fn}")
+    data = tomllib.loads(Path(args.scene).read_text())
+    data["background"] = [HALL]
+    data.setdefault("tracker", {})["space"] = HALL_D
+    room = replace(scene_from_mapping(data, f"{args.scene} (in a hall)"), duration_s=args.duration)
+    frames = int(round(scene.duration_s * scene.tracker.rate_hz))
+    print(f"{scene.name}: {scene.duration_s:g} s of virtual time ({frames} frames), "
+          f"{scene.optics.point_rate_hz} points/s, effects {sorted(scene.effects)}, 1 numba thread")
+    for name, sc, kw in (("as shipped (quadrotor + ground), 1 ms head grid", scene, {}),
+                         ("in a 60 x 40 x 8 m hall (quadrotor + 6 walls)", room, {}),
+                         ("as shipped, head pose exact at every point", scene, {"head_grid_s": 0.0})):
+        timed_run(replace(sc, duration_s=1.0), **kw)
+        wall = min(timed_run(sc, **kw) for _ in range(args.repeat))
+        print(f"  {name:50s} {wall:6.2f} s wall -> {sc.duration_s / wall:6.1f}x real time "
+              f"({wall / frames * 1e3:.2f} ms per frame)")
+    runs = [stage_breakdown(scene) for _ in range(args.repeat)]
+    best = {k: min(r[k] for r in runs) for k in runs[0]}
+    total = best.pop("whole step")
+    print(f"  where a frame's time goes (as shipped; best of {args.repeat}, {total / frames * 1e3:.2f} ms per frame "
+          f"with the timers):")
+    for k, v in sorted(best.items(), key=lambda kv: -kv[1]):
+        print(f"    {v / frames * 1e3:6.3f} ms  {100 * v / total:4.1f} %  {k}")
 
 
 if __name__ == "__main__":

@@ -140,18 +140,37 @@ def cast_static_kernel(d_world, prims, prim_offset, out_range, out_prim):
     there (so targets and background can be cast in either order); hits record ``prim_offset + m``.
 
     Primitive by primitive (each ray still meets them in table order, so the result is the same as
-    ray by ray): an infinite plane — the ground of most scenes — gets a loop with its constants
-    hoisted that LLVM vectorises, with :func:`_hit_prim`'s arithmetic unchanged.
+    ray by ray): the flat kinds of a background — ground plane, walls and room faces (rectangles),
+    disks — get loops with their constants hoisted that LLVM vectorises, with :func:`_hit_prim`'s
+    arithmetic unchanged.
     """
     n = d_world.shape[0]
     for m in range(prims.shape[0]):
-        if int(prims[m, 0]) == PLANE:
+        kind = int(prims[m, 0])
+        if kind == PLANE or kind == RECT or kind == DISK:
+            cx, cy, cz = prims[m, 1], prims[m, 2], prims[m, 3]
             nx, ny, nz = prims[m, 7], prims[m, 8], prims[m, 9]
-            num = nx * prims[m, 1] + ny * prims[m, 2] + nz * prims[m, 3]
+            num = nx * cx + ny * cy + nz * cz
+            # rectangle: in-plane axes u and v = n x u, half sizes; disk: radius
+            ux, uy, uz = prims[m, 10], prims[m, 11], prims[m, 12]
+            vx = ny * uz - nz * uy
+            vy = nz * ux - nx * uz
+            vz = nx * uy - ny * ux
+            h_u, h_v, r2 = prims[m, 4], prims[m, 5], prims[m, 4] * prims[m, 4]
             for j in range(n):
-                den = nx * d_world[j, 0] + ny * d_world[j, 1] + nz * d_world[j, 2]
+                dx, dy, dz = d_world[j, 0], d_world[j, 1], d_world[j, 2]
+                den = nx * dx + ny * dy + nz * dz
                 t = num / den
                 hit = abs(den) >= _EPS and t > _EPS and t < out_range[j]
+                if kind != PLANE:
+                    px = dx * t - cx
+                    py = dy * t - cy
+                    pz = dz * t - cz
+                    if kind == RECT:
+                        hit = (hit and abs(px * ux + py * uy + pz * uz) <= h_u
+                               and abs(px * vx + py * vy + pz * vz) <= h_v)
+                    else:
+                        hit = hit and px * px + py * py + pz * pz <= r2
                 out_range[j] = t if hit else out_range[j]
                 out_prim[j] = prim_offset + m if hit else out_prim[j]
             continue
