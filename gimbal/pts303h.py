@@ -549,6 +549,29 @@ class PTS303H:
         self.advance_to(float(flat.max()))
         return (wrap_pan_deg(pan) if wrap_pan else pan).reshape(t.shape), tilt.reshape(t.shape)
 
+    def pose_segments(self, t0_s: float, t1_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The exact motion over ``[t0_s, t1_s]`` as constant-acceleration pieces, or None if the
+        speed ripple is on there (then use :meth:`angles_at`).
+
+        Returns ``(pan, tilt)``, each (4, S) float64: rows ``t_start_s, angle_deg, speed_deg_s,
+        accel_deg_s2`` of the pieces in force from ``t0_s`` on (the first starts at or before it);
+        the angle at ``t`` in piece ``i`` is ``angle + speed d + accel d^2 / 2`` with
+        ``d = t - t_start``, the very expression of :meth:`angles_at` (pan unwrapped).  Like
+        :meth:`angles_at`, asking advances the model to ``t1_s``.
+        """
+        out = []
+        for axis in (self._pan, self._tilt):
+            t0, p0, v0, a, r = axis.arrays()
+            i0 = int(np.searchsorted(t0, t0_s, side="right")) - 1
+            i1 = int(np.searchsorted(t0, t1_s, side="right"))
+            if i0 < 0:
+                raise ValueError(f"{axis.name}: time {t0_s} is before the kept history (starts {t0[0]})")
+            if r[i0:i1].any():
+                return None
+            out.append(np.stack([t0[i0:i1], p0[i0:i1], v0[i0:i1], a[i0:i1]]))
+        self.advance_to(t1_s)
+        return out[0], out[1]
+
     def rates_at(self, t_s) -> tuple[np.ndarray, np.ndarray]:
         """True (pan_speed_deg_s, tilt_speed_deg_s) at each time (vectorised, ripple included)."""
         t = np.asarray(t_s, dtype=float)

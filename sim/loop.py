@@ -105,13 +105,18 @@ class FrameLog:
 class ClosedLoop:
     """One run of a scene.  ``frame_hook(frame, output, loop)`` sees every frame (recording).
 
-    ``head_grid_s``: the head pose is evaluated exactly on this time grid and interpolated to each
-    point (see :func:`sim.world.kernels.rotate_pan_tilt_grid_kernel` for the error bound); 0 evaluates
-    it exactly at every point (slower; the accuracy-vs-time study compares the two).
+    ``head_grid_s``: how each point gets the head's pose at its own time.  None (default): exactly,
+    from the head's constant-acceleration pieces (:func:`sim.world.kernels.rotate_head_pieces_kernel`;
+    when the scene lists the head's speed ripple, as for 0); 0: exactly, the head model asked about
+    every point (the slow reference); > 0: interpolated from a grid of that step (see
+    :func:`sim.world.kernels.rotate_pan_tilt_grid_kernel` for the error bound; the accuracy-vs-time
+    study measures it).
     ``target_motion``: see :class:`sim.sensor.SceneSensor`.
     """
 
-    def __init__(self, scene: Scene, frame_hook=None, head_grid_s: float = 0.001, controller=None,
+    _TRIG_NODE_S = 0.001   # trigonometry once per ms in the exact route (1.7e-3 rad steps at 100 deg/s)
+
+    def __init__(self, scene: Scene, frame_hook=None, head_grid_s: float | None = None, controller=None,
                  target_motion: str = "per_point"):
         self.scene = scene
         self.head_grid_s = head_grid_s
@@ -196,10 +201,16 @@ class ClosedLoop:
         # 3. beams in the world at each point's own head pose.
         d_world = np.empty_like(d_lidar)
         t_mid = 0.5 * (t0 + t1)
-        if self.head_grid_s > 0:
-            # Nodes from t0 to exactly t1 (the step shrinks to divide the frame): the head is never
-            # asked about a time past t1, which a command sent at t1 could still affect.  The frame's
-            # mid-time rides along (the log's truth).  Pan unwrapped: continuous between nodes.
+        # Grids run from t0 to exactly t1 (the step shrinks to divide the frame): the head is never
+        # asked about a time past t1, which a command sent at t1 could still affect.
+        pieces = self.head.pose_segments(t0, t1) if self.head_grid_s is None else None
+        if pieces is not None:
+            n_steps = max(1, math.ceil((t1 - t0) / self._TRIG_NODE_S - 1e-9))
+            wk.rotate_head_pieces_kernel(d_lidar, t_s, t0, (t1 - t0) / n_steps, n_steps + 1, pieces[0], pieces[1],
+                                         d_world)
+            pan, tilt = self.head.angles_at(np.array([t_mid]))
+        elif self.head_grid_s:
+            # The frame's mid-time rides along (the log's truth).  Pan unwrapped: continuous between nodes.
             n_steps = max(1, math.ceil((t1 - t0) / self.head_grid_s - 1e-9))
             step = (t1 - t0) / n_steps
             times = np.append(t0 + step * np.arange(n_steps + 1), t_mid)

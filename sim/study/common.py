@@ -167,7 +167,7 @@ def loop_metrics(scene, log: dict) -> dict:
     }
 
 
-def run_loop(scene, head_grid_s: float = 0.001, target_motion: str = "per_point", frame_hook=None,
+def run_loop(scene, head_grid_s: float | None = None, target_motion: str = "per_point", frame_hook=None,
              time_tracker: bool = False) -> dict:
     """Run a scene's closed loop; metrics, CPU/wall time and, if asked, the tracker's own CPU time.
 

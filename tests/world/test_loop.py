@@ -183,3 +183,18 @@ def test_run_overrides_rebuild_a_manual_flight(tmp_path, capsys):
         assert "Traceback" not in capsys.readouterr().err
     (tmp_path / "file").write_text("x")
     assert main(["simulate", str(path), "--no-progress", "--out", str(tmp_path / "file")]) == 2
+
+
+def test_exact_head_pose_from_pieces_matches_asking_the_head_at_every_point():
+    # The default route (pose from the head's motion pieces, trigonometry per ms) and the reference
+    # (the head model asked about every point) are the same model: same points, same tracking.
+    scene = short("fig12-tracking", 3.0)
+    fast_loop, fast = _run(scene)
+    ref_loop = ClosedLoop(scene, head_grid_s=0.0)
+    ref = ref_loop.run()
+    assert np.array_equal(fast["points"], ref["points"])
+    assert np.array_equal(fast["points_on_target"], ref["points_on_target"])
+    assert [tuple(c) for c in fast["command"]] == [tuple(c) for c in ref["command"]]
+    np.testing.assert_allclose(fast["head_pan_deg"], ref["head_pan_deg"], atol=1e-12)
+    np.testing.assert_allclose(fast["estimate_xyz"], ref["estimate_xyz"], atol=1e-9)
+    assert np.abs(fast["head_pan_deg"]).max() > 1.0          # the head did move during the run

@@ -31,6 +31,35 @@ def test_rotation_kernel_matches_matrix_twin_and_conventions():
         np.testing.assert_allclose(o[0], want, atol=1e-15)
 
 
+@pytest.mark.parametrize("ripple", [False, True])
+def test_head_pieces_rotation_is_the_exact_pose_at_every_point(ripple):
+    # A real head model: commands inside the frame (piece boundaries between points), pan crossing
+    # 180 deg at turbo.  The kernel must give the rotation by the head's exact pose at each point.
+    from dataclasses import replace
+
+    from gimbal.pelco import encode_pan_tilt
+    from gimbal.pts303h import PTS303H, HeadParams
+
+    params = HeadParams(ripple_rel=0.02 if ripple else 0.0)
+    head = PTS303H(replace(params, history_s=100.0), unit_seed=5, pan0_deg=179.0, tilt0_deg=10.0)
+    head.receive(encode_pan_tilt(1, 1, 0xFF, 1, 0x3F), [0.01 + 0.001 * i for i in range(7)])
+    head.receive(encode_pan_tilt(1, -1, 0x20, -1, 0x10), [0.52 + 0.001 * i for i in range(7)])
+    rng = np.random.default_rng(7)
+    n = 20_000
+    d = _unit(rng, n)
+    t = np.sort(rng.uniform(0.4, 0.7, n))        # the second command takes effect in here
+    pieces = head.pose_segments(0.4, 0.7)
+    if ripple:
+        assert pieces is None                     # then the loop asks the model point by point
+        return
+    assert pieces[0].shape[1] >= 2               # a piece boundary inside the window
+    pan, tilt = head.angles_at(t, wrap_pan=False)
+    assert pan.max() > 180.0                      # crossed the wrap, continuously
+    out = np.empty_like(d)
+    K.rotate_head_pieces_kernel(d, t, 0.4, 0.001, 301, pieces[0], pieces[1], out)
+    np.testing.assert_allclose(out, rotate_twin(d, np.radians(pan), np.radians(tilt)), atol=1e-14)
+
+
 def test_grid_rotation_matches_exact_rotation_of_interpolated_pose():
     rng = np.random.default_rng(1)
     n = 2000
