@@ -365,7 +365,7 @@ _NS_PER_S = 1_000_000_000
 
 @njit(cache=True, fastmath=False)
 def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
-                      noise_eps, rev_per_s, channel_count, revs, t_ns, channel, j0, tb, sb):
+                      noise_eps, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb):
     """Phases (with speed noise), times and channels of the ``m <= 256`` points ``k .. k + m - 1``.
 
     Explicitly not fastmath (``arcp`` would turn the divisions below into multiplications by a
@@ -406,13 +406,10 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
     r0 = float(num - q2 * rate_hz)
     for i in range(m):
         t_ns[j0 + i] = t_base + np.int64(math.floor((r0 + _RAMP[i] * 1e9) / rate_f))
-    # channels
-    c = k % channel_count
+    # channels: (k + i) mod C read from the pattern ``channel_pattern[j] = j mod C`` at offset k mod C
+    c0 = k % channel_count
     for i in range(m):
-        channel[j0 + i] = np.uint8(c)
-        c += 1
-        if c == channel_count:
-            c = 0
+        channel[j0 + i] = channel_pattern[c0 + i]
     # phases
     if noise_on:
         for i in range(m):
@@ -502,10 +499,13 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
         first[c, 1] = dy
         first[c, 2] = dz
         first[c, 3] = st
+    channel_pattern = np.empty(_BLOCK + channel_count, dtype=np.uint8)
+    for j in range(_BLOCK + channel_count):
+        channel_pattern[j] = np.uint8(j % channel_count)
     for j0 in range(0, n, _BLOCK):
         m = min(_BLOCK, n - j0)
         _scan_block_setup(k0 + j0, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
-                          noise_eps, rev_per_s, channel_count, revs, t_ns, channel, j0, tb, sb)
+                          noise_eps, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb)
         for i in range(m):
             c = channel[j0 + i]
             bx[i] = first[c, 0]
