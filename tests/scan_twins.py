@@ -101,3 +101,17 @@ def add_speed_noise_twin(k0, rate_hz, segment_s, cum, eps, rev_per_s, revs):
     s = np.floor(t / segment_s).astype(int)
     v = revs + (rev_per_s[:, None] * (cum[s].T + eps[s].T * (t - s * segment_s)[None, :]))
     return v - np.floor(v)
+
+
+def scan_exact_twin(k0, count, rate_hz, r_exact_fractions, phase0_rev, noise, channel_count, incident, sin_wedge,
+                    cos_wedge, index, exit_tilted):
+    """Same contract as ``scan_exact_kernel``, composed of the twins above: exact rational phases,
+    the speed noise (``noise = (segment_s, cum, eps, rev_per_s)`` or None), the exact trace, the
+    integer times and channel ``k mod C``.  Returns (t_ns, channel, direction, status)."""
+    revs = phase_revs_twin(k0, r_exact_fractions, phase0_rev, count)  # (N, P)
+    if noise is not None and count:
+        segment_s, cum, eps, rev_per_s = noise
+        revs = add_speed_noise_twin(k0, float(rate_hz), segment_s, cum, eps, rev_per_s, revs.T).T
+    channel = (np.arange(k0, k0 + count, dtype=object) % channel_count).astype(np.int64)
+    direction, status = trace_exact_twin(revs, channel, incident, sin_wedge, cos_wedge, index, exit_tilted)
+    return point_times_ns_twin(k0, rate_hz, count), channel.astype(np.uint8), direction, status

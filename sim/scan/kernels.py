@@ -1,7 +1,7 @@
 """Numba kernels of the scan model: every hot loop of ``sim.scan`` and nothing else.
 
 Each kernel takes arrays and scalars only, writes into caller-provided outputs, and has a plain-numpy
-twin in ``tests/scan/twins.py``; the tests compare the two to 1e-12 (stumpy's layout, see
+twin in ``tests/scan_twins.py``; the tests compare the two to 1e-12 (stumpy's layout, see
 ``shared/DESIGN.md``).  ``NUMBA_DISABLE_JIT=1`` runs them as Python so coverage can see inside.
 
 Ray status codes (per ray, never a silent NaN):
@@ -30,9 +30,29 @@ _SPLIT_MASK = (1 << _SPLIT_BITS) - 1
 _TWO_26 = float(1 << _SPLIT_BITS)
 
 
-@njit(cache=True)
+# Exact-arithmetic helpers pin ``fastmath=False``: numba lets a callee that leaves an option unset
+# inherit it from its caller (``Flags.inherit_if_not_set("fastmath")``), so called from a fastmath
+# kernel they would be compiled (and cached) with reassociation, which breaks the split products.
+@njit(cache=True, fastmath=False)
 def _frac(x):
     return x - math.floor(x)
+
+
+@njit(cache=True, inline="always", fastmath=False)
+def _phase_rev_at(k, r_h1, r_h2, r_lo, phase0_rev):
+    """One prism's exact fractional revolutions at point ``k`` (the body of :func:`phase_revs_kernel`)."""
+    a = float(k >> _SPLIT_BITS)
+    b = float(k & _SPLIT_MASK)
+    kf = float(k)
+    s = (
+        _frac(a * r_h1 * _TWO_26)
+        + _frac(a * r_h2 * _TWO_26)
+        + _frac(b * r_h1)
+        + _frac(b * r_h2)
+        + kf * r_lo
+        + phase0_rev
+    )
+    return _frac(s)
 
 
 @njit(cache=True)
@@ -58,19 +78,7 @@ def phase_revs_kernel(k0, r_h1, r_h2, r_lo, phase0_rev, out):
     p_count, n = out.shape
     for p in range(p_count):
         for j in range(n):
-            k = k0 + j
-            a = float(k >> _SPLIT_BITS)
-            b = float(k & _SPLIT_MASK)
-            kf = float(k)
-            s = (
-                _frac(a * r_h1[p] * _TWO_26)
-                + _frac(a * r_h2[p] * _TWO_26)
-                + _frac(b * r_h1[p])
-                + _frac(b * r_h2[p])
-                + kf * r_lo[p]
-                + phase0_rev[p]
-            )
-            out[p, j] = _frac(s)
+            out[p, j] = _phase_rev_at(k0 + j, r_h1[p], r_h2[p], r_lo[p], phase0_rev[p])
 
 
 # Kernels that trace rays are written as branch-free inner loops over a block of rays, one prism at a
@@ -295,6 +303,7 @@ __all__ = [
     "RAY_GRAZING",
     "phase_revs_kernel",
     "trace_exact_kernel",
+    "scan_exact_kernel",
     "trace_paraxial_kernel",
     "point_times_ns_kernel",
     "first_hit_kernel",
@@ -347,3 +356,197 @@ def add_speed_noise_kernel(k0, rate_hz, segment_s, noise_cum, noise_eps, rev_per
         for p in range(p_count):
             v = revs[p, j] + rev_per_s[p] * (noise_cum[s, p] + noise_eps[s, p] * dt)
             revs[p, j] = v - math.floor(v)
+
+
+# ---- fused scan: phases + speed noise + times + channels + exact trace, one pass ---------------------
+_RAMP = np.arange(_BLOCK, dtype=np.float64)  # 0.0, 1.0, ..., 255.0 (AVX2 cannot convert int64 -> f64)
+_NS_PER_S = 1_000_000_000
+
+
+@njit(cache=True, fastmath=False)
+def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
+                      noise_eps, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb):
+    """Phases (with speed noise), times and channels of the ``m <= 256`` points ``k .. k + m - 1``.
+
+    Explicitly not fastmath (``arcp`` would turn the divisions below into multiplications by a
+    reciprocal, ``reassoc`` would regroup the double-double phase; an unset flag would be inherited
+    from the fastmath caller).  Writes ``revs[:, :m]`` and ``t_ns`` / ``channel`` at ``j0 ..``;
+    ``tb`` and ``sb`` are scratch blocks.
+
+    Phase: the exact double-double phase :math:`\\phi_p(k)` (as in :func:`phase_revs_kernel`) at the
+    block start, then :math:`\\phi_p(k) + i\\,\\hat r_p` for ``i < 256`` in float64, where
+    :math:`\\hat r_p = r_{h1} + r_{h2} + r_{lo}` rounded.  Against the exact :math:`\\phi_p(k+i)`
+    this adds at most :math:`255\\,|\\hat r_p - r_p| + \\tfrac12\\mathrm{ulp}(255\\,r_p)
+    \\le 255\\,|r_p|\\,2^{-52}` rev, e.g. 7e-17 rev for the Mid-40's fast prism
+    (:math:`r = 1.2\\times10^{-3}` rev/point), plus the final rounding of the sum (below 1.2e-16
+    rev, the same as the per-point kernel's own last rounding).
+
+    Speed noise: the formula of :func:`add_speed_noise_kernel` point by point (same ``t``, same
+    segment ``s``, same ``dt``); ``k + i`` is formed as ``float(k) + i`` (exact below 2^53), and the
+    block is cut into runs of equal ``s`` so the segment's ``cum`` / ``eps`` are scalars per run.
+
+    Times: ``floor((k + i) 1e9 / rate)`` exactly, with integer arithmetic once per block:
+    ``k = q rate + r``, ``r 1e9 = q2 rate + R0``, so ``floor((k + i) 1e9 / rate) = q 1e9 + q2 +
+    floor((R0 + i 1e9) / rate)``.  ``N = R0 + i 1e9 < 2e6 + 255e9 < 2^53`` is exact in float64 and
+    the division is correctly rounded, so ``fl(N / rate)`` differs from ``x = N / rate`` by at most
+    ``x 2^-53``.  If ``x`` is not a whole number, the next whole number ``c`` has
+    ``c - x >= 1 / rate`` (``c rate - N`` is a positive integer), and ``x 2^-53 < 1 / rate``
+    because ``N < 2^53``; rounding is monotone and ``c`` is representable, so ``fl(x) < c`` and
+    ``floor(fl(x)) = floor(x)``.  If ``x`` is whole, it is representable and ``fl(x) = x``.
+    """
+    p_count = revs.shape[0]
+    rate_f = float(rate_hz)
+    k_f = float(k)
+    # times
+    q = k // rate_hz
+    r = k - q * rate_hz
+    num = r * _NS_PER_S
+    q2 = num // rate_hz
+    t_base = q * _NS_PER_S + q2
+    r0 = float(num - q2 * rate_hz)
+    for i in range(m):
+        t_ns[j0 + i] = t_base + np.int64(math.floor((r0 + _RAMP[i] * 1e9) / rate_f))
+    # channels: (k + i) mod C read from the pattern ``channel_pattern[j] = j mod C`` at offset k mod C
+    c0 = k % channel_count
+    for i in range(m):
+        channel[j0 + i] = channel_pattern[c0 + i]
+    # phases
+    if noise_on:
+        for i in range(m):
+            t = (k_f + _RAMP[i]) / rate_f
+            tb[i] = t
+            sb[i] = math.floor(t / segment_s)
+    i = 0
+    while i < m:
+        e = m
+        cum_scale = 0.0
+        seg_f = 0.0
+        si = 0
+        if noise_on:
+            seg_f = sb[i]
+            e = i + 1
+            while e < m and sb[e] == seg_f:
+                e += 1
+            si = int(seg_f)
+            cum_scale = 1.0
+        for p in range(p_count):
+            base = _phase_rev_at(k, r_h1[p], r_h2[p], r_lo[p], phase0_rev[p])
+            r_p = r_h1[p] + r_h2[p] + r_lo[p]
+            row = revs[p]
+            if noise_on:
+                w = rev_per_s[p]
+                cum = noise_cum[si, p]
+                eps = noise_eps[si, p]
+                s_t = seg_f * segment_s
+                for ii in range(i, e):
+                    v = (base + _RAMP[ii] * r_p) + w * (cum + eps * (tb[ii] - s_t))
+                    row[ii] = v - math.floor(v)
+            else:
+                for ii in range(i, e):
+                    v = base + _RAMP[ii] * r_p
+                    row[ii] = v - math.floor(v)
+        i = e
+
+
+@njit(cache=True, fastmath=_FAST, error_model="numpy")
+def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum, noise_eps,
+                      rev_per_s, channel_count, incident, sin_wedge, cos_wedge, index, exit_tilted,
+                      t_ns, channel, out_dir, status):
+    """Points ``k0 .. k0 + N - 1`` of the exact model in one pass: what ``phase_revs_kernel`` +
+    ``add_speed_noise_kernel`` + ``point_times_ns_kernel`` + channel ``k mod C`` +
+    ``trace_exact_kernel`` give together (paper Section III, Appendix B), without the (P, N) phase
+    array, the per-point double-double phase and the per-point int64 division.
+
+    Per 256-ray block (:func:`_scan_block_setup`): the exact phase at the block start, then
+    ``+ i r_p`` in float64 (extra phase error <= 255 |r_p| 2^-52 rev, ~7e-17 rev at the Mid-40's
+    speeds; the per-point kernel's is ~1e-15 rev), the piecewise-constant speed-noise phase error
+    (same formula as ``add_speed_noise_kernel``; ``noise_on`` False skips it), exact times and the
+    channels; then the trace of ``trace_exact_kernel`` (same ``_sincos_rev``, ``_refract``,
+    ``_refract_flat``; a first prism whose flat face comes first refracts each channel's incident
+    direction there once per call, not once per ray).  The slow sinusoidal drift is not here (the model keeps the composed path for it).
+
+    Parameters
+    ----------
+    k0 : int >= 0                      index of the first point
+    rate_hz : int in [1e3, 2e6]        point rate [points/s]
+    r_h1, r_h2, r_lo, phase0_rev : (P,) float64   as for ``phase_revs_kernel``
+    noise_on : bool
+    segment_s : float > 0 [s]; noise_cum : (S+1, P); noise_eps : (S, P); rev_per_s : (P,) [rev/s]
+        as for ``add_speed_noise_kernel`` (grown to cover the last point's segment + 1)
+    channel_count : int >= 1           channels C; point k is fired by channel ``k mod C``
+    incident, sin_wedge, cos_wedge, index, exit_tilted : as for ``trace_exact_kernel``
+    t_ns : (N,) int64 [ns]; channel : (N,) uint8; out_dir : (N, 3) float64; status : (N,) uint8  outputs
+    """
+    p_count = r_h1.shape[0]
+    n = out_dir.shape[0]
+    revs = np.empty((p_count, _BLOCK))
+    tb = np.empty(_BLOCK)
+    sb = np.empty(_BLOCK)
+    bx = np.empty(_BLOCK)
+    by = np.empty(_BLOCK)
+    bz = np.empty(_BLOCK)
+    bs = np.empty(_BLOCK)
+    # A first prism with its flat face first sees each channel's fixed incident direction there:
+    # that refraction does not depend on the phase, so it is done once per channel, not per ray.
+    pre = incident.shape[0] > 0 and exit_tilted[0]
+    first = np.empty((incident.shape[0], 4))
+    for c in range(incident.shape[0]):
+        if pre:
+            dx, dy, dz, st = _refract_flat(incident[c, 0], incident[c, 1], incident[c, 2], 1.0 / index[0], 0.0)
+        else:
+            dx, dy, dz, st = incident[c, 0], incident[c, 1], incident[c, 2], 0.0
+        first[c, 0] = dx
+        first[c, 1] = dy
+        first[c, 2] = dz
+        first[c, 3] = st
+    channel_pattern = np.empty(_BLOCK + channel_count, dtype=np.uint8)
+    for j in range(_BLOCK + channel_count):
+        channel_pattern[j] = np.uint8(j % channel_count)
+    for j0 in range(0, n, _BLOCK):
+        m = min(_BLOCK, n - j0)
+        _scan_block_setup(k0 + j0, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
+                          noise_eps, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb)
+        for i in range(m):
+            c = channel[j0 + i]
+            bx[i] = first[c, 0]
+            by[i] = first[c, 1]
+            bz[i] = first[c, 2]
+            bs[i] = first[c, 3]
+        for p in range(p_count):
+            row = revs[p]
+            sa = sin_wedge[p]
+            ca = cos_wedge[p]
+            n_p = index[p]
+            inv_n = 1.0 / n_p
+            if p == 0 and pre:
+                for i in range(m):
+                    s_t, c_t = _sincos_rev(row[i])
+                    dx, dy, dz, st = _refract(bx[i], by[i], bz[i], -sa * c_t, -sa * s_t, ca, n_p, bs[i])
+                    bx[i] = dx
+                    by[i] = dy
+                    bz[i] = dz
+                    bs[i] = st
+            elif exit_tilted[p]:
+                for i in range(m):
+                    s_t, c_t = _sincos_rev(row[i])
+                    dx, dy, dz, st = _refract_flat(bx[i], by[i], bz[i], inv_n, bs[i])
+                    dx, dy, dz, st = _refract(dx, dy, dz, -sa * c_t, -sa * s_t, ca, n_p, st)
+                    bx[i] = dx
+                    by[i] = dy
+                    bz[i] = dz
+                    bs[i] = st
+            else:
+                for i in range(m):
+                    s_t, c_t = _sincos_rev(row[i])
+                    dx, dy, dz, st = _refract(bx[i], by[i], bz[i], sa * c_t, sa * s_t, ca, inv_n, bs[i])
+                    dx, dy, dz, st = _refract_flat(dx, dy, dz, n_p, st)
+                    bx[i] = dx
+                    by[i] = dy
+                    bz[i] = dz
+                    bs[i] = st
+        for i in range(m):
+            keep = 1.0 if bs[i] == 0.0 else 0.0
+            out_dir[j0 + i, 0] = bz[i] * keep
+            out_dir[j0 + i, 1] = bx[i] * keep
+            out_dir[j0 + i, 2] = by[i] * keep
+            status[j0 + i] = np.uint8(bs[i])

@@ -159,8 +159,46 @@ class ScanModel:
             kernels.trace_paraxial_kernel(revs_pn, channel, self._offset_rad, self._deviation_rad, direction)
         return direction, status
 
+    @property
+    def fused(self) -> bool:
+        """True if :meth:`scan` runs the one-pass :func:`~sim.scan.kernels.scan_exact_kernel`: the
+        exact model without the slow sinusoidal drift (``drift_frac == 0``, the default)."""
+        return self.model == "exact" and (self.speed_noise is None or self.speed_noise.drift_frac == 0)
+
     def scan(self, k0: int, count: int) -> ScanChunk:
-        """Points ``k0 .. k0 + count - 1``: times, directions, channels and ray status."""
+        """Points ``k0 .. k0 + count - 1``: times, directions, channels and ray status.
+
+        Runs the fused kernel when :attr:`fused` (equal to :meth:`scan_composed` to ~1e-15 in
+        direction, times and channels identical, the same noise draws), else :meth:`scan_composed`.
+        """
+        if k0 < 0 or count < 0:
+            raise ValueError(f"k0 = {k0}, count = {count}: both must be >= 0")
+        if not self.fused:
+            return self.scan_composed(k0, count)
+        k0 = int(k0)
+        count = int(count)
+        noise = self.speed_noise
+        segment_s = 1.0
+        if noise is not None and count:
+            # The same growth call as prism_revs makes, so the draws do not depend on the path.
+            t_last = (k0 + count - 1) / self.optics.point_rate_hz
+            self._grow_noise(int(math.floor(t_last / noise.segment_s)) + 2)
+            segment_s = noise.segment_s
+        t_ns = np.empty(count, dtype=np.int64)
+        channel = np.empty(count, dtype=np.uint8)
+        direction = np.empty((count, 3))
+        status = np.empty(count, dtype=np.uint8)
+        kernels.scan_exact_kernel(
+            k0, int(self.optics.point_rate_hz), self._r_h1, self._r_h2, self._r_lo, self._phase0_rev,
+            noise is not None, segment_s, self._noise_cum, self._noise_eps, self._rev_per_s,
+            int(self.optics.channels), self._incident, self._sin_wedge, self._cos_wedge, self._index,
+            self._exit_tilted, t_ns, channel, direction, status,
+        )
+        return ScanChunk(k0=k0, t_ns=t_ns, direction=direction, channel=channel, status=status)
+
+    def scan_composed(self, k0: int, count: int) -> ScanChunk:
+        """:meth:`scan` through the separate kernels (phases, noise, drift, channels, times, trace):
+        the path for the paraxial model and the drift, and the reference the fused kernel must equal."""
         if k0 < 0 or count < 0:
             raise ValueError(f"k0 = {k0}, count = {count}: both must be >= 0")
         revs = self.prism_revs(k0, count)
