@@ -2,7 +2,7 @@
 
 Plain-numpy twins: the generic route of :mod:`foveatrack.detection` (``valid_points`` and
 ``Box.contains`` on points turned by :meth:`foveatrack.reconstruction.Reconstructor.lidar_to_world`);
-``tests/tracker/test_kernels.py`` compares the two.
+``tests/tracker/test_detection_kernels.py`` compares the two.
 """
 
 from __future__ import annotations
