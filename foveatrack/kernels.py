@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 
@@ -40,3 +41,12 @@ def box_members_kernel(xyz, rot, offset, lo, hi, out_idx):
             out_idx[k] = j
             k += 1
     return k
+
+
+def compile_all() -> None:
+    """Compile (or load from numba's cache) every kernel here, on tiny inputs.
+
+    A real-time driver calls this before data flows: a first call compiles, which takes up to a
+    second on a fresh install and would stall the first frame.
+    """
+    box_members_kernel(np.zeros((1, 3)), np.eye(3), np.zeros(3), np.zeros(3), np.ones(3), np.empty(1, np.int64))

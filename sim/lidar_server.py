@@ -242,6 +242,11 @@ def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("
     else:
         source = SceneSource(scene)
 
+    # Compile (or load from numba's cache) every kernel of the stream before going real time: on a
+    # fresh install the first chunk would otherwise take seconds.  A throwaway source, so the
+    # served one's random streams start untouched.
+    SceneSource(scene)(0, 2_000_000)
+
     def _ready(lidar: VirtualLivox):
         if tail is not None:
             # VirtualLivox sets its monotonic origin when serve() starts, right after this call.

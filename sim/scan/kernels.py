@@ -374,7 +374,8 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
     ``tb`` and ``sb`` are scratch blocks.
 
     Phase: the exact double-double phase :math:`\\phi_p(k)` (as in :func:`phase_revs_kernel`) at the
-    block start, then :math:`\\phi_p(k) + i\\,\\hat r_p` for ``i < 256`` in float64, where
+    block's anchor ``k`` (the multiple of 256 at or before the first point, so that chunking never
+    changes a bit), then :math:`\\phi_p(k) + i\\,\\hat r_p` for ``i < 256`` in float64, where
     :math:`\\hat r_p = r_{h1} + r_{h2} + r_{lo}` rounded.  Against the exact :math:`\\phi_p(k+i)`
     this adds at most :math:`255\\,|\\hat r_p - r_p| + \\tfrac12\\mathrm{ulp}(255\\,r_p)
     \\le 255\\,|r_p|\\,2^{-52}` rev, e.g. 7e-17 rev for the Mid-40's fast prism
@@ -410,7 +411,9 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
     c0 = k % channel_count
     for i in range(m):
         channel[j0 + i] = channel_pattern[c0 + i]
-    # phases
+    # phases (the caller keeps a block within one 256-point cell: off + m <= 256)
+    off = k % _BLOCK
+    anchor = k - off
     if noise_on:
         for i in range(m):
             t = (k_f + _RAMP[i]) / rate_f
@@ -430,7 +433,9 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
             si = int(seg_f)
             cum_scale = 1.0
         for p in range(p_count):
-            base = _phase_rev_at(k, r_h1[p], r_h2[p], r_lo[p], phase0_rev[p])
+            # exact at the block's absolute anchor (a multiple of 256 at or before k), so that the
+            # phase of a point does not depend on where the caller's chunk began
+            base = _phase_rev_at(anchor, r_h1[p], r_h2[p], r_lo[p], phase0_rev[p])
             r_p = r_h1[p] + r_h2[p] + r_lo[p]
             row = revs[p]
             if noise_on:
@@ -439,11 +444,11 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
                 eps = noise_eps[si, p]
                 s_t = seg_f * segment_s
                 for ii in range(i, e):
-                    v = (base + _RAMP[ii] * r_p) + w * (cum + eps * (tb[ii] - s_t))
+                    v = (base + _RAMP[ii + off] * r_p) + w * (cum + eps * (tb[ii] - s_t))
                     row[ii] = v - math.floor(v)
             else:
                 for ii in range(i, e):
-                    v = base + _RAMP[ii] * r_p
+                    v = base + _RAMP[ii + off] * r_p
                     row[ii] = v - math.floor(v)
         i = e
 
@@ -457,7 +462,8 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
     ``trace_exact_kernel`` give together (paper Section III, Appendix B), without the (P, N) phase
     array, the per-point double-double phase and the per-point int64 division.
 
-    Per 256-ray block (:func:`_scan_block_setup`): the exact phase at the block start, then
+    Per 256-ray block, aligned to absolute multiples of 256 points (:func:`_scan_block_setup`): the
+    exact phase at the block's anchor, then
     ``+ i r_p`` in float64 (extra phase error <= 255 |r_p| 2^-52 rev, ~7e-17 rev at the Mid-40's
     speeds; the per-point kernel's is ~1e-15 rev), the piecewise-constant speed-noise phase error
     (same formula as ``add_speed_noise_kernel``; ``noise_on`` False skips it), exact times and the
@@ -502,8 +508,12 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
     channel_pattern = np.empty(_BLOCK + channel_count, dtype=np.uint8)
     for j in range(_BLOCK + channel_count):
         channel_pattern[j] = np.uint8(j % channel_count)
-    for j0 in range(0, n, _BLOCK):
-        m = min(_BLOCK, n - j0)
+    # Blocks start at absolute multiples of 256 points, so a point's phase (exact at its block's
+    # start, + i r inside) does not depend on how the caller chunks the scan: the same bits for the
+    # closed loop's 100 ms frames and the virtual lidar's packets.
+    j0 = 0
+    while j0 < n:
+        m = min(_BLOCK - (k0 + j0) % _BLOCK, n - j0)
         _scan_block_setup(k0 + j0, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
                           noise_eps, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb)
         for i in range(m):
@@ -550,3 +560,4 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
             out_dir[j0 + i, 1] = bx[i] * keep
             out_dir[j0 + i, 2] = by[i] * keep
             status[j0 + i] = np.uint8(bs[i])
+        j0 += m

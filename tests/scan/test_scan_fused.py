@@ -167,3 +167,20 @@ def test_scan_after_24_hours_has_the_exact_phase():
     got = model.scan(k0, 600)
     _, _, want, _ = _twin(model, k0, 600, False)
     assert np.max(np.linalg.norm(got.direction - want, axis=1)) < 1e-12
+
+
+@pytest.mark.parametrize("preset", ["mid40", "horizon"])
+def test_chunking_does_not_change_a_bit(preset):
+    # Blocks are anchored at absolute multiples of 256 points: the closed loop (100 ms frames) and
+    # the virtual lidar (packets of any size) must produce the very same directions.
+    def model():
+        return ScanModel(PRESETS[preset], speed_noise=SpeedNoise(sigma_frac=0.01, segment_s=0.0037),
+                         rng=np.random.default_rng(3))
+
+    k0, n = 123_457, 30_001
+    whole = model().scan(k0, n)
+    m = model()
+    cuts = [k0, k0 + 1, k0 + 97, k0 + 256 * 7 + 3, k0 + 20_000, k0 + n]
+    parts = [m.scan(a, b - a) for a, b in zip(cuts[:-1], cuts[1:])]
+    assert np.array_equal(np.concatenate([p.direction for p in parts]), whole.direction)
+    assert np.array_equal(np.concatenate([p.t_ns for p in parts]), whole.t_ns)
