@@ -281,7 +281,13 @@ class _Axis:
         if self._arrays is None:   # rebuilt after every command: one pass over the segments
             table = np.array([(s.t0, s.p0, s.v0, s.a, s.r) for s in self.segs], dtype=float)
             self._arrays = tuple(table.T.copy())
+            self._pieces = (np.ascontiguousarray(table[:, :4].T), bool(table[:, 4].any()))
         return self._arrays
+
+    def pieces(self) -> tuple[np.ndarray, bool]:
+        """All kept segments as a (4, S) table (t0, p0, v0, a) and whether any has ripple."""
+        self.arrays()
+        return self._pieces
 
     def eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         t0, p0, v0, a, r = self.arrays()
@@ -551,24 +557,23 @@ class PTS303H:
 
     def pose_segments(self, t0_s: float, t1_s: float) -> tuple[np.ndarray, np.ndarray] | None:
         """The exact motion over ``[t0_s, t1_s]`` as constant-acceleration pieces, or None if the
-        speed ripple is on there (then use :meth:`angles_at`).
+        speed ripple is on (then use :meth:`angles_at`).
 
         Returns ``(pan, tilt)``, each (4, S) float64: rows ``t_start_s, angle_deg, speed_deg_s,
-        accel_deg_s2`` of the pieces in force from ``t0_s`` on (the first starts at or before it);
+        accel_deg_s2`` of the kept pieces in time order (the one in force at ``t0_s`` among them;
+        read-only, shared until the next command);
         the angle at ``t`` in piece ``i`` is ``angle + speed d + accel d^2 / 2`` with
         ``d = t - t_start``, the very expression of :meth:`angles_at` (pan unwrapped).  Like
         :meth:`angles_at`, asking advances the model to ``t1_s``.
         """
         out = []
         for axis in (self._pan, self._tilt):
-            t0, p0, v0, a, r = axis.arrays()
-            i0 = int(np.searchsorted(t0, t0_s, side="right")) - 1
-            i1 = int(np.searchsorted(t0, t1_s, side="right"))
-            if i0 < 0:
-                raise ValueError(f"{axis.name}: time {t0_s} is before the kept history (starts {t0[0]})")
-            if r[i0:i1].any():
+            table, ripple = axis.pieces()
+            if table[0, 0] > t0_s:
+                raise ValueError(f"{axis.name}: time {t0_s} is before the kept history (starts {table[0, 0]})")
+            if ripple:
                 return None
-            out.append(np.stack([t0[i0:i1], p0[i0:i1], v0[i0:i1], a[i0:i1]]))
+            out.append(table)
         self.advance_to(t1_s)
         return out[0], out[1]
 

@@ -208,7 +208,8 @@ class ClosedLoop:
             n_steps = max(1, math.ceil((t1 - t0) / self._TRIG_NODE_S - 1e-9))
             wk.rotate_head_pieces_kernel(d_lidar, t_s, t0, (t1 - t0) / n_steps, n_steps + 1, pieces[0], pieces[1],
                                          d_world)
-            pan, tilt = self.head.angles_at(np.array([t_mid]))
+            pan = [wk.piece_angle_deg_kernel(pieces[0], t_mid)]    # the log's truth at mid-frame
+            tilt = [wk.piece_angle_deg_kernel(pieces[1], t_mid)]
         elif self.head_grid_s:
             # The frame's mid-time rides along (the log's truth).  Pan unwrapped: continuous between nodes.
             n_steps = max(1, math.ceil((t1 - t0) / self.head_grid_s - 1e-9))

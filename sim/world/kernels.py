@@ -341,10 +341,17 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
         spi = math.sin(pan_ref)
         cti = math.cos(tilt_ref)
         sti = math.sin(tilt_ref)
+        t_last = t_s[j_end - 1]
+        ip = _advance_piece(pan_pieces, ip, t_s[j])
+        it = _advance_piece(tilt_pieces, it, t_s[j])
+        # Usually no piece starts inside the interval: then the pieces are constants of the inner
+        # loop (which vectorises); otherwise the pointers advance point by point.
+        steady = (_advance_piece(pan_pieces, ip, t_last) == ip and _advance_piece(tilt_pieces, it, t_last) == it)
         for k in range(j, j_end):
             t = t_s[k]
-            ip = _advance_piece(pan_pieces, ip, t)
-            it = _advance_piece(tilt_pieces, it, t)
+            if not steady:
+                ip = _advance_piece(pan_pieces, ip, t)
+                it = _advance_piece(tilt_pieces, it, t)
             dp = _piece_angle_rad(pan_pieces, ip, t) - pan_ref
             dq = _piece_angle_rad(tilt_pieces, it, t) - tilt_ref
             dp2 = dp * dp
@@ -369,3 +376,12 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
 
 
 _RAD_PER_DEG = math.pi / 180.0
+
+
+@njit(cache=True)
+def piece_angle_deg_kernel(pieces, t):
+    """The angle [deg] at one time ``t`` from a head's pieces (see
+    :func:`rotate_head_pieces_kernel`): the head model's own expression, the same bits."""
+    i = _advance_piece(pieces, 0, t)
+    d = t - pieces[0, i]
+    return pieces[1, i] + pieces[2, i] * d + 0.5 * pieces[3, i] * d * d
