@@ -152,6 +152,51 @@ def _refract_flat(dx, dy, dz, eta, st):
     return eta * dx, eta * dy, math.sqrt(max(k, 0.0)), st
 
 
+@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+def _trace_prism(row, r0, m, bx, by, bz, bs, sa, ca, n_p, exit_tilted, flat_done):
+    """Refract the block's rays ``bx/by/bz`` (status ``bs``) through one prism at the angles
+    ``row[r0 + i]`` [rev]: flat face then tilted face, or the other way round; ``flat_done``: the
+    flat entry face was already applied (it does not depend on the prism angle)."""
+    inv_n = 1.0 / n_p
+    if flat_done:
+        for i in range(m):
+            s_t, c_t = _sincos_rev(row[r0 + i])
+            dx, dy, dz, st = _refract(bx[i], by[i], bz[i], -sa * c_t, -sa * s_t, ca, n_p, bs[i])
+            bx[i] = dx
+            by[i] = dy
+            bz[i] = dz
+            bs[i] = st
+    elif exit_tilted:
+        for i in range(m):
+            s_t, c_t = _sincos_rev(row[r0 + i])
+            dx, dy, dz, st = _refract_flat(bx[i], by[i], bz[i], inv_n, bs[i])
+            dx, dy, dz, st = _refract(dx, dy, dz, -sa * c_t, -sa * s_t, ca, n_p, st)
+            bx[i] = dx
+            by[i] = dy
+            bz[i] = dz
+            bs[i] = st
+    else:
+        for i in range(m):
+            s_t, c_t = _sincos_rev(row[r0 + i])
+            dx, dy, dz, st = _refract(bx[i], by[i], bz[i], sa * c_t, sa * s_t, ca, inv_n, bs[i])
+            dx, dy, dz, st = _refract_flat(dx, dy, dz, n_p, st)
+            bx[i] = dx
+            by[i] = dy
+            bz[i] = dz
+            bs[i] = st
+
+
+@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+def _store_block(out_dir, status, j0, m, bx, by, bz, bs):
+    """Optics frame (x, y, z along the axis) -> lidar frame (X fwd = z); failed rays zeroed."""
+    for i in range(m):
+        keep = 1.0 if bs[i] == 0.0 else 0.0
+        out_dir[j0 + i, 0] = bz[i] * keep
+        out_dir[j0 + i, 1] = bx[i] * keep
+        out_dir[j0 + i, 2] = by[i] * keep
+        status[j0 + i] = np.uint8(bs[i])
+
+
 @njit(cache=True, fastmath=_FAST, error_model="numpy")
 def trace_exact_kernel(revs, channel, incident, sin_wedge, cos_wedge, index, exit_tilted, out_dir, status):
     """Exact refraction of each ray through all prisms (direction only), paper Appendix B.
@@ -190,35 +235,9 @@ def trace_exact_kernel(revs, channel, incident, sin_wedge, cos_wedge, index, exi
             bz[i] = incident[c, 2]
             bs[i] = 0.0
         for p in range(p_count):
-            row = revs[p]
-            sa = sin_wedge[p]
-            ca = cos_wedge[p]
-            n_p = index[p]
-            inv_n = 1.0 / n_p
-            if exit_tilted[p]:
-                for i in range(m):
-                    s_t, c_t = _sincos_rev(row[j0 + i])
-                    dx, dy, dz, st = _refract_flat(bx[i], by[i], bz[i], inv_n, bs[i])
-                    dx, dy, dz, st = _refract(dx, dy, dz, -sa * c_t, -sa * s_t, ca, n_p, st)
-                    bx[i] = dx
-                    by[i] = dy
-                    bz[i] = dz
-                    bs[i] = st
-            else:
-                for i in range(m):
-                    s_t, c_t = _sincos_rev(row[j0 + i])
-                    dx, dy, dz, st = _refract(bx[i], by[i], bz[i], sa * c_t, sa * s_t, ca, inv_n, bs[i])
-                    dx, dy, dz, st = _refract_flat(dx, dy, dz, n_p, st)
-                    bx[i] = dx
-                    by[i] = dy
-                    bz[i] = dz
-                    bs[i] = st
-        for i in range(m):
-            keep = 1.0 if bs[i] == 0.0 else 0.0
-            out_dir[j0 + i, 0] = bz[i] * keep
-            out_dir[j0 + i, 1] = bx[i] * keep
-            out_dir[j0 + i, 2] = by[i] * keep
-            status[j0 + i] = np.uint8(bs[i])
+            _trace_prism(revs[p], j0, m, bx, by, bz, bs, sin_wedge[p], cos_wedge[p], index[p], exit_tilted[p],
+                         False)
+        _store_block(out_dir, status, j0, m, bx, by, bz, bs)
 
 
 @njit(cache=True, fastmath=_FAST, error_model="numpy")
@@ -523,41 +542,7 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
             bz[i] = first[c, 2]
             bs[i] = first[c, 3]
         for p in range(p_count):
-            row = revs[p]
-            sa = sin_wedge[p]
-            ca = cos_wedge[p]
-            n_p = index[p]
-            inv_n = 1.0 / n_p
-            if p == 0 and pre:
-                for i in range(m):
-                    s_t, c_t = _sincos_rev(row[i])
-                    dx, dy, dz, st = _refract(bx[i], by[i], bz[i], -sa * c_t, -sa * s_t, ca, n_p, bs[i])
-                    bx[i] = dx
-                    by[i] = dy
-                    bz[i] = dz
-                    bs[i] = st
-            elif exit_tilted[p]:
-                for i in range(m):
-                    s_t, c_t = _sincos_rev(row[i])
-                    dx, dy, dz, st = _refract_flat(bx[i], by[i], bz[i], inv_n, bs[i])
-                    dx, dy, dz, st = _refract(dx, dy, dz, -sa * c_t, -sa * s_t, ca, n_p, st)
-                    bx[i] = dx
-                    by[i] = dy
-                    bz[i] = dz
-                    bs[i] = st
-            else:
-                for i in range(m):
-                    s_t, c_t = _sincos_rev(row[i])
-                    dx, dy, dz, st = _refract(bx[i], by[i], bz[i], sa * c_t, sa * s_t, ca, inv_n, bs[i])
-                    dx, dy, dz, st = _refract_flat(dx, dy, dz, n_p, st)
-                    bx[i] = dx
-                    by[i] = dy
-                    bz[i] = dz
-                    bs[i] = st
-        for i in range(m):
-            keep = 1.0 if bs[i] == 0.0 else 0.0
-            out_dir[j0 + i, 0] = bz[i] * keep
-            out_dir[j0 + i, 1] = bx[i] * keep
-            out_dir[j0 + i, 2] = by[i] * keep
-            status[j0 + i] = np.uint8(bs[i])
+            _trace_prism(revs[p], 0, m, bx, by, bz, bs, sin_wedge[p], cos_wedge[p], index[p], exit_tilted[p],
+                         p == 0 and pre)
+        _store_block(out_dir, status, j0, m, bx, by, bz, bs)
         j0 += m

@@ -259,28 +259,36 @@ def rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0_s, dt_s, pan_rad, tilt_rad, out
             f = (t_s[k] - t0_s) * inv_dt - i
             dp = f * dpan
             dq = f * dtilt
-            dp2 = dp * dp
-            dq2 = dq * dq
-            cdp = 1.0 - dp2 * (0.5 - dp2 * _INV24)
-            sdp = dp * (1.0 - dp2 * (_INV6 - dp2 * _INV120))
-            cdq = 1.0 - dq2 * (0.5 - dq2 * _INV24)
-            sdq = dq * (1.0 - dq2 * (_INV6 - dq2 * _INV120))
-            cp = cpi * cdp - spi * sdp
-            sp = spi * cdp + cpi * sdp
-            ct = cti * cdq - sti * sdq
-            st = sti * cdq + cti * sdq
-            x = d_lidar[k, 0]
-            y = d_lidar[k, 1]
-            z = d_lidar[k, 2]
-            x1 = x * ct - z * st
-            z1 = x * st + z * ct
-            out[k, 0] = x1 * cp - y * sp
-            out[k, 1] = x1 * sp + y * cp
-            out[k, 2] = z1
+            _turn_beam(d_lidar, out, k, cpi, spi, cti, sti, dp, dq)
         j = j_end
 
 
 _INV6, _INV24, _INV120 = 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0
+
+
+@njit(cache=True, inline="always")
+def _turn_beam(d_lidar, out, k, cpi, spi, cti, sti, dp, dq):
+    """``out[k]`` = beam ``k`` turned by pan ``p + dp`` and tilt ``q + dq`` given the cos/sin of the
+    node angles ``p, q`` and small steps (|d| < 2e-3 rad): ``cos d = 1 - d^2/2 + d^4/24``,
+    ``sin d = d - d^3/6 + d^5/120`` (truncation < 1e-20), then the angle-sum formulas."""
+    dp2 = dp * dp
+    dq2 = dq * dq
+    cdp = 1.0 - dp2 * (0.5 - dp2 * _INV24)
+    sdp = dp * (1.0 - dp2 * (_INV6 - dp2 * _INV120))
+    cdq = 1.0 - dq2 * (0.5 - dq2 * _INV24)
+    sdq = dq * (1.0 - dq2 * (_INV6 - dq2 * _INV120))
+    cp = cpi * cdp - spi * sdp
+    sp = spi * cdp + cpi * sdp
+    ct = cti * cdq - sti * sdq
+    st = sti * cdq + cti * sdq
+    x = d_lidar[k, 0]
+    y = d_lidar[k, 1]
+    z = d_lidar[k, 2]
+    x1 = x * ct - z * st
+    z1 = x * st + z * ct
+    out[k, 0] = x1 * cp - y * sp
+    out[k, 1] = x1 * sp + y * cp
+    out[k, 2] = z1
 
 
 @njit(cache=True, inline="always")
@@ -354,24 +362,7 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
                 it = _advance_piece(tilt_pieces, it, t)
             dp = _piece_angle_rad(pan_pieces, ip, t) - pan_ref
             dq = _piece_angle_rad(tilt_pieces, it, t) - tilt_ref
-            dp2 = dp * dp
-            dq2 = dq * dq
-            cdp = 1.0 - dp2 * (0.5 - dp2 * _INV24)
-            sdp = dp * (1.0 - dp2 * (_INV6 - dp2 * _INV120))
-            cdq = 1.0 - dq2 * (0.5 - dq2 * _INV24)
-            sdq = dq * (1.0 - dq2 * (_INV6 - dq2 * _INV120))
-            cp = cpi * cdp - spi * sdp
-            sp = spi * cdp + cpi * sdp
-            ct = cti * cdq - sti * sdq
-            st = sti * cdq + cti * sdq
-            x = d_lidar[k, 0]
-            y = d_lidar[k, 1]
-            z = d_lidar[k, 2]
-            x1 = x * ct - z * st
-            z1 = x * st + z * ct
-            out[k, 0] = x1 * cp - y * sp
-            out[k, 1] = x1 * sp + y * cp
-            out[k, 2] = z1
+            _turn_beam(d_lidar, out, k, cpi, spi, cti, sti, dp, dq)
         j = j_end
 
 
