@@ -245,10 +245,7 @@ def rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0_s, dt_s, pan_rad, tilt_rad, out
     # constant in the inner loop, which LLVM vectorises; the per-point formulas are unchanged.
     j = 0
     while j < n:
-        i = _grid_interval((t_s[j] - t0_s) * inv_dt, n_grid)
-        j_end = j + 1
-        while j_end < n and _grid_interval((t_s[j_end] - t0_s) * inv_dt, n_grid) == i:
-            j_end += 1
+        i, j_end = _interval_run(t_s, j, t0_s, inv_dt, n_grid)
         cpi = math.cos(pan_rad[i])
         spi = math.sin(pan_rad[i])
         cti = math.cos(tilt_rad[i])
@@ -289,6 +286,16 @@ def _turn_beam(d_lidar, out, k, cpi, spi, cti, sti, dp, dq):
     out[k, 0] = x1 * cp - y * sp
     out[k, 1] = x1 * sp + y * cp
     out[k, 2] = z1
+
+
+@njit(cache=True, inline="always")
+def _interval_run(t_s, j, t0_s, inv_dt, n_grid):
+    """The grid interval of point ``j`` and the end of the run of points ``j ..`` in it."""
+    i = _grid_interval((t_s[j] - t0_s) * inv_dt, n_grid)
+    j_end = j + 1
+    while j_end < t_s.shape[0] and _grid_interval((t_s[j_end] - t0_s) * inv_dt, n_grid) == i:
+        j_end += 1
+    return i, j_end
 
 
 @njit(cache=True, inline="always")
@@ -336,10 +343,7 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
     it = 0
     j = 0
     while j < n:
-        i = _grid_interval((t_s[j] - t0_s) * inv_dt, n_nodes)
-        j_end = j + 1
-        while j_end < n and _grid_interval((t_s[j_end] - t0_s) * inv_dt, n_nodes) == i:
-            j_end += 1
+        i, j_end = _interval_run(t_s, j, t0_s, inv_dt, n_nodes)
         tn = t0_s + i * dt_s
         ip_node = _advance_piece(pan_pieces, ip_node, tn)
         it_node = _advance_piece(tilt_pieces, it_node, tn)
