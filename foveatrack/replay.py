@@ -54,6 +54,9 @@ class ReplayResult:
     comparison: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
     recorded_metrics: dict = field(default_factory=dict)
+    # Dead-reckoned (pan_deg, tilt_deg) once the head has settled after the last command sent
+    # (2 s later): where the run left the head, by the tracker's own reckoning.
+    final_pose_deg: tuple[float, float] | None = None
 
     def summary(self) -> dict:
         return {"source": self.source, "path": self.path, "config": self.config, "frames": len(self.frames["t_end_s"]),
@@ -238,6 +241,8 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
         for c in after:   # watchdog / shutdown STOPs, in the order they were sent
             tracker.command_sent(float(c["send_t_s"]), HeadCommand(c["pan_dir"], c["pan_byte"], c["tilt_dir"],
                                                                     c["tilt_byte"]))
+    t_settled = (tracker.recon.last_send_t_s or 0.0) + 2.0
+    final_pose = tuple(float(a) for a in tracker.recon.angles_at(t_settled)[:2])
     frames = F.arrays()
     recorded = {k: np.asarray(v) for k, v in R.items()}
     recorded["det_xyz"] = recorded["det_xyz"].reshape(-1, 3)
@@ -245,7 +250,8 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     if has_truth:
         truth = {k: np.asarray(v) for k, v in T.items()}
         truth["target_xyz_m"] = truth["target_xyz_m"].reshape(-1, 3)
-    res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth)
+    res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth,
+                       final_pose_deg=final_pose)
     res.comparison = compare(frames, recorded)
     res.metrics = replay_metrics(frames, truth, cfg)
     res.recorded_metrics = _recorded_metrics(recorded, truth, rec_cfg, frames)
