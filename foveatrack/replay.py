@@ -60,7 +60,8 @@ class ReplayResult:
 
     def summary(self) -> dict:
         return {"source": self.source, "path": self.path, "config": self.config, "frames": len(self.frames["t_end_s"]),
-                "metrics": self.metrics, "comparison": self.comparison, "recorded_metrics": self.recorded_metrics}
+                "metrics": self.metrics, "comparison": self.comparison, "recorded_metrics": self.recorded_metrics,
+                "final_pose_deg": None if self.final_pose_deg is None else list(self.final_pose_deg)}
 
 
 def load_tracker_table(path: str | os.PathLike) -> dict:
