@@ -198,3 +198,24 @@ def test_exact_head_pose_from_pieces_matches_asking_the_head_at_every_point():
     np.testing.assert_allclose(fast["head_pan_deg"], ref["head_pan_deg"], atol=1e-12)
     np.testing.assert_allclose(fast["estimate_xyz"], ref["estimate_xyz"], atol=1e-9)
     assert np.abs(fast["head_pan_deg"]).max() > 1.0          # the head did move during the run
+
+
+def test_sunlight_false_alarms_are_added_in_time_order_and_touch_nothing_else():
+    clean = short("fig14a-frozen-pass", 0.5, effects=frozenset())
+    sunny = replace(clean, effects=frozenset({"sunlight"}),
+                    effect_params={**clean.effect_params, "sunlight_rate": 0.01, "sunlight_max_range_m": 40.0})
+    frames = {}
+    for name, scene in (("clean", clean), ("sunny", sunny)):
+        got = []
+        ClosedLoop(scene, frame_hook=lambda f, out, loop: got.append(f)).run()
+        frames[name] = got
+    n_extra = 0
+    for a, b in zip(frames["clean"], frames["sunny"]):
+        assert np.all(np.diff(b.t_ns) >= 0)                                   # still in time order
+        false = b.reflectivity == 1
+        assert np.array_equal(b.xyz[~false], a.xyz) and np.array_equal(b.t_ns[~false], a.t_ns)
+        r = np.linalg.norm(b.xyz[false], axis=1)
+        assert np.all((r >= 0.5) & (r <= 40.0))
+        n_extra += int(false.sum())
+    rays = 0.5 * clean.optics.point_rate_hz                                    # all rays leave the prisms
+    assert abs(n_extra - 0.01 * rays) < 5 * np.sqrt(0.01 * rays)               # binomial, 5 sigma
