@@ -303,7 +303,7 @@ class _Axis:
         this for every frame)."""
         t0, p0, v0, a, r = self.arrays()
         idx = self._segment_of(t0, t)
-        if r[idx[0]:idx[-1] + 1].any():
+        if self._pieces[1]:   # some kept segment has ripple (times may come in any order)
             return _pos(t0[idx], p0[idx], v0[idx], a[idx], r[idx], self.omega, self.phi, t)
         d = t - t0[idx]
         return p0[idx] + v0[idx] * d + 0.5 * a[idx] * d * d   # _pos's order: the same bits

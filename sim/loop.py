@@ -221,7 +221,7 @@ class ClosedLoop:
         else:
             pan, tilt = self.head.angles_at(np.append(t_s, t_mid), wrap_pan=False)
             wk.rotate_pan_tilt_kernel(d_lidar, np.radians(pan[:-1]), np.radians(tilt[:-1]), d_world)
-        self._mid_pose_deg = (float(wrap_pan_deg(pan[-1])), float(tilt[-1]))
+        mid_pose_deg = (float(wrap_pan_deg(pan[-1])), float(tilt[-1]))   # the log's truth
         # 4-5. ray casting and the effects the scene lists.
         xyz, pt_ns, refl_byte, on_target = self.sensor.returns(chunk, d_world, t0, t1)
         frame = Frame(t0, t1, xyz, pt_ns, refl_byte)
@@ -247,16 +247,17 @@ class ClosedLoop:
                 # reports nothing), so here they are only counted; a reply parser must skip them.
                 self.echo_bytes += sum(len(b) for _, b in self.uart.pop_echo())
             self.last_sent = (send_t, data)
-        self._log(t0, t1, frame, int(on_target.sum()), out)
+        self._log(t0, t1, frame, int(on_target.sum()), out, mid_pose_deg)
         if self.frame_hook is not None:
             self.frame_hook(frame, out, self)
         return frame, out
 
     # ----------------------------------------------------------------------------------------------
-    def _log(self, t0, t1, frame, n_on_target, out):
+    def _log(self, t0, t1, frame, n_on_target, out, mid_pose_deg):
+        """Append a frame; ``mid_pose_deg``: the head's true (pan, tilt) at mid-frame (from step 3)."""
         L = self.log
         t_mid = 0.5 * (t0 + t1)
-        pan, tilt = self._mid_pose_deg   # the true pose at t_mid, from step 3
+        pan, tilt = mid_pose_deg
         L.t_end_s.append(t1)
         L.points.append(frame.n_points)
         L.points_on_target.append(n_on_target)

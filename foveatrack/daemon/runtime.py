@@ -157,8 +157,7 @@ class Daemon:
         self.lat_ms: list[float] = []
         self.frame_id = 0
         self.last_out = None
-        self._compute_est_s = 0.002
-        self._compute_s: deque = deque([0.002], maxlen=9)
+        self._compute_s: deque = deque([0.002], maxlen=9)   # recent compute times [s]
         self._last_send_t = -math.inf
         self.recorder: RecordingThread | None = None
         self.recording_path = None
@@ -248,7 +247,7 @@ class Daemon:
         frame = strip_no_return(frame)
         now_s = self.sensor_now_s()
         send_t = self._send_time((frame.t_end_s if now_s is None else max(now_s, frame.t_end_s))
-                                 + self._compute_est_s)
+                                 + float(np.median(self._compute_s)))
         out = self.tracker.process(frame, send_t_s=send_t)
         fid = self.frame_id
         self.frame_id += 1
@@ -268,7 +267,6 @@ class Daemon:
         # frame that waited in a backlog, or one slow first frame, would otherwise push the later
         # commands' dead-reckoned times ahead of their real ones (seen: 0.2 s, 0.5 deg of tilt).
         self._compute_s.append(t_written - t_begin)
-        self._compute_est_s = float(np.median(self._compute_s))
         lat = None
         if self.rx.offset_s is not None:
             t_last = frame.t_ns[-1] * 1e-9 if frame.n_points else frame.t_end_s

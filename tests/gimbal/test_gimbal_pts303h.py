@@ -300,3 +300,14 @@ def test_parameter_errors_are_user_errors():
         HeadParams.for_family("pts-999")
     assert HeadParams.for_family("heavy-worm").tilt_speed_max_deg_s == 15.0
     assert set(HEAD_FAMILIES) >= {"pts-303", "heavy-worm"}
+
+
+def test_times_in_any_order_give_the_same_angles_with_ripple():
+    h = PTS303H(replace(PARAMS, history_s=100.0), unit_seed=3)
+    h.receive(P.encode_pan_tilt(1, 1, 0x3F, 1, 0x20), 0.5)
+    h.receive(P.encode_pan_tilt(1, 0, 0, -1, 0x10), 2.5)
+    t = np.linspace(0.0, 4.0, 401)
+    pan, tilt = h.angles_at(t)
+    pan_r, tilt_r = h.angles_at(t[::-1])
+    assert np.array_equal(pan_r[::-1], pan) and np.array_equal(tilt_r[::-1], tilt)
+    assert np.array_equal(pan, P.wrap_pan_deg(h._pan.eval(t)[0]))   # ripple included
