@@ -502,8 +502,27 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
     incident, sin_wedge, cos_wedge, index, exit_tilted : as for ``trace_exact_kernel``
     t_ns : (N,) int64 [ns]; channel : (N,) uint8; out_dir : (N, 3) float64; status : (N,) uint8  outputs
     """
-    p_count = r_h1.shape[0]
     n = out_dir.shape[0]
+    revs, tb, sb, bx, by, bz, bs, first, pre, channel_pattern = _scan_scratch(r_h1.shape[0], channel_count,
+                                                                                 incident, index, exit_tilted)
+    # Blocks start at absolute multiples of 256 points, so a point's phase (exact at its block's
+    # start, + i r inside) does not depend on how the caller chunks the scan: the same bits for the
+    # closed loop's 100 ms frames and the virtual lidar's packets.
+    j0 = 0
+    while j0 < n:
+        m = min(_BLOCK - (k0 + j0) % _BLOCK, n - j0)
+        _scan_block(k0 + j0, m, j0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
+                    noise_eps, rev_per_s, channel_count, sin_wedge, cos_wedge, index, exit_tilted,
+                    channel_pattern, first, pre, revs, tb, sb, t_ns, channel, bx, by, bz, bs)
+        _store_block(out_dir, status, j0, m, bx, by, bz, bs)
+        j0 += m
+
+
+@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+def _scan_scratch(p_count, channel_count, incident, index, exit_tilted):
+    """Scratch blocks of :func:`scan_exact_kernel` and what it computes once per call: each channel's
+    direction after a first prism's flat entry face (``first``, with ``pre`` telling whether that face
+    comes first) and the channel pattern ``j mod C``."""
     revs = np.empty((p_count, _BLOCK))
     tb = np.empty(_BLOCK)
     sb = np.empty(_BLOCK)
@@ -527,22 +546,24 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
     channel_pattern = np.empty(_BLOCK + channel_count, dtype=np.uint8)
     for j in range(_BLOCK + channel_count):
         channel_pattern[j] = np.uint8(j % channel_count)
-    # Blocks start at absolute multiples of 256 points, so a point's phase (exact at its block's
-    # start, + i r inside) does not depend on how the caller chunks the scan: the same bits for the
-    # closed loop's 100 ms frames and the virtual lidar's packets.
-    j0 = 0
-    while j0 < n:
-        m = min(_BLOCK - (k0 + j0) % _BLOCK, n - j0)
-        _scan_block_setup(k0 + j0, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
-                          noise_eps, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb)
-        for i in range(m):
-            c = channel[j0 + i]
-            bx[i] = first[c, 0]
-            by[i] = first[c, 1]
-            bz[i] = first[c, 2]
-            bs[i] = first[c, 3]
-        for p in range(p_count):
-            _trace_prism(revs[p], 0, m, bx, by, bz, bs, sin_wedge[p], cos_wedge[p], index[p], exit_tilted[p],
-                         p == 0 and pre)
-        _store_block(out_dir, status, j0, m, bx, by, bz, bs)
-        j0 += m
+    return revs, tb, sb, bx, by, bz, bs, first, pre, channel_pattern
+
+
+@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+def _scan_block(k, m, j0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum, noise_eps,
+                rev_per_s, channel_count, sin_wedge, cos_wedge, index, exit_tilted, channel_pattern, first, pre,
+                revs, tb, sb, t_ns, channel, bx, by, bz, bs):
+    """One block of :func:`scan_exact_kernel` (``m`` points from ``k``, within one 256-point cell):
+    times and channels at ``j0 ..``, and the traced rays left in ``bx, by, bz`` (optics frame) with
+    their status in ``bs``."""
+    _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
+                      noise_eps, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb)
+    for i in range(m):
+        c = channel[j0 + i]
+        bx[i] = first[c, 0]
+        by[i] = first[c, 1]
+        bz[i] = first[c, 2]
+        bs[i] = first[c, 3]
+    for p in range(revs.shape[0]):
+        _trace_prism(revs[p], 0, m, bx, by, bz, bs, sin_wedge[p], cos_wedge[p], index[p], exit_tilted[p],
+                     p == 0 and pre)
