@@ -189,12 +189,14 @@ def _trace_prism(row, r0, m, bx, by, bz, bs, sa, ca, n_p, exit_tilted, flat_done
 @njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
 def _store_block(out_dir, status, j0, m, bx, by, bz, bs):
     """Optics frame (x, y, z along the axis) -> lidar frame (X fwd = z); failed rays zeroed."""
+    out_blk = out_dir[j0:j0 + m]
+    st_blk = status[j0:j0 + m]
     for i in range(m):
         keep = 1.0 if bs[i] == 0.0 else 0.0
-        out_dir[j0 + i, 0] = bz[i] * keep
-        out_dir[j0 + i, 1] = bx[i] * keep
-        out_dir[j0 + i, 2] = by[i] * keep
-        status[j0 + i] = np.uint8(bs[i])
+        out_blk[i, 0] = bz[i] * keep
+        out_blk[i, 1] = bx[i] * keep
+        out_blk[i, 2] = by[i] * keep
+        st_blk[i] = np.uint8(bs[i])
 
 
 @njit(cache=True, fastmath=_FAST, error_model="numpy")
@@ -424,12 +426,17 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
     q2 = num // rate_hz
     t_base = q * _NS_PER_S + q2
     r0 = float(num - q2 * rate_hz)
+    # (Loops index slices from 0: numba's wrap-around test on an index like j0 + i, which might be
+    # negative as far as the compiler knows, stops LLVM vectorising a loop.)
+    t_blk = t_ns[j0:j0 + m]
     for i in range(m):
-        t_ns[j0 + i] = t_base + np.int64(math.floor((r0 + _RAMP[i] * 1e9) / rate_f))
+        t_blk[i] = t_base + np.int64(math.floor((r0 + _RAMP[i] * 1e9) / rate_f))
     # channels: (k + i) mod C read from the pattern ``channel_pattern[j] = j mod C`` at offset k mod C
     c0 = k % channel_count
+    ch_blk = channel[j0:j0 + m]
+    pat = channel_pattern[c0:c0 + m]
     for i in range(m):
-        channel[j0 + i] = channel_pattern[c0 + i]
+        ch_blk[i] = pat[i]
     # phases (the caller keeps a block within one 256-point cell: off + m <= 256)
     off = k % _BLOCK
     anchor = k - off
@@ -462,13 +469,18 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
                 cum = noise_cum[si, p]
                 eps = noise_eps[si, p]
                 s_t = seg_f * segment_s
-                for ii in range(i, e):
-                    v = (base + _RAMP[ii + off] * r_p) + w * (cum + eps * (tb[ii] - s_t))
-                    row[ii] = v - math.floor(v)
+                row_r = row[i:e]
+                ramp_r = _RAMP[i + off:e + off]
+                tb_r = tb[i:e]
+                for ii in range(e - i):
+                    v = (base + ramp_r[ii] * r_p) + w * (cum + eps * (tb_r[ii] - s_t))
+                    row_r[ii] = v - math.floor(v)
             else:
-                for ii in range(i, e):
-                    v = base + _RAMP[ii + off] * r_p
-                    row[ii] = v - math.floor(v)
+                row_r = row[i:e]
+                ramp_r = _RAMP[i + off:e + off]
+                for ii in range(e - i):
+                    v = base + ramp_r[ii] * r_p
+                    row_r[ii] = v - math.floor(v)
         i = e
 
 
@@ -558,8 +570,9 @@ def _scan_block(k, m, j0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
     their status in ``bs``."""
     _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
                       noise_eps, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb)
+    ch_blk = channel[j0:j0 + m]
     for i in range(m):
-        c = channel[j0 + i]
+        c = ch_blk[i]
         bx[i] = first[c, 0]
         by[i] = first[c, 1]
         bz[i] = first[c, 2]
