@@ -227,9 +227,10 @@ def unit_speed_table(
 # one axis: a list of exact segments
 # ------------------------------------------------------------------------------------------------
 _INF = math.inf
+_RTOL = 4 * np.finfo(float).eps   # brentq's tightest relative tolerance
 
 
-@dataclass
+@dataclass(slots=True)
 class _Seg:
     t0: float
     t1: float
@@ -274,9 +275,9 @@ class _Axis:
 
     ``segs`` changes only through :meth:`prune`, :meth:`_cut` and :meth:`_append`, which keep a
     mirror of the segments' ``(t0, p0, v0, a, r)`` in the columns ``_lo ..`` of ``_cols`` (a
-    segment's fields other than ``t1`` never change once appended), so the tables of
-    :meth:`arrays` / :meth:`pieces` are one slice copy when the motion changed, and reused while
-    it has not.
+    segment's fields other than ``t1`` never change once appended) and the number of kept
+    segments with ripple, so the tables of :meth:`arrays` / :meth:`pieces` are one slice copy when
+    the motion changed (``_table`` None), and reused while it has not.
     """
 
     _COLS0 = 64
@@ -289,10 +290,16 @@ class _Axis:
         self.phi = phi
         self.segs: list[_Seg] = []
         self.target_speed = 0.0
-        self._cols = np.empty((5, self._COLS0))
+        self._set_cols(np.empty((5, self._COLS0)))
         self._lo = 0
-        self._arrays = None
+        self._n_ripple = 0   # kept segments with r != 0
+        self._table = None   # (5, S) copy of the mirror, None after a change
         self._append(_Seg(t_start, _INF, p0, 0.0, 0.0, 0.0))
+
+    def _set_cols(self, cols: np.ndarray) -> None:
+        self._cols = cols
+        self._cap = cols.shape[1]
+        self._mv = memoryview(cols).cast("B").cast("d")   # flat: element (k, j) at k * cap + j
 
     # -- evaluation ------------------------------------------------------------------------
     def _find(self, t: float) -> int:
@@ -308,18 +315,23 @@ class _Axis:
         p = _pos1(s.t0, s.p0, s.v0, s.a, s.r, self.omega, self.phi, t)
         return p, s.v0 + s.a * (t - s.t0), s
 
-    def arrays(self):
-        """The kept segments as five rows ``(t0, p0, v0, a, r)``; rebuilt after each change of the
-        motion (one slice copy of the mirror), shared until the next."""
-        if self._arrays is None:
+    def _tables(self) -> None:
+        if self._table is None:   # after a change of the motion: one slice copy of the mirror
             table = self._cols[:, self._lo:self._lo + len(self.segs)].copy()
-            self._arrays = tuple(table)
-            self._pieces = (table[:4], bool(table[4].any()))
+            self._table = table
+            self._arrays = None
+            self._pieces = (table[:4], self._n_ripple > 0)
+
+    def arrays(self):
+        """The kept segments as five rows ``(t0, p0, v0, a, r)``, shared until the motion changes."""
+        self._tables()
+        if self._arrays is None:
+            self._arrays = tuple(self._table)
         return self._arrays
 
     def pieces(self) -> tuple[np.ndarray, bool]:
         """All kept segments as a (4, S) table (t0, p0, v0, a) and whether any has ripple."""
-        self.arrays()
+        self._tables()
         return self._pieces
 
     def eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -336,7 +348,7 @@ class _Axis:
         this for every frame)."""
         t0, p0, v0, a, r = self.arrays()
         idx = self._segment_of(t0, t)
-        if self._pieces[1]:   # some kept segment has ripple (times may come in any order)
+        if self._n_ripple:   # some kept segment has ripple (times may come in any order)
             return _pos(t0[idx], p0[idx], v0[idx], a[idx], r[idx], self.omega, self.phi, t)
         d = t - t0[idx]
         return p0[idx] + v0[idx] * d + 0.5 * a[idx] * d * d   # _pos's order: the same bits
@@ -352,17 +364,25 @@ class _Axis:
     def prune(self, t_keep: float) -> None:
         segs = self.segs
         while len(segs) > 1 and segs[1].t0 <= t_keep and segs[0].t1 < t_keep:
-            segs.pop(0)
+            if segs.pop(0).r != 0:
+                self._n_ripple -= 1
             self._lo += 1
-            self._arrays = None
+            self._table = None
 
     # -- commands --------------------------------------------------------------------------
     def _cut(self, te: float) -> tuple[float, float, _Seg]:
         """State at ``te``; forget the planned segments after it (the next plan starts there)."""
+        segs = self.segs
         i = self._find(te)
-        p, v, s = self.state(te)
-        del self.segs[i + 1:]
-        self._arrays = None
+        s = segs[i]
+        p = _pos1(s.t0, s.p0, s.v0, s.a, s.r, self.omega, self.phi, te)
+        v = s.v0 + s.a * (te - s.t0)
+        if i + 1 < len(segs):
+            for dropped in segs[i + 1:]:
+                if dropped.r != 0:
+                    self._n_ripple -= 1
+            del segs[i + 1:]
+            self._table = None
         return p, v, s
 
     def set_speed(self, te: float, v_target: float, ripple: float) -> None:
@@ -447,20 +467,30 @@ class _Axis:
     def _append(self, s: _Seg) -> None:
         segs = self.segs
         if segs and segs[-1].t0 >= s.t0:  # a zero-length predecessor: replace it
-            segs.pop()
+            if segs.pop().r != 0:
+                self._n_ripple -= 1
         if segs:
             segs[-1].t1 = s.t0
         segs.append(s)
+        if s.r != 0:
+            self._n_ripple += 1
         n = len(segs)
-        cols = self._cols
-        if self._lo + n > cols.shape[1]:   # out of columns: move the kept ones to the front
-            if 2 * n > cols.shape[1]:
-                cols = np.empty((5, 2 * cols.shape[1]))
+        cap = self._cap
+        if self._lo + n > cap:   # out of columns: move the kept ones to the front (or grow)
+            cols = np.empty((5, 2 * cap)) if 2 * n > cap else self._cols
             cols[:, :n - 1] = self._cols[:, self._lo:self._lo + n - 1]
-            self._cols = cols
+            self._mv.release()
+            self._set_cols(cols)
             self._lo = 0
-        cols[:, self._lo + n - 1] = (s.t0, s.p0, s.v0, s.a, s.r)
-        self._arrays = None
+            cap = self._cap
+        j = self._lo + n - 1
+        mv = self._mv
+        mv[j] = s.t0
+        mv[cap + j] = s.p0
+        mv[2 * cap + j] = s.v0
+        mv[3 * cap + j] = s.a
+        mv[4 * cap + j] = s.r
+        self._table = None
 
     def _stop_hit(self, s: _Seg):
         lo, hi = self.stops
@@ -482,7 +512,7 @@ class _Axis:
             t_end = s.t1
         if side * f(t_end) < 0:
             return None
-        t_hit = brentq(f, s.t0, t_end, xtol=1e-13, rtol=4 * np.finfo(float).eps, maxiter=200)
+        t_hit = brentq(f, s.t0, t_end, xtol=1e-13, rtol=_RTOL, maxiter=200)
         return t_hit, side, stop
 
 
