@@ -301,6 +301,15 @@ class _Axis:
         self._cap = cols.shape[1]
         self._mv = memoryview(cols).cast("B").cast("d")   # flat: element (k, j) at k * cap + j
 
+    def __getstate__(self):   # a memoryview does not pickle / deepcopy: rebuilt from _cols
+        state = self.__dict__.copy()
+        del state["_mv"]
+        return state
+
+    def __setstate__(self, state) -> None:
+        self.__dict__.update(state)
+        self._set_cols(self._cols)
+
     # -- evaluation ------------------------------------------------------------------------
     def _find(self, t: float) -> int:
         for i in range(len(self.segs) - 1, -1, -1):

@@ -9,6 +9,8 @@
 * the UART's numpy-free timing without random effects vs its numpy route.
 """
 
+import copy
+import pickle
 import random
 
 import numpy as np
@@ -215,3 +217,16 @@ def test_uart_timing_without_random_effects_equals_the_numpy_route(seed, baud, e
         assert plain.line_free_at_s.hex() == numpy_route.line_free_at_s.hex()
         assert plain.pop_echo() == numpy_route.pop_echo()
     assert plain.bytes_sent == numpy_route.bytes_sent
+
+
+def test_a_head_still_pickles_and_deep_copies_and_the_copy_runs_on_identically():
+    h = PTS303H(HeadParams(ripple_rel=0.0), tilt0_deg=10.0)
+    h.receive(P.encode_pan_tilt(1, 1, 0x30, -1, 0x20), 0.1)
+    h.pose_segments(0.0, 0.2)
+    heads = [h, pickle.loads(pickle.dumps(h)), copy.deepcopy(h)]
+    for k in range(3, 40):   # enough commands to make the column mirror compact and grow
+        for x in heads:
+            x.receive(P.encode_pan_tilt(1, (-1) ** k, 0x10 + k, 1, 0x3F), 0.1 * k)
+            x.advance_to(0.1 * k + 0.05)
+    got = [x.pose_segments(3.8, 4.0) for x in heads]
+    assert all(x.tobytes() == y.tobytes() for g in got[1:] for x, y in zip(g, got[0]))
