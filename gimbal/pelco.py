@@ -39,6 +39,7 @@ the PTS family's quirk (bench notes: "the tilt word is inverted, native 0 = zeni
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 from gimbal.errors import GimbalError
 
@@ -109,7 +110,8 @@ def checksum_p(first7: bytes | bytearray) -> int:
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class PelcoCommand:
-    """One Pelco frame, decoded.  Raw fields plus derived meaning (properties).
+    """One Pelco frame, decoded.  Raw fields plus derived meaning (properties, computed once per
+    instance: the parser hands out one instance per distinct Pelco-D frame).
 
     protocol : 'D' or 'P' (the envelope it came in / goes out in)
     address : logical camera address (D: 0-255, P: 1-256; see module docstring)
@@ -131,11 +133,11 @@ class PelcoCommand:
             _check_byte(getattr(self, name), name)
 
     # -- meaning -------------------------------------------------------------------------
-    @property
+    @cached_property
     def is_extended(self) -> bool:
         return bool(self.cmd2 & 0x01)
 
-    @property
+    @cached_property
     def kind(self) -> str:
         """'stop', 'pan_tilt', 'set_preset', 'clear_preset', 'goto_preset', 'set_pan',
         'set_tilt', 'query_pan', 'query_tilt', 'pan_reply', 'tilt_reply', 'unknown_extended'
@@ -150,17 +152,17 @@ class PelcoCommand:
             return "stop"
         return "pan_tilt"
 
-    @property
+    @cached_property
     def pan_dir(self) -> int:
         """+1 = LEFT (pan angle increases), -1 = right, 0 = none (both bits set = 0)."""
         return _dir(self.cmd2, PAN_LEFT, PAN_RIGHT) if not self.is_extended else 0
 
-    @property
+    @cached_property
     def tilt_dir(self) -> int:
         """+1 = UP (tilt angle increases), -1 = down, 0 = none (both bits set = 0)."""
         return _dir(self.cmd2, TILT_UP, TILT_DOWN) if not self.is_extended else 0
 
-    @property
+    @cached_property
     def pan_byte(self) -> int:
         """Pan speed byte, with turbo normalised to ``PAN_TURBO`` (0xFF) for both envelopes."""
         if self.protocol == "P" and self.data1 == _P_TURBO_WIRE:

@@ -61,6 +61,7 @@ from gimbal.framing import PelcoParser
 from gimbal.pelco import (
     MAX_SPEED_BYTE,
     PAN_TURBO,
+    SYNC_D,
     PelcoCommand,
     encode_pan_reply,
     encode_tilt_reply,
@@ -73,6 +74,7 @@ from gimbal.pelco import (
 )
 
 FEEDBACK_MODES = ("none", "at-rest", "always")
+_BYTE = [bytes((b,)) for b in range(256)]
 AXES = ("pan", "tilt")
 
 
@@ -225,9 +227,10 @@ def unit_speed_table(
 # one axis: a list of exact segments
 # ------------------------------------------------------------------------------------------------
 _INF = math.inf
+_RTOL = 4 * np.finfo(float).eps   # brentq's tightest relative tolerance
 
 
-@dataclass
+@dataclass(slots=True)
 class _Seg:
     t0: float
     t1: float
@@ -248,20 +251,64 @@ def _pos(t0, p0, v0, a, r, omega, phi, tau):
     return p0 + v0 * d + 0.5 * a * d * d + r * ripple
 
 
+def _pos1(t0, p0, v0, a, r, omega, phi, tau) -> float:
+    """``float(_pos(...))`` for one time, bit for bit, without trigonometry when ``r == 0``.
+
+    ``_pos`` ends with ``+ r * ripple``; with ``r == 0`` and a finite ripple that adds a signed
+    zero, which leaves every finite non-zero sum unchanged.  A zero sum (whose sign the added
+    zero may flip) or a non-finite one takes the full expression.
+    """
+    if r == 0.0:
+        d = tau - t0
+        base = p0 + v0 * d + 0.5 * a * d * d
+        if base != 0.0 and d - d == 0.0 and base - base == 0.0:
+            return float(base)
+    return float(_pos(t0, p0, v0, a, r, omega, phi, tau))
+
+
 def _speed(t0, v0, a, r, omega, phi, tau):
     return (v0 + a * (tau - t0)) * (1.0 + r * np.sin(omega * tau + phi))
 
 
 class _Axis:
+    """One axis's motion: the kept segments ``segs`` in time order, and the plan after them.
+
+    ``segs`` changes only through :meth:`prune`, :meth:`_cut` and :meth:`_append`, which keep a
+    mirror of the segments' ``(t0, p0, v0, a, r)`` in the columns ``_lo ..`` of ``_cols`` (a
+    segment's fields other than ``t1`` never change once appended) and the number of kept
+    segments with ripple, so the tables of :meth:`arrays` / :meth:`pieces` are one slice copy when
+    the motion changed (``_table`` None), and reused while it has not.
+    """
+
+    _COLS0 = 64
+
     def __init__(self, name, p0, accel, stops, omega, phi, t_start=0.0):
         self.name = name
         self.accel = accel
         self.stops = stops  # (lo, hi) or None
         self.omega = omega
         self.phi = phi
-        self.segs: list[_Seg] = [_Seg(t_start, _INF, p0, 0.0, 0.0, 0.0)]
+        self.segs: list[_Seg] = []
         self.target_speed = 0.0
-        self._arrays = None
+        self._set_cols(np.empty((5, self._COLS0)))
+        self._lo = 0
+        self._n_ripple = 0   # kept segments with r != 0
+        self._table = None   # (5, S) copy of the mirror, None after a change
+        self._append(_Seg(t_start, _INF, p0, 0.0, 0.0, 0.0))
+
+    def _set_cols(self, cols: np.ndarray) -> None:
+        self._cols = cols
+        self._cap = cols.shape[1]
+        self._mv = memoryview(cols).cast("B").cast("d")   # flat: element (k, j) at k * cap + j
+
+    def __getstate__(self):   # a memoryview does not pickle / deepcopy: rebuilt from _cols
+        state = self.__dict__.copy()
+        del state["_mv"]
+        return state
+
+    def __setstate__(self, state) -> None:
+        self.__dict__.update(state)
+        self._set_cols(self._cols)
 
     # -- evaluation ------------------------------------------------------------------------
     def _find(self, t: float) -> int:
@@ -274,19 +321,26 @@ class _Axis:
 
     def state(self, t: float) -> tuple[float, float, _Seg]:
         s = self.segs[self._find(t)]
-        p = float(_pos(s.t0, s.p0, s.v0, s.a, s.r, self.omega, self.phi, t))
+        p = _pos1(s.t0, s.p0, s.v0, s.a, s.r, self.omega, self.phi, t)
         return p, s.v0 + s.a * (t - s.t0), s
 
+    def _tables(self) -> None:
+        if self._table is None:   # after a change of the motion: one slice copy of the mirror
+            table = self._cols[:, self._lo:self._lo + len(self.segs)].copy()
+            self._table = table
+            self._arrays = None
+            self._pieces = (table[:4], self._n_ripple > 0)
+
     def arrays(self):
-        if self._arrays is None:   # rebuilt after every command: one pass over the segments
-            table = np.array([(s.t0, s.p0, s.v0, s.a, s.r) for s in self.segs], dtype=float)
-            self._arrays = tuple(table.T.copy())
-            self._pieces = (np.ascontiguousarray(table[:, :4].T), bool(table[:, 4].any()))
+        """The kept segments as five rows ``(t0, p0, v0, a, r)``, shared until the motion changes."""
+        self._tables()
+        if self._arrays is None:
+            self._arrays = tuple(self._table)
         return self._arrays
 
     def pieces(self) -> tuple[np.ndarray, bool]:
         """All kept segments as a (4, S) table (t0, p0, v0, a) and whether any has ripple."""
-        self.arrays()
+        self._tables()
         return self._pieces
 
     def eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -303,7 +357,7 @@ class _Axis:
         this for every frame)."""
         t0, p0, v0, a, r = self.arrays()
         idx = self._segment_of(t0, t)
-        if self._pieces[1]:   # some kept segment has ripple (times may come in any order)
+        if self._n_ripple:   # some kept segment has ripple (times may come in any order)
             return _pos(t0[idx], p0[idx], v0[idx], a[idx], r[idx], self.omega, self.phi, t)
         d = t - t0[idx]
         return p0[idx] + v0[idx] * d + 0.5 * a[idx] * d * d   # _pos's order: the same bits
@@ -317,17 +371,27 @@ class _Axis:
         return idx
 
     def prune(self, t_keep: float) -> None:
-        while len(self.segs) > 1 and self.segs[1].t0 <= t_keep and self.segs[0].t1 < t_keep:
-            self.segs.pop(0)
-            self._arrays = None
+        segs = self.segs
+        while len(segs) > 1 and segs[1].t0 <= t_keep and segs[0].t1 < t_keep:
+            if segs.pop(0).r != 0:
+                self._n_ripple -= 1
+            self._lo += 1
+            self._table = None
 
     # -- commands --------------------------------------------------------------------------
     def _cut(self, te: float) -> tuple[float, float, _Seg]:
         """State at ``te``; forget the planned segments after it (the next plan starts there)."""
+        segs = self.segs
         i = self._find(te)
-        p, v, s = self.state(te)
-        del self.segs[i + 1:]
-        self._arrays = None
+        s = segs[i]
+        p = _pos1(s.t0, s.p0, s.v0, s.a, s.r, self.omega, self.phi, te)
+        v = s.v0 + s.a * (te - s.t0)
+        if i + 1 < len(segs):
+            for dropped in segs[i + 1:]:
+                if dropped.r != 0:
+                    self._n_ripple -= 1
+            del segs[i + 1:]
+            self._table = None
         return p, v, s
 
     def set_speed(self, te: float, v_target: float, ripple: float) -> None:
@@ -395,8 +459,8 @@ class _Axis:
                 continue
             if math.isnan(s.p0):
                 prev = self.segs[-1]
-                s.p0 = float(_pos(prev.t0, prev.p0, prev.v0, prev.a, prev.r,
-                                  self.omega, self.phi, s.t0))
+                s.p0 = _pos1(prev.t0, prev.p0, prev.v0, prev.a, prev.r,
+                             self.omega, self.phi, s.t0)
             if self.stops is not None and not s.pinned:
                 hit = self._stop_hit(s)
                 if hit is not None:
@@ -410,12 +474,32 @@ class _Axis:
             self._append(s)
 
     def _append(self, s: _Seg) -> None:
-        if self.segs[-1].t0 >= s.t0:  # a zero-length predecessor: replace it
-            self.segs.pop()
-        if self.segs:
-            self.segs[-1].t1 = s.t0
-        self.segs.append(s)
-        self._arrays = None
+        segs = self.segs
+        if segs and segs[-1].t0 >= s.t0:  # a zero-length predecessor: replace it
+            if segs.pop().r != 0:
+                self._n_ripple -= 1
+        if segs:
+            segs[-1].t1 = s.t0
+        segs.append(s)
+        if s.r != 0:
+            self._n_ripple += 1
+        n = len(segs)
+        cap = self._cap
+        if self._lo + n > cap:   # out of columns: move the kept ones to the front (or grow)
+            cols = np.empty((5, 2 * cap)) if 2 * n > cap else self._cols
+            cols[:, :n - 1] = self._cols[:, self._lo:self._lo + n - 1]
+            self._mv.release()
+            self._set_cols(cols)
+            self._lo = 0
+            cap = self._cap
+        j = self._lo + n - 1
+        mv = self._mv
+        mv[j] = s.t0
+        mv[cap + j] = s.p0
+        mv[2 * cap + j] = s.v0
+        mv[3 * cap + j] = s.a
+        mv[4 * cap + j] = s.r
+        self._table = None
 
     def _stop_hit(self, s: _Seg):
         lo, hi = self.stops
@@ -426,7 +510,7 @@ class _Axis:
             return None
         side = 1 if direction > 0 else -1
         stop = hi if side > 0 else lo
-        f = lambda tau: float(_pos(s.t0, s.p0, s.v0, s.a, s.r, self.omega, self.phi, tau)) - stop  # noqa: E731,E501
+        f = lambda tau: _pos1(s.t0, s.p0, s.v0, s.a, s.r, self.omega, self.phi, tau) - stop  # noqa: E731,E501
         if side * f(s.t0) >= 0:
             return s.t0, side, stop
         if s.t1 == _INF:
@@ -437,7 +521,7 @@ class _Axis:
             t_end = s.t1
         if side * f(t_end) < 0:
             return None
-        t_hit = brentq(f, s.t0, t_end, xtol=1e-13, rtol=4 * np.finfo(float).eps, maxiter=200)
+        t_hit = brentq(f, s.t0, t_end, xtol=1e-13, rtol=_RTOL, maxiter=200)
         return t_hit, side, stop
 
 
@@ -486,6 +570,8 @@ class PTS303H:
         self._tilt_table = unit_speed_table(
             np.random.default_rng(s_tilt), params.tilt_speed_max_deg_s, None, params
         )
+        self._pan_speeds = self._pan_table.tolist()
+        self._tilt_speeds = self._tilt_table.tolist()
         rr = np.random.default_rng(s_ripple)
         f_pan, f_tilt = params.ripple_freq_hz * np.exp(0.1 * rr.standard_normal(2))
         ph_pan, ph_tilt = rr.uniform(0, 2 * np.pi, 2)
@@ -618,12 +704,36 @@ class PTS303H:
             if len(times) != len(data):
                 raise ValueError(f"{len(times)} byte times for {len(data)} bytes")
         replies: list[tuple[float, bytes]] = []
-        for b, t in zip(data, times):
+        parser = self._parser
+        n = len(data)
+        i = 0
+        while i < n:
+            # Fast path: a clean Pelco-D frame at once (the closed loop's every frame).  It leaves
+            # parser, receive times and head as the byte-by-byte route below would (tested).
+            if data[i] == SYNC_D and i + 7 <= n and not parser._buf:
+                j = i + 7
+                ts = times[i:j]
+                last = self._t_rx_last
+                for t in ts:
+                    if t < last:
+                        break
+                    last = t
+                else:
+                    cmd = parser.take_clean_d(data, i, times)
+                    if cmd is not None:
+                        self._t_rx_last = last
+                        self._rx_times.extend(ts)
+                        replies.extend(self._handle(cmd, last))
+                        i = j
+                        continue
+            b = data[i]
+            t = times[i]
+            i += 1
             if t < self._t_rx_last:
                 raise ValueError(f"bytes must arrive in time order: {t} < {self._t_rx_last}")
             self._t_rx_last = t
             self._rx_times.append(t)
-            for cmd in self._parser.feed(bytes((b,)), t):
+            for cmd in parser.feed(_BYTE[b], t):
                 replies.extend(self._handle(cmd, t))
         return replies
 
@@ -641,12 +751,13 @@ class PTS303H:
         p = self.params
         te = t + p.dead_time_s
         kind = cmd.kind
-        if kind in ("stop", "pan_tilt"):
+        if kind == "pan_tilt" or kind == "stop":
             self._check_causal(te)
-            vp = cmd.pan_dir * self._pan_table[cmd.pan_byte]
-            vt = cmd.tilt_dir * self._tilt_table[cmd.tilt_byte]
-            self._pan.set_speed(te, float(vp), p.ripple_rel)
-            self._tilt.set_speed(te, float(vt), p.ripple_rel)
+            # Python floats of the tables: the same products as with the numpy scalars
+            vp = cmd.pan_dir * self._pan_speeds[cmd.pan_byte]
+            vt = cmd.tilt_dir * self._tilt_speeds[cmd.tilt_byte]
+            self._pan.set_speed(te, vp, p.ripple_rel)
+            self._tilt.set_speed(te, vt, p.ripple_rel)
             return []
         if kind == "set_preset":
             pan, tilt = self.angles_now(t)

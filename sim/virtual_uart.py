@@ -23,6 +23,8 @@ import numpy as np
 
 EFFECTS = frozenset({"bit_errors", "drop", "echo"})
 BITS_PER_BYTE = 10  # start + 8 data + stop
+_RANDOM_EFFECTS = frozenset({"bit_errors", "drop"})
+_BYTE = [bytes((b,)) for b in range(256)]
 
 
 class VirtualUart:
@@ -89,6 +91,17 @@ class VirtualUart:
         if n == 0:
             return []
         start = max(float(t_s), self._line_free_s)
+        if not self.effects & _RANDOM_EFFECTS:
+            # No random effect: plain Python floats, the numpy route's arithmetic element by element
+            # (start + byte_time * k), so the same times to the bit; no numpy calls on 7 bytes.
+            bt = self.byte_time_s
+            ends = [start + bt * k for k in range(1, n + 1)]
+            self._line_free_s = ends[-1]
+            self.bytes_sent += n
+            out = [(t, _BYTE[b]) for t, b in zip(ends, data)]
+            if "echo" in self.effects:
+                self._echo.extend(out)
+            return out
         ends = start + self.byte_time_s * np.arange(1, n + 1)
         self._line_free_s = float(ends[-1])
         self.bytes_sent += n
