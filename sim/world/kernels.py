@@ -140,46 +140,100 @@ def cast_static_kernel(d_world, prims, prim_offset, out_range, out_prim):
     ``out_range``/``out_prim`` are updated only where a primitive is nearer than the value already
     there (so targets and background can be cast in either order); hits record ``prim_offset + m``.
 
-    Primitive by primitive (each ray still meets them in table order, so the result is the same as
+    Block by block (256 rays copied into x, y, z arrays, unless there is only one primitive), then
+    primitive by primitive (each ray still meets them in table order, so the result is the same as
     ray by ray): the flat kinds of a background — ground plane, walls and room faces (rectangles),
-    disks — get loops with their constants hoisted that LLVM vectorises, with :func:`_hit_prim`'s
-    arithmetic unchanged.
+    disks — get branch-free loops with their constants hoisted (:func:`_cast_flat_block`) that LLVM
+    vectorises, with :func:`_hit_prim`'s arithmetic unchanged.  A 60 x 40 x 8 m hall (six
+    rectangles) on a 10k-ray frame: 650 -> 190-240 us.
     """
     n = d_world.shape[0]
+    if prims.shape[0] <= 1:
+        # One primitive (a ground plane): straight through the rows; the copies would cost more
+        # than they save.
+        _cast_prims(prims, prim_offset, d_world[:, 0], d_world[:, 1], d_world[:, 2], n, out_range, out_prim)
+        return
+    bx = np.empty(_BLOCK)
+    by = np.empty(_BLOCK)
+    bz = np.empty(_BLOCK)
+    br = np.empty(_BLOCK)
+    bp = np.empty(_BLOCK, dtype=np.int64)
+    for j0 in range(0, n, _BLOCK):
+        m_blk = min(_BLOCK, n - j0)
+        d_blk = d_world[j0:j0 + m_blk]
+        r_blk = out_range[j0:j0 + m_blk]
+        p_blk = out_prim[j0:j0 + m_blk]
+        for i in range(m_blk):
+            bx[i] = d_blk[i, 0]
+            by[i] = d_blk[i, 1]
+            bz[i] = d_blk[i, 2]
+            br[i] = r_blk[i]
+            bp[i] = p_blk[i]
+        _cast_prims(prims, prim_offset, bx, by, bz, m_blk, br, bp)
+        for i in range(m_blk):
+            r_blk[i] = br[i]
+            p_blk[i] = bp[i]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _cast_prims(prims, prim_offset, bx, by, bz, n, br, bp):
+    """Every primitive, in table order, against ``n`` rays given as x, y, z arrays."""
     for m in range(prims.shape[0]):
         kind = int(prims[m, 0])
         if kind == PLANE or kind == RECT or kind == DISK:
-            cx, cy, cz = prims[m, 1], prims[m, 2], prims[m, 3]
-            nx, ny, nz = prims[m, 7], prims[m, 8], prims[m, 9]
-            num = nx * cx + ny * cy + nz * cz
-            # rectangle: in-plane axes u and v = n x u, half sizes; disk: radius
-            ux, uy, uz = prims[m, 10], prims[m, 11], prims[m, 12]
-            vx = ny * uz - nz * uy
-            vy = nz * ux - nx * uz
-            vz = nx * uy - ny * ux
-            h_u, h_v, r2 = prims[m, 4], prims[m, 5], prims[m, 4] * prims[m, 4]
-            for j in range(n):
-                dx, dy, dz = d_world[j, 0], d_world[j, 1], d_world[j, 2]
-                den = nx * dx + ny * dy + nz * dz
-                t = num / den
-                hit = abs(den) >= _EPS and t > _EPS and t < out_range[j]
-                if kind != PLANE:
-                    px = dx * t - cx
-                    py = dy * t - cy
-                    pz = dz * t - cz
-                    if kind == RECT:
-                        hit = (hit and abs(px * ux + py * uy + pz * uz) <= h_u
-                               and abs(px * vx + py * vy + pz * vz) <= h_v)
-                    else:
-                        hit = hit and px * px + py * py + pz * pz <= r2
-                out_range[j] = t if hit else out_range[j]
-                out_prim[j] = prim_offset + m if hit else out_prim[j]
+            _cast_flat_block(prims, m, kind, prim_offset + m, bx, by, bz, n, br, bp)
             continue
-        for j in range(n):
-            t = _hit_prim(prims, m, 0.0, 0.0, 0.0, d_world[j, 0], d_world[j, 1], d_world[j, 2])
-            if t < out_range[j]:
-                out_range[j] = t
-                out_prim[j] = prim_offset + m
+        for i in range(n):
+            t = _hit_prim(prims, m, 0.0, 0.0, 0.0, bx[i], by[i], bz[i])
+            if t < br[i]:
+                br[i] = t
+                bp[i] = prim_offset + m
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _cast_flat_block(prims, m, kind, label, bx, by, bz, n, br, bp):
+    """Plane, rectangle or disk ``m`` against the ``n`` rays of a block, updating the block's
+    nearest range ``br`` and primitive ``bp``.  One loop per kind and ``&`` instead of ``and``: a
+    branch in the loop body would stop LLVM vectorising it."""
+    cx, cy, cz = prims[m, 1], prims[m, 2], prims[m, 3]
+    nx, ny, nz = prims[m, 7], prims[m, 8], prims[m, 9]
+    num = nx * cx + ny * cy + nz * cz
+    # rectangle: in-plane axes u and v = n x u, half sizes; disk: radius
+    ux, uy, uz = prims[m, 10], prims[m, 11], prims[m, 12]
+    vx = ny * uz - nz * uy
+    vy = nz * ux - nx * uz
+    vz = nx * uy - ny * ux
+    h_u, h_v, r2 = prims[m, 4], prims[m, 5], prims[m, 4] * prims[m, 4]
+    if kind == PLANE:
+        for i in range(n):
+            den = nx * bx[i] + ny * by[i] + nz * bz[i]
+            t = num / den
+            hit = (abs(den) >= _EPS) & (t > _EPS) & (t < br[i])
+            br[i] = t if hit else br[i]
+            bp[i] = label if hit else bp[i]
+    elif kind == RECT:
+        for i in range(n):
+            dx, dy, dz = bx[i], by[i], bz[i]
+            den = nx * dx + ny * dy + nz * dz
+            t = num / den
+            px = dx * t - cx
+            py = dy * t - cy
+            pz = dz * t - cz
+            hit = ((abs(den) >= _EPS) & (t > _EPS) & (t < br[i])
+                   & (abs(px * ux + py * uy + pz * uz) <= h_u) & (abs(px * vx + py * vy + pz * vz) <= h_v))
+            br[i] = t if hit else br[i]
+            bp[i] = label if hit else bp[i]
+    else:
+        for i in range(n):
+            dx, dy, dz = bx[i], by[i], bz[i]
+            den = nx * dx + ny * dy + nz * dz
+            t = num / den
+            px = dx * t - cx
+            py = dy * t - cy
+            pz = dz * t - cz
+            hit = (abs(den) >= _EPS) & (t > _EPS) & (t < br[i]) & (px * px + py * py + pz * pz <= r2)
+            br[i] = t if hit else br[i]
+            bp[i] = label if hit else bp[i]
 
 
 @njit(cache=True)
