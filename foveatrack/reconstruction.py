@@ -70,6 +70,8 @@ class _Knot:
     S: np.ndarray       # signed time per byte index up to t [s]
     var_timing: float   # accumulated sum (dv sigma_t)^2 [deg^2]
     var_bytes: float = 0.0  # sum over bytes (sigma_b S_b)^2 at t [deg^2] (set by the integrator)
+    sig_run: float = 0.0    # sigma_b of the running byte (idx >= 0), as a float for ``state``
+    s_run: float = 0.0      # S of the running byte at t [s]
 
 
 class _AxisIntegrator:
@@ -82,6 +84,7 @@ class _AxisIntegrator:
         self.wrap = wrap
         self.sig_b = np.nan_to_num(table.speeds_array()[1], nan=0.0)
         self.sigma0 = sigma0
+        self._var0 = sigma0 ** 2
         self.timing_sigma_s = timing_sigma_s
         self.q = q
         self.t0 = t0
@@ -117,17 +120,19 @@ class _AxisIntegrator:
 
     def state(self, t: float) -> tuple[float, float, float]:
         """(angle, speed, sigma) at t."""
-        k = self._knot_before(t)
-        if k is None:   # before all retained history: the earliest knot's angle
+        i = bisect.bisect_right(self.times, t) - 1
+        if i >= 0:
+            k = self.knots[i]
+        else:   # before all retained history: the earliest knot's angle
             k = self.knots[0]
             t = k.t
         ang, v = self._advance(k, t)
         var_b = k.var_bytes
         if k.idx >= 0:   # only the running byte's time has grown since the knot
-            sb = self.sig_b[k.idx]
-            s0 = k.S[k.idx]
+            sb = k.sig_run
+            s0 = k.s_run
             var_b += (sb * (s0 + k.direction * (t - k.t))) ** 2 - (sb * s0) ** 2
-        var = max(self.sigma0 ** 2 + var_b + k.var_timing + self.q * max(t - self.t0, 0.0), 0.0)
+        var = max(self._var0 + var_b + k.var_timing + self.q * max(t - self.t0, 0.0), 0.0)
         if self.wrap:
             ang = wrap_deg(ang)
         return ang, v, math.sqrt(var)
@@ -151,7 +156,8 @@ class _AxisIntegrator:
         if self.wrap:
             ang = wrap_deg(ang)
         self.knots.append(_Knot(t_eff, ang, v, v_tgt, idx, direction, S, var_t,
-                                float(np.sum((self.sig_b * S) ** 2))))
+                                float(np.sum((self.sig_b * S) ** 2)),
+                                float(self.sig_b[idx]) if idx >= 0 else 0.0, float(S[idx]) if idx >= 0 else 0.0))
         self.times.append(t_eff)
         # bound memory: keep knots within history_s of the newest (always >= 2)
         cut = bisect.bisect_left(self.times, t_eff - self.history_s) - 1

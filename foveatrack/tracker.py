@@ -36,7 +36,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
-from foveatrack.control import (STOP, HeadCommand, deadband_p, head_errors_deg, lidar_errors_deg,
+from foveatrack.control import (STOP, HeadCommand, deadband_p, head_command, head_errors_deg, lidar_errors_deg,
                                 limit_for_stops, speed_to_axis)
 from foveatrack.detection import Detection, detect, detect_in_box, wrap_deg
 from foveatrack.errors import UserError
@@ -376,4 +376,4 @@ class Tracker:
                                    allow_turbo=cfg.allow_turbo, floor=lim_p)
         td, tb, vt = speed_to_axis(v_tilt, self.table.tilt, max_speed_deg_s=cfg.max_tilt_speed_deg_s,
                                    floor=lim_t)
-        return HeadCommand(pd, pb, td, tb), vp, vt, lim_t or lim_p
+        return head_command(pd, pb, td, tb), vp, vt, lim_t or lim_p
