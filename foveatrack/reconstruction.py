@@ -133,7 +133,7 @@ class _AxisIntegrator:
             s0 = k.s_run
             var_b += (sb * (s0 + k.direction * (t - k.t))) ** 2 - (sb * s0) ** 2
         var = max(self._var0 + var_b + k.var_timing + self.q * max(t - self.t0, 0.0), 0.0)
-        if self.wrap:
+        if self.wrap and not -180.0 < ang <= 180.0:   # in range: wrap_deg returns it unchanged
             ang = wrap_deg(ang)
         return ang, v, math.sqrt(var)
 
@@ -202,7 +202,7 @@ class Reconstructor:
                                     tuple(tilt_limits_deg), False, timing_sigma_s, random_walk_deg2_s, history_s)
         self.last_command: HeadCommand | None = None
         self.last_send_t_s: float | None = None
-        self._memo = None
+        self._memo: dict[float, tuple[float, float, float, float]] = {}
 
     @property
     def effect_delay_s(self) -> float:
@@ -211,22 +211,29 @@ class Reconstructor:
     def on_command(self, t_s: float, cmd: HeadCommand) -> None:
         """Record that ``cmd`` was written to the head at ``t_s`` (commands in time order)."""
         t_eff = t_s + self.effect_delay_s
-        self._memo = None
+        memo, self._memo = self._memo, {}
         self.pan.command(t_eff, cmd.pan_dir, cmd.pan_byte)
         self.tilt.command(t_eff, cmd.tilt_dir, cmd.tilt_byte)
         self.last_command = cmd
         self.last_send_t_s = t_s
+        # A command changes nothing before its effect time: answers for earlier instants still
+        # hold (same knot), unless the trim of old history moved an instant before the first knot.
+        t_first = max(self.pan.times[0], self.tilt.times[0])
+        self._memo = {k: v for k, v in memo.items() if t_first <= k < t_eff}
 
     def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
         """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180]."""
-        # A frame asks about the same instant several times (D's frame, the controller, the world
-        # position); the answer only changes with a new command.
-        if self._memo is not None and self._memo[0] == t_s:
-            return self._memo[1]
+        # A frame asks about a few instants several times (D's frame, the detection, the command's
+        # effect, the driver's log); an answer only changes with a command effective before it.
+        hit = self._memo.get(t_s)
+        if hit is not None:
+            return hit
         p, _, sp = self.pan.state(t_s)
         t, _, st = self.tilt.state(t_s)
-        self._memo = (t_s, (p, t, sp, st))
-        return p, t, sp, st
+        if len(self._memo) >= 8:
+            self._memo.clear()
+        ans = self._memo[t_s] = (p, t, sp, st)
+        return ans
 
     def speeds_at(self, t_s: float) -> tuple[float, float]:
         """Estimated actual (pan, tilt) speeds [deg/s] at ``t_s``."""
@@ -247,7 +254,8 @@ class Reconstructor:
         p, t, sp, st = self.angles_at(detection.t_s)
         q = np.asarray(detection.xyz, float) + self.lidar_offset_m
         w = rotation_matrix(p, t) @ q
-        rho = math.hypot(w[0], w[1])
-        r = float(np.linalg.norm(q))
+        w0, w1, _ = w.tolist()
+        rho = math.hypot(w0, w1)
+        r = math.sqrt(q.dot(q))   # np.linalg.norm(q), without its checks
         sigma = math.hypot(rho * math.radians(sp), r * math.radians(st))
         return w, sigma

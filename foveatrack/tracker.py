@@ -36,7 +36,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
-from foveatrack.control import (STOP, HeadCommand, deadband_p, head_command, head_errors_deg, lidar_errors_deg,
+from foveatrack.control import (STOP, HeadCommand, deadband_p, head_command, head_errors_deg,
                                 limit_for_stops, speed_to_axis)
 from foveatrack.detection import Detection, detect, detect_in_box, wrap_deg
 from foveatrack.errors import UserError
@@ -267,8 +267,8 @@ class Tracker:
             use_head = cfg.error_frame == "head" or cfg.controller == "predictive"
             if use_head:
                 err_pan, err_tilt = head_errors_deg(det.xyz, ht, cfg.lidar_offset_m)
-            else:
-                err_pan, err_tilt = lidar_errors_deg(det.xyz)
+            else:   # lidar_errors_deg(det.xyz): the detection's bearing, already computed
+                err_pan, err_tilt = det.az_deg, det.el_deg
             world, sigma_w = self.recon.to_world(det)
             self.last_detection_t_s = det.t_s
             self.last_pan_error_deg = err_pan
