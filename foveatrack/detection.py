@@ -107,22 +107,40 @@ def detect_points(xyz: np.ndarray, t_ns: np.ndarray, space=None, *, test_xyz: np
 def detect_in_box(xyz: np.ndarray, t_ns: np.ndarray, box, rot: np.ndarray, offset: np.ndarray) -> Detection | None:
     """Algorithm 1 with a box D in one kernel call (:func:`foveatrack.kernels.box_median_kernel`):
     the same detection as :func:`detect_points` with ``test_xyz = (xyz + offset) @ rot.T``."""
-    from foveatrack.kernels import box_median_kernel
-
+    global _box_median_kernel
+    if _box_median_kernel is None:   # numba loads on first use, not on import
+        from foveatrack.kernels import box_median_kernel as _box_median_kernel
     xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
     t_ns = np.ascontiguousarray(t_ns, dtype=np.int64).reshape(-1)
     rot = np.ascontiguousarray(rot, dtype=np.float64)
     offset = np.asarray(offset, dtype=np.float64)
-    lo, hi = np.asarray(box.min_xyz, dtype=np.float64), np.asarray(box.max_xyz, dtype=np.float64)
+    lo, hi = _box_bounds(box)
     if t_ns.shape[0] < xyz.shape[0]:   # malformed input: the general route reports it
         return _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi)
     p = np.empty(3)
-    n, t_med_ns = box_median_kernel(xyz, t_ns, rot, offset, lo, hi, p)
+    n, t_med_ns = _box_median_kernel(xyz, t_ns, rot, offset, lo, hi, p)
     if n == 0:
         return None
     if n < 0:   # a zero median: its sign is numpy's sort's business (see the kernel)
         return _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi)
     return _detection(p, t_med_ns, n)
+
+
+_box_median_kernel = None
+_BOX_BOUNDS: dict = {}
+
+
+def _box_bounds(box) -> tuple[np.ndarray, np.ndarray]:
+    """``box.min_xyz``, ``box.max_xyz`` as float64 arrays, made once per distinct box."""
+    key = (tuple(box.min_xyz), tuple(box.max_xyz))
+    b = _BOX_BOUNDS.get(key)
+    if b is None:
+        if len(_BOX_BOUNDS) > 64:
+            _BOX_BOUNDS.clear()
+        b = _BOX_BOUNDS[key] = (np.asarray(box.min_xyz, dtype=np.float64), np.asarray(box.max_xyz, dtype=np.float64))
+        for a in b:
+            a.flags.writeable = False
+    return b
 
 
 def _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi) -> Detection | None:

@@ -54,9 +54,9 @@ def rotation_matrix(pan_deg: float, tilt_deg: float) -> np.ndarray:
     p = math.radians(wrap_deg(pan_deg))
     t = math.radians(tilt_deg)
     cp, sp, ct, st = math.cos(p), math.sin(p), math.cos(t), math.sin(t)
-    return np.array([[cp * ct, -sp, -cp * st],
-                     [sp * ct, cp, -sp * st],
-                     [st, 0.0, ct]])
+    return np.array([cp * ct, -sp, -cp * st,
+                     sp * ct, cp, -sp * st,
+                     st, 0.0, ct]).reshape(3, 3)
 
 
 @dataclass
@@ -203,6 +203,7 @@ class Reconstructor:
         self.last_command: HeadCommand | None = None
         self.last_send_t_s: float | None = None
         self._memo: dict[float, tuple[float, float, float, float]] = {}
+        self._n_carried = 0   # the memo's first entries, carried over the last command
 
     @property
     def effect_delay_s(self) -> float:
@@ -218,8 +219,12 @@ class Reconstructor:
         self.last_send_t_s = t_s
         # A command changes nothing before its effect time: answers for earlier instants still
         # hold (same knot), unless the trim of old history moved an instant before the first knot.
+        # Only the instants asked since the previous command are carried (older ones are not asked
+        # again in practice, and the memo stays small).
         t_first = max(self.pan.times[0], self.tilt.times[0])
-        self._memo = {k: v for k, v in memo.items() if t_first <= k < t_eff}
+        fresh = list(memo.items())[self._n_carried:] if self._n_carried else memo.items()
+        self._memo = {k: v for k, v in fresh if t_first <= k < t_eff}
+        self._n_carried = len(self._memo)
 
     def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
         """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180]."""
@@ -232,8 +237,17 @@ class Reconstructor:
         t, _, st = self.tilt.state(t_s)
         if len(self._memo) >= 8:
             self._memo.clear()
+            self._n_carried = 0
         ans = self._memo[t_s] = (p, t, sp, st)
         return ans
+
+    def tilt_at(self, t_s: float) -> tuple[float, float]:
+        """(tilt_deg, sigma_tilt_deg) at ``t_s``: ``angles_at(t_s)[1::2]`` without integrating pan."""
+        hit = self._memo.get(t_s)
+        if hit is not None:
+            return hit[1], hit[3]
+        t, _, st = self.tilt.state(t_s)
+        return t, st
 
     def speeds_at(self, t_s: float) -> tuple[float, float]:
         """Estimated actual (pan, tilt) speeds [deg/s] at ``t_s``."""

@@ -364,7 +364,7 @@ class Tracker:
     def _to_command(self, v_pan: float, v_tilt: float, send_t: float) -> tuple[HeadCommand, float, float, bool]:
         cfg = self.config
         t_act = send_t + self.recon.effect_delay_s
-        _, tilt_a, _, s_tilt = self.recon.angles_at(t_act)
+        tilt_a, s_tilt = self.recon.tilt_at(t_act)
         v_tilt, lim_t = limit_for_stops(v_tilt, tilt_a, s_tilt, *cfg.tilt_limits_deg, cfg.tilt_margin_deg,
                                         cfg.stop_lookahead_s)
         lim_p = False

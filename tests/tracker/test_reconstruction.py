@@ -131,13 +131,16 @@ def test_memoised_angles_equal_fresh_integration_across_commands():
         # instants before, at and after this command's effect; some asked before it is sent
         asked = [t - 0.05, t_eff - 1e-9, t_eff, t_eff + 0.02, t - 2.5]
         rec._memo.clear()   # (the memo holds at most 8 instants; start this round with room)
+        rec._n_carried = 0
         for q in asked[:3]:
             rec.angles_at(q)
         rec.on_command(t, cmd)
         assert t_eff not in rec._memo
         n_hits += sum(q in rec._memo for q in asked[:2])
         for q in asked + [t + float(rng.uniform(0, 0.3))]:
+            assert rec.tilt_at(q) == _axis_states(rec, q)[1::2]
             assert rec.angles_at(q) == _axis_states(rec, q)
             assert rec.angles_at(q) == _axis_states(rec, q)   # a second ask (a memo hit)
+            assert rec.tilt_at(q) == _axis_states(rec, q)[1::2]
         t += float(rng.uniform(0.02, 0.3))
     assert n_hits > 500   # the memo did carry answers across commands
