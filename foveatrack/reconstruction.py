@@ -59,7 +59,7 @@ def rotation_matrix(pan_deg: float, tilt_deg: float) -> np.ndarray:
                      st, 0.0, ct]).reshape(3, 3)
 
 
-@dataclass
+@dataclass(slots=True)
 class _Knot:
     t: float            # effect time [s]
     angle: float        # angle at t [deg] (pan kept wrapped)

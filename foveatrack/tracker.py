@@ -38,7 +38,7 @@ import numpy as np
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
 from foveatrack.control import (STOP, HeadCommand, deadband_p, head_command, head_errors_deg,
                                 limit_for_stops, speed_to_axis)
-from foveatrack.detection import Detection, detect, detect_in_box, wrap_deg
+from foveatrack.detection import Detection, detect, detect_in_box, frozen_maker, wrap_deg
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.predictive import BearingFilter
@@ -235,6 +235,9 @@ class TrackOutput:
     stop_limited: bool = False
 
 
+_make_output = frozen_maker(TrackOutput)   # TrackOutput(...) without the frozen init's per-field cost
+
+
 class Tracker:
     """Algorithms 1 and 2 at ``config.rate_hz`` with head dead reckoning.  See module docstring."""
 
@@ -281,8 +284,8 @@ class Tracker:
         cmd, vp, vt, limited = self._to_command(v_pan, v_tilt, send_t)
         self.recon.on_command(send_t, cmd)
         self.last_command = cmd
-        return TrackOutput(t_now, self.state, det, cmd, vp, vt, err_pan, err_tilt, hp, ht, sp, st,
-                           world, sigma_w, limited)
+        return _make_output(t_now, self.state, det, cmd, vp, vt, err_pan, err_tilt, hp, ht, sp, st,
+                            world, sigma_w, limited)
 
     def command_sent(self, t_s: float, cmd: HeadCommand) -> None:
         """For drivers that send extra commands of their own (e.g. a stop on shutdown)."""
