@@ -74,19 +74,34 @@ class HeadCommand:
 
 STOP = HeadCommand()
 
+_COMMANDS: dict[tuple[int, int, int, int], HeadCommand] = {STOP.axis("pan") + STOP.axis("tilt"): STOP}
+
+
+def head_command(pan_dir: int, pan_byte: int, tilt_dir: int, tilt_byte: int) -> HeadCommand:
+    """``HeadCommand(pan_dir, pan_byte, tilt_dir, tilt_byte)``, one shared instance per value (it
+    is immutable), so the per-frame path validates each distinct command once."""
+    key = (pan_dir, pan_byte, tilt_dir, tilt_byte)
+    cmd = _COMMANDS.get(key)
+    if cmd is None:
+        cmd = HeadCommand(pan_dir, pan_byte, tilt_dir, tilt_byte)
+        _COMMANDS[key] = cmd
+    return cmd
+
 
 def lidar_errors_deg(p_lidar) -> tuple[float, float]:
     """The paper's bearing errors (atan2 form), lidar frame: (e_pan, e_tilt) [deg]."""
-    return bearing_deg(*np.asarray(p_lidar, float))
+    return bearing_deg(*np.asarray(p_lidar, float).tolist())
 
 
 def head_errors_deg(p_lidar, tilt_deg: float, lidar_offset_m=(0.0, 0.0, 0.0)) -> tuple[float, float]:
     """Pan and tilt changes [deg] that put the point on the optical axis (see module docstring)."""
-    q = np.asarray(p_lidar, float) + np.asarray(lidar_offset_m, float)
+    px, py, pz = np.asarray(p_lidar, float).tolist()
+    ox, oy, oz = np.asarray(lidar_offset_m, float).tolist()
+    q0, q1, q2 = px + ox, py + oy, pz + oz
     t = math.radians(tilt_deg)
     c, s = math.cos(t), math.sin(t)
     # R_y(-t) applied to q: x' = c x - s z, z' = s x + c z   (tilt up by t turns lidar +X toward +Z)
-    qx, qy, qz = c * q[0] - s * q[2], q[1], s * q[0] + c * q[2]
+    qx, qy, qz = c * q0 - s * q2, q1, s * q0 + c * q2
     e_pan = wrap_deg(math.degrees(math.atan2(qy, qx)))
     e_tilt = math.degrees(math.atan2(qz, math.hypot(qx, qy))) - tilt_deg
     return e_pan, e_tilt

@@ -54,12 +54,12 @@ def rotation_matrix(pan_deg: float, tilt_deg: float) -> np.ndarray:
     p = math.radians(wrap_deg(pan_deg))
     t = math.radians(tilt_deg)
     cp, sp, ct, st = math.cos(p), math.sin(p), math.cos(t), math.sin(t)
-    return np.array([[cp * ct, -sp, -cp * st],
-                     [sp * ct, cp, -sp * st],
-                     [st, 0.0, ct]])
+    return np.array([cp * ct, -sp, -cp * st,
+                     sp * ct, cp, -sp * st,
+                     st, 0.0, ct]).reshape(3, 3)
 
 
-@dataclass
+@dataclass(slots=True)
 class _Knot:
     t: float            # effect time [s]
     angle: float        # angle at t [deg] (pan kept wrapped)
@@ -70,6 +70,8 @@ class _Knot:
     S: np.ndarray       # signed time per byte index up to t [s]
     var_timing: float   # accumulated sum (dv sigma_t)^2 [deg^2]
     var_bytes: float = 0.0  # sum over bytes (sigma_b S_b)^2 at t [deg^2] (set by the integrator)
+    sig_run: float = 0.0    # sigma_b of the running byte (idx >= 0), as a float for ``state``
+    s_run: float = 0.0      # S of the running byte at t [s]
 
 
 class _AxisIntegrator:
@@ -82,6 +84,7 @@ class _AxisIntegrator:
         self.wrap = wrap
         self.sig_b = np.nan_to_num(table.speeds_array()[1], nan=0.0)
         self.sigma0 = sigma0
+        self._var0 = sigma0 ** 2
         self.timing_sigma_s = timing_sigma_s
         self.q = q
         self.t0 = t0
@@ -117,18 +120,20 @@ class _AxisIntegrator:
 
     def state(self, t: float) -> tuple[float, float, float]:
         """(angle, speed, sigma) at t."""
-        k = self._knot_before(t)
-        if k is None:   # before all retained history: the earliest knot's angle
+        i = bisect.bisect_right(self.times, t) - 1
+        if i >= 0:
+            k = self.knots[i]
+        else:   # before all retained history: the earliest knot's angle
             k = self.knots[0]
             t = k.t
         ang, v = self._advance(k, t)
         var_b = k.var_bytes
         if k.idx >= 0:   # only the running byte's time has grown since the knot
-            sb = self.sig_b[k.idx]
-            s0 = k.S[k.idx]
+            sb = k.sig_run
+            s0 = k.s_run
             var_b += (sb * (s0 + k.direction * (t - k.t))) ** 2 - (sb * s0) ** 2
-        var = max(self.sigma0 ** 2 + var_b + k.var_timing + self.q * max(t - self.t0, 0.0), 0.0)
-        if self.wrap:
+        var = max(self._var0 + var_b + k.var_timing + self.q * max(t - self.t0, 0.0), 0.0)
+        if self.wrap and not -180.0 < ang <= 180.0:   # in range: wrap_deg returns it unchanged
             ang = wrap_deg(ang)
         return ang, v, math.sqrt(var)
 
@@ -151,7 +156,8 @@ class _AxisIntegrator:
         if self.wrap:
             ang = wrap_deg(ang)
         self.knots.append(_Knot(t_eff, ang, v, v_tgt, idx, direction, S, var_t,
-                                float(np.sum((self.sig_b * S) ** 2))))
+                                float(np.sum((self.sig_b * S) ** 2)),
+                                float(self.sig_b[idx]) if idx >= 0 else 0.0, float(S[idx]) if idx >= 0 else 0.0))
         self.times.append(t_eff)
         # bound memory: keep knots within history_s of the newest (always >= 2)
         cut = bisect.bisect_left(self.times, t_eff - self.history_s) - 1
@@ -196,7 +202,8 @@ class Reconstructor:
                                     tuple(tilt_limits_deg), False, timing_sigma_s, random_walk_deg2_s, history_s)
         self.last_command: HeadCommand | None = None
         self.last_send_t_s: float | None = None
-        self._memo = None
+        self._memo: dict[float, tuple[float, float, float, float]] = {}
+        self._n_carried = 0   # the memo's first entries, carried over the last command
 
     @property
     def effect_delay_s(self) -> float:
@@ -205,22 +212,42 @@ class Reconstructor:
     def on_command(self, t_s: float, cmd: HeadCommand) -> None:
         """Record that ``cmd`` was written to the head at ``t_s`` (commands in time order)."""
         t_eff = t_s + self.effect_delay_s
-        self._memo = None
+        memo, self._memo = self._memo, {}
         self.pan.command(t_eff, cmd.pan_dir, cmd.pan_byte)
         self.tilt.command(t_eff, cmd.tilt_dir, cmd.tilt_byte)
         self.last_command = cmd
         self.last_send_t_s = t_s
+        # A command changes nothing before its effect time: answers for earlier instants still
+        # hold (same knot), unless the trim of old history moved an instant before the first knot.
+        # Only the instants asked since the previous command are carried (older ones are not asked
+        # again in practice, and the memo stays small).
+        t_first = max(self.pan.times[0], self.tilt.times[0])
+        fresh = list(memo.items())[self._n_carried:] if self._n_carried else memo.items()
+        self._memo = {k: v for k, v in fresh if t_first <= k < t_eff}
+        self._n_carried = len(self._memo)
 
     def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
         """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180]."""
-        # A frame asks about the same instant several times (D's frame, the controller, the world
-        # position); the answer only changes with a new command.
-        if self._memo is not None and self._memo[0] == t_s:
-            return self._memo[1]
+        # A frame asks about a few instants several times (D's frame, the detection, the command's
+        # effect, the driver's log); an answer only changes with a command effective before it.
+        hit = self._memo.get(t_s)
+        if hit is not None:
+            return hit
         p, _, sp = self.pan.state(t_s)
         t, _, st = self.tilt.state(t_s)
-        self._memo = (t_s, (p, t, sp, st))
-        return p, t, sp, st
+        if len(self._memo) >= 8:
+            self._memo.clear()
+            self._n_carried = 0
+        ans = self._memo[t_s] = (p, t, sp, st)
+        return ans
+
+    def tilt_at(self, t_s: float) -> tuple[float, float]:
+        """(tilt_deg, sigma_tilt_deg) at ``t_s``: ``angles_at(t_s)[1::2]`` without integrating pan."""
+        hit = self._memo.get(t_s)
+        if hit is not None:
+            return hit[1], hit[3]
+        t, _, st = self.tilt.state(t_s)
+        return t, st
 
     def speeds_at(self, t_s: float) -> tuple[float, float]:
         """Estimated actual (pan, tilt) speeds [deg/s] at ``t_s``."""
@@ -241,7 +268,8 @@ class Reconstructor:
         p, t, sp, st = self.angles_at(detection.t_s)
         q = np.asarray(detection.xyz, float) + self.lidar_offset_m
         w = rotation_matrix(p, t) @ q
-        rho = math.hypot(w[0], w[1])
-        r = float(np.linalg.norm(q))
+        w0, w1, _ = w.tolist()
+        rho = math.hypot(w0, w1)
+        r = math.sqrt(q.dot(q))   # np.linalg.norm(q), without its checks
         sigma = math.hypot(rho * math.radians(sp), r * math.radians(st))
         return w, sigma

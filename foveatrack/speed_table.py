@@ -32,6 +32,7 @@ integer or a string such as ``"0x3F"``/``"turbo"``.
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 from dataclasses import dataclass, field
@@ -75,6 +76,10 @@ class AxisTable:
     accel_deg_s2: float | None = None
     _speed: np.ndarray = field(init=False, repr=False, compare=False)   # over bytes 0..64 (64 = turbo)
     _sigma: np.ndarray = field(init=False, repr=False, compare=False)
+    # Per-frame lookups as plain Python (see :meth:`_build_lookups`): speeds by index, and per
+    # allow_turbo the candidates sorted by speed for :meth:`byte_for_speed`.
+    _speed_list: list = field(init=False, repr=False, compare=False)
+    _lookup: dict = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.axis not in AXES:
@@ -109,6 +114,21 @@ class AxisTable:
                 sigma[64] = e.sigma_deg_s if math.isfinite(e.sigma_deg_s) else abs(e.speed_deg_s)
         object.__setattr__(self, "_speed", speed)
         object.__setattr__(self, "_sigma", sigma)
+        self._build_lookups()
+
+    def _build_lookups(self) -> None:
+        """Precompute what the tracker asks every frame (the same values as the numpy routes):
+        ``speed_deg_s`` as a list, and per ``allow_turbo`` the max / min candidate speed and the
+        candidates sorted by (speed, candidate position) for the bisection in :meth:`byte_for_speed`."""
+        object.__setattr__(self, "_speed_list", [float(v) for v in self._speed])
+        lookup = {}
+        for turbo in (False, True):
+            b, s = self._candidates(turbo)
+            bl, sl = [int(v) for v in b], [float(v) for v in s]
+            order = sorted(range(len(sl)), key=lambda i: (sl[i], i))
+            lookup[turbo] = (float(s.max()) if s.size else 0.0, float(s.min()) if s.size else 0.0,
+                             [sl[i] for i in order], [bl[i] for i in order])
+        object.__setattr__(self, "_lookup", lookup)
 
     @staticmethod
     def _idx(byte: int) -> int:
@@ -116,7 +136,7 @@ class AxisTable:
 
     def speed_deg_s(self, byte: int) -> float:
         """Speed magnitude [deg/s] of a byte (NaN if unknown)."""
-        return float(self._speed[self._idx(byte)])
+        return self._speed_list[64 if byte == TURBO else int(byte)]
 
     def sigma_deg_s(self, byte: int) -> float:
         return float(self._sigma[self._idx(byte)])
@@ -143,15 +163,39 @@ class AxisTable:
         return bytes_[ok], s[ok]
 
     def max_speed_deg_s(self, allow_turbo: bool = False) -> float:
-        _, s = self._candidates(allow_turbo)
-        return float(s.max()) if s.size else 0.0
+        return self._lookup[bool(allow_turbo)][0]
 
     def min_speed_deg_s(self) -> float:
-        _, s = self._candidates(False)
-        return float(s.min()) if s.size else 0.0
+        return self._lookup[False][1]
 
     def byte_for_speed(self, speed_deg_s: float, allow_turbo: bool = False) -> int:
-        """Inverse: the byte whose known speed (> 0) is nearest to ``|speed_deg_s|`` (ties: slower)."""
+        """Inverse: the byte whose known speed (> 0) is nearest to ``|speed_deg_s|`` (ties: slower).
+
+        Bisection in the candidates sorted by (speed, byte order): ``|s - target|`` only grows
+        away from the target on either side, so the nearest speed is a neighbour of the insertion
+        point, and the slowest speed within 1e-12 of the nearest distance is found by walking down
+        from there.  The same byte as :meth:`_byte_for_speed_scan` (tested), in ~1 us instead of ~20.
+        """
+        smax, _, ss, bs = self._lookup[bool(allow_turbo)]
+        target = abs(float(speed_deg_s))
+        if not ss or target != target:   # no candidate, or NaN: the scan raises its error
+            return self._byte_for_speed_scan(speed_deg_s, allow_turbo)
+        target = min(target, smax)
+        j = bisect.bisect_left(ss, target)   # ss[j - 1] < target <= ss[j]
+        n = len(ss)
+        d_lo = abs(ss[j - 1] - target) if j > 0 else math.inf
+        d_hi = abs(ss[j] - target) if j < n else math.inf
+        thr = min(d_lo, d_hi) + 1e-12
+        i = j - 1
+        if i >= 0 and d_lo <= thr:
+            while i > 0 and abs(ss[i - 1] - target) <= thr:
+                i -= 1
+            # among equal speeds the first in byte order (sorted so), as the scan's argmin
+            return bs[i]
+        return bs[j]
+
+    def _byte_for_speed_scan(self, speed_deg_s: float, allow_turbo: bool = False) -> int:
+        """The general route of :meth:`byte_for_speed`: scan every candidate (numpy)."""
         b, s = self._candidates(allow_turbo)
         if b.size == 0:
             raise UserError(f"speed table: the {self.axis} axis has no byte with a known speed > 0")

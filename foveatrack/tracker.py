@@ -36,9 +36,9 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
-from foveatrack.control import (STOP, HeadCommand, deadband_p, head_errors_deg, lidar_errors_deg,
+from foveatrack.control import (STOP, HeadCommand, deadband_p, head_command, head_errors_deg,
                                 limit_for_stops, speed_to_axis)
-from foveatrack.detection import Detection, detect, detect_in_box, wrap_deg
+from foveatrack.detection import Detection, detect, detect_in_box, frozen_maker, wrap_deg
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.predictive import BearingFilter
@@ -235,6 +235,9 @@ class TrackOutput:
     stop_limited: bool = False
 
 
+_make_output = frozen_maker(TrackOutput)   # TrackOutput(...) without the frozen init's per-field cost
+
+
 class Tracker:
     """Algorithms 1 and 2 at ``config.rate_hz`` with head dead reckoning.  See module docstring."""
 
@@ -267,8 +270,8 @@ class Tracker:
             use_head = cfg.error_frame == "head" or cfg.controller == "predictive"
             if use_head:
                 err_pan, err_tilt = head_errors_deg(det.xyz, ht, cfg.lidar_offset_m)
-            else:
-                err_pan, err_tilt = lidar_errors_deg(det.xyz)
+            else:   # lidar_errors_deg(det.xyz): the detection's bearing, already computed
+                err_pan, err_tilt = det.az_deg, det.el_deg
             world, sigma_w = self.recon.to_world(det)
             self.last_detection_t_s = det.t_s
             self.last_pan_error_deg = err_pan
@@ -281,8 +284,8 @@ class Tracker:
         cmd, vp, vt, limited = self._to_command(v_pan, v_tilt, send_t)
         self.recon.on_command(send_t, cmd)
         self.last_command = cmd
-        return TrackOutput(t_now, self.state, det, cmd, vp, vt, err_pan, err_tilt, hp, ht, sp, st,
-                           world, sigma_w, limited)
+        return _make_output(t_now, self.state, det, cmd, vp, vt, err_pan, err_tilt, hp, ht, sp, st,
+                            world, sigma_w, limited)
 
     def command_sent(self, t_s: float, cmd: HeadCommand) -> None:
         """For drivers that send extra commands of their own (e.g. a stop on shutdown)."""
@@ -364,7 +367,7 @@ class Tracker:
     def _to_command(self, v_pan: float, v_tilt: float, send_t: float) -> tuple[HeadCommand, float, float, bool]:
         cfg = self.config
         t_act = send_t + self.recon.effect_delay_s
-        _, tilt_a, _, s_tilt = self.recon.angles_at(t_act)
+        tilt_a, s_tilt = self.recon.tilt_at(t_act)
         v_tilt, lim_t = limit_for_stops(v_tilt, tilt_a, s_tilt, *cfg.tilt_limits_deg, cfg.tilt_margin_deg,
                                         cfg.stop_lookahead_s)
         lim_p = False
@@ -376,4 +379,4 @@ class Tracker:
                                    allow_turbo=cfg.allow_turbo, floor=lim_p)
         td, tb, vt = speed_to_axis(v_tilt, self.table.tilt, max_speed_deg_s=cfg.max_tilt_speed_deg_s,
                                    floor=lim_t)
-        return HeadCommand(pd, pb, td, tb), vp, vt, lim_t or lim_p
+        return head_command(pd, pb, td, tb), vp, vt, lim_t or lim_p

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from foveatrack.control import (HeadCommand, deadband_p, head_errors_deg, lidar_errors_deg,
+from foveatrack.control import (HeadCommand, deadband_p, head_command, head_errors_deg, lidar_errors_deg,
                                 limit_for_stops, speed_to_axis)
 from foveatrack.errors import UserError
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable
@@ -127,3 +127,61 @@ def test_table_roundtrip_and_errors(tmp_path):
         assert str(p) in str(ei.value)
     with pytest.raises(UserError, match="cannot read"):
         SpeedTable.load(tmp_path / "missing.json")
+
+
+def _random_axis_table(rng, axis):
+    """Tables with repeated speeds (rounded), gaps (NaN), zeros and (pan) a turbo entry."""
+    n = int(rng.integers(1, 12))
+    bytes_ = sorted(rng.choice(64, size=n, replace=False).tolist())
+    speeds = np.round(rng.uniform(0.0, 10.0, n), int(rng.integers(0, 3)))
+    speeds[rng.random(n) < 0.1] = 0.0
+    es = [SpeedEntry(int(b), float(s), 0.1) for b, s in zip(bytes_, speeds)]
+    if axis == "pan" and rng.random() < 0.7:
+        es.append(SpeedEntry(TURBO, float(rng.choice([speeds.max(), round(rng.uniform(0, 12), 1)])), 0.1))
+    return AxisTable(axis, tuple(es))
+
+
+def test_byte_for_speed_bisection_equals_the_scan():
+    """The per-frame inverse (bisection in sorted candidates) picks the scan's byte: nearest,
+    ties within 1e-12 to the slower, equal speeds to the first byte, beyond the table the fastest."""
+    rng = np.random.default_rng(7)
+    n_checked = 0
+    for _ in range(40):
+        tab = _random_axis_table(rng, str(rng.choice(["pan", "tilt"])))
+        for turbo in (False, True):
+            b, s = tab._candidates(turbo)
+            if b.size == 0:
+                with pytest.raises(UserError):
+                    tab.byte_for_speed(1.0, allow_turbo=turbo)
+                continue
+            assert tab.max_speed_deg_s(turbo) == float(s.max())
+            if not turbo:
+                assert tab.min_speed_deg_s() == float(s.min())
+            ss = np.sort(s)
+            mids = (ss[:-1] + ss[1:]) / 2
+            targets = np.concatenate([s, s + 1e-12, s - 1e-12, s + 2e-12, mids, mids + 5e-13, -s,
+                                      rng.uniform(-15, 15, 20), [0.0, 1e17, -np.inf, np.inf]])
+            for v in targets:
+                assert tab.byte_for_speed(v, allow_turbo=turbo) == tab._byte_for_speed_scan(v, allow_turbo=turbo)
+                n_checked += 1
+    assert n_checked > 3000
+    with pytest.raises(ValueError):
+        SpeedTable.nominal().pan.byte_for_speed(float("nan"))   # as the scan: no nearest byte
+
+
+def test_speed_lookup_equals_the_arrays():
+    tab = SpeedTable.nominal()
+    for ax in (tab.pan, tab.tilt):
+        speed, _ = ax.speeds_array()
+        for b in list(range(64)) + [TURBO]:
+            got = ax.speed_deg_s(b)
+            ref = float(speed[64 if b == TURBO else b])
+            assert type(got) is float and (got == ref or (math.isnan(got) and math.isnan(ref)))
+
+
+def test_head_command_shares_one_validated_instance_per_value():
+    a = head_command(1, 5, -1, 3)
+    assert a == HeadCommand(1, 5, -1, 3) and head_command(1, 5, -1, 3) is a
+    assert head_command(0, 0, 0, 0) == HeadCommand()
+    with pytest.raises(ValueError):
+        head_command(0, 5, 0, 0)

@@ -94,3 +94,26 @@ def test_median_of_rows_equals_numpys_median():
         assert np.array_equal(_median_rows(a), np.median(a, axis=0)), n
         t = rng.integers(0, 10**17, n).astype(np.float64)   # timestamps [ns] as floats
         assert _median_rows(t) == np.median(t), n
+
+
+def test_frozen_maker_builds_what_the_constructor_builds():
+    import dataclasses
+    import pickle
+
+    from foveatrack.control import STOP
+    from foveatrack.detection import Detection, frozen_maker
+    from foveatrack.tracker import TrackOutput, TrackState
+
+    cases = [(Detection, (1.5, np.array([1.0, 2.0, 3.0]), 7, 63.4, 53.3, 3.74)),
+             (TrackOutput, (1.0, TrackState.TRACKING, None, STOP, 1.0, -2.0, 0.5, -1.0, 10.0, 2.0, 0.1, 0.2,
+                            np.array([1.0, 2.0, 3.0]), 0.3, True))]
+    for cls, args in cases:
+        a, b = frozen_maker(cls)(*args), cls(*args)
+        assert type(a) is cls and repr(a) == repr(b)
+        for f in dataclasses.fields(cls):
+            assert getattr(a, f.name) is getattr(b, f.name)
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            a.t_s = 0.0
+        assert repr(pickle.loads(pickle.dumps(a))) == repr(b)
+        with pytest.raises(TypeError):
+            frozen_maker(cls)(*args[:-1])

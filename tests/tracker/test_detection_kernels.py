@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from foveatrack.detection import detect_in_box, detect_points
-from foveatrack.kernels import box_members_kernel
+from foveatrack.kernels import box_median_kernel, box_members_kernel
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.space_of_interest import Box
 
@@ -47,3 +47,64 @@ def test_box_edges_are_half_open_like_box_contains():
     idx = np.empty(4, dtype=np.int64)
     k = box_members_kernel(xyz, np.eye(3), np.zeros(3), np.zeros(3), np.ones(3), idx)
     assert list(idx[:k]) == list(np.flatnonzero(box.contains(xyz))) == [0, 2]
+
+
+def _numpy_box_median(xyz, t_ns, rot, offset, lo, hi):
+    """Plain-numpy twin of box_median_kernel: valid points inside the turned box, np.median."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        w = np.stack([rot[k, 0] * (xyz[:, 0] + offset[0]) + rot[k, 1] * (xyz[:, 1] + offset[1])
+                      + rot[k, 2] * (xyz[:, 2] + offset[2]) for k in range(3)], axis=1)
+        keep = (np.isfinite(xyz).all(axis=1) & (xyz != 0).any(axis=1)
+                & (w >= lo).all(axis=1) & (w < hi).all(axis=1))
+    if not keep.any():
+        return 0, None, None
+    return int(keep.sum()), np.median(xyz[keep], axis=0), float(np.median(t_ns[keep].astype(np.float64)))
+
+
+@pytest.mark.parametrize("pan, tilt", [(0.0, 0.0), (37.0, -12.0), (-179.0, 58.0)])
+@pytest.mark.parametrize("n", [0, 1, 2, 7, 5000])
+def test_box_median_kernel_matches_numpy_median(pan, tilt, n):
+    xyz, t_ns = _cloud(100 + n, n)
+    rot, offset = rotation_matrix(pan, tilt), np.array([0.05, -0.02, 0.1])
+    if n > 7:
+        lo, hi = np.array([-5.0, -20.0, -3.0]), np.array([25.0, 10.0, 8.0])
+    else:   # few points: a box around everything, so the medians see them all
+        lo, hi = np.full(3, -1e9), np.full(3, 1e9)
+    out = np.empty(3)
+    k, t_med = box_median_kernel(xyz, t_ns, rot, offset, lo, hi, out)
+    k_ref, p_ref, t_ref = _numpy_box_median(xyz, t_ns, rot, offset, lo, hi)
+    assert abs(k) == k_ref
+    if k_ref:
+        assert k > 0 and t_med == t_ref
+        assert out.tobytes() == p_ref.tobytes()
+
+
+def test_a_zero_median_takes_numpys_route_bit_for_bit():
+    """-0.0 and +0.0 tie in a sort, so a zero median's sign is the sort's choice: the kernel flags
+    it and detect_in_box answers with numpy's median, sign bit included."""
+    xyz = np.array([[5.0, -0.0, 1.0], [6.0, 0.0, 2.0], [7.0, 0.0, -0.0], [8.0, -0.0, 0.0], [9.0, 1.0, 0.0]])
+    t_ns = np.arange(5, dtype=np.int64) * 1000
+    box = Box((1.0, -5.0, -5.0), (20.0, 5.0, 5.0))
+    k, _ = box_median_kernel(xyz, t_ns, np.eye(3), np.zeros(3), np.array(box.min_xyz), np.array(box.max_xyz),
+                             np.empty(3))
+    assert k == -5
+    a = detect_in_box(xyz, t_ns, box, np.eye(3), np.zeros(3))
+    b = detect_points(xyz, t_ns, box)
+    assert a.xyz.tobytes() == b.xyz.tobytes() and (a.t_s, a.n_points, a.az_deg, a.el_deg, a.range_m) == \
+        (b.t_s, b.n_points, b.az_deg, b.el_deg, b.range_m)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_detect_in_box_equals_detect_points_to_the_bit(seed):
+    xyz, t_ns = _cloud(seed, 3000)
+    box = Box((-5.0, -20.0, -3.0), (25.0, 10.0, 8.0), frame="world")
+    rot, offset = rotation_matrix(20.0 * seed, 7.0 * seed), np.array([0.05, -0.02, 0.1])
+    # the generic route tests D on points turned exactly as the kernel turns them
+    q = xyz + offset
+    with np.errstate(invalid="ignore"):
+            w = np.stack([rot[k, 0] * q[:, 0] + rot[k, 1] * q[:, 1] + rot[k, 2] * q[:, 2] for k in range(3)], axis=1)
+    a = detect_in_box(xyz, t_ns, box, rot, offset)
+    with np.errstate(invalid="ignore"):
+        b = detect_points(xyz, t_ns, box, test_xyz=w)
+    assert a.xyz.tobytes() == b.xyz.tobytes()
+    assert (a.t_s, a.n_points, a.az_deg, a.el_deg, a.range_m) == (b.t_s, b.n_points, b.az_deg, b.el_deg, b.range_m)

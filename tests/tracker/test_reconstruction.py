@@ -105,3 +105,42 @@ def test_to_world_places_a_detection():
     w, s = rec.to_world(det)
     assert np.allclose(w, [0, 10, 0])
     assert s == pytest.approx(math.hypot(10 * math.radians(0.1), 10 * math.radians(0.1)))
+
+
+def _axis_states(rec, t):
+    """The general route: each axis integrated afresh (no memo)."""
+    p, _, sp = rec.pan.state(t)
+    ti, _, st = rec.tilt.state(t)
+    return p, ti, sp, st
+
+
+def test_memoised_angles_equal_fresh_integration_across_commands():
+    """angles_at keeps answers across a command only for instants before its effect time (and
+    inside the retained history); every answer equals a fresh integration, bit for bit."""
+    table = SpeedTable.nominal()
+    rec = Reconstructor(table, pan0_deg=175.0, tilt0_deg=5.0, latency_s=0.01, dead_time_s=0.05,
+                        accel_deg_s2=40.0, history_s=2.0)
+    rng = np.random.default_rng(11)
+    t = 0.0
+    n_hits = 0
+    for _ in range(300):
+        d = rng.integers(-1, 2, 2)
+        cmd = HeadCommand(int(d[0]), int(rng.integers(0, 64)) if d[0] else 0,
+                          int(d[1]), int(rng.integers(0, 64)) if d[1] else 0)
+        t_eff = t + rec.effect_delay_s
+        # instants before, at and after this command's effect; some asked before it is sent
+        asked = [t - 0.05, t_eff - 1e-9, t_eff, t_eff + 0.02, t - 2.5]
+        rec._memo.clear()   # (the memo holds at most 8 instants; start this round with room)
+        rec._n_carried = 0
+        for q in asked[:3]:
+            rec.angles_at(q)
+        rec.on_command(t, cmd)
+        assert t_eff not in rec._memo
+        n_hits += sum(q in rec._memo for q in asked[:2])
+        for q in asked + [t + float(rng.uniform(0, 0.3))]:
+            assert rec.tilt_at(q) == _axis_states(rec, q)[1::2]
+            assert rec.angles_at(q) == _axis_states(rec, q)
+            assert rec.angles_at(q) == _axis_states(rec, q)   # a second ask (a memo hit)
+            assert rec.tilt_at(q) == _axis_states(rec, q)[1::2]
+        t += float(rng.uniform(0.02, 0.3))
+    assert n_hits > 500   # the memo did carry answers across commands
