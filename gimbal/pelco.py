@@ -38,6 +38,8 @@ the PTS family's quirk (bench notes: "the tilt word is inverted, native 0 = zeni
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -385,6 +387,12 @@ TILT_ZEROS = ("level", "zenith")
 
 def wrap_pan_deg(pan_deg):
     """Wrap to (-180, 180] (works on floats and numpy arrays)."""
+    if type(pan_deg) is float and math.isfinite(pan_deg):
+        # a plain float without numpy: the same operations, so the same bits (per-frame hot path)
+        # (np.ceil gives -0.0 on (-1, 0]; math.ceil an int, so the zero's sign is put back)
+        y = (pan_deg - 180.0) / 360.0
+        c = math.ceil(y)
+        return pan_deg - 360.0 * (float(c) if c else math.copysign(0.0, y))
     import numpy as np
 
     x = np.asarray(pan_deg, dtype=float)

@@ -74,14 +74,12 @@ class SceneSensor:
         """
         scene = self.scene
         n = len(chunk)
-        t_s = chunk.t_ns * 1e-9
-        ok = chunk.status == RAY_OK
         # 4. ray casting: targets (culled) then background.
         rng_m = np.full(n, np.inf)
         prim = np.full(n, -1, dtype=np.int64)
         offset = 0
         for spec, cull in zip(scene.targets, self._cull):
-            self._cast_target(spec, cull, t0, t1, t_s, d_world, ok, rng_m, prim, offset)
+            self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
             offset += spec.body.prims.shape[0]
         self.rays_total += n
         if self._bg.shape[0]:
@@ -116,7 +114,7 @@ class SceneSensor:
             return xyz, pt_ns, refl_byte, on_target
         # Sunlight false alarms are appended, then the frame is put back in time order (stable:
         # a false alarm after a real return of the same instant).
-        xyz, pt_ns, refl_byte, on_target = self._sunlight(chunk, ok, xyz, pt_ns, refl_byte, on_target)
+        xyz, pt_ns, refl_byte, on_target = self._sunlight(chunk, xyz, pt_ns, refl_byte, on_target)
         order = np.argsort(pt_ns, kind="stable")
         return xyz[order], pt_ns[order], refl_byte[order], on_target[order]
 
@@ -128,7 +126,7 @@ class SceneSensor:
         self.draw_calls[effect] += 1
         return self.rngs[effect]
 
-    def _cast_target(self, spec, cull, t0, t1, t_s, d_world, ok, rng_m, prim, offset):
+    def _cast_target(self, spec, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset):
         traj = spec.trajectory
         t_mid = 0.5 * (t0 + t1)
         c = traj.position(np.array([t_mid]))[0]
@@ -137,19 +135,17 @@ class SceneSensor:
         # Beam divergence can catch a body just outside the central ray's path.
         if self.scene.has("beam_footprint"):
             reach += np.linalg.norm(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
-        cand = np.empty(t_s.size, dtype=np.bool_)
-        wk.cone_candidates_kernel(d_world, c[0], c[1], c[2], reach, cand)
-        cand &= ok
-        idx = np.flatnonzero(cand)
+        idx = np.empty(t_ns.size, dtype=np.int64)
+        idx = idx[:wk.cone_candidates_kernel(d_world, status, c[0], c[1], c[2], reach, idx)]
         self.rays_cast_targets += idx.size
         if idx.size == 0:
             return
-        t_pose = t_s[idx] if self.target_motion == "per_point" else np.full(idx.size, t_mid)
+        t_pose = t_ns[idx] * 1e-9 if self.target_motion == "per_point" else np.full(idx.size, t_mid)
         pos = traj.position(t_pose)
         yaw = heading_rad(traj.velocity(t_pose))
         prims = spec.body.prims
         if not self.scene.has("beam_footprint"):
-            wk.cast_moving_kernel(idx.astype(np.int64), d_world, pos, yaw, prims, offset, rng_m, prim)
+            wk.cast_moving_kernel(idx, d_world, pos, yaw, prims, offset, rng_m, prim)
             return
         # Beam footprint: sub-rays over the divergence ellipse; the return is the nearest sub-ray
         # range if at least half of the sub-rays hit (a partial hit on a thin arm may still return).
@@ -178,8 +174,9 @@ class SceneSensor:
         rng_m[idx[take]] = best[take]
         prim[idx[take]] = best_prim[take]
 
-    def _sunlight(self, chunk, ok, xyz, pt_ns, refl_byte, on_target):
+    def _sunlight(self, chunk, xyz, pt_ns, refl_byte, on_target):
         rng = self._stream("sunlight")
+        ok = chunk.status == RAY_OK
         n_false = rng.binomial(int(ok.sum()), self.scene.param("sunlight_rate"))
         if n_false == 0:
             return xyz, pt_ns, refl_byte, on_target

@@ -26,6 +26,8 @@ import math
 import numpy as np
 from numba import njit
 
+from sim.scan.kernels import RAY_OK
+
 SPHERE, BOX, DISK, PLANE, RECT = 0, 1, 2, 3, 4
 _BLOCK = 256   # beams per x, y, z block of the rotation (a 1 ms run of a Mid-40 is 100)
 PRIM_COLUMNS = 13
@@ -267,17 +269,17 @@ def cast_moving_kernel(idx, d_world, pos, yaw, prims, prim_offset, out_range, ou
 
 
 @njit(cache=True)
-def cone_candidates_kernel(d_world, cx, cy, cz, radius, out):
-    """Rays passing within ``radius`` of the point c (and in front of the origin): the cheap cull
-    that keeps a one-UAV scene from tracing the whole cloud.  Returns how many were marked."""
+def cone_candidates_kernel(d_world, status, cx, cy, cz, radius, out_idx):
+    """Indices of the valid rays (``status == RAY_OK``) passing within ``radius`` of the point c (and in
+    front of the origin): the cheap cull that keeps a one-UAV scene from tracing the whole cloud.
+    Writes them in order to ``out_idx`` and returns how many there are."""
     n = 0
     r2 = radius * radius
     c2 = cx * cx + cy * cy + cz * cz
     for j in range(d_world.shape[0]):
         b = d_world[j, 0] * cx + d_world[j, 1] * cy + d_world[j, 2] * cz
-        hit = (c2 - b * b <= r2) and (b > -radius)
-        out[j] = hit
-        if hit:
+        if (c2 - b * b <= r2) and (b > -radius) and status[j] == RAY_OK:
+            out_idx[n] = j
             n += 1
     return n
 

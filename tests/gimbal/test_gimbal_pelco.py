@@ -1,5 +1,6 @@
 """Pelco-D/P codec: known frames, round trips for every command, angle words."""
 
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -156,3 +157,23 @@ def test_tilt_word_conventions():
     assert P.tilt_deg_to_word(0.0, "zenith") == 9000
     assert P.pan_deg_to_word(-90.0) == 27000
     assert P.wrap_pan_deg(180.0) == 180.0 and P.wrap_pan_deg(-180.0) == 180.0
+
+
+def test_wrap_pan_float_path_equals_array_path_to_the_bit():
+    """A plain float is wrapped without numpy (per-frame hot path); it must give the array route's
+    bits, the sign of a zero included (np.ceil gives -0.0 on (-1, 0])."""
+    import math
+
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.uniform(-1e4, 1e4, 20_000), rng.uniform(-400, 400, 20_000),
+                        [180.0, -180.0, 540.0, -540.0, 0.0, -0.0, 360.0, -360.0, 1e-300, -1e-300,
+                         math.nextafter(180.0, 0), math.nextafter(180.0, 360), math.nan, math.inf]])
+    with np.errstate(invalid="ignore"):     # inf - inf in the array route: NaN, as intended
+        arr = P.wrap_pan_deg(x)
+        got_all = [P.wrap_pan_deg(float(v)) for v in x]
+    for v, w, got in zip(x, arr, got_all):
+        assert type(got) is float
+        if math.isnan(w):
+            assert math.isnan(got)
+        else:
+            assert got == w and math.copysign(1.0, got) == math.copysign(1.0, w), v

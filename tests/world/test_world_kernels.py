@@ -159,13 +159,18 @@ def test_cone_cull_keeps_every_ray_that_can_hit():
     rng = np.random.default_rng(5)
     d = _unit(rng, 50_000)
     c = np.array([6.0, 1.0, 0.5])
-    mark = np.empty(len(d), dtype=np.bool_)
-    K.cone_candidates_kernel(d, *c, 0.8, mark)
+    status = (rng.random(len(d)) < 0.1).astype(np.uint8)    # 10 % of the rays failed in the prisms
+    idx = np.empty(len(d), dtype=np.int64)
+    k = K.cone_candidates_kernel(d, status, *c, 0.8, idx)
+    mark = np.zeros(len(d), dtype=bool)
+    mark[idx[:k]] = True
+    assert np.all(np.diff(idx[:k]) > 0), "in ray order"
     r = np.full(len(d), np.inf)
     p = np.full(len(d), -1, dtype=np.int64)
     K.cast_static_kernel(d, np.array([bodies.sphere(c, 0.8)]), 0, r, p)
-    assert np.all(mark[p >= 0]), "no ray that hits the bounding sphere is culled"
-    assert mark.mean() < 0.01
+    assert np.all(mark[(p >= 0) & (status == 0)]), "no valid ray that hits the bounding sphere is culled"
+    assert not mark[status != 0].any(), "failed rays are never candidates"
+    assert 0 < mark.mean() < 0.01
 
 
 def test_quadrotor_size_and_bound():
