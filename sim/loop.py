@@ -151,6 +151,7 @@ class ClosedLoop:
                                   "latency_s": 7 * 10 / g.baud, "send_delay_s": g.send_delay_s}
         self.tracker = Tracker(replace(scene.tracker, **self.tracker_overrides), table)
         self._pending: list[tuple[float, bytes]] = []
+        self._encoded: dict[tuple, bytes] = {}   # Pelco-D bytes per (pan_dir, pan_byte, tilt_dir, tilt_byte)
         self.log = FrameLog()
         self.bytes_sent = 0
         self.echo_bytes = 0
@@ -239,7 +240,10 @@ class ClosedLoop:
             self.tracker.command_sent(send_t, STOP)
         if not scene.gimbal.frozen:
             c = out.command
-            data = encode_pan_tilt(scene.gimbal.address, c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte)
+            key = (c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte)
+            data = self._encoded.get(key)
+            if data is None:     # a run uses a few dozen distinct commands: encode each once
+                data = self._encoded[key] = encode_pan_tilt(scene.gimbal.address, *key)
             self._pending.extend(self.uart.send(data, send_t))
             self.bytes_sent += len(data)
             if "echo" in self.uart.effects:
@@ -282,7 +286,7 @@ class ClosedLoop:
             L.true_error_deg.append(math.degrees(math.atan2(math.hypot(q[1], q[2]), q[0])))
             L.true_az_deg.append(math.degrees(math.atan2(q[1], q[0])))
             L.true_el_deg.append(math.degrees(math.atan2(q[2], math.hypot(q[0], q[1]))))
-            L.target_range_m.append(float(np.linalg.norm(p)))
+            L.target_range_m.append(math.sqrt(p.dot(p)))   # np.linalg.norm's own expression, its bits
             L.target_lateral_m.append(float(p[1]))
             t_det = out.detection.t_s if out.detection is not None else t_mid
             L.target_xyz.append(traj.position(np.array([t_det]))[0])

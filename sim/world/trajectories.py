@@ -29,7 +29,9 @@ class Straight:
         return np.asarray(self.start_m) + _col(t_s) * np.asarray(self.velocity_m_s)
 
     def velocity(self, t_s):
-        return np.broadcast_to(np.asarray(self.velocity_m_s, float), (_col(t_s).shape[0], 3)).copy()
+        out = np.empty((_col(t_s).shape[0], 3))
+        out[:] = self.velocity_m_s
+        return out
 
     @property
     def max_speed_m_s(self) -> float:
@@ -178,5 +180,6 @@ class Manual:
 def heading_rad(velocity: np.ndarray, default: float = 0.0) -> np.ndarray:
     """Yaw of the body (x forward along the horizontal velocity); ``default`` when hovering."""
     vx, vy = velocity[:, 0], velocity[:, 1]
-    moving = vx * vx + vy * vy > 1e-8
-    return np.where(moving, np.arctan2(vy, vx), default)
+    yaw = np.arctan2(vy, vx)
+    yaw[~(vx * vx + vy * vy > 1e-8)] = default    # hovering (or an undefined velocity)
+    return yaw
