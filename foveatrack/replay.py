@@ -16,7 +16,9 @@ How a recording's tracker is rebuilt (``meta``):
   was written at ``t_end + send_delay_s``.
 * daemon (:mod:`foveatrack.daemon.runtime`): ``[tracker]`` table + ``tracker_overrides``; frames end
   at the recorded ``t_ns``; the send time is the command's ``send_t_s``; commands the safety gate
-  limited, and the watchdog's and shutdown's STOPs, are registered where they happened.
+  limited, and the watchdog's and shutdown's STOPs, are registered where they happened; a command
+  whose write failed (``written: false``) is replaced, at the same instant, by the last one that
+  reached the head (the head never saw it, and kept moving as it was told before).
 
 Replay is open loop: the points are what the lidar saw while the head moved as it did, so a
 different configuration shows which detections and commands would have differed on the same data,
@@ -156,6 +158,22 @@ def _groups(reader):
         yield cur
 
 
+def _tracker_record(channels: dict) -> dict | None:
+    cm = [c for c in channels.get("commands", []) if c.get("source", "tracker") == "tracker"]
+    return cm[0] if cm else None
+
+
+def _reached_head(tracker: Tracker, send_t: float, cmd: HeadCommand, record: dict | None,
+                  head_cmd: HeadCommand) -> HeadCommand:
+    """What the head runs after a command sent at ``send_t``: ``cmd``, unless the recording says its
+    write failed (the daemon's ``written: false``); then the head kept ``head_cmd``, and the dead
+    reckoning is told so at the same instant, as the daemon did."""
+    if record is not None and record.get("written", True) is False:
+        tracker.command_sent(send_t, head_cmd)
+        return head_cmd
+    return cmd
+
+
 def _sent_stale(channels: dict, tag: str) -> bool:
     return any(tag in c.get("limited", ()) for c in channels.get("commands", [])
                if c.get("source", "tracker") == "tracker")
@@ -189,6 +207,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
                          "processing_ms", "latency_ms")}
     T = {k: [] for k in ("true_error_deg", "target_xyz_m", "points_on_target", "pan_deg", "tilt_deg")}
     has_truth = False
+    head_cmd = STOP   # the last command the head received: a daemon's failed write left it running this
     for pts, ch, after in _groups(reader):
         k = int(pts.frame_index)
         if source == "simulator":
@@ -211,6 +230,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
                 cmd, why = STOP, why + [STALE_FRAME]
             if why:
                 tracker.command_sent(send_t, cmd)
+        head_cmd = _reached_head(tracker, send_t, cmd, _tracker_record(ch), head_cmd)
         F.add(k, frame, out, cmd)
         dets = ch.get("detections", [])
         d = dets[0] if dets else {}
@@ -240,8 +260,10 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             T["pan_deg"].append(np.nan)
             T["tilt_deg"].append(np.nan)
         for c in after:   # watchdog / shutdown STOPs, in the order they were sent
-            tracker.command_sent(float(c["send_t_s"]), HeadCommand(c["pan_dir"], c["pan_byte"], c["tilt_dir"],
-                                                                    c["tilt_byte"]))
+            t_c = float(c["send_t_s"])
+            cmd_c = HeadCommand(c["pan_dir"], c["pan_byte"], c["tilt_dir"], c["tilt_byte"])
+            tracker.command_sent(t_c, cmd_c)
+            head_cmd = _reached_head(tracker, t_c, cmd_c, c, head_cmd)
     t_settled = (tracker.recon.last_send_t_s or 0.0) + 2.0
     final_pose = tuple(float(a) for a in tracker.recon.angles_at(t_settled)[:2])
     frames = F.arrays()

@@ -159,6 +159,7 @@ class Daemon:
         self.last_out = None
         self._compute_s: deque = deque([0.002], maxlen=9)   # recent compute times [s]
         self._last_send_t = -math.inf
+        self._head_cmd: HeadCommand = STOP   # the last command the head actually received (it starts stopped)
         self.recorder: RecordingThread | None = None
         self.recording_path = None
 
@@ -228,6 +229,14 @@ class Daemon:
         ok = self.head.send_frame(raw)
         t_written = time.monotonic()
         self.counters["commands_written" if ok else "commands_failed"] += 1
+        if ok:
+            self._head_cmd = cmd
+        else:
+            # The head never got these bytes, so it keeps doing what it was last told (a Pelco head
+            # latches motion): the dead reckoning must too, or a link outage reads as the head
+            # following the tracker (seen: ~9 deg of pan while a head was unplugged).  The caller
+            # registered ``cmd`` at ``send_t_s``; this later registration at the same time wins.
+            self.tracker.command_sent(send_t_s, self._head_cmd)
         rec = {"raw": raw, "frame_id": fid, "source": source, "send_t_s": float(send_t_s), "written": bool(ok),
                "host_written_s": t_written, "pan_dir": cmd.pan_dir, "pan_byte": cmd.pan_byte,
                "tilt_dir": cmd.tilt_dir, "tilt_byte": cmd.tilt_byte}
@@ -354,8 +363,8 @@ class Daemon:
                     t_s = self.sensor_now_s(now)
                     if t_s is not None and watchdog_tripped:
                         t_s = self._send_time(t_s)
-                        rec, _ = self._send(STOP, "watchdog", t_s)
                         self.tracker.command_sent(t_s, STOP)
+                        rec, _ = self._send(STOP, "watchdog", t_s)
                         self._record(_job_command, rec)
                     else:
                         self.head.stop()
@@ -422,8 +431,8 @@ class Daemon:
         t_s = self.sensor_now_s()
         if t_s is not None:
             t_s = self._send_time(t_s)
-            rec, _ = self._send(STOP, "shutdown", t_s)
             self.tracker.command_sent(t_s, STOP)
+            rec, _ = self._send(STOP, "shutdown", t_s)
             self._record(_job_command, rec)
         else:
             self.head.stop()
