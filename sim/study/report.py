@@ -113,7 +113,9 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
           "paired by seed (same seed, reference vs setting), averaged over seeds.  Any change of a knob changes "
           "how many random numbers the noise streams draw, so the *seed-to-seed spread* of the reference is the "
           "floor below which a deviation means nothing.  A 50 ms head grid cannot run (the loop asks the head "
-          "about times after the next command's earliest effect); 25 ms is the coarsest measured.", ""]
+          "about times after the next command's earliest effect); 25 ms is the coarsest measured.  "
+          "`head exact pieces` is the loop's default route: each point's pose exactly from the head's "
+          "constant-acceleration pieces (`head exact` asks the head model about every point instead).", ""]
     for key, f in ax["fidelity"].items():
         fl = f["noise_floor"]
         L += [f"**{f['scene']}** (shortened to {f['duration_s']:g} s, seeds {', '.join(map(str, f['seeds']))}; "
@@ -121,7 +123,7 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
               f"{_f(fl['points_on_target_per_frame'])} per frame):", ""]
         L += _table(["setting", "footprint", "target", "head grid [ms]", "CPU s / virtual s", "error rms [deg]",
                      "abs Δ error rms [deg]", "points on target / frame", "abs Δ points", "detections / frame"],
-                    [[r["setting"], r["footprint"], r["target_motion"].replace("_", "-"), _f(r["head_grid_ms"], "{:g}"),
+                    [[r["setting"], r["footprint"], r["target_motion"].replace("_", "-"), _f(r["head_grid_ms"], "{:g}", none="exact (pieces)"),
                       _f(r["cpu_per_virtual_s"]), _f(r["error_rms_all_deg"]), _f(r["d_error_rms_all_deg"]),
                       _f(r["points_on_target_per_frame"]), _f(r["d_points_on_target_per_frame"]), _f(r["detect_frac"], "{:.2f}")]
                      for r in f["rows"]])

@@ -7,7 +7,8 @@ plus the two corners of the box:
 * beam footprint sub-rays: off, 3, 7, 15 (the beam's 0.28 x 0.03 deg divergence ellipse);
 * target motion: ``per_point`` (each point sees the target at its own time) vs ``per_frame``
   (frozen at the frame's mid-time);
-* head pose: exact at every point (``head_grid_s = 0``) vs interpolated from a 1, 10 or 25 ms grid
+* head pose: exact at every point, asking the head model about each (``head_grid_s = 0``) or from
+  its constant-acceleration pieces (``None``, the loop's default), vs interpolated from a 1, 10 or 25 ms grid
   (50 ms, asked for, cannot run: ``ClosedLoop.step`` evaluates the grid up to ``t1 + grid``, and a
   50 ms grid asks the head about times after the next command's earliest effect --
   ``t1`` + send delay + 7.3 ms on the wire + 40 ms dead time -- which the head model refuses as
@@ -42,6 +43,7 @@ SETTINGS = {
     "footprint 15": (15, "per_point", 0.001),
     "per-frame target": (None, "per_frame", 0.001),
     "head exact": (None, "per_point", 0.0),
+    "head exact pieces": (None, "per_point", None),   # the loop's default: exact, from the motion pieces
     "head 10 ms": (None, "per_point", 0.010),
     "head 25 ms": (None, "per_point", 0.025),
     "all-exact": (15, "per_point", 0.0),
@@ -106,7 +108,7 @@ def collect(results) -> dict:
             if not have:
                 continue
             row = {"setting": name, "footprint": describe(have[0][0].scene), "target_motion": motion,
-                   "head_grid_ms": grid * 1000, "seeds": len(have)}
+                   "head_grid_ms": None if grid is None else grid * 1000, "seeds": len(have)}
             for k in METRICS + ("cpu_per_virtual_s", "cpu_s", "wall_s", "error_rms_acq_deg"):
                 vals = [r[k] for _, r in have if r.get(k) is not None]
                 row[k] = float(np.mean(vals)) if vals else None
