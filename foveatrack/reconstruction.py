@@ -141,6 +141,13 @@ class _AxisIntegrator:
         last = self.knots[-1]
         if t_eff < last.t:
             raise ValueError(f"commands must come in time order (effect time {t_eff} < {last.t})")
+        if t_eff == last.t and len(self.knots) > 1:
+            # A second command at the same instant replaces the first (a driver's gate limited it,
+            # its write failed, the head is frozen): one change of speed, not two, so its timing
+            # variance is counted once.
+            self.knots.pop()
+            self.times.pop()
+            last = self.knots[-1]
         idx = -1 if direction == 0 else (64 if byte == TURBO else byte)
         v_tgt = 0.0 if direction == 0 else direction * self.table.speed_deg_s(byte)
         if not math.isfinite(v_tgt):

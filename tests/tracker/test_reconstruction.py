@@ -144,3 +144,25 @@ def test_memoised_angles_equal_fresh_integration_across_commands():
             assert rec.tilt_at(q) == _axis_states(rec, q)[1::2]
         t += float(rng.uniform(0.02, 0.3))
     assert n_hits > 500   # the memo did carry answers across commands
+
+
+def test_a_second_command_at_the_same_instant_replaces_the_first():
+    """A driver may register a command and then, at the same instant, the one actually sent (its
+    safety gate limited it, its write failed, the head is frozen).  That is one change of speed: the
+    angles *and* the timing uncertainty must be those of the second command alone."""
+    table = SpeedTable.nominal()
+    kw = dict(pan0_deg=10.0, tilt0_deg=5.0, latency_s=0.007, dead_time_s=0.04, accel_deg_s2=40.0)
+    once, twice = Reconstructor(table, **kw), Reconstructor(table, **kw)
+    rng = np.random.default_rng(8)
+    t = 0.0
+    for _ in range(60):
+        pd, td = int(rng.integers(-1, 2)), int(rng.integers(-1, 2))
+        cmd = HeadCommand(pd, int(rng.integers(1, 64)) if pd else 0, td, int(rng.integers(1, 64)) if td else 0)
+        other = HeadCommand(1, 40, -1, 30)
+        once.on_command(t, cmd)
+        twice.on_command(t, other)          # replaced at the same instant ...
+        twice.on_command(t, cmd)            # ... by what was sent
+        t += float(rng.uniform(0.05, 0.3))
+    for u in np.linspace(0.0, t + 1.0, 200):
+        assert twice.angles_at(u) == once.angles_at(u)
+    assert len(twice.pan.knots) == len(once.pan.knots)
