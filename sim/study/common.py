@@ -115,7 +115,7 @@ def warm_up() -> None:
         for model in ("exact", "paraxial"):
             ScanModel(optics, model).scan(0, 1000)
     scene = with_footprint(replace(load_study_scene("fig12"), duration_s=0.2), 3)
-    for grid, motion in ((0.001, "per_point"), (0.0, "per_frame")):
+    for grid, motion in ((None, "per_point"), (0.001, "per_point"), (0.0, "per_frame")):
         ClosedLoop(scene, head_grid_s=grid, target_motion=motion).run()
     _WARM = True
 

@@ -112,8 +112,7 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
           "per-point target, head pose exact at every point: the **reference**) and `all-cheap`.  Deviations are "
           "paired by seed (same seed, reference vs setting), averaged over seeds.  Any change of a knob changes "
           "how many random numbers the noise streams draw, so the *seed-to-seed spread* of the reference is the "
-          "floor below which a deviation means nothing.  A 50 ms head grid cannot run (the loop asks the head "
-          "about times after the next command's earliest effect); 25 ms is the coarsest measured.  "
+          "floor below which a deviation means nothing.  "
           "`head exact pieces` is the loop's default route: each point's pose exactly from the head's "
           "constant-acceleration pieces (`head exact` asks the head model about every point instead).", ""]
     for key, f in ax["fidelity"].items():

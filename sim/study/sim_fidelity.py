@@ -8,11 +8,9 @@ plus the two corners of the box:
 * target motion: ``per_point`` (each point sees the target at its own time) vs ``per_frame``
   (frozen at the frame's mid-time);
 * head pose: exact at every point, asking the head model about each (``head_grid_s = 0``) or from
-  its constant-acceleration pieces (``None``, the loop's default), vs interpolated from a 1, 10 or 25 ms grid
-  (50 ms, asked for, cannot run: ``ClosedLoop.step`` evaluates the grid up to ``t1 + grid``, and a
-  50 ms grid asks the head about times after the next command's earliest effect --
-  ``t1`` + send delay + 7.3 ms on the wire + 40 ms dead time -- which the head model refuses as
-  non-causal; a knob for the lead);
+  its constant-acceleration pieces (``None``, the loop's default), vs interpolated from a 1, 10, 25 or
+  50 ms grid (the loop shrinks the step so the grid ends exactly at the frame's end: it never asks the
+  head about a time a later command could still change);
 * ``all-exact`` (15 sub-rays, per point, exact head): the reference;
 * ``all-cheap`` (no footprint, per frame, 25 ms grid).
 
@@ -46,6 +44,7 @@ SETTINGS = {
     "head exact pieces": (None, "per_point", None),   # the loop's default: exact, from the motion pieces
     "head 10 ms": (None, "per_point", 0.010),
     "head 25 ms": (None, "per_point", 0.025),
+    "head 50 ms": (None, "per_point", 0.050),
     "all-exact": (15, "per_point", 0.0),
     "all-cheap": (0, "per_frame", 0.025),
 }
@@ -59,7 +58,7 @@ class FidelityTask:
     setting: str
     seed: int
     scene: object
-    head_grid_s: float
+    head_grid_s: float | None   # None: the exact pieces route (see sim.loop.ClosedLoop)
     target_motion: str
 
     axis = "fidelity"
