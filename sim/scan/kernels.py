@@ -364,12 +364,13 @@ def paint_footprint_kernel(az_deg, el_deg, k0, half_az_deg, half_el_deg, az_min,
 
 
 @njit(cache=True)
-def add_speed_noise_kernel(k0, rate_hz, segment_s, noise_cum, noise_eps, rev_per_s, revs):
+def add_speed_noise_kernel(k0, rate_hz, segment_s, noise_cum, noise_eps, noise_seg0, rev_per_s, revs):
     """Add the phase error of piecewise-constant relative speed errors to ``revs`` (P, N) [rev].
 
     Point ``k0 + j`` is at ``t = (k0 + j) / rate``, in segment ``s = floor(t / T)``; its phase error
     is ``rev_per_s[p] * (noise_cum[s, p] + noise_eps[s, p] * (t - s T))`` (the integral of the
-    relative error), wrapped back into [0, 1).
+    relative error), wrapped back into [0, 1).  The tables hold segments from ``noise_seg0`` on (row
+    ``s - noise_seg0``): older ones are dropped on long runs (:class:`sim.scan.model.ScanModel`).
     """
     p_count, n = revs.shape
     for j in range(n):
@@ -377,7 +378,8 @@ def add_speed_noise_kernel(k0, rate_hz, segment_s, noise_cum, noise_eps, rev_per
         s = int(math.floor(t / segment_s))
         dt = t - s * segment_s
         for p in range(p_count):
-            v = revs[p, j] + rev_per_s[p] * (noise_cum[s, p] + noise_eps[s, p] * dt)
+            r = s - noise_seg0
+            v = revs[p, j] + rev_per_s[p] * (noise_cum[r, p] + noise_eps[r, p] * dt)
             revs[p, j] = v - np.floor(v)
 
 
@@ -388,7 +390,7 @@ _NS_PER_S = 1_000_000_000
 
 @njit(cache=True, fastmath=False)
 def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
-                      noise_eps, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb):
+                      noise_eps, noise_seg0, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb):
     """Phases (with speed noise), times and channels of the ``m <= 256`` points ``k .. k + m - 1``.
 
     Explicitly not fastmath (``arcp`` would turn the divisions below into multiplications by a
@@ -450,7 +452,6 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
     i = 0
     while i < m:
         e = m
-        cum_scale = 0.0
         seg_f = 0.0
         si = 0
         if noise_on:
@@ -458,8 +459,7 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
             e = i + 1
             while e < m and sb[e] == seg_f:
                 e += 1
-            si = int(seg_f)
-            cum_scale = 1.0
+            si = int(seg_f) - noise_seg0
         for p in range(p_count):
             # exact at the block's absolute anchor (a multiple of 256 at or before k), so that the
             # phase of a point does not depend on where the caller's chunk began
@@ -488,7 +488,7 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
 
 @njit(cache=True, fastmath=_FAST, error_model="numpy")
 def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum, noise_eps,
-                      rev_per_s, channel_count, incident, sin_wedge, cos_wedge, index, exit_tilted,
+                      noise_seg0, rev_per_s, channel_count, incident, sin_wedge, cos_wedge, index, exit_tilted,
                       t_ns, channel, out_dir, status):
     """Points ``k0 .. k0 + N - 1`` of the exact model in one pass: what ``phase_revs_kernel`` +
     ``add_speed_noise_kernel`` + ``point_times_ns_kernel`` + channel ``k mod C`` +
@@ -510,8 +510,9 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
     rate_hz : int in [1e3, 2e6]        point rate [points/s]
     r_h1, r_h2, r_lo, phase0_rev : (P,) float64   as for ``phase_revs_kernel``
     noise_on : bool
-    segment_s : float > 0 [s]; noise_cum : (S+1, P); noise_eps : (S, P); rev_per_s : (P,) [rev/s]
-        as for ``add_speed_noise_kernel`` (grown to cover the last point's segment + 1)
+    segment_s : float > 0 [s]; noise_cum : (S+1, P); noise_eps : (S, P); noise_seg0 : int;
+    rev_per_s : (P,) [rev/s]   as for ``add_speed_noise_kernel`` (from segment ``noise_seg0``, grown
+        to cover the last point's segment + 1)
     channel_count : int >= 1           channels C; point k is fired by channel ``k mod C``
     incident, sin_wedge, cos_wedge, index, exit_tilted : as for ``trace_exact_kernel``
     t_ns : (N,) int64 [ns]; channel : (N,) uint8; out_dir : (N, 3) float64; status : (N,) uint8  outputs
@@ -526,7 +527,7 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
     while j0 < n:
         m = min(_BLOCK - (k0 + j0) % _BLOCK, n - j0)
         _scan_block(k0 + j0, m, j0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
-                    noise_eps, rev_per_s, channel_count, sin_wedge, cos_wedge, index, exit_tilted,
+                    noise_eps, noise_seg0, rev_per_s, channel_count, sin_wedge, cos_wedge, index, exit_tilted,
                     channel_pattern, first, pre, revs, tb, sb, t_ns, channel, bx, by, bz, bs)
         _store_block(out_dir, status, j0, m, bx, by, bz, bs)
         j0 += m
@@ -563,15 +564,16 @@ def _scan_scratch(p_count, channel_count, incident, index, exit_tilted):
     return revs, tb, sb, bx, by, bz, bs, first, pre, channel_pattern
 
 
-@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+@njit(cache=True, fastmath=_FAST, error_model="numpy")   # not inlined: numba's inliner refuses 30+ arguments
 def _scan_block(k, m, j0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum, noise_eps,
-                rev_per_s, channel_count, sin_wedge, cos_wedge, index, exit_tilted, channel_pattern, first, pre,
+                noise_seg0, rev_per_s, channel_count, sin_wedge, cos_wedge, index, exit_tilted, channel_pattern,
+                first, pre,
                 revs, tb, sb, t_ns, channel, bx, by, bz, bs):
     """One block of :func:`scan_exact_kernel` (``m`` points from ``k``, within one 256-point cell):
     times and channels at ``j0 ..``, and the traced rays left in ``bx, by, bz`` (optics frame) with
     their status in ``bs``."""
     _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
-                      noise_eps, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb)
+                      noise_eps, noise_seg0, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb)
     ch_blk = channel[j0:j0 + m]
     for i in range(m):
         c = ch_blk[i]

@@ -102,6 +102,7 @@ class ScanModel:
         # how the caller chunks the scan.
         self._noise_cum = np.zeros((1, len(prisms)))  # integral of relative speed error [s]
         self._noise_eps = np.zeros((0, len(prisms)))
+        self._noise_seg0 = 0   # absolute index of the tables' first segment
         self._drift_phase = None
         self.noise_draws = 0  # how many random numbers the noise has drawn (tests count these)
 
@@ -124,10 +125,9 @@ class ScanModel:
         kernels.phase_revs_kernel(int(k0), self._r_h1, self._r_h2, self._r_lo, self._phase0_rev, out)
         if self.speed_noise is not None and count:
             noise = self.speed_noise
-            t_last = (k0 + count - 1) / self.optics.point_rate_hz
-            self._grow_noise(int(math.floor(t_last / noise.segment_s)) + 2)
+            self._noise_for(k0, count)
             kernels.add_speed_noise_kernel(int(k0), float(self.optics.point_rate_hz), noise.segment_s,
-                                           self._noise_cum, self._noise_eps, self._rev_per_s, out)
+                                           self._noise_cum, self._noise_eps, self._noise_seg0, self._rev_per_s, out)
             if noise.drift_frac > 0:
                 t_s = (np.arange(count, dtype=np.float64) + float(k0)) / self.optics.point_rate_hz
                 out += self._drift_revs(t_s).T
@@ -180,9 +180,7 @@ class ScanModel:
         noise = self.speed_noise
         segment_s = 1.0
         if noise is not None and count:
-            # The same growth call as prism_revs makes, so the draws do not depend on the path.
-            t_last = (k0 + count - 1) / self.optics.point_rate_hz
-            self._grow_noise(int(math.floor(t_last / noise.segment_s)) + 2)
+            self._noise_for(k0, count)   # as prism_revs does, so the draws do not depend on the path
             segment_s = noise.segment_s
         t_ns = np.empty(count, dtype=np.int64)
         channel = np.empty(count, dtype=np.uint8)
@@ -190,7 +188,7 @@ class ScanModel:
         status = np.empty(count, dtype=np.uint8)
         kernels.scan_exact_kernel(
             k0, int(self.optics.point_rate_hz), self._r_h1, self._r_h2, self._r_lo, self._phase0_rev,
-            noise is not None, segment_s, self._noise_cum, self._noise_eps, self._rev_per_s,
+            noise is not None, segment_s, self._noise_cum, self._noise_eps, self._noise_seg0, self._rev_per_s,
             int(self.optics.channels), self._incident, self._sin_wedge, self._cos_wedge, self._index,
             self._exit_tilted, t_ns, channel, direction, status,
         )
@@ -248,12 +246,37 @@ class ScanModel:
             np.cos(self._drift_phase)[None, :] - np.cos(w * t_s[:, None] + self._drift_phase[None, :]))
         return frac_s * self._rev_per_s[None, :]
 
+    # Speed-noise tables: grown in blocks of at most _NOISE_GROW_MAX segments, and segments more than
+    # _NOISE_KEEP behind the oldest point asked for are dropped (a day at 10 ms segments would
+    # otherwise hold 280 MB; now at most ~6 MB).  The draws do not depend on either: a segment's error
+    # is the same whenever it is drawn.
+    _NOISE_GROW_MAX = 65_536
+    _NOISE_KEEP = 65_536
+
+    def _noise_for(self, k0: int, count: int) -> None:
+        """Make the noise tables cover points ``k0 .. k0 + count - 1``; drop what lies far behind."""
+        rate = self.optics.point_rate_hz
+        seg = self.speed_noise.segment_s
+        first = int(math.floor(k0 / rate / seg))
+        if first < self._noise_seg0:
+            raise ValueError(
+                f"point {k0} (t = {k0 / rate:.3f} s) is older than the kept motor-speed noise (from "
+                f"t = {self._noise_seg0 * seg:.3f} s): a scan with speed noise may go back at most "
+                f"{self._NOISE_KEEP * seg:.0f} s behind the latest point it was asked for")
+        self._grow_noise(int(math.floor((k0 + count - 1) / rate / seg)) + 2)
+        drop = first - self._NOISE_KEEP - self._noise_seg0
+        if drop > self._NOISE_KEEP:      # trim in big steps: a copy per ~11 min of virtual time
+            self._noise_eps = self._noise_eps[drop:].copy()
+            self._noise_cum = self._noise_cum[drop:].copy()
+            self._noise_seg0 += drop
+
     def _grow_noise(self, segments: int) -> None:
-        have = self._noise_eps.shape[0]
+        """Draw segments up to (absolute) ``segments``."""
+        have = self._noise_seg0 + self._noise_eps.shape[0]
         if segments <= have:
             return
         noise = self.speed_noise
-        grow = max(segments - have, have, 1024)
+        grow = min(max(segments - have, have, 1024), max(segments - have, self._NOISE_GROW_MAX))
         eps = self._rng.normal(0.0, noise.sigma_frac, size=(grow, self.prism_count))
         self.noise_draws += eps.size
         self._noise_eps = np.vstack([self._noise_eps, eps])

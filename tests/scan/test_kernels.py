@@ -168,6 +168,6 @@ def test_speed_noise_kernel_matches_twin():
     eps = rng.normal(0, 0.01, (51, 2))
     revs = rng.random((2, 3000))
     want = add_speed_noise_twin(12_345, 100_000.0, 0.01, cum, eps, np.array([121.6, -77.7]), revs)
-    K.add_speed_noise_kernel(12_345, 100_000.0, 0.01, cum, eps, np.array([121.6, -77.7]), revs)
+    K.add_speed_noise_kernel(12_345, 100_000.0, 0.01, cum, eps, 0, np.array([121.6, -77.7]), revs)
     d = (revs - want + 0.5) % 1 - 0.5
     assert np.max(np.abs(d)) < 1e-12

@@ -26,8 +26,8 @@ def _kernel(model, k0, count, noise_on):
     status = np.empty(count, dtype=np.uint8)
     seg = model.speed_noise.segment_s if noise_on else 1.0
     K.scan_exact_kernel(k0, model.optics.point_rate_hz, model._r_h1, model._r_h2, model._r_lo, model._phase0_rev,
-                        noise_on, seg, model._noise_cum, model._noise_eps, model._rev_per_s, model.optics.channels,
-                        model._incident, model._sin_wedge, model._cos_wedge, model._index, model._exit_tilted,
+                        noise_on, seg, model._noise_cum, model._noise_eps, model._noise_seg0, model._rev_per_s,
+                        model.optics.channels, model._incident, model._sin_wedge, model._cos_wedge, model._index, model._exit_tilted,
                         t_ns, channel, direction, status)
     return t_ns, channel, direction, status
 
@@ -184,3 +184,26 @@ def test_chunking_does_not_change_a_bit(preset):
     parts = [m.scan(a, b - a) for a, b in zip(cuts[:-1], cuts[1:])]
     assert np.array_equal(np.concatenate([p.direction for p in parts]), whole.direction)
     assert np.array_equal(np.concatenate([p.t_ns for p in parts]), whole.t_ns)
+
+
+def test_speed_noise_tables_stay_bounded_on_long_runs_with_the_same_points(monkeypatch):
+    """Segments far behind the scan are dropped (a day at 10 ms segments held 280 MB); the points do
+    not change, and asking for a dropped time is an error naming it.  Small table limits stand in for
+    the real 65 536 segments (about 11 min at 10 ms)."""
+    noise = SpeedNoise(segment_s=0.001)
+    kept = ScanModel(PRESETS["mid40"], speed_noise=noise, rng=np.random.default_rng(4))
+    full = ScanModel(PRESETS["mid40"], speed_noise=noise, rng=np.random.default_rng(4))
+    monkeypatch.setattr(kept, "_NOISE_KEEP", 50)
+    monkeypatch.setattr(kept, "_NOISE_GROW_MAX", 64)
+    monkeypatch.setattr(full, "_NOISE_KEEP", 10**9)
+    monkeypatch.setattr(full, "_NOISE_GROW_MAX", 64)
+    rows = []
+    for k in range(0, 200_000, 10_000):          # 2 s in 100 ms frames: 2000 segments
+        a, b = kept.scan(k, 10_000), full.scan(k, 10_000)
+        assert np.array_equal(a.direction, b.direction) and np.array_equal(a.t_ns, b.t_ns)
+        rows.append(kept._noise_eps.shape[0])
+    assert kept._noise_seg0 > 0 and max(rows) <= 3 * 50 + 64 + 200
+    assert full._noise_eps.shape[0] >= 2000
+    with pytest.raises(ValueError, match="older than the kept motor-speed noise"):
+        kept.scan(0, 10)
+    assert np.array_equal(kept.scan_composed(190_000, 500).direction, full.scan_composed(190_000, 500).direction)
