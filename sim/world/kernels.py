@@ -215,27 +215,26 @@ def _cast_flat_block(prims, m, kind, label, bx, by, bz, n, br, bp):
             bp[i] = label if hit else bp[i]
     elif kind == RECT:
         for i in range(n):
-            dx, dy, dz = bx[i], by[i], bz[i]
-            den = nx * dx + ny * dy + nz * dz
-            t = num / den
-            px = dx * t - cx
-            py = dy * t - cy
-            pz = dz * t - cz
+            den, t, px, py, pz = _plane_point(bx[i], by[i], bz[i], nx, ny, nz, num, cx, cy, cz)
             hit = ((abs(den) >= _EPS) & (t > _EPS) & (t < br[i])
                    & (abs(px * ux + py * uy + pz * uz) <= h_u) & (abs(px * vx + py * vy + pz * vz) <= h_v))
             br[i] = t if hit else br[i]
             bp[i] = label if hit else bp[i]
     else:
         for i in range(n):
-            dx, dy, dz = bx[i], by[i], bz[i]
-            den = nx * dx + ny * dy + nz * dz
-            t = num / den
-            px = dx * t - cx
-            py = dy * t - cy
-            pz = dz * t - cz
+            den, t, px, py, pz = _plane_point(bx[i], by[i], bz[i], nx, ny, nz, num, cx, cy, cz)
             hit = (abs(den) >= _EPS) & (t > _EPS) & (t < br[i]) & (px * px + py * py + pz * pz <= r2)
             br[i] = t if hit else br[i]
             bp[i] = label if hit else bp[i]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _plane_point(dx, dy, dz, nx, ny, nz, num, cx, cy, cz):
+    """Where the ray ``d`` from the origin meets the plane ``n . x = num`` through ``c``: the
+    denominator ``n . d``, the range ``t`` and the hit point relative to ``c``."""
+    den = nx * dx + ny * dy + nz * dz
+    t = num / den
+    return den, t, dx * t - cx, dy * t - cy, dz * t - cz
 
 
 @njit(cache=True)

@@ -15,7 +15,7 @@ from gimbal.pts303h import PTS303H
 from sim.loop import truth_speed_table
 import pytest
 
-from daemon_procs import SCENE, event, first_line, free_udp_port, log_events, start, terminate, wait_for, write_config
+from daemon_procs import SCENE, event, first_line, free_udp_port, start, terminate, wait_for, write_config
 from foveatrack.recording import RecordingReader
 from foveatrack.replay import replay_recording
 from sim.virtual_head import read_truth

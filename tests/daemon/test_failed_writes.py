@@ -8,19 +8,16 @@ one fed only with the commands that were written, and replay must rebuild the sa
 """
 
 import time
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from foveatrack.control import HeadCommand
-from foveatrack.daemon import Daemon, load_config
-from foveatrack.daemon.support import RecordingThread
-from foveatrack.recording import RecordingReader, RecordingWriter
+from foveatrack.recording import RecordingReader
 from foveatrack.replay import replay_recording
 from foveatrack.tracker import Tracker
 
-from test_stale_frames import CONFIG, _target_frame
+from inprocess import inprocess_daemon, target_frame
 
 
 class FlakyHead:
@@ -36,15 +33,9 @@ class FlakyHead:
 
 
 def _run(tmp_path, down_frames):
-    cfg_path = tmp_path / "d.toml"
-    cfg_path.write_text(CONFIG)
-    d = Daemon(load_config(cfg_path), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
-    rec = tmp_path / "rec.mcap"
-    d.recorder = RecordingThread(RecordingWriter(rec, d._meta()), 50)
-    d.head = FlakyHead()
-    d.rx = SimpleNamespace(offset_s=None)
+    d, rec = inprocess_daemon(tmp_path, FlakyHead())
     for k in range(20):
-        fr = _target_frame(k, az_deg=10.0 if k < 10 else -10.0)   # the UAV swaps sides mid-outage
+        fr = target_frame(k, az_deg=10.0 if k < 10 else -10.0)   # the UAV swaps sides mid-outage
         d.head.up = k not in down_frames
         d.rx.offset_s = time.monotonic() - (fr.t_end_s + 0.01)      # processed 10 ms after its end
         d._process(fr, time.monotonic())

@@ -7,27 +7,12 @@ Here the daemon runs in-process with a fake head link and a fake receiver whose 
 """
 
 import time
-from types import SimpleNamespace
 
-import numpy as np
-
-from foveatrack.daemon import Daemon, load_config
-from foveatrack.daemon.support import STALE_FRAME, RecordingThread
-from foveatrack.frames import Frame
-from foveatrack.recording import RecordingReader, RecordingWriter
+from foveatrack.daemon.support import STALE_FRAME
+from foveatrack.recording import RecordingReader
 from foveatrack.replay import replay_recording
 
-CONFIG = """
-[lidar]
-sensor_ip = "127.0.0.1"
-host_ip = "127.0.0.1"
-[head]
-port = "/tmp/not-opened-in-this-test"
-[tracker]
-deadband_deg = 2.0
-[daemon]
-stale_frame_s = 0.2
-"""
+from inprocess import inprocess_daemon, target_frame
 
 
 class FakeHead:
@@ -41,29 +26,13 @@ class FakeHead:
         return True
 
 
-def _target_frame(k, period=0.1, az_deg=10.0, n=40):
-    """A small cluster 12 m out, ``az_deg`` to the left: the tracker wants to pan left."""
-    t0, t1 = k * period, (k + 1) * period
-    rng = np.random.default_rng(k)
-    a = np.radians(az_deg)
-    xyz = np.array([12 * np.cos(a), 12 * np.sin(a), 0.5]) + rng.normal(0, 0.05, (n, 3))
-    t_ns = np.linspace(t0 * 1e9, t1 * 1e9 - 1e3, n).astype(np.int64)
-    return Frame(t0, t1, xyz, t_ns, np.full(n, 30, np.uint8))
-
-
 def test_stale_frames_send_stop_and_replay_repeats_it(tmp_path):
-    cfg_path = tmp_path / "d.toml"
-    cfg_path.write_text(CONFIG)
-    d = Daemon(load_config(cfg_path), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
-    rec = tmp_path / "rec.mcap"
-    d.recorder = RecordingThread(RecordingWriter(rec, d._meta()), 50)
-    d.head = FakeHead()
-    d.rx = SimpleNamespace(offset_s=None)
+    d, rec = inprocess_daemon(tmp_path, FakeHead())
     sent = []
     # A start-up burst: frames 0-5 are all processed at sensor time 0.75 s (0.65 ... 0.15 s late); from
     # frame 6 on, each is processed 10 ms after its end.
     for k in range(10):
-        fr = _target_frame(k)
+        fr = target_frame(k)
         now_s = 0.75 if k < 6 else fr.t_end_s + 0.01
         d.rx.offset_s = time.monotonic() - now_s
         d._process(fr, time.monotonic())
