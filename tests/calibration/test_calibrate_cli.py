@@ -3,7 +3,6 @@
 import json
 
 import numpy as np
-import pytest
 
 from calib_fixture import ROOT
 from foveatrack.cli import main

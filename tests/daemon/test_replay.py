@@ -2,7 +2,6 @@
 recordings, the CLI (JSON, plots, exports), and .lvx files (lidar only, head frozen)."""
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np

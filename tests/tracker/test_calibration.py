@@ -9,7 +9,7 @@ from fakes import FakeHead, corner_frame, nonlinear_speed, world_to_lidar
 from foveatrack.calibration import CalibrationPlan, Calibrator, FeatureSpec, find_corner
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
-from foveatrack.speed_table import TURBO, SpeedTable
+from foveatrack.speed_table import TURBO
 
 # a room: interior x < 5, y < 2, z < 1.5 (front wall, left wall, ceiling); corner at (5, 2, 1.5)
 CORNER = np.array([5.0, 2.0, 1.5])

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from fakes import FakeHead, target_frame, world_to_lidar
-from foveatrack.control import HeadCommand
-from foveatrack.detection import bearing_deg, wrap_deg
+from foveatrack.detection import bearing_deg
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.speed_table import SpeedTable
