@@ -235,7 +235,8 @@ class Daemon:
             # The head never got these bytes, so it keeps doing what it was last told (a Pelco head
             # latches motion): the dead reckoning must too, or a link outage reads as the head
             # following the tracker (seen: ~9 deg of pan while a head was unplugged).  The caller
-            # registered ``cmd`` at ``send_t_s``; this later registration at the same time wins.
+            # registered ``cmd`` at ``send_t_s``; a second command at the same instant replaces it
+            # in the dead reckoning (one change of speed, not two: ``_AxisIntegrator.command``).
             self.tracker.command_sent(send_t_s, self._head_cmd)
         rec = {"raw": raw, "frame_id": fid, "source": source, "send_t_s": float(send_t_s), "written": bool(ok),
                "host_written_s": t_written, "pan_dir": cmd.pan_dir, "pan_byte": cmd.pan_byte,
