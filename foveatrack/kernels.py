@@ -102,9 +102,15 @@ def box_median_kernel(xyz, t_ns, rot, offset, lo, hi, out_xyz):
 def compile_all() -> None:
     """Compile (or load from numba's cache) every kernel here, on tiny inputs.
 
-    A real-time driver calls this before data flows: a first call compiles, which takes up to a
-    second on a fresh install and would stall the first frame.
+    A real-time driver calls this before data flows: a first call compiles, which takes seconds on
+    a fresh install and would stall the first frames.  The arguments have the types the tracker
+    passes: numba compiles one version per signature, and D's bounds come read-only from
+    :func:`foveatrack.detection._box_bounds` (writable ones here once left the daemon's first frame
+    to compile the kernel anew: 1.8 s late, seen in a fresh clone).
     """
-    box_members_kernel(np.zeros((1, 3)), np.eye(3), np.zeros(3), np.zeros(3), np.ones(3), np.empty(1, np.int64))
-    box_median_kernel(np.ones((1, 3)), np.zeros(1, np.int64), np.eye(3), np.zeros(3), np.zeros(3), np.full(3, 2.0),
-                      np.empty(3))
+    from foveatrack.detection import _box_bounds
+    from foveatrack.space_of_interest import Box
+
+    lo, hi = _box_bounds(Box((0.0, 0.0, 0.0), (2.0, 2.0, 2.0)))
+    box_members_kernel(np.zeros((1, 3)), np.eye(3), np.zeros(3), lo, hi, np.empty(1, np.int64))
+    box_median_kernel(np.ones((1, 3)), np.zeros(1, np.int64), np.eye(3), np.zeros(3), lo, hi, np.empty(3))

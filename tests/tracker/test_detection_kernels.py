@@ -108,3 +108,39 @@ def test_detect_in_box_equals_detect_points_to_the_bit(seed):
         b = detect_points(xyz, t_ns, box, test_xyz=w)
     assert a.xyz.tobytes() == b.xyz.tobytes()
     assert (a.t_s, a.n_points, a.az_deg, a.el_deg, a.range_m) == (b.t_s, b.n_points, b.az_deg, b.el_deg, b.range_m)
+
+
+_TRACKER_AFTER_COMPILE_ALL = """
+import numpy as np
+from foveatrack.frames import Frame
+from foveatrack.kernels import box_median_kernel, box_members_kernel, compile_all
+from foveatrack.space_of_interest import Box
+from foveatrack.speed_table import SpeedTable
+from foveatrack.tracker import Tracker, TrackerConfig
+
+compile_all()
+before = (len(box_median_kernel.signatures), len(box_members_kernel.signatures))
+rng = np.random.default_rng(0)
+for frame_name in ("lidar", "world"):
+    tracker = Tracker(TrackerConfig(space=Box((1.0, -5.0, -1.0), (30.0, 5.0, 5.0), frame=frame_name)),
+                      SpeedTable.nominal())
+    xyz = np.array([12.0, 1.0, 0.5]) + rng.normal(0, 0.05, (50, 3))
+    assert tracker.process(Frame(0.0, 0.1, xyz, np.linspace(0, 99_000_000, 50).astype(np.int64))).detection
+    xyz[:, 1] = 0.0          # a zero median: the numpy route, through box_members_kernel
+    tracker.process(Frame(0.1, 0.2, xyz, np.linspace(100_000_000, 199_000_000, 50).astype(np.int64)))
+print(list(before), [len(box_median_kernel.signatures), len(box_members_kernel.signatures)])
+"""
+
+
+def test_compile_all_covers_what_the_tracker_calls():
+    """The daemon compiles before data flows; if the tracker then calls a kernel with other argument
+    types (numba compiles per signature: e.g. read-only D bounds), its first frame stalls for the
+    compile (1.8 s, seen in a fresh clone).  In a fresh interpreter (nothing loaded yet), a tracker's
+    frames after compile_all add no signature."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _TRACKER_AFTER_COMPILE_ALL], capture_output=True, text=True,
+                         check=True).stdout
+    before, after = out.strip().split("] [")
+    assert before.lstrip("[") == after.rstrip("]"), f"signatures (median, members) before/after: {out}"
