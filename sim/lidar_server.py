@@ -159,6 +159,16 @@ class TruthTail:
             self._fh = None
 
 
+def warm_up_kernels(scene) -> None:
+    """Compile (or load from numba's cache) every kernel of the scene's stream before going real
+    time: on a fresh install the first chunk would otherwise take seconds.  A throwaway source, so
+    the served one's random streams start untouched; and the target casts too, which 2 ms of stream
+    may not reach (the first ray on the UAV then stalled the stream ~2 s, sent on in a burst)."""
+    warm = SceneSource(scene)
+    warm(0, 2_000_000)
+    warm.sensor.warm_up(warm.scan.scan(0, 16))
+
+
 class SceneSource:
     """The returns of a scene's lidar for stream-time intervals (``VirtualLivox`` source).
 
@@ -242,10 +252,7 @@ def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("
     else:
         source = SceneSource(scene)
 
-    # Compile (or load from numba's cache) every kernel of the stream before going real time: on a
-    # fresh install the first chunk would otherwise take seconds.  A throwaway source, so the
-    # served one's random streams start untouched.
-    SceneSource(scene)(0, 2_000_000)
+    warm_up_kernels(scene)
 
     def _ready(lidar: VirtualLivox):
         if tail is not None:

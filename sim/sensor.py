@@ -9,6 +9,7 @@ effect the scene does not list is never called.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -117,6 +118,20 @@ class SceneSensor:
         xyz, pt_ns, refl_byte, on_target = self._sunlight(chunk, xyz, pt_ns, refl_byte, on_target)
         order = np.argsort(pt_ns, kind="stable")
         return xyz[order], pt_ns[order], refl_byte[order], on_target[order]
+
+    def warm_up(self, chunk) -> None:
+        """Run every kernel of :meth:`returns` once (compiled, or loaded from numba's cache), for a
+        real-time driver to call before data flows.  ``chunk``: a few rays of the scene's scan; the
+        first ray of each target is pointed at it, so that its cull finds a candidate and the
+        moving-body cast runs too.  Call it on a throwaway sensor: it draws from the streams."""
+        d = chunk.direction.copy()
+        t_mid_s = float(chunk.t_ns.mean()) * 1e-9
+        for i, spec in enumerate(self.scene.targets[:len(d)]):
+            c = spec.trajectory.position(np.array([t_mid_s]))[0]
+            d[i] = c / max(np.linalg.norm(c), 1e-9)
+        chunk = replace(chunk, direction=d, status=np.zeros_like(chunk.status))
+        t0, t1 = chunk.t_ns[0] * 1e-9, chunk.t_ns[-1] * 1e-9 + 1e-6
+        self.returns(chunk, d, t0, t1)
 
     def _param_if(self, effect: str, key: str) -> float:
         return float(self.scene.param(key)) if self.scene.has(effect) else 0.0

@@ -43,7 +43,8 @@ def _setup(tmp_path, cmd_port=0, data_port=0, loss_rate=0.0):
     procs["lidar"] = start(["lidar", "serve", str(SCENE), "--cmd-port", "0", "--broadcast-port", str(bport),
                             "--head-truth", str(truth), "--loss-rate", str(loss_rate), "--seed", "5"],
                            tmp_path / "l.out", tmp_path / "l.err")
-    wait_for(lambda: event(log, "lidar_data"), 25, "lidar data at the daemon", list(procs.values()))
+    # (up to ~20 s of compiling on a fresh install with cold caches, on two busy cores)
+    wait_for(lambda: event(log, "lidar_data"), 60, "lidar data at the daemon", list(procs.values()))
     return procs, link, truth, rec, log
 
 
