@@ -29,7 +29,7 @@ from numba import njit
 from sim.scan.kernels import RAY_OK
 
 SPHERE, BOX, DISK, PLANE, RECT = 0, 1, 2, 3, 4
-_BLOCK = 256   # beams per x, y, z block of the rotation (a 1 ms run of a Mid-40 is 100)
+_BLOCK = 256   # beams per x, y, z block (rotation runs: a 1 ms run of a Mid-40 is 100; background cast)
 PRIM_COLUMNS = 13
 _EPS = 1e-12
 
