@@ -108,6 +108,63 @@ def test_static_cast_matches_twin_for_every_primitive_kind():
     assert np.array_equal(p3, np.where(p >= 0, p + 7, -1))
 
 
+def _cast_one_by_one(d, prims, offset):
+    """Each primitive alone (the kernel's plain per-primitive route), nearest kept in table order."""
+    r = np.full(len(d), np.inf)
+    p = np.full(len(d), -1, dtype=np.int64)
+    for m in range(len(prims)):
+        rm = np.full(len(d), np.inf)
+        pm = np.full(len(d), -1, dtype=np.int64)
+        K.cast_static_kernel(d, prims[m:m + 1], offset + m, rm, pm)
+        nearer = rm < r
+        r[nearer], p[nearer] = rm[nearer], pm[nearer]
+    return r, p
+
+
+@pytest.mark.parametrize("layout", ["room", "room after bodies", "room reversed", "wall pair + box"])
+def test_room_and_opposed_walls_cast_like_each_rectangle_alone(layout):
+    # Opposed rectangles with the origin between them are tested one per ray (the one it heads
+    # for); the result must be the same, to the bit, as every rectangle tested: also on rays along
+    # the axes and through the room's edges and corners, where a wall's in-rectangle test rounds.
+    rng = np.random.default_rng(11)
+    size, centre = np.array([60.0, 40.0, 8.0]), np.array([20.0, 0.0, 2.5])
+    room = np.array(bodies.room(size, centre))
+    prims = {"room": room,
+             "room after bodies": np.vstack([np.array([bodies.sphere((3, 1, 0), 0.5),
+                                                       bodies.box((5, -1, 0), (0.3, 0.4, 0.2), 0.3)]), room]),
+             "room reversed": room[::-1].copy(),
+             "wall pair + box": np.vstack([room[2:4], np.array([bodies.box((4, 0, 0), (0.2, 0.2, 0.2), 0.1)])]),
+             }[layout]
+    corners = centre + size / 2 * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    edges = (corners[:, None, :] + corners[None, :, :]).reshape(-1, 3) / 2
+    d = np.vstack([_unit(rng, 20_000), np.eye(3), -np.eye(3), corners, edges])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    r = np.full(len(d), np.inf)
+    p = np.full(len(d), -1, dtype=np.int64)
+    K.cast_static_kernel(d, prims, 5, r, p)
+    r1, p1 = _cast_one_by_one(d, prims, 5)
+    assert np.array_equal(r, r1) and np.array_equal(p, p1)
+    if layout.startswith("room"):
+        assert np.all(p >= 0), "from inside a closed room every ray hits something"
+    rt, pt = cast_static_twin(d, prims)
+    assert np.array_equal(np.where(p >= 0, p - 5, -1), pt)
+    np.testing.assert_allclose(r[pt >= 0], rt[pt >= 0], rtol=1e-12)
+
+
+def test_walls_not_around_the_origin_are_cast_one_by_one():
+    # Both walls of a pair on one side of the origin (a building seen from outside): either can be
+    # hit, the nearer one wins.
+    near = bodies.rect((10, 0, 0), (-1, 0, 0), (0, 1, 0), 2.0, 2.0)
+    far = bodies.rect((20, 0, 0), (1, 0, 0), (0, 1, 0), 8.0, 8.0)
+    d = np.array([[1.0, 0.0, 0.0], [0.9, 0.3, 0.0], [0.99, 0.0, 0.14]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    r = np.full(len(d), np.inf)
+    p = np.full(len(d), -1, dtype=np.int64)
+    K.cast_static_kernel(d, np.array([near, far]), 0, r, p)
+    assert list(p) == [0, 1, 0]
+    np.testing.assert_allclose(r, [10.0, 20.0 / d[1, 0], 10.0 / d[2, 0]], rtol=1e-15)
+
+
 def test_hit_points_lie_on_the_surfaces():
     rng = np.random.default_rng(3)
     d = _unit(rng, 20_000)
