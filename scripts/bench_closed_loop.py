@@ -10,7 +10,9 @@ Runs, on one numba thread, each after a warm-up run (numba's cache, first-call c
   the pose (the default takes it exactly from the head's motion pieces);
 
 and prints wall time, real-time factor and where the time of one frame goes (each stage of
-:meth:`sim.loop.ClosedLoop.step` timed by a wrapper; best of the repetitions).
+:meth:`sim.loop.ClosedLoop.step` timed by a wrapper; best of the repetitions).  Last, the floor: what
+the work every frame of the hall must do costs by itself (the exact scan of its 10 000 rays and the
+random draws of the effects the scene lists, one per hit), against the 0.5 ms a frame has at 200x.
 
 Usage: python scripts/bench_closed_loop.py [SCENE.toml] [--duration S] [--repeat N]
 """
@@ -18,6 +20,7 @@ Usage: python scripts/bench_closed_loop.py [SCENE.toml] [--duration S] [--repeat
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import time
 import tomllib
@@ -25,9 +28,12 @@ from collections import defaultdict
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import sim.loop as loop_mod  # noqa: E402
+from sim import effects as fx  # noqa: E402
 from sim.loop import ClosedLoop  # noqa: E402
 from sim.scene import load_scene, scene_from_mapping  # noqa: E402
 
@@ -77,6 +83,45 @@ def stage_breakdown(scene) -> dict[str, float]:
     return T
 
 
+def best_ms(fn, repeat: int = 50) -> float:
+    fn()
+    best = math.inf
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t)
+    return best * 1e3
+
+
+def frame_floor(scene) -> list[tuple[str, float]]:
+    """Milliseconds of the work a frame of ``scene`` cannot skip at its fidelity: its exact scan and
+    its effects' random draws (numpy's generators, the streams the recordings are made of), for the
+    number of hits of a frame in the middle of the run (each measured alone, best of 50)."""
+    loop = ClosedLoop(replace(scene, duration_s=1.5))
+    seen = {}
+    returns = loop.sensor.returns
+
+    def count(chunk, d_world, t0, t1):
+        out = returns(chunk, d_world, t0, t1)
+        seen["rays"], seen["hits"] = len(chunk), len(out[0])
+        return out
+    loop.sensor.returns = count
+    loop.run()
+    period = loop.tracker.config.period_s
+    rng = np.random.default_rng(0)
+    n = seen["hits"]
+    figures = [(f"exact scan of a frame ({seen['rays']} rays)", best_ms(lambda: loop.scan.scan_time(1.0, 1.0 + period)))]
+    if scene.has("range_noise"):
+        figures.append((f"range noise: {n} gaussian draws", best_ms(lambda: fx.range_noise_draws(rng, n, 0.02))))
+    if scene.has("return_probability"):
+        figures.append((f"return probability: {n} uniform draws", best_ms(lambda: fx.return_draws(rng, n))))
+    if scene.has("dropouts"):
+        figures.append((f"dropouts: {n} uniform draws", best_ms(lambda: fx.dropout_draws(rng, n))))
+    if scene.has("angular_noise"):
+        figures.append((f"angular noise: {3 * n} gaussian draws", best_ms(lambda: fx.angular_noise_draws(rng, n, 0.01))))
+    return figures
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scene", nargs="?", default=str(ROOT / "scenes" / "fig12-tracking.toml"))
@@ -106,6 +151,13 @@ def main() -> None:
           f"with the timers):")
     for k, v in sorted(best.items(), key=lambda kv: -kv[1]):
         print(f"    {v / frames * 1e3:6.3f} ms  {100 * v / total:4.1f} %  {k}")
+    budget = 1e3 * scene.tracker.period_s / 200
+    floor = frame_floor(room)
+    print(f"  the floor of a frame in the hall (each alone, best of 50), against the {budget:.2f} ms of a frame at 200x:")
+    for k, v in floor:
+        print(f"    {v:6.3f} ms  {k}")
+    rest = budget - sum(v for _, v in floor)
+    print(f"    {rest:6.3f} ms  left for the head pose, ray casting, the tracker, the head model and the log")
 
 
 if __name__ == "__main__":
