@@ -11,6 +11,20 @@ from collections.abc import Mapping, Sequence
 from foveatrack.errors import UserError
 
 
+def seed_arg(text: str) -> int:
+    """argparse ``type=`` for seeds and unit seeds: an integer >= 0 (numpy's SeedSequence rejects
+    negative ones with a traceback deep inside the run)."""
+    import argparse
+
+    try:
+        v = int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: a seed must be an integer >= 0")
+    return v
+
+
 def check_keys(data: Mapping, allowed: Sequence[str], where: str) -> None:
     if not isinstance(data, Mapping):
         raise UserError(f"{where}: expected a table/mapping, got {type(data).__name__}")

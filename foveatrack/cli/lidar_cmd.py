@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+from foveatrack.config_util import seed_arg
 from foveatrack.errors import UserError
 
 
@@ -31,7 +32,7 @@ def register(sub) -> None:
                            help=f"accumulation time in seconds (default {duration:g})")
             p.add_argument("--noise", type=float, default=None, metavar="FRAC",
                            help="motor speed noise, 1-sigma relative (paper: 0.01); default none")
-            p.add_argument("--seed", type=int, default=0, help="seed of the speed noise")
+            p.add_argument("--seed", type=seed_arg, default=0, help="seed of the speed noise")
         p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
         p.add_argument("--plot", metavar="FILE.png", help="write a plot")
 
@@ -61,7 +62,7 @@ def register(sub) -> None:
                    help="prism 2 speed range [rpm]; negative ranges need '=': --rpm2=-12000:-1000")
     p.add_argument("--grid", type=int, default=30, metavar="N", help="N x N speeds (default 30)")
     p.add_argument("--cap", type=_positive, default=5.0, metavar="S", help="time cap in seconds (paper: 5)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (tcp://host:port)")
     p.add_argument("--no-progress", action="store_true")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import sys
 
+from foveatrack.config_util import seed_arg
 from foveatrack.errors import UserError
 
 
@@ -26,7 +27,7 @@ def add_serve_parser(lsub) -> None:
                    help="data type (default: 0 for mid40/prototype, 2 for horizon)")
     p.add_argument("--time-scale", type=float, default=1.0, help="stream seconds per wall second")
     p.add_argument("--loss-rate", type=float, default=0.0, help="fraction of data packets dropped")
-    p.add_argument("--seed", type=int, default=0, help="seed of the packet loss")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of the packet loss")
     p.add_argument("--head-truth", metavar="FILE",
                    help="follow the head served by 'foveatrack gimbal serve --truth FILE'")
     p.add_argument("--head-clock-zero", type=float, default=None, metavar="MONO",
