@@ -22,7 +22,7 @@ import math
 import sys
 
 from foveatrack.calibration import FeatureSpec
-from foveatrack.config_util import seed_arg
+from foveatrack.config_util import check_output_file, seed_arg
 from foveatrack.errors import UserError
 from foveatrack.speed_table import TURBO
 
@@ -99,6 +99,9 @@ def cmd_calibrate(args) -> int:
                         "simulated head")
     if not args.scene:
         raise UserError("calibrate needs --scene SCENE.toml (e.g. scenes/calibration-room.toml)")
+    check_output_file(args.out, "--out")   # before minutes of calibration, not after
+    if args.plot:
+        check_output_file(args.plot, "--plot")
     run = calibrate_scene(args)
     table = run.table
     table.save(args.out)

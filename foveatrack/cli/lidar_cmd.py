@@ -85,6 +85,19 @@ def _positive(text: str) -> float:
     return v
 
 
+def _load(args):
+    """The command's optics, after checking that its --plot file can be written (before the work)."""
+    from foveatrack.config_util import check_output_file
+
+    if getattr(args, "plot", None):
+        check_output_file(args.plot, "--plot")
+    return load_optics(args.preset)
+
+
+# ``lidar pattern`` holds every point (directions, times, channels) in memory: ~50 bytes a point.
+PATTERN_MAX_POINTS = 20_000_000
+
+
 def load_optics(spec: str):
     """A preset name or a TOML file of custom optics -> RisleyOptics (errors name the file and key)."""
     from foveatrack.config_util import read_toml
@@ -158,7 +171,7 @@ def info_dict(optics, model: str) -> dict:
 
 
 def cmd_info(args) -> int:
-    optics = load_optics(args.preset)
+    optics = _load(args)
     info = info_dict(optics, args.model)
     err = info["paraxial_error_deg"]
     _emit(args, info, [
@@ -191,11 +204,15 @@ def _pattern_plot(optics, model, duration, path, scan=None):
 
 
 def cmd_pattern(args) -> int:
-    optics = load_optics(args.preset)
+    optics = _load(args)
     scan = _scan_model(args, optics)
     count = int(round(args.duration * optics.point_rate_hz))
     if count < 2:
         raise UserError(f"--duration {args.duration:g}: holds no points at {optics.point_rate_hz} points/s")
+    if count > PATTERN_MAX_POINTS:
+        raise UserError(f"--duration {args.duration:g}: {count} points; the pattern holds every point in memory, "
+                        f"at most {PATTERN_MAX_POINTS} ({PATTERN_MAX_POINTS / optics.point_rate_hz:g} s at "
+                        f"{optics.point_rate_hz} points/s)")
     chunk = scan.scan(0, count)
     from sim.scan.fov import az_el_deg
 
@@ -219,7 +236,7 @@ def cmd_density(args) -> int:
     from sim.scan.density import radial_density
     from sim.scan.model import ScanModel
 
-    optics = load_optics(args.preset)
+    optics = _load(args)
     if len(optics.prisms) != 2:
         raise UserError(f"{optics.name}: eq. (4) describes two-prism patterns; this scanner has {len(optics.prisms)}")
     if args.bins < 1:
@@ -265,7 +282,7 @@ def coverage_curve(optics, scan, method, duration):
 
 
 def cmd_coverage(args) -> int:
-    optics = load_optics(args.preset)
+    optics = _load(args)
     scan = _scan_model(args, optics)
     t0 = time.perf_counter()
     curve = coverage_curve(optics, scan, args.method, args.duration)
@@ -301,7 +318,7 @@ def cmd_coverage_map(args) -> int:
     from sim.scan.coverage_map import coverage_map
     from sim.sweep import make_executor
 
-    optics = load_optics(args.preset)
+    optics = _load(args)
     if len(optics.prisms) != 2:
         raise UserError(f"{optics.name}: the speed map varies two prisms; this scanner has {len(optics.prisms)}")
     if args.grid < 2:
