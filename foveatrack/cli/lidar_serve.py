@@ -43,6 +43,8 @@ def cmd_serve(args) -> int:
     scene = load_scene(args.scene)
     if not args.time_scale > 0:
         raise UserError(f"--time-scale must be > 0, got {args.time_scale}")
+    if args.duration_s is not None and not args.duration_s > 0:
+        raise UserError(f"--duration-s must be > 0 (or absent: serve until Ctrl-C), got {args.duration_s}")
     if not 0 <= args.loss_rate < 1:
         raise UserError(f"--loss-rate must be in [0, 1), got {args.loss_rate}")
     if not 0 <= args.cmd_port <= 65535 or not 0 < args.broadcast_port <= 65535:

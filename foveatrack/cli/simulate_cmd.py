@@ -6,7 +6,6 @@ import json
 import sys
 from pathlib import Path
 
-from foveatrack.config_util import seed_arg
 from foveatrack.errors import UserError
 
 
@@ -16,7 +15,7 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="DIR", help="write the recording (run.mcap), summary.json and plots here")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--plot", action="store_true", help="write the Fig. 14 a/b/c plots into --out")
-    p.add_argument("--seed", type=seed_arg, help="override the scene's seed")
+    p.add_argument("--seed", type=int, help="override the scene's seed")
     p.add_argument("--duration", type=float, metavar="S", help="override the scene's duration")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=cmd_simulate)
