@@ -11,6 +11,36 @@ from collections.abc import Mapping, Sequence
 from foveatrack.errors import UserError
 
 
+def seed_arg(text: str) -> int:
+    """argparse ``type=`` for seeds and unit seeds: an integer >= 0 (numpy's SeedSequence rejects
+    negative ones with a traceback deep inside the run)."""
+    import argparse
+
+    try:
+        v = int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: a seed must be an integer >= 0")
+    return v
+
+
+def check_output_file(path, flag: str) -> None:
+    """Fail early, before a long run, if the output file ``path`` (given with ``flag``) cannot be
+    written: its directory must exist, and the path must not be a directory."""
+    import os
+    from pathlib import Path
+
+    p = Path(path)
+    parent = p.parent if str(p.parent) else Path(".")
+    if p.is_dir():
+        raise UserError(f"{flag} {path}: is a directory; give a file name")
+    if not parent.is_dir():
+        raise UserError(f"{flag} {path}: the directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise UserError(f"{flag} {path}: the directory {parent} is not writable")
+
+
 def check_keys(data: Mapping, allowed: Sequence[str], where: str) -> None:
     if not isinstance(data, Mapping):
         raise UserError(f"{where}: expected a table/mapping, got {type(data).__name__}")

@@ -153,6 +153,16 @@ _KINDS = ("box", "cylinder", "sector", "background")
 
 
 def space_from_mapping(data: Mapping, where: str) -> SpaceOfInterest:
+    """Build D from a config table (see :func:`_space_from_mapping`); every error names ``where``."""
+    try:
+        return _space_from_mapping(data, where)
+    except UserError as exc:
+        # the shapes' own checks (min below max, ...) do not know the file and table they came from
+        msg = str(exc)
+        raise UserError(msg if msg.startswith(where) else f"{where}: {msg}") from None
+
+
+def _space_from_mapping(data: Mapping, where: str) -> SpaceOfInterest:
     """Build D from a config table, e.g. ``{kind = "sector", r_min_m = 1, r_max_m = 300}``.
 
     Keys per kind: box (min_xyz, max_xyz, frame); cylinder (center_xy, radius_m, z_min_m, z_max_m,
@@ -189,7 +199,7 @@ def space_from_mapping(data: Mapping, where: str) -> SpaceOfInterest:
     check_keys(data, ("kind", "voxel_m", "dilate", "outer"), where)
     if "frame" in data and data["frame"] != "world":
         raise UserError(f"{where}: a background map is always in the world frame")
-    outer = space_from_mapping(data["outer"], where + ".outer") if "outer" in data else None
+    outer = _space_from_mapping(data["outer"], where + ".outer") if "outer" in data else None
     dilate = data.get("dilate", 1)
     if isinstance(dilate, bool) or not isinstance(dilate, int) or not 0 <= dilate <= 3:
         raise UserError(f"{where}: dilate must be an integer 0..3, got {dilate!r}")

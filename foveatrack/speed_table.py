@@ -340,7 +340,10 @@ class SpeedTable:
                 if dl is not None:
                     dl = _num_or_nan(dl, w + ".delay_s")
                 entries.append(SpeedEntry(b, sp * k, sg * k, meas, dl, str(e.get("note", ""))))
-            tables[a] = AxisTable(a, tuple(entries), ax_acc)
+            try:
+                tables[a] = AxisTable(a, tuple(entries), ax_acc)
+            except UserError as exc:  # its own checks (a byte listed twice) name no file
+                raise UserError(f"{where}: axes.{exc}") from None
             if tables[a].max_speed_deg_s(allow_turbo=True) <= 0:
                 raise UserError(f"{where}: axes.{a} has no entry with a known speed > 0; it cannot be used")
         dt = _num_or_nan(data.get("dead_time_s", 0.0), where + ": dead_time_s")

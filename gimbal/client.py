@@ -107,6 +107,7 @@ class HeadClient:
         self.tilt_zero = tilt_zero
         self.stats = ClientStats()
         self._ser = None
+        self.last_open_error: str | None = None  # why the last attempt to open the port failed
         self._last_open_attempt = -float("inf")
         self._parser = PelcoParser(protocol)
         if open_now:
@@ -129,11 +130,13 @@ class HeadClient:
                 self.url, baudrate=self.baud, timeout=_READ_SLICE_S,
                 write_timeout=self.write_timeout_s,
             )
-        except (serial.SerialException, OSError, ValueError):
+        except (serial.SerialException, OSError, ValueError) as exc:
             self.stats.open_failures += 1
+            self.last_open_error = str(exc) or type(exc).__name__
             self._ser = None
             return False
         self.stats.opens += 1
+        self.last_open_error = None
         self._parser.reset()
         return True
 

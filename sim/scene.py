@@ -240,7 +240,15 @@ def _gimbal(t: Mapping, w: str, base_dir: Path | None = None) -> GimbalSpec:
         if v not in ("truth", "nominal") and base_dir is not None and not Path(v).is_absolute():
             v = str(base_dir / v)  # a table file next to the scene, wherever the run starts from
         kw["speed_table"] = v
-    return GimbalSpec(**kw)
+    spec = GimbalSpec(**kw)
+    from gimbal.pts303h import HeadParams
+
+    params = HeadParams.for_family(spec.family)
+    if not params.tilt_min_deg <= spec.tilt0_deg <= params.tilt_max_deg:
+        # the closed loop would clamp it to the stop, silently: the run starts somewhere else
+        raise UserError(f"{w}: tilt0_deg {spec.tilt0_deg:g} is beyond the {spec.family} head's tilt stops "
+                        f"[{params.tilt_min_deg:g}, {params.tilt_max_deg:g}] deg")
+    return spec
 
 
 def _target(t: Mapping, w: str, duration_s: float, seed: int) -> TargetSpec:

@@ -48,6 +48,12 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into `head` and closed: not an error of ours
         sys.stderr.close()
         return 0
+    except OSError as exc:
+        # a file, directory or port the user named cannot be used (an --out, --plot or --export path
+        # on a missing directory or a full disk): say which and why, without a traceback
+        name = exc.filename if exc.filename is not None else ""
+        print(f"foveatrack: error: {name}{': ' if name else ''}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("foveatrack: interrupted", file=sys.stderr)
         return 130

@@ -22,6 +22,7 @@ import math
 import sys
 
 from foveatrack.calibration import FeatureSpec
+from foveatrack.config_util import check_output_file, seed_arg
 from foveatrack.errors import UserError
 from foveatrack.speed_table import TURBO
 
@@ -30,7 +31,7 @@ def register(sub) -> None:
     p = sub.add_parser("calibrate", help="measure the head's speed table by tracking a room corner (App. D.4)")
     p.add_argument("--scene", metavar="SCENE.toml", help="simulate: a scene with a room corner in view "
                    "(scenes/calibration-room.toml)")
-    p.add_argument("--unit-seed", type=int, metavar="N", help="simulate another unit of the head family")
+    p.add_argument("--unit-seed", type=seed_arg, metavar="N", help="simulate another unit of the head family")
     p.add_argument("--out", metavar="TABLE.json", default="speed-table.json",
                    help="where to write the speed table (default: %(default)s)")
     p.add_argument("--plot", metavar="F.png", help="plot measured speeds (and the truth, when simulated)")
@@ -41,7 +42,7 @@ def register(sub) -> None:
     p.add_argument("--dwell-s", type=float, help="max seconds per leg (default 6)")
     p.add_argument("--corner", type=float, nargs=3, metavar=("X", "Y", "Z"),
                    help="approximate corner position in the lidar frame [m] (simulated: from the scene)")
-    p.add_argument("--seed", type=int, default=0, help="RANSAC seed of the corner finder")
+    p.add_argument("--seed", type=seed_arg, default=0, help="RANSAC seed of the corner finder")
     p.add_argument("--lidar", metavar="IP", help="real hardware: the Livox's IP (not yet wired)")
     p.add_argument("--serial", metavar="PORT", help="real hardware: the head's serial port (not yet wired)")
     p.add_argument("--no-progress", action="store_true")
@@ -98,6 +99,9 @@ def cmd_calibrate(args) -> int:
                         "simulated head")
     if not args.scene:
         raise UserError("calibrate needs --scene SCENE.toml (e.g. scenes/calibration-room.toml)")
+    check_output_file(args.out, "--out")   # before minutes of calibration, not after
+    if args.plot:
+        check_output_file(args.plot, "--plot")
     run = calibrate_scene(args)
     table = run.table
     table.save(args.out)

@@ -39,4 +39,6 @@ def cmd_daemon(args) -> int:
     print(f"foveatrack daemon: {s.get('frames', 0)} frames, {s.get('frames_detected', 0)} with a detection; "
           f"processing p99 {s.get('processing_ms_p99', float('nan'))} ms, latency p99 {s.get('latency_ms_p99', float('nan'))} ms"
           f"{'; recording ' + str(d.recording_path) if d.recording_path else ''}", file=sys.stderr)
+    for problem in d.problems():
+        print(f"foveatrack daemon: {problem}", file=sys.stderr)
     return code

@@ -14,6 +14,7 @@ import argparse
 import signal
 import sys
 
+from foveatrack.config_util import seed_arg
 from foveatrack.errors import UserError
 
 
@@ -26,7 +27,7 @@ def register(subparsers) -> None:
     s = sub.add_parser("serve", help="serve a virtual head on a pseudo-terminal")
     s.add_argument("--baud", type=int, default=9600, help="line speed for byte pacing [bit/s]")
     s.add_argument("--address", type=int, default=1, help="Pelco address (DIP switch), 1-255")
-    s.add_argument("--unit-seed", type=int, default=0, help="which unit (speed curve, ripple)")
+    s.add_argument("--unit-seed", type=seed_arg, default=0, help="which unit (speed curve, ripple)")
     s.add_argument("--feedback", choices=("none", "at-rest", "always"), default="none",
                    help="position-query answers: none (the paper's head), at-rest, always")
     s.add_argument("--family", default="pts-303", help="head family: pts-303 or heavy-worm")
@@ -39,7 +40,7 @@ def register(subparsers) -> None:
 
     c = sub.add_parser("curves", help="plot true speed vs speed byte for unit seeds")
     c.add_argument("--plot", metavar="F.png", required=True, help="output PNG")
-    c.add_argument("--unit-seeds", type=int, nargs="+", default=[0, 1])
+    c.add_argument("--unit-seeds", type=seed_arg, nargs="+", default=[0, 1])
     c.add_argument("--family", default="pts-303")
     c.set_defaults(func=cmd_curves)
 

@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+from foveatrack.config_util import seed_arg
 from foveatrack.errors import UserError
 
 
@@ -31,7 +32,7 @@ def register(sub) -> None:
                            help=f"accumulation time in seconds (default {duration:g})")
             p.add_argument("--noise", type=float, default=None, metavar="FRAC",
                            help="motor speed noise, 1-sigma relative (paper: 0.01); default none")
-            p.add_argument("--seed", type=int, default=0, help="seed of the speed noise")
+            p.add_argument("--seed", type=seed_arg, default=0, help="seed of the speed noise")
         p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
         p.add_argument("--plot", metavar="FILE.png", help="write a plot")
 
@@ -61,7 +62,7 @@ def register(sub) -> None:
                    help="prism 2 speed range [rpm]; negative ranges need '=': --rpm2=-12000:-1000")
     p.add_argument("--grid", type=int, default=30, metavar="N", help="N x N speeds (default 30)")
     p.add_argument("--cap", type=_positive, default=5.0, metavar="S", help="time cap in seconds (paper: 5)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (tcp://host:port)")
     p.add_argument("--no-progress", action="store_true")
@@ -82,6 +83,19 @@ def _positive(text: str) -> float:
     if not (v > 0 and math.isfinite(v)):
         raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number")
     return v
+
+
+def _load(args):
+    """The command's optics, after checking that its --plot file can be written (before the work)."""
+    from foveatrack.config_util import check_output_file
+
+    if getattr(args, "plot", None):
+        check_output_file(args.plot, "--plot")
+    return load_optics(args.preset)
+
+
+# ``lidar pattern`` holds every point (directions, times, channels) in memory: ~50 bytes a point.
+PATTERN_MAX_POINTS = 20_000_000
 
 
 def load_optics(spec: str):
@@ -157,7 +171,7 @@ def info_dict(optics, model: str) -> dict:
 
 
 def cmd_info(args) -> int:
-    optics = load_optics(args.preset)
+    optics = _load(args)
     info = info_dict(optics, args.model)
     err = info["paraxial_error_deg"]
     _emit(args, info, [
@@ -190,11 +204,15 @@ def _pattern_plot(optics, model, duration, path, scan=None):
 
 
 def cmd_pattern(args) -> int:
-    optics = load_optics(args.preset)
+    optics = _load(args)
     scan = _scan_model(args, optics)
     count = int(round(args.duration * optics.point_rate_hz))
     if count < 2:
         raise UserError(f"--duration {args.duration:g}: holds no points at {optics.point_rate_hz} points/s")
+    if count > PATTERN_MAX_POINTS:
+        raise UserError(f"--duration {args.duration:g}: {count} points; the pattern holds every point in memory, "
+                        f"at most {PATTERN_MAX_POINTS} ({PATTERN_MAX_POINTS / optics.point_rate_hz:g} s at "
+                        f"{optics.point_rate_hz} points/s)")
     chunk = scan.scan(0, count)
     from sim.scan.fov import az_el_deg
 
@@ -218,7 +236,7 @@ def cmd_density(args) -> int:
     from sim.scan.density import radial_density
     from sim.scan.model import ScanModel
 
-    optics = load_optics(args.preset)
+    optics = _load(args)
     if len(optics.prisms) != 2:
         raise UserError(f"{optics.name}: eq. (4) describes two-prism patterns; this scanner has {len(optics.prisms)}")
     if args.bins < 1:
@@ -264,7 +282,7 @@ def coverage_curve(optics, scan, method, duration):
 
 
 def cmd_coverage(args) -> int:
-    optics = load_optics(args.preset)
+    optics = _load(args)
     scan = _scan_model(args, optics)
     t0 = time.perf_counter()
     curve = coverage_curve(optics, scan, args.method, args.duration)
@@ -300,7 +318,7 @@ def cmd_coverage_map(args) -> int:
     from sim.scan.coverage_map import coverage_map
     from sim.sweep import make_executor
 
-    optics = load_optics(args.preset)
+    optics = _load(args)
     if len(optics.prisms) != 2:
         raise UserError(f"{optics.name}: the speed map varies two prisms; this scanner has {len(optics.prisms)}")
     if args.grid < 2:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import sys
 
+from foveatrack.config_util import seed_arg
 from foveatrack.errors import UserError
 
 
@@ -26,7 +27,7 @@ def add_serve_parser(lsub) -> None:
                    help="data type (default: 0 for mid40/prototype, 2 for horizon)")
     p.add_argument("--time-scale", type=float, default=1.0, help="stream seconds per wall second")
     p.add_argument("--loss-rate", type=float, default=0.0, help="fraction of data packets dropped")
-    p.add_argument("--seed", type=int, default=0, help="seed of the packet loss")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of the packet loss")
     p.add_argument("--head-truth", metavar="FILE",
                    help="follow the head served by 'foveatrack gimbal serve --truth FILE'")
     p.add_argument("--head-clock-zero", type=float, default=None, metavar="MONO",
@@ -42,6 +43,8 @@ def cmd_serve(args) -> int:
     scene = load_scene(args.scene)
     if not args.time_scale > 0:
         raise UserError(f"--time-scale must be > 0, got {args.time_scale}")
+    if args.duration_s is not None and not args.duration_s > 0:
+        raise UserError(f"--duration-s must be > 0 (or absent: serve until Ctrl-C), got {args.duration_s}")
     if not 0 <= args.loss_rate < 1:
         raise UserError(f"--loss-rate must be in [0, 1), got {args.loss_rate}")
     if not 0 <= args.cmd_port <= 65535 or not 0 < args.broadcast_port <= 65535:

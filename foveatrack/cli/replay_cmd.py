@@ -26,9 +26,15 @@ def cmd_replay(args) -> int:
     import json
     from pathlib import Path
 
+    from foveatrack.config_util import check_output_file
     from foveatrack.errors import UserError
     from foveatrack.replay import export_replay_trajectory, format_report, replay
 
+    for flag, path in (("--export-points", args.export_points), ("--export-trajectory", args.export_trajectory)):
+        if path:  # before the replay, which takes a while on a long recording
+            if Path(path).suffix.lower() not in (".csv", ".npz"):
+                raise UserError(f"{flag} {path}: the file name must end in .csv or .npz")
+            check_output_file(path, flag)
     res = replay(args.recording, args.tracker_config)
     notes = []
     if args.export_points:

@@ -180,26 +180,48 @@ class Daemon:
         from foveatrack.livox.client import LivoxClient
         from foveatrack.recording import RecordingWriter
 
+        # Links first, the recording last: a port that cannot be used fails the start before a
+        # recording file exists (an empty one was left behind for every failed start).
         c = self.cfg
-        path = c.recording_path()
-        if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            r = c.recording
-            writer = RecordingWriter(path, self._meta(), flush_every_frames=r.flush_every_frames,
-                                     compression=r.compression, points_dtype=r.points_dtype, overwrite=r.overwrite)
-            # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
-            self.recorder = RecordingThread(writer, r.queue_frames)
-            self.recording_path = path
-        L = c.lidar
-        self.client = LivoxClient(L.sensor_ip, L.host_ip, cmd_port=L.cmd_port, data_port=L.data_port,
-                                  broadcast_port=L.broadcast_port, sensor_cmd_port=L.sensor_cmd_port,
-                                  point_rate_hz=L.point_rate_hz, broadcast_code=L.broadcast_code,
-                                  keep_no_return=True)
         try:
             self.head = HeadClient(c.head.port, baud=c.head.baud, address=c.head.address, protocol=c.head.protocol)
         except GimbalError as exc:
-            self.client.close()
             raise UserError(f"{c.path} [head]: {exc}") from None
+        if not self.head.connected:
+            # A port that is wrong at start (a typo, an adapter not plugged in, a regular file, a
+            # server not started) would otherwise leave the daemon tracking with no head, silently:
+            # the link reconnects by itself only once it has been up.
+            raise UserError(f"{c.path} [head]: port {c.head.port!r} cannot be opened ({self.head.last_open_error}); "
+                            "give the head's serial device (/dev/ttyUSB0) or a pyserial URL (socket://host:port, "
+                            "rfc2217://host:port) that exists now, e.g. start 'foveatrack gimbal serve --link PATH' first")
+        L = c.lidar
+        try:
+            self.client = LivoxClient(L.sensor_ip, L.host_ip, cmd_port=L.cmd_port, data_port=L.data_port,
+                                      broadcast_port=L.broadcast_port, sensor_cmd_port=L.sensor_cmd_port,
+                                      point_rate_hz=L.point_rate_hz, broadcast_code=L.broadcast_code,
+                                      keep_no_return=True)
+        except BaseException:
+            self.head.close()
+            raise
+        # the bound ports (config 0 = any), kept: the client's sockets are closed at shutdown
+        self.host_ports = {"cmd": self.client.cmd_port, "data": self.client.data_port,
+                           "broadcast": self.client.broadcast_port}
+        path = c.recording_path()
+        if path is not None:
+            r = c.recording
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                writer = RecordingWriter(path, self._meta(), flush_every_frames=r.flush_every_frames,
+                                         compression=r.compression, points_dtype=r.points_dtype, overwrite=r.overwrite)
+            except (OSError, UserError) as exc:
+                self.client.close()
+                self.head.close()
+                if isinstance(exc, UserError):
+                    raise
+                raise UserError(f"{c.path} [recording] path: cannot create {path} ({exc.strerror or exc})") from None
+            # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
+            self.recorder = RecordingThread(writer, r.queue_frames)
+            self.recording_path = path
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
         self.rx = _Receiver(self.client, self.q, self.stop_ev)
 
@@ -302,8 +324,7 @@ class Daemon:
         self.log.event("start", config=c.path, recording=str(self.recording_path) if self.recording_path else None,
                        lidar=asdict(c.lidar), head_port=c.head.port, head_open=self.head.connected,
                        rate_hz=c.tracker.rate_hz,
-                       host_ports={"cmd": self.client.cmd_port, "data": self.client.data_port,
-                                   "broadcast": self.client.broadcast_port})
+                       host_ports=self.host_ports)
         self.head.stop()
         self.rx.start()
         period = 1.0 / c.tracker.rate_hz
@@ -409,6 +430,35 @@ class Daemon:
                 d[f"{name}_p99"] = round(float(np.percentile(a, 99)), 3)
                 d[f"{name}_max"] = round(float(a.max()), 3)
         return d
+
+    def problems(self) -> list[str]:
+        """What went wrong in the run, in words for the final stderr lines (empty when nothing did).
+
+        A run that received nothing from the lidar otherwise ended on "0 frames" with the reason
+        only in the log's counters (e.g. a mistyped ``sensor_ip``: every datagram was dropped as
+        ``lidar_foreign_source``)."""
+        out = []
+        rx = getattr(self, "rx", None)
+        if rx is not None and rx.last_packet_mono is None:
+            L = self.cfg.lidar
+            hp = self.host_ports
+            ports = f"data port {hp['data']}, command port {hp['cmd']}" + (
+                f", broadcasts on port {hp['broadcast']}" if hp["broadcast"] is not None else "")
+            msg = f"no lidar data arrived from [lidar] sensor_ip {L.sensor_ip} ({ports})"
+            foreign = sorted(self.client.foreign_addresses)
+            if foreign:
+                msg += (f"; {rx.counters.get('foreign_source', 0)} datagrams from {', '.join(foreign)} were dropped: "
+                        "is sensor_ip the lidar's address?")
+            else:
+                msg += (f"; nothing arrived at all: is the lidar on and on this network, and host_ip {L.host_ip} "
+                        "this host's address on it?")
+            out.append(msg)
+        failed = self.counters.get("commands_failed", 0)
+        if failed:
+            total = failed + self.counters.get("commands_written", 0)
+            out.append(f"{failed} of {total} head commands were not written to [head] port {self.cfg.head.port!r} "
+                       "(see head_* counters in the log)")
+        return out
 
     def drops(self) -> int:
         rx = self.rx

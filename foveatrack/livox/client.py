@@ -133,6 +133,7 @@ class LivoxClient:
         self._fixed_sensor_port = sensor_cmd_port is not None
         self.device_broadcast_code: str | None = None
         self.device_type: int | None = None
+        self.foreign_addresses: set[str] = set()  # senders other than sensor_ip seen (at most 8 kept)
         self.state = DISCOVERING
         self.sampling = False
         self._want_sampling = False
@@ -273,6 +274,8 @@ class LivoxClient:
                 return
             if addr[0] != self.sensor_ip:
                 self._counters["foreign_source"] += 1
+                if len(self.foreign_addresses) < 8:  # named in the daemon's "no lidar data" hint
+                    self.foreign_addresses.add(addr[0])
                 continue
             if kind == "data":
                 data.append(buf)

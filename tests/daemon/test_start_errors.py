@@ -1,0 +1,81 @@
+"""A daemon whose head port, lidar port or recording path cannot be used fails at start with a
+message naming the config key, and leaves no recording behind; a run that got no lidar data says
+why at the end.  (Found by a review: a head port that was a typo, a regular file or /dev/null gave
+a daemon that "tracked" for minutes with no head and said nothing; every failed start left an empty
+recording; a mistyped sensor_ip ended on "0 frames" with the reason only in the log.)"""
+
+import socket
+import time
+
+import pytest
+
+from foveatrack.daemon import Daemon, load_config
+from foveatrack.errors import UserError
+
+
+def _daemon(tmp_path, port, sensor_ip="127.0.0.1", data_port=0, rec_dir=None):
+    rec_dir = rec_dir or tmp_path / "runs"
+    cfg = tmp_path / "d.toml"
+    cfg.write_text(f"""
+[lidar]
+sensor_ip = "{sensor_ip}"
+host_ip = "127.0.0.1"
+cmd_port = 0
+data_port = {data_port}
+broadcast_port = false
+sensor_cmd_port = 65000
+[head]
+port = "{port}"
+[recording]
+path = "{rec_dir}/run-{{time}}.mcap"
+""")
+    return Daemon(load_config(cfg), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
+
+
+@pytest.mark.parametrize("port", ["{tmp}/not-a-tty.txt", "{tmp}/no-such-adapter", "/dev/null", "sockett://x:1"])
+def test_a_head_port_that_cannot_be_opened_fails_the_start(tmp_path, port):
+    (tmp_path / "not-a-tty.txt").write_text("a regular file\n")
+    port = port.format(tmp=tmp_path)
+    d = _daemon(tmp_path, port)
+    with pytest.raises(UserError) as exc:
+        d._open()
+    msg = str(exc.value)
+    assert "[head]" in msg and repr(port) in msg and "cannot be opened" in msg and "/dev/ttyUSB0" in msg
+    assert not (tmp_path / "runs").exists()   # no empty recording left behind
+
+
+def test_a_busy_lidar_port_fails_the_start_without_a_recording(tmp_path):
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        d = _daemon(tmp_path, "loop://", data_port=s.getsockname()[1])
+        with pytest.raises(UserError, match="Address already in use"):
+            d._open()
+    assert not (tmp_path / "runs").exists()
+
+
+def test_a_recording_path_that_cannot_be_created_is_a_user_error(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    d = _daemon(tmp_path, "loop://", rec_dir=blocker / "runs")   # a directory inside a regular file
+    with pytest.raises(UserError, match=r"\[recording\] path: cannot create"):
+        d._open()
+
+
+def test_no_lidar_data_is_explained_naming_the_senders_dropped(tmp_path):
+    d = _daemon(tmp_path, "loop://", sensor_ip="127.0.0.2")   # the lidar really is 127.0.0.1
+    d._open()
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.sendto(b"\x00" * 32, ("127.0.0.1", d.host_ports["data"]))
+        deadline = time.monotonic() + 2.0
+        while not d.client.foreign_addresses and time.monotonic() < deadline:
+            d.client.poll(0.05)
+        d.rx.counters = d.client.counters
+        problems = d.problems()
+    finally:
+        d.client.close()
+        d.head.close()
+        d.recorder.close()
+    assert len(problems) == 1
+    assert "no lidar data arrived from [lidar] sensor_ip 127.0.0.2" in problems[0]
+    assert "from 127.0.0.1 were dropped" in problems[0] and "is sensor_ip the lidar's address?" in problems[0]

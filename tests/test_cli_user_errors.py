@@ -1,0 +1,118 @@
+"""Inputs a user gets wrong reach the CLI as one clear line naming the input and what is allowed,
+never as a traceback (found by a review that fed the commands wrong values)."""
+
+import pytest
+
+from foveatrack.cli import main
+
+SCENE = "scenes/fig12-tracking.toml"
+ROOM = "scenes/calibration-room.toml"
+
+
+@pytest.mark.parametrize("argv", [
+    ["gimbal", "serve", "--unit-seed", "-1"],
+    ["gimbal", "curves", "--unit-seeds", "0", "-3", "--plot", "x.png"],
+    ["calibrate", "--scene", ROOM, "--unit-seed", "-1"],
+    ["calibrate", "--scene", ROOM, "--seed", "-4"],
+    ["lidar", "pattern", "mid40", "--noise", "0.01", "--seed", "-2"],
+    ["lidar", "coverage-map", "prototype", "--grid", "2", "--seed", "-2"],
+    ["lidar", "serve", SCENE, "--loss-rate", "0.1", "--seed", "-2"],
+])  # (simulate --seed -1 was already a UserError: tests/world/test_loop.py)
+def test_negative_seed_is_refused_by_the_parser(argv, capsys):
+    # before: numpy's SeedSequence raised "ValueError: expected non-negative integer" mid-run
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "a seed must be an integer >= 0" in err and "Traceback" not in err
+
+
+def _run(argv, capsys):
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return code, err
+
+
+def test_output_paths_are_checked_before_the_work(tmp_path, capsys):
+    missing = tmp_path / "no-such-dir"
+    # replay: before, the export failed with a FileNotFoundError traceback after the whole replay;
+    # the recording here does not even exist, so the export path is what was checked first
+    code, err = _run(["replay", str(tmp_path / "nothing.mcap"), "--export-points", str(missing / "p.csv")], capsys)
+    assert code == 2 and "--export-points" in err and "does not exist" in err
+    code, err = _run(["replay", str(tmp_path / "nothing.mcap"), "--export-trajectory", str(tmp_path / "t.txt")], capsys)
+    assert code == 2 and "--export-trajectory" in err and ".csv or .npz" in err
+    # calibrate: before, minutes of calibration ran and then table.save raised FileNotFoundError
+    code, err = _run(["calibrate", "--scene", ROOM, "--out", str(missing / "t.json")], capsys)
+    assert code == 2 and "--out" in err and "does not exist" in err
+    code, err = _run(["calibrate", "--scene", ROOM, "--out", str(tmp_path)], capsys)
+    assert code == 2 and "is a directory" in err
+    # lidar plots: before, matplotlib's savefig raised FileNotFoundError after the analysis
+    code, err = _run(["lidar", "info", "mid40", "--plot", str(missing / "i.png")], capsys)
+    assert code == 2 and "--plot" in err and "does not exist" in err
+    assert not missing.exists()
+
+
+def test_an_os_error_in_any_command_is_one_line_naming_the_file(monkeypatch, capsys):
+    from foveatrack.cli import lidar_cmd
+
+    def full_disk(args):
+        raise OSError(28, "No space left on device", "/data/out.png")
+
+    monkeypatch.setattr(lidar_cmd, "cmd_info", full_disk)
+    code, err = _run(["lidar", "info", "mid40"], capsys)
+    assert code == 2
+    assert err.strip() == "foveatrack: error: /data/out.png: No space left on device"
+
+
+def test_pattern_duration_beyond_memory_is_refused(capsys):
+    # before: numpy's _ArrayMemoryError ("Unable to allocate 728. TiB") traceback
+    code, err = _run(["lidar", "pattern", "mid40", "--duration", "1e9"], capsys)
+    assert code == 2 and "--duration 1e+09" in err and "at most 20000000" in err
+
+
+def _scene_with(tmp_path, old, new):
+    from pathlib import Path
+
+    text = Path(SCENE).read_text()
+    assert old in text
+    path = tmp_path / "scene.toml"
+    path.write_text(text.replace(old, new, 1))
+    return str(path)
+
+
+def test_scene_tilt0_beyond_the_heads_stops_is_refused(tmp_path, capsys):
+    # before: the closed loop clamped 95 deg to the 60 deg stop and ran from there, silently
+    path = _scene_with(tmp_path, "unit_seed = 3", "unit_seed = 3\ntilt0_deg = 95")
+    code, err = _run(["simulate", path], capsys)
+    assert code == 2
+    assert f"{path} [gimbal]: tilt0_deg 95 is beyond the pts-303 head's tilt stops [-30, 60] deg" in err
+
+
+def test_space_of_interest_errors_name_the_file_and_table(tmp_path, capsys):
+    # before: "box: min_xyz ... must be below max_xyz ..." with no file or table
+    path = _scene_with(tmp_path, "max_xyz = [60.0, 60.0, 40.0]", "max_xyz = [0.0, 60.0, 40.0]")
+    code, err = _run(["simulate", path], capsys)
+    assert code == 2 and f"{path} [tracker].space: box: min_xyz" in err
+
+
+def test_speed_table_duplicate_byte_names_the_file(tmp_path, capsys):
+    import json
+
+    from foveatrack.errors import UserError
+    from foveatrack.speed_table import SpeedTable
+
+    data = SpeedTable.nominal().to_dict()
+    entries = data["axes"]["pan"]["entries"]
+    entries.append(dict(entries[5]))
+    path = tmp_path / "table.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(UserError) as exc:
+        SpeedTable.load(path)
+    assert str(exc.value).startswith(f"speed table {path}: axes.pan: speed byte {entries[5]['byte']} is listed twice")
+
+
+def test_lidar_serve_refuses_a_non_positive_duration(capsys):
+    # before: --duration-s -1 served nothing and exited 0
+    code, err = _run(["lidar", "serve", SCENE, "--duration-s", "-1"], capsys)
+    assert code == 2 and "--duration-s must be > 0" in err
