@@ -10,9 +10,16 @@ runs :class:`foveatrack.calibration.Calibrator` against the simulated PTS-303H o
 :mod:`foveatrack.speed_table`), prints the entries it could not measure and, since the unit's truth is
 known in simulation, each measured entry's error.
 
-Real hardware (a Livox and a head on a serial port) is driven the same way: any frame source and any
-command sink go through :class:`CalibrationDriver` / :func:`drive_calibration`; the live wiring
-(``--lidar/--serial``) is not in this command yet.
+Real hardware (a Livox and a head on a serial port)::
+
+    foveatrack calibrate --config DAEMON.toml --corner X Y Z [--lidar IP] [--serial PORT]
+                         [--out table.json] [--plot F.png] [--json] [--max-s S]
+
+reads the devices, limits and start pose from the daemon's config (``--lidar``/``--serial`` replace
+its ``[lidar] sensor_ip`` and ``[head] port``) and runs the same procedure on the live stream
+(:func:`foveatrack.calibration_live.calibrate_live`); ``--corner`` is where the room corner is in
+the lidar frame at the start, within 1 m.  The table is written only when the procedure completes;
+the head is stopped at the end, on Ctrl-C and on any error.
 """
 
 from __future__ import annotations
@@ -31,6 +38,8 @@ def register(sub) -> None:
     p = sub.add_parser("calibrate", help="measure the head's speed table by tracking a room corner (App. D.4)")
     p.add_argument("--scene", metavar="SCENE.toml", help="simulate: a scene with a room corner in view "
                    "(scenes/calibration-room.toml)")
+    p.add_argument("--config", metavar="DAEMON.toml", help="real hardware: the daemon config naming the lidar "
+                   "and the head (ports, limits, start pose)")
     p.add_argument("--unit-seed", type=seed_arg, metavar="N", help="simulate another unit of the head family")
     p.add_argument("--out", metavar="TABLE.json", default="speed-table.json",
                    help="where to write the speed table (default: %(default)s)")
@@ -41,10 +50,15 @@ def register(sub) -> None:
     p.add_argument("--tilt-bytes", metavar="B,B,...", help="tilt bytes to measure (0-63)")
     p.add_argument("--dwell-s", type=float, help="max seconds per leg (default 6)")
     p.add_argument("--corner", type=float, nargs=3, metavar=("X", "Y", "Z"),
-                   help="approximate corner position in the lidar frame [m] (simulated: from the scene)")
+                   help="approximate corner position in the lidar frame [m], within 1 m (real hardware: "
+                   "required; simulated: from the scene)")
     p.add_argument("--seed", type=seed_arg, default=0, help="RANSAC seed of the corner finder")
-    p.add_argument("--lidar", metavar="IP", help="real hardware: the Livox's IP (not yet wired)")
-    p.add_argument("--serial", metavar="PORT", help="real hardware: the head's serial port (not yet wired)")
+    p.add_argument("--lidar", metavar="IP", help="real hardware: the Livox's IP (replaces the config's "
+                   "[lidar] sensor_ip)")
+    p.add_argument("--serial", metavar="PORT", help="real hardware: the head's serial port (replaces the "
+                   "config's [head] port)")
+    p.add_argument("--max-s", type=float, metavar="S", help="real hardware: give up after S seconds "
+                   "(default: no limit)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=cmd_calibrate)
 
@@ -92,16 +106,16 @@ def unmeasured_summary(report) -> dict:
 
 
 def cmd_calibrate(args) -> int:
-    if args.lidar or args.serial:
-        raise UserError("real-hardware calibration (--lidar/--serial): not wired into this command yet; "
-                        "drive foveatrack.cli.calibrate_cmd.drive_calibration(Calibrator(...), frames, send) "
-                        "from a Livox frame source and a Pelco-D port, or use --scene to calibrate the "
-                        "simulated head")
+    if args.config and args.scene:
+        raise UserError("calibrate: give --scene (simulated head) or --config (real devices), not both")
+    if args.config or args.lidar or args.serial:
+        return calibrate_devices(args)
+    if args.unit_seed is not None and not args.scene:
+        raise UserError("--unit-seed picks a simulated unit: it needs --scene")
     if not args.scene:
-        raise UserError("calibrate needs --scene SCENE.toml (e.g. scenes/calibration-room.toml)")
-    check_output_file(args.out, "--out")   # before minutes of calibration, not after
-    if args.plot:
-        check_output_file(args.plot, "--plot")
+        raise UserError("calibrate needs --scene SCENE.toml (simulated, e.g. scenes/calibration-room.toml) "
+                        "or --config DAEMON.toml --corner X Y Z (a real lidar and head)")
+    _check_outputs(args)
     run = calibrate_scene(args)
     table = run.table
     table.save(args.out)
@@ -117,7 +131,7 @@ def cmd_calibrate(args) -> int:
         "measured": len(run.comparison),
     }
     if args.plot:
-        _plot(run, args.plot)
+        _plot(run.table, run.comparison, args.plot, truth=run.truth)
     if args.json:
         json.dump(summary, sys.stdout, indent=2, default=_jsonable)
         sys.stdout.write("\n")
@@ -141,11 +155,7 @@ def cmd_calibrate(args) -> int:
     return 0
 
 
-def calibrate_scene(args):
-    from sim.calibration_run import default_plan, run_calibration
-    from sim.scene import load_scene
-
-    scene = load_scene(args.scene)
+def _plan_overrides(args) -> dict:
     kw = {}
     pb, tb = _bytes(args.pan_bytes, "--pan-bytes"), _bytes(args.tilt_bytes, "--tilt-bytes")
     if pb is not None:
@@ -154,7 +164,120 @@ def calibrate_scene(args):
         kw["tilt_bytes"] = tb
     if args.dwell_s is not None:
         kw["dwell_s"] = args.dwell_s
-    plan = default_plan(scene, **kw)
+    return kw
+
+
+def measured_rows(table) -> list[dict]:
+    """Per measured entry of a table: axis, byte, measured speed and its sigma."""
+    from foveatrack.speed_table import axis_bytes
+
+    rows = []
+    for axis in ("pan", "tilt"):
+        ax = table.axis(axis)
+        rows += [{"axis": axis, "byte": b, "measured_deg_s": ax.speed_deg_s(b), "sigma_deg_s": ax.sigma_deg_s(b)}
+                 for b in axis_bytes(axis) if ax.is_measured(b)]
+    return rows
+
+
+def _check_outputs(args) -> None:
+    check_output_file(args.out, "--out")   # before minutes of calibration, not after
+    if args.plot:
+        check_output_file(args.plot, "--plot")
+
+
+def calibrate_devices(args) -> int:
+    """``calibrate --config DAEMON.toml``: the procedure on a real (or virtual) lidar and head."""
+    import signal
+    import threading
+    from dataclasses import replace
+
+    from foveatrack.calibration import CalibrationPlan
+    from foveatrack.calibration_live import calibrate_live, delay_summary_ms
+    from foveatrack.daemon.config import load_config
+
+    if not args.config:
+        raise UserError("--lidar/--serial calibrate real devices: they need --config DAEMON.toml (the daemon's "
+                        "config names the rest: host address, baud, Pelco address, limits, start pose)")
+    if args.unit_seed is not None:
+        raise UserError("--unit-seed picks a simulated unit; with --config the unit is the real head")
+    if not args.corner:
+        raise UserError("calibrate --config needs --corner X Y Z: where the room corner is in the lidar "
+                        "frame [m] at the start (X forward, Y left, Z up), within 1 m")
+    if args.max_s is not None and not args.max_s > 0:
+        raise UserError(f"--max-s must be > 0, got {args.max_s}")
+    _check_outputs(args)
+    cfg = load_config(args.config)
+    if args.lidar:
+        cfg = replace(cfg, lidar=replace(cfg.lidar, sensor_ip=args.lidar))
+    if args.serial:
+        cfg = replace(cfg, head=replace(cfg.head, port=args.serial))
+    plan = CalibrationPlan(**_plan_overrides(args))
+    stop = threading.Event()
+    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    bar = None
+    progress = None
+    if not args.no_progress and not args.json:
+        from tqdm import tqdm
+
+        bar = tqdm(total=None, desc="calibrating", unit=" leg", file=sys.stderr, leave=False)
+
+        def progress(frames, legs, total):
+            if bar.total != total:
+                bar.total = total
+            if legs != bar.n:
+                bar.update(legs - bar.n)
+    try:
+        run = calibrate_live(cfg, plan, FeatureSpec(tuple(args.corner), radius_m=1.0), seed=args.seed,
+                             max_s=args.max_s, stop=stop, progress=progress)
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+        if bar is not None:
+            bar.close()
+    table = run.table
+    table.save(args.out)
+    rows = measured_rows(table)
+    delays = delay_summary_ms(run.delay_ms)
+    summary = {
+        "table": str(args.out), "head": table.head, "date": table.date, "frames": run.frames,
+        "wall_s": round(run.wall_s, 2), "dead_time_s": table.dead_time_s, "accel_deg_s2": table.accel_deg_s2,
+        "implied_start_tilt_deg": run.report.implied_start_tilt_deg,
+        "left_out_by_limits": run.dropped_bytes,
+        "command_delay_ms": None if delays is None else {"median": delays[0], "p95": delays[1]},
+        "latency_assumed_ms": run.plan.latency_s * 1e3,
+        "unmeasured": unmeasured_summary(run.report), "entries": rows, "counters": run.counters,
+    }
+    if args.plot:
+        _plot(table, rows, args.plot)
+    if args.json:
+        json.dump(summary, sys.stdout, indent=2, default=_jsonable)
+        sys.stdout.write("\n")
+        return 0
+    print(f"calibrated {table.head}: {run.frames} frames in {run.wall_s:.1f} s")
+    print(f"  {'axis':4s} {'byte':>5s} {'measured':>9s} {'sigma':>7s}")
+    for r in rows:
+        b = "turbo" if r["byte"] == TURBO else str(r["byte"])
+        print(f"  {r['axis']:4s} {b:>5s} {r['measured_deg_s']:9.4f} {r['sigma_deg_s']:7.4f}")
+    for axis, bs in run.dropped_bytes.items():
+        print(f"  not measured, {axis}: {ranges(bs)}  (beyond the config's [head] limits)")
+    for axis, d in summary["unmeasured"].items():
+        for reason, bs in d.items():
+            print(f"  not measured, {axis}: {ranges(bs)}  ({reason})")
+    acc = "-" if table.accel_deg_s2 is None else f"{table.accel_deg_s2:.1f}"
+    print(f"  dead time {table.dead_time_s * 1e3:.0f} ms, acceleration {acc} deg/s^2")
+    if delays is not None:
+        print(f"  commands left {delays[0]:.1f} ms (median; p95 {delays[1]:.1f}) after their frame's last point; "
+              f"the plan assumed {run.plan.latency_s * 1e3:.1f} ms to the head")
+    print(f"  table written to {args.out}")
+    return 0
+
+
+def calibrate_scene(args):
+    from sim.calibration_run import default_plan, run_calibration
+    from sim.scene import load_scene
+
+    scene = load_scene(args.scene)
+    plan = default_plan(scene, **_plan_overrides(args))
     feature = FeatureSpec(tuple(args.corner)) if args.corner else None
     progress = None
     bar = None
@@ -184,7 +307,8 @@ def _jsonable(o):
         return str(o)
 
 
-def _plot(run, path) -> None:
+def _plot(table, rows_all, path, truth=None) -> None:
+    """Measured speeds (3 sigma bars), the table between them and, when simulated, the truth."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -193,22 +317,24 @@ def _plot(run, path) -> None:
 
     fig, axs = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, axis in zip(axs, ("pan", "tilt")):
-        tr = run.truth.axis(axis)
         b = np.arange(64)
-        ax.plot(b, [tr.speed_deg_s(int(x)) for x in b], "-", color="0.6", label="true (simulated unit)")
-        rows = [r for r in run.comparison if r["axis"] == axis and r["byte"] != TURBO]
+        if truth is not None:
+            tr = truth.axis(axis)
+            ax.plot(b, [tr.speed_deg_s(int(x)) for x in b], "-", color="0.6", label="true (simulated unit)")
+        rows = [r for r in rows_all if r["axis"] == axis and r["byte"] != TURBO]
         ax.errorbar([r["byte"] for r in rows], [r["measured_deg_s"] for r in rows],
                     yerr=[3 * r["sigma_deg_s"] for r in rows], fmt="o", ms=4, capsize=3, label="measured (3 sigma)")
-        t = run.table.axis(axis)
+        t = table.axis(axis)
         ax.plot(b, [t.speed_deg_s(int(x)) for x in b], ":", lw=1, label="table (interpolated)")
-        turbo = [r for r in run.comparison if r["axis"] == axis and r["byte"] == TURBO]
+        turbo = [r for r in rows_all if r["axis"] == axis and r["byte"] == TURBO]
         if turbo:
             ax.errorbar([66], [turbo[0]["measured_deg_s"]], yerr=[3 * turbo[0]["sigma_deg_s"]], fmt="s", ms=4,
                         capsize=3, label="turbo (0xFF), drawn at 66")
-            ax.plot([66], [tr.speed_deg_s(TURBO)], "x", color="0.4")
+            if truth is not None:
+                ax.plot([66], [tr.speed_deg_s(TURBO)], "x", color="0.4")
         ax.set_xlabel("speed byte")
         ax.set_ylabel(f"{axis} speed [deg/s]")
-        ax.set_title(f"{axis}: speed table ({run.table.head})", fontsize=9)
+        ax.set_title(f"{axis}: speed table ({table.head})", fontsize=9)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()

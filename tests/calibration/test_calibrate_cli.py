@@ -56,10 +56,13 @@ def test_ranges():
     assert ranges([0, 1, 2, 5, 7, 8, 255]) == "0-2, 5, 7-8, turbo"
 
 
-def test_real_hardware_mode_is_a_clear_error(capsys):
+def test_missing_or_mixed_modes_are_clear_errors(capsys):
+    # Real devices are named by a daemon config (tests/daemon/test_calibrate_devices.py runs them).
     assert main(["calibrate", "--serial", "/dev/ttyUSB0", "--lidar", "192.168.1.50"]) == 2
-    assert "real-hardware calibration" in capsys.readouterr().err
+    assert "need --config DAEMON.toml" in capsys.readouterr().err
     assert main(["calibrate"]) == 2
+    err = capsys.readouterr().err
+    assert "--scene SCENE.toml" in err and "--config DAEMON.toml" in err
     assert main(["calibrate", "--scene", SCENE, "--pan-bytes", "12,x"]) == 2
 
 

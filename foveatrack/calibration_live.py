@@ -1,0 +1,192 @@
+"""The speed-table calibration on live devices: a Livox over UDP, the head over a serial port
+(paper Appendix D.4; ``foveatrack calibrate --config DAEMON.toml --corner X Y Z``).
+
+The devices are the daemon's (:mod:`foveatrack.daemon`): the same config file names the lidar
+(``[lidar]``), the head's port, baud, address, protocol and safety limits (``[head]``), so a bench
+that runs the daemon calibrates with the same file.  The procedure is the simulator's:
+:class:`~foveatrack.calibration.PriorAxisCalibrator` behind :class:`CalibrationDriver`, fed
+``rate_hz`` frames cut from the live stream (:class:`~foveatrack.frames.FrameSlicer`), one Pelco-D
+command written per frame (a keep-alive as well as the procedure's changes).
+
+Safety: the plan is cut to the config's limits before anything moves (speed bytes above
+``max_pan_byte``/``max_tilt_byte`` and turbo unless ``allow_turbo`` are dropped, and said so); the head
+is stopped when the lidar falls silent for ``[daemon] watchdog_s`` (the run then ends with an error),
+on Ctrl-C / SIGTERM, on any error and at the end.
+
+Timing: the Calibrator stamps each command with its frame's end (sensor time); the bytes reach the
+head later by the time the frame took to complete and be processed, plus one Pelco-D frame on the
+wire.  The plan's ``latency_s`` (subtracted from the measured delays, so the table's dead time is
+the head's own) is the wire time plus ``processing_s``; the delays actually seen (host clock, from the
+frame's last point to the bytes written) are returned, so a user can check that guess.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from foveatrack.calibration import CalibrationPlan, CalibrationReport, FeatureSpec, PriorAxisCalibrator
+from foveatrack.calibration_drive import CalibrationDriver
+from foveatrack.daemon.config import DaemonConfig
+from foveatrack.daemon.support import strip_no_return
+from foveatrack.errors import UserError
+from foveatrack.frames import FrameSlicer
+from foveatrack.speed_table import TURBO, SpeedTable
+
+
+@dataclass
+class LiveCalibration:
+    """A finished calibration on live devices."""
+
+    table: SpeedTable
+    report: CalibrationReport
+    plan: CalibrationPlan                 # as run (cut to the config's limits)
+    dropped_bytes: dict                   # {axis: [bytes]} the limits removed from the plan
+    frames: int
+    wall_s: float
+    delay_ms: list = field(default_factory=list)   # per command: frame's last point -> bytes written
+    counters: dict = field(default_factory=dict)   # lidar and head link counters
+
+
+def plan_within_limits(plan: CalibrationPlan, config: DaemonConfig) -> tuple[CalibrationPlan, dict]:
+    """The plan without the bytes the config's ``[head]`` limits forbid, and which were removed."""
+    h = config.head
+    pan = tuple(b for b in plan.pan_bytes if (b == TURBO and h.allow_turbo) or (b != TURBO and b <= h.max_pan_byte))
+    tilt = tuple(b for b in plan.tilt_bytes if b <= h.max_tilt_byte)
+    dropped = {"pan": [b for b in plan.pan_bytes if b not in pan], "tilt": [b for b in plan.tilt_bytes if b not in tilt]}
+    if not pan or not tilt:
+        raise UserError(f"{config.path} [head]: max_pan_byte {h.max_pan_byte}, max_tilt_byte {h.max_tilt_byte}, "
+                        f"allow_turbo {h.allow_turbo} leave no {'pan' if not pan else 'tilt'} byte of the plan "
+                        f"to measure (plan: pan {list(plan.pan_bytes)}, tilt {list(plan.tilt_bytes)})")
+    return replace(plan, pan_bytes=pan, tilt_bytes=tilt), {k: v for k, v in dropped.items() if v}
+
+
+def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: FeatureSpec, *, rate_hz: float = 20.0,
+                   processing_s: float = 0.005, seed: int = 0, start_tilt_sigma_deg: float = 0.5,
+                   max_s: float | None = None, stop: threading.Event | None = None, progress=None,
+                   date: str | None = None, first_data_s: float = 10.0) -> LiveCalibration:
+    """Calibrate the head named by ``config`` against its lidar (see the module docstring).
+
+    plan : bytes and timing (``start_tilt_deg`` is taken from ``[head] tilt0_deg``, ``latency_s``
+        from the wire time + ``processing_s``)
+    feature : the room corner, where it is in the lidar frame at the start (within ``radius_m``)
+    rate_hz : frame rate of the procedure (20 Hz: 50 ms frames keep a corner sharp at full pan speed)
+    max_s : wall-time budget [s] (None: no limit); stop : set it to end the run early (the head
+        is stopped; UserError "interrupted")
+    progress : ``progress(frames, legs_done, legs_total)`` after each frame
+    first_data_s : how long to wait for the lidar's first packet [s]
+
+    Raises UserError when the lidar never sends or falls silent, the calibration fails, runs out of
+    time or is interrupted; the head is stopped in every case.
+    """
+    from gimbal.client import HeadClient
+    from gimbal.errors import GimbalError
+    from gimbal.pelco import encode_pan_tilt
+
+    from foveatrack.livox.client import LivoxClient
+
+    h, L = config.head, config.lidar
+    plan, dropped = plan_within_limits(plan, config)
+    plan = replace(plan, start_tilt_deg=h.tilt0_deg, latency_s=h.frame_time_s + processing_s)
+    cal = PriorAxisCalibrator(plan, feature, seed=seed, date=date, start_tilt_sigma_deg=start_tilt_sigma_deg,
+                              head=f"{h.protocol} head, address {h.address} on {h.port}")
+    driver = CalibrationDriver(cal)
+    legs_total = len(plan.pan_bytes) * 2 + len(plan.tilt_bytes) * 2
+    client = LivoxClient(L.sensor_ip, L.host_ip, cmd_port=L.cmd_port, data_port=L.data_port,
+                         broadcast_port=L.broadcast_port, sensor_cmd_port=L.sensor_cmd_port,
+                         point_rate_hz=L.point_rate_hz, broadcast_code=L.broadcast_code, keep_no_return=True)
+    try:
+        head = HeadClient(h.port, baud=h.baud, address=h.address, protocol=h.protocol)
+    except GimbalError as exc:
+        client.close()
+        raise UserError(f"{config.path} [head]: {exc}") from None
+    if not head.connected:
+        # (as the daemon's start: a wrong port would leave the procedure commanding nothing)
+        client.close()
+        raise UserError(f"{config.path} [head]: port {h.port!r} cannot be opened ({head.last_open_error})")
+    slicer = FrameSlicer(rate_hz)
+    encoded: dict = {}
+    delay_ms: list[float] = []
+    frames = 0
+    t_start = time.monotonic()
+    last_packet = None
+    packets = 0
+    offset_s = None          # host - sensor clock (smallest seen: the transit delay, see daemon.runtime)
+    try:
+        head.stop()
+        client.start_sampling()
+        while not driver.finished:
+            now = time.monotonic()
+            if stop is not None and stop.is_set():
+                raise UserError(f"calibration interrupted after {frames} frames ({_legs(cal)} legs done); "
+                                "the head was stopped and no table was written")
+            if max_s is not None and now - t_start > max_s:
+                raise UserError(f"the calibration did not finish within {max_s:g} s ({_legs(cal)} of "
+                                f"{legs_total} legs done); the head was stopped and no table was written")
+            # Watchdog: the procedure cannot see the head move without the lidar (and a head left
+            # turning would run into its stops), so silence ends the run.
+            if last_packet is None and now - t_start > first_data_s:
+                raise UserError(f"no data from the lidar {L.sensor_ip} within {first_data_s:g} s (is it on, "
+                                f"and is [lidar] host_ip {L.host_ip} this machine's address on its network?); "
+                                f"the head was stopped and no table was written (lidar counters: {client.counters})")
+            if last_packet is not None and now - last_packet > config.loop.watchdog_s:
+                raise UserError(f"the lidar fell silent for {now - last_packet:.1f} s ([daemon] watchdog_s "
+                                f"{config.loop.watchdog_s:g}) after {frames} frames; the head was stopped and no "
+                                "table was written")
+            batches = client.poll(0.02)
+            now = time.monotonic()
+            if client.counters.get("packets", 0) != packets:
+                packets = client.counters.get("packets", 0)
+                last_packet = now
+            for b in batches:
+                if not len(b):
+                    continue
+                off = now - int(b.t_ns[-1]) * 1e-9
+                offset_s = off if offset_s is None else min(offset_s, off)
+                for frame in slicer.push(b.xyz, b.t_ns, b.reflectivity):
+                    frame = strip_no_return(frame)
+                    frames += 1
+                    cmd = driver(frame, frame.t_end_s)
+                    key = (cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte)
+                    raw = encoded.get(key)
+                    if raw is None:
+                        raw = encoded[key] = encode_pan_tilt(h.address, *key, h.protocol)
+                    head.send_frame(raw)
+                    if frame.n_points:
+                        delay_ms.append((time.monotonic() - (frame.t_ns[-1] * 1e-9 + offset_s)) * 1e3)
+                    if progress is not None:
+                        progress(frames, _legs(cal), legs_total)
+                    if driver.finished:
+                        break
+                if driver.finished:
+                    break
+        table = cal.result()
+    finally:
+        head.stop()
+        counters = {"lidar": dict(client.counters), "head": _head_stats(head)}
+        client.close()
+        head.close()
+    return LiveCalibration(table, cal.report, plan, dropped, frames, time.monotonic() - t_start, delay_ms, counters)
+
+
+def _legs(cal) -> int:
+    return sum(1 for leg in cal.legs if leg.t_stop_s is not None)
+
+
+def _head_stats(head) -> dict:
+    from dataclasses import asdict, is_dataclass
+
+    s = getattr(head, "stats", None)
+    return asdict(s) if is_dataclass(s) else {}
+
+
+def delay_summary_ms(delay_ms: list[float]) -> tuple[float, float] | None:
+    """(median, 95th percentile) of the command delays [ms], or None without any."""
+    if not delay_ms:
+        return None
+    d = np.asarray(delay_ms)
+    return float(np.median(d)), float(np.percentile(d, 95))
+

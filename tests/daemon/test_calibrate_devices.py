@@ -1,0 +1,155 @@
+"""``foveatrack calibrate --config``: the speed-table calibration on live devices (paper App. D.4).
+
+End to end through the virtual devices, as a bench would run it: ``gimbal serve`` (a PTS-303H unit
+on a pseudo-terminal, Pelco-D in) and ``lidar serve`` (the calibration room over Livox UDP, following
+that head's pose), and the command under test reading the daemon's config.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from daemon_procs import ROOT, env, first_line, free_udp_port, start, terminate, wait_for
+from foveatrack.calibration import CalibrationPlan
+from foveatrack.calibration_live import plan_within_limits
+from foveatrack.cli import main
+from foveatrack.daemon import load_config
+from foveatrack.speed_table import TURBO, SpeedTable
+from gimbal.pts303h import PTS303H
+from sim.virtual_head import read_truth
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty")
+
+UNIT = 101
+CORNER = ("5.9", "0.8", "0.84")   # the room corner in the lidar frame at the start (within 1 m suffices)
+
+
+def _config(tmp_path, link, bport, **head):
+    extra = "".join(f"{k} = {json.dumps(v)}\n" for k, v in head.items())
+    p = tmp_path / "d.toml"
+    p.write_text(f"""
+[lidar]
+sensor_ip = "127.0.0.1"
+host_ip = "127.0.0.1"
+cmd_port = 0
+data_port = 0
+broadcast_port = {bport}
+[head]
+port = "{link}"
+pan0_deg = 23.0
+tilt0_deg = 6.5
+{extra}""")
+    return p
+
+
+def _calibrate(cfg, out, *extra) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "foveatrack", "calibrate", "--config", str(cfg), "--corner", *CORNER,
+                             "--out", str(out), "--json", "--max-s", "90", *extra], cwd=ROOT, env=env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_calibrates_a_head_through_its_serial_port_and_the_lidar_stream(tmp_path):
+    link, truth = tmp_path / "head", tmp_path / "truth.jsonl"
+    bport = free_udp_port()
+    cfg = _config(tmp_path, link, bport, allow_turbo=False, max_pan_byte=50)
+    procs = [start(["gimbal", "serve", "--link", str(link), "--truth", str(truth), "--unit-seed", str(UNIT),
+                    "--pan0-deg", "23", "--tilt0-deg", "6.5"], tmp_path / "head.out", tmp_path / "head.err")]
+    try:
+        wait_for(lambda: first_line(tmp_path / "head.out"), 20, "the head's pty", procs)
+        procs.append(start(["lidar", "serve", str(ROOT / "scenes" / "calibration-room.toml"), "--cmd-port", "0",
+                            "--broadcast-port", str(bport), "--head-truth", str(truth)],
+                           tmp_path / "l.out", tmp_path / "l.err"))
+        wait_for(lambda: first_line(tmp_path / "l.out"), 60, "the virtual lidar", procs)
+        out = tmp_path / "table.json"
+        # Pan byte 60 and turbo are beyond this config's limits: left out, and said so.
+        p = _calibrate(cfg, out, "--pan-bytes", "40,60,turbo", "--tilt-bytes", "63", "--dwell-s", "3")
+        stdout, stderr = p.communicate(timeout=150)
+        assert p.returncode == 0, stderr
+        summary = json.loads(stdout)
+        assert summary["left_out_by_limits"] == {"pan": [60, TURBO]}
+        unit = PTS303H(unit_seed=UNIT)
+        rows = {(r["axis"], r["byte"]): r for r in summary["entries"]}
+        assert set(rows) == {("pan", 40), ("tilt", 63)}
+        for (axis, b), r in rows.items():
+            v_true = unit.true_speed_deg_s(axis, b)
+            assert abs(r["measured_deg_s"] - v_true) <= max(0.02 * v_true, 3 * r["sigma_deg_s"]), (axis, b, r, v_true)
+        table = SpeedTable.load(out)
+        assert table.pan.is_measured(40) and not table.pan.is_measured(60)
+        # The head's own dead time is 40 ms; the virtual lidar follows the head's pose 20-30 ms late
+        # (its truth file's period + a batch), which the calibration cannot tell from dead time.
+        assert 0.0 <= summary["dead_time_s"] <= 0.12
+        assert summary["command_delay_ms"]["median"] < 100
+        rest = read_truth(truth)[-1]
+        assert rest["pan_speed_deg_s"] == 0.0 and rest["tilt_speed_deg_s"] == 0.0, "the head is left stopped"
+
+        # Interrupted: the head stops, no table is written, the error says so.
+        out2 = tmp_path / "table2.json"
+        p = _calibrate(cfg, out2, "--pan-bytes", "40", "--tilt-bytes", "63", "--dwell-s", "3")
+        n0 = len(read_truth(truth))
+        wait_for(lambda: any(r["pan_speed_deg_s"] != 0.0 for r in read_truth(truth)[n0:]), 60, "the head to move",
+                 procs + [p])
+        p.send_signal(signal.SIGINT)
+        stdout, stderr = p.communicate(timeout=30)
+        assert p.returncode == 2 and "interrupted" in stderr and "no table was written" in stderr, stderr
+        assert not out2.exists()
+        time.sleep(0.3)   # the STOP's effect in the next truth lines (20 ms period, 40 ms dead time, ramp)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            rest = read_truth(truth)[-1]
+            if rest["pan_speed_deg_s"] == 0.0 and rest["tilt_speed_deg_s"] == 0.0:
+                break
+            time.sleep(0.1)
+        assert rest["pan_speed_deg_s"] == 0.0 and rest["tilt_speed_deg_s"] == 0.0, "Ctrl-C stops the head"
+    finally:
+        for q in procs:
+            terminate(q)
+
+
+def test_no_lidar_is_an_error_that_names_it_and_stops_the_head(tmp_path, capsys):
+    link, truth = tmp_path / "head", tmp_path / "truth.jsonl"
+    cfg = load_config(_config(tmp_path, link, free_udp_port()))
+    head = start(["gimbal", "serve", "--link", str(link), "--truth", str(truth)], tmp_path / "h.out", tmp_path / "h.err")
+    try:
+        wait_for(lambda: first_line(tmp_path / "h.out"), 20, "the head's pty", [head])
+        from foveatrack.calibration import FeatureSpec
+        from foveatrack.calibration_live import calibrate_live
+        from foveatrack.errors import UserError
+
+        with pytest.raises(UserError, match=r"no data from the lidar 127\.0\.0\.1 within 1 s.*head was stopped"):
+            calibrate_live(cfg, CalibrationPlan(pan_bytes=(40,), tilt_bytes=(63,)), FeatureSpec((5.9, 0.8, 0.84)),
+                           first_data_s=1.0)
+    finally:
+        terminate(head)
+
+
+def test_the_plan_is_cut_to_the_configs_limits(tmp_path):
+    cfg = load_config(_config(tmp_path, tmp_path / "x", 55000, max_pan_byte=30, max_tilt_byte=20, allow_turbo=False))
+    plan, dropped = plan_within_limits(CalibrationPlan(pan_bytes=(10, 30, 31, TURBO), tilt_bytes=(5, 20, 63)), cfg)
+    assert plan.pan_bytes == (10, 30) and plan.tilt_bytes == (5, 20)
+    assert dropped == {"pan": [31, TURBO], "tilt": [63]}
+    from foveatrack.errors import UserError
+    with pytest.raises(UserError, match=r"d\.toml \[head\].*leave no tilt byte"):
+        plan_within_limits(CalibrationPlan(pan_bytes=(10,), tilt_bytes=(40,)), cfg)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--config", "X.toml", "--scene", "S.toml"], "not both"),
+    (["--serial", "/dev/ttyUSB0"], "need --config"),
+    (["--config", "{cfg}"], "needs --corner X Y Z"),
+    (["--config", "{cfg}", "--corner", "1", "2", "3", "--unit-seed", "4"], "simulated unit"),
+    (["--config", "{cfg}", "--corner", "1", "2", "3", "--max-s", "0"], "--max-s must be > 0"),
+    (["--config", "{cfg}", "--corner", "1", "2", "3", "--serial", "/nonexistent/tty-x"], r"\[head\].*tty-x"),
+])
+def test_command_line_mistakes_are_named(tmp_path, capsys, argv, message):
+    cfg = _config(tmp_path, tmp_path / "x", free_udp_port())
+    rc = main(["calibrate", *[a.format(cfg=cfg) for a in argv], "--out", str(tmp_path / "t.json")])
+    err = capsys.readouterr().err
+    assert rc == 2
+    import re
+    assert re.search(message, err), err
+    assert "Traceback" not in err and not (tmp_path / "t.json").exists()
