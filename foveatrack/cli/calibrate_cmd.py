@@ -133,9 +133,7 @@ def cmd_calibrate(args) -> int:
     if args.plot:
         _plot(run.table, run.comparison, args.plot, truth=run.truth)
     if args.json:
-        json.dump(summary, sys.stdout, indent=2, default=_jsonable)
-        sys.stdout.write("\n")
-        return 0
+        return _print_json(summary)
     print(f"calibrated {table.head}: {run.frames} frames ({run.virtual_s:.0f} s virtual, {run.wall_s:.1f} s wall)")
     print(f"  {'axis':4s} {'byte':>5s} {'measured':>9s} {'sigma':>7s} {'true':>9s} {'error':>8s}")
     for r in run.comparison:
@@ -144,15 +142,25 @@ def cmd_calibrate(args) -> int:
         print(f"  {r['axis']:4s} {b:>5s} {r['measured_deg_s']:9.4f} {r['sigma_deg_s']:7.4f} {r['true_deg_s']:9.4f} "
               f"{e:>8s}{'' if r['ok'] else '  OUTSIDE max(2 %, 3 sigma)'}")
     print(f"  {summary['within_tolerance']}/{summary['measured']} measured entries within max(2 %, 3 sigma) of the truth")
-    for axis, d in summary["unmeasured"].items():
-        for reason, bs in d.items():
-            print(f"  not measured, {axis}: {ranges(bs)}  ({reason})")
+    _print_unmeasured(summary["unmeasured"])
     acc = "-" if table.accel_deg_s2 is None else f"{table.accel_deg_s2:.1f}"
     print(f"  dead time {table.dead_time_s * 1e3:.0f} ms, acceleration {acc} deg/s^2; head back at pan "
           f"{run.head_end_deg[0]:.2f}, tilt {run.head_end_deg[1]:.2f} deg (started {run.head_start_deg[0]:.2f}, "
           f"{run.head_start_deg[1]:.2f})")
     print(f"  table written to {args.out}")
     return 0
+
+
+def _print_json(summary) -> int:
+    json.dump(summary, sys.stdout, indent=2, default=_jsonable)
+    sys.stdout.write("\n")
+    return 0
+
+
+def _print_unmeasured(unmeasured: dict) -> None:
+    for axis, d in unmeasured.items():
+        for reason, bs in d.items():
+            print(f"  not measured, {axis}: {ranges(bs)}  ({reason})")
 
 
 def _plan_overrides(args) -> dict:
@@ -250,9 +258,7 @@ def calibrate_devices(args) -> int:
     if args.plot:
         _plot(table, rows, args.plot)
     if args.json:
-        json.dump(summary, sys.stdout, indent=2, default=_jsonable)
-        sys.stdout.write("\n")
-        return 0
+        return _print_json(summary)
     print(f"calibrated {table.head}: {run.frames} frames in {run.wall_s:.1f} s")
     print(f"  {'axis':4s} {'byte':>5s} {'measured':>9s} {'sigma':>7s}")
     for r in rows:
@@ -260,9 +266,7 @@ def calibrate_devices(args) -> int:
         print(f"  {r['axis']:4s} {b:>5s} {r['measured_deg_s']:9.4f} {r['sigma_deg_s']:7.4f}")
     for axis, bs in run.dropped_bytes.items():
         print(f"  not measured, {axis}: {ranges(bs)}  (beyond the config's [head] limits)")
-    for axis, d in summary["unmeasured"].items():
-        for reason, bs in d.items():
-            print(f"  not measured, {axis}: {ranges(bs)}  ({reason})")
+    _print_unmeasured(summary["unmeasured"])
     acc = "-" if table.accel_deg_s2 is None else f"{table.accel_deg_s2:.1f}"
     print(f"  dead time {table.dead_time_s * 1e3:.0f} ms, acceleration {acc} deg/s^2")
     if delays is not None:
