@@ -30,6 +30,7 @@ def cmd_replay(args) -> int:
     from foveatrack.errors import UserError
     from foveatrack.replay import export_replay_trajectory, format_report, replay
 
+    _check_recording_arg(args.recording)
     for flag, path in (("--export-points", args.export_points), ("--export-trajectory", args.export_trajectory)):
         if path:  # before the replay, which takes a while on a long recording
             if Path(path).suffix.lower() not in (".csv", ".npz"):
@@ -66,3 +67,22 @@ def cmd_replay(args) -> int:
         for n in notes:
             print("  " + n)
     return 0
+
+
+def _check_recording_arg(recording) -> None:
+    """A directory given as RECORDING is a UserError saying so (not "no such recording"), naming
+    the newest ``.mcap`` in it when there is one: the likely meant file."""
+    from pathlib import Path
+
+    from foveatrack.errors import UserError
+
+    p = Path(recording)
+    if not p.is_dir():
+        return
+    mcaps = [f for f in p.glob("*.mcap") if f.is_file()]
+    if mcaps:
+        newest = max(mcaps, key=lambda f: f.stat().st_mtime)
+        raise UserError(f"{p}: is a directory, not a recording; give a file, e.g. the newest "
+                        f"recording in it, {newest} ({len(mcaps)} .mcap file(s) in it)")
+    raise UserError(f"{p}: is a directory, not a recording (no .mcap files in it); "
+                    "give a .mcap recording or a .lvx file")
