@@ -152,3 +152,19 @@ def test_cli_directory_is_named_as_a_directory(tmp_path, capsys):
     assert main(["replay", str(empty)]) == 2
     err = capsys.readouterr().err
     assert "is a directory" in err and "no .mcap files" in err
+
+
+def test_cli_empty_tracker_config_is_refused(sim_run, tmp_path, capsys):
+    """An empty --tracker-config file was silently read as all defaults; it is refused, naming the
+    file. A bare `[tracker]` (explicitly empty) still means the defaults."""
+    path, _, _ = sim_run
+    for text in ("", "# to do\n\n"):
+        cfg = tmp_path / "empty.toml"
+        cfg.write_text(text)
+        assert main(["replay", str(path), "--tracker-config", str(cfg)]) == 2
+        err = capsys.readouterr().err
+        assert f"--tracker-config {cfg}" in err and "empty" in err
+    bare = tmp_path / "bare.toml"
+    bare.write_text("[tracker]\n")
+    assert main(["replay", str(path), "--tracker-config", str(bare), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["config"] == str(bare)
