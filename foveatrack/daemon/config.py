@@ -122,11 +122,13 @@ class DaemonConfig:
         return SpeedTable.load(p)
 
     def recording_path(self, now: _dt.datetime | None = None) -> Path | None:
+        """The recording's file, absolute and resolved (a path relative to the config file gave
+        ``examples/../out/runs/...`` in messages and logs, which a user had to work out)."""
         if self.recording.path is None:
             return None
         now = now or _dt.datetime.now(_dt.timezone.utc)
         p = Path(self.recording.path.replace("{time}", now.strftime("%Y%m%dT%H%M%SZ")))
-        return p if p.is_absolute() else Path(self.path).parent / p
+        return (p if p.is_absolute() else Path(self.path).parent / p).resolve()
 
 
 def _int(v, key, where, lo, hi):
