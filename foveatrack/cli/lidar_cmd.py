@@ -298,8 +298,14 @@ def cmd_coverage(args) -> int:
         plot_coverage([(f"{args.method}, noise {args.noise or 0:g}", curve)],
                       f"{optics.name}: coverage ({args.method} definition)", args.plot)
     _emit(args, result, [f"{optics.name}: {args.method} coverage after {args.duration:g} s: {curve.coverage[-1]:.1%} "
-                         f"of {curve.cells} cells; 50 % at {curve.t50_s} s, 90 % at {curve.t90_s} s"])
+                         f"of {curve.cells} cells; 50 % {_reached(curve.t50_s, args.duration)}, "
+                         f"90 % {_reached(curve.t90_s, args.duration)}"])
     return 0
+
+
+def _reached(t_s: float | None, duration_s: float) -> str:
+    """``at T s``, or ``not reached in D s`` when the run ended before that coverage (not "at None s")."""
+    return f"at {t_s:g} s" if t_s is not None else f"not reached in {duration_s:g} s"
 
 
 def _range(text: str, name: str):
