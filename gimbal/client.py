@@ -41,6 +41,12 @@ from gimbal.pelco import (
 )
 
 FRAME_BUDGET_S = 0.1  # one lidar frame
+
+STANDARD_BAUDS: tuple[int, ...] = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
+"""Line speeds a head's UART is set to [bit/s]: the standard rates (the PTS family's DIP switches
+offer 1200-9600, 2400 common; the faster ones are for other Pelco heads and adapters).  One
+definition for every config that names a baud (a scene's ``[gimbal]``, a daemon's ``[head]``), so
+a rate one accepts the other does not refuse."""
 _READ_SLICE_S = 0.005  # a blocking read waits at most this long; the deadline is checked between
 
 

@@ -207,6 +207,7 @@ def _lidar(t: Mapping, w: str):
 
 
 def _gimbal(t: Mapping, w: str, base_dir: Path | None = None) -> GimbalSpec:
+    from gimbal.client import STANDARD_BAUDS
     from gimbal.pts303h import FEEDBACK_MODES, HEAD_FAMILIES
 
     check_keys(t, ["family", "unit_seed", "baud", "feedback", "address", "pan0_deg", "tilt0_deg", "frozen",
@@ -222,8 +223,8 @@ def _gimbal(t: Mapping, w: str, base_dir: Path | None = None) -> GimbalSpec:
             kw[k] = v
     if "address" in kw and not 1 <= kw["address"] <= 255:
         raise UserError(f"{w}: address must be a Pelco-D address 1-255, got {kw['address']}")
-    if "baud" in kw and kw["baud"] not in (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200):
-        raise UserError(f"{w}: baud {kw['baud']} is not a standard rate (2400, 4800, 9600, 19200, ...)")
+    if "baud" in kw and kw["baud"] not in STANDARD_BAUDS:
+        raise UserError(f"{w}: baud {kw['baud']} is not a standard rate ({', '.join(map(str, STANDARD_BAUDS))})")
     if "feedback" in t:
         kw["feedback"] = as_choice(t["feedback"], "feedback", w, tuple(FEEDBACK_MODES))
     for k in ("pan0_deg", "tilt0_deg"):

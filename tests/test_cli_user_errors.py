@@ -116,3 +116,19 @@ def test_lidar_serve_refuses_a_non_positive_duration(capsys):
     # before: --duration-s -1 served nothing and exited 0
     code, err = _run(["lidar", "serve", SCENE, "--duration-s", "-1"], capsys)
     assert code == 2 and "--duration-s must be > 0" in err
+
+
+def test_lidar_serve_head_truth_in_a_missing_directory_is_refused(tmp_path, capsys):
+    # before: served with the head frozen at the scene's start pose, saying nothing
+    truth = tmp_path / "no-such-dir" / "t.jsonl"
+    code, err = _run(["lidar", "serve", SCENE, "--head-truth", str(truth), "--duration-s", "0.2"], capsys)
+    assert code == 2 and f"--head-truth {truth}" in err and "does not exist" in err
+
+
+def test_lidar_serve_says_it_waits_for_a_head_truth_file_not_yet_written(tmp_path, capsys):
+    truth = tmp_path / "t.jsonl"    # the head serve may start later: not an error, one line
+    code, err = _run(["lidar", "serve", SCENE, "--head-truth", str(truth), "--duration-s", "0.2",
+                      "--cmd-port", "0", "--broadcast-port", "55999"], capsys)
+    assert code == 0
+    waiting = [line for line in err.splitlines() if "does not exist yet" in line]
+    assert len(waiting) == 1 and f"--head-truth {truth}" in waiting[0] and "waiting for it" in waiting[0]

@@ -171,6 +171,15 @@ def _plan_overrides(args) -> dict:
     if tb is not None:
         kw["tilt_bytes"] = tb
     if args.dwell_s is not None:
+        # the plan's own check (CalibrationPlan.__post_init__: dwell_s > settle_s) speaks of its
+        # fields; a user typed --dwell-s, so name the flag and its range here
+        from foveatrack.calibration import CalibrationPlan
+
+        settle = CalibrationPlan.settle_s
+        if not (math.isfinite(args.dwell_s) and args.dwell_s > settle):
+            raise UserError(f"--dwell-s {args.dwell_s:g}: must be a finite number of seconds > {settle:g} (each leg "
+                            f"first discards {settle:g} s while the head settles); default "
+                            f"{CalibrationPlan.dwell_s:g}")
         kw["dwell_s"] = args.dwell_s
     return kw
 

@@ -47,12 +47,14 @@ def register(sub) -> None:
     p = lsub.add_parser("density", help="radial density vs the analytic eq. (4) (paper Fig. 5)")
     common(p, duration=2.0)
     p.add_argument("--bins", type=int, default=60)
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr (shown on long runs)")
     p.set_defaults(func=cmd_density)
 
     p = lsub.add_parser("coverage", help="coverage vs accumulation time (paper Fig. 6e)")
     common(p, duration=2.0)
     p.add_argument("--method", choices=("voxel", "footprint"), default="voxel",
                    help="voxel: paper Appendix C 100x100 grid; footprint: Livox's illuminated area")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr (shown on long runs)")
     p.set_defaults(func=cmd_coverage)
 
     p = lsub.add_parser("coverage-map", help="time to 90%% coverage over the two prism speeds (paper Fig. 7)")
@@ -92,6 +94,37 @@ def _load(args):
     if getattr(args, "plot", None):
         check_output_file(args.plot, "--plot")
     return load_optics(args.preset)
+
+
+# ``lidar density`` / ``lidar coverage`` stream the scan in chunks (memory does not grow with --duration),
+# so a long run is only slow: a progress bar on stderr shows how far it is once it has run this long.
+PROGRESS_DELAY_S = 1.0
+
+
+class _Progress:
+    """A tqdm bar on stderr over a run's scan samples, for a run of ``passes`` equal passes (``part(i)``
+    is pass i's ``progress(done, total)`` callback); hidden with ``--no-progress`` and on runs shorter
+    than :data:`PROGRESS_DELAY_S`.  ``total`` (all passes) when known before the run, else the
+    first callback sets it."""
+
+    def __init__(self, args, desc: str, total: int | None = None, passes: int = 1):
+        from tqdm import tqdm
+
+        self.passes = passes
+        self.bar = tqdm(total=total, desc=desc, unit=" pts", unit_scale=True, file=sys.stderr, leave=False,
+                        delay=PROGRESS_DELAY_S, disable=args.no_progress)
+
+    def part(self, i: int = 0):
+        def progress(done: int, total: int) -> None:
+            self.bar.total = self.passes * total
+            self.bar.update(i * total + done - self.bar.n)
+        return progress
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.bar.close()
 
 
 # ``lidar pattern`` holds every point (directions, times, channels) in memory: ~50 bytes a point.
@@ -244,10 +277,13 @@ def cmd_density(args) -> int:
     if args.duration * optics.point_rate_hz < 1000:
         raise UserError(f"--duration {args.duration:g}: too short for a density (< 1000 points at "
                         f"{optics.point_rate_hz} points/s)")
-    dens = radial_density(_scan_model(args, optics), args.duration, bins=args.bins)
     # The other model is always computed alongside so the departure is visible.
     other = "paraxial" if args.model == "exact" else "exact"
-    dens_other = radial_density(ScanModel(optics, model=other), args.duration, bins=args.bins)
+    n = int(round(args.duration * optics.point_rate_hz))
+    with _Progress(args, "density", total=2 * n, passes=2) as bar:
+        dens = radial_density(_scan_model(args, optics), args.duration, bins=args.bins, progress=bar.part(0))
+        dens_other = radial_density(ScanModel(optics, model=other), args.duration, bins=args.bins,
+                                    progress=bar.part(1))
     x = dens.centers_deg / dens.r_scale_deg
     sel = (x >= 0.1) & (x <= 1.8)
     worst = float(np.max(np.abs(dens.relative_error[sel])))
@@ -273,19 +309,21 @@ def cmd_density(args) -> int:
     return 0
 
 
-def coverage_curve(optics, scan, method, duration):
+def coverage_curve(optics, scan, method, duration, progress=None):
     from sim.scan.coverage import footprint_coverage, voxel_coverage
 
     if method == "voxel":
-        return voxel_coverage(scan, duration)
-    return footprint_coverage(scan, duration)
+        return voxel_coverage(scan, duration, progress=progress)
+    return footprint_coverage(scan, duration, progress=progress)
 
 
 def cmd_coverage(args) -> int:
     optics = _load(args)
     scan = _scan_model(args, optics)
     t0 = time.perf_counter()
-    curve = coverage_curve(optics, scan, args.method, args.duration)
+    n = int(round(args.duration * optics.point_rate_hz)) if args.method == "voxel" else None  # footprint: substeps
+    with _Progress(args, f"{args.method} coverage", total=n) as bar:
+        curve = coverage_curve(optics, scan, args.method, args.duration, progress=bar.part())
     result = {
         "name": optics.name, "model": args.model, "method": args.method, "duration_s": args.duration,
         "speed_noise": args.noise, "cells": curve.cells,
@@ -298,8 +336,14 @@ def cmd_coverage(args) -> int:
         plot_coverage([(f"{args.method}, noise {args.noise or 0:g}", curve)],
                       f"{optics.name}: coverage ({args.method} definition)", args.plot)
     _emit(args, result, [f"{optics.name}: {args.method} coverage after {args.duration:g} s: {curve.coverage[-1]:.1%} "
-                         f"of {curve.cells} cells; 50 % at {curve.t50_s} s, 90 % at {curve.t90_s} s"])
+                         f"of {curve.cells} cells; 50 % {_reached(curve.t50_s, args.duration)}, "
+                         f"90 % {_reached(curve.t90_s, args.duration)}"])
     return 0
+
+
+def _reached(t_s: float | None, duration_s: float) -> str:
+    """``at T s``, or ``not reached in D s`` when the run ended before that coverage (not "at None s")."""
+    return f"at {t_s:g} s" if t_s is not None else f"not reached in {duration_s:g} s"
 
 
 def _range(text: str, name: str):

@@ -49,6 +49,8 @@ def cmd_serve(args) -> int:
         raise UserError(f"--loss-rate must be in [0, 1), got {args.loss_rate}")
     if not 0 <= args.cmd_port <= 65535 or not 0 < args.broadcast_port <= 65535:
         raise UserError("--cmd-port must be in 0..65535 and --broadcast-port in 1..65535")
+    if args.head_truth:
+        _check_head_truth(args.head_truth)
 
     def ready(lidar):
         print(f"READY {lidar.address[0]} {lidar.cmd_port}", flush=True)
@@ -63,3 +65,21 @@ def cmd_serve(args) -> int:
         head_truth=args.head_truth, head_clock_zero=args.head_clock_zero, duration_s=args.duration_s, ready=ready)
     print(json.dumps({k: int(v) for k, v in sorted(counters.items())}), flush=True)
     return 0
+
+
+def _check_head_truth(path: str) -> None:
+    """``--head-truth FILE`` in a directory that does not exist can never appear: an error (before, the
+    lidar served with the head frozen at the scene's start pose and said nothing).  A file that does not
+    exist yet is normal (the head serve may start later): one stderr line says it is awaited."""
+    from pathlib import Path
+
+    p = Path(path)
+    parent = p.parent if str(p.parent) else Path(".")
+    if p.is_dir():
+        raise UserError(f"--head-truth {path}: is a directory; give the file 'foveatrack gimbal serve --truth' writes")
+    if not parent.is_dir():
+        raise UserError(f"--head-truth {path}: the directory {parent} does not exist, so the head's truth "
+                        "can never appear there; give the file 'foveatrack gimbal serve --truth FILE' writes")
+    if not p.exists():
+        print(f"lidar serve: --head-truth {path} does not exist yet; waiting for it (the head stays at the "
+              "scene's pan0/tilt0 until 'foveatrack gimbal serve --truth' writes it)", file=sys.stderr, flush=True)

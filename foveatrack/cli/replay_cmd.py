@@ -30,6 +30,9 @@ def cmd_replay(args) -> int:
     from foveatrack.errors import UserError
     from foveatrack.replay import export_replay_trajectory, format_report, replay
 
+    _check_recording_arg(args.recording)
+    if args.tracker_config:
+        _check_tracker_config(args.tracker_config)
     for flag, path in (("--export-points", args.export_points), ("--export-trajectory", args.export_trajectory)):
         if path:  # before the replay, which takes a while on a long recording
             if Path(path).suffix.lower() not in (".csv", ".npz"):
@@ -66,3 +69,36 @@ def cmd_replay(args) -> int:
         for n in notes:
             print("  " + n)
     return 0
+
+
+def _check_recording_arg(recording) -> None:
+    """A directory given as RECORDING is a UserError saying so (not "no such recording"), naming
+    the newest ``.mcap`` in it when there is one: the likely meant file."""
+    from pathlib import Path
+
+    from foveatrack.errors import UserError
+
+    p = Path(recording)
+    if not p.is_dir():
+        return
+    mcaps = [f for f in p.glob("*.mcap") if f.is_file()]
+    if mcaps:
+        newest = max(mcaps, key=lambda f: f.stat().st_mtime)
+        raise UserError(f"{p}: is a directory, not a recording; give a file, e.g. the newest "
+                        f"recording in it, {newest} ({len(mcaps)} .mcap file(s) in it)")
+    raise UserError(f"{p}: is a directory, not a recording (no .mcap files in it); "
+                    "give a .mcap recording or a .lvx file")
+
+
+def _check_tracker_config(path) -> None:
+    """An empty ``--tracker-config`` file (nothing but whitespace or comments) is refused: it would
+    be read as "all defaults", which is almost certainly not what was meant (a file saved before it
+    was written, a wrong file).  A file that says ``[tracker]`` with nothing under it still means the
+    defaults, on purpose."""
+    from foveatrack.config_util import read_toml
+    from foveatrack.errors import UserError
+
+    data, _ = read_toml(path, "tracker config (--tracker-config)")
+    if not data:
+        raise UserError(f"--tracker-config {path}: the file is empty (no keys, no tables); give a [tracker] "
+                        "table, a scene or a daemon config (an empty [tracker] table means all defaults)")

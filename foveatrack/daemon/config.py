@@ -5,7 +5,8 @@ Tables::
 
     [lidar]      sensor_ip, host_ip, cmd_port, data_port, broadcast_port (0 = any; false = no
                  discovery, then sensor_cmd_port), sensor_cmd_port, point_rate_hz, broadcast_code
-    [head]       port (device path or pyserial URL), baud, address, protocol ("D" | "P"),
+    [head]       port (device path or pyserial URL), baud (a standard rate, gimbal.client.STANDARD_BAUDS,
+                 as a scene's [gimbal] baud), address, protocol ("D" | "P"),
                  speed_table ("nominal" | path to a calibrated table JSON, relative to this file),
                  pan_speed_max_deg_s, tilt_speed_max_deg_s, pan_turbo_deg_s (the nominal table),
                  max_pan_byte, max_tilt_byte, allow_turbo, tilt_limits_deg, tilt_margin_deg,
@@ -122,11 +123,13 @@ class DaemonConfig:
         return SpeedTable.load(p)
 
     def recording_path(self, now: _dt.datetime | None = None) -> Path | None:
+        """The recording's file, absolute and resolved (a path relative to the config file gave
+        ``examples/../out/runs/...`` in messages and logs, which a user had to work out)."""
         if self.recording.path is None:
             return None
         now = now or _dt.datetime.now(_dt.timezone.utc)
         p = Path(self.recording.path.replace("{time}", now.strftime("%Y%m%dT%H%M%SZ")))
-        return p if p.is_absolute() else Path(self.path).parent / p
+        return (p if p.is_absolute() else Path(self.path).parent / p).resolve()
 
 
 def _int(v, key, where, lo, hi):
@@ -178,7 +181,12 @@ def _head(t: Mapping, w: str) -> HeadConfig:
             raise UserError(f"{w}: port must be a device path (/dev/ttyUSB0) or a pyserial URL (socket://host:port)")
         kw["port"] = t["port"]
     if "baud" in t:
-        kw["baud"] = _int(t["baud"], "baud", w, 300, 115200)
+        from gimbal.client import STANDARD_BAUDS   # the scene's rule too (sim/scene.py)
+
+        v = t["baud"]
+        if isinstance(v, bool) or not isinstance(v, int) or v not in STANDARD_BAUDS:
+            raise UserError(f"{w}: baud must be a standard rate ({', '.join(map(str, STANDARD_BAUDS))}), got {v!r}")
+        kw["baud"] = v
     if "address" in t:
         kw["address"] = _int(t["address"], "address", w, 1, 255)
     if "protocol" in t:

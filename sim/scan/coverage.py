@@ -139,11 +139,12 @@ def _curve(method, first_hit_k, mask, rate_hz, duration_s, stopped_early, sample
 
 
 def voxel_coverage(model: ScanModel, duration_s: float, grid: CoverageGrid | None = None, stop_at: float | None = None,
-                   chunk_points: int = 20_000) -> CoverageCurve:
+                   chunk_points: int = 20_000, progress=None) -> CoverageCurve:
     """Paper Appendix C coverage of ``model``'s scan over ``duration_s`` (eq. 9).
 
     ``stop_at`` (0-1) ends the run as soon as that coverage is reached (the Fig. 7 map only needs
-    the time to 90 %); the curve then ends at the stopping time.
+    the time to 90 %); the curve then ends at the stopping time.  ``progress(points_done,
+    points_total)`` is called after each chunk.
     """
     if grid is None:
         grid = voxel_grid(model.optics, model.model)
@@ -157,6 +158,8 @@ def voxel_coverage(model: ScanModel, duration_s: float, grid: CoverageGrid | Non
         cells = grid.cells(chunk.direction[:, :])
         cells[~chunk.valid] = -1
         hit += kernels.first_hit_kernel(cells, chunk.k0, first_hit)
+        if progress is not None:
+            progress(chunk.k0 + len(chunk), end_k)
         if hit >= target:
             end_k = chunk.k0 + len(chunk)
             stopped = True
@@ -166,8 +169,12 @@ def voxel_coverage(model: ScanModel, duration_s: float, grid: CoverageGrid | Non
 
 
 def footprint_coverage(model: ScanModel, duration_s: float, substeps: int | None = None,
-                       reference_rays: int = 1_000_000, seed: int = 0, chunk_points: int = 20_000) -> CoverageCurve:
-    """Livox-style coverage: the illuminated fraction of the reachable FoV (see module docstring)."""
+                       reference_rays: int = 1_000_000, seed: int = 0, chunk_points: int = 20_000,
+                       progress=None) -> CoverageCurve:
+    """Livox-style coverage: the illuminated fraction of the reachable FoV (see module docstring).
+
+    ``progress(samples_done, samples_total)`` is called after each chunk (samples at ``substeps``
+    times the point rate)."""
     optics = model.optics
     div_az, div_el = optics.beam_divergence_deg
     half_az, half_el = div_az / 2, div_el / 2
@@ -203,6 +210,8 @@ def footprint_coverage(model: ScanModel, duration_s: float, substeps: int | None
             kidx = np.flatnonzero(ok).astype(np.int64) + k
             # Paint in sample order; the kernel takes k0 + j, so paint ray by ray index blocks.
             _paint_indexed(a, e, kidx, half_az, half_el, az0, el0, cell, first_hit)
+        if progress is not None:
+            progress(k + n, total)
     return _curve("footprint", first_hit.ravel(), mask, fine_rate, duration_s, False)
 
 

@@ -59,23 +59,27 @@ def analytic_bin_fraction(edges_deg: np.ndarray, r_scale_deg: float) -> np.ndarr
     return np.diff(2.0 / np.pi * np.arcsin(x))
 
 
-def radial_density(model: ScanModel, duration_s: float, bins: int = 60, r_scale_deg: float | None = None) -> RadialDensity:
+def radial_density(model: ScanModel, duration_s: float, bins: int = 60, r_scale_deg: float | None = None,
+                   progress=None) -> RadialDensity:
     """Histogram of the off-axis angle of every valid point over ``duration_s``.
 
     ``r_scale_deg`` defaults to the paraxial one-prism deflection (n - 1) alpha of the first prism
     (the R of eq. 1), so the exact model's departure from eq. (4) shows up rather than being
-    absorbed by a fitted scale.
+    absorbed by a fitted scale.  ``progress(points_done, points_total)`` is called after each chunk.
     """
     if r_scale_deg is None:
         r_scale_deg = model.optics.prisms[0].thin_prism_deviation_deg
     edges = np.linspace(0.0, 2.0 * r_scale_deg * 1.06, bins + 1)
     counts = np.zeros(bins, dtype=np.int64)
     total = 0
+    n_points = int(round(duration_s * model.optics.point_rate_hz))
     for chunk in model.iter_chunks(duration_s):
         d = chunk.direction[chunk.valid]
         r = np.degrees(np.arccos(np.clip(d[:, 0], -1.0, 1.0)))
         counts += np.histogram(r, bins=edges)[0]
         total += d.shape[0]
+        if progress is not None:
+            progress(chunk.k0 + len(chunk), n_points)
     area = np.pi * (edges[1:] ** 2 - edges[:-1] ** 2)
     simulated = counts / max(total, 1) / area
     analytic = analytic_bin_fraction(edges, r_scale_deg) / area

@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from calib_fixture import ROOT
 from foveatrack.cli import main
@@ -64,6 +65,14 @@ def test_missing_or_mixed_modes_are_clear_errors(capsys):
     err = capsys.readouterr().err
     assert "--scene SCENE.toml" in err and "--config DAEMON.toml" in err
     assert main(["calibrate", "--scene", SCENE, "--pan-bytes", "12,x"]) == 2
+
+
+@pytest.mark.parametrize("dwell", ["0", "0.5", "-1", "nan", "inf"])
+def test_a_bad_dwell_names_the_flag_and_its_range(capsys, dwell):
+    # before: "calibration plan: need dwell_s > settle_s >= 0 ...", the plan's field names, not the flag
+    assert main(["calibrate", "--scene", SCENE, "--dwell-s", dwell]) == 2
+    err = capsys.readouterr().err
+    assert f"--dwell-s {float(dwell):g}:" in err and "> 0.5" in err and "Traceback" not in err
 
 
 def test_calibrate_cli_writes_the_table_and_reports(tmp_path, capsys):

@@ -38,6 +38,7 @@ def test_example_config_loads():
 
 @pytest.mark.parametrize("patch, key", [
     (("[head]", "[head]\nbaud = 9601.5"), "baud"),
+    (("[head]", "[head]\nbaud = 9601"), "baud"),
     (("[head]", "[head]\naddress = 0"), "address"),
     (("[head]", "[head]\nprotocol = 'X'"), "protocol"),
     (("[head]", "[head]\nspeed_table = 'nope.json'"), "speed_table"),
@@ -57,6 +58,26 @@ def test_errors_name_file_and_key(tmp_path, patch, key):
         load_config(p)
     msg = str(e.value)
     assert str(p) in msg and key in msg, msg
+
+
+@pytest.mark.parametrize("baud", [300, 1200, 2400, 9600, 9601, 57600, 115200, 230400])
+def test_daemon_and_scene_accept_the_same_bauds(tmp_path, baud):
+    """A daemon's [head] baud follows a scene's [gimbal] baud rule (before: the daemon took any
+    integer 300-115200, so 9601 was accepted there and refused in a scene)."""
+    from sim.scene import scene_from_mapping
+
+    def accepted(load):
+        try:
+            load()
+        except UserError as e:
+            assert "baud" in str(e)
+            return False
+        return True
+
+    daemon_ok = accepted(lambda: load_config(_cfg(tmp_path, GOOD.replace("[head]", f"[head]\nbaud = {baud}", 1))))
+    scene_ok = accepted(lambda: scene_from_mapping({"scene": {"name": "b", "duration_s": 1.0},
+                                                    "lidar": {"preset": "mid40"}, "gimbal": {"baud": baud}}))
+    assert daemon_ok == scene_ok == (baud in (1200, 2400, 9600, 57600, 115200))
 
 
 def test_missing_file_and_bad_toml(tmp_path):

@@ -131,3 +131,40 @@ def test_lvx_replay_detects_the_passing_uav(tmp_path, capsys):
     assert np.all(f["head_pan_deg"] == 0.0) and np.any(f["command"][:, 0] != 0)
     assert main(["replay", str(path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["metrics"]["detection"]["frames_with_detection"] == det.sum()
+
+
+def test_cli_directory_is_named_as_a_directory(tmp_path, capsys):
+    """`replay DIR` said "no such recording" though DIR exists: it says it is a directory and names
+    the newest .mcap in it (the file the user most likely meant)."""
+    import os
+
+    old, new = tmp_path / "run-old.mcap", tmp_path / "run-new.mcap"
+    for f, t in ((old, 1_000_000), (new, 2_000_000)):
+        f.write_bytes(b"")
+        os.utime(f, (t, t))
+    (tmp_path / "later.txt").write_text("not a recording")   # newer, but not an .mcap
+    assert main(["replay", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "is a directory" in err and "no such recording" not in err
+    assert str(new) in err and str(old) not in err
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["replay", str(empty)]) == 2
+    err = capsys.readouterr().err
+    assert "is a directory" in err and "no .mcap files" in err
+
+
+def test_cli_empty_tracker_config_is_refused(sim_run, tmp_path, capsys):
+    """An empty --tracker-config file was silently read as all defaults; it is refused, naming the
+    file. A bare `[tracker]` (explicitly empty) still means the defaults."""
+    path, _, _ = sim_run
+    for text in ("", "# to do\n\n"):
+        cfg = tmp_path / "empty.toml"
+        cfg.write_text(text)
+        assert main(["replay", str(path), "--tracker-config", str(cfg)]) == 2
+        err = capsys.readouterr().err
+        assert f"--tracker-config {cfg}" in err and "empty" in err
+    bare = tmp_path / "bare.toml"
+    bare.write_text("[tracker]\n")
+    assert main(["replay", str(path), "--tracker-config", str(bare), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["config"] == str(bare)

@@ -6,6 +6,7 @@ recording; a mistyped sensor_ip ended on "0 frames" with the reason only in the 
 
 import socket
 import time
+from pathlib import Path
 
 import pytest
 
@@ -79,3 +80,18 @@ def test_no_lidar_data_is_explained_naming_the_senders_dropped(tmp_path):
     assert len(problems) == 1
     assert "no lidar data arrived from [lidar] sensor_ip 127.0.0.2" in problems[0]
     assert "from 127.0.0.1 were dropped" in problems[0] and "is sensor_ip the lidar's address?" in problems[0]
+
+
+def test_the_recording_path_is_printed_resolved(tmp_path, monkeypatch, capsys):
+    """A recording path relative to a config given by a relative path was printed as
+    `sub/../out/runs/...`; it is printed (and logged) absolute, without `..`."""
+    from foveatrack.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sub").mkdir()
+    _daemon(tmp_path / "sub", "loop://", rec_dir="../out/runs")      # writes sub/d.toml
+    assert main(["daemon", "--config", "sub/d.toml", "--duration-s", "0.2", "--no-status"]) == 0
+    err = capsys.readouterr().err
+    printed = err.split("; recording ", 1)[1].split()[0]
+    assert Path(printed).is_absolute() and ".." not in Path(printed).parts, err
+    assert Path(printed).parent == (tmp_path / "out" / "runs").resolve() and Path(printed).is_file()

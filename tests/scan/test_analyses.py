@@ -93,6 +93,26 @@ def test_footprint_coverage_paints_the_swept_path():
     assert curve.coverage[-1] > 1.5 * spots.coverage[-1]
 
 
+def test_progress_reaches_the_total_and_changes_nothing():
+    """The progress callbacks the CLI's bar uses (lidar density / coverage): monotone, ending at the
+    run's sample count, and a run reporting progress gives the same result as one that does not."""
+    def run(fn, **kw):
+        calls = []
+        res = fn(progress=lambda done, total: calls.append((done, total)), **kw)
+        done, totals = [c[0] for c in calls], {c[1] for c in calls}
+        assert len(totals) == 1 and done == sorted(done) and done[-1] == totals.pop()
+        return res, done[-1], fn(**kw)
+
+    model = lambda: ScanModel(PRESETS["prototype"])   # noqa: E731
+    dens, n, plain = run(lambda **kw: radial_density(model(), 0.25, bins=30, **kw))
+    assert n == 25_000 and np.array_equal(dens.simulated, plain.simulated)
+    grid = voxel_grid(PRESETS["prototype"], reference_rays=200_000)
+    cov, n, plain = run(lambda **kw: voxel_coverage(model(), 0.1, grid, **kw))
+    assert n == 10_000 and np.array_equal(cov.coverage, plain.coverage)
+    fp, n, plain = run(lambda **kw: footprint_coverage(model(), 0.01, substeps=3, reference_rays=100_000, **kw))
+    assert n == 3_000 and np.array_equal(fp.coverage, plain.coverage)
+
+
 def test_speed_noise_draws_nothing_unless_asked_and_is_independent_of_chunking():
     optics = PRESETS["prototype"]
     clean = ScanModel(optics)

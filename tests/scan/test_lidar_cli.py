@@ -31,6 +31,33 @@ def test_density_and_coverage_json_and_plots(capsys, tmp_path):
     assert (tmp_path / "d.png").stat().st_size > 10_000 and (tmp_path / "c.png").stat().st_size > 10_000
 
 
+def test_coverage_text_says_a_level_not_reached(capsys):
+    """A coverage level the run did not reach was printed as "90 % at None s"."""
+    c = run_json(capsys, "lidar", "coverage", "prototype", "--duration", "0.3", "--json")
+    assert c["t50_s"] is not None and c["t90_s"] is None     # the case: 50 % reached, 90 % not
+    assert main(["lidar", "coverage", "prototype", "--duration", "0.3"]) == 0
+    out = capsys.readouterr().out
+    assert f"50 % at {c['t50_s']:g} s" in out and "90 % not reached in 0.3 s" in out and "None" not in out
+
+
+@pytest.mark.parametrize("argv, desc, total", [
+    (["density", "prototype", "--duration", "0.3"], "density:", "/60.0k"),         # both models: 2 x 30 000
+    (["coverage", "prototype", "--duration", "0.1"], "voxel coverage:", "/10.0k"),
+])
+def test_density_and_coverage_show_progress_on_stderr_unless_told_not_to(capsys, monkeypatch, argv, desc, total):
+    """A long run showed nothing until it ended; the bar appears once a run has taken
+    PROGRESS_DELAY_S (0 here, so that this short run counts as long)."""
+    from foveatrack.cli import lidar_cmd
+
+    monkeypatch.setattr(lidar_cmd, "PROGRESS_DELAY_S", 0.0)
+    assert main(["lidar", *argv]) == 0
+    out, err = capsys.readouterr()
+    assert desc in err and total in err and "pts/s" in err
+    assert desc not in out and "pts" not in out
+    assert main(["lidar", *argv, "--no-progress"]) == 0
+    assert capsys.readouterr().err == ""
+
+
 def test_pattern_plot(tmp_path, capsys):
     assert main(["lidar", "pattern", "horizon", "--duration", "0.02", "--plot", str(tmp_path / "p.png")]) == 0
     assert (tmp_path / "p.png").exists()
