@@ -126,6 +126,18 @@ class Message:
     record: Any
 
 
+class RecordingExistsError(UserError):
+    """The recording file exists and ``overwrite`` was not given (``path``: that file).  Drivers
+    catch it to say how to fix their own configuration (the daemon: ``{time}`` in its path)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        what = "an empty file" if path.is_file() and path.stat().st_size == 0 else \
+            "a directory" if path.is_dir() else "a file"
+        super().__init__(f"recording {path} already exists ({what}); it is never overwritten unless asked: "
+                         f"choose another path, move it away, or pass overwrite=True")
+
+
 class RecordingWriter:
     """Write a recording; use as a context manager (``close()`` on exit, also after an exception).
 
@@ -161,7 +173,7 @@ class RecordingWriter:
             raise UserError(f"flush_every_frames must be >= 1, got {flush_every_frames}")
         self.path = Path(path)
         if self.path.exists() and not overwrite:
-            raise UserError(f"recording {self.path} already exists; choose another path or remove it")
+            raise RecordingExistsError(self.path)
         try:
             meta_json = json.dumps(meta or {}, default=_to_jsonable, sort_keys=True)
         except TypeError as exc:
@@ -1012,6 +1024,8 @@ def export_trajectory(
 __all__ = [
     "RecordingWriter",
     "RecordingReader",
+    "RecordingExistsError",
+    "Damage",
     "PointsFrame",
     "Message",
     "export_points",
