@@ -8,8 +8,9 @@ Layout of a recording (``profile`` "foveatrack", format version 1):
 
 - an MCAP Metadata record ``foveatrack`` written first, with string values ``format`` =
   "foveatrack-recording", ``format_version`` = "1", ``meta_json`` (the writer's ``meta`` dict as JSON:
-  scene/config text, seed, ...), ``foveatrack_version``, ``numpy_version``, ``python_version``,
-  ``created_utc``.
+  scene/config text, seed, ...), ``channels_json`` (channel id -> name of the standard channels, which
+  are defined up front; absent in older files), ``foveatrack_version``, ``numpy_version``,
+  ``python_version``, ``created_utc``.
 - channel ``/points`` (schema ``foxglove.PointCloud``, JSON encoding, so Foxglove's 3D panel draws it):
   one message per lidar frame, log time = the frame's ``t_ns``, with the standard fields
   ``timestamp {sec, nsec}``, ``frame_id`` = "lidar", ``pose`` (identity), ``point_stride``,
@@ -26,6 +27,11 @@ Crash safety: records go into the current chunk; the chunk is completed and hand
 :meth:`RecordingWriter.flush` and automatically when a new frame starts after ``flush_every_frames``
 frames (so a chunk holds whole frames with what was written after them).  ``fsync=True`` also
 syncs to the disk at each flush.
+
+Damage: each chunk carries a CRC of its records and is followed by a message index.  The reader
+skips a damaged chunk (bad CRC, garbage over it or over its length field), finds the next chunk
+whose header holds together and whose CRC verifies by scanning the bytes, reads on, and reports
+each skipped stretch (:class:`Damage`: bytes, why, messages lost per channel from the index).
 
 Not thread-safe: one writer per thread (a daemon writes from one thread or behind a queue).
 """
@@ -566,6 +572,7 @@ class RecordingReader:
                     elif rop == _OP_METADATA and not self.info and content[0] == META_NAME:
                         self._set_meta(content[1])
                         if stop_after_meta:
+                            self.complete = None     # not known until a full walk
                             yield "", 0, b""
                             return
                 if op == _OP_CHUNK:

@@ -187,3 +187,25 @@ def test_other_compressions_resynchronise_too(tmp_path, compression):
     r, got = read_all(damaged(tmp_path, data))
     assert got == [m for m in full if m not in in_chunks(full, [cks[4]])]
     assert r.damage[0].lost == {c: 1 for c in CHANNELS}
+
+
+def test_older_recordings_take_the_channels_from_the_summary(tmp_path, monkeypatch):
+    """Recordings written before the channel table was in the metadata define each channel only in
+    the chunk where it is first used.  With that chunk damaged, a closed file's summary (CRC-checked)
+    still names them; in a file cut short as well, the messages that no intact record attributes
+    are counted in ``problem``, not passed off as another channel's."""
+    import foveatrack.recording as rec
+
+    monkeypatch.setattr(rec, "STANDARD_CHANNELS", ())     # the writer as it was: channels defined lazily
+    p = tmp_path / "old.mcap"
+    write_run(p, n_frames=10)
+    full = [key(m) for m in RecordingReader(p).messages()]
+    cks = chunks(p)
+    data = bytearray(p.read_bytes())
+    data[cks[0][0] + 9 + 24] ^= 0x01
+    r, got = read_all(damaged(tmp_path, data))
+    assert got == [m for m in full if m not in in_chunks(full, [cks[0]])]
+    assert r.damage[0].lost == {c: 1 for c in CHANNELS} and not r.unattributed
+    r, got = read_all(damaged(tmp_path, data[: cks[8][0] + 30], "old_cut.mcap"))
+    assert got == [] and r.unattributed == {i: 7 for i in range(1, 6)}
+    assert "35 message(s) of channel id(s) [1, 2, 3, 4, 5] skipped" in r.problem
