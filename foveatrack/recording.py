@@ -8,8 +8,9 @@ Layout of a recording (``profile`` "foveatrack", format version 1):
 
 - an MCAP Metadata record ``foveatrack`` written first, with string values ``format`` =
   "foveatrack-recording", ``format_version`` = "1", ``meta_json`` (the writer's ``meta`` dict as JSON:
-  scene/config text, seed, ...), ``foveatrack_version``, ``numpy_version``, ``python_version``,
-  ``created_utc``.
+  scene/config text, seed, ...), ``channels_json`` (channel id -> name of the standard channels, which
+  are defined up front; absent in older files), ``foveatrack_version``, ``numpy_version``,
+  ``python_version``, ``created_utc``.
 - channel ``/points`` (schema ``foxglove.PointCloud``, JSON encoding, so Foxglove's 3D panel draws it):
   one message per lidar frame, log time = the frame's ``t_ns``, with the standard fields
   ``timestamp {sec, nsec}``, ``frame_id`` = "lidar", ``pose`` (identity), ``point_stride``,
@@ -27,6 +28,11 @@ Crash safety: records go into the current chunk; the chunk is completed and hand
 frames (so a chunk holds whole frames with what was written after them).  ``fsync=True`` also
 syncs to the disk at each flush.
 
+Damage: each chunk carries a CRC of its records and is followed by a message index.  The reader
+skips a damaged chunk (bad CRC, garbage over it or over its length field), finds the next chunk
+whose header holds together and whose CRC verifies by scanning the bytes, reads on, and reports
+each skipped stretch (:class:`Damage`: bytes, why, messages lost per channel from the index).
+
 Not thread-safe: one writer per thread (a daemon writes from one thread or behind a queue).
 """
 
@@ -36,8 +42,11 @@ import base64
 import csv
 import datetime as _dt
 import json
+import mmap
 import os
 import platform
+import struct
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -55,6 +64,7 @@ COMMANDS = "commands"
 HEAD = "head"
 TRUTH = "truth"
 METRICS = "metrics"
+STANDARD_CHANNELS = (POINTS, DETECTIONS, COMMANDS, HEAD, TRUTH, METRICS)
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 # foxglove NumericType (docs.foxglove.dev, "NumericType")
@@ -122,6 +132,18 @@ class Message:
     record: Any
 
 
+class RecordingExistsError(UserError):
+    """The recording file exists and ``overwrite`` was not given (``path``: that file).  Drivers
+    catch it to say how to fix their own configuration (the daemon: ``{time}`` in its path)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        what = "an empty file" if path.is_file() and path.stat().st_size == 0 else \
+            "a directory" if path.is_dir() else "a file"
+        super().__init__(f"recording {path} already exists ({what}); it is never overwritten unless asked: "
+                         f"choose another path, move it away, or pass overwrite=True")
+
+
 class RecordingWriter:
     """Write a recording; use as a context manager (``close()`` on exit, also after an exception).
 
@@ -157,7 +179,7 @@ class RecordingWriter:
             raise UserError(f"flush_every_frames must be >= 1, got {flush_every_frames}")
         self.path = Path(path)
         if self.path.exists() and not overwrite:
-            raise UserError(f"recording {self.path} already exists; choose another path or remove it")
+            raise RecordingExistsError(self.path)
         try:
             meta_json = json.dumps(meta or {}, default=_to_jsonable, sort_keys=True)
         except TypeError as exc:
@@ -174,12 +196,18 @@ class RecordingWriter:
         from foveatrack import __version__
 
         self._w.start(profile="foveatrack", library=f"foveatrack {__version__}")
+        # The standard channels are defined up front, in the first chunk, and named in the metadata
+        # too: a reader then attributes every later chunk's messages even if that chunk is damaged.
+        self._channels: dict[str, int] = {}
+        for name in STANDARD_CHANNELS:
+            self._channel(name)
         self._w.add_metadata(
             META_NAME,
             {
                 "format": FORMAT,
                 "format_version": FORMAT_VERSION,
                 "meta_json": meta_json,
+                "channels_json": json.dumps({str(cid): name for name, cid in self._channels.items()}),
                 "foveatrack_version": __version__,
                 "numpy_version": np.__version__,
                 "python_version": platform.python_version(),
@@ -187,7 +215,6 @@ class RecordingWriter:
                 else _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             },
         )
-        self._channels: dict[str, int] = {}
         self._frames_since_flush = 0
         self._seq = 0
         self.frames_written = 0
@@ -336,12 +363,90 @@ class RecordingWriter:
 # ====================================================================================== reading
 
 
+# MCAP records the reader walks itself (https://mcap.dev/spec): opcode u8, length u64, content.
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_MINDEX = 1, 2, 3, 4, 5, 6, 7
+_OP_METADATA, _OP_DATA_END = 0x0C, 0x0F
+_TOP_LEVEL_OPS = frozenset(range(0x01, 0x10))
+_REC = struct.Struct("<BQ")
+_CHUNK_HEAD = struct.Struct("<QQQII")         # message_start_time, message_end_time, uncompressed_size, crc, len(compression)
+_MSG_HEAD = struct.Struct("<HIQQ")            # channel_id, sequence, log_time, publish_time
+_U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
+_COMPRESSIONS = (b"", b"lz4", b"zstd")
+_DATA_END_SIZE = 1 + 8 + 4
+_FOOTER_SIZE = 1 + 8 + 8 + 8 + 4
+
+
+class _Bad(Exception):
+    """A record that does not hold together (the reader skips it and resynchronises)."""
+
+
+@dataclass(frozen=True)
+class Damage:
+    """One stretch of a recording the reader skipped.
+
+    start_byte, end_byte : the bytes ``[start_byte, end_byte)`` that were skipped
+    reason : what was wrong at ``start_byte`` (a chunk's CRC, an unreadable record, ...)
+    cut_short : the stretch is an incomplete last record: the file ends inside it
+    lost : messages lost per channel, from the message index the writer put after each chunk
+        (None when no index of the lost data survived, e.g. a cut-short tail)
+    lost_exact : ``lost`` is the whole of what the stretch held; False: at least that much
+    lost_t_ns : (first, last) log time of the lost messages when known [ns]
+    frames_before : lidar frames read before the stretch
+    """
+
+    start_byte: int
+    end_byte: int
+    reason: str
+    cut_short: bool = False
+    lost: dict[str, int] | None = None
+    lost_exact: bool = False
+    lost_t_ns: tuple[int, int] | None = None
+    frames_before: int = 0
+
+    @property
+    def frames_lost(self) -> int | None:
+        """Lidar frames lost in the stretch (a lower bound unless ``lost_exact``), None if unknown."""
+        return None if self.lost is None else self.lost.get(POINTS, 0)
+
+    def describe(self) -> str:
+        """One line: which bytes, why, and what was lost."""
+        where = f"bytes {self.start_byte}-{self.end_byte}"
+        if self.cut_short:
+            what = f"file cut short at byte {self.start_byte}: {self.reason} ({where})"
+        else:
+            what = f"skipped {where} ({self.end_byte - self.start_byte} bytes): {self.reason}"
+        if self.lost is None:
+            what += "; the messages in it are lost" if self.cut_short else \
+                "; what it held is unknown (no index of it survived)"
+        elif not self.lost:
+            what += "; no messages lost (index bytes only)" if self.lost_exact else \
+                "; no lost messages are known (no index of a damaged chunk survived)"
+        else:
+            n_f = self.lost.get(POINTS, 0)
+            n_o = sum(self.lost.values()) - n_f
+            exact = "" if self.lost_exact else "at least "
+            what += (f"; {exact}{n_f} frame{'' if n_f == 1 else 's'} and {n_o} other record{'' if n_o == 1 else 's'}"
+                     f" lost ({', '.join(f'{k} {v}' for k, v in sorted(self.lost.items()))})")
+        if self.lost_t_ns is not None:
+            t0, t1 = self.lost_t_ns
+            what += f", log time {t0 / 1e9:.3f} s" if t0 == t1 else f", log times {t0 / 1e9:.3f}-{t1 / 1e9:.3f} s"
+        return what
+
+
 class RecordingReader:
-    """Read a recording, also one cut short (everything up to the last completed chunk).
+    """Read a recording, also one cut short or damaged: nothing that was recorded and is intact is lost.
 
     ``meta`` (the writer's meta dict), ``info`` (format and versions); :meth:`messages` iterates
-    in file order; after a full iteration ``complete`` says whether the data section ended properly
-    (the writer was closed) and ``problem`` says where and why reading stopped early otherwise.
+    in file order.  After a full iteration: ``complete`` says whether the data section ended properly
+    (the writer was closed); ``damage`` lists each stretch of bytes skipped (:class:`Damage`: byte range,
+    why, which messages were lost) and ``problem`` sums them up in one line (None if nothing was skipped).
+
+    A damaged chunk (CRC mismatch, garbage over it, its length field included) is skipped and reading
+    resumes at the next chunk whose header holds together and whose CRC verifies -- found by scanning
+    the bytes, not by trusting a length that may itself be damaged.  Messages of a channel whose
+    definition was in a damaged chunk are attributed by the channel table the writer puts in the
+    metadata (or the file's summary, for recordings written before it did); messages of a channel
+    that no intact record names are counted in ``problem``.
     Raises UserError naming the file if it is not a foveatrack recording.
     """
 
@@ -360,8 +465,13 @@ class RecordingReader:
         self.info: dict[str, str] = {}
         self.meta: dict = {}
         self.complete: bool | None = None
-        self.problem: str | None = None
-        for _kind, _obj in self._records(stop_after_meta=True):
+        self.damage: list[Damage] = []
+        self.unattributed: dict[int, int] = {}
+        self._meta_channels: dict[int, str] = {}
+        self._summary: tuple[int, int] | None = None
+        self._channels_read: dict[int, str] = {}
+        self._summary_channels: dict[int, str] | None = None
+        for _ in self._records(stop_after_meta=True):
             break
         if not self.info:
             raise UserError(
@@ -369,44 +479,240 @@ class RecordingReader:
                 f"{' (' + self.problem + ')' if self.problem else ''}"
             )
 
-    def _records(self, stop_after_meta: bool = False) -> Iterator[tuple[str, Any]]:
-        from mcap.records import Channel, DataEnd, Message as McapMessage, Metadata
-        from mcap.stream_reader import StreamReader
+    # ------------------------------------------------------------------ reporting
 
-        self.problem = None
+    @property
+    def problem(self) -> str | None:
+        """One line saying what was skipped (None: nothing)."""
+        parts = [d.describe() for d in self.damage]
+        if self.unattributed:
+            n = sum(self.unattributed.values())
+            parts.append(f"{n} message(s) of channel id(s) {sorted(self.unattributed)} skipped: their channel "
+                         f"was defined in a damaged chunk")
+        if not parts and self.complete is False:
+            parts.append(f"the file ends at byte {self.size} without its end-of-data record: the writer was not "
+                         f"closed (cut short, e.g. kill -9 or power loss); every whole chunk before it was read")
+        return "; ".join(parts) if parts else None
+
+    # ------------------------------------------------------------------ walking the file
+
+    def _records(self, stop_after_meta: bool = False) -> Iterator[tuple[str, int, bytes]]:
+        """Yield (channel name, log time [ns], payload) in file order, skipping damage (see class doc)."""
         self.complete = False
-        channels: dict[int, str] = {}
-        with open(self.path, "rb") as fh:
-            reader = StreamReader(fh, validate_crcs=True, record_size_limit=max(self.size, 1))
-            it = iter(reader.records)
+        self.damage = []
+        self.unattributed = {}
+        size = self.size
+        with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            data_end = self._data_end_pos(mm)
+            channels: dict[int, str] = {}
+            self._channels_read = channels
+            frames = 0
+            pos = len(MCAP_MAGIC)
+            prev_ok = prev_times = None   # opcode of the last record read intact; the last intact chunk's times
             while True:
+                if pos == size:
+                    return
+                if pos == data_end:
+                    self.complete = True
+                    return
                 try:
-                    rec = next(it)
-                except StopIteration:
-                    self.complete = True
-                    return
-                except Exception as exc:  # noqa: BLE001 - any damage ends reading here, cleanly
-                    self.problem = (
-                        f"stopped at byte {fh.tell()} of {self.size}: "
-                        f"{type(exc).__name__}{': ' + str(exc) if str(exc) else ''} (file cut short or damaged)"
-                    )
-                    return
-                if isinstance(rec, Metadata) and rec.name == META_NAME and not self.info:
-                    self._set_meta(rec.metadata)
-                    if stop_after_meta:
-                        yield "meta", None
+                    if size - pos < _REC.size:
+                        raise _Bad(f"{size - pos} stray byte(s) after the last whole record")
+                    op, length = _REC.unpack_from(mm, pos)
+                    body = pos + _REC.size
+                    end = body + length
+                    if op not in _TOP_LEVEL_OPS:
+                        raise _Bad(f"no MCAP record starts there (opcode 0x{op:02x})")
+                    if end > size:
+                        raise _Bad(f"a record whose length field ({length} bytes) runs past the end of the file")
+                    if op == _OP_CHUNK:
+                        recs = _chunk_records(mm, pos, length)
+                    elif op == _OP_MINDEX:
+                        _message_index(mm, body, length)
+                        recs = ()
+                    elif op == _OP_DATA_END:
+                        if length != 4:
+                            raise _Bad("a damaged end-of-data record")
+                        self.complete = True
                         return
-                elif isinstance(rec, Channel):
-                    channels[rec.id] = rec.topic.lstrip("/")
-                elif isinstance(rec, DataEnd):
-                    # the data section ended properly; the summary after it holds nothing we need
-                    self.complete = True
-                    return
-                elif isinstance(rec, McapMessage):
-                    name = channels.get(rec.channel_id)
-                    if name is None:
-                        continue
-                    yield "message", (name, rec)
+                    elif op == _OP_FOOTER:
+                        raise _Bad("a footer where data was expected")
+                    elif op == _OP_METADATA:
+                        recs = ((op, _metadata(mm[body:end])),)
+                    elif op in (_OP_MESSAGE, _OP_CHANNEL):
+                        if op == _OP_MESSAGE and length < _MSG_HEAD.size:
+                            raise _Bad("a damaged message record")
+                        recs = ((op, memoryview(mm[body:end])),)
+                    else:
+                        recs = ()
+                except _Bad as exc:
+                    if stop_after_meta and not self.info:
+                        self.damage.append(Damage(pos, size, str(exc)))
+                        return
+                    resume, found = self._resync(mm, pos, data_end)
+                    self.damage.append(self._account(mm, pos, resume, str(exc), prev_ok, prev_times, frames, found))
+                    prev_ok = prev_times = None
+                    if resume is None:
+                        return
+                    pos = resume
+                    continue
+                for rop, content in recs:
+                    if rop == _OP_MESSAGE:
+                        cid, _seq, log_time, _pub = _MSG_HEAD.unpack_from(content, 0)
+                        name = channels.get(cid) or self._fallback_channel(cid)
+                        if name is None:
+                            self.unattributed[cid] = self.unattributed.get(cid, 0) + 1
+                            continue
+                        if name == POINTS:
+                            frames += 1
+                        yield name, log_time, bytes(content[_MSG_HEAD.size:])
+                    elif rop == _OP_CHANNEL:
+                        cid, topic = _channel(content)
+                        channels[cid] = topic
+                    elif rop == _OP_METADATA and not self.info and content[0] == META_NAME:
+                        self._set_meta(content[1])
+                        if stop_after_meta:
+                            self.complete = None     # not known until a full walk
+                            yield "", 0, b""
+                            return
+                if op == _OP_CHUNK:
+                    prev_times = _chunk_times(mm, pos, size)
+                prev_ok = op
+                pos = end
+
+    def _data_end_pos(self, mm) -> int | None:
+        """Where the end-of-data record sits, from the footer of a closed file (None: no valid footer)."""
+        size = self.size
+        f = size - len(MCAP_MAGIC) - _FOOTER_SIZE
+        if f < len(MCAP_MAGIC) or mm[size - len(MCAP_MAGIC):] != MCAP_MAGIC:
+            return None
+        op, length = _REC.unpack_from(mm, f)
+        if op != _OP_FOOTER or length != 20:
+            return None
+        summary_start, _summary_offset_start, summary_crc = struct.unpack_from("<QQI", mm, f + 9)
+        if summary_start:
+            if not len(MCAP_MAGIC) < summary_start <= f or zlib.crc32(mm[summary_start:f + 9 + 16]) != summary_crc:
+                return None
+            de = summary_start - _DATA_END_SIZE
+        else:
+            de = f - _DATA_END_SIZE
+        if de < len(MCAP_MAGIC) or _REC.unpack_from(mm, de) != (_OP_DATA_END, 4):
+            return None
+        if summary_start:
+            self._summary = (summary_start, f)
+        return de
+
+    def _fallback_channel(self, cid: int) -> str | None:
+        """The name of a channel whose definition was not read (it was in a damaged chunk)."""
+        name = self._channels_read.get(cid) or self._meta_channels.get(cid)
+        if name is not None:
+            return name
+        if self._summary_channels is None:
+            self._summary_channels = self._read_summary_channels()
+        return self._summary_channels.get(cid)
+
+    def _read_summary_channels(self) -> dict[int, str]:
+        out: dict[int, str] = {}
+        span = self._summary
+        if span is None:
+            return out
+        with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            pos, stop = span
+            while pos + _REC.size <= stop:
+                op, length = _REC.unpack_from(mm, pos)
+                end = pos + _REC.size + length
+                if end > stop:
+                    break
+                if op == _OP_CHANNEL:
+                    cid, topic = _channel(mm[pos + _REC.size:end])
+                    out[cid] = topic
+                pos = end
+        return out
+
+    def _resync(self, mm, pos: int, data_end: int | None) -> tuple[int | None, list[int]]:
+        """The next place to read on from after damage at ``pos``: the first chunk after it whose
+        header holds together and whose CRC verifies, else the end-of-data record (closed file),
+        else None.  Also returns the positions of chunks after ``pos`` whose header holds together
+        but whose contents do not (damaged chunks in the stretch)."""
+        stop = self.size if data_end is None else data_end
+        found: list[int] = []
+        p = pos
+        while True:
+            p = mm.find(b"\x06", p, stop)
+            if p < 0:
+                return data_end, found
+            length = _chunk_length(mm, p, stop)
+            if length is not None:
+                try:
+                    _chunk_records(mm, p, length)
+                    if p > pos:
+                        return p, found
+                except _Bad:
+                    pass
+                found.append(p)
+            p += 1
+
+    def _account(self, mm, pos, resume, reason, prev_ok, prev_times, frames, found) -> Damage:
+        """What the skipped stretch ``[pos, resume)`` held, from the message index the writer put after
+        each chunk: exact for a damaged chunk whose header holds (its index starts where it ends), a
+        lower bound when the stretch starts with bytes that do not hold together (the index found
+        just before the next readable record); index records of the intact chunk before the stretch
+        (their times lie in its time range) are not counted as lost."""
+        size = self.size
+        end = size if resume is None else resume
+        heads = sorted({p for p in found if pos <= p < end})
+        bounds = ([] if heads and heads[0] == pos else [pos]) + heads + [end]
+        lost: dict[int, int] | None = None
+        times: list[int] = []
+        exact = True
+
+        in_intact_index = False
+
+        def add(chain, skip=None):
+            nonlocal lost, in_intact_index
+            lost = {} if lost is None else lost
+            for cid, ts in chain:
+                if skip is not None and ts and all(skip[0] <= t <= skip[1] for t in ts):
+                    in_intact_index = True
+                    continue
+                lost[cid] = lost.get(cid, 0) + len(ts)
+                times.extend(ts)
+
+        for s, e in zip(bounds, bounds[1:]):
+            if s in heads:                      # a damaged chunk whose header holds together
+                after = s + _REC.size + _U64.unpack_from(mm, s + 1)[0]
+                chain = _index_chain(mm, after, e)
+                if chain is not None:
+                    add(chain)
+                    continue
+                exact = False
+                chain = _index_chain_ending_at(mm, after, e)
+            else:                               # bytes that do not hold together
+                exact = False
+                chain = _index_chain_ending_at(mm, s, e)
+            if chain:
+                add(chain, prev_times if s == pos and prev_ok in (_OP_CHUNK, _OP_MINDEX) else None)
+        cut_short = resume is None and _record_runs_past(mm, pos, size)
+        if cut_short:
+            if mm[pos] == _OP_MINDEX and prev_ok in (_OP_CHUNK, _OP_MINDEX):
+                reason, lost, exact = "its last record, a message index of the chunk before it, is incomplete", {}, True
+            else:
+                reason = "its last record is incomplete"
+                t = _chunk_times(mm, pos, size)
+                if t is not None:
+                    times.extend(t)
+        elif resume is None:
+            reason += "; no readable chunk after it"
+        if in_intact_index and not cut_short:
+            reason += " (in the message index of the intact chunk before it)"
+        names: dict[str, int] | None = None
+        if lost is not None:
+            names = {}
+            for cid, n in lost.items():
+                name = self._fallback_channel(cid) or f"channel id {cid}"
+                names[name] = names.get(name, 0) + n
+        return Damage(pos, end, reason, cut_short, names, exact and lost is not None,
+                      (min(times), max(times)) if times else None, frames)
 
     def _set_meta(self, md: dict[str, str]) -> None:
         if md.get("format") != FORMAT:
@@ -419,23 +725,23 @@ class RecordingReader:
         self.info = dict(md)
         try:
             self.meta = json.loads(md.get("meta_json", "{}"))
-        except ValueError:
+            self._meta_channels = {int(k): v for k, v in json.loads(md.get("channels_json", "{}")).items()}
+        except (ValueError, AttributeError):
             raise UserError(f"{self.path}: its metadata JSON is damaged") from None
+
+    # ------------------------------------------------------------------ public reading
 
     def messages(self, channels: Iterable[str] | str | None = None) -> Iterator[Message]:
         """Messages in file order, optionally only those of ``channels`` (names without '/')."""
         want = {channels} if isinstance(channels, str) else None if channels is None else set(channels)
-        for kind, obj in self._records():
-            if kind != "message":
-                continue
-            name, rec = obj
+        for name, log_time, data in self._records():
             if want is not None and name not in want:
                 continue
             try:
-                record = _decode_points(rec.data) if name == POINTS else json.loads(rec.data)
+                record = _decode_points(data) if name == POINTS else json.loads(data)
             except (ValueError, KeyError, TypeError) as exc:
-                raise UserError(f"{self.path}: a {name} message at t_ns={rec.log_time} is damaged: {exc}") from None
-            yield Message(name, int(rec.log_time), record)
+                raise UserError(f"{self.path}: a {name} message at t_ns={log_time} is damaged: {exc}") from None
+            yield Message(name, int(log_time), record)
 
     def points(self) -> Iterator[PointsFrame]:
         """The lidar frames, in order."""
@@ -449,10 +755,156 @@ class RecordingReader:
     def channels(self) -> dict[str, int]:
         """Message count per channel (reads the whole file)."""
         out: dict[str, int] = {}
-        for kind, obj in self._records():
-            if kind == "message":
-                out[obj[0]] = out.get(obj[0], 0) + 1
+        for name, _t, _d in self._records():
+            out[name] = out.get(name, 0) + 1
         return out
+
+
+def _chunk_length(mm, pos: int, stop: int) -> int | None:
+    """The record length of a chunk at ``pos`` if its header holds together and it ends by ``stop``."""
+    if pos + _REC.size + _CHUNK_HEAD.size + 8 > stop or mm[pos] != _OP_CHUNK:
+        return None
+    length = _U64.unpack_from(mm, pos + 1)[0]
+    clen = _CHUNK_HEAD.unpack_from(mm, pos + _REC.size)[4]
+    c0 = pos + _REC.size + _CHUNK_HEAD.size
+    if clen > 4 or c0 + clen + 8 > stop or mm[c0:c0 + clen] not in _COMPRESSIONS:
+        return None
+    dlen = _U64.unpack_from(mm, c0 + clen)[0]
+    if length != _CHUNK_HEAD.size + clen + 8 + dlen or pos + _REC.size + length > stop:
+        return None
+    return length
+
+
+def _chunk_times(mm, pos: int, size: int) -> tuple[int, int] | None:
+    if pos + _REC.size + 16 > size or mm[pos] != _OP_CHUNK:
+        return None
+    t0, t1 = struct.unpack_from("<QQ", mm, pos + _REC.size)
+    return (t0, t1) if t0 <= t1 else None
+
+
+def _chunk_records(mm, pos: int, length: int) -> list[tuple[int, bytes]]:
+    """The (opcode, content) records of the chunk at ``pos``: decompressed, size and CRC checked."""
+    if _chunk_length(mm, pos, len(mm)) != length:
+        raise _Bad("a chunk whose header does not hold together (damaged length or compression fields)")
+    b = pos + _REC.size
+    _t0, _t1, usize, crc, clen = _CHUNK_HEAD.unpack_from(mm, b)
+    c0 = b + _CHUNK_HEAD.size
+    comp = mm[c0:c0 + clen]
+    d0 = c0 + clen + 8
+    raw = mm[d0:b + length]
+    try:
+        if comp == b"lz4":
+            import lz4.frame
+
+            data = lz4.frame.decompress(raw)
+        elif comp == b"zstd":
+            import zstandard
+
+            if usize > 64 * len(raw) + (1 << 20):
+                raise _Bad("a chunk with an implausible uncompressed size")
+            data = zstandard.ZstdDecompressor().decompress(raw, max_output_size=usize)
+        else:
+            data = raw
+    except _Bad:
+        raise
+    except Exception as exc:  # noqa: BLE001 - any decompressor error means damaged bytes
+        raise _Bad(f"a chunk that does not decompress ({type(exc).__name__})") from None
+    if len(data) != usize:
+        raise _Bad(f"a chunk of {len(data)} bytes where its header says {usize}")
+    if crc != 0 and zlib.crc32(data) != crc:
+        raise _Bad("a chunk whose CRC does not match its contents")
+    out = []
+    mv = memoryview(data)
+    i, n = 0, len(data)
+    while i < n:
+        if n - i < _REC.size:
+            raise _Bad("a chunk whose records do not add up")
+        op, ln = _REC.unpack_from(data, i)
+        j = i + _REC.size
+        if j + ln > n or (op == _OP_MESSAGE and ln < _MSG_HEAD.size):
+            raise _Bad("a chunk whose records do not add up")
+        if op in (_OP_MESSAGE, _OP_CHANNEL):
+            out.append((op, mv[j:j + ln]))
+        i = j + ln
+    return out
+
+
+def _string(buf, i: int) -> tuple[str, int]:
+    n = _U32.unpack_from(buf, i)[0]
+    return bytes(buf[i + 4:i + 4 + n]).decode("utf-8", "replace"), i + 4 + n
+
+
+def _channel(content) -> tuple[int, str]:
+    cid = _U16.unpack_from(content, 0)[0]
+    topic, _ = _string(content, 4)
+    return cid, topic.lstrip("/")
+
+
+def _metadata(content) -> tuple[str, dict[str, str]]:
+    try:
+        name, i = _string(content, 0)
+        n = _U32.unpack_from(content, i)[0]
+        i += 4
+        stop = i + n
+        md = {}
+        while i < stop:
+            k, i = _string(content, i)
+            v, i = _string(content, i)
+            md[k] = v
+    except struct.error:
+        raise _Bad("a metadata record that does not hold together") from None
+    if i != stop or stop != len(content):
+        raise _Bad("a metadata record that does not hold together")
+    return name, md
+
+
+def _message_index(mm, body: int, length: int) -> tuple[int, list[int]]:
+    """(channel id, log times) of a message index record whose content is ``mm[body:body+length]``."""
+    if length < 6:
+        raise _Bad("a damaged message index record")
+    cid, n = struct.unpack_from("<HI", mm, body)
+    if n % 16 or length != 6 + n:
+        raise _Bad("a damaged message index record")
+    return cid, [_U64.unpack_from(mm, body + 6 + 16 * k)[0] for k in range(n // 16)]
+
+
+def _index_chain(mm, pos: int, stop: int) -> list[tuple[int, list[int]]] | None:
+    """Consecutive message index records from ``pos`` up to exactly ``stop`` (None if they do not)."""
+    out = []
+    while pos < stop:
+        if pos + _REC.size > stop:
+            return None
+        op, length = _REC.unpack_from(mm, pos)
+        if op != _OP_MINDEX or pos + _REC.size + length > stop:
+            return None
+        try:
+            out.append(_message_index(mm, pos + _REC.size, length))
+        except _Bad:
+            return None
+        pos += _REC.size + length
+    return out if pos == stop else None
+
+
+def _index_chain_ending_at(mm, start: int, stop: int) -> list[tuple[int, list[int]]] | None:
+    """The longest run of message index records in ``[start, stop)`` that ends exactly at ``stop``
+    (the index of a chunk whose own header is damaged)."""
+    p = start
+    while True:
+        p = mm.find(bytes([_OP_MINDEX]), p, stop)
+        if p < 0:
+            return None
+        chain = _index_chain(mm, p, stop)
+        if chain:
+            return chain
+        p += 1
+
+
+def _record_runs_past(mm, pos: int, size: int) -> bool:
+    """The record at ``pos`` has a known opcode and a length that runs past the end of the file."""
+    if size - pos < _REC.size:
+        return True
+    op, length = _REC.unpack_from(mm, pos)
+    return op in _TOP_LEVEL_OPS and pos + _REC.size + length > size and length < (1 << 40)
 
 
 def _decode_points(data: bytes) -> PointsFrame:
@@ -579,6 +1031,8 @@ def export_trajectory(
 __all__ = [
     "RecordingWriter",
     "RecordingReader",
+    "RecordingExistsError",
+    "Damage",
     "PointsFrame",
     "Message",
     "export_points",

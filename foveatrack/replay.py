@@ -23,6 +23,12 @@ How a recording's tracker is rebuilt (``meta``):
 Replay is open loop: the points are what the lidar saw while the head moved as it did, so a
 different configuration shows which detections and commands would have differed on the same data,
 not where the head would have gone.
+
+A damaged recording (:class:`foveatrack.recording.Damage`) is replayed from everything the reader
+recovered; the report's first line after the title is a WARNING naming what was skipped.  Frames
+lost in the middle take their commands with them, so the replay's dead reckoning after the gap
+lacks those commands: the comparison then says it is *partial* (``comparison["partial"]``,
+``gaps`` with the head-estimate offset after each, ``before_first_gap`` exact as before).
 """
 
 from __future__ import annotations
@@ -204,7 +210,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     send_delay_sim = rec_cfg.send_delay_s
     F = _Frames()
     R = {k: [] for k in ("detected", "det_xyz", "det_n_points", "command", "error_pan_deg", "error_tilt_deg",
-                         "processing_ms", "latency_ms")}
+                         "processing_ms", "latency_ms", "head_pan_deg", "head_tilt_deg")}
     T = {k: [] for k in ("true_error_deg", "target_xyz_m", "points_on_target", "pan_deg", "tilt_deg")}
     has_truth = False
     head_cmd = STOP   # the last command the head received: a daemon's failed write left it running this
@@ -244,6 +250,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
         mets = {m["name"]: m["value"] for m in ch.get("metrics", [])}
         R["processing_ms"].append(mets.get("processing_ms", np.nan))
         R["latency_ms"].append(np.nan if mets.get("latency_ms") is None else mets["latency_ms"])
+        hd = ch.get("head", [])
+        R["head_pan_deg"].append(np.nan if not hd or hd[0].get("pan_deg") is None else hd[0]["pan_deg"])
+        R["head_tilt_deg"].append(np.nan if not hd or hd[0].get("tilt_deg") is None else hd[0]["tilt_deg"])
         tr = ch.get("truth", [])
         if tr:
             has_truth = True
@@ -281,7 +290,45 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     if reader.problem:
         res.comparison["recording_problem"] = reader.problem
     res.comparison["recording_complete"] = bool(reader.complete)
+    res.comparison["recording_damage"] = [d.describe() for d in reader.damage]
+    res.comparison.update(_gaps(frames, recorded, reader))
     return res
+
+
+def _gaps(frames: dict, recorded: dict, reader) -> dict:
+    """Where frames are missing (a skipped damaged stretch), and whether that makes the comparison partial.
+
+    A gap is a jump in the recorded frame index (both drivers number frames 0, 1, 2, ...), or damage
+    before the first frame read.  The commands sent in missing frames are lost with them, so after a
+    gap the replay's dead reckoning lacks them and its head estimate, detections in the world frame
+    and commands may differ from the recording for that reason alone: the comparison is then
+    *partial*, exact only up to the first gap (``before_first_gap``).  A cut-short tail leaves no gap.
+    """
+    fi = np.asarray(frames["frame_index"], np.int64)
+    gaps = []
+    lead = [d for d in reader.damage if not d.cut_short and d.frames_before == 0]
+    if fi.size and (fi[0] > 0 or (lead and lead[0].frames_lost)):
+        gaps.append((0, None, int(fi[0]), int(fi[0]) if fi[0] > 0 else lead[0].frames_lost))
+    for i in np.flatnonzero(np.diff(fi) != 1) + 1:
+        gaps.append((int(i), int(fi[i - 1]), int(fi[i]), int(fi[i] - fi[i - 1] - 1)))
+    # damage that lost records other than frames (e.g. a watchdog STOP) also leaves the reckoning short
+    lost_other = any(not d.cut_short and (d.lost is None or sum(d.lost.values()) > 0) for d in reader.damage)
+    partial = bool(gaps) or lost_other or bool(reader.unattributed)
+    out: dict = {"partial": partial, "frames_missing": int(sum(g[3] for g in gaps if g[3])), "gaps": []}
+    for i, after, before, n in gaps:
+        dp = frames["head_pan_deg"][i] - recorded["head_pan_deg"][i]
+        dt = frames["head_tilt_deg"][i] - recorded["head_tilt_deg"][i]
+        diff = float(np.hypot((dp + 180.0) % 360.0 - 180.0, dt))
+        out["gaps"].append({"after_frame": after, "before_frame": before, "frames_missing": n,
+                            "head_estimate_diff_deg": diff if math.isfinite(diff) else None})
+    if partial:
+        k = gaps[0][0] if gaps else len(fi)
+        c = compare({key: v[:k] for key, v in frames.items()}, {key: v[:k] for key, v in recorded.items()})
+        out["before_first_gap"] = {"frames": int(k), "detections_equal": c["detections_equal"],
+                                   "commands_equal": c["commands_equal"],
+                                   "frames_detection_differs": c["frames_detection_differs"],
+                                   "frames_command_differs": c["frames_command_differs"]}
+    return out
 
 
 def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, config_name: str | None = None,
@@ -425,7 +472,25 @@ def format_report(res: ReplayResult) -> str:
                 if be["rms"] is not None else "")
              + f"; states {d['states']}")
     c = res.comparison
-    if "detections_equal" in c:
+    if c.get("recording_damage"):
+        L.insert(1, "  WARNING: damaged recording, " + "; ".join(c["recording_damage"]))
+    if c.get("partial"):
+        b = c["before_first_gap"]
+        gaps = []
+        for g in c["gaps"]:
+            n = g["frames_missing"]
+            txt = (f"frames before {g['before_frame']}" if not n else f"frame {g['before_frame'] - 1}" if n == 1
+                   else f"frames {g['before_frame'] - n}-{g['before_frame'] - 1}")
+            if g["head_estimate_diff_deg"] is not None:
+                txt += f" (head estimate after it {g['head_estimate_diff_deg']:.3f} deg off the recorded)"
+            gaps.append(txt)
+        upto = ("same as recorded" if b["detections_equal"] and b["commands_equal"] else
+                f"{b['frames_detection_differs']} detections and {b['frames_command_differs']} commands differ")
+        L.append(f"  comparison is partial: {'; '.join(gaps) or 'records other than frames'} missing; the commands "
+                 f"sent in them are lost, so after the first gap the replay's dead reckoning lacks them. Before it "
+                 f"({b['frames']} frames): {upto}; over all {d['frames']} replayed frames {c['frames_detection_differs']}"
+                 f" detections and {c['frames_command_differs']} of {c['commands_compared']} commands differ")
+    elif "detections_equal" in c:
         if c["detections_equal"] and c["commands_equal"]:
             L.append(f"  same as recorded: all {d['frames']} detections and {c['commands_compared']} commands identical")
         else:
@@ -436,7 +501,7 @@ def format_report(res: ReplayResult) -> str:
                      f"open loop: same points, the head moved as recorded")
     for k, v in res.recorded_metrics.items():
         L.append(f"  recorded {k}: p50 {v['p50']:.2f}, p99 {v['p99']:.2f}, max {v['max']:.2f}")
-    if c.get("recording_problem"):
+    if c.get("recording_problem") and not c.get("recording_damage"):
         L.append(f"  note: {c['recording_problem']}")
     return "\n".join(L)
 

@@ -178,7 +178,7 @@ class Daemon:
 
         from foveatrack.errors import UserError
         from foveatrack.livox.client import LivoxClient
-        from foveatrack.recording import RecordingWriter
+        from foveatrack.recording import RecordingExistsError, RecordingWriter
 
         # Links first, the recording last: a port that cannot be used fails the start before a
         # recording file exists (an empty one was left behind for every failed start).
@@ -216,6 +216,13 @@ class Daemon:
             except (OSError, UserError) as exc:
                 self.client.close()
                 self.head.close()
+                if isinstance(exc, RecordingExistsError):
+                    why = ("two starts within the same second gave the same '{time}' name; start again a "
+                           "second later" if "{time}" in r.path else
+                           "put '{time}' in it for a new file per start (e.g. path = \"runs/{time}.mcap\")")
+                    raise UserError(f"{c.path} [recording] path: {path} already exists and is never overwritten "
+                                    f"unless asked; {why}, or set overwrite = true in [recording] to replace it"
+                                    ) from None
                 if isinstance(exc, UserError):
                     raise
                 raise UserError(f"{c.path} [recording] path: cannot create {path} ({exc.strerror or exc})") from None

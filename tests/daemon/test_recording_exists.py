@@ -1,0 +1,77 @@
+"""A daemon whose recording file already exists refuses to start, leaves the file as it was, and says
+how to fix the config: '{time}' in [recording] path (a new file per start) or overwrite = true.
+(Before, it said only "recording X already exists; choose another path or remove it", which sent
+the user renaming files by hand before every start.)"""
+
+import pytest
+
+from foveatrack.daemon import Daemon, load_config
+from foveatrack.daemon.config import DaemonConfig
+from foveatrack.errors import UserError
+from foveatrack.recording import RecordingExistsError, RecordingReader, RecordingWriter
+
+
+def _daemon(tmp_path, rec_path, extra=""):
+    cfg = tmp_path / "d.toml"
+    cfg.write_text(f"""
+[lidar]
+sensor_ip = "127.0.0.1"
+host_ip = "127.0.0.1"
+cmd_port = 0
+data_port = 0
+broadcast_port = false
+sensor_cmd_port = 65000
+[head]
+port = "loop://"
+[recording]
+path = "{rec_path}"
+{extra}
+""")
+    return Daemon(load_config(cfg), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
+
+
+def _close(d):
+    d.client.close()
+    d.head.close()
+    d.recorder.close()
+
+
+def test_the_writer_names_the_file_and_the_way_out(tmp_path):
+    p = tmp_path / "r.mcap"
+    p.write_text("precious")
+    with pytest.raises(RecordingExistsError) as exc:
+        RecordingWriter(p, {})
+    assert isinstance(exc.value, UserError) and exc.value.path == p
+    assert str(p) in str(exc.value) and "overwrite=True" in str(exc.value)
+    assert p.read_text() == "precious"
+
+
+def test_an_existing_recording_path_says_how_to_fix_the_config(tmp_path):
+    p = tmp_path / "run.mcap"
+    p.write_text("precious")
+    d = _daemon(tmp_path, p)
+    with pytest.raises(UserError) as exc:
+        d._open()
+    msg = str(exc.value)
+    assert str(tmp_path / "d.toml") in msg and "[recording] path" in msg and str(p) in msg
+    assert "{time}" in msg and "overwrite = true" in msg
+    assert p.read_text() == "precious"
+
+
+def test_a_time_stamped_path_taken_within_the_same_second(tmp_path, monkeypatch):
+    p = tmp_path / "run-20260101T000000Z.mcap"
+    p.write_text("precious")
+    monkeypatch.setattr(DaemonConfig, "recording_path", lambda self, now=None: p)
+    d = _daemon(tmp_path, tmp_path / "run-{time}.mcap")
+    with pytest.raises(UserError, match="same second") as exc:
+        d._open()
+    assert "overwrite = true" in str(exc.value) and p.read_text() == "precious"
+
+
+def test_overwrite_true_replaces_it(tmp_path):
+    p = tmp_path / "run.mcap"
+    p.write_text("old")
+    d = _daemon(tmp_path, p, "overwrite = true")
+    d._open()
+    _close(d)
+    assert RecordingReader(p).meta["source"] == "daemon"
