@@ -8,6 +8,8 @@ equal the recorded ones, and with ``--tracker-config`` what would have changed.
 
 from __future__ import annotations
 
+import sys
+
 
 def register(sub) -> None:
     p = sub.add_parser("replay", help="re-run detection and control over a recording (.mcap) or a .lvx file")
@@ -64,6 +66,9 @@ def cmd_replay(args) -> int:
         s = res.summary()
         s["outputs"] = notes
         print(json.dumps(s, indent=1, default=lambda x: x.item() if hasattr(x, "item") else str(x)))
+        damage = res.comparison.get("recording_damage")
+        if damage:   # stdout is for the machine; a person watching must still see that bytes were skipped
+            print(f"foveatrack replay: WARNING: damaged recording, {'; '.join(damage)}", file=sys.stderr)
     else:
         print(format_report(res))
         for n in notes:

@@ -98,5 +98,7 @@ def test_cli_prints_one_warning_line_and_replays_the_rest(sim_run, tmp_path, cap
     assert len(warn) == 1 and "2 frames" in warn[0] and "Traceback" not in out
     assert "comparison is partial" in out
     assert main(["replay", str(bad), "--json"]) == 0
-    c = json.loads(capsys.readouterr().out)["comparison"]
+    cap = capsys.readouterr()
+    c = json.loads(cap.out)["comparison"]
     assert c["partial"] and c["frames_missing"] == 2 and len(c["recording_damage"]) == 1
+    assert "WARNING: damaged recording" in cap.err, "with --json the warning still reaches a person, on stderr"
