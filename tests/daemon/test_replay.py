@@ -11,25 +11,16 @@ from foveatrack.cli import main
 from foveatrack.livox import protocol as P
 from foveatrack.livox.lvx import LvxDevice, write_lvx
 from foveatrack.metrics import tracking_metrics
-from foveatrack.recording import RecordingWriter
 from foveatrack.replay import replay, replay_recording
 from sim.lidar_server import SceneSource
-from sim.loop import ClosedLoop
-from sim.recorder import SimRecorder, recording_meta
-from sim.scene import load_scene, scene_from_mapping
+from sim.scene import scene_from_mapping
 
 SCENE = Path(__file__).parent / "scene_track.toml"
 
 
-@pytest.fixture(scope="module")
-def sim_run(tmp_path_factory):
-    path = tmp_path_factory.mktemp("rec") / "sim.mcap"
-    scene = load_scene(SCENE)
-    loop = ClosedLoop(scene)
-    with RecordingWriter(path, recording_meta(scene, loop)) as w:
-        loop.frame_hook = SimRecorder(w)
-        log = loop.run()
-    return path, log, scene
+@pytest.fixture
+def sim_run(sim_recording):
+    return sim_recording
 
 
 def test_simulator_recording_replays_identically(sim_run):

@@ -11,23 +11,13 @@ import pytest
 from mcap.reader import make_reader
 
 from foveatrack.cli import main
-from foveatrack.recording import RecordingWriter
 from foveatrack.replay import format_report, replay_recording
-from sim.loop import ClosedLoop
-from sim.recorder import SimRecorder, recording_meta
-from sim.scene import load_scene
 
-SCENE = Path(__file__).parent / "scene_track.toml"
 
 
 @pytest.fixture(scope="module")
-def sim_run(tmp_path_factory):
-    path = tmp_path_factory.mktemp("rec") / "sim.mcap"
-    scene = load_scene(SCENE)
-    loop = ClosedLoop(scene)
-    with RecordingWriter(path, recording_meta(scene, loop)) as w:
-        loop.frame_hook = SimRecorder(w)
-        log = loop.run()
+def sim_run(sim_recording):
+    path, log, _ = sim_recording
     with open(path, "rb") as fh:
         cks = sorted((c.chunk_start_offset, c.chunk_length) for c in make_reader(fh).get_summary().chunk_indexes)
     return path, log, cks
