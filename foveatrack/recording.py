@@ -53,6 +53,7 @@ from typing import Any, Iterable, Iterator
 
 import numpy as np
 
+from foveatrack import mcap_walk as mw
 from foveatrack.errors import UserError
 
 FORMAT = "foveatrack-recording"
@@ -363,23 +364,6 @@ class RecordingWriter:
 # ====================================================================================== reading
 
 
-# MCAP records the reader walks itself (https://mcap.dev/spec): opcode u8, length u64, content.
-_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_MINDEX = 1, 2, 3, 4, 5, 6, 7
-_OP_METADATA, _OP_DATA_END = 0x0C, 0x0F
-_TOP_LEVEL_OPS = frozenset(range(0x01, 0x10))
-_REC = struct.Struct("<BQ")
-_CHUNK_HEAD = struct.Struct("<QQQII")         # message_start_time, message_end_time, uncompressed_size, crc, len(compression)
-_MSG_HEAD = struct.Struct("<HIQQ")            # channel_id, sequence, log_time, publish_time
-_U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
-_COMPRESSIONS = (b"", b"lz4", b"zstd")
-_DATA_END_SIZE = 1 + 8 + 4
-_FOOTER_SIZE = 1 + 8 + 8 + 8 + 4
-
-
-class _Bad(Exception):
-    """A record that does not hold together (the reader skips it and resynchronises)."""
-
-
 @dataclass(frozen=True)
 class Damage:
     """One stretch of a recording the reader skipped.
@@ -516,36 +500,36 @@ class RecordingReader:
                     self.complete = True
                     return
                 try:
-                    if size - pos < _REC.size:
-                        raise _Bad(f"{size - pos} stray byte(s) after the last whole record")
-                    op, length = _REC.unpack_from(mm, pos)
-                    body = pos + _REC.size
+                    if size - pos < mw.REC.size:
+                        raise mw.BadRecord(f"{size - pos} stray byte(s) after the last whole record")
+                    op, length = mw.REC.unpack_from(mm, pos)
+                    body = pos + mw.REC.size
                     end = body + length
-                    if op not in _TOP_LEVEL_OPS:
-                        raise _Bad(f"no MCAP record starts there (opcode 0x{op:02x})")
+                    if op not in mw.TOP_LEVEL_OPS:
+                        raise mw.BadRecord(f"no MCAP record starts there (opcode 0x{op:02x})")
                     if end > size:
-                        raise _Bad(f"a record whose length field ({length} bytes) runs past the end of the file")
-                    if op == _OP_CHUNK:
-                        recs = _chunk_records(mm, pos, length)
-                    elif op == _OP_MINDEX:
-                        _message_index(mm, body, length)
+                        raise mw.BadRecord(f"a record whose length field ({length} bytes) runs past the end of the file")
+                    if op == mw.OP_CHUNK:
+                        recs = mw.chunk_records(mm, pos, length)
+                    elif op == mw.OP_MINDEX:
+                        mw.message_index(mm, body, length)
                         recs = ()
-                    elif op == _OP_DATA_END:
+                    elif op == mw.OP_DATA_END:
                         if length != 4:
-                            raise _Bad("a damaged end-of-data record")
+                            raise mw.BadRecord("a damaged end-of-data record")
                         self.complete = True
                         return
-                    elif op == _OP_FOOTER:
-                        raise _Bad("a footer where data was expected")
-                    elif op == _OP_METADATA:
-                        recs = ((op, _metadata(mm[body:end])),)
-                    elif op in (_OP_MESSAGE, _OP_CHANNEL):
-                        if op == _OP_MESSAGE and length < _MSG_HEAD.size:
-                            raise _Bad("a damaged message record")
+                    elif op == mw.OP_FOOTER:
+                        raise mw.BadRecord("a footer where data was expected")
+                    elif op == mw.OP_METADATA:
+                        recs = ((op, mw.metadata(mm[body:end])),)
+                    elif op in (mw.OP_MESSAGE, mw.OP_CHANNEL):
+                        if op == mw.OP_MESSAGE and length < mw.MSG_HEAD.size:
+                            raise mw.BadRecord("a damaged message record")
                         recs = ((op, memoryview(mm[body:end])),)
                     else:
                         recs = ()
-                except _Bad as exc:
+                except mw.BadRecord as exc:
                     if stop_after_meta and not self.info:
                         self.damage.append(Damage(pos, size, str(exc)))
                         return
@@ -557,46 +541,46 @@ class RecordingReader:
                     pos = resume
                     continue
                 for rop, content in recs:
-                    if rop == _OP_MESSAGE:
-                        cid, _seq, log_time, _pub = _MSG_HEAD.unpack_from(content, 0)
+                    if rop == mw.OP_MESSAGE:
+                        cid, _seq, log_time, _pub = mw.MSG_HEAD.unpack_from(content, 0)
                         name = channels.get(cid) or self._fallback_channel(cid)
                         if name is None:
                             self.unattributed[cid] = self.unattributed.get(cid, 0) + 1
                             continue
                         if name == POINTS:
                             frames += 1
-                        yield name, log_time, bytes(content[_MSG_HEAD.size:])
-                    elif rop == _OP_CHANNEL:
-                        cid, topic = _channel(content)
+                        yield name, log_time, bytes(content[mw.MSG_HEAD.size:])
+                    elif rop == mw.OP_CHANNEL:
+                        cid, topic = mw.channel(content)
                         channels[cid] = topic
-                    elif rop == _OP_METADATA and not self.info and content[0] == META_NAME:
+                    elif rop == mw.OP_METADATA and not self.info and content[0] == META_NAME:
                         self._set_meta(content[1])
                         if stop_after_meta:
                             self.complete = None     # not known until a full walk
                             yield "", 0, b""
                             return
-                if op == _OP_CHUNK:
-                    prev_times = _chunk_times(mm, pos, size)
+                if op == mw.OP_CHUNK:
+                    prev_times = mw.chunk_times(mm, pos, size)
                 prev_ok = op
                 pos = end
 
     def _data_end_pos(self, mm) -> int | None:
         """Where the end-of-data record sits, from the footer of a closed file (None: no valid footer)."""
         size = self.size
-        f = size - len(MCAP_MAGIC) - _FOOTER_SIZE
+        f = size - len(MCAP_MAGIC) - mw.FOOTER_SIZE
         if f < len(MCAP_MAGIC) or mm[size - len(MCAP_MAGIC):] != MCAP_MAGIC:
             return None
-        op, length = _REC.unpack_from(mm, f)
-        if op != _OP_FOOTER or length != 20:
+        op, length = mw.REC.unpack_from(mm, f)
+        if op != mw.OP_FOOTER or length != 20:
             return None
         summary_start, _summary_offset_start, summary_crc = struct.unpack_from("<QQI", mm, f + 9)
         if summary_start:
             if not len(MCAP_MAGIC) < summary_start <= f or zlib.crc32(mm[summary_start:f + 9 + 16]) != summary_crc:
                 return None
-            de = summary_start - _DATA_END_SIZE
+            de = summary_start - mw.DATA_END_SIZE
         else:
-            de = f - _DATA_END_SIZE
-        if de < len(MCAP_MAGIC) or _REC.unpack_from(mm, de) != (_OP_DATA_END, 4):
+            de = f - mw.DATA_END_SIZE
+        if de < len(MCAP_MAGIC) or mw.REC.unpack_from(mm, de) != (mw.OP_DATA_END, 4):
             return None
         if summary_start:
             self._summary = (summary_start, f)
@@ -618,13 +602,13 @@ class RecordingReader:
             return out
         with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
             pos, stop = span
-            while pos + _REC.size <= stop:
-                op, length = _REC.unpack_from(mm, pos)
-                end = pos + _REC.size + length
+            while pos + mw.REC.size <= stop:
+                op, length = mw.REC.unpack_from(mm, pos)
+                end = pos + mw.REC.size + length
                 if end > stop:
                     break
-                if op == _OP_CHANNEL:
-                    cid, topic = _channel(mm[pos + _REC.size:end])
+                if op == mw.OP_CHANNEL:
+                    cid, topic = mw.channel(mm[pos + mw.REC.size:end])
                     out[cid] = topic
                 pos = end
         return out
@@ -641,13 +625,13 @@ class RecordingReader:
             p = mm.find(b"\x06", p, stop)
             if p < 0:
                 return data_end, found
-            length = _chunk_length(mm, p, stop)
+            length = mw.chunk_length(mm, p, stop)
             if length is not None:
                 try:
-                    _chunk_records(mm, p, length)
+                    mw.chunk_records(mm, p, length)
                     if p > pos:
                         return p, found
-                except _Bad:
+                except mw.BadRecord:
                     pass
                 found.append(p)
             p += 1
@@ -680,25 +664,25 @@ class RecordingReader:
 
         for s, e in zip(bounds, bounds[1:]):
             if s in heads:                      # a damaged chunk whose header holds together
-                after = s + _REC.size + _U64.unpack_from(mm, s + 1)[0]
-                chain = _index_chain(mm, after, e)
+                after = s + mw.REC.size + mw.U64.unpack_from(mm, s + 1)[0]
+                chain = mw.index_chain(mm, after, e)
                 if chain is not None:
                     add(chain)
                     continue
                 exact = False
-                chain = _index_chain_ending_at(mm, after, e)
+                chain = mw.index_chain_ending_at(mm, after, e)
             else:                               # bytes that do not hold together
                 exact = False
-                chain = _index_chain_ending_at(mm, s, e)
+                chain = mw.index_chain_ending_at(mm, s, e)
             if chain:
-                add(chain, prev_times if s == pos and prev_ok in (_OP_CHUNK, _OP_MINDEX) else None)
-        cut_short = resume is None and _record_runs_past(mm, pos, size)
+                add(chain, prev_times if s == pos and prev_ok in (mw.OP_CHUNK, mw.OP_MINDEX) else None)
+        cut_short = resume is None and mw.record_runs_past(mm, pos, size)
         if cut_short:
-            if mm[pos] == _OP_MINDEX and prev_ok in (_OP_CHUNK, _OP_MINDEX):
+            if mm[pos] == mw.OP_MINDEX and prev_ok in (mw.OP_CHUNK, mw.OP_MINDEX):
                 reason, lost, exact = "its last record, a message index of the chunk before it, is incomplete", {}, True
             else:
                 reason = "its last record is incomplete"
-                t = _chunk_times(mm, pos, size)
+                t = mw.chunk_times(mm, pos, size)
                 if t is not None:
                     times.extend(t)
         elif resume is None:
@@ -758,153 +742,6 @@ class RecordingReader:
         for name, _t, _d in self._records():
             out[name] = out.get(name, 0) + 1
         return out
-
-
-def _chunk_length(mm, pos: int, stop: int) -> int | None:
-    """The record length of a chunk at ``pos`` if its header holds together and it ends by ``stop``."""
-    if pos + _REC.size + _CHUNK_HEAD.size + 8 > stop or mm[pos] != _OP_CHUNK:
-        return None
-    length = _U64.unpack_from(mm, pos + 1)[0]
-    clen = _CHUNK_HEAD.unpack_from(mm, pos + _REC.size)[4]
-    c0 = pos + _REC.size + _CHUNK_HEAD.size
-    if clen > 4 or c0 + clen + 8 > stop or mm[c0:c0 + clen] not in _COMPRESSIONS:
-        return None
-    dlen = _U64.unpack_from(mm, c0 + clen)[0]
-    if length != _CHUNK_HEAD.size + clen + 8 + dlen or pos + _REC.size + length > stop:
-        return None
-    return length
-
-
-def _chunk_times(mm, pos: int, size: int) -> tuple[int, int] | None:
-    if pos + _REC.size + 16 > size or mm[pos] != _OP_CHUNK:
-        return None
-    t0, t1 = struct.unpack_from("<QQ", mm, pos + _REC.size)
-    return (t0, t1) if t0 <= t1 else None
-
-
-def _chunk_records(mm, pos: int, length: int) -> list[tuple[int, bytes]]:
-    """The (opcode, content) records of the chunk at ``pos``: decompressed, size and CRC checked."""
-    if _chunk_length(mm, pos, len(mm)) != length:
-        raise _Bad("a chunk whose header does not hold together (damaged length or compression fields)")
-    b = pos + _REC.size
-    _t0, _t1, usize, crc, clen = _CHUNK_HEAD.unpack_from(mm, b)
-    c0 = b + _CHUNK_HEAD.size
-    comp = mm[c0:c0 + clen]
-    d0 = c0 + clen + 8
-    raw = mm[d0:b + length]
-    try:
-        if comp == b"lz4":
-            import lz4.frame
-
-            data = lz4.frame.decompress(raw)
-        elif comp == b"zstd":
-            import zstandard
-
-            if usize > 64 * len(raw) + (1 << 20):
-                raise _Bad("a chunk with an implausible uncompressed size")
-            data = zstandard.ZstdDecompressor().decompress(raw, max_output_size=usize)
-        else:
-            data = raw
-    except _Bad:
-        raise
-    except Exception as exc:  # noqa: BLE001 - any decompressor error means damaged bytes
-        raise _Bad(f"a chunk that does not decompress ({type(exc).__name__})") from None
-    if len(data) != usize:
-        raise _Bad(f"a chunk of {len(data)} bytes where its header says {usize}")
-    if crc != 0 and zlib.crc32(data) != crc:
-        raise _Bad("a chunk whose CRC does not match its contents")
-    out = []
-    mv = memoryview(data)
-    i, n = 0, len(data)
-    while i < n:
-        if n - i < _REC.size:
-            raise _Bad("a chunk whose records do not add up")
-        op, ln = _REC.unpack_from(data, i)
-        j = i + _REC.size
-        if j + ln > n or (op == _OP_MESSAGE and ln < _MSG_HEAD.size):
-            raise _Bad("a chunk whose records do not add up")
-        if op in (_OP_MESSAGE, _OP_CHANNEL):
-            out.append((op, mv[j:j + ln]))
-        i = j + ln
-    return out
-
-
-def _string(buf, i: int) -> tuple[str, int]:
-    n = _U32.unpack_from(buf, i)[0]
-    return bytes(buf[i + 4:i + 4 + n]).decode("utf-8", "replace"), i + 4 + n
-
-
-def _channel(content) -> tuple[int, str]:
-    cid = _U16.unpack_from(content, 0)[0]
-    topic, _ = _string(content, 4)
-    return cid, topic.lstrip("/")
-
-
-def _metadata(content) -> tuple[str, dict[str, str]]:
-    try:
-        name, i = _string(content, 0)
-        n = _U32.unpack_from(content, i)[0]
-        i += 4
-        stop = i + n
-        md = {}
-        while i < stop:
-            k, i = _string(content, i)
-            v, i = _string(content, i)
-            md[k] = v
-    except struct.error:
-        raise _Bad("a metadata record that does not hold together") from None
-    if i != stop or stop != len(content):
-        raise _Bad("a metadata record that does not hold together")
-    return name, md
-
-
-def _message_index(mm, body: int, length: int) -> tuple[int, list[int]]:
-    """(channel id, log times) of a message index record whose content is ``mm[body:body+length]``."""
-    if length < 6:
-        raise _Bad("a damaged message index record")
-    cid, n = struct.unpack_from("<HI", mm, body)
-    if n % 16 or length != 6 + n:
-        raise _Bad("a damaged message index record")
-    return cid, [_U64.unpack_from(mm, body + 6 + 16 * k)[0] for k in range(n // 16)]
-
-
-def _index_chain(mm, pos: int, stop: int) -> list[tuple[int, list[int]]] | None:
-    """Consecutive message index records from ``pos`` up to exactly ``stop`` (None if they do not)."""
-    out = []
-    while pos < stop:
-        if pos + _REC.size > stop:
-            return None
-        op, length = _REC.unpack_from(mm, pos)
-        if op != _OP_MINDEX or pos + _REC.size + length > stop:
-            return None
-        try:
-            out.append(_message_index(mm, pos + _REC.size, length))
-        except _Bad:
-            return None
-        pos += _REC.size + length
-    return out if pos == stop else None
-
-
-def _index_chain_ending_at(mm, start: int, stop: int) -> list[tuple[int, list[int]]] | None:
-    """The longest run of message index records in ``[start, stop)`` that ends exactly at ``stop``
-    (the index of a chunk whose own header is damaged)."""
-    p = start
-    while True:
-        p = mm.find(bytes([_OP_MINDEX]), p, stop)
-        if p < 0:
-            return None
-        chain = _index_chain(mm, p, stop)
-        if chain:
-            return chain
-        p += 1
-
-
-def _record_runs_past(mm, pos: int, size: int) -> bool:
-    """The record at ``pos`` has a known opcode and a length that runs past the end of the file."""
-    if size - pos < _REC.size:
-        return True
-    op, length = _REC.unpack_from(mm, pos)
-    return op in _TOP_LEVEL_OPS and pos + _REC.size + length > size and length < (1 << 40)
 
 
 def _decode_points(data: bytes) -> PointsFrame:
