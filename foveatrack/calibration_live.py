@@ -11,7 +11,8 @@ command written per frame (a keep-alive as well as the procedure's changes).
 Safety: the plan is cut to the config's limits before anything moves (speed bytes above
 ``max_pan_byte``/``max_tilt_byte`` and turbo unless ``allow_turbo`` are dropped, and said so); the head
 is stopped when the lidar falls silent for ``[daemon] watchdog_s`` (the run then ends with an error),
-on Ctrl-C / SIGTERM, on any error and at the end.
+on Ctrl-C / SIGTERM, on any error and at the end.  A change of command that cannot be written ends
+the run too (the head would go on with the previous one while a new leg is timed).
 
 Timing: the Calibrator stamps each command with its frame's end (sensor time); the bytes reach the
 head later by the time the frame took to complete and be processed, plus one Pelco-D frame on the
@@ -109,6 +110,7 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
         raise UserError(f"{config.path} [head]: port {h.port!r} cannot be opened ({head.last_open_error})")
     slicer = FrameSlicer(rate_hz)
     encoded: dict = {}
+    written = None           # the last command the head got
     delay_ms: list[float] = []
     frames = 0
     t_start = time.monotonic()
@@ -154,7 +156,14 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
                     raw = encoded.get(key)
                     if raw is None:
                         raw = encoded[key] = encode_pan_tilt(h.address, *key, h.protocol)
-                    head.send_frame(raw)
+                    if not head.send_frame(raw) and key != written:
+                        # A keep-alive that did not get through changes nothing; a change of
+                        # command that did not, leaves the head doing the last one while the
+                        # procedure times a new leg: its measurements would be wrong.
+                        raise UserError(f"the head's serial link [head] port {h.port!r} failed when the calibration "
+                                        f"changed its command ({_legs(cal)} legs done); the head was stopped if it "
+                                        "could be reached and no table was written")
+                    written = key
                     if frame.n_points:
                         delay_ms.append((time.monotonic() - (frame.t_ns[-1] * 1e-9 + offset_s)) * 1e3)
                     if progress is not None:

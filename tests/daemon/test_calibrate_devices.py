@@ -119,6 +119,19 @@ def test_calibrates_a_head_through_its_serial_port_and_the_lidar_stream(tmp_path
                 break
             time.sleep(0.1)
         assert rest["pan_speed_deg_s"] == 0.0 and rest["tilt_speed_deg_s"] == 0.0, "Ctrl-C stops the head"
+
+        # The head's link dies mid-run: the next change of command cannot be written, so the run
+        # ends with an error naming the port (a leg timed against a head that never got its
+        # command would give a wrong speed), and writes no table.
+        out3 = tmp_path / "table3.json"
+        p = _calibrate(cfg, out3, "--pan-bytes", "40", "--tilt-bytes", "63", "--dwell-s", "3")
+        n0 = len(read_truth(truth))
+        wait_for(lambda: any(r["pan_speed_deg_s"] != 0.0 for r in read_truth(truth)[n0:]), 60, "the head to move",
+                 procs + [p])
+        procs[0].kill()
+        stdout, stderr = p.communicate(timeout=60)
+        assert p.returncode == 2 and "serial link" in stderr and str(link) in stderr, stderr
+        assert not out3.exists()
     finally:
         for q in procs:
             terminate(q)
