@@ -9,8 +9,8 @@ Runs, on one numba thread, each after a warm-up run (numba's cache, first-call c
   and with the head model asked about every point (``head_grid_s = 0``), the two other routes to
   the pose (the default takes it exactly from the head's motion pieces);
 
-and prints wall time, real-time factor and where the time of one frame goes (each stage of
-:meth:`sim.loop.ClosedLoop.step` timed by a wrapper; best of the repetitions).  Last, the floor: what
+and prints wall time, real-time factor and where the time of one frame goes (the stages of
+:meth:`sim.loop.ClosedLoop.step`, from the loop's own clocks; best of the repetitions).  Last, the floor: what
 the work every frame of the hall must do costs by itself (the exact scan of its 10 000 rays and the
 random draws of the effects the scene lists, one per hit), against the 0.5 ms a frame has at 200x.
 
@@ -24,7 +24,6 @@ import math
 import os
 import time
 import tomllib
-from collections import defaultdict
 from dataclasses import replace
 from pathlib import Path
 
@@ -32,7 +31,6 @@ import numpy as np
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
-import sim.loop as loop_mod  # noqa: E402
 from sim import effects as fx  # noqa: E402
 from sim.loop import ClosedLoop  # noqa: E402
 from sim.scene import load_scene, scene_from_mapping  # noqa: E402
@@ -50,36 +48,11 @@ def timed_run(scene, **kw) -> float:
 
 
 def stage_breakdown(scene) -> dict[str, float]:
-    """Seconds per stage of one run (wrappers around the loop's collaborators)."""
-    T: dict[str, float] = defaultdict(float)
-
-    def wrap(name, fn):
-        def w(*a, **k):
-            t = time.perf_counter()
-            r = fn(*a, **k)
-            T[name] += time.perf_counter() - t
-            return r
-        return w
-
+    """Seconds per stage of one run (the loop's own stage clocks, as ``simulate --json`` reports them)."""
     loop = ClosedLoop(scene)
-    loop.head.receive = wrap("head model: commands arrive", loop.head.receive)
-    loop.scan.scan_time = wrap("scan (phases, exact refraction)", loop.scan.scan_time)
-    loop.head.angles_at = wrap("head model: pose queries", loop.head.angles_at)
-    loop.head.pose_segments = wrap("head model: pose queries", loop.head.pose_segments)
-    loop.sensor.returns = wrap("ray casting + effects", loop.sensor.returns)
-    loop.tracker.process = wrap("tracker (Algorithms 1, 2, dead reckoning)", loop.tracker.process)
-    loop.uart.send = wrap("virtual UART", loop.uart.send)
-    loop._log = wrap("per-frame log (truth, metrics)", loop._log)
-    rotate = loop_mod.wk.rotate_head_pieces_kernel
-    loop_mod.wk.rotate_head_pieces_kernel = wrap("beams into the world (head pose)", rotate)
-    step = wrap("whole step", loop.step)
-    try:
-        period = loop.tracker.config.period_s
-        for k in range(int(round(scene.duration_s / period))):
-            step(k * period, (k + 1) * period)
-    finally:
-        loop_mod.wk.rotate_head_pieces_kernel = rotate
-    T["rest of the step (glue)"] = T["whole step"] - sum(v for k, v in T.items() if k != "whole step")
+    loop.run()
+    T = dict(loop.stage_s)
+    T["whole step"] = sum(loop.stage_s.values())
     return T
 
 
@@ -147,8 +120,7 @@ def main() -> None:
     runs = [stage_breakdown(scene) for _ in range(args.repeat)]
     best = {k: min(r[k] for r in runs) for k in runs[0]}
     total = best.pop("whole step")
-    print(f"  where a frame's time goes (as shipped; best of {args.repeat}, {total / frames * 1e3:.2f} ms per frame "
-          f"with the timers):")
+    print(f"  where a frame's time goes (as shipped; best of {args.repeat}, {total / frames * 1e3:.2f} ms per frame):")
     for k, v in sorted(best.items(), key=lambda kv: -kv[1]):
         print(f"    {v / frames * 1e3:6.3f} ms  {100 * v / total:4.1f} %  {k}")
     budget = 1e3 * scene.tracker.period_s / 200

@@ -102,6 +102,10 @@ class FrameLog:
         return {k: np.asarray(v) for k, v in self.__dict__.items()}
 
 
+STAGES = ("head model: commands arrive", "scan", "beams into the world (head pose)", "ray casting + effects",
+          "tracker", "link (Pelco-D, UART)", "log and recording")
+
+
 class ClosedLoop:
     """One run of a scene.  ``frame_hook(frame, output, loop)`` sees every frame (recording).
 
@@ -156,6 +160,10 @@ class ClosedLoop:
         self.bytes_sent = 0
         self.echo_bytes = 0
         self.last_sent: tuple[float, bytes] | None = None  # (time, Pelco-D bytes) of this frame's command
+        # Wall time per stage of :meth:`step`, summed over the run [s] (what a scene's fidelity costs,
+        # reported by ``simulate --json``); the first step's total alone (it loads or compiles the kernels).
+        self.stage_s: dict[str, float] = dict.fromkeys(STAGES, 0.0)
+        self.first_step_s: float | None = None
 
     # Effect streams and work counters live in the sensor; these keep the loop's own view of them.
     @property
@@ -190,13 +198,18 @@ class ClosedLoop:
 
     def step(self, t0: float, t1: float):
         scene = self.scene
+        clock = time.perf_counter
+        T = self.stage_s
+        c0 = clock()
         # 1. bytes that have arrived by the end of this frame reach the head first.
         due = [(t, b) for t, b in self._pending if t < t1]
         self._pending = [(t, b) for t, b in self._pending if t >= t1]
         if due:
             self.head.receive(b"".join(b for _, b in due), [t for t, _ in due])
+        c1 = clock()
         # 2. the scan.
         chunk = self.scan.scan_time(t0, t1)
+        c2 = clock()
         t_s = chunk.t_ns * 1e-9
         d_lidar = chunk.direction
         # 3. beams in the world at each point's own head pose.
@@ -223,9 +236,11 @@ class ClosedLoop:
             pan, tilt = self.head.angles_at(np.append(t_s, t_mid), wrap_pan=False)
             wk.rotate_pan_tilt_kernel(d_lidar, np.radians(pan[:-1]), np.radians(tilt[:-1]), d_world)
         mid_pose_deg = (float(wrap_pan_deg(pan[-1])), float(tilt[-1]))   # the log's truth
+        c3 = clock()
         # 4-5. ray casting and the effects the scene lists.
         xyz, pt_ns, refl_byte, on_target = self.sensor.returns(chunk, d_world, t0, t1)
         frame = Frame(t0, t1, xyz, pt_ns, refl_byte)
+        c4 = clock()
         # 6. the tracker and the link.
         send_t = t1 + scene.gimbal.send_delay_s
         if self.controller is not None:
@@ -233,6 +248,7 @@ class ClosedLoop:
             out = ExternalOutput(STOP if cmd is None else cmd)
         else:
             out = self.tracker.process(frame, send_t_s=send_t)
+        c5 = clock()
         self.last_sent = None
         if scene.gimbal.frozen and self.controller is None:
             # The head is frozen (paper Fig. 13/14a): nothing is sent, and the tracker's dead reckoning
@@ -251,9 +267,15 @@ class ClosedLoop:
                 # reports nothing), so here they are only counted; a reply parser must skip them.
                 self.echo_bytes += sum(len(b) for _, b in self.uart.pop_echo())
             self.last_sent = (send_t, data)
+        c6 = clock()
         self._log(t0, t1, frame, int(on_target.sum()), out, mid_pose_deg)
         if self.frame_hook is not None:
             self.frame_hook(frame, out, self)
+        c7 = clock()
+        for name, a, b in zip(STAGES, (c0, c1, c2, c3, c4, c5, c6), (c1, c2, c3, c4, c5, c6, c7)):
+            T[name] += b - a
+        if self.first_step_s is None:
+            self.first_step_s = c7 - c0
         return frame, out
 
     # ----------------------------------------------------------------------------------------------

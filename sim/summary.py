@@ -9,11 +9,17 @@ import numpy as np
 from foveatrack.metrics import tracking_metrics
 
 
-def summarize(scene, log: dict, wall_s: float) -> dict:
+def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
     """Tracking error after acquisition, acquisition time, detections, points on target, speed.
 
     "In the FoV" (the acquisition clock's start) is the first frame whose true off-axis angle is
     inside the scanner's half-FoV; acquisition uses the dead band + 1 deg (``foveatrack.metrics``).
+
+    Speed: ``wall_s`` and ``realtime_factor`` (virtual / wall seconds) are the whole run's; with the
+    run's ``loop`` (:class:`sim.loop.ClosedLoop`) also ``first_frame_s`` (the first frame loads the
+    numba kernels from their cache, or compiles them on a fresh install), ``realtime_factor_after_first_frame``
+    and ``time_per_frame_ms``: the mean wall time of each stage of a frame (scan, ray casting and
+    effects, tracker, ...), which is what the scene's fidelity costs.
     """
     half_fov = _half_fov_deg(scene)
     err = log["true_error_deg"].astype(float)
@@ -26,6 +32,14 @@ def summarize(scene, log: dict, wall_s: float) -> dict:
     m["points_per_frame"] = float(np.mean(log["points"])) if len(pts) else 0.0
     m["wall_s"] = round(wall_s, 3)
     m["realtime_factor"] = round(scene.duration_s / wall_s, 2) if wall_s > 0 else math.inf
+    if loop is not None and loop.first_step_s is not None:
+        n = len(log["t_end_s"])
+        steps_s = sum(loop.stage_s.values())
+        m["first_frame_s"] = round(loop.first_step_s, 3)
+        rest_s = steps_s - loop.first_step_s
+        m["realtime_factor_after_first_frame"] = (round((n - 1) * scene.tracker.period_s / rest_s, 2)
+                                                  if n > 1 and rest_s > 0 else None)
+        m["time_per_frame_ms"] = {k: round(v / n * 1e3, 4) for k, v in loop.stage_s.items()}
     m["scene"] = scene.name
     m["seed"] = scene.seed
     m["effects"] = sorted(scene.effects)

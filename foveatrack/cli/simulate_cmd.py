@@ -66,7 +66,7 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
         if writer is not None:
             writer.close()
     wall = time.perf_counter() - t0
-    summary = summarize(scene, log, wall)
+    summary = summarize(scene, log, wall, loop)
     if out_dir is not None:
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     if plot:
@@ -91,8 +91,13 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
         if "reconstruction_error_m" in summary:
             r = summary["reconstruction_error_m"]
             print(f"  reconstructed position error [m]: rms {fmt(r['rms'])}  max {fmt(r['max'])}")
-        print(f"  {summary['wall_s']:.2f} s wall, {summary['realtime_factor']:.1f}x real time"
-              + (f"; recording and plots in {out_dir}/" if out_dir else ""))
+        speed = f"  {summary['wall_s']:.2f} s wall, {summary['realtime_factor']:.1f}x real time"
+        after = summary.get("realtime_factor_after_first_frame")
+        if after is not None and summary["first_frame_s"] > 0.5:
+            # on a first run the kernels compile inside the first frame: say so, and the speed without it
+            speed += (f" ({summary['first_frame_s']:.1f} s of it the first frame, which loads or compiles the "
+                      f"numba kernels; {after:.0f}x after it)")
+        print(speed + (f"; recording and plots in {out_dir}/" if out_dir else ""))
     return summary
 
 

@@ -1,6 +1,7 @@
 """The closed loop: determinism, opt-in effects, scene validation, and Fig. 14a."""
 
 import hashlib
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -31,6 +32,20 @@ def test_same_seed_same_recording_to_the_bit(tmp_path):
     assert main(["simulate", str(SCENES / "noisy-link.toml"), "--duration", "2", "--seed", "7",
                  "--out", str(tmp_path / "other"), "--no-progress", "--json"]) == 0
     assert hashlib.sha256((tmp_path / "other" / "run.mcap").read_bytes()).hexdigest() != digests[0]
+
+
+def test_simulate_summary_says_where_a_frame_goes(tmp_path, capsys):
+    # The stages of a frame, as the scene's fidelity spends them (what accuracy costs in time).
+    assert main(["simulate", str(SCENES / "noisy-link.toml"), "--duration", "1", "--no-progress", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    from sim.loop import STAGES
+    per = s["time_per_frame_ms"]
+    assert list(per) == list(STAGES) and all(v >= 0 for v in per.values())
+    assert per["scan"] > 0 and per["ray casting + effects"] > 0 and per["tracker"] > 0
+    # the stages are inside the run's wall time, and the first frame is one of them
+    assert sum(per.values()) * s["frames"] / 1e3 <= s["wall_s"] + 1e-3
+    assert 0 < s["first_frame_s"] <= sum(per.values()) * s["frames"] / 1e3 + 1e-9
+    assert s["realtime_factor_after_first_frame"] > 0
 
 
 def _run(scene):
