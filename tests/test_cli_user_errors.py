@@ -132,3 +132,13 @@ def test_lidar_serve_says_it_waits_for_a_head_truth_file_not_yet_written(tmp_pat
     assert code == 0
     waiting = [line for line in err.splitlines() if "does not exist yet" in line]
     assert len(waiting) == 1 and f"--head-truth {truth}" in waiting[0] and "waiting for it" in waiting[0]
+
+
+def test_version_names_the_package_and_what_it_runs_on(capsys):
+    import foveatrack
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"foveatrack {foveatrack.__version__} (Python ") and "numpy" in out and "numba" in out

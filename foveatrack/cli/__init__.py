@@ -26,11 +26,25 @@ COMMAND_MODULES = (
 )
 
 
+def _version(dist: str) -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(dist)
+    except PackageNotFoundError:
+        return "not installed"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="foveatrack",
         description="Foveal UAV-intruder tracking with a retina-like lidar on a pan/tilt head.",
     )
+    from foveatrack import __version__
+
+    # what a bug report needs (recordings carry the same in their metadata)
+    parser.add_argument("--version", action="version", version=f"foveatrack {__version__} (Python "
+                        f"{sys.version.split()[0]}, numpy {_version('numpy')}, numba {_version('numba')})")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
