@@ -7,7 +7,9 @@ Definitions (the ones ``foveatrack simulate --json`` and the regression baseline
   accurate near 0), in degrees.
 * acquisition: the first frame from which the error stays below ``acquired_deg`` (default: the dead
   band + 1 deg) for ``hold_frames`` consecutive frames; ``acquisition_s`` = its time minus the time
-  the target was first inside the FoV (or the start).  ``None`` if never acquired.
+  the target was first inside the FoV (or the start).  ``None`` if never acquired.  The two instants
+  themselves (run time [s], for marking a plot) are ``in_fov_t_s`` and ``acquired_t_s`` (``None`` if
+  never acquired).
 * ``rms``, ``p95``, ``max`` of the error over frames *after acquisition* (NaN frames -- no truth --
   skipped).
 * ``reconstruction_error_m`` (rms/p95/max) and ``reconstruction_error_rel`` (error / range) when world
@@ -69,6 +71,8 @@ def tracking_metrics(t_s, error_deg, *, detected=None, in_fov=None, acquired_deg
         "frames": int(F),
         "frames_with_detection": int(np.sum(detected)) if detected is not None else None,
         "acquisition_s": None if acq_idx is None else float(t[acq_idx] - t_ref),
+        "in_fov_t_s": float(t_ref),
+        "acquired_t_s": None if acq_idx is None else float(t[acq_idx]),
         "tracking_error_deg": _stats(e[acq_idx:]) if acq_idx is not None else {"rms": None, "p95": None, "max": None},
     }
     if world_est is not None and world_true is not None:

@@ -65,6 +65,8 @@ class ReplayResult:
     # Dead-reckoned (pan_deg, tilt_deg) once the head has settled after the last command sent
     # (2 s later): where the run left the head, by the tracker's own reckoning.
     final_pose_deg: tuple[float, float] | None = None
+    # The tracker configuration the replay ran with (its dead band and tilt stops go on the plots).
+    tracker_cfg: TrackerConfig | None = None
 
     def summary(self) -> dict:
         return {"source": self.source, "path": self.path, "config": self.config, "frames": len(self.frames["t_end_s"]),
@@ -283,7 +285,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
         truth = {k: np.asarray(v) for k, v in T.items()}
         truth["target_xyz_m"] = truth["target_xyz_m"].reshape(-1, 3)
     res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth,
-                       final_pose_deg=final_pose)
+                       final_pose_deg=final_pose, tracker_cfg=cfg)
     res.comparison = compare(frames, recorded)
     res.metrics = replay_metrics(frames, truth, cfg)
     res.recorded_metrics = _recorded_metrics(recorded, truth, rec_cfg, frames)
@@ -364,7 +366,7 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
         run(slicer.flush())
         problem = r.problem
     frames = F.arrays()
-    res = ReplayResult("lvx", str(path), config_name or "default", frames, None, None)
+    res = ReplayResult("lvx", str(path), config_name or "default", frames, None, None, tracker_cfg=cfg)
     res.metrics = replay_metrics(frames, None, cfg)
     if problem:
         res.comparison["recording_problem"] = problem

@@ -28,6 +28,7 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
     m = tracking_metrics(log["t_end_s"], err, detected=log["detected"], in_fov=err < half_fov,
                          acquired_deg=acquired, world_est=log["estimate_xyz"], world_true=log["target_xyz"])
     pts = log["points_on_target"]
+    m["half_fov_deg"] = half_fov
     m["points_on_target_per_frame"] = float(np.mean(pts)) if len(pts) else 0.0
     m["points_per_frame"] = float(np.mean(log["points"])) if len(pts) else 0.0
     m["wall_s"] = round(wall_s, 3)

@@ -135,7 +135,7 @@ def cmd_calibrate(args) -> int:
     if args.json:
         return _print_json(summary)
     print(f"calibrated {table.head}: {run.frames} frames ({run.virtual_s:.0f} s virtual, {run.wall_s:.1f} s wall)")
-    print(f"  {'axis':4s} {'byte':>5s} {'measured':>9s} {'sigma':>7s} {'true':>9s} {'error':>8s}")
+    print(f"  {'axis':4s} {'byte':>5s} {'measured':>9s} {'sigma':>7s} {'true':>9s} {'error':>8s}   speeds in deg/s")
     for r in run.comparison:
         b = "turbo" if r["byte"] == TURBO else str(r["byte"])
         e = "-" if r["error_pct"] is None else f"{r['error_pct']:+.2f}%"
@@ -269,7 +269,7 @@ def calibrate_devices(args) -> int:
     if args.json:
         return _print_json(summary)
     print(f"calibrated {table.head}: {run.frames} frames in {run.wall_s:.1f} s")
-    print(f"  {'axis':4s} {'byte':>5s} {'measured':>9s} {'sigma':>7s}")
+    print(f"  {'axis':4s} {'byte':>5s} {'measured':>9s} {'sigma':>7s}   speeds in deg/s")
     for r in rows:
         b = "turbo" if r["byte"] == TURBO else str(r["byte"])
         print(f"  {r['axis']:4s} {b:>5s} {r['measured_deg_s']:9.4f} {r['sigma_deg_s']:7.4f}")
@@ -328,28 +328,46 @@ def _plot(table, rows_all, path, truth=None) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    fig, axs = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, axs = plt.subplots(1, 2, figsize=(11, 4.4))
     for ax, axis in zip(axs, ("pan", "tilt")):
         b = np.arange(64)
+        shown = []    # the speeds the y range is fitted to (an error bar may reach past it)
         if truth is not None:
             tr = truth.axis(axis)
-            ax.plot(b, [tr.speed_deg_s(int(x)) for x in b], "-", color="0.6", label="true (simulated unit)")
+            true_v = [tr.speed_deg_s(int(x)) for x in b]
+            ax.plot(b, true_v, "-", color="0.6", label="true (simulated unit)")
+            shown += true_v
         rows = [r for r in rows_all if r["axis"] == axis and r["byte"] != TURBO]
         ax.errorbar([r["byte"] for r in rows], [r["measured_deg_s"] for r in rows],
                     yerr=[3 * r["sigma_deg_s"] for r in rows], fmt="o", ms=4, capsize=3, label="measured (3 sigma)")
         t = table.axis(axis)
-        ax.plot(b, [t.speed_deg_s(int(x)) for x in b], ":", lw=1, label="table (interpolated)")
+        table_v = [t.speed_deg_s(int(x)) for x in b]
+        ax.plot(b, table_v, ":", lw=1, label="table (interpolated)")
+        shown += table_v + [r["measured_deg_s"] for r in rows]
         turbo = [r for r in rows_all if r["axis"] == axis and r["byte"] == TURBO]
         if turbo:
             ax.errorbar([66], [turbo[0]["measured_deg_s"]], yerr=[3 * turbo[0]["sigma_deg_s"]], fmt="s", ms=4,
                         capsize=3, label="turbo (0xFF), drawn at 66")
+            shown.append(turbo[0]["measured_deg_s"])
             if truth is not None:
                 ax.plot([66], [tr.speed_deg_s(TURBO)], "x", color="0.4")
-        ax.set_xlabel("speed byte")
+                shown.append(tr.speed_deg_s(TURBO))
+        # A speed is >= 0, and one short leg's wide 3-sigma bar must not squash the curve: fit the range
+        # to the speeds and write the size of any bar cut at the top beside its point.
+        top = 1.35 * max([v for v in shown if np.isfinite(v)] or [1.0])
+        ax.set_ylim(0, top)
+        for r in rows + turbo:
+            if r["measured_deg_s"] + 3 * r["sigma_deg_s"] > top:
+                x = 66 if r["byte"] == TURBO else r["byte"]
+                ax.annotate(f"3 sigma = {3 * r['sigma_deg_s']:.2f} deg/s (bar cut)", (x, r["measured_deg_s"]),
+                            xytext=(-6 if x > 40 else 6, 8), textcoords="offset points", fontsize=8, color="C0",
+                            ha="right" if x > 40 else "left")
+        ax.set_xlabel("Pelco-D speed byte")
         ax.set_ylabel(f"{axis} speed [deg/s]")
-        ax.set_title(f"{axis}: speed table ({table.head})", fontsize=9)
+        ax.set_title(axis, fontsize=10)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="upper left")
+    fig.suptitle(f"speed table of {table.head}: measured speed per speed byte")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -57,10 +57,10 @@ def cmd_demo(args) -> int:
     if len(optics.prisms) == 2:
         exact = radial_density(ScanModel(optics), 1.0)
         para = radial_density(ScanModel(optics, model="paraxial"), 1.0)
-        plot_density(para, exact, f"{optics.name}: radial density, 1 s", scan_dir / "density.png")
+        plot_density(para, exact, f"{optics.name}: radial density, 1 s (paper Fig. 5, eq. 4)", scan_dir / "density.png")
     noisy = ScanModel(optics, speed_noise=SpeedNoise(), rng=np.random.default_rng(0))
     curve = voxel_coverage(noisy, 2.0)
-    plot_coverage([("voxel, 1 % speed noise", curve)], f"{optics.name}: coverage (paper Appendix C)",
+    plot_coverage([("voxel, 1 % speed noise", curve)], f"{optics.name}: coverage, voxel definition (paper Fig. 6e)",
                   scan_dir / "coverage.png")
     print(f"  coverage (voxel, 1 % speed noise): 50 % at {curve.t50_s:.2f} s, 90 % at {curve.t90_s:.2f} s")
     print(f"plots: {out}/error.png, points_on_target.png, trajectory.png, head.png, scan/*.png")

@@ -232,7 +232,8 @@ def _pattern_plot(optics, model, duration, path, scan=None):
     chunk = scan.scan(0, int(round(duration * optics.point_rate_hz)))
     az, el = az_el_deg(chunk.direction[chunk.valid])
     plot_pattern(az, el, chunk.channel[chunk.valid].astype(np.int64),
-                 f"{optics.name}: {duration * 1000:g} ms, {scan.model} model", path)
+                 f"{optics.name}: scan pattern, {duration * 1000:g} ms, {scan.model} model\n(cf. paper Fig. 4, 8, 9c)",
+                 path)
     return az, el
 
 
@@ -303,7 +304,8 @@ def cmd_density(args) -> int:
         from foveatrack.cli.scan_plots import plot_density
 
         para, exact = (dens, dens_other) if args.model == "paraxial" else (dens_other, dens)
-        plot_density(para, exact, f"{optics.name}: radial density, {args.duration:g} s", args.plot)
+        plot_density(para, exact, f"{optics.name}: radial density, {args.duration:g} s (paper Fig. 5, eq. 4)",
+                     args.plot)
     _emit(args, result, [f"{optics.name}: {dens.points} points; {args.model} model vs eq. (4) between 0.1R and 1.8R: "
                          f"max relative error {worst:.2%}; {other}: {result[other]['max_relative_error_0.1R_1.8R']:.2%}"])
     return 0
@@ -333,8 +335,9 @@ def cmd_coverage(args) -> int:
     if args.plot:
         from foveatrack.cli.scan_plots import plot_coverage
 
-        plot_coverage([(f"{args.method}, noise {args.noise or 0:g}", curve)],
-                      f"{optics.name}: coverage ({args.method} definition)", args.plot)
+        noise = f"{args.noise * 100:g} % speed noise" if args.noise else "no speed noise"
+        plot_coverage([(f"{args.method}, {noise}", curve)],
+                      f"{optics.name}: coverage, {args.method} definition (paper Fig. 6e)", args.plot)
     _emit(args, result, [f"{optics.name}: {args.method} coverage after {args.duration:g} s: {curve.coverage[-1]:.1%} "
                          f"of {curve.cells} cells; 50 % {_reached(curve.t50_s, args.duration)}, "
                          f"90 % {_reached(curve.t90_s, args.duration)}"])
@@ -343,7 +346,7 @@ def cmd_coverage(args) -> int:
 
 def _reached(t_s: float | None, duration_s: float) -> str:
     """``at T s``, or ``not reached in D s`` when the run ended before that coverage (not "at None s")."""
-    return f"at {t_s:g} s" if t_s is not None else f"not reached in {duration_s:g} s"
+    return f"at {t_s:.2f} s" if t_s is not None else f"not reached in {duration_s:g} s"
 
 
 def _range(text: str, name: str):
@@ -386,7 +389,8 @@ def cmd_coverage_map(args) -> int:
     if args.plot:
         from foveatrack.cli.scan_plots import plot_coverage_map
 
-        plot_coverage_map(cmap, f"{optics.name}: time to 90 % voxel coverage", args.plot)
+        plot_coverage_map(cmap, f"{optics.name}: time to 90 % voxel coverage (paper Fig. 7)", args.plot,
+                          device_rpm=(optics.prisms[0].rpm, optics.prisms[1].rpm))
     frac_noise = float(np.mean(cmap.t90_noise_s < args.cap))
     frac_clean = float(np.mean(cmap.t90_clean_s < args.cap))
     _emit(args, result, [f"{optics.name}: {args.grid}x{args.grid} speeds, cap {args.cap:g} s, {wall:.1f} s wall: "

@@ -1,11 +1,20 @@
-"""Plots of a replay: the paper's Fig. 14a/b/c equivalents (matplotlib Agg, PNG; CLI edge only).
+"""Plots of a replay: the paper's Fig. 14a/b/c equivalents and the head angles (matplotlib Agg, PNG;
+CLI edge only).  Drawn by the same functions as ``foveatrack simulate --plot`` (``sim_plots``), so a
+simulated run and its replay look alike.
 
-* fig14a_points_vs_lateral.png -- points on the target per frame vs the target's lateral position
-  (truth: the simulator's points_on_target and target y; otherwise the detection's point count and y)
-* fig14b_error_vs_time.png -- tracking error vs time (truth: true error off the axis; and the
-  detection bearing error off the lidar axis)
-* fig14c_trajectory.png -- reconstructed target trajectory (the tracker's world estimates) vs truth,
-  top view (x-y) and height vs time
+* fig14a_points_vs_lateral.png -- points per frame (a) along the target's path, (b) against its angle
+  off the lidar axis.  With truth (a simulator recording): the true points on the target and the
+  detection's points, both against the true position; otherwise the detection's points against the
+  tracker's own world estimate and bearing.
+* fig14b_error_vs_time.png -- the true error off the axis (truth) and the detection's bearing off the
+  axis against time, the dead band, the acquisition and tracking phases shaded (paper Fig. 12 colours)
+* fig14c_trajectory.png -- the reconstructed target trajectory (the tracker's world estimates) against
+  truth: top view, height against time, and the reconstruction error
+* head_angles.png -- the head (true, or as recorded) and the replay's dead reckoning, the tilt stops
+  when the tilt comes near one, and the tracker's state frame by frame (not for a ``.lvx`` file)
+
+Time is the recording's own for a simulator recording (virtual time, as ``simulate`` plots it) and
+seconds since the first frame otherwise.
 """
 
 from __future__ import annotations
@@ -16,68 +25,57 @@ import numpy as np
 
 
 def plot_all(res, out_dir: Path) -> list[Path]:
-    import matplotlib
+    from foveatrack.cli import sim_plots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    f, t = res.frames, res.truth
-    time_s = f["t_end_s"] - (f["t_end_s"][0] if len(f["t_end_s"]) else 0.0)
-    det = f["detected"]
+    f, truth, cfg = res.frames, res.truth, res.tracker_cfg
+    out_dir = Path(out_dir)
+    rp = Path(res.path)   # "overhead-tilt-stop/run.mcap": simulate names every recording run.mcap
+    name = f"{rp.parent.name}/{rp.name}" if rp.parent.name else rp.name
+    t_abs = np.asarray(f["t_end_s"], float)
+    t0 = 0.0 if res.source == "simulator" or not len(t_abs) else float(t_abs[0])
+    t = t_abs - t0
+    det = np.asarray(f["detected"], bool)
+    bearing = np.where(det, np.hypot(f["error_pan_deg"], f["error_tilt_deg"]), np.nan)
+    det_points = np.where(det, f["det_n_points"], np.nan)
     files = []
 
-    fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
-    if t is not None:
-        ax.plot(t["target_xyz_m"][:, 1], t["points_on_target"], ".", ms=4, label="truth: points on target")
-    ax.plot(f["det_xyz"][det, 1], f["det_n_points"][det], "x", ms=4, label="detection: points in D")
-    ax.set_xlabel("lateral position y [m] (" + ("world, truth" if t is not None else "lidar frame") + ")")
-    ax.set_ylabel("points per frame")
-    ax.set_title("Fig. 14a equivalent: points on target vs lateral position")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    files.append(_save(fig, plt, out_dir / "fig14a_points_vs_lateral.png"))
+    if truth is not None:
+        files.append(sim_plots.plot_points_vs_position(
+            truth["target_xyz_m"], truth["true_error_deg"], truth["points_on_target"],
+            f"{name}: points on the UAV per frame (replay)", out_dir / "fig14a_points_vs_lateral.png",
+            det_points=det_points))
+    else:
+        files.append(sim_plots.plot_points_vs_position(
+            f["world_xyz"], bearing, None, f"{name}: points in the detection per frame (replay)",
+            out_dir / "fig14a_points_vs_lateral.png", det_points=det_points, source="tracker's"))
 
-    fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
-    if t is not None:
-        ax.plot(time_s, t["true_error_deg"], "-", lw=1.2, label="true error off the axis")
-    be = np.hypot(f["error_pan_deg"], f["error_tilt_deg"])
-    ax.plot(time_s, be, ".", ms=3, label="detection bearing error")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("error [deg]")
-    ax.set_title("Fig. 14b equivalent: tracking error vs time")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    files.append(_save(fig, plt, out_dir / "fig14b_error_vs_time.png"))
+    tr = res.metrics.get("tracking") or {}
+    phases = {}
+    if tr.get("in_fov_t_s") is not None:
+        acq = tr.get("acquired_t_s")
+        phases = dict(in_fov_t_s=tr["in_fov_t_s"] - t0, acquired_t_s=None if acq is None else acq - t0)
+    db = None if cfg is None else max(cfg.deadband_pan_deg, cfg.deadband_tilt_deg)
+    if res.source == "lvx":   # the head did not move: nothing was tracked, the dead band never acted
+        db, err_title = None, f"{name}: detection's bearing off the lidar axis (replay, head frozen)"
+    else:
+        err_title = f"{name}: tracking error (replay; paper Fig. 14b)"
+    files.append(sim_plots.plot_error_vs_time(
+        t, None if truth is None else truth["true_error_deg"], err_title,
+        out_dir / "fig14b_error_vs_time.png", detected=det if truth is not None else None,
+        bearing_error_deg=bearing, deadband_deg=db, **phases))
 
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
-    w = f["world_xyz"]
-    if t is not None:
-        a1.plot(t["target_xyz_m"][:, 0], t["target_xyz_m"][:, 1], "-", lw=1.5, label="truth")
-        a2.plot(time_s, t["target_xyz_m"][:, 2], "-", lw=1.5, label="truth")
-    a1.plot(w[:, 0], w[:, 1], ".", ms=3, label="reconstructed")
-    a2.plot(time_s, w[:, 2], ".", ms=3, label="reconstructed")
-    a1.set_xlabel("x [m]")
-    a1.set_ylabel("y [m]")
-    a1.set_aspect("equal", adjustable="datalim")
-    a1.set_title("top view")
-    a2.set_xlabel("time [s]")
-    a2.set_ylabel("z [m]")
-    a2.set_title("height")
-    for a in (a1, a2):
-        a.grid(alpha=0.3)
-        a.legend()
-    fig.suptitle("Fig. 14c equivalent: reconstructed trajectory vs truth")
-    files.append(_save(fig, plt, out_dir / "fig14c_trajectory.png"))
+    files.append(sim_plots.plot_trajectory(
+        t, f["world_xyz"], f"{name}: reconstructed trajectory (replay; paper Fig. 14c)",
+        out_dir / "fig14c_trajectory.png", true_xyz=None if truth is None else truth["target_xyz_m"]))
+
+    if res.source != "lvx":
+        if truth is not None:
+            pan, tilt, source = truth["pan_deg"], truth["tilt_deg"], "true"
+        else:
+            pan, tilt, source = res.recorded["head_pan_deg"], res.recorded["head_tilt_deg"], "recorded"
+        files.append(sim_plots.plot_head(
+            t, pan, tilt, f"{name}: head angles (replay)", out_dir / "head_angles.png",
+            est_pan_deg=f["head_pan_deg"], est_tilt_deg=f["head_tilt_deg"], state=f["state"], source=source,
+            tilt_limits_deg=None if cfg is None else cfg.tilt_limits_deg,
+            tilt_margin_deg=None if cfg is None else cfg.tilt_margin_deg))
     return files
-
-
-def _save(fig, plt, path: Path) -> Path:
-    from foveatrack.errors import UserError
-
-    try:
-        fig.savefig(path, dpi=110)
-    except OSError as exc:
-        raise UserError(f"cannot write {path}: {exc.strerror}") from None
-    finally:
-        plt.close(fig)
-    return path

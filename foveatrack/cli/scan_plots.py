@@ -25,16 +25,22 @@ def _save(fig, path: str | Path) -> Path:
 
 
 def plot_pattern(az_deg, el_deg, channel, title: str, path) -> Path:
-    """Scan pattern in azimuth/elevation (paper Fig. 4, 8, 9c)."""
+    """Scan pattern in azimuth/elevation (paper Fig. 4, 8, 9c), as seen from behind the lidar."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 7 * max(0.35, np.ptp(el_deg) / max(np.ptp(az_deg), 1e-9))))
     if channel.max() > 0:
-        sc = ax.scatter(az_deg, el_deg, c=channel, s=0.3, cmap="tab10", linewidths=0)
-        fig.colorbar(sc, ax=ax, label="channel (line id)")
+        from matplotlib.colors import BoundaryNorm, ListedColormap
+
+        n = int(channel.max()) + 1      # one colour band per channel, centred on its id
+        cmap = ListedColormap(plt.get_cmap("tab10").colors[:n]) if n <= 10 else plt.get_cmap("viridis", n)
+        sc = ax.scatter(az_deg, el_deg, c=channel, s=0.3, cmap=cmap, norm=BoundaryNorm(np.arange(n + 1) - 0.5, n),
+                        linewidths=0)
+        fig.colorbar(sc, ax=ax, label="channel (line id)", ticks=np.arange(n))
     else:
         ax.plot(az_deg, el_deg, lw=0.25, color="tab:red")
     ax.set_aspect("equal")
-    ax.set_xlabel("azimuth [deg] (+ = left)")
+    ax.invert_xaxis()   # +az = left drawn on the left: the pattern as seen from behind the lidar, not mirrored
+    ax.set_xlabel("azimuth [deg] (+ = left; seen from behind the lidar)")
     ax.set_ylabel("elevation [deg]")
     ax.set_title(title)
     return _save(fig, path)
@@ -45,18 +51,23 @@ def plot_density(density, exact_density, title: str, path) -> Path:
     plt = _plt()
     fig, (ax, ax2) = plt.subplots(2, 1, figsize=(7, 7), sharex=True, height_ratios=[2, 1])
     x = density.centers_deg / density.r_scale_deg
-    ax.semilogy(x, density.analytic, "k-", lw=1.5, label="eq. (4), analytic")
+    # eq. (4) is 0 past the rim (r > 2R): on a log axis that drew a vertical drop that reads as data
+    analytic = np.where(density.analytic > 0, density.analytic, np.nan)
+    ax.semilogy(x, analytic, "k-", lw=1.5, label="eq. (4), analytic")
     ax.semilogy(x, density.simulated, "o", ms=3, label=f"simulated, {density.model} model")
     if exact_density is not None:
         ax.semilogy(x, exact_density.simulated, "s", ms=3, mfc="none", label=f"simulated, {exact_density.model} model")
     ax.set_ylabel("points per deg$^2$ (fraction of all)")
     ax.legend()
     ax.set_title(title)
-    ax2.axhspan(-0.05, 0.05, color="0.9")
+    ax2.axhspan(-0.05, 0.05, color="0.9", label="within 5 %")
     ax2.plot(x, density.relative_error, "o", ms=3, label=density.model)
     if exact_density is not None:
         ax2.plot(x, exact_density.relative_error, "s", ms=3, mfc="none", label=exact_density.model)
-    ax2.set_ylim(-0.6, 0.6)
+    errs = [d.relative_error for d in (density, exact_density) if d is not None]
+    worst = max((float(np.nanmax(np.abs(e[np.isfinite(e)]))) for e in errs if np.isfinite(e).any()), default=0.0)
+    lim = min(1.05, max(0.6, 1.1 * worst))     # every point shown (to -100 %: nothing in a bin)
+    ax2.set_ylim(-lim, lim)
     ax2.set_xlabel("off-axis angle r / R   (R = (n-1)α, one prism's paraxial deflection)")
     ax2.set_ylabel("simulated / eq. (4) − 1")
     ax2.legend()
@@ -64,32 +75,53 @@ def plot_density(density, exact_density, title: str, path) -> Path:
 
 
 def plot_coverage(curves, title: str, path) -> Path:
-    """Coverage against accumulation time (paper Fig. 6e)."""
+    """Coverage against accumulation time (paper Fig. 6e), the times to 50 % and 90 % marked
+    (the paper's device: 0.3 s and 0.8 s)."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for label, curve in curves:
-        ax.plot(curve.times_s, 100 * curve.coverage, label=label)
+        (line,) = ax.plot(curve.times_s, 100 * curve.coverage, label=label)
+        for level, t in ((50, curve.t50_s), (90, curve.t90_s)):
+            if t is not None:
+                ax.plot([t, t], [0, level], ":", color=line.get_color(), lw=1)
+                ax.annotate(f"{level} % at {t:.2f} s", (t, level), xytext=(5, -12), textcoords="offset points",
+                            fontsize="small", color=line.get_color())
     ax.axhline(90, color="0.6", ls=":")
     ax.axhline(50, color="0.6", ls=":")
     ax.set_xlabel("accumulation time [s]")
     ax.set_ylabel("coverage [%]")
     ax.set_ylim(0, 101)
-    ax.legend()
+    ax.set_xlim(left=0)
+    ax.legend(loc="lower right")
     ax.set_title(title)
     return _save(fig, path)
 
 
-def plot_coverage_map(cmap, title: str, path) -> Path:
-    """Time to 90 % coverage over the two prism speeds, with and without noise (paper Fig. 7)."""
+def plot_coverage_map(cmap, title: str, path, device_rpm=None) -> Path:
+    """Time to 90 % coverage over the two prism speeds, with and without noise (paper Fig. 7).
+
+    device_rpm : (rpm1, rpm2) of the scanner's own prisms, ringed in red as in the paper.
+    """
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
-    extent = [cmap.rpm1[0], cmap.rpm1[-1], cmap.rpm2[0], cmap.rpm2[-1]]
+
+    def edges(c):   # each cell centred on its speed (the grid's ends were the image's edges)
+        h = 0.5 * (c[-1] - c[0]) / max(len(c) - 1, 1)
+        return c[0] - h, c[-1] + h
+
+    extent = [*edges(cmap.rpm1), *edges(cmap.rpm2)]
     for ax, data, name in ((axes[0], cmap.t90_noise_s, "(a) 1 % speed noise"), (axes[1], cmap.t90_clean_s, "(b) no noise")):
         im = ax.imshow(np.minimum(data, cmap.cap_s), origin="lower", extent=extent, aspect="auto",
                        vmin=0, vmax=cmap.cap_s, cmap="viridis")
+        inside = device_rpm is not None and (extent[0] <= device_rpm[0] <= extent[1]
+                                             and extent[2] <= device_rpm[1] <= extent[3])
+        if inside:   # a ring, no legend box over the map: the title says what it is
+            ax.plot(*device_rpm, "o", ms=14, mfc="none", mec="red", mew=2)
         ax.set_xlabel("prism 1 speed [rpm]")
         ax.set_ylabel("prism 2 speed [rpm]")
         ax.set_title(name)
     fig.colorbar(im, ax=axes, label=f"time to {int(cmap.level * 100)} % coverage [s] (capped at {cmap.cap_s:g} s)")
+    if inside:
+        title += f"; red ring: this scanner ({device_rpm[0]:g}, {device_rpm[1]:g} rpm)"
     fig.suptitle(title)
     return _save(fig, path)

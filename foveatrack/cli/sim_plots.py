@@ -1,4 +1,14 @@
-"""Plots of a closed-loop run: the paper's Fig. 14 a/b/c equivalents (PNG)."""
+"""Plots of a tracking run: the paper's Fig. 14 a/b/c equivalents and the head angles (PNG).
+
+One set of functions for both drivers: ``foveatrack simulate --plot`` passes the closed loop's log,
+``foveatrack replay --plot`` the replay's arrays (see ``replay_plots``), so a simulated run and its
+replay look alike.  The functions take plain per-frame arrays (NaN where a value is missing).
+
+Colours are the same in every plot: truth a dark grey line, the tracker's own estimates and
+detections orange, frames without a detection red crosses, thresholds (dead band, half FoV, tilt
+stops) grey.  The error plot shades the acquisition phase pink and the tracking phase green, the
+marking colours of the paper's Fig. 12 that its Fig. 14b reuses.
+"""
 
 from __future__ import annotations
 
@@ -8,61 +18,228 @@ import numpy as np
 
 from foveatrack.cli.scan_plots import _plt, _save
 
+TRUTH_C = "0.2"          # truth: a dark grey line
+EST_C = "tab:orange"     # the tracker's estimates and detections
+MISS_C = "tab:red"       # frames without a detection
+THRESH_C = "0.45"        # dead band, half FoV, stops
+ACQ_C = "tab:pink"       # paper Fig. 12: pink, where first detection happens
+TRACK_C = "tab:green"    # paper Fig. 12: green, the active tracking phase
+STATE_C = {"waiting": "0.75", "tracking": "tab:green", "holding": "gold", "searching": "tab:pink"}
 
-def plot_points_vs_position(log, title, path) -> Path:
-    """Fig. 14a: points on the UAV per frame against its lateral position."""
+_AXIS_LABEL = ("x [m] (forward)", "y [m] (+ = left)", "z [m] (+ = up)")
+
+
+def _legend_outside(ax, **kw):
+    """Legend to the right of the axes: it never covers data (saved with ``bbox_inches="tight"``)."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", borderaxespad=0.0, **kw)
+
+
+def main_axis(xyz) -> int:
+    """Index (0 x, 1 y, 2 z) of the world axis along which the positions spread the most: the
+    "horizontal line" of the paper's Fig. 14a is y for a crossing pass, x for a target flying
+    overhead toward the lidar."""
+    xyz = np.asarray(xyz, float).reshape(-1, 3)
+    ok = np.all(np.isfinite(xyz), axis=1)
+    if not ok.any():
+        return 1
+    return int(np.argmax(np.ptp(xyz[ok], axis=0)))
+
+
+def plot_points_vs_position(pos_xyz, off_axis_deg, points, title, path, *, det_points=None,
+                            half_fov_deg=None, source="true") -> Path:
+    """Fig. 14a: points on the UAV per frame (a) along its path, (b) against its angle off the lidar axis.
+
+    pos_xyz : (F, 3) [m] world positions; off_axis_deg : (F,) [deg] the target's angle off the lidar
+    axis; points : (F,) points on the target (truth) or None; det_points : (F,) points in the
+    tracker's detection (NaN: none); source : "true" or "reconstructed", what pos/off-axis are.
+    Panel (b) is the one to set beside the radial density (paper Fig. 5): it peaks on the axis.
+    """
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(7, 4))
-    ax.plot(log["target_lateral_m"], log["points_on_target"], "o-", ms=3, lw=0.8)
-    ax.set_xlabel("target lateral position y [m] (+ = left)")
-    ax.set_ylabel("points on the target per frame")
-    ax.set_title(title)
-    return _save(fig, path)
-
-
-def plot_error_vs_time(log, deadband_deg, title, path) -> Path:
-    """Fig. 14b: angular tracking error against time."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(8, 4))
-    t = log["t_end_s"]
-    ax.plot(t, log["true_error_deg"], lw=1, label="true error (target off the lidar axis)")
-    det = log["detected"].astype(bool)
-    ax.plot(t[~det], log["true_error_deg"][~det], "x", ms=4, color="tab:red", label="no detection")
-    ax.axhline(deadband_deg, color="0.5", ls=":", label=f"dead band {deadband_deg:g} deg")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("angular error [deg]")
-    ax.set_yscale("symlog", linthresh=1.0)
-    ax.legend()
-    ax.set_title(title)
-    return _save(fig, path)
-
-
-def plot_trajectory(log, title, path) -> Path:
-    """Fig. 14c: the intruder's trajectory reconstructed from lidar + head commands, vs truth."""
-    plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
-    tru = np.asarray(log["target_xyz"], float)
-    est = np.asarray(log["estimate_xyz"], float)
-    for ax, (i, j, lab) in zip(axes, ((0, 1, "top view: x [m], y [m]"), (1, 2, "front view: y [m], z [m]"))):
-        ax.plot(tru[:, i], tru[:, j], "-", color="0.3", lw=1.5, label="truth")
-        ax.plot(est[:, i], est[:, j], ".", ms=3, color="tab:orange", label="reconstructed")
-        ax.set_title(lab)
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.legend()
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True, constrained_layout=True)
+    pos = np.asarray(pos_xyz, float).reshape(-1, 3)
+    k = main_axis(pos)
+    off = np.asarray(off_axis_deg, float)
+    series = []
+    if points is not None:
+        series.append((np.asarray(points, float), "points on the target (truth)", dict(color=TRUTH_C, marker="o")))
+    if det_points is not None:
+        series.append((np.asarray(det_points, float), "points in the detection (Alg. 1)",
+                       dict(color=EST_C, marker="x", ls="none")))
+    for n, label, style in series:
+        a1.plot(pos[:, k], n, ms=3, lw=0.6, label=label, **style)
+        a2.plot(off, n, ms=3, ls="none", **{k2: v for k2, v in style.items() if k2 != "ls"})
+    a1.set_xlabel(f"{source} target position {_AXIS_LABEL[k]}")
+    a1.set_ylabel("points per frame")
+    a1.set_title("(a) along its path (paper Fig. 14a)", fontsize="medium")
+    a2.set_xlabel(f"{source} target angle off the lidar axis [deg]")
+    a2.set_title("(b) against the angle off the axis (cf. density, paper Fig. 5)", fontsize="medium")
+    if half_fov_deg is not None:
+        a2.axvline(half_fov_deg, color=THRESH_C, ls="--", lw=1, label=f"half FoV {half_fov_deg:.1f} deg")
+    a2.set_xlim(left=0)
+    for a in (a1, a2):
+        a.yaxis.get_major_locator().set_params(integer=True)
+        a.set_ylim(bottom=0)
+        a.grid(alpha=0.3)
+    handles = [h for a in (a1, a2) for h in a.get_legend_handles_labels()[0]]
+    labels = [lab for a in (a1, a2) for lab in a.get_legend_handles_labels()[1]]
+    fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize="small")
     fig.suptitle(title)
     return _save(fig, path)
 
 
-def plot_head(log, title, path) -> Path:
+def plot_error_vs_time(t_s, error_deg, title, path, *, detected=None, bearing_error_deg=None, deadband_deg=None,
+                       half_fov_deg=None, in_fov_t_s=None, acquired_t_s=None) -> Path:
+    """Fig. 14b: angular tracking error against time, acquisition and tracking phases shaded.
+
+    error_deg : (F,) [deg] true angle of the target off the lidar axis, or None (no truth);
+    bearing_error_deg : (F,) [deg] the detection's bearing off the axis (NaN: no detection);
+    in_fov_t_s, acquired_t_s : [s] the acquisition clock's start and the acquisition instant
+    (``foveatrack.metrics.tracking_metrics``; ``acquired_t_s`` None: never acquired).
+    """
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(8, 4))
-    t = log["t_end_s"]
-    ax.plot(t, log["head_pan_deg"], label="pan, true")
-    ax.plot(t, log["est_pan_deg"], "--", label="pan, dead-reckoned")
-    ax.plot(t, log["head_tilt_deg"], label="tilt, true")
-    ax.plot(t, log["est_tilt_deg"], "--", label="tilt, dead-reckoned")
+    fig, ax = plt.subplots(figsize=(9, 4.2))
+    t = np.asarray(t_s, float)
+    t_end = float(t[-1]) if len(t) else 0.0
+    if acquired_t_s is not None:
+        t0 = in_fov_t_s if in_fov_t_s is not None else (float(t[0]) if len(t) else 0.0)
+        if acquired_t_s > t0:
+            ax.axvspan(t0, acquired_t_s, color=ACQ_C, alpha=0.15, lw=0,
+                       label=f"acquisition, {acquired_t_s - t0:.2f} s")
+        ax.axvspan(acquired_t_s, t_end, color=TRACK_C, alpha=0.10, lw=0, label="tracking after acquisition")
+    elif in_fov_t_s is not None:
+        ax.text(0.01, 0.97, "never acquired", transform=ax.transAxes, va="top", fontsize="small", color=MISS_C)
+    top = 0.0
+    if error_deg is not None:
+        e = np.asarray(error_deg, float)
+        ax.plot(t, e, "-", color=TRUTH_C, lw=1.2, label="true error (target off the lidar axis)")
+        if detected is not None:
+            miss = ~np.asarray(detected, bool)
+            ax.plot(t[miss], e[miss], "x", ms=4, color=MISS_C, label="no detection")
+        top = max(top, np.nanmax(e) if np.isfinite(e).any() else 0.0)
+    if bearing_error_deg is not None:
+        b = np.asarray(bearing_error_deg, float)
+        ax.plot(t, b, ".", ms=3, color=EST_C, label="detection's bearing off the axis")
+        top = max(top, np.nanmax(b) if np.isfinite(b).any() else 0.0)
+    if deadband_deg is not None:
+        ax.axhline(deadband_deg, color=THRESH_C, ls=":", label=f"dead band {deadband_deg:g} deg")
+    if half_fov_deg is not None and top >= 0.8 * half_fov_deg:   # only where the curve comes near it
+        ax.axhline(half_fov_deg, color=THRESH_C, ls="--", lw=1, label=f"half FoV {half_fov_deg:.1f} deg")
+    ax.set_ylim(bottom=0)
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("[deg]")
-    ax.legend()
+    ax.set_ylabel("angular error [deg]")
+    ax.grid(alpha=0.3)
+    _legend_outside(ax)
     ax.set_title(title)
+    return _save(fig, path)
+
+
+def plot_trajectory(t_s, est_xyz, title, path, *, true_xyz=None) -> Path:
+    """Fig. 14c: the intruder's trajectory reconstructed from lidar + head, against the truth.
+
+    Top view (x forward, y left; the lidar at the origin), height against time and, with truth, the
+    reconstruction error against time: at tens of metres a 0.1 m error is invisible in the views.
+    """
+    plt = _plt()
+    ncol = 3 if true_xyz is not None else 2
+    fig, axes = plt.subplots(1, ncol, figsize=(5.2 * ncol, 4.6), constrained_layout=True,
+                             width_ratios=[1.3] + [1] * (ncol - 1))
+    t = np.asarray(t_s, float)
+    est = np.asarray(est_xyz, float).reshape(-1, 3)
+    a1, a2 = axes[0], axes[1]
+    a1.plot([0], [0], marker=(3, 0, -90), ms=9, color="k", ls="none", label="lidar (head centre)")
+    if true_xyz is not None:
+        tru = np.asarray(true_xyz, float).reshape(-1, 3)
+        a1.plot(tru[:, 0], tru[:, 1], "-", color=TRUTH_C, lw=1.5, label="truth")
+        a2.plot(t, tru[:, 2], "-", color=TRUTH_C, lw=1.5)
+    a1.plot(est[:, 0], est[:, 1], ".", ms=3, color=EST_C, label="reconstructed")
+    a2.plot(t, est[:, 2], ".", ms=3, color=EST_C)
+    a1.set_xlabel(_AXIS_LABEL[0])
+    a1.set_ylabel(_AXIS_LABEL[1])
+    a1.set_aspect("equal", adjustable="datalim")
+    a1.set_title("top view", fontsize="medium")
+    a2.set_xlabel("time [s]")
+    if len(t):
+        a2.set_xlim(t[0] - 0.02 * (t[-1] - t[0]), t[-1] + 0.02 * (t[-1] - t[0]))
+    a2.set_ylabel("height " + _AXIS_LABEL[2])
+    a2.set_title("height", fontsize="medium")
+    if true_xyz is not None:
+        d = np.linalg.norm(est - tru, axis=1)
+        a3 = axes[2]
+        a3.sharex(a2)
+        a3.plot(t, d, ".", ms=3, color=EST_C)
+        ok = np.isfinite(d)
+        rms = f", rms {np.sqrt(np.mean(d[ok] ** 2)):.2f} m" if ok.any() else ""
+        a3.set_title(f"reconstruction error{rms}", fontsize="medium")
+        a3.set_xlabel("time [s]")
+        a3.set_ylabel("|reconstructed - true| [m]")
+        a3.set_ylim(bottom=0)
+    for a in axes:
+        a.grid(alpha=0.3)
+    fig.legend(*a1.get_legend_handles_labels(), loc="outside lower center", ncols=3, fontsize="small")
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def plot_head(t_s, pan_deg, tilt_deg, title, path, *, est_pan_deg=None, est_tilt_deg=None, state=None,
+              tilt_limits_deg=None, tilt_margin_deg=None, source="true") -> Path:
+    """Head angles against time: ``source`` (true or recorded) and the tracker's dead reckoning,
+    the tilt stops when the tilt comes near them, and the tracker's state as a strip along the bottom.
+
+    Pan is unwrapped for the plot (a pass through +-180 deg stays a continuous line).
+    """
+    plt = _plt()
+    if state is not None and len(t_s):
+        fig, (ax, axs) = plt.subplots(2, 1, figsize=(9, 4.6), sharex=True, height_ratios=[1, 0.07])
+    else:
+        fig, ax = plt.subplots(figsize=(9, 4.2))
+        axs = None
+    t = np.asarray(t_s, float)
+
+    def unwrap(a):
+        a = np.asarray(a, float)
+        ok = np.isfinite(a)
+        out = a.copy()
+        if ok.any():
+            out[ok] = np.degrees(np.unwrap(np.radians(a[ok])))
+        return out
+
+    for name, val, est, c in (("pan (+ = left)", unwrap(pan_deg), est_pan_deg, "tab:blue"),
+                              ("tilt (+ = up)", np.asarray(tilt_deg, float), est_tilt_deg, "tab:purple")):
+        if np.isfinite(val).any():
+            ax.plot(t, val, "-", color=c, lw=3, alpha=0.45, label=f"{name}, {source}")
+        if est is not None:
+            e = unwrap(est) if name.startswith("pan") else np.asarray(est, float)
+            ax.plot(t, e, "--", color=c, lw=1.2, label=f"{name}, dead-reckoned")
+    if tilt_limits_deg is not None:
+        tilt = np.asarray(est_tilt_deg if est_tilt_deg is not None else tilt_deg, float)
+        tilt = tilt[np.isfinite(tilt)]
+        for i, stop in enumerate(tilt_limits_deg):
+            if tilt.size and np.min(np.abs(tilt - stop)) < 15.0:   # only a stop the tilt comes near
+                ax.axhline(stop, color=THRESH_C, ls="-", lw=1.5, label=f"tilt stop {stop:g} deg")
+                if tilt_margin_deg:
+                    inner = stop - tilt_margin_deg if i == 1 else stop + tilt_margin_deg
+                    ax.axhline(inner, color=THRESH_C, ls=":", lw=1,
+                               label=f"tracker keeps {tilt_margin_deg:g} deg off the stop")
+    ax.set_ylabel("head angle [deg]")
+    ax.grid(alpha=0.3)
+    ax.set_title(title)
+    if axs is None:
+        ax.set_xlabel("time [s]")
+        _legend_outside(ax)
+        return _save(fig, path)
+    # the tracker's state, frame by frame, in a strip of its own under the angles
+    st = np.asarray(state).astype(str)
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.1
+    for name in dict.fromkeys(st):
+        idx = np.flatnonzero(st == name)
+        runs = np.split(idx, np.flatnonzero(np.diff(idx) != 1) + 1)
+        axs.broken_barh([(t[r[0]] - dt, t[r[-1]] - t[r[0]] + dt) for r in runs], (0, 1),
+                        color=STATE_C.get(name, "0.5"), label=f"tracker {name}")
+    axs.set_yticks([])
+    axs.set_ylim(0, 1)
+    axs.set_ylabel("state", rotation=0, ha="right", va="center", fontsize="small")
+    axs.set_xlabel("time [s]")
+    h1, l1 = ax.get_legend_handles_labels()
+    h2, l2 = axs.get_legend_handles_labels()
+    ax.legend(h1 + h2, l1 + l2, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", borderaxespad=0.0)
     return _save(fig, path)

@@ -23,6 +23,9 @@ def register(sub) -> None:
 
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
                    quiet=False) -> dict:
+    import time
+
+    import numpy as np
     from tqdm import tqdm
 
     from foveatrack.recording import RecordingWriter
@@ -30,7 +33,6 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     from sim.recorder import SimRecorder, recording_meta
     from sim.scene import load_scene, with_run_overrides
     from sim.summary import summarize
-    import time
 
     if seed is not None and seed < 0:
         raise UserError(f"--seed {seed}: must be an integer >= 0")
@@ -70,14 +72,7 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     if out_dir is not None:
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     if plot:
-        from foveatrack.cli import sim_plots
-
-        db = max(scene.tracker.deadband_pan_deg, scene.tracker.deadband_tilt_deg)
-        sim_plots.plot_error_vs_time(log, db, f"{scene.name}: tracking error (paper Fig. 14b)", out_dir / "error.png")
-        sim_plots.plot_points_vs_position(log, f"{scene.name}: points on the UAV per frame (paper Fig. 14a)",
-                                          out_dir / "points_on_target.png")
-        sim_plots.plot_trajectory(log, f"{scene.name}: reconstructed trajectory (paper Fig. 14c)", out_dir / "trajectory.png")
-        sim_plots.plot_head(log, f"{scene.name}: head angles", out_dir / "head.png")
+        _plot_run(scene, log, summary, out_dir)
     if want_json:
         json.dump(summary, sys.stdout, indent=2)
         sys.stdout.write("\n")
@@ -86,11 +81,23 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
         fmt = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
         print(f"{scene.name}: {summary['frames']} frames, {summary['frames_with_detection']} with a detection, "
               f"{summary['points_on_target_per_frame']:.1f} points on target per frame")
-        print(f"  tracking error after acquisition [deg]: rms {fmt(e['rms'])}  p95 {fmt(e['p95'])}  max {fmt(e['max'])};"
-              f" acquisition {fmt(summary['acquisition_s'])} s")
+        db = max(scene.tracker.deadband_pan_deg, scene.tracker.deadband_tilt_deg)
+        if scene.gimbal.frozen:
+            err = log["true_error_deg"]
+            i = int(np.nanargmin(err)) if np.isfinite(err).any() else None
+            print("  head frozen (paper Fig. 13/14a): no tracking"
+                  + (f"; the target passed {err[i]:.2f} deg off the lidar axis at {log['t_end_s'][i]:.1f} s"
+                     if i is not None else ""))
+        elif summary["acquisition_s"] is None:
+            print(f"  never acquired (error never under {db + 1:g} deg = dead band + 1 for 5 frames in a row): "
+                  "no tracking error to report")
+        else:
+            print(f"  tracking error after acquisition [deg]: rms {fmt(e['rms'])}  p95 {fmt(e['p95'])}  "
+                  f"max {fmt(e['max'])}; acquisition {fmt(summary['acquisition_s'])} s")
         if "reconstruction_error_m" in summary:
             r = summary["reconstruction_error_m"]
-            print(f"  reconstructed position error [m]: rms {fmt(r['rms'])}  max {fmt(r['max'])}")
+            print(f"  reconstructed target position error [m]: rms {fmt(r['rms'])}  p95 {fmt(r['p95'])}  "
+                  f"max {fmt(r['max'])}")
         speed = f"  {summary['wall_s']:.2f} s wall, {summary['realtime_factor']:.1f}x real time"
         after = summary.get("realtime_factor_after_first_frame")
         if after is not None and summary["first_frame_s"] > 0.5:
@@ -99,6 +106,35 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
                       f"numba kernels; {after:.0f}x after it)")
         print(speed + (f"; recording and plots in {out_dir}/" if out_dir else ""))
     return summary
+
+
+def _plot_run(scene, log, summary, out_dir) -> list[Path]:
+    """The run's plots (paper Fig. 14 a/b/c and the head angles) into ``out_dir``."""
+    from foveatrack.cli import sim_plots
+
+    name, cfg = scene.name, scene.tracker
+    t = log["t_end_s"]
+    db = max(cfg.deadband_pan_deg, cfg.deadband_tilt_deg)
+    frozen = " (head frozen)" if scene.gimbal.frozen else ""
+    if scene.gimbal.frozen:   # nothing is tracked: no acquisition phase to mark, no dead band at work
+        err_title, phases = f"{name}: target angle off the fixed lidar axis (head frozen)", {}
+    else:
+        err_title = f"{name}: tracking error (paper Fig. 14b)"
+        phases = dict(deadband_deg=db, in_fov_t_s=summary["in_fov_t_s"], acquired_t_s=summary["acquired_t_s"])
+    return [
+        sim_plots.plot_error_vs_time(t, log["true_error_deg"], err_title, out_dir / "error.png",
+                                     detected=log["detected"], half_fov_deg=summary["half_fov_deg"], **phases),
+        sim_plots.plot_points_vs_position(
+            log["target_xyz"], log["true_error_deg"], log["points_on_target"],
+            f"{name}: points on the UAV per frame{frozen}", out_dir / "points_on_target.png",
+            half_fov_deg=summary["half_fov_deg"]),
+        sim_plots.plot_trajectory(t, log["estimate_xyz"], f"{name}: reconstructed trajectory (paper Fig. 14c)",
+                                  out_dir / "trajectory.png", true_xyz=log["target_xyz"]),
+        sim_plots.plot_head(t, log["head_pan_deg"], log["head_tilt_deg"], f"{name}: head angles{frozen}",
+                            out_dir / "head.png", est_pan_deg=log["est_pan_deg"], est_tilt_deg=log["est_tilt_deg"],
+                            state=log["state"], tilt_limits_deg=cfg.tilt_limits_deg,
+                            tilt_margin_deg=cfg.tilt_margin_deg),
+    ]
 
 
 def cmd_simulate(args) -> int:

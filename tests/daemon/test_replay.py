@@ -81,7 +81,9 @@ def test_cli_json_plots_exports(sim_run, tmp_path, capsys):
     assert z["x_m"].size == log["points"].sum()
     rows = trj.read_text().splitlines()
     assert len(rows) == len(log["t_end_s"]) + 1 and "true_error_deg" in rows[0]
-    for name in ("fig14a_points_vs_lateral.png", "fig14b_error_vs_time.png", "fig14c_trajectory.png"):
+    names = ("fig14a_points_vs_lateral.png", "fig14b_error_vs_time.png", "fig14c_trajectory.png", "head_angles.png")
+    assert [Path(o.split(" -> ")[1]).name for o in s["outputs"] if o.startswith("plot")] == list(names)
+    for name in names:
         assert (plots / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert main(["replay", str(tmp_path / "none.mcap")]) == 2
 
@@ -120,8 +122,12 @@ def test_lvx_replay_detects_the_passing_uav(tmp_path, capsys):
     assert np.all(np.linalg.norm(f["det_xyz"][det], axis=1) < np.linalg.norm(truth, axis=1))   # ... on the near side
     # head frozen: the reconstruction never moves even though commands were computed
     assert np.all(f["head_pan_deg"] == 0.0) and np.any(f["command"][:, 0] != 0)
-    assert main(["replay", str(path), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["metrics"]["detection"]["frames_with_detection"] == det.sum()
+    assert main(["replay", str(path), "--json", "--plot", str(tmp_path / "plots")]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["metrics"]["detection"]["frames_with_detection"] == det.sum()
+    # no head in a .lvx file: the Fig. 14 plots from the tracker's own estimates, no head-angle plot
+    assert sorted(p.name for p in (tmp_path / "plots").iterdir()) == [
+        "fig14a_points_vs_lateral.png", "fig14b_error_vs_time.png", "fig14c_trajectory.png"]
 
 
 def test_cli_directory_is_named_as_a_directory(tmp_path, capsys):

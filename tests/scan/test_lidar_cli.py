@@ -37,7 +37,7 @@ def test_coverage_text_says_a_level_not_reached(capsys):
     assert c["t50_s"] is not None and c["t90_s"] is None     # the case: 50 % reached, 90 % not
     assert main(["lidar", "coverage", "prototype", "--duration", "0.3"]) == 0
     out = capsys.readouterr().out
-    assert f"50 % at {c['t50_s']:g} s" in out and "90 % not reached in 0.3 s" in out and "None" not in out
+    assert f"50 % at {c['t50_s']:.2f} s" in out and "90 % not reached in 0.3 s" in out and "None" not in out
 
 
 @pytest.mark.parametrize("argv, desc, total", [

@@ -15,11 +15,14 @@ def test_tracking_metrics_hand_case():
     e = np.array([30, 20, 10, 5, 2, 1, 2, 1, 2, 1] + [1.0] * 10)
     m = tracking_metrics(t, e, detected=np.ones(20, bool), acquired_deg=3.0, hold_frames=3)
     assert m["acquisition_s"] == pytest.approx(0.4)
+    assert m["acquired_t_s"] == pytest.approx(0.4) and m["in_fov_t_s"] == 0.0
+    late = tracking_metrics(t, e, in_fov=t >= 0.2, acquired_deg=3.0, hold_frames=3)   # clock starts at 0.2 s
+    assert (late["in_fov_t_s"], late["acquired_t_s"], late["acquisition_s"]) == pytest.approx((0.2, 0.4, 0.2))
     after = e[4:]
     assert m["tracking_error_deg"]["rms"] == pytest.approx(np.sqrt(np.mean(after ** 2)))
     assert m["tracking_error_deg"]["max"] == 2.0
     never = tracking_metrics(t, np.full(20, 50.0))
-    assert never["acquisition_s"] is None and never["tracking_error_deg"]["rms"] is None
+    assert never["acquisition_s"] is None and never["acquired_t_s"] is None and never["tracking_error_deg"]["rms"] is None
     w = tracking_metrics(t, e, world_est=np.ones((20, 3)) * [100, 0, 0.5], world_true=np.ones((20, 3)) * [100, 0, 0])
     assert w["reconstruction_error_m"]["max"] == pytest.approx(0.5)
     assert w["reconstruction_error_rel"]["max"] == pytest.approx(0.005)
