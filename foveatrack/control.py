@@ -1,8 +1,8 @@
 """Algorithm 2 of the paper (Appendix D.3): dead-band proportional speed control, and the neutral
 command the tracker emits.
 
-Sign conventions (written once here; tested in tests/tracker/test_control.py)
---------------------------------------------------------------------------
+Sign conventions (written once here; tested in tests/tracker/test_control_and_table.py)
+---------------------------------------------------------------------------------------
 * Lidar frame: X forward (optical axis), Y left, Z up.
 * Bearing errors: ``e_pan = atan2(y, x)`` (target to the left is positive),
   ``e_tilt = atan2(z, hypot(x, y))`` (target up is positive).  The paper writes

@@ -16,7 +16,8 @@ Turbo is only known from its own entry.
 
 Inverse (:meth:`AxisTable.byte_for_speed`): among the bytes with a known speed > 0, the one whose
 speed is nearest to the request (ties -> the slower).  This works on non-monotone measured tables
-(it searches all bytes, not a bisection), and a request beyond the table gets the fastest byte.
+(it bisects the candidates sorted by speed, not by byte number), and a request beyond the table
+gets the fastest byte.
 
 File (JSON)::
 
@@ -242,10 +243,11 @@ class SpeedTable:
     @classmethod
     def nominal(cls, pan_max_deg_s: float = 15.0, tilt_max_deg_s: float = 2.0,
                 pan_turbo_deg_s: float | None = 20.0, rel_sigma: float = 0.3) -> "SpeedTable":
-        """A documented table for an *uncalibrated* head: linear ``(b + 1) / 64 * max`` (the FLIR
-        D300E rule in the facts file), pan 15 deg/s and tilt 2 deg/s at 0x3F (the PTS family
-        datasheet figures), turbo 20 deg/s (a guess), every entry ``measured = False`` with 30 %
-        uncertainty.  Good enough to start tracking; calibrate before trusting reconstruction."""
+        """A documented table for an *uncalibrated* head: linear ``(b + 1) / 64 * max`` (the facts
+        file's FLIR D300E rule ``(p + 1) / 65 * max`` rescaled so that 0x3F gives the maximum), pan
+        15 deg/s and tilt 2 deg/s at 0x3F (the PTS family datasheet figures), turbo 20 deg/s (a
+        guess), every entry ``measured = False`` with 30 % uncertainty.  Good enough to start
+        tracking; calibrate before trusting reconstruction."""
         def axis(name, vmax, turbo):
             es = [SpeedEntry(b, (b + 1) / 64.0 * vmax, rel_sigma * (b + 1) / 64.0 * vmax, False, note="nominal")
                   for b in range(64)]

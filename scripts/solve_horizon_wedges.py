@@ -4,7 +4,8 @@ The paper (Section III.D.2, Fig. 9c) gives the FoV, 81.7 x 25.1 deg, but no pris
 Paraxially P1 = P2 = a and P3 = b give x: +-(2a + b), y: +-b (``shared/facts/risley-optics.md``);
 exact refraction at these angles is far from paraxial, so we start from the paraxial solution and
 let a least-squares solve on the exact FoV finish.  Paste the printed wedges into
-``sim/scan/presets.py``; ``tests/scan/test_presets.py`` re-checks the FoV.
+``sim/scan/presets.py``; ``tests/scan/test_analyses.py`` (``test_horizon_fov_channels_and_rate``)
+re-checks the FoV.
 
 Usage: python scripts/solve_horizon_wedges.py
 """

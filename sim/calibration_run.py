@@ -3,7 +3,8 @@
 :class:`foveatrack.calibration.Calibrator` is a driver-agnostic state machine; here it drives the
 closed loop's PTS-303H model through the virtual UART, by way of ``ClosedLoop(controller=...)``
 (the tracker is bypassed: the calibration decides every command).  The driver adapter is
-:class:`foveatrack.cli.calibrate_cmd.CalibrationDriver`, the same one a real lidar + head loop uses.
+:class:`foveatrack.calibration_drive.CalibrationDriver`, the same one the live calibration on a real
+lidar + head uses (:func:`foveatrack.calibration_live.calibrate_live`).
 
 The room corner the calibration tracks is found from the scene's geometry
 (:func:`room_corner_in_view`): on real hardware the user gives its approximate position instead.

@@ -4,7 +4,7 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, settings
 
-# tests/scan/twins.py and friends are imported as plain modules by the tests beside them.
+# tests/scan_twins.py and friends are imported as plain modules by the tests beside them.
 sys.path.insert(0, str(Path(__file__).parent))
 
 # Hypothesis profiles (select with HYPOTHESIS_PROFILE=long or pytest's --hypothesis-profile=long).

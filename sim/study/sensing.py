@@ -7,12 +7,13 @@ head (and target) move during the window.  Measured per window, in the closed lo
 
 * ``near``: ``fig12-tracking`` as shipped (a 0.35 m quadrotor at ~12 m entering 11 deg off-centre,
   paper Fig. 12);
-* ``far``: ``far-target-range-limit`` (150 m, near the 159 m range limit at 30 % reflectivity), with
-  the head pointed at the target's start so that the window, not the acquisition, is measured;
-* ``mid``: the same scene scaled to 60 m (circle radius 60 m about (0, 0, 12) m at 2 m/s: the same
-  bearings and bearing rate), head pointed at the start likewise.  At 150 m the beam footprint
-  (0.28 deg = 0.73 m) is wider than the body and almost no return passes the half-of-the-sub-rays
-  rule at any window; 60 m shows how a window trades points for latency on a target with few points.
+* ``far``: ``far-target-range-limit`` (a 0.8 m UAV on a 140 m circle, near the 159 m range limit at
+  30 % reflectivity), with the head pointed at the target's start so that the window, not the
+  acquisition, is measured;
+* ``mid``: the same scene scaled by 0.4 (circle radius 56 m about (0, 0, 0.8) m at 2 m/s: the same
+  bearings and bearing rate), head pointed at the start likewise.  At 140 m the beam footprint
+  (0.28 deg = 0.68 m) is nearly as wide as the body and few returns pass the half-of-the-sub-rays
+  rule; 56 m shows how a window trades points for latency on a target with more points.
 
 Definitions (per run; means over seeds in the report):
 

@@ -1,4 +1,4 @@
-"""The numba kernels against their plain-numpy twins (tests/scan/twins.py), to 1e-12."""
+"""The numba kernels against their plain-numpy twins (tests/scan_twins.py), to 1e-12."""
 
 from fractions import Fraction
 
