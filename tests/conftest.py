@@ -9,7 +9,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 # Hypothesis profiles (select with HYPOTHESIS_PROFILE=long or pytest's --hypothesis-profile=long).
 # "ci": reproducible (derandomize: the same examples on every run, no example database) and sized to
-# run the stability suite in a few minutes on 2 shared cores; no per-example deadline and no
+# run the stability suite in about a minute on 2 shared cores; no per-example deadline and no
 # too-slow health check, since a shared CI machine's timing says nothing about correctness.
 # "long": 20x the examples, random seeds, for hunting new counterexamples before a release.
 # max_examples = 100 in "ci" is hypothesis's own default, so tests elsewhere keep their size; the

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 from sim.study.calibration_time import PLANS
+from sim.study.sensing import target_scene
 from sim.study.runner import TARGETS
 
 COMMAND = "foveatrack study accuracy-vs-time --out docs --workers 2"
@@ -137,8 +138,9 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
           "point) vs the true target centre in the lidar frame at the detection's timestamp with the head's "
           "true pose.  Control latency: when the command's last byte reaches the head minus the detection's "
           "timestamp (the head's 40 ms dead time comes on top).  `near` is fig12-tracking as shipped; `far` is "
-          "far-target-range-limit (150 m) and `mid` the same geometry scaled to 60 m, both with the head "
-          "pointed at the target's start so the window, not the acquisition, is measured.", ""]
+          f"far-target-range-limit (a {_orbit_m('far'):g} m circle around the head) and `mid` the same geometry "
+          f"scaled to {_orbit_m('mid'):g} m, both with the head pointed at the target's start so the window, not "
+          "the acquisition, is measured.", ""]
     for target, t in ax["sensing"]["targets"].items():
         L += [f"**{target}** ({t['scene']}, {_f(t['duration_s'], '{:g}')} s per run):", ""]
         L += _table(["window [ms]", "seeds", "detections / frames in FoV", "P(detect)", "bearing rms [deg]",
@@ -253,3 +255,8 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
 
 
 __all__ = ["write_report", "headlines", "COMMAND", "TARGETS"]
+
+
+def _orbit_m(target: str) -> float:
+    """Radius of a sensing target's circle [m], from the scene the study runs (not a copy of it)."""
+    return target_scene(target).targets[0].trajectory.radius_m
