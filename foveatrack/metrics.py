@@ -45,6 +45,13 @@ def _stats(x: np.ndarray) -> dict:
     return {"rms": float(np.sqrt(np.mean(x ** 2))), "p95": float(np.percentile(x, 95)), "max": float(x.max())}
 
 
+def acquired_within_deg(cfg) -> float:
+    """The error under which a run counts as acquired (held ``hold_frames`` frames): the larger dead
+    band + 1 deg.  One rule for the simulator's summary and for replay, so both report the same
+    acquisition time for a run."""
+    return max(cfg.deadband_pan_deg, cfg.deadband_tilt_deg) + 1.0
+
+
 def tracking_metrics(t_s, error_deg, *, detected=None, in_fov=None, acquired_deg: float = 3.0,
                      hold_frames: int = 5, world_est=None, world_true=None) -> dict:
     """Metrics of one run from per-frame arrays.

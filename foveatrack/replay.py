@@ -43,7 +43,7 @@ import numpy as np
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame, FrameSlicer
-from foveatrack.metrics import tracking_metrics
+from foveatrack.metrics import acquired_within_deg, tracking_metrics
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig, Tracker
 
@@ -287,7 +287,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth,
                        final_pose_deg=final_pose, tracker_cfg=cfg)
     res.comparison = compare(frames, recorded)
-    res.metrics = replay_metrics(frames, truth, cfg)
+    res.metrics = replay_metrics(frames, truth, cfg, meta.get("half_fov_deg"))
     res.recorded_metrics = _recorded_metrics(recorded, truth, rec_cfg, frames)
     if reader.problem:
         res.comparison["recording_problem"] = reader.problem
@@ -408,13 +408,19 @@ def bearing_metrics(frames: dict) -> dict:
             "states": {str(s): int(c) for s, c in zip(states, counts)}}
 
 
-def replay_metrics(frames: dict, truth: dict | None, cfg: TrackerConfig) -> dict:
+def replay_metrics(frames: dict, truth: dict | None, cfg: TrackerConfig, half_fov_deg: float | None = None) -> dict:
+    """Detection metrics, and with the simulator's truth the tracking metrics as ``simulate`` gives
+    them: the acquisition clock starts when the true error is inside ``half_fov_deg`` (recorded by
+    the simulator; recordings made before it was, start it at the first frame with points on the
+    target) and stops once it is held within :func:`foveatrack.metrics.acquired_within_deg`."""
     out = {"detection": bearing_metrics(frames)}
     if truth is not None:
+        err = np.asarray(truth["true_error_deg"], float)
+        with np.errstate(invalid="ignore"):
+            in_fov = err < half_fov_deg if half_fov_deg is not None else truth["points_on_target"] > 0
         out["tracking"] = tracking_metrics(
-            frames["t_end_s"], truth["true_error_deg"], detected=frames["detected"],
-            in_fov=truth["points_on_target"] > 0, acquired_deg=cfg.deadband_pan_deg + 1.0,
-            world_est=frames["world_xyz"], world_true=truth["target_xyz_m"])
+            frames["t_end_s"], err, detected=frames["detected"], in_fov=in_fov,
+            acquired_deg=acquired_within_deg(cfg), world_est=frames["world_xyz"], world_true=truth["target_xyz_m"])
     return out
 
 

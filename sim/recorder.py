@@ -25,6 +25,8 @@ from foveatrack.track_log import finite_or_none, ns, write_tracker_frame
 def recording_meta(scene, loop) -> dict:
     from dataclasses import asdict
 
+    from sim.summary import half_fov_deg
+
     return {
         "source": "simulator",
         "scene_name": scene.name,
@@ -38,6 +40,7 @@ def recording_meta(scene, loop) -> dict:
         "rate_hz": loop.tracker.config.rate_hz,
         "point_rate_hz": scene.optics.point_rate_hz,
         "gimbal": asdict(scene.gimbal),
+        "half_fov_deg": half_fov_deg(scene),    # replay's "in the FoV", as the simulator's summary has it
     }
 
 

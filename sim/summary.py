@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from foveatrack.metrics import tracking_metrics
+from foveatrack.metrics import acquired_within_deg, tracking_metrics
 
 
 def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
@@ -21,10 +21,9 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
     and ``time_per_frame_ms``: the mean wall time of each stage of a frame (scan, ray casting and
     effects, tracker, ...), which is what the scene's fidelity costs.
     """
-    half_fov = _half_fov_deg(scene)
+    half_fov = half_fov_deg(scene)
     err = log["true_error_deg"].astype(float)
-    cfg = scene.tracker
-    acquired = max(cfg.deadband_pan_deg, cfg.deadband_tilt_deg) + 1.0
+    acquired = acquired_within_deg(scene.tracker)
     m = tracking_metrics(log["t_end_s"], err, detected=log["detected"], in_fov=err < half_fov,
                          acquired_deg=acquired, world_est=log["estimate_xyz"], world_true=log["target_xyz"])
     pts = log["points_on_target"]
@@ -47,7 +46,9 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
     return m
 
 
-def _half_fov_deg(scene) -> float:
+def half_fov_deg(scene) -> float:
+    """Half the scanner's smaller FoV [deg]: a target this far off the axis is "in the FoV" (the
+    start of the acquisition clock; recorded in a recording's meta so that replay uses it too)."""
     from sim.scan.fov import field_of_view_deg
 
     h, v = field_of_view_deg(scene.optics, model=scene.scan_model, samples=100_000)

@@ -10,8 +10,8 @@ import pytest
 from foveatrack.cli import main
 from foveatrack.livox import protocol as P
 from foveatrack.livox.lvx import LvxDevice, write_lvx
-from foveatrack.metrics import tracking_metrics
 from foveatrack.replay import replay, replay_recording
+from sim.summary import summarize
 from sim.lidar_server import SceneSource
 from sim.scene import scene_from_mapping
 
@@ -31,12 +31,14 @@ def test_simulator_recording_replays_identically(sim_run):
     assert c["max_detection_xyz_diff_m"] == 0.0
     assert np.array_equal(res.frames["detected"], log["detected"])
     assert np.array_equal(res.frames["command"], log["command"])
-    # the metrics the simulator would print, from its own log (a second route to the same figures)
-    ref = tracking_metrics(log["t_end_s"], log["true_error_deg"], detected=log["detected"],
-                           in_fov=log["points_on_target"] > 0, acquired_deg=scene.tracker.deadband_pan_deg + 1,
-                           world_est=log["estimate_xyz"], world_true=log["target_xyz"])
-    assert res.metrics["tracking"] == ref
-    assert res.metrics["tracking"]["acquisition_s"] is not None
+    # the metrics the simulator prints for the run (sim.summary, from its own log): replay reports
+    # the same acquisition time and errors, by the same rule (they used to differ: 1.30 vs 1.40 s)
+    ref = summarize(scene, log, 1.0)
+    got = res.metrics["tracking"]
+    for k in ("frames", "frames_with_detection", "acquisition_s", "in_fov_t_s", "acquired_t_s",
+              "tracking_error_deg", "reconstruction_error_m", "reconstruction_error_rel"):
+        assert got[k] == ref[k], k
+    assert got["acquisition_s"] is not None
     # and twice is the same, to the bit
     again = replay_recording(path)
     for k, v in res.frames.items():
