@@ -99,9 +99,10 @@ def test_calibrates_a_head_through_its_serial_port_and_the_lidar_stream(tmp_path
         rows = {(r["axis"], r["byte"]): r for r in summary["entries"]}
         assert set(rows) == {("pan", 40), ("tilt", 63)}
         # The bar (2 % or 3 sigma) is tested where the head's pose is exact: in the simulator
-        # (tests/calibration).  Here the lidar learns the head's pose from a 20 ms truth file in another
-        # process, and on a loaded 2-core machine its pose lags or is held (seen: tilt 3-4 % high in two
-        # CI runs, 0.2-2 % on an idle machine); this checks the live path measures the right speeds.
+        # (tests/calibration) and on the one-process rig below.  Here the lidar learns the head's pose
+        # from a 20 ms truth file in another process, and on a loaded 2-core machine its pose lags or
+        # is held (seen: tilt 3-4 % high in two CI runs, 0.2-2 % on an idle machine): this checks that
+        # the processes together measure the right speeds.
         for (axis, b), r in rows.items():
             v_true = unit.true_speed_deg_s(axis, b)
             assert abs(r["measured_deg_s"] - v_true) <= max(0.10 * v_true, 3 * r["sigma_deg_s"]), (axis, b, r, v_true)
@@ -142,6 +143,65 @@ def test_calibrates_a_head_through_its_serial_port_and_the_lidar_stream(tmp_path
     finally:
         for q in procs:
             terminate(q)
+
+
+def test_live_calibration_is_as_accurate_as_the_simulated_one_when_the_lidar_knows_the_pose(tmp_path):
+    # The rig in one process: the head model served on a pty (as gimbal serve does) and a virtual
+    # Livox that takes each point's head pose from that model at the point's own time, so the
+    # only error left is the live path's (frames from UDP, commands through the pty).  The issue's
+    # bar applies: 2 % or 3 sigma.  (Measured: pan 40 within 0.02 %, tilt 63 within 0.34 %, idle and
+    # with two busy loops beside it; through the truth-file rig above, tilt read up to 4.4 % high.)
+    import threading
+
+    import numpy as np
+
+    from foveatrack.livox import protocol as P
+    from sim.lidar_server import SceneSource, warm_up_kernels
+    from sim.scene import load_scene
+    from sim.virtual_head import VirtualHeadServer
+    from sim.virtual_lidar import VirtualLivox
+
+    scene = load_scene(ROOT / "scenes" / "calibration-room.toml")
+    head = PTS303H(unit_seed=UNIT, pan0_deg=23.0, tilt0_deg=6.5)
+    lock = threading.Lock()
+    done = threading.Event()
+    server = VirtualHeadServer(head, time.monotonic, link_path=str(tmp_path / "head"))
+    server.open()
+    offset = [0.0]    # head time - lidar stream time [s]
+
+    def serve_head():
+        while not done.is_set():
+            with lock:
+                server.step(0.002)
+
+    def pose(t_s):
+        with lock:
+            return head.angles_at(np.asarray(t_s) + offset[0])
+
+    warm_up_kernels(scene)
+    bport = free_udp_port()
+    lidar = VirtualLivox(SceneSource(scene, pose=pose), cmd_port=0, broadcast_addr=("127.0.0.1", bport),
+                         point_rate_hz=float(scene.optics.point_rate_hz), packet_type=0,
+                         dev_type=P.DEVICE_TYPES["mid40"])
+    head_thread = threading.Thread(target=serve_head, daemon=True)
+    head_thread.start()
+    offset[0] = time.monotonic() - server.clock_zero     # the stream's time 0 is now (to ~1 ms)
+    lidar.start()
+    try:
+        out = tmp_path / "table.json"
+        p = _calibrate(_config(tmp_path, tmp_path / "head", bport), out, "--pan-bytes", "40", "--tilt-bytes", "63",
+                       "--dwell-s", "3")
+        stdout, stderr = p.communicate(timeout=150)
+        assert p.returncode == 0, stderr
+        for r in json.loads(stdout)["entries"]:
+            v_true = head.true_speed_deg_s(r["axis"], r["byte"])
+            assert abs(r["measured_deg_s"] - v_true) <= max(0.02 * v_true, 3 * r["sigma_deg_s"]), (r, v_true)
+        assert {(r["axis"], r["byte"]) for r in json.loads(stdout)["entries"]} == {("pan", 40), ("tilt", 63)}
+    finally:
+        lidar.stop()
+        done.set()
+        head_thread.join(2)
+        server.close()
 
 
 def test_no_lidar_is_an_error_that_names_it_and_stops_the_head(tmp_path, capsys):
