@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -49,7 +50,14 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
 def half_fov_deg(scene) -> float:
     """Half the scanner's smaller FoV [deg]: a target this far off the axis is "in the FoV" (the
     start of the acquisition clock; recorded in a recording's meta so that replay uses it too)."""
+    return _half_fov_deg(scene.optics, scene.scan_model)
+
+
+@functools.lru_cache(maxsize=16)
+def _half_fov_deg(optics, scan_model: str) -> float:
+    # A pure function of the optics (the noise-free pattern), ~25 ms: a recorded run asks twice
+    # (recording meta, summary) and a study asks for every run of a scene.
     from sim.scan.fov import field_of_view_deg
 
-    h, v = field_of_view_deg(scene.optics, model=scene.scan_model, samples=100_000)
+    h, v = field_of_view_deg(optics, model=scan_model, samples=100_000)
     return 0.5 * min(h, v)
