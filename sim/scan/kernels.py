@@ -82,9 +82,14 @@ def phase_revs_kernel(k0, r_h1, r_h2, r_lo, phase0_rev, out):
 
 
 # Kernels that trace rays are written as branch-free inner loops over a block of rays, one prism at a
-# time, so LLVM turns them into SIMD code (AVX2: 4 rays per instruction).  ``fastmath`` allows
-# contraction and reassociation but NOT "no NaNs / no infs": the status logic must stay exact.
-_FAST = {"contract", "arcp", "nsz", "afn", "reassoc"}
+# time, so LLVM turns them into SIMD code (AVX2: 4 rays per instruction, AVX-512: 8).  No fast-math:
+# with contraction (FMA) or reassociation allowed, LLVM compiled the vector body and the scalar
+# remainder of a loop differently, so a ray's direction changed by an ulp with its position in a call
+# (chunking a scan changed bits on AVX-512) and with the CPU's vector width.  Strict IEEE arithmetic
+# (+, *, /, sqrt, floor, all correctly rounded) gives every lane the same bits on any x86-64 target
+# (tests/determinism) and cost nothing measurable: one 100 ms Mid-40 frame 0.105-0.120 ms with
+# fast-math, 0.116-0.117 ms without (scripts/bench_scan.py, interleaved runs on a loaded machine).
+_FASTMATH = False
 _BLOCK = 256
 
 # Taylor coefficients of sin and cos on [-pi/4, pi/4]: the first omitted term is < 1e-19.
@@ -99,7 +104,7 @@ _F_TIR = float(RAY_TIR)
 _F_GRAZING = float(RAY_GRAZING)
 
 
-@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+@njit(cache=True, inline="always", fastmath=_FASTMATH, error_model="numpy")
 def _sincos_rev(rev):
     """``(sin, cos)`` of ``2 pi rev`` for an angle given in revolutions, branch-free.
 
@@ -125,7 +130,7 @@ def _sincos_rev(rev):
     return sn * sin_sign, cn * cos_sign
 
 
-@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+@njit(cache=True, inline="always", fastmath=_FASTMATH, error_model="numpy")
 def _refract(dx, dy, dz, mx, my, mz, eta, st):
     """Vector Snell at a face with unit normal ``m`` pointing along the ray (N = -m).
 
@@ -144,7 +149,7 @@ def _refract(dx, dy, dz, mx, my, mz, eta, st):
     return eta * dx - g * mx, eta * dy - g * my, eta * dz - g * mz, st
 
 
-@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+@njit(cache=True, inline="always", fastmath=_FASTMATH, error_model="numpy")
 def _refract_flat(dx, dy, dz, eta, st):
     """:func:`_refract` for the face perpendicular to the axis (m = +z), with the zeros folded in:
     ``t = (eta dx, eta dy, cos theta_t)``."""
@@ -154,7 +159,7 @@ def _refract_flat(dx, dy, dz, eta, st):
     return eta * dx, eta * dy, math.sqrt(max(k, 0.0)), st
 
 
-@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+@njit(cache=True, inline="always", fastmath=_FASTMATH, error_model="numpy")
 def _trace_prism(row, r0, m, bx, by, bz, bs, sa, ca, n_p, exit_tilted, flat_done):
     """Refract the block's rays ``bx/by/bz`` (status ``bs``) through one prism at the angles
     ``row[r0 + i]`` [rev]: flat face then tilted face, or the other way round; ``flat_done``: the
@@ -188,7 +193,7 @@ def _trace_prism(row, r0, m, bx, by, bz, bs, sa, ca, n_p, exit_tilted, flat_done
             bs[i] = st
 
 
-@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+@njit(cache=True, inline="always", fastmath=_FASTMATH, error_model="numpy")
 def _store_block(out_dir, status, j0, m, bx, by, bz, bs):
     """Optics frame (x, y, z along the axis) -> lidar frame (X fwd = z); failed rays zeroed."""
     out_blk = out_dir[j0:j0 + m]
@@ -201,7 +206,7 @@ def _store_block(out_dir, status, j0, m, bx, by, bz, bs):
         st_blk[i] = np.uint8(bs[i])
 
 
-@njit(cache=True, fastmath=_FAST, error_model="numpy")
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
 def trace_exact_kernel(revs, channel, incident, sin_wedge, cos_wedge, index, exit_tilted, out_dir, status):
     """Exact refraction of each ray through all prisms (direction only), paper Appendix B.
 
@@ -244,7 +249,7 @@ def trace_exact_kernel(revs, channel, incident, sin_wedge, cos_wedge, index, exi
         _store_block(out_dir, status, j0, m, bx, by, bz, bs)
 
 
-@njit(cache=True, fastmath=_FAST, error_model="numpy")
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
 def trace_paraxial_kernel(revs, channel, offset_rad, deviation_rad, out_dir):
     """First-order (paraxial) model: the beam's angular offset is the vector sum of the prisms'.
 
@@ -486,7 +491,7 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
         i = e
 
 
-@njit(cache=True, fastmath=_FAST, error_model="numpy")
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
 def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum, noise_eps,
                       noise_seg0, rev_per_s, channel_count, incident, sin_wedge, cos_wedge, index, exit_tilted,
                       t_ns, channel, out_dir, status):
@@ -533,7 +538,7 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
         j0 += m
 
 
-@njit(cache=True, inline="always", fastmath=_FAST, error_model="numpy")
+@njit(cache=True, inline="always", fastmath=_FASTMATH, error_model="numpy")
 def _scan_scratch(p_count, channel_count, incident, index, exit_tilted):
     """Scratch blocks of :func:`scan_exact_kernel` and what it computes once per call: each channel's
     direction after a first prism's flat entry face (``first``, with ``pre`` telling whether that face
@@ -564,7 +569,7 @@ def _scan_scratch(p_count, channel_count, incident, index, exit_tilted):
     return revs, tb, sb, bx, by, bz, bs, first, pre, channel_pattern
 
 
-@njit(cache=True, fastmath=_FAST, error_model="numpy")   # not inlined: numba's inliner refuses 30+ arguments
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")   # not inlined: numba's inliner refuses 30+ arguments
 def _scan_block(k, m, j0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum, noise_eps,
                 noise_seg0, rev_per_s, channel_count, sin_wedge, cos_wedge, index, exit_tilted, channel_pattern,
                 first, pre,

@@ -4,6 +4,7 @@ import json
 import math
 
 import numpy as np
+import pytest
 
 from sim.lidar_server import SceneSource, TruthTail
 from sim.loop import ClosedLoop
@@ -20,6 +21,7 @@ def _scene(target_at, frozen=True, ground=True):
     return scene_from_mapping(d)
 
 
+@pytest.mark.determinism
 def test_points_equal_the_closed_loop_frame():
     scene = scene_from_mapping({
         "scene": {"name": "t", "duration_s": 1.0, "seed": 1}, "lidar": {"preset": "mid40"}, "gimbal": {"frozen": True},

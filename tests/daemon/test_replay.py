@@ -23,6 +23,7 @@ def sim_run(sim_recording):
     return sim_recording
 
 
+@pytest.mark.determinism
 def test_simulator_recording_replays_identically(sim_run):
     path, log, scene = sim_run
     res = replay_recording(path)

@@ -113,6 +113,7 @@ def test_progress_reaches_the_total_and_changes_nothing():
     assert n == 3_000 and np.array_equal(fp.coverage, plain.coverage)
 
 
+@pytest.mark.determinism
 def test_speed_noise_draws_nothing_unless_asked_and_is_independent_of_chunking():
     optics = PRESETS["prototype"]
     clean = ScanModel(optics)

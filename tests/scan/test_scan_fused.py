@@ -169,6 +169,7 @@ def test_scan_after_24_hours_has_the_exact_phase():
     assert np.max(np.linalg.norm(got.direction - want, axis=1)) < 1e-12
 
 
+@pytest.mark.determinism
 @pytest.mark.parametrize("preset", ["mid40", "horizon"])
 def test_chunking_does_not_change_a_bit(preset):
     # Blocks are anchored at absolute multiples of 256 points: the closed loop (100 ms frames) and

@@ -21,6 +21,7 @@ def short(name, seconds=2.0, **changes):
     return replace(load_scene(SCENES / f"{name}.toml"), duration_s=seconds, **changes)
 
 
+@pytest.mark.determinism
 def test_same_seed_same_recording_to_the_bit(tmp_path):
     digests = []
     for i in range(2):
@@ -42,10 +43,11 @@ def test_simulate_summary_says_where_a_frame_goes(tmp_path, capsys):
     per = s["time_per_frame_ms"]
     assert list(per) == list(STAGES) and all(v >= 0 for v in per.values())
     assert per["scan"] > 0 and per["ray casting + effects"] > 0 and per["tracker"] > 0
-    # the stages are inside the run's wall time, and the first frame is one of them
-    assert sum(per.values()) * s["frames"] / 1e3 <= s["wall_s"] + 1e-3
-    assert 0 < s["first_frame_s"] <= sum(per.values()) * s["frames"] / 1e3 + 1e-9
-    assert s["realtime_factor_after_first_frame"] > 0
+    # the stages are the frames after the first (which loads or compiles the kernels), and together
+    # with the first frame they fit inside the run's wall time
+    after_s = sum(per.values()) * (s["frames"] - 1) / 1e3
+    assert 0 < s["first_frame_s"] and after_s + s["first_frame_s"] <= s["wall_s"] + 1e-3
+    assert s["realtime_factor_after_first_frame"] == pytest.approx(0.1 * (s["frames"] - 1) / after_s, rel=0.01)
 
 
 def _run(scene):
