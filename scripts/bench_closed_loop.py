@@ -34,6 +34,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 from sim import effects as fx  # noqa: E402
 from sim.loop import ClosedLoop  # noqa: E402
 from sim.scene import load_scene, scene_from_mapping  # noqa: E402
+from foveatrack.environment import describe  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 HALL = {"type": "room", "size_m": [60.0, 40.0, 8.0], "centre_m": [20.0, 0.0, 2.5], "reflectivity": 0.2}
@@ -48,11 +49,13 @@ def timed_run(scene, **kw) -> float:
 
 
 def stage_breakdown(scene) -> dict[str, float]:
-    """Seconds per stage of one run (the loop's own stage clocks, as ``simulate --json`` reports them)."""
+    """Seconds per stage of one run after its first frame (the loop's own stage clocks, as ``simulate
+    --json`` reports them), and the number of frames they cover under ``"frames"``."""
     loop = ClosedLoop(scene)
     loop.run()
     T = dict(loop.stage_s)
     T["whole step"] = sum(loop.stage_s.values())
+    T["frames"] = loop.steps_timed
     return T
 
 
@@ -101,6 +104,7 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=30.0)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
+    print(describe(), flush=True)   # versions, CPU and numba target: a figure without them says little
     scene = replace(load_scene(args.scene), duration_s=args.duration)
     data = tomllib.loads(Path(args.scene).read_text())
     data["background"] = [HALL]
@@ -120,6 +124,7 @@ def main() -> None:
     runs = [stage_breakdown(scene) for _ in range(args.repeat)]
     best = {k: min(r[k] for r in runs) for k in runs[0]}
     total = best.pop("whole step")
+    frames = best.pop("frames")
     print(f"  where a frame's time goes (as shipped; best of {args.repeat}, {total / frames * 1e3:.2f} ms per frame):")
     for k, v in sorted(best.items(), key=lambda kv: -kv[1]):
         print(f"    {v / frames * 1e3:6.3f} ms  {100 * v / total:4.1f} %  {k}")

@@ -160,9 +160,11 @@ class ClosedLoop:
         self.bytes_sent = 0
         self.echo_bytes = 0
         self.last_sent: tuple[float, bytes] | None = None  # (time, Pelco-D bytes) of this frame's command
-        # Wall time per stage of :meth:`step`, summed over the run [s] (what a scene's fidelity costs,
-        # reported by ``simulate --json``); the first step's total alone (it loads or compiles the kernels).
+        # Wall time per stage of :meth:`step` [s], summed over every step but the first (what a scene's
+        # fidelity costs, reported by ``simulate --json``); the first step alone in ``first_step_s``: it
+        # loads the numba kernels from their cache, or compiles them (about a minute) on a first run.
         self.stage_s: dict[str, float] = dict.fromkeys(STAGES, 0.0)
+        self.steps_timed = 0
         self.first_step_s: float | None = None
 
     # Effect streams and work counters live in the sensor; these keep the loop's own view of them.
@@ -272,10 +274,12 @@ class ClosedLoop:
         if self.frame_hook is not None:
             self.frame_hook(frame, out, self)
         c7 = clock()
-        for name, a, b in zip(STAGES, (c0, c1, c2, c3, c4, c5, c6), (c1, c2, c3, c4, c5, c6, c7)):
-            T[name] += b - a
         if self.first_step_s is None:
             self.first_step_s = c7 - c0
+        else:
+            for name, a, b in zip(STAGES, (c0, c1, c2, c3, c4, c5, c6), (c1, c2, c3, c4, c5, c6, c7)):
+                T[name] += b - a
+            self.steps_timed += 1
         return frame, out
 
     # ----------------------------------------------------------------------------------------------

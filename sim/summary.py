@@ -19,7 +19,7 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
     Speed: ``wall_s`` and ``realtime_factor`` (virtual / wall seconds) are the whole run's; with the
     run's ``loop`` (:class:`sim.loop.ClosedLoop`) also ``first_frame_s`` (the first frame loads the
     numba kernels from their cache, or compiles them on a fresh install), ``realtime_factor_after_first_frame``
-    and ``time_per_frame_ms``: the mean wall time of each stage of a frame (scan, ray casting and
+    and ``time_per_frame_ms``: the mean wall time of each stage of a frame after the first (scan, ray casting and
     effects, tracker, ...), which is what the scene's fidelity costs.
     """
     half_fov = half_fov_deg(scene)
@@ -34,13 +34,12 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
     m["wall_s"] = round(wall_s, 3)
     m["realtime_factor"] = round(scene.duration_s / wall_s, 2) if wall_s > 0 else math.inf
     if loop is not None and loop.first_step_s is not None:
-        n = len(log["t_end_s"])
-        steps_s = sum(loop.stage_s.values())
+        n = loop.steps_timed   # the frames after the first (which loads or compiles the kernels)
+        rest_s = sum(loop.stage_s.values())
         m["first_frame_s"] = round(loop.first_step_s, 3)
-        rest_s = steps_s - loop.first_step_s
-        m["realtime_factor_after_first_frame"] = (round((n - 1) * scene.tracker.period_s / rest_s, 2)
-                                                  if n > 1 and rest_s > 0 else None)
-        m["time_per_frame_ms"] = {k: round(v / n * 1e3, 4) for k, v in loop.stage_s.items()}
+        m["realtime_factor_after_first_frame"] = (round(n * scene.tracker.period_s / rest_s, 2)
+                                                  if n > 0 and rest_s > 0 else None)
+        m["time_per_frame_ms"] = ({k: round(v / n * 1e3, 4) for k, v in loop.stage_s.items()} if n > 0 else None)
     m["scene"] = scene.name
     m["seed"] = scene.seed
     m["effects"] = sorted(scene.effects)
