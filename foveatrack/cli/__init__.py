@@ -16,6 +16,7 @@ from foveatrack.errors import UserError
 # Command-group modules, in the order `foveatrack --help` lists them.
 COMMAND_MODULES = (
     "foveatrack.cli.demo_cmd",
+    "foveatrack.cli.warmup_cmd",
     "foveatrack.cli.simulate_cmd",
     "foveatrack.cli.lidar_cmd",
     "foveatrack.cli.gimbal_cmd",
@@ -26,25 +27,16 @@ COMMAND_MODULES = (
 )
 
 
-def _version(dist: str) -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version(dist)
-    except PackageNotFoundError:
-        return "not installed"
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="foveatrack",
         description="Foveal UAV-intruder tracking with a retina-like lidar on a pan/tilt head.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,   # keeps --version's two lines as written
     )
-    from foveatrack import __version__
+    from foveatrack.environment import describe
 
-    # what a bug report needs (recordings carry the same in their metadata)
-    parser.add_argument("--version", action="version", version=f"foveatrack {__version__} (Python "
-                        f"{sys.version.split()[0]}, numpy {_version('numpy')}, numba {_version('numba')})")
+    # what a bug report needs: versions, CPU, numba target (benchmark headers print the same)
+    parser.add_argument("--version", action="version", version=describe())
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)

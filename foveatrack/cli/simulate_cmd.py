@@ -21,6 +21,48 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_simulate)
 
 
+class CompileNotice:
+    """Says on stderr that the numba kernels are compiling when the first frame takes longer than
+    ``after_s`` (a first run after an install: about a minute; a warm start loads them in ~0.5 s and
+    says nothing), and how long it took once :meth:`done` is called."""
+
+    MESSAGE = ("compiling the numba kernels (about a minute, once per install; `foveatrack warmup` "
+               "does it ahead) ...")
+
+    def __init__(self, enabled: bool = True, after_s: float = 2.0, stream=None):
+        import threading
+        import time
+
+        self._stream = stream if stream is not None else sys.stderr
+        self._t0 = time.perf_counter()
+        self._said = False
+        self._lock = threading.Lock()
+        self._timer = None
+        if enabled:
+            self._timer = threading.Timer(after_s, self._say)
+            self._timer.daemon = True
+            self._timer.start()
+
+    def _say(self) -> None:
+        with self._lock:
+            if self._timer is None:
+                return
+            self._said = True
+            print(self.MESSAGE, file=self._stream, flush=True)
+
+    def done(self) -> None:
+        import time
+
+        with self._lock:
+            if self._timer is None:
+                return
+            self._timer.cancel()
+            self._timer = None
+            if self._said:
+                print(f"kernels ready after {time.perf_counter() - self._t0:.0f} s (cached for later runs)",
+                      file=self._stream, flush=True)
+
+
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
                    quiet=False) -> dict:
     import time
@@ -60,11 +102,26 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
                                  created_utc="virtual time (simulation)")
         loop.frame_hook = SimRecorder(writer)
     n = int(round(scene.duration_s * scene.tracker.rate_hz))
-    bar = tqdm(total=n, desc=scene.name, unit="frame", disable=not progress, file=sys.stderr)
+    # The first frame loads the numba kernels, or compiles them on a first run: announced if it is slow,
+    # and kept out of the progress bar (its rate and ETA would be those of a one-minute frame).
+    notice = CompileNotice(enabled=progress)
+    bar = None
+
+    def advance(k, total):
+        nonlocal bar
+        if bar is None:
+            notice.done()
+            bar = tqdm(total=total, initial=k, desc=scene.name, unit="frame", disable=not progress,
+                       file=sys.stderr)
+        else:
+            bar.update(1)
+
     try:
-        log = loop.run(lambda k, total: bar.update(1))
+        log = loop.run(advance)
     finally:
-        bar.close()
+        notice.done()
+        if bar is not None:
+            bar.close()
         if writer is not None:
             writer.close()
     wall = time.perf_counter() - t0
