@@ -39,6 +39,7 @@ from foveatrack.tracker import Tracker, TrackerConfig  # noqa: E402
 from gimbal.pelco import encode_pan_tilt  # noqa: E402
 from sim.lidar_server import SceneSource  # noqa: E402
 from sim.scene import scene_from_mapping  # noqa: E402
+from foveatrack.environment import describe  # noqa: E402
 
 SCENE = {
     "scene": {"name": "bench-horizon", "duration_s": 60.0, "seed": 1},
@@ -138,6 +139,7 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--cpu", type=int, default=None, help="pin to this core (default: the first allowed)")
     a = ap.parse_args()
+    print(describe(), flush=True)   # versions, CPU and numba target: a figure without them says little
     if hasattr(os, "sched_setaffinity"):
         cpu = a.cpu if a.cpu is not None else min(os.sched_getaffinity(0))
         os.sched_setaffinity(0, {cpu})

@@ -19,6 +19,7 @@ import numpy as np
 
 from foveatrack.livox import protocol as P
 from foveatrack.recording import RecordingWriter
+from foveatrack.environment import describe  # noqa: E402
 
 
 def make_stream(rate_hz: float, seconds: float, rng) -> list[bytes]:
@@ -70,6 +71,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--poll-ms", type=float, default=10.0)
     a = ap.parse_args()
+    print(describe(), flush=True)   # versions, CPU and numba target: a figure without them says little
     rng = np.random.default_rng(0)
     print(f"type-2 decode, {a.poll_ms:g} ms of packets per decode call, best of {a.repeat} (CPU time)")
     for rate in (240_000.0, 480_000.0):

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.recording import RecordingReader, RecordingWriter
+from foveatrack.environment import describe  # noqa: E402
 
 
 def write(path: Path, frames: int, points: int) -> None:
@@ -44,6 +45,7 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=400)
     ap.add_argument("--points", type=int, default=20_000)
     a = ap.parse_args()
+    print(describe(), flush=True)   # versions, CPU and numba target: a figure without them says little
     path = Path(a.file) if a.file else Path(tempfile.gettempdir()) / f"bench_read_{a.frames}x{a.points}.mcap"
     if not path.exists():
         t0 = time.perf_counter()

@@ -28,6 +28,7 @@ from scan_twins import trace_exact_twin  # noqa: E402
 from sim.scan import kernels as K  # noqa: E402
 from sim.scan.model import ScanModel  # noqa: E402
 from sim.scan.presets import PRESETS  # noqa: E402
+from foveatrack.environment import describe  # noqa: E402
 
 
 def best_rate(fn, count, repeats=5):
@@ -69,6 +70,7 @@ def main() -> None:
     ap.add_argument("--frame-reps", type=int, default=300)
     ap.add_argument("--frames-only", action="store_true", help="only the per-frame section")
     args = ap.parse_args()
+    print(describe(), flush=True)   # versions, CPU and numba target: a figure without them says little
     if args.frames_only:
         frame_section(args.frame_reps)
         return

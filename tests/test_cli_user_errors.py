@@ -141,4 +141,8 @@ def test_version_names_the_package_and_what_it_runs_on(capsys):
         main(["--version"])
     assert exc.value.code == 0
     out = capsys.readouterr().out
-    assert out.startswith(f"foveatrack {foveatrack.__version__} (Python ") and "numpy" in out and "numba" in out
+    assert out.startswith(f"foveatrack {foveatrack.__version__} (Python ")
+    from foveatrack.environment import DEPENDENCIES, installed_version
+    for dist in DEPENDENCIES:   # every pinned dependency, with the version installed
+        assert f"{dist} {installed_version(dist)}" in out
+    assert "numba target" in out and len(out.strip().splitlines()) == 2
