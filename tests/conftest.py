@@ -23,3 +23,19 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.too_slow],
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+# The quick loop (`pytest -m "not slow"`, under a minute warm on 2 cores) leaves out whole folders
+# whose tests run real processes in real time, hypothesis sweeps or many closed-loop runs; single slow
+# tests elsewhere carry @pytest.mark.slow themselves.  CI runs everything.
+SLOW_FOLDERS = ("calibration", "daemon", "determinism", "regression", "stability", "study")
+
+
+def pytest_collection_modifyitems(config, items):
+    import pytest
+
+    tests_dir = Path(__file__).parent
+    for item in items:
+        rel = Path(str(item.fspath)).relative_to(tests_dir)
+        if rel.parts[0] in SLOW_FOLDERS:
+            item.add_marker(pytest.mark.slow)

@@ -67,6 +67,7 @@ def _truth_between(rows, t0, t1):
     return [r for r in rows if t0 <= r["t_s"] <= t1]
 
 
+@pytest.mark.slow
 def test_client_drives_the_served_head_end_to_end(served):
     proc, path, truth_path, zero = served
     assert path.startswith("/dev/")

@@ -140,6 +140,7 @@ def test_client_ignores_a_lidar_at_another_address():
         assert client.counters["foreign_source"] >= 2
 
 
+@pytest.mark.slow
 def test_link_loss_and_recovery_with_a_restarted_lidar():
     client, lidar = make_pair(link_timeout_s=0.4)
     with client:

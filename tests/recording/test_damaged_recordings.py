@@ -151,6 +151,7 @@ def test_damage_in_the_first_chunk_which_defines_the_channels(run, tmp_path):
     assert r.damage[0].lost == {c: 1 for c in CHANNELS}
 
 
+@pytest.mark.slow
 def test_one_flipped_byte_anywhere_loses_at_most_its_chunk(run, tmp_path):
     """Every chunk in turn gets one byte flipped at a random place in its record or its index: the
     reader returns a subsequence of the full recording holding everything outside that chunk, and

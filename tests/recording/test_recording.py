@@ -91,6 +91,7 @@ def test_existing_file_is_not_overwritten(tmp_path):
     assert RecordingReader(p).meta == {}
 
 
+@pytest.mark.slow
 def test_every_truncation_reads_a_prefix_of_whole_frames(tmp_path):
     p = tmp_path / "full.mcap"
     with RecordingWriter(p, {"seed": 3}) as w:  # three chunks of one frame + its detection

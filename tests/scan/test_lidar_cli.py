@@ -21,6 +21,7 @@ def test_info_json_and_model_switch(capsys):
     assert para["model"] == "paraxial" and para["fov_deg"] == info["paraxial_fov_deg"]
 
 
+@pytest.mark.slow
 def test_density_and_coverage_json_and_plots(capsys, tmp_path):
     d = run_json(capsys, "lidar", "density", "prototype", "--duration", "0.5", "--json", "--plot", str(tmp_path / "d.png"))
     assert len(d["radius_edges_deg"]) == len(d["simulated"]) + 1 == len(d["analytic"]) + 1
@@ -44,6 +45,7 @@ def test_coverage_text_says_a_level_not_reached(capsys):
     (["density", "prototype", "--duration", "0.3"], "density:", "/60.0k"),         # both models: 2 x 30 000
     (["coverage", "prototype", "--duration", "0.1"], "voxel coverage:", "/10.0k"),
 ])
+@pytest.mark.slow
 def test_density_and_coverage_show_progress_on_stderr_unless_told_not_to(capsys, monkeypatch, argv, desc, total):
     """A long run showed nothing until it ended; the bar appears once a run has taken
     PROGRESS_DELAY_S (0 here, so that this short run counts as long)."""
@@ -99,6 +101,7 @@ def test_coverage_map_runs_on_a_local_dask_cluster(capsys):
     assert on_dask["t90_noise_s"] == local["t90_noise_s"] and on_dask["t90_clean_s"] == local["t90_clean_s"]
 
 
+@pytest.mark.slow
 def test_unreachable_scheduler_is_a_clear_error(capsys):
     assert main(["lidar", "coverage-map", "prototype", "--grid", "2", "--cap", "0.1", "--no-progress",
                  "--scheduler", "tcp://127.0.0.1:9"]) == 2

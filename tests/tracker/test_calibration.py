@@ -43,6 +43,7 @@ def drive(cal, head, rng, latency_s=0.01, max_frames=20000):
     return k
 
 
+@pytest.mark.slow
 def test_recovers_a_nonlinear_table_within_2_percent_on_an_unseen_unit():
     pan_true = nonlinear_speed(30.0, power=1.7, dead_bytes=3, turbo=40.0)
     tilt_true = nonlinear_speed(12.0, power=1.4, dead_bytes=2)

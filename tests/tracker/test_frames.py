@@ -13,6 +13,7 @@ def _stream(rng, n=5000, t_end_ns=1_234_567_891):
     return xyz, t
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("batch", [1, 7, 333, 5000])
 def test_every_point_in_exactly_one_frame(batch):
     rng = np.random.default_rng(1)
