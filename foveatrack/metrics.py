@@ -145,3 +145,66 @@ def compare_to_baseline(metrics: Mapping, baseline: Mapping, tolerances: Mapping
     lines = ["  ".join(h.ljust(w[i]) for i, h in enumerate(head)), "  ".join("-" * x for x in w)]
     lines += ["  ".join(c.ljust(w[i]) for i, c in enumerate(r)) for r in rows]
     return "\n".join(lines), failures
+
+
+def spread_over_runs(runs: list[Mapping]) -> dict[str, dict]:
+    """Mean and spread of each numeric metric over runs of one scene with different seeds.
+
+    Returns ``{metric: {"mean", "std", "n", "missing"}}`` for every flattened numeric metric:
+    ``std`` is the sample standard deviation (ddof 1; 0 for one run), ``missing`` counts the runs
+    where the metric is None or NaN (e.g. a seed whose target was never acquired).
+    """
+    flat = [flatten(r) for r in runs]
+    keys = sorted({k for f in flat for k, v in f.items()
+                   if v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))})
+    out = {}
+    for key in keys:
+        vals = [f.get(key) for f in flat]
+        good = np.array([float(v) for v in vals if v is not None and not (isinstance(v, float) and math.isnan(v))])
+        out[key] = {"mean": float(good.mean()) if good.size else None,
+                    "std": float(good.std(ddof=1)) if good.size > 1 else 0.0,
+                    "n": int(good.size), "missing": len(vals) - int(good.size)}
+    return out
+
+
+def compare_spread_to_baseline(spread: Mapping, baseline: Mapping, tolerances: Mapping,
+                               spread_rel: float = 0.5) -> tuple[str, list[str]]:
+    """Compare a Monte Carlo run's :func:`spread_over_runs` with the baseline's.
+
+    A metric fails when its mean got worse by more than its tolerance (as in
+    :func:`compare_to_baseline`: ``abs + rel * |baseline mean|``), when its spread grew beyond
+    ``std_base * (1 + spread_rel)`` plus that same slack (eight seeds estimate a standard deviation to
+    about 25 %, so 50 % growth is a change, not chance), or when more runs lack it than in the baseline.
+    """
+    default = tolerances.get("*")
+    rows, failures = [], []
+    for key in sorted(baseline):
+        b, s = baseline[key], spread.get(key)
+        tol = tolerances.get(key, default)
+        if tol is None or b.get("mean") is None:
+            continue
+        if s is None or s["mean"] is None:
+            failures.append(f"{key}: baseline mean {b['mean']:.4g}, now missing in every run")
+            rows.append((key, f"{b['mean']:.4g} ± {b['std']:.3g}", "missing", "", "FAIL"))
+            continue
+        limit_mean = float(tol.get("abs", 0.0)) + float(tol.get("rel", 0.0)) * abs(b["mean"])
+        limit_std = b["std"] * (1.0 + spread_rel) + limit_mean   # a spread of 0 may grow to the mean's slack
+        worse = (b["mean"] - s["mean"]) if key.split(".")[0] in HIGHER_IS_BETTER else (s["mean"] - b["mean"])
+        status = "ok"
+        slack = 1e-12 * max(1.0, abs(b["mean"]))
+        if worse > limit_mean + slack:
+            status = "FAIL"
+            failures.append(f"{key}: mean {s['mean']:.4g} vs baseline {b['mean']:.4g} (allowed +{limit_mean:.3g})")
+        if s["std"] > limit_std + slack:
+            status = "FAIL"
+            failures.append(f"{key}: spread {s['std']:.3g} vs baseline {b['std']:.3g} (allowed {limit_std:.3g})")
+        if s["missing"] > b["missing"]:
+            status = "FAIL"
+            failures.append(f"{key}: missing in {s['missing']} runs, baseline {b['missing']}")
+        rows.append((key, f"{b['mean']:.4g} ± {b['std']:.3g}", f"{s['mean']:.4g} ± {s['std']:.3g}",
+                     f"+{limit_mean:.3g} / {limit_std:.3g}", status))
+    head = ("metric", "baseline mean ± sd", "now", "allowed (mean / sd)", "status")
+    w = [max(len(r[i]) for r in rows + [head]) for i in range(5)]
+    lines = ["  ".join(h.ljust(w[i]) for i, h in enumerate(head)), "  ".join("-" * x for x in w)]
+    lines += ["  ".join(c.ljust(w[i]) for i, c in enumerate(r)) for r in rows]
+    return "\n".join(lines), failures

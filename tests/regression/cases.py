@@ -66,3 +66,22 @@ def run_case(name: str) -> dict:
         m.pop(k, None)
     m["duration_s"] = scene.duration_s
     return m
+
+
+# ---- Monte Carlo mode: each pinned scene over several seeds, mean and spread per metric ----------
+# The baseline (baseline_mc.json) records the seeds it used; the tests run the same ones.  8 in CI
+# (about a minute on two cores); regenerate with more for a tighter baseline:
+#     python scripts/update_regression_baseline.py --monte-carlo --seeds 32 [--scheduler tcp://...]
+BASELINE_MC = Path(__file__).with_name("baseline_mc.json")
+MC_SEEDS = 8
+
+
+def monte_carlo(names, seeds, executor=None, tracker: dict | None = None, progress: bool = False) -> dict:
+    """``{scene name: spread_over_runs(...)}`` of the pinned scenes over ``seeds``."""
+    from foveatrack.metrics import spread_over_runs
+    from sim.monte_carlo import SeedRun, run_seeds
+
+    tasks = [SeedRun(str(ROOT / "scenes" / f"{n}.toml"), s, CASES[n], tuple(sorted((tracker or {}).items())))
+             for n in names for s in seeds]
+    results = run_seeds(tasks, executor, progress)
+    return {n: spread_over_runs([results[t] for t in tasks if Path(t.scene_path).stem == n]) for n in names}

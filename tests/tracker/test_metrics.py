@@ -46,3 +46,21 @@ def test_compare_to_baseline_flags_only_worse_beyond_tolerance():
     # exactly at the limit passes
     edge = {"tracking_error_deg": {"rms": 1.0 + 0.05 + 0.1}}
     assert compare_to_baseline(edge, {"tracking_error_deg": {"rms": 1.0}}, tol)[1] == []
+
+
+def test_spread_over_runs_and_its_comparison_catch_a_wider_spread_and_lost_runs():
+    from foveatrack.metrics import compare_spread_to_baseline, spread_over_runs
+
+    tol = {"*": {"abs": 0.0, "rel": 0.05}}
+    base = spread_over_runs([{"e": {"rms": v}, "acq": 1.0} for v in (2.0, 2.1, 1.9, 2.0)])
+    assert base["e.rms"]["mean"] == pytest.approx(2.0) and base["e.rms"]["std"] == pytest.approx(0.0816, abs=1e-4)
+    assert compare_spread_to_baseline(base, base, tol)[1] == []
+    # same mean, three times the spread: flagged as spread, not as mean
+    wide = spread_over_runs([{"e": {"rms": v}, "acq": 1.0} for v in (2.3, 1.7, 2.25, 1.75)])
+    failures = compare_spread_to_baseline(wide, base, tol)[1]
+    assert len(failures) == 1 and failures[0].startswith("e.rms: spread")
+    # a better mean passes; a seed that is never acquired is a failure even though the mean is equal
+    better = spread_over_runs([{"e": {"rms": v}, "acq": a} for v, a in ((1.5, 1.0), (1.5, None), (1.5, 1.0), (1.5, 1.0))])
+    assert base["acq"]["missing"] == 0 and better["acq"]["missing"] == 1
+    failures = compare_spread_to_baseline(better, base, tol)[1]
+    assert failures == ["acq: missing in 1 runs, baseline 0"]
