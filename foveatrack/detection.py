@@ -201,3 +201,22 @@ def _median_rows(a: np.ndarray):
 def detect(frame: Frame, space=None, *, test_xyz: np.ndarray | None = None) -> Detection | None:
     """Algorithm 1 on a :class:`~foveatrack.frames.Frame`."""
     return detect_points(frame.xyz, frame.t_ns, space, test_xyz=test_xyz)
+
+
+def compile_all() -> None:
+    """Compile (or load from numba's cache) the kernels of :mod:`foveatrack.kernels` before a
+    real-time driver's data flows.
+
+    A first call compiles, which takes seconds on a fresh install and would stall the first frames.
+    numba compiles one version per argument signature, so the kernels are run through the tracker's
+    own entry point, :func:`detect_in_box`, with both of its routes (the median
+    kernel, and a zero median's numpy route through :func:`box_members_kernel`): the types are then
+    the tracker's by construction.  (Hand-made arguments once missed its read-only D bounds, and the
+    daemon's first frame compiled anew, 1.8 s late, in a fresh clone.)
+    """
+    from foveatrack.space_of_interest import Box
+
+    box = Box((0.0, 0.0, 0.0), (2.0, 2.0, 2.0))
+    t_ns = np.zeros(1, dtype=np.int64)
+    detect_in_box(np.ones((1, 3)), t_ns, box, np.eye(3), np.zeros(3))
+    detect_in_box(np.array([[1.0, 0.0, 1.0]]), t_ns, box, np.eye(3), np.zeros(3))   # a zero median

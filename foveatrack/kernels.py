@@ -97,22 +97,3 @@ def box_median_kernel(xyz, t_ns, rot, offset, lo, hi, out_xyz):
     col.sort()
     t_med = _median_sorted(col)
     return (-n if zero else n), t_med
-
-
-def compile_all() -> None:
-    """Compile (or load from numba's cache) every kernel here, before a real-time driver's data flows.
-
-    A first call compiles, which takes seconds on a fresh install and would stall the first frames.
-    numba compiles one version per argument signature, so the kernels are run through the tracker's
-    own entry point, :func:`foveatrack.detection.detect_in_box`, with both of its routes (the median
-    kernel, and a zero median's numpy route through :func:`box_members_kernel`): the types are then
-    the tracker's by construction.  (Hand-made arguments once missed its read-only D bounds, and the
-    daemon's first frame compiled anew, 1.8 s late, in a fresh clone.)
-    """
-    from foveatrack.detection import detect_in_box
-    from foveatrack.space_of_interest import Box
-
-    box = Box((0.0, 0.0, 0.0), (2.0, 2.0, 2.0))
-    t_ns = np.zeros(1, dtype=np.int64)
-    detect_in_box(np.ones((1, 3)), t_ns, box, np.eye(3), np.zeros(3))
-    detect_in_box(np.array([[1.0, 0.0, 1.0]]), t_ns, box, np.eye(3), np.zeros(3))   # a zero median

@@ -319,7 +319,7 @@ class Daemon:
 
     # -------------------------------------------------------------------------------- the loop
     def run(self) -> int:
-        from foveatrack.kernels import compile_all
+        from foveatrack.detection import compile_all
 
         compile_all()   # before data flows: a first-call compile would stall the first frame
         self._open()

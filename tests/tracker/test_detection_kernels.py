@@ -113,7 +113,8 @@ def test_detect_in_box_equals_detect_points_to_the_bit(seed):
 _TRACKER_AFTER_COMPILE_ALL = """
 import numpy as np
 from foveatrack.frames import Frame
-from foveatrack.kernels import box_median_kernel, box_members_kernel, compile_all
+from foveatrack.detection import compile_all
+from foveatrack.kernels import box_median_kernel, box_members_kernel
 from foveatrack.space_of_interest import Box
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import Tracker, TrackerConfig
