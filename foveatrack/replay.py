@@ -12,7 +12,7 @@ How a recording's tracker is rebuilt (``meta``):
 
 * simulator (``sim.recorder.recording_meta``): ``[tracker]`` table + what
   :class:`sim.loop.ClosedLoop` sets from ``[gimbal]`` (start pose, the family's tilt stops,
-  ``latency_s = 70 / baud``, ``send_delay_s``); frame ``k`` is ``[k, k+1) / rate_hz`` and its command
+  ``latency_s`` = a Pelco-D frame's time on the wire, ``send_delay_s``); frame ``k`` is ``[k, k+1) / rate_hz`` and its command
   was written at ``t_end + send_delay_s``.
 * daemon (:mod:`foveatrack.daemon.runtime`): ``[tracker]`` table + ``tracker_overrides``; frames end
   at the recorded ``t_ns``; the send time is the command's ``send_t_s``; commands the safety gate
@@ -87,6 +87,7 @@ def _overrides(meta: dict) -> dict:
     if "tracker_overrides" in meta:  # written by the daemon and by the simulator
         return {k: tuple(v) if isinstance(v, list) else v for k, v in meta["tracker_overrides"].items()}
     if src == "simulator":  # recordings made before the simulator wrote its overrides
+        from gimbal.pelco import frame_time_s
         from gimbal.pts303h import HeadParams
 
         g = meta["gimbal"]
@@ -94,7 +95,7 @@ def _overrides(meta: dict) -> dict:
         tilt0 = min(max(g["tilt0_deg"], params.tilt_min_deg), params.tilt_max_deg)
         return {"pan0_deg": g["pan0_deg"], "tilt0_deg": tilt0,
                 "tilt_limits_deg": (params.tilt_min_deg, params.tilt_max_deg),
-                "latency_s": 7 * 10 / g["baud"], "send_delay_s": g["send_delay_s"]}
+                "latency_s": frame_time_s("D", g["baud"]), "send_delay_s": g["send_delay_s"]}
     raise UserError(f"recording source {src!r} is not 'simulator' or 'daemon'")
 
 

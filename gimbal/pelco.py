@@ -49,6 +49,23 @@ SYNC_D = 0xFF
 STX_P = 0xA0
 ETX_P = 0xAF
 FRAME_LEN = {"D": 7, "P": 8}
+BITS_PER_BYTE = 10  # on the wire, 8N1: start bit + 8 data bits + stop bit
+
+
+def byte_time_s(baud: int) -> float:
+    """One byte on the wire [s]: 10 bits (8N1) at ``baud`` [bit/s]."""
+    return BITS_PER_BYTE / baud
+
+
+def frame_time_s(protocol: str, baud: int) -> float:
+    """One command frame on the wire [s]: 7 bytes for Pelco-D, 8 for Pelco-P, at ``baud`` (8N1).
+
+    The time from the first byte leaving the host to the head having the whole command: the part of
+    the command latency the dead reckoning adds to the send time (70 / baud for Pelco-D, 80 / baud
+    for Pelco-P; 7.3 and 8.3 ms at 9600 baud).
+    """
+    _check_protocol(protocol)
+    return FRAME_LEN[protocol] * byte_time_s(baud)
 
 PAN_TURBO = 0xFF  # the normalised turbo pan byte (Pelco-D wire value)
 _P_TURBO_WIRE = 0x40  # Pelco-P's wire value for turbo pan

@@ -10,7 +10,7 @@ The room corner the calibration tracks is found from the scene's geometry
 (:func:`room_corner_in_view`): on real hardware the user gives its approximate position instead.
 
 Command timing: the Calibrator stamps a command with its frame's end; the loop writes it
-``send_delay_s`` later and a 7-byte Pelco-D frame takes ``70 / baud`` on the wire.  Both are given
+``send_delay_s`` later and a Pelco-D frame takes :func:`gimbal.pelco.frame_time_s` on the wire.  Both are given
 to the plan as ``latency_s``, so the dead time written into the table is the head's own (the
 reconstruction adds the link latency itself, see :mod:`foveatrack.reconstruction`).
 """
@@ -27,12 +27,13 @@ from foveatrack.calibration import CalibrationPlan, CalibrationReport, FeatureSp
 from foveatrack.errors import UserError
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import SpeedTable, axis_bytes
+from gimbal.pelco import frame_time_s
 from sim.scene import Scene
 
 
 def link_latency_s(scene: Scene) -> float:
     """Frame end -> command bytes at the head: the loop's send delay plus a 7-byte Pelco-D frame."""
-    return scene.gimbal.send_delay_s + 7 * 10 / scene.gimbal.baud
+    return scene.gimbal.send_delay_s + frame_time_s("D", scene.gimbal.baud)
 
 
 def room_corner_in_view(scene: Scene, margin_deg: float = 4.0) -> np.ndarray:

@@ -30,7 +30,7 @@ from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable
 from foveatrack.tracker import Tracker
-from gimbal.pelco import encode_pan_tilt, wrap_pan_deg
+from gimbal.pelco import encode_pan_tilt, frame_time_s, wrap_pan_deg
 from gimbal.pts303h import PTS303H, HeadParams
 from sim import effects as fx
 from sim.scene import Scene
@@ -149,10 +149,11 @@ class ClosedLoop:
             drop_rate=scene.effect_params.get("uart_drop_rate", 0.0))
         table = load_tracker_table(g.speed_table, self.head, f"{scene.path} [gimbal] speed_table")
         # What the loop sets in the tracker's config from the scene's head and link (recorded, so
-        # that replay rebuilds exactly this tracker).  Latency: a 7-byte Pelco-D frame on the wire.
+        # that replay rebuilds exactly this tracker).  Latency: a Pelco-D frame on the wire (the loop
+        # speaks Pelco-D, as the PTS-303H does).
         self.tracker_overrides = {"pan0_deg": g.pan0_deg, "tilt0_deg": tilt0,
                                   "tilt_limits_deg": (params.tilt_min_deg, params.tilt_max_deg),
-                                  "latency_s": 7 * 10 / g.baud, "send_delay_s": g.send_delay_s}
+                                  "latency_s": frame_time_s("D", g.baud), "send_delay_s": g.send_delay_s}
         self.tracker = Tracker(replace(scene.tracker, **self.tracker_overrides), table)
         self._pending: list[tuple[float, bytes]] = []
         self._encoded: dict[tuple, bytes] = {}   # Pelco-D bytes per (pan_dir, pan_byte, tilt_dir, tilt_byte)

@@ -29,9 +29,8 @@ from collections import deque
 from collections.abc import Callable
 from typing import TextIO
 
+from gimbal.pelco import BITS_PER_BYTE  # 8N1: the link's facts live with the protocol
 from gimbal.pts303h import PTS303H
-
-BITS_PER_BYTE = 10
 
 
 class VirtualHeadServer:

@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from gimbal.pelco import BITS_PER_BYTE  # 8N1: the link's facts live with the protocol
+
 EFFECTS = frozenset({"bit_errors", "drop", "echo"})
-BITS_PER_BYTE = 10  # start + 8 data + stop
 _RANDOM_EFFECTS = frozenset({"bit_errors", "drop"})
 _BYTE = [bytes((b,)) for b in range(256)]
 

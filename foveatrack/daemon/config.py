@@ -29,6 +29,7 @@ from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_k
 from foveatrack.errors import UserError
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig
+from gimbal.pelco import frame_time_s
 
 
 @dataclass(frozen=True)
@@ -63,8 +64,9 @@ class HeadConfig:
 
     @property
     def frame_time_s(self) -> float:
-        """One 7-byte Pelco frame on the wire (10 bits per byte) [s]."""
-        return 7 * 10 / self.baud
+        """One command frame of this head's protocol on the wire at its baud [s] (Pelco-D 7 bytes,
+        Pelco-P 8: :func:`gimbal.pelco.frame_time_s`)."""
+        return frame_time_s(self.protocol, self.baud)
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,7 @@ import numpy as np
 
 from foveatrack.metrics import angle_between_deg
 from foveatrack.reconstruction import rotation_matrix
+from gimbal.pelco import frame_time_s
 from sim.study.common import Timer, load_study_scene, run_loop, seeds_for, strip_private, with_window
 
 TARGETS = {"near": "fig12", "mid": "far", "far": "far"}
@@ -74,7 +75,7 @@ class BearingProbe:
         self.bearing_err_deg: list[float] = []
         self.latency_s: list[float] = []
         self.points: list[int] = []
-        self.wire_s = 7 * 10 / scene.gimbal.baud
+        self.wire_s = frame_time_s("D", scene.gimbal.baud)
 
     def true_lidar_xyz(self, loop, t_s: float) -> np.ndarray:
         """The target centre in the lidar frame at ``t_s`` (true head pose; lidar at the head origin)."""

@@ -36,6 +36,16 @@ def test_example_config_loads():
     assert cfg.speed_table().pan.max_speed_deg_s() == pytest.approx(15.0)
 
 
+@pytest.mark.parametrize("protocol, baud, frame_bytes", [("D", 9600, 7), ("P", 9600, 8), ("P", 2400, 8)])
+def test_the_tracker_dead_reckons_with_the_heads_own_frame_time(tmp_path, protocol, baud, frame_bytes):
+    # A Pelco-P frame is 8 bytes: its command reaches the head 80 / baud after the send, not 70 / baud
+    # (the old rule, written in four places, assumed Pelco-D everywhere).
+    cfg = load_config(_cfg(tmp_path, GOOD.replace("[head]", f"[head]\nprotocol = '{protocol}'\nbaud = {baud}")))
+    assert cfg.head.frame_time_s == pytest.approx(frame_bytes * 10 / baud)
+    assert cfg.tracker.latency_s == pytest.approx(frame_bytes * 10 / baud)
+    assert cfg.tracker_overrides["latency_s"] == pytest.approx(frame_bytes * 10 / baud)
+
+
 @pytest.mark.parametrize("patch, key", [
     (("[head]", "[head]\nbaud = 9601.5"), "baud"),
     (("[head]", "[head]\nbaud = 9601"), "baud"),
