@@ -32,7 +32,7 @@ import numpy as np
 from foveatrack.calibration import CalibrationPlan, CalibrationReport, FeatureSpec, PriorAxisCalibrator
 from foveatrack.calibration_drive import CalibrationDriver
 from foveatrack.daemon.config import DaemonConfig
-from foveatrack.daemon.support import strip_no_return
+from foveatrack.frames import strip_no_return
 from foveatrack.errors import UserError
 from foveatrack.frames import FrameSlicer
 from foveatrack.speed_table import TURBO, SpeedTable

@@ -175,3 +175,16 @@ class FrameSlicer:
         self._buf_r = [refl[rest:]] if refl is not None else []
         self._next_start_ns = int(edges[-1])
         return frames
+
+
+def strip_no_return(frame: Frame) -> Frame:
+    """The frame without Livox "no return" points (0, 0, 0).  Drivers keep them on the wire so that
+    time keeps moving while the lidar sees only sky (frames still come every period), then strip
+    them here before detection and recording."""
+    if not frame.n_points:
+        return frame
+    ret = np.any(frame.xyz != 0.0, axis=1)
+    if ret.all():
+        return frame
+    return Frame(frame.t_start_s, frame.t_end_s, frame.xyz[ret], frame.t_ns[ret],
+                 None if frame.reflectivity is None else frame.reflectivity[ret])

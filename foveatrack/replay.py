@@ -43,6 +43,7 @@ import numpy as np
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame, FrameSlicer
+from foveatrack.gate import STALE_FRAME, CommandGate, Limits
 from foveatrack.metrics import acquired_within_deg, tracking_metrics
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig, Tracker
@@ -172,15 +173,21 @@ def _tracker_record(channels: dict) -> dict | None:
     return cm[0] if cm else None
 
 
-def _reached_head(tracker: Tracker, send_t: float, cmd: HeadCommand, record: dict | None,
-                  head_cmd: HeadCommand) -> HeadCommand:
-    """What the head runs after a command sent at ``send_t``: ``cmd``, unless the recording says its
-    write failed (the daemon's ``written: false``); then the head kept ``head_cmd``, and the dead
-    reckoning is told so at the same instant, as the daemon did."""
-    if record is not None and record.get("written", True) is False:
-        tracker.command_sent(send_t, head_cmd)
-        return head_cmd
-    return cmd
+def _reached_head(gate: CommandGate, tracker: Tracker, send_t: float, cmd: HeadCommand,
+                  record: dict | None) -> HeadCommand:
+    """What the head runs after a command sent at ``send_t``: the gate's rule for a write, with the
+    outcome the recording gives (the daemon's ``written: false`` for a failed write)."""
+    return gate.wrote(tracker, send_t, cmd, ok=record is None or record.get("written", True) is not False)
+
+
+def _recorded_limits(meta: dict) -> Limits | None:
+    """The gate's limits as the daemon or the simulator recorded them (None where none were recorded:
+    a scene without [gate], older recordings; their commands pass the gate unchanged)."""
+    if not meta.get("limits"):
+        return None
+    L = dict(meta["limits"])
+    L["tilt_limits_deg"] = tuple(L["tilt_limits_deg"])
+    return Limits(**L)
 
 
 def _sent_stale(channels: dict, tag: str) -> bool:
@@ -201,13 +208,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     rec_cfg = tracker_config(meta)
     table = SpeedTable.from_dict(meta["speed_table"], where=f"{path}: recorded speed table")
     tracker = Tracker(cfg, table, t0_s=float(meta.get("tracker_t0_s", 0.0)))
-    limits = None
-    if source == "daemon" and meta.get("limits"):
-        from foveatrack.daemon.support import STALE_FRAME, Limits
-
-        L = dict(meta["limits"])
-        L["tilt_limits_deg"] = tuple(L["tilt_limits_deg"])
-        limits = Limits(**L)
+    gate = CommandGate(_recorded_limits(meta))
     period = rec_cfg.period_s
     period_ns = int(round(1e9 / rec_cfg.rate_hz))
     send_delay_sim = rec_cfg.send_delay_s
@@ -216,7 +217,6 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
                          "processing_ms", "latency_ms", "head_pan_deg", "head_tilt_deg")}
     T = {k: [] for k in ("true_error_deg", "target_xyz_m", "points_on_target", "pan_deg", "tilt_deg")}
     has_truth = False
-    head_cmd = STOP   # the last command the head received: a daemon's failed write left it running this
     for pts, ch, after in _groups(reader):
         k = int(pts.frame_index)
         if source == "simulator":
@@ -232,14 +232,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             send_t = float(cmds[0]["send_t_s"]) if cmds and "send_t_s" in cmds[0] else t1 + cfg.send_delay_s
         frame = Frame(t0, t1, pts.xyz, pts.t_ns_points, pts.reflectivity)
         out = tracker.process(frame, send_t_s=send_t)
-        cmd = out.command
-        if limits is not None:
-            cmd, why = limits.apply(out.command, out.head_tilt_deg, out.head_sigma_tilt_deg)
-            if _sent_stale(ch, STALE_FRAME):       # the daemon found this frame stale (wall clock): it sent STOP
-                cmd, why = STOP, why + [STALE_FRAME]
-            if why:
-                tracker.command_sent(send_t, cmd)
-        head_cmd = _reached_head(tracker, send_t, cmd, _tracker_record(ch), head_cmd)
+        # the daemon found the frame stale by its wall clock: the recording says so
+        cmd, _ = gate.decide(tracker, out, send_t, stale=_sent_stale(ch, STALE_FRAME))
+        _reached_head(gate, tracker, send_t, cmd, _tracker_record(ch))
         F.add(k, frame, out, cmd)
         dets = ch.get("detections", [])
         d = dets[0] if dets else {}
@@ -275,7 +270,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             t_c = float(c["send_t_s"])
             cmd_c = HeadCommand(c["pan_dir"], c["pan_byte"], c["tilt_dir"], c["tilt_byte"])
             tracker.command_sent(t_c, cmd_c)
-            head_cmd = _reached_head(tracker, t_c, cmd_c, c, head_cmd)
+            _reached_head(gate, tracker, t_c, cmd_c, c)
     t_settled = (tracker.recon.last_send_t_s or 0.0) + 2.0
     final_pose = tuple(float(a) for a in tracker.recon.angles_at(t_settled)[:2])
     frames = F.arrays()
@@ -338,7 +333,7 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
                point_rate_hz: float | None = None) -> ReplayResult:
     """Run the tracker over a Livox Viewer ``.lvx`` file (lidar only, head frozen: after every frame
     the reconstruction is told the head stopped, so the commands are what it would have sent)."""
-    from foveatrack.daemon.support import strip_no_return
+    from foveatrack.frames import strip_no_return
     from foveatrack.livox.lvx import LvxReader
 
     cfg = TrackerConfig.from_mapping(tracker_table or {}, where=f"{config_name or 'default'} [tracker]")

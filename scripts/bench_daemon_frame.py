@@ -30,7 +30,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from foveatrack.daemon.runtime import _job_frame  # noqa: E402
-from foveatrack.daemon.support import Limits, RecordingThread, strip_no_return  # noqa: E402
+from foveatrack.daemon.support import RecordingThread  # noqa: E402
+from foveatrack.frames import strip_no_return  # noqa: E402
+from foveatrack.gate import Limits  # noqa: E402
 from foveatrack.frames import FrameSlicer  # noqa: E402
 from foveatrack.livox import protocol as P  # noqa: E402
 from foveatrack.recording import RecordingWriter  # noqa: E402

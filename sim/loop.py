@@ -27,6 +27,7 @@ import numpy as np
 from foveatrack.control import STOP
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
+from foveatrack.gate import CommandGate, Limits
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable
 from foveatrack.tracker import Tracker
@@ -155,6 +156,12 @@ class ClosedLoop:
                                   "tilt_limits_deg": (params.tilt_min_deg, params.tilt_max_deg),
                                   "latency_s": frame_time_s("D", g.baud), "send_delay_s": g.send_delay_s}
         self.tracker = Tracker(replace(scene.tracker, **self.tracker_overrides), table)
+        # The daemon's gate (limits, stale frames): pass-through unless the scene has a [gate] table.
+        self.gate = CommandGate(None if scene.gate is None else Limits(
+            scene.gate.max_pan_byte, scene.gate.max_tilt_byte, scene.gate.allow_turbo,
+            (params.tilt_min_deg, params.tilt_max_deg), scene.gate.tilt_margin_deg))
+        self.last_command = STOP          # this frame's command as sent (after the gate)
+        self.last_limited: list[str] = []  # why the gate changed it (empty: unchanged)
         self._pending: list[tuple[float, bytes]] = []
         self._encoded: dict[tuple, bytes] = {}   # Pelco-D bytes per (pan_dir, pan_byte, tilt_dir, tilt_byte)
         self.log = FrameLog()
@@ -253,12 +260,19 @@ class ClosedLoop:
             out = self.tracker.process(frame, send_t_s=send_t)
         c5 = clock()
         self.last_sent = None
+        self.last_limited = []
         if scene.gimbal.frozen and self.controller is None:
             # The head is frozen (paper Fig. 13/14a): nothing is sent, and the tracker's dead reckoning
             # must know that its command never left.
             self.tracker.command_sent(send_t, STOP)
         if not scene.gimbal.frozen:
             c = out.command
+            if self.controller is None:
+                stale_s = None if scene.gate is None else scene.gate.stale_frame_s
+                c, self.last_limited = self.gate.decide(self.tracker, out, send_t,
+                                                        stale=stale_s is not None and send_t - t1 > stale_s)
+                self.gate.wrote(self.tracker, send_t, c, ok=True)   # the virtual UART always takes the bytes
+            self.last_command = c
             key = (c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte)
             data = self._encoded.get(key)
             if data is None:     # a run uses a few dozen distinct commands: encode each once
@@ -303,7 +317,7 @@ class ClosedLoop:
             est_pan, est_tilt = math.nan, math.nan
         L.est_pan_deg.append(est_pan)
         L.est_tilt_deg.append(est_tilt)
-        c = out.command
+        c = out.command if self.scene.gimbal.frozen else self.last_command   # as sent, after the gate
         L.command.append((c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte))
         if self.scene.targets:
             traj = self.scene.targets[0].trajectory

@@ -41,6 +41,8 @@ def recording_meta(scene, loop) -> dict:
         "point_rate_hz": scene.optics.point_rate_hz,
         "gimbal": asdict(scene.gimbal),
         "half_fov_deg": half_fov_deg(scene),    # replay's "in the FoV", as the simulator's summary has it
+        # the gate's limits (absent: commands passed unchanged), for replay to run the same gate
+        **({"limits": asdict(loop.gate.limits)} if loop.gate.limits is not None else {}),
     }
 
 
@@ -55,11 +57,16 @@ class SimRecorder:
         w = self.writer
         fid = self.frame_id
         t_end = write_tracker_frame(w, fid, frame, out)
-        c = out.command
+        c = loop.last_command   # as sent, after the gate
         if loop.last_sent is not None:
             t_send, data = loop.last_sent
+            extra = {}
+            if loop.last_limited:   # the gate changed the tracker's command: as the daemon records it
+                t = out.command
+                extra = {"limited": list(loop.last_limited),
+                         "tracker_command": [t.pan_dir, t.pan_byte, t.tilt_dir, t.tilt_byte]}
             w.write_command(ns(t_send), data, frame_id=fid, pan_dir=c.pan_dir, pan_byte=c.pan_byte,
-                            tilt_dir=c.tilt_dir, tilt_byte=c.tilt_byte)
+                            tilt_dir=c.tilt_dir, tilt_byte=c.tilt_byte, **extra)
         L = loop.log
         w.write_truth(t_end, frame_id=fid, pan_deg=L.head_pan_deg[-1], tilt_deg=L.head_tilt_deg[-1],
                       target_xyz_m=[float(v) for v in np.asarray(L.target_xyz[-1])],

@@ -71,6 +71,23 @@ class GimbalSpec:
 
 
 @dataclass(frozen=True)
+class GateSpec:
+    """``[gate]``: the command gate's limits for this scene (:mod:`foveatrack.gate`, the daemon's own
+    ``[head]`` limits and ``[daemon] stale_frame_s``).  Without the table the simulator's gate passes
+    every command unchanged.  The tilt stops are the head's.
+
+    max_pan_byte, max_tilt_byte : 0..63; allow_turbo : bool; tilt_margin_deg : >= 0 [deg]
+    stale_frame_s : > 0 [s] or None: a frame older than this when its command is sent (virtual time:
+        ``[gimbal] send_delay_s``) steers nothing, STOP is sent instead
+    """
+    max_pan_byte: int = 0x3F
+    max_tilt_byte: int = 0x3F
+    allow_turbo: bool = True
+    tilt_margin_deg: float = 2.0
+    stale_frame_s: float | None = None
+
+
+@dataclass(frozen=True)
 class Scene:
     name: str
     path: str
@@ -87,6 +104,7 @@ class Scene:
     background_reflectivity: np.ndarray = field(repr=False)
     tracker: Any = None  # TrackerConfig
     tracker_table: Mapping[str, Any] = field(default_factory=dict)
+    gate: GateSpec | None = None
 
     def has(self, effect: str) -> bool:
         return effect in self.effects
@@ -122,7 +140,7 @@ def load_scene(path: str | Path) -> Scene:
 def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str = "") -> Scene:
     from foveatrack.tracker import TrackerConfig
 
-    check_keys(data, ["scene", "effects", "lidar", "gimbal", "target", "background", "tracker"], where)
+    check_keys(data, ["scene", "effects", "lidar", "gimbal", "target", "background", "tracker", "gate"], where)
     sc = data.get("scene", {})
     w = f"{where} [scene]"
     check_keys(sc, ["name", "duration_s", "seed", "effects", "description"], w)
@@ -179,6 +197,7 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         targets=target_specs,
         background_prims=np.array(prims).reshape(-1, 13), background_reflectivity=np.array(refl, dtype=float),
         tracker=tracker, tracker_table=tracker_table,
+        gate=_gate(data["gate"], f"{where} [gate]") if "gate" in data else None,
     )
 
 
@@ -204,6 +223,26 @@ def _lidar(t: Mapping, w: str):
     except OpticsError as exc:
         msg = str(exc)
         raise UserError(msg if msg.startswith(w) else f"{w}: {msg}") from None
+
+
+def _gate(t: Mapping, w: str) -> GateSpec:
+    if not isinstance(t, Mapping):
+        raise UserError(f"{w}: must be a table of gate keys, got {t!r}")
+    check_keys(t, ["max_pan_byte", "max_tilt_byte", "allow_turbo", "tilt_margin_deg", "stale_frame_s"], w)
+    kw: dict[str, Any] = {}
+    for k in ("max_pan_byte", "max_tilt_byte"):
+        if k in t:
+            v = t[k]
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 0x3F:
+                raise UserError(f"{w}: {k} must be an integer speed byte in [0, 63], got {v!r}")
+            kw[k] = v
+    if "allow_turbo" in t:
+        kw["allow_turbo"] = as_bool(t["allow_turbo"], "allow_turbo", w)
+    if "tilt_margin_deg" in t:
+        kw["tilt_margin_deg"] = as_float(t["tilt_margin_deg"], "tilt_margin_deg", w, lo=0, hi=30)
+    if "stale_frame_s" in t:
+        kw["stale_frame_s"] = as_float(t["stale_frame_s"], "stale_frame_s", w, lo=0, lo_open=True, hi=10)
+    return GateSpec(**kw)
 
 
 def _gimbal(t: Mapping, w: str, base_dir: Path | None = None) -> GimbalSpec:

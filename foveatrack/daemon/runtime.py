@@ -3,7 +3,7 @@
 Threads and queues::
 
     receiver thread:  LivoxClient.poll -> (host time, points) -> bounded batch queue (drops counted)
-    control loop:     batch queue -> FrameSlicer -> Tracker.process -> Limits.apply -> HeadClient
+    control loop:     batch queue -> FrameSlicer -> Tracker.process -> CommandGate -> HeadClient
                       (the main thread; a monotonic 10 Hz tick runs the watchdog and the status)
     recording thread: bounded job queue -> RecordingWriter (drops counted; never blocks the loop)
 
@@ -27,8 +27,9 @@ Figures recorded per frame (``/metrics``): ``processing_ms`` = from the arrival 
 completed the frame to the command bytes written (slicing, detection, control, encoding, write);
 ``latency_ms`` = end to end, host time of the frame's last point -> command bytes written.
 
-Safety: a command leaves only through :class:`~foveatrack.daemon.support.Limits` (speed bytes,
-turbo, tilt stops against the reconstructed tilt); the watchdog sends STOP when no lidar packet has
+Safety: a command leaves only through :class:`foveatrack.gate.CommandGate` (speed bytes, turbo, tilt
+stops against the reconstructed tilt, stale frames, failed writes; the simulator and replay run the
+same gate); the watchdog sends STOP when no lidar packet has
 arrived for ``watchdog_s`` (and repeats it every second while silent); SIGINT/SIGTERM stop the
 head, close the recording and return 0.  The serial link reconnects by itself
 (:class:`gimbal.client.HeadClient`).
@@ -48,9 +49,9 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.daemon.config import DaemonConfig
-from foveatrack.daemon.support import (STALE_FRAME, JsonLog, Limits, RecordingThread, StatusLine, format_status,
-                                       strip_no_return)
-from foveatrack.frames import Frame, FrameSlicer
+from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, format_status
+from foveatrack.frames import Frame, FrameSlicer, strip_no_return
+from foveatrack.gate import CommandGate, Limits
 from foveatrack.track_log import ns, write_tracker_frame
 from foveatrack.tracker import Tracker
 
@@ -149,6 +150,7 @@ class Daemon:
         self.stop_ev = threading.Event()
         h = config.head
         self.limits = Limits(h.max_pan_byte, h.max_tilt_byte, h.allow_turbo, h.tilt_limits_deg, h.tilt_margin_deg)
+        self.gate = CommandGate(self.limits)
         self.table = config.speed_table()
         self.tracker = Tracker(config.tracker, self.table)
         self.slicer = FrameSlicer(config.tracker.rate_hz)
@@ -159,7 +161,6 @@ class Daemon:
         self.last_out = None
         self._compute_s: deque = deque([0.002], maxlen=9)   # recent compute times [s]
         self._last_send_t = -math.inf
-        self._head_cmd: HeadCommand = STOP   # the last command the head actually received (it starts stopped)
         self.recorder: RecordingThread | None = None
         self.recording_path = None
 
@@ -258,15 +259,9 @@ class Daemon:
         ok = self.head.send_frame(raw)
         t_written = time.monotonic()
         self.counters["commands_written" if ok else "commands_failed"] += 1
-        if ok:
-            self._head_cmd = cmd
-        else:
-            # The head never got these bytes, so it keeps doing what it was last told (a Pelco head
-            # latches motion): the dead reckoning must too, or a link outage reads as the head
-            # following the tracker (seen: ~9 deg of pan while a head was unplugged).  The caller
-            # registered ``cmd`` at ``send_t_s``; a second command at the same instant replaces it
-            # in the dead reckoning (one change of speed, not two: ``_AxisIntegrator.command``).
-            self.tracker.command_sent(send_t_s, self._head_cmd)
+        # A failed write leaves the head on its last command; the gate tells the dead reckoning (seen
+        # without it: ~9 deg of pan while a head was unplugged).
+        self.gate.wrote(self.tracker, send_t_s, cmd, ok)
         rec = {"raw": raw, "frame_id": fid, "source": source, "send_t_s": float(send_t_s), "written": bool(ok),
                "host_written_s": t_written, "pan_dir": cmd.pan_dir, "pan_byte": cmd.pan_byte,
                "tilt_dir": cmd.tilt_dir, "tilt_byte": cmd.tilt_byte}
@@ -290,16 +285,14 @@ class Daemon:
         out = self.tracker.process(frame, send_t_s=send_t)
         fid = self.frame_id
         self.frame_id += 1
-        cmd, why = self.limits.apply(out.command, out.head_tilt_deg, out.head_sigma_tilt_deg)
         # A frame this old steers nothing: its bearing is stale, and while the loop is catching up
         # (a stall, a start-up burst) the clock offset may still be settling, which would misplace
         # the command in the dead reckoning.  STOP is sent and recorded instead (replay repeats it).
-        if now_s is not None and now_s - frame.t_end_s > self.cfg.loop.stale_frame_s:
-            cmd, why = STOP, why + [STALE_FRAME]
-            self.counters["frames_stale"] += 1
+        stale = now_s is not None and now_s - frame.t_end_s > self.cfg.loop.stale_frame_s
+        cmd, why = self.gate.decide(self.tracker, out, send_t, stale)
+        self.counters["frames_stale"] += stale
         if why:
             self.counters["commands_limited"] += 1
-            self.tracker.command_sent(send_t, cmd)
         rec, t_written = self._send(cmd, "tracker", send_t, fid, out.command, why)
         proc = t_written - t_arrival
         # The send-time prediction learns the compute time only, robustly (median of the last 9): a

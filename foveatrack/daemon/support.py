@@ -1,5 +1,5 @@
-"""Daemon helpers: the last safety gate before bytes leave, the status line, JSON logs, and the
-recording thread.  No I/O of the lidar or the head here."""
+"""Daemon helpers: the status line, JSON logs and the recording thread.  No I/O of the lidar or
+the head here (the safety gate every command passes is :mod:`foveatrack.gate`, shared by all drivers)."""
 
 from __future__ import annotations
 
@@ -9,69 +9,9 @@ import queue
 import sys
 import threading
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
-from foveatrack.control import HeadCommand
-from foveatrack.speed_table import TURBO
-
-
-def strip_no_return(frame):
-    """The frame without Livox "no return" points (0, 0, 0).  Drivers keep them on the wire so that
-    time keeps moving while the lidar sees only sky (frames still come every period), then strip
-    them here before detection and recording."""
-    from foveatrack.frames import Frame
-
-    if not frame.n_points:
-        return frame
-    ret = np.any(frame.xyz != 0.0, axis=1)
-    if ret.all():
-        return frame
-    return Frame(frame.t_start_s, frame.t_end_s, frame.xyz[ret], frame.t_ns[ret],
-                 None if frame.reflectivity is None else frame.reflectivity[ret])
-
-
-# ----------------------------------------------------------------------------------------- safety
-# Recorded in a command's ``limited`` list when the daemon sent STOP because the frame was older
-# than ``stale_frame_s`` when processed (wall-clock, so replay reads it from the recording).
-STALE_FRAME = "stale_frame"
-
-
-@dataclass(frozen=True)
-class Limits:
-    """Hard limits applied to every command after the tracker, before it is encoded.
-
-    max_pan_byte, max_tilt_byte : 0..63       highest speed byte allowed per axis
-    allow_turbo : bool                        may pan use 0xFF (else it becomes max_pan_byte)
-    tilt_limits_deg : (lo, hi) [deg]          the head's tilt stops
-    tilt_margin_deg : >= 0 [deg]              no tilt motion toward a stop once the estimated tilt
-                                              (+ its 2 sigma) is within this of it
-    """
-
-    max_pan_byte: int = 0x3F
-    max_tilt_byte: int = 0x3F
-    allow_turbo: bool = False
-    tilt_limits_deg: tuple[float, float] = (-30.0, 60.0)
-    tilt_margin_deg: float = 2.0
-
-    def apply(self, cmd: HeadCommand, tilt_deg: float, tilt_sigma_deg: float = 0.0) -> tuple[HeadCommand, list[str]]:
-        """The command that may leave, and the reasons it was changed (empty if unchanged)."""
-        why = []
-        pd, pb, td, tb = cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte
-        if pb == TURBO and not self.allow_turbo:
-            pb, why = self.max_pan_byte, why + ["turbo"]
-        elif pb != TURBO and pb > self.max_pan_byte:
-            pb, why = self.max_pan_byte, why + ["pan_speed"]
-        if tb > self.max_tilt_byte:
-            tb, why = self.max_tilt_byte, why + ["tilt_speed"]
-        lo, hi = self.tilt_limits_deg
-        s2 = 2.0 * max(tilt_sigma_deg, 0.0)
-        if td > 0 and tilt_deg + s2 >= hi - self.tilt_margin_deg:
-            td, tb, why = 0, 0, why + ["tilt_stop_up"]
-        elif td < 0 and tilt_deg - s2 <= lo + self.tilt_margin_deg:
-            td, tb, why = 0, 0, why + ["tilt_stop_down"]
-        return HeadCommand(pd, pb if pd else 0, td, tb if td else 0), why
 
 
 # ----------------------------------------------------------------------------------------- logs

@@ -8,7 +8,7 @@ Here the daemon runs in-process with a fake head link and a fake receiver whose 
 
 import time
 
-from foveatrack.daemon.support import STALE_FRAME
+from foveatrack.gate import STALE_FRAME
 from foveatrack.recording import RecordingReader
 from foveatrack.replay import replay_recording
 

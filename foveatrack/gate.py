@@ -1,0 +1,97 @@
+"""The command gate: the one way a tracker's command reaches a head, in every driver.
+
+The simulator, replay and the daemon each run a frame through :meth:`foveatrack.tracker.Tracker.process`
+and then through :class:`CommandGate`, so the command path the hardware uses is the one the
+simulator exercises and replay re-enacts::
+
+    tracker command --decide()--> limits (speed bytes, turbo, tilt stops) --> stale frame -> STOP
+                    --(the sink writes it)--> wrote(): a failed write leaves the head on its last command
+
+The head reports nothing, so the tracker dead-reckons from what it sent.  Whenever the gate changes a
+command, or the sink fails to write it, the tracker is told what the head really got, at the same
+instant (:meth:`Tracker.command_sent` replaces the command sent at that time).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from foveatrack.control import STOP, HeadCommand
+from foveatrack.speed_table import TURBO
+
+# Recorded in a command's ``limited`` list when STOP was sent because the frame was older than
+# ``stale_frame_s`` when processed (the daemon judges by the wall clock, so replay reads it from the
+# recording; the simulator by virtual time).
+STALE_FRAME = "stale_frame"
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Hard limits applied to every command after the tracker, before it is encoded.
+
+    max_pan_byte, max_tilt_byte : 0..63       highest speed byte allowed per axis
+    allow_turbo : bool                        may pan use 0xFF (else it becomes max_pan_byte)
+    tilt_limits_deg : (lo, hi) [deg]          the head's tilt stops
+    tilt_margin_deg : >= 0 [deg]              no tilt motion toward a stop once the estimated tilt
+                                              (+ its 2 sigma) is within this of it
+    """
+
+    max_pan_byte: int = 0x3F
+    max_tilt_byte: int = 0x3F
+    allow_turbo: bool = False
+    tilt_limits_deg: tuple[float, float] = (-30.0, 60.0)
+    tilt_margin_deg: float = 2.0
+
+    def apply(self, cmd: HeadCommand, tilt_deg: float, tilt_sigma_deg: float = 0.0) -> tuple[HeadCommand, list[str]]:
+        """The command that may leave, and the reasons it was changed (empty if unchanged)."""
+        why = []
+        pd, pb, td, tb = cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte
+        if pb == TURBO and not self.allow_turbo:
+            pb, why = self.max_pan_byte, why + ["turbo"]
+        elif pb != TURBO and pb > self.max_pan_byte:
+            pb, why = self.max_pan_byte, why + ["pan_speed"]
+        if tb > self.max_tilt_byte:
+            tb, why = self.max_tilt_byte, why + ["tilt_speed"]
+        lo, hi = self.tilt_limits_deg
+        s2 = 2.0 * max(tilt_sigma_deg, 0.0)
+        if td > 0 and tilt_deg + s2 >= hi - self.tilt_margin_deg:
+            td, tb, why = 0, 0, why + ["tilt_stop_up"]
+        elif td < 0 and tilt_deg - s2 <= lo + self.tilt_margin_deg:
+            td, tb, why = 0, 0, why + ["tilt_stop_down"]
+        return HeadCommand(pd, pb if pd else 0, td, tb if td else 0), why
+
+
+class CommandGate:
+    """Limits, stale frames and failed writes, between a tracker and a head (see the module docstring).
+
+    limits : Limits or None (None: the tracker's commands pass unchanged, as in recordings made
+             before the daemon recorded its limits)
+    """
+
+    def __init__(self, limits: Limits | None):
+        self.limits = limits
+        self.head_cmd: HeadCommand = STOP   # what the head last received (it starts stopped)
+
+    def decide(self, tracker, out, send_t_s: float, stale: bool = False) -> tuple[HeadCommand, list[str]]:
+        """The command to write for the tracker output ``out`` sent at ``send_t_s``, and why it differs
+        from the tracker's (empty: unchanged).  ``stale``: the frame was too old when processed (the
+        driver judges: wall clock, recording or virtual time); STOP is sent instead."""
+        cmd, why = out.command, []
+        if self.limits is not None:
+            cmd, why = self.limits.apply(out.command, out.head_tilt_deg, out.head_sigma_tilt_deg)
+        if stale:
+            cmd, why = STOP, why + [STALE_FRAME]
+        if why:
+            tracker.command_sent(send_t_s, cmd)
+        return cmd, why
+
+    def wrote(self, tracker, send_t_s: float, cmd: HeadCommand, ok: bool) -> HeadCommand:
+        """After the sink wrote ``cmd`` (registered with the tracker at ``send_t_s``): ``ok`` False means
+        the head never got the bytes and keeps running its last command, which the dead reckoning is
+        told at the same instant (a Pelco head latches motion: a link outage would otherwise read as
+        the head following the tracker).  Returns what the head now runs."""
+        if ok:
+            self.head_cmd = cmd
+        else:
+            tracker.command_sent(send_t_s, self.head_cmd)
+        return self.head_cmd
