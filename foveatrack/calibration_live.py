@@ -32,9 +32,9 @@ import numpy as np
 from foveatrack.calibration import CalibrationPlan, CalibrationReport, FeatureSpec, PriorAxisCalibrator
 from foveatrack.calibration_drive import CalibrationDriver
 from foveatrack.daemon.config import DaemonConfig
-from foveatrack.frames import strip_no_return
 from foveatrack.errors import UserError
-from foveatrack.frames import FrameSlicer
+from foveatrack.frames import FrameSlicer, strip_no_return
+from foveatrack.live_devices import LidarStream, open_devices
 from foveatrack.speed_table import TURBO, SpeedTable
 
 
@@ -83,12 +83,6 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
     Raises UserError when the lidar never sends or falls silent, the calibration fails, runs out of
     time or is interrupted; the head is stopped in every case.
     """
-    from gimbal.client import HeadClient
-    from gimbal.errors import GimbalError
-    from gimbal.pelco import encode_pan_tilt
-
-    from foveatrack.livox.client import LivoxClient
-
     h, L = config.head, config.lidar
     plan, dropped = plan_within_limits(plan, config)
     plan = replace(plan, start_tilt_deg=h.tilt0_deg, latency_s=h.frame_time_s + processing_s)
@@ -96,27 +90,13 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
                               head=f"{h.protocol} head, address {h.address} on {h.port}")
     driver = CalibrationDriver(cal)
     legs_total = len(plan.pan_bytes) * 2 + len(plan.tilt_bytes) * 2
-    client = LivoxClient(L.sensor_ip, L.host_ip, cmd_port=L.cmd_port, data_port=L.data_port,
-                         broadcast_port=L.broadcast_port, sensor_cmd_port=L.sensor_cmd_port,
-                         point_rate_hz=L.point_rate_hz, broadcast_code=L.broadcast_code, keep_no_return=True)
-    try:
-        head = HeadClient(h.port, baud=h.baud, address=h.address, protocol=h.protocol)
-    except GimbalError as exc:
-        client.close()
-        raise UserError(f"{config.path} [head]: {exc}") from None
-    if not head.connected:
-        # (as the daemon's start: a wrong port would leave the procedure commanding nothing)
-        client.close()
-        raise UserError(f"{config.path} [head]: port {h.port!r} cannot be opened ({head.last_open_error})")
+    head, client = open_devices(config)     # as the daemon opens them, with the same messages
+    stream = LidarStream(client)            # last packet (watchdog) and host - sensor clock offset
     slicer = FrameSlicer(rate_hz)
-    encoded: dict = {}
     written = None           # the last command the head got
     delay_ms: list[float] = []
     frames = 0
     t_start = time.monotonic()
-    last_packet = None
-    packets = 0
-    offset_s = None          # host - sensor clock (smallest seen: the transit delay, see daemon.runtime)
     try:
         head.stop()
         client.start_sampling()
@@ -130,42 +110,34 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
                                 f"{legs_total} legs done); the head was stopped and no table was written")
             # Watchdog: the procedure cannot see the head move without the lidar (and a head left
             # turning would run into its stops), so silence ends the run.
-            if last_packet is None and now - t_start > first_data_s:
+            silent_s = stream.silent_s(now)
+            if silent_s is None and now - t_start > first_data_s:
                 raise UserError(f"no data from the lidar {L.sensor_ip} within {first_data_s:g} s (is it on, "
                                 f"and is [lidar] host_ip {L.host_ip} this machine's address on its network?); "
                                 f"the head was stopped and no table was written (lidar counters: {client.counters})")
-            if last_packet is not None and now - last_packet > config.loop.watchdog_s:
-                raise UserError(f"the lidar fell silent for {now - last_packet:.1f} s ([daemon] watchdog_s "
+            if silent_s is not None and silent_s > config.loop.watchdog_s:
+                raise UserError(f"the lidar fell silent for {silent_s:.1f} s ([daemon] watchdog_s "
                                 f"{config.loop.watchdog_s:g}) after {frames} frames; the head was stopped and no "
                                 "table was written")
-            batches = client.poll(0.02)
-            now = time.monotonic()
-            if client.counters.get("packets", 0) != packets:
-                packets = client.counters.get("packets", 0)
-                last_packet = now
+            _, batches = stream.poll(0.02)
             for b in batches:
                 if not len(b):
                     continue
-                off = now - int(b.t_ns[-1]) * 1e-9
-                offset_s = off if offset_s is None else min(offset_s, off)
                 for frame in slicer.push(b.xyz, b.t_ns, b.reflectivity):
                     frame = strip_no_return(frame)
                     frames += 1
                     cmd = driver(frame, frame.t_end_s)
-                    key = (cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte)
-                    raw = encoded.get(key)
-                    if raw is None:
-                        raw = encoded[key] = encode_pan_tilt(h.address, *key, h.protocol)
-                    if not head.send_frame(raw) and key != written:
+                    _, ok = head.send(cmd)
+                    if not ok and cmd != written:
                         # A keep-alive that did not get through changes nothing; a change of
                         # command that did not, leaves the head doing the last one while the
                         # procedure times a new leg: its measurements would be wrong.
                         raise UserError(f"the head's serial link [head] port {h.port!r} failed when the calibration "
                                         f"changed its command ({_legs(cal)} legs done); the head was stopped if it "
                                         "could be reached and no table was written")
-                    written = key
+                    written = cmd
                     if frame.n_points:
-                        delay_ms.append((time.monotonic() - (frame.t_ns[-1] * 1e-9 + offset_s)) * 1e3)
+                        delay_ms.append((time.monotonic() - (frame.t_ns[-1] * 1e-9 + stream.offset_s)) * 1e3)
                     if progress is not None:
                         progress(frames, _legs(cal), legs_total)
                     if driver.finished:
@@ -175,7 +147,7 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
         table = cal.result()
     finally:
         head.stop()
-        counters = {"lidar": dict(client.counters), "head": _head_stats(head)}
+        counters = {"lidar": dict(client.counters), "head": head.stats_dict()}
         client.close()
         head.close()
     return LiveCalibration(table, cal.report, plan, dropped, frames, time.monotonic() - t_start, delay_ms, counters)
@@ -183,13 +155,6 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
 
 def _legs(cal) -> int:
     return sum(1 for leg in cal.legs if leg.t_stop_s is not None)
-
-
-def _head_stats(head) -> dict:
-    from dataclasses import asdict, is_dataclass
-
-    s = getattr(head, "stats", None)
-    return asdict(s) if is_dataclass(s) else {}
 
 
 def delay_summary_ms(delay_ms: list[float]) -> tuple[float, float] | None:

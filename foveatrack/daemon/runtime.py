@@ -52,6 +52,7 @@ from foveatrack.daemon.config import DaemonConfig
 from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, format_status
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
 from foveatrack.gate import CommandGate, Limits
+from foveatrack.live_devices import LidarStream, open_devices
 from foveatrack.track_log import ns, write_tracker_frame
 from foveatrack.tracker import Tracker
 
@@ -80,13 +81,13 @@ def _job_event(w, t_ns, rec: dict):
 
 
 class _Receiver(threading.Thread):
-    """Owns the LivoxClient; hands (host time, xyz, t_ns, reflectivity) to the control loop."""
+    """Owns the lidar's :class:`~foveatrack.live_devices.LidarStream`; hands (host time, xyz, t_ns,
+    reflectivity) to the control loop."""
 
     def __init__(self, client, q: queue.Queue, stop: threading.Event):
         super().__init__(name="livox-receiver", daemon=True)
         self.client, self.q, self.stop_ev = client, q, stop
-        self.offset_s: float | None = None
-        self.last_packet_mono: float | None = None
+        self.stream = LidarStream(client)
         self.dropped_batches = 0
         self.dropped_points = 0
         self.points_in = 0
@@ -95,24 +96,24 @@ class _Receiver(threading.Thread):
         self.error: BaseException | None = None
         self.counters: dict = {}
 
+    @property
+    def offset_s(self) -> float | None:
+        return self.stream.offset_s
+
+    @property
+    def last_packet_mono(self) -> float | None:
+        return self.stream.last_packet_mono
+
     def run(self) -> None:
         try:
             self.client.start_sampling()
-            packets = 0
             while not self.stop_ev.is_set():
-                batches = self.client.poll(0.02)
-                now = time.monotonic()
-                c = self.client.counters
-                if c.get("packets", 0) != packets:
-                    packets = c.get("packets", 0)
-                    self.last_packet_mono = now
-                self.counters = c
+                now, batches = self.stream.poll(0.02)
+                self.counters = self.client.counters
                 for b in batches:
                     if not len(b):
                         continue
                     t_last = int(b.t_ns[-1])
-                    off = now - t_last * 1e-9
-                    self.offset_s = off if self.offset_s is None else min(self.offset_s, off)
                     if self.first_t_ns is None:
                         self.first_t_ns = int(b.t_ns[0])
                     self.last_t_ns = t_last
@@ -174,36 +175,13 @@ class Daemon:
                 "limits": asdict(self.limits)}
 
     def _open(self):
-        from gimbal.client import HeadClient
-        from gimbal.errors import GimbalError
-
         from foveatrack.errors import UserError
-        from foveatrack.livox.client import LivoxClient
         from foveatrack.recording import RecordingExistsError, RecordingWriter
 
         # Links first, the recording last: a port that cannot be used fails the start before a
         # recording file exists (an empty one was left behind for every failed start).
         c = self.cfg
-        try:
-            self.head = HeadClient(c.head.port, baud=c.head.baud, address=c.head.address, protocol=c.head.protocol)
-        except GimbalError as exc:
-            raise UserError(f"{c.path} [head]: {exc}") from None
-        if not self.head.connected:
-            # A port that is wrong at start (a typo, an adapter not plugged in, a regular file, a
-            # server not started) would otherwise leave the daemon tracking with no head, silently:
-            # the link reconnects by itself only once it has been up.
-            raise UserError(f"{c.path} [head]: port {c.head.port!r} cannot be opened ({self.head.last_open_error}); "
-                            "give the head's serial device (/dev/ttyUSB0) or a pyserial URL (socket://host:port, "
-                            "rfc2217://host:port) that exists now, e.g. start 'foveatrack gimbal serve --link PATH' first")
-        L = c.lidar
-        try:
-            self.client = LivoxClient(L.sensor_ip, L.host_ip, cmd_port=L.cmd_port, data_port=L.data_port,
-                                      broadcast_port=L.broadcast_port, sensor_cmd_port=L.sensor_cmd_port,
-                                      point_rate_hz=L.point_rate_hz, broadcast_code=L.broadcast_code,
-                                      keep_no_return=True)
-        except BaseException:
-            self.head.close()
-            raise
+        self.head, self.client = open_devices(c)
         # the bound ports (config 0 = any), kept: the client's sockets are closed at shutdown
         self.host_ports = {"cmd": self.client.cmd_port, "data": self.client.data_port,
                            "broadcast": self.client.broadcast_port}
@@ -252,11 +230,7 @@ class Daemon:
         return t_s
 
     def _send(self, cmd: HeadCommand, source: str, send_t_s: float, fid=None, tracker_cmd=None, why=()):
-        from gimbal.pelco import encode_pan_tilt
-
-        raw = encode_pan_tilt(self.cfg.head.address, cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte,
-                              self.cfg.head.protocol)
-        ok = self.head.send_frame(raw)
+        raw, ok = self.head.send(cmd)
         t_written = time.monotonic()
         self.counters["commands_written" if ok else "commands_failed"] += 1
         # A failed write leaves the head on its last command; the gate tells the dead reckoning (seen

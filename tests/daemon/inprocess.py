@@ -7,6 +7,7 @@ import numpy as np
 
 from foveatrack.daemon import Daemon, load_config
 from foveatrack.daemon.support import RecordingThread
+from foveatrack.live_devices import HeadLink
 from foveatrack.frames import Frame
 from foveatrack.recording import RecordingWriter
 
@@ -41,6 +42,6 @@ def inprocess_daemon(tmp_path, head):
     d = Daemon(load_config(cfg_path), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
     rec = tmp_path / "rec.mcap"
     d.recorder = RecordingThread(RecordingWriter(rec, d._meta()), 50)
-    d.head = head
+    d.head = HeadLink(head, d.cfg.head.address, d.cfg.head.protocol)   # the test's fake behind the real link
     d.rx = SimpleNamespace(offset_s=None)
     return d, rec

@@ -36,7 +36,7 @@ def _run(tmp_path, down_frames):
     d, rec = inprocess_daemon(tmp_path, FlakyHead())
     for k in range(20):
         fr = target_frame(k, az_deg=10.0 if k < 10 else -10.0)   # the UAV swaps sides mid-outage
-        d.head.up = k not in down_frames
+        d.head.client.up = k not in down_frames
         d.rx.offset_s = time.monotonic() - (fr.t_end_s + 0.01)      # processed 10 ms after its end
         d._process(fr, time.monotonic())
     d.recorder.close()

@@ -36,7 +36,7 @@ def test_stale_frames_send_stop_and_replay_repeats_it(tmp_path):
         now_s = 0.75 if k < 6 else fr.t_end_s + 0.01
         d.rx.offset_s = time.monotonic() - now_s
         d._process(fr, time.monotonic())
-        sent.append(d.head.frames[-1])
+        sent.append(d.head.client.frames[-1])
     d.recorder.close()
     # 0.65 ... 0.25 s late: stale; frame 5 (0.15 s late) is within the 0.2 s bound and steers
     assert d.counters["frames_stale"] == 5
