@@ -4,7 +4,7 @@
 The devices are the daemon's (:mod:`foveatrack.daemon`): the same config file names the lidar
 (``[lidar]``), the head's port, baud, address, protocol and safety limits (``[head]``), so a bench
 that runs the daemon calibrates with the same file.  The procedure is the simulator's:
-:class:`~foveatrack.calibration.PriorAxisCalibrator` behind :class:`CalibrationDriver`, fed
+:class:`~foveatrack.calibration.PriorAxisCalibrator` run by :func:`~foveatrack.calibration_drive.drive_calibration`, fed
 ``rate_hz`` frames cut from the live stream (:class:`~foveatrack.frames.FrameSlicer`), one Pelco-D
 command written per frame (a keep-alive as well as the procedure's changes).
 
@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from foveatrack.calibration import CalibrationPlan, CalibrationReport, FeatureSpec, PriorAxisCalibrator
-from foveatrack.calibration_drive import CalibrationDriver
+from foveatrack.calibration_drive import drive_calibration
 from foveatrack.daemon.config import DaemonConfig
 from foveatrack.errors import UserError
 from foveatrack.frames import FrameSlicer, strip_no_return
@@ -88,22 +88,20 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
     plan = replace(plan, start_tilt_deg=h.tilt0_deg, latency_s=h.frame_time_s + processing_s)
     cal = PriorAxisCalibrator(plan, feature, seed=seed, date=date, start_tilt_sigma_deg=start_tilt_sigma_deg,
                               head=f"{h.protocol} head, address {h.address} on {h.port}")
-    driver = CalibrationDriver(cal)
     legs_total = len(plan.pan_bytes) * 2 + len(plan.tilt_bytes) * 2
     head, client = open_devices(config)     # as the daemon opens them, with the same messages
     stream = LidarStream(client)            # last packet (watchdog) and host - sensor clock offset
-    slicer = FrameSlicer(rate_hz)
-    written = None           # the last command the head got
-    delay_ms: list[float] = []
-    frames = 0
     t_start = time.monotonic()
-    try:
-        head.stop()
-        client.start_sampling()
-        while not driver.finished:
+    run = {"frames": 0, "written": None, "last_point_s": None}   # frames fed, the head's last command
+    delay_ms: list[float] = []
+
+    def frames():
+        """The live frame source: frames cut from the stream, with the run's checks between polls."""
+        slicer = FrameSlicer(rate_hz)
+        while True:
             now = time.monotonic()
             if stop is not None and stop.is_set():
-                raise UserError(f"calibration interrupted after {frames} frames ({_legs(cal)} legs done); "
+                raise UserError(f"calibration interrupted after {run['frames']} frames ({_legs(cal)} legs done); "
                                 "the head was stopped and no table was written")
             if max_s is not None and now - t_start > max_s:
                 raise UserError(f"the calibration did not finish within {max_s:g} s ({_legs(cal)} of "
@@ -117,40 +115,45 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
                                 f"the head was stopped and no table was written (lidar counters: {client.counters})")
             if silent_s is not None and silent_s > config.loop.watchdog_s:
                 raise UserError(f"the lidar fell silent for {silent_s:.1f} s ([daemon] watchdog_s "
-                                f"{config.loop.watchdog_s:g}) after {frames} frames; the head was stopped and no "
-                                "table was written")
+                                f"{config.loop.watchdog_s:g}) after {run['frames']} frames; the head was stopped "
+                                "and no table was written")
             _, batches = stream.poll(0.02)
             for b in batches:
-                if not len(b):
-                    continue
-                for frame in slicer.push(b.xyz, b.t_ns, b.reflectivity):
-                    frame = strip_no_return(frame)
-                    frames += 1
-                    cmd = driver(frame, frame.t_end_s)
-                    _, ok = head.send(cmd)
-                    if not ok and cmd != written:
-                        # A keep-alive that did not get through changes nothing; a change of
-                        # command that did not, leaves the head doing the last one while the
-                        # procedure times a new leg: its measurements would be wrong.
-                        raise UserError(f"the head's serial link [head] port {h.port!r} failed when the calibration "
-                                        f"changed its command ({_legs(cal)} legs done); the head was stopped if it "
-                                        "could be reached and no table was written")
-                    written = cmd
-                    if frame.n_points:
-                        delay_ms.append((time.monotonic() - (frame.t_ns[-1] * 1e-9 + stream.offset_s)) * 1e3)
-                    if progress is not None:
-                        progress(frames, _legs(cal), legs_total)
-                    if driver.finished:
-                        break
-                if driver.finished:
-                    break
+                if len(b):
+                    for frame in slicer.push(b.xyz, b.t_ns, b.reflectivity):
+                        frame = strip_no_return(frame)
+                        run["frames"] += 1
+                        run["last_point_s"] = frame.t_ns[-1] * 1e-9 if frame.n_points else None
+                        yield frame
+
+    def send(t_s, cmd) -> None:
+        """The command sink: the head's serial link, one Pelco frame per frame (a keep-alive too)."""
+        _, ok = head.send(cmd)
+        if not ok and cmd != run["written"]:
+            # A keep-alive that did not get through changes nothing; a change of command that did
+            # not, leaves the head doing the last one while the procedure times a new leg: its
+            # measurements would be wrong.
+            raise UserError(f"the head's serial link [head] port {h.port!r} failed when the calibration "
+                            f"changed its command ({_legs(cal)} legs done); the head was stopped if it "
+                            "could be reached and no table was written")
+        run["written"] = cmd
+        if run["last_point_s"] is not None and stream.offset_s is not None:
+            delay_ms.append((time.monotonic() - (run["last_point_s"] + stream.offset_s)) * 1e3)
+        if progress is not None:
+            progress(run["frames"], _legs(cal), legs_total)
+
+    try:
+        head.stop()
+        client.start_sampling()
+        drive_calibration(cal, frames(), send)   # the procedure the simulator runs, on the live devices
         table = cal.result()
     finally:
         head.stop()
         counters = {"lidar": dict(client.counters), "head": head.stats_dict()}
         client.close()
         head.close()
-    return LiveCalibration(table, cal.report, plan, dropped, frames, time.monotonic() - t_start, delay_ms, counters)
+    return LiveCalibration(table, cal.report, plan, dropped, run["frames"], time.monotonic() - t_start, delay_ms,
+                           counters)
 
 
 def _legs(cal) -> int:
