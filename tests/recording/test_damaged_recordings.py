@@ -195,7 +195,7 @@ def test_older_recordings_take_the_channels_from_the_summary(tmp_path, monkeypat
     the chunk where it is first used.  With that chunk damaged, a closed file's summary (CRC-checked)
     still names them; in a file cut short as well, the messages that no intact record attributes
     are counted in ``problem``, not passed off as another channel's."""
-    import foveatrack.recording as rec
+    import foveatrack.recording.writer as rec
 
     monkeypatch.setattr(rec, "STANDARD_CHANNELS", ())     # the writer as it was: channels defined lazily
     p = tmp_path / "old.mcap"

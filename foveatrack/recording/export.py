@@ -1,0 +1,111 @@
+"""Exporting a recording's points and trajectory as CSV or NPZ."""
+
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from foveatrack.errors import UserError
+from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRUTH
+from foveatrack.recording.reader import RecordingReader
+
+
+def _out_kind(out_path: Path) -> str:
+    suf = out_path.suffix.lower()
+    if suf not in (".csv", ".npz"):
+        raise UserError(f"export to {out_path}: the file name must end in .csv or .npz")
+    return suf[1:]
+
+
+def export_points(recording: str | os.PathLike, out_path: str | os.PathLike) -> int:
+    """Write all recorded points to CSV or NPZ (by suffix); returns the number of points.
+
+    Columns / arrays: frame_index, frame_t_ns, t_ns, x_m, y_m, z_m, reflectivity (lidar frame).
+    """
+    out_path = Path(out_path)
+    kind = _out_kind(out_path)
+    frames = list(RecordingReader(recording).points())
+    if frames:
+        cols = {
+            "frame_index": np.concatenate([np.full(len(f), f.frame_index, np.int64) for f in frames]),
+            "frame_t_ns": np.concatenate([np.full(len(f), f.t_ns, np.int64) for f in frames]),
+            "t_ns": np.concatenate([f.t_ns_points for f in frames]),
+            "x_m": np.concatenate([f.xyz[:, 0] for f in frames]),
+            "y_m": np.concatenate([f.xyz[:, 1] for f in frames]),
+            "z_m": np.concatenate([f.xyz[:, 2] for f in frames]),
+            "reflectivity": np.concatenate([f.reflectivity for f in frames]),
+        }
+    else:
+        cols = {k: np.zeros(0) for k in ("frame_index", "frame_t_ns", "t_ns", "x_m", "y_m", "z_m", "reflectivity")}
+    n = len(cols["t_ns"])
+    if kind == "npz":
+        np.savez_compressed(out_path, **cols)
+    else:
+        with open(out_path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(cols.keys())
+            for row in zip(*(c.tolist() for c in cols.values())):
+                w.writerow(row)
+    return n
+
+
+def _flatten(rec: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in rec.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(_flatten(v, key + "."))
+        elif isinstance(v, list) and all(isinstance(e, (int, float)) or e is None for e in v):
+            for i, e in enumerate(v):
+                out[f"{key}[{i}]"] = e
+        else:
+            out[key] = v
+    return out
+
+
+def export_trajectory(
+    recording: str | os.PathLike,
+    out_path: str | os.PathLike,
+    channels: Iterable[str] = (DETECTIONS, HEAD, TRUTH, COMMANDS),
+) -> int:
+    """Write the time series of ``channels`` to CSV or NPZ (by suffix); returns the row count.
+
+    Records are flattened (``xyz_m`` → ``xyz_m[0..2]``, nested dicts → ``a.b``).  CSV: one row per
+    record with columns ``channel, t_ns`` and the union of the fields (blank where absent).  NPZ: one
+    array per ``<channel>.<field>`` (NaN / "" where a record lacks the field).
+    """
+    out_path = Path(out_path)
+    kind = _out_kind(out_path)
+    channels = tuple(channels)
+    rows = [(m.channel, _flatten(m.record)) for m in RecordingReader(recording).messages(channels)]
+    if kind == "csv":
+        keys: list[str] = []
+        for _, r in rows:
+            keys.extend(k for k in r if k not in keys)
+        keys = ["t_ns"] + [k for k in keys if k != "t_ns"]
+        with open(out_path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["channel", *keys])
+            for ch, r in rows:
+                w.writerow([ch, *("" if r.get(k) is None else r.get(k) for k in keys)])
+    else:
+        arrays: dict[str, np.ndarray] = {}
+        for ch in channels:
+            recs = [r for c, r in rows if c == ch]
+            keys = []
+            for r in recs:
+                keys.extend(k for k in r if k not in keys)
+            for k in keys:
+                vals = [r.get(k) for r in recs]
+                if all(isinstance(v, (int, float, bool)) for v in vals):
+                    arrays[f"{ch}.{k}"] = np.array(vals)
+                elif all(isinstance(v, (int, float, bool)) or v is None for v in vals):
+                    arrays[f"{ch}.{k}"] = np.array([np.nan if v is None else v for v in vals], dtype=float)
+                else:
+                    arrays[f"{ch}.{k}"] = np.array(["" if v is None else str(v) for v in vals])
+        np.savez_compressed(out_path, **arrays)
+    return len(rows)

@@ -1,0 +1,397 @@
+"""Reading a recording: :class:`RecordingReader`, which skips damaged chunks and says what it skipped."""
+
+from __future__ import annotations
+
+import json
+import mmap
+import os
+import struct
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Iterator
+
+from foveatrack.errors import UserError
+from foveatrack.recording import mcap_walk as mw
+from foveatrack.recording.format import (FORMAT, FORMAT_VERSION, MCAP_MAGIC, META_NAME, POINTS, Message,
+                                         PointsFrame, _decode_points)
+
+
+@dataclass(frozen=True)
+class Damage:
+    """One stretch of a recording the reader skipped.
+
+    start_byte, end_byte : the bytes ``[start_byte, end_byte)`` that were skipped
+    reason : what was wrong at ``start_byte`` (a chunk's CRC, an unreadable record, ...)
+    cut_short : the stretch is an incomplete last record: the file ends inside it
+    lost : messages lost per channel, from the message index the writer put after each chunk
+        (None when no index of the lost data survived, e.g. a cut-short tail)
+    lost_exact : ``lost`` is the whole of what the stretch held; False: at least that much
+    lost_t_ns : (first, last) log time of the lost messages when known [ns]
+    frames_before : lidar frames read before the stretch
+    """
+
+    start_byte: int
+    end_byte: int
+    reason: str
+    cut_short: bool = False
+    lost: dict[str, int] | None = None
+    lost_exact: bool = False
+    lost_t_ns: tuple[int, int] | None = None
+    frames_before: int = 0
+
+    @property
+    def frames_lost(self) -> int | None:
+        """Lidar frames lost in the stretch (a lower bound unless ``lost_exact``), None if unknown."""
+        return None if self.lost is None else self.lost.get(POINTS, 0)
+
+    def describe(self) -> str:
+        """One line: which bytes, why, and what was lost."""
+        where = f"bytes {self.start_byte}-{self.end_byte}"
+        if self.cut_short:
+            what = f"file cut short at byte {self.start_byte}: {self.reason} ({where})"
+        else:
+            what = f"skipped {where} ({self.end_byte - self.start_byte} bytes): {self.reason}"
+        if self.lost is None:
+            what += "; the messages in it are lost" if self.cut_short else \
+                "; what it held is unknown (no index of it survived)"
+        elif not self.lost:
+            what += "; no messages lost (index bytes only)" if self.lost_exact else \
+                "; no lost messages are known (no index of a damaged chunk survived)"
+        else:
+            n_f = self.lost.get(POINTS, 0)
+            n_o = sum(self.lost.values()) - n_f
+            exact = "" if self.lost_exact else "at least "
+            what += (f"; {exact}{n_f} frame{'' if n_f == 1 else 's'} and {n_o} other record{'' if n_o == 1 else 's'}"
+                     f" lost ({', '.join(f'{k} {v}' for k, v in sorted(self.lost.items()))})")
+        if self.lost_t_ns is not None:
+            t0, t1 = self.lost_t_ns
+            what += f", log time {t0 / 1e9:.3f} s" if t0 == t1 else f", log times {t0 / 1e9:.3f}-{t1 / 1e9:.3f} s"
+        return what
+
+
+class RecordingReader:
+    """Read a recording, also one cut short or damaged: nothing that was recorded and is intact is lost.
+
+    ``meta`` (the writer's meta dict), ``info`` (format and versions); :meth:`messages` iterates
+    in file order.  After a full iteration: ``complete`` says whether the data section ended properly
+    (the writer was closed); ``damage`` lists each stretch of bytes skipped (:class:`Damage`: byte range,
+    why, which messages were lost) and ``problem`` sums them up in one line (None if nothing was skipped).
+
+    A damaged chunk (CRC mismatch, garbage over it, its length field included) is skipped and reading
+    resumes at the next chunk whose header holds together and whose CRC verifies -- found by scanning
+    the bytes, not by trusting a length that may itself be damaged.  Messages of a channel whose
+    definition was in a damaged chunk are attributed by the channel table the writer puts in the
+    metadata (or the file's summary, for recordings written before it did); messages of a channel
+    that no intact record names are counted in ``problem``.
+    Raises UserError naming the file if it is not a foveatrack recording.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise UserError(f"recording {self.path} does not exist or is not a file")
+        self.size = self.path.stat().st_size
+        with open(self.path, "rb") as fh:
+            head = fh.read(len(MCAP_MAGIC))
+        if head != MCAP_MAGIC:
+            what = "is empty" if self.size == 0 else "does not start with the MCAP magic"
+            if 0 < self.size < len(MCAP_MAGIC) and MCAP_MAGIC.startswith(head):
+                what = f"is cut short after {self.size} bytes, before its metadata"
+            raise UserError(f"{self.path} is not a foveatrack recording: the file {what}")
+        self.info: dict[str, str] = {}
+        self.meta: dict = {}
+        self.complete: bool | None = None
+        self.damage: list[Damage] = []
+        self.unattributed: dict[int, int] = {}
+        self._meta_channels: dict[int, str] = {}
+        self._summary: tuple[int, int] | None = None
+        self._channels_read: dict[int, str] = {}
+        self._summary_channels: dict[int, str] | None = None
+        for _ in self._records(stop_after_meta=True):
+            break
+        if not self.info:
+            raise UserError(
+                f"{self.path} is not a foveatrack recording: no complete '{META_NAME}' metadata record"
+                f"{' (' + self.problem + ')' if self.problem else ''}"
+            )
+
+    # ------------------------------------------------------------------ reporting
+
+    @property
+    def problem(self) -> str | None:
+        """One line saying what was skipped (None: nothing)."""
+        parts = [d.describe() for d in self.damage]
+        if self.unattributed:
+            n = sum(self.unattributed.values())
+            parts.append(f"{n} message(s) of channel id(s) {sorted(self.unattributed)} skipped: their channel "
+                         f"was defined in a damaged chunk")
+        if not parts and self.complete is False:
+            parts.append(f"the file ends at byte {self.size} without its end-of-data record: the writer was not "
+                         f"closed (cut short, e.g. kill -9 or power loss); every whole chunk before it was read")
+        return "; ".join(parts) if parts else None
+
+    # ------------------------------------------------------------------ walking the file
+
+    def _records(self, stop_after_meta: bool = False) -> Iterator[tuple[str, int, bytes]]:
+        """Yield (channel name, log time [ns], payload) in file order, skipping damage (see class doc)."""
+        self.complete = False
+        self.damage = []
+        self.unattributed = {}
+        size = self.size
+        with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            data_end = self._data_end_pos(mm)
+            channels: dict[int, str] = {}
+            self._channels_read = channels
+            frames = 0
+            pos = len(MCAP_MAGIC)
+            prev_ok = prev_times = None   # opcode of the last record read intact; the last intact chunk's times
+            while True:
+                if pos == size:
+                    return
+                if pos == data_end:
+                    self.complete = True
+                    return
+                try:
+                    if size - pos < mw.REC.size:
+                        raise mw.BadRecord(f"{size - pos} stray byte(s) after the last whole record")
+                    op, length = mw.REC.unpack_from(mm, pos)
+                    body = pos + mw.REC.size
+                    end = body + length
+                    if op not in mw.TOP_LEVEL_OPS:
+                        raise mw.BadRecord(f"no MCAP record starts there (opcode 0x{op:02x})")
+                    if end > size:
+                        raise mw.BadRecord(f"a record whose length field ({length} bytes) runs past the end of the file")
+                    if op == mw.OP_CHUNK:
+                        recs = mw.chunk_records(mm, pos, length)
+                    elif op == mw.OP_MINDEX:
+                        mw.message_index(mm, body, length)
+                        recs = ()
+                    elif op == mw.OP_DATA_END:
+                        if length != 4:
+                            raise mw.BadRecord("a damaged end-of-data record")
+                        self.complete = True
+                        return
+                    elif op == mw.OP_FOOTER:
+                        raise mw.BadRecord("a footer where data was expected")
+                    elif op == mw.OP_METADATA:
+                        recs = ((op, mw.metadata(mm[body:end])),)
+                    elif op in (mw.OP_MESSAGE, mw.OP_CHANNEL):
+                        if op == mw.OP_MESSAGE and length < mw.MSG_HEAD.size:
+                            raise mw.BadRecord("a damaged message record")
+                        recs = ((op, memoryview(mm[body:end])),)
+                    else:
+                        recs = ()
+                except mw.BadRecord as exc:
+                    if stop_after_meta and not self.info:
+                        self.damage.append(Damage(pos, size, str(exc)))
+                        return
+                    resume, found = self._resync(mm, pos, data_end)
+                    self.damage.append(self._account(mm, pos, resume, str(exc), prev_ok, prev_times, frames, found))
+                    prev_ok = prev_times = None
+                    if resume is None:
+                        return
+                    pos = resume
+                    continue
+                for rop, content in recs:
+                    if rop == mw.OP_MESSAGE:
+                        cid, _seq, log_time, _pub = mw.MSG_HEAD.unpack_from(content, 0)
+                        name = channels.get(cid) or self._fallback_channel(cid)
+                        if name is None:
+                            self.unattributed[cid] = self.unattributed.get(cid, 0) + 1
+                            continue
+                        if name == POINTS:
+                            frames += 1
+                        yield name, log_time, bytes(content[mw.MSG_HEAD.size:])
+                    elif rop == mw.OP_CHANNEL:
+                        cid, topic = mw.channel(content)
+                        channels[cid] = topic
+                    elif rop == mw.OP_METADATA and not self.info and content[0] == META_NAME:
+                        self._set_meta(content[1])
+                        if stop_after_meta:
+                            self.complete = None     # not known until a full walk
+                            yield "", 0, b""
+                            return
+                if op == mw.OP_CHUNK:
+                    prev_times = mw.chunk_times(mm, pos, size)
+                prev_ok = op
+                pos = end
+
+    def _data_end_pos(self, mm) -> int | None:
+        """Where the end-of-data record sits, from the footer of a closed file (None: no valid footer)."""
+        size = self.size
+        f = size - len(MCAP_MAGIC) - mw.FOOTER_SIZE
+        if f < len(MCAP_MAGIC) or mm[size - len(MCAP_MAGIC):] != MCAP_MAGIC:
+            return None
+        op, length = mw.REC.unpack_from(mm, f)
+        if op != mw.OP_FOOTER or length != 20:
+            return None
+        summary_start, _summary_offset_start, summary_crc = struct.unpack_from("<QQI", mm, f + 9)
+        if summary_start:
+            if not len(MCAP_MAGIC) < summary_start <= f or zlib.crc32(mm[summary_start:f + 9 + 16]) != summary_crc:
+                return None
+            de = summary_start - mw.DATA_END_SIZE
+        else:
+            de = f - mw.DATA_END_SIZE
+        if de < len(MCAP_MAGIC) or mw.REC.unpack_from(mm, de) != (mw.OP_DATA_END, 4):
+            return None
+        if summary_start:
+            self._summary = (summary_start, f)
+        return de
+
+    def _fallback_channel(self, cid: int) -> str | None:
+        """The name of a channel whose definition was not read (it was in a damaged chunk)."""
+        name = self._channels_read.get(cid) or self._meta_channels.get(cid)
+        if name is not None:
+            return name
+        if self._summary_channels is None:
+            self._summary_channels = self._read_summary_channels()
+        return self._summary_channels.get(cid)
+
+    def _read_summary_channels(self) -> dict[int, str]:
+        out: dict[int, str] = {}
+        span = self._summary
+        if span is None:
+            return out
+        with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            pos, stop = span
+            while pos + mw.REC.size <= stop:
+                op, length = mw.REC.unpack_from(mm, pos)
+                end = pos + mw.REC.size + length
+                if end > stop:
+                    break
+                if op == mw.OP_CHANNEL:
+                    cid, topic = mw.channel(mm[pos + mw.REC.size:end])
+                    out[cid] = topic
+                pos = end
+        return out
+
+    def _resync(self, mm, pos: int, data_end: int | None) -> tuple[int | None, list[int]]:
+        """The next place to read on from after damage at ``pos``: the first chunk after it whose
+        header holds together and whose CRC verifies, else the end-of-data record (closed file),
+        else None.  Also returns the positions of chunks after ``pos`` whose header holds together
+        but whose contents do not (damaged chunks in the stretch)."""
+        stop = self.size if data_end is None else data_end
+        found: list[int] = []
+        p = pos
+        while True:
+            p = mm.find(b"\x06", p, stop)
+            if p < 0:
+                return data_end, found
+            length = mw.chunk_length(mm, p, stop)
+            if length is not None:
+                try:
+                    mw.chunk_records(mm, p, length)
+                    if p > pos:
+                        return p, found
+                except mw.BadRecord:
+                    pass
+                found.append(p)
+            p += 1
+
+    def _account(self, mm, pos, resume, reason, prev_ok, prev_times, frames, found) -> Damage:
+        """What the skipped stretch ``[pos, resume)`` held, from the message index the writer put after
+        each chunk: exact for a damaged chunk whose header holds (its index starts where it ends), a
+        lower bound when the stretch starts with bytes that do not hold together (the index found
+        just before the next readable record); index records of the intact chunk before the stretch
+        (their times lie in its time range) are not counted as lost."""
+        size = self.size
+        end = size if resume is None else resume
+        heads = sorted({p for p in found if pos <= p < end})
+        bounds = ([] if heads and heads[0] == pos else [pos]) + heads + [end]
+        lost: dict[int, int] | None = None
+        times: list[int] = []
+        exact = True
+
+        in_intact_index = False
+
+        def add(chain, skip=None):
+            nonlocal lost, in_intact_index
+            lost = {} if lost is None else lost
+            for cid, ts in chain:
+                if skip is not None and ts and all(skip[0] <= t <= skip[1] for t in ts):
+                    in_intact_index = True
+                    continue
+                lost[cid] = lost.get(cid, 0) + len(ts)
+                times.extend(ts)
+
+        for s, e in zip(bounds, bounds[1:]):
+            if s in heads:                      # a damaged chunk whose header holds together
+                after = s + mw.REC.size + mw.U64.unpack_from(mm, s + 1)[0]
+                chain = mw.index_chain(mm, after, e)
+                if chain is not None:
+                    add(chain)
+                    continue
+                exact = False
+                chain = mw.index_chain_ending_at(mm, after, e)
+            else:                               # bytes that do not hold together
+                exact = False
+                chain = mw.index_chain_ending_at(mm, s, e)
+            if chain:
+                add(chain, prev_times if s == pos and prev_ok in (mw.OP_CHUNK, mw.OP_MINDEX) else None)
+        cut_short = resume is None and mw.record_runs_past(mm, pos, size)
+        if cut_short:
+            if mm[pos] == mw.OP_MINDEX and prev_ok in (mw.OP_CHUNK, mw.OP_MINDEX):
+                reason, lost, exact = "its last record, a message index of the chunk before it, is incomplete", {}, True
+            else:
+                reason = "its last record is incomplete"
+                t = mw.chunk_times(mm, pos, size)
+                if t is not None:
+                    times.extend(t)
+        elif resume is None:
+            reason += "; no readable chunk after it"
+        if in_intact_index and not cut_short:
+            reason += " (in the message index of the intact chunk before it)"
+        names: dict[str, int] | None = None
+        if lost is not None:
+            names = {}
+            for cid, n in lost.items():
+                name = self._fallback_channel(cid) or f"channel id {cid}"
+                names[name] = names.get(name, 0) + n
+        return Damage(pos, end, reason, cut_short, names, exact and lost is not None,
+                      (min(times), max(times)) if times else None, frames)
+
+    def _set_meta(self, md: dict[str, str]) -> None:
+        if md.get("format") != FORMAT:
+            raise UserError(f"{self.path} is an MCAP file but not a foveatrack recording (format {md.get('format')!r})")
+        if md.get("format_version") != FORMAT_VERSION:
+            raise UserError(
+                f"{self.path} has recording format version {md.get('format_version')!r}; "
+                f"this foveatrack reads version {FORMAT_VERSION}"
+            )
+        self.info = dict(md)
+        try:
+            self.meta = json.loads(md.get("meta_json", "{}"))
+            self._meta_channels = {int(k): v for k, v in json.loads(md.get("channels_json", "{}")).items()}
+        except (ValueError, AttributeError):
+            raise UserError(f"{self.path}: its metadata JSON is damaged") from None
+
+    # ------------------------------------------------------------------ public reading
+
+    def messages(self, channels: Iterable[str] | str | None = None) -> Iterator[Message]:
+        """Messages in file order, optionally only those of ``channels`` (names without '/')."""
+        want = {channels} if isinstance(channels, str) else None if channels is None else set(channels)
+        for name, log_time, data in self._records():
+            if want is not None and name not in want:
+                continue
+            try:
+                record = _decode_points(data) if name == POINTS else json.loads(data)
+            except (ValueError, KeyError, TypeError) as exc:
+                raise UserError(f"{self.path}: a {name} message at t_ns={log_time} is damaged: {exc}") from None
+            yield Message(name, int(log_time), record)
+
+    def points(self) -> Iterator[PointsFrame]:
+        """The lidar frames, in order."""
+        for m in self.messages(POINTS):
+            yield m.record
+
+    def records(self, channel: str) -> list[dict]:
+        """All JSON records of one channel."""
+        return [m.record for m in self.messages(channel)]
+
+    def channels(self) -> dict[str, int]:
+        """Message count per channel (reads the whole file)."""
+        out: dict[str, int] = {}
+        for name, _t, _d in self._records():
+            out[name] = out.get(name, 0) + 1
+        return out
