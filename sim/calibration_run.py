@@ -3,8 +3,8 @@
 :class:`foveatrack.calibration.Calibrator` is a driver-agnostic state machine; here it drives the
 closed loop's PTS-303H model through the virtual UART, by way of ``ClosedLoop(controller=...)``
 (the tracker is bypassed: the calibration decides every command).  The driver adapter is
-:class:`foveatrack.calibration_drive.CalibrationDriver`, the same one the live calibration on a real
-lidar + head uses (:func:`foveatrack.calibration_live.calibrate_live`).
+:class:`foveatrack.calibration.drive.CalibrationDriver`, the same one the live calibration on a real
+lidar + head uses (:func:`foveatrack.calibration.live.calibrate_live`).
 
 The room corner the calibration tracks is found from the scene's geometry
 (:func:`room_corner_in_view`): on real hardware the user gives its approximate position instead.
@@ -148,7 +148,7 @@ def run_calibration(scene: Scene, plan: CalibrationPlan | None = None, feature: 
     seed : the Calibrator's RANSAC seed.  ``progress(t_s, budget_s)`` is called every frame.
     """
     from foveatrack.calibration import PriorAxisCalibrator
-    from foveatrack.calibration_drive import CalibrationDriver
+    from foveatrack.calibration.drive import CalibrationDriver
     from sim.loop import ClosedLoop, truth_speed_table
 
     if unit_seed is not None:

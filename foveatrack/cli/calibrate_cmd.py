@@ -17,7 +17,7 @@ Real hardware (a Livox and a head on a serial port)::
 
 reads the devices, limits and start pose from the daemon's config (``--lidar``/``--serial`` replace
 its ``[lidar] sensor_ip`` and ``[head] port``) and runs the same procedure on the live stream
-(:func:`foveatrack.calibration_live.calibrate_live`); ``--corner`` is where the room corner is in
+(:func:`foveatrack.calibration.live.calibrate_live`); ``--corner`` is where the room corner is in
 the lidar frame at the start, within 1 m.  The table is written only when the procedure completes;
 the head is stopped at the end, on Ctrl-C and on any error.
 """
@@ -209,7 +209,7 @@ def calibrate_devices(args) -> int:
     from dataclasses import replace
 
     from foveatrack.calibration import CalibrationPlan
-    from foveatrack.calibration_live import calibrate_live, delay_summary_ms
+    from foveatrack.calibration.live import calibrate_live, delay_summary_ms
     from foveatrack.daemon.config import load_config
 
     if not args.config:

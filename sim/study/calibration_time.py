@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from foveatrack.calibration import DEFAULT_BYTES, CalibrationPlan, FeatureSpec, PriorAxisCalibrator
-from foveatrack.calibration_drive import CalibrationDriver
+from foveatrack.calibration.drive import CalibrationDriver
 from foveatrack.metrics import angle_between_deg
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO

@@ -7,7 +7,7 @@ import pytest
 
 from calib_fixture import ROOT
 from foveatrack.cli import main
-from foveatrack.calibration_drive import CalibrationDriver, drive_calibration
+from foveatrack.calibration.drive import CalibrationDriver, drive_calibration
 from foveatrack.cli.calibrate_cmd import ranges
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.frames import Frame

@@ -17,7 +17,7 @@ import pytest
 
 from daemon_procs import ROOT, env, first_line, free_udp_port, start, terminate, wait_for
 from foveatrack.calibration import CalibrationPlan
-from foveatrack.calibration_live import plan_within_limits
+from foveatrack.calibration.live import plan_within_limits
 from foveatrack.cli import main
 from foveatrack.daemon import load_config
 from foveatrack.speed_table import TURBO, SpeedTable
@@ -28,8 +28,9 @@ pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty"
 
 UNIT = 101
 # The virtual lidar can pause for over 0.5 s (the shipped watchdog) on a busy 2-core machine: "fell
-# silent for 0.5 s after 149 frames" at load 2.85.  These tests are about calibrating, not the watchdog.
-WATCHDOG_S = 2.0
+# silent for 0.5 s after 149 frames" at load 2.85, and 2 s once at load 3 beside three other test runs.
+# These tests are about calibrating, not the watchdog.
+WATCHDOG_S = 5.0
 CORNER = ("5.9", "0.8", "0.84")   # the room corner in the lidar frame at the start (within 1 m suffices)
 
 
@@ -217,7 +218,7 @@ def test_no_lidar_is_an_error_that_names_it_and_stops_the_head(tmp_path, capsys)
     try:
         wait_for(lambda: first_line(tmp_path / "h.out"), 20, "the head's pty", [head])
         from foveatrack.calibration import FeatureSpec
-        from foveatrack.calibration_live import calibrate_live
+        from foveatrack.calibration.live import calibrate_live
         from foveatrack.errors import UserError
 
         with pytest.raises(UserError, match=r"no data from the lidar 127\.0\.0\.1 within 1 s.*head was stopped"):

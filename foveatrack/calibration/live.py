@@ -4,7 +4,7 @@
 The devices are the daemon's (:mod:`foveatrack.daemon`): the same config file names the lidar
 (``[lidar]``), the head's port, baud, address, protocol and safety limits (``[head]``), so a bench
 that runs the daemon calibrates with the same file.  The procedure is the simulator's:
-:class:`~foveatrack.calibration.PriorAxisCalibrator` run by :func:`~foveatrack.calibration_drive.drive_calibration`, fed
+:class:`~foveatrack.calibration.PriorAxisCalibrator` run by :func:`~foveatrack.calibration.drive.drive_calibration`, fed
 ``rate_hz`` frames cut from the live stream (:class:`~foveatrack.frames.FrameSlicer`), one Pelco-D
 command written per frame (a keep-alive as well as the procedure's changes).
 
@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from foveatrack.calibration import CalibrationPlan, CalibrationReport, FeatureSpec, PriorAxisCalibrator
-from foveatrack.calibration_drive import drive_calibration
+from foveatrack.calibration.drive import drive_calibration
 from foveatrack.daemon.config import DaemonConfig
 from foveatrack.errors import UserError
 from foveatrack.frames import FrameSlicer, strip_no_return

@@ -1,4 +1,4 @@
-"""Speed-table calibration by tracking a room corner (paper Appendix D.4).
+"""The calibration procedure: the state machine and the estimators (paper Appendix D.4).
 
 "We calibrate the gimbal's rotation speed by tracking a pre-known feature point (e.g. a room corner)
 in the lidar point cloud.  The calibration builds a lookup table mapping the command to actual
@@ -46,174 +46,16 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
+from foveatrack.calibration.corner import _SIGN, _angle_about, _rotate_about, find_corner
+from foveatrack.calibration.plan import CalibrationPlan, CalibrationReport, FeatureSpec, LegRecord
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.detection import valid_points
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable, axis_bytes
-
-DEFAULT_BYTES = (0, 1, 2, 3, 4, 6, 8, 10, 12, 16, 20, 24, 28, 32, 40, 48, 56, 63)
-
-
-@dataclass(frozen=True)
-class FeatureSpec:
-    """The known feature: an inside room corner (three planes).
-
-    approx_xyz : (3,) [m]  where the corner is in the lidar frame at the start (within radius_m)
-    radius_m : > 0 [m]     points this close to the predicted corner are used
-    plane_tol_m : > 0 [m]  RANSAC inlier distance
-    min_plane_points : int minimum inliers per plane
-    ransac_iters : int     hypotheses per plane
-    """
-
-    approx_xyz: tuple[float, float, float]
-    radius_m: float = 0.6
-    plane_tol_m: float = 0.03
-    min_plane_points: int = 25
-    ransac_iters: int = 80
-
-
-@dataclass(frozen=True)
-class CalibrationPlan:
-    """Which bytes and how long.  Bytes not listed are interpolated by the table (documented subset).
-
-    dwell_s [s] max per leg; settle_s [s] discarded after each command (dead time + acceleration);
-    rest_s [s] stopped between legs; max_excursion_deg keeps the corner inside the FoV;
-    reference_s [s] static frames at the start; min_samples per leg fit; start_tilt_deg prior for
-    the pan axis if the legs cannot tell it; latency_s subtracted from the measured delays (the link
-    part, which the Reconstructor adds itself); return_tol_deg for the final return.
-    """
-
-    pan_bytes: tuple[int, ...] = DEFAULT_BYTES + (TURBO,)
-    tilt_bytes: tuple[int, ...] = DEFAULT_BYTES
-    dwell_s: float = 6.0
-    settle_s: float = 0.5
-    rest_s: float = 0.5
-    max_excursion_deg: float = 15.0
-    reference_s: float = 1.0
-    min_samples: int = 4
-    start_tilt_deg: float = 0.0
-    latency_s: float = 0.0
-    return_tol_deg: float = 0.3
-
-    def __post_init__(self) -> None:
-        for axis, bs in (("pan", self.pan_bytes), ("tilt", self.tilt_bytes)):
-            bad = [b for b in bs if b not in axis_bytes(axis)]
-            if bad:
-                raise UserError(f"calibration plan: {axis} bytes {bad} not allowed (0..63"
-                                f"{', 255 = turbo' if axis == 'pan' else ''})")
-        if not (self.dwell_s > self.settle_s >= 0 and self.max_excursion_deg > 0):
-            raise UserError("calibration plan: need dwell_s > settle_s >= 0 and max_excursion_deg > 0")
-
-
-@dataclass
-class LegRecord:
-    axis: str
-    byte: int
-    direction: int
-    t_cmd_s: float
-    t_stop_s: float | None = None
-    ref_q: np.ndarray | None = None          # corner position at rest before the leg (lidar)
-    samples: list = field(default_factory=list)   # (t_s, q (3,))
-
-
-@dataclass
-class CalibrationReport:
-    unmeasured: dict            # axis -> {byte: reason}
-    axis_lidar: dict            # axis -> unit vector (rotation axis in lidar coords)
-    implied_start_tilt_deg: float | None
-    asymmetry: dict             # axis -> {byte: (v_out, v_back)}
-    dead_time_s: float
-    accel_deg_s2: float | None
-    frames: int
-    frames_with_feature: int
-
-
-def _fit_plane(p: np.ndarray) -> tuple[np.ndarray, float]:
-    c = p.mean(axis=0)
-    _, _, vt = np.linalg.svd(p - c, full_matrices=False)
-    n = vt[-1]
-    return n, float(n @ c)
-
-
-def find_corner(xyz: np.ndarray, center: np.ndarray, spec: FeatureSpec, rng: np.random.Generator
-                ) -> tuple[np.ndarray, np.ndarray] | None:
-    """Corner (intersection of three planes) near ``center``; returns (corner, inlier mask) or None.
-
-    Sequential RANSAC for three planes (inliers within ``plane_tol_m``), each refined by SVD; then
-    each plane is refitted on the points near it but away from the other two."""
-    d = np.linalg.norm(xyz - center, axis=1)
-    sel = np.flatnonzero(d <= spec.radius_m)
-    if sel.size < 3 * spec.min_plane_points:
-        return None
-    pts = xyz[sel]
-    remaining = np.arange(len(pts))
-    planes, used = [], np.zeros(len(pts), bool)
-    for _ in range(3):
-        P = pts[remaining]
-        if len(P) < spec.min_plane_points:
-            return None
-        idx = rng.integers(0, len(P), size=(spec.ransac_iters, 3))
-        a, b, c = P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]]
-        n = np.cross(b - a, c - a)
-        nn = np.linalg.norm(n, axis=1)
-        ok = nn > 1e-9
-        n = n[ok] / nn[ok, None]
-        off = np.einsum("ij,ij->i", n, a[ok])
-        dist = np.abs(P @ n.T - off)                      # (len(P), hyps)
-        counts = (dist < spec.plane_tol_m).sum(axis=0)
-        if counts.size == 0:
-            return None
-        best = int(np.argmax(counts))
-        inl = dist[:, best] < spec.plane_tol_m
-        if inl.sum() < spec.min_plane_points:
-            return None
-        nrm, o = _fit_plane(P[inl])
-        inl = np.abs(P @ nrm - o) < spec.plane_tol_m          # re-select with the refined plane
-        nrm, o = _fit_plane(P[inl])
-        planes.append((nrm, o))
-        used[remaining[inl]] = True
-        remaining = remaining[~inl]
-    # final refinement: each plane from the points near it and away from the other two (points along
-    # the corner's edges would otherwise pull a plane toward its neighbours)
-    N = np.array([p[0] for p in planes])
-    D = np.array([p[1] for p in planes])
-    dist = np.abs(pts @ N.T - D)                          # (n, 3)
-    for i in range(3):
-        own = (dist[:, i] < spec.plane_tol_m) & np.all(np.delete(dist, i, axis=1) > spec.plane_tol_m, axis=1)
-        if own.sum() >= spec.min_plane_points:
-            N[i], D[i] = _fit_plane(pts[own])
-    # normals well separated (a corner, not two parallel walls)
-    g = np.abs(N @ N.T)[np.triu_indices(3, 1)]
-    if g.max() > 0.5 or abs(np.linalg.det(N)) < 0.3:
-        return None
-    corner = np.linalg.solve(N, D)
-    if np.linalg.norm(corner - center) > spec.radius_m:
-        return None
-    mask = np.zeros(len(xyz), bool)
-    mask[sel[used]] = True
-    return corner, mask
-
-
-def _rotate_about(p: np.ndarray, axis: np.ndarray, ang_rad: np.ndarray) -> np.ndarray:
-    """Rodrigues rotation of points p (n,3) about a unit axis by per-point angles."""
-    c, s = np.cos(ang_rad)[:, None], np.sin(ang_rad)[:, None]
-    k = axis[None, :]
-    return p * c + np.cross(k, p) * s + k * (p @ axis)[:, None] * (1 - c)
-
-
-def _angle_about(q: np.ndarray, axis: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    e1 = ref - (ref @ axis) * axis
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(axis, e1)
-    return np.degrees(np.arctan2(q @ e2, q @ e1))
-
-
-_SIGN = {"pan": -1.0, "tilt": +1.0}   # head speed = sign * d(angle of corner about axis)/dt
 
 
 class Calibrator:
@@ -611,8 +453,6 @@ class PriorAxisCalibrator(Calibrator):
         from dataclasses import replace as _replace
 
         from scipy.optimize import least_squares
-
-        from foveatrack.calibration import _SIGN, _angle_about
 
         table, report = super()._estimate()
         axes = {ax: np.asarray(report.axis_lidar[ax], float) for ax in ("pan", "tilt")}
