@@ -44,6 +44,8 @@ from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame, FrameSlicer
 from foveatrack.gate import STALE_FRAME, CommandGate, Limits
+from foveatrack.recording.format import METRICS, POINTS
+from foveatrack.recording.records import CommandRecord, DetectionRecord, HeadEstimateRecord, TruthRecord, parse
 from foveatrack.metrics import acquired_within_deg, tracking_metrics
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig, Tracker
@@ -112,10 +114,6 @@ def tracker_config(meta: dict, table: dict | None = None, where: str = "recorded
     return replace(cfg, **ov)
 
 
-def _cmd_tuple(rec: dict) -> tuple:
-    return (rec.get("pan_dir"), rec.get("pan_byte"), rec.get("tilt_dir"), rec.get("tilt_byte"))
-
-
 class _Frames:
     """Per-frame arrays built frame by frame."""
 
@@ -150,34 +148,58 @@ class _Frames:
         return out
 
 
-def _groups(reader):
-    """Yield (points record, {channel: [records]}, [non-frame commands after it]) per frame."""
+@dataclass
+class _RecordedFrame:
+    """One frame of a recording with the typed records that belong to it (None where absent) and the
+    commands sent after it that belong to no frame (watchdog, shutdown)."""
+    points: object
+    detection: DetectionRecord | None = None
+    head: HeadEstimateRecord | None = None
+    command: CommandRecord | None = None       # the tracker's command for this frame, as sent
+    truth: TruthRecord | None = None
+    metrics: dict = field(default_factory=dict)
+    after: list = field(default_factory=list)   # [CommandRecord] in the order sent
+
+    @property
+    def stale(self) -> bool:
+        """The driver found the frame stale when processing it (the daemon: by its wall clock)."""
+        return self.command is not None and STALE_FRAME in self.command.limited
+
+
+def _frames_of(reader):
+    """Yield a :class:`_RecordedFrame` per frame of the recording."""
     cur = None
     for m in reader.messages():
-        if m.channel == "points":
+        if m.channel == POINTS:
             if cur is not None:
                 yield cur
-            cur = (m.record, {}, [])
-        elif cur is None:
+            cur = _RecordedFrame(m.record)
             continue
-        elif m.channel == "commands" and m.record.get("frame_id") is None:
-            cur[2].append(m.record)
-        else:
-            cur[1].setdefault(m.channel, []).append(m.record)
+        if cur is None:
+            continue
+        rec = parse(m.channel, m.record)
+        if isinstance(rec, CommandRecord):
+            if rec.frame_id is None:
+                cur.after.append(rec)
+            elif rec.from_tracker and cur.command is None:
+                cur.command = rec
+        elif isinstance(rec, DetectionRecord) and cur.detection is None:
+            cur.detection = rec
+        elif isinstance(rec, HeadEstimateRecord) and cur.head is None:
+            cur.head = rec
+        elif isinstance(rec, TruthRecord) and cur.truth is None:
+            cur.truth = rec
+        elif m.channel == METRICS:
+            cur.metrics.setdefault(rec["name"], rec["value"])
     if cur is not None:
         yield cur
 
 
-def _tracker_record(channels: dict) -> dict | None:
-    cm = [c for c in channels.get("commands", []) if c.get("source", "tracker") == "tracker"]
-    return cm[0] if cm else None
-
-
 def _reached_head(gate: CommandGate, tracker: Tracker, send_t: float, cmd: HeadCommand,
-                  record: dict | None) -> HeadCommand:
+                  record: CommandRecord | None) -> HeadCommand:
     """What the head runs after a command sent at ``send_t``: the gate's rule for a write, with the
     outcome the recording gives (the daemon's ``written: false`` for a failed write)."""
-    return gate.wrote(tracker, send_t, cmd, ok=record is None or record.get("written", True) is not False)
+    return gate.wrote(tracker, send_t, cmd, ok=record is None or record.reached_head)
 
 
 def _recorded_limits(meta: dict) -> Limits | None:
@@ -188,11 +210,6 @@ def _recorded_limits(meta: dict) -> Limits | None:
     L = dict(meta["limits"])
     L["tilt_limits_deg"] = tuple(L["tilt_limits_deg"])
     return Limits(**L)
-
-
-def _sent_stale(channels: dict, tag: str) -> bool:
-    return any(tag in c.get("limited", ()) for c in channels.get("commands", [])
-               if c.get("source", "tracker") == "tracker")
 
 
 def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
@@ -217,7 +234,8 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
                          "processing_ms", "latency_ms", "head_pan_deg", "head_tilt_deg")}
     T = {k: [] for k in ("true_error_deg", "target_xyz_m", "points_on_target", "pan_deg", "tilt_deg")}
     has_truth = False
-    for pts, ch, after in _groups(reader):
+    for rf in _frames_of(reader):
+        pts = rf.points
         k = int(pts.frame_index)
         if source == "simulator":
             t0, t1 = k * period, (k + 1) * period
@@ -228,49 +246,43 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
         else:
             t1 = pts.t_ns * 1e-9
             t0 = (pts.t_ns - period_ns) * 1e-9
-            cmds = [c for c in ch.get("commands", []) if c.get("source", "tracker") == "tracker"]
-            send_t = float(cmds[0]["send_t_s"]) if cmds and "send_t_s" in cmds[0] else t1 + cfg.send_delay_s
+            c = rf.command
+            send_t = float(c.send_t_s) if c is not None and c.send_t_s is not None else t1 + cfg.send_delay_s
         frame = Frame(t0, t1, pts.xyz, pts.t_ns_points, pts.reflectivity)
         out = tracker.process(frame, send_t_s=send_t)
-        # the daemon found the frame stale by its wall clock: the recording says so
-        cmd, _ = gate.decide(tracker, out, send_t, stale=_sent_stale(ch, STALE_FRAME))
-        _reached_head(gate, tracker, send_t, cmd, _tracker_record(ch))
+        # a frame the driver found stale (the daemon: by its wall clock) is stale here too
+        cmd, _ = gate.decide(tracker, out, send_t, stale=rf.stale)
+        _reached_head(gate, tracker, send_t, cmd, rf.command)
         F.add(k, frame, out, cmd)
-        dets = ch.get("detections", [])
-        d = dets[0] if dets else {}
-        R["detected"].append(bool(d.get("detected", False)))
-        R["det_xyz"].append(np.full(3, np.nan) if d.get("xyz_m") is None else np.asarray(d["xyz_m"], float))
-        R["det_n_points"].append(int(d.get("n_points", 0)))
-        R["error_pan_deg"].append(np.nan if d.get("error_pan_deg") is None else d["error_pan_deg"])
-        R["error_tilt_deg"].append(np.nan if d.get("error_tilt_deg") is None else d["error_tilt_deg"])
-        cm = [c for c in ch.get("commands", []) if c.get("source", "tracker") == "tracker"]
-        R["command"].append(_cmd_tuple(cm[0]) if cm else (None,) * 4)
-        mets = {m["name"]: m["value"] for m in ch.get("metrics", [])}
-        R["processing_ms"].append(mets.get("processing_ms", np.nan))
-        R["latency_ms"].append(np.nan if mets.get("latency_ms") is None else mets["latency_ms"])
-        hd = ch.get("head", [])
-        R["head_pan_deg"].append(np.nan if not hd or hd[0].get("pan_deg") is None else hd[0]["pan_deg"])
-        R["head_tilt_deg"].append(np.nan if not hd or hd[0].get("tilt_deg") is None else hd[0]["tilt_deg"])
-        tr = ch.get("truth", [])
-        if tr:
+        d = rf.detection
+        R["detected"].append(d is not None and d.detected)
+        R["det_xyz"].append(np.full(3, np.nan) if d is None or d.xyz_m is None else np.asarray(d.xyz_m, float))
+        R["det_n_points"].append(0 if d is None else d.n_points)
+        R["error_pan_deg"].append(np.nan if d is None or d.error_pan_deg is None else d.error_pan_deg)
+        R["error_tilt_deg"].append(np.nan if d is None or d.error_tilt_deg is None else d.error_tilt_deg)
+        R["command"].append((None,) * 4 if rf.command is None else rf.command.speeds)
+        R["processing_ms"].append(rf.metrics.get("processing_ms", np.nan))
+        R["latency_ms"].append(np.nan if rf.metrics.get("latency_ms") is None else rf.metrics["latency_ms"])
+        h = rf.head
+        R["head_pan_deg"].append(np.nan if h is None else h.est_pan_deg)
+        R["head_tilt_deg"].append(np.nan if h is None else h.est_tilt_deg)
+        t = rf.truth
+        if t is not None:
             has_truth = True
-            t = tr[0]
-            T["true_error_deg"].append(np.nan if t.get("true_error_deg") is None else t["true_error_deg"])
-            T["target_xyz_m"].append(np.asarray(t.get("target_xyz_m", [np.nan] * 3), float))
-            T["points_on_target"].append(int(t.get("points_on_target", 0)))
-            T["pan_deg"].append(t.get("pan_deg", np.nan))
-            T["tilt_deg"].append(t.get("tilt_deg", np.nan))
+            T["true_error_deg"].append(np.nan if t.true_error_deg is None else t.true_error_deg)
+            T["target_xyz_m"].append(np.asarray(t.true_target_world_m, float))
+            T["points_on_target"].append(t.points_on_target)
+            T["pan_deg"].append(t.true_pan_deg)
+            T["tilt_deg"].append(t.true_tilt_deg)
         else:
             T["true_error_deg"].append(np.nan)
             T["target_xyz_m"].append(np.full(3, np.nan))
             T["points_on_target"].append(0)
             T["pan_deg"].append(np.nan)
             T["tilt_deg"].append(np.nan)
-        for c in after:   # watchdog / shutdown STOPs, in the order they were sent
-            t_c = float(c["send_t_s"])
-            cmd_c = HeadCommand(c["pan_dir"], c["pan_byte"], c["tilt_dir"], c["tilt_byte"])
-            tracker.command_sent(t_c, cmd_c)
-            _reached_head(gate, tracker, t_c, cmd_c, c)
+        for c in rf.after:   # watchdog / shutdown STOPs, in the order they were sent
+            tracker.command_sent(c.send_time_s, c.command)
+            _reached_head(gate, tracker, c.send_time_s, c.command, c)
     t_settled = (tracker.recon.last_send_t_s or 0.0) + 2.0
     final_pose = tuple(float(a) for a in tracker.recon.angles_at(t_settled)[:2])
     frames = F.arrays()

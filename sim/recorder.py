@@ -2,7 +2,7 @@
 
 Channels and fields, shared with the daemon so ``foveatrack replay`` reads both:
 
-The per-frame layout is :mod:`foveatrack.track_log`'s (the daemon writes the same):
+The per-frame records are :mod:`foveatrack.recording.records`' (the daemon writes the same):
 
 * points: per frame, ``t_ns`` = frame end, xyz in the lidar frame, per-point ``t_ns``, reflectivity
 * detections: ``detected``, ``xyz_m`` (lidar frame), ``n_points``, ``az_deg``, ``el_deg``, ``state``,
@@ -19,7 +19,7 @@ import json
 import numpy as np
 
 from foveatrack.recording import RecordingWriter
-from foveatrack.track_log import finite_or_none, ns, write_tracker_frame
+from foveatrack.recording.records import CommandRecord, TruthRecord, ns, write_record, write_tracker_frame
 
 
 def recording_meta(scene, loop) -> dict:
@@ -60,15 +60,12 @@ class SimRecorder:
         c = loop.last_command   # as sent, after the gate
         if loop.last_sent is not None:
             t_send, data = loop.last_sent
-            extra = {}
-            if loop.last_limited:   # the gate changed the tracker's command: as the daemon records it
-                t = out.command
-                extra = {"limited": list(loop.last_limited),
-                         "tracker_command": [t.pan_dir, t.pan_byte, t.tilt_dir, t.tilt_byte]}
-            w.write_command(ns(t_send), data, frame_id=fid, pan_dir=c.pan_dir, pan_byte=c.pan_byte,
-                            tilt_dir=c.tilt_dir, tilt_byte=c.tilt_byte, **extra)
+            t = out.command   # the tracker's, recorded when the gate changed it (as the daemon records it)
+            write_record(w, CommandRecord(ns(t_send), data, c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte,
+                                          frame_id=fid, limited=tuple(loop.last_limited),
+                                          tracker_command=(t.pan_dir, t.pan_byte, t.tilt_dir, t.tilt_byte)))
         L = loop.log
-        w.write_truth(t_end, frame_id=fid, pan_deg=L.head_pan_deg[-1], tilt_deg=L.head_tilt_deg[-1],
-                      target_xyz_m=[float(v) for v in np.asarray(L.target_xyz[-1])],
-                      true_error_deg=finite_or_none(L.true_error_deg[-1]), points_on_target=L.points_on_target[-1])
+        write_record(w, TruthRecord(t_end, fid, L.head_pan_deg[-1], L.head_tilt_deg[-1],
+                                    tuple(float(v) for v in np.asarray(L.target_xyz[-1])), L.true_error_deg[-1],
+                                    L.points_on_target[-1]))
         self.frame_id += 1

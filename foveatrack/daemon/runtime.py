@@ -53,7 +53,7 @@ from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, form
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
 from foveatrack.gate import CommandGate, Limits
 from foveatrack.live_devices import LidarStream, open_devices
-from foveatrack.track_log import ns, write_tracker_frame
+from foveatrack.recording.records import CommandRecord, ns, write_record, write_tracker_frame
 from foveatrack.tracker import Tracker
 
 FORMAT_SOURCE = "daemon"
@@ -61,19 +61,13 @@ FORMAT_SOURCE = "daemon"
 
 # ----------------------------------------------------------------------------------------- record jobs
 def _job_frame(w, fid, frame, out, cmd_rec, proc_ms, lat_ms):
-    """Write one processed frame in the layout of :mod:`foveatrack.track_log` (shared with the simulator)."""
+    """Write one processed frame as every driver does (:mod:`foveatrack.recording.records`)."""
     t_end = write_tracker_frame(w, fid, frame, out)
     if cmd_rec is not None:
-        _job_command(w, cmd_rec)
+        write_record(w, cmd_rec)
     w.write_metric(t_end, "processing_ms", proc_ms, frame_id=fid)
     if lat_ms is not None:
         w.write_metric(t_end, "latency_ms", lat_ms, frame_id=fid)
-
-
-def _job_command(w, rec: dict):
-    rec = dict(rec)
-    raw = rec.pop("raw")
-    w.write_command(ns(rec["send_t_s"]), raw, **rec)
 
 
 def _job_event(w, t_ns, rec: dict):
@@ -236,13 +230,11 @@ class Daemon:
         # A failed write leaves the head on its last command; the gate tells the dead reckoning (seen
         # without it: ~9 deg of pan while a head was unplugged).
         self.gate.wrote(self.tracker, send_t_s, cmd, ok)
-        rec = {"raw": raw, "frame_id": fid, "source": source, "send_t_s": float(send_t_s), "written": bool(ok),
-               "host_written_s": t_written, "pan_dir": cmd.pan_dir, "pan_byte": cmd.pan_byte,
-               "tilt_dir": cmd.tilt_dir, "tilt_byte": cmd.tilt_byte}
-        if why:
-            rec["limited"] = list(why)
-            rec["tracker_command"] = [tracker_cmd.pan_dir, tracker_cmd.pan_byte, tracker_cmd.tilt_dir,
-                                      tracker_cmd.tilt_byte]
+        t = tracker_cmd
+        rec = CommandRecord(ns(send_t_s), raw, cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte, frame_id=fid,
+                            source=source, send_t_s=float(send_t_s), written=bool(ok), host_written_s=t_written,
+                            limited=tuple(why),
+                            tracker_command=None if t is None else (t.pan_dir, t.pan_byte, t.tilt_dir, t.tilt_byte))
         return rec, t_written
 
     def _record(self, fn, *args):
@@ -361,7 +353,7 @@ class Daemon:
                         t_s = self._send_time(t_s)
                         self.tracker.command_sent(t_s, STOP)
                         rec, _ = self._send(STOP, "watchdog", t_s)
-                        self._record(_job_command, rec)
+                        self._record(write_record, rec)
                     else:
                         self.head.stop()
                 if not silent and watchdog_tripped:
@@ -458,7 +450,7 @@ class Daemon:
             t_s = self._send_time(t_s)
             self.tracker.command_sent(t_s, STOP)
             rec, _ = self._send(STOP, "shutdown", t_s)
-            self._record(_job_command, rec)
+            self._record(write_record, rec)
         else:
             self.head.stop()
         self.rx.join(2.0)

@@ -1,0 +1,237 @@
+"""The typed records of a recording: one class per channel, written and read by the same code.
+
+Every driver writes these (the simulator, the daemon) and replay reads them back; a record's JSON
+field names are the file format (unchanged since format version 1, so older recordings read), while
+the attributes say what a value is -- ``true_`` for simulation truth, ``est_`` for what the tracker
+believes (its dead-reckoned head pose, its reconstructed target):
+
+=====================  ==============  =====================================================
+class                  channel         what
+=====================  ==============  =====================================================
+DetectionRecord        /detections     Algorithm 1 on a frame (lidar frame) and the tracker's state
+HeadEstimateRecord     /head           the tracker's estimate: head pose and target in the world
+CommandRecord          /commands       a command as written to the head (Pelco bytes), and why
+                                       the gate changed it
+TruthRecord            /truth          simulation only: the true head pose and target
+=====================  ==============  =====================================================
+
+``from_json`` takes a record as read (missing keys of older files become None / defaults);
+``to_json`` gives the dict to write, its keys in the order the writers have always used (a run
+records the same bytes as before).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRUTH
+
+
+def ns(t_s: float) -> int:
+    """Seconds -> the integer nanoseconds records are stamped with."""
+    return int(round(t_s * 1e9))
+
+
+def _finite_or_none(v):
+    """JSON has no NaN: a missing or non-finite float is recorded as null."""
+    return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
+
+
+def _xyz(v):
+    return None if v is None else [float(x) for x in v]
+
+
+def _nan(v) -> float:
+    return math.nan if v is None else float(v)
+
+
+@dataclass(frozen=True)
+class DetectionRecord:
+    """Algorithm 1's output for frame ``frame_id`` (``t_ns`` = frame end): the target's median point
+    ``xyz_m`` [m, lidar frame] or None, its time and bearing, the tracker state and the angular errors
+    [deg] the controller saw (None when nothing was detected)."""
+
+    CHANNEL = DETECTIONS
+    t_ns: int
+    frame_id: int
+    detected: bool
+    xyz_m: tuple | None = None
+    n_points: int = 0
+    t_s: float | None = None
+    az_deg: float | None = None
+    el_deg: float | None = None
+    state: str | None = None
+    error_pan_deg: float | None = None
+    error_tilt_deg: float | None = None
+
+    @classmethod
+    def from_output(cls, t_ns: int, frame_id: int, out) -> "DetectionRecord":
+        """From a :class:`foveatrack.tracker.TrackOutput`."""
+        d = out.detection
+        return cls(int(t_ns), int(frame_id), d is not None, None if d is None else tuple(float(v) for v in d.xyz),
+                   0 if d is None else int(d.n_points), None if d is None else float(d.t_s),
+                   None if d is None else float(d.az_deg), None if d is None else float(d.el_deg),
+                   str(out.state.value), _finite_or_none(out.error_pan_deg), _finite_or_none(out.error_tilt_deg))
+
+    def to_json(self) -> dict:
+        return {"frame_index": self.frame_id, "detected": self.detected, "xyz_m": _xyz(self.xyz_m),
+                "n_points": self.n_points, "t_s": self.t_s, "az_deg": self.az_deg, "el_deg": self.el_deg,
+                "state": self.state, "error_pan_deg": self.error_pan_deg, "error_tilt_deg": self.error_tilt_deg}
+
+    @classmethod
+    def from_json(cls, r: dict) -> "DetectionRecord":
+        return cls(int(r["t_ns"]), int(r.get("frame_index", -1)), bool(r.get("detected", False)),
+                   None if r.get("xyz_m") is None else tuple(r["xyz_m"]), int(r.get("n_points", 0)), r.get("t_s"),
+                   r.get("az_deg"), r.get("el_deg"), r.get("state"), r.get("error_pan_deg"), r.get("error_tilt_deg"))
+
+
+@dataclass(frozen=True)
+class HeadEstimateRecord:
+    """What the tracker believes at frame end: the head's dead-reckoned pose [deg] (pan + = left, tilt
+    + = up) with its 1-sigma, and the target reconstructed in the world [m] (None without one)."""
+
+    CHANNEL = HEAD
+    t_ns: int
+    frame_id: int
+    est_pan_deg: float
+    est_tilt_deg: float
+    est_sigma_pan_deg: float | None = None
+    est_sigma_tilt_deg: float | None = None
+    est_target_world_m: tuple | None = None
+    est_target_world_sigma_m: float | None = None
+
+    @classmethod
+    def from_output(cls, t_ns: int, frame_id: int, out) -> "HeadEstimateRecord":
+        return cls(int(t_ns), int(frame_id), float(out.head_pan_deg), float(out.head_tilt_deg),
+                   out.head_sigma_pan_deg, out.head_sigma_tilt_deg,
+                   None if out.world_xyz is None else tuple(float(v) for v in out.world_xyz),
+                   _finite_or_none(out.world_sigma_m))
+
+    def to_json(self) -> dict:
+        return {"pan_deg": float(self.est_pan_deg), "tilt_deg": float(self.est_tilt_deg), "frame_id": self.frame_id,
+                "sigma_pan_deg": self.est_sigma_pan_deg, "sigma_tilt_deg": self.est_sigma_tilt_deg,
+                "world_xyz_m": _xyz(self.est_target_world_m), "world_sigma_m": self.est_target_world_sigma_m}
+
+    @classmethod
+    def from_json(cls, r: dict) -> "HeadEstimateRecord":
+        return cls(int(r["t_ns"]), int(r.get("frame_id", -1)), _nan(r.get("pan_deg")), _nan(r.get("tilt_deg")),
+                   r.get("sigma_pan_deg"), r.get("sigma_tilt_deg"),
+                   None if r.get("world_xyz_m") is None else tuple(r["world_xyz_m"]), r.get("world_sigma_m"))
+
+
+@dataclass(frozen=True)
+class CommandRecord:
+    """A command as written to the head: ``raw`` the Pelco bytes, ``t_ns`` the send time the dead
+    reckoning used, the decoded speeds, and from the gate (:mod:`foveatrack.gate`) why it differs
+    from the tracker's (``limited``, with ``tracker_command``).  The daemon adds ``source``
+    (tracker, watchdog, shutdown), ``written`` (False: the link failed, the head never got it) and
+    ``host_written_s`` (monotonic host time of the write)."""
+
+    CHANNEL = COMMANDS
+    t_ns: int
+    raw: bytes
+    pan_dir: int
+    pan_byte: int
+    tilt_dir: int
+    tilt_byte: int
+    frame_id: int | None = None
+    source: str | None = None
+    send_t_s: float | None = None
+    written: bool | None = None
+    host_written_s: float | None = None
+    limited: tuple[str, ...] = field(default=())
+    tracker_command: tuple | None = None
+
+    @property
+    def command(self):
+        from foveatrack.control import HeadCommand
+
+        return HeadCommand(self.pan_dir, self.pan_byte, self.tilt_dir, self.tilt_byte)
+
+    @property
+    def speeds(self) -> tuple:
+        return (self.pan_dir, self.pan_byte, self.tilt_dir, self.tilt_byte)
+
+    @property
+    def from_tracker(self) -> bool:
+        return self.source in (None, "tracker")
+
+    @property
+    def reached_head(self) -> bool:
+        return self.written is not False
+
+    @property
+    def send_time_s(self) -> float:
+        return self.send_t_s if self.send_t_s is not None else self.t_ns * 1e-9
+
+    def to_json(self) -> dict:
+        r = {"raw_hex": bytes(self.raw).hex(), "frame_id": self.frame_id}
+        for k in ("source", "send_t_s", "written", "host_written_s"):
+            v = getattr(self, k)
+            if v is not None:
+                r[k] = v
+        r.update(pan_dir=self.pan_dir, pan_byte=self.pan_byte, tilt_dir=self.tilt_dir, tilt_byte=self.tilt_byte)
+        if self.limited:
+            r["limited"] = list(self.limited)
+            r["tracker_command"] = None if self.tracker_command is None else list(self.tracker_command)
+        return r
+
+    @classmethod
+    def from_json(cls, r: dict) -> "CommandRecord":
+        tc = r.get("tracker_command")
+        return cls(int(r["t_ns"]), bytes.fromhex(r.get("raw_hex", "")), r.get("pan_dir"), r.get("pan_byte"),
+                   r.get("tilt_dir"), r.get("tilt_byte"), r.get("frame_id"), r.get("source"), r.get("send_t_s"),
+                   r.get("written"), r.get("host_written_s"), tuple(r.get("limited", ())),
+                   None if tc is None else tuple(tc))
+
+
+@dataclass(frozen=True)
+class TruthRecord:
+    """Simulation truth at frame mid (``t_ns`` = frame end): the head's true pose [deg], the target's
+    true position [m, world], the true off-axis error [deg] and the points that hit the target."""
+
+    CHANNEL = TRUTH
+    t_ns: int
+    frame_id: int
+    true_pan_deg: float
+    true_tilt_deg: float
+    true_target_world_m: tuple
+    true_error_deg: float | None
+    points_on_target: int
+
+    def to_json(self) -> dict:
+        return {"frame_id": self.frame_id, "pan_deg": self.true_pan_deg, "tilt_deg": self.true_tilt_deg,
+                "target_xyz_m": _xyz(self.true_target_world_m), "true_error_deg": _finite_or_none(self.true_error_deg),
+                "points_on_target": self.points_on_target}
+
+    @classmethod
+    def from_json(cls, r: dict) -> "TruthRecord":
+        return cls(int(r["t_ns"]), int(r.get("frame_id", -1)), _nan(r.get("pan_deg")), _nan(r.get("tilt_deg")),
+                   tuple(r.get("target_xyz_m", (math.nan,) * 3)), r.get("true_error_deg"),
+                   int(r.get("points_on_target", 0)))
+
+
+def write_record(writer, rec) -> None:
+    """Write a typed record on its channel."""
+    writer.write(rec.CHANNEL, rec.t_ns, rec.to_json())
+
+
+def write_tracker_frame(writer, frame_id: int, frame, out) -> int:
+    """Record one frame and the tracker's output for it (points, detection, head estimate), as every
+    driver does; returns the frame-end time [ns].  Commands and truth each driver writes itself."""
+    t_end = ns(frame.t_end_s)
+    writer.write_points(t_end, frame_id, frame.xyz, frame.t_ns, frame.reflectivity)
+    write_record(writer, DetectionRecord.from_output(t_end, frame_id, out))
+    write_record(writer, HeadEstimateRecord.from_output(t_end, frame_id, out))
+    return t_end
+
+
+PARSERS = {DETECTIONS: DetectionRecord.from_json, HEAD: HeadEstimateRecord.from_json,
+           COMMANDS: CommandRecord.from_json, TRUTH: TruthRecord.from_json}
+
+
+def parse(channel: str, record: dict):
+    """The typed record of a JSON record read from ``channel`` (the dict itself on other channels)."""
+    p = PARSERS.get(channel)
+    return record if p is None else p(record)
