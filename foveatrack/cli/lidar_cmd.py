@@ -24,7 +24,8 @@ def register(sub) -> None:
     lsub = lidar.add_subparsers(dest="lidar_command", metavar="ANALYSIS", required=True)
 
     def common(p, duration: float | None = None):
-        p.add_argument("preset", metavar="PRESET", help="prototype | mid40 | horizon | optics.toml")
+        p.add_argument("preset", metavar="PRESET",
+                       help="prototype | mid40 | horizon | mid70 | avia | tele15 | mid100 | optics.toml")
         p.add_argument("--model", choices=("exact", "paraxial"), default="exact",
                        help="exact refraction (default) or the paraxial vector sum")
         if duration is not None:
@@ -200,6 +201,7 @@ def info_dict(optics, model: str) -> dict:
         ],
         "channel_offsets_deg": [list(c) for c in optics.channel_offsets_deg],
         "beam_divergence_deg": list(optics.beam_divergence_deg),
+        **({"head_yaw_deg": list(optics.head_yaw_deg)} if optics.head_yaw_deg else {}),
     }
 
 
