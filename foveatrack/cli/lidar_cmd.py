@@ -53,8 +53,10 @@ def register(sub) -> None:
 
     p = lsub.add_parser("coverage", help="coverage vs accumulation time (paper Fig. 6e)")
     common(p, duration=2.0)
-    p.add_argument("--method", choices=("voxel", "footprint"), default="voxel",
-                   help="voxel: paper Appendix C 100x100 grid; footprint: Livox's illuminated area")
+    p.add_argument("--method", choices=("voxel", "footprint", "footprint-fixed"), default="voxel",
+                   help="voxel: paper Appendix C 100x100 grid; footprint: Livox's FoV coverage (the beam's "
+                        "swath, as wide as its divergence's major axis); footprint-fixed: the area of a "
+                        "footprint held aligned with az/el (docs/livox-files.md)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr (shown on long runs)")
     p.set_defaults(func=cmd_coverage)
 
@@ -314,10 +316,12 @@ def cmd_density(args) -> int:
 
 
 def coverage_curve(optics, scan, method, duration, progress=None):
-    from sim.scan.coverage import footprint_coverage, voxel_coverage
+    from sim.scan.coverage import footprint_coverage, swath_coverage, voxel_coverage
 
     if method == "voxel":
         return voxel_coverage(scan, duration, progress=progress)
+    if method == "footprint":
+        return swath_coverage(scan, duration, progress=progress)
     return footprint_coverage(scan, duration, progress=progress)
 
 
