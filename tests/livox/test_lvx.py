@@ -223,7 +223,7 @@ def _read_all(path):
 
 
 def test_fuzzed_and_truncated_files_give_frames_or_a_user_error(tmp_path):
-    """Random byte changes and every cut of a two-frame file: either frames come out or a UserError
+    """Random byte changes and every 13th cut of a two-frame file: either frames come out or a UserError
     naming the file does; nothing else is raised."""
     frames, _ = make_frames(np.random.default_rng(3), n_frames=2)
     src = tmp_path / "src.lvx"
@@ -232,7 +232,7 @@ def test_fuzzed_and_truncated_files_give_frames_or_a_user_error(tmp_path):
     p = tmp_path / "f.lvx"
     rng = np.random.default_rng(4)
     outcomes = Counter()
-    for k in range(400):
+    for k in range(200):
         b = bytearray(data)
         for _ in range(int(rng.integers(1, 4))):
             b[int(rng.integers(0, len(b)))] = int(rng.integers(0, 256))
@@ -245,7 +245,7 @@ def test_fuzzed_and_truncated_files_give_frames_or_a_user_error(tmp_path):
             outcomes["refused"] += 1
     assert outcomes["read"] > 0 and outcomes["refused"] > 0
     full = _read_all(src)
-    for cut in range(0, len(data), 7):
+    for cut in range(0, len(data), 13):
         p.write_bytes(data[:cut])
         try:
             got = _read_all(p)
