@@ -8,8 +8,11 @@ devices and three frames; the script writes the same frames with ``foveatrack.li
 and ``foveatrack export``'s packet layout, then compares the files byte for byte and reads the
 vendor's file back with our reader.
 
-Usage: python scripts/compare_lvx_with_vendor_writer.py SDK_SOURCE_DIR
+Usage: python scripts/compare_lvx_with_vendor_writer.py SDK_SOURCE_DIR [--fixture DIR]
 (SDK_SOURCE_DIR holds sample/lidar_lvx_file and sdk_core/include, e.g. a ``git archive v2.3.0``.)
+``--fixture DIR`` also keeps the harness input (``vendor_lvx_input.bin``) and the vendor's file
+(``vendor_lvx_writer.lvx``) there: ``tests/livox/test_lvx_vendor_fixture.py`` checks our writer
+against them where the SDK is not present (CI).
 """
 
 from __future__ import annotations
@@ -49,10 +52,16 @@ def packets(rng) -> list[list[tuple[int, bytes]]]:
 
 
 def main() -> int:
-    if len(sys.argv) != 2:
+    args = sys.argv[1:]
+    fixture = None
+    if "--fixture" in args:
+        i = args.index("--fixture")
+        fixture = Path(args[i + 1])
+        del args[i : i + 2]
+    if len(args) != 1:
         print(__doc__)
         return 2
-    sdk = Path(sys.argv[1]).resolve()
+    sdk = Path(args[0]).resolve()
     src = sdk / "sample" / "lidar_lvx_file"
     if not (src / "lvx_file.cpp").is_file():
         print(f"{src}/lvx_file.cpp not found: give the SDK 2.3.0 source directory")
@@ -79,6 +88,10 @@ def main() -> int:
         (tmp / "in.bin").write_bytes(bytes(inp))
         subprocess.run([str(exe), str(tmp / "in.bin")], cwd=tmp, check=True)
         (vendor,) = tmp.glob("*.lvx")
+        if fixture is not None:
+            fixture.mkdir(parents=True, exist_ok=True)
+            (fixture / "vendor_lvx_input.bin").write_bytes(bytes(inp))
+            (fixture / "vendor_lvx_writer.lvx").write_bytes(vendor.read_bytes())
         ours = tmp / "ours.lvx"
         write_lvx(ours, frames, devices)
         a, b = vendor.read_bytes(), ours.read_bytes()
