@@ -277,6 +277,11 @@ def cmd_density(args) -> int:
     optics = _load(args)
     if len(optics.prisms) != 2:
         raise UserError(f"{optics.name}: eq. (4) describes two-prism patterns; this scanner has {len(optics.prisms)}")
+    if optics.channels != 1:
+        # several lasers (Avia, Tele-15) or heads (Mid-100) overlay shifted patterns: not eq. (4)'s radial law
+        kind = "heads" if optics.head_yaw_deg else "channels"
+        raise UserError(f"{optics.name}: eq. (4) describes a single beam's pattern; this scanner has "
+                        f"{optics.channels} {kind}")
     if args.bins < 1:
         raise UserError(f"--bins {args.bins}: at least 1")
     if args.duration * optics.point_rate_hz < 1000:
