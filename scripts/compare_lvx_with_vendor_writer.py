@@ -9,7 +9,8 @@ and ``foveatrack export``'s packet layout, then compares the files byte for byte
 vendor's file back with our reader.
 
 Usage: python scripts/compare_lvx_with_vendor_writer.py SDK_SOURCE_DIR [--fixture DIR]
-(SDK_SOURCE_DIR holds sample/lidar_lvx_file and sdk_core/include, e.g. a ``git archive v2.3.0``.)
+(SDK_SOURCE_DIR holds sample/lidar_lvx_file and sdk_core/include, e.g. from a clone of
+Livox-SDK/Livox-SDK: ``git archive v2.3.0 sample/lidar_lvx_file sdk_core/include | tar -x -C DIR``.)
 ``--fixture DIR`` also keeps the harness input (``vendor_lvx_input.bin``) and the vendor's file
 (``vendor_lvx_writer.lvx``) there: ``tests/livox/test_lvx_vendor_fixture.py`` checks our writer
 against them where the SDK is not present (CI).
