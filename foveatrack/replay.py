@@ -140,8 +140,15 @@ class _Frames:
         d["head_tilt_deg"].append(out.head_tilt_deg)
         d["world_xyz"].append(np.full(3, np.nan) if out.world_xyz is None else np.asarray(out.world_xyz, float))
 
+    # dtypes given so that a run with no frames (an empty or all-no-return .lvx) still yields arrays
+    # that index and reduce like the others (a bare np.asarray([]) is float: not a mask)
+    DTYPES = {"frame_index": np.int64, "n_points": np.int64, "detected": bool, "det_n_points": np.int64,
+              "t_end_s": float, "error_pan_deg": float, "error_tilt_deg": float, "head_pan_deg": float,
+              "head_tilt_deg": float, "det_xyz": float, "world_xyz": float, "command": np.int64}
+
     def arrays(self) -> dict[str, np.ndarray]:
-        out = {k: np.asarray(v) for k, v in self.d.items()}
+        out = {k: np.asarray(v, dtype=self.DTYPES.get(k)) if v or k in self.DTYPES else np.asarray(v)
+               for k, v in self.d.items()}
         for k in ("det_xyz", "world_xyz"):
             out[k] = out[k].reshape(-1, 3)
         out["command"] = out["command"].reshape(-1, 4)
@@ -405,7 +412,7 @@ def _stats(x) -> dict:
 
 def bearing_metrics(frames: dict) -> dict:
     """Detection-based figures (no truth needed): bearing error of the detections off the lidar axis."""
-    det = frames["detected"]
+    det = np.asarray(frames["detected"], bool)
     ep, et = frames["error_pan_deg"], frames["error_tilt_deg"]
     states, counts = np.unique(frames["state"], return_counts=True) if len(det) else ([], [])
     return {"frames": int(len(det)), "frames_with_detection": int(det.sum()),

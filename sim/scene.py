@@ -205,7 +205,8 @@ def _lidar(t: Mapping, w: str):
     from sim.scan.optics import OpticsError, optics_from_table, optics_overrides
     from sim.scan.presets import PRESETS
 
-    check_keys(t, ["preset", "model", "point_rate_hz", "prisms", "channel_offsets_deg", "beam_divergence_deg", "name"], w)
+    check_keys(t, ["preset", "model", "point_rate_hz", "prisms", "channel_offsets_deg", "beam_divergence_deg", "name",
+                   "head_yaw_deg"], w)
     model = as_choice(t.get("model", "exact"), "model", w, ("exact", "paraxial"))
     rest = {k: v for k, v in t.items() if k not in ("preset", "model")}
     try:

@@ -96,6 +96,19 @@ def paint_footprint_twin(az, el, k0, half_az, half_el, az_min, el_min, cell, sha
     return first
 
 
+def paint_swath_twin(u, v, k0, radius, u_min, v_min, cell, shape):
+    """Cell centres within ``radius`` of each sample, smallest sample index per cell (brute force)."""
+    n_v, n_u = shape
+    cu = u_min + (np.arange(n_u) + 0.5) * cell
+    cv = v_min + (np.arange(n_v) + 0.5) * cell
+    first = np.full(shape, np.iinfo(np.int64).max, dtype=np.int64)
+    for j in range(len(u)):
+        inside = (cu[None, :] - u[j]) ** 2 + (cv[:, None] - v[j]) ** 2 <= radius**2
+        first[inside] = np.minimum(first[inside], k0 + j)
+    first[first == np.iinfo(np.int64).max] = -1
+    return first
+
+
 def add_speed_noise_twin(k0, rate_hz, segment_s, cum, eps, rev_per_s, revs):
     t = (k0 + np.arange(revs.shape[1])) / rate_hz
     s = np.floor(t / segment_s).astype(int)

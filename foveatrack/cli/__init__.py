@@ -23,6 +23,7 @@ COMMAND_MODULES = (
     "foveatrack.cli.calibrate_cmd",
     "foveatrack.cli.daemon_cmd",
     "foveatrack.cli.replay_cmd",
+    "foveatrack.cli.export_cmd",
     "foveatrack.cli.study_cmd",
 )
 

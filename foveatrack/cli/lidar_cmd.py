@@ -24,7 +24,8 @@ def register(sub) -> None:
     lsub = lidar.add_subparsers(dest="lidar_command", metavar="ANALYSIS", required=True)
 
     def common(p, duration: float | None = None):
-        p.add_argument("preset", metavar="PRESET", help="prototype | mid40 | horizon | optics.toml")
+        p.add_argument("preset", metavar="PRESET",
+                       help="prototype | mid40 | horizon | mid70 | avia | tele15 | mid100 | optics.toml")
         p.add_argument("--model", choices=("exact", "paraxial"), default="exact",
                        help="exact refraction (default) or the paraxial vector sum")
         if duration is not None:
@@ -52,8 +53,10 @@ def register(sub) -> None:
 
     p = lsub.add_parser("coverage", help="coverage vs accumulation time (paper Fig. 6e)")
     common(p, duration=2.0)
-    p.add_argument("--method", choices=("voxel", "footprint"), default="voxel",
-                   help="voxel: paper Appendix C 100x100 grid; footprint: Livox's illuminated area")
+    p.add_argument("--method", choices=("voxel", "footprint", "footprint-fixed"), default="voxel",
+                   help="voxel: paper Appendix C 100x100 grid; footprint: Livox's FoV coverage (the beam's "
+                        "swath, as wide as its divergence's major axis); footprint-fixed: the area of a "
+                        "footprint held aligned with az/el (docs/livox-files.md)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr (shown on long runs)")
     p.set_defaults(func=cmd_coverage)
 
@@ -200,6 +203,7 @@ def info_dict(optics, model: str) -> dict:
         ],
         "channel_offsets_deg": [list(c) for c in optics.channel_offsets_deg],
         "beam_divergence_deg": list(optics.beam_divergence_deg),
+        **({"head_yaw_deg": list(optics.head_yaw_deg)} if optics.head_yaw_deg else {}),
     }
 
 
@@ -273,6 +277,11 @@ def cmd_density(args) -> int:
     optics = _load(args)
     if len(optics.prisms) != 2:
         raise UserError(f"{optics.name}: eq. (4) describes two-prism patterns; this scanner has {len(optics.prisms)}")
+    if optics.channels != 1:
+        # several lasers (Avia, Tele-15) or heads (Mid-100) overlay shifted patterns: not eq. (4)'s radial law
+        kind = "heads" if optics.head_yaw_deg else "channels"
+        raise UserError(f"{optics.name}: eq. (4) describes a single beam's pattern; this scanner has "
+                        f"{optics.channels} {kind}")
     if args.bins < 1:
         raise UserError(f"--bins {args.bins}: at least 1")
     if args.duration * optics.point_rate_hz < 1000:
@@ -312,10 +321,12 @@ def cmd_density(args) -> int:
 
 
 def coverage_curve(optics, scan, method, duration, progress=None):
-    from sim.scan.coverage import footprint_coverage, voxel_coverage
+    from sim.scan.coverage import footprint_coverage, swath_coverage, voxel_coverage
 
     if method == "voxel":
         return voxel_coverage(scan, duration, progress=progress)
+    if method == "footprint":
+        return swath_coverage(scan, duration, progress=progress)
     return footprint_coverage(scan, duration, progress=progress)
 
 

@@ -101,7 +101,6 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
         writer = RecordingWriter(out_dir / "run.mcap", meta=recording_meta(scene, loop), overwrite=True,
                                  created_utc="virtual time (simulation)")
         loop.frame_hook = SimRecorder(writer)
-    n = int(round(scene.duration_s * scene.tracker.rate_hz))
     # The first frame loads the numba kernels, or compiles them on a first run: announced if it is slow,
     # and kept out of the progress bar (its rate and ETA would be those of a one-minute frame).
     notice = CompileNotice(enabled=progress)

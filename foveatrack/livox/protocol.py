@@ -25,14 +25,16 @@ Data packets (UDP, from the lidar to the host's data port): an 18-byte header th
 Point layouts (``POINT_DTYPES``): 0 Cartesian (x, y, z i32 mm; reflectivity u8) × 100, 1 spherical
 (depth u32 mm; zenith, azimuth u16 in 0.01 deg; reflectivity u8) × 100, 2 extended Cartesian (type 0 +
 tag u8) × 96, 3 extended spherical (type 1 + tag) × 96, 4 dual Cartesian (2 × (x, y, z, refl, tag)) ×
-48, 6 IMU (6 × f32) × 1.  Points decode to metres in the lidar frame: X forward (optical axis), Y left,
+48, 5 dual extended spherical (zenith, azimuth u16 shared; 2 × (depth u32, refl, tag)) × 48, 6 IMU
+(6 × f32) × 1, 7 triple extended Cartesian (3 × (x, y, z, refl, tag)) × 30, 8 triple extended
+spherical (zenith, azimuth; 3 × (depth, refl, tag)) × 30 (SDK 2.3.0 ``livox_def.h``).  Points decode to metres in the lidar frame: X forward (optical axis), Y left,
 Z up, right-handed; spherical :math:`x = r\\sin\\theta\\cos\\varphi`, :math:`y = r\\sin\\theta
 \\sin\\varphi`, :math:`z = r\\cos\\theta` (θ zenith from +Z, φ azimuth from +X towards +Y).
 A point (0, 0, 0) (depth 0) is "no return".
 
 Per-point time: the packet timestamp is the time of its first point; point ``i`` of a packet is at
-``timestamp + round(i * 1e9 / point_rate_hz)`` ns (the dual-return type gives both returns of a slot
-the same time).
+``timestamp + round(i * 1e9 / point_rate_hz)`` ns (the dual- and triple-return types give every
+return of a slot the same time; returns come out slot by slot, first return first).
 
 Decoding is done with numpy structured dtypes over many packets at once (no per-point Python loop).
 :class:`DataDecoder` is the safe entry point: every malformed datagram is dropped and counted under a
@@ -309,11 +311,21 @@ POINT_DTYPES: dict[int, np.dtype] = {
             ("x2", "<i4"), ("y2", "<i4"), ("z2", "<i4"), ("reflectivity2", "u1"), ("tag2", "u1"),
         ]
     ),
+    5: np.dtype([("zenith", "<u2"), ("azimuth", "<u2")]
+                + [(f"{f}{k}", t) for k in (1, 2) for f, t in (("depth", "<u4"), ("reflectivity", "u1"), ("tag", "u1"))]),
     6: np.dtype([("gyro_x", "<f4"), ("gyro_y", "<f4"), ("gyro_z", "<f4"), ("acc_x", "<f4"), ("acc_y", "<f4"), ("acc_z", "<f4")]),
+    7: np.dtype([(f"{f}{k}", t) for k in (1, 2, 3)
+                 for f, t in (("x", "<i4"), ("y", "<i4"), ("z", "<i4"), ("reflectivity", "u1"), ("tag", "u1"))]),
+    8: np.dtype([("zenith", "<u2"), ("azimuth", "<u2")]
+                + [(f"{f}{k}", t) for k in (1, 2, 3) for f, t in (("depth", "<u4"), ("reflectivity", "u1"), ("tag", "u1"))]),
 }
-POINTS_PER_PACKET = {0: 100, 1: 100, 2: 96, 3: 96, 4: 48, 6: 1}
+POINTS_PER_PACKET = {0: 100, 1: 100, 2: 96, 3: 96, 4: 48, 5: 48, 6: 1, 7: 30, 8: 30}
+#: Returns per time slot of each point data type (dual 2, triple 3).
+RETURNS_PER_SLOT = {0: 1, 1: 1, 2: 1, 3: 1, 4: 2, 5: 2, 7: 3, 8: 3}
 IMU_DATA_TYPE = 6
-POINT_DATA_TYPES = (0, 1, 2, 3, 4)
+POINT_DATA_TYPES = (0, 1, 2, 3, 4, 5, 7, 8)
+CARTESIAN_TYPES = (0, 2, 4, 7)
+SPHERICAL_TYPES = (1, 3, 5, 8)
 TIMESTAMP_TYPES_NS = (0, 1, 4)
 TIMESTAMP_TYPE_UTC = 3
 
@@ -402,9 +414,11 @@ def decode_packets_array(arr: np.ndarray, point_rate_hz: float, keep_no_return: 
             raise PacketError("data_bad_timestamp", str(exc)) from None
     t = (ts[:, None] + point_offsets_ns(n_pt, point_rate_hz)[None, :]).reshape(-1)
     pdt = POINT_DTYPES[data_type]
-    if data_type in (0, 2, 4):
-        # x, y, z (and x2, y2, z2) as one strided int32 view of the packed bytes: a single copy
-        per = 2 if data_type == 4 else 1
+    per = RETURNS_PER_SLOT.get(data_type, 0)
+    if per > 1:
+        t = np.repeat(t, per)   # every return of a slot has the slot's time
+    if data_type in CARTESIAN_TYPES:
+        # x, y, z (and x2.. z3) as one strided int32 view of the packed bytes: a single copy
         step = pdt.itemsize // per
         mm = np.ndarray(
             (n_pk, n_pt, per, 3), "<i4", buffer=arr, offset=HEADER_LEN, strides=(arr.dtype.itemsize, pdt.itemsize, step, 4)
@@ -413,18 +427,23 @@ def decode_packets_array(arr: np.ndarray, point_rate_hz: float, keep_no_return: 
                          strides=(arr.dtype.itemsize, pdt.itemsize, step, 1))
         refl = raw[..., 12].reshape(-1)
         tag = raw[..., 13].reshape(-1) if data_type != 0 else np.zeros(n_pk * n_pt, np.uint8)
-        if per == 2:
-            t = np.repeat(t, 2)
         ok = None if keep_no_return else (mm[:, 0] | mm[:, 1] | mm[:, 2]) != 0
         if ok is not None:
             keep = np.flatnonzero(ok)  # take() with indices is ~5x faster than a 2-D boolean mask
             mm, refl, tag, t = mm.take(keep, axis=0), refl.take(keep), tag.take(keep), t.take(keep)
         xyz = mm * 1e-3
-    elif data_type in (1, 3):
-        depth = pts["depth"].reshape(-1)
-        refl = pts["reflectivity"].reshape(-1)
-        tag = pts["tag"].reshape(-1) if data_type == 3 else np.zeros(n_pk * n_pt, np.uint8)
-        zen, azi = pts["zenith"].reshape(-1), pts["azimuth"].reshape(-1)
+    elif data_type in SPHERICAL_TYPES:
+        if per == 1:
+            depth = pts["depth"].reshape(-1)
+            refl = pts["reflectivity"].reshape(-1)
+            tag = pts["tag"].reshape(-1) if data_type == 3 else np.zeros(n_pk * n_pt, np.uint8)
+            zen, azi = pts["zenith"].reshape(-1), pts["azimuth"].reshape(-1)
+        else:   # the returns of a slot share its direction
+            ks = range(1, per + 1)
+            depth = np.stack([pts[f"depth{k}"] for k in ks], axis=-1).reshape(-1)
+            refl = np.stack([pts[f"reflectivity{k}"] for k in ks], axis=-1).reshape(-1)
+            tag = np.stack([pts[f"tag{k}"] for k in ks], axis=-1).reshape(-1)
+            zen, azi = np.repeat(pts["zenith"].reshape(-1), per), np.repeat(pts["azimuth"].reshape(-1), per)
         ok = None if keep_no_return else depth != 0
         if ok is not None:
             depth, refl, tag, t, zen, azi = depth[ok], refl[ok], tag[ok], t[ok], zen[ok], azi[ok]
@@ -559,15 +578,16 @@ def encode_data_packets(
 
     xyz_m : (n, 3) [m] lidar frame; rows of zeros are "no return" slots.  Point ``i`` is at time
     ``t0_ns + i / point_rate_hz``; packet ``k`` is stamped with the time of its first slot.  The last
-    packet is padded with no-return slots.  For data type 4 (dual return) consecutive rows are the
-    two returns of one slot.  Values are rounded to the wire resolution (1 mm, 0.01 deg).
+    packet is padded with no-return slots.  For the multi-return types (4, 5 dual; 7, 8 triple)
+    consecutive rows are the returns of one slot (the spherical ones store one direction per slot:
+    that of its first return with a range, the others keep only their range).  Values are rounded to the wire resolution (1 mm, 0.01 deg).
     """
     if data_type not in POINT_DATA_TYPES:
         raise ValueError(f"cannot encode data type {data_type}")
     xyz_m = np.asarray(xyz_m, dtype=np.float64).reshape(-1, 3)
     refl = np.asarray(reflectivity, dtype=np.uint8).reshape(-1)
     tag = np.zeros(len(refl), np.uint8) if tag is None else np.asarray(tag, np.uint8).reshape(-1)
-    per_slot = 2 if data_type == 4 else 1
+    per_slot = RETURNS_PER_SLOT[data_type]
     n_slots = -(-len(refl) // per_slot)
     n_per = POINTS_PER_PACKET[data_type]
     n_pk = -(-n_slots // n_per)
@@ -589,31 +609,38 @@ def encode_data_packets(
     h["data_type"] = data_type
     h["timestamp"] = t0_ns + np.round(np.arange(n_pk) * n_per * (1e9 / point_rate_hz)).astype(np.int64)
     p = arr["pts"]
-    if data_type in (0, 2):
-        mm = np.round(xyz_m * 1000.0).astype(np.int64).clip(-(2**31), 2**31 - 1).reshape(n_pk, n_per, 3)
-        p["x"], p["y"], p["z"] = mm[..., 0], mm[..., 1], mm[..., 2]
-        p["reflectivity"] = refl.reshape(n_pk, n_per)
-        if data_type == 2:
-            p["tag"] = tag.reshape(n_pk, n_per)
-    elif data_type in (1, 3):
+    if data_type in CARTESIAN_TYPES:
+        mm = np.round(xyz_m * 1000.0).astype(np.int64).clip(-(2**31), 2**31 - 1).reshape(n_pk, n_per, per_slot, 3)
+        rr = refl.reshape(n_pk, n_per, per_slot)
+        tt = tag.reshape(n_pk, n_per, per_slot)
+        for k in range(per_slot):
+            sfx = "" if per_slot == 1 else str(k + 1)
+            p[f"x{sfx}"], p[f"y{sfx}"], p[f"z{sfx}"] = mm[:, :, k, 0], mm[:, :, k, 1], mm[:, :, k, 2]
+            p[f"reflectivity{sfx}"] = rr[:, :, k]
+            if data_type != 0:
+                p[f"tag{sfx}"] = tt[:, :, k]
+    else:
         x, y, z = xyz_m[:, 0], xyz_m[:, 1], xyz_m[:, 2]
         r = np.sqrt(x * x + y * y + z * z)
         th = np.degrees(np.arctan2(np.hypot(x, y), z))
         ph = np.degrees(np.arctan2(y, x)) % 360.0
-        p["depth"] = np.round(r * 1000.0).astype(np.int64).clip(0, 2**32 - 1).reshape(n_pk, n_per)
-        p["zenith"] = np.round(th * 100.0).astype(np.int64).clip(0, 18000).reshape(n_pk, n_per)
-        p["azimuth"] = (np.round(ph * 100.0).astype(np.int64) % 36000).reshape(n_pk, n_per)
-        p["reflectivity"] = refl.reshape(n_pk, n_per)
-        if data_type == 3:
-            p["tag"] = tag.reshape(n_pk, n_per)
-    else:  # 4: dual
-        mm = np.round(xyz_m * 1000.0).astype(np.int64).clip(-(2**31), 2**31 - 1).reshape(n_pk, n_per, 2, 3)
-        rr = refl.reshape(n_pk, n_per, 2)
-        tt = tag.reshape(n_pk, n_per, 2)
-        for k in (1, 2):
-            p[f"x{k}"], p[f"y{k}"], p[f"z{k}"] = mm[:, :, k - 1, 0], mm[:, :, k - 1, 1], mm[:, :, k - 1, 2]
-            p[f"reflectivity{k}"] = rr[:, :, k - 1]
-            p[f"tag{k}"] = tt[:, :, k - 1]
+        depth = np.round(r * 1000.0).astype(np.int64).clip(0, 2**32 - 1).reshape(n_pk, n_per, per_slot)
+        zen = np.round(th * 100.0).astype(np.int64).clip(0, 18000).reshape(n_pk, n_per, per_slot)
+        azi = (np.round(ph * 100.0).astype(np.int64) % 36000).reshape(n_pk, n_per, per_slot)
+        rr = refl.reshape(n_pk, n_per, per_slot)
+        tt = tag.reshape(n_pk, n_per, per_slot)
+        if per_slot == 1:
+            p["depth"], p["zenith"], p["azimuth"] = depth[..., 0], zen[..., 0], azi[..., 0]
+            p["reflectivity"] = rr[..., 0]
+            if data_type == 3:
+                p["tag"] = tt[..., 0]
+        else:
+            # one direction per slot: that of its first return with a range (zenith 0 if none has one)
+            first = np.argmax(depth > 0, axis=-1)[..., None]
+            p["zenith"] = np.take_along_axis(zen, first, -1)[..., 0]
+            p["azimuth"] = np.take_along_axis(azi, first, -1)[..., 0]
+            for k in range(per_slot):
+                p[f"depth{k + 1}"], p[f"reflectivity{k + 1}"], p[f"tag{k + 1}"] = depth[..., k], rr[..., k], tt[..., k]
     raw = arr.tobytes()
     L = arr.dtype.itemsize
     return [raw[k * L : (k + 1) * L] for k in range(n_pk)]

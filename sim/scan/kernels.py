@@ -369,6 +369,44 @@ def paint_footprint_kernel(az_deg, el_deg, k0, half_az_deg, half_el_deg, az_min,
 
 
 @njit(cache=True)
+def paint_swath_kernel(u_deg, v_deg, k0, radius_deg, u_min, v_min, cell_deg, first_hit):
+    """Paint a disc of radius ``radius_deg`` around each trajectory sample into a fine grid: with
+    samples closer than ``radius_deg`` the union of the discs is the swath the beam sweeps, of width
+    ``2 radius_deg`` across its path (Livox's FoV coverage, see ``sim.scan.coverage.swath_coverage``).
+
+    u_deg, v_deg : (N,) float64 [deg] sample positions (azimuthal-equidistant projection about the axis)
+    k0 : int, index of sample 0: a cell records the smallest ``k0 + j`` whose disc holds its centre
+    first_hit : (n_v, n_u) int64, -1 where unpainted; cell (r, i) is centred at
+        ``(u_min + (i + 0.5) cell, v_min + (r + 0.5) cell)``
+    Returns how many cells were newly painted.  Keeping the smallest index (not the first painted)
+    makes the result independent of the order of the calls: of how a trajectory is cut into chunks
+    and of the order in which several channels' trajectories are painted.
+    """
+    n_v, n_u = first_hit.shape
+    new = 0
+    r2 = radius_deg * radius_deg
+    for j in range(u_deg.shape[0]):
+        u0 = u_deg[j]
+        v0 = v_deg[j]
+        i_lo = max(0, int(math.ceil((u0 - radius_deg - u_min) / cell_deg - 0.5)))
+        i_hi = min(n_u - 1, int(math.floor((u0 + radius_deg - u_min) / cell_deg - 0.5)))
+        r_lo = max(0, int(math.ceil((v0 - radius_deg - v_min) / cell_deg - 0.5)))
+        r_hi = min(n_v - 1, int(math.floor((v0 + radius_deg - v_min) / cell_deg - 0.5)))
+        for r in range(r_lo, r_hi + 1):
+            dv = v_min + (r + 0.5) * cell_deg - v0
+            for i in range(i_lo, i_hi + 1):
+                du = u_min + (i + 0.5) * cell_deg - u0
+                if du * du + dv * dv <= r2:
+                    old = first_hit[r, i]
+                    if old < 0:
+                        first_hit[r, i] = k0 + j
+                        new += 1
+                    elif k0 + j < old:
+                        first_hit[r, i] = k0 + j
+    return new
+
+
+@njit(cache=True)
 def add_speed_noise_kernel(k0, rate_hz, segment_s, noise_cum, noise_eps, noise_seg0, rev_per_s, revs):
     """Add the phase error of piecewise-constant relative speed errors to ``revs`` (P, N) [rev].
 

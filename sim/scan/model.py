@@ -98,6 +98,9 @@ class ScanModel:
         inc = np.column_stack([np.tan(off[:, 0]), np.tan(off[:, 1]), np.ones(len(off))])
         self._incident = np.ascontiguousarray(inc / np.linalg.norm(inc, axis=1, keepdims=True))
         self._rev_per_s = np.array([p.rpm / 60.0 for p in prisms])
+        # several heads (optics.head_yaw_deg): each channel's beam turned about the lidar Z axis
+        yaw = np.radians(np.asarray(optics.head_yaw_deg, dtype=float))
+        self._head_cos_sin = np.column_stack([np.cos(yaw), np.sin(yaw)]) if yaw.size and yaw.any() else None
         # Speed-noise state, grown on demand in segment order so that the draws do not depend on
         # how the caller chunks the scan.
         self._noise_cum = np.zeros((1, len(prisms)))  # integral of relative speed error [s]
@@ -157,7 +160,18 @@ class ScanModel:
             )
         else:
             kernels.trace_paraxial_kernel(revs_pn, channel, self._offset_rad, self._deviation_rad, direction)
+        self._turn_heads(direction, channel)
         return direction, status
+
+    def _turn_heads(self, direction: np.ndarray, channel: np.ndarray) -> None:
+        """Turn each beam by its head's yaw about Z, in place (no-op for a single-head scanner).
+        One vectorised rotation per chunk: elementwise, so chunking cannot change a bit."""
+        if self._head_cos_sin is None or not len(direction):
+            return
+        cs = self._head_cos_sin[np.asarray(channel, dtype=np.int64)]
+        x, y = direction[:, 0].copy(), direction[:, 1].copy()
+        direction[:, 0] = cs[:, 0] * x - cs[:, 1] * y
+        direction[:, 1] = cs[:, 1] * x + cs[:, 0] * y
 
     @property
     def fused(self) -> bool:
@@ -192,6 +206,7 @@ class ScanModel:
             int(self.optics.channels), self._incident, self._sin_wedge, self._cos_wedge, self._index,
             self._exit_tilted, t_ns, channel, direction, status,
         )
+        self._turn_heads(direction, channel)
         return ScanChunk(k0=k0, t_ns=t_ns, direction=direction, channel=channel, status=status)
 
     def scan_composed(self, k0: int, count: int) -> ScanChunk:

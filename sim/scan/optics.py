@@ -94,6 +94,11 @@ class RisleyOptics:
         Full-angle beam divergence, used by the footprint coverage definition.
     name : str
         Label shown in reports.
+    head_yaw_deg : tuple of float [deg], one per channel, each in [-90, 90]; or () for none
+        Several scan heads in one housing (Livox Mid-100: three Mid-40s): channel ``c``'s beam,
+        after the prisms, is turned by ``head_yaw_deg[c]`` about the lidar's Z axis (positive toward
+        +Y, left).  The heads share the prisms' phases (one pattern, turned): a simplification, the
+        real heads run their own motors.
     """
 
     prisms: tuple[Prism, ...]
@@ -101,6 +106,7 @@ class RisleyOptics:
     channel_offsets_deg: tuple[tuple[float, float], ...] = ((0.0, 0.0),)
     beam_divergence_deg: tuple[float, float] = (0.28, 0.03)
     name: str = "custom"
+    head_yaw_deg: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if not (2 <= len(self.prisms) <= 3):
@@ -119,6 +125,12 @@ class RisleyOptics:
                 raise OpticsError(
                     f"channel_offsets_deg[{i}] = {off!r}: must be [x_deg, y_deg] with |value| < 20"
                 )
+        if self.head_yaw_deg and (len(self.head_yaw_deg) != len(self.channel_offsets_deg)
+                                  or not all(math.isfinite(v) and abs(v) <= 90 for v in self.head_yaw_deg)):
+            raise OpticsError(
+                f"head_yaw_deg = {self.head_yaw_deg!r}: one angle in [-90, 90] degrees per channel "
+                f"({len(self.channel_offsets_deg)}), or none"
+            )
         if len(self.beam_divergence_deg) != 2 or not all(0 < v < 5 for v in self.beam_divergence_deg):
             raise OpticsError(
                 f"beam_divergence_deg = {self.beam_divergence_deg!r}: two values in (0, 5) degrees"
@@ -174,7 +186,7 @@ def _lcm_fraction(a: Fraction, b: Fraction) -> Fraction:
 
 
 _PRISM_KEYS = {"wedge_deg", "index", "tilted_face", "rpm", "phase_deg"}
-_OPTICS_KEYS = {"prisms", "point_rate_hz", "channel_offsets_deg", "beam_divergence_deg", "name"}
+_OPTICS_KEYS = {"prisms", "point_rate_hz", "channel_offsets_deg", "beam_divergence_deg", "name", "head_yaw_deg"}
 
 
 def optics_from_table(table: Mapping[str, Any], where: str = "optics") -> RisleyOptics:
@@ -245,6 +257,8 @@ def optics_overrides(table: Mapping[str, Any], where: str) -> dict[str, Any]:
                                               for i, c in enumerate(offs))
     if "beam_divergence_deg" in table:
         kwargs["beam_divergence_deg"] = _numbers(table["beam_divergence_deg"], 2, "beam_divergence_deg", where)
+    if "head_yaw_deg" in table:
+        kwargs["head_yaw_deg"] = _numbers(table["head_yaw_deg"], None, "head_yaw_deg", where)
     if "name" in table:
         kwargs["name"] = str(table["name"])
     return kwargs

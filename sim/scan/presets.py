@@ -15,6 +15,23 @@
   for the published FoV by ``scripts/solve_horizon_wedges.py`` (starting from the paraxial
   decomposition x: 2a + b, y: b) and pinned here; a test re-checks the FoV.  Speeds and channel
   spacing are our choices, documented below.
+* ``mid70`` — Livox Mid-70: 70.4 deg circular FoV, 100 k points/s, one laser, beam divergence
+  0.28 x 0.03 deg (Livox Mid-70 datasheet / user manual).  The Mid-40 design (HELIOS++
+  ``livox_mid-70`` has the Mid-40's speeds and a 35.2 deg half angle) with the wedge angle solved
+  under exact refraction for 70.4 deg by ``scripts/solve_livox_presets.py``.
+* ``avia`` — Livox Avia: 70.4 (H) x 77.2 (V) deg non-repetitive FoV, 240 k points/s, six lasers,
+  beam divergence 0.28 x 0.03 deg (Livox Avia datasheet; the Gazebo plugin's avia.csv has the same
+  horizontal_fov / vertical_fov).  The Mid-40 design with six lasers stacked vertically: the wedge
+  angle (horizontal span) and the channel spacing (the extra vertical span) are solved together
+  for the datasheet FoV.  Speeds: the Mid-40's (our choice; Livox does not publish them).
+* ``tele15`` — Livox Tele-15: 14.5 (H) x 16.2 (V) deg, 240 k points/s, six lasers, beam divergence
+  0.02 x 0.12 deg (Livox Tele-15 datasheet; facts: livox.md).  Solved as the Avia.
+* ``mid100`` — Livox Mid-100: three Mid-40 heads in one housing, 98.4 x 38.4 deg, 300 k points/s
+  (Livox Mid-40/Mid-100 datasheet).  Heads turned +30 / 0 / -30 deg about the vertical (HELIOS++
+  ``livox-mid-100``: beam origins at -30, 0, +30 deg; 38.4 + 60 = 98.4).  Point ``k`` comes from
+  head ``k mod 3``; the heads share one prism phase (:attr:`RisleyOptics.head_yaw_deg`).
+
+``DATASHEET_FOV_DEG`` holds each preset's datasheet FoV; a test holds every preset within 0.5 deg.
 """
 
 from __future__ import annotations
@@ -62,4 +79,48 @@ def horizon_optics(wedge_p12_deg: float, wedge_p3_deg: float) -> RisleyOptics:
 
 HORIZON = horizon_optics(HORIZON_WEDGE_P12_DEG, HORIZON_WEDGE_P3_DEG)
 
-PRESETS: dict[str, RisleyOptics] = {"prototype": PROTOTYPE, "mid40": MID40, "horizon": HORIZON}
+# ---- the other Livox SDK v1 Risley units (scripts/solve_livox_presets.py) -----------------------------
+# Mid-40 speeds (HELIOS++ gives its Mid-70 the same 7294 / -4664); our choice for the Avia and Tele-15.
+LIVOX_RPM = (7294.0, -4664.0)
+
+
+def stacked_optics(name: str, wedge_deg: float, channels: int, spacing_deg: float, point_rate_hz: int = 240_000,
+                   beam_divergence_deg: tuple[float, float] = (0.28, 0.03)) -> RisleyOptics:
+    """The Mid-40 design with its own wedge angle and ``channels`` lasers stacked vertically
+    (``y_opt``) ``spacing_deg`` apart, centred on the axis (used by the solver and the presets)."""
+    offsets = tuple((0.0, (c - (channels - 1) / 2) * spacing_deg) for c in range(channels))
+    return RisleyOptics(
+        prisms=(
+            Prism(wedge_deg=wedge_deg, index=N_BK7_LIKE, tilted_face="exit", rpm=LIVOX_RPM[0]),
+            Prism(wedge_deg=wedge_deg, index=N_BK7_LIKE, tilted_face="entry", rpm=LIVOX_RPM[1]),
+        ),
+        point_rate_hz=point_rate_hz,
+        channel_offsets_deg=offsets,
+        beam_divergence_deg=beam_divergence_deg,
+        name=name,
+    )
+
+
+# solved by scripts/solve_livox_presets.py (exact FoV printed beside each)
+MID70_WEDGE_DEG = 29.681516              # 70.400 x 70.400 deg
+AVIA_WEDGE_DEG = 29.614309               # 70.400 x 77.200 deg
+AVIA_CHANNEL_SPACING_DEG = 0.923672
+TELE15_WEDGE_DEG = 7.060391              # 14.500 x 16.200 deg
+TELE15_CHANNEL_SPACING_DEG = 0.335468
+
+#: Datasheet FoV (horizontal, vertical) [deg] of every preset, the target each is solved for.
+DATASHEET_FOV_DEG = {"prototype": (38.4, 38.4), "mid40": (38.4, 38.4), "horizon": (81.7, 25.1),
+                     "mid70": (70.4, 70.4), "avia": (70.4, 77.2), "tele15": (14.5, 16.2), "mid100": (98.4, 38.4)}
+#: Mid-100: three Mid-40 heads, left / centre / right, 30 deg apart (HELIOS++ livox-mid-100: beam
+#: origins rotated -30, 0, +30 deg about the vertical; 38.4 + 2 x 30 = 98.4 deg, the datasheet FoV).
+MID100_HEAD_YAW_DEG = (30.0, 0.0, -30.0)
+
+MID70 = stacked_optics("mid70", MID70_WEDGE_DEG, 1, 0.0, point_rate_hz=100_000)
+AVIA = stacked_optics("avia", AVIA_WEDGE_DEG, 6, AVIA_CHANNEL_SPACING_DEG)
+TELE15 = stacked_optics("tele15", TELE15_WEDGE_DEG, 6, TELE15_CHANNEL_SPACING_DEG,
+                        beam_divergence_deg=(0.02, 0.12))
+MID100 = MID40.with_(name="mid100", point_rate_hz=300_000, channel_offsets_deg=((0.0, 0.0),) * 3,
+                     head_yaw_deg=MID100_HEAD_YAW_DEG)
+
+PRESETS: dict[str, RisleyOptics] = {"prototype": PROTOTYPE, "mid40": MID40, "horizon": HORIZON, "mid70": MID70,
+                                    "avia": AVIA, "tele15": TELE15, "mid100": MID100}

@@ -8,6 +8,7 @@ import pytest
 from scan_twins import (
     add_speed_noise_twin,
     paint_footprint_twin,
+    paint_swath_twin,
     first_hit_twin,
     phase_revs_twin,
     point_times_ns_twin,
@@ -171,3 +172,27 @@ def test_speed_noise_kernel_matches_twin():
     K.add_speed_noise_kernel(12_345, 100_000.0, 0.01, cum, eps, 0, np.array([121.6, -77.7]), revs)
     d = (revs - want + 0.5) % 1 - 0.5
     assert np.max(np.abs(d)) < 1e-12
+
+
+def test_swath_painting_matches_twin_and_sweeps_a_strip_of_its_width():
+    rng = np.random.default_rng(12)
+    u = rng.uniform(-1, 1, 300)
+    v = rng.uniform(-0.5, 0.5, 300)
+    shape = (70, 130)
+    first = np.full(shape, -1, dtype=np.int64)
+    new = K.paint_swath_kernel(u, v, 7, 0.14, -1.2, -0.7, 0.02, first)
+    ref = paint_swath_twin(u, v, 7, 0.14, -1.2, -0.7, 0.02, shape)
+    assert np.array_equal(first, ref) and new == int((ref >= 0).sum()) > 0
+    # painted in another order (the later half first) the cells keep the smallest index
+    again = np.full(shape, -1, dtype=np.int64)
+    K.paint_swath_kernel(u[150:], v[150:], 157, 0.14, -1.2, -0.7, 0.02, again)
+    K.paint_swath_kernel(u[:150], v[:150], 7, 0.14, -1.2, -0.7, 0.02, again)
+    assert np.array_equal(again, ref)
+    # a straight path 2 deg long, samples 0.01 deg apart: a 0.28 deg strip with round ends
+    t = np.arange(0, 2.0 + 1e-9, 0.01)
+    for ang in (0.0, 0.6, np.pi / 2):
+        strip = np.full((300, 300), -1, dtype=np.int64)
+        n = K.paint_swath_kernel(t * np.cos(ang) - 1, t * np.sin(ang) - 1, 0, 0.14, -1.5, -1.5, 0.01, strip)
+        area = n * 0.01**2
+        want = 2.0 * 0.28 + np.pi * 0.14**2
+        assert abs(area / want - 1) < 0.02, (ang, area, want)

@@ -142,3 +142,17 @@ def test_coverage_map_keeps_cells_whose_speeds_repeat_after_rounding():
     with make_executor(workers=1) as ex:
         m = coverage_map(PRESETS["prototype"], np.linspace(7000, 7001, 3), np.array([-4664.0]), 0.05, ex, progress=False)
     assert not np.isnan(m.t90_clean_s).any() and not np.isnan(m.t90_noise_s).any()
+
+
+@pytest.mark.parametrize("preset, fov, message", [
+    ("mid70", "70.40 x 70.40", None),
+    ("avia", "70.40 x 77.20", "6 channels"),
+    ("tele15", "14.50 x 16.20", "6 channels"),
+    ("mid100", "98.43 x 38.43", "3 heads"),
+])
+def test_livox_presets_in_lidar_info_and_density(capsys, preset, fov, message):
+    assert main(["lidar", "info", preset]) == 0
+    assert f"{preset}: FoV {fov} deg (exact model)" in capsys.readouterr().out
+    if message:   # eq. (4) is one beam's radial law: several lasers or heads are refused, named
+        assert main(["lidar", "density", preset, "--duration", "0.05", "--no-progress"]) == 2
+        assert message in capsys.readouterr().err

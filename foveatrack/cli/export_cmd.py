@@ -1,0 +1,65 @@
+"""``foveatrack export RECORDING``: a recording's points as Livox ``.lvx``, CSV or NPZ.
+
+``--lvx OUT`` writes a Livox Viewer LVX v1.1 file (:mod:`foveatrack.livox.lvx_export`) that Livox
+Viewer, the vendor SDK's tools and ``livox-lvx`` read; ``--csv`` / ``--npz`` write every point
+(:func:`foveatrack.recording.export_points`); ``--trajectory F.csv|F.npz`` the recorded detections,
+head, truth and commands (:func:`foveatrack.recording.export_trajectory`).  Several at once are fine.
+"""
+
+from __future__ import annotations
+
+
+def register(sub) -> None:
+    p = sub.add_parser("export", help="write a recording's points as Livox .lvx, CSV or NPZ")
+    p.add_argument("recording", metavar="RECORDING", help="a foveatrack .mcap recording")
+    p.add_argument("--lvx", metavar="OUT.lvx", help="Livox Viewer LVX v1.1 file of every point")
+    p.add_argument("--csv", metavar="OUT.csv", help="every point as CSV")
+    p.add_argument("--npz", metavar="OUT.npz", help="every point as NPZ")
+    p.add_argument("--trajectory", metavar="F.csv|F.npz", help="detections, head, truth and commands over time")
+    p.add_argument("--data-type", type=int, metavar="N",
+                   help="LVX point data type: 0 Cartesian, 1 spherical, 2/3 extended, 4/5 dual, 7/8 triple "
+                        "(default: what the device sends, Mid-40 0, others 2)")
+    p.add_argument("--device", metavar="NAME",
+                   help="LVX device (mid40, horizon, tele15, mid70, avia, mid100); default: the recording's preset")
+    p.add_argument("--frame-ms", type=int, default=50, metavar="MS", help="LVX frame length (default 50, as Livox Viewer)")
+    p.set_defaults(func=cmd_export)
+
+
+def cmd_export(args) -> int:
+    from pathlib import Path
+
+    from foveatrack.config_util import check_output_file
+    from foveatrack.errors import UserError
+
+    outs = [("--lvx", args.lvx, (".lvx",)), ("--csv", args.csv, (".csv",)), ("--npz", args.npz, (".npz",)),
+            ("--trajectory", args.trajectory, (".csv", ".npz"))]
+    if not any(path for _, path, _ in outs):
+        raise UserError("export: give at least one of --lvx, --csv, --npz, --trajectory")
+    rec = Path(args.recording)
+    if not rec.is_file():
+        raise UserError(f"{rec}: no such recording")
+    with open(rec, "rb") as fh:
+        if fh.read(10) == b"livox_tech":
+            raise UserError(f"{rec} is already a Livox .lvx file; export reads foveatrack .mcap recordings")
+    for flag, path, suffixes in outs:
+        if path:
+            if Path(path).suffix.lower() not in suffixes:
+                raise UserError(f"{flag} {path}: the file name must end in {' or '.join(suffixes)}")
+            check_output_file(path, flag)
+    if args.lvx:
+        from foveatrack.livox.lvx_export import export_lvx
+
+        r = export_lvx(rec, args.lvx, data_type=args.data_type, device=args.device, frame_duration_ms=args.frame_ms)
+        extra = f"; {r.slot_collisions} points sharing a slot left out" if r.slot_collisions else ""
+        print(f"{r.points} points in {r.packets} packets (data type {r.data_type}, device type {r.device_type}, "
+              f"{r.devices} device{'s' if r.devices > 1 else ''}), {r.frames} frames -> {args.lvx}{extra}")
+    elif args.data_type is not None or args.device:
+        raise UserError("--data-type and --device are for --lvx")
+    from foveatrack.recording import export_points, export_trajectory
+
+    for flag, path in (("--csv", args.csv), ("--npz", args.npz)):
+        if path:
+            print(f"{export_points(rec, path)} points -> {path}")
+    if args.trajectory:
+        print(f"{export_trajectory(rec, args.trajectory)} records -> {args.trajectory}")
+    return 0
