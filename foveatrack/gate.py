@@ -24,6 +24,12 @@ from foveatrack.speed_table import TURBO
 # recording; the simulator by virtual time).
 STALE_FRAME = "stale_frame"
 
+# Two tilt margins, two layers: the tracker keeps TrackerConfig.tilt_margin_deg (3 deg) from a stop
+# by itself; the gate, the last line, refuses tilt toward a stop GATE_TILT_MARGIN_DEG (2 deg) from
+# it, so it only acts when the tracker did not (a bug, a misconfigured table).  The daemon's [head]
+# tilt_margin_deg and a scene's [gate] tilt_margin_deg set this one.
+GATE_TILT_MARGIN_DEG = 2.0
+
 
 @dataclass(frozen=True)
 class Limits:
@@ -40,7 +46,7 @@ class Limits:
     max_tilt_byte: int = 0x3F
     allow_turbo: bool = False
     tilt_limits_deg: tuple[float, float] = (-30.0, 60.0)
-    tilt_margin_deg: float = 2.0
+    tilt_margin_deg: float = GATE_TILT_MARGIN_DEG
 
     def apply(self, cmd: HeadCommand, tilt_deg: float, tilt_sigma_deg: float = 0.0) -> tuple[HeadCommand, list[str]]:
         """The command that may leave, and the reasons it was changed (empty if unchanged)."""

@@ -102,16 +102,28 @@ def _overrides(meta: dict) -> dict:
     raise UserError(f"recording source {src!r} is not 'simulator' or 'daemon'")
 
 
+class _RecordedHead:
+    """The head's facts as a recording gives them (its ``tracker_overrides``), for
+    :meth:`TrackerConfig.with_head`."""
+
+    def __init__(self, values: dict):
+        self._values = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
+
+    def tracker_values(self) -> dict:
+        return dict(self._values)
+
+
 def tracker_config(meta: dict, table: dict | None = None, where: str = "recorded [tracker]") -> TrackerConfig:
-    """The effective tracker configuration of a recording (or of ``table`` applied to its setup)."""
-    recorded = table is None
-    table = dict(meta.get("tracker_table", {})) if recorded else dict(table)
-    cfg = TrackerConfig.from_mapping(table, where=where)
-    ov = _overrides(meta)
-    if meta.get("source") == "daemon" and not recorded:
-        ov = {k: v for k, v in ov.items() if k not in table}
-    ov = {k: tuple(v) if isinstance(v, list) else v for k, v in ov.items()}
-    return replace(cfg, **ov)
+    """The effective tracker configuration of a recording, or of another ``[tracker]`` ``table`` on the
+    recording's head: the head's facts win by the rule every driver applies (:meth:`TrackerConfig.with_head`;
+    a table that contradicts them is an error naming the key).  Without ``table`` the recorded table and
+    the head values recorded with it rebuild what ran (in daemon recordings made before that rule, a
+    [tracker] head key had won over [head], and the recording left that key out of its overrides)."""
+    head = _RecordedHead(_overrides(meta))
+    if table is None:
+        return replace(TrackerConfig.from_mapping(dict(meta.get("tracker_table", {})), where=where),
+                       **head.tracker_values())
+    return TrackerConfig.from_mapping(dict(table), where=where).with_head(head, table, where)
 
 
 class _Frames:
@@ -302,6 +314,12 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth,
                        final_pose_deg=final_pose, tracker_cfg=cfg)
     res.comparison = compare(frames, recorded)
+    if tracker_table is None and "tracker_effective" in meta:
+        # the configuration replay rebuilt is the one that ran (JSON-normalised: tuples as lists)
+        import json
+
+        res.comparison["tracker_config_as_recorded"] = (
+            json.loads(json.dumps(cfg.effective())) == meta["tracker_effective"])
     res.metrics = replay_metrics(frames, truth, cfg, meta.get("half_fov_deg"))
     res.recorded_metrics = _recorded_metrics(recorded, truth, rec_cfg, frames)
     if reader.problem:

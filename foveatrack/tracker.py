@@ -28,10 +28,11 @@ angle + 2 sigma stays ``tilt_margin_deg`` inside the stops ``stop_lookahead_s`` 
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -199,6 +200,45 @@ class TrackerConfig:
                             f"tilt_limits_deg {cfg.tilt_limits_deg}")
         if not lo <= cfg.tilt0_deg <= hi:
             raise UserError(f"{where}: tilt0_deg {cfg.tilt0_deg} is outside tilt_limits_deg {cfg.tilt_limits_deg}")
+        return cfg
+
+    def effective(self) -> dict:
+        """Every setting as it runs, for a recording's metadata and a person reading it (the space of
+        interest by its kind and parameters; a learned background by its size only)."""
+        def plain(v):
+            if isinstance(v, tuple):
+                return [plain(x) for x in v]
+            if dataclasses.is_dataclass(v):
+                d = {f.name: plain(getattr(v, f.name)) for f in fields(v) if not f.name.startswith("_")}
+                return {"kind": type(v).__name__, **d}
+            if isinstance(v, (set, frozenset)):
+                return len(v)
+            return v
+        return {f.name: plain(getattr(self, f.name)) for f in fields(self)}
+
+    def with_head(self, facts, table: Mapping | None = None, where: str = "[tracker]") -> "TrackerConfig":
+        """This configuration with the head's facts (:class:`gimbal.head_facts.HeadFacts`).
+
+        One rule in every driver (simulator, replay, daemon): the stops, the start pose and the link
+        timing are the head's, configured with the head (``[gimbal]`` in a scene, ``[head]`` in a
+        daemon config), and always win.  A ``[tracker]`` ``table`` that sets one of them to another
+        value is an error naming the key (the same value is accepted).
+        """
+        vals = facts.tracker_values()
+        for k, v in vals.items():
+            if table is not None and k in table:
+                given = table[k]
+                same = (tuple(float(x) for x in given) == v) if isinstance(v, tuple) else \
+                    (isinstance(given, (int, float)) and abs(float(given) - v) <= 1e-9 * max(1.0, abs(v)))
+                if not same:
+                    raise UserError(f"{where}: {k} = {given!r} contradicts the head's {list(v) if isinstance(v, tuple) else v!r}: "
+                                    "it is a fact of the head and its link, set with the head ([head] in a daemon "
+                                    "config, [gimbal] in a scene); remove it from [tracker]")
+        cfg = replace(self, **vals)
+        lo, hi = cfg.tilt_limits_deg
+        if not lo + cfg.tilt_margin_deg < hi - cfg.tilt_margin_deg or not lo <= cfg.tilt0_deg <= hi:
+            raise UserError(f"{where}: the head's tilt leaves no room: tilt_limits_deg {list(cfg.tilt_limits_deg)}, "
+                            f"tilt_margin_deg {cfg.tilt_margin_deg}, tilt0_deg {cfg.tilt0_deg}")
         return cfg
 
 

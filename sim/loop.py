@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -31,7 +31,8 @@ from foveatrack.gate import CommandGate, Limits
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable
 from foveatrack.tracker import Tracker
-from gimbal.pelco import encode_pan_tilt, frame_time_s, wrap_pan_deg
+from gimbal.head_facts import HeadFacts
+from gimbal.pelco import encode_pan_tilt, wrap_pan_deg
 from gimbal.pts303h import PTS303H, HeadParams
 from sim import effects as fx
 from sim.scene import Scene
@@ -149,13 +150,14 @@ class ClosedLoop:
             bit_error_rate=scene.effect_params.get("uart_bit_error_rate", 0.0),
             drop_rate=scene.effect_params.get("uart_drop_rate", 0.0))
         table = load_tracker_table(g.speed_table, self.head, f"{scene.path} [gimbal] speed_table")
-        # What the loop sets in the tracker's config from the scene's head and link (recorded, so
-        # that replay rebuilds exactly this tracker).  Latency: a Pelco-D frame on the wire (the loop
-        # speaks Pelco-D, as the PTS-303H does).
-        self.tracker_overrides = {"pan0_deg": g.pan0_deg, "tilt0_deg": tilt0,
-                                  "tilt_limits_deg": (params.tilt_min_deg, params.tilt_max_deg),
-                                  "latency_s": frame_time_s("D", g.baud), "send_delay_s": g.send_delay_s}
-        self.tracker = Tracker(replace(scene.tracker, **self.tracker_overrides), table)
+        # The head's facts (its stops, start pose, Pelco-D at the scene's baud, the loop's send delay)
+        # win over [tracker] by the one rule every driver applies (TrackerConfig.with_head); recorded,
+        # so that replay rebuilds exactly this tracker.
+        self.head_facts = HeadFacts((params.tilt_min_deg, params.tilt_max_deg), g.pan0_deg, tilt0, "D", g.baud,
+                                    g.send_delay_s)
+        self.tracker_overrides = self.head_facts.tracker_values()
+        self.tracker = Tracker(scene.tracker.with_head(self.head_facts, scene.tracker_table, f"{scene.path} [tracker]"),
+                               table)
         # The daemon's gate (limits, stale frames): pass-through unless the scene has a [gate] table.
         self.gate = CommandGate(None if scene.gate is None else Limits(
             scene.gate.max_pan_byte, scene.gate.max_tilt_byte, scene.gate.allow_turbo,

@@ -38,6 +38,7 @@ def recording_meta(scene, loop) -> dict:
         "tracker_overrides": {k: list(v) if isinstance(v, tuple) else v for k, v in loop.tracker_overrides.items()},
         "speed_table": loop.tracker.table.to_dict(),
         "rate_hz": loop.tracker.config.rate_hz,
+        "tracker_effective": loop.tracker.config.effective(),   # the configuration that ran, every setting
         "point_rate_hz": scene.optics.point_rate_hz,
         "gimbal": asdict(scene.gimbal),
         "half_fov_deg": half_fov_deg(scene),    # replay's "in the FoV", as the simulator's summary has it

@@ -29,6 +29,7 @@ import numpy as np
 
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys, read_toml
 from foveatrack.errors import UserError
+from foveatrack.gate import GATE_TILT_MARGIN_DEG
 
 # Effects a scene can ask for, with their parameters and defaults (sources in the docstring of
 # sim.effects).  Head/link effects act in gimbal/ and sim/virtual_uart.py.
@@ -83,7 +84,7 @@ class GateSpec:
     max_pan_byte: int = 0x3F
     max_tilt_byte: int = 0x3F
     allow_turbo: bool = True
-    tilt_margin_deg: float = 2.0
+    tilt_margin_deg: float = GATE_TILT_MARGIN_DEG
     stale_frame_s: float | None = None
 
 

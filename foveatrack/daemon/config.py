@@ -29,7 +29,8 @@ from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_k
 from foveatrack.errors import UserError
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig
-from gimbal.pelco import frame_time_s
+from foveatrack.gate import GATE_TILT_MARGIN_DEG
+from gimbal.head_facts import HeadFacts
 
 
 @dataclass(frozen=True)
@@ -58,15 +59,21 @@ class HeadConfig:
     max_tilt_byte: int = 0x3F
     allow_turbo: bool = False
     tilt_limits_deg: tuple[float, float] = (-30.0, 60.0)
-    tilt_margin_deg: float = 2.0
+    tilt_margin_deg: float = GATE_TILT_MARGIN_DEG   # the gate's (foveatrack.gate), inside the tracker's 3 deg
     pan0_deg: float = 0.0
     tilt0_deg: float = 0.0
+
+    @property
+    def facts(self) -> HeadFacts:
+        """The head's facts (stops, start pose, protocol, baud) the tracker and the gate read; the
+        daemon measures each send, so no fixed send delay."""
+        return HeadFacts(self.tilt_limits_deg, self.pan0_deg, self.tilt0_deg, self.protocol, self.baud, None)
 
     @property
     def frame_time_s(self) -> float:
         """One command frame of this head's protocol on the wire at its baud [s] (Pelco-D 7 bytes,
         Pelco-P 8: :func:`gimbal.pelco.frame_time_s`)."""
-        return frame_time_s(self.protocol, self.baud)
+        return self.facts.frame_time_s
 
 
 @dataclass(frozen=True)
@@ -102,18 +109,8 @@ class DaemonConfig:
 
     @property
     def tracker_overrides(self) -> dict:
-        """What the daemon sets on top of ``[tracker]`` (from ``[head]``), kept for replay."""
-        t = self.tracker_table
-        out = {}
-        if "pan0_deg" not in t:
-            out["pan0_deg"] = self.head.pan0_deg
-        if "tilt0_deg" not in t:
-            out["tilt0_deg"] = self.head.tilt0_deg
-        if "tilt_limits_deg" not in t:
-            out["tilt_limits_deg"] = list(self.head.tilt_limits_deg)
-        if "latency_s" not in t:
-            out["latency_s"] = self.head.frame_time_s
-        return out
+        """What the head's facts set on top of ``[tracker]`` (:meth:`TrackerConfig.with_head`), kept for replay."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in self.head.facts.tracker_values().items()}
 
     def speed_table(self) -> SpeedTable:
         h = self.head
@@ -276,12 +273,7 @@ def config_from_mapping(data: Mapping, where: str = "daemon config", text: str =
     cfg = DaemonConfig(where, text, lidar, head, tt, tracker,
                        _recording(data.get("recording", {}), f"{where} [recording]"),
                        _loop(data.get("daemon", {}), f"{where} [daemon]"))
-    eff = replace(tracker, **{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.tracker_overrides.items()})
-    lo, hi = eff.tilt_limits_deg
-    if not lo + eff.tilt_margin_deg < hi - eff.tilt_margin_deg or not lo <= eff.tilt0_deg <= hi:
-        raise UserError(f"{where}: [tracker]/[head] tilt settings leave no room: tilt_limits_deg {list(eff.tilt_limits_deg)}, "
-                        f"tilt_margin_deg {eff.tilt_margin_deg}, tilt0_deg {eff.tilt0_deg}")
-    cfg = replace(cfg, tracker=eff)
+    cfg = replace(cfg, tracker=tracker.with_head(head.facts, tt, f"{where} [tracker]"))
     if head.speed_table != "nominal":
         p = Path(head.speed_table)
         p = p if p.is_absolute() else Path(where).parent / p

@@ -165,6 +165,7 @@ class Daemon:
         return {"source": FORMAT_SOURCE, "config_path": c.path, "config_text": c.text,
                 "tracker_table": dict(c.tracker_table), "tracker_overrides": c.tracker_overrides,
                 "tracker_t0_s": 0.0, "speed_table": self.table.to_dict(), "rate_hz": c.tracker.rate_hz,
+                "tracker_effective": c.tracker.effective(),   # the configuration that runs, every setting
                 "point_rate_hz": c.lidar.point_rate_hz, "head": asdict(c.head), "lidar": asdict(c.lidar),
                 "limits": asdict(self.limits)}
 

@@ -146,3 +146,14 @@ def test_status_line_only_on_a_terminal():
     s.show(text)
     s.done()
     assert tty.getvalue() == ("\r" + text + "\x1b[K") * 2 + "\n"
+
+
+def test_the_heads_facts_win_by_one_rule_and_a_contradiction_names_the_key(tmp_path):
+    """Stops, start pose and link timing are the head's ([head]); [tracker] may repeat them, not change them."""
+    same = load_config(_cfg(tmp_path, GOOD.replace("[tracker]", "[tracker]\ntilt_limits_deg = [-30.0, 60.0]")))
+    assert same.tracker.tilt_limits_deg == (-30.0, 60.0)
+    head = load_config(_cfg(tmp_path, GOOD.replace("[head]", "[head]\npan0_deg = 12.5\ntilt_limits_deg = [-20, 50]")))
+    assert head.tracker.pan0_deg == 12.5 and head.tracker.tilt_limits_deg == (-20.0, 50.0)
+    for key, value in (("pan0_deg", "5.0"), ("tilt_limits_deg", "[-10.0, 40.0]"), ("latency_s", "0.02")):
+        with pytest.raises(UserError, match=rf"\[tracker\]: {key} = .* contradicts the head's.*\[head\]"):
+            load_config(_cfg(tmp_path, GOOD.replace("[tracker]", f"[tracker]\n{key} = {value}")))

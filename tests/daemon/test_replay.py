@@ -29,6 +29,7 @@ def test_simulator_recording_replays_identically(sim_run):
     res = replay_recording(path)
     c = res.comparison
     assert c["detections_equal"] and c["commands_equal"] and c["commands_compared"] == len(log["t_end_s"])
+    assert c["tracker_config_as_recorded"] is True   # the effective configuration the run recorded
     assert c["max_detection_xyz_diff_m"] == 0.0
     assert np.array_equal(res.frames["detected"], log["detected"])
     assert np.array_equal(res.frames["command"], log["command"])

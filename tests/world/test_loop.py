@@ -236,3 +236,15 @@ def test_sunlight_false_alarms_are_added_in_time_order_and_touch_nothing_else():
         n_extra += int(false.sum())
     rays = 0.5 * clean.optics.point_rate_hz                                    # all rays leave the prisms
     assert abs(n_extra - 0.01 * rays) < 5 * np.sqrt(0.01 * rays)               # binomial, 5 sigma
+
+
+def test_a_scene_tracker_table_may_not_contradict_the_head():
+    from sim.scene import scene_from_mapping
+    import tomllib
+
+    data = tomllib.loads((SCENES / "fig12-tracking.toml").read_text())
+    data["tracker"]["tilt_limits_deg"] = [-10.0, 40.0]        # the PTS-303H stops at -30 / +60
+    with pytest.raises(UserError, match=r"tilt_limits_deg .* contradicts the head's \[-30.0, 60.0\]"):
+        ClosedLoop(scene_from_mapping(data, "contradicting.toml"))
+    data["tracker"]["tilt_limits_deg"] = [-30.0, 60.0]         # repeating the head's value is fine
+    assert ClosedLoop(scene_from_mapping(data, "repeating.toml")).tracker.config.tilt_limits_deg == (-30.0, 60.0)
