@@ -74,6 +74,11 @@ class PelcoParser:
         self._last_t = None
 
     @property
+    def idle(self) -> bool:
+        """No partial frame is being assembled (the next byte may start a frame)."""
+        return not self._buf
+
+    @property
     def pending(self) -> bytes:
         """Bytes of the partial frame being assembled."""
         return bytes(self._buf)
