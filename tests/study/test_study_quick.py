@@ -72,7 +72,6 @@ def test_fidelity_reference_deviates_from_itself_by_nothing(quick):
     for f in res["axes"]["fidelity"].values():
         ref = next(r for r in f["rows"] if r["setting"] == f["reference"])
         assert ref["d_error_rms_all_deg"] == 0.0 and ref["d_points_on_target_per_frame"] == 0.0
-        assert all(r["d_error_rms_all_deg"] >= 0 for r in f["rows"])
 
 
 def test_sensing_numbers_obey_their_definitions(quick):
@@ -114,9 +113,6 @@ def test_truth_table_reconstructs_the_head_exactly_and_nominal_does_not(quick):
     assert rows["nominal"]["pointing_rms_deg"] > 0.1
     measured = [r for r in res["axes"]["calibration"]["rows"] if r["plan"] not in ("truth", "nominal")]
     assert measured and all(r["failed"] == 0 and r["cal_virtual_s"] > 0 for r in measured)
-    # the diagnostic swaps only the timing: with the truth timing and truth speeds the error is 0,
-    # so a measured table's error with true timing is what its speed entries alone cost (>= 0)
-    assert all(r["pointing_rms_true_timing_deg"] >= 0 for r in measured)
 
 
 def test_pareto_tables_in_the_report_are_consistent_with_the_points(quick):
