@@ -234,3 +234,11 @@ def test_client_wakes_a_unit_in_standby_before_sampling():
         assert client.counters["mode_requests"] >= 1 and lidar.work_state == P.LIDAR_MODE_NORMAL
         assert run_until(client, lambda: len(client.poll(0.05)) > 0)
         assert client.state == CONNECTED
+
+
+def test_daemon_status_line_names_what_the_unit_reports():
+    from foveatrack.daemon.support import format_status
+
+    plain = format_status(10.0, 9980, "tracking", 1.2, -0.3, 11.0, 0, True)
+    noted = format_status(10.0, 9980, "tracking", 1.2, -0.3, 11.0, 0, True, "lidar standby, dirty/blocked 1")
+    assert noted == plain + "  [lidar standby, dirty/blocked 1]" and "[" not in plain
