@@ -137,7 +137,8 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
             if last_packet is not None and now - last_packet > config.loop.watchdog_s:
                 raise UserError(f"the lidar fell silent for {now - last_packet:.1f} s ([daemon] watchdog_s "
                                 f"{config.loop.watchdog_s:g}) after {frames} frames; the head was stopped and no "
-                                "table was written")
+                                f"table was written (link {client.state}, unit {client.unit_status()}, "
+                                f"lidar counters: {client.counters})")
             batches = client.poll(0.02)
             now = time.monotonic()
             if client.counters.get("packets", 0) != packets:

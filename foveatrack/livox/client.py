@@ -394,8 +394,13 @@ class LivoxClient:
             return
         pending = self._pending.pop(frame.seq, None)
         if pending is None or pending[:2] != frame.key:
-            self._counters["acks_unmatched"] += 1
-            return
+            if frame.key != (P.CMD_SET_GENERAL, P.CMD_ID_HEARTBEAT):
+                self._counters["acks_unmatched"] += 1
+                return
+            # as the SDK (command_channel.cpp): a heartbeat ACK keeps the link whatever its seq or
+            # delay, so a unit slow to answer (> cmd_timeout_s) is not taken for a lost one
+            self._counters["heartbeat_acks_late"] += 1
+            pending = (P.CMD_SET_GENERAL, P.CMD_ID_HEARTBEAT, b"", now)
         cmd_set, cmd_id, payload, _sent = pending
         ret = P.ret_code(frame.payload)
         if ret != 0:

@@ -242,3 +242,49 @@ def test_daemon_status_line_names_what_the_unit_reports():
     plain = format_status(10.0, 9980, "tracking", 1.2, -0.3, 11.0, 0, True)
     noted = format_status(10.0, 9980, "tracking", 1.2, -0.3, 11.0, 0, True, "lidar standby, dirty/blocked 1")
     assert noted == plain + "  [lidar standby, dirty/blocked 1]" and "[" not in plain
+
+
+@pytest.mark.slow
+def test_late_heartbeat_acks_keep_the_link():
+    """A unit answering heartbeats later than the 0.5 s command time-out (a loaded machine) is not
+    lost: as in the SDK, any heartbeat ACK keeps the link; with none for 3 s it is lost."""
+    import threading
+
+    unit = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    unit.bind(("127.0.0.1", 0))
+    unit.settimeout(0.05)
+    client = LivoxClient("127.0.0.1", "127.0.0.1", cmd_port=0, data_port=0, broadcast_port=None,
+                         sensor_cmd_port=unit.getsockname()[1], point_rate_hz=RATE, retry_period_s=0.1)
+    stop, answer = threading.Event(), threading.Event()
+    answer.set()
+
+    def serve():
+        late = []
+        while not stop.is_set():
+            try:
+                buf, addr = unit.recvfrom(2048)
+                f = P.parse_control(buf)
+                if f.key == (0, 1):
+                    unit.sendto(P.make_ack(f), addr)
+                elif f.key == (0, 3) and answer.is_set():
+                    late.append((time.monotonic() + 0.7, f, addr))
+            except socket.timeout:
+                pass
+            while late and late[0][0] <= time.monotonic():
+                _, f, addr = late.pop(0)
+                unit.sendto(P.make_ack(f, P.heartbeat_ack_payload(0, 1, 0, 0)), addr)
+
+    th = threading.Thread(target=serve, daemon=True)
+    th.start()
+    try:
+        with client:
+            client.connect(2.0)
+            run_until(client, lambda: False, 4.0)
+            assert client.state == CONNECTED and client.counters.get("link_lost", 0) == 0
+            assert client.counters["heartbeat_acks_late"] >= 3
+            answer.clear()
+            assert run_until(client, lambda: client.counters.get("link_lost", 0) == 1, 5.0)
+    finally:
+        stop.set()
+        th.join(2)
+        unit.close()
