@@ -288,3 +288,14 @@ def test_late_heartbeat_acks_keep_the_link():
         stop.set()
         th.join(2)
         unit.close()
+
+
+def test_lidar_serve_refuses_a_data_type_its_unit_does_not_send():
+    from foveatrack.errors import UserError
+    from sim.lidar_server import serve_scene
+    from sim.scene import scene_from_mapping
+
+    scene = scene_from_mapping({"scene": {"name": "t", "duration_s": 1.0, "seed": 1}, "lidar": {"preset": "mid40"},
+                                "gimbal": {"frozen": True}, "background": [{"type": "ground", "height_m": 1.5}]})
+    with pytest.raises(UserError, match=r"a Mid-40 sends data types \[0, 1\]"):
+        serve_scene(scene, cmd_port=0, packet_type=2, duration_s=0.1)
