@@ -38,11 +38,9 @@ import time
 
 import numpy as np
 
+from sim.livox_units import UNITS as PRESET_UNITS, unit_for_preset  # the Livox unit each preset serves as
 from sim.sensor import SceneSensor, scene_scan_model
 from sim.world import kernels as wk
-
-# Livox device type and packet type per scanner preset (facts: livox.md, "SDK v1 data packets").
-PRESET_DEVICE = {"mid40": ("mid40", 0), "prototype": ("mid40", 0), "horizon": ("horizon", 2)}
 
 
 class TruthTail:
@@ -232,7 +230,7 @@ class _FollowingSource:
 
 def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("127.0.0.1", 55000),
                 time_scale=1.0, loss_rate=0.0, seed=0, packet_type=None, head_truth=None,
-                head_clock_zero=None, duration_s=None, ready=None) -> dict:
+                head_clock_zero=None, duration_s=None, ready=None, control_log=None) -> dict:
     """Serve ``scene``'s lidar until SIGINT/SIGTERM or ``duration_s``; returns the counters.
 
     ``ready(lidar)`` is called once the sockets are bound (the CLI prints ``READY ip port``).
@@ -241,8 +239,10 @@ def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("
     from foveatrack.livox import protocol as P
     from sim.virtual_lidar import VirtualLivox, run_virtual_lidar
 
-    dev_name, default_type = PRESET_DEVICE.get(scene.optics.name, ("horizon", 2))
-    ptype = default_type if packet_type is None else packet_type
+    unit = unit_for_preset(scene.optics.name)
+    if packet_type is not None and unit.mode_of_data_type(packet_type) is None:
+        types = sorted(set(t for t in unit.data_types.values() if t in P.POINT_DATA_TYPES))
+        raise UserError(f"--packet-type {packet_type}: a {unit.model} sends data types {types}")
     if head_truth is not None and time_scale != 1.0:
         raise UserError("--head-truth follows a head served in real time; use --time-scale 1")
     tail = None
@@ -263,8 +263,8 @@ def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("
 
     counters = run_virtual_lidar(
         source, duration_s=duration_s, ready=_ready, bind_ip=bind_ip, cmd_port=cmd_port,
-        broadcast_addr=broadcast_addr, point_rate_hz=float(scene.optics.point_rate_hz), packet_type=ptype,
-        dev_type=P.DEVICE_TYPES[dev_name], time_scale=time_scale, loss_rate=loss_rate, seed=seed)
+        broadcast_addr=broadcast_addr, point_rate_hz=float(scene.optics.point_rate_hz), packet_type=packet_type,
+        unit=unit, time_scale=time_scale, loss_rate=loss_rate, seed=seed, control_log=control_log)
     inner = source.inner if tail is not None else source
     counters["points_on_target"] = inner.points_on_target
     if tail is not None:
@@ -274,4 +274,4 @@ def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("
     return counters
 
 
-__all__ = ["SceneSource", "TruthTail", "serve_scene", "PRESET_DEVICE"]
+__all__ = ["SceneSource", "TruthTail", "serve_scene", "PRESET_UNITS"]

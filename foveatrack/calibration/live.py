@@ -116,7 +116,8 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
             if silent_s is not None and silent_s > config.loop.watchdog_s:
                 raise UserError(f"the lidar fell silent for {silent_s:.1f} s ([daemon] watchdog_s "
                                 f"{config.loop.watchdog_s:g}) after {run['frames']} frames; the head was stopped "
-                                "and no table was written")
+                                f"and no table was written (link {client.state}, unit {client.unit_status()}, "
+                                f"lidar counters: {client.counters})")
             _, batches = stream.poll(0.02)
             for b in batches:
                 if len(b):

@@ -23,8 +23,10 @@ def add_serve_parser(lsub) -> None:
     p.add_argument("--cmd-port", type=int, default=65000, help="its command port (65000 as a real Livox; 0 = any)")
     p.add_argument("--broadcast-ip", default="127.0.0.1", help="where discovery broadcasts go")
     p.add_argument("--broadcast-port", type=int, default=55000, help="host port of the broadcasts (55000)")
-    p.add_argument("--packet-type", type=int, default=None, choices=(0, 1, 2, 3, 4),
-                   help="data type (default: 0 for mid40/prototype, 2 for horizon)")
+    p.add_argument("--packet-type", type=int, default=None, metavar="TYPE",
+                   help="data type, one the preset's unit sends (default: its Cartesian single-return type: "
+                        "0 for mid40/mid100/prototype, 2 for the others); a host can change it with the "
+                        "coordinate-system and return-mode commands")
     p.add_argument("--time-scale", type=float, default=1.0, help="stream seconds per wall second")
     p.add_argument("--loss-rate", type=float, default=0.0, help="fraction of data packets dropped")
     p.add_argument("--seed", type=seed_arg, default=0, help="seed of the packet loss")
@@ -32,6 +34,8 @@ def add_serve_parser(lsub) -> None:
                    help="follow the head served by 'foveatrack gimbal serve --truth FILE'")
     p.add_argument("--head-clock-zero", type=float, default=None, metavar="MONO",
                    help="that head's time.monotonic() at t_s = 0 (printed by gimbal serve; default: estimated)")
+    p.add_argument("--log-control", metavar="FILE",
+                   help="write every control datagram received and sent as JSON lines {dir, t_s, hex}")
     p.add_argument("--duration-s", type=float, default=None, help="stop after this many seconds")
     p.set_defaults(func=cmd_serve)
 
@@ -54,17 +58,49 @@ def cmd_serve(args) -> int:
 
     def ready(lidar):
         print(f"READY {lidar.address[0]} {lidar.cmd_port}", flush=True)
+        u = lidar.unit
+        if u.fallback:
+            print(f"lidar serve: no Livox unit is known for scanner preset {scene.optics.name!r}; serving it as "
+                  f"a generic {u.model}", file=sys.stderr, flush=True)
+        print(f"Livox {u.model} (device type {lidar.dev_type}, broadcast code {lidar.broadcast_code}, firmware "
+              f"{'.'.join(str(v) for v in u.firmware)}, data type {lidar.packet_type}"
+              f"{', IMU 200 Hz' if u.has_imu else ''})", file=sys.stderr, flush=True)
         print(f"virtual {scene.optics.name} lidar for scene {scene.name!r} ({scene.optics.point_rate_hz:g} pts/s) "
               f"on {lidar.address[0]}:{lidar.cmd_port}, broadcasting to {args.broadcast_ip}:{args.broadcast_port}"
               f"{'; following head truth ' + args.head_truth if args.head_truth else ''}; Ctrl-C stops",
               file=sys.stderr, flush=True)
 
+    log = _ControlLog(args.log_control) if args.log_control else None
     counters = serve_scene(
         scene, bind_ip=args.bind_ip, cmd_port=args.cmd_port, broadcast_addr=(args.broadcast_ip, args.broadcast_port),
         time_scale=args.time_scale, loss_rate=args.loss_rate, seed=args.seed, packet_type=args.packet_type,
-        head_truth=args.head_truth, head_clock_zero=args.head_clock_zero, duration_s=args.duration_s, ready=ready)
+        head_truth=args.head_truth, head_clock_zero=args.head_clock_zero, duration_s=args.duration_s, ready=ready, control_log=log)
+    if log is not None:
+        log.close()
     print(json.dumps({k: int(v) for k, v in sorted(counters.items())}), flush=True)
     return 0
+
+
+class _ControlLog:
+    """``--log-control FILE``: the virtual lidar appends (direction, bytes); one JSON line each."""
+
+    def __init__(self, path: str):
+        import time
+
+        try:
+            self._fh = open(path, "w")
+        except OSError as exc:
+            raise UserError(f"--log-control {path}: {exc.strerror}") from None
+        self._t0 = time.monotonic()
+        self._clock = time.monotonic
+
+    def append(self, item) -> None:
+        direction, buf = item
+        self._fh.write(json.dumps({"dir": direction, "t_s": round(self._clock() - self._t0, 4), "hex": buf.hex()}) + "\n")
+        self._fh.flush()
+
+    def close(self) -> None:
+        self._fh.close()
 
 
 def _check_head_truth(path: str) -> None:

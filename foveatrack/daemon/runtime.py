@@ -89,6 +89,9 @@ class _Receiver(threading.Thread):
         self.last_t_ns: int | None = None
         self.error: BaseException | None = None
         self.counters: dict = {}
+        # what the unit reports (LivoxClient.take_events), for the control loop's log and status line
+        self.unit_events: queue.SimpleQueue = queue.SimpleQueue()
+        self.unit_note = ""
 
     @property
     def offset_s(self) -> float | None:
@@ -104,6 +107,11 @@ class _Receiver(threading.Thread):
             while not self.stop_ev.is_set():
                 now, batches = self.stream.poll(0.02)
                 self.counters = self.client.counters
+                for ev in self.client.take_events():
+                    self.unit_events.put(ev)
+                    st = self.client.unit_status()
+                    bad = st["work_state_name"] not in (None, "normal")
+                    self.unit_note = ", ".join(([f"lidar {st['work_state_name']}"] if bad else []) + st["problems"])
                 for b in batches:
                     if not len(b):
                         continue
@@ -338,6 +346,9 @@ class Daemon:
                 if next_tick < now:
                     self.counters["ticks_late"] += 1
                     next_tick = now + period
+                while not self.rx.unit_events.empty():   # the unit's state, status, refusals, link losses
+                    ev = dict(self.rx.unit_events.get_nowait())
+                    self.log.event("lidar_" + ev.pop("event"), **ev)
                 last_pkt = self.rx.last_packet_mono
                 silent = last_pkt is None or now - last_pkt > c.loop.watchdog_s
                 if last_pkt is not None and not lidar_up:
@@ -442,7 +453,8 @@ class Daemon:
         self.status.show(format_status(rate, getattr(self, "last_pts", 0), state,
                                        None if out is None else out.error_pan_deg,
                                        None if out is None else out.error_tilt_deg,
-                                       self.lat_ms[-1] if self.lat_ms else None, self.drops(), self.head.connected))
+                                       self.lat_ms[-1] if self.lat_ms else None, self.drops(), self.head.connected,
+                                       self.rx.unit_note))
 
     def _shutdown(self, old_handlers) -> None:
         self.stop_ev.set()

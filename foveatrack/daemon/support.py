@@ -73,11 +73,14 @@ class StatusLine:
             self.stream.flush()
 
 
-def format_status(rate_hz, pts, state, err_pan, err_tilt, latency_ms, drops, head_ok) -> str:
+def format_status(rate_hz, pts, state, err_pan, err_tilt, latency_ms, drops, head_ok, lidar_note="") -> str:
+    """One status line; ``lidar_note`` names what the Livox unit reports as not normal (work state,
+    status-code problems), empty when all is well."""
     err = "   -/-   " if err_pan is None else f"{err_pan:+5.1f}/{err_tilt:+5.1f}"
     lat = "-" if latency_ms is None or not math.isfinite(latency_ms) else f"{latency_ms:4.0f}"
     return (f"foveatrack daemon  {rate_hz:4.1f} Hz  {pts:6d} pts/frame  {state:<9}  err {err} deg  "
-            f"lat {lat} ms  drops {drops}  head {'ok' if head_ok else 'DOWN'}")
+            f"lat {lat} ms  drops {drops}  head {'ok' if head_ok else 'DOWN'}"
+            + (f"  [{lidar_note}]" if lidar_note else ""))
 
 
 # ----------------------------------------------------------------------------------------- recording

@@ -72,16 +72,57 @@ CMD_SET_GENERAL = 0
 CMD_SET_LIDAR = 1
 CMD_SET_HUB = 2
 
+# general command set (SDK 2.3.0 ``command_impl.h``)
 CMD_ID_BROADCAST = 0
 CMD_ID_HANDSHAKE = 1
 CMD_ID_QUERY_INFO = 2
 CMD_ID_HEARTBEAT = 3
 CMD_ID_SAMPLING = 4
+CMD_ID_COORDINATE_SYSTEM = 5
 CMD_ID_DISCONNECT = 6
+CMD_ID_PUSH_ABNORMAL_STATE = 7
+CMD_ID_SET_IP = 8
+CMD_ID_GET_IP = 9
+CMD_ID_REBOOT = 0x0A
+CMD_ID_WRITE_PARAMS = 0x0B
+CMD_ID_READ_PARAMS = 0x0C
+CMD_ID_RESET_PARAMS = 0x0D
+
+# lidar command set
+LIDAR_ID_SET_MODE = 0
+LIDAR_ID_WRITE_EXTRINSIC = 1
+LIDAR_ID_READ_EXTRINSIC = 2
+LIDAR_ID_RAIN_FOG = 3
+LIDAR_ID_SET_FAN = 4
+LIDAR_ID_GET_FAN = 5
+LIDAR_ID_SET_RETURN_MODE = 6
+LIDAR_ID_GET_RETURN_MODE = 7
+LIDAR_ID_SET_IMU_FREQ = 8
+LIDAR_ID_GET_IMU_FREQ = 9
+LIDAR_ID_SET_UTC = 0x0A
+
+#: ACK return codes: the v1 protocol defines 0 success and 1 fail for every command, and 2
+#: "switching" for lidar set mode; there is no separate "not supported" code.
+RET_SUCCESS = 0
+RET_FAIL = 1
+RET_SWITCHING = 2
+
+#: Work states of the heartbeat ACK (``LidarState``); modes of lidar set mode (``LidarMode``).
+LIDAR_STATES = {0: "init", 1: "normal", 2: "power-saving", 3: "standby", 4: "error", 5: "unknown"}
+LIDAR_MODE_NORMAL, LIDAR_MODE_POWER_SAVING, LIDAR_MODE_STANDBY = 1, 2, 3
+#: Return modes (``PointCloudReturnMode``) and IMU push frequencies (``ImuFreq``).
+RETURN_MODES = {0: "first", 1: "strongest", 2: "dual", 3: "triple"}
+IMU_FREQ_OFF, IMU_FREQ_200HZ = 0, 1
+IMU_RATE_HZ = 200.0
+#: Configuration parameter keys (general 0x0B/0x0C) and their error codes (``KeyErrorCode``).
+PARAM_KEY_HIGH_SENSITIVITY, PARAM_KEY_SCAN_PATTERN, PARAM_KEY_SLOT_NUM = 1, 2, 3
+KEY_NO_ERROR, KEY_NOT_SUPPORTED, KEY_EXEC_FAILED, KEY_VALUE_ERROR, KEY_VALUE_LENGTH_ERROR = 0, 1, 2, 4, 5
 
 DEFAULT_BROADCAST_PORT = 55000
 DEFAULT_SENSOR_CMD_PORT = 65000
-BROADCAST_CODE_LEN = 16
+BROADCAST_CODE_LEN = 16      # the field; the code itself is NUL-terminated, 15 characters at most
+BROADCAST_CODE_MAX_CHARS = 15
+SERIAL_LEN = 14              # a real code is the 14-character serial + one digit (1; 1/2/3 on a Mid-100)
 
 DEVICE_TYPES = {"hub": 0, "mid40": 1, "tele15": 2, "horizon": 3, "mid70": 6, "avia": 7}
 #: Nominal single-return point rates by device type [points/s] (facts: livox.md spec table).
@@ -224,8 +265,29 @@ def parse_control_safe(buf: bytes) -> tuple[ControlFrame | None, str | None]:
 # -- payloads of the general command set
 
 
+def check_broadcast_code(code: str) -> str:
+    """A broadcast code as the SDK can hold it: 1-15 printable ASCII characters (the 16-byte field
+    keeps a NUL: ``livox_def.h`` "null-terminated string, 15 characters at most").  Raises UserError."""
+    if not isinstance(code, str) or not 1 <= len(code) <= BROADCAST_CODE_MAX_CHARS or not code.isascii() \
+            or not code.isprintable():
+        raise UserError(f"Livox broadcast code {code!r} must be 1-{BROADCAST_CODE_MAX_CHARS} printable ASCII "
+                        "characters (the SDK's 16-byte field is NUL-terminated); real units use the 14-character "
+                        "serial number and one digit, e.g. 0TFDFCE00504061")
+    return code
+
+
+def make_broadcast_code(serial: str, index: int = 1) -> str:
+    """The code a real unit broadcasts: its 14-character serial and one digit (1; a Mid-100's three
+    units 1, 2, 3 for left, middle, right; SDK README, "Broadcast Code")."""
+    if len(serial) != SERIAL_LEN or not serial.isascii() or not serial.isalnum():
+        raise UserError(f"Livox serial {serial!r} must be {SERIAL_LEN} ASCII letters or digits")
+    if not 1 <= index <= 9:
+        raise UserError(f"Livox broadcast code digit must be 1..9, got {index}")
+    return serial + str(index)
+
+
 def broadcast_payload(broadcast_code: str, dev_type: int) -> bytes:
-    code = broadcast_code.encode("ascii")[:BROADCAST_CODE_LEN].ljust(BROADCAST_CODE_LEN, b"\0")
+    code = check_broadcast_code(broadcast_code).encode("ascii").ljust(BROADCAST_CODE_LEN, b"\0")
     return code + struct.pack("<BH", dev_type, 0)
 
 
@@ -257,6 +319,72 @@ def heartbeat_ack_payload(ret_code: int = 0, state: int = 1, feature: int = 0, s
     return struct.pack("<BBBI", ret_code, state, feature, status)
 
 
+def parse_heartbeat_ack(payload: bytes) -> tuple[int, int, int, int]:
+    """``(ret_code, work_state, feature, status)`` of a heartbeat ACK (``HeartbeatResponse``); status is
+    the init progress (0-100) in state 0, else the status code bits (:func:`decode_status_code`)."""
+    if len(payload) < 7:
+        raise PacketError("ctrl_truncated", f"heartbeat ACK payload {len(payload)} bytes < 7")
+    ret, state, feature, status = struct.unpack_from("<BBBI", payload)
+    return ret, state, feature, status
+
+
+def device_info_payload(firmware: Sequence[int], ret: int = RET_SUCCESS) -> bytes:
+    """Query-device-information ACK: ret_code, firmware version AA.BB.CC.DD as 4 bytes."""
+    return bytes((ret, *firmware))
+
+
+def parse_device_info(payload: bytes) -> tuple[int, tuple[int, int, int, int]]:
+    """``(ret_code, (AA, BB, CC, DD))`` of a device-information ACK."""
+    if len(payload) < 5:
+        raise PacketError("ctrl_truncated", f"device information ACK payload {len(payload)} bytes < 5")
+    return payload[0], tuple(payload[1:5])
+
+
+def firmware_str(fw: Sequence[int]) -> str:
+    """Firmware as Livox writes it, e.g. (3, 8, 0, 0) -> '03.08.0000'."""
+    return f"{fw[0]:02d}.{fw[1]:02d}.{fw[2]:02d}{fw[3]:02d}"
+
+
+#: LiDAR status code bits (``LidarErrorCode``, the err_code of data packets and heartbeat ACKs):
+#: name -> (first bit, width).  system_status: 0 normal, 1 warning, 2 error.
+STATUS_FIELDS = {
+    "temp_status": (0, 2), "volt_status": (2, 2), "motor_status": (4, 2), "dirty_warn": (6, 2),
+    "firmware_err": (8, 1), "pps_status": (9, 1), "device_status": (10, 1), "fan_status": (11, 1),
+    "self_heating": (12, 1), "ptp_status": (13, 1), "time_sync_status": (14, 3), "system_status": (30, 2),
+}
+
+
+def decode_status_code(code: int) -> dict[str, int]:
+    """The named fields of a LiDAR status code (u32)."""
+    return {k: (int(code) >> b) & ((1 << w) - 1) for k, (b, w) in STATUS_FIELDS.items()}
+
+
+def encode_status_code(**fields: int) -> int:
+    """A LiDAR status code from named fields (the others 0); raises ValueError for an unknown name
+    or a value that does not fit its bits."""
+    code = 0
+    for k, v in fields.items():
+        if k not in STATUS_FIELDS:
+            raise ValueError(f"unknown status field {k!r}")
+        b, w = STATUS_FIELDS[k]
+        if not 0 <= int(v) < (1 << w):
+            raise ValueError(f"status field {k}={v} does not fit {w} bits")
+        code |= int(v) << b
+    return code
+
+
+def status_problems(code: int) -> list[str]:
+    """Short words for the non-normal fields of a status code (empty for a healthy unit), for logs."""
+    f = decode_status_code(code)
+    words = {"temp_status": "temperature", "volt_status": "voltage", "motor_status": "motor",
+             "dirty_warn": "dirty/blocked", "firmware_err": "firmware abnormal", "device_status": "end of life",
+             "fan_status": "fan"}
+    out = [f"{w} {f[k]}" if STATUS_FIELDS[k][1] > 1 else w for k, w in words.items() if f[k]]
+    if f["system_status"]:
+        out.append({1: "system warning", 2: "system error"}.get(f["system_status"], f"system {f['system_status']}"))
+    return out
+
+
 def sampling_payload(start: bool) -> bytes:
     return bytes((1 if start else 0,))
 
@@ -268,6 +396,13 @@ def ret_code(payload: bytes) -> int:
 
 def make_cmd(cmd_id: int, seq: int, payload: bytes = b"", cmd_set: int = CMD_SET_GENERAL) -> bytes:
     return encode_control(ControlFrame(CMD_TYPE_CMD, seq, cmd_set, cmd_id, payload))
+
+
+def make_handshake(seq: int, host_ip: str, data_port: int, cmd_port: int, imu_port: int = 0) -> bytes:
+    """The handshake as the vendor SDK frames it: cmd_type 1 (ACK), not 0 (SDK 2.3.0
+    ``device_discovery.cpp``, ``packet.packet_type = kCommandTypeAck``); real units take both."""
+    return encode_control(ControlFrame(CMD_TYPE_ACK, seq, CMD_SET_GENERAL, CMD_ID_HANDSHAKE,
+                                       handshake_payload(host_ip, data_port, cmd_port, imu_port)))
 
 
 def make_ack(request: ControlFrame, payload: bytes = b"\0") -> bytes:
@@ -500,6 +635,13 @@ class DataDecoder:
     def __post_init__(self) -> None:
         if not self.point_rate_hz > 0:
             raise UserError(f"point_rate_hz must be > 0, got {self.point_rate_hz!r}")
+        self.last_err_code: int | None = None  # status code (err_code) of the newest accepted packet
+        self._imu: list[bytes] = []
+
+    def take_imu(self) -> "ImuBatch":
+        """The IMU samples (data type 6) decoded since the last call, in arrival order."""
+        bufs, self._imu = self._imu, []
+        return decode_imu_packets(bufs)
 
     def decode(self, datagrams: Iterable[bytes]) -> list[PointBatch]:
         """Decode datagrams; returns one batch per run of consecutive packets of one data type."""
@@ -509,8 +651,10 @@ class DataDecoder:
             if reason is not None:
                 self.dropped[reason] += 1
                 continue
+            self.last_err_code = int.from_bytes(buf[4:8], "little")
             if dt == IMU_DATA_TYPE:
                 self.counters["imu_packets"] += 1
+                self._imu.append(bytes(buf))
                 continue
             if runs and runs[-1][0] == dt:
                 runs[-1][1].append(buf)
@@ -644,3 +788,76 @@ def encode_data_packets(
     raw = arr.tobytes()
     L = arr.dtype.itemsize
     return [raw[k * L : (k + 1) * L] for k in range(n_pk)]
+
+
+# --------------------------------------------------------------------------------------------
+# IMU packets (data type 6: one sample each, 200 Hz on Horizon, Tele-15 and Avia)
+
+
+@dataclass(frozen=True, eq=False)
+class ImuBatch:
+    """IMU samples.  gyro_rad_s : (n, 3) float [rad/s]; acc_g : (n, 3) float [g] (specific force,
+    a level sensor at rest reads about (0, 0, 1)); t_ns : (n,) int64 [ns], packet timestamps.
+    Axes are the lidar's (X forward, Y left, Z up; SDK ``LivoxImuPoint``)."""
+
+    gyro_rad_s: np.ndarray
+    acc_g: np.ndarray
+    t_ns: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t_ns.shape[0])
+
+    @staticmethod
+    def empty() -> "ImuBatch":
+        return ImuBatch(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64))
+
+    @staticmethod
+    def concat(batches: Sequence["ImuBatch"]) -> "ImuBatch":
+        batches = [b for b in batches if len(b)]
+        if not batches:
+            return ImuBatch.empty()
+        return ImuBatch(np.concatenate([b.gyro_rad_s for b in batches]), np.concatenate([b.acc_g for b in batches]),
+                        np.concatenate([b.t_ns for b in batches]))
+
+
+IMU_PACKET_DTYPE = np.dtype([("hdr", HEADER_DTYPE), ("imu", POINT_DTYPES[IMU_DATA_TYPE])])
+
+
+def encode_imu_packets(t_ns: np.ndarray, gyro_rad_s: np.ndarray, acc_g: np.ndarray, timestamp_type: int = 0,
+                       err_code: int = 0, slot: int = 1, lidar_id: int = 1) -> list[bytes]:
+    """One data-type-6 packet per sample (t_ns (n,) [ns]; gyro (n, 3) [rad/s]; acc (n, 3) [g])."""
+    t = np.asarray(t_ns, np.int64).reshape(-1)
+    g = np.asarray(gyro_rad_s, np.float64).reshape(-1, 3)
+    a = np.asarray(acc_g, np.float64).reshape(-1, 3)
+    arr = np.zeros(t.size, IMU_PACKET_DTYPE)
+    h = arr["hdr"]
+    h["version"], h["slot"], h["id"], h["err_code"] = DATA_VERSION, slot, lidar_id, err_code
+    h["timestamp_type"], h["data_type"], h["timestamp"] = timestamp_type, IMU_DATA_TYPE, t
+    for k, ax in enumerate("xyz"):
+        arr["imu"][f"gyro_{ax}"] = g[:, k]
+        arr["imu"][f"acc_{ax}"] = a[:, k]
+    raw = arr.tobytes()
+    L = IMU_PACKET_DTYPE.itemsize
+    return [raw[k * L:(k + 1) * L] for k in range(t.size)]
+
+
+def decode_imu_packets(bufs: Sequence[bytes]) -> ImuBatch:
+    """Decode whole IMU packets (each already validated by :func:`classify_data` as type 6).
+    A UTC-stamped packet with an invalid date is dropped."""
+    if not bufs:
+        return ImuBatch.empty()
+    arr = np.frombuffer(b"".join(bufs), IMU_PACKET_DTYPE)
+    ts = arr["hdr"]["timestamp"].astype(np.int64)
+    keep = np.ones(arr.shape[0], bool)
+    utc = arr["hdr"]["timestamp_type"] == TIMESTAMP_TYPE_UTC
+    for k in np.flatnonzero(utc):
+        raw = np.frombuffer(bufs[k][10:18], np.uint8)[None, :]
+        try:
+            ts[k] = _utc_ns(raw)[0]
+        except (ValueError, OverflowError):
+            keep[k] = False
+    imu = arr["imu"][keep]
+    gyro = np.stack([imu["gyro_x"], imu["gyro_y"], imu["gyro_z"]], axis=1).astype(np.float64)
+    acc = np.stack([imu["acc_x"], imu["acc_y"], imu["acc_z"]], axis=1).astype(np.float64)
+    return ImuBatch(gyro, acc, ts[keep])
+
