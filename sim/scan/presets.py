@@ -63,3 +63,6 @@ def horizon_optics(wedge_p12_deg: float, wedge_p3_deg: float) -> RisleyOptics:
 HORIZON = horizon_optics(HORIZON_WEDGE_P12_DEG, HORIZON_WEDGE_P3_DEG)
 
 PRESETS: dict[str, RisleyOptics] = {"prototype": PROTOTYPE, "mid40": MID40, "horizon": HORIZON}
+
+# Multi-line spinning comparison scanners (not Risley; the lidar-IMU calibration): sim/scan/spinning.py.
+from sim.scan.spinning import SPINNING_PRESETS  # noqa: E402,F401
