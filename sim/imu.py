@@ -101,6 +101,12 @@ class PoseSchedule:
     step_m: float = 0.10
     dwell_s: float = 10.0
     move_s: float = 1.0
+    home_rpy_deg: tuple = (0.0, 0.0, 0.0)   # the lidar's home pose in the world (roll/pitch/yaw as [imu])
+    home_m: tuple = (0.0, 0.0, 0.0)
+
+    @property
+    def T_world_home(self) -> np.ndarray:
+        return make_T(Rotation.from_euler("xyz", self.home_rpy_deg, degrees=True).as_matrix(), self.home_m)
 
     def windows(self) -> list[tuple[float, float]]:
         per = self.dwell_s + self.move_s
@@ -138,7 +144,7 @@ def imu_from_table(t: Mapping, where: str) -> ImuSpec:
 
 
 def poses_from_table(t: Mapping, where: str) -> PoseSchedule:
-    check_keys(t, ["count", "step_deg", "step_m", "dwell_s", "move_s"], where)
+    check_keys(t, ["count", "step_deg", "step_m", "dwell_s", "move_s", "home_rpy_deg", "home_m"], where)
     kw = {}
     if "count" in t:
         c = t["count"]
@@ -153,6 +159,10 @@ def poses_from_table(t: Mapping, where: str) -> PoseSchedule:
         kw["dwell_s"] = as_float(t["dwell_s"], "dwell_s", where, lo=0.1, hi=600)
     if "move_s" in t:
         kw["move_s"] = as_float(t["move_s"], "move_s", where, lo=0.2, hi=60)
+    if "home_rpy_deg" in t:
+        kw["home_rpy_deg"] = as_vec(t["home_rpy_deg"], "home_rpy_deg", where, 3)
+    if "home_m" in t:
+        kw["home_m"] = as_vec(t["home_m"], "home_m", where, 3)
     return PoseSchedule(**kw)
 
 

@@ -3,8 +3,8 @@ accumulated clouds and the IMU's samples, and the calibration error against accu
 (Fig. 11b, eq. (8)).
 
 The rig: the lidar at ``T_world_lidar``, the IMU rigidly at ``X = T_lidar_imu`` (the scene's
-``[imu]``).  Home pose: the lidar at the world origin looking along +x (like the head of the other
-scenes).  Pose sequence (``[imu_poses]``): from home, each pose's lidar offset is a rotation of at
+``[imu]``).  Home pose: ``[imu_poses] home_rpy_deg / home_m`` (default: the lidar at the world origin
+looking along +x, like the head of the other scenes).  Pose sequence (``[imu_poses]``): from home, each pose's lidar offset is a rotation of at
 most ``step_deg`` about a random axis and a translation of at most ``step_m`` in a random direction,
 drawn until the step from the previous pose is 0.8-1.2 x ``step_deg`` and 0.8-1.2 x ``step_m`` (so the
 poses stay near home and every move turns and shifts the rig in all six degrees of freedom); the
@@ -45,6 +45,7 @@ def prims_in_frame(prims: np.ndarray, T_world_frame: np.ndarray) -> np.ndarray:
 
 def pose_sequence(schedule: PoseSchedule, rng: np.random.Generator) -> list[np.ndarray]:
     """Lidar poses ``T_world_lidar`` (home first), see the module docstring."""
+    home = schedule.T_world_home
     poses = [np.eye(4)]
     for _ in range(schedule.count - 1):
         prev = poses[-1]
@@ -63,7 +64,7 @@ def pose_sequence(schedule: PoseSchedule, rng: np.random.Generator) -> list[np.n
                 break
         else:  # pragma: no cover - the acceptance region is large
             raise RuntimeError("no pose step drawn within 10 000 tries")
-    return poses
+    return [home @ p for p in poses]
 
 
 @dataclass(frozen=True)
@@ -198,3 +199,30 @@ def run(scene, lidars: list[str], accumulate_s=ACCUMULATE_DEFAULT_S, bootstrap_s
     if bar is not None:
         bar.close()
     return data, out
+
+
+def score_row(s: Score) -> dict:
+    """A :class:`Score` as plain JSON-ready numbers."""
+    return {
+        "lidar": s.lidar, "accumulate_s": s.accumulate_s, "points_per_pose": s.points_per_pose,
+        "eq8_mean": s.eq8_mean, "eq8_translation_m": s.eq8_translation_m, "eq8_rotation_deg": s.eq8_rotation_deg,
+        "rotation_error_deg": s.rotation_error_deg, "translation_error_m": s.translation_error_m,
+        "registration_rotation_deg": s.registration_rotation_deg,
+        "registration_translation_m": s.registration_translation_m,
+        "rotation_sigma_deg": [float(v) for v in s.rotation_sigma_deg],
+        "translation_sigma_m": [float(v) for v in s.translation_sigma_m],
+    }
+
+
+def coverage_curves(scene, lidars: list[str], duration_s: float) -> dict:
+    """Paper Fig. 6e coverage (Appendix C voxel definition) of each Risley lidar over ``duration_s``
+    with the scene's scan model; spinning lidars have none (their pattern repeats every turn)."""
+    from sim.scan.coverage import voxel_coverage
+    from sim.scan.presets import PRESETS
+
+    out = {}
+    for name in lidars:
+        if name in PRESETS:
+            curve = voxel_coverage(scan_model_for(scene, name), duration_s)
+            out[name] = (curve.times_s, curve.coverage)
+    return out

@@ -57,11 +57,12 @@ def lidar_motions(clouds: list[PoseCloud], B: list, X0: np.ndarray, accumulate_s
             raise UserError(f"pose {i}: {len(p)} lidar points in {accumulate_s:g} s; the scene gives the "
                             "lidar too little to register against (need at least 100)")
     X0i = inv_T(X0)
-    cache: dict = {}
+    models = [registration.CloudModel(p) for p in pts]
     out = []
     for i in range(len(pts) - 1):
         guess = X0 @ B[i] @ X0i
-        out.append(registration.register(pts[i + 1], pts[i], guess, stages, prepared=cache))
+        out.append(registration.register(models[i + 1], models[i], guess, stages))
+        models[i] = None   # its cells are no longer needed
         if progress is not None:
             progress.update(1)
     return out

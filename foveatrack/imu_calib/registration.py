@@ -32,10 +32,12 @@ from foveatrack.imu_calib.se3 import so3_exp, transform_points
 
 # (cell [m], max correspondence distance [m], iterations) per stage, coarse to fine.
 DEFAULT_STAGES = ((0.5, 0.30, 15), (0.25, 0.10, 10), (0.25, 0.05, 20))
-MAX_SOURCE_POINTS = 30_000    # fixed strides beyond these (cost); the planes keep every point
+MAX_SOURCE_POINTS = 15_000    # fixed strides beyond these (cost); the planes keep every point
 MAX_ANCHOR_POINTS = 120_000
 MAX_NORMAL_ANGLE_DEG = 15.0   # source and target planes of a correspondence must agree this well
 _COS_NORMAL = float(np.cos(np.radians(MAX_NORMAL_ANGLE_DEG)))
+MAX_PLANE_POINTS = 1_000_000  # per cloud for the plane fits (a fixed stride beyond): compute time
+_SELF_AND_FACES = ((0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
 
 
 def _cell_keys(points: np.ndarray, cell_m: float):
@@ -98,13 +100,15 @@ def plane_cells(points: np.ndarray, cell_m: float, min_points: int = 8, max_flat
     not a line: one scan ring in a cell gives no normal).  Moments are taken about each cell's
     corner, so nothing cancels in floating point.
 
-    Two passes.  A cube cuts a noisy plane wherever the plane runs close to one of its faces: the
+    Two passes (at most :data:`MAX_PLANE_POINTS` points, by a fixed stride: the cost).  A cube cuts a noisy plane wherever the plane runs close to one of its faces: the
     points on the far side of the face land in the next cell, and both cells' means move off the
     plane (measured: a room's front wall 2 cm inside a cell face gave 1.4-1.8 cm mean residuals
     at the true transform, a bias that longer accumulation does not average away; range noise lies
     along the beam, so its spread across the plane is not small).  So the first pass only finds
     each planar cell's plane; the second refits it from every point within ``band_m`` of that plane
-    whose projection onto it falls inside the cell, whichever cube the point itself is in.
+    whose projection onto it falls inside the cell, whichever cube the point itself is in (the
+    point's own cube or one of its six face neighbours: a plane 10 cm from a cube's edge and corner
+    at once is rare, and the 27-neighbour version cost four times as much for no measured gain).
     ``min_coplanar_neighbours`` > 0 also drops cells with fewer planar neighbours of the same
     plane (edges of surfaces).
     """
@@ -132,22 +136,21 @@ def plane_cells(points: np.ndarray, cell_m: float, min_points: int = 8, max_flat
     m = len(codes)
     # Second pass: every point near a planar cell's plane whose projection is inside that cell.
     pts_idx, cell_idx, loc_list = [], [], []
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            for dz in (-1, 0, 1):
-                nb = flat + (dx * shape[1] + dy) * shape[2] + dz
-                pos = np.clip(np.searchsorted(codes, nb), 0, m - 1)
-                found = np.flatnonzero(codes[pos] == nb)
-                if not len(found):
-                    continue
-                j = pos[found]
-                loc = local[found] - np.array([dx, dy, dz]) * cell_m    # in cell j's corner frame
-                d = np.einsum("ij,ij->i", loc, normal[j]) - offset[j]
-                proj = loc - d[:, None] * normal[j]
-                ok = (np.abs(d) < band_m) & np.all((proj >= 0) & (proj < cell_m), axis=1)
-                pts_idx.append(found[ok])
-                cell_idx.append(j[ok])
-                loc_list.append(loc[ok])
+    for dx, dy, dz in _SELF_AND_FACES:
+        nb = flat + (dx * shape[1] + dy) * shape[2] + dz
+        pos = np.clip(np.searchsorted(codes, nb), 0, m - 1)
+        found = np.flatnonzero(codes[pos] == nb)
+        if not len(found):
+            continue
+        j = pos[found]
+        loc = local[found] - np.array([dx, dy, dz]) * cell_m    # in cell j's corner frame
+        d = np.einsum("ij,ij->i", loc, normal[j]) - offset[j]
+        proj = loc - d[:, None] * normal[j]
+        ok = (np.abs(d) < band_m) & np.all((proj >= 0) & (proj < cell_m), axis=1)
+        pts_idx.append(found[ok])
+        cell_idx.append(j[ok])
+        loc_list.append(loc[ok])
+        del nb, pos
     pi = np.concatenate(pts_idx)
     ci = np.concatenate(cell_idx)
     cnt2, s1b, s2b = _moments(np.vstack(loc_list), ci, m)
@@ -247,40 +250,48 @@ def _icp_stage(src: np.ndarray, src_normal: np.ndarray, cells: PlaneCells, ancho
     return T, rms, used, H, it
 
 
-def register(source: np.ndarray, target: np.ndarray, T0: np.ndarray | None = None,
-             stages=DEFAULT_STAGES, prepared: dict | None = None) -> Registration:
+class CloudModel:
+    """One pose's cloud with its planar cells per cell size, computed once and used both as the
+    target of one pair and as the source of the next."""
+
+    def __init__(self, points: np.ndarray):
+        stride = max(1, -(-len(points) // MAX_PLANE_POINTS))
+        self.points = np.ascontiguousarray(points[::stride])
+        self._cells: dict = {}
+
+    def cells(self, cell_m: float):
+        if cell_m not in self._cells:
+            cells = plane_cells(self.points, cell_m)
+            on_plane = np.flatnonzero(cells.label >= 0)
+            anchors = on_plane[::max(1, -(-len(on_plane) // MAX_ANCHOR_POINTS))]
+            tree = cKDTree(self.points[anchors]) if len(anchors) else None
+            sources = on_plane[::max(1, -(-len(on_plane) // MAX_SOURCE_POINTS))]
+            self._cells[cell_m] = (cells, cells.label[anchors], tree, self.points[sources],
+                                   cells.normal[cells.label[sources]])
+        return self._cells[cell_m]
+
+
+def register(source, target, T0: np.ndarray | None = None, stages=DEFAULT_STAGES) -> Registration:
     """Transform that maps ``source`` points (lidar frame at pose j) onto ``target`` (pose i).
 
     Parameters
     ----------
-    source, target : (N, 3) [m] accumulated clouds, each in the lidar frame of its pose
+    source, target : (N, 3) [m] accumulated clouds, each in the lidar frame of its pose, or
+        :class:`CloudModel` of them (to reuse a cloud's cells across pairs)
     T0 : 4 x 4 initial guess (default identity); ICP only converges from a guess within its
         basin (in a room, a few degrees and a few tenths of a metre).
     stages : ((cell_m, max_dist_m, iterations), ...) coarse to fine
-    prepared : optional cache {(id(target), cell_m): (PlaneCells, anchor cells, cKDTree)} to reuse
-        a target's cells across pairs.
     """
+    src_model = source if isinstance(source, CloudModel) else CloudModel(source)
+    tgt_model = target if isinstance(target, CloudModel) else CloudModel(target)
     T = np.eye(4) if T0 is None else T0.copy()
     total = 0
     rms, used, H = np.inf, 0, np.zeros((6, 6))
     for cell_m, max_dist_m, iters in stages:
-        key = (id(target), cell_m)
-        if prepared is not None and key in prepared:
-            cells, anchor_cell, tree = prepared[key]
-        else:
-            cells = plane_cells(target, cell_m)
-            on_plane = np.flatnonzero(cells.label >= 0)
-            on_plane = on_plane[::max(1, -(-len(on_plane) // MAX_ANCHOR_POINTS))]
-            anchor_cell = cells.label[on_plane]
-            tree = cKDTree(target[on_plane]) if len(on_plane) else None
-            if prepared is not None:
-                prepared[key] = (cells, anchor_cell, tree)
-        src_cells = plane_cells(source, cell_m)
-        on_src = np.flatnonzero(src_cells.label >= 0)
-        on_src = on_src[::max(1, -(-len(on_src) // MAX_SOURCE_POINTS))]
-        if tree is None or len(cells) < 6 or len(on_src) < 6:
+        cells, anchor_cell, tree, _, _ = tgt_model.cells(cell_m)
+        _, _, _, src_pts, src_nrm = src_model.cells(cell_m)
+        if tree is None or len(cells) < 6 or len(src_pts) < 6:
             break
-        T, rms, used, H, it = _icp_stage(source[on_src], src_cells.normal[src_cells.label[on_src]], cells, anchor_cell,
-                                         tree, T, max_dist_m, iters)
+        T, rms, used, H, it = _icp_stage(src_pts, src_nrm, cells, anchor_cell, tree, T, max_dist_m, iters)
         total += it
     return Registration(T, rms, used, H, total)
