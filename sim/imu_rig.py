@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from foveatrack.errors import UserError
-from foveatrack.imu_calib import procedure
+from foveatrack.imu_calib import handeye, procedure
 from foveatrack.imu_calib.imu_integration import ImuSamples, relative_motions
 from foveatrack.imu_calib.se3 import eq8_error, eq8_parts, inv_T, make_T, rotation_angle_deg, so3_exp, so3_log
 from sim.effects import effect_rng
@@ -152,6 +152,10 @@ class Score:
     rotation_sigma_deg: np.ndarray
     translation_sigma_m: np.ndarray
     points_per_pose: float
+    imu_floor_rotation_deg: float      # X error from the true A and the IMU's B: what the IMU allows
+    imu_floor_translation_m: float
+    lidar_floor_rotation_deg: float    # X error from the registered A and the true B: what the lidar allows
+    lidar_floor_translation_m: float
 
 
 def score(data: RigData, result: procedure.CalibrationResult, lidar: str) -> Score:
@@ -162,6 +166,10 @@ def score(data: RigData, result: procedure.CalibrationResult, lidar: str) -> Sco
     reg_r = [rotation_angle_deg(a[:3, :3].T @ t[:3, :3]) for a, t in zip(result.A, A_true)]
     reg_t = [float(np.linalg.norm(a[:3, 3] - t[:3, 3])) for a, t in zip(result.A, A_true)]
     npts = np.mean([len(procedure.accumulated(c, result.accumulate_s)) for c in data.clouds[lidar]])
+    X_true = data.X_true
+    B_true = [inv_T(X_true) @ a @ X_true for a in A_true]
+    imu_floor = _x_error(handeye.solve_handeye(A_true, result.B).X, X_true)
+    lidar_floor = _x_error(handeye.solve_handeye(result.A, B_true).X, X_true)
     return Score(
         lidar, result.accumulate_s, X,
         float(np.degrees(np.linalg.norm(so3_log(X[:3, :3] @ data.X_true[:3, :3].T)))),
@@ -169,7 +177,13 @@ def score(data: RigData, result: procedure.CalibrationResult, lidar: str) -> Sco
         float(np.mean(e8)), float(parts[:, 0].mean()), float(np.degrees(parts[:, 1].mean())),
         float(np.mean(reg_r)), float(np.mean(reg_t)),
         result.uncertainty.rotation_sigma_deg, result.uncertainty.translation_sigma_m, float(npts),
+        *imu_floor, *lidar_floor,
     )
+
+
+def _x_error(X: np.ndarray, X_true: np.ndarray) -> tuple[float, float]:
+    return (float(np.degrees(np.linalg.norm(so3_log(X[:3, :3] @ X_true[:3, :3].T)))),
+            float(np.linalg.norm(X[:3, 3] - X_true[:3, 3])))
 
 
 def run(scene, lidars: list[str], accumulate_s=ACCUMULATE_DEFAULT_S, bootstrap_samples: int = 200,
@@ -211,6 +225,9 @@ def score_row(s: Score) -> dict:
         "registration_translation_m": s.registration_translation_m,
         "rotation_sigma_deg": [float(v) for v in s.rotation_sigma_deg],
         "translation_sigma_m": [float(v) for v in s.translation_sigma_m],
+        "imu_floor_rotation_deg": s.imu_floor_rotation_deg, "imu_floor_translation_m": s.imu_floor_translation_m,
+        "lidar_floor_rotation_deg": s.lidar_floor_rotation_deg,
+        "lidar_floor_translation_m": s.lidar_floor_translation_m,
     }
 
 

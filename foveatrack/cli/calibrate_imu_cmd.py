@@ -123,7 +123,7 @@ def cmd_calibrate_imu(args) -> int:
         from foveatrack.cli.imu_calib_plots import plot_error_vs_accumulation
 
         plot_error_vs_accumulation(rows, coverage, args.plot, scene.name,
-                                   f"foveatrack calibrate-imu {args.scene} --lidar {','.join(lidars)}")
+                                   f"foveatrack calibrate-imu {args.scene} --lidar {','.join(lidars)} --accumulate {args.accumulate} --plot {args.plot}")
     summary = {"scene": scene.name, "poses": len(data.lidar_poses), "wall_s": round(wall_s, 1),
                "extrinsic": extrinsic, "rows": rows}
     if args.json:
@@ -138,6 +138,12 @@ def cmd_calibrate_imu(args) -> int:
               f"{r['rotation_error_deg']:7.4f} d {r['translation_error_m'] * 100:7.3f} cm "
               f"{max(r['rotation_sigma_deg']):10.4f} d {max(r['translation_sigma_m']) * 100:8.3f} cm "
               f"{r['registration_rotation_deg']:6.4f} d {r['registration_translation_m'] * 100:5.3f} cm")
+    for name in lidars:
+        r = [x for x in rows if x["lidar"] == name][-1]
+        print(f"what the noise allows ({name}, {r['accumulate_s']:g} s): true lidar motions with the IMU's -> "
+              f"{r['imu_floor_rotation_deg']:.4f} deg, {r['imu_floor_translation_m'] * 100:.3f} cm; registered lidar "
+              f"motions with the true IMU's -> {r['lidar_floor_rotation_deg']:.4f} deg, "
+              f"{r['lidar_floor_translation_m'] * 100:.3f} cm")
     e = extrinsic
     print(f"extrinsic ({e['lidar']}, {e['accumulate_s']:g} s): rpy {e['rotation_rpy_deg']} deg "
           f"(truth {e['truth_rotation_rpy_deg']}), t {e['translation_m']} m (truth {e['truth_translation_m']})"

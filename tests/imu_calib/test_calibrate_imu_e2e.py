@@ -1,7 +1,8 @@
 """The whole lidar-IMU calibration on the simulated rig (paper Section IV.A, Fig. 11b).
 
 The bar of issue 19: the extrinsic within 0.1 deg and 1 cm after 10 s per pose on the Mid-40 rig
-(scenes/imu-calibration-room.toml: 2 cm range noise, 1 % motor speed noise, a BMI088).  The error must
+(scenes/imu-calibration-room.toml: 25 poses, 2 cm range noise, 1 % motor speed noise, a BMI088;
+with 13 poses it measured 0.17 deg, not met).  The error must
 fall with accumulation and the 16-line lidar must do worse at equal time.
 """
 
@@ -18,14 +19,22 @@ ROOM = "scenes/imu-calibration-room.toml"
 
 
 @pytest.fixture(scope="module")
-def room_runs():
-    scene = load_scene(ROOM)
-    return imu_rig.run(scene, ["mid40", "vlp16"], (0.2, 1.0, 10.0), bootstrap_samples=100)
+def room_25_poses():
+    """The shipped room (25 poses), Mid-40, 10 s per pose."""
+    return imu_rig.run(load_scene(ROOM), ["mid40"], (10.0,), bootstrap_samples=100)
+
+
+@pytest.fixture(scope="module")
+def room_7_poses(tmp_path_factory):
+    """The room with 7 poses (6 pairs): enough to compare registration errors."""
+    path = tmp_path_factory.mktemp("imu") / "room7.toml"
+    path.write_text(open(ROOM).read().replace("count = 25", "count = 7"))
+    return imu_rig.run(load_scene(path), ["mid40", "vlp16"], (0.2, 1.0, 10.0), bootstrap_samples=0)
 
 
 @pytest.mark.slow
-def test_mid40_10s_meets_the_bar(room_runs):
-    data, out = room_runs
+def test_mid40_10s_meets_the_bar(room_25_poses):
+    _, out = room_25_poses
     _, s = out["mid40"][-1]
     assert s.accumulate_s == 10.0
     assert s.rotation_error_deg < 0.1, s
@@ -36,14 +45,14 @@ def test_mid40_10s_meets_the_bar(room_runs):
 
 
 @pytest.mark.slow
-def test_error_falls_with_accumulation_and_16_lines_do_worse(room_runs):
-    _, out = room_runs
+def test_error_falls_with_accumulation_and_16_lines_do_worse(room_7_poses):
+    _, out = room_7_poses
     mid = {s.accumulate_s: s for _, s in out["mid40"]}
     vlp = {s.accumulate_s: s for _, s in out["vlp16"]}
-    assert mid[10.0].eq8_mean < mid[0.2].eq8_mean
+    assert mid[10.0].registration_rotation_deg < mid[0.2].registration_rotation_deg
     assert mid[10.0].registration_translation_m < mid[0.2].registration_translation_m
     for t in (1.0, 10.0):
-        assert vlp[t].registration_translation_m > mid[t].registration_translation_m, (t, vlp[t], mid[t])
+        assert vlp[t].registration_translation_m > 2 * mid[t].registration_translation_m, (t, vlp[t], mid[t])
 
 
 def test_cli_user_errors(tmp_path, capsys):
@@ -60,7 +69,7 @@ def test_cli_user_errors(tmp_path, capsys):
 @pytest.mark.slow
 def test_cli_writes_the_extrinsic(tmp_path, capsys):
     scene = tmp_path / "short.toml"
-    text = open(ROOM).read().replace("count = 13", "count = 5").replace("dwell_s = 10.0", "dwell_s = 1.0")
+    text = open(ROOM).read().replace("count = 25", "count = 5").replace("dwell_s = 10.0", "dwell_s = 1.0")
     scene.write_text(text)
     out = tmp_path / "x.json"
     assert main(["calibrate-imu", str(scene), "--accumulate", "1", "--out", str(out), "--json",
