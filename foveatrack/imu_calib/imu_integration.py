@@ -69,8 +69,8 @@ def integrate_rotation(t_s: np.ndarray, rate_rad_s: np.ndarray) -> np.ndarray:
 def relative_motions(samples: ImuSamples, windows: list[tuple[float, float]]) -> ImuMotion:
     """``B_i`` between consecutive static windows ``[(t_start_s, t_end_s), ...]`` (time order)."""
     P = len(windows)
-    if P < 2:
-        raise UserError(f"{P} static pose(s): the IMU calibration needs at least 3")
+    if P < 3:
+        raise UserError(f"{P} static pose(s): the IMU calibration needs at least 3 (two pairs of poses)")
     masks = [_window(samples, a, b) for a, b in windows]
     mid_s = np.array([0.5 * (a + b) for a, b in windows])
     bg = np.array([samples.gyro_rad_s[m].mean(axis=0) for m in masks])
