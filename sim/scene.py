@@ -16,6 +16,9 @@ and what is allowed.  Tables::
                  waypoints | manual (+ its parameters)
     [[background]] type = ground | wall | room | box (+ its parameters), reflectivity
     [tracker]    foveatrack.tracker.TrackerConfig keys
+    [imu]        an IMU on the lidar (only then simulated): rotation_deg, translation_m (its pose in
+                 the lidar frame), nominal_*, noise keys (sim.imu; defaults: BMI088)
+    [imu_poses]  the static poses of the lidar-IMU calibration: count, step_deg, step_m, dwell_s, move_s
 """
 
 from __future__ import annotations
@@ -106,6 +109,8 @@ class Scene:
     tracker: Any = None  # TrackerConfig
     tracker_table: Mapping[str, Any] = field(default_factory=dict)
     gate: GateSpec | None = None
+    imu: Any = None        # sim.imu.ImuSpec, only if the scene has [imu]
+    imu_poses: Any = None  # sim.imu.PoseSchedule, only if the scene has [imu_poses]
 
     def has(self, effect: str) -> bool:
         return effect in self.effects
@@ -141,7 +146,8 @@ def load_scene(path: str | Path) -> Scene:
 def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str = "") -> Scene:
     from foveatrack.tracker import TrackerConfig
 
-    check_keys(data, ["scene", "effects", "lidar", "gimbal", "target", "background", "tracker", "gate"], where)
+    check_keys(data, ["scene", "effects", "lidar", "gimbal", "target", "background", "tracker", "gate", "imu",
+                      "imu_poses"], where)
     sc = data.get("scene", {})
     w = f"{where} [scene]"
     check_keys(sc, ["name", "duration_s", "seed", "effects", "description"], w)
@@ -192,14 +198,30 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         raise UserError(f"{where}: [tracker] must be a table of tracker keys, got {tracker_raw!r}")
     tracker_table = dict(tracker_raw)
     tracker = TrackerConfig.from_mapping(tracker_table, where=f"{where} [tracker]")
+    imu, imu_poses = _imu(data, where)
     return Scene(
         name=str(sc.get("name", Path(where).stem)), path=where, text=text, duration_s=duration, seed=seed,
         effects=frozenset(effects), effect_params=params, optics=optics, scan_model=scan_model, gimbal=gimbal,
         targets=target_specs,
         background_prims=np.array(prims).reshape(-1, 13), background_reflectivity=np.array(refl, dtype=float),
-        tracker=tracker, tracker_table=tracker_table,
+        tracker=tracker, tracker_table=tracker_table, imu=imu, imu_poses=imu_poses,
         gate=_gate(data["gate"], f"{where} [gate]") if "gate" in data else None,
     )
+
+
+def _imu(data: Mapping, where: str):
+    if "imu" not in data and "imu_poses" not in data:
+        return None, None
+    from sim.imu import imu_from_table, poses_from_table
+
+    for key in ("imu", "imu_poses"):
+        if key in data and not isinstance(data[key], Mapping):
+            raise UserError(f"{where}: [{key}] must be a table")
+    if "imu_poses" in data and "imu" not in data:
+        raise UserError(f"{where}: [imu_poses] needs an [imu] table (the IMU whose mount is calibrated)")
+    imu = imu_from_table(data["imu"], f"{where} [imu]")
+    poses = poses_from_table(data["imu_poses"], f"{where} [imu_poses]") if "imu_poses" in data else None
+    return imu, poses
 
 
 def _lidar(t: Mapping, w: str):

@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "foveatrack.cli.lidar_cmd",
     "foveatrack.cli.gimbal_cmd",
     "foveatrack.cli.calibrate_cmd",
+    "foveatrack.cli.calibrate_imu_cmd",
     "foveatrack.cli.daemon_cmd",
     "foveatrack.cli.replay_cmd",
     "foveatrack.cli.export_cmd",

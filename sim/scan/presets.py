@@ -124,3 +124,6 @@ MID100 = MID40.with_(name="mid100", point_rate_hz=300_000, channel_offsets_deg=(
 
 PRESETS: dict[str, RisleyOptics] = {"prototype": PROTOTYPE, "mid40": MID40, "horizon": HORIZON, "mid70": MID70,
                                     "avia": AVIA, "tele15": TELE15, "mid100": MID100}
+
+# Multi-line spinning comparison scanners (not Risley; the lidar-IMU calibration): sim/scan/spinning.py.
+from sim.scan.spinning import SPINNING_PRESETS  # noqa: E402,F401

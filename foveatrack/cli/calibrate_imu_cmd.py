@@ -1,0 +1,153 @@
+"""``foveatrack calibrate-imu SCENE``: the lidar-IMU extrinsic from static poses (paper Section IV.A,
+Fig. 10-11), on the simulated rig.
+
+::
+
+    foveatrack calibrate-imu SCENE.toml [--lidar mid40,horizon,vlp16] [--accumulate 0.1,0.2,...,10]
+                             [--out X.json] [--plot F.png] [--json] [--bootstrap N]
+
+The scene's ``[imu]`` gives the true mount and ``[imu_poses]`` the pose sequence
+(``docs/imu-calibration.md``).  For each lidar and accumulation time the procedure of
+:mod:`foveatrack.imu_calib.procedure` runs on the same poses and IMU data; the error of eq. (8)
+against the true lidar motion, and the extrinsic's error against the true mount, are printed.
+``--out`` gets the extrinsic of the first lidar at the longest accumulation, with its bootstrap
+1-sigma.  ``--plot``: eq. (8) error and extrinsic error against accumulation time (Fig. 11b) beside
+the coverage of the Risley lidars (Fig. 6e).
+
+Not here yet: the real rig (IMU packets from a live Livox, the head stepped through the poses by
+Pelco-D); the algorithms in :mod:`foveatrack.imu_calib` take plain arrays and would serve it.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+import numpy as np
+
+from foveatrack.config_util import check_output_file
+from foveatrack.errors import UserError
+
+
+def _floats(text: str, flag: str) -> list[float]:
+    try:
+        vals = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise UserError(f"{flag} {text!r}: a comma-separated list of seconds, e.g. 0.1,0.5,1,10") from None
+    if not vals or any(not (v > 0) for v in vals):
+        raise UserError(f"{flag} {text!r}: every time must be > 0 s")
+    return vals
+
+
+def register(sub) -> None:
+    p = sub.add_parser("calibrate-imu", help="lidar-IMU extrinsic from static poses (paper Sec. IV.A, Fig. 11)")
+    p.add_argument("scene", metavar="SCENE.toml", help="a scene with [imu] and [imu_poses] "
+                   "(scenes/imu-calibration-room.toml)")
+    p.add_argument("--accumulate", default="0.1,0.2,0.5,1,2,5,10", metavar="S,S,...",
+                   help="accumulation times per pose [s] (default: %(default)s)")
+    p.add_argument("--lidar", metavar="NAME,...", help="lidars to compare (Risley presets mid40, horizon, "
+                   "prototype; spinning vlp16); default: the scene's [lidar] preset")
+    p.add_argument("--out", metavar="X.json", help="write the extrinsic (first lidar, longest accumulation)")
+    p.add_argument("--plot", metavar="F.png", help="plot error vs accumulation time beside coverage")
+    p.add_argument("--json", action="store_true", help="print a JSON summary instead of text")
+    p.add_argument("--bootstrap", type=int, default=200, metavar="N", help="bootstrap resamples for the "
+                   "1-sigma (default: %(default)s)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=cmd_calibrate_imu)
+
+
+def _extrinsic_json(score, res, truth=None) -> dict:
+    from scipy.spatial.transform import Rotation
+
+    X = res.X
+    out = {
+        "frame": "T_lidar_imu: the IMU's pose in the lidar frame (p_lidar = R p_imu + t)",
+        "rotation_matrix": X[:3, :3].round(9).tolist(),
+        "rotation_rpy_deg": Rotation.from_matrix(X[:3, :3]).as_euler("xyz", degrees=True).round(5).tolist(),
+        "translation_m": X[:3, 3].round(6).tolist(),
+        "sigma_rotation_deg": np.round(res.uncertainty.rotation_sigma_deg, 5).tolist(),
+        "sigma_translation_m": np.round(res.uncertainty.translation_sigma_m, 6).tolist(),
+        "sigma_method": f"bootstrap over the {res.handeye.pairs_used} pose pairs "
+                        f"({res.uncertainty.samples} resamples), 1-sigma per axis",
+        "lidar": score.lidar,
+        "accumulate_s": score.accumulate_s,
+        "pairs": res.handeye.pairs_used,
+        "axis_spread_deg": round(res.handeye.axis_spread_deg, 3),
+        "consistency_eq8_mean": float(np.mean(res.consistency())),
+    }
+    if truth is not None:
+        out["truth_translation_m"] = truth[:3, 3].round(6).tolist()
+        out["truth_rotation_rpy_deg"] = Rotation.from_matrix(truth[:3, :3]).as_euler("xyz", degrees=True).round(5).tolist()
+        out["error_rotation_deg"] = round(score.rotation_error_deg, 5)
+        out["error_translation_m"] = round(score.translation_error_m, 6)
+    return out
+
+
+def cmd_calibrate_imu(args) -> int:
+    from sim import imu_rig
+    from sim.scene import load_scene
+
+    acc = sorted(set(_floats(args.accumulate, "--accumulate")))
+    if args.bootstrap < 0:
+        raise UserError(f"--bootstrap {args.bootstrap}: must be >= 0")
+    for path in (args.out, args.plot):
+        if path:
+            check_output_file(path, "--out" if path == args.out else "--plot")
+    scene = load_scene(args.scene)
+    lidars = [s.strip() for s in args.lidar.split(",") if s.strip()] if args.lidar else [scene.optics.name]
+    for name in lidars:
+        imu_rig.scan_model_for(scene, name)   # unknown names fail here, before any work
+
+    def bar(total, desc):
+        if args.no_progress:
+            return None
+        from tqdm import tqdm
+
+        return tqdm(total=total, desc=desc, file=sys.stderr, leave=False)
+
+    t0 = time.perf_counter()
+    data, results = imu_rig.run(scene, lidars, acc, bootstrap_samples=args.bootstrap, progress_factory=bar)
+    wall_s = time.perf_counter() - t0
+    coverage = None
+    if args.plot:
+        coverage = imu_rig.coverage_curves(scene, lidars, max(acc))
+    first = results[lidars[0]][-1]
+    extrinsic = _extrinsic_json(first[1], first[0], data.X_true)
+    if args.out:
+        with open(args.out, "w") as fh:
+            json.dump(extrinsic, fh, indent=2)
+            fh.write("\n")
+    rows = [imu_rig.score_row(s) for name in lidars for _, s in results[name]]
+    if args.plot:
+        from foveatrack.cli.imu_calib_plots import plot_error_vs_accumulation
+
+        plot_error_vs_accumulation(rows, coverage, args.plot, scene.name,
+                                   f"foveatrack calibrate-imu {args.scene} --lidar {','.join(lidars)} --accumulate {args.accumulate} --plot {args.plot}")
+    summary = {"scene": scene.name, "poses": len(data.lidar_poses), "wall_s": round(wall_s, 1),
+               "extrinsic": extrinsic, "rows": rows}
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    print(f"scene {scene.name}: {len(data.lidar_poses)} static poses, {len(data.lidar_poses) - 1} pairs; "
+          f"{wall_s:.1f} s wall")
+    print(f"{'lidar':8} {'T [s]':>6} {'pts/pose':>9} {'eq8':>8} {'rot err':>9} {'trans err':>10} "
+          f"{'1-sigma rot':>12} {'1-sigma tr':>11} {'reg rot':>8} {'reg tr':>8}")
+    for r in rows:
+        print(f"{r['lidar']:8} {r['accumulate_s']:6.1f} {r['points_per_pose']:9.0f} {r['eq8_mean']:8.5f} "
+              f"{r['rotation_error_deg']:7.4f} d {r['translation_error_m'] * 100:7.3f} cm "
+              f"{max(r['rotation_sigma_deg']):10.4f} d {max(r['translation_sigma_m']) * 100:8.3f} cm "
+              f"{r['registration_rotation_deg']:6.4f} d {r['registration_translation_m'] * 100:5.3f} cm")
+    for name in lidars:
+        r = [x for x in rows if x["lidar"] == name][-1]
+        print(f"what the noise allows ({name}, {r['accumulate_s']:g} s): true lidar motions with the IMU's -> "
+              f"{r['imu_floor_rotation_deg']:.4f} deg, {r['imu_floor_translation_m'] * 100:.3f} cm; registered lidar "
+              f"motions with the true IMU's -> {r['lidar_floor_rotation_deg']:.4f} deg, "
+              f"{r['lidar_floor_translation_m'] * 100:.3f} cm")
+    e = extrinsic
+    print(f"extrinsic ({e['lidar']}, {e['accumulate_s']:g} s): rpy {e['rotation_rpy_deg']} deg "
+          f"(truth {e['truth_rotation_rpy_deg']}), t {e['translation_m']} m (truth {e['truth_translation_m']})"
+          + (f" -> {args.out}" if args.out else ""))
+    if args.plot:
+        print(f"plot: {args.plot}")
+    return 0
