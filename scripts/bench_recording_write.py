@@ -48,17 +48,52 @@ def run(writer_cls, n_points: int, n_frames: int, path: Path, **kw) -> tuple[np.
     return np.asarray(cpu) * 1e3, path.stat().st_size
 
 
+def closed_loop(scene_path: str, background: bool, old=None, **wkw) -> tuple[float, float, float, int]:
+    """fig12 as ``simulate --out`` runs it: (frame hook CPU ms per frame on the loop's thread, wall s of
+    the run without recording, wall s with it, file bytes)."""
+    from sim.loop import ClosedLoop
+    from sim.recorder import SimRecorder, recording_meta
+    from sim.scene import load_scene
+
+    scene = load_scene(scene_path)
+    ClosedLoop(scene).run()                       # warm: numba cache, first calls
+    t = time.perf_counter()
+    ClosedLoop(scene).run()
+    wall_plain = time.perf_counter() - t
+    cls = RecordingWriter if old is None else old
+    kw = {"background": True, **wkw} if background else dict(wkw)
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "run.mcap"
+        hook_s = []
+        t = time.perf_counter()
+        loop = ClosedLoop(scene)
+        with cls(path, recording_meta(scene, loop), overwrite=True, **kw) as w:
+            rec = SimRecorder(w)
+
+            def hook(frame, out, lp):
+                c = time.thread_time()
+                rec(frame, out, lp)
+                hook_s.append(time.thread_time() - c)
+            loop.frame_hook = hook
+            loop.run()
+        wall_rec = time.perf_counter() - t
+        return float(np.mean(hook_s[1:]) * 1e3), wall_plain, wall_rec, path.stat().st_size
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--points", type=int, default=10_000)
     ap.add_argument("--frames", type=int, default=200)
     ap.add_argument("--old", help="a format-1 writer module to time beside the current one")
+    ap.add_argument("--scene", help="also run this scene's closed loop (e.g. scenes/fig12-tracking.toml) without "
+                                    "and with recording")
     a = ap.parse_args()
-    cases = [("foxglove-sdk writer (format 2, zstd)", RecordingWriter, {}),
-             ("foxglove-sdk writer (format 2, lz4)", RecordingWriter, {"compression": "lz4"}),
+    cases = [("foxglove-sdk writer (format 2, zstd)", RecordingWriter, {"compression": "zstd"}),
+             ("foxglove-sdk writer (format 2, lz4)", RecordingWriter, {}),
              ("foxglove-sdk writer (format 2, none)", RecordingWriter, {"compression": "none"}),
-             ("foxglove-sdk writer (zstd), background=True", RecordingWriter, {"background": True}),
-             ("foxglove-sdk writer (lz4), background=True", RecordingWriter, {"background": True, "compression": "lz4"})]
+             ("foxglove-sdk writer (zstd), background=True", RecordingWriter, {"background": True,
+                                                                                "compression": "zstd"}),
+             ("foxglove-sdk writer (lz4), background=True", RecordingWriter, {"background": True})]
     if a.old:
         spec = importlib.util.spec_from_file_location("old_writer", a.old)
         mod = importlib.util.module_from_spec(spec)
@@ -66,12 +101,31 @@ def main() -> None:
         cases.insert(0, ("python mcap writer (format 1, JSON + base64, lz4)", mod.RecordingWriter, {}))
     print(f"{a.frames} frames of {a.points} points, CPU ms per frame on the writing thread (os.cpu_count() = "
           f"{os.cpu_count()}):")
+    old_cls = cases[0][1] if a.old else None
     with tempfile.TemporaryDirectory() as d:
         for name, cls, kw in cases:
             ms, size = run(cls, a.points, a.frames, Path(d) / "r.mcap", **kw)
             ms = ms[5:]     # first frames: imports, schemas
             print(f"  {name:52s} p50 {np.percentile(ms, 50):6.3f}  p95 {np.percentile(ms, 95):6.3f}  "
                   f"mean {ms.mean():6.3f} ms; {size / a.frames / 1e3:7.1f} kB per frame")
+    if a.scene:
+        scene_report(a.scene, old_cls)
+
+
+
+
+
+def scene_report(scene: str, old_cls) -> None:
+    runs = [("foxglove-sdk writer (lz4), background=True (simulate --out)", True, None, {}),
+            ("foxglove-sdk writer (zstd), background=True", True, None, {"compression": "zstd"}),
+            ("foxglove-sdk writer (lz4), on the loop's thread", False, None, {})]
+    if old_cls is not None:
+        runs.insert(0, ("python mcap writer (format 1, lz4)", False, old_cls, {}))
+    print(f"{scene}: closed loop without / with the recording")
+    for name, bg, cls, wkw in runs:
+        hook_ms, plain, rec, size = closed_loop(scene, bg, cls, **wkw)
+        print(f"  {name:56s} hook {hook_ms:6.3f} ms/frame on the loop's thread; wall {plain:5.2f} s -> "
+              f"{rec:5.2f} s with it; {size / 1e6:6.2f} MB")
 
 
 if __name__ == "__main__":

@@ -174,17 +174,21 @@ def _varint(v: int) -> bytes:
 
 
 def encode_points_pb(t_ns: int, frame_id: int, packed: np.ndarray) -> bytes:
-    """One frame as a foxglove.PointCloud (protobuf) encoded by the Foxglove SDK, frame ``lidar``,
-    with the frame index in field 15.  ``packed``: an array of :func:`packed_point_dtype`."""
+    """One frame as a foxglove.PointCloud (protobuf), frame ``lidar``, with the frame index in field
+    15.  ``packed``: an array of :func:`packed_point_dtype`.  The Foxglove SDK encodes the message
+    without its point data; the data (field 6, bytes) is appended to it, so the ~0.3 MB of a 10 k-point
+    frame is copied once, not four times (a message's fields may come in any order)."""
     from foxglove.messages import PackedElementField, PackedElementFieldNumericType as NT, PointCloud, Timestamp
 
     types = {"<f8": NT.Float64, "<f4": NT.Float32, "<i4": NT.Int32, "|u1": NT.Uint8}
     fields = [PackedElementField(name=name, offset=int(off), type=types[dt_.str])
               for name, (dt_, off) in packed.dtype.fields.items()]
     t_ns = int(t_ns)
-    msg = PointCloud(timestamp=Timestamp(t_ns // 1_000_000_000, t_ns % 1_000_000_000), frame_id="lidar",
-                     point_stride=packed.dtype.itemsize, fields=fields, data=packed.tobytes())
-    return msg.encode() + bytes([FRAME_INDEX_FIELD << 3]) + _varint(int(frame_id))
+    head = PointCloud(timestamp=Timestamp(t_ns // 1_000_000_000, t_ns % 1_000_000_000), frame_id="lidar",
+                      point_stride=packed.dtype.itemsize, fields=fields).encode()
+    data = memoryview(np.ascontiguousarray(packed)).cast("B")
+    return b"".join((head, bytes([6 << 3 | 2]), _varint(data.nbytes), data,
+                     bytes([FRAME_INDEX_FIELD << 3]), _varint(int(frame_id))))
 
 
 def _pb_fields(buf, i: int = 0, n: int | None = None):

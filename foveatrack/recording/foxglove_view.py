@@ -26,7 +26,7 @@ import numpy as np
 from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, LOG, METRICS, POINTS, RECORD_SCHEMAS, SCENE,
                                          TF, TRUTH, encode_points_pb)
 
-HISTORY_MAX = 600          # points kept in a drawn trajectory (60 s at 10 Hz)
+SEGMENT_FRAMES = 50        # a drawn trajectory is one line entity per 50 frames (constant cost per frame)
 
 
 def head_quaternion(pan_deg: float, tilt_deg: float) -> tuple[float, float, float, float]:
@@ -77,8 +77,7 @@ class FoxgloveChannels:
         table = meta.get("tracker_table") or {}
         self.lidar_offset_m = tuple(float(v) for v in table.get("lidar_offset_m", (0.0, 0.0, 0.0)))
         self._space = table.get("space") if isinstance(table.get("space"), dict) else None
-        self._est_path: list = []
-        self._true_path: list = []
+        self._paths: dict[str, tuple[int, list]] = {}     # name -> (segment number, its points)
         self._state: str | None = None
         self._space_sent = False
 
@@ -121,19 +120,17 @@ class FoxgloveChannels:
         """Transforms, scene entities and log lines from a record just written."""
         if name == HEAD and rec.get("pan_deg") is not None:
             self._head_tf(t_ns, "head_est", "lidar", rec["pan_deg"], rec["tilt_deg"])
+            ents = [] if self._space_sent else self._space_entities(t_ns)
             if rec.get("world_xyz_m") is not None:
-                self._est_path.append(rec["world_xyz_m"])
-                del self._est_path[:-HISTORY_MAX]
-            self._scene_update(t_ns, [self._line("reconstructed_trajectory", t_ns, self._est_path, (0.1, 0.5, 1.0))]
-                               + ([] if self._space_sent else self._space_entities(t_ns)))
+                ents.append(self._path_point("reconstructed_trajectory", t_ns, rec["world_xyz_m"], (0.1, 0.5, 1.0)))
+            if ents:
+                self._scene_update(t_ns, ents)
         elif name == TRUTH and rec.get("pan_deg") is not None:
             self._head_tf(t_ns, "head_true", "lidar_true", rec["pan_deg"], rec["tilt_deg"])
             xyz = rec.get("target_xyz_m")
             if xyz is not None:
-                self._true_path.append(xyz)
-                del self._true_path[:-HISTORY_MAX]
                 self._scene_update(t_ns, [self._sphere("true_uav", t_ns, "world", xyz, 0.5, (0.1, 0.9, 0.2)),
-                                          self._line("true_trajectory", t_ns, self._true_path, (0.1, 0.9, 0.2))])
+                                          self._path_point("true_trajectory", t_ns, xyz, (0.1, 0.9, 0.2))])
         elif name == DETECTIONS:
             xyz = rec.get("xyz_m") if rec.get("detected") else None
             ent = self._sphere("detection", t_ns, "lidar", xyz, 0.6, (1.0, 0.2, 0.1))
@@ -185,6 +182,16 @@ class FoxgloveChannels:
                       orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
             size=Vector3(x=size_m, y=size_m, z=size_m), color=self._color(rgb, 0.8))]
         return SceneEntity(timestamp=_ts(t_ns), frame_id=frame, id=ident, spheres=spheres)
+
+    def _path_point(self, name, t_ns, xyz, rgb):
+        """Add a point to trajectory ``name``: the entity ``name/N`` of its current segment grows by
+        one point; a new segment starts at the last point of the one before (no gap)."""
+        seg, pts = self._paths.get(name, (0, []))
+        if len(pts) > SEGMENT_FRAMES:
+            seg, pts = seg + 1, pts[-1:]
+        pts.append(xyz)
+        self._paths[name] = (seg, pts)
+        return self._line(f"{name}/{seg}", t_ns, pts, rgb)
 
     def _line(self, ident, t_ns, pts, rgb):
         from foxglove.messages import LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity

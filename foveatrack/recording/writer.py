@@ -45,7 +45,8 @@ class RecordingWriter:
         None: no file (the messages go only to the sinks of :attr:`context`, e.g. the live view)
     meta : dict, JSON-serialisable (scene/config text, seed, parameters, ...)
     flush_every_frames : int >= 1, complete a chunk every this many point frames
-    compression : "zstd" (default), "lz4" or "none"
+    compression : "lz4" (default: the float64 points hardly compress, zstd saves ~4 % of a simulator
+        recording for 2.5x the CPU), "zstd" or "none"
     points_dtype : "float64" (bit-exact replay) or "float32" (compact)
     fsync : also fsync the file at each flush
     background : encode and write on a thread of the writer's own: the caller's ``write*`` and
@@ -60,7 +61,7 @@ class RecordingWriter:
         path: str | os.PathLike | None,
         meta: dict | None = None,
         flush_every_frames: int = 1,
-        compression: str = "zstd",
+        compression: str = "lz4",
         points_dtype: str = "float64",
         fsync: bool = False,
         overwrite: bool = False,
