@@ -161,3 +161,34 @@ def test_a_simulator_recording_replays_to_the_bit(sim_rec):
     c = replay_recording(path).comparison
     assert c["detections_equal"] and c["commands_equal"] and c["max_detection_xyz_diff_m"] == 0.0
     assert c["commands_compared"] == len(log["t_end_s"])
+
+
+def test_the_shipped_layout_names_channels_and_fields_a_recording_has(sim_rec):
+    """docs/foxglove-layout.json (scripts/make_foxglove_layout.py): every plotted path is a field of
+    its channel's schema, every topic it shows is one a simulator recording has."""
+    path, _ = sim_rec
+    doc = json.loads((ROOT / "docs" / "foxglove-layout.json").read_text())
+    summary, _ = decoded(path)
+    topics = {c.topic: json.loads(summary.schemas[c.schema_id].data) if c.message_encoding == "json" else None
+              for c in summary.channels.values()}
+    values, shown = [], []
+
+    def walk(x):
+        if isinstance(x, dict):
+            for k, v in x.items():
+                if k == "value" and isinstance(v, str):
+                    values.append(v)
+                elif k == "topicToRender":
+                    shown.append(v)
+                elif k == "topics" and isinstance(v, dict):
+                    shown.extend(v)
+                walk(v)
+        elif isinstance(x, list):
+            for v in x:
+                walk(v)
+    walk(doc)
+    assert len(values) >= 6 and {"/points", "/scene", "/log"} <= set(shown)
+    assert set(shown) <= set(topics)
+    for v in values:
+        topic, field = v.split(".", 1)
+        assert topic in topics and field in topics[topic]["properties"], v
