@@ -201,7 +201,10 @@ def _plot_run(scene, log, summary, out_dir) -> list[Path]:
         err_title, phases = f"{name}: target angle off the fixed lidar axis (head frozen)", {}
     else:
         err_title = f"{name}: tracking error (paper Fig. 14b)"
-        phases = dict(deadband_deg=db, in_fov_t_s=summary["in_fov_t_s"], acquired_t_s=summary["acquired_t_s"])
+        phases = dict(deadband_deg=db, in_fov_t_s=summary["in_fov_t_s"], acquired_t_s=summary["acquired_t_s"],
+                      deadband_axes_deg=(cfg.deadband_pan_deg, cfg.deadband_tilt_deg))
+        if "true_az_deg" in log and "true_el_deg" in log:
+            phases["axis_error_deg"] = (log["true_az_deg"], log["true_el_deg"])
     return [
         sim_plots.plot_error_vs_time(t, log["true_error_deg"], err_title, out_dir / "error.png",
                                      detected=log["detected"], half_fov_deg=summary["half_fov_deg"], **phases),
