@@ -94,3 +94,30 @@ def test_the_pacer_holds_virtual_time_to_the_wall_clock():
     assert time.monotonic() - t0 >= 0.5 / 20.0
     with pytest.raises(UserError, match="--speed"):
         Pacer(0)
+
+
+FIXTURE = __import__("pathlib").Path(__file__).parent / "fixtures" / "fig12-v1.mcap"
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
+
+
+def test_simulate_and_replay_live_from_the_cli(capsys):
+    from foveatrack.cli import main
+
+    assert main(["simulate", str(ROOT / "scenes" / "fig12-tracking.toml"), "--duration", "0.3", "--live", "0",
+                 "--speed", "50", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "live view on ws://127.0.0.1:" in err and "50x real time" in err
+    assert main(["replay", str(FIXTURE), "--live", "0", "--speed", "100", "--wait-s", "0"]) == 0
+    cap = capsys.readouterr()
+    assert "live view: served 40 messages" in cap.err          # 8 frames x 5 records of a format-1 file
+    assert "same as recorded" in cap.out
+
+
+@pytest.mark.parametrize("args,msg", [(["--live", "abc"], "--live 'abc'"), (["--live", "99999"], "0-65535"),
+                                      (["--live", "0", "--speed", "0"], "--speed 0")])
+def test_live_flags_are_checked(args, msg, capsys):
+    from foveatrack.cli import main
+
+    code = main(["simulate", str(ROOT / "scenes" / "fig12-tracking.toml"), "--duration", "0.2", "--no-progress",
+                 *args])
+    assert code != 0 and msg in capsys.readouterr().err
