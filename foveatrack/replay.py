@@ -421,11 +421,15 @@ def replay(path: str | os.PathLike, tracker_config_path: str | None = None) -> R
 
 # ----------------------------------------------------------------------------------------- figures
 def _stats(x) -> dict:
+    """rms, p95 and max of the magnitude |x| (a percentile of a signed error mixes its two sides:
+    p95 -0.82 beside rms 2.30 said nothing), and the signed mean (the bias); ``of`` says so."""
     x = np.asarray(x, float)
     x = x[np.isfinite(x)]
     if x.size == 0:
-        return {"rms": None, "p95": None, "max": None}
-    return {"rms": float(np.sqrt(np.mean(x ** 2))), "p95": float(np.percentile(x, 95)), "max": float(np.max(np.abs(x)))}
+        return {"rms": None, "p95": None, "max": None, "mean_signed": None, "of": "|error|; mean_signed is signed"}
+    a = np.abs(x)
+    return {"rms": float(np.sqrt(np.mean(x ** 2))), "p95": float(np.percentile(a, 95)), "max": float(np.max(a)),
+            "mean_signed": float(np.mean(x)), "of": "|error|; mean_signed is signed"}
 
 
 def bearing_metrics(frames: dict) -> dict:
@@ -496,23 +500,27 @@ def format_report(res: ReplayResult) -> str:
     L = [f"replay of {res.path} ({res.source}, {len(res.frames['t_end_s'])} frames, tracker config: {res.config})"]
     m = res.metrics
     tr = m.get("tracking")
+    c = res.comparison
+    # with another configuration the replay is open loop (the points are those of the recorded head
+    # motion): its errors are what that configuration would have seen there, said beside the numbers
+    open_loop = ("detections_equal" in c and not (c["detections_equal"] and c["commands_equal"]))
+    caveat = " (open loop: on the recorded head motion, not where this config would have steered)" if open_loop else ""
     if tr is not None:
         te = tr["tracking_error_deg"]
         fmt = lambda v: "n/a" if v is None else f"{v:.3f}"  # noqa: E731
         L.append(f"  tracking error after acquisition [deg]: rms {fmt(te['rms'])}, p95 {fmt(te['p95'])}, "
                  f"max {fmt(te['max'])}; acquisition {fmt(tr['acquisition_s'])} s; "
-                 f"frames with detection {tr['frames_with_detection']}/{tr['frames']}")
+                 f"frames with detection {tr['frames_with_detection']}/{tr['frames']}{caveat}")
         if "reconstruction_error_m" in tr and tr["reconstruction_error_m"]["rms"] is not None:
             re_ = tr["reconstruction_error_m"]
             L.append(f"  reconstructed target position error [m]: rms {re_['rms']:.3f}, p95 {re_['p95']:.3f}, "
-                     f"max {re_['max']:.3f}")
+                     f"max {re_['max']:.3f}{caveat}")
     d = m["detection"]
     be = d["bearing_error_deg"]
     L.append(f"  detections: {d['frames_with_detection']}/{d['frames']} frames"
-             + (f", bearing error off the lidar axis [deg]: rms {be['rms']:.3f}, p95 {be['p95']:.3f}, max {be['max']:.3f}"
-                if be["rms"] is not None else "")
+             + (f", bearing error off the lidar axis [deg]: rms {be['rms']:.3f}, p95 |.| {be['p95']:.3f}, "
+                f"max |.| {be['max']:.3f}" if be["rms"] is not None else "")
              + f"; states {d['states']}")
-    c = res.comparison
     if c.get("recording_damage"):
         L.insert(1, "  WARNING: damaged recording, " + "; ".join(c["recording_damage"]))
     if c.get("partial"):

@@ -15,6 +15,8 @@ def register(sub) -> None:
     p.add_argument("--duration-s", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--no-status", action="store_true", help="no live status line even on a terminal")
     p.add_argument("--check", action="store_true", help="validate the config, print it, and exit")
+    p.add_argument("--live", nargs="?", const=8765, default=None, metavar="PORT",
+                   help="serve the tracking to Foxglove on ws://127.0.0.1:PORT (default 8765)")
     p.set_defaults(func=cmd_daemon)
 
 
@@ -33,7 +35,13 @@ def cmd_daemon(args) -> int:
         return 0
     if args.duration_s is not None and not args.duration_s > 0:
         raise UserError(f"--duration-s must be > 0, got {args.duration_s}")
-    d = Daemon(cfg, log_path=args.log, status=False if args.no_status else None, duration_s=args.duration_s)
+    live = None
+    if args.live is not None:
+        from foveatrack.recording.live import check_port
+
+        live = check_port(args.live)
+    d = Daemon(cfg, log_path=args.log, status=False if args.no_status else None, duration_s=args.duration_s,
+               live_port=live)
     code = d.run()
     s = d.final_stats
     print(f"foveatrack daemon: {s.get('frames', 0)} frames, {s.get('frames_detected', 0)} with a detection; "

@@ -21,6 +21,12 @@ def register(sub) -> None:
     p.add_argument("--export-points", metavar="F.csv|F.npz", help="export every recorded point")
     p.add_argument("--export-trajectory", metavar="F.csv|F.npz",
                    help="export the replay's per-frame detections, commands, head and world estimates (and truth)")
+    p.add_argument("--live", nargs="?", const=8765, default=None, metavar="PORT",
+                   help="first serve the recording to Foxglove (ws://127.0.0.1:PORT, default 8765), paced at --speed")
+    p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
+                   help="with --live: recorded seconds per wall second (default 1 = as recorded)")
+    p.add_argument("--wait-s", type=float, default=3.0, metavar="S",
+                   help="with --live: seconds to wait for a viewer to connect before streaming (default 3)")
     p.set_defaults(func=cmd_replay)
 
 
@@ -40,6 +46,14 @@ def cmd_replay(args) -> int:
             if Path(path).suffix.lower() not in (".csv", ".npz"):
                 raise UserError(f"{flag} {path}: the file name must end in .csv or .npz")
             check_output_file(path, flag)
+    if args.live is not None and not args.recording.lower().endswith(".lvx"):
+        from foveatrack.recording.live import check_port, stream_recording
+
+        n = stream_recording(args.recording, check_port(args.live), args.speed, max(args.wait_s, 0.0),
+                             say=lambda t: print(t, file=sys.stderr, flush=True))
+        print(f"live view: served {n} messages", file=sys.stderr)
+    elif args.live is not None:
+        raise UserError("--live serves foveatrack recordings (.mcap); a .lvx file has no records to show")
     res = replay(args.recording, args.tracker_config)
     notes = []
     if args.export_points:

@@ -10,8 +10,9 @@ simulated run and its replay look alike.
   axis against time, the dead band, the acquisition and tracking phases shaded (paper Fig. 12 colours)
 * fig14c_trajectory.png -- the reconstructed target trajectory (the tracker's world estimates) against
   truth: top view, height against time, and the reconstruction error
-* head_angles.png -- the head (true, or as recorded) and the replay's dead reckoning, the tilt stops
-  when the tilt comes near one, and the tracker's state frame by frame (not for a ``.lvx`` file)
+* head_angles.png -- the head (true; in a daemon recording the daemon's own estimate, the head
+  reports no pose) and the replay's dead reckoning, their difference per axis, the tilt stops when
+  the tilt comes near one, and the tracker's state frame by frame (not for a ``.lvx`` file)
 
 Time is the recording's own for a simulator recording (virtual time, as ``simulate`` plots it) and
 seconds since the first frame otherwise.
@@ -62,7 +63,8 @@ def plot_all(res, out_dir: Path) -> list[Path]:
     files.append(sim_plots.plot_error_vs_time(
         t, None if truth is None else truth["true_error_deg"], err_title,
         out_dir / "fig14b_error_vs_time.png", detected=det if truth is not None else None,
-        bearing_error_deg=bearing, deadband_deg=db, **phases))
+        bearing_error_deg=bearing, deadband_deg=db, **phases,
+        deadband_axes_deg=None if db is None else (cfg.deadband_pan_deg, cfg.deadband_tilt_deg)))
 
     files.append(sim_plots.plot_trajectory(
         t, f["world_xyz"], f"{name}: reconstructed trajectory (replay; paper Fig. 14c)",
@@ -71,10 +73,15 @@ def plot_all(res, out_dir: Path) -> list[Path]:
     if res.source != "lvx":
         if truth is not None:
             pan, tilt, source = truth["pan_deg"], truth["tilt_deg"], "true"
+            head_title = f"{name}: head angles (replay)"
         else:
-            pan, tilt, source = res.recorded["head_pan_deg"], res.recorded["head_tilt_deg"], "recorded"
+            # a daemon recording holds the daemon's own dead reckoning, not the head's pose (the head
+            # reports none): the residual says how far the replay is from it, not from the head
+            pan, tilt, source = res.recorded["head_pan_deg"], res.recorded["head_tilt_deg"], "daemon's estimate"
+            head_title = f"{name}: head angles (replay; the head's true pose is not measured)"
         files.append(sim_plots.plot_head(
-            t, pan, tilt, f"{name}: head angles (replay)", out_dir / "head_angles.png",
+            t, pan, tilt, head_title, out_dir / "head_angles.png", est_label="replay's dead reckoning",
+            residual_label="replay - " + ("true" if truth is not None else "daemon") + " [deg]",
             est_pan_deg=f["head_pan_deg"], est_tilt_deg=f["head_tilt_deg"], state=f["state"], source=source,
             tilt_limits_deg=None if cfg is None else cfg.tilt_limits_deg,
             tilt_margin_deg=None if cfg is None else cfg.tilt_margin_deg))

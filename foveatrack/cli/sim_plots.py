@@ -68,7 +68,12 @@ def plot_points_vs_position(pos_xyz, off_axis_deg, points, title, path, *, det_p
     for n, label, style in series:
         a1.plot(pos[:, k], n, ms=3, lw=0.6, label=label, **style)
         a2.plot(off, n, ms=3, ls="none", **{k2: v for k2, v in style.items() if k2 != "ls"})
-    a1.set_xlabel(f"{source} target position {_AXIS_LABEL[k]}")
+    xl = f"{source} target position {_AXIS_LABEL[k]}"
+    ok = np.isfinite(pos[:, k])
+    if ok.sum() >= 2 and pos[ok, k][-1] < pos[ok, k][0]:
+        a1.invert_xaxis()       # the target moves toward smaller values: time still runs left to right
+        xl += ", axis reversed"
+    a1.set_xlabel(xl + "  (time ->)")
     a1.set_ylabel("points per frame")
     a1.set_title("(a) along its path (paper Fig. 14a)", fontsize="medium")
     a2.set_xlabel(f"{source} target angle off the lidar axis [deg]")
@@ -88,13 +93,19 @@ def plot_points_vs_position(pos_xyz, off_axis_deg, points, title, path, *, det_p
 
 
 def plot_error_vs_time(t_s, error_deg, title, path, *, detected=None, bearing_error_deg=None, deadband_deg=None,
-                       half_fov_deg=None, in_fov_t_s=None, acquired_t_s=None) -> Path:
+                       half_fov_deg=None, in_fov_t_s=None, acquired_t_s=None, axis_error_deg=None,
+                       deadband_axes_deg=None) -> Path:
     """Fig. 14b: angular tracking error against time, acquisition and tracking phases shaded.
 
     error_deg : (F,) [deg] true angle of the target off the lidar axis, or None (no truth);
     bearing_error_deg : (F,) [deg] the detection's bearing off the axis (NaN: no detection);
     in_fov_t_s, acquired_t_s : [s] the acquisition clock's start and the acquisition instant
-    (``foveatrack.metrics.tracking_metrics``; ``acquired_t_s`` None: never acquired).
+    (``foveatrack.metrics.tracking_metrics``; ``acquired_t_s`` None: never acquired);
+    axis_error_deg : (pan, tilt) (F,) arrays [deg], the true error per axis (azimuth, elevation off
+    the axis), drawn as magnitudes beside the total; deadband_axes_deg : (pan, tilt) [deg].  The dead
+    band acts per axis, so the total angle may sit at up to sqrt(db_pan^2 + db_tilt^2) with both axes
+    inside it: that bound is drawn for the total (a 2 deg line under a 2.8 deg total read as "never
+    converges").
     """
     plt = _plt()
     fig, ax = plt.subplots(figsize=(9, 4.2))
@@ -116,12 +127,21 @@ def plot_error_vs_time(t_s, error_deg, title, path, *, detected=None, bearing_er
             miss = ~np.asarray(detected, bool)
             ax.plot(t[miss], e[miss], "x", ms=4, color=MISS_C, label="no detection")
         top = max(top, np.nanmax(e) if np.isfinite(e).any() else 0.0)
+    if axis_error_deg is not None:
+        for a, name, c in zip(axis_error_deg, ("pan (azimuth)", "tilt (elevation)"), ("tab:blue", "tab:purple")):
+            ax.plot(t, np.abs(np.asarray(a, float)), "-", color=c, lw=0.8, alpha=0.8, label=f"|true {name} error|")
     if bearing_error_deg is not None:
         b = np.asarray(bearing_error_deg, float)
         ax.plot(t, b, ".", ms=3, color=EST_C, label="detection's bearing off the axis")
         top = max(top, np.nanmax(b) if np.isfinite(b).any() else 0.0)
-    if deadband_deg is not None:
-        ax.axhline(deadband_deg, color=THRESH_C, ls=":", label=f"dead band {deadband_deg:g} deg")
+    if deadband_axes_deg is not None:
+        dp, dt_ = (float(v) for v in deadband_axes_deg)
+        per_axis = f"{dp:g} deg" if dp == dt_ else f"pan {dp:g} / tilt {dt_:g} deg"
+        ax.axhline(max(dp, dt_), color=THRESH_C, ls=":", label=f"dead band per axis, {per_axis}")
+        ax.axhline(float(np.hypot(dp, dt_)), color=THRESH_C, ls="-.", lw=1,
+                   label=f"total with both axes at their dead band, {np.hypot(dp, dt_):.2f} deg")
+    elif deadband_deg is not None:
+        ax.axhline(deadband_deg, color=THRESH_C, ls=":", label=f"dead band {deadband_deg:g} deg (per axis)")
     if half_fov_deg is not None and top >= 0.8 * half_fov_deg:   # only where the curve comes near it
         ax.axhline(half_fov_deg, color=THRESH_C, ls="--", lw=1, label=f"half FoV {half_fov_deg:.1f} deg")
     ax.set_ylim(bottom=0)
@@ -181,19 +201,27 @@ def plot_trajectory(t_s, est_xyz, title, path, *, true_xyz=None) -> Path:
 
 
 def plot_head(t_s, pan_deg, tilt_deg, title, path, *, est_pan_deg=None, est_tilt_deg=None, state=None,
-              tilt_limits_deg=None, tilt_margin_deg=None, source="true") -> Path:
-    """Head angles against time: ``source`` (true or recorded) and the tracker's dead reckoning,
-    the tilt stops when the tilt comes near them, and the tracker's state as a strip along the bottom.
+              tilt_limits_deg=None, tilt_margin_deg=None, source="true", est_label="dead-reckoned",
+              residual_label=None) -> Path:
+    """Head angles against time: ``source`` (e.g. "true") and ``est_label`` (the tracker's dead
+    reckoning), the tilt stops when the tilt comes near them, the residual estimate - source per
+    axis in a panel of its own (the two lines overlay at this scale: a speed table of "truth" drew
+    them identical), and the tracker's state as a strip along the bottom.
 
     Pan is unwrapped for the plot (a pass through +-180 deg stays a continuous line).
+    residual_label : the residual panel's y label (default "{est_label} - {source}").
     """
     plt = _plt()
-    if state is not None and len(t_s):
-        fig, (ax, axs) = plt.subplots(2, 1, figsize=(9, 4.6), sharex=True, height_ratios=[1, 0.07])
-    else:
-        fig, ax = plt.subplots(figsize=(9, 4.2))
-        axs = None
     t = np.asarray(t_s, float)
+    has_res = (est_pan_deg is not None and np.isfinite(np.asarray(pan_deg, float)).any()
+               and np.isfinite(np.asarray(est_pan_deg, float)).any())
+    rows = [1.0] + ([0.45] if has_res else []) + ([0.07] if state is not None and len(t_s) else [])
+    fig, axes = plt.subplots(len(rows), 1, figsize=(9, 4.2 + 1.6 * has_res), sharex=True, height_ratios=rows,
+                             squeeze=False)
+    axes = list(axes[:, 0])
+    ax = axes[0]
+    axr = axes[1] if has_res else None
+    axs = axes[-1] if state is not None and len(t_s) else None
 
     def unwrap(a):
         a = np.asarray(a, float)
@@ -209,7 +237,9 @@ def plot_head(t_s, pan_deg, tilt_deg, title, path, *, est_pan_deg=None, est_tilt
             ax.plot(t, val, "-", color=c, lw=3, alpha=0.45, label=f"{name}, {source}")
         if est is not None:
             e = unwrap(est) if name.startswith("pan") else np.asarray(est, float)
-            ax.plot(t, e, "--", color=c, lw=1.2, label=f"{name}, dead-reckoned")
+            ax.plot(t, e, "--", color=c, lw=1.2, label=f"{name}, {est_label}")
+            if axr is not None:
+                axr.plot(t, e - val, "-", color=c, lw=1.0, label=f"{name.split()[0]} residual")
     if tilt_limits_deg is not None:
         tilt = np.asarray(est_tilt_deg if est_tilt_deg is not None else tilt_deg, float)
         tilt = tilt[np.isfinite(tilt)]
@@ -223,8 +253,13 @@ def plot_head(t_s, pan_deg, tilt_deg, title, path, *, est_pan_deg=None, est_tilt
     ax.set_ylabel("head angle [deg]")
     ax.grid(alpha=0.3)
     ax.set_title(title)
+    if axr is not None:
+        axr.axhline(0, color=THRESH_C, lw=0.8)
+        axr.set_ylabel(residual_label or f"{est_label}\n- {source} [deg]", fontsize="small")
+        axr.grid(alpha=0.3)
+        axr.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", borderaxespad=0.0)
     if axs is None:
-        ax.set_xlabel("time [s]")
+        axes[-1].set_xlabel("time [s]")
         _legend_outside(ax)
         return _save(fig, path)
     # the tracker's state, frame by frame, in a strip of its own under the angles

@@ -18,6 +18,10 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, help="override the scene's seed")
     p.add_argument("--duration", type=float, metavar="S", help="override the scene's duration")
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--live", nargs="?", const=8765, default=None, metavar="PORT",
+                   help="serve the run to Foxglove (ws://127.0.0.1:PORT, default 8765), paced at --speed")
+    p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
+                   help="with --live: virtual seconds per wall second (default 1 = real time)")
     p.set_defaults(func=cmd_simulate)
 
 
@@ -64,7 +68,7 @@ class CompileNotice:
 
 
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
-                   quiet=False) -> dict:
+                   quiet=False, live_port=None, speed=1.0) -> dict:
     import time
 
     import numpy as np
@@ -93,14 +97,33 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
             out_dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise UserError(f"--out {out_dir}: cannot create the output directory ({exc})") from None
-    writer = None
+    writer = live = None
+    pacer = None
+    if live_port is not None:
+        from foveatrack.recording.live import Pacer, check_port
+
+        live_port = check_port(live_port)
+        pacer = Pacer(speed)
     t0 = time.perf_counter()
     loop = ClosedLoop(scene)
-    if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        writer = RecordingWriter(out_dir / "run.mcap", meta=recording_meta(scene, loop), overwrite=True,
-                                 created_utc="virtual time (simulation)")
-        loop.frame_hook = SimRecorder(writer)
+    if out_dir is not None or live_port is not None:
+        # the encoding and the writes run on the writer's thread: the loop only hands the frame over
+        writer = RecordingWriter(None if out_dir is None else out_dir / "run.mcap", meta=recording_meta(scene, loop),
+                                 overwrite=True, created_utc="virtual time (simulation)", background=True)
+        recorder = SimRecorder(writer)
+        loop.frame_hook = recorder
+        if live_port is not None:
+            from foveatrack.recording.live import LiveServer
+
+            live = LiveServer(writer.context, live_port)
+            print(f"live view on {live.url} (Foxglove: Open connection -> Foxglove WebSocket), "
+                  f"{speed:g}x real time", file=sys.stderr, flush=True)
+
+            def paced(frame, out, loop_):
+                recorder(frame, out, loop_)
+                pacer.wait(frame.t_end_s)
+
+            loop.frame_hook = paced
     # The first frame loads the numba kernels, or compiles them on a first run: announced if it is slow,
     # and kept out of the progress bar (its rate and ETA would be those of a one-minute frame).
     notice = CompileNotice(enabled=progress)
@@ -123,6 +146,8 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
             bar.close()
         if writer is not None:
             writer.close()
+        if live is not None:
+            live.stop()
     wall = time.perf_counter() - t0
     summary = summarize(scene, log, wall, loop)
     if out_dir is not None:
@@ -176,7 +201,10 @@ def _plot_run(scene, log, summary, out_dir) -> list[Path]:
         err_title, phases = f"{name}: target angle off the fixed lidar axis (head frozen)", {}
     else:
         err_title = f"{name}: tracking error (paper Fig. 14b)"
-        phases = dict(deadband_deg=db, in_fov_t_s=summary["in_fov_t_s"], acquired_t_s=summary["acquired_t_s"])
+        phases = dict(deadband_deg=db, in_fov_t_s=summary["in_fov_t_s"], acquired_t_s=summary["acquired_t_s"],
+                      deadband_axes_deg=(cfg.deadband_pan_deg, cfg.deadband_tilt_deg))
+        if "true_az_deg" in log and "true_el_deg" in log:
+            phases["axis_error_deg"] = (log["true_az_deg"], log["true_el_deg"])
     return [
         sim_plots.plot_error_vs_time(t, log["true_error_deg"], err_title, out_dir / "error.png",
                                      detected=log["detected"], half_fov_deg=summary["half_fov_deg"], **phases),
@@ -194,5 +222,6 @@ def _plot_run(scene, log, summary, out_dir) -> list[Path]:
 
 
 def cmd_simulate(args) -> int:
-    run_and_report(args.scene, args.out, args.json, args.plot, args.seed, args.duration, not args.no_progress)
+    run_and_report(args.scene, args.out, args.json, args.plot, args.seed, args.duration, not args.no_progress,
+                   live_port=args.live, speed=args.speed)
     return 0

@@ -53,17 +53,21 @@ def plot_fidelity(axis: dict, path) -> Path:
     fig, axes = plt.subplots(1, len(keys), figsize=(6.5 * len(keys), 4.8), squeeze=False)
     for ax, key in zip(axes[0], keys):
         res = axis[key]
-        for r in res["rows"]:
+        # one legend entry per setting, each its own colour and marker: settings that cost about the
+        # same sit on top of each other, and their labels ran together ("basefine10ms")
+        markers = "osD^vP<>Xph"
+        for i, r in enumerate(res["rows"]):
             x, y = r["cpu_per_virtual_s"], r["d_error_rms_all_deg"]
             if not (_finite(x) and _finite(y)):
                 continue
             ref = r["setting"] == res["reference"]
-            ax.plot(x, max(y, 1e-4), "*" if ref else "o", ms=12 if ref else 6)
-            ax.annotate(r["setting"], (x, max(y, 1e-4)), textcoords="offset points", xytext=(4, 3), fontsize=7)
+            ax.plot(x, max(y, 1e-4), "*" if ref else markers[i % len(markers)], ms=13 if ref else 7,
+                    mfc="none" if not ref else None, mew=1.4, ls="none",
+                    label=f"{r['setting']} (reference)" if ref else r["setting"])
         fl = res["noise_floor"].get("error_rms_all_deg")
         if _finite(fl) and fl > 0:
             ax.axhline(fl, color="0.5", ls="--", lw=0.8, label=f"seed-to-seed spread {fl:.3g} deg")
-            ax.legend(fontsize=8)
+        ax.legend(fontsize=7, loc="best", ncols=2)
         ax.set_yscale("log")
         ax.set_xscale("log")
         ax.set_xlabel("CPU seconds per virtual second")

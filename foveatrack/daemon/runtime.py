@@ -144,8 +144,10 @@ class Daemon:
     """
 
     def __init__(self, config: DaemonConfig, log_path: str | None = None, status: bool | None = None,
-                 duration_s: float | None = None, install_signals: bool = True):
+                 duration_s: float | None = None, install_signals: bool = True, live_port: int | None = None):
         self.cfg = config
+        self.live_port = live_port      # serve the recording's channels on ws://127.0.0.1:PORT
+        self.live = None
         self.log = JsonLog(log_path or config.loop.log)
         self.status = StatusLine(enabled=status)
         self.duration_s = duration_s
@@ -211,8 +213,27 @@ class Daemon:
             # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
             self.recorder = RecordingThread(writer, r.queue_frames)
             self.recording_path = path
+        if self.live_port is not None:
+            self._open_live()
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
         self.rx = _Receiver(self.client, self.q, self.stop_ev)
+
+    def _open_live(self) -> None:
+        """The live view: a second sink of the recording's channels (a writer without a file when
+        nothing is recorded), fed by the same recording thread."""
+        from foveatrack.recording import RecordingWriter
+        from foveatrack.recording.live import LiveServer
+
+        if self.recorder is None:
+            self.recorder = RecordingThread(RecordingWriter(None, self._meta()), self.cfg.recording.queue_frames)
+        try:
+            self.live = LiveServer(self.recorder.writer.context, self.live_port)
+        except Exception:
+            self.recorder.close()
+            self.client.close()
+            self.head.close()
+            raise
+        self.log.event("live_view", url=self.live.url)
 
     # -------------------------------------------------------------------------------- helpers
     def sensor_now_s(self, mono: float | None = None) -> float | None:
@@ -476,6 +497,8 @@ class Daemon:
             stats["recording_dropped"] = self.recorder.dropped
             if self.recorder.error is not None:
                 self.log.event("recording_error", error=repr(self.recorder.error))
+        if self.live is not None:
+            self.live.stop()
         self.status.done()
         self.log.event("stop", stats=stats, recording=str(self.recording_path) if self.recording_path else None)
         self.log.close()

@@ -4,24 +4,30 @@ Why MCAP: it is the ROS 2 default log container, append-only and chunked, with p
 summary at the end that a reader does not need.  Everything up to the last *completed chunk* of a
 file cut short (kill -9, power loss) is readable, and Foxglove Studio / ``mcap`` CLI open the files.
 
-Layout of a recording (``profile`` "foveatrack", format version 1):
+Layout of a recording (``profile`` "foveatrack", format version 2, written with the Foxglove SDK;
+docs/recordings.md lists every channel):
 
 - an MCAP Metadata record ``foveatrack`` written first, with string values ``format`` =
-  "foveatrack-recording", ``format_version`` = "1", ``meta_json`` (the writer's ``meta`` dict as JSON:
-  scene/config text, seed, ...), ``channels_json`` (channel id -> name of the standard channels, which
-  are defined up front; absent in older files), ``foveatrack_version``, ``numpy_version``,
-  ``python_version``, ``created_utc``.
-- channel ``/points`` (schema ``foxglove.PointCloud``, JSON encoding, so Foxglove's 3D panel draws it):
-  one message per lidar frame, log time = the frame's ``t_ns``, with the standard fields
-  ``timestamp {sec, nsec}``, ``frame_id`` = "lidar", ``pose`` (identity), ``point_stride``,
-  ``fields``, ``data`` (base64 of the packed points) plus ``frame_index`` and ``t_ns``.  Packed point
-  (little-endian, no padding): x, y, z (float64 by default, float32 with ``points_dtype="float32"``)
-  [m, lidar frame X forward, Y left, Z up], ``dt_ns`` int32 (point time − frame ``t_ns``, so
-  |dt| < 2.1 s), ``reflectivity`` uint8.  float64 keeps the live values bit-exact for replay.
-- JSON channels (schema = a small JSON schema, encoding ``json``), log time = the record's ``t_ns``:
-  ``/detections``, ``/commands`` (``raw_hex`` = the bytes sent, ``t_ns`` = send time),
-  ``/head`` (head estimates), ``/truth`` (simulation only), ``/metrics``, and any other name given to
-  :meth:`RecordingWriter.write`.
+  "foveatrack-recording", ``format_version`` = "2", ``meta_json`` (the writer's ``meta`` dict as JSON:
+  scene/config text, seed, ...), ``foveatrack_version``, ``numpy_version``, ``python_version``,
+  ``writer``, ``created_utc``; after the chunk where channels first appear, a Metadata record
+  ``foveatrack_channels`` (``channels_json``: channel id -> name) so that a damaged chunk does not take
+  the channel names along.
+- channel ``/points``: ``foxglove.PointCloud`` in protobuf, one message per lidar frame, log time = the
+  frame's ``t_ns``, ``frame_id`` "lidar", packed points (little-endian, no padding): x, y, z (float64
+  by default, float32 with ``points_dtype="float32"``) [m, lidar frame X forward, Y left, Z up],
+  ``dt_ns`` int32 (point time − frame ``t_ns``, so |dt| < 2.1 s), ``reflectivity`` uint8; the frame
+  index in protobuf field 15 (not in the schema; decoders skip it).  float64 keeps the live values
+  bit-exact for replay.
+- JSON channels (documented JSON schemas ``foveatrack.Detection`` ..., encoding ``json``), log time =
+  the record's ``t_ns``: ``/detections``, ``/commands`` (``raw_hex`` = the bytes sent, ``t_ns`` = send
+  time), ``/head`` (head estimates), ``/truth`` (simulation only), ``/metrics``, and any other name
+  given to :meth:`RecordingWriter.write`.
+- drawn for Foxglove from those records (replay needs none of them): ``/tf`` (FrameTransforms world ->
+  head_est -> lidar, world -> head_true -> lidar_true), ``/scene`` (SceneUpdate), ``/log`` (Log).
+
+Format 1 (before the SDK: JSON ``/points`` with base64 data, a channel table in the first metadata
+record) is still read.
 
 Crash safety: records go into the current chunk; the chunk is completed and handed to the OS by
 :meth:`RecordingWriter.flush` and automatically when a new frame starts after ``flush_every_frames``
@@ -33,7 +39,8 @@ skips a damaged chunk (bad CRC, garbage over it or over its length field), finds
 whose header holds together and whose CRC verifies by scanning the bytes, reads on, and reports
 each skipped stretch (:class:`Damage`: bytes, why, messages lost per channel from the index).
 
-Not thread-safe: one writer per thread (a daemon writes from one thread or behind a queue).
+Not thread-safe: one writer per thread (a daemon writes from one thread or behind a queue;
+``background=True`` gives the writer a thread of its own behind a bounded queue).
 """
 
 from foveatrack.recording.export import export_points, export_trajectory

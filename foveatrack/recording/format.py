@@ -14,8 +14,10 @@ from typing import Any
 import numpy as np
 
 FORMAT = "foveatrack-recording"
-FORMAT_VERSION = "1"
+FORMAT_VERSION = "2"
+READABLE_VERSIONS = ("1", "2")    # 1: JSON + base64 points (python mcap writer); 2: Foxglove SDK, protobuf
 META_NAME = "foveatrack"
+CHANNELS_META_NAME = "foveatrack_channels"   # channel id -> name tables written as channels appear
 POINTS = "points"
 DETECTIONS = "detections"
 COMMANDS = "commands"
@@ -23,6 +25,11 @@ HEAD = "head"
 TRUTH = "truth"
 METRICS = "metrics"
 STANDARD_CHANNELS = (POINTS, DETECTIONS, COMMANDS, HEAD, TRUTH, METRICS)
+# drawn for Foxglove from the records (format 2); replay needs none of them
+TF = "tf"
+SCENE = "scene"
+LOG = "log"
+VIEW_CHANNELS = (TF, SCENE, LOG)
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 # foxglove NumericType (docs.foxglove.dev, "NumericType")
@@ -42,6 +49,38 @@ _POINTCLOUD_SCHEMA = {
         "frame_index": {"type": "integer"},
         "t_ns": {"type": "integer"},
     },
+}
+
+
+def _obj(title: str, doc: str, props: dict) -> dict:
+    return {"title": title, "description": doc, "type": "object",
+            "properties": {"t_ns": {"type": "integer", "description": "log time [ns]"}, **props}}
+
+
+_NUM = {"type": ["number", "null"]}
+_XYZ = {"type": ["array", "null"], "items": {"type": "number"}, "minItems": 3, "maxItems": 3}
+# The documented custom JSON schemas of the record channels (docs/recordings.md): the fields of
+# foveatrack.recording.records, so Foxglove's plot panel offers them by name.
+RECORD_SCHEMAS = {
+    DETECTIONS: ("foveatrack.Detection", _obj("foveatrack.Detection", "Algorithm 1 on one frame (lidar frame)", {
+        "frame_index": {"type": "integer"}, "detected": {"type": "boolean"}, "xyz_m": _XYZ,
+        "n_points": {"type": "integer"}, "t_s": _NUM, "az_deg": _NUM, "el_deg": _NUM,
+        "state": {"type": ["string", "null"]}, "error_pan_deg": _NUM, "error_tilt_deg": _NUM})),
+    HEAD: ("foveatrack.HeadEstimate", _obj("foveatrack.HeadEstimate", "the tracker's dead-reckoned head pose "
+                                           "[deg] and reconstructed target [m, world]", {
+        "pan_deg": {"type": "number"}, "tilt_deg": {"type": "number"}, "frame_id": {"type": "integer"},
+        "sigma_pan_deg": _NUM, "sigma_tilt_deg": _NUM, "world_xyz_m": _XYZ, "world_sigma_m": _NUM})),
+    COMMANDS: ("foveatrack.Command", _obj("foveatrack.Command", "a Pelco-D command as written to the head", {
+        "raw_hex": {"type": "string"}, "frame_id": {"type": ["integer", "null"]}, "source": {"type": "string"},
+        "send_t_s": {"type": "number"}, "written": {"type": "boolean"}, "host_written_s": {"type": "number"},
+        "pan_dir": {"type": "integer"}, "pan_byte": {"type": "integer"}, "tilt_dir": {"type": "integer"},
+        "tilt_byte": {"type": "integer"}, "limited": {"type": "array", "items": {"type": "string"}},
+        "tracker_command": {"type": ["array", "null"], "items": {"type": "integer"}}})),
+    TRUTH: ("foveatrack.Truth", _obj("foveatrack.Truth", "simulation truth: head pose [deg], target [m, world]", {
+        "frame_id": {"type": "integer"}, "pan_deg": {"type": "number"}, "tilt_deg": {"type": "number"},
+        "target_xyz_m": _XYZ, "true_error_deg": _NUM, "points_on_target": {"type": "integer"}})),
+    METRICS: ("foveatrack.Metric", _obj("foveatrack.Metric", "a scalar figure of one frame", {
+        "name": {"type": "string"}, "value": _NUM, "frame_id": {"type": "integer"}})),
 }
 
 
@@ -111,4 +150,117 @@ def _decode_points(data: bytes) -> PointsFrame:
                        arr["reflectivity"].astype(np.uint8))
 
 
-# ====================================================================================== export
+
+
+
+# ------------------------------------------------------------------ format 2: protobuf foxglove.PointCloud
+# foxglove.PointCloud (https://docs.foxglove.dev/docs/visualization/message-schemas/point-cloud):
+# 1 timestamp {1 seconds, 2 nanos}, 2 frame_id, 3 pose, 4 point_stride (fixed32), 5 fields (repeated
+# {1 name, 2 offset fixed32, 3 type enum}), 6 data.  Field 15 (varint) carries the frame index: a field
+# the schema does not define, which protobuf decoders (Foxglove's among them) skip.
+FRAME_INDEX_FIELD = 15
+
+
+def _varint(v: int) -> bytes:
+    out = bytearray()
+    while True:
+        b = v & 0x7F
+        v >>= 7
+        if v:
+            out.append(b | 0x80)
+        else:
+            out.append(b)
+            return bytes(out)
+
+
+def encode_points_pb(t_ns: int, frame_id: int, packed: np.ndarray) -> bytes:
+    """One frame as a foxglove.PointCloud (protobuf), frame ``lidar``, with the frame index in field
+    15.  ``packed``: an array of :func:`packed_point_dtype`.  The Foxglove SDK encodes the message
+    without its point data; the data (field 6, bytes) is appended to it, so the ~0.3 MB of a 10 k-point
+    frame is copied once, not four times (a message's fields may come in any order)."""
+    from foxglove.messages import PackedElementField, PackedElementFieldNumericType as NT, PointCloud, Timestamp
+
+    types = {"<f8": NT.Float64, "<f4": NT.Float32, "<i4": NT.Int32, "|u1": NT.Uint8}
+    fields = [PackedElementField(name=name, offset=int(off), type=types[dt_.str])
+              for name, (dt_, off) in packed.dtype.fields.items()]
+    t_ns = int(t_ns)
+    head = PointCloud(timestamp=Timestamp(t_ns // 1_000_000_000, t_ns % 1_000_000_000), frame_id="lidar",
+                      point_stride=packed.dtype.itemsize, fields=fields).encode()
+    data = memoryview(np.ascontiguousarray(packed)).cast("B")
+    return b"".join((head, bytes([6 << 3 | 2]), _varint(data.nbytes), data,
+                     bytes([FRAME_INDEX_FIELD << 3]), _varint(int(frame_id))))
+
+
+def _pb_fields(buf, i: int = 0, n: int | None = None):
+    """(field number, wire type, value) of a protobuf message: int for varint/fixed, memoryview for bytes."""
+    n = len(buf) if n is None else n
+    while i < n:
+        key, i = _read_varint(buf, i)
+        fno, wt = key >> 3, key & 7
+        if wt == 0:
+            v, i = _read_varint(buf, i)
+        elif wt == 2:
+            ln, i = _read_varint(buf, i)
+            if i + ln > n:
+                raise ValueError("a length-delimited protobuf field runs past the message")
+            v, i = buf[i:i + ln], i + ln
+        elif wt == 5:
+            v, i = int.from_bytes(buf[i:i + 4], "little"), i + 4
+        elif wt == 1:
+            v, i = int.from_bytes(buf[i:i + 8], "little"), i + 8
+        else:
+            raise ValueError(f"protobuf wire type {wt} is not expected in a foxglove.PointCloud")
+        yield fno, wt, v
+
+
+def _read_varint(buf, i: int) -> tuple[int, int]:
+    v = shift = 0
+    while True:
+        if i >= len(buf) or shift > 63:
+            raise ValueError("a protobuf varint runs past the message")
+        b = buf[i]
+        i += 1
+        v |= (b & 0x7F) << shift
+        if not b & 0x80:
+            return v, i
+        shift += 7
+
+
+def _decode_points_pb(data: bytes) -> PointsFrame:
+    mv = memoryview(data)
+    sec = nsec = 0
+    stride = 0
+    fields: list[tuple[str, int, int]] = []
+    raw = b""
+    frame_index = -1
+    for fno, _wt, v in _pb_fields(mv):
+        if fno == 1:
+            for f2, _w2, v2 in _pb_fields(v):
+                if f2 == 1:
+                    sec = v2
+                elif f2 == 2:
+                    nsec = v2
+        elif fno == 4:
+            stride = v
+        elif fno == 5:
+            name, off, typ = "", 0, 0
+            for f2, _w2, v2 in _pb_fields(v):
+                if f2 == 1:
+                    name = bytes(v2).decode()
+                elif f2 == 2:
+                    off = v2
+                elif f2 == 3:
+                    typ = v2
+            fields.append((name, off, typ))
+        elif fno == 6:
+            raw = v
+        elif fno == FRAME_INDEX_FIELD:
+            frame_index = v
+    if not stride or len(raw) % stride:
+        raise ValueError(f"point data of {len(raw)} bytes is not a whole number of {stride}-byte points")
+    dt = np.dtype({"names": [f[0] for f in fields], "formats": [_FOX_TO_NP[f[2]] for f in fields],
+                   "offsets": [f[1] for f in fields], "itemsize": stride})
+    arr = np.frombuffer(raw, dtype=dt)
+    t_ns = sec * 1_000_000_000 + nsec
+    xyz = np.stack([arr["x"], arr["y"], arr["z"]], axis=1).astype(np.float64)
+    return PointsFrame(t_ns, frame_index, xyz, arr["dt_ns"].astype(np.int64) + t_ns, arr["reflectivity"].astype(np.uint8))

@@ -13,8 +13,9 @@ from typing import Iterable, Iterator
 
 from foveatrack.errors import UserError
 from foveatrack.recording import mcap_walk as mw
-from foveatrack.recording.format import (FORMAT, FORMAT_VERSION, MCAP_MAGIC, META_NAME, POINTS, Message,
-                                         PointsFrame, _decode_points)
+from foveatrack.recording.format import (CHANNELS_META_NAME, FORMAT, MCAP_MAGIC, META_NAME, POINTS,
+                                         READABLE_VERSIONS, VIEW_CHANNELS, Message, PointsFrame, _decode_points,
+                                         _decode_points_pb)
 
 
 @dataclass(frozen=True)
@@ -206,6 +207,8 @@ class RecordingReader:
                     elif rop == mw.OP_CHANNEL:
                         cid, topic = mw.channel(content)
                         channels[cid] = topic
+                    elif rop == mw.OP_METADATA and content[0] == CHANNELS_META_NAME:
+                        self._add_channel_table(content[1])
                     elif rop == mw.OP_METADATA and not self.info and content[0] == META_NAME:
                         self._set_meta(content[1])
                         if stop_after_meta:
@@ -275,9 +278,14 @@ class RecordingReader:
         found: list[int] = []
         p = pos
         while True:
-            p = mm.find(b"\x06", p, stop)
+            p = self._next_candidate(mm, p, stop)
             if p < 0:
                 return data_end, found
+            if mm[p] == mw.OP_METADATA:
+                if p > pos and self._channel_table_at(mm, p, stop):
+                    return p, found
+                p += 1
+                continue
             length = mw.chunk_length(mm, p, stop)
             if length is not None:
                 try:
@@ -288,6 +296,29 @@ class RecordingReader:
                     pass
                 found.append(p)
             p += 1
+
+    @staticmethod
+    def _next_candidate(mm, p: int, stop: int) -> int:
+        """The next byte at or after ``p`` that may start a chunk or a metadata record (-1: none)."""
+        a = mm.find(b"\x06", p, stop)
+        b = mm.find(bytes([mw.OP_METADATA]), p, stop)
+        return b if a < 0 else a if b < 0 else min(a, b)
+
+    @staticmethod
+    def _channel_table_at(mm, p: int, stop: int) -> bool:
+        """A whole channel-table metadata record starts at ``p`` (the writer puts one after the chunk
+        where channels first appear: reading resumes there, so a damaged chunk does not take it along)."""
+        if p + mw.REC.size > stop:
+            return False
+        _op, length = mw.REC.unpack_from(mm, p)
+        end = p + mw.REC.size + length
+        if end > stop or length > (1 << 20):
+            return False
+        try:
+            name, _md = mw.metadata(mm[p + mw.REC.size:end])
+        except mw.BadRecord:
+            return False
+        return name == CHANNELS_META_NAME
 
     def _account(self, mm, pos, resume, reason, prev_ok, prev_times, frames, found) -> Damage:
         """What the skipped stretch ``[pos, resume)`` held, from the message index the writer put after
@@ -354,10 +385,10 @@ class RecordingReader:
     def _set_meta(self, md: dict[str, str]) -> None:
         if md.get("format") != FORMAT:
             raise UserError(f"{self.path} is an MCAP file but not a foveatrack recording (format {md.get('format')!r})")
-        if md.get("format_version") != FORMAT_VERSION:
+        if md.get("format_version") not in READABLE_VERSIONS:
             raise UserError(
                 f"{self.path} has recording format version {md.get('format_version')!r}; "
-                f"this foveatrack reads version {FORMAT_VERSION}"
+                f"this foveatrack reads versions {', '.join(READABLE_VERSIONS)}"
             )
         self.info = dict(md)
         try:
@@ -366,16 +397,28 @@ class RecordingReader:
         except (ValueError, AttributeError):
             raise UserError(f"{self.path}: its metadata JSON is damaged") from None
 
+    def _add_channel_table(self, md: dict[str, str]) -> None:
+        try:
+            self._meta_channels.update({int(k): v for k, v in json.loads(md.get("channels_json", "{}")).items()})
+        except (ValueError, AttributeError):
+            pass    # a damaged table: the Channel records (or the summary) still name the channels
+
     # ------------------------------------------------------------------ public reading
 
     def messages(self, channels: Iterable[str] | str | None = None) -> Iterator[Message]:
         """Messages in file order, optionally only those of ``channels`` (names without '/')."""
         want = {channels} if isinstance(channels, str) else None if channels is None else set(channels)
+        pb = self.info.get("format_version") != "1"
         for name, log_time, data in self._records():
+            if want is None and name in VIEW_CHANNELS:
+                continue        # drawn for Foxglove from the records (protobuf); asked for by name: raw bytes
             if want is not None and name not in want:
                 continue
+            if name in VIEW_CHANNELS:
+                yield Message(name, int(log_time), data)
+                continue
             try:
-                record = _decode_points(data) if name == POINTS else json.loads(data)
+                record = (_decode_points_pb(data) if pb else _decode_points(data)) if name == POINTS else json.loads(data)
             except (ValueError, KeyError, TypeError) as exc:
                 raise UserError(f"{self.path}: a {name} message at t_ns={log_time} is damaged: {exc}") from None
             yield Message(name, int(log_time), record)

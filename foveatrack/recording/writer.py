@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import base64
 import datetime as _dt
 import json
 import os
@@ -12,9 +11,18 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.errors import UserError
-from foveatrack.recording.format import (_FOX_TYPES, _POINTCLOUD_SCHEMA, COMMANDS, DETECTIONS, FORMAT,
-                                         FORMAT_VERSION, HEAD, META_NAME, METRICS, POINTS, STANDARD_CHANNELS,
-                                         TRUTH, _json_schema, _to_jsonable, packed_point_dtype)
+from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD,
+                                         META_NAME, METRICS, POINTS, TRUTH, _to_jsonable, packed_point_dtype)
+from foveatrack.recording.foxglove_view import FoxgloveChannels
+
+
+def _sdk_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("foxglove-sdk")
+    except PackageNotFoundError:
+        return "?"
 
 
 class RecordingExistsError(UserError):
@@ -30,19 +38,27 @@ class RecordingExistsError(UserError):
 
 
 class RecordingWriter:
-    """Write a recording; use as a context manager (``close()`` on exit, also after an exception).
+    """Write a recording with the Foxglove SDK; use as a context manager (``close()`` on exit, also
+    after an exception).
 
-    path : file to create (``.mcap`` suggested); an existing file is an error unless ``overwrite``
+    path : file to create (``.mcap`` suggested); an existing file is an error unless ``overwrite``.
+        None: no file (the messages go only to the sinks of :attr:`context`, e.g. the live view)
     meta : dict, JSON-serialisable (scene/config text, seed, parameters, ...)
     flush_every_frames : int >= 1, complete a chunk every this many point frames
-    compression : "lz4" (default, fast), "zstd" (smaller, slower) or "none"
+    compression : "lz4" (default: the float64 points hardly compress, zstd saves ~4 % of a simulator
+        recording for 2.5x the CPU), "zstd" or "none"
     points_dtype : "float64" (bit-exact replay) or "float32" (compact)
     fsync : also fsync the file at each flush
+    background : encode and write on a thread of the writer's own: the caller's ``write*`` and
+        ``flush`` only queue the job (a bounded queue: the caller waits when it is full, nothing is
+        dropped), so the arrays handed over must not be changed afterwards.  An error on that thread
+        is raised by the next call or by ``close()``.  The daemon, which has a writing thread of its
+        own that drops rather than waits, leaves it off.
     """
 
     def __init__(
         self,
-        path: str | os.PathLike,
+        path: str | os.PathLike | None,
         meta: dict | None = None,
         flush_every_frames: int = 1,
         compression: str = "lz4",
@@ -50,86 +66,125 @@ class RecordingWriter:
         fsync: bool = False,
         overwrite: bool = False,
         created_utc: str | None = None,
+        background: bool = False,
     ):
         # created_utc: None stamps the wall-clock time; the simulator passes a fixed text so that
         # one scene and seed give the same file to the bit.
-        from mcap.writer import CompressionType, Writer
+        import foxglove
+        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-        comp = {"lz4": CompressionType.LZ4, "zstd": CompressionType.ZSTD, "none": CompressionType.NONE}
+        comp = {"lz4": MCAPCompression.Lz4, "zstd": MCAPCompression.Zstd, "none": None}
         if compression not in comp:
             raise UserError(f"recording compression {compression!r} is not one of {sorted(comp)}")
         if points_dtype not in ("float64", "float32"):
             raise UserError(f"recording points_dtype {points_dtype!r} is not 'float64' or 'float32'")
         if int(flush_every_frames) < 1:
             raise UserError(f"flush_every_frames must be >= 1, got {flush_every_frames}")
-        self.path = Path(path)
-        if self.path.exists() and not overwrite:
+        self.path = None if path is None else Path(path)
+        if self.path is not None and self.path.exists() and not overwrite:
             raise RecordingExistsError(self.path)
         try:
             meta_json = json.dumps(meta or {}, default=_to_jsonable, sort_keys=True)
         except TypeError as exc:
             raise UserError(f"recording metadata is not JSON-serialisable: {exc}") from None
-        try:
-            self._fh = open(self.path, "wb")
-        except OSError as exc:
-            raise UserError(f"cannot create recording {self.path}: {exc.strerror}") from None
         self.flush_every_frames = int(flush_every_frames)
         self.fsync = fsync
         self._pdtype = packed_point_dtype(points_dtype)
         self._xyz_dtype = points_dtype
-        self._w = Writer(self._fh, chunk_size=64 << 20, compression=comp[compression])
+        self.view = FoxgloveChannels(json.loads(meta_json), points_dtype)
+        self.context = self.view.context
+        self._w = None
         from foveatrack import __version__
 
-        self._w.start(profile="foveatrack", library=f"foveatrack {__version__}")
-        # The standard channels are defined up front, in the first chunk, and named in the metadata
-        # too: a reader then attributes every later chunk's messages even if that chunk is damaged.
-        self._channels: dict[str, int] = {}
-        for name in STANDARD_CHANNELS:
-            self._channel(name)
-        self._w.add_metadata(
-            META_NAME,
-            {
+        if self.path is not None:
+            if self.path.is_dir():
+                raise UserError(f"cannot create recording {self.path}: it is a directory")
+            # chunk_size None: a chunk ends only at flush(), so a chunk holds whole frames; the SDK
+            # writes the Schema and Channel records in the chunk of each channel's first message
+            opts = MCAPWriteOptions(compression=comp[compression], profile="foveatrack", chunk_size=None,
+                                    compression_threads=0)
+            try:
+                self._w = foxglove.open_mcap(self.path, allow_overwrite=True, context=self.context,
+                                             writer_options=opts)
+            except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types for I/O
+                raise UserError(f"cannot create recording {self.path}: {exc}") from None
+            self._w.write_metadata(META_NAME, {
                 "format": FORMAT,
                 "format_version": FORMAT_VERSION,
                 "meta_json": meta_json,
-                "channels_json": json.dumps({str(cid): name for name, cid in self._channels.items()}),
                 "foveatrack_version": __version__,
                 "numpy_version": np.__version__,
                 "python_version": platform.python_version(),
+                "writer": f"foxglove-sdk {_sdk_version()}",
                 "created_utc": created_utc if created_utc is not None
                 else _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            },
-        )
+            })
+        self._tabled = 0
         self._frames_since_flush = 0
-        self._seq = 0
         self.frames_written = 0
         self.messages_written = 0
         self._closed = False
+        self._q = None
+        self._thread = None
+        self._error: BaseException | None = None
         self.flush()
+        if background:
+            import queue
+            import threading
+
+            self._q = queue.Queue(maxsize=64)
+            self._thread = threading.Thread(target=self._run, name="recording-writer", daemon=True)
+            self._thread.start()
+
+    # ------------------------------------------------------------------ the writing thread
+
+    def _run(self) -> None:
+        while True:
+            job = self._q.get()
+            if job is None:
+                return
+            if self._error is not None:
+                continue
+            fn, args = job
+            try:
+                fn(*args)
+            except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread
+                self._error = exc
+
+    def _submit(self, fn, *args) -> bool:
+        """Queue ``fn(*args)`` on the writing thread (True), or say to run it here (False)."""
+        if self._error is not None:
+            err, self._error = self._error, None
+            raise err
+        if self._q is None:
+            return False
+        if self._closed:
+            raise ValueError("recording is closed")
+        self._q.put((fn, args))
+        return True
 
     # ------------------------------------------------------------------ channels
 
-    def _channel(self, name: str) -> int:
-        cid = self._channels.get(name)
-        if cid is None:
-            if name == POINTS:
-                sid = self._w.register_schema("foxglove.PointCloud", "jsonschema", json.dumps(_POINTCLOUD_SCHEMA).encode())
-            else:
-                sid = self._w.register_schema(f"foveatrack.{name}", "jsonschema", json.dumps(_json_schema(name)).encode())
-            cid = self._w.register_channel("/" + name, "json", sid)
-            self._channels[name] = cid
-        return cid
-
-    def _add(self, name: str, t_ns: int, payload: bytes) -> None:
+    def _add(self, name: str, t_ns: int) -> int:
         if self._closed:
             raise ValueError("recording is closed")
         t_ns = int(t_ns)
         if t_ns < 0:
             raise ValueError(f"t_ns must be >= 0 (MCAP log time), got {t_ns}")
-        cid = self._channel(name)
-        self._seq += 1
-        self._w.add_message(cid, log_time=t_ns, data=payload, publish_time=t_ns, sequence=self._seq & 0xFFFFFFFF)
         self.messages_written += 1
+        return t_ns
+
+    def _channel_table(self) -> None:
+        """Name the MCAP channel ids in a metadata record between chunks whenever new channels
+        appeared: a reader then attributes the messages of a chunk whose Channel record was lost in
+        a damaged chunk.  The SDK numbers channels 1, 2, ... in the order of their first message
+        (checked against the file's summary in tests/recording/test_foxglove.py)."""
+        order = self.view.first_log_order
+        if self._w is None or len(order) == self._tabled:
+            return
+        self._tabled = len(order)
+        self._w.write_metadata(CHANNELS_META_NAME, {"channels_json": json.dumps(
+            {str(i + 1): name for i, name in enumerate(order)})})
 
     # ------------------------------------------------------------------ writing
 
@@ -139,8 +194,13 @@ class RecordingWriter:
             raise ValueError("use write_points for the points channel")
         if not channel or "/" in channel:
             raise ValueError(f"bad channel name {channel!r}")
-        rec = {"t_ns": int(t_ns), **record}
-        self._add(channel, t_ns, json.dumps(rec, default=_to_jsonable).encode())
+        if not self._submit(self._write_now, channel, t_ns, record):
+            self._write_now(channel, t_ns, record)
+
+    def _write_now(self, channel: str, t_ns: int, record: dict) -> None:
+        t_ns = self._add(channel, t_ns)
+        rec = {"t_ns": t_ns, **record}
+        self.view.log_json(channel, t_ns, json.dumps(rec, default=_to_jsonable).encode(), rec)
 
     def write_points(
         self,
@@ -154,6 +214,10 @@ class RecordingWriter:
 
         Starts a new chunk first if ``flush_every_frames`` frames are pending.
         """
+        if not self._submit(self._write_points_now, t_ns, frame_id, xyz, t_ns_points, reflectivity):
+            self._write_points_now(t_ns, frame_id, xyz, t_ns_points, reflectivity)
+
+    def _write_points_now(self, t_ns, frame_id, xyz, t_ns_points, reflectivity) -> None:
         xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
         n = xyz.shape[0]
         tp = np.asarray(t_ns_points, dtype=np.int64).reshape(-1)
@@ -161,7 +225,7 @@ class RecordingWriter:
         if tp.shape[0] != n or refl.shape[0] != n:
             raise ValueError(f"xyz has {n} points but t_ns_points {tp.shape[0]} and reflectivity {refl.shape[0]}")
         if self._frames_since_flush >= self.flush_every_frames:
-            self.flush()
+            self._flush_now()
         dt = tp - int(t_ns)
         if n and (dt.min() < -(2**31) or dt.max() >= 2**31):
             raise ValueError("point times must lie within ±2.1 s of the frame t_ns")
@@ -169,23 +233,8 @@ class RecordingWriter:
         arr["x"], arr["y"], arr["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
         arr["dt_ns"] = dt
         arr["reflectivity"] = refl
-        fields = [
-            {"name": name, "offset": int(off), "type": _FOX_TYPES[dt_.str[1:]]}
-            for name, (dt_, off) in self._pdtype.fields.items()
-        ]
-        t_ns = int(t_ns)
-        rec = {
-            "timestamp": {"sec": t_ns // 1_000_000_000, "nsec": t_ns % 1_000_000_000},
-            "frame_id": "lidar",
-            "pose": {"position": {"x": 0, "y": 0, "z": 0}, "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}},
-            "point_stride": self._pdtype.itemsize,
-            "fields": fields,
-            "frame_index": int(frame_id),
-            "t_ns": t_ns,
-        }
-        # splice the base64 text in: json.dumps would scan the whole (escape-free) string again
-        head = json.dumps(rec).encode()
-        self._add(POINTS, t_ns, head[:-1] + b', "data": "' + base64.b64encode(arr.tobytes()) + b'"}')
+        t_ns = self._add(POINTS, t_ns)
+        self.view.log_points(t_ns, frame_id, arr)
         self.frames_written += 1
         self._frames_since_flush += 1
 
@@ -219,24 +268,44 @@ class RecordingWriter:
         """Complete the current chunk and hand it to the OS (and the disk if ``fsync``)."""
         if self._closed:
             return
-        self._w.flush()
-        self._fh.flush()
-        if self.fsync:
-            os.fsync(self._fh.fileno())
+        if not self._submit(self._flush_now):
+            self._flush_now()
+
+    def _flush_now(self) -> None:
         self._frames_since_flush = 0
+        if self._w is None:
+            return
+        self._w.flush()
+        self._channel_table()
+        if self.fsync:
+            fd = os.open(self.path, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
 
     def close(self) -> None:
         """Write the last chunk and the summary; the file is then complete."""
         if self._closed:
             return
+        if self._thread is not None:
+            self._q.put(None)
+            self._thread.join()
+            self._thread = self._q = None
         try:
-            self._w.finish()
-            self._fh.flush()
-            if self.fsync:
-                os.fsync(self._fh.fileno())
+            if self._w is not None:
+                self._w.close()
+                if self.fsync:
+                    fd = os.open(self.path, os.O_RDONLY)
+                    try:
+                        os.fsync(fd)
+                    finally:
+                        os.close(fd)
         finally:
             self._closed = True
-            self._fh.close()
+        if self._error is not None:
+            err, self._error = self._error, None
+            raise err
 
     def __enter__(self) -> "RecordingWriter":
         return self

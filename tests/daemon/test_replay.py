@@ -169,3 +169,28 @@ def test_cli_empty_tracker_config_is_refused(sim_run, tmp_path, capsys):
     bare.write_text("[tracker]\n")
     assert main(["replay", str(path), "--tracker-config", str(bare), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["config"] == str(bare)
+
+
+def test_bearing_percentiles_are_of_the_magnitude():
+    """A signed error's percentile mixes its two sides (p95 -0.82 beside rms 2.30): p95 and max are
+    of |error|, the signed mean is given apart."""
+    from foveatrack.replay import _stats
+
+    x = np.array([-3.0] * 50 + [0.5] * 50)
+    s = _stats(x)
+    assert s["p95"] == 3.0 and s["max"] == 3.0 and s["mean_signed"] == -1.25
+    assert s["rms"] == pytest.approx(np.sqrt((9 * 50 + 0.25 * 50) / 100))
+    assert "|error|" in s["of"]
+
+
+def test_the_open_loop_caveat_sits_beside_the_numbers(sim_run, tmp_path):
+    from foveatrack.replay import format_report
+
+    path, _, _ = sim_run
+    cfg = tmp_path / "tight.toml"
+    cfg.write_text(SCENE.read_text().replace("deadband_deg = 2.0", "deadband_deg = 0.5"))
+    lines = format_report(replay(path, str(cfg))).splitlines()
+    err_line = next(x for x in lines if x.lstrip().startswith("tracking error"))
+    assert "open loop" in err_line
+    same = format_report(replay_recording(path)).splitlines()
+    assert not any("open loop" in x for x in same)

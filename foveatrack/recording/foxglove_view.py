@@ -1,0 +1,240 @@
+"""Foxglove's well-known schemas for a recording: the channels, their schemas, and what is drawn.
+
+One :class:`FoxgloveChannels` per writer owns a ``foxglove.Context`` (the official Foxglove SDK,
+``foxglove-sdk``); every sink bound to that context -- the MCAP file of
+:class:`foveatrack.recording.RecordingWriter`, the WebSocket server of the live view
+(:mod:`foveatrack.recording.live`) -- receives the same channels.  docs/recordings.md lists them.
+
+Frames (``FrameTransforms`` on ``/tf``)::
+
+    world -> head_est -> lidar          the tracker's dead-reckoned head pose, the lidar on it
+    world -> head_true -> lidar_true    simulation only: the true head pose
+
+so the cloud (frame ``lidar``) sits in the world where the tracker believes it is, and the drift of
+the estimate shows as the offset between ``head_est`` and ``head_true``.  Head coordinates are the
+tracker's (:func:`foveatrack.reconstruction.rotation_matrix`): ``world = R_z(pan) R_y(-tilt)
+(p_lidar + lidar_offset_m)``, X forward, Y left, Z up, pan + = left, tilt + = up.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, LOG, METRICS, POINTS, RECORD_SCHEMAS, SCENE,
+                                         TF, TRUTH, encode_points_pb)
+
+SEGMENT_FRAMES = 50        # a drawn trajectory is one line entity per 50 frames (constant cost per frame)
+
+
+def head_quaternion(pan_deg: float, tilt_deg: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of ``R_z(pan) R_y(-tilt)`` (head -> world), the rotation of
+    :func:`foveatrack.reconstruction.rotation_matrix`; pan, tilt [deg], any finite value."""
+    hz = math.radians(pan_deg) / 2.0
+    hy = -math.radians(tilt_deg) / 2.0
+    cz, sz, cy, sy = math.cos(hz), math.sin(hz), math.cos(hy), math.sin(hy)
+    return (-sz * sy, cz * sy, cy * sz, cz * cy)
+
+
+def _ts(t_ns: int):
+    from foxglove.messages import Timestamp
+
+    return Timestamp(int(t_ns) // 1_000_000_000, int(t_ns) % 1_000_000_000)
+
+
+class FoxgloveChannels:
+    """The channels of a recording on one ``foxglove.Context``, and the visual messages derived from
+    the records (transforms, scene entities, log lines).
+
+    meta : the recording's meta (its ``tracker_table`` gives D and the lidar offset)
+    points_dtype : "float64" (exact) or "float32" (x, y, z of the packed points)
+    """
+
+    def __init__(self, meta: dict | None = None, points_dtype: str = "float64"):
+        import foxglove
+        from foxglove.channels import FrameTransformsChannel, LogChannel, SceneUpdateChannel
+
+        self.context = foxglove.Context()
+        ctx = self.context
+        self.first_log_order: list[str] = []     # channel names in the order of their first message
+        self._seen: set[str] = set()
+        # the SDK's own foxglove.PointCloud schema, on a plain channel: the points are encoded by the
+        # SDK (foxglove.messages.PointCloud.encode) with the frame index appended (format.encode_points_pb)
+        probe = foxglove.channels.PointCloudChannel("/_schema_probe", context=ctx)
+        pc_schema = probe.schema()
+        probe.close()
+        self._points = foxglove.Channel("/" + POINTS, schema=pc_schema, message_encoding="protobuf", context=ctx)
+        self._points_dtype = points_dtype
+        self._json: dict[str, object] = {}
+        for name in RECORD_SCHEMAS:
+            self._json_channel(name)
+        self._tf = FrameTransformsChannel("/" + TF, context=ctx)
+        self._scene = SceneUpdateChannel("/" + SCENE, context=ctx)
+        self._log = LogChannel("/" + LOG, context=ctx)
+        meta = meta or {}
+        table = meta.get("tracker_table") or {}
+        self.lidar_offset_m = tuple(float(v) for v in table.get("lidar_offset_m", (0.0, 0.0, 0.0)))
+        self._space = table.get("space") if isinstance(table.get("space"), dict) else None
+        self._paths: dict[str, tuple[int, list]] = {}     # name -> (segment number, its points)
+        self._state: str | None = None
+        self._space_sent = False
+
+    # ------------------------------------------------------------------ channels
+
+    def _json_channel(self, name: str):
+        import foxglove
+
+        ch = self._json.get(name)
+        if ch is None:
+            schema_name, schema = RECORD_SCHEMAS.get(name, (f"foveatrack.{name}", {"type": "object"}))
+            ch = foxglove.Channel("/" + name, schema=foxglove.Schema(
+                name=schema_name, encoding="jsonschema", data=json.dumps(schema).encode()),
+                message_encoding="json", context=self.context)
+            self._json[name] = ch
+        return ch
+
+    def _note(self, name: str) -> None:
+        if name not in self._seen:
+            self._seen.add(name)
+            self.first_log_order.append(name)
+
+    # ------------------------------------------------------------------ records
+
+    def log_points(self, t_ns: int, frame_id: int, packed: np.ndarray) -> None:
+        self._note(POINTS)
+        self._points.log(encode_points_pb(t_ns, frame_id, packed), log_time=int(t_ns))
+
+    def log_json(self, name: str, t_ns: int, payload: bytes, rec: dict) -> None:
+        self._note(name)
+        self._json_channel(name).log(payload, log_time=int(t_ns))
+        try:
+            self._derive(name, int(t_ns), rec)
+        except (KeyError, TypeError, ValueError, IndexError):
+            pass    # a record without what a drawing needs (a caller's own fields) is recorded, not drawn
+
+    # ------------------------------------------------------------------ what is drawn
+
+    def _derive(self, name: str, t_ns: int, rec: dict) -> None:
+        """Transforms, scene entities and log lines from a record just written."""
+        if name == HEAD and rec.get("pan_deg") is not None:
+            self._head_tf(t_ns, "head_est", "lidar", rec["pan_deg"], rec["tilt_deg"])
+            ents = [] if self._space_sent else self._space_entities(t_ns)
+            if rec.get("world_xyz_m") is not None:
+                ents.append(self._path_point("reconstructed_trajectory", t_ns, rec["world_xyz_m"], (0.1, 0.5, 1.0)))
+            if ents:
+                self._scene_update(t_ns, ents)
+        elif name == TRUTH and rec.get("pan_deg") is not None:
+            self._head_tf(t_ns, "head_true", "lidar_true", rec["pan_deg"], rec["tilt_deg"])
+            xyz = rec.get("target_xyz_m")
+            if xyz is not None:
+                self._scene_update(t_ns, [self._sphere("true_uav", t_ns, "world", xyz, 0.5, (0.1, 0.9, 0.2)),
+                                          self._path_point("true_trajectory", t_ns, xyz, (0.1, 0.9, 0.2))])
+        elif name == DETECTIONS:
+            xyz = rec.get("xyz_m") if rec.get("detected") else None
+            ent = self._sphere("detection", t_ns, "lidar", xyz, 0.6, (1.0, 0.2, 0.1))
+            self._scene_update(t_ns, [ent])
+            state = rec.get("state")
+            if state is not None and state != self._state:
+                self._log_line(t_ns, 2, f"tracker state {self._state or '-'} -> {state} "
+                                        f"(frame {rec.get('frame_index')})", "tracker")
+                self._state = state
+        elif name == COMMANDS and rec.get("limited"):
+            self._log_line(t_ns, 3, f"the gate changed the command: {', '.join(rec['limited'])}", "gate")
+        elif name not in (METRICS, TRUTH, HEAD, DETECTIONS, COMMANDS):
+            ev = rec.get("event")
+            self._log_line(t_ns, 2, json.dumps(rec, default=str) if ev is None else
+                           f"{ev}: " + json.dumps({k: v for k, v in rec.items() if k not in ("event", "t_ns")},
+                                                  default=str), name)
+
+    def _head_tf(self, t_ns, head, lidar, pan_deg, tilt_deg) -> None:
+        from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Vector3
+
+        x, y, z, w = head_quaternion(float(pan_deg), float(tilt_deg))
+        ox, oy, oz = self.lidar_offset_m
+        ts = _ts(t_ns)
+        self._note(TF)
+        self._tf.log(FrameTransforms(transforms=[
+            FrameTransform(timestamp=ts, parent_frame_id="world", child_frame_id=head,
+                           translation=Vector3(x=0.0, y=0.0, z=0.0), rotation=Quaternion(x=x, y=y, z=z, w=w)),
+            FrameTransform(timestamp=ts, parent_frame_id=head, child_frame_id=lidar,
+                           translation=Vector3(x=ox, y=oy, z=oz), rotation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+        ]), log_time=int(t_ns))
+
+    def _scene_update(self, t_ns, entities) -> None:
+        from foxglove.messages import SceneUpdate
+
+        self._note(SCENE)
+        self._scene.log(SceneUpdate(entities=entities), log_time=int(t_ns))
+
+    @staticmethod
+    def _color(rgb, a=1.0):
+        from foxglove.messages import Color
+
+        return Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
+
+    def _sphere(self, ident, t_ns, frame, xyz, size_m, rgb):
+        from foxglove.messages import Pose, Quaternion, SceneEntity, SpherePrimitive, Vector3
+
+        spheres = [] if xyz is None else [SpherePrimitive(
+            pose=Pose(position=Vector3(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2])),
+                      orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+            size=Vector3(x=size_m, y=size_m, z=size_m), color=self._color(rgb, 0.8))]
+        return SceneEntity(timestamp=_ts(t_ns), frame_id=frame, id=ident, spheres=spheres)
+
+    def _path_point(self, name, t_ns, xyz, rgb):
+        """Add a point to trajectory ``name``: the entity ``name/N`` of its current segment grows by
+        one point; a new segment starts at the last point of the one before (no gap)."""
+        seg, pts = self._paths.get(name, (0, []))
+        if len(pts) > SEGMENT_FRAMES:
+            seg, pts = seg + 1, pts[-1:]
+        pts.append(xyz)
+        self._paths[name] = (seg, pts)
+        return self._line(f"{name}/{seg}", t_ns, pts, rgb)
+
+    def _line(self, ident, t_ns, pts, rgb):
+        from foxglove.messages import LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity
+
+        lines = [LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=2.0, scale_invariant=True,
+                               points=[Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in pts],
+                               color=self._color(rgb))] if len(pts) >= 2 else []
+        return SceneEntity(timestamp=_ts(t_ns), frame_id="world", id=ident, lines=lines)
+
+    def _space_entities(self, t_ns) -> list:
+        """D of the tracker config (box or vertical cylinder; a sector or a learned map is not drawn)."""
+        from foxglove.messages import CubePrimitive, CylinderPrimitive, Pose, Quaternion, SceneEntity, Vector3
+
+        self._space_sent = True
+        s = self._space
+        if not s:
+            return []
+        frame = "world" if s.get("frame") == "world" else "lidar"
+        ident = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+        col = self._color((1.0, 0.8, 0.0), 0.12)
+        try:
+            if s.get("kind") == "box":
+                lo, hi = np.asarray(s["min_xyz"], float), np.asarray(s["max_xyz"], float)
+                c, size = (lo + hi) / 2, hi - lo
+                prim = {"cubes": [CubePrimitive(pose=Pose(position=Vector3(x=c[0], y=c[1], z=c[2]), orientation=ident),
+                                                size=Vector3(x=size[0], y=size[1], z=size[2]), color=col)]}
+            elif s.get("kind") == "cylinder":
+                cx, cy = (float(v) for v in s.get("center_xy", (0.0, 0.0)))
+                z0, z1 = float(s["z_min_m"]), float(s["z_max_m"])
+                d = 2 * float(s["radius_m"])
+                prim = {"cylinders": [CylinderPrimitive(
+                    pose=Pose(position=Vector3(x=cx, y=cy, z=(z0 + z1) / 2), orientation=ident),
+                    size=Vector3(x=d, y=d, z=z1 - z0), bottom_scale=1.0, top_scale=1.0, color=col)]}
+            else:
+                return []
+        except (KeyError, TypeError, ValueError):
+            return []
+        # frame_locked: D stays where it is defined whatever the transforms do later
+        return [SceneEntity(timestamp=_ts(t_ns), frame_id=frame, id="space_of_interest", frame_locked=True, **prim)]
+
+    def _log_line(self, t_ns, level, text, name) -> None:
+        from foxglove.messages import Log, LogLevel
+
+        lv = {2: LogLevel.Info, 3: LogLevel.Warning, 4: LogLevel.Error}[level]
+        self._note(LOG)
+        self._log.log(Log(timestamp=_ts(t_ns), level=lv, message=text, name=str(name)), log_time=int(t_ns))

@@ -1,0 +1,132 @@
+"""Recording cost on the thread that writes: one 10 k-point frame (float64 points, per-point times,
+reflectivity) with its detection, head estimate, command and truth records, then the chunk flush
+(``flush_every_frames = 1``, as ``simulate --out`` and the daemon write).
+
+    python scripts/bench_recording_write.py [--points 10000] [--frames 200] [--old PATH_TO_OLD_WRITER_PY]
+
+Prints the calling thread's CPU time per frame [ms] (with ``background=True`` the encoding and
+writing run on the writer's thread: what is left is the hand-over) and bytes per frame.  ``--old`` times a format-1 writer
+module (e.g. ``git show d76062b:foveatrack/recording/writer.py > /tmp/old_writer.py``) for the
+before/after figures of docs/recordings.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from foveatrack.recording import RecordingWriter
+from foveatrack.recording.records import CommandRecord, DetectionRecord, HeadEstimateRecord, TruthRecord, write_record
+
+
+def run(writer_cls, n_points: int, n_frames: int, path: Path, **kw) -> tuple[np.ndarray, int]:
+    rng = np.random.default_rng(1)
+    # lidar-like points: 5-130 m along a narrow cone, full float64 mantissas (as the simulator makes them)
+    r = rng.uniform(5, 130, n_points)
+    xyz = np.stack([r, rng.normal(0, 0.1, n_points) * r, rng.normal(0, 0.1, n_points) * r], axis=1)
+    refl = rng.integers(0, 256, n_points).astype(np.uint8)
+    cpu = []
+    with writer_cls(path, {"seed": 1}, overwrite=True, **kw) as w:
+        for k in range(n_frames):
+            t = 1_000_000_000 + k * 100_000_000
+            tp = t - 100_000_000 + np.arange(n_points, dtype=np.int64) * (100_000_000 // n_points)
+            pts = xyz + rng.normal(0, 0.02, xyz.shape)
+            c0 = time.thread_time()
+            w.write_points(t, k, pts, tp, refl)
+            write_record(w, DetectionRecord(t, k, True, (12.0, 0.1, 0.2), 40, t * 1e-9, 0.5, 0.9, "tracking", 0.1, 0.2))
+            write_record(w, HeadEstimateRecord(t, k, 0.1 * k, 1.0, 0.01, 0.01, (12.0, 0.2, 1.0), 0.05))
+            write_record(w, CommandRecord(t + 5_000_000, b"\xff\x01\x00\x04\x20\x00\x25", 1, 32, 0, 0, frame_id=k))
+            write_record(w, TruthRecord(t, k, 0.1 * k, 1.0, (12.0, 0.2, 1.0), 0.3, 40))
+            w.flush()
+            cpu.append(time.thread_time() - c0)
+    return np.asarray(cpu) * 1e3, path.stat().st_size
+
+
+def closed_loop(scene_path: str, background: bool, old=None, **wkw) -> tuple[float, float, float, int]:
+    """fig12 as ``simulate --out`` runs it: (frame hook CPU ms per frame on the loop's thread, wall s of
+    the run without recording, wall s with it, file bytes)."""
+    from sim.loop import ClosedLoop
+    from sim.recorder import SimRecorder, recording_meta
+    from sim.scene import load_scene
+
+    scene = load_scene(scene_path)
+    ClosedLoop(scene).run()                       # warm: numba cache, first calls
+    t = time.perf_counter()
+    ClosedLoop(scene).run()
+    wall_plain = time.perf_counter() - t
+    cls = RecordingWriter if old is None else old
+    kw = {"background": True, **wkw} if background else dict(wkw)
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "run.mcap"
+        hook_s = []
+        t = time.perf_counter()
+        loop = ClosedLoop(scene)
+        with cls(path, recording_meta(scene, loop), overwrite=True, **kw) as w:
+            rec = SimRecorder(w)
+
+            def hook(frame, out, lp):
+                c = time.thread_time()
+                rec(frame, out, lp)
+                hook_s.append(time.thread_time() - c)
+            loop.frame_hook = hook
+            loop.run()
+        wall_rec = time.perf_counter() - t
+        return float(np.mean(hook_s[1:]) * 1e3), wall_plain, wall_rec, path.stat().st_size
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--points", type=int, default=10_000)
+    ap.add_argument("--frames", type=int, default=200)
+    ap.add_argument("--old", help="a format-1 writer module to time beside the current one")
+    ap.add_argument("--scene", help="also run this scene's closed loop (e.g. scenes/fig12-tracking.toml) without "
+                                    "and with recording")
+    a = ap.parse_args()
+    cases = [("foxglove-sdk writer (format 2, zstd)", RecordingWriter, {"compression": "zstd"}),
+             ("foxglove-sdk writer (format 2, lz4)", RecordingWriter, {}),
+             ("foxglove-sdk writer (format 2, none)", RecordingWriter, {"compression": "none"}),
+             ("foxglove-sdk writer (zstd), background=True", RecordingWriter, {"background": True,
+                                                                                "compression": "zstd"}),
+             ("foxglove-sdk writer (lz4), background=True", RecordingWriter, {"background": True})]
+    if a.old:
+        spec = importlib.util.spec_from_file_location("old_writer", a.old)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        cases.insert(0, ("python mcap writer (format 1, JSON + base64, lz4)", mod.RecordingWriter, {}))
+    print(f"{a.frames} frames of {a.points} points, CPU ms per frame on the writing thread (os.cpu_count() = "
+          f"{os.cpu_count()}):")
+    old_cls = cases[0][1] if a.old else None
+    with tempfile.TemporaryDirectory() as d:
+        for name, cls, kw in cases:
+            ms, size = run(cls, a.points, a.frames, Path(d) / "r.mcap", **kw)
+            ms = ms[5:]     # first frames: imports, schemas
+            print(f"  {name:52s} p50 {np.percentile(ms, 50):6.3f}  p95 {np.percentile(ms, 95):6.3f}  "
+                  f"mean {ms.mean():6.3f} ms; {size / a.frames / 1e3:7.1f} kB per frame")
+    if a.scene:
+        scene_report(a.scene, old_cls)
+
+
+
+
+
+def scene_report(scene: str, old_cls) -> None:
+    runs = [("foxglove-sdk writer (lz4), background=True (simulate --out)", True, None, {}),
+            ("foxglove-sdk writer (zstd), background=True", True, None, {"compression": "zstd"}),
+            ("foxglove-sdk writer (lz4), on the loop's thread", False, None, {})]
+    if old_cls is not None:
+        runs.insert(0, ("python mcap writer (format 1, lz4)", False, old_cls, {}))
+    print(f"{scene}: closed loop without / with the recording")
+    for name, bg, cls, wkw in runs:
+        hook_ms, plain, rec, size = closed_loop(scene, bg, cls, **wkw)
+        print(f"  {name:56s} hook {hook_ms:6.3f} ms/frame on the loop's thread; wall {plain:5.2f} s -> "
+              f"{rec:5.2f} s with it; {size / 1e6:6.2f} MB")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,194 @@
+"""Recordings in Foxglove's schemas, read back by the official ``mcap`` reader with its protobuf
+decoder (``mcap-protobuf-support``): a route to the file that shares nothing with our reader.
+
+Checks: every channel is a Foxglove well-known schema in protobuf or one of the documented custom
+JSON schemas (docs/recordings.md); the transforms chain world -> head_est -> lidar and give the
+head rotation of :func:`foveatrack.reconstruction.rotation_matrix` at the recorded estimate (and
+world -> head_true the recorded truth); the PointCloud decoded by protobuf is the frame our reader
+returns, to the bit; the channel table the writer predicts names the ids the file's summary has."""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+
+from foveatrack.reconstruction import rotation_matrix
+from foveatrack.recording import RecordingReader, RecordingWriter
+from foveatrack.recording.foxglove_view import head_quaternion
+from foveatrack.recording.format import CHANNELS_META_NAME, RECORD_SCHEMAS
+
+ROOT = Path(__file__).resolve().parents[2]
+WELL_KNOWN = {"foxglove.PointCloud", "foxglove.FrameTransforms", "foxglove.SceneUpdate", "foxglove.Log"}
+
+
+@pytest.fixture(scope="module")
+def sim_rec(tmp_path_factory):
+    """0.6 s of fig12-tracking recorded as ``simulate --out`` records it (writer thread included)."""
+    from sim.loop import ClosedLoop
+    from sim.recorder import SimRecorder, recording_meta
+    from sim.scene import load_scene, with_run_overrides
+
+    path = tmp_path_factory.mktemp("fox") / "run.mcap"
+    scene = with_run_overrides(load_scene(ROOT / "scenes" / "fig12-tracking.toml"), 0.6, None)
+    loop = ClosedLoop(scene)
+    with RecordingWriter(path, recording_meta(scene, loop), background=True) as w:
+        loop.frame_hook = SimRecorder(w)
+        log = loop.run()
+    return path, log
+
+
+def decoded(path):
+    with open(path, "rb") as fh:
+        r = make_reader(fh, decoder_factories=[DecoderFactory()])
+        summary = r.get_summary()
+        msgs = []
+        for schema, channel, message in r.iter_messages():
+            if channel.message_encoding == "json":
+                msgs.append((channel.topic, message.log_time, json.loads(message.data), message.data))
+            else:
+                msgs.append((channel.topic, message.log_time, None, message.data))
+        return summary, msgs
+
+
+def quat_to_matrix(q):
+    x, y, z, w = q.x, q.y, q.z, q.w
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def test_every_channel_is_well_known_or_documented(sim_rec):
+    path, _ = sim_rec
+    summary, _ = decoded(path)
+    custom = {name for name, _schema in RECORD_SCHEMAS.values()}
+    seen = set()
+    for ch in summary.channels.values():
+        sc = summary.schemas[ch.schema_id]
+        seen.add(ch.topic)
+        if sc.name in WELL_KNOWN:
+            assert (ch.message_encoding, sc.encoding) == ("protobuf", "protobuf"), ch.topic
+        else:
+            assert sc.name in custom, (ch.topic, sc.name)
+            assert (ch.message_encoding, sc.encoding) == ("json", "jsonschema"), ch.topic
+            assert json.loads(sc.data)["title"] == sc.name
+    assert {"/points", "/tf", "/scene", "/detections", "/head", "/commands", "/truth"} <= seen
+    # and every protobuf message decodes under its schema with the official decoder
+    with open(path, "rb") as fh:
+        n = sum(1 for _ in make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+            topics=["/points", "/tf", "/scene", "/log"]))
+    assert n == sum(summary.statistics.channel_message_counts[c.id] for c in summary.channels.values()
+                    if c.message_encoding == "protobuf")
+
+
+def test_transforms_chain_world_to_lidar_at_the_recorded_poses(sim_rec):
+    path, log = sim_rec
+    with open(path, "rb") as fh:
+        r = make_reader(fh, decoder_factories=[DecoderFactory()])
+        tfs = {}
+        for _s, ch, msg, dec in r.iter_decoded_messages(topics=["/tf"]):
+            for t in dec.transforms:
+                tfs[(msg.log_time, t.child_frame_id)] = t
+    rec = RecordingReader(path)
+    heads = rec.records("head")
+    truths = rec.records("truth")
+    assert heads and len(truths) == len(heads)
+    for h, tr in zip(heads, truths):
+        t = h["t_ns"]
+        lidar = tfs[(t, "lidar")]
+        assert lidar.parent_frame_id == "head_est"
+        head = tfs[(t, lidar.parent_frame_id)]
+        assert head.parent_frame_id == "world"                 # world -> head_est -> lidar
+        np.testing.assert_allclose(quat_to_matrix(head.rotation), rotation_matrix(h["pan_deg"], h["tilt_deg"]),
+                                   atol=1e-12)
+        true_head = tfs[(t, "head_true")]
+        assert true_head.parent_frame_id == "world" and tfs[(t, "lidar_true")].parent_frame_id == "head_true"
+        np.testing.assert_allclose(quat_to_matrix(true_head.rotation),
+                                   rotation_matrix(tr["pan_deg"], tr["tilt_deg"]), atol=1e-12)
+
+
+def test_pointcloud_decoded_by_protobuf_is_the_frame_our_reader_returns(sim_rec):
+    path, log = sim_rec
+    ours = list(RecordingReader(path).points())
+    with open(path, "rb") as fh:
+        clouds = [(m.log_time, d) for _s, _c, m, d in
+                  make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/points"])]
+    assert len(clouds) == len(ours) == len(log["t_end_s"])
+    for f, (t, pc) in zip(ours, clouds):
+        assert pc.frame_id == "lidar" and t == f.t_ns
+        assert pc.timestamp.seconds * 10**9 + pc.timestamp.nanos == f.t_ns
+        names = {fl.name: fl for fl in pc.fields}
+        assert set(names) == {"x", "y", "z", "dt_ns", "reflectivity"}
+        dt = np.dtype({"names": ["x", "y", "z", "dt_ns", "reflectivity"],
+                       "formats": ["<f8", "<f8", "<f8", "<i4", "u1"],
+                       "offsets": [names[n].offset for n in ("x", "y", "z", "dt_ns", "reflectivity")],
+                       "itemsize": pc.point_stride})
+        arr = np.frombuffer(pc.data, dt)
+        assert np.array_equal(np.stack([arr["x"], arr["y"], arr["z"]], 1), f.xyz)
+        assert np.array_equal(arr["dt_ns"] + f.t_ns, f.t_ns_points)
+    assert [f.frame_index for f in ours] == list(range(len(ours)))
+
+
+def test_the_channel_table_names_the_ids_of_the_summary(sim_rec):
+    path, _ = sim_rec
+    with open(path, "rb") as fh:
+        r = make_reader(fh)
+        table = {}
+        for md in r.iter_metadata():
+            if md.name == CHANNELS_META_NAME:
+                table.update(json.loads(md.metadata["channels_json"]))
+        summary = r.get_summary()
+    assert table == {str(c.id): c.topic.lstrip("/") for c in summary.channels.values()}
+
+
+@pytest.mark.parametrize("pan_deg,tilt_deg", [(0, 0), (30, 0), (0, 20), (-170, -35), (95.5, 61.2), (400, 10)])
+def test_head_quaternion_is_the_trackers_rotation(pan_deg, tilt_deg):
+    q = head_quaternion(pan_deg, tilt_deg)
+    assert math.isclose(sum(v * v for v in q), 1.0, rel_tol=1e-12)
+
+    class Q:
+        x, y, z, w = q
+    np.testing.assert_allclose(quat_to_matrix(Q), rotation_matrix(pan_deg, tilt_deg), atol=1e-12)
+
+
+def test_a_simulator_recording_replays_to_the_bit(sim_rec):
+    from foveatrack.replay import replay_recording
+
+    path, log = sim_rec
+    c = replay_recording(path).comparison
+    assert c["detections_equal"] and c["commands_equal"] and c["max_detection_xyz_diff_m"] == 0.0
+    assert c["commands_compared"] == len(log["t_end_s"])
+
+
+def test_the_shipped_layout_names_channels_and_fields_a_recording_has(sim_rec):
+    """docs/foxglove-layout.json (scripts/make_foxglove_layout.py): every plotted path is a field of
+    its channel's schema, every topic it shows is one a simulator recording has."""
+    path, _ = sim_rec
+    doc = json.loads((ROOT / "docs" / "foxglove-layout.json").read_text())
+    summary, _ = decoded(path)
+    topics = {c.topic: json.loads(summary.schemas[c.schema_id].data) if c.message_encoding == "json" else None
+              for c in summary.channels.values()}
+    values, shown = [], []
+
+    def walk(x):
+        if isinstance(x, dict):
+            for k, v in x.items():
+                if k == "value" and isinstance(v, str):
+                    values.append(v)
+                elif k == "topicToRender":
+                    shown.append(v)
+                elif k == "topics" and isinstance(v, dict):
+                    shown.extend(v)
+                walk(v)
+        elif isinstance(x, list):
+            for v in x:
+                walk(v)
+    walk(doc)
+    assert len(values) >= 6 and {"/points", "/scene", "/log"} <= set(shown)
+    assert set(shown) <= set(topics)
+    for v in values:
+        topic, field = v.split(".", 1)
+        assert topic in topics and field in topics[topic]["properties"], v

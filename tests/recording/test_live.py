@@ -1,0 +1,123 @@
+"""The live view: a WebSocket client (``websockets``, speaking Foxglove's WebSocket protocol)
+connects to the SDK's server on loopback, subscribes to every advertised channel and receives the
+recording's channels; the points it receives decode to the frame that was logged."""
+
+import json
+import time
+
+import numpy as np
+import pytest
+from websockets.sync.client import connect
+
+from foveatrack.errors import UserError
+from foveatrack.recording import RecordingWriter
+from foveatrack.recording.format import _decode_points_pb
+from foveatrack.recording.live import LiveServer, Pacer
+from foveatrack.recording.records import DetectionRecord, HeadEstimateRecord, TruthRecord, write_record
+
+META = {"tracker_table": {"space": {"kind": "box", "frame": "world", "min_xyz": [1, -5, -1], "max_xyz": [50, 5, 10]}}}
+
+
+def log_frame(w, k, rng):
+    t = 1_000_000_000 + k * 100_000_000
+    xyz = rng.normal(0, 20, (50, 3))
+    w.write_points(t, k, xyz, t - 50_000_000 + np.arange(50) * 1000, np.full(50, 7, np.uint8))
+    write_record(w, DetectionRecord(t, k, True, (12.0, 0.1, 0.2), 9, t * 1e-9, 0.5, 0.9, "tracking", 0.1, 0.2))
+    write_record(w, HeadEstimateRecord(t, k, 0.1 * k, 1.0, 0.01, 0.01, (12.0, 0.2, 1.0), 0.05))
+    write_record(w, TruthRecord(t, k, 0.1 * k, 1.0, (12.0, 0.2, 1.0), 0.3, 9))
+    return t, xyz
+
+
+def test_a_websocket_client_subscribes_and_receives_the_channels():
+    rng = np.random.default_rng(5)
+    w = RecordingWriter(None, META)          # no file: the live view only
+    with LiveServer(w.context, port=0) as live, \
+            connect(f"ws://127.0.0.1:{live.port}", subprotocols=["foxglove.sdk.v1"], open_timeout=10) as ws:
+        assert live.url.startswith("ws://127.0.0.1:")
+        channels = {}
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and "/points" not in {c["topic"] for c in channels.values()}:
+            msg = json.loads(ws.recv(timeout=5))
+            if msg.get("op") == "advertise":
+                channels.update({c["id"]: c for c in msg["channels"]})
+        by_topic = {c["topic"]: c for c in channels.values()}
+        assert {"/points", "/detections", "/head", "/truth", "/tf", "/scene"} <= set(by_topic)
+        assert by_topic["/points"]["schemaName"] == "foxglove.PointCloud"
+        assert by_topic["/points"]["encoding"] == "protobuf"
+        subs = {i + 1: cid for i, cid in enumerate(channels)}
+        ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": s, "channelId": c} for s, c in subs.items()]}))
+        got: dict[str, list] = {}
+        sent = {}
+        k = 0
+        deadline = time.monotonic() + 15
+        want = {"/points", "/detections", "/head", "/truth", "/tf", "/scene"}
+        while time.monotonic() < deadline and not want <= set(got):
+            t, xyz = log_frame(w, k, rng)
+            sent[t] = (k, xyz)
+            k += 1
+            try:
+                while True:
+                    data = ws.recv(timeout=0.2)
+                    if isinstance(data, bytes) and data[0] == 0x01:     # message data
+                        sub = int.from_bytes(data[1:5], "little")
+                        topic = channels[subs[sub]]["topic"]
+                        got.setdefault(topic, []).append((int.from_bytes(data[5:13], "little"), data[13:]))
+            except TimeoutError:
+                pass
+    w.close()
+    assert want <= set(got), set(got)
+    for log_time, payload in got["/points"]:
+        f = _decode_points_pb(payload)
+        k, xyz = sent[f.t_ns]
+        assert log_time == f.t_ns and f.frame_index == k and np.array_equal(f.xyz, xyz)
+    det = json.loads(got["/detections"][0][1])
+    assert det["detected"] is True and det["xyz_m"] == [12.0, 0.1, 0.2]
+
+
+def test_only_loopback_is_served_and_bad_ports_are_named():
+    w = RecordingWriter(None, {})
+    with pytest.raises(UserError, match="loopback"):
+        LiveServer(w.context, port=0, host="0.0.0.0")
+    with pytest.raises(UserError, match="0-65535"):
+        LiveServer(w.context, port=70000)
+    with LiveServer(w.context, port=0) as a:
+        with pytest.raises(UserError, match=f"--live {a.port}: cannot serve"):
+            LiveServer(w.context, port=a.port)
+    w.close()
+
+
+def test_the_pacer_holds_virtual_time_to_the_wall_clock():
+    p = Pacer(speed=20.0)
+    t0 = time.monotonic()
+    for k in range(6):
+        p.wait(k * 0.1)          # 0.5 s of virtual time at 20x: at least 25 ms of wall time
+    assert time.monotonic() - t0 >= 0.5 / 20.0
+    with pytest.raises(UserError, match="--speed"):
+        Pacer(0)
+
+
+FIXTURE = __import__("pathlib").Path(__file__).parent / "fixtures" / "fig12-v1.mcap"
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
+
+
+def test_simulate_and_replay_live_from_the_cli(capsys):
+    from foveatrack.cli import main
+
+    assert main(["simulate", str(ROOT / "scenes" / "fig12-tracking.toml"), "--duration", "0.3", "--live", "0",
+                 "--speed", "50", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "live view on ws://127.0.0.1:" in err and "50x real time" in err
+    assert main(["replay", str(FIXTURE), "--live", "0", "--speed", "100", "--wait-s", "0"]) == 0
+    cap = capsys.readouterr()
+    assert "live view: served 40 messages" in cap.err          # 8 frames x 5 records of a format-1 file
+    assert "same as recorded" in cap.out
+
+
+@pytest.mark.parametrize("args,msg", [(["--live", "abc"], "--live 'abc'"), (["--live", "99999"], "0-65535"),
+                                      (["--live", "0", "--speed", "0"], "--speed 0")])
+def test_live_flags_are_checked(args, msg, capsys):
+    from foveatrack.cli import main
+
+    code = main(["simulate", str(ROOT / "scenes" / "fig12-tracking.toml"), "--duration", "0.2", "--no-progress",
+                 *args])
+    assert code != 0 and msg in capsys.readouterr().err
