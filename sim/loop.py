@@ -64,19 +64,6 @@ def load_tracker_table(spec: str, head: PTS303H, where: str) -> SpeedTable:
         raise UserError(f"{where}: {exc}") from None
 
 
-@dataclass(frozen=True)
-class ExternalOutput:
-    """What the loop logs for a frame driven by an external controller instead of the tracker."""
-
-    command: object
-    detection: object = None
-    state: str = "external"
-    head_pan_deg: float = math.nan
-    head_tilt_deg: float = math.nan
-    world_xyz: object = None
-    world_sigma_m: float = math.nan
-
-
 @dataclass
 class FrameLog:
     """Per-frame record of a run (arrays are built by :meth:`ClosedLoop.run`)."""
@@ -127,9 +114,9 @@ class ClosedLoop:
         self.scene = scene
         self.head_grid_s = head_grid_s
         self.sensor = SceneSensor(scene, target_motion)
-        # Another driver of the head instead of the tracker (e.g. the calibration procedure):
-        # controller(frame, send_t_s) -> HeadCommand or None (stop).
-        self.controller = controller
+        # What drives the head (foveatrack.controller.Controller): the tracker, or another controller
+        # (the calibration procedure) in its place; the command gate and the link are the same.
+        self.external_controller = controller
         self.frame_hook = frame_hook
         seed = scene.seed
         g = scene.gimbal
@@ -158,6 +145,7 @@ class ClosedLoop:
         self.tracker_overrides = self.head_facts.tracker_values()
         self.tracker = Tracker(scene.tracker.with_head(self.head_facts, scene.tracker_table, f"{scene.path} [tracker]"),
                                table)
+        self.controller = controller if controller is not None else self.tracker
         # The daemon's gate (limits, stale frames): pass-through unless the scene has a [gate] table.
         self.gate = CommandGate(None if scene.gate is None else Limits(
             scene.gate.max_pan_byte, scene.gate.max_tilt_byte, scene.gate.allow_turbo,
@@ -255,25 +243,19 @@ class ClosedLoop:
         c4 = clock()
         # 6. the tracker and the link.
         send_t = t1 + scene.gimbal.send_delay_s
-        if self.controller is not None:
-            cmd = self.controller(frame, send_t)
-            out = ExternalOutput(STOP if cmd is None else cmd)
-        else:
-            out = self.tracker.process(frame, send_t_s=send_t)
+        out = self.controller.process(frame, send_t)
         c5 = clock()
         self.last_sent = None
         self.last_limited = []
-        if scene.gimbal.frozen and self.controller is None:
-            # The head is frozen (paper Fig. 13/14a): nothing is sent, and the tracker's dead reckoning
-            # must know that its command never left.
-            self.tracker.command_sent(send_t, STOP)
-        if not scene.gimbal.frozen:
-            c = out.command
-            if self.controller is None:
-                stale_s = None if scene.gate is None else scene.gate.stale_frame_s
-                c, self.last_limited = self.gate.decide(self.tracker, out, send_t,
-                                                        stale=stale_s is not None and send_t - t1 > stale_s)
-                self.gate.wrote(self.tracker, send_t, c, ok=True)   # the virtual UART always takes the bytes
+        if scene.gimbal.frozen:
+            # The head is frozen (paper Fig. 13/14a): nothing is sent, and the controller (the tracker's
+            # dead reckoning) must know that its command never left.
+            self.controller.command_sent(send_t, STOP)
+        else:
+            stale_s = None if scene.gate is None else scene.gate.stale_frame_s
+            c, self.last_limited = self.gate.decide(self.controller, out, send_t,
+                                                    stale=stale_s is not None and send_t - t1 > stale_s)
+            self.gate.wrote(self.controller, send_t, c, ok=True)   # the virtual UART always takes the bytes
             self.last_command = c
             key = (c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte)
             data = self._encoded.get(key)
@@ -313,7 +295,7 @@ class ClosedLoop:
         L.head_pan_deg.append(pan)
         L.head_tilt_deg.append(tilt)
         # The tracker's dead reckoning at the same instant as the truth above (frame mid).
-        if self.controller is None:
+        if self.external_controller is None:
             est_pan, est_tilt = self.tracker.recon.angles_at(t_mid)[:2]
         else:
             est_pan, est_tilt = math.nan, math.nan

@@ -7,11 +7,30 @@ with any command sink, so a real lidar + head driver reuses the same procedure.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 
 from foveatrack.calibration import Calibrator
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.frames import Frame
+
+
+@dataclass(frozen=True)
+class CalibrationOutput:
+    """What a driver records for a frame driven by the calibration procedure (no tracking state)."""
+
+    command: HeadCommand
+    detection: object = None
+    state: str = "calibrating"
+    head_pan_deg: float = math.nan
+    head_tilt_deg: float = math.nan
+    head_sigma_pan_deg: float = math.nan
+    head_sigma_tilt_deg: float = math.nan
+    world_xyz: object = None
+    world_sigma_m: float = math.nan
+    error_pan_deg: float | None = None
+    error_tilt_deg: float | None = None
 
 
 class CalibrationDriver:
@@ -29,10 +48,20 @@ class CalibrationDriver:
         self.calibrator = calibrator
         self.current: HeadCommand = STOP
         self.sent: list[tuple[float, HeadCommand]] = []
+        self.overridden: list[tuple[float, HeadCommand]] = []   # (t, what the head got instead)
 
     @property
     def finished(self) -> bool:
         return self.calibrator.done
+
+    def process(self, frame: Frame, send_t_s: float) -> "CalibrationOutput":
+        """The :class:`foveatrack.controller.Controller` step: this frame's command to send."""
+        return CalibrationOutput(self(frame, send_t_s))
+
+    def command_sent(self, t_s: float, cmd: HeadCommand) -> None:
+        """The gate or the link changed a command: the procedure times its legs from its own commands
+        (its plan is cut to the limits beforehand), so a change is recorded, not integrated."""
+        self.overridden.append((t_s, cmd))
 
     def __call__(self, frame: Frame, send_t_s: float) -> HeadCommand:
         cmd = self.calibrator.step(frame)
@@ -45,18 +74,22 @@ class CalibrationDriver:
 
 
 def drive_calibration(calibrator: Calibrator, frames: Iterable[Frame], send: Callable[[float, HeadCommand], None],
-                      send_delay_s: float = 0.0) -> CalibrationDriver:
+                      send_delay_s: float = 0.0, gate=None) -> CalibrationDriver:
     """Run a calibration from any frame source into any command sink (a real lidar + head, a replay).
 
     ``frames`` yields consecutive frames (e.g. :class:`foveatrack.frames.FrameSlicer` over a live
     Livox stream); ``send(t_s, command)`` writes the command (e.g. Pelco-D to the head's port) and
-    is called once per frame.  Stops consuming frames when the calibration is done (after sending a
-    final STOP).  Returns the driver (``driver.calibrator.result()`` is the table).
+    is called once per frame.  ``gate``: the :class:`foveatrack.gate.CommandGate` every command passes
+    on its way (the daemon's limits on a real head; None: commands pass unchanged).  Stops consuming
+    frames when the calibration is done (after sending a final STOP).  Returns the driver
+    (``driver.calibrator.result()`` is the table).
     """
     driver = CalibrationDriver(calibrator)
     for frame in frames:
         t = frame.t_end_s + send_delay_s
-        send(t, driver(frame, t))
+        out = driver.process(frame, t)
+        cmd = out.command if gate is None else gate.decide(driver, out, t)[0]
+        send(t, cmd)
         if driver.finished:
             break
     return driver

@@ -34,6 +34,7 @@ from foveatrack.calibration.drive import drive_calibration
 from foveatrack.daemon.config import DaemonConfig
 from foveatrack.errors import UserError
 from foveatrack.frames import FrameSlicer, strip_no_return
+from foveatrack.gate import CommandGate
 from foveatrack.live_devices import LidarStream, open_devices
 from foveatrack.speed_table import TURBO, SpeedTable
 
@@ -146,7 +147,8 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
     try:
         head.stop()
         client.start_sampling()
-        drive_calibration(cal, frames(), send)   # the procedure the simulator runs, on the live devices
+        # the procedure the simulator runs, on the live devices, through the daemon's command gate
+        drive_calibration(cal, frames(), send, gate=CommandGate(h.limits))
         table = cal.result()
     finally:
         head.stop()

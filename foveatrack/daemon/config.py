@@ -29,7 +29,7 @@ from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_k
 from foveatrack.errors import UserError
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig
-from foveatrack.gate import GATE_TILT_MARGIN_DEG
+from foveatrack.gate import GATE_TILT_MARGIN_DEG, Limits
 from gimbal.head_facts import HeadFacts
 
 
@@ -68,6 +68,12 @@ class HeadConfig:
         """The head's facts (stops, start pose, protocol, baud) the tracker and the gate read; the
         daemon measures each send, so no fixed send delay."""
         return HeadFacts(self.tilt_limits_deg, self.pan0_deg, self.tilt0_deg, self.protocol, self.baud, None)
+
+    @property
+    def limits(self) -> Limits:
+        """The command gate's limits for this head (:mod:`foveatrack.gate`)."""
+        return Limits(self.max_pan_byte, self.max_tilt_byte, self.allow_turbo, self.tilt_limits_deg,
+                      self.tilt_margin_deg)
 
     @property
     def frame_time_s(self) -> float:

@@ -51,7 +51,7 @@ from foveatrack.control import STOP, HeadCommand
 from foveatrack.daemon.config import DaemonConfig
 from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, format_status
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
-from foveatrack.gate import CommandGate, Limits
+from foveatrack.gate import CommandGate
 from foveatrack.live_devices import LidarStream, open_devices
 from foveatrack.recording.records import CommandRecord, ns, write_record, write_tracker_frame
 from foveatrack.tracker import Tracker
@@ -154,7 +154,7 @@ class Daemon:
         self.install_signals = install_signals
         self.stop_ev = threading.Event()
         h = config.head
-        self.limits = Limits(h.max_pan_byte, h.max_tilt_byte, h.allow_turbo, h.tilt_limits_deg, h.tilt_margin_deg)
+        self.limits = h.limits
         self.gate = CommandGate(self.limits)
         self.table = config.speed_table()
         self.tracker = Tracker(config.tracker, self.table)

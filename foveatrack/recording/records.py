@@ -72,7 +72,7 @@ class DetectionRecord:
         return cls(int(t_ns), int(frame_id), d is not None, None if d is None else tuple(float(v) for v in d.xyz),
                    0 if d is None else int(d.n_points), None if d is None else float(d.t_s),
                    None if d is None else float(d.az_deg), None if d is None else float(d.el_deg),
-                   str(out.state.value), _finite_or_none(out.error_pan_deg), _finite_or_none(out.error_tilt_deg))
+                   str(getattr(out.state, "value", out.state)), _finite_or_none(out.error_pan_deg), _finite_or_none(out.error_tilt_deg))
 
     def to_json(self) -> dict:
         return {"frame_index": self.frame_id, "detected": self.detected, "xyz_m": _xyz(self.xyz_m),

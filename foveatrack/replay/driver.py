@@ -1,0 +1,247 @@
+"""Replay: re-run detection and control offline over recorded point frames (deterministic).
+
+One tracker object for every driver (DESIGN.md): :func:`replay_recording` pushes the recorded frames
+of a simulator or daemon recording (:mod:`foveatrack.recording`) through a fresh
+:class:`foveatrack.tracker.Tracker` with the recorded configuration -- or another one -- and the
+recorded send times, so with the recorded configuration the detections and commands come out
+identical (to the bit) to the recorded ones.  :func:`replay_lvx` runs the tracker over a Livox Viewer
+``.lvx`` file (lidar only: the head is taken as frozen, so the commands are what the tracker *would*
+have sent).
+
+How a recording's tracker is rebuilt (``meta``):
+
+* simulator (``sim.recorder.recording_meta``): ``[tracker]`` table + what
+  :class:`sim.loop.ClosedLoop` sets from ``[gimbal]`` (start pose, the family's tilt stops,
+  ``latency_s`` = a Pelco-D frame's time on the wire, ``send_delay_s``); frame ``k`` is ``[k, k+1) / rate_hz`` and its command
+  was written at ``t_end + send_delay_s``.
+* daemon (:mod:`foveatrack.daemon.runtime`): ``[tracker]`` table + ``tracker_overrides``; frames end
+  at the recorded ``t_ns``; the send time is the command's ``send_t_s``; commands the safety gate
+  limited, and the watchdog's and shutdown's STOPs, are registered where they happened; a command
+  whose write failed (``written: false``) is replaced, at the same instant, by the last one that
+  reached the head (the head never saw it, and kept moving as it was told before).
+
+Replay is open loop: the points are what the lidar saw while the head moved as it did, so a
+different configuration shows which detections and commands would have differed on the same data,
+not where the head would have gone.
+
+A damaged recording (:class:`foveatrack.recording.Damage`) is replayed from everything the reader
+recovered; the report's first line after the title is a WARNING naming what was skipped.  Frames
+lost in the middle take their commands with them, so the replay's dead reckoning after the gap
+lacks those commands: the comparison then says it is *partial* (``comparison["partial"]``,
+``gaps`` with the head-estimate offset after each, ``before_first_gap`` exact as before).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from foveatrack.control import STOP, HeadCommand
+from foveatrack.errors import UserError
+from foveatrack.frames import Frame, FrameSlicer
+from foveatrack.gate import CommandGate
+from foveatrack.recording.records import CommandRecord
+from foveatrack.replay.config import recorded_limits, load_tracker_table, tracker_config
+from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
+from foveatrack.replay.recorded import FrameArrays, recorded_frames
+from foveatrack.replay.result import ReplayResult
+from foveatrack.speed_table import SpeedTable
+from foveatrack.tracker import Tracker, TrackerConfig
+
+
+def _reached_head(gate: CommandGate, tracker: Tracker, send_t: float, cmd: HeadCommand,
+                  record: CommandRecord | None) -> HeadCommand:
+    """What the head runs after a command sent at ``send_t``: the gate's rule for a write, with the
+    outcome the recording gives (the daemon's ``written: false`` for a failed write)."""
+    return gate.wrote(tracker, send_t, cmd, ok=record is None or record.reached_head)
+
+
+def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
+                     config_name: str | None = None) -> ReplayResult:
+    """Re-run the tracker over a foveatrack recording (simulator or daemon)."""
+    from foveatrack.recording import RecordingReader
+
+    reader = RecordingReader(path)
+    meta = reader.meta
+    source = meta.get("source", "?")
+    where = f"{config_name} [tracker]" if config_name else "recorded [tracker]"
+    cfg = tracker_config(meta, tracker_table, where)
+    rec_cfg = tracker_config(meta)
+    table = SpeedTable.from_dict(meta["speed_table"], where=f"{path}: recorded speed table")
+    tracker = Tracker(cfg, table, t0_s=float(meta.get("tracker_t0_s", 0.0)))
+    gate = CommandGate(recorded_limits(meta))
+    period = rec_cfg.period_s
+    period_ns = int(round(1e9 / rec_cfg.rate_hz))
+    send_delay_sim = rec_cfg.send_delay_s
+    F = FrameArrays()
+    R = {k: [] for k in ("detected", "det_xyz", "det_n_points", "command", "error_pan_deg", "error_tilt_deg",
+                         "processing_ms", "latency_ms", "head_pan_deg", "head_tilt_deg")}
+    T = {k: [] for k in ("true_error_deg", "target_xyz_m", "points_on_target", "pan_deg", "tilt_deg")}
+    has_truth = False
+    for rf in recorded_frames(reader):
+        pts = rf.points
+        k = int(pts.frame_index)
+        if source == "simulator":
+            t0, t1 = k * period, (k + 1) * period
+            if abs(int(round(t1 * 1e9)) - pts.t_ns) > 1:   # not the simulator's frame grid: trust t_ns
+                t1 = pts.t_ns * 1e-9
+                t0 = t1 - period
+            send_t = t1 + send_delay_sim
+        else:
+            t1 = pts.t_ns * 1e-9
+            t0 = (pts.t_ns - period_ns) * 1e-9
+            c = rf.command
+            send_t = float(c.send_t_s) if c is not None and c.send_t_s is not None else t1 + cfg.send_delay_s
+        frame = Frame(t0, t1, pts.xyz, pts.t_ns_points, pts.reflectivity)
+        out = tracker.process(frame, send_t_s=send_t)
+        # a frame the driver found stale (the daemon: by its wall clock) is stale here too
+        cmd, _ = gate.decide(tracker, out, send_t, stale=rf.stale)
+        _reached_head(gate, tracker, send_t, cmd, rf.command)
+        F.add(k, frame, out, cmd)
+        d = rf.detection
+        R["detected"].append(d is not None and d.detected)
+        R["det_xyz"].append(np.full(3, np.nan) if d is None or d.xyz_m is None else np.asarray(d.xyz_m, float))
+        R["det_n_points"].append(0 if d is None else d.n_points)
+        R["error_pan_deg"].append(np.nan if d is None or d.error_pan_deg is None else d.error_pan_deg)
+        R["error_tilt_deg"].append(np.nan if d is None or d.error_tilt_deg is None else d.error_tilt_deg)
+        R["command"].append((None,) * 4 if rf.command is None else rf.command.speeds)
+        R["processing_ms"].append(rf.metrics.get("processing_ms", np.nan))
+        R["latency_ms"].append(np.nan if rf.metrics.get("latency_ms") is None else rf.metrics["latency_ms"])
+        h = rf.head
+        R["head_pan_deg"].append(np.nan if h is None else h.est_pan_deg)
+        R["head_tilt_deg"].append(np.nan if h is None else h.est_tilt_deg)
+        t = rf.truth
+        if t is not None:
+            has_truth = True
+            T["true_error_deg"].append(np.nan if t.true_error_deg is None else t.true_error_deg)
+            T["target_xyz_m"].append(np.asarray(t.true_target_world_m, float))
+            T["points_on_target"].append(t.points_on_target)
+            T["pan_deg"].append(t.true_pan_deg)
+            T["tilt_deg"].append(t.true_tilt_deg)
+        else:
+            T["true_error_deg"].append(np.nan)
+            T["target_xyz_m"].append(np.full(3, np.nan))
+            T["points_on_target"].append(0)
+            T["pan_deg"].append(np.nan)
+            T["tilt_deg"].append(np.nan)
+        for c in rf.after:   # watchdog / shutdown STOPs, in the order they were sent
+            tracker.command_sent(c.send_time_s, c.command)
+            _reached_head(gate, tracker, c.send_time_s, c.command, c)
+    t_settled = (tracker.recon.last_send_t_s or 0.0) + 2.0
+    final_pose = tuple(float(a) for a in tracker.recon.angles_at(t_settled)[:2])
+    frames = F.arrays()
+    recorded = {k: np.asarray(v) for k, v in R.items()}
+    recorded["det_xyz"] = recorded["det_xyz"].reshape(-1, 3)
+    truth = None
+    if has_truth:
+        truth = {k: np.asarray(v) for k, v in T.items()}
+        truth["target_xyz_m"] = truth["target_xyz_m"].reshape(-1, 3)
+    res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth,
+                       final_pose_deg=final_pose, tracker_cfg=cfg)
+    res.comparison = compare(frames, recorded)
+    if tracker_table is None and "tracker_effective" in meta:
+        # the configuration replay rebuilt is the one that ran (JSON-normalised: tuples as lists)
+        import json
+
+        res.comparison["tracker_config_as_recorded"] = (
+            json.loads(json.dumps(cfg.effective())) == meta["tracker_effective"])
+    res.metrics = replay_metrics(frames, truth, cfg, meta.get("half_fov_deg"))
+    res.recorded_metrics = recorded_metrics(recorded, truth, rec_cfg, frames)
+    if reader.problem:
+        res.comparison["recording_problem"] = reader.problem
+    res.comparison["recording_complete"] = bool(reader.complete)
+    res.comparison["recording_damage"] = [d.describe() for d in reader.damage]
+    res.comparison.update(_gaps(frames, recorded, reader))
+    return res
+
+
+def _gaps(frames: dict, recorded: dict, reader) -> dict:
+    """Where frames are missing (a skipped damaged stretch), and whether that makes the comparison partial.
+
+    A gap is a jump in the recorded frame index (both drivers number frames 0, 1, 2, ...), or damage
+    before the first frame read.  The commands sent in missing frames are lost with them, so after a
+    gap the replay's dead reckoning lacks them and its head estimate, detections in the world frame
+    and commands may differ from the recording for that reason alone: the comparison is then
+    *partial*, exact only up to the first gap (``before_first_gap``).  A cut-short tail leaves no gap.
+    """
+    fi = np.asarray(frames["frame_index"], np.int64)
+    gaps = []
+    lead = [d for d in reader.damage if not d.cut_short and d.frames_before == 0]
+    if fi.size and (fi[0] > 0 or (lead and lead[0].frames_lost)):
+        gaps.append((0, None, int(fi[0]), int(fi[0]) if fi[0] > 0 else lead[0].frames_lost))
+    for i in np.flatnonzero(np.diff(fi) != 1) + 1:
+        gaps.append((int(i), int(fi[i - 1]), int(fi[i]), int(fi[i] - fi[i - 1] - 1)))
+    # damage that lost records other than frames (e.g. a watchdog STOP) also leaves the reckoning short
+    lost_other = any(not d.cut_short and (d.lost is None or sum(d.lost.values()) > 0) for d in reader.damage)
+    partial = bool(gaps) or lost_other or bool(reader.unattributed)
+    out: dict = {"partial": partial, "frames_missing": int(sum(g[3] for g in gaps if g[3])), "gaps": []}
+    for i, after, before, n in gaps:
+        dp = frames["head_pan_deg"][i] - recorded["head_pan_deg"][i]
+        dt = frames["head_tilt_deg"][i] - recorded["head_tilt_deg"][i]
+        diff = float(np.hypot((dp + 180.0) % 360.0 - 180.0, dt))
+        out["gaps"].append({"after_frame": after, "before_frame": before, "frames_missing": n,
+                            "head_estimate_diff_deg": diff if math.isfinite(diff) else None})
+    if partial:
+        k = gaps[0][0] if gaps else len(fi)
+        c = compare({key: v[:k] for key, v in frames.items()}, {key: v[:k] for key, v in recorded.items()})
+        out["before_first_gap"] = {"frames": int(k), "detections_equal": c["detections_equal"],
+                                   "commands_equal": c["commands_equal"],
+                                   "frames_detection_differs": c["frames_detection_differs"],
+                                   "frames_command_differs": c["frames_command_differs"]}
+    return out
+
+
+def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, config_name: str | None = None,
+               point_rate_hz: float | None = None) -> ReplayResult:
+    """Run the tracker over a Livox Viewer ``.lvx`` file (lidar only, head frozen: after every frame
+    the reconstruction is told the head stopped, so the commands are what it would have sent)."""
+    from foveatrack.frames import strip_no_return
+    from foveatrack.livox.lvx import LvxReader
+
+    cfg = TrackerConfig.from_mapping(tracker_table or {}, where=f"{config_name or 'default'} [tracker]")
+    tracker = None
+    slicer = FrameSlicer(cfg.rate_hz)
+    F = FrameArrays()
+    fid = 0
+
+    def run(frames):
+        nonlocal tracker, fid
+        for fr in frames:
+            fr = strip_no_return(fr)
+            if tracker is None:
+                tracker = Tracker(cfg, SpeedTable.nominal(), t0_s=fr.t_start_s)
+            send_t = fr.t_end_s + cfg.send_delay_s
+            out = tracker.process(fr, send_t_s=send_t)
+            tracker.command_sent(send_t, STOP)   # the head is frozen
+            F.add(fid, fr, out, out.command)
+            fid += 1
+
+    # no-return points are kept for their times (frames keep coming over the sky), then stripped
+    with LvxReader(path, point_rate_hz=point_rate_hz, keep_no_return=True) as r:
+        for lf in r.frames():
+            b = lf.points
+            run(slicer.push(b.xyz, b.t_ns, b.reflectivity))
+        run(slicer.flush())
+        problem = r.problem
+    frames = F.arrays()
+    res = ReplayResult("lvx", str(path), config_name or "default", frames, None, None, tracker_cfg=cfg)
+    res.metrics = replay_metrics(frames, None, cfg)
+    if problem:
+        res.comparison["recording_problem"] = problem
+    return res
+
+
+def replay(path: str | os.PathLike, tracker_config_path: str | None = None) -> ReplayResult:
+    """Replay a recording (``.mcap``) or a Livox Viewer file (``.lvx``), by content."""
+    p = Path(path)
+    if not p.is_file():
+        raise UserError(f"{p}: no such recording")
+    table = load_tracker_table(tracker_config_path) if tracker_config_path else None
+    with open(p, "rb") as fh:
+        head = fh.read(16)
+    if head.startswith(b"livox_tech"):
+        return replay_lvx(p, table, tracker_config_path)
+    return replay_recording(p, table, tracker_config_path)

@@ -1,0 +1,100 @@
+"""A recording read frame by frame (:class:`RecordedFrame` with its typed records) and the
+per-frame arrays a replay builds (:class:`FrameArrays`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from foveatrack.gate import STALE_FRAME
+from foveatrack.recording.format import METRICS, POINTS
+from foveatrack.recording.records import CommandRecord, DetectionRecord, HeadEstimateRecord, TruthRecord, parse
+
+
+class FrameArrays:
+    """Per-frame arrays built frame by frame."""
+
+    KEYS = ("frame_index", "t_end_s", "n_points", "detected", "det_xyz", "det_n_points", "state", "error_pan_deg",
+            "error_tilt_deg", "command", "head_pan_deg", "head_tilt_deg", "world_xyz")
+
+    def __init__(self):
+        self.d = {k: [] for k in self.KEYS}
+
+    def add(self, fid, frame, out, cmd):
+        d = self.d
+        det = out.detection
+        d["frame_index"].append(fid)
+        d["t_end_s"].append(frame.t_end_s)
+        d["n_points"].append(frame.n_points)
+        d["detected"].append(det is not None)
+        d["det_xyz"].append(np.full(3, np.nan) if det is None else np.asarray(det.xyz, float))
+        d["det_n_points"].append(0 if det is None else int(det.n_points))
+        d["state"].append(out.state.value)
+        d["error_pan_deg"].append(np.nan if out.error_pan_deg is None else out.error_pan_deg)
+        d["error_tilt_deg"].append(np.nan if out.error_tilt_deg is None else out.error_tilt_deg)
+        d["command"].append((cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte))
+        d["head_pan_deg"].append(out.head_pan_deg)
+        d["head_tilt_deg"].append(out.head_tilt_deg)
+        d["world_xyz"].append(np.full(3, np.nan) if out.world_xyz is None else np.asarray(out.world_xyz, float))
+
+    # dtypes given so that a run with no frames (an empty or all-no-return .lvx) still yields arrays
+    # that index and reduce like the others (a bare np.asarray([]) is float: not a mask)
+    DTYPES = {"frame_index": np.int64, "n_points": np.int64, "detected": bool, "det_n_points": np.int64,
+              "t_end_s": float, "error_pan_deg": float, "error_tilt_deg": float, "head_pan_deg": float,
+              "head_tilt_deg": float, "det_xyz": float, "world_xyz": float, "command": np.int64}
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        out = {k: np.asarray(v, dtype=self.DTYPES.get(k)) if v or k in self.DTYPES else np.asarray(v)
+               for k, v in self.d.items()}
+        for k in ("det_xyz", "world_xyz"):
+            out[k] = out[k].reshape(-1, 3)
+        out["command"] = out["command"].reshape(-1, 4)
+        return out
+
+
+@dataclass
+class RecordedFrame:
+    """One frame of a recording with the typed records that belong to it (None where absent) and the
+    commands sent after it that belong to no frame (watchdog, shutdown)."""
+    points: object
+    detection: DetectionRecord | None = None
+    head: HeadEstimateRecord | None = None
+    command: CommandRecord | None = None       # the tracker's command for this frame, as sent
+    truth: TruthRecord | None = None
+    metrics: dict = field(default_factory=dict)
+    after: list = field(default_factory=list)   # [CommandRecord] in the order sent
+
+    @property
+    def stale(self) -> bool:
+        """The driver found the frame stale when processing it (the daemon: by its wall clock)."""
+        return self.command is not None and STALE_FRAME in self.command.limited
+
+
+def recorded_frames(reader):
+    """Yield a :class:`RecordedFrame` per frame of the recording."""
+    cur = None
+    for m in reader.messages():
+        if m.channel == POINTS:
+            if cur is not None:
+                yield cur
+            cur = RecordedFrame(m.record)
+            continue
+        if cur is None:
+            continue
+        rec = parse(m.channel, m.record)
+        if isinstance(rec, CommandRecord):
+            if rec.frame_id is None:
+                cur.after.append(rec)
+            elif rec.from_tracker and cur.command is None:
+                cur.command = rec
+        elif isinstance(rec, DetectionRecord) and cur.detection is None:
+            cur.detection = rec
+        elif isinstance(rec, HeadEstimateRecord) and cur.head is None:
+            cur.head = rec
+        elif isinstance(rec, TruthRecord) and cur.truth is None:
+            cur.truth = rec
+        elif m.channel == METRICS:
+            cur.metrics.setdefault(rec["name"], rec["value"])
+    if cur is not None:
+        yield cur
