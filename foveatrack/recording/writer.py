@@ -278,11 +278,7 @@ class RecordingWriter:
         self._w.flush()
         self._channel_table()
         if self.fsync:
-            fd = os.open(self.path, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
+            _fsync(self.path)
 
     def close(self) -> None:
         """Write the last chunk and the summary; the file is then complete."""
@@ -296,11 +292,7 @@ class RecordingWriter:
             if self._w is not None:
                 self._w.close()
                 if self.fsync:
-                    fd = os.open(self.path, os.O_RDONLY)
-                    try:
-                        os.fsync(fd)
-                    finally:
-                        os.close(fd)
+                    _fsync(self.path)
         finally:
             self._closed = True
         if self._error is not None:
@@ -315,3 +307,12 @@ class RecordingWriter:
 
 
 # ====================================================================================== reading
+
+
+def _fsync(path) -> None:
+    """Sync a written file to the disk (the writer's ``fsync=True``)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
