@@ -111,27 +111,57 @@ class HeadLink:
 
 class LidarStream:
     """The lidar's batches with what a driver keeps from them (see the module docstring): the host
-    time of the last packet (``last_packet_mono``, for the watchdog) and the clock ``offset_s``."""
+    time of the last packet (``last_packet_mono``, for the watchdog) and the clock ``offset_s``.
 
-    def __init__(self, client):
+    Point times pass the :class:`~foveatrack.sensor_time.SensorTimeGuard` first: a packet with a wrong
+    time is dropped and counted, a sensor clock that restarted or jumped is re-anchored (``epoch`` + 1,
+    the offset measured afresh; the driver restarts its frame slicer and its dead reckoning's clock),
+    so neither a restarted lidar nor one bad packet stops a driver.  The batches returned are
+    :class:`~foveatrack.sensor_time.Accepted` (``xyz``, ``t_ns``, ``reflectivity``, ``epoch``).
+    """
+
+    def __init__(self, client, guard=None):
+        from foveatrack.sensor_time import SensorTimeGuard
+
         self.client = client
+        self.guard = guard or SensorTimeGuard()
         self.offset_s: float | None = None
         self.last_packet_mono: float | None = None
         self._packets = 0
 
+    @property
+    def epoch(self) -> int:
+        return self.guard.epoch
+
+    @property
+    def counters(self) -> dict:
+        """The clock guard's counters (``clock_jumps``, ``bad_time_segments``, ``bad_time_points``)."""
+        return dict(self.guard.counters)
+
     def poll(self, timeout_s: float) -> tuple[float, list]:
-        """``(host monotonic time, [PointBatch, ...])`` of what arrived within ``timeout_s``."""
+        """``(host monotonic time, [Accepted, ...])`` of what arrived within ``timeout_s``."""
         batches = self.client.poll(timeout_s)
         now = time.monotonic()
         packets = self.client.counters.get("packets", 0)
-        if packets != self._packets:
-            self._packets = packets
-            self.last_packet_mono = now
+        if packets != self._packets and self.last_packet_mono is None:
+            self.last_packet_mono = now    # the first packet, even with wrong times: the lidar is there
+        self._packets = packets
+        out = []
         for b in batches:
             if len(b):
-                off = now - int(b.t_ns[-1]) * 1e-9
-                self.offset_s = off if self.offset_s is None else min(self.offset_s, off)
-        return now, batches
+                out.extend(self.guard.push(b.xyz, b.t_ns, b.reflectivity, now))
+        for a in out:
+            # only points with believable times feed the watchdog and the clock offset
+            self.last_packet_mono = now
+            off = now - int(a.t_ns[-1]) * 1e-9
+            if a.epoch != getattr(self, "_offset_epoch", 0):
+                self._offset_epoch, self.offset_s = a.epoch, None   # a new sensor clock: measure afresh
+            self.offset_s = off if self.offset_s is None else min(self.offset_s, off)
+        return now, out
+
+    def take_jumps(self) -> list:
+        """The re-anchors since the last call (:class:`~foveatrack.sensor_time.ClockJump`)."""
+        return self.guard.take_jumps()
 
     def sensor_now_s(self, mono: float | None = None) -> float | None:
         """The sensor time of host time ``mono`` (default: now); None before the first packet."""

@@ -43,7 +43,7 @@ import signal
 import threading
 import time
 from collections import Counter, deque
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 
@@ -57,6 +57,7 @@ from foveatrack.recording.records import CommandRecord, ns, write_record, write_
 from foveatrack.tracker import Tracker
 
 FORMAT_SOURCE = "daemon"
+PROGRESS_PERIOD_S = 1.0   # a "progress" log event (frames processed, ...) this often
 
 
 # ----------------------------------------------------------------------------------------- record jobs
@@ -87,11 +88,13 @@ class _Receiver(threading.Thread):
         self.points_in = 0
         self.first_t_ns: int | None = None
         self.last_t_ns: int | None = None
+        self.span_done_ns = 0        # sensor time spanned by earlier clock epochs (a restarted lidar)
         self.error: BaseException | None = None
         self.counters: dict = {}
         # what the unit reports (LivoxClient.take_events), for the control loop's log and status line
         self.unit_events: queue.SimpleQueue = queue.SimpleQueue()
         self.unit_note = ""
+        self.epoch = 0
 
     @property
     def offset_s(self) -> float | None:
@@ -106,7 +109,9 @@ class _Receiver(threading.Thread):
             self.client.start_sampling()
             while not self.stop_ev.is_set():
                 now, batches = self.stream.poll(0.02)
-                self.counters = self.client.counters
+                self.counters = {**self.client.counters, **self.stream.counters}
+                for jump in self.stream.take_jumps():   # the sensor clock restarted or jumped: re-anchored
+                    self.unit_events.put(jump.as_event())
                 for ev in self.client.take_events():
                     self.unit_events.put(ev)
                     st = self.client.unit_status()
@@ -116,6 +121,10 @@ class _Receiver(threading.Thread):
                     if not len(b):
                         continue
                     t_last = int(b.t_ns[-1])
+                    if b.epoch != self.epoch:
+                        if self.first_t_ns is not None:
+                            self.span_done_ns += self.last_t_ns - self.first_t_ns
+                        self.epoch, self.first_t_ns = b.epoch, None
                     if self.first_t_ns is None:
                         self.first_t_ns = int(b.t_ns[0])
                     self.last_t_ns = t_last
@@ -128,7 +137,7 @@ class _Receiver(threading.Thread):
                         ret[-1] = True
                         xyz, t_ns, refl = xyz[ret], t_ns[ret], refl[ret]
                     try:
-                        self.q.put_nowait((now, xyz, t_ns, refl))
+                        self.q.put_nowait((now, xyz, t_ns, refl, b.epoch))
                     except queue.Full:
                         self.dropped_batches += 1
                         self.dropped_points += len(t_ns)
@@ -166,6 +175,8 @@ class Daemon:
         self._last_send_t = -math.inf
         self.recorder: RecordingThread | None = None
         self.recording_path = None
+        self.epoch = 0                      # the sensor clock's epoch (foveatrack.sensor_time)
+        self.last_frame_end_s: float | None = None
 
     # -------------------------------------------------------------------------------- setup
     def _meta(self) -> dict:
@@ -246,6 +257,37 @@ class Daemon:
                             tracker_command=None if t is None else (t.pan_dir, t.pan_byte, t.tilt_dir, t.tilt_byte))
         return rec, t_written
 
+    def _new_clock(self, epoch: int, t0_s: float) -> None:
+        """Carry the tracker over to a new sensor clock starting at ``t0_s`` [s].
+
+        The head is stopped (on the old clock, after the last command it got), the dead reckoning's
+        pose once stopped becomes the new tracker's start pose at ``t0_s``: the tracker's state and
+        its filters restart, the head's pose is kept."""
+        old = self.tracker
+        t_stop = self._send_time(max(self._last_send_t, self.last_frame_end_s or -math.inf))
+        if not math.isfinite(t_stop):
+            t_stop = 0.0
+        if not old.last_command.is_stop:
+            old.command_sent(t_stop, STOP)
+            rec, _ = self._send(STOP, "clock_jump", t_stop)
+            self._record(write_record, rec)
+        pan, tilt, _, _ = old.recon.angles_at(t_stop + 5.0)    # decelerated long since
+        self._rebase_tracker(t0_s, pan, tilt)
+        self.slicer.reset()
+        self.epoch = epoch
+        self.counters["clock_epochs"] += 1
+        self.log.event("tracker_rebased", reason="clock_jump", epoch=epoch, t0_s=t0_s, pan_deg=pan, tilt_deg=tilt,
+                       frames=self.counters["frames"])
+        self._record(_job_event, ns(t0_s), {"event": "tracker_rebased", "reason": "clock_jump", "epoch": epoch,
+                                            "t0_s": t0_s, "pan_deg": pan, "tilt_deg": tilt})
+
+    def _rebase_tracker(self, t0_s: float, pan_deg: float, tilt_deg: float) -> None:
+        """A fresh tracker whose dead reckoning starts at ``(pan_deg, tilt_deg)`` at sensor time ``t0_s``."""
+        cfg = replace(self.cfg.tracker, pan0_deg=float(pan_deg), tilt0_deg=float(tilt_deg))
+        self.tracker = Tracker(cfg, self.table, t0_s=t0_s)
+        self._last_send_t = -math.inf
+        self.gate.head_cmd = STOP
+
     def _record(self, fn, *args):
         if self.recorder is not None:
             self.recorder.submit(fn, *args)
@@ -283,6 +325,7 @@ class Daemon:
         self.counters["frames"] += 1
         self.counters["frames_detected"] += out.detection is not None
         self.last_out, self.last_pts = out, frame.n_points
+        self.last_frame_end_s = frame.t_end_s
         self._record(_job_frame, fid, frame, out, rec, proc * 1e3, lat)
 
     # -------------------------------------------------------------------------------- the loop
@@ -306,6 +349,7 @@ class Daemon:
         t_start = time.monotonic()
         next_tick = t_start + period
         next_status = t_start
+        next_progress = t_start + PROGRESS_PERIOD_S
         watchdog_tripped = False
         last_watchdog_stop = -1e9
         head_up = self.head.connected
@@ -328,7 +372,13 @@ class Daemon:
                             break
                 except queue.Empty:
                     items = []
-                for t_rx, xyz, t_ns, refl in items:
+                for t_rx, xyz, t_ns, refl, epoch in items:
+                    if epoch != self.epoch:
+                        # the sensor clock restarted or jumped (re-anchored by the stream): frames of
+                        # the old clock are dropped, slicing and the dead reckoning's clock start again
+                        self.counters["frames_skipped"] += len(pending)
+                        pending.clear()
+                        self._new_clock(epoch, int(t_ns[0]) * 1e-9)
                     for fr in self.slicer.push(xyz, t_ns, refl):
                         pending.append((fr, t_rx))
                 while len(pending) > c.loop.max_frame_backlog:
@@ -375,6 +425,14 @@ class Daemon:
                     head_up = self.head.connected
                     self.counters["head_link_up" if head_up else "head_link_down"] += 1
                     self.log.event("head_connected" if head_up else "head_disconnected", stats=asdict(self.head.stats))
+                if now >= next_progress:
+                    # how far the run got, in the log every second: a killed daemon's log still says so
+                    next_progress = now + PROGRESS_PERIOD_S
+                    self.log.event("progress", frames=self.counters["frames"],
+                                   frames_detected=self.counters["frames_detected"],
+                                   frames_stale=self.counters["frames_stale"], sensor_t_s=self.last_frame_end_s,
+                                   commands_written=self.counters["commands_written"], drops=self.drops(),
+                                   lidar_points=self.rx.points_in)
                 if now >= next_status:
                     next_status = now + c.loop.status_period_s
                     self._show_status(frame_times, watchdog_tripped)
@@ -391,7 +449,7 @@ class Daemon:
             d["queue_dropped_batches"] = rx.dropped_batches
             d["queue_dropped_points"] = rx.dropped_points
             if rx.first_t_ns is not None and rate_known(self):
-                span = (rx.last_t_ns - rx.first_t_ns) * 1e-9
+                span = (rx.last_t_ns - rx.first_t_ns + rx.span_done_ns) * 1e-9
                 expected = span * self.client.decoder.point_rate_hz
                 if expected > 0:
                     d["lidar_points_missing_pct"] = round(max(0.0, 100.0 * (1 - rx.points_in / expected)), 3)
