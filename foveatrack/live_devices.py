@@ -28,13 +28,23 @@ from foveatrack.errors import UserError
 
 
 def open_head(config):
-    """The head's :class:`gimbal.client.HeadClient`, open now, or a UserError naming ``[head] port``."""
+    """The head's :class:`gimbal.client.HeadClient`, open now, or a UserError naming ``[head] port``.
+
+    The device is identified once (:mod:`foveatrack.serial_identity`; a ``/dev/serial/by-id/`` name of
+    it is opened instead of ``/dev/ttyUSB0`` where there is one) and every reopen after a disconnect
+    must find the same device: the client refuses to write to another (``open_refusals``)."""
+    from foveatrack.serial_identity import ReopenGuard, identify
     from gimbal.client import HeadClient
     from gimbal.errors import GimbalError
 
     h = config.head
+    ident = identify(h.port)
+    open_path = ident.by_id if ident is not None and ident.by_id else h.port
+    if open_path != h.port:
+        ident = identify(open_path)
+    guard = None if ident is None else ReopenGuard(ident, open_path)
     try:
-        head = HeadClient(h.port, baud=h.baud, address=h.address, protocol=h.protocol)
+        head = HeadClient(open_path, baud=h.baud, address=h.address, protocol=h.protocol, open_guard=guard)
     except GimbalError as exc:
         raise UserError(f"{config.path} [head]: {exc}") from None
     if not head.connected:
@@ -44,6 +54,7 @@ def open_head(config):
         raise UserError(f"{config.path} [head]: port {h.port!r} cannot be opened ({head.last_open_error}); "
                         "give the head's serial device (/dev/ttyUSB0) or a pyserial URL (socket://host:port, "
                         "rfc2217://host:port) that exists now, e.g. start 'foveatrack gimbal serve --link PATH' first")
+    head.identity, head.open_path = ident, open_path
     return head
 
 
@@ -75,6 +86,24 @@ class HeadLink:
     def __init__(self, client, address: int, protocol: str):
         self.client, self.address, self.protocol = client, address, protocol
         self._encoded: dict[tuple, bytes] = {}   # a run uses a few dozen distinct commands
+
+    @property
+    def identity(self):
+        """The device the head was found on at start (:class:`~foveatrack.serial_identity.SerialIdentity`;
+        None for a URL)."""
+        return getattr(self.client, "identity", None)
+
+    @property
+    def refused(self) -> str | None:
+        """Why the last reopen was refused (another device holds the path), or None."""
+        c = self.client
+        if c.connected or not getattr(c.stats, "open_refusals", 0):
+            return None
+        return c.last_open_error
+
+    def send_raw(self, raw: bytes) -> bool:
+        """Write one prepared frame (an absolute move while homing); whether the link took it."""
+        return bool(self.client.send_frame(raw))
 
     def encode(self, cmd: HeadCommand) -> bytes:
         from gimbal.pelco import encode_pan_tilt

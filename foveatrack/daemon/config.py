@@ -62,6 +62,24 @@ class HeadConfig:
     tilt_margin_deg: float = GATE_TILT_MARGIN_DEG   # the gate's (foveatrack.gate), inside the tracker's 3 deg
     pan0_deg: float = 0.0
     tilt0_deg: float = 0.0
+    on_reconnect: str = "stop"          # what a reconnected head's unknown pose gets: ON_RECONNECT
+    home_pan_deg: float | None = None   # where "home" drives the head (default pan0_deg, tilt0_deg)
+    home_tilt_deg: float | None = None
+    home_wait_s: float | None = None    # how long the absolute move may take (default: the worst case)
+
+    @property
+    def home_deg(self) -> tuple[float, float]:
+        return (self.pan0_deg if self.home_pan_deg is None else self.home_pan_deg,
+                self.tilt0_deg if self.home_tilt_deg is None else self.home_tilt_deg)
+
+    @property
+    def home_wait_worst_s(self) -> float:
+        """The time the head's absolute move to home may take from anywhere: 180 deg of pan and the whole
+        tilt range at the table's top speeds, plus 1 s for the ramps and the dead time [s]."""
+        if self.home_wait_s is not None:
+            return self.home_wait_s
+        lo, hi = self.tilt_limits_deg
+        return 180.0 / self.pan_speed_max_deg_s + (hi - lo) / self.tilt_speed_max_deg_s + 1.0
 
     @property
     def facts(self) -> HeadFacts:
@@ -129,6 +147,16 @@ class DaemonConfig:
         now = now or _dt.datetime.now(_dt.timezone.utc)
         p = Path(self.recording.path.replace("{time}", now.strftime("%Y%m%dT%H%M%SZ")))
         return (p if p.is_absolute() else Path(self.path).parent / p).resolve()
+
+
+# What the daemon does when the head's link comes back after a disconnect.  The head reports no
+# pose, and one that lost power comes back at its power-on pose, so the dead reckoning is void:
+#   "stop": STOP, report "pose unknown" and send no tracker command until the daemon is restarted
+#           (after the head was homed by hand)
+#   "home": STOP, then the absolute move (Pelco 0x4B/0x4D) to home_pan_deg/home_tilt_deg, wait
+#           home_wait_s for it, and track on from there
+#   "keep": trust the dead reckoning (only a link that was cut while the head kept its power)
+ON_RECONNECT = ("stop", "home", "keep")
 
 
 def _int(v, key, where, lo, hi):
@@ -214,8 +242,18 @@ def _head(t: Mapping, w: str) -> HeadConfig:
         kw["pan0_deg"] = as_float(t["pan0_deg"], "pan0_deg", w, lo=-180, hi=180)
     if "tilt0_deg" in t:
         kw["tilt0_deg"] = as_float(t["tilt0_deg"], "tilt0_deg", w, lo=-90, hi=90)
+    if "on_reconnect" in t:
+        kw["on_reconnect"] = as_choice(t["on_reconnect"], "on_reconnect", w, ON_RECONNECT)
+    if "home_pan_deg" in t:
+        kw["home_pan_deg"] = as_float(t["home_pan_deg"], "home_pan_deg", w, lo=-180, hi=180)
+    if "home_tilt_deg" in t:
+        kw["home_tilt_deg"] = as_float(t["home_tilt_deg"], "home_tilt_deg", w, lo=-90, hi=90)
+    if "home_wait_s" in t:
+        kw["home_wait_s"] = as_float(t["home_wait_s"], "home_wait_s", w, lo=0, hi=600)
     cfg = HeadConfig(**kw)
     lo, hi = cfg.tilt_limits_deg
+    if cfg.home_tilt_deg is not None and not lo <= cfg.home_tilt_deg <= hi:
+        raise UserError(f"{w}: home_tilt_deg {cfg.home_tilt_deg} is outside tilt_limits_deg {list(cfg.tilt_limits_deg)}")
     if not lo <= cfg.tilt0_deg <= hi:
         raise UserError(f"{w}: tilt0_deg {cfg.tilt0_deg} is outside tilt_limits_deg {list(cfg.tilt_limits_deg)}")
     return cfg

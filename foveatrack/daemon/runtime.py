@@ -57,7 +57,9 @@ from foveatrack.recording.records import CommandRecord, ns, write_record, write_
 from foveatrack.tracker import Tracker
 
 FORMAT_SOURCE = "daemon"
-PROGRESS_PERIOD_S = 1.0   # a "progress" log event (frames processed, ...) this often
+ABS_SET_QUIET_S = 0.3     # line quiet before a Pelco absolute set (the PTS family needs 0.2 s)
+PROGRESS_PERIOD_S = 1.0
+LINK_DOWN = "link_down"   # a command's `limited` reason: STOP written while the head's link was down   # a "progress" log event (frames processed, ...) this often
 
 
 # ----------------------------------------------------------------------------------------- record jobs
@@ -176,6 +178,8 @@ class Daemon:
         self.recorder: RecordingThread | None = None
         self.recording_path = None
         self.epoch = 0                      # the sensor clock's epoch (foveatrack.sensor_time)
+        self.pose_state: str | None = None  # None (known), "unknown", "homing" (after a head reconnect)
+        self._home_steps: list = []         # (host time, step) of the homing under way
         self.last_frame_end_s: float | None = None
 
     # -------------------------------------------------------------------------------- setup
@@ -281,6 +285,53 @@ class Daemon:
         self._record(_job_event, ns(t0_s), {"event": "tracker_rebased", "reason": "clock_jump", "epoch": epoch,
                                             "t0_s": t0_s, "pan_deg": pan, "tilt_deg": tilt})
 
+    def _pose_unknown(self, now: float) -> None:
+        """The head's link came back: its pose is unknown (one that lost power is back at its power-on
+        pose; the head reports none).  Stop it, and home it if the config says so."""
+        h = self.cfg.head
+        self.pose_state = "unknown"
+        self.counters["head_pose_unknown"] += 1
+        self.head.stop()
+        self.log.event("head_pose_unknown", on_reconnect=h.on_reconnect, frames=self.counters["frames"])
+        self._record(_job_event, ns(self.sensor_now_s(now) or 0.0),
+                     {"event": "head_pose_unknown", "on_reconnect": h.on_reconnect})
+        self._home_steps = []
+        if h.on_reconnect == "home":
+            from gimbal.pelco import encode_set_pan, encode_set_tilt
+
+            pan, tilt = h.home_deg
+            tz = getattr(self.head.client, "tilt_zero", "zenith")
+            quiet = ABS_SET_QUIET_S
+            # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile
+            self._home_steps = [(now + quiet, "pan", encode_set_pan(h.address, pan, h.protocol)),
+                                (now + 2 * quiet, "tilt", encode_set_tilt(h.address, tilt, h.protocol, tz)),
+                                (now + 2 * quiet + h.home_wait_worst_s, "done", None)]
+
+    def _pose_tick(self, now: float) -> None:
+        h = self.cfg.head
+        if h.on_reconnect == "stop":
+            if now - getattr(self, "_last_unknown_stop", -math.inf) >= 1.0:
+                self._last_unknown_stop = now
+                self.head.stop()
+            return
+        while self._home_steps and now >= self._home_steps[0][0]:
+            _, step, raw = self._home_steps.pop(0)
+            if step in ("pan", "tilt"):
+                if not self.head.send_raw(raw):
+                    self.log.event("head_homing_failed", step=step)
+                    return self._pose_unknown(now)      # start again once the link takes writes
+                self.pose_state = "homing"
+                self.log.event("head_homing", axis=step, home_deg=list(h.home_deg))
+            else:
+                t_s = self.sensor_now_s(now)
+                pan, tilt = h.home_deg
+                self._rebase_tracker(t_s if t_s is not None else 0.0, pan, tilt)
+                self.pose_state = None
+                self.counters["head_homed"] += 1
+                self.log.event("head_homed", pan_deg=pan, tilt_deg=tilt, t0_s=t_s, frames=self.counters["frames"])
+                self._record(_job_event, ns(t_s or 0.0), {"event": "tracker_rebased", "reason": "head_homed",
+                                                          "t0_s": t_s, "pan_deg": pan, "tilt_deg": tilt})
+
     def _rebase_tracker(self, t0_s: float, pan_deg: float, tilt_deg: float) -> None:
         """A fresh tracker whose dead reckoning starts at ``(pan_deg, tilt_deg)`` at sensor time ``t0_s``."""
         cfg = replace(self.cfg.tracker, pan0_deg=float(pan_deg), tilt0_deg=float(tilt_deg))
@@ -294,6 +345,11 @@ class Daemon:
 
     # -------------------------------------------------------------------------------- the frame
     def _process(self, frame: Frame, t_arrival: float) -> None:
+        if self.pose_state is not None:
+            # the head's pose is unknown (it reconnected): no bearing can be turned into a command
+            self.counters["frames_pose_unknown"] += 1
+            self.last_pts = frame.n_points
+            return
         t_begin = time.monotonic()
         frame = strip_no_return(frame)
         now_s = self.sensor_now_s()
@@ -307,10 +363,19 @@ class Daemon:
         # the command in the dead reckoning.  STOP is sent and recorded instead (replay repeats it).
         stale = now_s is not None and now_s - frame.t_end_s > self.cfg.loop.stale_frame_s
         cmd, why = self.gate.decide(self.tracker, out, send_t, stale)
+        reconnect_unknown = self.cfg.head.on_reconnect != "keep"
+        was_up = self.head.connected
+        if not was_up and reconnect_unknown:
+            # whatever a reopened link carries first is STOP: from then on the head's pose is unknown
+            if not cmd.is_stop:
+                self.tracker.command_sent(send_t, STOP)
+            cmd, why = STOP, [*why, LINK_DOWN]
         self.counters["frames_stale"] += stale
         if why:
             self.counters["commands_limited"] += 1
         rec, t_written = self._send(cmd, "tracker", send_t, fid, out.command, why)
+        if not was_up and self.head.connected and reconnect_unknown and self.pose_state is None:
+            self._pose_unknown(t_written)
         proc = t_written - t_arrival
         # The send-time prediction learns the compute time only, robustly (median of the last 9): a
         # frame that waited in a backlog, or one slow first frame, would otherwise push the later
@@ -353,6 +418,7 @@ class Daemon:
         watchdog_tripped = False
         last_watchdog_stop = -1e9
         head_up = self.head.connected
+        last_refusals, last_refusal_log = 0, -math.inf
         lidar_up = False
         frame_times = deque(maxlen=50)
         pending: deque = deque()
@@ -408,7 +474,8 @@ class Daemon:
                     watchdog_tripped = True
                     self.counters["watchdog_trips"] += 1
                     self.log.event("watchdog_stop", silent_s=now - last_pkt)
-                if silent and (watchdog_tripped or last_pkt is None) and now - last_watchdog_stop >= 1.0:
+                if (silent and (watchdog_tripped or last_pkt is None) and now - last_watchdog_stop >= 1.0
+                        and self.pose_state is None):
                     last_watchdog_stop = now
                     t_s = self.sensor_now_s(now)
                     if t_s is not None and watchdog_tripped:
@@ -421,10 +488,21 @@ class Daemon:
                 if not silent and watchdog_tripped:
                     watchdog_tripped = False
                     self.log.event("lidar_resumed")
+                refusals = self.head.stats.open_refusals
+                if refusals != last_refusals:
+                    # another device holds the head's path: never written to (foveatrack.serial_identity)
+                    if last_refusals == 0 or now - last_refusal_log >= 10.0:
+                        self.log.event("head_refused", reason=self.head.client.last_open_error, refusals=refusals)
+                        last_refusal_log = now
+                    last_refusals = refusals
                 if self.head.connected != head_up:
                     head_up = self.head.connected
                     self.counters["head_link_up" if head_up else "head_link_down"] += 1
                     self.log.event("head_connected" if head_up else "head_disconnected", stats=asdict(self.head.stats))
+                    if head_up and c.head.on_reconnect != "keep" and self.pose_state is None:
+                        self._pose_unknown(now)
+                if self.pose_state is not None:
+                    self._pose_tick(now)
                 if now >= next_progress:
                     # how far the run got, in the log every second: a killed daemon's log still says so
                     next_progress = now + PROGRESS_PERIOD_S
@@ -508,6 +586,10 @@ class Daemon:
             rate = (len(frame_times) - 1) / (frame_times[-1] - frame_times[0])
         out = self.last_out
         state = "watchdog" if watchdog else ("no lidar" if out is None else out.state.value)
+        if self.pose_state is not None:
+            state = "pose unknown" if self.pose_state == "unknown" else "homing"
+        elif self.head.refused:
+            state = "head refused" 
         self.status.show(format_status(rate, getattr(self, "last_pts", 0), state,
                                        None if out is None else out.error_pan_deg,
                                        None if out is None else out.error_tilt_deg,

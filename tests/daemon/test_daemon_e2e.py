@@ -30,7 +30,9 @@ def _setup(tmp_path, cmd_port=0, data_port=0, loss_rate=0.0):
     # are about the processes and the faults, not about an uncalibrated head's drifting world frame.
     table = tmp_path / "unit3.json"
     truth_speed_table(PTS303H(unit_seed=3)).save(table)
-    cfg = write_config(tmp_path / "d.toml", link, rec, bport, cmd_port, data_port, speed_table=str(table))
+    # the head restarted below keeps its pose (a cut link, not a power loss): "keep" trusts the dead reckoning
+    cfg = write_config(tmp_path / "d.toml", link, rec, bport, cmd_port, data_port, speed_table=str(table),
+                       head_extra='on_reconnect = "keep"')
     procs = {}
     procs["head"] = start(["gimbal", "serve", "--link", str(link), "--truth", str(truth), "--unit-seed", "3"],
                           tmp_path / "head.out", tmp_path / "head.err")
