@@ -26,6 +26,8 @@ def cmd_daemon(args) -> int:
     from foveatrack.errors import UserError
 
     cfg = load_config(args.config)
+    for w in cfg.warnings():
+        print(f"foveatrack daemon: WARNING: {w}", file=sys.stderr)
     if args.check:
         print(json.dumps({"lidar": cfg.lidar.__dict__, "head": cfg.head.__dict__,
                           "tracker_overrides": cfg.tracker_overrides, "recording": cfg.recording.__dict__,

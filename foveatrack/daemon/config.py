@@ -130,6 +130,18 @@ class DaemonConfig:
         """What the head's facts set on top of ``[tracker]`` (:meth:`TrackerConfig.with_head`), kept for replay."""
         return {k: list(v) if isinstance(v, tuple) else v for k, v in self.head.facts.tracker_values().items()}
 
+    def warnings(self) -> list[str]:
+        """What in this config runs but gives wrong results, in words (printed at start, logged, and
+        kept in the status line)."""
+        out = []
+        if self.head.speed_table == "nominal":
+            out.append(f"{self.path} [head] speed_table = \"nominal\": the head is uncalibrated; the dead reckoning "
+                       "uses the datasheet's speeds, not this unit's, and the world it reconstructs drifts (seen: "
+                       "the daemon believed pan -58 to -78 deg while the head was at -31 to -44 deg after 20 s); "
+                       "measure the table first: foveatrack calibrate --config THIS.toml --corner X Y Z --out "
+                       "table.json, then speed_table = \"table.json\"")
+        return out
+
     def speed_table(self) -> SpeedTable:
         h = self.head
         if h.speed_table == "nominal":

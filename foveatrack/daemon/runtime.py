@@ -408,6 +408,8 @@ class Daemon:
                        lidar=asdict(c.lidar), head_port=c.head.port, head_open=self.head.connected,
                        rate_hz=c.tracker.rate_hz,
                        host_ports=self.host_ports)
+        for w in c.warnings():
+            self.log.event("warning", message=w)
         self.head.stop()
         self.rx.start()
         period = 1.0 / c.tracker.rate_hz
@@ -594,7 +596,17 @@ class Daemon:
                                        None if out is None else out.error_pan_deg,
                                        None if out is None else out.error_tilt_deg,
                                        self.lat_ms[-1] if self.lat_ms else None, self.drops(), self.head.connected,
-                                       self.rx.unit_note))
+                                       ", ".join(self.status_notes())))
+
+    def status_notes(self) -> list[str]:
+        """What the status line says besides the figures: the lidar unit's problems, an uncalibrated
+        head, a head device refused, lost lidar packets."""
+        notes = [self.rx.unit_note] if getattr(self, "rx", None) is not None and self.rx.unit_note else []
+        if self.cfg.head.speed_table == "nominal":
+            notes.append("head UNCALIBRATED (nominal speed table)")
+        if getattr(self, "head", None) is not None and self.head.refused:
+            notes.append("head path holds another device: refused")
+        return notes
 
     def _shutdown(self, old_handlers) -> None:
         self.stop_ev.set()

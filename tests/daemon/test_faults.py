@@ -242,3 +242,33 @@ def test_fault4_a_head_back_at_its_power_on_pose_is_homed_before_tracking_resume
     assert min(errs[-3:]) < 5.0, errs
     assert all(np.linalg.norm(d["xyz_m"]) < 20.0 for d in after if d["detected"])   # the UAV is ~12 m away
     assert any(c["source"] == "tracker" and c["written"] for c in cmds)
+
+
+def test_fault5_a_nominal_speed_table_is_a_warning_at_start_in_the_log_and_the_status(tmp_path):
+    from foveatrack.daemon import Daemon, load_config
+
+    link, truth, rec, log = tmp_path / "head", tmp_path / "truth.jsonl", tmp_path / "rec.mcap", tmp_path / "d.jsonl"
+    cfg = write_config(tmp_path / "d.toml", link, rec, free_udp_port(), speed_table="nominal")
+    head = _head(tmp_path, link, truth)
+    try:
+        d = start(["daemon", "--config", str(cfg), "--log", str(log)], tmp_path / "d.out", tmp_path / "d.err")
+        wait_for(lambda: event(log, "start"), 60, "the daemon to start", [d])
+        assert terminate(d) == 0
+    finally:
+        _stop_all({"head": head})
+    err = (tmp_path / "d.err").read_text()
+    assert "WARNING" in err and 'speed_table = "nominal"' in err and "uncalibrated" in err and str(cfg) in err, err
+    assert "foveatrack calibrate" in event(log, "warning")["message"]
+    notes = Daemon(load_config(cfg), status=False, install_signals=False).status_notes()
+    assert any("UNCALIBRATED" in n for n in notes)
+    # a calibrated table: no warning (the shipped example has one, for its virtual unit 3)
+    cfg2 = write_config(tmp_path / "d2.toml", link, rec, 0, speed_table=str(tmp_path / "t.json"))
+    truth_speed_table(PTS303H(unit_seed=3)).save(tmp_path / "t.json")
+    assert load_config(cfg2).warnings() == []
+    from daemon_procs import ROOT
+    ex = load_config(ROOT / "examples" / "daemon-virtual.toml")
+    assert ex.warnings() == []
+    truth3 = truth_speed_table(PTS303H(unit_seed=3))
+    for axis in ("pan", "tilt"):     # the shipped table is unit 3's, within the calibration's 2 %
+        got, want = getattr(ex.speed_table(), axis).speeds_array()[0], getattr(truth3, axis).speeds_array()[0]
+        assert abs(got[63] / want[63] - 1) < 0.02 and abs(got[32] / want[32] - 1) < 0.02, (axis, got[63], want[63])
