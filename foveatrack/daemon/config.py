@@ -3,17 +3,18 @@ what is allowed).  Example: ``examples/daemon-virtual.toml``; reference: ``docs/
 
 Tables::
 
-    [lidar]      sensor_ip, host_ip, cmd_port, data_port, broadcast_port (0 = any; false = no
+    [lidar]      sensor_ip, host_ip (both required), cmd_port, data_port, broadcast_port (0 = any; false = no
                  discovery, then sensor_cmd_port), sensor_cmd_port, point_rate_hz, broadcast_code
     [head]       port (device path or pyserial URL), baud (a standard rate, gimbal.client.STANDARD_BAUDS,
                  as a scene's [gimbal] baud), address, protocol ("D" | "P"),
                  speed_table ("nominal" | path to a calibrated table JSON, relative to this file),
                  pan_speed_max_deg_s, tilt_speed_max_deg_s, pan_turbo_deg_s (the nominal table),
                  max_pan_byte, max_tilt_byte, allow_turbo, tilt_limits_deg, tilt_margin_deg,
-                 pan0_deg, tilt0_deg (the pose at start, e.g. after homing)
+                 pan0_deg, tilt0_deg (the pose at start, e.g. after homing),
+                 on_reconnect ("stop" | "home" | "keep"), home_pan_deg, home_tilt_deg, home_wait_s
     [tracker]    foveatrack.tracker.TrackerConfig keys (rate_hz is the loop rate)
-    [recording]  path ("{time}" becomes the UTC start time), flush_every_frames, compression,
-                 points_dtype, queue_frames, overwrite
+    [recording]  path ("{time}" becomes the UTC start time; its directory must exist unless
+                 make_dirs = true), flush_every_frames, compression, points_dtype, queue_frames, overwrite
     [daemon]     watchdog_s, max_frame_backlog, stale_frame_s, batch_queue, status_period_s, log
 """
 
@@ -35,8 +36,10 @@ from gimbal.head_facts import HeadFacts
 
 @dataclass(frozen=True)
 class LidarConfig:
-    sensor_ip: str = "192.168.1.50"
-    host_ip: str = "192.168.1.5"
+    # the addresses are required (a site's, never a default: 192.168.1.50/.5 once stood in silently);
+    # the ports default to the Livox SDK's own (protocol facts, docs/daemon.md)
+    sensor_ip: str
+    host_ip: str
     cmd_port: int = 56001
     data_port: int = 56000
     broadcast_port: int | None = 55000
@@ -47,7 +50,7 @@ class LidarConfig:
 
 @dataclass(frozen=True)
 class HeadConfig:
-    port: str = "/dev/ttyUSB0"
+    port: str                           # required: a missing port once became /dev/ttyUSB0 silently
     baud: int = 9600
     address: int = 1
     protocol: str = "D"
@@ -102,6 +105,7 @@ class RecordingConfig:
     points_dtype: str = "float64"
     queue_frames: int = 50
     overwrite: bool = False
+    make_dirs: bool = False     # create a missing directory (else it must exist: a typo made a new tree)
 
 
 @dataclass(frozen=True)
@@ -188,9 +192,10 @@ def _lidar(t: Mapping, w: str) -> LidarConfig:
     check_keys(t, ["sensor_ip", "host_ip", "cmd_port", "data_port", "broadcast_port", "sensor_cmd_port",
                    "point_rate_hz", "broadcast_code"], w)
     kw: dict = {}
-    for k in ("sensor_ip", "host_ip"):
-        if k in t:
-            kw[k] = _ip(t[k], k, w)
+    for k, what in (("sensor_ip", "the lidar's address"), ("host_ip", "this host's address on the lidar's network")):
+        if k not in t:
+            raise UserError(f"{w}: {k} is required ({what}, e.g. {k} = \"192.168.1.50\"); there is no default")
+        kw[k] = _ip(t[k], k, w)
     for k in ("cmd_port", "data_port"):
         if k in t:
             kw[k] = _int(t[k], k, w, 0, 65535)
@@ -215,6 +220,9 @@ def _lidar(t: Mapping, w: str) -> LidarConfig:
 def _head(t: Mapping, w: str) -> HeadConfig:
     check_keys(t, [f for f in HeadConfig.__dataclass_fields__], w)
     kw: dict = {}
+    if "port" not in t:
+        raise UserError(f"{w}: port is required (the head's serial device, best a /dev/serial/by-id/ name, or a "
+                        "pyserial URL such as socket://host:port); there is no default")
     if "port" in t:
         if not isinstance(t["port"], str) or not t["port"]:
             raise UserError(f"{w}: port must be a device path (/dev/ttyUSB0) or a pyserial URL (socket://host:port)")
@@ -288,6 +296,8 @@ def _recording(t: Mapping, w: str) -> RecordingConfig:
         kw["queue_frames"] = _int(t["queue_frames"], "queue_frames", w, 1, 10_000)
     if "overwrite" in t:
         kw["overwrite"] = as_bool(t["overwrite"], "overwrite", w)
+    if "make_dirs" in t:
+        kw["make_dirs"] = as_bool(t["make_dirs"], "make_dirs", w)
     return RecordingConfig(**kw)
 
 

@@ -206,6 +206,11 @@ class Daemon:
         path = c.recording_path()
         if path is not None:
             r = c.recording
+            if not path.parent.is_dir() and not r.make_dirs:
+                self.client.close()
+                self.head.close()
+                raise UserError(f"{c.path} [recording] path: the directory {path.parent} does not exist; create it "
+                                "(a mistyped path would otherwise start a new tree) or set make_dirs = true in [recording]")
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 writer = RecordingWriter(path, self._meta(), flush_every_frames=r.flush_every_frames,
@@ -575,6 +580,12 @@ class Daemon:
             out.append(f"{failed} of {total} head commands were not written to [head] port {self.cfg.head.port!r} "
                        "(see head_* counters in the log)")
         return out
+
+    @property
+    def no_lidar_data(self) -> bool:
+        """True when the run never received a lidar packet (the CLI exits non-zero)."""
+        rx = getattr(self, "rx", None)
+        return rx is not None and rx.last_packet_mono is None
 
     def drops(self) -> int:
         rx = self.rx
