@@ -176,6 +176,9 @@ class LidarStream:
             self.last_packet_mono = now    # the first packet, even with wrong times: the lidar is there
         self._packets = packets
         out = []
+        # the slot rate is the unit's (the client learns its model at the handshake)
+        rate = getattr(getattr(self.client, "decoder", None), "point_rate_hz", None)
+        self.guard.slot_ns = 1e9 / rate if rate else None
         for b in batches:
             if len(b):
                 out.extend(self.guard.push(b.xyz, b.t_ns, b.reflectivity, now))

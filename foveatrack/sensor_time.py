@@ -19,7 +19,9 @@ dropped as late.  :class:`SensorTimeGuard` sits between the client and the slice
 Nothing here allocates by a time difference: the work is ``O(points)`` whatever the times.
 
 Counters (``counters``): ``clock_jumps`` (re-anchors), ``bad_time_segments`` / ``bad_time_points``
-(dropped as wrong times), ``held_points`` (waiting in a candidate now).
+(dropped as wrong times), and, with the point rate known, ``lost_slots``: the time slots missing
+inside the stream (a Livox v1 packet has no sequence number, but its points are one slot apart, so a
+step of k slot periods is k - 1 lost slots: lost packets, counted where they were lost).
 """
 
 from __future__ import annotations
@@ -69,10 +71,12 @@ class SensorTimeGuard:
     jump_tolerance_s : > 0 [s], slack on top of the host time elapsed for a forward step
     back_tolerance_s : >= 0 [s], the largest step back still read as the same stream
     confirm_s : > 0 [s], sensor time a candidate new clock must run to be accepted
+    point_rate_hz : > 0 [slots/s] or None, the sensor's slot rate (counts ``lost_slots``)
     """
 
     def __init__(self, jump_tolerance_s: float = JUMP_TOLERANCE_S, back_tolerance_s: float = BACK_TOLERANCE_S,
-                 confirm_s: float = CONFIRM_S):
+                 confirm_s: float = CONFIRM_S, point_rate_hz: float | None = None):
+        self.slot_ns = None if not point_rate_hz else 1e9 / point_rate_hz
         self.jump_ns = int(jump_tolerance_s * 1e9)
         self.back_ns = int(back_tolerance_s * 1e9)
         self.confirm_ns = int(confirm_s * 1e9)
@@ -81,7 +85,7 @@ class SensorTimeGuard:
         self.last_host_s: float | None = None  # host time its batch arrived
         self._cand: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]] = []
         self._cand_first_ns = self._cand_last_ns = 0
-        self.counters: Counter = Counter(clock_jumps=0, bad_time_segments=0, bad_time_points=0)
+        self.counters: Counter = Counter(clock_jumps=0, bad_time_segments=0, bad_time_points=0, lost_slots=0)
         self.jumps: list[ClockJump] = []        # confirmed re-anchors not yet taken (take_jumps)
 
     # ------------------------------------------------------------------------------------------
@@ -139,6 +143,11 @@ class SensorTimeGuard:
                 self._accept(cx, ct, cr, ch, out)
 
     def _accept(self, xyz, t, refl, host_s, out: list[Accepted]) -> None:
+        if self.slot_ns is not None:
+            d = np.diff(t) if self.last_t_ns is None else np.diff(t, prepend=self.last_t_ns)
+            big = d[d > 1.5 * self.slot_ns]
+            if big.size:
+                self.counters["lost_slots"] += int(np.sum(np.rint(big / self.slot_ns) - 1))
         self.last_t_ns = int(t[-1])
         self.last_host_s = host_s
         if out and out[-1].epoch == self.epoch:

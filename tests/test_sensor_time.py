@@ -130,3 +130,17 @@ def test_the_slicer_never_allocates_by_a_wild_time():
     sl2 = FrameSlicer(10.0)
     sl2.push(*packets(1.0, 1)[:2])
     assert len(sl2.push(np.ones((1, 3)), np.array([int(31.05e9)], np.int64))) == 300
+
+
+def test_lost_packets_are_counted_by_the_slots_missing_between_points():
+    g = SensorTimeGuard(point_rate_hz=RATE)
+    xyz, t, r = packets(5.0, 300)
+    keep = np.ones(t.size, bool)
+    keep[1000:3000] = False            # 20 packets
+    keep[10_000:10_100] = False        # 1 packet
+    out = g.push(xyz[keep][:5000], t[keep][:5000], r[keep][:5000], host_s=100.0)
+    out += g.push(xyz[keep][5000:], t[keep][5000:], r[keep][5000:], host_s=100.1)   # across batches too
+    assert g.counters["lost_slots"] == 2100
+    # the first point of a new clock is not a loss
+    g.push(*packets(0.0, 30), host_s=105.0)
+    assert g.counters["lost_slots"] == 2100 and g.epoch == 1

@@ -538,6 +538,7 @@ class Daemon:
                 expected = span * self.client.decoder.point_rate_hz
                 if expected > 0:
                     d["lidar_points_missing_pct"] = round(max(0.0, 100.0 * (1 - rx.points_in / expected)), 3)
+                d["lidar_lost_pct"] = round(self.lost_pct() or 0.0, 3)
         if getattr(self, "head", None) is not None:
             d.update({f"head_{k}": v for k, v in asdict(self.head.stats).items()})
         d["slicer_late_points"] = self.slicer.late_points
@@ -617,7 +618,20 @@ class Daemon:
             notes.append("head UNCALIBRATED (nominal speed table)")
         if getattr(self, "head", None) is not None and self.head.refused:
             notes.append("head path holds another device: refused")
+        lost = self.lost_pct()
+        if lost:
+            notes.append(f"lidar lost {self.rx.counters.get('lost_slots', 0)} points ({lost:.1f} %)")
         return notes
+
+    def lost_pct(self) -> float | None:
+        """Lidar points lost on the way [%]: the slots missing inside the stream (by time, as a
+        sequence number) against the slots the stream spanned."""
+        rx = getattr(self, "rx", None)
+        if rx is None or rx.first_t_ns is None or not rate_known(self):
+            return None
+        span_slots = (rx.last_t_ns - rx.first_t_ns + rx.span_done_ns) * 1e-9 * self.client.decoder.point_rate_hz
+        lost = rx.counters.get("lost_slots", 0)
+        return 100.0 * lost / span_slots if span_slots > 0 and lost else None
 
     def _shutdown(self, old_handlers) -> None:
         self.stop_ev.set()

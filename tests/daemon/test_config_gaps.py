@@ -90,3 +90,26 @@ def test_a_run_without_lidar_data_exits_non_zero_and_says_so(tmp_path):
     r = _cli("daemon", "--config", str(p), "--duration-s", "1.5", "--no-status")
     assert r.returncode == 3, (r.returncode, r.stderr)
     assert "no lidar data arrived" in r.stderr and "no frame processed" in r.stderr and "nan" not in r.stderr
+
+
+def test_the_discovery_port_is_exclusive_and_a_second_holder_is_told(tmp_path):
+    """Two hosts, one lidar (issue 16, item 9): the discovery socket was shared (SO_REUSEADDR), so a
+    second process bound to the port silently took most broadcasts."""
+    from foveatrack.livox.client import LivoxClient
+    from daemon_procs import free_udp_port
+
+    port = free_udp_port()
+    first = LivoxClient("127.0.0.1", "127.0.0.1", cmd_port=0, data_port=0, broadcast_port=port)
+    try:
+        with pytest.raises(UserError) as exc:
+            LivoxClient("127.0.0.1", "127.0.0.1", cmd_port=0, data_port=0, broadcast_port=port)
+        msg = str(exc.value)
+        assert f"discovery port {port}" in msg and "another process" in msg and "broadcast_port = false" in msg
+        # nor may anyone else share it behind the client's back
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        with pytest.raises(OSError):
+            s.bind(("", port))
+        s.close()
+    finally:
+        first.close()

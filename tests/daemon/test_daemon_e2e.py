@@ -158,6 +158,13 @@ def test_faults_head_killed_and_restarted_lossy_lidar_garbage(tmp_path):
     assert stats["watchdog_trips"] == 1
     lidar_counters = json.loads((tmp_path / "l.out").read_text().splitlines()[-1])
     assert lidar_counters["head_restarts"] >= 1 and lidar_counters["packets_lost"] > 0
+    # counters that add up: every slot on the wire is a return or a no-return, and the points lost
+    # (missing time slots, the daemon's count) are the packets the lidar dropped (its count) x 100
+    assert stats["lidar_wire_points"] == stats["lidar_returns"] + stats["lidar_no_return_points"]
+    assert stats["lidar_no_return_points"] > 0
+    assert abs(stats["lidar_lost_slots"] - 100 * lidar_counters["packets_lost"]) <= 0.03 * stats["lidar_lost_slots"], \
+        (stats["lidar_lost_slots"], lidar_counters["packets_lost"])
+    assert 5.0 < stats["lidar_lost_pct"] < 15.0, stats["lidar_lost_pct"]
     # Recovered: after the restart the daemon's commands reach the head again and it turns right,
     # after the UAV (which drifted ~10 deg right of the axis while the head was gone), and the UAV is
     # detected again.  How fast the error closes is the tracker's business (the paper's controller
