@@ -80,11 +80,30 @@ def open_devices(config) -> tuple["HeadLink", object]:
     return HeadLink(head, config.head.address, config.head.protocol), lidar
 
 
-class HeadLink:
-    """Pelco frames of :class:`HeadCommand` s to a :class:`gimbal.client.HeadClient` (reconnecting)."""
+class CommandJournal:
+    """Every frame meant for the head, appended (one JSON line, flushed to the kernel) *before* it is
+    written to the port: whatever a driver killed with SIGKILL got to the head is in it (the
+    recording, written behind a queue, lost the frame in flight)."""
 
-    def __init__(self, client, address: int, protocol: str):
+    def __init__(self, path):
+        self.path = str(path)
+        self._f = open(self.path, "a", buffering=1)
+
+    def write(self, raw: bytes, source: str = "") -> None:
+        self._f.write(f'{{"t_mono_s": {time.monotonic():.6f}, "raw_hex": "{raw.hex()}", "source": "{source}"}}\n')
+
+    def close(self) -> None:
+        self._f.close()
+
+
+class HeadLink:
+    """Pelco frames of :class:`HeadCommand` s to a :class:`gimbal.client.HeadClient` (reconnecting).
+
+    journal : optional :class:`CommandJournal`: every frame is journaled before its write."""
+
+    def __init__(self, client, address: int, protocol: str, journal: CommandJournal | None = None):
         self.client, self.address, self.protocol = client, address, protocol
+        self.journal = journal
         self._encoded: dict[tuple, bytes] = {}   # a run uses a few dozen distinct commands
 
     @property
@@ -101,8 +120,10 @@ class HeadLink:
             return None
         return c.last_open_error
 
-    def send_raw(self, raw: bytes) -> bool:
-        """Write one prepared frame (an absolute move while homing); whether the link took it."""
+    def send_raw(self, raw: bytes, source: str = "") -> bool:
+        """Write one prepared frame (journaled first); whether the link took it."""
+        if self.journal is not None:
+            self.journal.write(raw, source)
         return bool(self.client.send_frame(raw))
 
     def encode(self, cmd: HeadCommand) -> bytes:
@@ -114,13 +135,15 @@ class HeadLink:
             raw = self._encoded[key] = encode_pan_tilt(self.address, *key, self.protocol)
         return raw
 
-    def send(self, cmd: HeadCommand) -> tuple[bytes, bool]:
+    def send(self, cmd: HeadCommand, source: str = "") -> tuple[bytes, bool]:
         """Write ``cmd``; returns the bytes and whether the link took them."""
         raw = self.encode(cmd)
-        return raw, bool(self.client.send_frame(raw))
+        return raw, self.send_raw(raw, source)
 
     def stop(self) -> None:
-        self.client.stop()
+        from foveatrack.control import STOP
+
+        self.send(STOP)
 
     @property
     def connected(self) -> bool:
@@ -136,6 +159,8 @@ class HeadLink:
 
     def close(self) -> None:
         self.client.close()
+        if self.journal is not None:
+            self.journal.close()
 
 
 class LidarStream:

@@ -231,6 +231,11 @@ class Daemon:
             # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
             self.recorder = RecordingThread(writer, r.queue_frames)
             self.recording_path = path
+            # the recording is written behind a queue: a journal of every frame for the head, written
+            # before the frame is, says what a killed daemon's head got (CommandJournal)
+            from foveatrack.live_devices import CommandJournal
+
+            self.head.journal = CommandJournal(path.with_name(path.name + ".commands.jsonl"))
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
         self.rx = _Receiver(self.client, self.q, self.stop_ev)
 
@@ -253,7 +258,7 @@ class Daemon:
         return t_s
 
     def _send(self, cmd: HeadCommand, source: str, send_t_s: float, fid=None, tracker_cmd=None, why=()):
-        raw, ok = self.head.send(cmd)
+        raw, ok = self.head.send(cmd, source)
         t_written = time.monotonic()
         self.counters["commands_written" if ok else "commands_failed"] += 1
         # A failed write leaves the head on its last command; the gate tells the dead reckoning (seen
@@ -322,7 +327,7 @@ class Daemon:
         while self._home_steps and now >= self._home_steps[0][0]:
             _, step, raw = self._home_steps.pop(0)
             if step in ("pan", "tilt"):
-                if not self.head.send_raw(raw):
+                if not self.head.send_raw(raw, "homing"):
                     self.log.event("head_homing_failed", step=step)
                     return self._pose_unknown(now)      # start again once the link takes writes
                 self.pose_state = "homing"

@@ -87,7 +87,7 @@ def test_fault1_a_restarted_lidar_is_tracked_again(tmp_path):
         procs["lidar"] = _lidar(tmp_path, bport, truth, "l2")
         wait_for(lambda: event(log, "tracker_rebased"), 60, "the daemon to re-anchor the new clock",
                  [procs["daemon"], procs["lidar"]])
-        _wait_frames(log, rec, 40, [procs["daemon"], procs["lidar"]])
+        _wait_frames(log, rec, 60, [procs["daemon"], procs["lidar"]])
         assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
     finally:
         _stop_all(procs)
@@ -99,11 +99,12 @@ def test_fault1_a_restarted_lidar_is_tracked_again(tmp_path):
     t = np.array([d["t_ns"] for d in dets]) * 1e-9
     back = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1          # the first frame of the new clock
     after = dets[back:]
-    assert len(after) >= 40
+    assert len(after) >= 50
     # tracked again within 2 s of its return (sensor time, i.e. frames of the new clock)
     first = next(i for i, d in enumerate(after) if d["detected"])
     assert (after[first]["t_ns"] - after[0]["t_ns"]) * 1e-9 <= 2.0, first
-    assert np.mean([d["detected"] for d in after[first:]]) >= 0.8
+    # then held (after the acquisition's first 15 frames: the restarted scene's UAV enters off-axis again)
+    assert len(after) >= first + 30 and np.mean([d["detected"] for d in after[first + 15:]]) >= 0.8
     # and nothing of the new clock was thrown away as late
     assert stats["slicer_late_points"] < 1000, stats["slicer_late_points"]
 
@@ -253,7 +254,7 @@ def test_fault5_a_nominal_speed_table_is_a_warning_at_start_in_the_log_and_the_s
     try:
         d = start(["daemon", "--config", str(cfg), "--log", str(log)], tmp_path / "d.out", tmp_path / "d.err")
         wait_for(lambda: event(log, "start"), 60, "the daemon to start", [d])
-        assert terminate(d) == 0
+        assert terminate(d) == 3            # no lidar in this test: "no lidar data arrived"
     finally:
         _stop_all({"head": head})
     err = (tmp_path / "d.err").read_text()
@@ -272,3 +273,43 @@ def test_fault5_a_nominal_speed_table_is_a_warning_at_start_in_the_log_and_the_s
     for axis in ("pan", "tilt"):     # the shipped table is unit 3's, within the calibration's 2 %
         got, want = getattr(ex.speed_table(), axis).speeds_array()[0], getattr(truth3, axis).speeds_array()[0]
         assert abs(got[63] / want[63] - 1) < 0.02 and abs(got[32] / want[32] - 1) < 0.02, (axis, got[63], want[63])
+
+
+def test_fault6_a_killed_daemon_journaled_every_frame_its_head_got_and_logged_its_progress(tmp_path):
+    """kill -9 (issue 16, fault 6): the frame in flight reached the head but not the recording, and the
+    log held only 'start'.  The head here is a bare pty whose every byte the test reads."""
+    master, slave = os.openpty()
+    os.set_blocking(master, False)
+    link = tmp_path / "head"
+    os.symlink(os.ttyname(slave), link)
+    rec, log = tmp_path / "rec.mcap", tmp_path / "d.jsonl"
+    cfg = write_config(tmp_path / "d.toml", link, rec, free_udp_port(), speed_table=str(tmp_path / "t.json"))
+    truth_speed_table(PTS303H(unit_seed=3)).save(tmp_path / "t.json")
+    got = bytearray()
+
+    def drain():
+        try:
+            while True:
+                got.extend(os.read(master, 4096))
+        except (BlockingIOError, OSError):
+            pass
+
+    d = start(["daemon", "--config", str(cfg), "--log", str(log)], tmp_path / "d.out", tmp_path / "d.err")
+    try:
+        wait_for(lambda: event(log, "start"), 60, "the daemon to start", [d])
+        # no lidar: the daemon stops the head at start and every second; wait for 3 progress events
+        wait_for(lambda: (drain(), len([e for e in log_events(log) if e["event"] == "progress"]) >= 3)[1], 60,
+                 "progress in the log", [d])
+        d.kill()
+        d.wait(10)
+        drain()
+    finally:
+        if d.poll() is None:
+            d.kill()
+        os.close(master), os.close(slave)
+    journal = [__import__("json").loads(x) for x in (tmp_path / "rec.mcap.commands.jsonl").read_text().splitlines()]
+    sent = b"".join(bytes.fromhex(j["raw_hex"]) for j in journal)
+    assert len(got) >= 14 and len(got) % 7 == 0          # whole Pelco-D frames, at least two STOPs
+    assert sent[:len(got)] == bytes(got) and len(sent) - len(got) <= 7, (len(sent), len(got))
+    prog = [e for e in log_events(log) if e["event"] == "progress"]
+    assert prog[-1]["frames"] == 0 and "commands_written" in prog[-1]
