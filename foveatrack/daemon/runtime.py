@@ -295,16 +295,22 @@ class Daemon:
         self._record(_job_event, ns(t0_s), {"event": "tracker_rebased", "reason": "clock_jump", "epoch": epoch,
                                             "t0_s": t0_s, "pan_deg": pan, "tilt_deg": tilt})
 
-    def _pose_unknown(self, now: float) -> None:
-        """The head's link came back: its pose is unknown (one that lost power is back at its power-on
-        pose; the head reports none).  Stop it, and home it if the config says so."""
+    def _pose_unknown(self, now: float, why: str) -> None:
+        """The head's link was lost (or a homing write failed): from now its pose is unknown (one that
+        lost power comes back at its power-on pose; the head reports none).  No frame is tracked until
+        :meth:`_reconnected` has done what ``[head] on_reconnect`` says."""
         h = self.cfg.head
         self.pose_state = "unknown"
+        self._home_steps = []
         self.counters["head_pose_unknown"] += 1
-        self.head.stop()
-        self.log.event("head_pose_unknown", on_reconnect=h.on_reconnect, frames=self.counters["frames"])
+        self.log.event("head_pose_unknown", why=why, on_reconnect=h.on_reconnect, frames=self.counters["frames"])
         self._record(_job_event, ns(self.sensor_now_s(now) or 0.0),
-                     {"event": "head_pose_unknown", "on_reconnect": h.on_reconnect})
+                     {"event": "head_pose_unknown", "why": why, "on_reconnect": h.on_reconnect})
+
+    def _reconnected(self, now: float) -> None:
+        """The link is back (its first frame was STOP): home the head if the config says so."""
+        h = self.cfg.head
+        self.head.stop()
         self._home_steps = []
         if h.on_reconnect == "home":
             from gimbal.pelco import encode_set_pan, encode_set_tilt
@@ -319,7 +325,9 @@ class Daemon:
 
     def _pose_tick(self, now: float) -> None:
         h = self.cfg.head
-        if h.on_reconnect == "stop":
+        if not self.head.connected or h.on_reconnect == "stop":
+            # STOP every second: while the link is down each try is the reopen, so the first frame a
+            # reopened link carries is STOP; with "stop" it holds the head until the daemon restarts
             if now - getattr(self, "_last_unknown_stop", -math.inf) >= 1.0:
                 self._last_unknown_stop = now
                 self.head.stop()
@@ -329,7 +337,7 @@ class Daemon:
             if step in ("pan", "tilt"):
                 if not self.head.send_raw(raw, "homing"):
                     self.log.event("head_homing_failed", step=step)
-                    return self._pose_unknown(now)      # start again once the link takes writes
+                    return self._pose_unknown(now, "homing_write_failed")   # again once the link is back
                 self.pose_state = "homing"
                 self.log.event("head_homing", axis=step, home_deg=list(h.home_deg))
             else:
@@ -384,8 +392,8 @@ class Daemon:
         if why:
             self.counters["commands_limited"] += 1
         rec, t_written = self._send(cmd, "tracker", send_t, fid, out.command, why)
-        if not was_up and self.head.connected and reconnect_unknown and self.pose_state is None:
-            self._pose_unknown(t_written)
+        if was_up and not self.head.connected and reconnect_unknown and self.pose_state is None:
+            self._pose_unknown(t_written, "link_lost")
         proc = t_written - t_arrival
         # The send-time prediction learns the compute time only, robustly (median of the last 9): a
         # frame that waited in a backlog, or one slow first frame, would otherwise push the later
@@ -511,8 +519,13 @@ class Daemon:
                     head_up = self.head.connected
                     self.counters["head_link_up" if head_up else "head_link_down"] += 1
                     self.log.event("head_connected" if head_up else "head_disconnected", stats=asdict(self.head.stats))
-                    if head_up and c.head.on_reconnect != "keep" and self.pose_state is None:
-                        self._pose_unknown(now)
+                    if c.head.on_reconnect != "keep":
+                        if not head_up and self.pose_state is None:
+                            self._pose_unknown(now, "link_lost")
+                        elif head_up:
+                            if self.pose_state is None:     # lost and back between two ticks
+                                self._pose_unknown(now, "link_lost")
+                            self._reconnected(now)
                 if self.pose_state is not None:
                     self._pose_tick(now)
                 if now >= next_progress:

@@ -241,7 +241,9 @@ def test_fault4_a_head_back_at_its_power_on_pose_is_homed_before_tracking_resume
     # the UAV drifted off while the head was down and homing; the head turns onto it again (how fast
     # is the paper's controller's business: it stops on every empty frame; 4-6 s from 17 deg off)
     assert min(errs[-3:]) < 5.0, errs
-    assert all(np.linalg.norm(d["xyz_m"]) < 20.0 for d in after if d["detected"])   # the UAV is ~12 m away
+    # the UAV is ~12 m away; nothing else is taken for it, also while the head was gone (frames are not
+    # tracked from the moment its link was lost: a dead-reckoned world without a head once saw 23-32 m)
+    assert all(np.linalg.norm(d["xyz_m"]) < 20.0 for d in dets if d["detected"])
     assert any(c["source"] == "tracker" and c["written"] for c in cmds)
 
 
