@@ -7,9 +7,12 @@ so one wild time once asked for a 195 GiB frame-edge array, and a restarted unit
 dropped as late.  :class:`SensorTimeGuard` sits between the client and the slicer:
 
 * **continuity** -- consecutive points of one stream are ``1 / point_rate`` apart; packets lost on
-  the way make a forward step, but never longer than the host time that passed since the previous
-  accepted points arrived (``+ jump_tolerance_s``).  A backward step (beyond ``back_tolerance_s``) or a
-  longer forward step starts a new *segment*;
+  the way make a forward step, but never one longer than the host time that passed since the
+  previous accepted points arrived, nor one to a time later than the host clock says the sensor's
+  clock reads now (``host time - min over the stream of (host time - sensor time)``), each
+  ``+ jump_tolerance_s``: the second rule keeps a stalled receiver (packets read late, then a lidar
+  that skipped time) from reading as a jump.  A backward step (beyond ``back_tolerance_s``) or a
+  forward step that breaks both rules starts a new *segment*;
 * a segment that is not continuous with the stream is held as a **candidate** epoch.  If the points
   that follow continue the candidate for ``confirm_s`` of sensor time, the sensor clock really jumped
   (a restart, a sync change): the guard **re-anchors** (``epoch`` + 1, the host - sensor offset starts
@@ -83,6 +86,7 @@ class SensorTimeGuard:
         self.epoch = 0
         self.last_t_ns: int | None = None      # the stream's newest accepted point time
         self.last_host_s: float | None = None  # host time its batch arrived
+        self.min_off_ns: int | None = None     # min (host - sensor) time of this clock's stream [ns]
         self._cand: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]] = []
         self._cand_first_ns = self._cand_last_ns = 0
         self.counters: Counter = Counter(clock_jumps=0, bad_time_segments=0, bad_time_points=0, lost_slots=0)
@@ -93,11 +97,18 @@ class SensorTimeGuard:
         elapsed = 0.0 if since_s is None else max(0.0, host_s - since_s)
         return int(elapsed * 1e9) + self.jump_ns
 
-    def _continues(self, last_ns: int | None, since_s: float | None, first_ns: int, host_s: float) -> bool:
+    def _sensor_now_ns(self, host_s: float) -> int | None:
+        """The latest time the stream's sensor clock can read at host time ``host_s`` (+ tolerance)."""
+        return None if self.min_off_ns is None else int(host_s * 1e9) - self.min_off_ns + self.jump_ns
+
+    def _continues(self, last_ns: int | None, since_s: float | None, first_ns: int, host_s: float,
+                   now_ns: int | None = None) -> bool:
         if last_ns is None:
             return True
         step = first_ns - last_ns
-        return -self.back_ns <= step <= self._fwd_limit_ns(host_s, since_s)
+        if step < -self.back_ns:
+            return False
+        return step <= self._fwd_limit_ns(host_s, since_s) or (now_ns is not None and first_ns <= now_ns)
 
     def push(self, xyz, t_ns, reflectivity, host_s: float) -> list[Accepted]:
         """The accepted points of one batch that arrived at host time ``host_s`` [s] (monotonic), in
@@ -109,7 +120,11 @@ class SensorTimeGuard:
         refl = np.asarray(reflectivity).reshape(-1)
         d = np.diff(t_ns)
         lim = self._fwd_limit_ns(host_s, self.last_host_s)   # any step inside one poll
-        cuts = np.flatnonzero((d < -self.back_ns) | (d > lim)) + 1
+        fwd = d > lim
+        now_ns = self._sensor_now_ns(host_s)
+        if now_ns is not None:
+            fwd &= t_ns[1:] > now_ns
+        cuts = np.flatnonzero((d < -self.back_ns) | fwd) + 1
         bounds = np.concatenate(([0], cuts, [t_ns.size]))
         out: list[Accepted] = []
         for a, b in zip(bounds[:-1], bounds[1:]):
@@ -118,7 +133,7 @@ class SensorTimeGuard:
 
     def _segment(self, xyz, t, refl, host_s: float, out: list[Accepted]) -> None:
         first, last = int(t[0]), int(t[-1])
-        if self._continues(self.last_t_ns, self.last_host_s, first, host_s):
+        if self._continues(self.last_t_ns, self.last_host_s, first, host_s, self._sensor_now_ns(host_s)):
             if self._cand:
                 # the stream carried on where it was: the candidate was wrong times
                 self._drop_candidate()
@@ -138,7 +153,7 @@ class SensorTimeGuard:
             self.jumps.append(ClockJump(self.epoch, None if self.last_t_ns is None else self.last_t_ns * 1e-9,
                                         self._cand_first_ns * 1e-9, host_s))
             cand, self._cand = self._cand, []
-            self.last_t_ns = None
+            self.last_t_ns = self.min_off_ns = None
             for cx, ct, cr, ch in cand:
                 self._accept(cx, ct, cr, ch, out)
 
@@ -150,6 +165,8 @@ class SensorTimeGuard:
                 self.counters["lost_slots"] += int(np.sum(np.rint(big / self.slot_ns) - 1))
         self.last_t_ns = int(t[-1])
         self.last_host_s = host_s
+        off = int(host_s * 1e9) - self.last_t_ns
+        self.min_off_ns = off if self.min_off_ns is None else min(self.min_off_ns, off)
         if out and out[-1].epoch == self.epoch:
             prev = out[-1]
             out[-1] = Accepted(np.concatenate([prev.xyz, xyz]), np.concatenate([prev.t_ns, t]),

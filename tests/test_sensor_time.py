@@ -144,3 +144,17 @@ def test_lost_packets_are_counted_by_the_slots_missing_between_points():
     # the first point of a new clock is not a loss
     g.push(*packets(0.0, 30), host_s=105.0)
     assert g.counters["lost_slots"] == 2100 and g.epoch == 1
+
+
+def test_a_stalled_receiver_then_a_lidar_that_skipped_time_is_the_same_clock():
+    """Read late (the receiver stalled 0.4 s), then the next packets 0.5 s later in sensor time (the
+    lidar skipped) only 0.1 s of host time later: the host clock says the sensor can read that now."""
+    g = SensorTimeGuard()
+    feed(g, 10.0, 100, host_s=100.0)                 # sensor 10.0-10.1 s read at host 100.0-100.1
+    feed(g, 10.1, 10, host_s=100.5)                  # sensor 10.1-10.11 s read late at host 100.5
+    feed(g, 10.6, 100, host_s=100.6)                 # sensor 10.6 s at host 100.6: on time
+    assert g.epoch == 0 and g.counters["bad_time_points"] == 0
+    # but a time later than the host clock allows is still a wrong one
+    feed(g, 12.0, 1, host_s=100.75)
+    feed(g, 10.75, 10, host_s=100.76)
+    assert g.counters["bad_time_points"] == 100 and g.epoch == 0
