@@ -156,7 +156,8 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
         table = cal.result()
     finally:
         head.stop()
-        counters = {"lidar": dict(client.counters), "head": head.stats_dict()}
+        # the clock guard's counts beside the client's: points dropped as wrong times show here
+        counters = {"lidar": {**client.counters, **stream.counters}, "head": head.stats_dict()}
         client.close()
         head.close()
     return LiveCalibration(table, cal.report, plan, dropped, run["frames"], time.monotonic() - t_start, delay_ms,
