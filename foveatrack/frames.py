@@ -16,6 +16,10 @@ Conventions
 * Points are expected in non-decreasing time *per batch and across batches up to* ``max_lateness_ns``
   (Livox packets arrive in order).  A point older than the last emitted frame is counted in
   :attr:`FrameSlicer.late_points` and dropped (it can no longer be placed in an emitted frame).
+* Nothing is allocated by a time difference: a point more than ``max_gap_frames`` periods past the
+  current frame (a wild timestamp; once a 195 GiB edge array) restarts the slicer at that point's
+  frame, dropping what was buffered (:attr:`FrameSlicer.restarts`, :attr:`FrameSlicer.gap_dropped_points`).
+  Live drivers filter such times first (:mod:`foveatrack.sensor_time`); this is the last line.
 """
 
 from __future__ import annotations
@@ -87,10 +91,15 @@ class FrameSlicer:
     ----------
     rate_hz : float > 0 [Hz]
         Frame rate (paper: 10 Hz).
+    max_gap_frames : int >= 1
+        The most (empty) frames one push may complete; beyond, the slicer restarts (see the module docstring).
     """
 
     rate_hz: float = 10.0
+    max_gap_frames: int = 600
     late_points: int = field(default=0, init=False)
+    restarts: int = field(default=0, init=False)
+    gap_dropped_points: int = field(default=0, init=False)
     _t0_ns: int | None = field(default=None, init=False, repr=False)
     _next_start_ns: int | None = field(default=None, init=False, repr=False)
     _buf_xyz: list = field(default_factory=list, init=False, repr=False)
@@ -139,6 +148,9 @@ class FrameSlicer:
         t_max = max(int(t.max()) for t in self._buf_t if t.size) if any(t.size for t in self._buf_t) \
             else self._next_start_ns
         n_complete = (t_max - self._next_start_ns) // period  # frames whose end <= t_max
+        if n_complete > self.max_gap_frames:
+            self._restart_at(t_max)
+            return []
         if n_complete <= 0:
             return []
         return self._emit(int(n_complete))
@@ -149,7 +161,31 @@ class FrameSlicer:
             return []
         t_max = max(int(t.max()) for t in self._buf_t if t.size)
         n = (t_max - self._next_start_ns) // self.period_ns + 1
+        if n > self.max_gap_frames:
+            self._restart_at(t_max)
+            n = 1
         return self._emit(int(n))
+
+    def reset(self) -> None:
+        """Forget the stream (a driver whose sensor clock restarted): the next point starts frame 0 afresh."""
+        self._t0_ns = self._next_start_ns = None
+        self._buf_xyz, self._buf_t, self._buf_r = [], [], []
+
+    def _restart_at(self, t_ns: int) -> None:
+        """Start again at the frame holding ``t_ns``, keeping only the buffered points in it."""
+        period = self.period_ns
+        start = (t_ns // period) * period
+        self.restarts += 1
+        kept_x, kept_t, kept_r = [], [], []
+        for k, t in enumerate(self._buf_t):
+            keep = t >= start
+            self.gap_dropped_points += int((~keep).sum())
+            kept_t.append(t[keep])
+            kept_x.append(self._buf_xyz[k][keep])
+            if self._has_refl:
+                kept_r.append(self._buf_r[k][keep])
+        self._buf_xyz, self._buf_t, self._buf_r = kept_x, kept_t, kept_r
+        self._next_start_ns = start
 
     def _emit(self, n_frames: int) -> list[Frame]:
         period = self.period_ns

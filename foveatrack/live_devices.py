@@ -28,13 +28,23 @@ from foveatrack.errors import UserError
 
 
 def open_head(config):
-    """The head's :class:`gimbal.client.HeadClient`, open now, or a UserError naming ``[head] port``."""
+    """The head's :class:`gimbal.client.HeadClient`, open now, or a UserError naming ``[head] port``.
+
+    The device is identified once (:mod:`foveatrack.serial_identity`; a ``/dev/serial/by-id/`` name of
+    it is opened instead of ``/dev/ttyUSB0`` where there is one) and every reopen after a disconnect
+    must find the same device: the client refuses to write to another (``open_refusals``)."""
+    from foveatrack.serial_identity import ReopenGuard, identify
     from gimbal.client import HeadClient
     from gimbal.errors import GimbalError
 
     h = config.head
+    ident = identify(h.port)
+    open_path = ident.by_id if ident is not None and ident.by_id else h.port
+    if open_path != h.port:
+        ident = identify(open_path)
+    guard = None if ident is None else ReopenGuard(ident, open_path)
     try:
-        head = HeadClient(h.port, baud=h.baud, address=h.address, protocol=h.protocol)
+        head = HeadClient(open_path, baud=h.baud, address=h.address, protocol=h.protocol, open_guard=guard)
     except GimbalError as exc:
         raise UserError(f"{config.path} [head]: {exc}") from None
     if not head.connected:
@@ -44,6 +54,7 @@ def open_head(config):
         raise UserError(f"{config.path} [head]: port {h.port!r} cannot be opened ({head.last_open_error}); "
                         "give the head's serial device (/dev/ttyUSB0) or a pyserial URL (socket://host:port, "
                         "rfc2217://host:port) that exists now, e.g. start 'foveatrack gimbal serve --link PATH' first")
+    head.identity, head.open_path = ident, open_path
     return head
 
 
@@ -69,12 +80,51 @@ def open_devices(config) -> tuple["HeadLink", object]:
     return HeadLink(head, config.head.address, config.head.protocol), lidar
 
 
-class HeadLink:
-    """Pelco frames of :class:`HeadCommand` s to a :class:`gimbal.client.HeadClient` (reconnecting)."""
+class CommandJournal:
+    """Every frame meant for the head, appended (one JSON line, flushed to the kernel) *before* it is
+    written to the port: whatever a driver killed with SIGKILL got to the head is in it (the
+    recording, written behind a queue, lost the frame in flight)."""
 
-    def __init__(self, client, address: int, protocol: str):
+    def __init__(self, path):
+        self.path = str(path)
+        self._f = open(self.path, "a", buffering=1)
+
+    def write(self, raw: bytes, source: str = "") -> None:
+        self._f.write(f'{{"t_mono_s": {time.monotonic():.6f}, "raw_hex": "{raw.hex()}", "source": "{source}"}}\n')
+
+    def close(self) -> None:
+        self._f.close()
+
+
+class HeadLink:
+    """Pelco frames of :class:`HeadCommand` s to a :class:`gimbal.client.HeadClient` (reconnecting).
+
+    journal : optional :class:`CommandJournal`: every frame is journaled before its write."""
+
+    def __init__(self, client, address: int, protocol: str, journal: CommandJournal | None = None):
         self.client, self.address, self.protocol = client, address, protocol
+        self.journal = journal
         self._encoded: dict[tuple, bytes] = {}   # a run uses a few dozen distinct commands
+
+    @property
+    def identity(self):
+        """The device the head was found on at start (:class:`~foveatrack.serial_identity.SerialIdentity`;
+        None for a URL)."""
+        return getattr(self.client, "identity", None)
+
+    @property
+    def refused(self) -> str | None:
+        """Why the last reopen was refused (another device holds the path), or None."""
+        c = self.client
+        if c.connected or not getattr(c.stats, "open_refusals", 0):
+            return None
+        return c.last_open_error
+
+    def send_raw(self, raw: bytes, source: str = "") -> bool:
+        """Write one prepared frame (journaled first); whether the link took it."""
+        if self.journal is not None:
+            self.journal.write(raw, source)
+        return bool(self.client.send_frame(raw))
 
     def encode(self, cmd: HeadCommand) -> bytes:
         from gimbal.pelco import encode_pan_tilt
@@ -85,13 +135,15 @@ class HeadLink:
             raw = self._encoded[key] = encode_pan_tilt(self.address, *key, self.protocol)
         return raw
 
-    def send(self, cmd: HeadCommand) -> tuple[bytes, bool]:
+    def send(self, cmd: HeadCommand, source: str = "") -> tuple[bytes, bool]:
         """Write ``cmd``; returns the bytes and whether the link took them."""
         raw = self.encode(cmd)
-        return raw, bool(self.client.send_frame(raw))
+        return raw, self.send_raw(raw, source)
 
     def stop(self) -> None:
-        self.client.stop()
+        from foveatrack.control import STOP
+
+        self.send(STOP)
 
     @property
     def connected(self) -> bool:
@@ -107,31 +159,66 @@ class HeadLink:
 
     def close(self) -> None:
         self.client.close()
+        if self.journal is not None:
+            self.journal.close()
 
 
 class LidarStream:
     """The lidar's batches with what a driver keeps from them (see the module docstring): the host
-    time of the last packet (``last_packet_mono``, for the watchdog) and the clock ``offset_s``."""
+    time of the last packet (``last_packet_mono``, for the watchdog) and the clock ``offset_s``.
 
-    def __init__(self, client):
+    Point times pass the :class:`~foveatrack.sensor_time.SensorTimeGuard` first: a packet with a wrong
+    time is dropped and counted, a sensor clock that restarted or jumped is re-anchored (``epoch`` + 1,
+    the offset measured afresh; the driver restarts its frame slicer and its dead reckoning's clock),
+    so neither a restarted lidar nor one bad packet stops a driver.  The batches returned are
+    :class:`~foveatrack.sensor_time.Accepted` (``xyz``, ``t_ns``, ``reflectivity``, ``epoch``).
+    """
+
+    def __init__(self, client, guard=None):
+        from foveatrack.sensor_time import SensorTimeGuard
+
         self.client = client
+        self.guard = guard or SensorTimeGuard()
         self.offset_s: float | None = None
         self.last_packet_mono: float | None = None
         self._packets = 0
 
+    @property
+    def epoch(self) -> int:
+        return self.guard.epoch
+
+    @property
+    def counters(self) -> dict:
+        """The clock guard's counters (``clock_jumps``, ``bad_time_segments``, ``bad_time_points``)."""
+        return dict(self.guard.counters)
+
     def poll(self, timeout_s: float) -> tuple[float, list]:
-        """``(host monotonic time, [PointBatch, ...])`` of what arrived within ``timeout_s``."""
+        """``(host monotonic time, [Accepted, ...])`` of what arrived within ``timeout_s``."""
         batches = self.client.poll(timeout_s)
         now = time.monotonic()
         packets = self.client.counters.get("packets", 0)
-        if packets != self._packets:
-            self._packets = packets
-            self.last_packet_mono = now
+        if packets != self._packets and self.last_packet_mono is None:
+            self.last_packet_mono = now    # the first packet, even with wrong times: the lidar is there
+        self._packets = packets
+        out = []
+        # the slot rate is the unit's (the client learns its model at the handshake)
+        rate = getattr(getattr(self.client, "decoder", None), "point_rate_hz", None)
+        self.guard.slot_ns = 1e9 / rate if rate else None
         for b in batches:
             if len(b):
-                off = now - int(b.t_ns[-1]) * 1e-9
-                self.offset_s = off if self.offset_s is None else min(self.offset_s, off)
-        return now, batches
+                out.extend(self.guard.push(b.xyz, b.t_ns, b.reflectivity, now))
+        for a in out:
+            # only points with believable times feed the watchdog and the clock offset
+            self.last_packet_mono = now
+            off = now - int(a.t_ns[-1]) * 1e-9
+            if a.epoch != getattr(self, "_offset_epoch", 0):
+                self._offset_epoch, self.offset_s = a.epoch, None   # a new sensor clock: measure afresh
+            self.offset_s = off if self.offset_s is None else min(self.offset_s, off)
+        return now, out
+
+    def take_jumps(self) -> list:
+        """The re-anchors since the last call (:class:`~foveatrack.sensor_time.ClockJump`)."""
+        return self.guard.take_jumps()
 
     def sensor_now_s(self, mono: float | None = None) -> float | None:
         """The sensor time of host time ``mono`` (default: now); None before the first packet."""

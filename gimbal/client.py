@@ -59,6 +59,7 @@ class ClientStats:
     query_timeouts: int = 0  # no (valid) reply before the read deadline
     bad_replies: int = 0  # checksum-valid replies whose word is not an angle
     open_failures: int = 0
+    open_refusals: int = 0  # reopens the open_guard refused (another device now holds the path)
     opens: int = 0
     disconnects: int = 0
 
@@ -79,6 +80,9 @@ class HeadClient:
     reconnect_interval_s : float >= 0 [s], least time between attempts to reopen a lost port
     tilt_zero : 'zenith' (PTS family) or 'level', the head's tilt word convention
     open_now : try to open in the constructor (failure is counted, not raised)
+    open_guard : optional callable() -> None or a reason: asked before every reopen after the first
+                 open; a reason refuses it (counted in ``open_refusals``, kept in ``last_open_error``),
+                 so a client never writes to a device that is no longer its head
     """
 
     def __init__(
@@ -92,6 +96,7 @@ class HeadClient:
         reconnect_interval_s: float = 0.5,
         tilt_zero: str = "zenith",
         open_now: bool = True,
+        open_guard=None,
     ) -> None:
         if protocol not in FRAME_LEN:
             raise GimbalError(f"protocol={protocol!r} is not allowed; use 'D' or 'P'")
@@ -116,6 +121,7 @@ class HeadClient:
         self.last_open_error: str | None = None  # why the last attempt to open the port failed
         self._last_open_attempt = -float("inf")
         self._parser = PelcoParser(protocol)
+        self.open_guard = open_guard
         if open_now:
             self._ensure_open(force=True)
 
@@ -131,6 +137,12 @@ class HeadClient:
         if not force and now - self._last_open_attempt < self.reconnect_interval_s:
             return False
         self._last_open_attempt = now
+        if self.open_guard is not None and self.stats.opens:
+            why = self.open_guard()
+            if why:
+                self.stats.open_refusals += 1
+                self.last_open_error = why
+                return False
         try:
             self._ser = serial.serial_for_url(
                 self.url, baudrate=self.baud, timeout=_READ_SLICE_S,

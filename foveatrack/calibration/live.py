@@ -121,6 +121,12 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
                                 f"lidar counters: {client.counters})")
             _, batches = stream.poll(0.02)
             for b in batches:
+                if b.epoch != 0:
+                    # the procedure times legs on the sensor clock: a restarted or jumped clock mid-run
+                    # would mis-time the leg under way (the daemon re-anchors; a table must not)
+                    raise UserError(f"the lidar's clock restarted or jumped after {run['frames']} frames "
+                                    f"({_legs(cal)} legs done; lidar counters: {stream.counters}); the head "
+                                    "was stopped and no table was written: start the calibration again")
                 if len(b):
                     for frame in slicer.push(b.xyz, b.t_ns, b.reflectivity):
                         frame = strip_no_return(frame)
@@ -152,7 +158,8 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
         table = cal.result()
     finally:
         head.stop()
-        counters = {"lidar": dict(client.counters), "head": head.stats_dict()}
+        # the clock guard's counts beside the client's: points dropped as wrong times show here
+        counters = {"lidar": {**client.counters, **stream.counters}, "head": head.stats_dict()}
         client.close()
         head.close()
     return LiveCalibration(table, cal.report, plan, dropped, run["frames"], time.monotonic() - t_start, delay_ms,

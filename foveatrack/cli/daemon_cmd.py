@@ -28,10 +28,15 @@ def cmd_daemon(args) -> int:
     from foveatrack.errors import UserError
 
     cfg = load_config(args.config)
+    for w in cfg.warnings():
+        print(f"foveatrack daemon: WARNING: {w}", file=sys.stderr)
     if args.check:
         print(json.dumps({"lidar": cfg.lidar.__dict__, "head": cfg.head.__dict__,
                           "tracker_overrides": cfg.tracker_overrides, "recording": cfg.recording.__dict__,
                           "daemon": cfg.loop.__dict__}, indent=1, default=str))
+        # the devices as the daemon opens them: a port that does not exist or a socket another process
+        # holds fails here, naming the key (before: --check passed a head port that did not exist)
+        print(f"foveatrack daemon --check: {check_devices(cfg)}", file=sys.stderr)
         return 0
     if args.duration_s is not None and not args.duration_s > 0:
         raise UserError(f"--duration-s must be > 0, got {args.duration_s}")
@@ -44,9 +49,33 @@ def cmd_daemon(args) -> int:
                live_port=live)
     code = d.run()
     s = d.final_stats
-    print(f"foveatrack daemon: {s.get('frames', 0)} frames, {s.get('frames_detected', 0)} with a detection; "
-          f"processing p99 {s.get('processing_ms_p99', float('nan'))} ms, latency p99 {s.get('latency_ms_p99', float('nan'))} ms"
+    timing = (f"processing p99 {s['processing_ms_p99']} ms, latency p99 {s.get('latency_ms_p99', float('nan'))} ms"
+              if "processing_ms_p99" in s else "no frame processed")
+    print(f"foveatrack daemon: {s.get('frames', 0)} frames, {s.get('frames_detected', 0)} with a detection; {timing}"
           f"{'; recording ' + str(d.recording_path) if d.recording_path else ''}", file=sys.stderr)
     for problem in d.problems():
         print(f"foveatrack daemon: {problem}", file=sys.stderr)
+    if code == 0 and d.no_lidar_data:
+        return NO_LIDAR_DATA_EXIT     # a run that never heard the lidar did not do its job
     return code
+
+
+NO_LIDAR_DATA_EXIT = 3
+
+
+def check_devices(cfg) -> str:
+    """Open the head's port and bind the lidar's sockets as the daemon does, close them, and say what
+    was opened; a UserError naming the key when one cannot be."""
+    from foveatrack.live_devices import open_devices
+
+    head, client = open_devices(cfg)
+    try:
+        ident = head.identity
+        ports = f"cmd {client.cmd_port}, data {client.data_port}" + (
+            f", broadcast {client.broadcast_port}" if client.broadcast_port is not None else "")
+        return (f"head port {cfg.head.port!r} opened"
+                + (f" ({ident.describe()})" if ident is not None else "")
+                + f"; lidar sockets bound ({ports})")
+    finally:
+        client.close()
+        head.close()

@@ -3,17 +3,18 @@ what is allowed).  Example: ``examples/daemon-virtual.toml``; reference: ``docs/
 
 Tables::
 
-    [lidar]      sensor_ip, host_ip, cmd_port, data_port, broadcast_port (0 = any; false = no
+    [lidar]      sensor_ip, host_ip (both required), cmd_port, data_port, broadcast_port (0 = any; false = no
                  discovery, then sensor_cmd_port), sensor_cmd_port, point_rate_hz, broadcast_code
     [head]       port (device path or pyserial URL), baud (a standard rate, gimbal.client.STANDARD_BAUDS,
                  as a scene's [gimbal] baud), address, protocol ("D" | "P"),
                  speed_table ("nominal" | path to a calibrated table JSON, relative to this file),
                  pan_speed_max_deg_s, tilt_speed_max_deg_s, pan_turbo_deg_s (the nominal table),
                  max_pan_byte, max_tilt_byte, allow_turbo, tilt_limits_deg, tilt_margin_deg,
-                 pan0_deg, tilt0_deg (the pose at start, e.g. after homing)
+                 pan0_deg, tilt0_deg (the pose at start, e.g. after homing),
+                 on_reconnect ("stop" | "home" | "keep"), home_pan_deg, home_tilt_deg, home_wait_s
     [tracker]    foveatrack.tracker.TrackerConfig keys (rate_hz is the loop rate)
-    [recording]  path ("{time}" becomes the UTC start time), flush_every_frames, compression,
-                 points_dtype, queue_frames, overwrite
+    [recording]  path ("{time}" becomes the UTC start time; its directory must exist unless
+                 make_dirs = true), flush_every_frames, compression, points_dtype, queue_frames, overwrite
     [daemon]     watchdog_s, max_frame_backlog, stale_frame_s, batch_queue, status_period_s, log
 """
 
@@ -35,8 +36,10 @@ from gimbal.head_facts import HeadFacts
 
 @dataclass(frozen=True)
 class LidarConfig:
-    sensor_ip: str = "192.168.1.50"
-    host_ip: str = "192.168.1.5"
+    # the addresses are required (a site's, never a default: 192.168.1.50/.5 once stood in silently);
+    # the ports default to the Livox SDK's own (protocol facts, docs/daemon.md)
+    sensor_ip: str
+    host_ip: str
     cmd_port: int = 56001
     data_port: int = 56000
     broadcast_port: int | None = 55000
@@ -47,7 +50,7 @@ class LidarConfig:
 
 @dataclass(frozen=True)
 class HeadConfig:
-    port: str = "/dev/ttyUSB0"
+    port: str                           # required: a missing port once became /dev/ttyUSB0 silently
     baud: int = 9600
     address: int = 1
     protocol: str = "D"
@@ -62,6 +65,24 @@ class HeadConfig:
     tilt_margin_deg: float = GATE_TILT_MARGIN_DEG   # the gate's (foveatrack.gate), inside the tracker's 3 deg
     pan0_deg: float = 0.0
     tilt0_deg: float = 0.0
+    on_reconnect: str = "stop"          # what a reconnected head's unknown pose gets: ON_RECONNECT
+    home_pan_deg: float | None = None   # where "home" drives the head (default pan0_deg, tilt0_deg)
+    home_tilt_deg: float | None = None
+    home_wait_s: float | None = None    # how long the absolute move may take (default: the worst case)
+
+    @property
+    def home_deg(self) -> tuple[float, float]:
+        return (self.pan0_deg if self.home_pan_deg is None else self.home_pan_deg,
+                self.tilt0_deg if self.home_tilt_deg is None else self.home_tilt_deg)
+
+    @property
+    def home_wait_worst_s(self) -> float:
+        """The time the head's absolute move to home may take from anywhere: 180 deg of pan and the whole
+        tilt range at the table's top speeds, plus 1 s for the ramps and the dead time [s]."""
+        if self.home_wait_s is not None:
+            return self.home_wait_s
+        lo, hi = self.tilt_limits_deg
+        return 180.0 / self.pan_speed_max_deg_s + (hi - lo) / self.tilt_speed_max_deg_s + 1.0
 
     @property
     def facts(self) -> HeadFacts:
@@ -90,6 +111,7 @@ class RecordingConfig:
     points_dtype: str = "float64"
     queue_frames: int = 50
     overwrite: bool = False
+    make_dirs: bool = False     # create a missing directory (else it must exist: a typo made a new tree)
 
 
 @dataclass(frozen=True)
@@ -118,6 +140,18 @@ class DaemonConfig:
         """What the head's facts set on top of ``[tracker]`` (:meth:`TrackerConfig.with_head`), kept for replay."""
         return {k: list(v) if isinstance(v, tuple) else v for k, v in self.head.facts.tracker_values().items()}
 
+    def warnings(self) -> list[str]:
+        """What in this config runs but gives wrong results, in words (printed at start, logged, and
+        kept in the status line)."""
+        out = []
+        if self.head.speed_table == "nominal":
+            out.append(f"{self.path} [head] speed_table = \"nominal\": the head is uncalibrated; the dead reckoning "
+                       "uses the datasheet's speeds, not this unit's, and the world it reconstructs drifts (seen: "
+                       "the daemon believed pan -58 to -78 deg while the head was at -31 to -44 deg after 20 s); "
+                       "measure the table first: foveatrack calibrate --config THIS.toml --corner X Y Z --out "
+                       "table.json, then speed_table = \"table.json\"")
+        return out
+
     def speed_table(self) -> SpeedTable:
         h = self.head
         if h.speed_table == "nominal":
@@ -137,6 +171,16 @@ class DaemonConfig:
         return (p if p.is_absolute() else Path(self.path).parent / p).resolve()
 
 
+# What the daemon does when the head's link comes back after a disconnect.  The head reports no
+# pose, and one that lost power comes back at its power-on pose, so the dead reckoning is void:
+#   "stop": STOP, report "pose unknown" and send no tracker command until the daemon is restarted
+#           (after the head was homed by hand)
+#   "home": STOP, then the absolute move (Pelco 0x4B/0x4D) to home_pan_deg/home_tilt_deg, wait
+#           home_wait_s for it, and track on from there
+#   "keep": trust the dead reckoning (only a link that was cut while the head kept its power)
+ON_RECONNECT = ("stop", "home", "keep")
+
+
 def _int(v, key, where, lo, hi):
     if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
         raise UserError(f"{where}: {key} must be an integer in [{lo}, {hi}], got {v!r}")
@@ -154,9 +198,10 @@ def _lidar(t: Mapping, w: str) -> LidarConfig:
     check_keys(t, ["sensor_ip", "host_ip", "cmd_port", "data_port", "broadcast_port", "sensor_cmd_port",
                    "point_rate_hz", "broadcast_code"], w)
     kw: dict = {}
-    for k in ("sensor_ip", "host_ip"):
-        if k in t:
-            kw[k] = _ip(t[k], k, w)
+    for k, what in (("sensor_ip", "the lidar's address"), ("host_ip", "this host's address on the lidar's network")):
+        if k not in t:
+            raise UserError(f"{w}: {k} is required ({what}, e.g. {k} = \"192.168.1.50\"); there is no default")
+        kw[k] = _ip(t[k], k, w)
     for k in ("cmd_port", "data_port"):
         if k in t:
             kw[k] = _int(t[k], k, w, 0, 65535)
@@ -181,6 +226,9 @@ def _lidar(t: Mapping, w: str) -> LidarConfig:
 def _head(t: Mapping, w: str) -> HeadConfig:
     check_keys(t, [f for f in HeadConfig.__dataclass_fields__], w)
     kw: dict = {}
+    if "port" not in t:
+        raise UserError(f"{w}: port is required (the head's serial device, best a /dev/serial/by-id/ name, or a "
+                        "pyserial URL such as socket://host:port); there is no default")
     if "port" in t:
         if not isinstance(t["port"], str) or not t["port"]:
             raise UserError(f"{w}: port must be a device path (/dev/ttyUSB0) or a pyserial URL (socket://host:port)")
@@ -220,8 +268,18 @@ def _head(t: Mapping, w: str) -> HeadConfig:
         kw["pan0_deg"] = as_float(t["pan0_deg"], "pan0_deg", w, lo=-180, hi=180)
     if "tilt0_deg" in t:
         kw["tilt0_deg"] = as_float(t["tilt0_deg"], "tilt0_deg", w, lo=-90, hi=90)
+    if "on_reconnect" in t:
+        kw["on_reconnect"] = as_choice(t["on_reconnect"], "on_reconnect", w, ON_RECONNECT)
+    if "home_pan_deg" in t:
+        kw["home_pan_deg"] = as_float(t["home_pan_deg"], "home_pan_deg", w, lo=-180, hi=180)
+    if "home_tilt_deg" in t:
+        kw["home_tilt_deg"] = as_float(t["home_tilt_deg"], "home_tilt_deg", w, lo=-90, hi=90)
+    if "home_wait_s" in t:
+        kw["home_wait_s"] = as_float(t["home_wait_s"], "home_wait_s", w, lo=0, hi=600)
     cfg = HeadConfig(**kw)
     lo, hi = cfg.tilt_limits_deg
+    if cfg.home_tilt_deg is not None and not lo <= cfg.home_tilt_deg <= hi:
+        raise UserError(f"{w}: home_tilt_deg {cfg.home_tilt_deg} is outside tilt_limits_deg {list(cfg.tilt_limits_deg)}")
     if not lo <= cfg.tilt0_deg <= hi:
         raise UserError(f"{w}: tilt0_deg {cfg.tilt0_deg} is outside tilt_limits_deg {list(cfg.tilt_limits_deg)}")
     return cfg
@@ -244,6 +302,8 @@ def _recording(t: Mapping, w: str) -> RecordingConfig:
         kw["queue_frames"] = _int(t["queue_frames"], "queue_frames", w, 1, 10_000)
     if "overwrite" in t:
         kw["overwrite"] = as_bool(t["overwrite"], "overwrite", w)
+    if "make_dirs" in t:
+        kw["make_dirs"] = as_bool(t["make_dirs"], "make_dirs", w)
     return RecordingConfig(**kw)
 
 

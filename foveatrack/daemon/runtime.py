@@ -43,7 +43,7 @@ import signal
 import threading
 import time
 from collections import Counter, deque
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 
@@ -57,6 +57,9 @@ from foveatrack.recording.records import CommandRecord, ns, write_record, write_
 from foveatrack.tracker import Tracker
 
 FORMAT_SOURCE = "daemon"
+ABS_SET_QUIET_S = 0.3     # line quiet before a Pelco absolute set (the PTS family needs 0.2 s)
+PROGRESS_PERIOD_S = 1.0
+LINK_DOWN = "link_down"   # a command's `limited` reason: STOP written while the head's link was down   # a "progress" log event (frames processed, ...) this often
 
 
 # ----------------------------------------------------------------------------------------- record jobs
@@ -87,11 +90,13 @@ class _Receiver(threading.Thread):
         self.points_in = 0
         self.first_t_ns: int | None = None
         self.last_t_ns: int | None = None
+        self.span_done_ns = 0        # sensor time spanned by earlier clock epochs (a restarted lidar)
         self.error: BaseException | None = None
         self.counters: dict = {}
         # what the unit reports (LivoxClient.take_events), for the control loop's log and status line
         self.unit_events: queue.SimpleQueue = queue.SimpleQueue()
         self.unit_note = ""
+        self.epoch = 0
 
     @property
     def offset_s(self) -> float | None:
@@ -106,7 +111,9 @@ class _Receiver(threading.Thread):
             self.client.start_sampling()
             while not self.stop_ev.is_set():
                 now, batches = self.stream.poll(0.02)
-                self.counters = self.client.counters
+                self.counters = {**self.client.counters, **self.stream.counters}
+                for jump in self.stream.take_jumps():   # the sensor clock restarted or jumped: re-anchored
+                    self.unit_events.put(jump.as_event())
                 for ev in self.client.take_events():
                     self.unit_events.put(ev)
                     st = self.client.unit_status()
@@ -116,6 +123,10 @@ class _Receiver(threading.Thread):
                     if not len(b):
                         continue
                     t_last = int(b.t_ns[-1])
+                    if b.epoch != self.epoch:
+                        if self.first_t_ns is not None:
+                            self.span_done_ns += self.last_t_ns - self.first_t_ns
+                        self.epoch, self.first_t_ns = b.epoch, None
                     if self.first_t_ns is None:
                         self.first_t_ns = int(b.t_ns[0])
                     self.last_t_ns = t_last
@@ -128,7 +139,7 @@ class _Receiver(threading.Thread):
                         ret[-1] = True
                         xyz, t_ns, refl = xyz[ret], t_ns[ret], refl[ret]
                     try:
-                        self.q.put_nowait((now, xyz, t_ns, refl))
+                        self.q.put_nowait((now, xyz, t_ns, refl, b.epoch))
                     except queue.Full:
                         self.dropped_batches += 1
                         self.dropped_points += len(t_ns)
@@ -168,6 +179,10 @@ class Daemon:
         self._last_send_t = -math.inf
         self.recorder: RecordingThread | None = None
         self.recording_path = None
+        self.epoch = 0                      # the sensor clock's epoch (foveatrack.sensor_time)
+        self.pose_state: str | None = None  # None (known), "unknown", "homing" (after a head reconnect)
+        self._home_steps: list = []         # (host time, step) of the homing under way
+        self.last_frame_end_s: float | None = None
 
     # -------------------------------------------------------------------------------- setup
     def _meta(self) -> dict:
@@ -193,6 +208,11 @@ class Daemon:
         path = c.recording_path()
         if path is not None:
             r = c.recording
+            if not path.parent.is_dir() and not r.make_dirs:
+                self.client.close()
+                self.head.close()
+                raise UserError(f"{c.path} [recording] path: the directory {path.parent} does not exist; create it "
+                                "(a mistyped path would otherwise start a new tree) or set make_dirs = true in [recording]")
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 writer = RecordingWriter(path, self._meta(), flush_every_frames=r.flush_every_frames,
@@ -213,6 +233,11 @@ class Daemon:
             # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
             self.recorder = RecordingThread(writer, r.queue_frames)
             self.recording_path = path
+            # the recording is written behind a queue: a journal of every frame for the head, written
+            # before the frame is, says what a killed daemon's head got (CommandJournal)
+            from foveatrack.live_devices import CommandJournal
+
+            self.head.journal = CommandJournal(path.with_name(path.name + ".commands.jsonl"))
         if self.live_port is not None:
             self._open_live()
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
@@ -254,7 +279,7 @@ class Daemon:
         return t_s
 
     def _send(self, cmd: HeadCommand, source: str, send_t_s: float, fid=None, tracker_cmd=None, why=()):
-        raw, ok = self.head.send(cmd)
+        raw, ok = self.head.send(cmd, source)
         t_written = time.monotonic()
         self.counters["commands_written" if ok else "commands_failed"] += 1
         # A failed write leaves the head on its last command; the gate tells the dead reckoning (seen
@@ -267,12 +292,103 @@ class Daemon:
                             tracker_command=None if t is None else (t.pan_dir, t.pan_byte, t.tilt_dir, t.tilt_byte))
         return rec, t_written
 
+    def _new_clock(self, epoch: int, t0_s: float) -> None:
+        """Carry the tracker over to a new sensor clock starting at ``t0_s`` [s].
+
+        The head is stopped (on the old clock, after the last command it got), the dead reckoning's
+        pose once stopped becomes the new tracker's start pose at ``t0_s``: the tracker's state and
+        its filters restart, the head's pose is kept."""
+        old = self.tracker
+        t_stop = self._send_time(max(self._last_send_t, self.last_frame_end_s or -math.inf))
+        if not math.isfinite(t_stop):
+            t_stop = 0.0
+        if not old.last_command.is_stop:
+            old.command_sent(t_stop, STOP)
+            rec, _ = self._send(STOP, "clock_jump", t_stop)
+            self._record(write_record, rec)
+        pan, tilt, _, _ = old.recon.angles_at(t_stop + 5.0)    # decelerated long since
+        self._rebase_tracker(t0_s, pan, tilt)
+        self.slicer.reset()
+        self.epoch = epoch
+        self.counters["clock_epochs"] += 1
+        self.log.event("tracker_rebased", reason="clock_jump", epoch=epoch, t0_s=t0_s, pan_deg=pan, tilt_deg=tilt,
+                       frames=self.counters["frames"])
+        self._record(_job_event, ns(t0_s), {"event": "tracker_rebased", "reason": "clock_jump", "epoch": epoch,
+                                            "t0_s": t0_s, "pan_deg": pan, "tilt_deg": tilt})
+
+    def _pose_unknown(self, now: float, why: str) -> None:
+        """The head's link was lost (or a homing write failed): from now its pose is unknown (one that
+        lost power comes back at its power-on pose; the head reports none).  No frame is tracked until
+        :meth:`_reconnected` has done what ``[head] on_reconnect`` says."""
+        h = self.cfg.head
+        self.pose_state = "unknown"
+        self._home_steps = []
+        self.counters["head_pose_unknown"] += 1
+        self.log.event("head_pose_unknown", why=why, on_reconnect=h.on_reconnect, frames=self.counters["frames"])
+        self._record(_job_event, ns(self.sensor_now_s(now) or 0.0),
+                     {"event": "head_pose_unknown", "why": why, "on_reconnect": h.on_reconnect})
+
+    def _reconnected(self, now: float) -> None:
+        """The link is back (its first frame was STOP): home the head if the config says so."""
+        h = self.cfg.head
+        self.head.stop()
+        self._home_steps = []
+        if h.on_reconnect == "home":
+            from gimbal.pelco import encode_set_pan, encode_set_tilt
+
+            pan, tilt = h.home_deg
+            tz = getattr(self.head.client, "tilt_zero", "zenith")
+            quiet = ABS_SET_QUIET_S
+            # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile
+            self._home_steps = [(now + quiet, "pan", encode_set_pan(h.address, pan, h.protocol)),
+                                (now + 2 * quiet, "tilt", encode_set_tilt(h.address, tilt, h.protocol, tz)),
+                                (now + 2 * quiet + h.home_wait_worst_s, "done", None)]
+
+    def _pose_tick(self, now: float) -> None:
+        h = self.cfg.head
+        if not self.head.connected or h.on_reconnect == "stop":
+            # STOP every second: while the link is down each try is the reopen, so the first frame a
+            # reopened link carries is STOP; with "stop" it holds the head until the daemon restarts
+            if now - getattr(self, "_last_unknown_stop", -math.inf) >= 1.0:
+                self._last_unknown_stop = now
+                self.head.stop()
+            return
+        while self._home_steps and now >= self._home_steps[0][0]:
+            _, step, raw = self._home_steps.pop(0)
+            if step in ("pan", "tilt"):
+                if not self.head.send_raw(raw, "homing"):
+                    self.log.event("head_homing_failed", step=step)
+                    return self._pose_unknown(now, "homing_write_failed")   # again once the link is back
+                self.pose_state = "homing"
+                self.log.event("head_homing", axis=step, home_deg=list(h.home_deg))
+            else:
+                t_s = self.sensor_now_s(now)
+                pan, tilt = h.home_deg
+                self._rebase_tracker(t_s if t_s is not None else 0.0, pan, tilt)
+                self.pose_state = None
+                self.counters["head_homed"] += 1
+                self.log.event("head_homed", pan_deg=pan, tilt_deg=tilt, t0_s=t_s, frames=self.counters["frames"])
+                self._record(_job_event, ns(t_s or 0.0), {"event": "tracker_rebased", "reason": "head_homed",
+                                                          "t0_s": t_s, "pan_deg": pan, "tilt_deg": tilt})
+
+    def _rebase_tracker(self, t0_s: float, pan_deg: float, tilt_deg: float) -> None:
+        """A fresh tracker whose dead reckoning starts at ``(pan_deg, tilt_deg)`` at sensor time ``t0_s``."""
+        cfg = replace(self.cfg.tracker, pan0_deg=float(pan_deg), tilt0_deg=float(tilt_deg))
+        self.tracker = Tracker(cfg, self.table, t0_s=t0_s)
+        self._last_send_t = -math.inf
+        self.gate.head_cmd = STOP
+
     def _record(self, fn, *args):
         if self.recorder is not None:
             self.recorder.submit(fn, *args)
 
     # -------------------------------------------------------------------------------- the frame
     def _process(self, frame: Frame, t_arrival: float) -> None:
+        if self.pose_state is not None:
+            # the head's pose is unknown (it reconnected): no bearing can be turned into a command
+            self.counters["frames_pose_unknown"] += 1
+            self.last_pts = frame.n_points
+            return
         t_begin = time.monotonic()
         frame = strip_no_return(frame)
         now_s = self.sensor_now_s()
@@ -286,10 +402,19 @@ class Daemon:
         # the command in the dead reckoning.  STOP is sent and recorded instead (replay repeats it).
         stale = now_s is not None and now_s - frame.t_end_s > self.cfg.loop.stale_frame_s
         cmd, why = self.gate.decide(self.tracker, out, send_t, stale)
+        reconnect_unknown = self.cfg.head.on_reconnect != "keep"
+        was_up = self.head.connected
+        if not was_up and reconnect_unknown:
+            # whatever a reopened link carries first is STOP: from then on the head's pose is unknown
+            if not cmd.is_stop:
+                self.tracker.command_sent(send_t, STOP)
+            cmd, why = STOP, [*why, LINK_DOWN]
         self.counters["frames_stale"] += stale
         if why:
             self.counters["commands_limited"] += 1
         rec, t_written = self._send(cmd, "tracker", send_t, fid, out.command, why)
+        if was_up and not self.head.connected and reconnect_unknown and self.pose_state is None:
+            self._pose_unknown(t_written, "link_lost")
         proc = t_written - t_arrival
         # The send-time prediction learns the compute time only, robustly (median of the last 9): a
         # frame that waited in a backlog, or one slow first frame, would otherwise push the later
@@ -304,6 +429,7 @@ class Daemon:
         self.counters["frames"] += 1
         self.counters["frames_detected"] += out.detection is not None
         self.last_out, self.last_pts = out, frame.n_points
+        self.last_frame_end_s = frame.t_end_s
         self._record(_job_frame, fid, frame, out, rec, proc * 1e3, lat)
 
     # -------------------------------------------------------------------------------- the loop
@@ -321,15 +447,19 @@ class Daemon:
                        lidar=asdict(c.lidar), head_port=c.head.port, head_open=self.head.connected,
                        rate_hz=c.tracker.rate_hz,
                        host_ports=self.host_ports)
+        for w in c.warnings():
+            self.log.event("warning", message=w)
         self.head.stop()
         self.rx.start()
         period = 1.0 / c.tracker.rate_hz
         t_start = time.monotonic()
         next_tick = t_start + period
         next_status = t_start
+        next_progress = t_start + PROGRESS_PERIOD_S
         watchdog_tripped = False
         last_watchdog_stop = -1e9
         head_up = self.head.connected
+        last_refusals, last_refusal_log = 0, -math.inf
         lidar_up = False
         frame_times = deque(maxlen=50)
         pending: deque = deque()
@@ -349,7 +479,13 @@ class Daemon:
                             break
                 except queue.Empty:
                     items = []
-                for t_rx, xyz, t_ns, refl in items:
+                for t_rx, xyz, t_ns, refl, epoch in items:
+                    if epoch != self.epoch:
+                        # the sensor clock restarted or jumped (re-anchored by the stream): frames of
+                        # the old clock are dropped, slicing and the dead reckoning's clock start again
+                        self.counters["frames_skipped"] += len(pending)
+                        pending.clear()
+                        self._new_clock(epoch, int(t_ns[0]) * 1e-9)
                     for fr in self.slicer.push(xyz, t_ns, refl):
                         pending.append((fr, t_rx))
                 while len(pending) > c.loop.max_frame_backlog:
@@ -379,7 +515,8 @@ class Daemon:
                     watchdog_tripped = True
                     self.counters["watchdog_trips"] += 1
                     self.log.event("watchdog_stop", silent_s=now - last_pkt)
-                if silent and (watchdog_tripped or last_pkt is None) and now - last_watchdog_stop >= 1.0:
+                if (silent and (watchdog_tripped or last_pkt is None) and now - last_watchdog_stop >= 1.0
+                        and self.pose_state is None):
                     last_watchdog_stop = now
                     t_s = self.sensor_now_s(now)
                     if t_s is not None and watchdog_tripped:
@@ -392,10 +529,34 @@ class Daemon:
                 if not silent and watchdog_tripped:
                     watchdog_tripped = False
                     self.log.event("lidar_resumed")
+                refusals = self.head.stats.open_refusals
+                if refusals != last_refusals:
+                    # another device holds the head's path: never written to (foveatrack.serial_identity)
+                    if last_refusals == 0 or now - last_refusal_log >= 10.0:
+                        self.log.event("head_refused", reason=self.head.client.last_open_error, refusals=refusals)
+                        last_refusal_log = now
+                    last_refusals = refusals
                 if self.head.connected != head_up:
                     head_up = self.head.connected
                     self.counters["head_link_up" if head_up else "head_link_down"] += 1
                     self.log.event("head_connected" if head_up else "head_disconnected", stats=asdict(self.head.stats))
+                    if c.head.on_reconnect != "keep":
+                        if not head_up and self.pose_state is None:
+                            self._pose_unknown(now, "link_lost")
+                        elif head_up:
+                            if self.pose_state is None:     # lost and back between two ticks
+                                self._pose_unknown(now, "link_lost")
+                            self._reconnected(now)
+                if self.pose_state is not None:
+                    self._pose_tick(now)
+                if now >= next_progress:
+                    # how far the run got, in the log every second: a killed daemon's log still says so
+                    next_progress = now + PROGRESS_PERIOD_S
+                    self.log.event("progress", frames=self.counters["frames"],
+                                   frames_detected=self.counters["frames_detected"],
+                                   frames_stale=self.counters["frames_stale"], sensor_t_s=self.last_frame_end_s,
+                                   commands_written=self.counters["commands_written"], drops=self.drops(),
+                                   lidar_points=self.rx.points_in)
                 if now >= next_status:
                     next_status = now + c.loop.status_period_s
                     self._show_status(frame_times, watchdog_tripped)
@@ -412,10 +573,11 @@ class Daemon:
             d["queue_dropped_batches"] = rx.dropped_batches
             d["queue_dropped_points"] = rx.dropped_points
             if rx.first_t_ns is not None and rate_known(self):
-                span = (rx.last_t_ns - rx.first_t_ns) * 1e-9
+                span = (rx.last_t_ns - rx.first_t_ns + rx.span_done_ns) * 1e-9
                 expected = span * self.client.decoder.point_rate_hz
                 if expected > 0:
                     d["lidar_points_missing_pct"] = round(max(0.0, 100.0 * (1 - rx.points_in / expected)), 3)
+                d["lidar_lost_pct"] = round(self.lost_pct() or 0.0, 3)
         if getattr(self, "head", None) is not None:
             d.update({f"head_{k}": v for k, v in asdict(self.head.stats).items()})
         d["slicer_late_points"] = self.slicer.late_points
@@ -459,6 +621,12 @@ class Daemon:
                        "(see head_* counters in the log)")
         return out
 
+    @property
+    def no_lidar_data(self) -> bool:
+        """True when the run never received a lidar packet (the CLI exits non-zero)."""
+        rx = getattr(self, "rx", None)
+        return rx is not None and rx.last_packet_mono is None
+
     def drops(self) -> int:
         rx = self.rx
         c = rx.counters
@@ -471,11 +639,38 @@ class Daemon:
             rate = (len(frame_times) - 1) / (frame_times[-1] - frame_times[0])
         out = self.last_out
         state = "watchdog" if watchdog else ("no lidar" if out is None else out.state.value)
+        if self.pose_state is not None:
+            state = "pose unknown" if self.pose_state == "unknown" else "homing"
+        elif self.head.refused:
+            state = "head refused" 
         self.status.show(format_status(rate, getattr(self, "last_pts", 0), state,
                                        None if out is None else out.error_pan_deg,
                                        None if out is None else out.error_tilt_deg,
                                        self.lat_ms[-1] if self.lat_ms else None, self.drops(), self.head.connected,
-                                       self.rx.unit_note))
+                                       ", ".join(self.status_notes())))
+
+    def status_notes(self) -> list[str]:
+        """What the status line says besides the figures: the lidar unit's problems, an uncalibrated
+        head, a head device refused, lost lidar packets."""
+        notes = [self.rx.unit_note] if getattr(self, "rx", None) is not None and self.rx.unit_note else []
+        if self.cfg.head.speed_table == "nominal":
+            notes.append("head UNCALIBRATED (nominal speed table)")
+        if getattr(self, "head", None) is not None and self.head.refused:
+            notes.append("head path holds another device: refused")
+        lost = self.lost_pct()
+        if lost:
+            notes.append(f"lidar lost {self.rx.counters.get('lost_slots', 0)} points ({lost:.1f} %)")
+        return notes
+
+    def lost_pct(self) -> float | None:
+        """Lidar points lost on the way [%]: the slots missing inside the stream (by time, as a
+        sequence number) against the slots the stream spanned."""
+        rx = getattr(self, "rx", None)
+        if rx is None or rx.first_t_ns is None or not rate_known(self):
+            return None
+        span_slots = (rx.last_t_ns - rx.first_t_ns + rx.span_done_ns) * 1e-9 * self.client.decoder.point_rate_hz
+        lost = rx.counters.get("lost_slots", 0)
+        return 100.0 * lost / span_slots if span_slots > 0 and lost else None
 
     def _shutdown(self, old_handlers) -> None:
         self.stop_ev.set()

@@ -136,11 +136,18 @@ class LivoxClient:
         self._bcast = None
         if broadcast_port is not None:
             try:
-                # '' so that real broadcasts (255.255.255.255) reach us as well as unicast ones
-                self._bcast = _udp_socket("", broadcast_port, reuse=True)
-            except UserError:
+                # '' so that real broadcasts (255.255.255.255) reach us as well as unicast ones.
+                # Exclusive (no SO_REUSEADDR): with a shared port a second process silently took 15 of
+                # 17 broadcasts; now the second one is told at start.
+                self._bcast = _udp_socket("", broadcast_port)
+            except UserError as exc:
                 self._data.close()
                 self._cmd.close()
+                if "in use" in str(exc):
+                    raise UserError(f"{exc}: another process on this host holds the Livox discovery port "
+                                    f"{broadcast_port} (a second daemon, a calibration, the Livox SDK or viewer?); "
+                                    "only one may listen for the lidars' broadcasts: stop it, or give "
+                                    "broadcast_port = false with the lidar's sensor_cmd_port") from None
                 raise
             self._sel.register(self._bcast, selectors.EVENT_READ, "bcast")
         self._sel.register(self._cmd, selectors.EVENT_READ, "cmd")

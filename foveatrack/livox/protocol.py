@@ -624,7 +624,7 @@ class DataDecoder:
     keep_no_return : keep (0, 0, 0) points (default: drop and count them)
 
     ``counters``: packets (accepted point packets), points (points returned), imu_packets,
-    no_return_points, and ``dropped`` {reason: count}.
+    wire_points = returns + no_return_points (kept or not), and ``dropped`` {reason: count}.
     """
 
     point_rate_hz: float = 240_000.0
@@ -670,7 +670,15 @@ class DataDecoder:
                 # rare (an invalid UTC date): one packet at a time, keeping the good ones
                 batch, n_removed, n_good = self._decode_one_by_one(arr)
             self.counters["packets"] += n_good
-            self.counters["no_return_points"] += n_removed
+            # counts that add up whether no-returns are kept or not: wire_points (every slot's return on
+            # the wire) = returns + no_return_points (a kept no-return was once counted as a point and
+            # no_return_points said 0 while 80 % of the wire was no-return)
+            n_nr = n_removed
+            if self.keep_no_return and len(batch):
+                n_nr = len(batch) - int(np.count_nonzero(np.any(batch.xyz != 0.0, axis=1)))
+            self.counters["wire_points"] += len(batch) + n_removed
+            self.counters["no_return_points"] += n_nr
+            self.counters["returns"] += len(batch) + n_removed - n_nr
             self.counters["points"] += len(batch)
             if len(batch):
                 out.append(batch)

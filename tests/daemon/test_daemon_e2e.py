@@ -30,7 +30,9 @@ def _setup(tmp_path, cmd_port=0, data_port=0, loss_rate=0.0):
     # are about the processes and the faults, not about an uncalibrated head's drifting world frame.
     table = tmp_path / "unit3.json"
     truth_speed_table(PTS303H(unit_seed=3)).save(table)
-    cfg = write_config(tmp_path / "d.toml", link, rec, bport, cmd_port, data_port, speed_table=str(table))
+    # the head restarted below keeps its pose (a cut link, not a power loss): "keep" trusts the dead reckoning
+    cfg = write_config(tmp_path / "d.toml", link, rec, bport, cmd_port, data_port, speed_table=str(table),
+                       head_extra='on_reconnect = "keep"')
     procs = {}
     procs["head"] = start(["gimbal", "serve", "--link", str(link), "--truth", str(truth), "--unit-seed", "3"],
                           tmp_path / "head.out", tmp_path / "head.err")
@@ -156,6 +158,13 @@ def test_faults_head_killed_and_restarted_lossy_lidar_garbage(tmp_path):
     assert stats["watchdog_trips"] == 1
     lidar_counters = json.loads((tmp_path / "l.out").read_text().splitlines()[-1])
     assert lidar_counters["head_restarts"] >= 1 and lidar_counters["packets_lost"] > 0
+    # counters that add up: every slot on the wire is a return or a no-return, and the points lost
+    # (missing time slots, the daemon's count) are the packets the lidar dropped (its count) x 100
+    assert stats["lidar_wire_points"] == stats["lidar_returns"] + stats["lidar_no_return_points"]
+    assert stats["lidar_no_return_points"] > 0
+    assert abs(stats["lidar_lost_slots"] - 100 * lidar_counters["packets_lost"]) <= 0.03 * stats["lidar_lost_slots"], \
+        (stats["lidar_lost_slots"], lidar_counters["packets_lost"])
+    assert 5.0 < stats["lidar_lost_pct"] < 15.0, stats["lidar_lost_pct"]
     # Recovered: after the restart the daemon's commands reach the head again and it turns right,
     # after the UAV (which drifted ~10 deg right of the axis while the head was gone), and the UAV is
     # detected again.  How fast the error closes is the tracker's business (the paper's controller

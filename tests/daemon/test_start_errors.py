@@ -29,6 +29,7 @@ sensor_cmd_port = 65000
 port = "{port}"
 [recording]
 path = "{rec_dir}/run-{{time}}.mcap"
+make_dirs = true
 """)
     return Daemon(load_config(cfg), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
 
@@ -90,7 +91,8 @@ def test_the_recording_path_is_printed_resolved(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "sub").mkdir()
     _daemon(tmp_path / "sub", "loop://", rec_dir="../out/runs")      # writes sub/d.toml
-    assert main(["daemon", "--config", "sub/d.toml", "--duration-s", "0.2", "--no-status"]) == 0
+    # no lidar in this test: the run ends with exit status 3 ("no lidar data arrived")
+    assert main(["daemon", "--config", "sub/d.toml", "--duration-s", "0.2", "--no-status"]) == 3
     err = capsys.readouterr().err
     printed = err.split("; recording ", 1)[1].split()[0]
     assert Path(printed).is_absolute() and ".." not in Path(printed).parts, err

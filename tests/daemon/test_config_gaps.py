@@ -1,0 +1,115 @@
+"""Config gaps of issue 16 (item 7), each with its message: no silent defaults for addresses and the
+head's port, a recording directory that must exist, ``--check`` that opens the devices, and a run
+without lidar data that exits non-zero."""
+
+import os
+import socket
+import subprocess
+import sys
+
+import pytest
+
+from daemon_procs import ROOT, env
+from foveatrack.daemon import Daemon, load_config
+from foveatrack.errors import UserError
+
+FULL = {
+    "lidar": 'sensor_ip = "127.0.0.1"\nhost_ip = "127.0.0.1"\ncmd_port = 0\ndata_port = 0\nbroadcast_port = false\n'
+             'sensor_cmd_port = 65000',
+    "head": 'port = "loop://"',
+}
+
+
+def _write(tmp_path, lidar=None, head=None, recording=""):
+    p = tmp_path / "d.toml"
+    p.write_text(f"[lidar]\n{FULL['lidar'] if lidar is None else lidar}\n[head]\n{FULL['head'] if head is None else head}\n"
+                 + (f"[recording]\n{recording}\n" if recording else ""))
+    return p
+
+
+def _cli(*args, timeout=120):
+    return subprocess.run([sys.executable, "-m", "foveatrack", *args], cwd=ROOT, env=env(), capture_output=True,
+                          text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("key", ["sensor_ip", "host_ip"])
+def test_a_missing_lidar_address_is_an_error_naming_file_and_key(tmp_path, key):
+    lidar = "\n".join(line for line in FULL["lidar"].splitlines() if not line.startswith(key))
+    p = _write(tmp_path, lidar=lidar)
+    with pytest.raises(UserError) as exc:
+        load_config(p)
+    msg = str(exc.value)
+    assert str(p) in msg and "[lidar]" in msg and f"{key} is required" in msg and "192.168.1." in msg
+
+
+def test_a_missing_head_port_is_an_error_naming_the_key_not_a_default_device(tmp_path):
+    p = _write(tmp_path, head='baud = 9600')
+    with pytest.raises(UserError) as exc:
+        load_config(p)
+    msg = str(exc.value)
+    assert str(p) in msg and "[head]: port is required" in msg and "/dev/serial/by-id/" in msg
+
+
+def test_a_recording_directory_that_does_not_exist_is_refused_unless_asked(tmp_path):
+    typo = tmp_path / "runz"
+    p = _write(tmp_path, recording=f'path = "{typo}/run-{{time}}.mcap"')
+    d = Daemon(load_config(p), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
+    with pytest.raises(UserError) as exc:
+        d._open()
+    msg = str(exc.value)
+    assert "[recording] path" in msg and str(typo) in msg and "does not exist" in msg and "make_dirs" in msg
+    assert not typo.exists()
+    p = _write(tmp_path, recording=f'path = "{typo}/run-{{time}}.mcap"\nmake_dirs = true')
+    d = Daemon(load_config(p), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
+    d._open()
+    try:
+        assert typo.is_dir()
+    finally:
+        d.recorder.close()
+        d.client.close()
+        d.head.close()
+
+
+def test_check_opens_the_head_port_and_binds_the_lidar_sockets(tmp_path):
+    p = _write(tmp_path, head=f'port = "{tmp_path / "no-such-adapter"}"')
+    r = _cli("daemon", "--config", str(p), "--check")
+    assert r.returncode == 2 and "[head]" in r.stderr and "no-such-adapter" in r.stderr and "cannot be opened" in r.stderr
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        busy = s.getsockname()[1]
+        p = _write(tmp_path, lidar=FULL["lidar"].replace("data_port = 0", f"data_port = {busy}"))
+        r = _cli("daemon", "--config", str(p), "--check")
+    assert r.returncode == 2 and "Address already in use" in r.stderr and str(busy) in r.stderr, r.stderr
+    r = _cli("daemon", "--config", str(_write(tmp_path)), "--check")
+    assert r.returncode == 0 and "head port 'loop://' opened" in r.stderr and "lidar sockets bound" in r.stderr
+
+
+@pytest.mark.slow
+def test_a_run_without_lidar_data_exits_non_zero_and_says_so(tmp_path):
+    p = _write(tmp_path)
+    r = _cli("daemon", "--config", str(p), "--duration-s", "1.5", "--no-status")
+    assert r.returncode == 3, (r.returncode, r.stderr)
+    assert "no lidar data arrived" in r.stderr and "no frame processed" in r.stderr and "nan" not in r.stderr
+
+
+def test_the_discovery_port_is_exclusive_and_a_second_holder_is_told(tmp_path):
+    """Two hosts, one lidar (issue 16, item 9): the discovery socket was shared (SO_REUSEADDR), so a
+    second process bound to the port silently took most broadcasts."""
+    from foveatrack.livox.client import LivoxClient
+    from daemon_procs import free_udp_port
+
+    port = free_udp_port()
+    first = LivoxClient("127.0.0.1", "127.0.0.1", cmd_port=0, data_port=0, broadcast_port=port)
+    try:
+        with pytest.raises(UserError) as exc:
+            LivoxClient("127.0.0.1", "127.0.0.1", cmd_port=0, data_port=0, broadcast_port=port)
+        msg = str(exc.value)
+        assert f"discovery port {port}" in msg and "another process" in msg and "broadcast_port = false" in msg
+        # nor may anyone else share it behind the client's back
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        with pytest.raises(OSError):
+            s.bind(("", port))
+        s.close()
+    finally:
+        first.close()

@@ -1,0 +1,317 @@
+"""The daemon against what real devices do (issue 16), through the real processes: the virtual head
+(``gimbal serve``), the virtual lidar (``lidar serve``) and the daemon, all on loopback.
+
+Recovery is judged in sensor time and by counts (frames, detections), never by wall-clock luck: the
+machine these run on is shared and busy."""
+
+import os
+import signal
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from daemon_procs import SCENE, event, first_line, free_udp_port, log_events, start, terminate, wait_for, write_config
+from foveatrack.livox.protocol import encode_data_packets
+from foveatrack.recording import RecordingReader
+from gimbal.pts303h import PTS303H
+from sim.loop import truth_speed_table
+from sim.virtual_head import read_truth
+
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty")]
+
+
+def _head(tmp_path, link, truth, name="head", extra=()):
+    p = start(["gimbal", "serve", "--link", str(link), "--truth", str(truth), "--unit-seed", "3", *extra],
+              tmp_path / f"{name}.out", tmp_path / f"{name}.err")
+    wait_for(lambda: first_line(tmp_path / f"{name}.out"), 20, f"the {name}'s pty", [p])
+    return p
+
+
+def _lidar(tmp_path, bport, truth, name="l"):
+    return start(["lidar", "serve", str(SCENE), "--cmd-port", "0", "--broadcast-port", str(bport),
+                  "--head-truth", str(truth)], tmp_path / f"{name}.out", tmp_path / f"{name}.err")
+
+
+def _setup(tmp_path, data_port=0, speed_table=None, head_extra=(), config_extra=""):
+    link, truth, rec, log = tmp_path / "head", tmp_path / "truth.jsonl", tmp_path / "rec.mcap", tmp_path / "d.jsonl"
+    bport = free_udp_port()
+    if speed_table is None:
+        speed_table = tmp_path / "unit3.json"
+        truth_speed_table(PTS303H(unit_seed=3)).save(speed_table)
+    cfg = write_config(tmp_path / "d.toml", link, rec, bport, 0, data_port, speed_table=str(speed_table))
+    if config_extra:
+        txt = cfg.read_text()
+        cfg.write_text(txt.replace("[tracker]\n", config_extra + "\n[tracker]\n", 1))
+    procs = {"head": _head(tmp_path, link, truth, extra=head_extra)}
+    procs["daemon"] = start(["daemon", "--config", str(cfg), "--log", str(log)], tmp_path / "d.out", tmp_path / "d.err")
+    wait_for(lambda: event(log, "start"), 60, "the daemon to start", [procs["daemon"]])
+    procs["lidar"] = _lidar(tmp_path, bport, truth)
+    wait_for(lambda: event(log, "lidar_data"), 60, "lidar data at the daemon", list(procs.values()))
+    return procs, link, truth, rec, log, bport
+
+
+def _stop_all(procs):
+    for p in procs.values():
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    for p in procs.values():
+        try:
+            p.wait(10)
+        except Exception:  # noqa: BLE001
+            p.kill()
+
+
+def _wait_frames(log_path, rec_path, n, procs, timeout_s=90):
+    """Wait until the daemon's log says it processed ``n`` more frames (progress events)."""
+    def frames():
+        ev = [e for e in log_events(log_path) if e["event"] == "progress"]
+        return ev[-1]["frames"] if ev else 0
+    f0 = frames()
+    wait_for(lambda: frames() >= f0 + n, timeout_s, f"{n} more frames", procs)
+
+
+def _detections(rec):
+    return RecordingReader(rec).records("detections")
+
+
+def test_fault1_a_restarted_lidar_is_tracked_again(tmp_path):
+    procs, link, truth, rec, log, bport = _setup(tmp_path)
+    try:
+        _wait_frames(log, rec, 30, list(procs.values()))
+        procs["lidar"].kill()              # power cut: the lidar's clock will start again from 0
+        procs["lidar"].wait(5)
+        time.sleep(1.0)
+        procs["lidar"] = _lidar(tmp_path, bport, truth, "l2")
+        wait_for(lambda: event(log, "tracker_rebased"), 60, "the daemon to re-anchor the new clock",
+                 [procs["daemon"], procs["lidar"]])
+        _wait_frames(log, rec, 60, [procs["daemon"], procs["lidar"]])
+        assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
+    finally:
+        _stop_all(procs)
+    stats = event(log, "stop")["stats"]
+    jump = event(log, "lidar_clock_jump")
+    assert jump is not None and jump["new_t_s"] < jump["last_t_s"], jump      # the clock went back
+    assert stats["lidar_clock_jumps"] == 1 and stats["clock_epochs"] == 1
+    dets = _detections(rec)
+    t = np.array([d["t_ns"] for d in dets]) * 1e-9
+    back = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1          # the first frame of the new clock
+    after = dets[back:]
+    assert len(after) >= 50
+    # tracked again within 2 s of its return (sensor time, i.e. frames of the new clock)
+    first = next(i for i, d in enumerate(after) if d["detected"])
+    assert (after[first]["t_ns"] - after[0]["t_ns"]) * 1e-9 <= 2.0, first
+    # then held (after the acquisition's first 15 frames: the restarted scene's UAV enters off-axis again)
+    assert len(after) >= first + 30 and np.mean([d["detected"] for d in after[first + 15:]]) >= 0.8
+    # and nothing of the new clock was thrown away as late
+    assert stats["slicer_late_points"] < 1000, stats["slicer_late_points"]
+
+
+def test_fault2_packets_with_wrong_times_are_dropped_and_tracking_holds(tmp_path):
+    data_port = free_udp_port()
+    procs, link, truth, rec, log, bport = _setup(tmp_path, data_port=data_port)
+    stop = threading.Event()
+    sent = {"n": 0}
+
+    def bad_packets():
+        # well-formed Mid-40 packets from the lidar's own address with random times, ~2 % of its
+        # 1000 packets/s, and one stamped 20 s ahead of the stream
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.bind(("127.0.0.1", 0))
+        rng = np.random.default_rng(7)
+        xyz = np.tile([[5.0, 0.0, -1.5]], (100, 1))
+        while not stop.is_set():
+            t0 = int(rng.integers(0, 2**62))
+            if sent["n"] == 50:
+                ev = event(log, "progress") or {}
+                t0 = int((ev.get("sensor_t_s") or 0.0) * 1e9 + 20e9)
+            (pkt,) = encode_data_packets(xyz, np.full(100, 20, np.uint8), t0, 100_000.0, data_type=0)
+            s.sendto(pkt, ("127.0.0.1", data_port))
+            sent["n"] += 1
+            time.sleep(0.05)
+        s.close()
+
+    g = threading.Thread(target=bad_packets, daemon=True)
+    try:
+        _wait_frames(log, rec, 20, list(procs.values()))
+        g.start()
+        _wait_frames(log, rec, 60, list(procs.values()))
+        stop.set()
+        g.join(5)
+        assert procs["daemon"].poll() is None, (tmp_path / "d.err").read_text()
+        assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
+    finally:
+        stop.set()
+        _stop_all(procs)
+    stats = event(log, "stop")["stats"]
+    assert sent["n"] >= 50
+    # counted (a bad packet landing beside another is one segment with it: at least nearly all)
+    assert 0.9 * sent["n"] <= stats["lidar_bad_time_segments"] <= sent["n"], (stats["lidar_bad_time_segments"], sent)
+    assert stats.get("lidar_clock_jumps", 0) == 0 and stats.get("clock_epochs", 0) == 0
+    assert stats.get("frames_skipped", 0) <= 3
+    dets = _detections(rec)
+    detected = np.array([d["detected"] for d in dets])
+    assert detected[20:].mean() >= 0.9, np.flatnonzero(~detected)
+    t = np.array([d["t_ns"] for d in dets])
+    assert np.all(np.diff(t) == 100_000_000)      # every frame, in order, none lost to a wild time
+
+
+def test_fault3_a_pty_that_took_the_heads_old_number_gets_no_byte(tmp_path):
+    procs, link, truth, rec, log, bport = _setup(tmp_path, config_extra='on_reconnect = "keep"')
+    held = []
+    try:
+        _wait_frames(log, rec, 20, list(procs.values()))
+        old = os.readlink(link)
+        procs["head"].kill()               # the head dies; its link is left behind, naming its pty
+        procs["head"].wait(5)
+        wait_for(lambda: event(log, "head_disconnected"), 30, "the daemon to lose the head", [procs["daemon"]])
+        time.sleep(0.05)
+        other = None
+        for _ in range(64):                # another program takes a pty: the lowest free number
+            m, s = os.openpty()
+            held.append((m, s))
+            if os.ttyname(s) == old:
+                other = m
+                break
+        if other is None:
+            pytest.skip(f"{old} was not handed out again (other programs hold ptys)")
+        os.set_blocking(other, False)
+        wait_for(lambda: event(log, "head_refused"), 30, "the daemon to refuse the other pty", [procs["daemon"]])
+        _wait_frames(log, rec, 20, [procs["daemon"]])   # 2 s of frames, each wanting to write a command
+        got = b""
+        try:
+            got = os.read(other, 4096)
+        except BlockingIOError:
+            pass
+        assert got == b"", f"{len(got)} bytes written to another program's pty"
+        refused = event(log, "head_refused")
+        assert old in refused["reason"] and "not re-created" in refused["reason"], refused
+        # the head comes back (its server re-creates the link): the daemon drives it again
+        procs["head"] = _head(tmp_path, link, truth, "head2")
+        wait_for(lambda: event(log, "head_connected"), 30, "the daemon to reopen the head", [procs["daemon"]])
+        assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
+    finally:
+        for m, s in held:
+            os.close(m), os.close(s)
+        _stop_all(procs)
+    stats = event(log, "stop")["stats"]
+    assert stats["head_open_refusals"] >= 1
+
+
+def test_fault4_a_head_back_at_its_power_on_pose_is_homed_before_tracking_resumes(tmp_path):
+    # the restarted head comes back at 0/0 (its power-on pose); home is pan -6 deg (right, where the
+    # UAV goes): the absolute move must really happen for the dead reckoning to agree with the head
+    procs, link, truth, rec, log, bport = _setup(
+        tmp_path, config_extra='on_reconnect = "home"\nhome_pan_deg = -6.0\nhome_tilt_deg = 0.0\nhome_wait_s = 3.0')
+    try:
+        _wait_frames(log, rec, 30, list(procs.values()))
+        before = read_truth(str(truth))[-1]
+        procs["head"].kill()
+        procs["head"].wait(5)
+        time.sleep(1.0)
+        procs["head"] = _head(tmp_path, link, truth, "head2")          # at 0/0
+        wait_for(lambda: event(log, "head_pose_unknown"), 30, "pose unknown", [procs["daemon"]])
+        wait_for(lambda: event(log, "head_homed"), 60, "the head homed", [procs["daemon"]])
+        _wait_frames(log, rec, 70, [procs["daemon"], procs["lidar"]])
+        assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
+        time.sleep(0.6)
+    finally:
+        _stop_all(procs)
+    stats = event(log, "stop")["stats"]
+    assert abs(before["pan_deg"]) > 3.0, before          # the head had turned before it died
+    assert stats["head_pose_unknown"] == 1 and stats["head_homed"] == 1 and stats["frames_pose_unknown"] > 0
+    rows = read_truth(str(truth))                         # the restarted head's own truth
+    r = RecordingReader(rec)
+    cmds = r.records("commands")
+    # no tracker command reached the head between its return and the end of homing
+    homed_events = [e for e in r.records("daemon") if e.get("event") == "tracker_rebased"]
+    assert homed_events and homed_events[-1]["reason"] == "head_homed"
+    # the dead reckoning agrees with where the head really is (a wrong pose once locked onto the ground)
+    est = r.records("head")[-1]
+    assert abs(est["pan_deg"] - rows[-1]["pan_deg"]) < 1.5, (est, rows[-1])
+    assert abs(est["tilt_deg"] - rows[-1]["tilt_deg"]) < 0.5, (est, rows[-1])
+    # tracking resumed: the UAV detected again after the homing, inside D (not the ground)
+    dets = RecordingReader(rec).records("detections")
+    t_home = homed_events[-1]["t0_s"]
+    after = [d for d in dets if d["t_ns"] * 1e-9 > t_home]
+    errs = [abs(d["error_pan_deg"]) for d in after if d["detected"]]
+    assert len(errs) >= 10, errs
+    # the UAV drifted off while the head was down and homing; the head turns onto it again (how fast
+    # is the paper's controller's business: it stops on every empty frame; 4-6 s from 17 deg off)
+    assert min(errs[-3:]) < 5.0, errs
+    # the UAV is ~12 m away; nothing else is taken for it, also while the head was gone (frames are not
+    # tracked from the moment its link was lost: a dead-reckoned world without a head once saw 23-32 m)
+    assert all(np.linalg.norm(d["xyz_m"]) < 20.0 for d in dets if d["detected"])
+    assert any(c["source"] == "tracker" and c["written"] for c in cmds)
+
+
+def test_fault5_a_nominal_speed_table_is_a_warning_at_start_in_the_log_and_the_status(tmp_path):
+    from foveatrack.daemon import Daemon, load_config
+
+    link, truth, rec, log = tmp_path / "head", tmp_path / "truth.jsonl", tmp_path / "rec.mcap", tmp_path / "d.jsonl"
+    cfg = write_config(tmp_path / "d.toml", link, rec, free_udp_port(), speed_table="nominal")
+    head = _head(tmp_path, link, truth)
+    try:
+        d = start(["daemon", "--config", str(cfg), "--log", str(log)], tmp_path / "d.out", tmp_path / "d.err")
+        wait_for(lambda: event(log, "start"), 60, "the daemon to start", [d])
+        assert terminate(d) == 3            # no lidar in this test: "no lidar data arrived"
+    finally:
+        _stop_all({"head": head})
+    err = (tmp_path / "d.err").read_text()
+    assert "WARNING" in err and 'speed_table = "nominal"' in err and "uncalibrated" in err and str(cfg) in err, err
+    assert "foveatrack calibrate" in event(log, "warning")["message"]
+    notes = Daemon(load_config(cfg), status=False, install_signals=False).status_notes()
+    assert any("UNCALIBRATED" in n for n in notes)
+    # a calibrated table: no warning (the shipped example has one, for its virtual unit 3)
+    cfg2 = write_config(tmp_path / "d2.toml", link, rec, 0, speed_table=str(tmp_path / "t.json"))
+    truth_speed_table(PTS303H(unit_seed=3)).save(tmp_path / "t.json")
+    assert load_config(cfg2).warnings() == []
+    from daemon_procs import ROOT
+    ex = load_config(ROOT / "examples" / "daemon-virtual.toml")
+    assert ex.warnings() == []
+    truth3 = truth_speed_table(PTS303H(unit_seed=3))
+    for axis in ("pan", "tilt"):     # the shipped table is unit 3's, within the calibration's 2 %
+        got, want = getattr(ex.speed_table(), axis).speeds_array()[0], getattr(truth3, axis).speeds_array()[0]
+        assert abs(got[63] / want[63] - 1) < 0.02 and abs(got[32] / want[32] - 1) < 0.02, (axis, got[63], want[63])
+
+
+def test_fault6_a_killed_daemon_journaled_every_frame_its_head_got_and_logged_its_progress(tmp_path):
+    """kill -9 (issue 16, fault 6): the frame in flight reached the head but not the recording, and the
+    log held only 'start'.  The head here is a bare pty whose every byte the test reads."""
+    master, slave = os.openpty()
+    os.set_blocking(master, False)
+    link = tmp_path / "head"
+    os.symlink(os.ttyname(slave), link)
+    rec, log = tmp_path / "rec.mcap", tmp_path / "d.jsonl"
+    cfg = write_config(tmp_path / "d.toml", link, rec, free_udp_port(), speed_table=str(tmp_path / "t.json"))
+    truth_speed_table(PTS303H(unit_seed=3)).save(tmp_path / "t.json")
+    got = bytearray()
+
+    def drain():
+        try:
+            while True:
+                got.extend(os.read(master, 4096))
+        except (BlockingIOError, OSError):
+            pass
+
+    d = start(["daemon", "--config", str(cfg), "--log", str(log)], tmp_path / "d.out", tmp_path / "d.err")
+    try:
+        wait_for(lambda: event(log, "start"), 60, "the daemon to start", [d])
+        # no lidar: the daemon stops the head at start and every second; wait for 3 progress events
+        wait_for(lambda: (drain(), len([e for e in log_events(log) if e["event"] == "progress"]) >= 3)[1], 60,
+                 "progress in the log", [d])
+        d.kill()
+        d.wait(10)
+        drain()
+    finally:
+        if d.poll() is None:
+            d.kill()
+        os.close(master), os.close(slave)
+    journal = [__import__("json").loads(x) for x in (tmp_path / "rec.mcap.commands.jsonl").read_text().splitlines()]
+    sent = b"".join(bytes.fromhex(j["raw_hex"]) for j in journal)
+    assert len(got) >= 14 and len(got) % 7 == 0          # whole Pelco-D frames, at least two STOPs
+    assert sent[:len(got)] == bytes(got) and len(sent) - len(got) <= 7, (len(sent), len(got))
+    prog = [e for e in log_events(log) if e["event"] == "progress"]
+    assert prog[-1]["frames"] == 0 and "commands_written" in prog[-1]
