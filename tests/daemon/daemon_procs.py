@@ -74,6 +74,18 @@ def event(path: Path, name: str) -> dict | None:
     return next((e for e in log_events(path) if e["event"] == name), None)
 
 
+def stop_all(procs: dict) -> None:
+    """SIGTERM every process still running, then wait for each (killing one that does not stop in 10 s)."""
+    for p in procs.values():
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    for p in procs.values():
+        try:
+            p.wait(10)
+        except Exception:  # noqa: BLE001
+            p.kill()
+
+
 def terminate(p: subprocess.Popen, timeout_s: float = 10.0) -> int:
     if p.poll() is None:
         p.send_signal(signal.SIGTERM)

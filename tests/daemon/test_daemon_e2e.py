@@ -4,7 +4,6 @@ recording that holds every processed frame and replays to the same detections an
 
 import json
 import os
-import signal
 import socket
 import threading
 import time
@@ -15,7 +14,7 @@ from gimbal.pts303h import PTS303H
 from sim.loop import truth_speed_table
 import pytest
 
-from daemon_procs import SCENE, event, first_line, free_udp_port, start, terminate, wait_for, write_config
+from daemon_procs import SCENE, event, first_line, free_udp_port, start, stop_all, terminate, wait_for, write_config
 from foveatrack.recording import RecordingReader
 from foveatrack.replay import replay_recording
 from sim.virtual_head import read_truth
@@ -50,17 +49,6 @@ def _setup(tmp_path, cmd_port=0, data_port=0, loss_rate=0.0):
     return procs, link, truth, rec, log
 
 
-def _stop_all(procs):
-    for p in procs.values():
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-    for p in procs.values():
-        try:
-            p.wait(10)
-        except Exception:  # noqa: BLE001
-            p.kill()
-
-
 def _detections(rec):
     return [r for r in RecordingReader(rec).records("detections")]
 
@@ -72,7 +60,7 @@ def test_three_processes_track_and_replay(tmp_path):
         assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
         time.sleep(0.6)     # the head decelerates after the shutdown STOP (dead time + ramp)
     finally:
-        _stop_all(procs)
+        stop_all(procs)
     stats = event(log, "stop")["stats"]
     # tracking: the UAV starts 11 deg left of the axis; the head turns and keeps it near the axis
     dets = _detections(rec)
@@ -150,7 +138,7 @@ def test_faults_head_killed_and_restarted_lossy_lidar_garbage(tmp_path):
         assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
     finally:
         stop.set()
-        _stop_all(procs)
+        stop_all(procs)
     stats = event(log, "stop")["stats"]
     assert stats["lidar_foreign_source"] > 0.5 * sent["n"] - 50
     assert 5.0 < stats["lidar_points_missing_pct"] < 15.0, stats["lidar_points_missing_pct"]

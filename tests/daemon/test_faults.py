@@ -5,7 +5,6 @@ Recovery is judged in sensor time and by counts (frames, detections), never by w
 machine these run on is shared and busy."""
 
 import os
-import signal
 import socket
 import threading
 import time
@@ -13,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from daemon_procs import SCENE, event, first_line, free_udp_port, log_events, start, terminate, wait_for, write_config
+from daemon_procs import SCENE, event, first_line, free_udp_port, log_events, start, stop_all, terminate, wait_for, write_config
 from foveatrack.livox.protocol import encode_data_packets
 from foveatrack.recording import RecordingReader
 from gimbal.pts303h import PTS303H
@@ -53,17 +52,6 @@ def _setup(tmp_path, data_port=0, speed_table=None, head_extra=(), config_extra=
     return procs, link, truth, rec, log, bport
 
 
-def _stop_all(procs):
-    for p in procs.values():
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-    for p in procs.values():
-        try:
-            p.wait(10)
-        except Exception:  # noqa: BLE001
-            p.kill()
-
-
 def _wait_frames(log_path, rec_path, n, procs, timeout_s=90):
     """Wait until the daemon's log says it processed ``n`` more frames (progress events)."""
     def frames():
@@ -90,7 +78,7 @@ def test_fault1_a_restarted_lidar_is_tracked_again(tmp_path):
         _wait_frames(log, rec, 60, [procs["daemon"], procs["lidar"]])
         assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
     finally:
-        _stop_all(procs)
+        stop_all(procs)
     stats = event(log, "stop")["stats"]
     jump = event(log, "lidar_clock_jump")
     assert jump is not None and jump["new_t_s"] < jump["last_t_s"], jump      # the clock went back
@@ -144,7 +132,7 @@ def test_fault2_packets_with_wrong_times_are_dropped_and_tracking_holds(tmp_path
         assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
     finally:
         stop.set()
-        _stop_all(procs)
+        stop_all(procs)
     stats = event(log, "stop")["stats"]
     assert sent["n"] >= 50
     # counted (a bad packet landing beside another is one segment with it: at least nearly all)
@@ -195,7 +183,7 @@ def test_fault3_a_pty_that_took_the_heads_old_number_gets_no_byte(tmp_path):
     finally:
         for m, s in held:
             os.close(m), os.close(s)
-        _stop_all(procs)
+        stop_all(procs)
     stats = event(log, "stop")["stats"]
     assert stats["head_open_refusals"] >= 1
 
@@ -218,7 +206,7 @@ def test_fault4_a_head_back_at_its_power_on_pose_is_homed_before_tracking_resume
         assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
         time.sleep(0.6)
     finally:
-        _stop_all(procs)
+        stop_all(procs)
     stats = event(log, "stop")["stats"]
     assert abs(before["pan_deg"]) > 3.0, before          # the head had turned before it died
     assert stats["head_pose_unknown"] == 1 and stats["head_homed"] == 1 and stats["frames_pose_unknown"] > 0
@@ -258,7 +246,7 @@ def test_fault5_a_nominal_speed_table_is_a_warning_at_start_in_the_log_and_the_s
         wait_for(lambda: event(log, "start"), 60, "the daemon to start", [d])
         assert terminate(d) == 3            # no lidar in this test: "no lidar data arrived"
     finally:
-        _stop_all({"head": head})
+        stop_all({"head": head})
     err = (tmp_path / "d.err").read_text()
     assert "WARNING" in err and 'speed_table = "nominal"' in err and "uncalibrated" in err and str(cfg) in err, err
     assert "foveatrack calibrate" in event(log, "warning")["message"]
