@@ -21,6 +21,7 @@ Time: this module never reads the wall clock; the caller passes ``clock`` (the C
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import select
@@ -42,6 +43,10 @@ class VirtualHeadServer:
     truth : text file for JSON lines, or None
     truth_period_s : float > 0 [s]
     link_path : optional path of a symlink to create pointing at the pty (a stable name)
+    model_lock : optional lock held while the head model changes, for a caller that reads the model
+        from another thread (a virtual lidar asking for the pose at each point's time).  The wait for
+        input happens outside it: a lock held across the wait and taken again at once starves the
+        reader (Python's locks are not fair), which on a busy machine silenced the lidar for seconds.
     """
 
     def __init__(
@@ -52,6 +57,7 @@ class VirtualHeadServer:
         truth: TextIO | None = None,
         truth_period_s: float = 0.02,
         link_path: str | None = None,
+        model_lock=None,
     ) -> None:
         if not baud > 0:
             raise ValueError(f"baud={baud!r} must be > 0")
@@ -63,6 +69,7 @@ class VirtualHeadServer:
         self.truth = truth
         self.truth_period_s = truth_period_s
         self.link_path = link_path
+        self.model_lock = model_lock if model_lock is not None else contextlib.nullcontext()
         self.byte_time_s = BITS_PER_BYTE / baud
         self._master: int | None = None
         self._slave: int | None = None
@@ -134,7 +141,8 @@ class VirtualHeadServer:
             self.step(max_wait_s)
 
     def step(self, max_wait_s: float = 0.02) -> None:
-        """One pass: wait for input or the next deadline, then read, reply and log truth."""
+        """One pass: wait for input or the next deadline (outside ``model_lock``), then read, reply
+        and log truth (inside it)."""
         now = self.now()
         wait = min(max_wait_s, max(0.0, self._next_truth - now))
         if self._tx:
@@ -143,21 +151,22 @@ class VirtualHeadServer:
             readable, _, _ = select.select([self._master], [], [], wait)
         except InterruptedError:  # pragma: no cover - PEP 475 retries; kept for old kernels
             readable = []
-        now = self.now()
-        if readable:
-            try:
-                data = os.read(self._master, 4096)
-            except (BlockingIOError, InterruptedError):
-                data = b""
-            except OSError:  # EIO: no process has the device side open (cannot happen: we do)
-                data = b""
-            if data:
-                self._receive(data, now)
-        self._flush_tx(self.now())
-        now = self.now()
-        if now >= self._next_truth:
-            self._write_truth(now)
-            self._next_truth = max(self._next_truth + self.truth_period_s, now)
+        with self.model_lock:
+            now = self.now()
+            if readable:
+                try:
+                    data = os.read(self._master, 4096)
+                except (BlockingIOError, InterruptedError):
+                    data = b""
+                except OSError:  # EIO: no process has the device side open (cannot happen: we do)
+                    data = b""
+                if data:
+                    self._receive(data, now)
+            self._flush_tx(self.now())
+            now = self.now()
+            if now >= self._next_truth:
+                self._write_truth(now)
+                self._next_truth = max(self._next_truth + self.truth_period_s, now)
 
     def _receive(self, data: bytes, now: float) -> None:
         times = []

@@ -176,14 +176,13 @@ def test_live_calibration_is_as_accurate_as_the_simulated_one_when_the_lidar_kno
     head = PTS303H(unit_seed=UNIT, pan0_deg=23.0, tilt0_deg=6.5)
     lock = threading.Lock()
     done = threading.Event()
-    server = VirtualHeadServer(head, time.monotonic, link_path=str(tmp_path / "head"))
+    server = VirtualHeadServer(head, time.monotonic, link_path=str(tmp_path / "head"), model_lock=lock)
     server.open()
     offset = [0.0]    # head time - lidar stream time [s]
 
     def serve_head():
         while not done.is_set():
-            with lock:
-                server.step(0.002)
+            server.step(0.002)     # takes the lock only while the model changes, never across its wait
 
     def pose(t_s):
         with lock:
