@@ -35,6 +35,7 @@ from gimbal.head_facts import HeadFacts
 from gimbal.pelco import encode_pan_tilt, wrap_pan_deg
 from gimbal.pts303h import PTS303H, HeadParams
 from sim import effects as fx
+from sim.ahead import Ahead, ScanAhead
 from sim.scene import Scene
 from sim.sensor import SceneSensor, scene_scan_model
 from sim.virtual_uart import VirtualUart
@@ -121,6 +122,8 @@ class ClosedLoop:
         seed = scene.seed
         g = scene.gimbal
         self.scan = scene_scan_model(scene)
+        self._scan_ahead: ScanAhead | None = None     # only while run() drives the frames
+        self.worked_ahead = False                     # run(ahead=True) was used
         params = HeadParams.for_family(g.family, **({} if scene.has("head_ripple") else {"ripple_rel": 0.0}))
         tilt0 = min(max(g.tilt0_deg, params.tilt_min_deg), params.tilt_max_deg)
         self.head = PTS303H(params, unit_seed=g.unit_seed, feedback=g.feedback, address=g.address,
@@ -187,13 +190,31 @@ class ClosedLoop:
         return self.sensor.rays_cast_background
 
     # ----------------------------------------------------------------------------------------------
-    def run(self, progress=None) -> dict[str, np.ndarray]:
+    def run(self, progress=None, ahead: bool = False) -> dict[str, np.ndarray]:
+        """Run the scene's frames; returns the per-frame log.
+
+        ``ahead``: trace the scan of the coming frames and draw the effects' random values on a
+        second thread while this one works (:mod:`sim.ahead`; same bits).  Worth it for one run on a
+        machine with a free core (``simulate`` turns it on); not for many runs side by side (studies
+        keep it off).
+        """
         period = self.tracker.config.period_s
         n_frames = int(round(self.scene.duration_s / period))
-        for k in range(n_frames):
-            self.step(k * period, (k + 1) * period)
-            if progress is not None:
-                progress(k + 1, n_frames)
+        worker = None
+        if ahead:
+            self.worked_ahead = True
+            worker = Ahead()
+            self._scan_ahead = ScanAhead(self.scan, period, worker)
+            self.sensor.draw_ahead(worker)
+        try:
+            for k in range(n_frames):
+                self.step(k * period, (k + 1) * period)
+                if progress is not None:
+                    progress(k + 1, n_frames)
+        finally:
+            self._scan_ahead = None
+            if worker is not None:
+                worker.close()      # the streams drawn ahead go on synchronously if step() is called again
         return self.log.arrays()
 
     def step(self, t0: float, t1: float):
@@ -208,7 +229,7 @@ class ClosedLoop:
             self.head.receive(b"".join(b for _, b in due), [t for t, _ in due])
         c1 = clock()
         # 2. the scan.
-        chunk = self.scan.scan_time(t0, t1)
+        chunk = (self._scan_ahead or self.scan).scan_time(t0, t1)
         c2 = clock()
         t_s = chunk.t_ns * 1e-9
         d_lidar = chunk.direction
@@ -327,9 +348,10 @@ class ClosedLoop:
             L.estimate_sigma_m.append(math.nan)
 
 
-def run_scene(scene: Scene, frame_hook=None, progress=None) -> tuple[dict[str, np.ndarray], ClosedLoop, float]:
+def run_scene(scene: Scene, frame_hook=None, progress=None,
+              ahead: bool = False) -> tuple[dict[str, np.ndarray], ClosedLoop, float]:
     """Run a scene; returns the per-frame log, the loop object and the wall time [s]."""
     t = time.perf_counter()
     loop = ClosedLoop(scene, frame_hook)
-    log = loop.run(progress)
+    log = loop.run(progress, ahead=ahead)
     return log, loop, time.perf_counter() - t

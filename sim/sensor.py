@@ -24,6 +24,10 @@ from sim.world.trajectories import heading_rad
 _NONE = np.zeros(0)          # an effect that is off: no draws
 _NONE_3 = np.zeros((0, 3))
 EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")
+# The kind of value each effect takes from its stream, for the effects that take one kind only (these
+# can be drawn ahead: sim.ahead.DrawsAhead); sunlight mixes kinds and is drawn frame by frame.
+ONE_KIND_STREAMS = {"range_noise": "normal", "angular_noise": "normal", "return_probability": "uniform",
+                    "dropouts": "uniform"}
 
 
 def scene_scan_model(scene) -> ScanModel:
@@ -50,6 +54,7 @@ class SceneSensor:
         self.target_motion = target_motion
         self.rngs = {name: fx.effect_rng(scene.seed, name) for name in EFFECT_STREAMS}
         self.draw_calls = {name: 0 for name in self.rngs}
+        self._sources = dict(self.rngs)   # where each effect's values come from (drawn ahead or not)
         self._bg = np.ascontiguousarray(scene.background_prims)
         refl = [spec.body.reflectivity for spec in scene.targets]
         if self._bg.shape[0]:
@@ -133,13 +138,22 @@ class SceneSensor:
         t0, t1 = chunk.t_ns[0] * 1e-9, chunk.t_ns[-1] * 1e-9 + 1e-6
         self.returns(chunk, d, t0, t1)
 
+    def draw_ahead(self, ahead) -> None:
+        """From now on, the one-kind streams of the effects the scene lists are drawn ahead in blocks
+        on ``ahead``'s worker (:class:`sim.ahead.DrawsAhead`): the same values, off the loop's thread."""
+        from sim.ahead import DrawsAhead
+
+        for effect, kind in ONE_KIND_STREAMS.items():
+            if self.scene.has(effect) and self._sources[effect] is self.rngs[effect]:
+                self._sources[effect] = DrawsAhead(self.rngs[effect], kind, ahead)
+
     def _param_if(self, effect: str, key: str) -> float:
         return float(self.scene.param(key)) if self.scene.has(effect) else 0.0
 
     def _stream(self, effect: str) -> np.random.Generator:
         """The effect's random stream, counting the call (tests check unlisted effects draw nothing)."""
         self.draw_calls[effect] += 1
-        return self.rngs[effect]
+        return self._sources[effect]
 
     def _cast_target(self, spec, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset):
         traj = spec.trajectory

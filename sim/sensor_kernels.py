@@ -17,7 +17,7 @@ from numba import njit
 from sim.scan.kernels import RAY_OK
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def count_hits_kernel(prim, status):
     """How many rays hit something (``prim >= 0``) and left the prisms (``status == RAY_OK``)."""
     n = 0
@@ -27,7 +27,7 @@ def count_hits_kernel(prim, status):
     return n
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m, refl_byte_table, target_prim_end,
                             u_return, u_dropout, dropout_rate, range_noise, angular_noise,
                             out_xyz, out_t_ns, out_refl, out_on_target):

@@ -20,7 +20,8 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
     run's ``loop`` (:class:`sim.loop.ClosedLoop`) also ``first_frame_s`` (the first frame loads the
     numba kernels from their cache, or compiles them on a fresh install), ``realtime_factor_after_first_frame``
     and ``time_per_frame_ms``: the mean wall time of each stage of a frame after the first (scan, ray casting and
-    effects, tracker, ...), which is what the scene's fidelity costs.
+    effects, tracker, ...), which is what the scene's fidelity costs; ``worked_ahead``: whether the scan
+    and the effects' draws ran ahead on a second thread (:mod:`sim.ahead`; same results, other times).
     """
     half_fov = half_fov_deg(scene)
     err = log["true_error_deg"].astype(float)
@@ -40,6 +41,7 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
         m["realtime_factor_after_first_frame"] = (round(n * scene.tracker.period_s / rest_s, 2)
                                                   if n > 0 and rest_s > 0 else None)
         m["time_per_frame_ms"] = ({k: round(v / n * 1e3, 4) for k, v in loop.stage_s.items()} if n > 0 else None)
+        m["worked_ahead"] = loop.worked_ahead     # the scan and draws on a second thread (the times depend on it)
     m["scene"] = scene.name
     m["seed"] = scene.seed
     m["effects"] = sorted(scene.effects)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -22,6 +23,9 @@ def register(sub) -> None:
                    help="serve the run to Foxglove (ws://127.0.0.1:PORT, default 8765), paced at --speed")
     p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
                    help="with --live: virtual seconds per wall second (default 1 = real time)")
+    p.add_argument("--one-thread", action="store_true",
+                   help="do not trace the scan and draw the random values of the coming frames on a second thread "
+                        "(same results; for many runs side by side, or a one-core machine)")
     p.set_defaults(func=cmd_simulate)
 
 
@@ -68,7 +72,7 @@ class CompileNotice:
 
 
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
-                   quiet=False, live_port=None, speed=1.0) -> dict:
+                   quiet=False, live_port=None, speed=1.0, ahead=None) -> dict:
     import time
 
     import numpy as np
@@ -139,7 +143,9 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
             bar.update(1)
 
     try:
-        log = loop.run(advance)
+        if ahead is None:
+            ahead = (os.cpu_count() or 1) > 1
+        log = loop.run(advance, ahead=ahead)
     finally:
         notice.done()
         if bar is not None:
@@ -223,5 +229,5 @@ def _plot_run(scene, log, summary, out_dir) -> list[Path]:
 
 def cmd_simulate(args) -> int:
     run_and_report(args.scene, args.out, args.json, args.plot, args.seed, args.duration, not args.no_progress,
-                   live_port=args.live, speed=args.speed)
+                   live_port=args.live, speed=args.speed, ahead=False if args.one_thread else None)
     return 0

@@ -529,7 +529,7 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
         i = e
 
 
-@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy")
 def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum, noise_eps,
                       noise_seg0, rev_per_s, channel_count, incident, sin_wedge, cos_wedge, index, exit_tilted,
                       t_ns, channel, out_dir, status):

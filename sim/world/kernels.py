@@ -135,7 +135,7 @@ def _hit_prim(prims, m, ox, oy, oz, dx, dy, dz):
     return t if (abs(a) <= prims[m, 4] and abs(b) <= prims[m, 5]) else math.inf
 
 
-@njit(cache=True, error_model="numpy")   # den = 0 gives inf/nan (masked), not an exception
+@njit(cache=True, nogil=True, error_model="numpy")   # den = 0 gives inf/nan (masked), not an exception
 def cast_static_kernel(d_world, prims, prim_offset, out_range, out_prim):
     """Nearest hit of rays from the origin against static primitives (the background).
 
@@ -339,7 +339,7 @@ def _plane_point(dx, dy, dz, nx, ny, nz, num, cx, cy, cz):
     return den, t, dx * t - cx, dy * t - cy, dz * t - cz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def cast_moving_kernel(idx, d_world, pos, yaw, prims, prim_offset, out_range, out_prim):
     """Nearest hit of rays ``idx`` against a moving rigid body, each ray at its own time.
 
@@ -369,7 +369,7 @@ def cast_moving_kernel(idx, d_world, pos, yaw, prims, prim_offset, out_range, ou
                 out_prim[j] = prim_offset + m
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def cone_candidates_kernel(d_world, status, cx, cy, cz, radius, out_idx):
     """Indices of the valid rays (``status == RAY_OK``) passing within ``radius`` of the point c (and in
     front of the origin): the cheap cull that keeps a one-UAV scene from tracing the whole cloud.
@@ -512,7 +512,7 @@ def _advance_piece(pieces, i, t):
     return i
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, tilt_pieces, out):
     """:func:`rotate_pan_tilt_kernel` with the head pose exact at every point's own time.
 

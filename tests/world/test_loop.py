@@ -24,10 +24,10 @@ def short(name, seconds=2.0, **changes):
 @pytest.mark.determinism
 def test_same_seed_same_recording_to_the_bit(tmp_path):
     digests = []
-    for i in range(2):
+    for i, threads in enumerate([[], ["--one-thread"]]):    # the scan traced ahead on a thread, or not
         out = tmp_path / f"run{i}"
         assert main(["simulate", str(SCENES / "noisy-link.toml"), "--duration", "2", "--out", str(out),
-                     "--no-progress", "--json"]) == 0
+                     "--no-progress", "--json", *threads]) == 0
         digests.append(hashlib.sha256((out / "run.mcap").read_bytes()).hexdigest())
     assert digests[0] == digests[1]
     assert main(["simulate", str(SCENES / "noisy-link.toml"), "--duration", "2", "--seed", "7",

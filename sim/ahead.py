@@ -1,0 +1,162 @@
+"""Work the closed loop will need, done ahead on the second core while it works on the current frame.
+
+Two things a frame needs do not depend on anything the loop decides:
+
+* the scan: the rosette pattern moves with the prisms, not with the head (the head turns the beams
+  afterwards), so the points of the coming frames can be traced early (:class:`ScanAhead`);
+* the effects' random draws: each effect owns a stream and takes the next ``n`` values of one kind
+  (uniforms or standard normals) per frame, so those values can be drawn early in blocks
+  (:class:`DrawsAhead`).
+
+Both run on one worker thread (:class:`Ahead`), in numba kernels that release the GIL (the scan
+kernel :func:`sim.scan.kernels.scan_exact_kernel`, the fills of :mod:`sim.random_kernels`), so the
+worker runs beside the loop's Python.  The loop's critical path loses the scan and the draws (measured by
+``scripts/bench_closed_loop.py``: the loop thread's CPU per frame with and without).
+
+Same bits as without, by construction:
+
+* a point's direction, time and channel do not depend on where a chunk starts (the kernels are
+  compiled without fast-math; ``tests/scan/test_scan_fused.py`` checks chunking), and the worker is the
+  only caller of the scan model while it runs, in frame order, so motor-noise draws come in the same
+  order;
+* numpy's ``Generator.random(n)`` and ``standard_normal(n)`` give the same values however a run of
+  draws is split into calls, ``normal(0, s, n)`` is ``0 + s * standard_normal(n)`` value for value,
+  and numba's kernels draw what numpy draws (``tests/world/test_ahead.py`` checks all three against
+  the installed numpy and numba, and whole runs).
+
+What differs: a stream drawn ahead ends the run further along than one drawn frame by frame (the
+unused rest of its last block); nothing reads a stream after its effect.
+"""
+
+from __future__ import annotations
+
+import math
+from concurrent.futures import Future, ThreadPoolExecutor
+
+import numpy as np
+
+from sim import random_kernels as rk
+from sim.scan.model import ScanChunk, ScanModel
+
+
+class Ahead:
+    """The worker thread.  After :meth:`close`, everything that used it works synchronously."""
+
+    def __init__(self):
+        self._pool: ThreadPoolExecutor | None = ThreadPoolExecutor(1, thread_name_prefix="sim-ahead")
+
+    def submit(self, fn, *args) -> Future:
+        if self._pool is None:           # closed: do it now, on the caller's thread
+            f: Future = Future()
+            f.set_result(fn(*args))
+            return f
+        return self._pool.submit(fn, *args)
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+
+class ScanAhead:
+    """``scan_time`` of ``model`` for consecutive frames of ``period_s``, traced ``batch_frames`` at a
+    time one batch ahead on ``ahead``'s worker.  Any other request is traced at once (after the
+    batch in flight, so the model is only ever used by one thread at a time)."""
+
+    def __init__(self, model: ScanModel, period_s: float, ahead: Ahead, batch_frames: int = 10):
+        if not period_s > 0:
+            raise ValueError(f"period_s = {period_s!r} must be > 0")
+        if batch_frames < 1:
+            raise ValueError(f"batch_frames = {batch_frames!r} must be >= 1")
+        self.model = model
+        self.period_s = period_s
+        self.batch_frames = batch_frames
+        self._ahead = ahead
+        self._next: tuple[int, Future] | None = None             # (first frame, its batch in flight)
+        self._batch: tuple[int, ScanChunk] | None = None         # (first frame, its points)
+
+    def _frame_k(self, f: int) -> int:
+        return self.model.index_at_time(f * self.period_s)
+
+    def _submit(self, f0: int) -> tuple[int, Future]:
+        k0, k1 = self._frame_k(f0), self._frame_k(f0 + self.batch_frames)
+        return f0, self._ahead.submit(self.model.scan, k0, k1 - k0)
+
+    def scan_time(self, t0_s: float, t1_s: float) -> ScanChunk:
+        """The points fired in ``[t0_s, t1_s)``, as :meth:`ScanModel.scan_time`."""
+        f = round(t0_s / self.period_s)
+        if not (f >= 0 and f * self.period_s == t0_s and (f + 1) * self.period_s == t1_s):
+            self._drain()                 # not a frame of the grid: traced here and now
+            return self.model.scan_time(t0_s, t1_s)
+        if self._batch is None or not self._batch[0] <= f < self._batch[0] + self.batch_frames:
+            if self._next is None or self._next[0] != f:
+                self._drain()
+                self._next = self._submit(f)
+            f0, fut = self._next
+            self._batch = (f0, fut.result())
+            self._next = self._submit(f0 + self.batch_frames)    # the next batch starts now
+        chunk = self._batch[1]
+        a = self._frame_k(f) - chunk.k0
+        b = self._frame_k(f + 1) - chunk.k0
+        return ScanChunk(k0=chunk.k0 + a, t_ns=chunk.t_ns[a:b], direction=chunk.direction[a:b],
+                         channel=chunk.channel[a:b], status=chunk.status[a:b])
+
+    def _drain(self) -> None:
+        """Wait for the batch in flight and forget it (the model is then the caller's alone)."""
+        if self._next is not None:
+            self._next[1].result()
+            self._next = None
+        self._batch = None
+
+
+class DrawsAhead:
+    """One effect's stream, drawn ahead in blocks of one kind: ``"uniform"`` (``rng.random``) or
+    ``"normal"`` (``rng.standard_normal``).  Stands in for the ``numpy.random.Generator`` the effect's
+    draw function (:mod:`sim.effects`) is given: :meth:`random` and :meth:`normal` return the values
+    the generator itself would have returned to the same sequence of calls."""
+
+    def __init__(self, rng: np.random.Generator, kind: str, ahead: Ahead, block: int = 65_536):
+        if kind not in ("uniform", "normal"):
+            raise ValueError(f"kind {kind!r}: 'uniform' or 'normal'")
+        if block < 1:
+            raise ValueError(f"block = {block!r} must be >= 1")
+        self.kind = kind
+        self._rng = rng
+        self._kernel = rk.fill_uniform_kernel if kind == "uniform" else rk.fill_standard_normal_kernel
+        self._ahead = ahead
+        self._block = block
+        self._buf = np.empty(0)
+        self._pos = 0
+        self._next = ahead.submit(self._fill, block)
+
+    def _fill(self, n: int) -> np.ndarray:
+        out = np.empty(n)
+        self._kernel(self._rng, out)      # releases the GIL: the loop's thread goes on meanwhile
+        return out
+
+    def _take(self, n: int) -> np.ndarray:
+        if self._pos + n <= self._buf.size:           # the usual case: one slice of the block
+            out = self._buf[self._pos:self._pos + n].copy()
+            self._pos += n
+            return out
+        parts = [self._buf[self._pos:]]
+        need = n - parts[0].size
+        while need > 0:
+            self._buf = self._next.result()
+            self._next = self._ahead.submit(self._fill, max(self._block, need))
+            k = min(need, self._buf.size)
+            parts.append(self._buf[:k])
+            self._pos = k
+            need -= k
+        return np.concatenate(parts)
+
+    def random(self, size: int) -> np.ndarray:
+        if self.kind != "uniform":
+            raise TypeError("a stream drawn ahead as normals cannot give uniforms (it would change the draws)")
+        return self._take(int(size))
+
+    def normal(self, loc: float, scale: float, size) -> np.ndarray:
+        if self.kind != "normal":
+            raise TypeError("a stream drawn ahead as uniforms cannot give normals (it would change the draws)")
+        shape = (int(size),) if np.ndim(size) == 0 else tuple(int(s) for s in size)
+        return loc + scale * self._take(math.prod(shape)).reshape(shape)
