@@ -30,7 +30,6 @@ unused rest of its last block); nothing reads a stream after its effect.
 
 from __future__ import annotations
 
-import math
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
@@ -112,8 +111,9 @@ class ScanAhead:
 class DrawsAhead:
     """One effect's stream, drawn ahead in blocks of one kind: ``"uniform"`` (``rng.random``) or
     ``"normal"`` (``rng.standard_normal``).  Stands in for the ``numpy.random.Generator`` the effect's
-    draw function (:mod:`sim.effects`) is given: :meth:`random` and :meth:`normal` return the values
-    the generator itself would have returned to the same sequence of calls."""
+    draw function (:mod:`sim.effects`) is given: it returns the values
+    the generator itself would have returned to the same sequence of calls (:meth:`random`,
+    :meth:`standard_normal`)."""
 
     def __init__(self, rng: np.random.Generator, kind: str, ahead: Ahead, block: int = 65_536):
         if kind not in ("uniform", "normal"):
@@ -155,8 +155,7 @@ class DrawsAhead:
             raise TypeError("a stream drawn ahead as normals cannot give uniforms (it would change the draws)")
         return self._take(int(size))
 
-    def normal(self, loc: float, scale: float, size) -> np.ndarray:
+    def standard_normal(self, size: int) -> np.ndarray:
         if self.kind != "normal":
             raise TypeError("a stream drawn ahead as uniforms cannot give normals (it would change the draws)")
-        shape = (int(size),) if np.ndim(size) == 0 else tuple(int(s) for s in size)
-        return loc + scale * self._take(math.prod(shape)).reshape(shape)
+        return self._take(int(size))

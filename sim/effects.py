@@ -21,6 +21,8 @@ import zlib
 
 import numpy as np
 
+from sim import random_kernels as rk
+
 
 def effect_rng(seed: int, name: str) -> np.random.Generator:
     """The random stream of one named noise source of a run (independent of the others)."""
@@ -40,15 +42,26 @@ def dropout_draws(rng, n_hits: int) -> np.ndarray:
     return rng.random(n_hits)
 
 
+def standard_normals(rng, n: int) -> np.ndarray:
+    """``rng.standard_normal(n)``, value for value: for a numpy Generator through numba's ziggurat
+    (:mod:`sim.random_kernels`; 0.038 against numpy's 0.091 ms for 10 000 on the AVX-512 test machine);
+    a stream drawn ahead (:class:`sim.ahead.DrawsAhead`) gives its own."""
+    if isinstance(rng, np.random.Generator):
+        out = np.empty(n)
+        rk.fill_standard_normal_kernel(rng, out)
+        return out
+    return rng.standard_normal(n)
+
+
 def range_noise_draws(rng, n_hits: int, sigma_m: float) -> np.ndarray:
-    """Range errors [m], gaussian."""
-    return rng.normal(0.0, sigma_m, n_hits)
+    """Range errors [m], gaussian: ``rng.normal(0, sigma_m, n_hits)`` (which is ``0 + sigma * z``)."""
+    return 0.0 + sigma_m * standard_normals(rng, n_hits)
 
 
 def angular_noise_draws(rng, n_hits: int, sigma_deg: float) -> np.ndarray:
     """Direction errors (n_hits, 3) [rad], gaussian per axis: a small isotropic angle once the
-    direction is renormalised."""
-    return rng.normal(0.0, math.radians(sigma_deg), (n_hits, 3))
+    direction is renormalised.  ``rng.normal(0, sigma, (n_hits, 3))``, value for value."""
+    return 0.0 + math.radians(sigma_deg) * standard_normals(rng, 3 * n_hits).reshape(n_hits, 3)
 
 
 def range_limit_m(reflectivity: np.ndarray, range_80pct_m: float) -> np.ndarray:
