@@ -297,6 +297,14 @@ class Tracker:
         self.lost_since_s: float | None = None
         self.last_command: HeadCommand = STOP
 
+    def rebased(self, t0_s: float, pan_deg: float, tilt_deg: float) -> "Tracker":
+        """A fresh tracker (state and filters restarted) with this one's configuration and speed table,
+        whose dead reckoning starts at ``(pan_deg, tilt_deg)`` at sensor time ``t0_s`` [s]: what the
+        daemon does when the lidar's clock restarts or the head was homed (its ``tracker_rebased``
+        event), and what replay repeats from that event."""
+        cfg = replace(self.config, pan0_deg=float(pan_deg), tilt0_deg=float(tilt_deg))
+        return Tracker(cfg, self.table, t0_s=float(t0_s))
+
     # ------------------------------------------------------------------------------------------
     def process(self, frame: Frame, send_t_s: float | None = None) -> TrackOutput:
         cfg = self.config

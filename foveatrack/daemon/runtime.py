@@ -43,7 +43,7 @@ import signal
 import threading
 import time
 from collections import Counter, deque
-from dataclasses import asdict, replace
+from dataclasses import asdict
 
 import numpy as np
 
@@ -53,6 +53,7 @@ from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, form
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
 from foveatrack.gate import CommandGate
 from foveatrack.live_devices import LidarStream, open_devices
+from foveatrack.recording.format import DAEMON_EVENTS
 from foveatrack.recording.records import CommandRecord, ns, write_record, write_tracker_frame
 from foveatrack.tracker import Tracker
 
@@ -74,7 +75,7 @@ def _job_frame(w, fid, frame, out, cmd_rec, proc_ms, lat_ms):
 
 
 def _job_event(w, t_ns, rec: dict):
-    w.write("daemon", t_ns, rec)
+    w.write(DAEMON_EVENTS, t_ns, rec)
 
 
 class _Receiver(threading.Thread):
@@ -373,8 +374,7 @@ class Daemon:
 
     def _rebase_tracker(self, t0_s: float, pan_deg: float, tilt_deg: float) -> None:
         """A fresh tracker whose dead reckoning starts at ``(pan_deg, tilt_deg)`` at sensor time ``t0_s``."""
-        cfg = replace(self.cfg.tracker, pan0_deg=float(pan_deg), tilt0_deg=float(tilt_deg))
-        self.tracker = Tracker(cfg, self.table, t0_s=t0_s)
+        self.tracker = self.tracker.rebased(t0_s, pan_deg, tilt_deg)   # replay repeats it from the event
         self._last_send_t = -math.inf
         self.gate.head_cmd = STOP
 

@@ -24,6 +24,7 @@ COMMANDS = "commands"
 HEAD = "head"
 TRUTH = "truth"
 METRICS = "metrics"
+DAEMON_EVENTS = "daemon"     # the daemon's events (tracker_rebased, head_pose_unknown, ...), JSON
 STANDARD_CHANNELS = (POINTS, DETECTIONS, COMMANDS, HEAD, TRUTH, METRICS)
 # drawn for Foxglove from the records (format 2); replay needs none of them
 TF = "tf"

@@ -18,7 +18,8 @@ How a recording's tracker is rebuilt (``meta``):
   at the recorded ``t_ns``; the send time is the command's ``send_t_s``; commands the safety gate
   limited, and the watchdog's and shutdown's STOPs, are registered where they happened; a command
   whose write failed (``written: false``) is replaced, at the same instant, by the last one that
-  reached the head (the head never saw it, and kept moving as it was told before).
+  reached the head (the head never saw it, and kept moving as it was told before); where the daemon
+  started a fresh tracker (``tracker_rebased``: a new lidar clock, the head homed), so does replay.
 
 Replay is open loop: the points are what the lidar saw while the head moved as it did, so a
 different configuration shows which detections and commands would have differed on the same data,
@@ -46,7 +47,7 @@ from foveatrack.gate import CommandGate
 from foveatrack.recording.records import CommandRecord
 from foveatrack.replay.config import recorded_limits, load_tracker_table, tracker_config
 from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
-from foveatrack.replay.recorded import FrameArrays, recorded_frames
+from foveatrack.replay.recorded import FrameArrays, TrackerRebased, recorded_frames
 from foveatrack.replay.result import ReplayResult
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import Tracker, TrackerConfig
@@ -127,7 +128,11 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             T["points_on_target"].append(0)
             T["pan_deg"].append(np.nan)
             T["tilt_deg"].append(np.nan)
-        for c in rf.after:   # watchdog / shutdown STOPs, in the order they were sent
+        for c in rf.after:   # watchdog / shutdown STOPs and the daemon's rebases, in the order they happened
+            if isinstance(c, TrackerRebased):
+                tracker = tracker.rebased(c.t0_s, c.pan_deg, c.tilt_deg)
+                gate.head_cmd = STOP
+                continue
             tracker.command_sent(c.send_time_s, c.command)
             _reached_head(gate, tracker, c.send_time_s, c.command, c)
     t_settled = (tracker.recon.last_send_t_s or 0.0) + 2.0

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from foveatrack.gate import STALE_FRAME
-from foveatrack.recording.format import METRICS, POINTS
+from foveatrack.recording.format import DAEMON_EVENTS, METRICS, POINTS
 from foveatrack.recording.records import CommandRecord, DetectionRecord, HeadEstimateRecord, TruthRecord, parse
 
 
@@ -53,6 +53,16 @@ class FrameArrays:
         return out
 
 
+@dataclass(frozen=True)
+class TrackerRebased:
+    """The daemon started a fresh tracker at this pose and sensor time (its ``tracker_rebased``
+    event: a new lidar clock, or the head homed); replay does the same at the same place."""
+    t0_s: float
+    pan_deg: float
+    tilt_deg: float
+    reason: str
+
+
 @dataclass
 class RecordedFrame:
     """One frame of a recording with the typed records that belong to it (None where absent) and the
@@ -63,7 +73,7 @@ class RecordedFrame:
     command: CommandRecord | None = None       # the tracker's command for this frame, as sent
     truth: TruthRecord | None = None
     metrics: dict = field(default_factory=dict)
-    after: list = field(default_factory=list)   # [CommandRecord] in the order sent
+    after: list = field(default_factory=list)   # [CommandRecord | TrackerRebased] in the order they happened
 
     @property
     def stale(self) -> bool:
@@ -81,6 +91,12 @@ def recorded_frames(reader):
             cur = RecordedFrame(m.record)
             continue
         if cur is None:
+            continue
+        if m.channel == DAEMON_EVENTS:
+            e = m.record
+            if e.get("event") == "tracker_rebased":
+                cur.after.append(TrackerRebased(float(e["t0_s"]), float(e["pan_deg"]), float(e["tilt_deg"]),
+                                                str(e.get("reason", "?"))))
             continue
         rec = parse(m.channel, m.record)
         if isinstance(rec, CommandRecord):
