@@ -22,6 +22,8 @@ The client reads the wall clock for its timeouts; it is real-time code and lives
 
 from __future__ import annotations
 
+import os
+import select
 import time
 from dataclasses import dataclass
 
@@ -185,7 +187,7 @@ class HeadClient:
         if not self._ensure_open():
             return False
         try:
-            n = self._ser.write(frame)
+            n = self._write(frame)
             self._ser.flush()
         except serial.SerialTimeoutException:
             self.stats.write_timeouts += 1
@@ -199,6 +201,35 @@ class HeadClient:
             return False
         self.stats.frames_sent += 1
         return True
+
+    def _write(self, frame: bytes) -> int:
+        """Write ``frame`` within ``write_timeout_s``; the number of bytes the port took.
+
+        On a POSIX port (a tty or pty path) the bytes go through ``os.write`` on pyserial's
+        non-blocking descriptor, and a frame counts as written once the kernel took all of it, however
+        late that was.  pyserial 3.5's own ``write`` checks its deadline *after* a complete write and
+        raises ``SerialTimeoutException`` if it has passed, so on a loaded machine (this process
+        descheduled for 20 ms between two lines) a command that reached the head was reported lost:
+        the daemon's dead reckoning then took the head for still running the previous command, and
+        the live calibration aborted a leg.  Other ports (socket://, rfc2217://, ...) use pyserial's.
+        """
+        fd = getattr(self._ser, "fd", None)
+        if not isinstance(fd, int) or not hasattr(self._ser, "pipe_abort_write_r"):   # not serialposix
+            return self._ser.write(frame)
+        view = memoryview(frame)
+        deadline = time.monotonic() + self.write_timeout_s
+        sent = 0
+        while sent < len(frame):
+            try:
+                sent += os.write(fd, view[sent:])
+            except (BlockingIOError, InterruptedError):
+                pass
+            if sent == len(frame):
+                break
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([], [fd], [], left)[1]:
+                raise serial.SerialTimeoutException(f"write timeout: {sent} of {len(frame)} bytes taken")
+        return sent
 
     def send_speeds(self, pan_dir: int, pan_byte: int, tilt_dir: int, tilt_byte: int) -> bool:
         """Combined speed move (pan_dir +1 = LEFT, tilt_dir +1 = UP; bytes 0x00-0x3F, pan 0xFF

@@ -211,3 +211,38 @@ def test_sigint_stops_the_server_cleanly(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_a_frame_the_port_took_is_sent_even_if_the_writer_was_descheduled(monkeypatch):
+    # pyserial 3.5 raises SerialTimeoutException when its deadline passed during a write that took
+    # every byte (this process descheduled for 20+ ms on a loaded machine): the command reached the
+    # head, but was reported lost.  Our write counts the bytes the kernel took.
+    master, slave = os.openpty()
+    import tty
+
+    tty.setraw(master)
+    tty.setraw(slave)
+    client = HeadClient(os.ttyname(slave), write_timeout_s=0.02)
+    fd = client._ser.fd
+    real_write = os.write
+
+    def descheduled_write(f, data):
+        n = real_write(f, data)
+        if f == fd:
+            time.sleep(0.05)          # well past the 20 ms deadline, after the kernel took the bytes
+        return n
+
+    monkeypatch.setattr(os, "write", descheduled_write)
+    try:
+        assert client.stop() is True
+        assert client.send_speeds(+1, 0x20, 0, 0) is True
+        assert client.stats.write_timeouts == 0 and client.stats.frames_sent == 2
+        got = b""
+        while len(got) < 14 and select.select([master], [], [], 1.0)[0]:
+            got += os.read(master, 64)
+        assert len(got) == 14 and got[:1] == b"\xff"        # both Pelco-D frames, whole
+    finally:
+        monkeypatch.undo()
+        client.close()
+        os.close(master)
+        os.close(slave)
