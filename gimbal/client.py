@@ -208,8 +208,9 @@ class HeadClient:
         On a POSIX port (a tty or pty path) the bytes go through ``os.write`` on pyserial's
         non-blocking descriptor, and a frame counts as written once the kernel took all of it, however
         late that was.  pyserial 3.5's own ``write`` checks its deadline *after* a complete write and
-        raises ``SerialTimeoutException`` if it has passed, so on a loaded machine (this process
-        descheduled for 20 ms between two lines) a command that reached the head was reported lost:
+        raises ``SerialTimeoutException`` if it has passed (pyserial issue #281, open since 2017), so on
+        a loaded machine (this process descheduled for 20 ms between two lines) a command that reached
+        the head was reported lost:
         the daemon's dead reckoning then took the head for still running the previous command, and
         the live calibration aborted a leg.  Other ports (socket://, rfc2217://, ...) use pyserial's.
         """
