@@ -31,7 +31,8 @@ Gyro bias.  The BMI088's zero-rate offset is up to 1 deg/s, far more than the sp
 so the bias is estimated whenever the head is known to be at rest, and the attitude is held there (a
 zero-velocity update).  "At rest" comes from the commands the tracker itself sent: before the first
 motion command (the head waits, homed, while the lidar starts), and from ``rest_margin_s`` after a
-STOP's effect plus the deceleration the dead reckoning expects, until the next motion command
+STOP's effect plus the deceleration from the larger of the speed the dead reckoning expects and the
+gyro's latest rate (a mis-calibrated table underrates it), until the next motion command
 *leaves* (its send time: the head cannot move earlier).  Each rest stretch's mean rate (at most
 ``REST_CHUNK_S`` long) updates a per-axis random-walk Kalman filter of the bias:
 ``P += q (t - t_prev)``, ``K = P / (P + r)``, ``b += K (z - b)``, ``P *= 1 - K``, with
@@ -73,6 +74,9 @@ REST_CHUNK_S = 2.0
 CHECK_SAMPLES = 20
 #: ... and a deviation beyond this many sigma on any axis refutes the rest.
 REST_CHECK_SIGMA = 5.0
+#: Deceleration assumed for the gyro's rate when neither the table nor the config gives the head's
+#: (a table without timing): the PTS-303H's slower axis, tilt, 10 deg/s^2 [deg/s^2].
+FALLBACK_ACCEL_DEG_S2 = 10.0
 #: The BMI088's zero-rate offset, 1 sigma (data sheet: +-1 deg/s typical): the bias prior [deg/s].
 BIAS_PRIOR_SIGMA_DEG_S = 0.5
 
@@ -253,6 +257,12 @@ class GyroAttitude:
                 t_eff = t_s + self.commands.effect_delay_s
                 vp, vt = self.commands.speeds_at(t_eff)
                 decel = max(self._decel_s(self.commands.pan, vp), self._decel_s(self.commands.tilt, vt))
+                # the gyro's latest rate is the head's real speed (a table may be wrong about it)
+                if self._w_prev is not None:   # the body rate in head axes: pan = wx sin t + wz cos t, tilt = -wy
+                    wx, wy, wz = self._w_prev
+                    tl = math.radians(pan_tilt_from_quat(self._q)[1])
+                    for ax, rate in ((self.commands.pan, wx * math.sin(tl) + wz * math.cos(tl)), (self.commands.tilt, wy)):
+                        decel = max(decel, math.degrees(abs(rate)) / (ax.accel or FALLBACK_ACCEL_DEG_S2))
                 self._rest.append([t_eff + decel + self.rest_margin_s, math.inf])
         else:
             # The head may move from the moment the command leaves; a rest not yet begun is void.

@@ -1,0 +1,117 @@
+"""Head attitude from the commands or from the gyro, on the same scene: the runs and their errors.
+
+A variant of a scene file (:func:`scene_variant`): ``[imu]`` added if it has none (the BMI088 of
+:mod:`sim.imu`, mounted as the lidar: the tracker's ``imu_rotation_deg`` is the scene's), ``[tracker]
+attitude`` set, and optionally the tracker's speed table replaced by the unit's true curve scaled by a
+factor (a mis-calibrated table: every speed ``scale`` times the truth, the dead time and accelerations
+true).  The two variants of a scene differ only in the tracker's attitude source: the gyro is
+simulated in both (its own random stream), so the head, the target and every effect draw alike until
+the tracker's commands differ.
+
+Errors (:func:`run_variant`), per frame at mid-frame after acquisition is irrelevant here (all frames):
+
+* reconstruction: ``foveatrack simulate --json``'s ``reconstruction_error_m`` / ``_rel`` (the
+  tracker's world estimate of each detection against the true target position);
+* head angle: the rotation angle between the true lidar attitude ``R(pan, tilt)`` and the estimated
+  one (geodesic distance on SO(3), ``arccos((tr(R_true^T R_est) - 1) / 2)``, computed as
+  ``2 asin(|R_true - R_est|_F / sqrt(8))`` to keep its accuracy near 0) [deg].
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from foveatrack.reconstruction import rotation_matrix
+from sim.scene import Scene, scene_from_mapping
+
+
+def _scaled_truth_table(data: dict, scale: float, where: str) -> str:
+    """The unit's true speed table with every speed times ``scale``, as a JSON file; its path."""
+    from gimbal.pts303h import PTS303H, HeadParams
+    from sim.loop import truth_speed_table
+
+    g = data.get("gimbal", {})
+    head = PTS303H(HeadParams.for_family(g.get("family", "pts-303")), unit_seed=g.get("unit_seed", 0))
+    d = truth_speed_table(head).to_dict()
+    for ax in d["axes"].values():
+        for e in ax["entries"]:
+            if e["speed"] is not None:
+                e["speed"] *= scale
+    d["source"] = f"the unit's truth x {scale:g} ({where}: a mis-calibrated table)"
+    f = tempfile.NamedTemporaryFile("w", suffix=".json", prefix="table-", delete=False)
+    import json
+
+    json.dump(d, f)
+    f.close()
+    return f.name
+
+
+def scene_variant(path, attitude: str, *, table_scale: float | None = None, duration_s: float | None = None,
+                  imu: dict | None = None) -> Scene:
+    """The scene at ``path`` with an IMU on the head and ``[tracker] attitude = attitude`` (see the
+    module docstring); ``imu`` replaces the added ``[imu]`` table (a scene's own is kept)."""
+    path = Path(path)
+    data = tomllib.loads(path.read_text())
+    if "imu" not in data or imu is not None:
+        data["imu"] = dict(imu or {})
+    tr = dict(data.get("tracker", {}))
+    tr["attitude"] = attitude
+    rot = data["imu"].get("rotation_deg")
+    if rot is not None and "imu_rotation_deg" not in tr:
+        tr["imu_rotation_deg"] = rot
+    data["tracker"] = tr
+    sc = dict(data.get("scene", {}))
+    if duration_s is not None:
+        sc["duration_s"] = duration_s
+    data["scene"] = sc
+    if table_scale is not None:
+        data.setdefault("gimbal", {})["speed_table"] = _scaled_truth_table(data, table_scale, str(path))
+    return scene_from_mapping(data, str(path))
+
+
+def head_angle_error_deg(log: dict) -> np.ndarray:
+    """Per frame, the angle [deg] of the rotation between the true and the estimated lidar attitude."""
+    out = np.full(len(log["head_pan_deg"]), np.nan)
+    for i, (p, t, ep, et) in enumerate(zip(log["head_pan_deg"], log["head_tilt_deg"], log["est_pan_deg"],
+                                           log["est_tilt_deg"])):
+        if math.isfinite(ep) and math.isfinite(et):
+            d = np.linalg.norm(rotation_matrix(p, t) - rotation_matrix(ep, et))
+            out[i] = math.degrees(2.0 * math.asin(min(d / math.sqrt(8.0), 1.0)))
+    return out
+
+
+def _stats(x) -> dict:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if not x.size:
+        return {"rms": None, "p95": None, "max": None}
+    return {"rms": float(np.sqrt(np.mean(x * x))), "p95": float(np.percentile(x, 95)), "max": float(x.max())}
+
+
+def run_variant(scene: Scene) -> dict:
+    """Run a scene variant; its reconstruction and head-angle errors, and the gyro's own counters."""
+    from sim.loop import ClosedLoop
+    from sim.summary import summarize
+
+    t = time.perf_counter()
+    loop = ClosedLoop(scene)
+    log = loop.run()
+    m = summarize(scene, log, time.perf_counter() - t, loop)
+    out = {"scene": scene.name, "attitude": scene.tracker.attitude,
+           "reconstruction_error_m": m["reconstruction_error_m"],
+           "reconstruction_error_rel": m["reconstruction_error_rel"],
+           "head_angle_error_deg": _stats(head_angle_error_deg(log)),
+           "tracking_error_deg": m["tracking_error_deg"], "frames_with_detection": m["frames_with_detection"],
+           "frames": m["frames"], "wall_s": m["wall_s"]}
+    src = loop.tracker.recon
+    if hasattr(src, "bias"):
+        out["gyro"] = {"bias_updates": src.bias.updates, "rests_refuted": src.rests_refuted,
+                       "bias_error_deg_s": float(np.degrees(np.max(np.abs(src.bias.b - loop.gyro._bias)))),
+                       "rest_fraction": src.rest_samples / max(src.samples, 1)}
+    return out
