@@ -213,6 +213,7 @@ class GyroAttitude:
         self._sigma0_deg = s0
         # Rest stretches [start, end) from the commands; the head rests until the first motion command.
         self._rest: list[list[float]] = [[-math.inf, math.inf]]
+        self._cmd_undo: tuple | None = None   # (send time, rests before it) of the last command
         # Samples: time, unwrapped pan, tilt, sigma (after the step to that sample).
         self._t: list[float] = []
         self._pan: list[float] = []
@@ -251,6 +252,12 @@ class GyroAttitude:
     def on_command(self, t_s: float, cmd: HeadCommand) -> None:
         """A command left at ``t_s``: the dead reckoning learns it, and it bounds the rest stretches."""
         self.commands.on_command(t_s, cmd)
+        # A second command at the same instant replaces the first (the gate limited it, the write
+        # failed, the head is frozen): the rests are as if only the second had been sent.
+        if self._cmd_undo is not None and self._cmd_undo[0] == t_s:
+            self._rest = [list(iv) for iv in self._cmd_undo[1]]
+        else:
+            self._cmd_undo = (t_s, [list(iv) for iv in self._rest])
         last = self._rest[-1]
         if cmd.is_stop:
             if last[1] != math.inf:   # moving: rest once the expected deceleration is over

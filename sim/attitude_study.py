@@ -2,9 +2,9 @@
 
 A variant of a scene file (:func:`scene_variant`): ``[imu]`` added if it has none (the BMI088 of
 :mod:`sim.imu`, mounted as the lidar: the tracker's ``imu_rotation_deg`` is the scene's), ``[tracker]
-attitude`` set, and optionally the tracker's speed table replaced by the unit's true curve scaled by a
-factor (a mis-calibrated table: every speed ``scale`` times the truth, the dead time and accelerations
-true).  The two variants of a scene differ only in the tracker's attitude source: the gyro is
+attitude`` set, and optionally the tracker's speed table replaced by the unit's true curve scaled (a
+mis-calibrated table: every speed ``table_scale`` times the truth, each axis's acceleration
+``accel_scale`` times it; the dead time true).  The two variants of a scene differ only in the tracker's attitude source: the gyro is
 simulated in both (its own random stream), so the head, the target and every effect draw alike until
 the tracker's commands differ.
 
@@ -19,6 +19,7 @@ Errors (:func:`run_variant`), per frame at mid-frame after acquisition is irrele
 
 from __future__ import annotations
 
+import json
 import math
 import tempfile
 import time
@@ -31,8 +32,9 @@ from foveatrack.reconstruction import rotation_matrix
 from sim.scene import Scene, scene_from_mapping
 
 
-def _scaled_truth_table(data: dict, scale: float, where: str) -> str:
-    """The unit's true speed table with every speed times ``scale``, as a JSON file; its path."""
+def _scaled_truth_table(data: dict, scale: float, accel_scale: float, where: str) -> str:
+    """The unit's true speed table with every speed times ``scale`` and each axis's acceleration times
+    ``accel_scale``, as a JSON file; its path."""
     from gimbal.pts303h import PTS303H, HeadParams
     from sim.loop import truth_speed_table
 
@@ -43,17 +45,19 @@ def _scaled_truth_table(data: dict, scale: float, where: str) -> str:
         for e in ax["entries"]:
             if e["speed"] is not None:
                 e["speed"] *= scale
-    d["source"] = f"the unit's truth x {scale:g} ({where}: a mis-calibrated table)"
-    f = tempfile.NamedTemporaryFile("w", suffix=".json", prefix="table-", delete=False)
-    import json
+        if ax.get("accel_deg_s2"):
+            ax["accel_deg_s2"] *= accel_scale
+    d["source"] = f"the unit's truth, speeds x {scale:g}, accelerations x {accel_scale:g} ({where}: mis-calibrated)"
+    # one file per unit and scales, reused (the loop reads it when it starts)
+    out = Path(tempfile.gettempdir()) / "foveatrack-tables" / (
+        f"{g.get('family', 'pts-303')}-unit{g.get('unit_seed', 0)}-speed{scale:g}-accel{accel_scale:g}.json")
+    out.parent.mkdir(exist_ok=True)
+    out.write_text(json.dumps(d))
+    return str(out)
 
-    json.dump(d, f)
-    f.close()
-    return f.name
 
-
-def scene_variant(path, attitude: str, *, table_scale: float | None = None, duration_s: float | None = None,
-                  imu: dict | None = None) -> Scene:
+def scene_variant(path, attitude: str, *, table_scale: float | None = None, accel_scale: float | None = None,
+                  duration_s: float | None = None, imu: dict | None = None) -> Scene:
     """The scene at ``path`` with an IMU on the head and ``[tracker] attitude = attitude`` (see the
     module docstring); ``imu`` replaces the added ``[imu]`` table (a scene's own is kept)."""
     path = Path(path)
@@ -70,8 +74,9 @@ def scene_variant(path, attitude: str, *, table_scale: float | None = None, dura
     if duration_s is not None:
         sc["duration_s"] = duration_s
     data["scene"] = sc
-    if table_scale is not None:
-        data.setdefault("gimbal", {})["speed_table"] = _scaled_truth_table(data, table_scale, str(path))
+    if table_scale is not None or accel_scale is not None:
+        data.setdefault("gimbal", {})["speed_table"] = _scaled_truth_table(
+            data, 1.0 if table_scale is None else table_scale, 1.0 if accel_scale is None else accel_scale, str(path))
     return scene_from_mapping(data, str(path))
 
 

@@ -196,3 +196,17 @@ def test_config_key_and_its_errors():
         assert key in str(e.value) and "x.toml [tracker]" in str(e.value)
     with pytest.raises(UserError, match="commands, gyro|'commands', 'gyro'|commands.*gyro"):
         TrackerConfig.from_mapping({"attitude": "imu"})
+
+
+def test_a_command_replaced_at_the_same_instant_leaves_the_rest_alone():
+    # a frozen head: the tracker registers its command, the driver then says STOP went instead
+    g = _source(0.0, 0.0, moving=False)
+    for k in range(5):
+        g.on_command(0.1 * k, HeadCommand(1, 30, 1, 30))
+        g.on_command(0.1 * k, STOP)
+    assert g.at_rest(0.25) and g.at_rest(10.0)
+    # the same with a real motion first: the replacement STOP's rest starts after the deceleration
+    g.on_command(1.0, HeadCommand(1, 30, 0, 0))
+    g.on_command(1.1, HeadCommand(1, 40, 0, 0))
+    g.on_command(1.1, STOP)
+    assert not g.at_rest(1.1) and g.at_rest(3.0)
