@@ -450,3 +450,59 @@ class GyroAttitude:
         if len(self._t) > 64 and self._t[-1] - self._t[0] > 1.5 * self.history_s:
             cut = bisect.bisect_left(self._t, self._t[-1] - self.history_s)
             del self._t[:cut], self._pan[:cut], self._tilt[:cut], self._sig[:cut]
+
+
+class ImuFeed:
+    """The lidar's IMU samples held until the frame they precede (the daemon's feed to
+    :meth:`foveatrack.tracker.Tracker.on_imu`).
+
+    ``push`` takes what the Livox client decoded (data type 6: packet times [ns] on the sensor clock,
+    gyro [rad/s]); ``release(t_end_s)`` returns, in time order, the samples before a frame's end and
+    keeps the later ones.  A sample before the last frame end released (a late packet: the source has
+    moved past it) is dropped and counted in ``late``; one more than ``AHEAD_S`` after the frame's end
+    (a wild timestamp, which would block every later sample) in ``bad_time``.  Samples before the
+    first frame are the head's wait at start: they are released with it (the bias's first estimate).
+    """
+
+    AHEAD_S = 5.0
+
+    def __init__(self):
+        self._t: list[np.ndarray] = []
+        self._g: list[np.ndarray] = []
+        self.not_before_s = -math.inf     # released up to here (and a rebased tracker's start)
+        self.samples_in = 0
+        self.samples_fed = 0
+        self.late = 0
+        self.bad_time = 0
+
+    def push(self, t_ns, gyro_rad_s) -> None:
+        t = np.asarray(t_ns, np.int64).reshape(-1)
+        if t.size:
+            self._t.append(t * 1e-9)
+            self._g.append(np.asarray(gyro_rad_s, float).reshape(-1, 3))
+            self.samples_in += t.size
+
+    def release(self, t_end_s: float) -> tuple[np.ndarray, np.ndarray]:
+        if not self._t:
+            self.not_before_s = max(self.not_before_s, t_end_s)
+            return np.empty(0), np.empty((0, 3))
+        t = np.concatenate(self._t)
+        g = np.concatenate(self._g)
+        order = np.argsort(t, kind="stable")
+        t, g = t[order], g[order]
+        late = t < self.not_before_s
+        wild = t > t_end_s + self.AHEAD_S
+        self.late += int(late.sum())
+        self.bad_time += int(wild.sum())
+        now = (t < t_end_s) & ~late
+        keep = (t >= t_end_s) & ~wild
+        self._t, self._g = ([t[keep]], [g[keep]]) if keep.any() else ([], [])
+        self.not_before_s = max(self.not_before_s, t_end_s)
+        self.samples_fed += int(now.sum())
+        return t[now], g[now]
+
+    def restart(self, t0_s: float) -> None:
+        """A new tracker starts at ``t0_s`` (a new sensor clock, a homed head): the pending samples
+        and any before ``t0_s`` are not its (the head may have moved while its pose was unknown)."""
+        self._t, self._g = [], []
+        self.not_before_s = t0_s
