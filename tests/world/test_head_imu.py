@@ -68,3 +68,17 @@ def test_gyro_beats_command_dead_reckoning_with_a_miscalibrated_table():
     assert gyro["reconstruction_error_m"]["rms"] < cmd["reconstruction_error_m"]["rms"]
     # measured: commands 0.86 deg rms, gyro 0.13 deg rms; the gyro's own bound on this run
     assert gyro["head_angle_error_deg"]["max"] < 0.5
+
+
+def test_replay_of_a_gyro_run_says_the_imu_was_not_recorded(tmp_path, capsys):
+    from foveatrack.cli import main
+
+    text = (SCENES / "fig12-tracking.toml").read_text().replace("[gimbal]\n", "[imu]\n\n[gimbal]\n", 1)
+    text = text.replace("[tracker]\n", '[tracker]\nattitude = "gyro"\n', 1)
+    scene = tmp_path / "gyro.toml"
+    scene.write_text(text)
+    assert load_scene(scene).tracker.attitude == "gyro" and load_scene(scene).imu is not None
+    assert main(["simulate", str(scene), "--duration", "1", "--out", str(tmp_path / "out"), "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(tmp_path / "out" / "run.mcap")]) == 0
+    assert "recordings hold no IMU samples" in capsys.readouterr().out
