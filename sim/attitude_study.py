@@ -4,23 +4,22 @@ A variant of a scene file (:func:`scene_variant`): ``[imu]`` added if it has non
 :mod:`sim.imu`, mounted as the lidar: the tracker's ``imu_rotation_deg`` is the scene's), ``[tracker]
 attitude`` set, and optionally the tracker's speed table replaced by the unit's true curve scaled (a
 mis-calibrated table: every speed ``table_scale`` times the truth, each axis's acceleration
-``accel_scale`` times it; the dead time true).  The two variants of a scene differ only in the tracker's attitude source: the gyro is
-simulated in both (its own random stream), so the head, the target and every effect draw alike until
+``accel_scale`` times it; the dead time true).  The two variants of a scene differ only in the
+tracker's attitude source: the gyro is simulated in both (its own random stream), so the head, the target and every effect draw alike until
 the tracker's commands differ.
 
-Errors (:func:`run_variant`), per frame at mid-frame after acquisition is irrelevant here (all frames):
+Errors (:func:`run_variant`):
 
 * reconstruction: ``foveatrack simulate --json``'s ``reconstruction_error_m`` / ``_rel`` (the
   tracker's world estimate of each detection against the true target position);
-* head angle: the rotation angle between the true lidar attitude ``R(pan, tilt)`` and the estimated
-  one (geodesic distance on SO(3), ``arccos((tr(R_true^T R_est) - 1) / 2)``, computed as
-  ``2 asin(|R_true - R_est|_F / sqrt(8))`` to keep its accuracy near 0) [deg].
+* head angle: ``head_angle_error_deg`` of the same summary, the rotation angle between the true lidar
+  attitude ``R(pan, tilt)`` and the estimated one at mid-frame, every frame
+  (:func:`foveatrack.metrics.head_angle_error_deg`) [deg].
 """
 
 from __future__ import annotations
 
 import json
-import math
 import tempfile
 import time
 import tomllib
@@ -28,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from foveatrack.reconstruction import rotation_matrix
+from foveatrack import metrics
 from sim.scene import Scene, scene_from_mapping
 
 
@@ -81,22 +80,9 @@ def scene_variant(path, attitude: str, *, table_scale: float | None = None, acce
 
 
 def head_angle_error_deg(log: dict) -> np.ndarray:
-    """Per frame, the angle [deg] of the rotation between the true and the estimated lidar attitude."""
-    out = np.full(len(log["head_pan_deg"]), np.nan)
-    for i, (p, t, ep, et) in enumerate(zip(log["head_pan_deg"], log["head_tilt_deg"], log["est_pan_deg"],
-                                           log["est_tilt_deg"])):
-        if math.isfinite(ep) and math.isfinite(et):
-            d = np.linalg.norm(rotation_matrix(p, t) - rotation_matrix(ep, et))
-            out[i] = math.degrees(2.0 * math.asin(min(d / math.sqrt(8.0), 1.0)))
-    return out
-
-
-def _stats(x) -> dict:
-    x = np.asarray(x, float)
-    x = x[np.isfinite(x)]
-    if not x.size:
-        return {"rms": None, "p95": None, "max": None}
-    return {"rms": float(np.sqrt(np.mean(x * x))), "p95": float(np.percentile(x, 95)), "max": float(x.max())}
+    """Per frame, the angle [deg] between the true and the estimated lidar attitude (mid-frame)."""
+    return metrics.head_angle_error_deg(log["head_pan_deg"], log["head_tilt_deg"], log["est_pan_deg"],
+                                        log["est_tilt_deg"])
 
 
 def run_variant(scene: Scene) -> dict:
@@ -111,7 +97,7 @@ def run_variant(scene: Scene) -> dict:
     out = {"scene": scene.name, "attitude": scene.tracker.attitude,
            "reconstruction_error_m": m["reconstruction_error_m"],
            "reconstruction_error_rel": m["reconstruction_error_rel"],
-           "head_angle_error_deg": _stats(head_angle_error_deg(log)),
+           "head_angle_error_deg": m["head_angle_error_deg"],
            "tracking_error_deg": m["tracking_error_deg"], "frames_with_detection": m["frames_with_detection"],
            "frames": m["frames"], "wall_s": m["wall_s"]}
     src = loop.tracker.recon

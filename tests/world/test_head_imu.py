@@ -82,3 +82,22 @@ def test_replay_of_a_gyro_run_says_the_imu_was_not_recorded(tmp_path, capsys):
     capsys.readouterr()
     assert main(["replay", str(tmp_path / "out" / "run.mcap")]) == 0
     assert "recordings hold no IMU samples" in capsys.readouterr().out
+
+
+def test_head_angle_error_is_the_rotation_between_the_attitudes():
+    # two routes: the vectorised metric against the angle of R_true^T R_est from its trace
+    from foveatrack.metrics import head_angle_error_deg as metric
+    from foveatrack.reconstruction import rotation_matrix
+
+    rng = np.random.default_rng(4)
+    p, t = rng.uniform(-180, 180, 200), rng.uniform(-80, 80, 200)
+    ep, et = p + rng.normal(0, 2, 200), t + rng.normal(0, 2, 200)
+    ep[:3], et[:3] = p[:3], t[:3]
+    got = metric(p, t, ep, et)
+    want = [np.degrees(np.arccos(np.clip((np.trace(rotation_matrix(a, b).T @ rotation_matrix(c, d)) - 1) / 2, -1, 1)))
+            for a, b, c, d in zip(p, t, ep, et)]
+    assert np.allclose(got, want, atol=1e-6)
+    assert np.all(got[:3] == 0.0)
+    # pure tilt error: the angle is the tilt difference; NaN estimates stay NaN
+    assert metric([10.0], [20.0], [10.0], [20.5])[0] == pytest.approx(0.5, abs=1e-9)
+    assert np.isnan(metric([0.0], [0.0], [np.nan], [0.0])[0])
