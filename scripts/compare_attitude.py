@@ -44,6 +44,8 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", default=",".join(SCENES), help="scene names under scenes/ (comma-separated)")
     ap.add_argument("--tables", default=",".join(TABLES), help=f"which tables: {', '.join(TABLES)}")
     ap.add_argument("--duration", type=float, default=None, help="virtual seconds (default: each scene's own)")
+    ap.add_argument("--rest-before-s", type=float, default=None,
+                    help="seconds the IMU streams with the head at rest before the first frame (default: sim/imu.py's 5)")
     ap.add_argument("--json", action="store_true", help="print every number as JSON instead of the table")
     a = ap.parse_args(argv)
     scenes = [s for s in a.scenes.split(",") if s]
@@ -57,7 +59,8 @@ def main(argv=None) -> int:
     rows = []
     jobs = [(s, t) for s in scenes for t in tables]
     for s, t in tqdm(jobs, desc="scenes x tables", file=sys.stderr):
-        pair = {att: run_variant(scene_variant(ROOT / "scenes" / f"{s}.toml", att, duration_s=a.duration,
+        imu = None if a.rest_before_s is None else {"rest_before_s": a.rest_before_s}
+        pair = {att: run_variant(scene_variant(ROOT / "scenes" / f"{s}.toml", att, duration_s=a.duration, imu=imu,
                                                **TABLES[t]))
                 for att in ("commands", "gyro")}
         rows.append({"scene": s, "table": t, **pair})
