@@ -104,6 +104,7 @@ def _noisy_run(seed, rest_s=5.0, move_s=10.0, bias_deg_s=(0.3, -0.5, 0.8)):
     return float(dp[0]), float(dt[0]), g.angles_at(t_move[-1])[2], g
 
 
+@pytest.mark.slow
 def test_with_noise_and_bias_within_the_stated_sigma():
     # 5 s at rest (bias estimate sigma 0.014/sqrt(5) = 0.0063 deg/s per axis), then 10 s moving:
     # the final error is the bias error x 10 s (0.063 deg) plus the angle random walk
