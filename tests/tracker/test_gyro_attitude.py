@@ -75,6 +75,8 @@ def test_imu_mount_rotation_is_undone():
     # the IMU turned in the lidar frame: its rates are R^T w; the source rotates them back
     rpy = (5.0, -20.0, 90.0)
     R_li = euler_xyz_matrix(rpy)
+    from scipy.spatial.transform import Rotation   # the convention of sim/imu.py and calibrate-imu
+    assert np.allclose(R_li, Rotation.from_euler("xyz", rpy, degrees=True).as_matrix(), atol=1e-15)
     assert np.allclose(R_li, quat_matrix(quat_from_matrix(R_li)), atol=1e-15)
     t = np.arange(0, 1001) / RATE_HZ
     tilt = 10.0 * t
