@@ -14,6 +14,8 @@ Definitions (the ones ``foveatrack simulate --json`` and the regression baseline
   skipped).
 * ``reconstruction_error_m`` (rms/p95/max) and ``reconstruction_error_rel`` (error / range) when world
   estimates are given.
+* ``head_angle_error_deg`` (rms/p95/max over every frame, :func:`head_angle_error_deg`): the tracker's
+  head attitude (dead reckoning or gyro) against the truth, in the simulator's summary.
 
 Regression: :func:`compare_to_baseline` flags a metric that got *worse* than its baseline by more than
 its tolerance (absolute ``abs`` plus relative ``rel``: ``new > base + abs + rel * |base|``; for metrics
@@ -35,6 +37,22 @@ def angle_between_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a = np.asarray(a, float).reshape(-1, 3)
     b = np.asarray(b, float).reshape(-1, 3)
     return np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b)))
+
+
+def head_angle_error_deg(true_pan_deg, true_tilt_deg, est_pan_deg, est_tilt_deg) -> np.ndarray:
+    """Per sample, the angle [deg] of the rotation between the true and the estimated lidar attitude
+    ``R = R_z(pan) R_y(-tilt)`` (:mod:`foveatrack.reconstruction`): the geodesic distance on SO(3),
+    ``arccos((tr(R_t^T R_e) - 1) / 2)``, computed as ``2 asin(|R_t - R_e|_F / sqrt(8))`` to keep its
+    accuracy near 0.  NaN where the estimate is NaN."""
+    p, t = np.radians(np.asarray(true_pan_deg, float)), np.radians(np.asarray(true_tilt_deg, float))
+    ep, et = np.radians(np.asarray(est_pan_deg, float)), np.radians(np.asarray(est_tilt_deg, float))
+
+    def cols(p, t):   # the three columns of R_z(p) R_y(-t), flattened per sample
+        cp, sp, ct, st = np.cos(p), np.sin(p), np.cos(t), np.sin(t)
+        return np.stack([cp * ct, sp * ct, st, -sp, cp, 0 * p, -cp * st, -sp * st, ct], axis=-1)
+
+    d = np.linalg.norm(cols(p, t) - cols(ep, et), axis=-1)
+    return np.degrees(2.0 * np.arcsin(np.minimum(d / math.sqrt(8.0), 1.0)))
 
 
 def _stats(x: np.ndarray) -> dict:

@@ -42,6 +42,7 @@ from foveatrack.control import (STOP, HeadCommand, deadband_p, head_command, hea
 from foveatrack.detection import Detection, detect, detect_in_box, frozen_maker, wrap_deg
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
+from foveatrack.gyro_attitude import GyroAttitude
 from foveatrack.predictive import BearingFilter
 from foveatrack.reconstruction import Reconstructor
 from foveatrack.space_of_interest import Box, SpaceOfInterest, space_from_mapping
@@ -94,6 +95,16 @@ class TrackerConfig:
     pred_deadband_deg : >= 0 [deg]           dead band of the predictive controller's corrective
                                              term (the feed-forward rate keeps the head moving, so
                                              the paper's 2 deg would park the target at the edge)
+    attitude : "commands" | "gyro"           where the head's angles come from: dead reckoning of
+                                             the commands sent (paper App. D.4), or the lidar's
+                                             bias-corrected gyro (foveatrack.gyro_attitude; needs
+                                             the lidar's IMU samples, fed with Tracker.on_imu)
+    imu_rotation_deg : (roll, pitch, yaw) [deg]  the IMU's mount in the lidar frame (R = Rz Ry Rx,
+                                             the result of ``foveatrack calibrate-imu``); gyro only
+    gyro_noise_deg_s_rthz : > 0              gyro white noise density (BMI088: 0.014); gyro only
+    gyro_bias_walk_deg_s_rts : >= 0          gyro bias random walk; gyro only
+    gyro_rest_margin_s : >= 0 [s]            after a STOP, wait this long past the expected
+                                             deceleration before taking the head as at rest
     """
 
     rate_hz: float = 10.0
@@ -128,8 +139,15 @@ class TrackerConfig:
     pred_q_deg2_s3: float = 4.0
     pred_r_deg2: float = 0.04
     pred_deadband_deg: float = 0.3
+    attitude: str = "commands"
+    imu_rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gyro_noise_deg_s_rthz: float = 0.014
+    gyro_bias_walk_deg_s_rts: float = 0.001
+    gyro_rest_margin_s: float = 0.2
 
     CONTROLLERS = ("paper", "predictive")
+    ATTITUDES = ("commands", "gyro")
+    GYRO_KEYS = ("imu_rotation_deg", "gyro_noise_deg_s_rthz", "gyro_bias_walk_deg_s_rts", "gyro_rest_margin_s")
     ERROR_FRAMES = ("lidar", "head")
     SEARCHES = ("sweep", "hold")
 
@@ -151,10 +169,10 @@ class TrackerConfig:
             elif k == "gain_1_s":
                 kw["gain_pan_1_s"] = kw["gain_tilt_1_s"] = f(k, lo=0, lo_open=True)
             elif k in ("deadband_pan_deg", "deadband_tilt_deg", "tilt_margin_deg", "hold_s", "send_delay_s",
-                       "latency_s", "timing_sigma_s", "pred_deadband_deg"):
+                       "latency_s", "timing_sigma_s", "pred_deadband_deg", "gyro_bias_walk_deg_s_rts"):
                 kw[k] = f(k, lo=0)
             elif k in ("rate_hz", "gain_pan_1_s", "gain_tilt_1_s", "stop_lookahead_s", "search_pan_speed_deg_s",
-                       "pred_q_deg2_s3", "pred_r_deg2"):
+                       "pred_q_deg2_s3", "pred_r_deg2", "gyro_noise_deg_s_rthz"):
                 kw[k] = f(k, lo=0, lo_open=True)
             elif k in ("max_pan_speed_deg_s", "max_tilt_speed_deg_s", "search_timeout_s", "accel_deg_s2"):
                 kw[k] = as_float(data[k], k, where, lo=0, lo_open=True, allow_none=True)
@@ -193,6 +211,15 @@ class TrackerConfig:
                 kw[k] = (lo, hi)
             elif k == "lidar_offset_m":
                 kw[k] = as_vec(data[k], k, where, 3)
+            elif k == "attitude":
+                kw[k] = as_choice(data[k], k, where, cls.ATTITUDES)
+            elif k == "imu_rotation_deg":
+                v = as_vec(data[k], k, where, 3)
+                if max(abs(x) for x in v) > 180:
+                    raise UserError(f"{where}: imu_rotation_deg angles must be within +-180 deg, got {list(v)}")
+                kw[k] = v
+            elif k == "gyro_rest_margin_s":
+                kw[k] = f(k, lo=0, hi=10)
         cfg = cls(**kw)
         lo, hi = cfg.tilt_limits_deg
         if not lo + cfg.tilt_margin_deg < hi - cfg.tilt_margin_deg:
@@ -214,7 +241,10 @@ class TrackerConfig:
             if isinstance(v, (set, frozenset)):
                 return len(v)
             return v
-        return {f.name: plain(getattr(self, f.name)) for f in fields(self)}
+        # The gyro's settings only when it runs: a recording made before they existed (attitude from
+        # the commands) still rebuilds as recorded.
+        skip = () if self.attitude == "gyro" else ("attitude",) + self.GYRO_KEYS
+        return {f.name: plain(getattr(self, f.name)) for f in fields(self) if f.name not in skip}
 
     def with_head(self, facts, table: Mapping | None = None, where: str = "[tracker]") -> "TrackerConfig":
         """This configuration with the head's facts (:class:`gimbal.head_facts.HeadFacts`).
@@ -289,6 +319,11 @@ class Tracker:
             latency_s=config.latency_s, dead_time_s=config.dead_time_s, accel_deg_s2=config.accel_deg_s2,
             tilt_limits_deg=config.tilt_limits_deg, timing_sigma_s=config.timing_sigma_s,
             lidar_offset_m=config.lidar_offset_m)
+        if config.attitude == "gyro":
+            self.recon = GyroAttitude(
+                self.recon, imu_rotation_deg=config.imu_rotation_deg,
+                noise_density_deg_s_rthz=config.gyro_noise_deg_s_rthz,
+                bias_walk_deg_s_rts=config.gyro_bias_walk_deg_s_rts, rest_margin_s=config.gyro_rest_margin_s)
         self.state = TrackState.WAITING
         self.pan_filter = BearingFilter(config.pred_q_deg2_s3, config.pred_r_deg2, wrap=True)
         self.tilt_filter = BearingFilter(config.pred_q_deg2_s3, config.pred_r_deg2, wrap=False)
@@ -334,6 +369,13 @@ class Tracker:
         self.last_command = cmd
         return _make_output(t_now, self.state, det, cmd, vp, vt, err_pan, err_tilt, hp, ht, sp, st,
                             world, sigma_w, limited)
+
+    def on_imu(self, t_s, gyro_rad_s) -> None:
+        """The lidar's gyro samples (time order; ``t_s`` (N,) on the frames' clock [s], ``gyro_rad_s``
+        (N, 3) in the IMU frame [rad/s]), fed before the frame they precede.  Ignored unless
+        ``attitude = "gyro"``: the commands' dead reckoning has no use for them."""
+        if self.config.attitude == "gyro":
+            self.recon.on_imu(t_s, gyro_rad_s)
 
     def command_sent(self, t_s: float, cmd: HeadCommand) -> None:
         """For drivers that send extra commands of their own (e.g. a stop on shutdown)."""

@@ -78,6 +78,9 @@ class ImuSpec:
     nominal_rotation_deg: tuple = (0.0, 0.0, 0.0)
     nominal_translation_m: tuple = (0.0, 0.0, 0.0)
     noise: ImuNoise = field(default_factory=ImuNoise)
+    # In a closed loop (sim/head_imu.py): how long the IMU streams, the head at rest at its start
+    # pose, before the run's first frame (the daemon starts the lidar and waits for a target) [s].
+    rest_before_s: float = 5.0
 
     @staticmethod
     def _T(rpy_deg, t_m) -> np.ndarray:
@@ -121,8 +124,11 @@ _NOISE_KEYS = [k for k in ImuNoise.__dataclass_fields__]
 
 
 def imu_from_table(t: Mapping, where: str) -> ImuSpec:
-    check_keys(t, ["rotation_deg", "translation_m", "nominal_rotation_deg", "nominal_translation_m"] + _NOISE_KEYS, where)
+    check_keys(t, ["rotation_deg", "translation_m", "nominal_rotation_deg", "nominal_translation_m", "rest_before_s"]
+               + _NOISE_KEYS, where)
     kw = {}
+    if "rest_before_s" in t:
+        kw["rest_before_s"] = as_float(t["rest_before_s"], "rest_before_s", where, lo=0, hi=600)
     for k in ("rotation_deg", "nominal_rotation_deg"):
         if k in t:
             v = as_vec(t[k], k, where, 3)

@@ -10,6 +10,8 @@ Per frame ``[t0, t1)`` (100 ms at the tracker's 10 Hz):
    target is only traced for rays inside its bounding cone for this frame, so a one-UAV scene
    never traces the whole cloud;
 5. the effects the scene lists act on the returns;
+   (with ``[imu]``: the lidar's gyro samples up to the frame's end, from the head's true motion,
+   go to the tracker first, :mod:`sim.head_imu`);
 6. the tracker gets the frame (points in the lidar frame) and returns a neutral command, which is
    encoded as Pelco-D and sent through the virtual UART (10 bits per byte at the scene's baud).
 
@@ -36,6 +38,7 @@ from gimbal.pelco import encode_pan_tilt, wrap_pan_deg
 from gimbal.pts303h import PTS303H, HeadParams
 from sim import effects as fx
 from sim.ahead import Ahead, ScanAhead
+from sim.head_imu import HeadGyro
 from sim.scene import Scene
 from sim.sensor import SceneSensor, scene_scan_model
 from sim.virtual_uart import VirtualUart
@@ -149,6 +152,11 @@ class ClosedLoop:
         self.tracker = Tracker(scene.tracker.with_head(self.head_facts, scene.tracker_table, f"{scene.path} [tracker]"),
                                table)
         self.controller = controller if controller is not None else self.tracker
+        # The lidar's gyro on the head, only when the scene has [imu] (its own random stream).
+        if self.tracker.config.attitude == "gyro" and scene.imu is None:
+            raise UserError(f"{scene.path} [tracker]: attitude = \"gyro\" needs an [imu] table "
+                            "(the lidar's IMU on the head, whose gyro it integrates)")
+        self.gyro = HeadGyro(scene.imu, seed, tilt0) if scene.imu is not None else None
         # The daemon's gate (limits, stale frames): pass-through unless the scene has a [gate] table.
         self.gate = CommandGate(None if scene.gate is None else Limits(
             scene.gate.max_pan_byte, scene.gate.max_tilt_byte, scene.gate.allow_turbo,
@@ -262,7 +270,12 @@ class ClosedLoop:
         xyz, pt_ns, refl_byte, on_target = self.sensor.returns(chunk, d_world, t0, t1)
         frame = Frame(t0, t1, xyz, pt_ns, refl_byte)
         c4 = clock()
-        # 6. the tracker and the link.
+        # 6. the tracker and the link; the gyro's samples of this frame (and before) come first.
+        if self.gyro is not None:
+            feed = getattr(self.controller, "on_imu", None)
+            t_imu, gyro = self.gyro.samples_until(self.head, t1)
+            if feed is not None:
+                feed(t_imu, gyro)
         send_t = t1 + scene.gimbal.send_delay_s
         out = self.controller.process(frame, send_t)
         c5 = clock()

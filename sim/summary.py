@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from foveatrack.metrics import acquired_within_deg, tracking_metrics
+from foveatrack.metrics import _stats, acquired_within_deg, head_angle_error_deg, tracking_metrics
 
 
 def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
@@ -28,6 +28,9 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
     acquired = acquired_within_deg(scene.tracker)
     m = tracking_metrics(log["t_end_s"], err, detected=log["detected"], in_fov=err < half_fov,
                          acquired_deg=acquired, world_est=log["estimate_xyz"], world_true=log["target_xyz"])
+    # the tracker's head attitude against the truth, every frame (None when no tracker runs)
+    m["head_angle_error_deg"] = _stats(head_angle_error_deg(log["head_pan_deg"], log["head_tilt_deg"],
+                                                            log["est_pan_deg"], log["est_tilt_deg"]))
     pts = log["points_on_target"]
     m["half_fov_deg"] = half_fov
     m["points_on_target_per_frame"] = float(np.mean(pts)) if len(pts) else 0.0

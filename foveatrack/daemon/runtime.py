@@ -52,6 +52,7 @@ from foveatrack.daemon.config import DaemonConfig
 from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, format_status
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
 from foveatrack.gate import CommandGate
+from foveatrack.gyro_attitude import ImuFeed
 from foveatrack.live_devices import LidarStream, open_devices
 from foveatrack.recording.format import DAEMON_EVENTS
 from foveatrack.recording.records import CommandRecord, ns, write_record, write_tracker_frame
@@ -98,6 +99,10 @@ class _Receiver(threading.Thread):
         self.unit_events: queue.SimpleQueue = queue.SimpleQueue()
         self.unit_note = ""
         self.epoch = 0
+        # The lidar's IMU samples (data type 6) for a tracker that takes its attitude from the gyro:
+        # (t_ns, gyro_rad_s, clock epoch) batches, taken by the control loop.
+        self.want_imu = False
+        self.imu: deque = deque(maxlen=4096)
 
     @property
     def offset_s(self) -> float | None:
@@ -112,6 +117,10 @@ class _Receiver(threading.Thread):
             self.client.start_sampling()
             while not self.stop_ev.is_set():
                 now, batches = self.stream.poll(0.02)
+                if self.want_imu:
+                    imu = self.client.take_imu()
+                    if len(imu.t_ns):
+                        self.imu.append((imu.t_ns, imu.gyro_rad_s, self.stream.epoch))
                 self.counters = {**self.client.counters, **self.stream.counters}
                 for jump in self.stream.take_jumps():   # the sensor clock restarted or jumped: re-anchored
                     self.unit_events.put(jump.as_event())
@@ -170,6 +179,8 @@ class Daemon:
         self.gate = CommandGate(self.limits)
         self.table = config.speed_table()
         self.tracker = Tracker(config.tracker, self.table)
+        # attitude = "gyro": the lidar's IMU samples, held until the frame they precede
+        self.imu_feed = ImuFeed() if config.tracker.attitude == "gyro" else None
         self.slicer = FrameSlicer(config.tracker.rate_hz)
         self.counters: Counter = Counter(frames_stale=0)
         self.proc_ms: list[float] = []
@@ -243,6 +254,7 @@ class Daemon:
             self._open_live()
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
         self.rx = _Receiver(self.client, self.q, self.stop_ev)
+        self.rx.want_imu = self.imu_feed is not None
 
     def _open_live(self) -> None:
         """The live view: a second sink of the recording's channels (a writer without a file when
@@ -292,6 +304,22 @@ class Daemon:
                             limited=tuple(why),
                             tracker_command=None if t is None else (t.pan_dir, t.pan_byte, t.tilt_dir, t.tilt_byte))
         return rec, t_written
+
+    def _feed_imu(self, t_end_s: float) -> None:
+        """The gyro samples before this frame's end go to the tracker first (of this clock only)."""
+        rx_imu = getattr(self.rx, "imu", None)
+        while rx_imu:
+            t_ns, gyro, epoch = rx_imu.popleft()
+            if epoch == self.epoch:
+                self.imu_feed.push(t_ns, gyro)
+        t, g = self.imu_feed.release(t_end_s)
+        self.tracker.on_imu(t, g)
+        self.counters["imu_samples"] = self.imu_feed.samples_fed
+        self.counters["imu_samples_bad_time"] = self.imu_feed.bad_time
+        if self.counters["frames"] == 20 and self.imu_feed.samples_in == 0:
+            self.log.event("warning", message="[tracker] attitude = \"gyro\" but no IMU samples from the lidar "
+                           "after 20 frames: the head's angles come from the commands alone (a Mid-40 has no "
+                           "IMU; a Horizon, Avia or Tele-15 streams it at 200 Hz unless its IMU push is off)")
 
     def _new_clock(self, epoch: int, t0_s: float) -> None:
         """Carry the tracker over to a new sensor clock starting at ``t0_s`` [s].
@@ -375,6 +403,8 @@ class Daemon:
     def _rebase_tracker(self, t0_s: float, pan_deg: float, tilt_deg: float) -> None:
         """A fresh tracker whose dead reckoning starts at ``(pan_deg, tilt_deg)`` at sensor time ``t0_s``."""
         self.tracker = self.tracker.rebased(t0_s, pan_deg, tilt_deg)   # replay repeats it from the event
+        if self.imu_feed is not None:
+            self.imu_feed.restart(t0_s)
         self._last_send_t = -math.inf
         self.gate.head_cmd = STOP
 
@@ -394,6 +424,8 @@ class Daemon:
         now_s = self.sensor_now_s()
         send_t = self._send_time((frame.t_end_s if now_s is None else max(now_s, frame.t_end_s))
                                  + float(np.median(self._compute_s)))
+        if self.imu_feed is not None:
+            self._feed_imu(frame.t_end_s)
         out = self.tracker.process(frame, send_t_s=send_t)
         fid = self.frame_id
         self.frame_id += 1

@@ -147,6 +147,10 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth,
                        final_pose_deg=final_pose, tracker_cfg=cfg)
     res.comparison = compare(frames, recorded)
+    if cfg.attitude == "gyro":
+        # Recordings hold no IMU samples: the replayed tracker's head angles come from its commands
+        # alone, so they, the world estimates and the commands may differ from the run for that reason.
+        res.comparison["gyro_samples_recorded"] = False
     if tracker_table is None and "tracker_effective" in meta:
         # the configuration replay rebuilt is the one that ran (JSON-normalised: tuples as lists)
         import json
