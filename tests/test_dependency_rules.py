@@ -63,4 +63,5 @@ def test_the_check_itself_catches_a_forbidden_import(tmp_path):
     env_path = f"{tmp_path}:{ROOT}"
     out = subprocess.run([sys.executable, "-c", CHECK, json.dumps(["fakepkg", "fakepkg.bad"]), json.dumps(["sim"])],
                          cwd=ROOT, capture_output=True, text=True, timeout=300, env={"PYTHONPATH": env_path, "PATH": ""})
-    assert json.loads(out.stdout) == {"fakepkg.bad": ["sim", "sim.effects"]}
+    got = json.loads(out.stdout)
+    assert set(got) == {"fakepkg.bad"} and {"sim", "sim.effects"} <= set(got["fakepkg.bad"]), got   # and what sim.effects imports
