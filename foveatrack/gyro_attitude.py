@@ -64,8 +64,8 @@ import math
 import numpy as np
 
 from foveatrack.control import HeadCommand
-from foveatrack.detection import Detection, wrap_deg
-from foveatrack.reconstruction import Reconstructor, rotation_matrix
+from foveatrack.detection import wrap_deg
+from foveatrack.reconstruction import HeadPose, Reconstructor, rotation_matrix
 
 #: A rest stretch longer than this is folded into the bias estimate in pieces of this length, so a
 #: long wait keeps the estimate fresh (the bias walks) [s].
@@ -185,7 +185,7 @@ class BiasFilter:
         self.updates += 1
 
 
-class GyroAttitude:
+class GyroAttitude(HeadPose):
     """Head angles from the bias-corrected gyro, with the commands' dead reckoning beyond the last
     sample; the interface of :class:`~foveatrack.reconstruction.Reconstructor` (what the tracker
     asks of its attitude source) plus :meth:`on_imu`.
@@ -328,22 +328,6 @@ class GyroAttitude:
 
     def speeds_at(self, t_s: float) -> tuple[float, float]:
         return self.commands.speeds_at(t_s)
-
-    def rotation_at(self, t_s: float) -> np.ndarray:
-        p, t, _, _ = self.angles_at(t_s)
-        return rotation_matrix(p, t)
-
-    def lidar_to_world(self, xyz: np.ndarray, t_s: float) -> np.ndarray:
-        return (np.asarray(xyz, float).reshape(-1, 3) + self.lidar_offset_m) @ self.rotation_at(t_s).T
-
-    def to_world(self, detection: Detection) -> tuple[np.ndarray, float]:
-        """As :meth:`Reconstructor.to_world`, with this source's angles and sigma."""
-        p, t, sp, st = self.angles_at(detection.t_s)
-        q = np.asarray(detection.xyz, float) + self.lidar_offset_m
-        w = rotation_matrix(p, t) @ q
-        w0, w1, _ = w.tolist()
-        sigma = math.hypot(math.hypot(w0, w1) * math.radians(sp), math.sqrt(q.dot(q)) * math.radians(st))
-        return w, sigma
 
     # -- the gyro ---------------------------------------------------------------------------------
     def on_imu(self, t_s, gyro_rad_s) -> None:

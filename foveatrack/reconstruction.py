@@ -173,7 +173,40 @@ class _AxisIntegrator:
             del self.times[:cut]
 
 
-class Reconstructor:
+class HeadPose:
+    """What a source of head angles gives the tracker once it has ``angles_at(t_s)`` -> ``(pan_deg,
+    tilt_deg, sigma_pan_deg, sigma_tilt_deg)`` and ``lidar_offset_m``: the head's rotation, points and
+    detections in the world.  Shared by the commands' dead reckoning (:class:`Reconstructor`) and the
+    gyro's (:class:`foveatrack.gyro_attitude.GyroAttitude`), so both place a detection the same way."""
+
+    lidar_offset_m: np.ndarray
+
+    def angles_at(self, t_s: float) -> tuple[float, float, float, float]:   # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def rotation_at(self, t_s: float) -> np.ndarray:
+        p, t, _, _ = self.angles_at(t_s)
+        return rotation_matrix(p, t)
+
+    def lidar_to_world(self, xyz: np.ndarray, t_s: float) -> np.ndarray:
+        """Points (N, 3) in the lidar frame at one time -> world frame."""
+        return (np.asarray(xyz, float).reshape(-1, 3) + self.lidar_offset_m) @ self.rotation_at(t_s).T
+
+    def to_world(self, detection: Detection) -> tuple[np.ndarray, float]:
+        """World position of a detection and its 1-sigma position uncertainty [m] from the head-angle
+        uncertainty: ``sigma^2 = (rho sigma_pan)^2 + (r sigma_tilt)^2`` with ``rho`` the horizontal
+        distance from the pan axis and ``r`` the distance from the head centre (radians inside)."""
+        p, t, sp, st = self.angles_at(detection.t_s)
+        q = np.asarray(detection.xyz, float) + self.lidar_offset_m
+        w = rotation_matrix(p, t) @ q
+        w0, w1, _ = w.tolist()
+        rho = math.hypot(w0, w1)
+        r = math.sqrt(q.dot(q))   # np.linalg.norm(q), without its checks
+        sigma = math.hypot(rho * math.radians(sp), r * math.radians(st))
+        return w, sigma
+
+
+class Reconstructor(HeadPose):
     """Estimate the head angles from the commands sent, and place detections in the world.
 
     Parameters
@@ -260,23 +293,3 @@ class Reconstructor:
         """Estimated actual (pan, tilt) speeds [deg/s] at ``t_s``."""
         return self.pan.state(t_s)[1], self.tilt.state(t_s)[1]
 
-    def rotation_at(self, t_s: float) -> np.ndarray:
-        p, t, _, _ = self.angles_at(t_s)
-        return rotation_matrix(p, t)
-
-    def lidar_to_world(self, xyz: np.ndarray, t_s: float) -> np.ndarray:
-        """Points (N, 3) in the lidar frame at one time -> world frame."""
-        return (np.asarray(xyz, float).reshape(-1, 3) + self.lidar_offset_m) @ self.rotation_at(t_s).T
-
-    def to_world(self, detection: Detection) -> tuple[np.ndarray, float]:
-        """World position of a detection and its 1-sigma position uncertainty [m] from the head-angle
-        uncertainty: ``sigma^2 = (rho sigma_pan)^2 + (r sigma_tilt)^2`` with ``rho`` the horizontal
-        distance from the pan axis and ``r`` the distance from the head centre (radians inside)."""
-        p, t, sp, st = self.angles_at(detection.t_s)
-        q = np.asarray(detection.xyz, float) + self.lidar_offset_m
-        w = rotation_matrix(p, t) @ q
-        w0, w1, _ = w.tolist()
-        rho = math.hypot(w0, w1)
-        r = math.sqrt(q.dot(q))   # np.linalg.norm(q), without its checks
-        sigma = math.hypot(rho * math.radians(sp), r * math.radians(st))
-        return w, sigma
