@@ -102,9 +102,9 @@ class FoxgloveChannels:
 
     # ------------------------------------------------------------------ records
 
-    def log_points(self, t_ns: int, frame_id: int, packed: np.ndarray) -> None:
+    def log_points(self, t_ns: int, frame_id: int, packed: np.ndarray, dt_unit_ns: int = 1) -> None:
         self._note(POINTS)
-        self._points.log(encode_points_pb(t_ns, frame_id, packed), log_time=int(t_ns))
+        self._points.log(encode_points_pb(t_ns, frame_id, packed, dt_unit_ns), log_time=int(t_ns))
 
     def log_json(self, name: str, t_ns: int, payload: bytes, rec: dict) -> None:
         self._note(name)
