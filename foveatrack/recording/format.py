@@ -6,6 +6,7 @@ See :mod:`foveatrack.recording` for the layout of a file.
 from __future__ import annotations
 
 import base64
+import functools
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,6 +103,7 @@ def _to_jsonable(x: Any) -> Any:
     raise TypeError(f"cannot record a {type(x).__name__} in JSON")
 
 
+@functools.lru_cache(maxsize=None)     # built once per layout: a dtype costs ~10 us, a frame's packing ~20
 def packed_point_dtype(xyz_dtype: str = "float64", dt_dtype: str = "<i4") -> np.dtype:
     """Packed point layout of the ``/points`` channel (format 3): x, y, z, ``dt`` (point time - frame
     time, in the frame's ``dt_unit_ns``), reflectivity."""
@@ -126,7 +128,8 @@ def mm_grid_f32(xyz_m: np.ndarray) -> np.ndarray | None:
     a float64 the client could have decoded) or past ``MAX_GRID_MM``.  xyz_m: (n, 3) float64 [m]."""
     from foveatrack.livox.protocol import m_to_mm, mm_to_m
 
-    mm = m_to_mm(xyz_m)
+    with np.errstate(invalid="ignore"):      # NaN: off the grid (the check below says so)
+        mm = m_to_mm(xyz_m)
     if mm.size and (np.abs(mm).max() >= MAX_GRID_MM or not np.array_equal(mm_to_m(mm), xyz_m)):
         return None
     return (np.rint(xyz_m * GRID_PER_M) / GRID_PER_M).astype(np.float32)
@@ -137,6 +140,19 @@ def mm_grid_to_m(v: np.ndarray) -> np.ndarray:
     from foveatrack.livox.protocol import mm_to_m
 
     return mm_to_m(np.rint(v.astype(np.float64) * 1000.0).astype(np.int32))
+
+
+def pack_points_numpy(xyz: np.ndarray, dt_ns: np.ndarray, reflectivity: np.ndarray) -> tuple[np.ndarray, int]:
+    """The packed points of a frame and the unit of their ``dt`` [ns] (numpy twin of
+    :func:`foveatrack.recording.pack_kernels.pack_points`, which the writer uses)."""
+    grid = mm_grid_f32(xyz)
+    unit, dt_type = time_unit_ns(dt_ns)
+    out = np.empty(len(dt_ns), packed_point_dtype("float64" if grid is None else "float32", dt_type))
+    src = xyz if grid is None else grid
+    out["x"], out["y"], out["z"] = src[:, 0], src[:, 1], src[:, 2]
+    out["dt"] = dt_ns // unit
+    out["reflectivity"] = reflectivity
+    return out, unit
 
 
 def time_unit_ns(dt_ns: np.ndarray) -> tuple[int, str]:

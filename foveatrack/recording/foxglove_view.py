@@ -26,7 +26,8 @@ import numpy as np
 from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, LOG, METRICS, POINTS, RECORD_SCHEMAS, SCENE,
                                          TF, TRUTH, encode_points_pb)
 
-SEGMENT_FRAMES = 50        # a drawn trajectory is one line entity per 50 frames (constant cost per frame)
+SEGMENT_FRAMES = 10        # a drawn trajectory is one line entity per 10 frames: each frame re-sends
+                           # its segment, so short segments keep the bytes and the CPU per frame small
 
 
 def head_quaternion(pan_deg: float, tilt_deg: float) -> tuple[float, float, float, float]:

@@ -13,9 +13,9 @@ import numpy as np
 from foveatrack.errors import UserError
 from foveatrack.livox.protocol import quantise_to_mm_grid
 from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD,
-                                         MAX_GRID_MM, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable, mm_grid_f32,
-                                         packed_point_dtype, time_unit_ns)
+                                         MAX_GRID_MM, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable)
 from foveatrack.recording.foxglove_view import FoxgloveChannels
+from foveatrack.recording.pack_kernels import pack_points
 
 
 def _sdk_version() -> str:
@@ -241,16 +241,10 @@ class RecordingWriter:
         # otherwise float64 (exact); "float32" forces the grid, rounding to the nearest mm
         if self._xyz_dtype == "float32":
             xyz = quantise_to_mm_grid(xyz)
-        grid = mm_grid_f32(xyz)
-        if grid is None and self._xyz_dtype == "float32":
+        arr, unit = pack_points(xyz, dt, refl)
+        if self._xyz_dtype == "float32" and arr.dtype["x"] != np.float32:
             raise ValueError(f"a point lies {MAX_GRID_MM / 1000:.0f} m or more from the lidar: past what "
                              f"points_dtype='float32' stores; record with 'float64'")
-        unit, dt_type = time_unit_ns(dt)
-        arr = np.empty(n, packed_point_dtype("float64" if grid is None else "float32", dt_type))
-        src = xyz if grid is None else grid
-        arr["x"], arr["y"], arr["z"] = src[:, 0], src[:, 1], src[:, 2]
-        arr["dt"] = dt // unit
-        arr["reflectivity"] = refl
         t_ns = self._add(POINTS, t_ns)
         self.view.log_points(t_ns, frame_id, arr, unit)
         self.frames_written += 1

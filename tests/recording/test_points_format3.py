@@ -87,3 +87,30 @@ def test_float32_refuses_points_past_the_bound(tmp_path):
     with RecordingWriter(tmp_path / "r.mcap", {}, points_dtype="float32") as w:
         with pytest.raises(ValueError, match="8192 m"):
             w.write_points(t, 0, xyz, tp, refl)
+
+
+@pytest.mark.parametrize("case", ["grid", "grid-i4", "off-grid", "far", "nan", "empty", "one", "same-time"])
+def test_pack_kernel_gives_the_numpy_twins_bytes(case):
+    from foveatrack.recording.format import pack_points_numpy
+    from foveatrack.recording.pack_kernels import pack_points
+
+    rng = np.random.default_rng(11)
+    n = {"empty": 0, "one": 1}.get(case, 2500)
+    xyz = rng.normal(0, 80, (n, 3))
+    if case != "off-grid":
+        xyz = mm_to_m(m_to_mm(xyz))
+    if case == "far":
+        xyz[-1, 1] = MAX_GRID_MM * 1e-3
+    if case == "nan":
+        xyz[3, 2] = np.nan
+    span = 100_000 if case == "grid-i4" else 30_000       # offsets in 10 us units: past int16 or not
+    dt = -np.sort(rng.choice(span, n, replace=False)).astype(np.int64) * 10_000
+    if case == "same-time":
+        dt[:] = -5_000_000
+    refl = rng.integers(0, 256, n).astype(np.uint8)
+    a, ua = pack_points(xyz, dt, refl)
+    b, ub = pack_points_numpy(xyz, dt, refl)
+    assert ua == ub and a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    expect_f32 = case in ("grid", "grid-i4", "empty", "one", "same-time")
+    assert (a.dtype["x"] == np.float32) == expect_f32
+    assert a.dtype["dt"] == (np.int32 if case == "grid-i4" else np.int16)
