@@ -22,6 +22,9 @@ import json
 import math
 
 import numpy as np
+from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms, LinePrimitive,
+                               LinePrimitiveLineType, Log, LogLevel, Point3, Pose, Quaternion, SceneEntity, SceneUpdate,
+                               SpherePrimitive, Timestamp, Vector3)
 
 from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, LOG, METRICS, POINTS, RECORD_SCHEMAS, SCENE,
                                          TF, TRUTH, encode_points_pb)
@@ -40,8 +43,6 @@ def head_quaternion(pan_deg: float, tilt_deg: float) -> tuple[float, float, floa
 
 
 def _ts(t_ns: int):
-    from foxglove.messages import Timestamp
-
     return Timestamp(int(t_ns) // 1_000_000_000, int(t_ns) % 1_000_000_000)
 
 
@@ -150,8 +151,6 @@ class FoxgloveChannels:
                                                   default=str), name)
 
     def _head_tf(self, t_ns, head, lidar, pan_deg, tilt_deg) -> None:
-        from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Vector3
-
         x, y, z, w = head_quaternion(float(pan_deg), float(tilt_deg))
         ox, oy, oz = self.lidar_offset_m
         ts = _ts(t_ns)
@@ -164,20 +163,14 @@ class FoxgloveChannels:
         ]), log_time=int(t_ns))
 
     def _scene_update(self, t_ns, entities) -> None:
-        from foxglove.messages import SceneUpdate
-
         self._note(SCENE)
         self._scene.log(SceneUpdate(entities=entities), log_time=int(t_ns))
 
     @staticmethod
     def _color(rgb, a=1.0):
-        from foxglove.messages import Color
-
         return Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
 
     def _sphere(self, ident, t_ns, frame, xyz, size_m, rgb):
-        from foxglove.messages import Pose, Quaternion, SceneEntity, SpherePrimitive, Vector3
-
         spheres = [] if xyz is None else [SpherePrimitive(
             pose=Pose(position=Vector3(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2])),
                       orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
@@ -195,8 +188,6 @@ class FoxgloveChannels:
         return self._line(f"{name}/{seg}", t_ns, pts, rgb)
 
     def _line(self, ident, t_ns, pts, rgb):
-        from foxglove.messages import LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity
-
         lines = [LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=2.0, scale_invariant=True,
                                points=[Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in pts],
                                color=self._color(rgb))] if len(pts) >= 2 else []
@@ -204,7 +195,6 @@ class FoxgloveChannels:
 
     def _space_entities(self, t_ns) -> list:
         """D of the tracker config (box or vertical cylinder; a sector or a learned map is not drawn)."""
-        from foxglove.messages import CubePrimitive, CylinderPrimitive, Pose, Quaternion, SceneEntity, Vector3
 
         self._space_sent = True
         s = self._space
@@ -234,8 +224,6 @@ class FoxgloveChannels:
         return [SceneEntity(timestamp=_ts(t_ns), frame_id=frame, id="space_of_interest", frame_locked=True, **prim)]
 
     def _log_line(self, t_ns, level, text, name) -> None:
-        from foxglove.messages import Log, LogLevel
-
         lv = {2: LogLevel.Info, 3: LogLevel.Warning, 4: LogLevel.Error}[level]
         self._note(LOG)
         self._log.log(Log(timestamp=_ts(t_ns), level=lv, message=text, name=str(name)), log_time=int(t_ns))
