@@ -59,7 +59,7 @@ def timed_run(scene, record: bool = False, **kw) -> float:
         t = time.perf_counter()
         loop = ClosedLoop(scene, **kw)
         with RecordingWriter(Path(tmp) / "run.mcap", meta=recording_meta(scene, loop), overwrite=True,
-                             created_utc="virtual time (simulation)", background=True) as writer:
+                             created_utc="virtual time (simulation)") as writer:
             loop.frame_hook = SimRecorder(writer)
             loop.run()
         return time.perf_counter() - t

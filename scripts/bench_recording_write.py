@@ -123,8 +123,8 @@ def main() -> None:
 
 
 def scene_report(scene: str, old_cls, levels: bool = False) -> None:
-    runs = [("format 3, zstd 1, background=True (simulate --out)", True, None, {}),
-            ("format 3, zstd 1, on the loop's thread", False, None, {})]
+    runs = [("format 3, zstd 1, on the loop's thread (simulate --out)", False, None, {}),
+            ("format 3, zstd 1, background=True", True, None, {})]
     if levels:
         runs += [(f"format 3, {c} {lv}, on the loop's thread", False, None, {"compression": c, "compression_level": lv})
                  for c, lv in (("lz4", 0), ("zstd", 2), ("zstd", 3), ("zstd", 4), ("zstd", 6))]
