@@ -63,8 +63,7 @@ def timed_run(scene, record: bool = False, ahead: bool = False, **kw) -> tuple[f
 
             tmp = stack.enter_context(tempfile.TemporaryDirectory())
             writer = stack.enter_context(RecordingWriter(Path(tmp) / "run.mcap", meta=recording_meta(scene, loop),
-                                                         overwrite=True, created_utc="virtual time (simulation)",
-                                                         background=True))
+                                                         overwrite=True, created_utc="virtual time (simulation)"))
             loop.frame_hook = SimRecorder(writer)
         loop.run(ahead=ahead)
     return time.perf_counter() - t, time.thread_time() - c

@@ -1,8 +1,10 @@
-"""Recording cost on the thread that writes: one 10 k-point frame (float64 points, per-point times,
-reflectivity) with its detection, head estimate, command and truth records, then the chunk flush
+"""Recording cost on the thread that writes: one 10 k-point frame (points on the Livox mm grid as the
+simulator and a Livox's Cartesian output give them, per-point times at 100 k points/s, reflectivity)
+with its detection, head estimate, command and truth records, then the chunk flush
 (``flush_every_frames = 1``, as ``simulate --out`` and the daemon write).
 
     python scripts/bench_recording_write.py [--points 10000] [--frames 200] [--old PATH_TO_OLD_WRITER_PY]
+            [--scene scenes/fig12-tracking.toml] [--levels]
 
 Prints the calling thread's CPU time per frame [ms] (with ``background=True`` the encoding and
 writing run on the writer's thread: what is left is the hand-over) and bytes per frame.  ``--old`` times a format-1 writer
@@ -21,13 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
+from foveatrack.livox.protocol import quantise_to_mm_grid
 from foveatrack.recording import RecordingWriter
 from foveatrack.recording.records import CommandRecord, DetectionRecord, HeadEstimateRecord, TruthRecord, write_record
 
 
-def run(writer_cls, n_points: int, n_frames: int, path: Path, **kw) -> tuple[np.ndarray, int]:
+def run(writer_cls, n_points: int, n_frames: int, path: Path, off_grid: bool = False, **kw) -> tuple[np.ndarray, int]:
     rng = np.random.default_rng(1)
-    # lidar-like points: 5-130 m along a narrow cone, full float64 mantissas (as the simulator makes them)
+    # lidar-like points: 5-130 m along a narrow cone, on the mm grid (off_grid: full float64 mantissas)
     r = rng.uniform(5, 130, n_points)
     xyz = np.stack([r, rng.normal(0, 0.1, n_points) * r, rng.normal(0, 0.1, n_points) * r], axis=1)
     refl = rng.integers(0, 256, n_points).astype(np.uint8)
@@ -37,6 +40,8 @@ def run(writer_cls, n_points: int, n_frames: int, path: Path, **kw) -> tuple[np.
             t = 1_000_000_000 + k * 100_000_000
             tp = t - 100_000_000 + np.arange(n_points, dtype=np.int64) * (100_000_000 // n_points)
             pts = xyz + rng.normal(0, 0.02, xyz.shape)
+            if not off_grid:
+                pts = quantise_to_mm_grid(pts)
             c0 = time.thread_time()
             w.write_points(t, k, pts, tp, refl)
             write_record(w, DetectionRecord(t, k, True, (12.0, 0.1, 0.2), 40, t * 1e-9, 0.5, 0.9, "tracking", 0.1, 0.2))
@@ -87,13 +92,15 @@ def main() -> None:
     ap.add_argument("--old", help="a format-1 writer module to time beside the current one")
     ap.add_argument("--scene", help="also run this scene's closed loop (e.g. scenes/fig12-tracking.toml) without "
                                     "and with recording")
+    ap.add_argument("--levels", action="store_true", help="with --scene: the compressions and levels on the "
+                                                          "loop's thread (size and CPU of each)")
     a = ap.parse_args()
-    cases = [("foxglove-sdk writer (format 2, zstd)", RecordingWriter, {"compression": "zstd"}),
-             ("foxglove-sdk writer (format 2, lz4)", RecordingWriter, {}),
-             ("foxglove-sdk writer (format 2, none)", RecordingWriter, {"compression": "none"}),
-             ("foxglove-sdk writer (zstd), background=True", RecordingWriter, {"background": True,
-                                                                                "compression": "zstd"}),
-             ("foxglove-sdk writer (lz4), background=True", RecordingWriter, {"background": True})]
+    cases = [("format 3, zstd 1 (default)", RecordingWriter, {}),
+             ("format 3, zstd 3", RecordingWriter, {"compression_level": 3}),
+             ("format 3, lz4", RecordingWriter, {"compression": "lz4"}),
+             ("format 3, none", RecordingWriter, {"compression": "none"}),
+             ("format 3, zstd 1, points off the mm grid (float64)", RecordingWriter, {"off_grid": True}),
+             ("format 3, zstd 1, background=True", RecordingWriter, {"background": True})]
     if a.old:
         spec = importlib.util.spec_from_file_location("old_writer", a.old)
         mod = importlib.util.module_from_spec(spec)
@@ -109,16 +116,19 @@ def main() -> None:
             print(f"  {name:52s} p50 {np.percentile(ms, 50):6.3f}  p95 {np.percentile(ms, 95):6.3f}  "
                   f"mean {ms.mean():6.3f} ms; {size / a.frames / 1e3:7.1f} kB per frame")
     if a.scene:
-        scene_report(a.scene, old_cls)
+        scene_report(a.scene, old_cls, a.levels)
 
 
 
 
 
-def scene_report(scene: str, old_cls) -> None:
-    runs = [("foxglove-sdk writer (lz4), background=True (simulate --out)", True, None, {}),
-            ("foxglove-sdk writer (zstd), background=True", True, None, {"compression": "zstd"}),
-            ("foxglove-sdk writer (lz4), on the loop's thread", False, None, {})]
+def scene_report(scene: str, old_cls, levels: bool = False) -> None:
+    runs = [("format 3, zstd 1, on the loop's thread (simulate --out)", False, None, {}),
+            ("format 3, zstd 1, background=True", True, None, {})]
+    if levels:
+        runs += [(f"format 3, {c} {lv}, on the loop's thread", False, None, {"compression": c, "compression_level": lv})
+                 for c, lv in (("lz4", 0), ("zstd", 2), ("zstd", 3), ("zstd", 4), ("zstd", 6))]
+        runs.append(("format 3, none, on the loop's thread", False, None, {"compression": "none"}))
     if old_cls is not None:
         runs.insert(0, ("python mcap writer (format 1, lz4)", False, old_cls, {}))
     print(f"{scene}: closed loop without / with the recording")

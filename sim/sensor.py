@@ -13,6 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from foveatrack.livox.protocol import quantise_to_mm_grid
 from sim import effects as fx
 from sim import sensor_kernels as sk
 from sim.scan.kernels import RAY_OK
@@ -76,7 +77,7 @@ class SceneSensor:
 
         ``[t0, t1)`` bounds the chunk's times (it sizes the per-target cull).  Returns
         ``(xyz (n, 3) [m] lidar frame, t_ns (n,), reflectivity byte (n,), on_target (n,) bool)``,
-        in time order.
+        in time order; xyz on the 1 mm grid of a Livox's Cartesian output (``quantise_to_mm_grid``).
         """
         scene = self.scene
         n = len(chunk)
@@ -116,13 +117,15 @@ class SceneSensor:
             draws.get("range_noise", _NONE), draws.get("angular_noise", _NONE_3),
             xyz, pt_ns, refl_byte, on_target)
         xyz, pt_ns, refl_byte, on_target = xyz[:k], pt_ns[:k], refl_byte[:k], on_target[:k]
-        if not (scene.has("sunlight") and n):
-            return xyz, pt_ns, refl_byte, on_target
-        # Sunlight false alarms are appended, then the frame is put back in time order (stable:
-        # a false alarm after a real return of the same instant).
-        xyz, pt_ns, refl_byte, on_target = self._sunlight(chunk, xyz, pt_ns, refl_byte, on_target)
-        order = np.argsort(pt_ns, kind="stable")
-        return xyz[order], pt_ns[order], refl_byte[order], on_target[order]
+        if scene.has("sunlight") and n:
+            # Sunlight false alarms are appended, then the frame is put back in time order (stable:
+            # a false alarm after a real return of the same instant).
+            xyz, pt_ns, refl_byte, on_target = self._sunlight(chunk, xyz, pt_ns, refl_byte, on_target)
+            order = np.argsort(pt_ns, kind="stable")
+            xyz, pt_ns, refl_byte, on_target = xyz[order], pt_ns[order], refl_byte[order], on_target[order]
+        # What a Livox outputs (Cartesian data types 0/2): int32 mm, which the live client turns into
+        # float64 metres; the same two functions here, so sim and live points have the same bits.
+        return quantise_to_mm_grid(xyz), pt_ns, refl_byte, on_target
 
     def warm_up(self, chunk) -> None:
         """Run every kernel of :meth:`returns` once (compiled, or loaded from numba's cache), for a

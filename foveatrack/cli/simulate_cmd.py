@@ -111,9 +111,11 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     t0 = time.perf_counter()
     loop = ClosedLoop(scene)
     if out_dir is not None or live_port is not None:
-        # the encoding and the writes run on the writer's thread: the loop only hands the frame over
+        # Written on the loop's own thread: the SDK holds the interpreter lock while it encodes and
+        # compresses, so a writer thread only takes turns with the loop, and the hand-overs cost more
+        # than they save (measured: docs/recordings.md)
         writer = RecordingWriter(None if out_dir is None else out_dir / "run.mcap", meta=recording_meta(scene, loop),
-                                 overwrite=True, created_utc="virtual time (simulation)", background=True)
+                                 overwrite=True, created_utc="virtual time (simulation)")
         recorder = SimRecorder(writer)
         loop.frame_hook = recorder
         if live_port is not None:

@@ -4,7 +4,7 @@ The kernels are compiled on first use and cached next to the sources (``cache=Tr
 ``foveatrack demo`` after an install spends about a minute compiling inside its first frame.  This
 command does that work up front: it runs two frames of every shipped scene (which compiles the scan,
 world, sensor and tracker kernels in the argument types the closed loop uses) and the scan analyses the
-demo draws (radial density, voxel coverage).  A second call only loads the cache and takes a few seconds.
+demo draws (radial density, voxel coverage), and the recording's point packing.  A second call only loads the cache and takes a few seconds.
 """
 
 from __future__ import annotations
@@ -45,8 +45,21 @@ def warm_up(progress: bool = True) -> float:
         optics = load_scene(shipped_scene("fig12-tracking.toml")).optics
         radial_density(ScanModel(optics), 0.01)
         voxel_coverage(ScanModel(optics), 0.01, voxel_grid(optics, reference_rays=20_000))
+        _warm_recording_kernels()
         bar.update(1)
     return time.perf_counter() - t0
+
+
+def _warm_recording_kernels() -> None:
+    """The recording's point packing (``simulate --out``, the daemon): a frame on the mm grid, int16
+    and int32 times."""
+    import numpy as np
+
+    from foveatrack.recording.pack_kernels import pack_points
+
+    xyz = np.zeros((2, 3))
+    for dt in (np.array([0, -10_000], np.int64), np.array([0, -1_000_001], np.int64)):
+        pack_points(xyz, dt, np.zeros(2, np.uint8))
 
 
 def cmd_warmup(args) -> int:

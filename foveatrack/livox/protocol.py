@@ -465,6 +465,31 @@ TIMESTAMP_TYPES_NS = (0, 1, 4)
 TIMESTAMP_TYPE_UTC = 3
 
 
+# The Cartesian wire grid (data types 0, 2, 4, 7: x, y, z int32 mm).  The simulator quantises its
+# points with these same two functions (sim/sensor.py), so a simulated point and the point a live
+# client decodes from the same packet are the same float64 bits, and a recording stores them exactly.
+MM_PER_M = 1000.0
+INT32_MM_MIN, INT32_MM_MAX = -(2**31), 2**31 - 1
+
+
+def m_to_mm(xyz_m) -> np.ndarray:
+    """Metres -> the int32 millimetres a Livox sends (round half to even, saturated at the int32 range:
+    ±2147 km, far past any range a sensor reports).  Any shape; NaN is not allowed."""
+    return np.rint(np.asarray(xyz_m, dtype=np.float64) * MM_PER_M).clip(INT32_MM_MIN, INT32_MM_MAX).astype(np.int32)
+
+
+def mm_to_m(mm) -> np.ndarray:
+    """int32 millimetres -> float64 metres: ``mm * 1e-3``, THE operation of every Cartesian point the
+    live client decodes and every point the simulator outputs (a product with 1e-3, not a quotient by
+    1000: the two differ in the last bit for some values, so nothing else may be used)."""
+    return np.multiply(np.asarray(mm, dtype=np.int32), 1e-3)
+
+
+def quantise_to_mm_grid(xyz_m) -> np.ndarray:
+    """Points [m] as a Livox reports them: on the int32 mm grid, in the client's float64 metres."""
+    return mm_to_m(m_to_mm(xyz_m))
+
+
 def packet_dtype(data_type: int) -> np.dtype:
     """Structured dtype of one whole data packet of ``data_type`` (header + fixed point array)."""
     return np.dtype([("hdr", HEADER_DTYPE), ("pts", POINT_DTYPES[data_type], (POINTS_PER_PACKET[data_type],))])
@@ -566,7 +591,7 @@ def decode_packets_array(arr: np.ndarray, point_rate_hz: float, keep_no_return: 
         if ok is not None:
             keep = np.flatnonzero(ok)  # take() with indices is ~5x faster than a 2-D boolean mask
             mm, refl, tag, t = mm.take(keep, axis=0), refl.take(keep), tag.take(keep), t.take(keep)
-        xyz = mm * 1e-3
+        xyz = mm_to_m(mm)
     elif data_type in SPHERICAL_TYPES:
         if per == 1:
             depth = pts["depth"].reshape(-1)
@@ -762,7 +787,7 @@ def encode_data_packets(
     h["timestamp"] = t0_ns + np.round(np.arange(n_pk) * n_per * (1e9 / point_rate_hz)).astype(np.int64)
     p = arr["pts"]
     if data_type in CARTESIAN_TYPES:
-        mm = np.round(xyz_m * 1000.0).astype(np.int64).clip(-(2**31), 2**31 - 1).reshape(n_pk, n_per, per_slot, 3)
+        mm = m_to_mm(xyz_m).reshape(n_pk, n_per, per_slot, 3)
         rr = refl.reshape(n_pk, n_per, per_slot)
         tt = tag.reshape(n_pk, n_per, per_slot)
         for k in range(per_slot):

@@ -4,7 +4,7 @@ Why MCAP: it is the ROS 2 default log container, append-only and chunked, with p
 summary at the end that a reader does not need.  Everything up to the last *completed chunk* of a
 file cut short (kill -9, power loss) is readable, and Foxglove Studio / ``mcap`` CLI open the files.
 
-Layout of a recording (``profile`` "foveatrack", format version 2, written with the Foxglove SDK;
+Layout of a recording (``profile`` "foveatrack", format version 3, written with the Foxglove SDK;
 docs/recordings.md lists every channel):
 
 - an MCAP Metadata record ``foveatrack`` written first, with string values ``format`` =
@@ -14,11 +14,14 @@ docs/recordings.md lists every channel):
   ``foveatrack_channels`` (``channels_json``: channel id -> name) so that a damaged chunk does not take
   the channel names along.
 - channel ``/points``: ``foxglove.PointCloud`` in protobuf, one message per lidar frame, log time = the
-  frame's ``t_ns``, ``frame_id`` "lidar", packed points (little-endian, no padding): x, y, z (float64
-  by default, float32 with ``points_dtype="float32"``) [m, lidar frame X forward, Y left, Z up],
-  ``dt_ns`` int32 (point time − frame ``t_ns``, so |dt| < 2.1 s), ``reflectivity`` uint8; the frame
-  index in protobuf field 15 (not in the schema; decoders skip it).  float64 keeps the live values
-  bit-exact for replay.
+  frame's ``t_ns``, ``frame_id`` "lidar", packed points (little-endian, no padding): x, y, z [m, lidar
+  frame X forward, Y left, Z up], ``dt`` (point time − frame ``t_ns`` in the unit of protobuf field 16,
+  [ns], absent = 1; int16 where that holds it, else int32), ``reflectivity`` uint8; the frame index in
+  protobuf field 15 (fields 15 and 16 are not in the schema; decoders skip them).  x, y, z of a frame
+  on the Livox mm grid (``foveatrack.livox.protocol.mm_to_m`` of int32 mm, as the client decodes and
+  the simulator outputs) are float32 multiples of 2^-11 m within 0.25 mm of the point, from which
+  ``rint(1000 v)`` is the mm value exactly; any other frame is float64.  Either way replay gets the
+  live values to the bit.
 - JSON channels (documented JSON schemas ``foveatrack.Detection`` ..., encoding ``json``), log time =
   the record's ``t_ns``: ``/detections``, ``/commands`` (``raw_hex`` = the bytes sent, ``t_ns`` = send
   time), ``/head`` (head estimates), ``/truth`` (simulation only), ``/metrics``, and any other name
@@ -27,7 +30,7 @@ docs/recordings.md lists every channel):
   head_est -> lidar, world -> head_true -> lidar_true), ``/scene`` (SceneUpdate), ``/log`` (Log).
 
 Format 1 (before the SDK: JSON ``/points`` with base64 data, a channel table in the first metadata
-record) is still read.
+record) and format 2 (float64 or plain float32 x, y, z, ``dt_ns`` int32) are still read.
 
 Crash safety: records go into the current chunk; the chunk is completed and handed to the OS by
 :meth:`RecordingWriter.flush` and automatically when a new frame starts after ``flush_every_frames``

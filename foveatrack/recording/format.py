@@ -6,6 +6,7 @@ See :mod:`foveatrack.recording` for the layout of a file.
 from __future__ import annotations
 
 import base64
+import functools
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,8 +15,10 @@ from typing import Any
 import numpy as np
 
 FORMAT = "foveatrack-recording"
-FORMAT_VERSION = "2"
-READABLE_VERSIONS = ("1", "2")    # 1: JSON + base64 points (python mcap writer); 2: Foxglove SDK, protobuf
+FORMAT_VERSION = "3"
+# 1: JSON + base64 points (python mcap writer); 2: Foxglove SDK, protobuf, float64 points;
+# 3: as 2, points on the Livox mm grid stored compactly (float32 on a 2^-11 m grid, time in its unit)
+READABLE_VERSIONS = ("1", "2", "3")
 META_NAME = "foveatrack"
 CHANNELS_META_NAME = "foveatrack_channels"   # channel id -> name tables written as channels appear
 POINTS = "points"
@@ -101,10 +104,67 @@ def _to_jsonable(x: Any) -> Any:
     raise TypeError(f"cannot record a {type(x).__name__} in JSON")
 
 
-def packed_point_dtype(xyz_dtype: str = "float64") -> np.dtype:
-    """Packed point layout of the ``/points`` channel."""
+@functools.lru_cache(maxsize=None)     # built once per layout: a dtype costs ~10 us, a frame's packing ~20
+def packed_point_dtype(xyz_dtype: str = "float64", dt_dtype: str = "<i4") -> np.dtype:
+    """Packed point layout of the ``/points`` channel (format 3): x, y, z, ``dt`` (point time - frame
+    time, in the frame's ``dt_unit_ns``), reflectivity."""
     f = {"float64": "<f8", "float32": "<f4"}[xyz_dtype]
-    return np.dtype([("x", f), ("y", f), ("z", f), ("dt_ns", "<i4"), ("reflectivity", "u1")])
+    return np.dtype([("x", f), ("y", f), ("z", f), ("dt", dt_dtype), ("reflectivity", "u1")])
+
+
+# ------------------------------------------------------------------ format 3: points on the mm grid
+# A Livox reports Cartesian points in int32 mm (the simulator too: sim/sensor.py), which the client
+# turns into float64 metres with foveatrack.livox.protocol.mm_to_m.  Such a point's mm value k is
+# stored as the float32 multiple of 2^-11 m nearest to k/1000 m: within 0.25 mm of the point, so
+# Foxglove draws it where it is, and k = rint(1000 v) exactly (|1000 v - k| <= 1000/2048/2 < 0.5),
+# whence the reader's mm_to_m(k) is the original float64 bits.  A multiple of 2^-11 has 11 fewer
+# significant bits than k/1000, which the chunk compressor turns into ~15 % fewer bytes (measured,
+# docs/recordings.md).  Exact while m = rint(2048 v) fits float32's 24-bit mantissa: |k| < MAX_GRID_MM.
+GRID_PER_M = 2048.0
+MAX_GRID_MM = 8_192_000        # |x| < 8192 m; a frame with a point past it is stored as float64
+
+
+def mm_grid_f32(xyz_m: np.ndarray) -> np.ndarray | None:
+    """The float32 grid values of points on the mm grid, or None when a point is off the grid (not
+    a float64 the client could have decoded) or past ``MAX_GRID_MM``.  xyz_m: (n, 3) float64 [m]."""
+    from foveatrack.livox.protocol import m_to_mm, mm_to_m
+
+    with np.errstate(invalid="ignore"):      # NaN: off the grid (the check below says so)
+        mm = m_to_mm(xyz_m)
+    if mm.size and (np.abs(mm).max() >= MAX_GRID_MM or not np.array_equal(mm_to_m(mm), xyz_m)):
+        return None
+    return (np.rint(xyz_m * GRID_PER_M) / GRID_PER_M).astype(np.float32)
+
+
+def mm_grid_to_m(v: np.ndarray) -> np.ndarray:
+    """float32 grid values -> the float64 metres they stand for (the client's own operation)."""
+    from foveatrack.livox.protocol import mm_to_m
+
+    return mm_to_m(np.rint(v.astype(np.float64) * 1000.0).astype(np.int32))
+
+
+def pack_points_numpy(xyz: np.ndarray, dt_ns: np.ndarray, reflectivity: np.ndarray) -> tuple[np.ndarray, int]:
+    """The packed points of a frame and the unit of their ``dt`` [ns] (numpy twin of
+    :func:`foveatrack.recording.pack_kernels.pack_points`, which the writer uses)."""
+    grid = mm_grid_f32(xyz)
+    unit, dt_type = time_unit_ns(dt_ns)
+    out = np.empty(len(dt_ns), packed_point_dtype("float64" if grid is None else "float32", dt_type))
+    src = xyz if grid is None else grid
+    out["x"], out["y"], out["z"] = src[:, 0], src[:, 1], src[:, 2]
+    out["dt"] = dt_ns // unit
+    out["reflectivity"] = reflectivity
+    return out, unit
+
+
+def time_unit_ns(dt_ns: np.ndarray) -> tuple[int, str]:
+    """The coarsest exact unit of the point times relative to the frame time (their gcd; 1 if all
+    are 0) and the narrowest integer type that holds them in it: int16 or int32.  A simulated Mid-40
+    frame: 10 000 ns (100 k points/s) and int16; a live frame's packet stamps usually give 1 ns."""
+    if not dt_ns.size:
+        return 1, "<i2"
+    unit = int(np.gcd.reduce(np.abs(dt_ns))) or 1
+    lo, hi = int(dt_ns.min()) // unit, int(dt_ns.max()) // unit
+    return unit, "<i2" if -(2**15) <= lo and hi < 2**15 else "<i4"
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,6 +220,7 @@ def _decode_points(data: bytes) -> PointsFrame:
 # {1 name, 2 offset fixed32, 3 type enum}), 6 data.  Field 15 (varint) carries the frame index: a field
 # the schema does not define, which protobuf decoders (Foxglove's among them) skip.
 FRAME_INDEX_FIELD = 15
+DT_UNIT_FIELD = 16      # format 3: the unit of the ``dt`` field [ns] (varint; absent: 1)
 
 
 def _varint(v: int) -> bytes:
@@ -174,22 +235,23 @@ def _varint(v: int) -> bytes:
             return bytes(out)
 
 
-def encode_points_pb(t_ns: int, frame_id: int, packed: np.ndarray) -> bytes:
+def encode_points_pb(t_ns: int, frame_id: int, packed: np.ndarray, dt_unit_ns: int = 1) -> bytes:
     """One frame as a foxglove.PointCloud (protobuf), frame ``lidar``, with the frame index in field
-    15.  ``packed``: an array of :func:`packed_point_dtype`.  The Foxglove SDK encodes the message
-    without its point data; the data (field 6, bytes) is appended to it, so the ~0.3 MB of a 10 k-point
-    frame is copied once, not four times (a message's fields may come in any order)."""
+    15 and the unit of ``dt`` in field 16.  ``packed``: an array of :func:`packed_point_dtype`.  The
+    Foxglove SDK encodes the message without its point data; the data (field 6, bytes) is appended to
+    it, so the point data is copied once, not four times (a message's fields may come in any order)."""
     from foxglove.messages import PackedElementField, PackedElementFieldNumericType as NT, PointCloud, Timestamp
 
-    types = {"<f8": NT.Float64, "<f4": NT.Float32, "<i4": NT.Int32, "|u1": NT.Uint8}
+    types = {"<f8": NT.Float64, "<f4": NT.Float32, "<i4": NT.Int32, "<i2": NT.Int16, "|u1": NT.Uint8}
     fields = [PackedElementField(name=name, offset=int(off), type=types[dt_.str])
               for name, (dt_, off) in packed.dtype.fields.items()]
     t_ns = int(t_ns)
     head = PointCloud(timestamp=Timestamp(t_ns // 1_000_000_000, t_ns % 1_000_000_000), frame_id="lidar",
                       point_stride=packed.dtype.itemsize, fields=fields).encode()
     data = memoryview(np.ascontiguousarray(packed)).cast("B")
+    unit = b"" if dt_unit_ns == 1 else _varint(DT_UNIT_FIELD << 3) + _varint(int(dt_unit_ns))
     return b"".join((head, bytes([6 << 3 | 2]), _varint(data.nbytes), data,
-                     bytes([FRAME_INDEX_FIELD << 3]), _varint(int(frame_id))))
+                     bytes([FRAME_INDEX_FIELD << 3]), _varint(int(frame_id)), unit))
 
 
 def _pb_fields(buf, i: int = 0, n: int | None = None):
@@ -227,8 +289,11 @@ def _read_varint(buf, i: int) -> tuple[int, int]:
         shift += 7
 
 
-def _decode_points_pb(data: bytes) -> PointsFrame:
+def _decode_points_pb(data: bytes, mm_grid: bool = False) -> PointsFrame:
+    """A /points message of format 2 or 3 (``mm_grid``: format 3, where float32 x, y, z are mm-grid
+    values, :func:`mm_grid_to_m`; in format 2 they were plain float32)."""
     mv = memoryview(data)
+    dt_unit = 1
     sec = nsec = 0
     stride = 0
     fields: list[tuple[str, int, int]] = []
@@ -257,11 +322,15 @@ def _decode_points_pb(data: bytes) -> PointsFrame:
             raw = v
         elif fno == FRAME_INDEX_FIELD:
             frame_index = v
+        elif fno == DT_UNIT_FIELD:
+            dt_unit = v
     if not stride or len(raw) % stride:
         raise ValueError(f"point data of {len(raw)} bytes is not a whole number of {stride}-byte points")
     dt = np.dtype({"names": [f[0] for f in fields], "formats": [_FOX_TO_NP[f[2]] for f in fields],
                    "offsets": [f[1] for f in fields], "itemsize": stride})
     arr = np.frombuffer(raw, dtype=dt)
     t_ns = sec * 1_000_000_000 + nsec
-    xyz = np.stack([arr["x"], arr["y"], arr["z"]], axis=1).astype(np.float64)
-    return PointsFrame(t_ns, frame_index, xyz, arr["dt_ns"].astype(np.int64) + t_ns, arr["reflectivity"].astype(np.uint8))
+    xyz = np.stack([arr["x"], arr["y"], arr["z"]], axis=1)
+    xyz = mm_grid_to_m(xyz) if mm_grid and xyz.dtype == np.float32 else xyz.astype(np.float64)
+    dt_ns = arr["dt"].astype(np.int64) * dt_unit if "dt" in arr.dtype.names else arr["dt_ns"].astype(np.int64)
+    return PointsFrame(t_ns, frame_index, xyz, dt_ns + t_ns, arr["reflectivity"].astype(np.uint8))

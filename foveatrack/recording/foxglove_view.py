@@ -22,11 +22,15 @@ import json
 import math
 
 import numpy as np
+from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms, LinePrimitive,
+                               LinePrimitiveLineType, Log, LogLevel, Point3, Pose, Quaternion, SceneEntity, SceneUpdate,
+                               SpherePrimitive, Timestamp, Vector3)
 
 from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, LOG, METRICS, POINTS, RECORD_SCHEMAS, SCENE,
                                          TF, TRUTH, encode_points_pb)
 
-SEGMENT_FRAMES = 50        # a drawn trajectory is one line entity per 50 frames (constant cost per frame)
+SEGMENT_FRAMES = 10        # a drawn trajectory is one line entity per 10 frames: each frame re-sends
+                           # its segment, so short segments keep the bytes and the CPU per frame small
 
 
 def head_quaternion(pan_deg: float, tilt_deg: float) -> tuple[float, float, float, float]:
@@ -39,8 +43,6 @@ def head_quaternion(pan_deg: float, tilt_deg: float) -> tuple[float, float, floa
 
 
 def _ts(t_ns: int):
-    from foxglove.messages import Timestamp
-
     return Timestamp(int(t_ns) // 1_000_000_000, int(t_ns) % 1_000_000_000)
 
 
@@ -102,9 +104,9 @@ class FoxgloveChannels:
 
     # ------------------------------------------------------------------ records
 
-    def log_points(self, t_ns: int, frame_id: int, packed: np.ndarray) -> None:
+    def log_points(self, t_ns: int, frame_id: int, packed: np.ndarray, dt_unit_ns: int = 1) -> None:
         self._note(POINTS)
-        self._points.log(encode_points_pb(t_ns, frame_id, packed), log_time=int(t_ns))
+        self._points.log(encode_points_pb(t_ns, frame_id, packed, dt_unit_ns), log_time=int(t_ns))
 
     def log_json(self, name: str, t_ns: int, payload: bytes, rec: dict) -> None:
         self._note(name)
@@ -149,8 +151,6 @@ class FoxgloveChannels:
                                                   default=str), name)
 
     def _head_tf(self, t_ns, head, lidar, pan_deg, tilt_deg) -> None:
-        from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Vector3
-
         x, y, z, w = head_quaternion(float(pan_deg), float(tilt_deg))
         ox, oy, oz = self.lidar_offset_m
         ts = _ts(t_ns)
@@ -163,20 +163,14 @@ class FoxgloveChannels:
         ]), log_time=int(t_ns))
 
     def _scene_update(self, t_ns, entities) -> None:
-        from foxglove.messages import SceneUpdate
-
         self._note(SCENE)
         self._scene.log(SceneUpdate(entities=entities), log_time=int(t_ns))
 
     @staticmethod
     def _color(rgb, a=1.0):
-        from foxglove.messages import Color
-
         return Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
 
     def _sphere(self, ident, t_ns, frame, xyz, size_m, rgb):
-        from foxglove.messages import Pose, Quaternion, SceneEntity, SpherePrimitive, Vector3
-
         spheres = [] if xyz is None else [SpherePrimitive(
             pose=Pose(position=Vector3(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2])),
                       orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
@@ -194,8 +188,6 @@ class FoxgloveChannels:
         return self._line(f"{name}/{seg}", t_ns, pts, rgb)
 
     def _line(self, ident, t_ns, pts, rgb):
-        from foxglove.messages import LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity
-
         lines = [LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=2.0, scale_invariant=True,
                                points=[Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in pts],
                                color=self._color(rgb))] if len(pts) >= 2 else []
@@ -203,7 +195,6 @@ class FoxgloveChannels:
 
     def _space_entities(self, t_ns) -> list:
         """D of the tracker config (box or vertical cylinder; a sector or a learned map is not drawn)."""
-        from foxglove.messages import CubePrimitive, CylinderPrimitive, Pose, Quaternion, SceneEntity, Vector3
 
         self._space_sent = True
         s = self._space
@@ -233,8 +224,6 @@ class FoxgloveChannels:
         return [SceneEntity(timestamp=_ts(t_ns), frame_id=frame, id="space_of_interest", frame_locked=True, **prim)]
 
     def _log_line(self, t_ns, level, text, name) -> None:
-        from foxglove.messages import Log, LogLevel
-
         lv = {2: LogLevel.Info, 3: LogLevel.Warning, 4: LogLevel.Error}[level]
         self._note(LOG)
         self._log.log(Log(timestamp=_ts(t_ns), level=lv, message=text, name=str(name)), log_time=int(t_ns))

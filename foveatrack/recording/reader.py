@@ -409,6 +409,7 @@ class RecordingReader:
         """Messages in file order, optionally only those of ``channels`` (names without '/')."""
         want = {channels} if isinstance(channels, str) else None if channels is None else set(channels)
         pb = self.info.get("format_version") != "1"
+        mm_grid = self.info.get("format_version") not in ("1", "2")
         for name, log_time, data in self._records():
             if want is None and name in VIEW_CHANNELS:
                 continue        # drawn for Foxglove from the records (protobuf); asked for by name: raw bytes
@@ -418,7 +419,7 @@ class RecordingReader:
                 yield Message(name, int(log_time), data)
                 continue
             try:
-                record = (_decode_points_pb(data) if pb else _decode_points(data)) if name == POINTS else json.loads(data)
+                record = (_decode_points_pb(data, mm_grid) if pb else _decode_points(data)) if name == POINTS else json.loads(data)
             except (ValueError, KeyError, TypeError) as exc:
                 raise UserError(f"{self.path}: a {name} message at t_ns={log_time} is damaged: {exc}") from None
             yield Message(name, int(log_time), record)

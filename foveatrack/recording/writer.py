@@ -11,9 +11,11 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.errors import UserError
+from foveatrack.livox.protocol import quantise_to_mm_grid
 from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD,
-                                         META_NAME, METRICS, POINTS, TRUTH, _to_jsonable, packed_point_dtype)
+                                         MAX_GRID_MM, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable)
 from foveatrack.recording.foxglove_view import FoxgloveChannels
+from foveatrack.recording.pack_kernels import pack_points
 
 
 def _sdk_version() -> str:
@@ -45,9 +47,13 @@ class RecordingWriter:
         None: no file (the messages go only to the sinks of :attr:`context`, e.g. the live view)
     meta : dict, JSON-serialisable (scene/config text, seed, parameters, ...)
     flush_every_frames : int >= 1, complete a chunk every this many point frames
-    compression : "lz4" (default: the float64 points hardly compress, zstd saves ~4 % of a simulator
-        recording for 2.5x the CPU), "zstd" or "none"
-    points_dtype : "float64" (bit-exact replay) or "float32" (compact)
+    compression : "zstd" (default), "lz4" or "none"; compression_level : the compressor's level (None:
+        1 for zstd, the compressor's default otherwise; 0: the compressor's default).  zstd 1: points on the mm grid compress to ~12 B/point (fig12: 12.3 MB) for about the
+        CPU of lz4 (15.3 MB); zstd 3 saves 5 % more for 1.7x the CPU (docs/recordings.md)
+    points_dtype : "float64" (default, exact): a frame whose points are on the Livox mm grid (what a
+        Livox's Cartesian data types and the simulator give) is stored compactly and exactly (float32 on
+        a 2^-11 m grid, format 3), any other frame as float64.  "float32": every frame compact, points
+        off the grid rounded to the nearest mm (at most 0.5 mm)
     fsync : also fsync the file at each flush
     background : encode and write on a thread of the writer's own: the caller's ``write*`` and
         ``flush`` only queue the job (a bounded queue: the caller waits when it is full, nothing is
@@ -61,7 +67,8 @@ class RecordingWriter:
         path: str | os.PathLike | None,
         meta: dict | None = None,
         flush_every_frames: int = 1,
-        compression: str = "lz4",
+        compression: str = "zstd",
+        compression_level: int | None = None,
         points_dtype: str = "float64",
         fsync: bool = False,
         overwrite: bool = False,
@@ -80,6 +87,8 @@ class RecordingWriter:
             raise UserError(f"recording points_dtype {points_dtype!r} is not 'float64' or 'float32'")
         if int(flush_every_frames) < 1:
             raise UserError(f"flush_every_frames must be >= 1, got {flush_every_frames}")
+        # zstd 1 unless asked: measured against lz4 and zstd 2-6 on fig12 (docs/recordings.md)
+        level = int(compression_level) if compression_level is not None else 1 if compression == "zstd" else 0
         self.path = None if path is None else Path(path)
         if self.path is not None and self.path.exists() and not overwrite:
             raise RecordingExistsError(self.path)
@@ -89,7 +98,6 @@ class RecordingWriter:
             raise UserError(f"recording metadata is not JSON-serialisable: {exc}") from None
         self.flush_every_frames = int(flush_every_frames)
         self.fsync = fsync
-        self._pdtype = packed_point_dtype(points_dtype)
         self._xyz_dtype = points_dtype
         self.view = FoxgloveChannels(json.loads(meta_json), points_dtype)
         self.context = self.view.context
@@ -102,7 +110,7 @@ class RecordingWriter:
             # chunk_size None: a chunk ends only at flush(), so a chunk holds whole frames; the SDK
             # writes the Schema and Channel records in the chunk of each channel's first message
             opts = MCAPWriteOptions(compression=comp[compression], profile="foveatrack", chunk_size=None,
-                                    compression_threads=0)
+                                    compression_threads=0, compression_level=level)
             try:
                 self._w = foxglove.open_mcap(self.path, allow_overwrite=True, context=self.context,
                                              writer_options=opts)
@@ -229,12 +237,16 @@ class RecordingWriter:
         dt = tp - int(t_ns)
         if n and (dt.min() < -(2**31) or dt.max() >= 2**31):
             raise ValueError("point times must lie within ±2.1 s of the frame t_ns")
-        arr = np.empty(n, self._pdtype)
-        arr["x"], arr["y"], arr["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-        arr["dt_ns"] = dt
-        arr["reflectivity"] = refl
+        # x, y, z: on the mm grid (a Livox's Cartesian output, the simulator's) compact and exact,
+        # otherwise float64 (exact); "float32" forces the grid, rounding to the nearest mm
+        if self._xyz_dtype == "float32":
+            xyz = quantise_to_mm_grid(xyz)
+        arr, unit = pack_points(xyz, dt, refl)
+        if self._xyz_dtype == "float32" and arr.dtype["x"] != np.float32:
+            raise ValueError(f"a point lies {MAX_GRID_MM / 1000:.0f} m or more from the lidar: past what "
+                             f"points_dtype='float32' stores; record with 'float64'")
         t_ns = self._add(POINTS, t_ns)
-        self.view.log_points(t_ns, frame_id, arr)
+        self.view.log_points(t_ns, frame_id, arr, unit)
         self.frames_written += 1
         self._frames_since_flush += 1
 

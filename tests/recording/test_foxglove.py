@@ -111,6 +111,11 @@ def test_transforms_chain_world_to_lidar_at_the_recorded_poses(sim_rec):
 
 
 def test_pointcloud_decoded_by_protobuf_is_the_frame_our_reader_returns(sim_rec):
+    # Format 3: the simulator's points are on the Livox mm grid, so x, y, z travel as float32 metres
+    # (Foxglove draws them within 0.25 mm of the point) from which rint(1000 v) gives the mm exactly;
+    # the point times as int16 in the unit of protobuf field 16 (10 us: the Mid-40's 100 k points/s).
+    from google.protobuf.unknown_fields import UnknownFieldSet
+
     path, log = sim_rec
     ours = list(RecordingReader(path).points())
     with open(path, "rb") as fh:
@@ -121,14 +126,20 @@ def test_pointcloud_decoded_by_protobuf_is_the_frame_our_reader_returns(sim_rec)
         assert pc.frame_id == "lidar" and t == f.t_ns
         assert pc.timestamp.seconds * 10**9 + pc.timestamp.nanos == f.t_ns
         names = {fl.name: fl for fl in pc.fields}
-        assert set(names) == {"x", "y", "z", "dt_ns", "reflectivity"}
-        dt = np.dtype({"names": ["x", "y", "z", "dt_ns", "reflectivity"],
-                       "formats": ["<f8", "<f8", "<f8", "<i4", "u1"],
-                       "offsets": [names[n].offset for n in ("x", "y", "z", "dt_ns", "reflectivity")],
+        assert set(names) == {"x", "y", "z", "dt", "reflectivity"}
+        dt = np.dtype({"names": ["x", "y", "z", "dt", "reflectivity"],
+                       "formats": ["<f4", "<f4", "<f4", "<i2", "u1"],
+                       "offsets": [names[n].offset for n in ("x", "y", "z", "dt", "reflectivity")],
                        "itemsize": pc.point_stride})
+        assert pc.point_stride == 15
         arr = np.frombuffer(pc.data, dt)
-        assert np.array_equal(np.stack([arr["x"], arr["y"], arr["z"]], 1), f.xyz)
-        assert np.array_equal(arr["dt_ns"] + f.t_ns, f.t_ns_points)
+        v = np.stack([arr["x"], arr["y"], arr["z"]], 1).astype(np.float64)
+        assert np.abs(v - f.xyz).max() <= 0.25e-3                       # drawn where the point is
+        assert np.array_equal(np.rint(v * 1000) * 1e-3, f.xyz)          # and exact through the mm
+        extra = {u.field_number: u.data for u in UnknownFieldSet(pc)}
+        assert extra[16] == 10_000
+        assert np.array_equal(arr["dt"].astype(np.int64) * extra[16] + f.t_ns, f.t_ns_points)
+        assert np.array_equal(arr["reflectivity"], f.reflectivity)
     assert [f.frame_index for f in ours] == list(range(len(ours)))
 
 

@@ -67,7 +67,7 @@ def test_a_websocket_client_subscribes_and_receives_the_channels():
     w.close()
     assert want <= set(got), set(got)
     for log_time, payload in got["/points"]:
-        f = _decode_points_pb(payload)
+        f = _decode_points_pb(payload, mm_grid=True)     # format 3: a float32 cloud is on the mm grid
         k, xyz = sent[f.t_ns]
         assert log_time == f.t_ns and f.frame_index == k and np.array_equal(f.xyz, xyz)
     det = json.loads(got["/detections"][0][1])

@@ -52,7 +52,7 @@ def test_round_trip_is_exact(tmp_path):
     frames = write_sample(p)
     r = RecordingReader(p)
     assert r.meta == META
-    assert r.info["format_version"] == "2" and "numpy_version" in r.info
+    assert r.info["format_version"] == "3" and "numpy_version" in r.info
     got = list(r.points())
     assert r.complete and r.problem is None
     assert len(got) == len(frames)
@@ -72,12 +72,15 @@ def test_round_trip_is_exact(tmp_path):
     assert [m.channel for m in r.messages()][:6] == ["points", "detections", "commands", "head", "truth", "metrics"]
 
 
-def test_float32_points_and_zstd(tmp_path):
+def test_float32_points_round_to_the_mm_and_zstd(tmp_path):
+    # points_dtype="float32": every frame in the compact mm-grid encoding, points off the grid rounded
+    # to the nearest mm (as a Livox would have reported them)
     p = tmp_path / "r.mcap"
     frames = write_sample(p, points_dtype="float32", compression="zstd")
     got = list(RecordingReader(p).points())
     for f, (_, xyz, tp, _) in zip(got, frames):
-        np.testing.assert_allclose(f.xyz, xyz, rtol=1e-7, atol=1e-5)
+        np.testing.assert_array_equal(f.xyz, np.rint(xyz * 1000) * 1e-3)
+        assert np.abs(f.xyz - xyz).max() <= 0.5e-3
         np.testing.assert_array_equal(f.t_ns_points, tp)
 
 
