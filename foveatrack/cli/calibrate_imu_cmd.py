@@ -42,8 +42,26 @@ def _floats(text: str, flag: str) -> list[float]:
 
 def register(sub) -> None:
     p = sub.add_parser("calibrate-imu", help="lidar-IMU extrinsic from static poses (paper Sec. IV.A, Fig. 11)")
-    p.add_argument("scene", metavar="SCENE.toml", help="a scene with [imu] and [imu_poses] "
+    p.add_argument("scene", metavar="SCENE.toml", nargs="?", help="simulate: a scene with [imu] and [imu_poses] "
                    "(scenes/imu-calibration-room.toml)")
+    live = p.add_argument_group("real rig (a Livox with an IMU on the daemon's head)")
+    live.add_argument("--config", metavar="DAEMON.toml", help="the daemon config naming the lidar and the head")
+    live.add_argument("--by-hand", action="store_true", help="do not drive the head: prompt for each pose and "
+                      "wait for Enter (the rig moved by hand)")
+    live.add_argument("--poses", type=int, default=13, metavar="N", help="static poses (default: %(default)s)")
+    live.add_argument("--step-deg", type=float, default=10.0, metavar="DEG",
+                      help="pan step between poses (default: %(default)s)")
+    live.add_argument("--tilt-step-deg", type=float, default=None, metavar="DEG",
+                      help="tilt step between poses (default: --step-deg)")
+    live.add_argument("--dwell-s", type=float, default=10.0, metavar="S",
+                      help="accumulation per pose (default: %(default)s)")
+    live.add_argument("--settle-s", type=float, default=1.0, metavar="S",
+                      help="wait after each stop before the pose's window opens (default: %(default)s)")
+    live.add_argument("--speed-deg-s", type=float, default=10.0, metavar="DEG/S",
+                      help="head speed while moving, per axis, within the config's limits (default: %(default)s)")
+    live.add_argument("--lidar-ip", metavar="IP", help="the Livox's IP (replaces the config's [lidar] sensor_ip)")
+    live.add_argument("--serial", metavar="PORT", help="the head's serial port (replaces the config's [head] port)")
+    live.add_argument("--max-s", type=float, metavar="S", help="give up after S seconds (default: no limit)")
     p.add_argument("--accumulate", default="0.1,0.2,0.5,1,2,5,10", metavar="S,S,...",
                    help="accumulation times per pose [s] (default: %(default)s)")
     p.add_argument("--lidar", metavar="NAME,...", help="lidars to compare (Risley presets mid40, horizon, "
@@ -60,6 +78,19 @@ def register(sub) -> None:
 def _extrinsic_json(score, res, truth=None) -> dict:
     from scipy.spatial.transform import Rotation
 
+    out = extrinsic_record(res, score.lidar, score.accumulate_s)
+    if truth is not None:
+        out["truth_translation_m"] = truth[:3, 3].round(6).tolist()
+        out["truth_rotation_rpy_deg"] = Rotation.from_matrix(truth[:3, :3]).as_euler("xyz", degrees=True).round(5).tolist()
+        out["error_rotation_deg"] = round(score.rotation_error_deg, 5)
+        out["error_translation_m"] = round(score.translation_error_m, 6)
+    return out
+
+
+def extrinsic_record(res, lidar: str, accumulate_s: float) -> dict:
+    """The extrinsic file's fields, simulated or live: ``X``, its bootstrap 1-sigma, what solved it."""
+    from scipy.spatial.transform import Rotation
+
     X = res.X
     out = {
         "frame": "T_lidar_imu: the IMU's pose in the lidar frame (p_lidar = R p_imu + t)",
@@ -70,27 +101,31 @@ def _extrinsic_json(score, res, truth=None) -> dict:
         "sigma_translation_m": np.round(res.uncertainty.translation_sigma_m, 6).tolist(),
         "sigma_method": f"bootstrap over the {res.handeye.pairs_used} pose pairs "
                         f"({res.uncertainty.samples} resamples), 1-sigma per axis",
-        "lidar": score.lidar,
-        "accumulate_s": score.accumulate_s,
+        "lidar": lidar,
+        "accumulate_s": accumulate_s,
         "pairs": res.handeye.pairs_used,
         "axis_spread_deg": round(res.handeye.axis_spread_deg, 3),
         "consistency_eq8_mean": float(np.mean(res.consistency())),
     }
-    if truth is not None:
-        out["truth_translation_m"] = truth[:3, 3].round(6).tolist()
-        out["truth_rotation_rpy_deg"] = Rotation.from_matrix(truth[:3, :3]).as_euler("xyz", degrees=True).round(5).tolist()
-        out["error_rotation_deg"] = round(score.rotation_error_deg, 5)
-        out["error_translation_m"] = round(score.translation_error_m, 6)
     return out
 
 
 def cmd_calibrate_imu(args) -> int:
+    if args.bootstrap < 0:
+        raise UserError(f"--bootstrap {args.bootstrap}: must be >= 0")
+    live_flags = [f for f, v in (("--by-hand", args.by_hand), ("--lidar-ip", args.lidar_ip), ("--serial", args.serial),
+                                 ("--max-s", args.max_s)) if v]
+    if args.config and args.scene:
+        raise UserError("calibrate-imu: give SCENE.toml (simulated rig) or --config DAEMON.toml (real rig), not both")
+    if args.config or live_flags:
+        return calibrate_live_rig(args, live_flags)
+    if not args.scene:
+        raise UserError("calibrate-imu needs SCENE.toml (simulated, e.g. scenes/imu-calibration-room.toml) or "
+                        "--config DAEMON.toml (a Livox with an IMU on the daemon's head)")
     from sim import imu_rig
     from sim.scene import load_scene
 
     acc = sorted(set(_floats(args.accumulate, "--accumulate")))
-    if args.bootstrap < 0:
-        raise UserError(f"--bootstrap {args.bootstrap}: must be >= 0")
     for path in (args.out, args.plot):
         if path:
             check_output_file(path, "--out" if path == args.out else "--plot")
@@ -150,4 +185,85 @@ def cmd_calibrate_imu(args) -> int:
           + (f" -> {args.out}" if args.out else ""))
     if args.plot:
         print(f"plot: {args.plot}")
+    return 0
+
+
+def calibrate_live_rig(args, live_flags: list[str]) -> int:
+    """``calibrate-imu --config DAEMON.toml [--by-hand]``: the procedure on a live lidar and head."""
+    import signal
+    import threading
+    from dataclasses import replace
+
+    from foveatrack.daemon.config import load_config
+    from foveatrack.imu_calib.live import RigPlan, calibrate_rig
+
+    if not args.config:
+        raise UserError(f"{', '.join(live_flags)} calibrate a real rig: they need --config DAEMON.toml (the daemon's "
+                        "config names the lidar, the head and its limits)")
+    if args.lidar:
+        raise UserError("--lidar names simulated lidars; on a real rig the lidar is the config's (--lidar-ip IP "
+                        "replaces its [lidar] sensor_ip)")
+    if args.plot:
+        raise UserError("--plot draws the simulated error-vs-accumulation curves; a real rig has no truth to plot")
+    if args.max_s is not None and not args.max_s > 0:
+        raise UserError(f"--max-s must be > 0, got {args.max_s}")
+    out = args.out or "imu-extrinsic.json"
+    check_output_file(out, "--out")
+    plan = RigPlan(poses=args.poses, step_deg=args.step_deg, tilt_step_deg=args.tilt_step_deg, dwell_s=args.dwell_s,
+                   settle_s=args.settle_s, speed_deg_s=args.speed_deg_s)
+    plan.check_axes()
+    cfg = load_config(args.config)
+    if args.lidar_ip:
+        cfg = replace(cfg, lidar=replace(cfg.lidar, sensor_ip=args.lidar_ip))
+    if args.serial:
+        cfg = replace(cfg, head=replace(cfg.head, port=args.serial))
+    stop = threading.Event()
+    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    bar = None
+    progress = None
+    if not args.no_progress and not args.json and not args.by_hand:
+        from tqdm import tqdm
+
+        bar = tqdm(total=plan.poses, desc="static poses", unit=" pose", file=sys.stderr, leave=False)
+
+        def progress(done, total):
+            bar.update(done - bar.n)
+    try:
+        run = calibrate_rig(cfg, plan, by_hand=args.by_hand, bootstrap_samples=args.bootstrap, max_s=args.max_s,
+                            stop=stop, progress=progress)
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+        if bar is not None:
+            bar.close()
+    res = run.result
+    extrinsic = extrinsic_record(res, "live", plan.dwell_s)
+    extrinsic.update({
+        "mode": "by hand" if run.by_hand else "head stepped by Pelco-D",
+        "poses": plan.poses,
+        "translation_singular_values": np.round(run.translation_singular_values, 5).tolist(),
+        "weakest_translation_direction": np.round(run.weakest_translation_direction, 4).tolist(),
+        "gravity_m_s2": round(res.imu.gravity_m_s2, 4),
+    })
+    with open(out, "w") as fh:
+        json.dump(extrinsic, fh, indent=2)
+        fh.write("\n")
+    summary = {"extrinsic": extrinsic, "out": out, "wall_s": round(run.wall_s, 1), "imu_samples": run.imu_samples,
+               "points_per_pose": run.points_per_pose,
+               "static_spread_deg_s": [round(v, 4) for v in run.static_spread_deg_s],
+               "registration_rms_m": [round(r.rms_m, 5) for r in res.registrations],
+               "consistency_eq8": np.round(res.consistency(), 6).tolist(), "counters": run.counters}
+    if args.json:
+        print(json.dumps(summary, indent=2, default=float))
+        return 0
+    e = extrinsic
+    print(f"lidar-IMU extrinsic from {plan.poses} static poses ({e['mode']}), {plan.dwell_s:g} s each, "
+          f"{run.wall_s:.0f} s wall; {run.imu_samples} IMU samples; gravity {e['gravity_m_s2']:.3f} m/s^2")
+    print(f"  rotation rpy {e['rotation_rpy_deg']} deg (1-sigma {e['sigma_rotation_deg']})")
+    print(f"  translation {e['translation_m']} m (1-sigma {e['sigma_translation_m']})")
+    print(f"  {res.handeye.pairs_used} pairs, rotation axes spread {res.handeye.axis_spread_deg:.1f} deg; translation "
+          f"pinned by singular values {e['translation_singular_values']} (weakest along "
+          f"{e['weakest_translation_direction']})")
+    print(f"  consistency eq. (8) without truth: mean {e['consistency_eq8_mean']:.2e}")
+    print(f"  written to {out}")
     return 0
