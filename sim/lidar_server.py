@@ -45,8 +45,8 @@ from sim.world import kernels as wk
 
 #: How long the served IMU trails the points when the scene has an ``[imu]`` (:mod:`sim.head_imu`):
 #: its finite differences need the head's pose 5 ms after each sample, and the truth file is up to a
-#: period (20 ms) + a batch (10 ms) old; 0.1 s leaves room for a loaded machine's pauses.
-IMU_LAG_S = 0.1
+#: period (20 ms) + a batch (10 ms) old; 0.25 s leaves room for a loaded machine's pauses.
+IMU_LAG_S = 0.25
 
 
 class TruthTail:

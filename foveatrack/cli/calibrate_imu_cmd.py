@@ -244,7 +244,19 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
         "translation_singular_values": np.round(run.translation_singular_values, 5).tolist(),
         "weakest_translation_direction": np.round(run.weakest_translation_direction, 4).tolist(),
         "gravity_m_s2": round(res.imu.gravity_m_s2, 4),
+        "pair_rotations_deg": [round(v, 3) for v in run.turned_deg],
     })
+    warnings = []
+    short = run.short_turns()
+    if short:
+        warnings.append(f"{len(short)} of {len(run.turned_deg)} moves turned less than half the plan (pairs "
+                        f"{', '.join(str(i + 1) for i in short)}: {', '.join(f'{run.turned_deg[i]:.1f}' for i in short)} deg "
+                        f"for {', '.join(f'{run.planned_deg[i]:.1f}' for i in short)} planned): the head's speed table "
+                        f"is off ([head] speed_table = {cfg.head.speed_table!r}); calibrate it first "
+                        "(foveatrack calibrate --config) for a better extrinsic")
+    extrinsic["warnings"] = warnings
+    for w in warnings:
+        print(f"calibrate-imu: warning: {w}", file=sys.stderr)
     with open(out, "w") as fh:
         json.dump(extrinsic, fh, indent=2)
         fh.write("\n")
@@ -252,7 +264,9 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
                "points_per_pose": run.points_per_pose,
                "static_spread_deg_s": [round(v, 4) for v in run.static_spread_deg_s],
                "registration_rms_m": [round(r.rms_m, 5) for r in res.registrations],
-               "consistency_eq8": np.round(res.consistency(), 6).tolist(), "counters": run.counters}
+               "consistency_eq8": np.round(res.consistency(), 6).tolist(), "counters": run.counters,
+               # per pose pair: the lidar's registered motion A and the IMU's integrated B (4 x 4)
+               "motions": [{"A": np.round(a, 9).tolist(), "B": np.round(b, 9).tolist()} for a, b in zip(res.A, res.B)]}
     if args.json:
         print(json.dumps(summary, indent=2, default=float))
         return 0

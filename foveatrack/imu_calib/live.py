@@ -50,6 +50,7 @@ from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
 from foveatrack.imu_calib import handeye, procedure, registration
 from foveatrack.imu_calib.imu_integration import GRAVITY_M_S2, ImuSamples
+from foveatrack.imu_calib.se3 import so3_log
 
 #: A window is static when no 0.25 s block of its gyro readings has a mean farther than this from the
 #: window's mean [deg/s] (BMI088 white noise: 0.2 deg/s per 200 Hz sample, 0.03 deg/s per block mean).
@@ -104,10 +105,12 @@ class RigPlan:
         moves = np.diff(off, axis=0)
         pans = np.any(moves[:, 0] != 0)
         tilts = np.any(moves[:, 1] != 0)
+        if not (pans or tilts):
+            raise handeye.DegenerateMotion("the pose plan does not turn the head (pan and tilt steps 0 deg)")
         if not (pans and tilts):
-            axis = "pan" if pans else "tilt" if tilts else "no"
+            axis = "pan" if pans else "tilt"
             raise handeye.DegenerateMotion(
-                f"the pose plan turns the head about {axis} axis only (pan step {self.step_deg:g} deg, tilt step "
+                f"the pose plan turns the head about its {axis} axis only (pan step {self.step_deg:g} deg, tilt step "
                 f"{self.tilt_step:g} deg): with one rotation axis the translation along it cannot be found; "
                 "give both a pan and a tilt step")
 
@@ -148,6 +151,13 @@ class LiveImuCalibration:
     translation_singular_values: np.ndarray   # of the stacked (R_A - I): how well t_X is pinned [rad]
     weakest_translation_direction: np.ndarray
     counters: dict = field(default_factory=dict)
+    turned_deg: list = field(default_factory=list)    # per pair: the rotation the lidar registered [deg]
+    planned_deg: list = field(default_factory=list)   # per pair: the plan's (dead-reckoned; head mode)
+
+    def short_turns(self) -> list[int]:
+        """Pairs that turned less than half as far as planned (the speed table is off: the IMU's
+        error over a small turn tilts the rotation axis, so X suffers)."""
+        return [i for i, (t, p) in enumerate(zip(self.turned_deg, self.planned_deg)) if t < 0.5 * p]
 
 
 def translation_observability(A: list) -> tuple[np.ndarray, np.ndarray]:
@@ -257,15 +267,21 @@ class _Rig:
                            "(a Mid-40 / Mid-70 has none)")
 
     def take_window(self, t0_s: float, t1_s: float) -> tuple[np.ndarray, np.ndarray]:
-        """Points of ``[t0_s, t1_s)`` (sensor time), once points and IMU samples past it have come."""
+        """Points of ``[t0_s, t1_s)`` (sensor time), once points past it have come.  The IMU samples
+        of the window may still be on their way: the next move starts at once (the IMU's error
+        over a move grows with the time between windows, ~T^1.5), and :meth:`wait_imu` waits for
+        them at the end."""
         self.window, self.xyz, self.t, self.seen = (t0_s, t1_s), [], [], 0
-        while (self.latest_point_s is None or self.latest_point_s < t1_s
-               or self.latest_imu_s is None or self.latest_imu_s < t1_s):
+        while self.latest_point_s is None or self.latest_point_s < t1_s:
             self.poll(0.02)
         self.window = None
         if not self.xyz:
             return np.zeros((0, 3)), np.zeros(0)
         return np.vstack(self.xyz), np.concatenate(self.t)
+
+    def wait_imu(self, t_s: float) -> None:
+        while self.latest_imu_s is None or self.latest_imu_s < t_s:
+            self.poll(0.02)
 
     def imu_samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every IMU sample so far, in time order, duplicates removed: (t_ns, gyro rad/s, acc g)."""
@@ -398,6 +414,7 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
                 print(f"pose {i + 1}/{plan.poses}: {len(xyz)} points kept; done", file=out, flush=True)
             if progress is not None:
                 progress(i + 1, plan.poses)
+        rig.wait_imu(windows[-1][1])
         if head is not None and return_home:
             move(*moves[-1])
     finally:
@@ -430,6 +447,8 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
     imu = ImuSamples(t_imu, gyro, acc * GRAVITY_M_S2)
     res = procedure.calibrate(pose_clouds, imu, win, plan.dwell_s, X0=X0, bootstrap_samples=bootstrap_samples,
                               seed=seed)
+    planned = [float(np.hypot(b[0] - a[0], b[1] - a[1])) for a, b in zip(offsets, offsets[1:])]
+    turned = [float(np.degrees(np.linalg.norm(so3_log(a[:3, :3])))) for a in res.A]
     s, weak = translation_observability(res.A)
     return LiveImuCalibration(res, win, [len(c[0]) for c in clouds], spreads, len(t_ns), time.monotonic() - t_wall0,
-                              by_hand, s, weak, counters)
+                              by_hand, s, weak, counters, turned, [] if by_hand else planned)

@@ -123,12 +123,14 @@ def test_static_spread_sees_a_rig_that_moves():
 
 
 def test_what_the_imu_allows_on_the_head_plan():
-    # The IMU's share of the error on the e2e test's plan (9 poses, 2 s dwell, 10 deg steps): the
-    # true lidar motions with the noisy IMU's, BMI088 noise (sim.imu defaults), 10 seeds.  Measured
-    # (20 seeds): rotation 0.087 deg mean (95th percentile 0.134), translation 0.74 cm (1.32 cm); the
-    # rotation is the gyro's white noise over the moves (no bias at all gives the same), spread over
-    # 8 pairs of 10 deg rotations about two axes.
-    path = HeadPath(RigPlan(poses=9))
+    # The IMU's share of the error on the e2e test's plan (9 poses, 2 s dwell, 10 deg steps, 1.5 s
+    # from one window to the next): the true lidar motions with the noisy IMU's, BMI088 noise
+    # (sim.imu defaults), 10 seeds.  Measured (20 seeds): rotation 0.068 deg mean (95th percentile
+    # 0.101), translation 0.40 cm (0.65 cm).  The rotation is the gyro's white noise over the moves
+    # (without any bias it is the same); the translation grows with the time between windows (2.3 s:
+    # 3.7 mm per pair against 1.7 mm at 1.5 s), which is why the live path starts each move as soon
+    # as the window's points are in.
+    path = HeadPath(RigPlan(poses=9), move_s=1.5)
     rot, tr = [], []
     for seed in range(10):
         motion = relative_motions(_imu(path, ImuNoise(), seed), path.windows())
@@ -137,5 +139,5 @@ def test_what_the_imu_allows_on_the_head_plan():
         tr.append(np.linalg.norm(X[:3, 3] - X_TRUE[:3, 3]))
     print(f"IMU-only floor over 10 seeds: rotation {np.mean(rot):.4f} deg (max {max(rot):.4f}), "
           f"translation {np.mean(tr) * 100:.3f} cm (max {max(tr) * 100:.3f})")
-    assert np.mean(rot) < 0.13 and np.mean(tr) < 0.011
+    assert np.mean(rot) < 0.09 and np.mean(tr) < 0.0055
     assert min(rot) > 0.005 and min(tr) > 5e-4    # the noise is there: not a noise-free route by mistake
