@@ -1,7 +1,7 @@
-"""``foveatrack calibrate-imu SCENE``: the lidar-IMU extrinsic from static poses (paper Section IV.A,
-Fig. 10-11), on the simulated rig.
+"""``foveatrack calibrate-imu``: the lidar-IMU extrinsic from static poses (paper Section IV.A,
+Fig. 10-11), on the simulated rig or on a real one.
 
-::
+Simulated::
 
     foveatrack calibrate-imu SCENE.toml [--lidar mid40,horizon,vlp16] [--accumulate 0.1,0.2,...,10]
                              [--out X.json] [--plot F.png] [--json] [--bootstrap N]
@@ -14,8 +14,16 @@ against the true lidar motion, and the extrinsic's error against the true mount,
 1-sigma.  ``--plot``: eq. (8) error and extrinsic error against accumulation time (Fig. 11b) beside
 the coverage of the Risley lidars (Fig. 6e).
 
-Not here yet: the real rig (IMU packets from a live Livox, the head stepped through the poses by
-Pelco-D); the algorithms in :mod:`foveatrack.imu_calib` take plain arrays and would serve it.
+Real rig (a Livox with an IMU on the daemon's head)::
+
+    foveatrack calibrate-imu --config DAEMON.toml [--by-hand] [--poses N] [--step-deg D]
+                             [--tilt-step-deg D] [--dwell-s S] [--settle-s S] [--speed-deg-s V]
+                             [--lidar-ip IP] [--serial PORT] [--max-s S] [--out X.json] [--json]
+
+steps the head through static poses by Pelco-D (or, ``--by-hand``, prompts for each pose and waits
+for Enter), gathers each pose's cloud and every IMU sample from the live stream and runs the same
+procedure (:mod:`foveatrack.imu_calib.live`); ``--out`` (default ``imu-extrinsic.json``) gets the
+extrinsic in the simulated command's format, without truth.
 """
 
 from __future__ import annotations
@@ -48,17 +56,15 @@ def register(sub) -> None:
     live.add_argument("--config", metavar="DAEMON.toml", help="the daemon config naming the lidar and the head")
     live.add_argument("--by-hand", action="store_true", help="do not drive the head: prompt for each pose and "
                       "wait for Enter (the rig moved by hand)")
-    live.add_argument("--poses", type=int, default=13, metavar="N", help="static poses (default: %(default)s)")
-    live.add_argument("--step-deg", type=float, default=10.0, metavar="DEG",
-                      help="pan step between poses (default: %(default)s)")
-    live.add_argument("--tilt-step-deg", type=float, default=None, metavar="DEG",
+    live.add_argument("--poses", type=int, metavar="N", help="static poses (default: 25)")
+    live.add_argument("--step-deg", type=float, metavar="DEG", help="pan step between poses (default: 10)")
+    live.add_argument("--tilt-step-deg", type=float, metavar="DEG",
                       help="tilt step between poses (default: --step-deg)")
-    live.add_argument("--dwell-s", type=float, default=10.0, metavar="S",
-                      help="accumulation per pose (default: %(default)s)")
-    live.add_argument("--settle-s", type=float, default=1.0, metavar="S",
-                      help="wait after each stop before the pose's window opens (default: %(default)s)")
-    live.add_argument("--speed-deg-s", type=float, default=10.0, metavar="DEG/S",
-                      help="head speed while moving, per axis, within the config's limits (default: %(default)s)")
+    live.add_argument("--dwell-s", type=float, metavar="S", help="accumulation per pose (default: 10)")
+    live.add_argument("--settle-s", type=float, metavar="S",
+                      help="wait after each stop before the pose's window opens (default: 1)")
+    live.add_argument("--speed-deg-s", type=float, metavar="DEG/S",
+                      help="head speed while moving, per axis, within the config's limits (default: 10)")
     live.add_argument("--lidar-ip", metavar="IP", help="the Livox's IP (replaces the config's [lidar] sensor_ip)")
     live.add_argument("--serial", metavar="PORT", help="the head's serial port (replaces the config's [head] port)")
     live.add_argument("--max-s", type=float, metavar="S", help="give up after S seconds (default: no limit)")
@@ -114,9 +120,15 @@ def cmd_calibrate_imu(args) -> int:
     if args.bootstrap < 0:
         raise UserError(f"--bootstrap {args.bootstrap}: must be >= 0")
     live_flags = [f for f, v in (("--by-hand", args.by_hand), ("--lidar-ip", args.lidar_ip), ("--serial", args.serial),
-                                 ("--max-s", args.max_s)) if v]
+                                 ("--max-s", args.max_s), ("--poses", args.poses), ("--step-deg", args.step_deg),
+                                 ("--tilt-step-deg", args.tilt_step_deg), ("--dwell-s", args.dwell_s),
+                                 ("--settle-s", args.settle_s), ("--speed-deg-s", args.speed_deg_s))
+                  if v is not None and v is not False]
     if args.config and args.scene:
         raise UserError("calibrate-imu: give SCENE.toml (simulated rig) or --config DAEMON.toml (real rig), not both")
+    if args.scene and live_flags:
+        raise UserError(f"{', '.join(live_flags)}: real-rig options; a simulated rig takes its poses from the scene's "
+                        "[imu_poses] (give --config DAEMON.toml instead of SCENE.toml for a real rig)")
     if args.config or live_flags:
         return calibrate_live_rig(args, live_flags)
     if not args.scene:
@@ -209,8 +221,9 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
         raise UserError(f"--max-s must be > 0, got {args.max_s}")
     out = args.out or "imu-extrinsic.json"
     check_output_file(out, "--out")
-    plan = RigPlan(poses=args.poses, step_deg=args.step_deg, tilt_step_deg=args.tilt_step_deg, dwell_s=args.dwell_s,
-                   settle_s=args.settle_s, speed_deg_s=args.speed_deg_s)
+    given = {k: getattr(args, k) for k in ("poses", "step_deg", "tilt_step_deg", "dwell_s", "settle_s", "speed_deg_s")
+             if getattr(args, k) is not None}
+    plan = RigPlan(**given)
     plan.check_axes()
     cfg = load_config(args.config)
     if args.lidar_ip:

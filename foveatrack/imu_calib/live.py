@@ -72,7 +72,7 @@ class RigPlan:
     Enter) before the window opens [s]; speed_deg_s : target speed of each axis while moving.
     """
 
-    poses: int = 13
+    poses: int = 25
     step_deg: float = 10.0
     tilt_step_deg: float | None = None
     dwell_s: float = 10.0

@@ -230,6 +230,7 @@ def test_ctrl_c_stops_the_head_and_writes_nothing(rig):
     (["--config", "{cfg}", "--lidar", "mid40"], "--lidar-ip"),
     (["--by-hand"], "need --config"),
     (["scenes/imu-calibration-room.toml", "--config", "{cfg}"], "not both"),
+    (["scenes/imu-calibration-room.toml", "--poses", "5"], r"--poses: real-rig options.*\[imu_poses\]"),
     (["--config", "{cfg}", "--serial", "/nonexistent/tty-x"], r"\[head\].*tty-x"),
 ])
 def test_command_line_mistakes_are_named(tmp_path, capsys, argv, message):
