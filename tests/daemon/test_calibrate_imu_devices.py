@@ -251,3 +251,25 @@ def test_poses_beyond_the_tilt_limits_are_refused_before_anything_moves(tmp_path
     rc = main(["calibrate-imu", "--config", cfg, "--out", str(tmp_path / "x.json")])
     err = capsys.readouterr().err
     assert rc == 2 and re.search(r"d\.toml \[head\].*tilt 55 to 65 deg.*tilt_limits_deg", err), err
+
+
+@pytest.mark.slow
+def test_a_lidar_without_an_imu_is_named(tmp_path):
+    # A Mid-40 (scenes/calibration-room.toml) streams points but no data type 6.
+    import io
+
+    from foveatrack.daemon import load_config
+    from foveatrack.errors import UserError
+    from foveatrack.imu_calib.live import RigPlan, calibrate_rig
+
+    bport = free_udp_port()
+    lidar = start(["lidar", "serve", str(ROOT / "scenes" / "calibration-room.toml"), "--cmd-port", "0",
+                   "--broadcast-port", str(bport)], tmp_path / "l.out", tmp_path / "l.err")
+    try:
+        wait_for(lambda: first_line(tmp_path / "l.out"), 120, "the virtual lidar", [lidar])
+        cfg = load_config(_config(tmp_path, tmp_path / "no-head", bport))
+        with pytest.raises(UserError, match=r"sends points but no IMU samples.*Mid-40"):
+            calibrate_rig(cfg, RigPlan(poses=3, dwell_s=0.5), by_hand=True, answers=io.StringIO(""),
+                          prompt_out=io.StringIO(), first_data_s=3.0)
+    finally:
+        terminate(lidar)
