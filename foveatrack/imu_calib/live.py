@@ -207,9 +207,10 @@ class _Rig:
         self.latest_point_s: float | None = None
         self.latest_imu_s: float | None = None
         self.pose = 0
+        self.drives_head = True
 
     def _fail(self, what: str):
-        raise UserError(f"{what}; the head was stopped and no extrinsic was written")
+        raise UserError(f"{what}; {'the head was stopped and ' if self.drives_head else ''}no extrinsic was written")
 
     def poll(self, timeout_s: float) -> None:
         now = time.monotonic()
@@ -347,6 +348,7 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
         head, client = open_devices(config)
     stream = LidarStream(client)
     rig = _Rig(config, client, stream, stop, max_s, first_data_s, stride)
+    rig.drives_head = head is not None
     out = prompt_out or sys.stderr
     inbox = _Answers(answers if answers is not None else sys.stdin) if by_hand else None
     windows, clouds = [], []
