@@ -43,6 +43,12 @@ from sim.sensor import SceneSensor, scene_scan_model
 from sim.world import kernels as wk
 
 
+#: How long the served IMU trails the points when the scene has an ``[imu]`` (:mod:`sim.head_imu`):
+#: its finite differences need the head's pose 5 ms after each sample, and the truth file is up to a
+#: period (20 ms) + a batch (10 ms) old; 0.25 s leaves room for a loaded machine's pauses.
+IMU_LAG_S = 0.25
+
+
 class TruthTail:
     """The head pose from a ``gimbal serve --truth`` JSON-lines file that is still being written.
 
@@ -253,6 +259,15 @@ def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("
         source = SceneSource(scene)
 
     warm_up_kernels(scene)
+    imu_kw = {}
+    if scene.imu is not None and unit.has_imu:
+        # the scene's IMU on the head, moving with the pose the points are cast at
+        from sim.effects import effect_rng
+        from sim.head_imu import HeadImu
+
+        pose = source._pose if tail is not None else source.pose
+        imu_kw = {"imu_source": HeadImu(pose, scene.imu.T_lidar_imu, scene.imu.noise, effect_rng(scene.seed, "imu")),
+                  "imu_lag_s": IMU_LAG_S}
 
     def _ready(lidar: VirtualLivox):
         if tail is not None:
@@ -264,7 +279,7 @@ def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("
     counters = run_virtual_lidar(
         source, duration_s=duration_s, ready=_ready, bind_ip=bind_ip, cmd_port=cmd_port,
         broadcast_addr=broadcast_addr, point_rate_hz=float(scene.optics.point_rate_hz), packet_type=packet_type,
-        unit=unit, time_scale=time_scale, loss_rate=loss_rate, seed=seed, control_log=control_log)
+        unit=unit, time_scale=time_scale, loss_rate=loss_rate, seed=seed, control_log=control_log, **imu_kw)
     inner = source.inner if tail is not None else source
     counters["points_on_target"] = inner.points_on_target
     if tail is not None:

@@ -102,6 +102,8 @@ class VirtualLivox:
     loss_rate : float in [0, 1), fraction of data packets dropped; seed : int for that generator
     t_start_ns : int, stream time at start(); batch_period_s : wall seconds between source calls
     imu_source : callable(t_ns (n,)) -> (gyro (n,3) rad/s, acc (n,3) g); default a static sensor
+    imu_lag_s : float >= 0 [s], the IMU samples leave this long after their time (a source that
+        differentiates a followed head's pose needs that pose a little after each sample)
     """
 
     def __init__(
@@ -126,6 +128,7 @@ class VirtualLivox:
         head: int = 1,
         imu_source: ImuSource | None = None,
         control_log: list | None = None,
+        imu_lag_s: float = 0.0,
     ):
         if not point_rate_hz > 0 or not time_scale > 0 or not 0 <= loss_rate < 1:
             raise ValueError("need point_rate_hz > 0, time_scale > 0 and 0 <= loss_rate < 1")
@@ -153,6 +156,7 @@ class VirtualLivox:
         self.timestamp_type = timestamp_type
         self.broadcast_addr = broadcast_addr
         self.imu_source = imu_source or static_imu_source(seed)
+        self.imu_lag_ns = int(round(max(0.0, imu_lag_s) * 1e9))
         self.control_log = control_log
         self._rng = np.random.default_rng(np.random.SeedSequence(seed))
         self.counters: Counter = Counter()
@@ -289,7 +293,7 @@ class VirtualLivox:
                 t_now = self.stream_time_ns(now)
                 self._stream_until(t_now)
                 if self.unit.has_imu and self.imu_freq == P.IMU_FREQ_200HZ:
-                    self._imu_until(t_now)
+                    self._imu_until(t_now - self.imu_lag_ns)
                 next_batch = now + self.batch_period_s
             if self.host is not None and P.decode_status_code(self.status_code)["system_status"] \
                     and now - self._last_push >= 0.8:

@@ -65,3 +65,12 @@ def test_the_check_itself_catches_a_forbidden_import(tmp_path):
                          cwd=ROOT, capture_output=True, text=True, timeout=300, env={"PYTHONPATH": env_path, "PATH": ""})
     got = json.loads(out.stdout)
     assert set(got) == {"fakepkg.bad"} and {"sim", "sim.effects"} <= set(got["fakepkg.bad"]), got   # and what sim.effects imports
+
+
+def test_test_files_have_unique_basenames():
+    # pytest imports test modules by basename (no __init__.py in the folders): two files of one name
+    # stop the whole suite at collection ("import file mismatch"), which two merges did here
+    names = {}
+    for p in (ROOT / "tests").rglob("test_*.py"):
+        names.setdefault(p.name, []).append(str(p.relative_to(ROOT)))
+    assert not {n: ps for n, ps in names.items() if len(ps) > 1}

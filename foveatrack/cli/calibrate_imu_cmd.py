@@ -1,7 +1,7 @@
-"""``foveatrack calibrate-imu SCENE``: the lidar-IMU extrinsic from static poses (paper Section IV.A,
-Fig. 10-11), on the simulated rig.
+"""``foveatrack calibrate-imu``: the lidar-IMU extrinsic from static poses (paper Section IV.A,
+Fig. 10-11), on the simulated rig or on a real one.
 
-::
+Simulated::
 
     foveatrack calibrate-imu SCENE.toml [--lidar mid40,horizon,vlp16] [--accumulate 0.1,0.2,...,10]
                              [--out X.json] [--plot F.png] [--json] [--bootstrap N]
@@ -14,8 +14,16 @@ against the true lidar motion, and the extrinsic's error against the true mount,
 1-sigma.  ``--plot``: eq. (8) error and extrinsic error against accumulation time (Fig. 11b) beside
 the coverage of the Risley lidars (Fig. 6e).
 
-Not here yet: the real rig (IMU packets from a live Livox, the head stepped through the poses by
-Pelco-D); the algorithms in :mod:`foveatrack.imu_calib` take plain arrays and would serve it.
+Real rig (a Livox with an IMU on the daemon's head)::
+
+    foveatrack calibrate-imu --config DAEMON.toml [--by-hand] [--poses N] [--step-deg D]
+                             [--tilt-step-deg D] [--dwell-s S] [--settle-s S] [--speed-deg-s V]
+                             [--lidar-ip IP] [--serial PORT] [--max-s S] [--out X.json] [--json]
+
+steps the head through static poses by Pelco-D (or, ``--by-hand``, prompts for each pose and waits
+for Enter), gathers each pose's cloud and every IMU sample from the live stream and runs the same
+procedure (:mod:`foveatrack.imu_calib.live`); ``--out`` (default ``imu-extrinsic.json``) gets the
+extrinsic in the simulated command's format, without truth.
 """
 
 from __future__ import annotations
@@ -42,8 +50,24 @@ def _floats(text: str, flag: str) -> list[float]:
 
 def register(sub) -> None:
     p = sub.add_parser("calibrate-imu", help="lidar-IMU extrinsic from static poses (paper Sec. IV.A, Fig. 11)")
-    p.add_argument("scene", metavar="SCENE.toml", help="a scene with [imu] and [imu_poses] "
+    p.add_argument("scene", metavar="SCENE.toml", nargs="?", help="simulate: a scene with [imu] and [imu_poses] "
                    "(scenes/imu-calibration-room.toml)")
+    live = p.add_argument_group("real rig (a Livox with an IMU on the daemon's head)")
+    live.add_argument("--config", metavar="DAEMON.toml", help="the daemon config naming the lidar and the head")
+    live.add_argument("--by-hand", action="store_true", help="do not drive the head: prompt for each pose and "
+                      "wait for Enter (the rig moved by hand)")
+    live.add_argument("--poses", type=int, metavar="N", help="static poses (default: 25)")
+    live.add_argument("--step-deg", type=float, metavar="DEG", help="pan step between poses (default: 10)")
+    live.add_argument("--tilt-step-deg", type=float, metavar="DEG",
+                      help="tilt step between poses (default: --step-deg)")
+    live.add_argument("--dwell-s", type=float, metavar="S", help="accumulation per pose (default: 10)")
+    live.add_argument("--settle-s", type=float, metavar="S",
+                      help="wait after each stop before the pose's window opens (default: 1)")
+    live.add_argument("--speed-deg-s", type=float, metavar="DEG/S",
+                      help="head speed while moving, per axis, within the config's limits (default: 10)")
+    live.add_argument("--lidar-ip", metavar="IP", help="the Livox's IP (replaces the config's [lidar] sensor_ip)")
+    live.add_argument("--serial", metavar="PORT", help="the head's serial port (replaces the config's [head] port)")
+    live.add_argument("--max-s", type=float, metavar="S", help="give up after S seconds (default: no limit)")
     p.add_argument("--accumulate", default="0.1,0.2,0.5,1,2,5,10", metavar="S,S,...",
                    help="accumulation times per pose [s] (default: %(default)s)")
     p.add_argument("--lidar", metavar="NAME,...", help="lidars to compare (Risley presets mid40, horizon, "
@@ -60,6 +84,19 @@ def register(sub) -> None:
 def _extrinsic_json(score, res, truth=None) -> dict:
     from scipy.spatial.transform import Rotation
 
+    out = extrinsic_record(res, score.lidar, score.accumulate_s)
+    if truth is not None:
+        out["truth_translation_m"] = truth[:3, 3].round(6).tolist()
+        out["truth_rotation_rpy_deg"] = Rotation.from_matrix(truth[:3, :3]).as_euler("xyz", degrees=True).round(5).tolist()
+        out["error_rotation_deg"] = round(score.rotation_error_deg, 5)
+        out["error_translation_m"] = round(score.translation_error_m, 6)
+    return out
+
+
+def extrinsic_record(res, lidar: str, accumulate_s: float) -> dict:
+    """The extrinsic file's fields, simulated or live: ``X``, its bootstrap 1-sigma, what solved it."""
+    from scipy.spatial.transform import Rotation
+
     X = res.X
     out = {
         "frame": "T_lidar_imu: the IMU's pose in the lidar frame (p_lidar = R p_imu + t)",
@@ -70,27 +107,37 @@ def _extrinsic_json(score, res, truth=None) -> dict:
         "sigma_translation_m": np.round(res.uncertainty.translation_sigma_m, 6).tolist(),
         "sigma_method": f"bootstrap over the {res.handeye.pairs_used} pose pairs "
                         f"({res.uncertainty.samples} resamples), 1-sigma per axis",
-        "lidar": score.lidar,
-        "accumulate_s": score.accumulate_s,
+        "lidar": lidar,
+        "accumulate_s": accumulate_s,
         "pairs": res.handeye.pairs_used,
         "axis_spread_deg": round(res.handeye.axis_spread_deg, 3),
         "consistency_eq8_mean": float(np.mean(res.consistency())),
     }
-    if truth is not None:
-        out["truth_translation_m"] = truth[:3, 3].round(6).tolist()
-        out["truth_rotation_rpy_deg"] = Rotation.from_matrix(truth[:3, :3]).as_euler("xyz", degrees=True).round(5).tolist()
-        out["error_rotation_deg"] = round(score.rotation_error_deg, 5)
-        out["error_translation_m"] = round(score.translation_error_m, 6)
     return out
 
 
 def cmd_calibrate_imu(args) -> int:
+    if args.bootstrap < 0:
+        raise UserError(f"--bootstrap {args.bootstrap}: must be >= 0")
+    live_flags = [f for f, v in (("--by-hand", args.by_hand), ("--lidar-ip", args.lidar_ip), ("--serial", args.serial),
+                                 ("--max-s", args.max_s), ("--poses", args.poses), ("--step-deg", args.step_deg),
+                                 ("--tilt-step-deg", args.tilt_step_deg), ("--dwell-s", args.dwell_s),
+                                 ("--settle-s", args.settle_s), ("--speed-deg-s", args.speed_deg_s))
+                  if v is not None and v is not False]
+    if args.config and args.scene:
+        raise UserError("calibrate-imu: give SCENE.toml (simulated rig) or --config DAEMON.toml (real rig), not both")
+    if args.scene and live_flags:
+        raise UserError(f"{', '.join(live_flags)}: real-rig options; a simulated rig takes its poses from the scene's "
+                        "[imu_poses] (give --config DAEMON.toml instead of SCENE.toml for a real rig)")
+    if args.config or live_flags:
+        return calibrate_live_rig(args, live_flags)
+    if not args.scene:
+        raise UserError("calibrate-imu needs SCENE.toml (simulated, e.g. scenes/imu-calibration-room.toml) or "
+                        "--config DAEMON.toml (a Livox with an IMU on the daemon's head)")
     from sim import imu_rig
     from sim.scene import load_scene
 
     acc = sorted(set(_floats(args.accumulate, "--accumulate")))
-    if args.bootstrap < 0:
-        raise UserError(f"--bootstrap {args.bootstrap}: must be >= 0")
     for path in (args.out, args.plot):
         if path:
             check_output_file(path, "--out" if path == args.out else "--plot")
@@ -150,4 +197,100 @@ def cmd_calibrate_imu(args) -> int:
           + (f" -> {args.out}" if args.out else ""))
     if args.plot:
         print(f"plot: {args.plot}")
+    return 0
+
+
+def calibrate_live_rig(args, live_flags: list[str]) -> int:
+    """``calibrate-imu --config DAEMON.toml [--by-hand]``: the procedure on a live lidar and head."""
+    import signal
+    import threading
+    from dataclasses import replace
+
+    from foveatrack.daemon.config import load_config
+    from foveatrack.imu_calib.live import RigPlan, calibrate_rig
+
+    if not args.config:
+        raise UserError(f"{', '.join(live_flags)} calibrate a real rig: they need --config DAEMON.toml (the daemon's "
+                        "config names the lidar, the head and its limits)")
+    if args.lidar:
+        raise UserError("--lidar names simulated lidars; on a real rig the lidar is the config's (--lidar-ip IP "
+                        "replaces its [lidar] sensor_ip)")
+    if args.plot:
+        raise UserError("--plot draws the simulated error-vs-accumulation curves; a real rig has no truth to plot")
+    if args.max_s is not None and not args.max_s > 0:
+        raise UserError(f"--max-s must be > 0, got {args.max_s}")
+    out = args.out or "imu-extrinsic.json"
+    check_output_file(out, "--out")
+    given = {k: getattr(args, k) for k in ("poses", "step_deg", "tilt_step_deg", "dwell_s", "settle_s", "speed_deg_s")
+             if getattr(args, k) is not None}
+    plan = RigPlan(**given)
+    plan.check_axes()
+    cfg = load_config(args.config)
+    if args.lidar_ip:
+        cfg = replace(cfg, lidar=replace(cfg.lidar, sensor_ip=args.lidar_ip))
+    if args.serial:
+        cfg = replace(cfg, head=replace(cfg.head, port=args.serial))
+    stop = threading.Event()
+    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    bar = None
+    progress = None
+    if not args.no_progress and not args.json and not args.by_hand:
+        from tqdm import tqdm
+
+        bar = tqdm(total=plan.poses, desc="static poses", unit=" pose", file=sys.stderr, leave=False)
+
+        def progress(done, total):
+            bar.update(done - bar.n)
+    try:
+        run = calibrate_rig(cfg, plan, by_hand=args.by_hand, bootstrap_samples=args.bootstrap, max_s=args.max_s,
+                            stop=stop, progress=progress)
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+        if bar is not None:
+            bar.close()
+    res = run.result
+    extrinsic = extrinsic_record(res, "live", plan.dwell_s)
+    extrinsic.update({
+        "mode": "by hand" if run.by_hand else "head stepped by Pelco-D",
+        "poses": plan.poses,
+        "translation_singular_values": np.round(run.translation_singular_values, 5).tolist(),
+        "weakest_translation_direction": np.round(run.weakest_translation_direction, 4).tolist(),
+        "gravity_m_s2": round(res.imu.gravity_m_s2, 4),
+        "pair_rotations_deg": [round(v, 3) for v in run.turned_deg],
+    })
+    warnings = []
+    short = run.short_turns()
+    if short:
+        warnings.append(f"{len(short)} of {len(run.turned_deg)} moves turned less than half the plan (pairs "
+                        f"{', '.join(str(i + 1) for i in short)}: {', '.join(f'{run.turned_deg[i]:.1f}' for i in short)} deg "
+                        f"for {', '.join(f'{run.planned_deg[i]:.1f}' for i in short)} planned): the head's speed table "
+                        f"is off ([head] speed_table = {cfg.head.speed_table!r}); calibrate it first "
+                        "(foveatrack calibrate --config) for a better extrinsic")
+    extrinsic["warnings"] = warnings
+    for w in warnings:
+        print(f"calibrate-imu: warning: {w}", file=sys.stderr)
+    with open(out, "w") as fh:
+        json.dump(extrinsic, fh, indent=2)
+        fh.write("\n")
+    summary = {"extrinsic": extrinsic, "out": out, "wall_s": round(run.wall_s, 1), "imu_samples": run.imu_samples,
+               "points_per_pose": run.points_per_pose,
+               "static_spread_deg_s": [round(v, 4) for v in run.static_spread_deg_s],
+               "registration_rms_m": [round(r.rms_m, 5) for r in res.registrations],
+               "consistency_eq8": np.round(res.consistency(), 6).tolist(), "counters": run.counters,
+               # per pose pair: the lidar's registered motion A and the IMU's integrated B (4 x 4)
+               "motions": [{"A": np.round(a, 9).tolist(), "B": np.round(b, 9).tolist()} for a, b in zip(res.A, res.B)]}
+    if args.json:
+        print(json.dumps(summary, indent=2, default=float))
+        return 0
+    e = extrinsic
+    print(f"lidar-IMU extrinsic from {plan.poses} static poses ({e['mode']}), {plan.dwell_s:g} s each, "
+          f"{run.wall_s:.0f} s wall; {run.imu_samples} IMU samples; gravity {e['gravity_m_s2']:.3f} m/s^2")
+    print(f"  rotation rpy {e['rotation_rpy_deg']} deg (1-sigma {e['sigma_rotation_deg']})")
+    print(f"  translation {e['translation_m']} m (1-sigma {e['sigma_translation_m']})")
+    print(f"  {res.handeye.pairs_used} pairs, rotation axes spread {res.handeye.axis_spread_deg:.1f} deg; translation "
+          f"pinned by singular values {e['translation_singular_values']} (weakest along "
+          f"{e['weakest_translation_direction']})")
+    print(f"  consistency eq. (8) without truth: mean {e['consistency_eq8_mean']:.2e}")
+    print(f"  written to {out}")
     return 0

@@ -45,7 +45,7 @@ def plot_error_vs_accumulation(rows: list[dict], coverage: dict | None, path: st
         for name, (t, cov) in coverage.items():
             ax_cov.plot(t, cov * 100, color=COLOURS.get(name), label=name)
         ax_cov.set(xscale="log", xlabel="accumulation time [s]", ylabel="coverage [%]",
-                   title="coverage of the FoV (paper Fig. 6e; spinning lidars: fixed after one turn)", ylim=(0, 100))
+                   title="coverage of the FoV (paper Fig. 6e)\nspinning lidars: fixed after one turn", ylim=(0, 100))
         ax_cov.grid(True, which="both", alpha=0.3)
         ax_cov.legend(fontsize=8)
     else:
