@@ -204,10 +204,9 @@ def _check_outputs(args) -> None:
 
 def calibrate_devices(args) -> int:
     """``calibrate --config DAEMON.toml``: the procedure on a real (or virtual) lidar and head."""
-    import signal
-    import threading
     from dataclasses import replace
 
+    from foveatrack.cli.stop_signals import stop_on_signals
     from foveatrack.calibration import CalibrationPlan
     from foveatrack.calibration.live import calibrate_live, delay_summary_ms
     from foveatrack.daemon.config import load_config
@@ -229,8 +228,6 @@ def calibrate_devices(args) -> int:
     if args.serial:
         cfg = replace(cfg, head=replace(cfg.head, port=args.serial))
     plan = CalibrationPlan(**_plan_overrides(args))
-    stop = threading.Event()
-    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     bar = None
     progress = None
     if not args.no_progress and not args.json:
@@ -244,11 +241,10 @@ def calibrate_devices(args) -> int:
             if legs != bar.n:
                 bar.update(legs - bar.n)
     try:
-        run = calibrate_live(cfg, plan, FeatureSpec(tuple(args.corner), radius_m=1.0), seed=args.seed,
-                             max_s=args.max_s, stop=stop, progress=progress)
+        with stop_on_signals() as stop:     # Ctrl-C / SIGTERM: the run stops the head and ends its own way
+            run = calibrate_live(cfg, plan, FeatureSpec(tuple(args.corner), radius_m=1.0), seed=args.seed,
+                                 max_s=args.max_s, stop=stop, progress=progress)
     finally:
-        for sig, h in old.items():
-            signal.signal(sig, h)
         if bar is not None:
             bar.close()
     table = run.table

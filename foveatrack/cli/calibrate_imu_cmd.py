@@ -202,10 +202,9 @@ def cmd_calibrate_imu(args) -> int:
 
 def calibrate_live_rig(args, live_flags: list[str]) -> int:
     """``calibrate-imu --config DAEMON.toml [--by-hand]``: the procedure on a live lidar and head."""
-    import signal
-    import threading
     from dataclasses import replace
 
+    from foveatrack.cli.stop_signals import stop_on_signals
     from foveatrack.daemon.config import load_config
     from foveatrack.imu_calib.live import RigPlan, calibrate_rig
 
@@ -230,8 +229,6 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
         cfg = replace(cfg, lidar=replace(cfg.lidar, sensor_ip=args.lidar_ip))
     if args.serial:
         cfg = replace(cfg, head=replace(cfg.head, port=args.serial))
-    stop = threading.Event()
-    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     bar = None
     progress = None
     if not args.no_progress and not args.json and not args.by_hand:
@@ -242,11 +239,10 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
         def progress(done, total):
             bar.update(done - bar.n)
     try:
-        run = calibrate_rig(cfg, plan, by_hand=args.by_hand, bootstrap_samples=args.bootstrap, max_s=args.max_s,
-                            stop=stop, progress=progress)
+        with stop_on_signals() as stop:     # Ctrl-C / SIGTERM: the run stops the head and ends its own way
+            run = calibrate_rig(cfg, plan, by_hand=args.by_hand, bootstrap_samples=args.bootstrap, max_s=args.max_s,
+                                stop=stop, progress=progress)
     finally:
-        for sig, h in old.items():
-            signal.signal(sig, h)
         if bar is not None:
             bar.close()
     res = run.result
