@@ -38,6 +38,7 @@ accumulated as a product, so it stays orthonormal to machine precision over any 
 
 from __future__ import annotations
 
+import abc
 import bisect
 import math
 from dataclasses import dataclass
@@ -173,7 +174,7 @@ class _AxisIntegrator:
             del self.times[:cut]
 
 
-class HeadPose:
+class HeadPose(abc.ABC):
     """What a source of head angles gives the tracker once it has ``angles_at(t_s)`` -> ``(pan_deg,
     tilt_deg, sigma_pan_deg, sigma_tilt_deg)`` and ``lidar_offset_m``: the head's rotation, points and
     detections in the world.  Shared by the commands' dead reckoning (:class:`Reconstructor`) and the
@@ -181,8 +182,9 @@ class HeadPose:
 
     lidar_offset_m: np.ndarray
 
-    def angles_at(self, t_s: float) -> tuple[float, float, float, float]:   # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
+        """``(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg)`` of the head at ``t_s`` [s]."""
 
     def rotation_at(self, t_s: float) -> np.ndarray:
         p, t, _, _ = self.angles_at(t_s)

@@ -248,18 +248,30 @@ class Calibrator:
         keep = t >= start
         return t[keep], Q[keep]
 
-    def _axis_estimate(self, axis: str) -> np.ndarray:
-        prior = self._pan_prior if axis == "pan" else np.array([0.0, 1.0, 0.0])
+    def _leg_scatter(self, axis: str, min_arc_rms_m: float = 0.0) -> tuple[np.ndarray, int]:
+        """Scatter matrix of the ``axis`` legs' steady corner positions about each leg's mean, and the
+        number of positions; legs shorter than ``plan.min_samples`` are left out, and with
+        ``min_arc_rms_m`` > 0 legs whose arc is shorter (rms along it): a leg that hardly moves
+        carries no information on the axis, only the corner's (anisotropic) noise."""
         C = np.zeros((3, 3))
         n = 0
         for leg in self.legs:
             if leg.axis != axis:
                 continue
             _, Q = self._steady(leg)
-            if len(Q) >= self.plan.min_samples:
-                Qc = Q - Q.mean(axis=0)
-                C += Qc.T @ Qc
-                n += len(Q)
+            if len(Q) < self.plan.min_samples:
+                continue
+            Qc = Q - Q.mean(axis=0)
+            S = Qc.T @ Qc
+            if min_arc_rms_m > 0 and math.sqrt(np.linalg.eigvalsh(S)[-1] / len(Q)) < min_arc_rms_m:
+                continue
+            C += S
+            n += len(Q)
+        return C, n
+
+    def _axis_estimate(self, axis: str) -> np.ndarray:
+        prior = self._pan_prior if axis == "pan" else np.array([0.0, 1.0, 0.0])
+        C, n = self._leg_scatter(axis)
         if n < 10:
             return prior
         w, v = np.linalg.eigh(C)
@@ -395,21 +407,7 @@ class PriorAxisCalibrator(Calibrator):
 
     def _axis_estimate(self, axis: str) -> np.ndarray:
         prior = self._pan_prior if axis == "pan" else np.array([0.0, 1.0, 0.0])
-        C = np.zeros((3, 3))
-        n = 0
-        for leg in self.legs:
-            if leg.axis != axis:
-                continue
-            _, Q = self._steady(leg)
-            if len(Q) < self.plan.min_samples:
-                continue
-            Qc = Q - Q.mean(axis=0)
-            # only legs whose arc is long (rms >= min_arc_rms_m along it): a leg that hardly moves
-            # carries no information on the axis, only the corner's (anisotropic) noise
-            if math.sqrt(np.linalg.eigvalsh(Qc.T @ Qc)[-1] / len(Q)) < self.min_arc_rms_m:
-                continue
-            C += Qc.T @ Qc
-            n += len(Q)
+        C, n = self._leg_scatter(axis, self.min_arc_rms_m)
         if n < 10:
             return prior
         w, v = np.linalg.eigh(C)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import math
 import os
 from pathlib import Path
 from typing import Iterable
@@ -14,11 +15,25 @@ from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRUTH
 from foveatrack.recording.reader import RecordingReader
 
 
-def _out_kind(out_path: Path) -> str:
+def out_kind(out_path: Path) -> str:
+    """"csv" or "npz", from the file name; any other is an error that names the file."""
     suf = out_path.suffix.lower()
     if suf not in (".csv", ".npz"):
         raise UserError(f"export to {out_path}: the file name must end in .csv or .npz")
     return suf[1:]
+
+
+def write_columns(out_path: Path, cols: dict, nan_as_empty: bool = False) -> None:
+    """Equal-length columns as NPZ (one array each) or CSV (a header row, then a row per index), by
+    the file name; ``nan_as_empty``: a NaN is an empty CSV cell."""
+    if out_kind(out_path) == "npz":
+        np.savez_compressed(out_path, **cols)
+        return
+    with open(out_path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(cols.keys())
+        for row in zip(*(np.asarray(c).tolist() for c in cols.values())):
+            w.writerow(["" if nan_as_empty and isinstance(v, float) and math.isnan(v) else v for v in row])
 
 
 def export_points(recording: str | os.PathLike, out_path: str | os.PathLike) -> int:
@@ -27,7 +42,7 @@ def export_points(recording: str | os.PathLike, out_path: str | os.PathLike) -> 
     Columns / arrays: frame_index, frame_t_ns, t_ns, x_m, y_m, z_m, reflectivity (lidar frame).
     """
     out_path = Path(out_path)
-    kind = _out_kind(out_path)
+    out_kind(out_path)
     frames = list(RecordingReader(recording).points())
     if frames:
         cols = {
@@ -41,16 +56,8 @@ def export_points(recording: str | os.PathLike, out_path: str | os.PathLike) -> 
         }
     else:
         cols = {k: np.zeros(0) for k in ("frame_index", "frame_t_ns", "t_ns", "x_m", "y_m", "z_m", "reflectivity")}
-    n = len(cols["t_ns"])
-    if kind == "npz":
-        np.savez_compressed(out_path, **cols)
-    else:
-        with open(out_path, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(cols.keys())
-            for row in zip(*(c.tolist() for c in cols.values())):
-                w.writerow(row)
-    return n
+    write_columns(out_path, cols)
+    return len(cols["t_ns"])
 
 
 def _flatten(rec: dict, prefix: str = "") -> dict:
@@ -79,7 +86,7 @@ def export_trajectory(
     array per ``<channel>.<field>`` (NaN / "" where a record lacks the field).
     """
     out_path = Path(out_path)
-    kind = _out_kind(out_path)
+    kind = out_kind(out_path)
     channels = tuple(channels)
     rows = [(m.channel, _flatten(m.record)) for m in RecordingReader(recording).messages(channels)]
     if kind == "csv":

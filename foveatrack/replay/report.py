@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 
-import numpy as np
-
-from foveatrack.errors import UserError
+from foveatrack.recording.export import out_kind, write_columns
 from foveatrack.replay.result import ReplayResult
 
 
@@ -78,9 +75,7 @@ def format_report(res: ReplayResult) -> str:
 def export_replay_trajectory(res: ReplayResult, out_path: str | os.PathLike) -> int:
     """Write the replay's per-frame arrays (and truth) to CSV or NPZ (by suffix); returns rows."""
     out_path = Path(out_path)
-    suf = out_path.suffix.lower()
-    if suf not in (".csv", ".npz"):
-        raise UserError(f"export to {out_path}: the file name must end in .csv or .npz")
+    out_kind(out_path)          # before the work: a wrong name is an error that names the file
     f = res.frames
     cols = {"frame_index": f["frame_index"], "t_end_s": f["t_end_s"], "n_points": f["n_points"],
             "detected": f["detected"].astype(int), "state": f["state"],
@@ -96,14 +91,5 @@ def export_replay_trajectory(res: ReplayResult, out_path: str | os.PathLike) -> 
                      "true_y_m": t["target_xyz_m"][:, 1], "true_z_m": t["target_xyz_m"][:, 2],
                      "points_on_target": t["points_on_target"], "true_pan_deg": t["pan_deg"],
                      "true_tilt_deg": t["tilt_deg"]})
-    if suf == ".npz":
-        np.savez_compressed(out_path, **cols)
-    else:
-        import csv
-
-        with open(out_path, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(cols.keys())
-            for row in zip(*(np.asarray(c).tolist() for c in cols.values())):
-                w.writerow(["" if isinstance(v, float) and math.isnan(v) else v for v in row])
+    write_columns(out_path, cols, nan_as_empty=True)
     return len(f["t_end_s"])
