@@ -186,6 +186,34 @@ def voxel_coverage(model: ScanModel, duration_s: float, grid: CoverageGrid | Non
     return _curve("voxel", first_hit, mask, model.optics.point_rate_hz, run_s, stopped)
 
 
+def _beam_speed_bound(optics: RisleyOptics) -> float:
+    """A bound on the beam's angular speed [deg/s x rad]: the sum of the prisms' (deviation x angular
+    rate), doubled for exact refraction; sets how finely the coverage methods sample the trajectory."""
+    return sum(2 * p.thin_prism_deviation_deg * abs(p.rpm) / 60 * 2 * math.pi for p in optics.prisms)
+
+
+def _trajectory_chunks(model: ScanModel, substeps: int, duration_s: float, chunk_points: int, project):
+    """The scan's trajectory at ``substeps`` x the point rate: the same noise process in time (its
+    draws depend on time segments only), each channel traced from the shared prism angles.  Yields,
+    per chunk, ``(samples_done, samples_total, [(x, y, sample_index) per channel])`` with ``project``
+    (directions -> two angle arrays [deg]) applied to the valid rays."""
+    optics = model.optics
+    fine_rate = optics.point_rate_hz * substeps
+    fine = ScanModel(optics.with_(point_rate_hz=fine_rate), model=model.model,
+                     speed_noise=model.speed_noise, rng=model._rng)
+    total = int(round(duration_s * fine_rate))
+    for k in range(0, total, chunk_points):
+        n = min(chunk_points, total - k)
+        revs = fine.prism_revs(k, n)
+        per_channel = []
+        for c in range(optics.channels):
+            d, st = model.directions_from_revs(revs, np.full(n, c, dtype=np.int64))
+            ok = st == kernels.RAY_OK
+            x, y = project(d[ok])
+            per_channel.append((x, y, np.flatnonzero(ok).astype(np.int64) + k))
+        yield k + n, total, per_channel
+
+
 def footprint_coverage(model: ScanModel, duration_s: float, substeps: int | None = None,
                        reference_rays: int = 1_000_000, seed: int = 0, chunk_points: int = 20_000,
                        progress=None) -> CoverageCurve:
@@ -198,10 +226,8 @@ def footprint_coverage(model: ScanModel, duration_s: float, substeps: int | None
     half_az, half_el = div_az / 2, div_el / 2
     cell = min(div_az, div_el) / 2
     if substeps is None:
-        # Keep sub-sample spacing below the footprint's minor semi-axis: bound the beam's angular
-        # speed by the sum of the prisms' (deviation x angular rate), doubled for exact refraction.
-        w = sum(2 * p.thin_prism_deviation_deg * abs(p.rpm) / 60 * 2 * math.pi for p in optics.prisms)
-        substeps = max(1, math.ceil(w / optics.point_rate_hz / half_el))
+        # keep sub-sample spacing below the footprint's minor semi-axis
+        substeps = max(1, math.ceil(_beam_speed_bound(optics) / optics.point_rate_hz / half_el))
     ref = reachable_directions(ScanModel(optics, model=model.model), reference_rays // optics.channels,
                                np.random.default_rng(seed))
     az, el = az_el_deg(ref)
@@ -211,25 +237,13 @@ def footprint_coverage(model: ScanModel, duration_s: float, substeps: int | None
     reach = np.full((n_el, n_az), -1, dtype=np.int64)
     kernels.paint_footprint_kernel(az, el, 0, half_az, half_el, az0, el0, cell, reach)
     mask = reach.ravel() >= 0
-    # The scan's trajectory at substeps x the point rate: the same noise process in time (its draws
-    # depend on time segments only), each channel traced from the shared prism angles.
-    fine_rate = optics.point_rate_hz * substeps
-    fine = ScanModel(optics.with_(point_rate_hz=fine_rate), model=model.model,
-                     speed_noise=model.speed_noise, rng=model._rng)
     first_hit = np.full((n_el, n_az), -1, dtype=np.int64)
-    total = int(round(duration_s * fine_rate))
-    for k in range(0, total, chunk_points):
-        n = min(chunk_points, total - k)
-        revs = fine.prism_revs(k, n)
-        for c in range(optics.channels):
-            d, st = model.directions_from_revs(revs, np.full(n, c, dtype=np.int64))
-            ok = st == kernels.RAY_OK
-            a, e = az_el_deg(d[ok])
-            kidx = np.flatnonzero(ok).astype(np.int64) + k
-            # Paint in sample order; the kernel takes k0 + j, so paint ray by ray index blocks.
-            _paint_indexed(a, e, kidx, half_az, half_el, az0, el0, cell, first_hit)
+    for done, total, per_channel in _trajectory_chunks(model, substeps, duration_s, chunk_points, az_el_deg):
+        for a, e, kidx in per_channel:
+            _paint_runs(kernels.paint_footprint_kernel, a, e, kidx, (half_az, half_el, az0, el0, cell, first_hit))
         if progress is not None:
-            progress(k + n, total)
+            progress(done, total)
+    fine_rate = optics.point_rate_hz * substeps
     return _curve("footprint-fixed", first_hit.ravel(), mask, fine_rate, duration_s, False)
 
 
@@ -266,8 +280,7 @@ def swath_coverage(model: ScanModel, duration_s: float, cell_deg: float | None =
     if not 0 < cell_deg <= radius / 4:
         raise ValueError(f"cell_deg = {cell_deg!r}: must be in (0, {radius / 4:g}] (a quarter of the swath half-width)")
     if substeps is None:
-        w = sum(2 * p.thin_prism_deviation_deg * abs(p.rpm) / 60 * 2 * math.pi for p in optics.prisms)
-        substeps = max(1, math.ceil(w / optics.point_rate_hz / (radius / 4)))
+        substeps = max(1, math.ceil(_beam_speed_bound(optics) / optics.point_rate_hz / (radius / 4)))
     ref = reachable_directions(ScanModel(optics, model=model.model), reference_rays // optics.channels,
                                np.random.default_rng(seed))
     u, v = axis_projection_deg(ref)
@@ -279,25 +292,17 @@ def swath_coverage(model: ScanModel, duration_s: float, cell_deg: float | None =
     reach = np.full((n_v, n_u), -1, dtype=np.int64)
     kernels.paint_swath_kernel(u, v, 0, radius, u0, v0, cell_deg, reach)
     mask = reach.ravel() >= 0
-    fine_rate = optics.point_rate_hz * substeps
-    fine = ScanModel(optics.with_(point_rate_hz=fine_rate), model=model.model,
-                     speed_noise=model.speed_noise, rng=model._rng)
     first_hit = np.full((n_v, n_u), -1, dtype=np.int64)
-    total = int(round(duration_s * fine_rate))
     # chunks on whole 256-ray blocks: the trace's vectorised loop gives the same bits only for
     # blocks that start alike, so any chunk_points gives the same curve
     chunk_points = max(256, -(-int(chunk_points) // 256) * 256)
-    for k in range(0, total, chunk_points):
-        n = min(chunk_points, total - k)
-        revs = fine.prism_revs(k, n)
-        for c in range(optics.channels):
-            d, st = model.directions_from_revs(revs, np.full(n, c, dtype=np.int64))
-            ok = st == kernels.RAY_OK
-            a, e = axis_projection_deg(d[ok])
-            _paint_runs(kernels.paint_swath_kernel, a, e, np.flatnonzero(ok).astype(np.int64) + k,
-                        (radius, u0, v0, cell_deg, first_hit))
+    for done, total, per_channel in _trajectory_chunks(model, substeps, duration_s, chunk_points,
+                                                       axis_projection_deg):
+        for a, e, kidx in per_channel:
+            _paint_runs(kernels.paint_swath_kernel, a, e, kidx, (radius, u0, v0, cell_deg, first_hit))
         if progress is not None:
-            progress(k + n, total)
+            progress(done, total)
+    fine_rate = optics.point_rate_hz * substeps
     return _curve("footprint", first_hit.ravel(), mask, fine_rate, duration_s, False)
 
 
@@ -308,12 +313,3 @@ def _paint_runs(kernel, a, e, kidx, args):
     breaks = np.flatnonzero(np.diff(kidx) != 1) + 1
     for lo, hi in zip(np.r_[0, breaks], np.r_[breaks, kidx.size]):
         kernel(a[lo:hi], e[lo:hi], int(kidx[lo]), *args)
-
-
-def _paint_indexed(a, e, kidx, half_az, half_el, az0, el0, cell, first_hit):
-    # Contiguous runs of valid rays keep the kernel's k0 + j indexing exact.
-    if kidx.size == 0:
-        return
-    breaks = np.flatnonzero(np.diff(kidx) != 1) + 1
-    for lo, hi in zip(np.r_[0, breaks], np.r_[breaks, kidx.size]):
-        kernels.paint_footprint_kernel(a[lo:hi], e[lo:hi], int(kidx[lo]), half_az, half_el, az0, el0, cell, first_hit)

@@ -339,6 +339,15 @@ __all__ = [
 ]
 
 
+@njit(cache=True, inline="always")
+def _cells_within(c, half, lo, cell, n):
+    """First and last index of the grid cells (``n`` of ``cell``, the first starting at ``lo``) whose
+    centre lies within ``half`` of ``c`` along one axis (last < first: none)."""
+    first = max(0, int(math.ceil((c - half - lo) / cell - 0.5)))
+    last = min(n - 1, int(math.floor((c + half - lo) / cell - 0.5)))
+    return first, last
+
+
 @njit(cache=True)
 def paint_footprint_kernel(az_deg, el_deg, k0, half_az_deg, half_el_deg, az_min, el_min, cell_deg, first_hit):
     """Paint each beam's elliptical footprint into a fine az/el grid (Livox's coverage definition).
@@ -354,10 +363,8 @@ def paint_footprint_kernel(az_deg, el_deg, k0, half_az_deg, half_el_deg, az_min,
     for j in range(az_deg.shape[0]):
         a0 = az_deg[j]
         e0 = el_deg[j]
-        i_lo = max(0, int(math.ceil((a0 - half_az_deg - az_min) / cell_deg - 0.5)))
-        i_hi = min(n_az - 1, int(math.floor((a0 + half_az_deg - az_min) / cell_deg - 0.5)))
-        r_lo = max(0, int(math.ceil((e0 - half_el_deg - el_min) / cell_deg - 0.5)))
-        r_hi = min(n_el - 1, int(math.floor((e0 + half_el_deg - el_min) / cell_deg - 0.5)))
+        i_lo, i_hi = _cells_within(a0, half_az_deg, az_min, cell_deg, n_az)
+        r_lo, r_hi = _cells_within(e0, half_el_deg, el_min, cell_deg, n_el)
         for r in range(r_lo, r_hi + 1):
             de = el_min + (r + 0.5) * cell_deg - e0
             for i in range(i_lo, i_hi + 1):
@@ -388,10 +395,8 @@ def paint_swath_kernel(u_deg, v_deg, k0, radius_deg, u_min, v_min, cell_deg, fir
     for j in range(u_deg.shape[0]):
         u0 = u_deg[j]
         v0 = v_deg[j]
-        i_lo = max(0, int(math.ceil((u0 - radius_deg - u_min) / cell_deg - 0.5)))
-        i_hi = min(n_u - 1, int(math.floor((u0 + radius_deg - u_min) / cell_deg - 0.5)))
-        r_lo = max(0, int(math.ceil((v0 - radius_deg - v_min) / cell_deg - 0.5)))
-        r_hi = min(n_v - 1, int(math.floor((v0 + radius_deg - v_min) / cell_deg - 0.5)))
+        i_lo, i_hi = _cells_within(u0, radius_deg, u_min, cell_deg, n_u)
+        r_lo, r_hi = _cells_within(v0, radius_deg, v_min, cell_deg, n_v)
         for r in range(r_lo, r_hi + 1):
             dv = v_min + (r + 0.5) * cell_deg - v0
             for i in range(i_lo, i_hi + 1):
