@@ -46,6 +46,12 @@ from foveatrack.imu_calib.se3 import make_T, so3_exp, so3_log
 G_WORLD = np.array([0.0, 0.0, -GRAVITY_M_S2])
 
 
+def pose_T(rpy_deg, t_m) -> np.ndarray:
+    """4 x 4 pose from roll/pitch/yaw [deg] (scipy's extrinsic "xyz", the scene files' convention)
+    and a translation [m]."""
+    return make_T(Rotation.from_euler("xyz", rpy_deg, degrees=True).as_matrix(), t_m)
+
+
 @dataclass(frozen=True)
 class ImuNoise:
     """Noise of one IMU (defaults: BMI088, see the module docstring)."""
@@ -82,17 +88,13 @@ class ImuSpec:
     # pose, before the run's first frame (the daemon starts the lidar and waits for a target) [s].
     rest_before_s: float = 5.0
 
-    @staticmethod
-    def _T(rpy_deg, t_m) -> np.ndarray:
-        return make_T(Rotation.from_euler("xyz", rpy_deg, degrees=True).as_matrix(), t_m)
-
     @property
     def T_lidar_imu(self) -> np.ndarray:
-        return self._T(self.rotation_deg, self.translation_m)
+        return pose_T(self.rotation_deg, self.translation_m)
 
     @property
     def nominal_T_lidar_imu(self) -> np.ndarray:
-        return self._T(self.nominal_rotation_deg, self.nominal_translation_m)
+        return pose_T(self.nominal_rotation_deg, self.nominal_translation_m)
 
 
 @dataclass(frozen=True)
@@ -109,7 +111,7 @@ class PoseSchedule:
 
     @property
     def T_world_home(self) -> np.ndarray:
-        return make_T(Rotation.from_euler("xyz", self.home_rpy_deg, degrees=True).as_matrix(), self.home_m)
+        return pose_T(self.home_rpy_deg, self.home_m)
 
     def windows(self) -> list[tuple[float, float]]:
         per = self.dwell_s + self.move_s
