@@ -133,3 +133,25 @@ path = "{recording}"
 watchdog_s = {watchdog_s}
 """)
     return path
+
+
+def device_config(path: Path, head_link, broadcast_port: int, watchdog_s: float, head: dict | None = None,
+                  lidar: dict | None = None) -> Path:
+    """A daemon config with what the calibration commands read: the virtual devices on loopback, the
+    head's port and the ``[head]`` / ``[lidar]`` keys given (values written as JSON, which TOML reads)."""
+    def keys(d):
+        return "".join(f"{k} = {json.dumps(v)}\n" for k, v in (d or {}).items())
+
+    path.write_text(f"""
+[lidar]
+sensor_ip = "127.0.0.1"
+host_ip = "127.0.0.1"
+cmd_port = 0
+data_port = 0
+broadcast_port = {broadcast_port}
+{keys(lidar)}[head]
+port = "{head_link}"
+{keys(head)}[daemon]
+watchdog_s = {watchdog_s}
+""")
+    return path

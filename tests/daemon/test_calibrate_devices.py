@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from daemon_procs import ROOT, env, first_line, free_udp_port, start, terminate, wait_for
+from daemon_procs import ROOT, device_config, env, first_line, free_udp_port, start, terminate, wait_for
 from foveatrack.calibration import CalibrationPlan
 from foveatrack.calibration.live import plan_within_limits
 from foveatrack.cli import main
@@ -35,24 +35,7 @@ CORNER = ("5.9", "0.8", "0.84")   # the room corner in the lidar frame at the st
 
 
 def _config(tmp_path, link, bport, **head):
-    extra = "".join(f"{k} = {json.dumps(v)}\n" for k, v in head.items())
-    p = tmp_path / "d.toml"
-    p.write_text(f"""
-[lidar]
-sensor_ip = "127.0.0.1"
-host_ip = "127.0.0.1"
-cmd_port = 0
-data_port = 0
-broadcast_port = {bport}
-[head]
-port = "{link}"
-pan0_deg = 23.0
-tilt0_deg = 6.5
-{extra}
-[daemon]
-watchdog_s = {WATCHDOG_S}
-""")
-    return p
+    return device_config(tmp_path / "d.toml", link, bport, WATCHDOG_S, head={"pan0_deg": 23.0, "tilt0_deg": 6.5, **head})
 
 
 def _clock_zero(head_out) -> str | None:

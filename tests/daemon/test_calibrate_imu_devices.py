@@ -29,7 +29,7 @@ import time
 import numpy as np
 import pytest
 
-from daemon_procs import ROOT, env, first_line, free_udp_port, start, terminate, wait_for
+from daemon_procs import ROOT, device_config, env, first_line, free_udp_port, start, terminate, wait_for
 from foveatrack.cli import main
 from foveatrack.imu_calib.se3 import so3_log
 from sim.scene import load_scene
@@ -57,27 +57,10 @@ def _unit_table(tmp_path) -> str:
 
 
 def _config(tmp_path, link, bport, table: str = "nominal") -> str:
-    p = tmp_path / "d.toml"
-    p.write_text(f"""
-[lidar]
-sensor_ip = "127.0.0.1"
-host_ip = "127.0.0.1"
-cmd_port = 0
-data_port = 0
-broadcast_port = {bport}
-point_rate_hz = 100000
-[head]
-port = "{link}"
-pan0_deg = 31.0
-tilt0_deg = -12.0
-pan_speed_max_deg_s = 30.0
-tilt_speed_max_deg_s = 15.0
-pan_turbo_deg_s = 40.0
-speed_table = "{table}"
-[daemon]
-watchdog_s = {WATCHDOG_S}
-""")
-    return str(p)
+    head = {"pan0_deg": 31.0, "tilt0_deg": -12.0, "pan_speed_max_deg_s": 30.0, "tilt_speed_max_deg_s": 15.0,
+            "pan_turbo_deg_s": 40.0, "speed_table": table}
+    return str(device_config(tmp_path / "d.toml", link, bport, WATCHDOG_S, head=head,
+                             lidar={"point_rate_hz": 100000}))
 
 
 def _clock_zero(path) -> str | None:

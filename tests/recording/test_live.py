@@ -14,6 +14,7 @@ from foveatrack.recording import RecordingWriter
 from foveatrack.recording.format import _decode_points_pb
 from foveatrack.recording.live import LiveServer, Pacer
 from foveatrack.recording.records import DetectionRecord, HeadEstimateRecord, TruthRecord, write_record
+from foxglove_ws import advertised_channels, received, subscribe_all
 
 META = {"tracker_table": {"space": {"kind": "box", "frame": "world", "min_xyz": [1, -5, -1], "max_xyz": [50, 5, 10]}}}
 
@@ -34,18 +35,12 @@ def test_a_websocket_client_subscribes_and_receives_the_channels():
     with LiveServer(w.context, port=0) as live, \
             connect(f"ws://127.0.0.1:{live.port}", subprotocols=["foxglove.sdk.v1"], open_timeout=10) as ws:
         assert live.url.startswith("ws://127.0.0.1:")
-        channels = {}
-        deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and "/points" not in {c["topic"] for c in channels.values()}:
-            msg = json.loads(ws.recv(timeout=5))
-            if msg.get("op") == "advertise":
-                channels.update({c["id"]: c for c in msg["channels"]})
+        channels = advertised_channels(ws)
         by_topic = {c["topic"]: c for c in channels.values()}
         assert {"/points", "/detections", "/head", "/truth", "/tf", "/scene"} <= set(by_topic)
         assert by_topic["/points"]["schemaName"] == "foxglove.PointCloud"
         assert by_topic["/points"]["encoding"] == "protobuf"
-        subs = {i + 1: cid for i, cid in enumerate(channels)}
-        ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": s, "channelId": c} for s, c in subs.items()]}))
+        subs = subscribe_all(ws, channels)
         got: dict[str, list] = {}
         sent = {}
         k = 0
@@ -55,15 +50,8 @@ def test_a_websocket_client_subscribes_and_receives_the_channels():
             t, xyz = log_frame(w, k, rng)
             sent[t] = (k, xyz)
             k += 1
-            try:
-                while True:
-                    data = ws.recv(timeout=0.2)
-                    if isinstance(data, bytes) and data[0] == 0x01:     # message data
-                        sub = int.from_bytes(data[1:5], "little")
-                        topic = channels[subs[sub]]["topic"]
-                        got.setdefault(topic, []).append((int.from_bytes(data[5:13], "little"), data[13:]))
-            except TimeoutError:
-                pass
+            for topic, log_time, payload in received(ws, channels, subs):
+                got.setdefault(topic, []).append((log_time, payload))
     w.close()
     assert want <= set(got), set(got)
     for log_time, payload in got["/points"]:
