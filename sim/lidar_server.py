@@ -45,7 +45,9 @@ from sim.world import kernels as wk
 
 #: How long the served IMU trails the points when the scene has an ``[imu]`` (:mod:`sim.head_imu`):
 #: its finite differences need the head's pose 5 ms after each sample, and the truth file is up to a
-#: period (20 ms) + a batch (10 ms) old; 0.25 s leaves room for a loaded machine's pauses.
+#: period (20 ms) + a batch (10 ms) old.  This is the least lag: on a loaded machine the truth can be
+#: later still, and the IMU then waits until the truth covers its samples (``imu_ready_ns``), rather
+#: than differentiating a held or extrapolated pose (up to ``sim.virtual_lidar.IMU_MAX_WAIT_S``).
 IMU_LAG_S = 0.25
 
 
@@ -225,6 +227,14 @@ class _FollowingSource:
         self.mono0: float | None = None  # monotonic at stream time 0 (set by serve_scene)
         self.inner = SceneSource(scene, pose=self._pose)
 
+    def known_until_ns(self, ahead_s: float) -> float:
+        """Stream time [ns] up to which the pose is interpolated from truth lines, not extrapolated,
+        with ``ahead_s`` of it to spare (the served IMU's differences look that far ahead)."""
+        R = self.tail.rows
+        if R.shape[0] == 0 or self.tail.zero is None or self.mono0 is None:
+            return -math.inf
+        return ((R[-1, 0] + self.tail.zero - self.mono0) * self.time_scale - ahead_s) * 1e9
+
     def _pose(self, t_s):
         mono0 = self.mono0 if self.mono0 is not None else 0.0
         return self.tail.pose_at_mono(mono0 + np.asarray(t_s) / self.time_scale)
@@ -266,8 +276,10 @@ def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("
         from sim.head_imu import HeadImu
 
         pose = source._pose if tail is not None else source.pose
-        imu_kw = {"imu_source": HeadImu(pose, scene.imu.T_lidar_imu, scene.imu.noise, effect_rng(scene.seed, "imu")),
-                  "imu_lag_s": IMU_LAG_S}
+        imu = HeadImu(pose, scene.imu.T_lidar_imu, scene.imu.noise, effect_rng(scene.seed, "imu"))
+        imu_kw = {"imu_source": imu, "imu_lag_s": IMU_LAG_S}
+        if tail is not None:
+            imu_kw["imu_ready_ns"] = lambda: source.known_until_ns(imu.h_s)
 
     def _ready(lidar: VirtualLivox):
         if tail is not None:

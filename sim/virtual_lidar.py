@@ -70,6 +70,10 @@ ImuSource = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 _RETURNS_PER_SLOT = {4: 2, 5: 2, 7: 3, 8: 3}
 
 
+#: The longest the served IMU waits behind the stream for its source (``imu_ready_ns``) [s].
+IMU_MAX_WAIT_S = 2.0
+
+
 def static_imu_source(seed: int = 0, gyro_noise_rad_s: float = 0.002, acc_noise_g: float = 0.002) -> ImuSource:
     """IMU of a level sensor at rest: gyro N(0, gyro_noise) [rad/s], acc (0, 0, 1) + N(0, acc_noise) [g]
     (specific force; Z up).  Noise levels of the order of a MEMS IMU's; one seeded stream."""
@@ -104,6 +108,9 @@ class VirtualLivox:
     imu_source : callable(t_ns (n,)) -> (gyro (n,3) rad/s, acc (n,3) g); default a static sensor
     imu_lag_s : float >= 0 [s], the IMU samples leave this long after their time (a source that
         differentiates a followed head's pose needs that pose a little after each sample)
+    imu_ready_ns : optional callable() -> stream time [ns] up to which ``imu_source`` can compute its
+        samples from what it knows (a pose it follows from a file): samples wait for it, at most
+        ``IMU_MAX_WAIT_S`` behind the stream (then they go with what the source has)
     """
 
     def __init__(
@@ -129,6 +136,7 @@ class VirtualLivox:
         imu_source: ImuSource | None = None,
         control_log: list | None = None,
         imu_lag_s: float = 0.0,
+        imu_ready_ns=None,
     ):
         if not point_rate_hz > 0 or not time_scale > 0 or not 0 <= loss_rate < 1:
             raise ValueError("need point_rate_hz > 0, time_scale > 0 and 0 <= loss_rate < 1")
@@ -157,6 +165,7 @@ class VirtualLivox:
         self.broadcast_addr = broadcast_addr
         self.imu_source = imu_source or static_imu_source(seed)
         self.imu_lag_ns = int(round(max(0.0, imu_lag_s) * 1e9))
+        self.imu_ready_ns = imu_ready_ns
         self.control_log = control_log
         self._rng = np.random.default_rng(np.random.SeedSequence(seed))
         self.counters: Counter = Counter()
@@ -293,7 +302,12 @@ class VirtualLivox:
                 t_now = self.stream_time_ns(now)
                 self._stream_until(t_now)
                 if self.unit.has_imu and self.imu_freq == P.IMU_FREQ_200HZ:
-                    self._imu_until(t_now - self.imu_lag_ns)
+                    t_imu = t_now - self.imu_lag_ns
+                    if self.imu_ready_ns is not None:
+                        # wait for the source's pose to cover the samples (a loaded machine delays
+                        # the head's truth), but never more than IMU_MAX_WAIT_S behind the stream
+                        t_imu = min(t_imu, int(max(self.imu_ready_ns(), t_now - IMU_MAX_WAIT_S * 1e9)))
+                    self._imu_until(t_imu)
                 next_batch = now + self.batch_period_s
             if self.host is not None and P.decode_status_code(self.status_code)["system_status"] \
                     and now - self._last_push >= 0.8:
