@@ -24,8 +24,9 @@ def register(sub) -> None:
     p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
                    help="with --live: virtual seconds per wall second (default 1 = real time)")
     p.add_argument("--one-thread", action="store_true",
-                   help="do not trace the scan and draw the random values of the coming frames on a second thread "
-                        "(same results; for many runs side by side, or a one-core machine)")
+                   help="do not trace the scan and draw the random values of the coming frames on a second thread, "
+                        "and write the recording on the loop's thread, not from a child process (same results, "
+                        "same file; for many runs side by side, or a one-core machine)")
     p.set_defaults(func=cmd_simulate)
 
 
@@ -72,7 +73,27 @@ class CompileNotice:
 
 
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
-                   quiet=False, live_port=None, speed=1.0, ahead=None) -> dict:
+                   quiet=False, live_port=None, speed=1.0, ahead=None, recording_process=None) -> dict:
+    """Run a scene and report it (the ``simulate`` command).  ``ahead``: trace the scan ahead on a second
+    thread; ``recording_process``: write the recording from a child process.  None: both where a second
+    core is there (same results and the same file either way)."""
+    from foveatrack.recording import writer_process
+
+    two_cores = (os.cpu_count() or 1) > 1
+    if recording_process is None:
+        recording_process = two_cores and writer_process.available()
+    # started first: the child's start (imports, kernels) runs beside the set-up below
+    child = writer_process.RecordingProcess() if recording_process and out and live_port is None else None
+    try:
+        return _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed,
+                               two_cores if ahead is None else ahead, child)
+    finally:
+        if child is not None:
+            child.close()       # a no-op after the run closed it; ends the child if the run failed early
+
+
+def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed, ahead,
+                    child) -> dict:
     import time
 
     import numpy as np
@@ -111,11 +132,11 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     t0 = time.perf_counter()
     loop = ClosedLoop(scene)
     if out_dir is not None or live_port is not None:
-        # Written on the loop's own thread: the SDK holds the interpreter lock while it encodes and
-        # compresses, so a writer thread only takes turns with the loop, and the hand-overs cost more
-        # than they save (measured: docs/recordings.md)
-        writer = RecordingWriter(None if out_dir is None else out_dir / "run.mcap", meta=recording_meta(scene, loop),
-                                 overwrite=True, created_utc="virtual time (simulation)")
+        # In a child process or on the loop's own thread, never a thread of its own: the SDK holds the
+        # interpreter lock while it encodes and compresses (docs/recordings.md)
+        options = dict(meta=recording_meta(scene, loop), overwrite=True, created_utc="virtual time (simulation)")
+        writer = child.open(out_dir / "run.mcap", **options) if child is not None else \
+            RecordingWriter(None if out_dir is None else out_dir / "run.mcap", **options)
         recorder = SimRecorder(writer)
         loop.frame_hook = recorder
         if live_port is not None:
@@ -145,8 +166,6 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
             bar.update(1)
 
     try:
-        if ahead is None:
-            ahead = (os.cpu_count() or 1) > 1
         log = loop.run(advance, ahead=ahead)
     finally:
         notice.done()
@@ -158,6 +177,8 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
             live.stop()
     wall = time.perf_counter() - t0
     summary = summarize(scene, log, wall, loop)
+    if writer is not None:
+        summary["recording_written_by"] = "a child process" if child is not None else "the loop's thread"
     if out_dir is not None:
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     if plot:
@@ -231,5 +252,5 @@ def _plot_run(scene, log, summary, out_dir) -> list[Path]:
 
 def cmd_simulate(args) -> int:
     run_and_report(args.scene, args.out, args.json, args.plot, args.seed, args.duration, not args.no_progress,
-                   live_port=args.live, speed=args.speed, ahead=False if args.one_thread else None)
+                   live_port=args.live, speed=args.speed, ahead=False if args.one_thread else None, recording_process=False if args.one_thread else None)
     return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import abc
 import datetime as _dt
 import json
 import os
@@ -39,27 +40,87 @@ class RecordingExistsError(UserError):
                          f"choose another path, move it away, or pass overwrite=True")
 
 
-class RecordingWriter:
-    """Write a recording with the Foxglove SDK; use as a context manager (``close()`` on exit, also
-    after an exception).
+class RecordCalls(abc.ABC):
+    """The typed calls every recording writer takes, each a :meth:`write` on its channel (shared by
+    :class:`RecordingWriter` and :class:`foveatrack.recording.writer_process.RecordingProcess`)."""
+
+    @abc.abstractmethod
+    def write(self, channel: str, t_ns: int, record: dict) -> None:
+        """Write a JSON record on ``channel`` (``t_ns`` is added to the record)."""
+
+    def write_detection(
+        self, t_ns: int, frame_id: int, detected: bool, xyz_m=None, n_points: int = 0, **extra
+    ) -> None:
+        """Detector output of a frame: target centre xyz_m [m, lidar frame] or None."""
+        self.write(DETECTIONS, t_ns, {"frame_index": int(frame_id), "detected": bool(detected),
+                                      "xyz_m": None if xyz_m is None else np.asarray(xyz_m, float).tolist(),
+                                      "n_points": int(n_points), **extra})
+
+    def write_command(self, t_ns: int, raw: bytes, **extra) -> None:
+        """A command sent to the head: ``raw`` bytes as written, ``t_ns`` = the time they were written."""
+        self.write(COMMANDS, t_ns, {"raw_hex": bytes(raw).hex(), **extra})
+
+    def write_head_estimate(self, t_ns: int, pan_deg: float, tilt_deg: float, **extra) -> None:
+        """The head pose the tracker believes at ``t_ns`` (pan + = left, tilt + = up) [deg]."""
+        self.write(HEAD, t_ns, {"pan_deg": float(pan_deg), "tilt_deg": float(tilt_deg), **extra})
+
+    def write_truth(self, t_ns: int, **fields) -> None:
+        """Simulation truth at ``t_ns`` (e.g. target_xyz_m, pan_deg, tilt_deg)."""
+        self.write(TRUTH, t_ns, fields)
+
+    def write_metric(self, t_ns: int, name: str, value: float, **extra) -> None:
+        """A scalar figure (processing time, latency, drop counts, ...)."""
+        self.write(METRICS, t_ns, {"name": str(name), "value": value, **extra})
+
+
+def check_options(path, meta, flush_every_frames, compression, compression_level, points_dtype,
+                  overwrite) -> tuple[Path | None, str, int]:
+    """Check a writer's options as :class:`RecordingWriter` takes them (a :class:`UserError` names the
+    one that is wrong): (the path, the metadata as JSON, the compression level)."""
+    if compression not in COMPRESSIONS:
+        raise UserError(f"recording compression {compression!r} is not one of {sorted(COMPRESSIONS)}")
+    if points_dtype not in ("float64", "float32"):
+        raise UserError(f"recording points_dtype {points_dtype!r} is not 'float64' or 'float32'")
+    if int(flush_every_frames) < 1:
+        raise UserError(f"flush_every_frames must be >= 1, got {flush_every_frames}")
+    path = None if path is None else Path(path)
+    if path is not None and path.exists() and not overwrite:
+        raise RecordingExistsError(path)
+    if path is not None and path.is_dir():
+        raise UserError(f"cannot create recording {path}: it is a directory")
+    try:
+        meta_json = json.dumps(meta or {}, default=_to_jsonable, sort_keys=True)
+    except TypeError as exc:
+        raise UserError(f"recording metadata is not JSON-serialisable: {exc}") from None
+    # zstd 1 unless asked: measured against lz4 and zstd 2-6 on fig12 (docs/recordings.md)
+    level = int(compression_level) if compression_level is not None else 1 if compression == "zstd" else 0
+    return path, meta_json, level
+
+
+COMPRESSIONS = ("lz4", "zstd", "none")
+
+
+class RecordingWriter(RecordCalls):
+    """Write a recording with the Foxglove SDK on the caller's thread; use as a context manager
+    (``close()`` on exit, also after an exception).  Not thread-safe.
+    :class:`foveatrack.recording.writer_process.RecordingProcess` takes the same calls and writes the
+    same file from a child process.
 
     path : file to create (``.mcap`` suggested); an existing file is an error unless ``overwrite``.
         None: no file (the messages go only to the sinks of :attr:`context`, e.g. the live view)
     meta : dict, JSON-serialisable (scene/config text, seed, parameters, ...)
     flush_every_frames : int >= 1, complete a chunk every this many point frames
     compression : "zstd" (default), "lz4" or "none"; compression_level : the compressor's level (None:
-        1 for zstd, the compressor's default otherwise; 0: the compressor's default).  zstd 1: points on the mm grid compress to ~12 B/point (fig12: 12.3 MB) for about the
-        CPU of lz4 (15.3 MB); zstd 3 saves 5 % more for 1.7x the CPU (docs/recordings.md)
+        1 for zstd, the compressor's default otherwise; 0: the compressor's default).  zstd 1: points
+        on the mm grid compress to ~12 B/point (fig12: 12.3 MB) for about the CPU of lz4 (15.3 MB);
+        zstd 3 saves 5 % more for 1.7x the CPU (docs/recordings.md)
     points_dtype : "float64" (default, exact): a frame whose points are on the Livox mm grid (what a
         Livox's Cartesian data types and the simulator give) is stored compactly and exactly (float32 on
         a 2^-11 m grid, format 3), any other frame as float64.  "float32": every frame compact, points
         off the grid rounded to the nearest mm (at most 0.5 mm)
     fsync : also fsync the file at each flush
-    background : encode and write on a thread of the writer's own: the caller's ``write*`` and
-        ``flush`` only queue the job (a bounded queue: the caller waits when it is full, nothing is
-        dropped), so the arrays handed over must not be changed afterwards.  An error on that thread
-        is raised by the next call or by ``close()``.  The daemon, which has a writing thread of its
-        own that drops rather than waits, leaves it off.
+    created_utc : None stamps the wall-clock time; the simulator passes a fixed text so that one
+        scene and seed give the same file to the bit
     """
 
     def __init__(
@@ -73,29 +134,12 @@ class RecordingWriter:
         fsync: bool = False,
         overwrite: bool = False,
         created_utc: str | None = None,
-        background: bool = False,
     ):
-        # created_utc: None stamps the wall-clock time; the simulator passes a fixed text so that
-        # one scene and seed give the same file to the bit.
         import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-        comp = {"lz4": MCAPCompression.Lz4, "zstd": MCAPCompression.Zstd, "none": None}
-        if compression not in comp:
-            raise UserError(f"recording compression {compression!r} is not one of {sorted(comp)}")
-        if points_dtype not in ("float64", "float32"):
-            raise UserError(f"recording points_dtype {points_dtype!r} is not 'float64' or 'float32'")
-        if int(flush_every_frames) < 1:
-            raise UserError(f"flush_every_frames must be >= 1, got {flush_every_frames}")
-        # zstd 1 unless asked: measured against lz4 and zstd 2-6 on fig12 (docs/recordings.md)
-        level = int(compression_level) if compression_level is not None else 1 if compression == "zstd" else 0
-        self.path = None if path is None else Path(path)
-        if self.path is not None and self.path.exists() and not overwrite:
-            raise RecordingExistsError(self.path)
-        try:
-            meta_json = json.dumps(meta or {}, default=_to_jsonable, sort_keys=True)
-        except TypeError as exc:
-            raise UserError(f"recording metadata is not JSON-serialisable: {exc}") from None
+        self.path, meta_json, level = check_options(path, meta, flush_every_frames, compression,
+                                                    compression_level, points_dtype, overwrite)
         self.flush_every_frames = int(flush_every_frames)
         self.fsync = fsync
         self._xyz_dtype = points_dtype
@@ -105,11 +149,10 @@ class RecordingWriter:
         from foveatrack import __version__
 
         if self.path is not None:
-            if self.path.is_dir():
-                raise UserError(f"cannot create recording {self.path}: it is a directory")
             # chunk_size None: a chunk ends only at flush(), so a chunk holds whole frames; the SDK
             # writes the Schema and Channel records in the chunk of each channel's first message
-            opts = MCAPWriteOptions(compression=comp[compression], profile="foveatrack", chunk_size=None,
+            comp = {"lz4": MCAPCompression.Lz4, "zstd": MCAPCompression.Zstd, "none": None}[compression]
+            opts = MCAPWriteOptions(compression=comp, profile="foveatrack", chunk_size=None,
                                     compression_threads=0, compression_level=level)
             try:
                 self._w = foxglove.open_mcap(self.path, allow_overwrite=True, context=self.context,
@@ -132,44 +175,7 @@ class RecordingWriter:
         self.frames_written = 0
         self.messages_written = 0
         self._closed = False
-        self._q = None
-        self._thread = None
-        self._error: BaseException | None = None
         self.flush()
-        if background:
-            import queue
-            import threading
-
-            self._q = queue.Queue(maxsize=64)
-            self._thread = threading.Thread(target=self._run, name="recording-writer", daemon=True)
-            self._thread.start()
-
-    # ------------------------------------------------------------------ the writing thread
-
-    def _run(self) -> None:
-        while True:
-            job = self._q.get()
-            if job is None:
-                return
-            if self._error is not None:
-                continue
-            fn, args = job
-            try:
-                fn(*args)
-            except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread
-                self._error = exc
-
-    def _submit(self, fn, *args) -> bool:
-        """Queue ``fn(*args)`` on the writing thread (True), or say to run it here (False)."""
-        if self._error is not None:
-            err, self._error = self._error, None
-            raise err
-        if self._q is None:
-            return False
-        if self._closed:
-            raise ValueError("recording is closed")
-        self._q.put((fn, args))
-        return True
 
     # ------------------------------------------------------------------ channels
 
@@ -202,10 +208,6 @@ class RecordingWriter:
             raise ValueError("use write_points for the points channel")
         if not channel or "/" in channel:
             raise ValueError(f"bad channel name {channel!r}")
-        if not self._submit(self._write_now, channel, t_ns, record):
-            self._write_now(channel, t_ns, record)
-
-    def _write_now(self, channel: str, t_ns: int, record: dict) -> None:
         t_ns = self._add(channel, t_ns)
         rec = {"t_ns": t_ns, **record}
         self.view.log_json(channel, t_ns, json.dumps(rec, default=_to_jsonable).encode(), rec)
@@ -222,10 +224,6 @@ class RecordingWriter:
 
         Starts a new chunk first if ``flush_every_frames`` frames are pending.
         """
-        if not self._submit(self._write_points_now, t_ns, frame_id, xyz, t_ns_points, reflectivity):
-            self._write_points_now(t_ns, frame_id, xyz, t_ns_points, reflectivity)
-
-    def _write_points_now(self, t_ns, frame_id, xyz, t_ns_points, reflectivity) -> None:
         xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
         n = xyz.shape[0]
         tp = np.asarray(t_ns_points, dtype=np.int64).reshape(-1)
@@ -233,7 +231,7 @@ class RecordingWriter:
         if tp.shape[0] != n or refl.shape[0] != n:
             raise ValueError(f"xyz has {n} points but t_ns_points {tp.shape[0]} and reflectivity {refl.shape[0]}")
         if self._frames_since_flush >= self.flush_every_frames:
-            self._flush_now()
+            self.flush()
         dt = tp - int(t_ns)
         if n and (dt.min() < -(2**31) or dt.max() >= 2**31):
             raise ValueError("point times must lie within ±2.1 s of the frame t_ns")
@@ -250,40 +248,12 @@ class RecordingWriter:
         self.frames_written += 1
         self._frames_since_flush += 1
 
-    def write_detection(
-        self, t_ns: int, frame_id: int, detected: bool, xyz_m=None, n_points: int = 0, **extra
-    ) -> None:
-        """Detector output of a frame: target centre xyz_m [m, lidar frame] or None."""
-        self.write(DETECTIONS, t_ns, {"frame_index": int(frame_id), "detected": bool(detected),
-                                      "xyz_m": None if xyz_m is None else np.asarray(xyz_m, float).tolist(),
-                                      "n_points": int(n_points), **extra})
-
-    def write_command(self, t_ns: int, raw: bytes, **extra) -> None:
-        """A command sent to the head: ``raw`` bytes as written, ``t_ns`` = the time they were written."""
-        self.write(COMMANDS, t_ns, {"raw_hex": bytes(raw).hex(), **extra})
-
-    def write_head_estimate(self, t_ns: int, pan_deg: float, tilt_deg: float, **extra) -> None:
-        """The head pose the tracker believes at ``t_ns`` (pan + = left, tilt + = up) [deg]."""
-        self.write(HEAD, t_ns, {"pan_deg": float(pan_deg), "tilt_deg": float(tilt_deg), **extra})
-
-    def write_truth(self, t_ns: int, **fields) -> None:
-        """Simulation truth at ``t_ns`` (e.g. target_xyz_m, pan_deg, tilt_deg)."""
-        self.write(TRUTH, t_ns, fields)
-
-    def write_metric(self, t_ns: int, name: str, value: float, **extra) -> None:
-        """A scalar figure (processing time, latency, drop counts, ...)."""
-        self.write(METRICS, t_ns, {"name": str(name), "value": value, **extra})
-
     # ------------------------------------------------------------------ lifecycle
 
     def flush(self) -> None:
         """Complete the current chunk and hand it to the OS (and the disk if ``fsync``)."""
         if self._closed:
             return
-        if not self._submit(self._flush_now):
-            self._flush_now()
-
-    def _flush_now(self) -> None:
         self._frames_since_flush = 0
         if self._w is None:
             return
@@ -296,10 +266,6 @@ class RecordingWriter:
         """Write the last chunk and the summary; the file is then complete."""
         if self._closed:
             return
-        if self._thread is not None:
-            self._q.put(None)
-            self._thread.join()
-            self._thread = self._q = None
         try:
             if self._w is not None:
                 self._w.close()
@@ -307,9 +273,6 @@ class RecordingWriter:
                     _fsync(self.path)
         finally:
             self._closed = True
-        if self._error is not None:
-            err, self._error = self._error, None
-            raise err
 
     def __enter__(self) -> "RecordingWriter":
         return self

@@ -27,7 +27,7 @@ WELL_KNOWN = {"foxglove.PointCloud", "foxglove.FrameTransforms", "foxglove.Scene
 
 @pytest.fixture(scope="module")
 def sim_rec(tmp_path_factory):
-    """0.6 s of fig12-tracking recorded as ``simulate --out`` records it (writer thread included)."""
+    """0.6 s of fig12-tracking recorded as ``simulate --out`` records it (from a child process)."""
     from sim.loop import ClosedLoop
     from sim.recorder import SimRecorder, recording_meta
     from sim.scene import load_scene, with_run_overrides
@@ -35,7 +35,9 @@ def sim_rec(tmp_path_factory):
     path = tmp_path_factory.mktemp("fox") / "run.mcap"
     scene = with_run_overrides(load_scene(ROOT / "scenes" / "fig12-tracking.toml"), 0.6, None)
     loop = ClosedLoop(scene)
-    with RecordingWriter(path, recording_meta(scene, loop), background=True) as w:
+    from foveatrack.recording.writer_process import RecordingProcess
+
+    with RecordingProcess().open(path, recording_meta(scene, loop)) as w:
         loop.frame_hook = SimRecorder(w)
         log = loop.run()
     return path, log

@@ -1,0 +1,346 @@
+"""A recording written by a child process: :class:`RecordingProcess` takes a
+:class:`foveatrack.recording.writer.RecordingWriter`'s calls and hands them, through a pipe, to a
+child interpreter (:func:`child_main`), which makes the same calls on a RecordingWriter of its own.  The file is the same to the byte (tests/recording/test_writer_process.py).
+
+Why a process: the Foxglove SDK holds the interpreter lock while it encodes, compresses and writes
+(0.4-0.5 ms of a 10 k-point frame), so a writer *thread* only takes turns with the loop
+(docs/recordings.md).  Here the caller's thread pickles a frame's calls (the point arrays travel as
+raw bytes behind them, one ``writev`` into a 1 MiB pipe): about 0.05 ms a frame.
+It pays where a second core is free; on one core ``simulate --one-thread`` writes on the loop's thread.
+
+What the caller sees:
+
+- the arrays handed over may be changed as soon as a call returns (the kernel has copied them);
+- a call waits only when the child is more than the pipe's 1 MiB behind (nothing is dropped);
+- an error in the child (disk full, ...) is raised by the next call or by :meth:`close`, which
+  still completes the file with what was written;
+- the child ignores SIGINT and SIGTERM (a Ctrl-C at the terminal reaches the whole process group):
+  it ends when the caller closes the pipe, by :meth:`close` or by dying, even by ``kill -9``, and
+  completes the file then, so nothing already handed over is lost.
+
+The child's start (an interpreter, numpy, the SDK, the packing kernel: 0.3-0.5 s warm, more under
+load) runs beside the caller: ``simulate`` starts it before the first frame, which loads the numba
+kernels anyway, and the first frames wait in the pipe.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from foveatrack.errors import UserError
+from foveatrack.recording.writer import RecordCalls, check_options
+
+_HEAD = struct.Struct("<QI")        # pickle bytes, number of arrays; then a <Q per array (its bytes)
+_ARRAY = "foveatrack.recording.writer_process.array"   # marks an argument sent as raw bytes
+_PIPE_BYTES = 1 << 20               # the pipe's capacity asked for (Linux F_SETPIPE_SZ; unprivileged maximum)
+_F_SETPIPE_SZ = 1031
+
+
+# The child's program: the signals first (a Ctrl-C at the terminal reaches the whole process group,
+# also while the child still imports), then the writer; the caller decides when to stop.
+# os._exit: the file is complete once the writer is closed; the interpreter's teardown (numba's and
+# the SDK's) would cost the caller another 0.1-0.2 s of waiting.
+_CHILD = ("import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); "
+          "signal.signal(signal.SIGTERM, signal.SIG_IGN); "
+          "from foveatrack.recording.writer_process import child_main; "
+          "rc = child_main(int(sys.argv[1]), int(sys.argv[2])); sys.stderr.flush(); os._exit(rc)")
+
+
+def _child_env() -> dict:
+    """The caller's environment, with the directory this foveatrack comes from first on the path (a
+    checkout run without installing it finds the same code)."""
+    import foveatrack
+
+    env = dict(os.environ)
+    root = str(Path(foveatrack.__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
+    return env
+
+
+def available() -> bool:
+    """Whether this platform can run the writer process (POSIX pipes handed to a child)."""
+    return os.name == "posix"
+
+
+class RecordingProcess(RecordCalls):
+    """A :class:`RecordingWriter` in a child process: same options (checked here, so a wrong one is
+    an error at once), same calls, same file.  ``RecordingProcess()`` starts the child;
+    :meth:`open` gives it the file.  Use as a context manager, or call :meth:`close`.
+
+    Start it early (before the caller's own set-up) and open it when the recording's meta is known:
+    the child's start then costs nothing.  The calls of a frame are sent together when its points
+    come (:meth:`write_points`), at :meth:`flush` and at :meth:`close`: one system call a frame.
+    """
+
+    def __init__(self):
+        self.path: Path | None = None
+        self.frames_written = self.messages_written = 0
+        self._pending: list = []
+        self._arrays: list = []
+        self._back = b""
+        self._ready = False
+        self._error: BaseException | None = None
+        self._closed = False
+        data_r, self._data = os.pipe()
+        self._back_fd, back_w = os.pipe()
+        try:
+            try:
+                import fcntl
+
+                fcntl.fcntl(self._data, _F_SETPIPE_SZ, _PIPE_BYTES)
+            except (ImportError, OSError):
+                pass        # the default 64 KiB pipe: the caller waits on the child more often
+            self._proc = subprocess.Popen([sys.executable, "-c", _CHILD, str(data_r), str(back_w)],
+                                          pass_fds=(data_r, back_w), stdin=subprocess.DEVNULL, env=_child_env())
+        except BaseException:
+            for fd in (data_r, back_w, self._data, self._back_fd):
+                os.close(fd)
+            raise
+        os.close(data_r)
+        os.close(back_w)
+        os.set_blocking(self._back_fd, False)
+
+    def open(self, path, meta: dict | None = None, flush_every_frames: int = 1, compression: str = "zstd",
+             compression_level: int | None = None, points_dtype: str = "float64", fsync: bool = False,
+             overwrite: bool = False, created_utc: str | None = None) -> "RecordingProcess":
+        """Give the child the file to write, with :class:`RecordingWriter`'s options; returns self."""
+        if self.path is not None:
+            raise ValueError(f"this writer process already writes {self.path}")
+        if path is None:
+            raise ValueError("a writer process writes a file: give a path (a live view needs RecordingWriter)")
+        path, _, _ = check_options(path, meta, flush_every_frames, compression, compression_level,
+                                   points_dtype, overwrite)
+        self.path = path.absolute()
+        self._call("open", str(self.path), meta, flush_every_frames, compression, compression_level,
+                   points_dtype, fsync, True, created_utc)
+        self._send()
+        return self
+
+    def wait_ready(self, timeout_s: float = 60.0) -> None:
+        """Wait until the child has started (its imports and kernels loaded): for benchmarks that
+        time the calls alone."""
+        import select
+
+        while not self._ready:
+            if not select.select([self._back_fd], [], [], timeout_s)[0]:
+                raise TimeoutError(f"the recording process did not start within {timeout_s:g} s")
+            self._read_back()
+            if self._proc.poll() is not None and not self._ready:
+                raise RuntimeError(f"the recording process exited with code {self._proc.returncode} at its start")
+
+    # ------------------------------------------------------------------ the calls
+
+    def write(self, channel: str, t_ns: int, record: dict) -> None:
+        self._call("write", channel, t_ns, record)
+
+    def write_points(self, t_ns, frame_id, xyz, t_ns_points, reflectivity=None) -> None:
+        # the arrays go as raw buffers after the message (a pickled array costs ~10 us more)
+        self._call("write_points", t_ns, frame_id, *(None if a is None else self._array(a)
+                                                     for a in (xyz, t_ns_points, reflectivity)))
+        self.frames_written += 1
+        self._send()
+
+    def _array(self, a) -> tuple:
+        a = np.ascontiguousarray(a)
+        self._arrays.append(a)
+        return _ARRAY, len(self._arrays) - 1, a.dtype.str, a.shape
+
+    def flush(self) -> None:
+        if self._closed:
+            return
+        self._call("flush")
+        self._send()
+
+    def close(self) -> None:
+        """Send what is pending, let the child complete the file, and wait for it.  Raises the
+        child's error, if one is still unreported."""
+        if self._closed:
+            return
+        self._closed = True
+        self._pending.append(("close", ()))
+        try:
+            self._send()
+        except (OSError, RuntimeError, UserError):
+            pass        # the child's report or its exit code (below) says what went wrong
+        finally:
+            os.close(self._data)
+        os.set_blocking(self._back_fd, True)
+        while True:
+            chunk = os.read(self._back_fd, 1 << 16)
+            if not chunk:
+                break
+            self._back += chunk
+        os.close(self._back_fd)
+        rc = self._proc.wait()
+        self._read_back()
+        if self._error is not None:
+            err, self._error = self._error, None
+            raise err
+        if rc != 0:
+            raise RuntimeError(f"the recording process exited with code {rc}" + (
+                "" if self.path is None else f"; {self.path} holds what it wrote up to then"))
+
+    def __enter__(self) -> "RecordingProcess":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ the pipe
+
+    def _call(self, name: str, *args) -> None:
+        if self._closed and name != "close":
+            raise ValueError("recording is closed")
+        if self.path is None and name != "open":
+            raise ValueError("open() the writer process before writing to it")
+        if self._error is not None:
+            err, self._error = self._error, None
+            raise err
+        self._pending.append((name, args))
+        self.messages_written += name in ("write", "write_points")
+
+    def _send(self) -> None:
+        """One message: the pending calls pickled, then the bytes of the arrays they refer to."""
+        calls, self._pending = self._pending, []
+        raws, self._arrays = self._arrays, []
+        body = pickle.dumps(calls, protocol=pickle.HIGHEST_PROTOCOL)
+        parts = [_HEAD.pack(len(body), len(raws)) + b"".join(struct.pack("<Q", r.nbytes) for r in raws) + body,
+                 *raws]
+        try:
+            _write_all(self._data, parts)
+        except BrokenPipeError:
+            self._read_back()
+            if self._error is not None:
+                err, self._error = self._error, None
+                raise err from None
+            raise RuntimeError(f"the recording process ended early (exit code {self._proc.poll()}); "
+                               f"{self.path} holds what it wrote up to then") from None
+        self._read_back()
+
+    def _read_back(self) -> None:
+        """Take the child's reports (an error, the final counts) without waiting."""
+        if not self._closed:
+            try:
+                while chunk := os.read(self._back_fd, 1 << 16):
+                    self._back += chunk
+            except BlockingIOError:
+                pass
+        while len(self._back) >= 8:
+            n = int.from_bytes(self._back[:8], "little")
+            if len(self._back) < 8 + n:
+                break
+            kind, value = pickle.loads(self._back[8:8 + n])
+            self._back = self._back[8 + n:]
+            if kind == "error" and self._error is None:
+                self._error = _rebuilt(*value, self.path)
+            elif kind == "ready":
+                self._ready = True
+
+
+def _write_all(fd: int, parts: list) -> None:
+    """``writev`` until every byte is in the pipe (a signal can cut a write short)."""
+    views = [memoryview(p).cast("B") for p in parts]
+    while views:
+        n = os.writev(fd, views)
+        while views and n >= views[0].nbytes:
+            n -= views[0].nbytes
+            views.pop(0)
+        if views and n:
+            views[0] = views[0][n:]
+
+
+def _rebuilt(kind: str, text: str, user: bool, path) -> BaseException:
+    """The child's error as the caller raises it: a user's mistake (disk full, no permission) stays a
+    :class:`UserError`; anything else names the process it came from."""
+    if user:
+        return UserError(text)
+    return RuntimeError(f"the recording process failed writing {path}: {kind}: {text}")
+
+
+# ====================================================================================== the child
+
+
+def _rebuilt_array(arg, bufs):
+    """An argument as the caller gave it: an array sent as raw bytes is rebuilt (in place, no copy)."""
+    if type(arg) is tuple and len(arg) == 4 and arg[0] == _ARRAY:
+        _, i, dtype, shape = arg
+        return np.frombuffer(bufs[i], dtype=dtype).reshape(shape)
+    return arg
+
+
+def _read_exact(f, n: int) -> bytearray | None:
+    buf = bytearray(n)
+    view = memoryview(buf)
+    got = 0
+    while got < n:
+        k = f.readinto(view[got:])
+        if not k:
+            return None
+        got += k
+    return buf
+
+
+def _report(fd: int, kind: str, value) -> None:
+    body = pickle.dumps((kind, value))
+    try:
+        os.write(fd, len(body).to_bytes(8, "little") + body)
+    except BrokenPipeError:
+        pass        # the caller is gone: the file is still completed
+
+
+def child_main(data_fd: int, back_fd: int) -> int:
+    """Read calls until ``close`` or the end of the pipe, make them on a RecordingWriter, and report
+    the first error (then the calls that follow are read and dropped; the file is still closed)."""
+    from foveatrack.recording.pack_kernels import pack_points
+    from foveatrack.recording.writer import RecordingWriter
+
+    # load the packing kernels now, while the caller still sets up (0.5 s the first time in a process)
+    pack_points(np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros(1, np.uint8))
+    _report(back_fd, "ready", None)
+    writer = None
+    failed = False
+    with open(data_fd, "rb", buffering=_PIPE_BYTES) as f:
+        while True:
+            head = _read_exact(f, _HEAD.size)
+            if head is None:
+                break           # the caller is gone (closed without "close", or died): complete the file
+            n_body, n_bufs = _HEAD.unpack(head)
+            lens = struct.unpack(f"<{n_bufs}Q", _read_exact(f, 8 * n_bufs)) if n_bufs else ()
+            body = _read_exact(f, n_body)
+            bufs = [_read_exact(f, k) for k in lens]
+            if body is None or any(b is None for b in bufs):
+                break
+            for name, args in pickle.loads(body):
+                if name == "close":
+                    break
+                if failed:
+                    continue
+                try:
+                    if name == "open":
+                        path, meta, flush_every, comp, level, dtype, fsync, overwrite, created = args
+                        writer = RecordingWriter(Path(path), meta, flush_every, comp, level, dtype, fsync,
+                                                 overwrite, created)
+                    else:
+                        getattr(writer, name)(*(_rebuilt_array(a, bufs) for a in args))
+                except Exception as exc:  # noqa: BLE001 - reported to the caller, which raises it
+                    failed = True
+                    _report(back_fd, "error", (type(exc).__name__, str(exc), isinstance(exc, UserError)))
+            else:
+                continue
+            break
+    if writer is not None:
+        try:
+            writer.close()
+        except Exception as exc:  # noqa: BLE001
+            if not failed:
+                _report(back_fd, "error", (type(exc).__name__, str(exc), isinstance(exc, UserError)))
+            return 1
+    return 0
+

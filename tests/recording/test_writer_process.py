@@ -1,0 +1,178 @@
+"""The recording written from a child process (foveatrack.recording.writer_process): the same file
+as the loop's-thread writer, errors raised in the caller, nothing lost when the caller dies."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from foveatrack.errors import UserError
+from foveatrack.recording import RecordingExistsError, RecordingReader, RecordingWriter
+from foveatrack.recording.writer_process import RecordingProcess
+
+ROOT = Path(__file__).resolve().parents[2]
+META = {"scene_toml": "[scene]\nname = 'x'\n", "seed": 42}
+
+
+def frames(n_frames=6, n_points=300, seed=0):
+    rng = np.random.default_rng(seed)
+    for k in range(n_frames):
+        t = 1_000_000_000 + k * 100_000_000
+        # on the Livox mm grid for even frames (stored compactly), off it for odd ones (float64)
+        xyz = rng.normal(0, 30, (n_points, 3))
+        if k % 2 == 0:
+            xyz = np.rint(xyz * 1000).astype(np.int32) * 1e-3
+        tp = t - 100_000_000 + np.sort(rng.integers(0, 10_000, n_points)) * 10_000
+        yield k, t, xyz, tp, rng.integers(0, 256, n_points).astype(np.uint8)
+
+
+def write_all(w):
+    for k, t, xyz, tp, refl in frames():
+        w.write_points(t, k, xyz, tp, refl)
+        w.write_detection(t, k, True, xyz_m=xyz.mean(0), n_points=len(xyz))
+        w.write_command(t + 500, b"\xff\x01\x00\x04\x20\x00\x25", frame_id=k)
+        w.write_head_estimate(t, pan_deg=0.1 * k, tilt_deg=-0.2 * k, world_xyz_m=[10.0, k, 2.0])
+        w.write_truth(t, pan_deg=0.1 * k, tilt_deg=0.0, target_xyz_m=[10.0, k, 2.0])
+        w.write_metric(t, "proc_ms", 1.5 + k)
+        if k == 2:
+            w.flush()
+
+
+def test_the_child_writes_the_same_file_to_the_byte(tmp_path):
+    with RecordingWriter(tmp_path / "thread.mcap", META, created_utc="fixed") as w:
+        write_all(w)
+    with RecordingProcess().open(tmp_path / "process.mcap", META, created_utc="fixed") as w:
+        write_all(w)
+        assert (w.frames_written, w.messages_written) == (6, 36)
+    assert (tmp_path / "process.mcap").read_bytes() == (tmp_path / "thread.mcap").read_bytes()
+
+
+def test_a_simulated_run_records_the_same_file_either_way(tmp_path):
+    # what simulate --out does (child process) and simulate --one-thread does (loop's thread)
+    from foveatrack.cli.simulate_cmd import run_and_report
+
+    sums = {}
+    for name, proc in (("child", True), ("loop", False)):
+        sums[name] = run_and_report(ROOT / "scenes" / "fig12-tracking.toml", tmp_path / name, quiet=True,
+                                    progress=False, duration=1.5, recording_process=proc, ahead=False)
+    assert sums["child"]["recording_written_by"] == "a child process"
+    assert sums["loop"]["recording_written_by"] == "the loop's thread"
+    a, b = ((tmp_path / n / "run.mcap").read_bytes() for n in ("child", "loop"))
+    assert a == b
+    assert len(list(RecordingReader(tmp_path / "child" / "run.mcap").points())) == 15
+
+
+def test_arrays_may_change_once_a_call_returns(tmp_path):
+    (k, t, xyz, tp, refl), = frames(1)
+    keep = xyz.copy()
+    with RecordingProcess().open(tmp_path / "r.mcap", META) as w:
+        w.write_points(t, k, xyz, tp, refl)
+        xyz[:] = 0.0        # the kernel has the bytes: changing the caller's array changes nothing
+    got, = RecordingReader(tmp_path / "r.mcap").points()
+    assert np.array_equal(got.xyz, keep)
+
+
+def test_wrong_options_are_errors_at_once(tmp_path):
+    p = tmp_path / "exists.mcap"
+    p.write_bytes(b"x")
+    with RecordingProcess() as w:
+        with pytest.raises(RecordingExistsError, match="exists.mcap already exists"):
+            w.open(p, META)
+        with pytest.raises(UserError, match="compression 'brotli'"):
+            w.open(tmp_path / "a.mcap", META, compression="brotli")
+        with pytest.raises(ValueError, match="open"):
+            w.write_metric(0, "x", 1.0)
+    assert p.read_bytes() == b"x"
+
+
+def test_an_error_in_the_child_is_raised_in_the_caller_and_the_file_is_completed(tmp_path):
+    p = tmp_path / "r.mcap"
+    w = RecordingProcess().open(p, META)
+    (k, t, xyz, tp, refl), = frames(1)
+    w.write_points(t, k, xyz, tp, refl)
+    w.write_points(-5, 1, xyz, tp, refl)      # a negative log time: the child's RecordingWriter refuses it
+    with pytest.raises(RuntimeError, match="recording process failed .*t_ns must be >= 0"):
+        for _ in range(1000):                 # raised by a later frame or flush, once the child reported it
+            w.flush()
+            time.sleep(0.01)
+    w.close()
+    r = RecordingReader(p)
+    assert [f.frame_index for f in r.points()] == [0]
+    assert r.complete
+
+
+def test_a_child_that_dies_is_reported(tmp_path):
+    w = RecordingProcess().open(tmp_path / "r.mcap", META)
+    w.wait_ready()
+    w._proc.send_signal(signal.SIGKILL)
+    w._proc.wait(10)
+    (k, t, xyz, tp, refl), = frames(1, n_points=100_000)     # more than the pipe holds
+    with pytest.raises(RuntimeError, match="recording process ended early"):
+        w.write_points(t, k, xyz, tp, refl)
+    with pytest.raises(RuntimeError, match="exited with code -9"):
+        w.close()
+
+
+def test_ctrl_c_at_the_terminal_does_not_stop_the_child(tmp_path):
+    p = tmp_path / "r.mcap"
+    with RecordingProcess().open(p, META) as w:
+        w.wait_ready()
+        w._proc.send_signal(signal.SIGINT)     # what the terminal sends to the whole process group
+        w._proc.send_signal(signal.SIGTERM)
+        write_all(w)
+    r = RecordingReader(p)
+    assert len(list(r.points())) == 6
+    assert r.complete
+
+
+def test_an_unopened_child_ends_with_its_caller():
+    w = RecordingProcess()
+    w.close()
+    assert w._proc.returncode == 0
+
+
+CALLER = textwrap.dedent(
+    """
+    import sys, numpy as np
+    sys.path.insert(0, {root!r})
+    from foveatrack.recording.writer_process import RecordingProcess
+    w = RecordingProcess().open(sys.argv[1], {{"seed": 1}})
+    for k in range(10):
+        xyz = np.full((50, 3), float(k))
+        w.write_points(10**9 + k * 10**8, k, xyz, np.full(50, 10**9 + k * 10**8, np.int64), np.zeros(50, np.uint8))
+        w.write_metric(10**9 + k * 10**8, "k", k)
+    w.flush()
+    print(w._proc.pid, flush=True)
+    sys.stdin.readline()
+    """
+)
+
+
+def test_kill_9_of_the_caller_loses_nothing_the_child_got(tmp_path):
+    # the child reads to the end of the pipe and completes the file (the loop's-thread writer would
+    # leave it readable only up to its last chunk)
+    p = tmp_path / "killed.mcap"
+    caller = subprocess.Popen([sys.executable, "-c", CALLER.format(root=str(ROOT)), str(p)],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    child_pid = int(caller.stdout.readline())
+    caller.send_signal(signal.SIGKILL)
+    caller.wait(10)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:      # the child is not ours to wait for: poll until it is gone
+        try:
+            os.kill(child_pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    else:
+        pytest.fail("the writer process did not end after its caller was killed")
+    r = RecordingReader(p)
+    assert [f.frame_index for f in r.points()] == list(range(10))
+    assert r.complete
+    assert [m["value"] for m in r.records("metrics")] == list(range(10))
