@@ -23,10 +23,14 @@ def register(sub) -> None:
                    help="serve the run to Foxglove (ws://127.0.0.1:PORT, default 8765), paced at --speed")
     p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
                    help="with --live: virtual seconds per wall second (default 1 = real time)")
-    p.add_argument("--one-thread", action="store_true",
-                   help="do not trace the scan and draw the random values of the coming frames on a second thread, "
-                        "and write the recording on the loop's thread, not from a child process (same results, "
-                        "same file; for many runs side by side, or a one-core machine)")
+    cores = p.add_mutually_exclusive_group()
+    cores.add_argument("--one-thread", action="store_true",
+                       help="do not trace the scan and draw the random values of the coming frames on a second "
+                            "thread, and write the recording on the loop's thread, not from a child process (same "
+                            "results, same file; for many runs side by side, or a one-core machine).  Default: a "
+                            "second core is used when the load average says one is free")
+    cores.add_argument("--second-core", action="store_true",
+                       help="use a second thread and a writer process whatever the load")
     p.set_defaults(func=cmd_simulate)
 
 
@@ -72,21 +76,34 @@ class CompileNotice:
                       file=self._stream, flush=True)
 
 
+def core_free(load_1min: float | None = None, cores: int | None = None) -> bool:
+    """Whether a core is free for a second thread and a writer process: the cores less the 1-minute
+    load average leave at least 1.5 (this run's loop takes one).  Both only pay where a core is idle; on a busy
+    machine they compete with the loop (measured: docs/speed.md, docs/recordings.md)."""
+    cores = (os.cpu_count() or 1) if cores is None else cores
+    if load_1min is None:
+        try:
+            load_1min = os.getloadavg()[0]
+        except OSError:         # no load average on this platform: count the cores only
+            load_1min = 0.0
+    return cores > 1 and cores - load_1min >= 1.5
+
+
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
                    quiet=False, live_port=None, speed=1.0, ahead=None, recording_process=None) -> dict:
     """Run a scene and report it (the ``simulate`` command).  ``ahead``: trace the scan ahead on a second
-    thread; ``recording_process``: write the recording from a child process.  None: both where a second
-    core is there (same results and the same file either way)."""
+    thread; ``recording_process``: write the recording from a child process.  None: both where a core is
+    free (:func:`core_free`); the results and the file are the same either way."""
     from foveatrack.recording import writer_process
 
-    two_cores = (os.cpu_count() or 1) > 1
+    spare = core_free()
     if recording_process is None:
-        recording_process = two_cores and writer_process.available()
+        recording_process = spare and writer_process.available()
     # started first: the child's start (imports, kernels) runs beside the set-up below
     child = writer_process.RecordingProcess() if recording_process and out and live_port is None else None
     try:
         return _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed,
-                               two_cores if ahead is None else ahead, child)
+                               spare if ahead is None else ahead, child)
     finally:
         if child is not None:
             child.close()       # a no-op after the run closed it; ends the child if the run failed early
@@ -250,7 +267,11 @@ def _plot_run(scene, log, summary, out_dir) -> list[Path]:
     ]
 
 
+def _cores_flag(args) -> bool | None:
+    return False if args.one_thread else True if args.second_core else None
+
+
 def cmd_simulate(args) -> int:
     run_and_report(args.scene, args.out, args.json, args.plot, args.seed, args.duration, not args.no_progress,
-                   live_port=args.live, speed=args.speed, ahead=False if args.one_thread else None, recording_process=False if args.one_thread else None)
+                   live_port=args.live, speed=args.speed, ahead=_cores_flag(args), recording_process=_cores_flag(args))
     return 0

@@ -176,3 +176,25 @@ def test_kill_9_of_the_caller_loses_nothing_the_child_got(tmp_path):
     assert [f.frame_index for f in r.points()] == list(range(10))
     assert r.complete
     assert [m["value"] for m in r.records("metrics")] == list(range(10))
+
+
+def test_simulate_uses_a_second_core_only_where_one_is_free():
+    from foveatrack.cli.simulate_cmd import core_free
+
+    assert core_free(load_1min=0.3, cores=2)
+    assert not core_free(load_1min=0.7, cores=2)      # another job holds most of a core: nothing to gain
+    assert not core_free(load_1min=0.0, cores=1)
+    assert core_free(load_1min=5.0, cores=8)
+    assert not core_free(load_1min=7.0, cores=8)
+
+
+def test_simulate_second_core_and_one_thread_flags():
+    from foveatrack.cli import build_parser
+    from foveatrack.cli.simulate_cmd import _cores_flag
+
+    p = build_parser()
+    assert _cores_flag(p.parse_args(["simulate", "s.toml"])) is None
+    assert _cores_flag(p.parse_args(["simulate", "s.toml", "--one-thread"])) is False
+    assert _cores_flag(p.parse_args(["simulate", "s.toml", "--second-core"])) is True
+    with pytest.raises(SystemExit):
+        p.parse_args(["simulate", "s.toml", "--one-thread", "--second-core"])
