@@ -24,7 +24,8 @@ def short(name, seconds=2.0, **changes):
 @pytest.mark.determinism
 def test_same_seed_same_recording_to_the_bit(tmp_path):
     digests = []
-    for i, threads in enumerate([[], ["--one-thread"]]):    # the scan traced ahead on a thread, or not
+    # the scan traced ahead on a thread and the recording written by a child process, or neither
+    for i, threads in enumerate([["--second-core"], ["--one-thread"]]):
         out = tmp_path / f"run{i}"
         assert main(["simulate", str(SCENES / "noisy-link.toml"), "--duration", "2", "--out", str(out),
                      "--no-progress", "--json", *threads]) == 0
