@@ -246,7 +246,8 @@ class RecordingProcess(RecordCalls):
 
 def _write_all(fd: int, parts: list) -> None:
     """``writev`` until every byte is in the pipe (a signal can cut a write short)."""
-    views = [memoryview(p).cast("B") for p in parts]
+    # (an empty array, a frame without points, has no bytes to send and cannot be cast)
+    views = [memoryview(p).cast("B") for p in parts if (p.nbytes if isinstance(p, np.ndarray) else len(p))]
     while views:
         n = os.writev(fd, views)
         while views and n >= views[0].nbytes:

@@ -34,8 +34,10 @@ def frames(n_frames=6, n_points=300, seed=0):
 
 def write_all(w):
     for k, t, xyz, tp, refl in frames():
+        if k == 3:      # a frame without points (the lidar saw nothing)
+            xyz, tp, refl = xyz[:0], tp[:0], refl[:0]
         w.write_points(t, k, xyz, tp, refl)
-        w.write_detection(t, k, True, xyz_m=xyz.mean(0), n_points=len(xyz))
+        w.write_detection(t, k, len(xyz) > 0, xyz_m=xyz.mean(0) if len(xyz) else None, n_points=len(xyz))
         w.write_command(t + 500, b"\xff\x01\x00\x04\x20\x00\x25", frame_id=k)
         w.write_head_estimate(t, pan_deg=0.1 * k, tilt_deg=-0.2 * k, world_xyz_m=[10.0, k, 2.0])
         w.write_truth(t, pan_deg=0.1 * k, tilt_deg=0.0, target_xyz_m=[10.0, k, 2.0])
