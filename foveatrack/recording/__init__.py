@@ -42,8 +42,9 @@ skips a damaged chunk (bad CRC, garbage over it or over its length field), finds
 whose header holds together and whose CRC verifies by scanning the bytes, reads on, and reports
 each skipped stretch (:class:`Damage`: bytes, why, messages lost per channel from the index).
 
-Not thread-safe: one writer per thread (a daemon writes from one thread or behind a queue;
-``background=True`` gives the writer a thread of its own behind a bounded queue).
+Not thread-safe: one writer per thread (a daemon writes from one thread or behind a queue).
+:class:`foveatrack.recording.writer_process.RecordingProcess` takes the same calls and writes the same
+file from a child process (``simulate --out`` where a core is free).
 """
 
 from foveatrack.recording.export import export_points, export_trajectory
