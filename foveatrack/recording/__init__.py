@@ -8,7 +8,7 @@ Layout of a recording (``profile`` "foveatrack", format version 3, written with 
 docs/recordings.md lists every channel):
 
 - an MCAP Metadata record ``foveatrack`` written first, with string values ``format`` =
-  "foveatrack-recording", ``format_version`` = "2", ``meta_json`` (the writer's ``meta`` dict as JSON:
+  "foveatrack-recording", ``format_version`` = "3", ``meta_json`` (the writer's ``meta`` dict as JSON:
   scene/config text, seed, ...), ``foveatrack_version``, ``numpy_version``, ``python_version``,
   ``writer``, ``created_utc``; after the chunk where channels first appear, a Metadata record
   ``foveatrack_channels`` (``channels_json``: channel id -> name) so that a damaged chunk does not take
