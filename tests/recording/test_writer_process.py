@@ -200,3 +200,23 @@ def test_simulate_second_core_and_one_thread_flags():
     assert _cores_flag(p.parse_args(["simulate", "s.toml", "--second-core"])) is True
     with pytest.raises(SystemExit):
         p.parse_args(["simulate", "s.toml", "--one-thread", "--second-core"])
+
+
+def test_frames_wrap_the_ring_many_times_and_oversized_ones_go_by_the_pipe(tmp_path):
+    # 16 MiB ring: frames of 100 k points (3.3 MB) wrap it every few frames, and the caller waits for
+    # the child to read on; a 400 k-point frame (9.6 MB of xyz, over half the ring) goes by the pipe
+    rng = np.random.default_rng(3)
+    sent = []
+    with RecordingProcess().open(tmp_path / "r.mcap", META) as w:
+        for k, n in enumerate([100_000] * 12 + [400_000, 7, 100_000]):
+            t = 10**9 + k * 10**8
+            xyz = np.rint(rng.normal(0, 30_000, (n, 3))) * 1e-3      # on the mm grid
+            tp = t - np.arange(n, dtype=np.int64)[::-1] * 100
+            refl = rng.integers(0, 256, n).astype(np.uint8)
+            w.write_points(t, k, xyz, tp, refl)
+            sent.append((xyz, tp, refl))
+    got = list(RecordingReader(tmp_path / "r.mcap").points())
+    assert len(got) == len(sent)
+    for f, (xyz, tp, refl) in zip(got, sent):
+        assert np.array_equal(f.xyz, xyz) and np.array_equal(f.t_ns_points, tp)
+        assert np.array_equal(f.reflectivity, refl)
