@@ -1,27 +1,28 @@
 """A recording written by a child process: :class:`RecordingProcess` takes a
-:class:`foveatrack.recording.writer.RecordingWriter`'s calls and hands them, through a pipe, to a
-child interpreter (:func:`child_main`), which makes the same calls on a RecordingWriter of its own.  The file is the same to the byte (tests/recording/test_writer_process.py).
+:class:`foveatrack.recording.writer.RecordingWriter`'s calls and hands them to a child interpreter
+(:func:`child_main`), which makes the same calls on a RecordingWriter of its own.  The file is the
+same to the byte (tests/recording/test_writer_process.py).
 
 Why a process: the Foxglove SDK holds the interpreter lock while it encodes, compresses and writes
 (0.4-0.5 ms of a 10 k-point frame), so a writer *thread* only takes turns with the loop
 (docs/recordings.md).  Here the caller's thread copies a frame's arrays into a ring of shared
 memory (a 16 MiB memfd both processes map) and pickles its calls into a 1 MiB pipe: about 0.1 ms a
-frame with the building of the records, where a core is free.
-It pays where a second core is free; on one core ``simulate --one-thread`` writes on the loop's thread.
+frame with the building of the records.  It pays only where a second core is free: ``simulate``
+uses it then (``--one-thread`` never, ``--second-core`` always).
 
 What the caller sees:
 
-- the arrays handed over may be changed as soon as a call returns (the kernel has copied them);
+- the arrays handed over may be changed as soon as a call returns (they were copied);
 - a call waits only when the child is ~50 frames behind (the ring is full; nothing is dropped);
-- an error in the child (disk full, ...) is raised by the next call or by :meth:`close`, which
-  still completes the file with what was written;
+- an error in the child (disk full, ...) is raised by the next frame, :meth:`flush` or :meth:`close`,
+  and the file is still completed with what was written;
 - the child ignores SIGINT and SIGTERM (a Ctrl-C at the terminal reaches the whole process group):
   it ends when the caller closes the pipe, by :meth:`close` or by dying, even by ``kill -9``, and
   completes the file then, so nothing already handed over is lost.
 
-The child's start (an interpreter, numpy, the SDK, the packing kernel: 0.3-0.5 s warm, more under
-load) runs beside the caller: ``simulate`` starts it before the first frame, which loads the numba
-kernels anyway, and the first frames wait in the pipe.
+The child's start (an interpreter, numpy, the SDK, numba and the packing kernel: 0.7-1.9 s, 0.7 s of
+CPU) runs beside the caller's own set-up: ``simulate`` starts it first, and the first frames wait
+in the ring.
 """
 
 from __future__ import annotations
