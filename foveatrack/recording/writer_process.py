@@ -53,8 +53,22 @@ _F_SETPIPE_SZ = 1031
 # the SDK's) would cost the caller another 0.1-0.2 s of waiting.
 _CHILD = ("import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); "
           "signal.signal(signal.SIGTERM, signal.SIG_IGN); "
+          "from foveatrack.recording.writer_process import background_priority; background_priority(); "
           "from foveatrack.recording.writer_process import child_main; "
           "rc = child_main(*map(int, sys.argv[1:])); sys.stderr.flush(); os._exit(rc)")
+
+
+def background_priority() -> None:
+    """Make the calling process yield to the loop: SCHED_BATCH (Linux: a write into its pipe does not
+    let it preempt the writer on the writer's core) and nice 5.  Where neither exists, nothing."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass
+    try:
+        os.nice(5)
+    except (AttributeError, OSError):
+        pass
 
 
 def _child_env() -> dict:
