@@ -262,6 +262,14 @@ class RecordingProcess(RecordCalls):
         if self._closed:
             return
         self._closed = True
+        if self.path is None:       # never opened: no file to complete, so no need to wait for its start
+            self._proc.kill()
+            self._proc.wait()
+            os.close(self._data)
+            os.close(self._back_fd)
+            if self._ring is not None:
+                self._ring.mm.close()
+            return
         self._pending.append(("close", ()))
         try:
             self._send()

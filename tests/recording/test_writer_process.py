@@ -55,6 +55,7 @@ def test_the_child_writes_the_same_file_to_the_byte(tmp_path):
     assert (tmp_path / "process.mcap").read_bytes() == (tmp_path / "thread.mcap").read_bytes()
 
 
+@pytest.mark.slow
 def test_a_simulated_run_records_the_same_file_either_way(tmp_path):
     # what simulate --out does (child process) and simulate --one-thread does (loop's thread)
     from foveatrack.cli.simulate_cmd import run_and_report
@@ -133,10 +134,11 @@ def test_ctrl_c_at_the_terminal_does_not_stop_the_child(tmp_path):
     assert r.complete
 
 
-def test_an_unopened_child_ends_with_its_caller():
+def test_an_unopened_child_ends_at_once_with_its_caller():
+    # simulate starts the child before it reads the scene: a wrong scene must not wait for its start
     w = RecordingProcess()
     w.close()
-    assert w._proc.returncode == 0
+    assert w._proc.returncode == -signal.SIGKILL    # ended, not waited for until its start was done
 
 
 CALLER = textwrap.dedent(
@@ -156,6 +158,7 @@ CALLER = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_kill_9_of_the_caller_loses_nothing_the_child_got(tmp_path):
     # the child reads to the end of the pipe and completes the file (the loop's-thread writer would
     # leave it readable only up to its last chunk)
