@@ -114,7 +114,7 @@ class SceneSensor:
             prim, chunk.status, rng_m, chunk.direction, chunk.t_ns, self._range_limit_m, self._refl_byte_table,
             self._target_prim_end, draws.get("return_probability", _NONE),
             draws.get("dropouts", _NONE), self._param_if("dropouts", "dropout_rate"),
-            draws.get("range_noise", _NONE), draws.get("angular_noise", _NONE_3),
+            draws.get("range_noise", _NONE), draws.get("angular_noise", _NONE_3), True,
             xyz, pt_ns, refl_byte, on_target)
         xyz, pt_ns, refl_byte, on_target = xyz[:k], pt_ns[:k], refl_byte[:k], on_target[:k]
         if scene.has("sunlight") and n:
@@ -123,9 +123,9 @@ class SceneSensor:
             xyz, pt_ns, refl_byte, on_target = self._sunlight(chunk, xyz, pt_ns, refl_byte, on_target)
             order = np.argsort(pt_ns, kind="stable")
             xyz, pt_ns, refl_byte, on_target = xyz[order], pt_ns[order], refl_byte[order], on_target[order]
-        # What a Livox outputs (Cartesian data types 0/2): int32 mm, which the live client turns into
-        # float64 metres; the same two functions here, so sim and live points have the same bits.
-        return quantise_to_mm_grid(xyz), pt_ns, refl_byte, on_target
+        # The points are what a Livox outputs (Cartesian data types 0/2): int32 mm, which the live
+        # client turns into float64 metres (the kernel's mm grid: the bits of quantise_to_mm_grid).
+        return xyz, pt_ns, refl_byte, on_target
 
     def warm_up(self, chunk) -> None:
         """Run every kernel of :meth:`returns` once (compiled, or loaded from numba's cache), for a
@@ -214,7 +214,7 @@ class SceneSensor:
             return xyz, pt_ns, refl_byte, on_target
         pick = rng.choice(np.flatnonzero(ok), n_false, replace=False)
         r = rng.uniform(0.5, self.scene.param("sunlight_max_range_m"), n_false)
-        xyz = np.vstack([xyz, chunk.direction[pick] * r[:, None]])
+        xyz = np.vstack([xyz, quantise_to_mm_grid(chunk.direction[pick] * r[:, None])])
         pt_ns = np.concatenate([pt_ns, chunk.t_ns[pick]])
         refl_byte = np.concatenate([refl_byte, np.full(n_false, 1, dtype=np.uint8)])
         on_target = np.concatenate([on_target, np.zeros(n_false, dtype=bool)])
