@@ -464,15 +464,16 @@ def _interval_run(t_s, j, t0_s, inv_dt, n_grid):
 
 
 @njit(cache=True, inline="always")
-def _interval_run_sorted(t_s, j, t0_s, inv_dt, n_grid):
-    """:func:`_interval_run` for times in order, by bisection (the interval grows with the time):
+def _interval_run_sorted_ns(t_ns, j, t0_s, inv_dt, n_grid):
+    """:func:`_interval_run` for times in order, given in integer ns (a point's time in seconds is
+    ``t_ns * 1e-9``, the loop's expression), by bisection (the interval grows with the time):
     ~log2(n) interval tests per run instead of one per point."""
-    i = _grid_interval((t_s[j] - t0_s) * inv_dt, n_grid)
+    i = _grid_interval((t_ns[j] * 1e-9 - t0_s) * inv_dt, n_grid)
     lo = j + 1
-    hi = t_s.shape[0]
+    hi = t_ns.shape[0]
     while lo < hi:
         mid = (lo + hi) // 2
-        if _grid_interval((t_s[mid] - t0_s) * inv_dt, n_grid) == i:
+        if _grid_interval((t_ns[mid] * 1e-9 - t0_s) * inv_dt, n_grid) == i:
             lo = mid + 1
         else:
             hi = mid
@@ -513,7 +514,7 @@ def _advance_piece(pieces, i, t):
 
 
 @njit(cache=True, nogil=True)
-def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, tilt_pieces, out):
+def rotate_head_pieces_kernel(d_lidar, t_ns, t0_s, dt_s, n_nodes, pan_pieces, tilt_pieces, out):
     """:func:`rotate_pan_tilt_kernel` with the head pose exact at every point's own time.
 
     The head moves in constant-acceleration pieces (``gimbal.pts303h.PTS303H.pose_segments``:
@@ -521,7 +522,9 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
     polynomials at its time — no interpolation.  The trigonometry is done once per node of a
     ``dt_s`` grid (``n_nodes`` nodes from ``t0_s``); a point turns by the small exact difference
     ``delta`` from its node (|delta| <= head speed x dt: 1.7e-3 rad at 100 deg/s and 1 ms) with the
-    series of :func:`rotate_pan_tilt_grid_kernel` (truncation < 1e-23 rad).  Points in time order.
+    series of :func:`rotate_pan_tilt_grid_kernel` (truncation < 1e-23 rad).  Points in time order,
+    ``t_ns`` int64 [ns]: a point's time [s] is ``t_ns * 1e-9``, computed here (the same bits as the
+    frame's array of it, which the loop no longer makes).
     """
     n = d_lidar.shape[0]
     inv_dt = 1.0 / dt_s
@@ -534,7 +537,7 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
     it = 0
     j = 0
     while j < n:
-        i, j_end = _interval_run_sorted(t_s, j, t0_s, inv_dt, n_nodes)
+        i, j_end = _interval_run_sorted_ns(t_ns, j, t0_s, inv_dt, n_nodes)
         tn = t0_s + i * dt_s
         ip_node = _advance_piece(pan_pieces, ip_node, tn)
         it_node = _advance_piece(tilt_pieces, it_node, tn)
@@ -544,15 +547,16 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
         spi = math.sin(pan_ref)
         cti = math.cos(tilt_ref)
         sti = math.sin(tilt_ref)
-        t_last = t_s[j_end - 1]
-        ip = _advance_piece(pan_pieces, ip, t_s[j])
-        it = _advance_piece(tilt_pieces, it, t_s[j])
+        t_last = t_ns[j_end - 1] * 1e-9
+        t_first = t_ns[j] * 1e-9
+        ip = _advance_piece(pan_pieces, ip, t_first)
+        it = _advance_piece(tilt_pieces, it, t_first)
         # Usually no piece starts inside the interval: then the pieces are constants of the inner
         # loop (which vectorises); otherwise the pointers advance point by point.
         steady = (_advance_piece(pan_pieces, ip, t_last) == ip and _advance_piece(tilt_pieces, it, t_last) == it)
         # Slices, so that the loops index from 0: numba's wrap-around test for a possibly negative
         # index (k = j + ...) would otherwise stop LLVM vectorising the loop (4x slower).
-        t_run = t_s[j:j_end]
+        t_run = t_ns[j:j_end]
         d_run = d_lidar[j:j_end]
         out_run = out[j:j_end]
         if steady and j_end - j <= _BLOCK:
@@ -566,7 +570,7 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
                 by[k] = d_run[k, 1]
                 bz[k] = d_run[k, 2]
             for k in range(m):
-                t = t_run[k]
+                t = t_run[k] * 1e-9
                 dp = _poly_angle_rad(p0, p1, p2, p3, t) - pan_ref
                 dq = _poly_angle_rad(q0, q1, q2, q3, t) - tilt_ref
                 bx[k], by[k], bz[k] = _turn_xyz(bx[k], by[k], bz[k], cpi, spi, cti, sti, dp, dq)
@@ -576,7 +580,7 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
                 out_run[k, 2] = bz[k]
         else:
             for k in range(j_end - j):
-                t = t_run[k]
+                t = t_run[k] * 1e-9
                 ip = _advance_piece(pan_pieces, ip, t)
                 it = _advance_piece(tilt_pieces, it, t)
                 dp = _piece_angle_rad(pan_pieces, ip, t) - pan_ref
