@@ -24,7 +24,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
 
 from sim.scan.kernels import RAY_OK
 
@@ -463,17 +464,30 @@ def _interval_run(t_s, j, t0_s, inv_dt, n_grid):
     return i, j_end
 
 
+def _seconds(t):
+    """A time in seconds from seconds (as is) or from integer nanoseconds (``t * 1e-9``, the
+    expression of the loop's float array of the times: the same bits without the array)."""
+    return t * 1e-9 if isinstance(t, (int, np.integer)) else t
+
+
+@overload(_seconds, inline="always")
+def _seconds_nb(t):
+    if isinstance(t, types.Integer):
+        return lambda t: t * 1e-9
+    return lambda t: t
+
+
 @njit(cache=True, inline="always")
-def _interval_run_sorted_ns(t_ns, j, t0_s, inv_dt, n_grid):
-    """:func:`_interval_run` for times in order, given in integer ns (a point's time in seconds is
-    ``t_ns * 1e-9``, the loop's expression), by bisection (the interval grows with the time):
-    ~log2(n) interval tests per run instead of one per point."""
-    i = _grid_interval((t_ns[j] * 1e-9 - t0_s) * inv_dt, n_grid)
+def _interval_run_sorted(times, j, t0_s, inv_dt, n_grid):
+    """:func:`_interval_run` for times in order (seconds or integer ns, :func:`_seconds`), by
+    bisection (the interval grows with the time): ~log2(n) interval tests per run instead of one
+    per point."""
+    i = _grid_interval((_seconds(times[j]) - t0_s) * inv_dt, n_grid)
     lo = j + 1
-    hi = t_ns.shape[0]
+    hi = times.shape[0]
     while lo < hi:
         mid = (lo + hi) // 2
-        if _grid_interval((t_ns[mid] * 1e-9 - t0_s) * inv_dt, n_grid) == i:
+        if _grid_interval((_seconds(times[mid]) - t0_s) * inv_dt, n_grid) == i:
             lo = mid + 1
         else:
             hi = mid
@@ -514,7 +528,7 @@ def _advance_piece(pieces, i, t):
 
 
 @njit(cache=True, nogil=True)
-def rotate_head_pieces_kernel(d_lidar, t_ns, t0_s, dt_s, n_nodes, pan_pieces, tilt_pieces, out):
+def rotate_head_pieces_kernel(d_lidar, times, t0_s, dt_s, n_nodes, pan_pieces, tilt_pieces, out):
     """:func:`rotate_pan_tilt_kernel` with the head pose exact at every point's own time.
 
     The head moves in constant-acceleration pieces (``gimbal.pts303h.PTS303H.pose_segments``:
@@ -522,9 +536,9 @@ def rotate_head_pieces_kernel(d_lidar, t_ns, t0_s, dt_s, n_nodes, pan_pieces, ti
     polynomials at its time — no interpolation.  The trigonometry is done once per node of a
     ``dt_s`` grid (``n_nodes`` nodes from ``t0_s``); a point turns by the small exact difference
     ``delta`` from its node (|delta| <= head speed x dt: 1.7e-3 rad at 100 deg/s and 1 ms) with the
-    series of :func:`rotate_pan_tilt_grid_kernel` (truncation < 1e-23 rad).  Points in time order,
-    ``t_ns`` int64 [ns]: a point's time [s] is ``t_ns * 1e-9``, computed here (the same bits as the
-    frame's array of it, which the loop no longer makes).
+    series of :func:`rotate_pan_tilt_grid_kernel` (truncation < 1e-23 rad).  Points in time order;
+    ``times``: float64 [s], or the points' int64 [ns] (then the time [s] is ``t_ns * 1e-9``, formed
+    here: the same bits as an array of it, which the loop need not make).
     """
     n = d_lidar.shape[0]
     inv_dt = 1.0 / dt_s
@@ -537,7 +551,7 @@ def rotate_head_pieces_kernel(d_lidar, t_ns, t0_s, dt_s, n_nodes, pan_pieces, ti
     it = 0
     j = 0
     while j < n:
-        i, j_end = _interval_run_sorted_ns(t_ns, j, t0_s, inv_dt, n_nodes)
+        i, j_end = _interval_run_sorted(times, j, t0_s, inv_dt, n_nodes)
         tn = t0_s + i * dt_s
         ip_node = _advance_piece(pan_pieces, ip_node, tn)
         it_node = _advance_piece(tilt_pieces, it_node, tn)
@@ -547,8 +561,8 @@ def rotate_head_pieces_kernel(d_lidar, t_ns, t0_s, dt_s, n_nodes, pan_pieces, ti
         spi = math.sin(pan_ref)
         cti = math.cos(tilt_ref)
         sti = math.sin(tilt_ref)
-        t_last = t_ns[j_end - 1] * 1e-9
-        t_first = t_ns[j] * 1e-9
+        t_last = _seconds(times[j_end - 1])
+        t_first = _seconds(times[j])
         ip = _advance_piece(pan_pieces, ip, t_first)
         it = _advance_piece(tilt_pieces, it, t_first)
         # Usually no piece starts inside the interval: then the pieces are constants of the inner
@@ -556,7 +570,7 @@ def rotate_head_pieces_kernel(d_lidar, t_ns, t0_s, dt_s, n_nodes, pan_pieces, ti
         steady = (_advance_piece(pan_pieces, ip, t_last) == ip and _advance_piece(tilt_pieces, it, t_last) == it)
         # Slices, so that the loops index from 0: numba's wrap-around test for a possibly negative
         # index (k = j + ...) would otherwise stop LLVM vectorising the loop (4x slower).
-        t_run = t_ns[j:j_end]
+        t_run = times[j:j_end]
         d_run = d_lidar[j:j_end]
         out_run = out[j:j_end]
         if steady and j_end - j <= _BLOCK:
@@ -570,7 +584,7 @@ def rotate_head_pieces_kernel(d_lidar, t_ns, t0_s, dt_s, n_nodes, pan_pieces, ti
                 by[k] = d_run[k, 1]
                 bz[k] = d_run[k, 2]
             for k in range(m):
-                t = t_run[k] * 1e-9
+                t = _seconds(t_run[k])
                 dp = _poly_angle_rad(p0, p1, p2, p3, t) - pan_ref
                 dq = _poly_angle_rad(q0, q1, q2, q3, t) - tilt_ref
                 bx[k], by[k], bz[k] = _turn_xyz(bx[k], by[k], bz[k], cpi, spi, cti, sti, dp, dq)
@@ -580,7 +594,7 @@ def rotate_head_pieces_kernel(d_lidar, t_ns, t0_s, dt_s, n_nodes, pan_pieces, ti
                 out_run[k, 2] = bz[k]
         else:
             for k in range(j_end - j):
-                t = t_run[k] * 1e-9
+                t = _seconds(t_run[k])
                 ip = _advance_piece(pan_pieces, ip, t)
                 it = _advance_piece(tilt_pieces, it, t)
                 dp = _piece_angle_rad(pan_pieces, ip, t) - pan_ref
