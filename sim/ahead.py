@@ -136,7 +136,10 @@ class DrawsAhead:
 
     def _take(self, n: int) -> np.ndarray:
         if self._pos + n <= self._buf.size:           # the usual case: one slice of the block
-            out = self._buf[self._pos:self._pos + n].copy()
+            # A view, not a copy: each value is handed out once and the block is never written
+            # again (a new block is a new array).  Left writeable: a read-only array would be
+            # another type to numba, one more compilation of each kernel it is given to.
+            out = self._buf[self._pos:self._pos + n]
             self._pos += n
             return out
         parts = [self._buf[self._pos:]]

@@ -23,7 +23,6 @@ from sim.world import kernels as wk
 from sim.world.trajectories import heading_rad
 
 _NONE = np.zeros(0)          # an effect that is off: no draws
-_NONE_3 = np.zeros((0, 3))
 EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")
 # The kind of value each effect takes from its stream, for the effects that take one kind only (these
 # can be drawn ahead: sim.ahead.DrawsAhead); sunlight mixes kinds and is drawn frame by frame.
@@ -64,6 +63,10 @@ class SceneSensor:
         self._refl_byte_table = np.clip(np.round(self._refl_table * 100), 0, 255).astype(np.uint8)
         self._range_limit_m = (fx.range_limit_m(self._refl_table, scene.param("range_80pct_m"))
                                if scene.has("return_probability") else np.zeros(self._refl_table.size))
+        # The noise effects' scales, as their draw functions compute them (sim.effects).
+        self._range_noise_m = float(scene.param("range_noise_m")) if scene.has("range_noise") else 0.0
+        self._angular_noise_rad = (math.radians(scene.param("angular_noise_deg")) if scene.has("angular_noise")
+                                   else 0.0)
         self._target_prim_end = sum(spec.body.prims.shape[0] for spec in scene.targets)
         # Per target, what sizes its per-frame cull (computed once: both walk Python objects).
         self._cull = [(spec.body.bounding_radius_m, spec.trajectory.max_speed_m_s) for spec in scene.targets]
@@ -101,11 +104,9 @@ class SceneSensor:
         if scene.has("dropouts"):
             draws["dropouts"] = fx.dropout_draws(self._stream("dropouts"), n_hit)
         if scene.has("range_noise"):
-            draws["range_noise"] = fx.range_noise_draws(self._stream("range_noise"), n_hit,
-                                                        scene.param("range_noise_m"))
+            draws["range_noise"] = fx.range_noise_normals(self._stream("range_noise"), n_hit)
         if scene.has("angular_noise") and n_hit:
-            draws["angular_noise"] = fx.angular_noise_draws(self._stream("angular_noise"), n_hit,
-                                                            scene.param("angular_noise_deg"))
+            draws["angular_noise"] = fx.angular_noise_normals(self._stream("angular_noise"), n_hit)
         xyz = np.empty((n_hit, 3))
         pt_ns = np.empty(n_hit, dtype=np.int64)
         refl_byte = np.empty(n_hit, dtype=np.uint8)
@@ -114,7 +115,8 @@ class SceneSensor:
             prim, chunk.status, rng_m, chunk.direction, chunk.t_ns, self._range_limit_m, self._refl_byte_table,
             self._target_prim_end, draws.get("return_probability", _NONE),
             draws.get("dropouts", _NONE), self._param_if("dropouts", "dropout_rate"),
-            draws.get("range_noise", _NONE), draws.get("angular_noise", _NONE_3), True,
+            draws.get("range_noise", _NONE), self._range_noise_m, draws.get("angular_noise", _NONE),
+            self._angular_noise_rad, True,
             xyz, pt_ns, refl_byte, on_target)
         xyz, pt_ns, refl_byte, on_target = xyz[:k], pt_ns[:k], refl_byte[:k], on_target[:k]
         if scene.has("sunlight") and n:

@@ -52,7 +52,8 @@ def count_hits_kernel(prim, status):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m, refl_byte_table, target_prim_end,
-                            u_return, u_dropout, dropout_rate, range_noise, angular_noise, mm_grid,
+                            u_return, u_dropout, dropout_rate, range_normals, range_noise_m, angular_normals,
+                            angular_noise_rad, mm_grid,
                             out_xyz, out_t_ns, out_refl, out_on_target):
     """Points of the hits, effects applied, in scan order; returns how many were kept.
 
@@ -65,8 +66,11 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
       the limit (z < -15) ``p > 1 - exp(z) - 2^-53 > 1 - 1e-6``, so a draw below ``1 - 1e-6`` is
       kept without the exponential (the same decision: only the cost changes);
     * ``u_dropout`` (uniform): kept if ``u >= dropout_rate``;
-    * ``range_noise`` [m]: added to the range;
-    * ``angular_noise`` (H, 3) [rad]: added to the direction, which is then renormalised.
+    * ``range_normals`` (standard normals): ``0.0 + range_noise_m * z`` [m] is added to the range
+      (``rng.normal(0, range_noise_m)``'s own expression, value for value:
+      :func:`sim.effects.range_noise_draws`, here without its two array operations);
+    * ``angular_normals`` (standard normals, 3 per hit, flat or (H, 3)): ``0.0 + angular_noise_rad * z``
+      [rad] is added to the direction, which is then renormalised (:func:`sim.effects.angular_noise_draws`).
 
     ``refl_byte_table``: the Livox reflectivity byte per primitive; a primitive below
     ``target_prim_end`` belongs to a target (``out_on_target``).  ``mm_grid``: the points go out on
@@ -75,8 +79,9 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
     """
     use_ret = u_return.shape[0] > 0
     use_drop = u_dropout.shape[0] > 0
-    use_rn = range_noise.shape[0] > 0
-    use_an = angular_noise.shape[0] > 0
+    use_rn = range_normals.shape[0] > 0
+    an = angular_normals.reshape(-1)
+    use_an = an.shape[0] > 0
     h = -1
     k = 0
     for j in range(prim.shape[0]):
@@ -94,14 +99,14 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
         if use_drop and not u_dropout[h] >= dropout_rate:
             continue
         if use_rn:
-            r = r + range_noise[h]
+            r = r + (0.0 + range_noise_m * range_normals[h])
         dx = d_lidar[j, 0]
         dy = d_lidar[j, 1]
         dz = d_lidar[j, 2]
         if use_an:
-            dx += angular_noise[h, 0]
-            dy += angular_noise[h, 1]
-            dz += angular_noise[h, 2]
+            dx += 0.0 + angular_noise_rad * an[3 * h]
+            dy += 0.0 + angular_noise_rad * an[3 * h + 1]
+            dz += 0.0 + angular_noise_rad * an[3 * h + 2]
             norm = math.sqrt(dx * dx + dy * dy + dz * dz)
             dx /= norm
             dy /= norm
