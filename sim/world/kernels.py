@@ -613,3 +613,14 @@ def piece_angle_deg_kernel(pieces, t):
     i = _advance_piece(pieces, 0, t)
     d = t - pieces[0, i]
     return pieces[1, i] + pieces[2, i] * d + 0.5 * pieces[3, i] * d * d
+
+
+@njit(cache=True, nogil=True)
+def straight_position_kernel(start_m, velocity_m_s, t_s, out):
+    """``out[j] = start + t_s[j] * velocity`` (N, 3) [m]: a straight pass at the points' times, the
+    expression of :meth:`sim.world.trajectories.Straight.position`'s numpy twin element for element
+    (the same bits), without numpy's broadcasting over rows of three (~6 us for 300 times, ~1 here)."""
+    for j in range(t_s.shape[0]):
+        t = t_s[j]
+        for i in range(3):
+            out[j, i] = start_m[i] + t * velocity_m_s[i]

@@ -14,6 +14,9 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 
+_straight_position_kernel = None
+
+
 def _col(t_s) -> np.ndarray:
     return np.asarray(t_s, dtype=np.float64).reshape(-1, 1)
 
@@ -24,13 +27,32 @@ class Straight:
 
     start_m: tuple[float, float, float]
     velocity_m_s: tuple[float, float, float]
+    # float64 copies of the two, made once (the closed loop asks for positions several times a frame)
+    _start: np.ndarray = field(init=False, repr=False, compare=False)
+    _velocity: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        for name, value in (("_start", self.start_m), ("_velocity", self.velocity_m_s)):
+            a = np.array(value, dtype=np.float64).reshape(3)
+            a.flags.writeable = False
+            object.__setattr__(self, name, a)
 
     def position(self, t_s):
+        global _straight_position_kernel
+        if _straight_position_kernel is None:   # numba loads on first use, not on import
+            from sim.world.kernels import straight_position_kernel as _straight_position_kernel
+        t = np.ascontiguousarray(t_s, dtype=np.float64).reshape(-1)
+        out = np.empty((t.shape[0], 3))
+        _straight_position_kernel(self._start, self._velocity, t, out)
+        return out
+
+    def position_twin(self, t_s):
+        """:meth:`position` in numpy (the kernel's twin)."""
         return np.asarray(self.start_m) + _col(t_s) * np.asarray(self.velocity_m_s)
 
     def velocity(self, t_s):
         out = np.empty((_col(t_s).shape[0], 3))
-        out[:] = self.velocity_m_s
+        out[:] = self._velocity
         return out
 
     @property
