@@ -67,6 +67,10 @@ class SceneSensor:
         self._range_noise_m = float(scene.param("range_noise_m")) if scene.has("range_noise") else 0.0
         self._angular_noise_rad = (math.radians(scene.param("angular_noise_deg")) if scene.has("angular_noise")
                                    else 0.0)
+        self._dropout_rate = self._param_if("dropouts", "dropout_rate")
+        # Which effects act, asked once (a frame asked the scene eight times).
+        self._has = {name: scene.has(name) for name in
+                     ("return_probability", "dropouts", "range_noise", "angular_noise", "sunlight", "beam_footprint")}
         self._target_prim_end = sum(spec.body.prims.shape[0] for spec in scene.targets)
         # Per target, what sizes its per-frame cull (computed once: both walk Python objects).
         self._cull = [(spec.body.bounding_radius_m, spec.trajectory.max_speed_m_s) for spec in scene.targets]
@@ -83,10 +87,13 @@ class SceneSensor:
         in time order; xyz on the 1 mm grid of a Livox's Cartesian output (``quantise_to_mm_grid``).
         """
         scene = self.scene
+        has = self._has
         n = len(chunk)
         # 4. ray casting: targets (culled) then background.
-        rng_m = np.full(n, np.inf)
-        prim = np.full(n, -1, dtype=np.int64)
+        rng_m = np.empty(n)
+        rng_m.fill(np.inf)
+        prim = np.empty(n, dtype=np.int64)
+        prim.fill(-1)
         offset = 0
         for spec, cull in zip(scene.targets, self._cull):
             self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
@@ -98,28 +105,25 @@ class SceneSensor:
         # 5. effects, each only if listed (draws in a fixed order, one call per effect and frame),
         # applied to the hits and gathered in scan order in one pass.
         n_hit = sk.count_hits_kernel(prim, chunk.status)
-        draws = {}
-        if scene.has("return_probability"):
-            draws["return_probability"] = fx.return_draws(self._stream("return_probability"), n_hit)
-        if scene.has("dropouts"):
-            draws["dropouts"] = fx.dropout_draws(self._stream("dropouts"), n_hit)
-        if scene.has("range_noise"):
-            draws["range_noise"] = fx.range_noise_normals(self._stream("range_noise"), n_hit)
-        if scene.has("angular_noise") and n_hit:
-            draws["angular_noise"] = fx.angular_noise_normals(self._stream("angular_noise"), n_hit)
+        u_return = u_dropout = range_normals = angular_normals = _NONE
+        if has["return_probability"]:
+            u_return = fx.return_draws(self._stream("return_probability"), n_hit)
+        if has["dropouts"]:
+            u_dropout = fx.dropout_draws(self._stream("dropouts"), n_hit)
+        if has["range_noise"]:
+            range_normals = fx.range_noise_normals(self._stream("range_noise"), n_hit)
+        if has["angular_noise"] and n_hit:
+            angular_normals = fx.angular_noise_normals(self._stream("angular_noise"), n_hit)
         xyz = np.empty((n_hit, 3))
         pt_ns = np.empty(n_hit, dtype=np.int64)
         refl_byte = np.empty(n_hit, dtype=np.uint8)
         on_target = np.empty(n_hit, dtype=np.bool_)
         k = sk.assemble_returns_kernel(
             prim, chunk.status, rng_m, chunk.direction, chunk.t_ns, self._range_limit_m, self._refl_byte_table,
-            self._target_prim_end, draws.get("return_probability", _NONE),
-            draws.get("dropouts", _NONE), self._param_if("dropouts", "dropout_rate"),
-            draws.get("range_noise", _NONE), self._range_noise_m, draws.get("angular_noise", _NONE),
-            self._angular_noise_rad, True,
-            xyz, pt_ns, refl_byte, on_target)
+            self._target_prim_end, u_return, u_dropout, self._dropout_rate, range_normals, self._range_noise_m,
+            angular_normals, self._angular_noise_rad, True, xyz, pt_ns, refl_byte, on_target)
         xyz, pt_ns, refl_byte, on_target = xyz[:k], pt_ns[:k], refl_byte[:k], on_target[:k]
-        if scene.has("sunlight") and n:
+        if has["sunlight"] and n:
             # Sunlight false alarms are appended, then the frame is put back in time order (stable:
             # a false alarm after a real return of the same instant).
             xyz, pt_ns, refl_byte, on_target = self._sunlight(chunk, xyz, pt_ns, refl_byte, on_target)
@@ -167,7 +171,7 @@ class SceneSensor:
         radius_m, v_max = cull
         reach = radius_m + v_max * 0.5 * (t1 - t0) * 1.01 + 1e-3
         # Beam divergence can catch a body just outside the central ray's path.
-        if self.scene.has("beam_footprint"):
+        if self._has["beam_footprint"]:
             reach += np.linalg.norm(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
         idx = np.empty(t_ns.size, dtype=np.int64)
         idx = idx[:wk.cone_candidates_kernel(d_world, status, c[0], c[1], c[2], reach, idx)]
@@ -178,7 +182,7 @@ class SceneSensor:
         pos = traj.position(t_pose)
         yaw = heading_rad(traj.velocity(t_pose))
         prims = spec.body.prims
-        if not self.scene.has("beam_footprint"):
+        if not self._has["beam_footprint"]:
             wk.cast_moving_kernel(idx, d_world, pos, yaw, prims, offset, rng_m, prim)
             return
         # Beam footprint: sub-rays over the divergence ellipse; the return is the nearest sub-ray
