@@ -113,9 +113,15 @@ class DrawsAhead:
     ``"normal"`` (``rng.standard_normal``).  Stands in for the ``numpy.random.Generator`` the effect's
     draw function (:mod:`sim.effects`) is given: it returns the values
     the generator itself would have returned to the same sequence of calls (:meth:`random`,
-    :meth:`standard_normal`)."""
+    :meth:`standard_normal`).
 
-    def __init__(self, rng: np.random.Generator, kind: str, ahead: Ahead, block: int = 65_536):
+    ``ahead`` None: the blocks are filled on the caller's thread when it runs out (no worker; what a
+    run without a second thread uses for its normals: one fill kernel call per block instead of one
+    per frame, whose ~7 us of numba unboxing the generator cost more than 3 000 draws); :meth:`work_on`
+    moves the filling to a worker from then on, the stream going on where it stands.
+    """
+
+    def __init__(self, rng: np.random.Generator, kind: str, ahead: Ahead | None, block: int = 65_536):
         if kind not in ("uniform", "normal"):
             raise ValueError(f"kind {kind!r}: 'uniform' or 'normal'")
         if block < 1:
@@ -127,7 +133,13 @@ class DrawsAhead:
         self._block = block
         self._buf = np.empty(0)
         self._pos = 0
-        self._next = ahead.submit(self._fill, block)
+        self._next = None if ahead is None else ahead.submit(self._fill, block)
+
+    def work_on(self, ahead: Ahead) -> None:
+        """Fill the coming blocks ahead on ``ahead``'s worker (the values do not change)."""
+        self._ahead = ahead
+        if self._next is None:
+            self._next = ahead.submit(self._fill, self._block)
 
     def _fill(self, n: int) -> np.ndarray:
         out = np.empty(n)
@@ -145,13 +157,16 @@ class DrawsAhead:
         parts = [self._buf[self._pos:]]
         need = n - parts[0].size
         while need > 0:
-            self._buf = self._next.result()
-            self._next = self._ahead.submit(self._fill, max(self._block, need))
+            if self._next is None:       # no worker: the next block, now
+                self._buf = self._fill(max(self._block, need))
+            else:
+                self._buf = self._next.result()
+                self._next = self._ahead.submit(self._fill, max(self._block, need))
             k = min(need, self._buf.size)
             parts.append(self._buf[:k])
             self._pos = k
             need -= k
-        return np.concatenate(parts)
+        return parts[1] if len(parts) == 2 and parts[0].size == 0 else np.concatenate(parts)
 
     def random(self, size: int) -> np.ndarray:
         if self.kind != "uniform":

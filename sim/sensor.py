@@ -26,6 +26,7 @@ _NONE = np.zeros(0)          # an effect that is off: no draws
 EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")
 # The kind of value each effect takes from its stream, for the effects that take one kind only (these
 # can be drawn ahead: sim.ahead.DrawsAhead); sunlight mixes kinds and is drawn frame by frame.
+_NORMALS_BLOCK = 16_384     # ~60 us of draws: a few frames' worth, the end of a run wastes at most one
 ONE_KIND_STREAMS = {"range_noise": "normal", "angular_noise": "normal", "return_probability": "uniform",
                     "dropouts": "uniform"}
 
@@ -55,6 +56,13 @@ class SceneSensor:
         self.rngs = {name: fx.effect_rng(scene.seed, name) for name in EFFECT_STREAMS}
         self.draw_calls = {name: 0 for name in self.rngs}
         self._sources = dict(self.rngs)   # where each effect's values come from (drawn ahead or not)
+        # Normals are drawn in blocks even on one thread (the same values; sim.ahead.DrawsAhead): one
+        # numba fill per block, not per frame (passing a Generator to numba costs ~7 us a call).
+        from sim.ahead import DrawsAhead
+
+        for effect, kind in ONE_KIND_STREAMS.items():
+            if kind == "normal" and scene.has(effect):
+                self._sources[effect] = DrawsAhead(self.rngs[effect], kind, None, block=_NORMALS_BLOCK)
         self._bg = np.ascontiguousarray(scene.background_prims)
         refl = [spec.body.reflectivity for spec in scene.targets]
         if self._bg.shape[0]:
@@ -153,8 +161,12 @@ class SceneSensor:
         from sim.ahead import DrawsAhead
 
         for effect, kind in ONE_KIND_STREAMS.items():
-            if self.scene.has(effect) and self._sources[effect] is self.rngs[effect]:
+            if not self.scene.has(effect):
+                continue
+            if self._sources[effect] is self.rngs[effect]:
                 self._sources[effect] = DrawsAhead(self.rngs[effect], kind, ahead)
+            else:     # drawn in blocks on this thread so far: the coming blocks go to the worker
+                self._sources[effect].work_on(ahead)
 
     def _param_if(self, effect: str, key: str) -> float:
         return float(self.scene.param(key)) if self.scene.has(effect) else 0.0
