@@ -15,6 +15,7 @@ from scipy.interpolate import CubicSpline
 
 
 _straight_position_kernel = None
+_hover_heading_kernel = None
 
 
 def _col(t_s) -> np.ndarray:
@@ -46,13 +47,10 @@ class Straight:
         _straight_position_kernel(self._start, self._velocity, t, out)
         return out
 
-    def position_twin(self, t_s):
-        """:meth:`position` in numpy (the kernel's twin)."""
-        return np.asarray(self.start_m) + _col(t_s) * np.asarray(self.velocity_m_s)
-
     def velocity(self, t_s):
         out = np.empty((_col(t_s).shape[0], 3))
-        out[:] = self._velocity
+        for i in range(3):    # column by column: broadcasting rows of three costs more
+            out[:, i] = self._velocity[i]
         return out
 
     @property
@@ -200,8 +198,11 @@ class Manual:
 
 
 def heading_rad(velocity: np.ndarray, default: float = 0.0) -> np.ndarray:
-    """Yaw of the body (x forward along the horizontal velocity); ``default`` when hovering."""
-    vx, vy = velocity[:, 0], velocity[:, 1]
-    yaw = np.arctan2(vy, vx)
-    yaw[~(vx * vx + vy * vy > 1e-8)] = default    # hovering (or an undefined velocity)
+    """Yaw of the body (x forward along the horizontal velocity); ``default`` when hovering
+    (``vx^2 + vy^2 <= 1e-8`` or undefined: :func:`sim.world.kernels.hover_heading_kernel`)."""
+    global _hover_heading_kernel
+    if _hover_heading_kernel is None:   # numba loads on first use, not on import
+        from sim.world.kernels import hover_heading_kernel as _hover_heading_kernel
+    yaw = np.arctan2(velocity[:, 1], velocity[:, 0])   # numpy's atan2: its bits (numba's libm call may differ)
+    _hover_heading_kernel(velocity, float(default), yaw)
     return yaw
