@@ -34,8 +34,12 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
+from foveatrack.detection import frozen_maker
 from sim import random_kernels as rk
 from sim.scan.model import ScanChunk, ScanModel
+
+_make_chunk = frozen_maker(ScanChunk)   # a frame's slice of a batch, once per frame: without the
+                                        # frozen dataclass's per-field __setattr__
 
 
 class Ahead:
@@ -73,6 +77,7 @@ class ScanAhead:
         self._ahead = ahead
         self._next: tuple[int, Future] | None = None             # (first frame, its batch in flight)
         self._batch: tuple[int, ScanChunk] | None = None         # (first frame, its points)
+        self._cuts: list[int] = []                               # frame starts in the batch's points
 
     def _frame_k(self, f: int) -> int:
         return self.model.index_at_time(f * self.period_s)
@@ -93,12 +98,14 @@ class ScanAhead:
                 self._next = self._submit(f)
             f0, fut = self._next
             self._batch = (f0, fut.result())
+            # where each frame of the batch starts in it, worked out once per batch
+            self._cuts = [self._frame_k(f0 + i) - self._batch[1].k0 for i in range(self.batch_frames + 1)]
             self._next = self._submit(f0 + self.batch_frames)    # the next batch starts now
-        chunk = self._batch[1]
-        a = self._frame_k(f) - chunk.k0
-        b = self._frame_k(f + 1) - chunk.k0
-        return ScanChunk(k0=chunk.k0 + a, t_ns=chunk.t_ns[a:b], direction=chunk.direction[a:b],
-                         channel=chunk.channel[a:b], status=chunk.status[a:b])
+        f0, chunk = self._batch
+        a = self._cuts[f - f0]
+        b = self._cuts[f - f0 + 1]
+        return _make_chunk(chunk.k0 + a, chunk.t_ns[a:b], chunk.direction[a:b], chunk.channel[a:b],
+                           chunk.status[a:b])
 
     def _drain(self) -> None:
         """Wait for the batch in flight and forget it (the model is then the caller's alone)."""
