@@ -163,15 +163,13 @@ def cast_static_kernel(d_world, prims, prim_offset, out_range, out_prim):
     bz = np.empty(_BLOCK)
     br = np.empty(_BLOCK)
     bp = np.empty(_BLOCK, dtype=np.int64)
+    d_flat = d_world.reshape(-1)
     for j0 in range(0, n, _BLOCK):
         m_blk = min(_BLOCK, n - j0)
-        d_blk = d_world[j0:j0 + m_blk]
         r_blk = out_range[j0:j0 + m_blk]
         p_blk = out_prim[j0:j0 + m_blk]
+        _rows_to_xyz(d_flat[3 * j0:3 * (j0 + m_blk)], m_blk, bx, by, bz)
         for i in range(m_blk):
-            bx[i] = d_blk[i, 0]
-            by[i] = d_blk[i, 1]
-            bz[i] = d_blk[i, 2]
             br[i] = r_blk[i]
             bp[i] = p_blk[i]
         _cast_prims(prims, prim_offset, bx, by, bz, m_blk, br, bp)
@@ -455,6 +453,27 @@ def _turn_xyz(x, y, z, cpi, spi, cti, sti, dp, dq):
 
 
 @njit(cache=True, inline="always")
+def _rows_to_xyz(flat, m, bx, by, bz):
+    """``m`` rows (x, y, z) given end to end (``flat``, a C-contiguous (m, 3) block reshaped) into
+    three arrays.  Indexed in the flat array, LLVM vectorises the stride-3 loads (interleaved
+    access); indexed as rows ``a[k, c]`` it does not (measured: the copies in and out of 10 000
+    beams, 17 -> 8 us)."""
+    for k in range(m):
+        bx[k] = flat[3 * k]
+        by[k] = flat[3 * k + 1]
+        bz[k] = flat[3 * k + 2]
+
+
+@njit(cache=True, inline="always")
+def _xyz_to_rows(bx, by, bz, m, flat):
+    """:func:`_rows_to_xyz` back: three arrays into ``m`` rows end to end."""
+    for k in range(m):
+        flat[3 * k] = bx[k]
+        flat[3 * k + 1] = by[k]
+        flat[3 * k + 2] = bz[k]
+
+
+@njit(cache=True, inline="always")
 def _interval_run(t_s, j, t0_s, inv_dt, n_grid):
     """The grid interval of point ``j`` and the end of the run of points ``j ..`` in it."""
     i = _grid_interval((t_s[j] - t0_s) * inv_dt, n_grid)
@@ -542,6 +561,8 @@ def rotate_head_pieces_kernel(d_lidar, times, t0_s, dt_s, n_nodes, pan_pieces, t
     """
     n = d_lidar.shape[0]
     inv_dt = 1.0 / dt_s
+    d_flat = d_lidar.reshape(-1)     # rows (x, y, z) end to end: see _rows_to_xyz
+    out_flat = out.reshape(-1)
     bx = np.empty(_BLOCK)
     by = np.empty(_BLOCK)
     bz = np.empty(_BLOCK)
@@ -575,23 +596,17 @@ def rotate_head_pieces_kernel(d_lidar, times, t0_s, dt_s, n_nodes, pan_pieces, t
         out_run = out[j:j_end]
         if steady and j_end - j <= _BLOCK:
             # a branch inside the loop would also stop the vectorisation: one loop per case; the
-            # beams go through x, y, z blocks (stride-3 rows do not vectorise)
+            # beams go through x, y, z blocks (the rows' stride-3 layout does not vectorise)
             p0, p1, p2, p3 = pan_pieces[0, ip], pan_pieces[1, ip], pan_pieces[2, ip], pan_pieces[3, ip]
             q0, q1, q2, q3 = tilt_pieces[0, it], tilt_pieces[1, it], tilt_pieces[2, it], tilt_pieces[3, it]
             m = j_end - j
-            for k in range(m):
-                bx[k] = d_run[k, 0]
-                by[k] = d_run[k, 1]
-                bz[k] = d_run[k, 2]
+            _rows_to_xyz(d_flat[3 * j:3 * j_end], m, bx, by, bz)
             for k in range(m):
                 t = _seconds(t_run[k])
                 dp = _poly_angle_rad(p0, p1, p2, p3, t) - pan_ref
                 dq = _poly_angle_rad(q0, q1, q2, q3, t) - tilt_ref
                 bx[k], by[k], bz[k] = _turn_xyz(bx[k], by[k], bz[k], cpi, spi, cti, sti, dp, dq)
-            for k in range(m):
-                out_run[k, 0] = bx[k]
-                out_run[k, 1] = by[k]
-                out_run[k, 2] = bz[k]
+            _xyz_to_rows(bx, by, bz, m, out_flat[3 * j:3 * j_end])
         else:
             for k in range(j_end - j):
                 t = _seconds(t_run[k])
