@@ -142,9 +142,15 @@ class DrawsAhead:
         self._pos = 0
         self._next = None if ahead is None else ahead.submit(self._fill, block)
 
-    def work_on(self, ahead: Ahead) -> None:
-        """Fill the coming blocks ahead on ``ahead``'s worker (the values do not change)."""
+    def work_on(self, ahead: Ahead, block: int = 65_536) -> None:
+        """Fill the coming blocks, of ``block`` values, ahead on ``ahead``'s worker (the values do not
+        change).  Blocks as big as a stream drawn ahead from the start: with the few frames a small
+        one lasts, the loop would wait for the worker at every block (it fills one block ahead,
+        queued behind the scan)."""
+        if block < 1:
+            raise ValueError(f"block = {block!r} must be >= 1")
         self._ahead = ahead
+        self._block = block
         if self._next is None:
             self._next = ahead.submit(self._fill, self._block)
 
