@@ -92,10 +92,13 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
         r = range_m[j]
         if use_ret:
             r_max = range_limit_m[m]
-            z = min(max((r - r_max) / (0.03 * r_max), -50.0), 50.0)
             u = u_return[h]
-            if not (z < -15.0 and u < 0.999999) and not u < 1.0 / (1.0 + math.exp(z)):
-                continue
+            # Within half the limit z < -16.6 (< -15 whatever the rounding): the draw alone decides,
+            # without the division (the same decision as the test below, which the others take).
+            if not (r < 0.5 * r_max and u < 0.999999):
+                z = min(max((r - r_max) / (0.03 * r_max), -50.0), 50.0)
+                if not (z < -15.0 and u < 0.999999) and not u < 1.0 / (1.0 + math.exp(z)):
+                    continue
         if use_drop and not u_dropout[h] >= dropout_rate:
             continue
         if use_rn:
