@@ -248,8 +248,8 @@ class ClosedLoop:
         pieces = self.head.pose_segments(t0, t1) if self.head_grid_s is None else None
         if pieces is not None:
             n_steps = max(1, math.ceil((t1 - t0) / self._TRIG_NODE_S - 1e-9))
-            wk.rotate_head_pieces_kernel(d_lidar, chunk.t_ns, t0, (t1 - t0) / n_steps, n_steps + 1, pieces[0], pieces[1],
-                                         d_world)
+            wk.rotate_head_pieces_kernel(d_lidar, chunk.t_ns, t0, (t1 - t0) / n_steps, n_steps + 1, pieces[0],
+                                         pieces[1], d_world)
             pan = [wk.piece_angle_deg_kernel(pieces[0], t_mid)]    # the log's truth at mid-frame
             tilt = [wk.piece_angle_deg_kernel(pieces[1], t_mid)]
         elif self.head_grid_s:

@@ -26,9 +26,9 @@ _NONE = np.zeros(0)          # an effect that is off: no draws
 EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")
 # The kind of value each effect takes from its stream, for the effects that take one kind only (these
 # can be drawn ahead: sim.ahead.DrawsAhead); sunlight mixes kinds and is drawn frame by frame.
-_NORMALS_BLOCK = 16_384     # ~60 us of draws: a few frames' worth, the end of a run wastes at most one
 ONE_KIND_STREAMS = {"range_noise": "normal", "angular_noise": "normal", "return_probability": "uniform",
                     "dropouts": "uniform"}
+_NORMALS_BLOCK = 16_384     # normals per block on one thread: ~60 us of draws, a few frames' worth
 
 
 def scene_scan_model(scene) -> ScanModel:
