@@ -34,8 +34,12 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
+from foveatrack.detection import frozen_maker
 from sim import random_kernels as rk
 from sim.scan.model import ScanChunk, ScanModel
+
+_make_chunk = frozen_maker(ScanChunk)   # a frame's slice of a batch, once per frame: without the
+                                        # frozen dataclass's per-field __setattr__
 
 
 class Ahead:
@@ -73,6 +77,7 @@ class ScanAhead:
         self._ahead = ahead
         self._next: tuple[int, Future] | None = None             # (first frame, its batch in flight)
         self._batch: tuple[int, ScanChunk] | None = None         # (first frame, its points)
+        self._cuts: list[int] = []                               # frame starts in the batch's points
 
     def _frame_k(self, f: int) -> int:
         return self.model.index_at_time(f * self.period_s)
@@ -93,12 +98,14 @@ class ScanAhead:
                 self._next = self._submit(f)
             f0, fut = self._next
             self._batch = (f0, fut.result())
+            # where each frame of the batch starts in it, worked out once per batch
+            self._cuts = [self._frame_k(f0 + i) - self._batch[1].k0 for i in range(self.batch_frames + 1)]
             self._next = self._submit(f0 + self.batch_frames)    # the next batch starts now
-        chunk = self._batch[1]
-        a = self._frame_k(f) - chunk.k0
-        b = self._frame_k(f + 1) - chunk.k0
-        return ScanChunk(k0=chunk.k0 + a, t_ns=chunk.t_ns[a:b], direction=chunk.direction[a:b],
-                         channel=chunk.channel[a:b], status=chunk.status[a:b])
+        f0, chunk = self._batch
+        a = self._cuts[f - f0]
+        b = self._cuts[f - f0 + 1]
+        return _make_chunk(chunk.k0 + a, chunk.t_ns[a:b], chunk.direction[a:b], chunk.channel[a:b],
+                           chunk.status[a:b])
 
     def _drain(self) -> None:
         """Wait for the batch in flight and forget it (the model is then the caller's alone)."""
@@ -113,9 +120,15 @@ class DrawsAhead:
     ``"normal"`` (``rng.standard_normal``).  Stands in for the ``numpy.random.Generator`` the effect's
     draw function (:mod:`sim.effects`) is given: it returns the values
     the generator itself would have returned to the same sequence of calls (:meth:`random`,
-    :meth:`standard_normal`)."""
+    :meth:`standard_normal`).
 
-    def __init__(self, rng: np.random.Generator, kind: str, ahead: Ahead, block: int = 65_536):
+    ``ahead`` None: the blocks are filled on the caller's thread when it runs out (no worker; what a
+    run without a second thread uses for its normals: one fill kernel call per block instead of one
+    per frame, whose ~7 us of numba unboxing the generator cost more than 3 000 draws); :meth:`work_on`
+    moves the filling to a worker from then on, the stream going on where it stands.
+    """
+
+    def __init__(self, rng: np.random.Generator, kind: str, ahead: Ahead | None, block: int = 65_536):
         if kind not in ("uniform", "normal"):
             raise ValueError(f"kind {kind!r}: 'uniform' or 'normal'")
         if block < 1:
@@ -127,7 +140,19 @@ class DrawsAhead:
         self._block = block
         self._buf = np.empty(0)
         self._pos = 0
-        self._next = ahead.submit(self._fill, block)
+        self._next = None if ahead is None else ahead.submit(self._fill, block)
+
+    def work_on(self, ahead: Ahead, block: int = 65_536) -> None:
+        """Fill the coming blocks, of ``block`` values, ahead on ``ahead``'s worker (the values do not
+        change).  Blocks as big as a stream drawn ahead from the start: with the few frames a small
+        one lasts, the loop would wait for the worker at every block (it fills one block ahead,
+        queued behind the scan)."""
+        if block < 1:
+            raise ValueError(f"block = {block!r} must be >= 1")
+        self._ahead = ahead
+        self._block = block
+        if self._next is None:
+            self._next = ahead.submit(self._fill, self._block)
 
     def _fill(self, n: int) -> np.ndarray:
         out = np.empty(n)
@@ -136,19 +161,25 @@ class DrawsAhead:
 
     def _take(self, n: int) -> np.ndarray:
         if self._pos + n <= self._buf.size:           # the usual case: one slice of the block
-            out = self._buf[self._pos:self._pos + n].copy()
+            # A view, not a copy: each value is handed out once and the block is never written
+            # again (a new block is a new array).  Left writeable: a read-only array would be
+            # another type to numba, one more compilation of each kernel it is given to.
+            out = self._buf[self._pos:self._pos + n]
             self._pos += n
             return out
         parts = [self._buf[self._pos:]]
         need = n - parts[0].size
         while need > 0:
-            self._buf = self._next.result()
-            self._next = self._ahead.submit(self._fill, max(self._block, need))
+            if self._next is None:       # no worker: the next block, now
+                self._buf = self._fill(max(self._block, need))
+            else:
+                self._buf = self._next.result()
+                self._next = self._ahead.submit(self._fill, max(self._block, need))
             k = min(need, self._buf.size)
             parts.append(self._buf[:k])
             self._pos = k
             need -= k
-        return np.concatenate(parts)
+        return parts[1] if len(parts) == 2 and parts[0].size == 0 else np.concatenate(parts)
 
     def random(self, size: int) -> np.ndarray:
         if self.kind != "uniform":

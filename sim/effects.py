@@ -53,6 +53,18 @@ def standard_normals(rng, n: int) -> np.ndarray:
     return rng.standard_normal(n)
 
 
+def range_noise_normals(rng, n_hits: int) -> np.ndarray:
+    """The standard normals of the range noise; :func:`sim.sensor_kernels.assemble_returns_kernel`
+    scales each as :func:`range_noise_draws` does (``0.0 + sigma_m * z``, the same bits)."""
+    return standard_normals(rng, n_hits)
+
+
+def angular_noise_normals(rng, n_hits: int) -> np.ndarray:
+    """The 3 standard normals per hit of the angular noise, flat; scaled in the kernel as
+    :func:`angular_noise_draws` does (``0.0 + radians(sigma_deg) * z``, the same bits)."""
+    return standard_normals(rng, 3 * n_hits)
+
+
 def range_noise_draws(rng, n_hits: int, sigma_m: float) -> np.ndarray:
     """Range errors [m], gaussian: ``rng.normal(0, sigma_m, n_hits)`` (which is ``0 + sigma * z``)."""
     return 0.0 + sigma_m * standard_normals(rng, n_hits)

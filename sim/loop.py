@@ -239,7 +239,6 @@ class ClosedLoop:
         # 2. the scan.
         chunk = (self._scan_ahead or self.scan).scan_time(t0, t1)
         c2 = clock()
-        t_s = chunk.t_ns * 1e-9
         d_lidar = chunk.direction
         # 3. beams in the world at each point's own head pose.
         d_world = np.empty_like(d_lidar)
@@ -249,8 +248,8 @@ class ClosedLoop:
         pieces = self.head.pose_segments(t0, t1) if self.head_grid_s is None else None
         if pieces is not None:
             n_steps = max(1, math.ceil((t1 - t0) / self._TRIG_NODE_S - 1e-9))
-            wk.rotate_head_pieces_kernel(d_lidar, t_s, t0, (t1 - t0) / n_steps, n_steps + 1, pieces[0], pieces[1],
-                                         d_world)
+            wk.rotate_head_pieces_kernel(d_lidar, chunk.t_ns, t0, (t1 - t0) / n_steps, n_steps + 1, pieces[0],
+                                         pieces[1], d_world)
             pan = [wk.piece_angle_deg_kernel(pieces[0], t_mid)]    # the log's truth at mid-frame
             tilt = [wk.piece_angle_deg_kernel(pieces[1], t_mid)]
         elif self.head_grid_s:
@@ -258,11 +257,12 @@ class ClosedLoop:
             n_steps = max(1, math.ceil((t1 - t0) / self.head_grid_s - 1e-9))
             step = (t1 - t0) / n_steps
             times = np.append(t0 + step * np.arange(n_steps + 1), t_mid)
+            t_s = chunk.t_ns * 1e-9
             pan, tilt = self.head.angles_at(times, wrap_pan=False)
             rad = np.radians(np.stack([pan[:-1], tilt[:-1]]))
             wk.rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0, step, rad[0], rad[1], d_world)
         else:
-            pan, tilt = self.head.angles_at(np.append(t_s, t_mid), wrap_pan=False)
+            pan, tilt = self.head.angles_at(np.append(chunk.t_ns * 1e-9, t_mid), wrap_pan=False)
             wk.rotate_pan_tilt_kernel(d_lidar, np.radians(pan[:-1]), np.radians(tilt[:-1]), d_world)
         mid_pose_deg = (float(wrap_pan_deg(pan[-1])), float(tilt[-1]))   # the log's truth
         c3 = clock()

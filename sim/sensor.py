@@ -23,12 +23,12 @@ from sim.world import kernels as wk
 from sim.world.trajectories import heading_rad
 
 _NONE = np.zeros(0)          # an effect that is off: no draws
-_NONE_3 = np.zeros((0, 3))
 EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")
 # The kind of value each effect takes from its stream, for the effects that take one kind only (these
 # can be drawn ahead: sim.ahead.DrawsAhead); sunlight mixes kinds and is drawn frame by frame.
 ONE_KIND_STREAMS = {"range_noise": "normal", "angular_noise": "normal", "return_probability": "uniform",
                     "dropouts": "uniform"}
+_NORMALS_BLOCK = 16_384     # normals per block on one thread: ~60 us of draws, a few frames' worth
 
 
 def scene_scan_model(scene) -> ScanModel:
@@ -56,6 +56,13 @@ class SceneSensor:
         self.rngs = {name: fx.effect_rng(scene.seed, name) for name in EFFECT_STREAMS}
         self.draw_calls = {name: 0 for name in self.rngs}
         self._sources = dict(self.rngs)   # where each effect's values come from (drawn ahead or not)
+        # Normals are drawn in blocks even on one thread (the same values; sim.ahead.DrawsAhead): one
+        # numba fill per block, not per frame (passing a Generator to numba costs ~7 us a call).
+        from sim.ahead import DrawsAhead
+
+        for effect, kind in ONE_KIND_STREAMS.items():
+            if kind == "normal" and scene.has(effect):
+                self._sources[effect] = DrawsAhead(self.rngs[effect], kind, None, block=_NORMALS_BLOCK)
         self._bg = np.ascontiguousarray(scene.background_prims)
         refl = [spec.body.reflectivity for spec in scene.targets]
         if self._bg.shape[0]:
@@ -64,6 +71,14 @@ class SceneSensor:
         self._refl_byte_table = np.clip(np.round(self._refl_table * 100), 0, 255).astype(np.uint8)
         self._range_limit_m = (fx.range_limit_m(self._refl_table, scene.param("range_80pct_m"))
                                if scene.has("return_probability") else np.zeros(self._refl_table.size))
+        # The noise effects' scales, as their draw functions compute them (sim.effects).
+        self._range_noise_m = float(scene.param("range_noise_m")) if scene.has("range_noise") else 0.0
+        self._angular_noise_rad = (math.radians(scene.param("angular_noise_deg")) if scene.has("angular_noise")
+                                   else 0.0)
+        self._dropout_rate = self._param_if("dropouts", "dropout_rate")
+        # Which effects act, asked once (a frame asked the scene eight times).
+        self._has = {name: scene.has(name) for name in
+                     ("return_probability", "dropouts", "range_noise", "angular_noise", "sunlight", "beam_footprint")}
         self._target_prim_end = sum(spec.body.prims.shape[0] for spec in scene.targets)
         # Per target, what sizes its per-frame cull (computed once: both walk Python objects).
         self._cull = [(spec.body.bounding_radius_m, spec.trajectory.max_speed_m_s) for spec in scene.targets]
@@ -80,10 +95,13 @@ class SceneSensor:
         in time order; xyz on the 1 mm grid of a Livox's Cartesian output (``quantise_to_mm_grid``).
         """
         scene = self.scene
+        has = self._has
         n = len(chunk)
         # 4. ray casting: targets (culled) then background.
-        rng_m = np.full(n, np.inf)
-        prim = np.full(n, -1, dtype=np.int64)
+        rng_m = np.empty(n)
+        rng_m.fill(np.inf)
+        prim = np.empty(n, dtype=np.int64)
+        prim.fill(-1)
         offset = 0
         for spec, cull in zip(scene.targets, self._cull):
             self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
@@ -95,37 +113,33 @@ class SceneSensor:
         # 5. effects, each only if listed (draws in a fixed order, one call per effect and frame),
         # applied to the hits and gathered in scan order in one pass.
         n_hit = sk.count_hits_kernel(prim, chunk.status)
-        draws = {}
-        if scene.has("return_probability"):
-            draws["return_probability"] = fx.return_draws(self._stream("return_probability"), n_hit)
-        if scene.has("dropouts"):
-            draws["dropouts"] = fx.dropout_draws(self._stream("dropouts"), n_hit)
-        if scene.has("range_noise"):
-            draws["range_noise"] = fx.range_noise_draws(self._stream("range_noise"), n_hit,
-                                                        scene.param("range_noise_m"))
-        if scene.has("angular_noise") and n_hit:
-            draws["angular_noise"] = fx.angular_noise_draws(self._stream("angular_noise"), n_hit,
-                                                            scene.param("angular_noise_deg"))
+        u_return = u_dropout = range_normals = angular_normals = _NONE
+        if has["return_probability"]:
+            u_return = fx.return_draws(self._stream("return_probability"), n_hit)
+        if has["dropouts"]:
+            u_dropout = fx.dropout_draws(self._stream("dropouts"), n_hit)
+        if has["range_noise"]:
+            range_normals = fx.range_noise_normals(self._stream("range_noise"), n_hit)
+        if has["angular_noise"] and n_hit:
+            angular_normals = fx.angular_noise_normals(self._stream("angular_noise"), n_hit)
         xyz = np.empty((n_hit, 3))
         pt_ns = np.empty(n_hit, dtype=np.int64)
         refl_byte = np.empty(n_hit, dtype=np.uint8)
         on_target = np.empty(n_hit, dtype=np.bool_)
         k = sk.assemble_returns_kernel(
             prim, chunk.status, rng_m, chunk.direction, chunk.t_ns, self._range_limit_m, self._refl_byte_table,
-            self._target_prim_end, draws.get("return_probability", _NONE),
-            draws.get("dropouts", _NONE), self._param_if("dropouts", "dropout_rate"),
-            draws.get("range_noise", _NONE), draws.get("angular_noise", _NONE_3),
-            xyz, pt_ns, refl_byte, on_target)
+            self._target_prim_end, u_return, u_dropout, self._dropout_rate, range_normals, self._range_noise_m,
+            angular_normals, self._angular_noise_rad, True, xyz, pt_ns, refl_byte, on_target)
         xyz, pt_ns, refl_byte, on_target = xyz[:k], pt_ns[:k], refl_byte[:k], on_target[:k]
-        if scene.has("sunlight") and n:
+        if has["sunlight"] and n:
             # Sunlight false alarms are appended, then the frame is put back in time order (stable:
             # a false alarm after a real return of the same instant).
             xyz, pt_ns, refl_byte, on_target = self._sunlight(chunk, xyz, pt_ns, refl_byte, on_target)
             order = np.argsort(pt_ns, kind="stable")
             xyz, pt_ns, refl_byte, on_target = xyz[order], pt_ns[order], refl_byte[order], on_target[order]
-        # What a Livox outputs (Cartesian data types 0/2): int32 mm, which the live client turns into
-        # float64 metres; the same two functions here, so sim and live points have the same bits.
-        return quantise_to_mm_grid(xyz), pt_ns, refl_byte, on_target
+        # The points are what a Livox outputs (Cartesian data types 0/2): int32 mm, which the live
+        # client turns into float64 metres (the kernel's mm grid: the bits of quantise_to_mm_grid).
+        return xyz, pt_ns, refl_byte, on_target
 
     def warm_up(self, chunk) -> None:
         """Run every kernel of :meth:`returns` once (compiled, or loaded from numba's cache), for a
@@ -147,8 +161,12 @@ class SceneSensor:
         from sim.ahead import DrawsAhead
 
         for effect, kind in ONE_KIND_STREAMS.items():
-            if self.scene.has(effect) and self._sources[effect] is self.rngs[effect]:
+            if not self.scene.has(effect):
+                continue
+            if self._sources[effect] is self.rngs[effect]:
                 self._sources[effect] = DrawsAhead(self.rngs[effect], kind, ahead)
+            else:     # drawn in blocks on this thread so far: the coming blocks go to the worker
+                self._sources[effect].work_on(ahead)
 
     def _param_if(self, effect: str, key: str) -> float:
         return float(self.scene.param(key)) if self.scene.has(effect) else 0.0
@@ -165,7 +183,7 @@ class SceneSensor:
         radius_m, v_max = cull
         reach = radius_m + v_max * 0.5 * (t1 - t0) * 1.01 + 1e-3
         # Beam divergence can catch a body just outside the central ray's path.
-        if self.scene.has("beam_footprint"):
+        if self._has["beam_footprint"]:
             reach += np.linalg.norm(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
         idx = np.empty(t_ns.size, dtype=np.int64)
         idx = idx[:wk.cone_candidates_kernel(d_world, status, c[0], c[1], c[2], reach, idx)]
@@ -176,7 +194,7 @@ class SceneSensor:
         pos = traj.position(t_pose)
         yaw = heading_rad(traj.velocity(t_pose))
         prims = spec.body.prims
-        if not self.scene.has("beam_footprint"):
+        if not self._has["beam_footprint"]:
             wk.cast_moving_kernel(idx, d_world, pos, yaw, prims, offset, rng_m, prim)
             return
         # Beam footprint: sub-rays over the divergence ellipse; the return is the nearest sub-ray
@@ -214,7 +232,7 @@ class SceneSensor:
             return xyz, pt_ns, refl_byte, on_target
         pick = rng.choice(np.flatnonzero(ok), n_false, replace=False)
         r = rng.uniform(0.5, self.scene.param("sunlight_max_range_m"), n_false)
-        xyz = np.vstack([xyz, chunk.direction[pick] * r[:, None]])
+        xyz = np.vstack([xyz, quantise_to_mm_grid(chunk.direction[pick] * r[:, None])])
         pt_ns = np.concatenate([pt_ns, chunk.t_ns[pick]])
         refl_byte = np.concatenate([refl_byte, np.full(n_false, 1, dtype=np.uint8)])
         on_target = np.concatenate([on_target, np.zeros(n_false, dtype=bool)])

@@ -12,9 +12,32 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from sim.scan.kernels import RAY_OK
+
+_MM_PER_M = 1000.0                        # foveatrack.livox.protocol.MM_PER_M
+_INT32_MM_MIN, _INT32_MM_MAX = -2147483648.0, 2147483647.0
+
+
+@njit(cache=True, inline="always")
+def _on_mm_grid(x_m):
+    """One coordinate [m] as a Livox's Cartesian output gives it: ``rint(x * 1000)`` saturated to
+    int32 millimetres, then ``mm * 1e-3`` in float64 — :func:`foveatrack.livox.protocol.quantise_to_mm_grid`
+    for one value, the same bits (through int32, so -0.0 becomes +0.0 as there).  NaN is not allowed."""
+    mm = np.int32(min(max(np.rint(x_m * _MM_PER_M), _INT32_MM_MIN), _INT32_MM_MAX))
+    return mm * 1e-3
+
+
+@njit(cache=True, nogil=True)
+def quantise_to_mm_grid_kernel(xyz_m, out):
+    """``out[:] = quantise_to_mm_grid(xyz_m)`` (any float64 shape, flattened alike); the test of
+    :func:`_on_mm_grid` against its numpy original."""
+    src = xyz_m.reshape(-1)
+    dst = out.reshape(-1)
+    for i in range(src.shape[0]):
+        dst[i] = _on_mm_grid(src[i])
 
 
 @njit(cache=True, nogil=True)
@@ -29,7 +52,8 @@ def count_hits_kernel(prim, status):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m, refl_byte_table, target_prim_end,
-                            u_return, u_dropout, dropout_rate, range_noise, angular_noise,
+                            u_return, u_dropout, dropout_rate, range_normals, range_noise_m, angular_normals,
+                            angular_noise_rad, mm_grid,
                             out_xyz, out_t_ns, out_refl, out_on_target):
     """Points of the hits, effects applied, in scan order; returns how many were kept.
 
@@ -42,16 +66,22 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
       the limit (z < -15) ``p > 1 - exp(z) - 2^-53 > 1 - 1e-6``, so a draw below ``1 - 1e-6`` is
       kept without the exponential (the same decision: only the cost changes);
     * ``u_dropout`` (uniform): kept if ``u >= dropout_rate``;
-    * ``range_noise`` [m]: added to the range;
-    * ``angular_noise`` (H, 3) [rad]: added to the direction, which is then renormalised.
+    * ``range_normals`` (standard normals): ``0.0 + range_noise_m * z`` [m] is added to the range
+      (``rng.normal(0, range_noise_m)``'s own expression, value for value:
+      :func:`sim.effects.range_noise_draws`, here without its two array operations);
+    * ``angular_normals`` (standard normals, 3 per hit, flat or (H, 3)): ``0.0 + angular_noise_rad * z``
+      [rad] is added to the direction, which is then renormalised (:func:`sim.effects.angular_noise_draws`).
 
     ``refl_byte_table``: the Livox reflectivity byte per primitive; a primitive below
-    ``target_prim_end`` belongs to a target (``out_on_target``).
+    ``target_prim_end`` belongs to a target (``out_on_target``).  ``mm_grid``: the points go out on
+    the 1 mm grid of a Livox's Cartesian output (:func:`_on_mm_grid`, the bits of
+    ``quantise_to_mm_grid`` applied afterwards, in this pass instead of five array operations).
     """
     use_ret = u_return.shape[0] > 0
     use_drop = u_dropout.shape[0] > 0
-    use_rn = range_noise.shape[0] > 0
-    use_an = angular_noise.shape[0] > 0
+    use_rn = range_normals.shape[0] > 0
+    an = angular_normals.reshape(-1)
+    use_an = an.shape[0] > 0
     h = -1
     k = 0
     for j in range(prim.shape[0]):
@@ -62,28 +92,38 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
         r = range_m[j]
         if use_ret:
             r_max = range_limit_m[m]
-            z = min(max((r - r_max) / (0.03 * r_max), -50.0), 50.0)
             u = u_return[h]
-            if not (z < -15.0 and u < 0.999999) and not u < 1.0 / (1.0 + math.exp(z)):
-                continue
+            # Within half the limit z < -16.6 (< -15 whatever the rounding): the draw alone decides,
+            # without the division (the same decision as the test below, which the others take).
+            if not (r < 0.5 * r_max and u < 0.999999):
+                z = min(max((r - r_max) / (0.03 * r_max), -50.0), 50.0)
+                if not (z < -15.0 and u < 0.999999) and not u < 1.0 / (1.0 + math.exp(z)):
+                    continue
         if use_drop and not u_dropout[h] >= dropout_rate:
             continue
         if use_rn:
-            r = r + range_noise[h]
+            r = r + (0.0 + range_noise_m * range_normals[h])
         dx = d_lidar[j, 0]
         dy = d_lidar[j, 1]
         dz = d_lidar[j, 2]
         if use_an:
-            dx += angular_noise[h, 0]
-            dy += angular_noise[h, 1]
-            dz += angular_noise[h, 2]
+            dx += 0.0 + angular_noise_rad * an[3 * h]
+            dy += 0.0 + angular_noise_rad * an[3 * h + 1]
+            dz += 0.0 + angular_noise_rad * an[3 * h + 2]
             norm = math.sqrt(dx * dx + dy * dy + dz * dz)
             dx /= norm
             dy /= norm
             dz /= norm
-        out_xyz[k, 0] = dx * r
-        out_xyz[k, 1] = dy * r
-        out_xyz[k, 2] = dz * r
+        x = dx * r
+        y = dy * r
+        z = dz * r
+        if mm_grid:
+            x = _on_mm_grid(x)
+            y = _on_mm_grid(y)
+            z = _on_mm_grid(z)
+        out_xyz[k, 0] = x
+        out_xyz[k, 1] = y
+        out_xyz[k, 2] = z
         out_t_ns[k] = t_ns[j]
         out_refl[k] = refl_byte_table[m]
         out_on_target[k] = m < target_prim_end

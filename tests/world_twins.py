@@ -85,3 +85,16 @@ def cast_moving_twin(d, pos, yaw, prims):
     best = np.argmin(ts, axis=1)
     rng = ts[np.arange(len(d)), best]
     return rng, np.where(np.isfinite(rng), best, -1)
+
+
+def straight_position_twin(start, velocity, t):
+    """``Straight.position`` as numpy computes it: ``start + t[:, None] * velocity``."""
+    return np.asarray(start) + np.asarray(t, float).reshape(-1, 1) * np.asarray(velocity)
+
+
+def heading_twin(velocity, default=0.0):
+    """``heading_rad`` with numpy's mask: ``default`` where ``not vx^2 + vy^2 > 1e-8``."""
+    vx, vy = velocity[:, 0], velocity[:, 1]
+    yaw = np.arctan2(vy, vx)
+    yaw[~(vx * vx + vy * vy > 1e-8)] = default
+    return yaw

@@ -196,13 +196,15 @@ def _trace_prism(row, r0, m, bx, by, bz, bs, sa, ca, n_p, exit_tilted, flat_done
 @njit(cache=True, inline="always", fastmath=_FASTMATH, error_model="numpy")
 def _store_block(out_dir, status, j0, m, bx, by, bz, bs):
     """Optics frame (x, y, z along the axis) -> lidar frame (X fwd = z); failed rays zeroed."""
-    out_blk = out_dir[j0:j0 + m]
+    # Rows written by flat index (rows end to end): LLVM vectorises the stride-3 stores then, not
+    # as out_dir[i, c] (see sim.world.kernels._rows_to_xyz).
+    out_blk = out_dir.reshape(-1)[3 * j0:3 * (j0 + m)]
     st_blk = status[j0:j0 + m]
     for i in range(m):
         keep = 1.0 if bs[i] == 0.0 else 0.0
-        out_blk[i, 0] = bz[i] * keep
-        out_blk[i, 1] = bx[i] * keep
-        out_blk[i, 2] = by[i] * keep
+        out_blk[3 * i] = bz[i] * keep
+        out_blk[3 * i + 1] = bx[i] * keep
+        out_blk[3 * i + 2] = by[i] * keep
         st_blk[i] = np.uint8(bs[i])
 
 

@@ -24,7 +24,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
 
 from sim.scan.kernels import RAY_OK
 
@@ -162,15 +163,13 @@ def cast_static_kernel(d_world, prims, prim_offset, out_range, out_prim):
     bz = np.empty(_BLOCK)
     br = np.empty(_BLOCK)
     bp = np.empty(_BLOCK, dtype=np.int64)
+    d_flat = d_world.reshape(-1)
     for j0 in range(0, n, _BLOCK):
         m_blk = min(_BLOCK, n - j0)
-        d_blk = d_world[j0:j0 + m_blk]
         r_blk = out_range[j0:j0 + m_blk]
         p_blk = out_prim[j0:j0 + m_blk]
+        _rows_to_xyz(d_flat[3 * j0:3 * (j0 + m_blk)], m_blk, bx, by, bz)
         for i in range(m_blk):
-            bx[i] = d_blk[i, 0]
-            by[i] = d_blk[i, 1]
-            bz[i] = d_blk[i, 2]
             br[i] = r_blk[i]
             bp[i] = p_blk[i]
         _cast_prims(prims, prim_offset, bx, by, bz, m_blk, br, bp)
@@ -454,6 +453,27 @@ def _turn_xyz(x, y, z, cpi, spi, cti, sti, dp, dq):
 
 
 @njit(cache=True, inline="always")
+def _rows_to_xyz(flat, m, bx, by, bz):
+    """``m`` rows (x, y, z) given end to end (``flat``, a C-contiguous (m, 3) block reshaped) into
+    three arrays.  Indexed in the flat array, LLVM vectorises the stride-3 loads (interleaved
+    access); indexed as rows ``a[k, c]`` it does not (measured: the copies in and out of 10 000
+    beams, 17 -> 8 us)."""
+    for k in range(m):
+        bx[k] = flat[3 * k]
+        by[k] = flat[3 * k + 1]
+        bz[k] = flat[3 * k + 2]
+
+
+@njit(cache=True, inline="always")
+def _xyz_to_rows(bx, by, bz, m, flat):
+    """:func:`_rows_to_xyz` back: three arrays into ``m`` rows end to end."""
+    for k in range(m):
+        flat[3 * k] = bx[k]
+        flat[3 * k + 1] = by[k]
+        flat[3 * k + 2] = bz[k]
+
+
+@njit(cache=True, inline="always")
 def _interval_run(t_s, j, t0_s, inv_dt, n_grid):
     """The grid interval of point ``j`` and the end of the run of points ``j ..`` in it."""
     i = _grid_interval((t_s[j] - t0_s) * inv_dt, n_grid)
@@ -463,16 +483,30 @@ def _interval_run(t_s, j, t0_s, inv_dt, n_grid):
     return i, j_end
 
 
+def _seconds(t):
+    """A time in seconds from seconds (as is) or from integer nanoseconds (``t * 1e-9``, the
+    expression of the loop's float array of the times: the same bits without the array)."""
+    return t * 1e-9 if isinstance(t, (int, np.integer)) else t
+
+
+@overload(_seconds, inline="always")
+def _seconds_nb(t):
+    if isinstance(t, types.Integer):
+        return lambda t: t * 1e-9
+    return lambda t: t
+
+
 @njit(cache=True, inline="always")
-def _interval_run_sorted(t_s, j, t0_s, inv_dt, n_grid):
-    """:func:`_interval_run` for times in order, by bisection (the interval grows with the time):
-    ~log2(n) interval tests per run instead of one per point."""
-    i = _grid_interval((t_s[j] - t0_s) * inv_dt, n_grid)
+def _interval_run_sorted(times, j, t0_s, inv_dt, n_grid):
+    """:func:`_interval_run` for times in order (seconds or integer ns, :func:`_seconds`), by
+    bisection (the interval grows with the time): ~log2(n) interval tests per run instead of one
+    per point."""
+    i = _grid_interval((_seconds(times[j]) - t0_s) * inv_dt, n_grid)
     lo = j + 1
-    hi = t_s.shape[0]
+    hi = times.shape[0]
     while lo < hi:
         mid = (lo + hi) // 2
-        if _grid_interval((t_s[mid] - t0_s) * inv_dt, n_grid) == i:
+        if _grid_interval((_seconds(times[mid]) - t0_s) * inv_dt, n_grid) == i:
             lo = mid + 1
         else:
             hi = mid
@@ -513,7 +547,7 @@ def _advance_piece(pieces, i, t):
 
 
 @njit(cache=True, nogil=True)
-def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, tilt_pieces, out):
+def rotate_head_pieces_kernel(d_lidar, times, t0_s, dt_s, n_nodes, pan_pieces, tilt_pieces, out):
     """:func:`rotate_pan_tilt_kernel` with the head pose exact at every point's own time.
 
     The head moves in constant-acceleration pieces (``gimbal.pts303h.PTS303H.pose_segments``:
@@ -521,10 +555,14 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
     polynomials at its time — no interpolation.  The trigonometry is done once per node of a
     ``dt_s`` grid (``n_nodes`` nodes from ``t0_s``); a point turns by the small exact difference
     ``delta`` from its node (|delta| <= head speed x dt: 1.7e-3 rad at 100 deg/s and 1 ms) with the
-    series of :func:`rotate_pan_tilt_grid_kernel` (truncation < 1e-23 rad).  Points in time order.
+    series of :func:`rotate_pan_tilt_grid_kernel` (truncation < 1e-23 rad).  Points in time order;
+    ``times``: float64 [s], or the points' int64 [ns] (then the time [s] is ``t_ns * 1e-9``, formed
+    here: the same bits as an array of it, which the loop need not make).
     """
     n = d_lidar.shape[0]
     inv_dt = 1.0 / dt_s
+    d_flat = d_lidar.reshape(-1)     # rows (x, y, z) end to end: see _rows_to_xyz
+    out_flat = out.reshape(-1)
     bx = np.empty(_BLOCK)
     by = np.empty(_BLOCK)
     bz = np.empty(_BLOCK)
@@ -534,7 +572,7 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
     it = 0
     j = 0
     while j < n:
-        i, j_end = _interval_run_sorted(t_s, j, t0_s, inv_dt, n_nodes)
+        i, j_end = _interval_run_sorted(times, j, t0_s, inv_dt, n_nodes)
         tn = t0_s + i * dt_s
         ip_node = _advance_piece(pan_pieces, ip_node, tn)
         it_node = _advance_piece(tilt_pieces, it_node, tn)
@@ -544,39 +582,34 @@ def rotate_head_pieces_kernel(d_lidar, t_s, t0_s, dt_s, n_nodes, pan_pieces, til
         spi = math.sin(pan_ref)
         cti = math.cos(tilt_ref)
         sti = math.sin(tilt_ref)
-        t_last = t_s[j_end - 1]
-        ip = _advance_piece(pan_pieces, ip, t_s[j])
-        it = _advance_piece(tilt_pieces, it, t_s[j])
+        t_last = _seconds(times[j_end - 1])
+        t_first = _seconds(times[j])
+        ip = _advance_piece(pan_pieces, ip, t_first)
+        it = _advance_piece(tilt_pieces, it, t_first)
         # Usually no piece starts inside the interval: then the pieces are constants of the inner
         # loop (which vectorises); otherwise the pointers advance point by point.
         steady = (_advance_piece(pan_pieces, ip, t_last) == ip and _advance_piece(tilt_pieces, it, t_last) == it)
         # Slices, so that the loops index from 0: numba's wrap-around test for a possibly negative
         # index (k = j + ...) would otherwise stop LLVM vectorising the loop (4x slower).
-        t_run = t_s[j:j_end]
+        t_run = times[j:j_end]
         d_run = d_lidar[j:j_end]
         out_run = out[j:j_end]
         if steady and j_end - j <= _BLOCK:
             # a branch inside the loop would also stop the vectorisation: one loop per case; the
-            # beams go through x, y, z blocks (stride-3 rows do not vectorise)
+            # beams go through x, y, z blocks (the rows' stride-3 layout does not vectorise)
             p0, p1, p2, p3 = pan_pieces[0, ip], pan_pieces[1, ip], pan_pieces[2, ip], pan_pieces[3, ip]
             q0, q1, q2, q3 = tilt_pieces[0, it], tilt_pieces[1, it], tilt_pieces[2, it], tilt_pieces[3, it]
             m = j_end - j
+            _rows_to_xyz(d_flat[3 * j:3 * j_end], m, bx, by, bz)
             for k in range(m):
-                bx[k] = d_run[k, 0]
-                by[k] = d_run[k, 1]
-                bz[k] = d_run[k, 2]
-            for k in range(m):
-                t = t_run[k]
+                t = _seconds(t_run[k])
                 dp = _poly_angle_rad(p0, p1, p2, p3, t) - pan_ref
                 dq = _poly_angle_rad(q0, q1, q2, q3, t) - tilt_ref
                 bx[k], by[k], bz[k] = _turn_xyz(bx[k], by[k], bz[k], cpi, spi, cti, sti, dp, dq)
-            for k in range(m):
-                out_run[k, 0] = bx[k]
-                out_run[k, 1] = by[k]
-                out_run[k, 2] = bz[k]
+            _xyz_to_rows(bx, by, bz, m, out_flat[3 * j:3 * j_end])
         else:
             for k in range(j_end - j):
-                t = t_run[k]
+                t = _seconds(t_run[k])
                 ip = _advance_piece(pan_pieces, ip, t)
                 it = _advance_piece(tilt_pieces, it, t)
                 dp = _piece_angle_rad(pan_pieces, ip, t) - pan_ref
@@ -595,3 +628,27 @@ def piece_angle_deg_kernel(pieces, t):
     i = _advance_piece(pieces, 0, t)
     d = t - pieces[0, i]
     return pieces[1, i] + pieces[2, i] * d + 0.5 * pieces[3, i] * d * d
+
+
+@njit(cache=True, nogil=True)
+def straight_position_kernel(start_m, velocity_m_s, t_s, out):
+    """``out[j] = start + t_s[j] * velocity`` (N, 3) [m]: a straight pass at the points' times
+    (:meth:`sim.world.trajectories.Straight.position`), numpy's ``start + t[:, None] * velocity``
+    element for element (the same bits), without its broadcasting over rows of three (~6 us for
+    300 times, ~1 here)."""
+    for j in range(t_s.shape[0]):
+        t = t_s[j]
+        for i in range(3):
+            out[j, i] = start_m[i] + t * velocity_m_s[i]
+
+
+@njit(cache=True, nogil=True)
+def hover_heading_kernel(velocity, default, yaw):
+    """``yaw[j] = default`` where the body hovers: ``not vx^2 + vy^2 > 1e-8`` [m^2/s^2] (NaN too),
+    row ``j`` of ``velocity`` (N, 3) [m/s]; :func:`sim.world.trajectories.heading_rad`'s mask in one
+    pass instead of six numpy operations (the same comparisons of the same IEEE products)."""
+    for j in range(velocity.shape[0]):
+        vx = velocity[j, 0]
+        vy = velocity[j, 1]
+        if not vx * vx + vy * vy > 1e-8:
+            yaw[j] = default

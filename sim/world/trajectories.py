@@ -14,6 +14,10 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 
+_straight_position_kernel = None
+_hover_heading_kernel = None
+
+
 def _col(t_s) -> np.ndarray:
     return np.asarray(t_s, dtype=np.float64).reshape(-1, 1)
 
@@ -24,13 +28,29 @@ class Straight:
 
     start_m: tuple[float, float, float]
     velocity_m_s: tuple[float, float, float]
+    # float64 copies of the two, made once (the closed loop asks for positions several times a frame)
+    _start: np.ndarray = field(init=False, repr=False, compare=False)
+    _velocity: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        for name, value in (("_start", self.start_m), ("_velocity", self.velocity_m_s)):
+            a = np.array(value, dtype=np.float64).reshape(3)
+            a.flags.writeable = False
+            object.__setattr__(self, name, a)
 
     def position(self, t_s):
-        return np.asarray(self.start_m) + _col(t_s) * np.asarray(self.velocity_m_s)
+        global _straight_position_kernel
+        if _straight_position_kernel is None:   # numba loads on first use, not on import
+            from sim.world.kernels import straight_position_kernel as _straight_position_kernel
+        t = np.ascontiguousarray(t_s, dtype=np.float64).reshape(-1)
+        out = np.empty((t.shape[0], 3))
+        _straight_position_kernel(self._start, self._velocity, t, out)
+        return out
 
     def velocity(self, t_s):
         out = np.empty((_col(t_s).shape[0], 3))
-        out[:] = self.velocity_m_s
+        for i in range(3):    # column by column: broadcasting rows of three costs more
+            out[:, i] = self._velocity[i]
         return out
 
     @property
@@ -178,8 +198,11 @@ class Manual:
 
 
 def heading_rad(velocity: np.ndarray, default: float = 0.0) -> np.ndarray:
-    """Yaw of the body (x forward along the horizontal velocity); ``default`` when hovering."""
-    vx, vy = velocity[:, 0], velocity[:, 1]
-    yaw = np.arctan2(vy, vx)
-    yaw[~(vx * vx + vy * vy > 1e-8)] = default    # hovering (or an undefined velocity)
+    """Yaw of the body (x forward along the horizontal velocity); ``default`` when hovering
+    (``vx^2 + vy^2 <= 1e-8`` or undefined: :func:`sim.world.kernels.hover_heading_kernel`)."""
+    global _hover_heading_kernel
+    if _hover_heading_kernel is None:   # numba loads on first use, not on import
+        from sim.world.kernels import hover_heading_kernel as _hover_heading_kernel
+    yaw = np.arctan2(velocity[:, 1], velocity[:, 0])   # numpy's atan2: its bits (numba's libm call may differ)
+    _hover_heading_kernel(velocity, float(default), yaw)
     return yaw

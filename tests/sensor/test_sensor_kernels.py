@@ -5,6 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
+from foveatrack.livox.protocol import quantise_to_mm_grid
 from sensor_twins import returns_twin
 from sim import effects as fx
 from sim import sensor_kernels as sk
@@ -38,18 +39,27 @@ def test_kernel_matches_twin(listed, n):
     draws = {
         "return_probability": fx.return_draws(g["return_probability"], n_hit) if "return_probability" in g else np.zeros(0),
         "dropouts": fx.dropout_draws(g["dropouts"], n_hit) if "dropouts" in g else np.zeros(0),
-        "range_noise": fx.range_noise_draws(g["range_noise"], n_hit, PARAMS["range_noise_m"]) if "range_noise" in g else np.zeros(0),
-        "angular_noise": (fx.angular_noise_draws(g["angular_noise"], n_hit, PARAMS["angular_noise_deg"])
-                          if "angular_noise" in g and n_hit else np.zeros((0, 3))),
+        "range_noise": fx.range_noise_normals(g["range_noise"], n_hit) if "range_noise" in g else np.zeros(0),
+        "angular_noise": (fx.angular_noise_normals(g["angular_noise"], n_hit)
+                          if "angular_noise" in g and n_hit else np.zeros(0)),
     }
     out = (np.empty((n_hit, 3)), np.empty(n_hit, np.int64), np.empty(n_hit, np.uint8), np.empty(n_hit, np.bool_))
     refl_byte = np.clip(np.round(refl * 100), 0, 255).astype(np.uint8)
-    k = sk.assemble_returns_kernel(prim, status, range_m, d, t_ns, fx.range_limit_m(refl, PARAMS["range_80pct_m"]),
-                                   refl_byte, 2, draws["return_probability"], draws["dropouts"], PARAMS["dropout_rate"] if "dropouts" in g else 0.0,
-                                   draws["range_noise"], draws["angular_noise"], *out)
+    args = (prim, status, range_m, d, t_ns, fx.range_limit_m(refl, PARAMS["range_80pct_m"]),
+            refl_byte, 2, draws["return_probability"], draws["dropouts"], PARAMS["dropout_rate"] if "dropouts" in g else 0.0,
+            draws["range_noise"], PARAMS["range_noise_m"], draws["angular_noise"], np.radians(PARAMS["angular_noise_deg"]))
+    k = sk.assemble_returns_kernel(*args, False, *out)
     got = tuple(a[:k] for a in out)
+    # on the mm grid in the same pass: the bits of quantise_to_mm_grid applied afterwards
+    out_mm = (np.empty((n_hit, 3)), np.empty(n_hit, np.int64), np.empty(n_hit, np.uint8), np.empty(n_hit, np.bool_))
+    assert sk.assemble_returns_kernel(*args, True, *out_mm) == k
+    assert np.array_equal(out_mm[0][:k].view(np.int64), quantise_to_mm_grid(got[0]).view(np.int64))
+    for a, b in zip(out_mm[1:], got[1:]):
+        np.testing.assert_array_equal(a[:k], b)
     assert k == len(twin[1])
     np.testing.assert_allclose(got[0], twin[0], rtol=0, atol=1e-12)
+    if "angular_noise" not in listed:   # the twin's expressions are the kernel's: the same bits
+        assert np.array_equal(got[0].view(np.int64), twin[0].view(np.int64))
     for a, b in zip(got[1:], twin[1:]):
         np.testing.assert_array_equal(a, b)
     # the generators end in the same state: the draws were the same calls
@@ -59,3 +69,22 @@ def test_kernel_matches_twin(listed, n):
         assert g[e].bit_generator.state == twin_g.bit_generator.state
     if "return_probability" in listed and n > 100:
         assert 0 < k < n_hit                     # past the range limit some returns are lost
+
+
+def test_mm_grid_kernel_is_quantise_to_mm_grid_to_the_bit():
+    """The kernels' one-value mm grid against its numpy original: ties to even, both zeros, saturation,
+    values a hair either side of a half millimetre, and many random ranges."""
+    half = np.arange(-2000, 2001) * 1e-3 + 0.0005
+    x = np.concatenate([
+        [0.0, -0.0, 0.0005, -0.0005, 0.0015, -0.0015, 0.0025, 1e-4, -1e-4, 3e6, -3e6, 2147483.6475, -2147483.6485,
+         1e300, -1e300],
+        half, np.nextafter(half, np.inf), np.nextafter(half, -np.inf),
+        np.random.default_rng(5).uniform(-500.0, 500.0, 20_001),
+    ])
+    got = np.empty_like(x)
+    sk.quantise_to_mm_grid_kernel(x, got)
+    assert np.array_equal(got.view(np.int64), quantise_to_mm_grid(x).view(np.int64))
+    xyz = x[:20_001 - 20_001 % 3].reshape(-1, 3)
+    got = np.empty_like(xyz)
+    sk.quantise_to_mm_grid_kernel(xyz, got)
+    assert np.array_equal(got.view(np.int64), quantise_to_mm_grid(xyz).view(np.int64))
