@@ -141,29 +141,16 @@ def test_a_wrong_corner_neither_turns_the_tilt_axis_nor_biases_the_speed():
     assert abs(v1 - v0) <= 0.25 * s0 and abs(s1 - s0) <= 0.25 * s0, (v1, s1, v0, s0)   # as if it were not there
 
 
-def test_one_wrong_corner_neither_ends_a_leg_nor_loses_the_corner(monkeypatch):
-    # A wrong corner 0.25 m along the motion read as ~50 deg/s from the last two samples: the
-    # excursion check's coasting distance ended the leg at once (or the next frames, de-rotated at
-    # that rate, lost the corner three times running); the live test lost its pan entry that way.
+def _calibrate_with(monkeypatch, tamper):
+    """A pan and a tilt byte (4 and 2 deg/s) calibrated on 20 Hz frames, with ``tamper(cal, found)``
+    in the corner finder's place (it gets the real result and returns what the procedure sees)."""
     import foveatrack.calibration.procedure as procedure
 
     head = FakeHead(lambda b: 4.0, lambda b: 2.0, dead_time_s=0.04, accel_deg_s2=40.0, pan0=PAN0, tilt0=TILT0)
     plan = CalibrationPlan(pan_bytes=(16,), tilt_bytes=(16,), dwell_s=2.0, latency_s=0.01)
     cal = Calibrator(plan, FeatureSpec(tuple(world_to_lidar(CORNER, PAN0, TILT0))), seed=2)
     real_find = procedure.find_corner
-    injected = []
-
-    def find_corner(xyz, center, spec, rng):
-        found = real_find(xyz, center, spec, rng)
-        leg = cal._leg
-        if (found is not None and not injected and cal._phase == "move" and leg.axis == "pan"
-                and leg.direction > 0 and len(leg.samples) == 20):
-            step = leg.samples[-1][1] - leg.samples[-2][1]
-            injected.append(True)
-            return found[0] + 0.25 * step / np.linalg.norm(step), found[1]
-        return found
-
-    monkeypatch.setattr(procedure, "find_corner", find_corner)
+    monkeypatch.setattr(procedure, "find_corner", lambda *a: tamper(cal, real_find(*a)))
     rng = np.random.default_rng(7)
     k = 0
     while not cal.done and k < 1000:
@@ -173,8 +160,66 @@ def test_one_wrong_corner_neither_ends_a_leg_nor_loses_the_corner(monkeypatch):
         if cmd is not None:
             head.command(t1 + 0.01, cmd)
         k += 1
-    assert injected and cal.done
+    assert cal.done
     out = next(leg for leg in cal.legs if leg.axis == "pan" and leg.direction > 0)
+    return cal, out, plan
+
+
+def _pan_out_leg(cal):
+    leg = cal._leg
+    return leg if cal._phase == "move" and leg.axis == "pan" and leg.direction > 0 else None
+
+
+def test_one_wrong_corner_neither_ends_a_leg_nor_loses_the_corner(monkeypatch):
+    # A wrong corner 0.25 m along the motion read as ~50 deg/s from the last two samples: the
+    # excursion check's coasting distance ended the leg at once (or the next frames, de-rotated at
+    # that rate, lost the corner three times running); the live test lost its pan entry that way.
+    injected = []
+
+    def tamper(cal, found):
+        leg = _pan_out_leg(cal)
+        if found is not None and not injected and leg is not None and len(leg.samples) == 20:
+            step = leg.samples[-1][1] - leg.samples[-2][1]
+            injected.append(True)
+            return found[0] + 0.25 * step / np.linalg.norm(step), found[1]
+        return found
+
+    cal, out, plan = _calibrate_with(monkeypatch, tamper)
+    assert injected
     assert out.t_stop_s - out.t_cmd_s >= plan.dwell_s - 0.05     # the leg ran its dwell
     v = cal.result().pan.speed_deg_s(16)
     assert abs(v - 4.0) <= 0.01 * 4.0, v
+
+
+def test_a_corner_unseen_for_three_frames_as_a_leg_starts_does_not_end_it(monkeypatch):
+    # The Mid-40's pattern now and then leaves one of the corner's planes thin for three 50 ms frames
+    # running; right after the command (dead time, ramp) that ended the leg as "lost" after 0.2 s and
+    # the byte came out unmeasured.
+    first = []
+
+    def hide_first_three(cal, found):
+        if _pan_out_leg(cal) is None:
+            return found
+        first[:] = first or [cal.frames]
+        return None if cal.frames - first[0] < 3 else found
+
+    cal, out, plan = _calibrate_with(monkeypatch, hide_first_three)
+    assert first and out.samples[0][0] - out.t_cmd_s > 0.15      # the first three frames saw nothing
+    assert out.t_stop_s - out.t_cmd_s >= plan.dwell_s - 0.05
+    v = cal.result().pan.speed_deg_s(16)
+    assert abs(v - 4.0) <= 0.01 * 4.0, v
+
+
+def test_a_corner_lost_for_three_frames_once_the_leg_has_settled_ends_it(monkeypatch):
+    # the safety the loss rule is for: a feature gone from view stops the head's leg
+    first = []
+
+    def hide_from_one_second(cal, found):
+        leg = _pan_out_leg(cal)
+        if leg is None or not leg.samples or leg.samples[-1][0] - leg.t_cmd_s < 1.0:
+            return found
+        first[:] = first or [cal.frames]
+        return None
+
+    cal, out, plan = _calibrate_with(monkeypatch, hide_from_one_second)
+    assert first and 1.0 < out.t_stop_s - out.t_cmd_s <= 1.0 + 4 * 0.05 + 1e-9
