@@ -12,8 +12,9 @@ the returned :class:`HeadCommand` (``None`` = keep the current, latched, command
 Procedure
 ---------
 1. Reference: head stopped, ``reference_s`` of frames locate the corner near ``FeatureSpec.approx_xyz``.
-2. For each axis, for each byte of the plan, two legs: OUT (direction +1) until ``dwell_s`` has passed
-   or the feature has turned ``max_excursion_deg`` from the reference, stop, rest ``rest_s``; BACK
+2. For each axis, for each byte of the plan, two legs: OUT (direction +1) until ``dwell_s`` has passed,
+   the feature has turned ``max_excursion_deg`` from the reference or it is lost (three frames in a
+   row without it, once ``settle_s`` has passed), stop, rest ``rest_s``; BACK
    (direction -1, same byte) until the feature is back at the reference (or as long as OUT lasted),
    stop, rest.  Both directions are measured and the head stays near its start.
 3. Return: the slowest usable byte brings each axis back to the reference, then stop; done.
@@ -21,14 +22,18 @@ Procedure
 Feature (per frame): points within ``radius_m`` of the predicted corner; three planes by sequential
 RANSAC (seeded generator) refined by least squares (SVD); the corner is their intersection (solve
 ``N c = d``), accepted only if the normals are well separated.  Points are first de-rotated to the
-frame's mean time with the leg's current rate estimate, so fast legs do not smear the planes.
+frame's mean time with the leg's current rate estimate, so fast legs do not smear the planes.  Now
+and then a corner comes out 0.05-0.3 m off (a plane taken from the wrong points); the online rate and
+angle (de-rotation, excursion and return checks) are medians over the last samples
+(:meth:`Calibrator._recent_motion`), and the estimate leaves such corners out (:func:`on_smooth_track`).
 
 Estimate (batch, in :meth:`result`): the rotation axis of each head axis *in the lidar frame* is the
 direction in which the corner positions do not move (smallest eigenvector of the pooled, per-leg
 centred scatter of corner positions; falls back to the prior -- lidar Y for tilt, ``R_y(t0) z`` for pan
 -- if the legs are too short to tell).  This makes pan calibration independent of the unknown start
 tilt (an error of cos(tilt) otherwise).  The angle of the corner about that axis is fitted against the
-corner's time by least squares over the steady part of each leg (after ``settle_s``):
+corner's time by least squares over the steady part of each leg (after ``settle_s``; the corners off
+the leg's smooth track left out, here and in the axis scatter):
 
 .. math:: \\theta(t) = a + b\\,t,\\quad \\hat v = \\mp b,\\quad
           \\sigma_{\\hat v} = \\sqrt{\\frac{\\sum r_i^2/(n-2)}{\\sum (t_i-\\bar t)^2}}
@@ -56,6 +61,46 @@ from foveatrack.detection import valid_points
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable, axis_bytes
+
+
+def on_smooth_track(t_s: np.ndarray, q_m: np.ndarray, n_sigma: float = 5.0, floor_m: float = 1e-3,
+                    min_n: int = 10, max_rounds: int = 5) -> np.ndarray:
+    """Which corner positions of a steady leg lie on its smooth track (bool mask); the others are
+    wrong corners (a plane RANSAC took from the wrong points), 0.05-0.3 m off where the noise is ~5 mm.
+
+    t_s : (n,) [s] increasing; q_m : (n, 3) [m] corner positions (lidar frame)
+    n_sigma : > 0, the cut in robust standard deviations; floor_m : > 0 [m], the least scale (exact
+    synthetic corners); min_n >= 6: fewer positions are all kept (a median of fewer residuals of a
+    3-parameter fit is no scale).
+
+    The track is a quadratic in time per coordinate (a constant-rate arc of <= 15 deg at any radius
+    departs from it by < 1 mm; the head's speed ripple adds < 1 cm at 35 deg/s), fitted by least
+    squares to the positions kept so far; the scale per coordinate is 1.4826 x the median absolute
+    deviation of their residuals (consistent with the standard deviation for Gaussian noise, and
+    unmoved by a minority of outliers: Rousseeuw & Croux, JASA 88 (1993) 1273).  Positions whose
+    residual exceeds ``n_sigma`` scales in any coordinate are dropped and the fit repeated until the
+    set stops changing (at most ``max_rounds`` times).  Why it matters: one such corner among the ~90
+    of two tilt legs made their scatter look like a curved arc and turned the estimated tilt axis
+    (9-23 deg in 6 of 40 simulated runs of a one-byte plan, 22 deg with every tilt speed 2.5-4 % high
+    in 3 of them; the same on the live rig).
+    """
+    t = np.asarray(t_s, float)
+    q = np.asarray(q_m, float)
+    keep = np.ones(len(t), bool)
+    if len(t) < min_n:
+        return keep
+    tc = t - t.mean()
+    V = np.column_stack([np.ones_like(tc), tc, tc * tc])
+    for _ in range(max_rounds):
+        coef, *_ = np.linalg.lstsq(V[keep], q[keep], rcond=None)
+        res = q - V @ coef
+        med = np.median(res[keep], axis=0)
+        scale = np.maximum(1.4826 * np.median(np.abs(res[keep] - med), axis=0), floor_m)
+        new = np.all(np.abs(res - med) <= n_sigma * scale, axis=1)
+        if new.sum() < min_n or np.array_equal(new, keep):
+            break
+        keep = new
+    return keep
 
 
 class Calibrator:
@@ -96,10 +141,37 @@ class Calibrator:
         return self._phase == "done"
 
     # ---- online helpers --------------------------------------------------------------------
+    def _prior_axis(self, axis: str) -> np.ndarray:
+        return self._pan_prior if axis == "pan" else np.array([0.0, 1.0, 0.0])
+
     def _online_angle(self, axis: str, q: np.ndarray) -> float:
         """Head rotation since the start reference, approximately (for the excursion check)."""
-        ax = self._pan_prior if axis == "pan" else np.array([0.0, 1.0, 0.0])
-        return _SIGN[axis] * float(_angle_about(q[None, :], ax, self._ref_q)[0])
+        return _SIGN[axis] * float(_angle_about(q[None, :], self._prior_axis(axis), self._ref_q)[0])
+
+    def _recent_motion(self, leg: LegRecord, n_rates: int = 3,
+                       max_jump_deg_s: float = 5.0) -> tuple[float, float, float]:
+        """``(t_s, angle_deg, rate_deg_s)``: the corner's angle about the leg's prior axis (from the
+        start reference, not signed as a head angle) at its latest sample and its rate, from the last
+        ``n_rates + 1`` samples (at least 2).
+
+        The rate is the newest sample-to-sample rate (it follows a ramp without lag) unless it
+        differs from the median of the last ``n_rates`` by more than ``max_jump_deg_s`` [deg/s] (a
+        ramp changes it by 2 deg/s a 50 ms frame at 40 deg/s^2), then that median; the angle is the
+        median of the samples carried to the latest time at that rate.  So one wrong corner among
+        them moves neither: a corner found 0.1-0.3 m off (RANSAC on ~700 points now and then takes
+        a wrong plane) read as 30-50 deg/s from the last two samples alone, which ended the leg at
+        once (the excursion's coasting distance) or de-rotated the next frames so far that the
+        corner was lost three times running (the leg ended with too few samples: a byte unmeasured).
+        """
+        recent = leg.samples[-(n_rates + 1):]
+        t = np.array([x for x, _ in recent])
+        ang = _angle_about(np.array([q for _, q in recent]), self._prior_axis(leg.axis), self._ref_q)
+        ang = np.degrees(np.unwrap(np.radians(ang)))
+        rates = np.diff(ang) / np.maximum(np.diff(t), 1e-6)
+        rate = float(np.median(rates))
+        if abs(rates[-1] - rate) <= max_jump_deg_s:
+            rate = float(rates[-1])   # the newest, which does not lag a ramp (40 deg/s^2: 2 deg/s a frame)
+        return float(t[-1]), float(np.median(ang + rate * (t[-1] - t))), rate
 
     def _measure(self, frame: Frame) -> tuple[float, np.ndarray] | None:
         if self._last_q is None:
@@ -114,9 +186,8 @@ class Calibrator:
         leg = self._leg
         if leg is not None and self._phase == "move" and len(leg.samples) >= 2:
             # de-rotate points to t_mid with the leg's current rate about the prior axis
-            (ta, qa), (tb, qb) = leg.samples[-2], leg.samples[-1]
-            ax = self._pan_prior if leg.axis == "pan" else np.array([0.0, 1.0, 0.0])
-            w = (_angle_about(qb[None], ax, qa)[0]) / max(tb - ta, 1e-6)   # deg/s of the corner
+            tb, _, w = self._recent_motion(leg)                         # deg/s of the corner
+            ax = self._prior_axis(leg.axis)
             xyz = _rotate_about(xyz, ax, np.radians(-w * (t_s - t_mid)))
             center = _rotate_about(center[None], ax, np.radians([w * (t_mid - tb)]))[0]
         found = find_corner(xyz, center, self.feature, self.rng)
@@ -173,13 +244,18 @@ class Calibrator:
             ang = self._online_angle(leg.axis, self._last_q) if self._last_q is not None else 0.0
             rate = 0.0
             if len(leg.samples) >= 2:
-                (ta, qa), (tb, qb) = leg.samples[-2], leg.samples[-1]
-                rate = (self._online_angle(leg.axis, qb) - self._online_angle(leg.axis, qa)) / max(tb - ta, 1e-6)
+                _, a, w = self._recent_motion(leg)
+                ang, rate = _SIGN[leg.axis] * a, _SIGN[leg.axis] * w
             if leg.direction > 0:
                 # stop early enough that dead time + deceleration + one frame stay inside the excursion
                 coast = abs(rate) * (frame.duration_s + 0.15) + rate * rate / (2 * 100.0)
-                end = (self._missed >= 3 or elapsed >= p.dwell_s
-                       or abs(ang) + coast >= p.max_excursion_deg)
+                # lost: three frames in a row without the corner, counted once the leg has settled.
+                # Before, the head is still in its dead time and ramp, and a frame whose scan left one
+                # of the corner's planes thin (< min_plane_points: the lidar's pattern, not the head)
+                # ended the leg after 0.2 s three times running in 3 of 200 simulated runs (the byte
+                # then unmeasured).  The price: up to settle_s of the ramp turned with the corner unseen.
+                lost = self._missed >= 3 and elapsed >= p.settle_s
+                end = lost or elapsed >= p.dwell_s or abs(ang) + coast >= p.max_excursion_deg
             else:
                 # back at the start reference (predicted one frame ahead), or as long as OUT took
                 # (time-symmetric return when the feature is out of sight)
@@ -246,7 +322,9 @@ class Calibrator:
                 t_steady = t[bad[-1] + 1] if bad.size else t[0]
                 start = min(start, t_steady)
         keep = t >= start
-        return t[keep], Q[keep]
+        t, Q = t[keep], Q[keep]
+        on_track = on_smooth_track(t, Q)
+        return t[on_track], Q[on_track]
 
     def _leg_scatter(self, axis: str, min_arc_rms_m: float = 0.0) -> tuple[np.ndarray, int]:
         """Scatter matrix of the ``axis`` legs' steady corner positions about each leg's mean, and the
