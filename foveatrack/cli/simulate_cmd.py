@@ -28,7 +28,7 @@ def register(sub) -> None:
                        help="do not trace the scan and draw the random values of the coming frames on a second "
                             "thread, and write the recording on the loop's thread, not from a child process (same "
                             "results, same file; for many runs side by side, or a one-core machine).  Default: a "
-                            "second core is used when the load average says one is free")
+                            "second core is used where one is free (no other task runnable, a low load average)")
     cores.add_argument("--second-core", action="store_true",
                        help="use a second thread and a writer process whatever the load")
     p.set_defaults(func=cmd_simulate)
@@ -76,17 +76,42 @@ class CompileNotice:
                       file=self._stream, flush=True)
 
 
-def core_free(load_1min: float | None = None, cores: int | None = None) -> bool:
-    """Whether a core is free for a second thread and a writer process: the cores less the 1-minute
-    load average leave at least 1.5 (this run's loop takes one).  Both only pay where a core is idle; on a busy
-    machine they compete with the loop (measured: docs/speed.md, docs/recordings.md)."""
+def core_free(load_1min: float | None = None, others_running: int | None = None, cores: int | None = None) -> bool:
+    """Whether a core is free for a second thread and a writer process, which only pay where a core
+    is idle (on a busy machine they compete with the loop: docs/speed.md, docs/recordings.md).
+
+    Free: no more than ``cores - 2`` other tasks runnable right now (Linux ``/proc/loadavg``, the
+    median of five looks 2 ms apart; this run's loop takes a core, and a job between two of its
+    processes shows as runnable most of the time), and a 1-minute load average of at most
+    ``cores - 0.5`` (no other job has held the machine; one earlier run of ours counts about one).
+    """
     cores = (os.cpu_count() or 1) if cores is None else cores
+    if cores < 2:
+        return False
     if load_1min is None:
         try:
             load_1min = os.getloadavg()[0]
-        except OSError:         # no load average on this platform: count the cores only
+        except OSError:         # no load average on this platform: count the tasks only
             load_1min = 0.0
-    return cores > 1 and cores - load_1min >= 1.5
+    if others_running is None:
+        others_running = _others_running()
+    return others_running <= cores - 2 and load_1min <= cores - 0.5
+
+
+def _others_running() -> int:
+    """Tasks runnable now besides the one asking (0 where ``/proc/loadavg`` does not exist)."""
+    import statistics
+    import time
+
+    counts = []
+    for _ in range(5):
+        try:
+            with open("/proc/loadavg") as fh:
+                counts.append(int(fh.read().split()[3].split("/")[0]) - 1)
+        except (OSError, IndexError, ValueError):
+            return 0
+        time.sleep(0.002)
+    return int(statistics.median(counts))
 
 
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,

@@ -184,13 +184,15 @@ def test_kill_9_of_the_caller_loses_nothing_the_child_got(tmp_path):
 
 
 def test_simulate_uses_a_second_core_only_where_one_is_free():
-    from foveatrack.cli.simulate_cmd import core_free
+    from foveatrack.cli.simulate_cmd import _others_running, core_free
 
-    assert core_free(load_1min=0.3, cores=2)
-    assert not core_free(load_1min=0.7, cores=2)      # another job holds most of a core: nothing to gain
-    assert not core_free(load_1min=0.0, cores=1)
-    assert core_free(load_1min=5.0, cores=8)
-    assert not core_free(load_1min=7.0, cores=8)
+    assert core_free(load_1min=0.7, others_running=0, cores=2)      # an earlier run of ours: still free
+    assert not core_free(load_1min=0.7, others_running=1, cores=2)  # another task holds the other core
+    assert not core_free(load_1min=2.5, others_running=0, cores=2)  # a job between its processes
+    assert not core_free(load_1min=0.0, others_running=0, cores=1)
+    assert core_free(load_1min=5.0, others_running=5, cores=8)
+    assert not core_free(load_1min=5.0, others_running=7, cores=8)
+    assert _others_running() >= 0
 
 
 def test_simulate_second_core_and_one_thread_flags():
