@@ -231,7 +231,7 @@ def write_markdown(path: Path, args, scene, rows, command, stages, total, frames
     lines += ["", f"`foveatrack simulate {Path(args.scene).name} --out DIR` as a command, best of {args.repeat}: "
               f"**{command[0]:.0f}x** real time after its first frame (the figure it prints), {command[1]:.2f} s for "
               "the whole command (interpreter start, kernel load, run, summary).  The writer process starts "
-              "before the command's own set-up and is ready before the first frame."]
+              "before the command's own set-up; the first frames wait in its ring until it is ready."]
     lines += ["", f"Where a frame's time goes (as shipped, one thread; {total / frames * 1e3:.2f} ms per frame):", "",
               "| stage | ms per frame | share |", "|---|---|---|"]
     lines += [f"| {k} | {v / frames * 1e3:.3f} | {100 * v / total:.0f} % |"
