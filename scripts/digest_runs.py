@@ -23,12 +23,14 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_closed_loop import HALL, HALL_D  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "determinism"))
+from digests import _digest as array_digest  # noqa: E402
 from sim.loop import ClosedLoop  # noqa: E402
 from sim.scene import load_scene, scene_from_mapping  # noqa: E402
 
@@ -37,12 +39,8 @@ FIG12 = ROOT / "scenes" / "fig12-tracking.toml"
 
 
 def _digest(*arrays) -> str:
-    h = hashlib.sha256()
-    for a in arrays:
-        a = np.ascontiguousarray(a)
-        h.update(str(a.dtype).encode() + str(a.shape).encode())
-        h.update(a.tobytes())
-    return h.hexdigest()[:16]
+    """The determinism tests' digest of arrays (dtype, shape and bytes), shortened for printing."""
+    return array_digest(*arrays)[:16]
 
 
 def run_digest(scene, ahead: bool = False, **kw) -> str:
