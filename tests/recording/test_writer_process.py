@@ -225,3 +225,32 @@ def test_frames_wrap_the_ring_many_times_and_oversized_ones_go_by_the_pipe(tmp_p
     for f, (xyz, tp, refl) in zip(got, sent):
         assert np.array_equal(f.xyz, xyz) and np.array_equal(f.t_ns_points, tp)
         assert np.array_equal(f.reflectivity, refl)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_simulate_stopped_by_a_signal_leaves_a_complete_recording(tmp_path, sig):
+    # Ctrl-C (the parent closes the writer on its way out) or SIGTERM (the parent dies at once, the
+    # child reads to the end of the pipe): either way the file is complete, with every frame it holds
+    out = tmp_path / "run"
+    p = subprocess.Popen([sys.executable, "-m", "foveatrack", "simulate", str(ROOT / "scenes" / "fig12-tracking.toml"),
+                          "--duration", "3000", "--out", str(out), "--second-core", "--no-progress"],
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not ((out / "run.mcap").exists() and (out / "run.mcap").stat().st_size > 2_000_000):
+            assert p.poll() is None and time.monotonic() < deadline, p.stderr.read() if p.poll() else "slow start"
+            time.sleep(0.1)
+        p.send_signal(sig)
+        p.communicate(timeout=60)
+    finally:
+        p.kill()
+    deadline = time.monotonic() + 60
+    while True:     # after SIGTERM the child may still be completing the file: read until it is
+        r = RecordingReader(out / "run.mcap")
+        frames = [f.frame_index for f in r.points()]
+        if r.complete or time.monotonic() > deadline:
+            break
+        time.sleep(0.2)
+    assert frames and frames == list(range(len(frames)))
+    assert r.complete, r.problem
