@@ -44,7 +44,6 @@ _ARRAY = "foveatrack.recording.writer_process.array"   # marks an argument sent 
 _IN_RING = "foveatrack.recording.writer_process.ring"  # marks an argument copied into the ring
 _RING_BYTES = 16 << 20              # ~50 frames of 10 k points: how far the child may fall behind
 _PIPE_BYTES = 1 << 20               # the pipe's capacity asked for (Linux F_SETPIPE_SZ; unprivileged maximum)
-_F_SETPIPE_SZ = 1031
 
 
 # The child's program: the signals first (a Ctrl-C at the terminal reaches the whole process group,
@@ -172,8 +171,8 @@ class RecordingProcess(RecordCalls):
             try:
                 import fcntl
 
-                fcntl.fcntl(self._data, _F_SETPIPE_SZ, _PIPE_BYTES)
-            except (ImportError, OSError):
+                fcntl.fcntl(self._data, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
+            except (ImportError, AttributeError, OSError):
                 pass        # the default 64 KiB pipe: the caller waits on the child more often
             self._proc = subprocess.Popen(
                 [sys.executable, "-c", _CHILD, str(data_r), str(back_w), *ring_args],
@@ -242,12 +241,9 @@ class RecordingProcess(RecordCalls):
         import time
 
         self._read_back()
-        if self._error is not None:
-            err, self._error = self._error, None
-            raise err
+        self._raise_reported()
         if self._proc.poll() is not None:
-            raise RuntimeError(f"the recording process ended early (exit code {self._proc.returncode}); "
-                               f"{self.path} holds what it wrote up to then")
+            raise self._ended_early()
         time.sleep(0.0005)
 
     def flush(self) -> None:
@@ -264,11 +260,7 @@ class RecordingProcess(RecordCalls):
         self._closed = True
         if self.path is None:       # never opened: no file to complete, so no need to wait for its start
             self._proc.kill()
-            self._proc.wait()
-            os.close(self._data)
-            os.close(self._back_fd)
-            if self._ring is not None:
-                self._ring.mm.close()
+            self._release()
             return
         self._pending.append(("close", ()))
         try:
@@ -276,24 +268,28 @@ class RecordingProcess(RecordCalls):
         except (OSError, RuntimeError, UserError):
             pass        # the child's report or its exit code (below) says what went wrong
         finally:
-            os.close(self._data)
+            os.close(self._data)    # the end of the pipe: the child completes the file and exits
+            self._data = -1
         os.set_blocking(self._back_fd, True)
-        while True:
-            chunk = os.read(self._back_fd, 1 << 16)
-            if not chunk:
-                break
+        while chunk := os.read(self._back_fd, 1 << 16):
             self._back += chunk
-        os.close(self._back_fd)
+        rc = self._release()
+        self._read_back()
+        self._raise_reported()
+        if rc != 0:
+            raise RuntimeError(f"the recording process exited with code {rc}; {self.path} holds what it "
+                               f"wrote up to then")
+
+    def _release(self) -> int:
+        """Wait for the child to end, close what is left open; its exit code."""
         rc = self._proc.wait()
+        for fd in (self._data, self._back_fd):
+            if fd >= 0:
+                os.close(fd)
+        self._data = self._back_fd = -1
         if self._ring is not None:
             self._ring.mm.close()
-        self._read_back()
-        if self._error is not None:
-            err, self._error = self._error, None
-            raise err
-        if rc != 0:
-            raise RuntimeError(f"the recording process exited with code {rc}" + (
-                "" if self.path is None else f"; {self.path} holds what it wrote up to then"))
+        return rc
 
     def __enter__(self) -> "RecordingProcess":
         return self
@@ -308,9 +304,7 @@ class RecordingProcess(RecordCalls):
             raise ValueError("recording is closed")
         if self.path is None and name != "open":
             raise ValueError("open() the writer process before writing to it")
-        if self._error is not None:
-            err, self._error = self._error, None
-            raise err
+        self._raise_reported()
         self._pending.append((name, args))
         self.messages_written += name in ("write", "write_points")
 
@@ -326,15 +320,23 @@ class RecordingProcess(RecordCalls):
             _write_all(self._data, parts)
         except BrokenPipeError:
             self._read_back()
-            if self._error is not None:
-                err, self._error = self._error, None
-                raise err from None
-            raise RuntimeError(f"the recording process ended early (exit code {self._proc.poll()}); "
-                               f"{self.path} holds what it wrote up to then") from None
+            self._raise_reported()
+            raise self._ended_early() from None
         self._read_back()
 
+    def _raise_reported(self) -> None:
+        """Raise the error the child reported, once."""
+        if self._error is not None:
+            err, self._error = self._error, None
+            raise err
+
+    def _ended_early(self) -> RuntimeError:
+        return RuntimeError(f"the recording process ended early (exit code {self._proc.poll()}); "
+                            f"{self.path} holds what it wrote up to then")
+
     def _read_back(self) -> None:
-        """Take the child's reports (an error, the final counts) without waiting."""
+        """Take the child's reports (ready, an error) without waiting; after :meth:`close`, only
+        parse what it has read."""
         if not self._closed:
             try:
                 while chunk := os.read(self._back_fd, 1 << 16):
@@ -410,6 +412,12 @@ def _report(fd: int, kind: str, value) -> None:
         pass        # the caller is gone: the file is still completed
 
 
+def _report_error(fd: int, exc: Exception) -> None:
+    """An error for the caller to raise (:func:`_rebuilt` there): its type, text, and whether it is a
+    user's mistake."""
+    _report(fd, "error", (type(exc).__name__, str(exc), isinstance(exc, UserError)))
+
+
 def child_main(data_fd: int, back_fd: int, ring_fd: int | None = None, ring_bytes: int = 0) -> int:
     """Read calls until ``close`` or the end of the pipe, make them on a RecordingWriter, and report
     the first error (then the calls that follow are read and dropped; the file is still closed)."""
@@ -450,7 +458,7 @@ def child_main(data_fd: int, back_fd: int, ring_fd: int | None = None, ring_byte
                         getattr(writer, name)(*(_rebuilt_array(a, bufs, ring) for a in args))
                 except Exception as exc:  # noqa: BLE001 - reported to the caller, which raises it
                     failed = True
-                    _report(back_fd, "error", (type(exc).__name__, str(exc), isinstance(exc, UserError)))
+                    _report_error(back_fd, exc)
             if ring is not None:
                 ring.set_read_up_to(ring_end)   # the writer keeps no view of the ring past its calls
             if closing:
@@ -460,7 +468,7 @@ def child_main(data_fd: int, back_fd: int, ring_fd: int | None = None, ring_byte
             writer.close()
         except Exception as exc:  # noqa: BLE001
             if not failed:
-                _report(back_fd, "error", (type(exc).__name__, str(exc), isinstance(exc, UserError)))
+                _report_error(back_fd, exc)
             return 1
     return 0
 
