@@ -121,7 +121,8 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     free (:func:`core_free`); the results and the file are the same either way."""
     from foveatrack.recording import writer_process
 
-    spare = core_free()
+    # asked only where the caller left the choice (it samples /proc/loadavg for ~10 ms)
+    spare = core_free() if ahead is None or recording_process is None else None
     if recording_process is None:
         recording_process = spare and writer_process.available()
     # started first: the child's start (imports, kernels) runs beside the set-up below
