@@ -15,10 +15,11 @@ import math
 import numpy as np
 from numba import njit
 
+from foveatrack.livox.protocol import INT32_MM_MAX, INT32_MM_MIN, MM_PER_M
 from sim.scan.kernels import RAY_OK
 
-_MM_PER_M = 1000.0                        # foveatrack.livox.protocol.MM_PER_M
-_INT32_MM_MIN, _INT32_MM_MAX = -2147483648.0, 2147483647.0
+# the client's conversion (foveatrack.livox.protocol.m_to_mm), as float bounds for the kernel
+_INT32_MM_MIN, _INT32_MM_MAX = float(INT32_MM_MIN), float(INT32_MM_MAX)
 
 
 @njit(cache=True, inline="always")
@@ -26,7 +27,7 @@ def _on_mm_grid(x_m):
     """One coordinate [m] as a Livox's Cartesian output gives it: ``rint(x * 1000)`` saturated to
     int32 millimetres, then ``mm * 1e-3`` in float64 — :func:`foveatrack.livox.protocol.quantise_to_mm_grid`
     for one value, the same bits (through int32, so -0.0 becomes +0.0 as there).  NaN is not allowed."""
-    mm = np.int32(min(max(np.rint(x_m * _MM_PER_M), _INT32_MM_MIN), _INT32_MM_MAX))
+    mm = np.int32(min(max(np.rint(x_m * MM_PER_M), _INT32_MM_MIN), _INT32_MM_MAX))
     return mm * 1e-3
 
 

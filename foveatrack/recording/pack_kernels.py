@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from foveatrack.livox.protocol import MM_PER_M
 from foveatrack.recording.format import GRID_PER_M, MAX_GRID_MM, packed_point_dtype
 
 
@@ -28,7 +29,7 @@ def grid_scan_kernel(xyz, dt_ns, max_mm):
     for i in range(xyz.shape[0]):
         for j in range(3):
             v = xyz[i, j]
-            k = np.rint(v * 1000.0)
+            k = np.rint(v * MM_PER_M)
             if not (abs(k) < max_mm) or k * 1e-3 != v:
                 on = False
         d = dt_ns[i]
