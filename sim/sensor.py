@@ -72,9 +72,8 @@ class SceneSensor:
         self._range_limit_m = (fx.range_limit_m(self._refl_table, scene.param("range_80pct_m"))
                                if scene.has("return_probability") else np.zeros(self._refl_table.size))
         # The noise effects' scales, as their draw functions compute them (sim.effects).
-        self._range_noise_m = float(scene.param("range_noise_m")) if scene.has("range_noise") else 0.0
-        self._angular_noise_rad = (math.radians(scene.param("angular_noise_deg")) if scene.has("angular_noise")
-                                   else 0.0)
+        self._range_noise_m = self._param_if("range_noise", "range_noise_m")
+        self._angular_noise_rad = math.radians(self._param_if("angular_noise", "angular_noise_deg"))
         self._dropout_rate = self._param_if("dropouts", "dropout_rate")
         # Which effects act, asked once (a frame asked the scene eight times).
         self._has = {name: scene.has(name) for name in
