@@ -38,6 +38,7 @@ from foveatrack.detection import frozen_maker
 from sim import random_kernels as rk
 from sim.scan.model import ScanChunk, ScanModel
 
+BLOCK = 65_536      # values per block drawn ahead (the worker fills one block ahead of the loop)
 _make_chunk = frozen_maker(ScanChunk)   # a frame's slice of a batch, once per frame: without the
                                         # frozen dataclass's per-field __setattr__
 
@@ -128,7 +129,7 @@ class DrawsAhead:
     moves the filling to a worker from then on, the stream going on where it stands.
     """
 
-    def __init__(self, rng: np.random.Generator, kind: str, ahead: Ahead | None, block: int = 65_536):
+    def __init__(self, rng: np.random.Generator, kind: str, ahead: Ahead | None, block: int = BLOCK):
         if kind not in ("uniform", "normal"):
             raise ValueError(f"kind {kind!r}: 'uniform' or 'normal'")
         if block < 1:
@@ -142,7 +143,7 @@ class DrawsAhead:
         self._pos = 0
         self._next = None if ahead is None else ahead.submit(self._fill, block)
 
-    def work_on(self, ahead: Ahead, block: int = 65_536) -> None:
+    def work_on(self, ahead: Ahead, block: int = BLOCK) -> None:
         """Fill the coming blocks, of ``block`` values, ahead on ``ahead``'s worker (the values do not
         change).  Blocks as big as a stream drawn ahead from the start: with the few frames a small
         one lasts, the loop would wait for the worker at every block (it fills one block ahead,
