@@ -348,7 +348,7 @@ class Calibrator:
         return C, n
 
     def _axis_estimate(self, axis: str) -> np.ndarray:
-        prior = self._pan_prior if axis == "pan" else np.array([0.0, 1.0, 0.0])
+        prior = self._prior_axis(axis)
         C, n = self._leg_scatter(axis)
         if n < 10:
             return prior
@@ -484,7 +484,7 @@ class PriorAxisCalibrator(Calibrator):
         self.min_arc_rms_m = float(min_arc_rms_m)
 
     def _axis_estimate(self, axis: str) -> np.ndarray:
-        prior = self._pan_prior if axis == "pan" else np.array([0.0, 1.0, 0.0])
+        prior = self._prior_axis(axis)
         C, n = self._leg_scatter(axis, self.min_arc_rms_m)
         if n < 10:
             return prior
