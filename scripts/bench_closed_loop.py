@@ -47,6 +47,15 @@ HALL = {"type": "room", "size_m": [60.0, 40.0, 8.0], "centre_m": [20.0, 0.0, 2.5
 HALL_D = {"kind": "box", "frame": "world", "min_xyz": [1.0, -19.0, -0.7], "max_xyz": [49.0, 19.0, 6.0]}
 
 
+def hall_scene(scene_path):
+    """The scene of ``scene_path`` in the hall (its ground replaced by the room, D inside it), with the
+    file's duration."""
+    data = tomllib.loads(Path(scene_path).read_text())
+    data["background"] = [HALL]
+    data.setdefault("tracker", {})["space"] = HALL_D
+    return scene_from_mapping(data, f"{scene_path} (in a hall)")
+
+
 def timed_run(scene, record: str | None = None, ahead: bool = False, **kw) -> tuple[float, float]:
     """Wall seconds of one run and the CPU seconds of the thread that runs the loop (the critical
     path; with ``ahead`` the scan and the draws run on a second thread, so the two differ).  ``record``:
@@ -158,10 +167,7 @@ def main() -> None:
     load_before = os.getloadavg()
     print(describe(), flush=True)   # versions, CPU and numba target: a figure without them says little
     scene = replace(load_scene(args.scene), duration_s=args.duration)
-    data = tomllib.loads(Path(args.scene).read_text())
-    data["background"] = [HALL]
-    data.setdefault("tracker", {})["space"] = HALL_D
-    room = replace(scene_from_mapping(data, f"{args.scene} (in a hall)"), duration_s=args.duration)
+    room = replace(hall_scene(args.scene), duration_s=args.duration)
     frames = int(round(scene.duration_s * scene.tracker.rate_hz))
     print(f"{scene.name}: {scene.duration_s:g} s of virtual time ({frames} frames), "
           f"{scene.optics.point_rate_hz} points/s, effects {sorted(scene.effects)}, 1 numba thread")

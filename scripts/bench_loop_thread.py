@@ -18,16 +18,15 @@ import os
 import statistics
 import sys
 import time
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_closed_loop import HALL, HALL_D  # noqa: E402
+from bench_closed_loop import hall_scene  # noqa: E402
 from sim.loop import ClosedLoop  # noqa: E402
-from sim.scene import load_scene, scene_from_mapping  # noqa: E402
+from sim.scene import load_scene  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "scenes" / "fig12-tracking.toml"
@@ -35,10 +34,7 @@ SCENE = ROOT / "scenes" / "fig12-tracking.toml"
 
 def scenes(duration_s: float) -> dict:
     shipped = replace(load_scene(SCENE), duration_s=duration_s)
-    data = tomllib.loads(SCENE.read_text())
-    data["background"] = [HALL]
-    data.setdefault("tracker", {})["space"] = HALL_D
-    hall = replace(scene_from_mapping(data, f"{SCENE} (in a hall)"), duration_s=duration_s)
+    hall = replace(hall_scene(SCENE), duration_s=duration_s)
     return {"fig12": shipped, "hall": hall}
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_closed_loop import HALL, HALL_D  # noqa: E402
+from bench_closed_loop import hall_scene  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "determinism"))
 from digests import _digest as array_digest  # noqa: E402
@@ -60,10 +60,7 @@ def run_digest(scene, ahead: bool = False, **kw) -> str:
 
 def main() -> None:
     out = {}
-    data = tomllib.loads(FIG12.read_text())
-    data["background"] = [HALL]
-    data.setdefault("tracker", {})["space"] = HALL_D
-    hall = scene_from_mapping(data, f"{FIG12} (in a hall)")
+    hall = hall_scene(FIG12)
     fig12 = load_scene(FIG12)
     for name, scene in (("fig12", fig12), ("hall", hall)):
         out[name] = run_digest(scene)
