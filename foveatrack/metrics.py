@@ -111,13 +111,17 @@ def tracking_metrics(t_s, error_deg, *, detected=None, in_fov=None, acquired_deg
     return out
 
 
-def flatten(metrics: Mapping, prefix: str = "") -> dict:
-    """{"tracking_error_deg": {"rms": 1}} -> {"tracking_error_deg.rms": 1}."""
+def flatten(metrics: Mapping, prefix: str = "", lists: bool = False) -> dict:
+    """{"tracking_error_deg": {"rms": 1}} -> {"tracking_error_deg.rms": 1}.  ``lists``: a list of
+    numbers (or None) becomes one key per element too, {"xyz_m": [1, 2]} -> {"xyz_m[0]": 1,
+    "xyz_m[1]": 2} (a table's columns: the recording's CSV export)."""
     out = {}
     for k, v in metrics.items():
         key = f"{prefix}{k}"
         if isinstance(v, Mapping):
-            out.update(flatten(v, key + "."))
+            out.update(flatten(v, key + ".", lists))
+        elif lists and isinstance(v, list) and all(isinstance(e, (int, float)) or e is None for e in v):
+            out.update((f"{key}[{i}]", e) for i, e in enumerate(v))
         else:
             out[key] = v
     return out

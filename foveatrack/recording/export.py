@@ -11,6 +11,7 @@ from typing import Iterable
 import numpy as np
 
 from foveatrack.errors import UserError
+from foveatrack.metrics import flatten
 from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRUTH
 from foveatrack.recording.reader import RecordingReader
 
@@ -60,20 +61,6 @@ def export_points(recording: str | os.PathLike, out_path: str | os.PathLike) -> 
     return len(cols["t_ns"])
 
 
-def _flatten(rec: dict, prefix: str = "") -> dict:
-    out = {}
-    for k, v in rec.items():
-        key = f"{prefix}{k}"
-        if isinstance(v, dict):
-            out.update(_flatten(v, key + "."))
-        elif isinstance(v, list) and all(isinstance(e, (int, float)) or e is None for e in v):
-            for i, e in enumerate(v):
-                out[f"{key}[{i}]"] = e
-        else:
-            out[key] = v
-    return out
-
-
 def export_trajectory(
     recording: str | os.PathLike,
     out_path: str | os.PathLike,
@@ -88,7 +75,7 @@ def export_trajectory(
     out_path = Path(out_path)
     kind = out_kind(out_path)
     channels = tuple(channels)
-    rows = [(m.channel, _flatten(m.record)) for m in RecordingReader(recording).messages(channels)]
+    rows = [(m.channel, flatten(m.record, lists=True)) for m in RecordingReader(recording).messages(channels)]
     if kind == "csv":
         keys: list[str] = []
         for _, r in rows:
