@@ -134,3 +134,12 @@ def test_a_damaged_imu_message_is_a_clear_error():
     short = encode_imu_pb(10, 0, *imu_columns([0.25, 0.5], np.full((2, 3), 0.125)))[:i + 16]   # gyro cut off
     with pytest.raises(ValueError, match=r"different lengths \(2, 0, 0, 0"):
         decode_imu_pb(short)
+
+
+def test_a_recording_with_imu_batches_streams_to_the_live_view(tmp_path):
+    # replay --live re-logs every message: the batches go back through write_imu (no client connected)
+    from foveatrack.recording.live import stream_recording
+
+    with RecordingWriter(tmp_path / "r.mcap", META) as w:
+        write_all(w)
+    assert stream_recording(tmp_path / "r.mcap", port=0, speed=1e6) == 18
