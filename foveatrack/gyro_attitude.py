@@ -446,6 +446,8 @@ class ImuFeed:
     moved past it) is dropped and counted in ``late``; one more than ``AHEAD_S`` after the frame's end
     (a wild timestamp, which would block every later sample) in ``bad_time``.  Samples before the
     first frame are the head's wait at start: they are released with it (the bias's first estimate).
+    The accelerometer's samples, where pushed, ride along (``released_accel_g``: those of the last
+    release, for the recording; None if none was ever pushed): the tracker uses only the gyro.
     """
 
     AHEAD_S = 5.0
@@ -453,40 +455,50 @@ class ImuFeed:
     def __init__(self):
         self._t: list[np.ndarray] = []
         self._g: list[np.ndarray] = []
+        self._a: list[np.ndarray] = []
+        self.has_accel = False
+        self.released_accel_g: np.ndarray | None = None
         self.not_before_s = -math.inf     # released up to here (and a rebased tracker's start)
         self.samples_in = 0
         self.samples_fed = 0
         self.late = 0
         self.bad_time = 0
 
-    def push(self, t_ns, gyro_rad_s) -> None:
+    def push(self, t_ns, gyro_rad_s, accel_g=None) -> None:
         t = np.asarray(t_ns, np.int64).reshape(-1)
         if t.size:
             self._t.append(t * 1e-9)
             self._g.append(np.asarray(gyro_rad_s, float).reshape(-1, 3))
+            # a batch without accel among ones with it: NaN (recorded as the source gave it)
+            self._a.append(np.full((t.size, 3), np.nan) if accel_g is None
+                           else np.asarray(accel_g, float).reshape(-1, 3))
+            self.has_accel |= accel_g is not None
             self.samples_in += t.size
 
     def release(self, t_end_s: float) -> tuple[np.ndarray, np.ndarray]:
         if not self._t:
             self.not_before_s = max(self.not_before_s, t_end_s)
+            self.released_accel_g = np.empty((0, 3)) if self.has_accel else None
             return np.empty(0), np.empty((0, 3))
         t = np.concatenate(self._t)
         g = np.concatenate(self._g)
+        a = np.concatenate(self._a)
         order = np.argsort(t, kind="stable")
-        t, g = t[order], g[order]
+        t, g, a = t[order], g[order], a[order]
         late = t < self.not_before_s
         wild = t > t_end_s + self.AHEAD_S
         self.late += int(late.sum())
         self.bad_time += int(wild.sum())
         now = (t < t_end_s) & ~late
         keep = (t >= t_end_s) & ~wild
-        self._t, self._g = ([t[keep]], [g[keep]]) if keep.any() else ([], [])
+        self._t, self._g, self._a = ([t[keep]], [g[keep]], [a[keep]]) if keep.any() else ([], [], [])
         self.not_before_s = max(self.not_before_s, t_end_s)
         self.samples_fed += int(now.sum())
+        self.released_accel_g = a[now] if self.has_accel else None
         return t[now], g[now]
 
     def restart(self, t0_s: float) -> None:
         """A new tracker starts at ``t0_s`` (a new sensor clock, a homed head): the pending samples
         and any before ``t0_s`` are not its (the head may have moved while its pose was unknown)."""
-        self._t, self._g = [], []
+        self._t, self._g, self._a = [], [], []
         self.not_before_s = t0_s

@@ -4,7 +4,10 @@ with its detection, head estimate, command and truth records, then the chunk flu
 (``flush_every_frames = 1``, as ``simulate --out`` and the daemon write).
 
     python scripts/bench_recording_write.py [--points 10000] [--frames 200] [--old PATH_TO_OLD_WRITER_PY]
-            [--scene scenes/fig12-tracking.toml] [--levels]
+            [--scene scenes/fig12-tracking.toml] [--gyro] [--levels]
+
+``--gyro`` runs the scene's variant with the lidar's IMU on the head and ``attitude = "gyro"``, whose
+gyro samples are recorded too (``/imu``).
 
 Prints the calling thread's CPU time per frame [ms] (with the writer process,
 :mod:`foveatrack.recording.writer_process`, the encoding and writing run in a child: what is left
@@ -38,12 +41,15 @@ def writer_process(path, meta, **kw) -> RecordingProcess:
     return w.open(path, meta, **kw)
 
 
-def run(writer_cls, n_points: int, n_frames: int, path: Path, off_grid: bool = False, **kw) -> tuple[np.ndarray, int]:
+def run(writer_cls, n_points: int, n_frames: int, path: Path, off_grid: bool = False, imu: bool = False,
+        **kw) -> tuple[np.ndarray, int]:
     rng = np.random.default_rng(1)
     # lidar-like points: 5-130 m along a narrow cone, on the mm grid (off_grid: full float64 mantissas)
     r = rng.uniform(5, 130, n_points)
     xyz = np.stack([r, rng.normal(0, 0.1, n_points) * r, rng.normal(0, 0.1, n_points) * r], axis=1)
     refl = rng.integers(0, 256, n_points).astype(np.uint8)
+    t_imu = np.arange(20) / 200.0 + 0.9
+    gyro = rng.normal(0, 0.01, (50, 20, 3))
     cpu = []
     with writer_cls(path, {"seed": 1}, overwrite=True, **kw) as w:
         for k in range(n_frames):
@@ -58,19 +64,30 @@ def run(writer_cls, n_points: int, n_frames: int, path: Path, off_grid: bool = F
             write_record(w, HeadEstimateRecord(t, k, 0.1 * k, 1.0, 0.01, 0.01, (12.0, 0.2, 1.0), 0.05))
             write_record(w, CommandRecord(t + 5_000_000, b"\xff\x01\x00\x04\x20\x00\x25", 1, 32, 0, 0, frame_id=k))
             write_record(w, TruthRecord(t, k, 0.1 * k, 1.0, (12.0, 0.2, 1.0), 0.3, 40))
+            if imu:     # a 200 Hz gyro's 20 samples of the frame (as attitude = "gyro" records them)
+                w.write_imu(t, k, t_imu + k * 0.1, gyro[k % 50])
             w.flush()
             cpu.append(time.thread_time() - c0)
     return np.asarray(cpu) * 1e3, path.stat().st_size
 
 
-def closed_loop(scene_path: str, in_process: bool, old=None, **wkw) -> tuple[float, float, float, int]:
+def load(scene_path: str, gyro: bool = False):
+    """The scene, or with ``gyro`` its variant with the lidar's IMU on the head and ``[tracker]
+    attitude = "gyro"`` (sim.attitude_study.scene_variant: 200 Hz, ~20 samples a frame)."""
+    from sim.attitude_study import scene_variant
+    from sim.scene import load_scene
+
+    return scene_variant(scene_path, "gyro") if gyro else load_scene(scene_path)
+
+
+def closed_loop(scene_path: str, in_process: bool, old=None, gyro: bool = False,
+                **wkw) -> tuple[float, float, float, int]:
     """fig12 as ``simulate --out`` runs it: (frame hook CPU ms per frame on the loop's thread, wall s of
     the run without recording, wall s with it, file bytes)."""
     from sim.loop import ClosedLoop
     from sim.recorder import SimRecorder, recording_meta
-    from sim.scene import load_scene
 
-    scene = load_scene(scene_path)
+    scene = load(scene_path, gyro)
     ClosedLoop(scene).run()                       # warm: numba cache, first calls
     t = time.perf_counter()
     ClosedLoop(scene).run()
@@ -106,6 +123,8 @@ def main() -> None:
     ap.add_argument("--old", help="a format-1 writer module to time beside the current one")
     ap.add_argument("--scene", help="also run this scene's closed loop (e.g. scenes/fig12-tracking.toml) without "
                                     "and with recording")
+    ap.add_argument("--gyro", action="store_true", help="with --scene: its variant with the lidar's IMU on the "
+                                                        "head and attitude = \"gyro\" (the gyro samples recorded)")
     ap.add_argument("--levels", action="store_true", help="with --scene: the compressions and levels on the "
                                                           "loop's thread (size and CPU of each)")
     a = ap.parse_args()
@@ -114,7 +133,9 @@ def main() -> None:
              ("format 3, lz4", RecordingWriter, {"compression": "lz4"}),
              ("format 3, none", RecordingWriter, {"compression": "none"}),
              ("format 3, zstd 1, points off the mm grid (float64)", RecordingWriter, {"off_grid": True}),
-             ("format 3, zstd 1, from a writer process", writer_process, {})]
+             ("format 3, zstd 1, from a writer process", writer_process, {}),
+             ("format 3, zstd 1, + 20 IMU samples a frame", RecordingWriter, {"imu": True}),
+             ("format 3, zstd 1, + 20 IMU samples, writer process", writer_process, {"imu": True})]
     if a.old:
         spec = importlib.util.spec_from_file_location("old_writer", a.old)
         mod = importlib.util.module_from_spec(spec)
@@ -130,10 +151,10 @@ def main() -> None:
             print(f"  {name:52s} p50 {np.percentile(ms, 50):6.3f}  p95 {np.percentile(ms, 95):6.3f}  "
                   f"mean {ms.mean():6.3f} ms; {size / a.frames / 1e3:7.1f} kB per frame")
     if a.scene:
-        scene_report(a.scene, old_cls, a.levels)
+        scene_report(a.scene, old_cls, a.levels, a.gyro)
 
 
-def scene_report(scene: str, old_cls, levels: bool = False) -> None:
+def scene_report(scene: str, old_cls, levels: bool = False, gyro: bool = False) -> None:
     runs = [("format 3, zstd 1, on the loop's thread (--one-thread)", False, None, {}),
             ("format 3, zstd 1, from a writer process (simulate --out)", True, None, {})]
     if levels:
@@ -142,9 +163,9 @@ def scene_report(scene: str, old_cls, levels: bool = False) -> None:
         runs.append(("format 3, none, on the loop's thread", False, None, {"compression": "none"}))
     if old_cls is not None:
         runs.insert(0, ("python mcap writer (format 1, lz4)", False, old_cls, {}))
-    print(f"{scene}: closed loop without / with the recording")
+    print(f"{scene}{' (gyro variant)' if gyro else ''}: closed loop without / with the recording")
     for name, in_process, cls, wkw in runs:
-        hook_ms, plain, rec, size = closed_loop(scene, in_process, cls, **wkw)
+        hook_ms, plain, rec, size = closed_loop(scene, in_process, cls, gyro, **wkw)
         print(f"  {name:56s} hook {hook_ms:6.3f} ms/frame on the loop's thread; wall {plain:5.2f} s -> "
               f"{rec:5.2f} s with it; {size / 1e6:6.2f} MB")
 

@@ -169,6 +169,7 @@ class ClosedLoop:
         self.bytes_sent = 0
         self.echo_bytes = 0
         self.last_sent: tuple[float, bytes] | None = None  # (time, Pelco-D bytes) of this frame's command
+        self.imu_fed: tuple[np.ndarray, np.ndarray] | None = None   # (t_s, gyro) fed before this frame
         # Wall time per stage of :meth:`step` [s], summed over every step but the first (what a scene's
         # fidelity costs, reported by ``simulate --json``); the first step alone in ``first_step_s``: it
         # loads the numba kernels from their cache, or compiles them (about a minute) on a first run.
@@ -271,11 +272,13 @@ class ClosedLoop:
         frame = Frame(t0, t1, xyz, pt_ns, refl_byte)
         c4 = clock()
         # 6. the tracker and the link; the gyro's samples of this frame (and before) come first.
+        self.imu_fed = None
         if self.gyro is not None:
             feed = getattr(self.controller, "on_imu", None)
             t_imu, gyro = self.gyro.samples_until(self.head, t1)
             if feed is not None:
                 feed(t_imu, gyro)
+                self.imu_fed = (t_imu, gyro)    # recorded with the frame (sim.recorder)
         send_t = t1 + scene.gimbal.send_delay_s
         out = self.controller.process(frame, send_t)
         c5 = clock()

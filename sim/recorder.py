@@ -10,6 +10,7 @@ The per-frame records are :mod:`foveatrack.recording.records`' (the daemon write
 * commands: ``raw_hex`` as written (Pelco-D), ``t_ns`` = send time, plus the decoded speeds
 * head: the tracker's reconstruction (``pan_deg``, ``tilt_deg``, sigmas, ``world_xyz_m``)
 * truth (simulation only): true head pose and target position at frame mid, true error
+* imu (scenes with ``[imu]``): the head gyro's samples fed to the tracker before the frame
 """
 
 from __future__ import annotations
@@ -57,7 +58,7 @@ class SimRecorder:
     def __call__(self, frame, out, loop) -> None:
         w = self.writer
         fid = self.frame_id
-        t_end = write_tracker_frame(w, fid, frame, out)
+        t_end = write_tracker_frame(w, fid, frame, out, loop.imu_fed)
         c = loop.last_command   # as sent, after the gate
         if loop.last_sent is not None:
             t_send, data = loop.last_sent

@@ -65,9 +65,10 @@ LINK_DOWN = "link_down"   # a command's `limited` reason: STOP written while the
 
 
 # ----------------------------------------------------------------------------------------- record jobs
-def _job_frame(w, fid, frame, out, cmd_rec, proc_ms, lat_ms):
-    """Write one processed frame as every driver does (:mod:`foveatrack.recording.records`)."""
-    t_end = write_tracker_frame(w, fid, frame, out)
+def _job_frame(w, fid, frame, out, cmd_rec, proc_ms, lat_ms, imu=None):
+    """Write one processed frame as every driver does (:mod:`foveatrack.recording.records`); ``imu``:
+    the samples fed to the tracker before it (attitude = "gyro"), None otherwise."""
+    t_end = write_tracker_frame(w, fid, frame, out, imu)
     if cmd_rec is not None:
         write_record(w, cmd_rec)
     w.write_metric(t_end, "processing_ms", proc_ms, frame_id=fid)
@@ -100,7 +101,7 @@ class _Receiver(threading.Thread):
         self.unit_note = ""
         self.epoch = 0
         # The lidar's IMU samples (data type 6) for a tracker that takes its attitude from the gyro:
-        # (t_ns, gyro_rad_s, clock epoch) batches, taken by the control loop.
+        # (t_ns, gyro_rad_s, clock epoch, acc_g) batches, taken by the control loop.
         self.want_imu = False
         self.imu: deque = deque(maxlen=4096)
 
@@ -120,7 +121,7 @@ class _Receiver(threading.Thread):
                 if self.want_imu:
                     imu = self.client.take_imu()
                     if len(imu.t_ns):
-                        self.imu.append((imu.t_ns, imu.gyro_rad_s, self.stream.epoch))
+                        self.imu.append((imu.t_ns, imu.gyro_rad_s, self.stream.epoch, imu.acc_g))
                 self.counters = {**self.client.counters, **self.stream.counters}
                 for jump in self.stream.take_jumps():   # the sensor clock restarted or jumped: re-anchored
                     self.unit_events.put(jump.as_event())
@@ -305,13 +306,14 @@ class Daemon:
                             tracker_command=None if t is None else (t.pan_dir, t.pan_byte, t.tilt_dir, t.tilt_byte))
         return rec, t_written
 
-    def _feed_imu(self, t_end_s: float) -> None:
-        """The gyro samples before this frame's end go to the tracker first (of this clock only)."""
+    def _feed_imu(self, t_end_s: float) -> tuple:
+        """The gyro samples before this frame's end go to the tracker first (of this clock only);
+        returns them, with the accelerometer's where the lidar sent it, for the recording."""
         rx_imu = getattr(self.rx, "imu", None)
         while rx_imu:
-            t_ns, gyro, epoch = rx_imu.popleft()
+            t_ns, gyro, epoch, *acc = rx_imu.popleft()
             if epoch == self.epoch:
-                self.imu_feed.push(t_ns, gyro)
+                self.imu_feed.push(t_ns, gyro, acc[0] if acc else None)
         t, g = self.imu_feed.release(t_end_s)
         self.tracker.on_imu(t, g)
         self.counters["imu_samples"] = self.imu_feed.samples_fed
@@ -320,6 +322,7 @@ class Daemon:
             self.log.event("warning", message="[tracker] attitude = \"gyro\" but no IMU samples from the lidar "
                            "after 20 frames: the head's angles come from the commands alone (a Mid-40 has no "
                            "IMU; a Horizon, Avia or Tele-15 streams it at 200 Hz unless its IMU push is off)")
+        return t, g, self.imu_feed.released_accel_g
 
     def _new_clock(self, epoch: int, t0_s: float) -> None:
         """Carry the tracker over to a new sensor clock starting at ``t0_s`` [s].
@@ -424,8 +427,7 @@ class Daemon:
         now_s = self.sensor_now_s()
         send_t = self._send_time((frame.t_end_s if now_s is None else max(now_s, frame.t_end_s))
                                  + float(np.median(self._compute_s)))
-        if self.imu_feed is not None:
-            self._feed_imu(frame.t_end_s)
+        imu = self._feed_imu(frame.t_end_s) if self.imu_feed is not None else None
         out = self.tracker.process(frame, send_t_s=send_t)
         fid = self.frame_id
         self.frame_id += 1
@@ -462,7 +464,7 @@ class Daemon:
         self.counters["frames_detected"] += out.detection is not None
         self.last_out, self.last_pts = out, frame.n_points
         self.last_frame_end_s = frame.t_end_s
-        self._record(_job_frame, fid, frame, out, rec, proc * 1e3, lat)
+        self._record(_job_frame, fid, frame, out, rec, proc * 1e3, lat, imu)
 
     # -------------------------------------------------------------------------------- the loop
     def run(self) -> int:

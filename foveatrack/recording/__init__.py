@@ -26,6 +26,11 @@ docs/recordings.md lists every channel):
   the record's ``t_ns``: ``/detections``, ``/commands`` (``raw_hex`` = the bytes sent, ``t_ns`` = send
   time), ``/head`` (head estimates), ``/truth`` (simulation only), ``/metrics``, and any other name
   given to :meth:`RecordingWriter.write`.
+- channel ``/imu`` (where the driver feeds the tracker IMU samples): protobuf ``foveatrack.ImuSamples``
+  (its FileDescriptorSet is the channel's schema), one message per frame right after the frame's
+  points, log time = the frame's ``t_ns``: the samples given to ``Tracker.on_imu`` before the frame
+  as packed float64 columns (times [s] as fed, gyro [rad/s], accel [g] where the source has one);
+  :meth:`RecordingReader.imu`, :class:`foveatrack.recording.format.ImuSamples`.
 - drawn for Foxglove from those records (replay needs none of them): ``/tf`` (FrameTransforms world ->
   head_est -> lidar, world -> head_true -> lidar_true), ``/scene`` (SceneUpdate), ``/log`` (Log).
 
@@ -48,11 +53,12 @@ file from a child process (``simulate --out`` where a core is free).
 """
 
 from foveatrack.recording.export import export_points, export_trajectory
-from foveatrack.recording.format import (COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD, META_NAME, METRICS,
-                                         POINTS, STANDARD_CHANNELS, TRUTH, Message, PointsFrame, packed_point_dtype)
+from foveatrack.recording.format import (COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD, IMU, META_NAME, METRICS,
+                                         POINTS, STANDARD_CHANNELS, TRUTH, ImuSamples, Message, PointsFrame,
+                                         packed_point_dtype)
 from foveatrack.recording.reader import Damage, RecordingReader
 from foveatrack.recording.writer import RecordingExistsError, RecordingWriter
 
-__all__ = ["COMMANDS", "DETECTIONS", "FORMAT", "FORMAT_VERSION", "HEAD", "META_NAME", "METRICS", "POINTS",
-           "STANDARD_CHANNELS", "TRUTH", "Damage", "Message", "PointsFrame", "RecordingExistsError",
+__all__ = ["COMMANDS", "DETECTIONS", "FORMAT", "FORMAT_VERSION", "HEAD", "IMU", "META_NAME", "METRICS", "POINTS",
+           "STANDARD_CHANNELS", "TRUTH", "Damage", "ImuSamples", "Message", "PointsFrame", "RecordingExistsError",
            "RecordingReader", "RecordingWriter", "export_points", "export_trajectory", "packed_point_dtype"]

@@ -26,8 +26,9 @@ from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, FrameTra
                                LinePrimitiveLineType, Log, LogLevel, Point3, Pose, Quaternion, SceneEntity, SceneUpdate,
                                SpherePrimitive, Timestamp, Vector3)
 
-from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, LOG, METRICS, POINTS, RECORD_SCHEMAS, SCENE,
-                                         TF, TRUTH, encode_points_pb)
+from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, IMU, IMU_DESCRIPTOR, IMU_SCHEMA_NAME, LOG,
+                                         METRICS, POINTS, RECORD_SCHEMAS, SCENE, TF, TRUTH, encode_imu_pb,
+                                         encode_points_pb)
 
 SEGMENT_FRAMES = 10        # a drawn trajectory is one line entity per 10 frames: each frame re-sends
                            # its segment, so short segments keep the bytes and the CPU per frame small
@@ -70,6 +71,7 @@ class FoxgloveChannels:
         self._points = foxglove.Channel("/" + POINTS, schema=pc_schema, message_encoding="protobuf", context=ctx)
         self._points_dtype = points_dtype
         self._json: dict[str, object] = {}
+        self._imu = None        # made at the first IMU batch: a run without one records what it always did
         for name in RECORD_SCHEMAS:
             self._json_channel(name)
         self._tf = FrameTransformsChannel("/" + TF, context=ctx)
@@ -107,6 +109,18 @@ class FoxgloveChannels:
     def log_points(self, t_ns: int, frame_id: int, packed: np.ndarray, dt_unit_ns: int = 1) -> None:
         self._note(POINTS)
         self._points.log(encode_points_pb(t_ns, frame_id, packed, dt_unit_ns), log_time=int(t_ns))
+
+    def log_imu(self, t_ns: int, frame_id: int, t_s: np.ndarray, gyro_rad_s: np.ndarray,
+                accel_g: np.ndarray | None = None) -> None:
+        """One frame's IMU samples (arrays as :func:`foveatrack.recording.format.imu_columns` gives them)."""
+        import foxglove
+
+        if self._imu is None:
+            self._imu = foxglove.Channel("/" + IMU, schema=foxglove.Schema(
+                name=IMU_SCHEMA_NAME, encoding="protobuf", data=IMU_DESCRIPTOR),
+                message_encoding="protobuf", context=self.context)
+        self._note(IMU)
+        self._imu.log(encode_imu_pb(t_ns, frame_id, t_s, gyro_rad_s, accel_g), log_time=int(t_ns))
 
     def log_json(self, name: str, t_ns: int, payload: bytes, rec: dict) -> None:
         self._note(name)

@@ -95,7 +95,7 @@ def stream_recording(path, port: int = DEFAULT_PORT, speed: float = 1.0, wait_fo
     recorded, with the transforms and scene entities drawn from them (a format-1 recording too).
     ``wait_for_client_s``: give a client that long to connect before the first message.  Returns the
     number of messages served."""
-    from foveatrack.recording.format import POINTS
+    from foveatrack.recording.format import IMU, POINTS
     from foveatrack.recording.reader import RecordingReader
     from foveatrack.recording.writer import RecordingWriter
 
@@ -114,6 +114,9 @@ def stream_recording(path, port: int = DEFAULT_PORT, speed: float = 1.0, wait_fo
             if m.channel == POINTS:
                 f = m.record
                 w.write_points(f.t_ns, f.frame_index, f.xyz, f.t_ns_points, f.reflectivity)
+            elif m.channel == IMU:
+                b = m.record
+                w.write_imu(b.t_ns, b.frame_id, b.t_s, b.gyro_rad_s, b.accel_g)
             else:
                 rec = {k: v for k, v in m.record.items() if k != "t_ns"}
                 w.write(m.channel, m.t_ns, rec)

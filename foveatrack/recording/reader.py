@@ -13,9 +13,9 @@ from typing import Iterable, Iterator
 
 from foveatrack.errors import UserError
 from foveatrack.recording import mcap_walk as mw
-from foveatrack.recording.format import (CHANNELS_META_NAME, FORMAT, MCAP_MAGIC, META_NAME, POINTS,
-                                         READABLE_VERSIONS, VIEW_CHANNELS, Message, PointsFrame, _decode_points,
-                                         _decode_points_pb)
+from foveatrack.recording.format import (CHANNELS_META_NAME, FORMAT, IMU, MCAP_MAGIC, META_NAME, POINTS,
+                                         READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message, PointsFrame,
+                                         _decode_points, _decode_points_pb, decode_imu_pb)
 
 
 @dataclass(frozen=True)
@@ -419,7 +419,12 @@ class RecordingReader:
                 yield Message(name, int(log_time), data)
                 continue
             try:
-                record = (_decode_points_pb(data, mm_grid) if pb else _decode_points(data)) if name == POINTS else json.loads(data)
+                if name == POINTS:
+                    record = _decode_points_pb(data, mm_grid) if pb else _decode_points(data)
+                elif name == IMU:
+                    record = decode_imu_pb(data)
+                else:
+                    record = json.loads(data)
             except (ValueError, KeyError, TypeError) as exc:
                 raise UserError(f"{self.path}: a {name} message at t_ns={log_time} is damaged: {exc}") from None
             yield Message(name, int(log_time), record)
@@ -427,6 +432,12 @@ class RecordingReader:
     def points(self) -> Iterator[PointsFrame]:
         """The lidar frames, in order."""
         for m in self.messages(POINTS):
+            yield m.record
+
+    def imu(self) -> Iterator[ImuSamples]:
+        """The IMU batches fed to the tracker, one per frame, in order (none in a recording made
+        before the channel existed, or of a run without an IMU)."""
+        for m in self.messages(IMU):
             yield m.record
 
     def records(self, channel: str) -> list[dict]:

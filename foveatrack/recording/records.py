@@ -15,6 +15,9 @@ CommandRecord          /commands       a command as written to the head (Pelco b
 TruthRecord            /truth          simulation only: the true head pose and target
 =====================  ==============  =====================================================
 
+The IMU samples fed to the tracker (``/imu``) are arrays, not a JSON record:
+:class:`foveatrack.recording.format.ImuSamples`, written by :func:`write_tracker_frame`.
+
 ``from_json`` takes a record as read (missing keys of older files become None / defaults);
 ``to_json`` gives the dict to write, its keys in the order the writers have always used (a run
 records the same bytes as before).
@@ -217,11 +220,17 @@ def write_record(writer, rec) -> None:
     writer.write(rec.CHANNEL, rec.t_ns, rec.to_json())
 
 
-def write_tracker_frame(writer, frame_id: int, frame, out) -> int:
+def write_tracker_frame(writer, frame_id: int, frame, out, imu=None) -> int:
     """Record one frame and the tracker's output for it (points, detection, head estimate), as every
-    driver does; returns the frame-end time [ns].  Commands and truth each driver writes itself."""
+    driver does; returns the frame-end time [ns].  Commands and truth each driver writes itself.
+
+    ``imu``: the samples the driver gave ``Tracker.on_imu`` before the frame, ``(t_s, gyro_rad_s)`` or
+    ``(t_s, gyro_rad_s, accel_g)``, or None where it feeds none (nothing is written then); recorded
+    right after the points, so that a reader finds them with the frame they precede."""
     t_end = ns(frame.t_end_s)
     writer.write_points(t_end, frame_id, frame.xyz, frame.t_ns, frame.reflectivity)
+    if imu is not None:
+        writer.write_imu(t_end, frame_id, *imu)
     write_record(writer, DetectionRecord.from_output(t_end, frame_id, out))
     write_record(writer, HeadEstimateRecord.from_output(t_end, frame_id, out))
     return t_end

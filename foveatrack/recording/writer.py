@@ -13,8 +13,8 @@ import numpy as np
 
 from foveatrack.errors import UserError
 from foveatrack.livox.protocol import quantise_to_mm_grid
-from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD,
-                                         MAX_GRID_MM, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable)
+from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD, IMU,
+                                         MAX_GRID_MM, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable, imu_columns)
 from foveatrack.recording.foxglove_view import FoxgloveChannels
 from foveatrack.recording.pack_kernels import pack_points
 
@@ -47,6 +47,12 @@ class RecordCalls(abc.ABC):
     @abc.abstractmethod
     def write(self, channel: str, t_ns: int, record: dict) -> None:
         """Write a JSON record on ``channel`` (``t_ns`` is added to the record)."""
+
+    @abc.abstractmethod
+    def write_imu(self, t_ns: int, frame_id: int, t_s, gyro_rad_s, accel_g=None) -> None:
+        """The IMU samples fed to the tracker before frame ``frame_id`` (``t_ns`` = its end): ``t_s``
+        (n,) [s] as fed, ``gyro_rad_s`` (n, 3) [rad/s], ``accel_g`` (n, 3) [g] where the source has
+        one; one ``/imu`` message (:mod:`foveatrack.recording.format`), written after the frame's points."""
 
     def write_detection(
         self, t_ns: int, frame_id: int, detected: bool, xyz_m=None, n_points: int = 0, **extra
@@ -204,8 +210,8 @@ class RecordingWriter(RecordCalls):
 
     def write(self, channel: str, t_ns: int, record: dict) -> None:
         """Write a JSON record on ``channel`` (``t_ns`` is added to the record)."""
-        if channel == POINTS:
-            raise ValueError("use write_points for the points channel")
+        if channel in (POINTS, IMU):
+            raise ValueError(f"use write_{channel} for the {channel} channel")
         if not channel or "/" in channel:
             raise ValueError(f"bad channel name {channel!r}")
         t_ns = self._add(channel, t_ns)
@@ -247,6 +253,11 @@ class RecordingWriter(RecordCalls):
         self.view.log_points(t_ns, frame_id, arr, unit)
         self.frames_written += 1
         self._frames_since_flush += 1
+
+    def write_imu(self, t_ns: int, frame_id: int, t_s, gyro_rad_s, accel_g=None) -> None:
+        t, g, a = imu_columns(t_s, gyro_rad_s, accel_g)
+        t_ns = self._add(IMU, t_ns)
+        self.view.log_imu(t_ns, frame_id, t, g, a)
 
     # ------------------------------------------------------------------ lifecycle
 

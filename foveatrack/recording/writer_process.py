@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.errors import UserError
+from foveatrack.recording.format import imu_columns
 from foveatrack.recording.writer import RecordCalls, check_options
 
 _HEAD = struct.Struct("<QI")        # pickle bytes, number of arrays; then a <Q per array (its bytes)
@@ -228,6 +229,11 @@ class RecordingProcess(RecordCalls):
         self.frames_written += 1
         self._send()
 
+    def write_imu(self, t_ns, frame_id, t_s, gyro_rad_s, accel_g=None) -> None:
+        # checked here (a wrong shape is the caller's error, raised at once); sent with the next frame
+        t, g, a = imu_columns(t_s, gyro_rad_s, accel_g)
+        self._call("write_imu", t_ns, frame_id, *(None if x is None else self._array(x) for x in (t, g, a)))
+
     def _array(self, a) -> tuple:
         a = np.ascontiguousarray(a)
         pos = None if self._ring is None else self._ring.put(a, self._wait_for_child)
@@ -306,7 +312,7 @@ class RecordingProcess(RecordCalls):
             raise ValueError("open() the writer process before writing to it")
         self._raise_reported()
         self._pending.append((name, args))
-        self.messages_written += name in ("write", "write_points")
+        self.messages_written += name in ("write", "write_points", "write_imu")
 
     def _send(self) -> None:
         """One message: the pending calls pickled, then the bytes of the arrays they refer to."""

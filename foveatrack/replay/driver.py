@@ -21,6 +21,11 @@ How a recording's tracker is rebuilt (``meta``):
   reached the head (the head never saw it, and kept moving as it was told before); where the daemon
   started a fresh tracker (``tracker_rebased``: a new lidar clock, the head homed), so does replay.
 
+A tracker whose attitude comes from the gyro (``attitude = "gyro"``) gets the IMU samples the run's
+tracker got (``/imu``), each frame's before that frame, as the driver fed them; a recording made
+before the channel existed has none, and its replay dead-reckons the commands (the comparison's
+``gyro_samples_recorded`` is then False and the report says so).
+
 Replay is open loop: the points are what the lidar saw while the head moved as it did, so a
 different configuration shows which detections and commands would have differed on the same data,
 not where the head would have gone.
@@ -82,6 +87,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
                          "processing_ms", "latency_ms", "head_pan_deg", "head_tilt_deg")}
     T = {k: [] for k in ("true_error_deg", "target_xyz_m", "points_on_target", "pan_deg", "tilt_deg")}
     has_truth = False
+    imu_recorded = False
     for rf in recorded_frames(reader):
         pts = rf.points
         k = int(pts.frame_index)
@@ -97,6 +103,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             c = rf.command
             send_t = float(c.send_t_s) if c is not None and c.send_t_s is not None else t1 + cfg.send_delay_s
         frame = Frame(t0, t1, pts.xyz, pts.t_ns_points, pts.reflectivity)
+        for b in rf.imu:        # as the driver fed them: before the frame (a commands tracker ignores them)
+            imu_recorded = True
+            tracker.on_imu(b.t_s, b.gyro_rad_s)
         out = tracker.process(frame, send_t_s=send_t)
         # a frame the driver found stale (the daemon: by its wall clock) is stale here too
         cmd, _ = gate.decide(tracker, out, send_t, stale=rf.stale)
@@ -148,9 +157,10 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
                        final_pose_deg=final_pose, tracker_cfg=cfg)
     res.comparison = compare(frames, recorded)
     if cfg.attitude == "gyro":
-        # Recordings hold no IMU samples: the replayed tracker's head angles come from its commands
-        # alone, so they, the world estimates and the commands may differ from the run for that reason.
-        res.comparison["gyro_samples_recorded"] = False
+        # Without IMU samples (a recording made before /imu existed, or of a run without an IMU) the
+        # replayed tracker's head angles come from its commands alone, so they, the world estimates
+        # and the commands may differ from the run for that reason.
+        res.comparison["gyro_samples_recorded"] = imu_recorded
     if tracker_table is None and "tracker_effective" in meta:
         # the configuration replay rebuilt is the one that ran (JSON-normalised: tuples as lists)
         import json

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from foveatrack.gate import STALE_FRAME
-from foveatrack.recording.format import DAEMON_EVENTS, METRICS, POINTS
+from foveatrack.recording.format import DAEMON_EVENTS, IMU, METRICS, POINTS
 from foveatrack.recording.records import CommandRecord, DetectionRecord, HeadEstimateRecord, TruthRecord, parse
 
 
@@ -74,6 +74,7 @@ class RecordedFrame:
     truth: TruthRecord | None = None
     metrics: dict = field(default_factory=dict)
     after: list = field(default_factory=list)   # [CommandRecord | TrackerRebased] in the order they happened
+    imu: list = field(default_factory=list)     # [ImuSamples] fed to the tracker before this frame
 
     @property
     def stale(self) -> bool:
@@ -91,6 +92,9 @@ def recorded_frames(reader):
             cur = RecordedFrame(m.record)
             continue
         if cur is None:
+            continue
+        if m.channel == IMU:
+            cur.imu.append(m.record)
             continue
         if m.channel == DAEMON_EVENTS:
             e = m.record

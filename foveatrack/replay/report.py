@@ -38,8 +38,9 @@ def format_report(res: ReplayResult) -> str:
     if c.get("recording_damage"):
         L.insert(1, "  WARNING: damaged recording, " + "; ".join(c["recording_damage"]))
     if c.get("gyro_samples_recorded") is False:
-        L.append("  attitude = \"gyro\", but recordings hold no IMU samples: the replay's head angles come from "
-                 "its commands alone, so they and what depends on them may differ from the run")
+        L.append("  attitude = \"gyro\", but the recording holds no IMU samples (made before they were recorded, or "
+                 "the run had no IMU): the replay's head angles come from its commands alone, so they and what "
+                 "depends on them may differ from the run")
     if c.get("partial"):
         b = c["before_first_gap"]
         gaps = []

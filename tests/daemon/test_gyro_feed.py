@@ -83,3 +83,52 @@ def test_imu_feed_releases_in_time_order_before_the_frame_end():
     f.push([9_000_000_000, 10_050_000_000], [[1, 1, 1], [2, 2, 2]])
     t, _ = f.release(10.1)
     assert t.tolist() == pytest.approx([10.05], abs=1e-12)
+
+
+def test_the_daemon_records_what_it_fed_and_replay_feeds_it_again(tmp_path):
+    # The batches come as the receiver queues them, accelerometer included (a Horizon's data type 6),
+    # some out of order across packets and one late (before a frame already released: dropped):
+    # /imu holds per frame exactly what the tracker got, and the replay's gyro attitude is the
+    # daemon's, frame by frame, to the bit (while dead reckoning the commands would be degrees off).
+    from foveatrack.recording import RecordingReader
+    from foveatrack.replay import replay_recording
+
+    d = _daemon(tmp_path)
+    rng = np.random.default_rng(2)
+    rate = 200
+    t_all = np.arange(-2 * rate, 2 * rate) / rate
+    t_ns_all = (t_all * 1e9).astype(np.int64) + 1_234          # the sensor's ns, off the 5 ms grid
+    g_all = np.array([0.01, -0.02, 0.015]) + rng.normal(0, 0.003, (t_all.size, 3))
+    a_all = np.array([0.0, 0.0, 1.0]) + rng.normal(0, 0.01, (t_all.size, 3))
+    fed = []
+    pre = t_all < 0
+    d.rx.imu.append((t_ns_all[pre], g_all[pre], 0, a_all[pre]))
+    for k in range(20):
+        fr = target_frame(k, az_deg=10.0)
+        sel = np.flatnonzero((t_all >= fr.t_start_s) & (t_all < fr.t_end_s))
+        half = sel[: sel.size // 2]
+        d.rx.imu.append((t_ns_all[sel[half.size:]], g_all[sel[half.size:]], 0, a_all[sel[half.size:]]))
+        d.rx.imu.append((t_ns_all[half], g_all[half], 0, a_all[half]))     # the earlier packet second
+        if k == 10:
+            d.rx.imu.append((t_ns_all[:1], g_all[:1], 0, a_all[:1]))     # late: long released
+        d.rx.offset_s = time.monotonic() - (fr.t_end_s + 0.01)
+        d._process(fr, time.monotonic())
+        fed.append(d.tracker.recon.samples)
+    d.recorder.close()
+    assert d.imu_feed.late == 1
+    got = list(RecordingReader(tmp_path / "rec.mcap").imu())
+    assert [b.frame_id for b in got] == list(range(20))
+    assert np.diff([0] + fed).tolist() == [len(b) for b in got]     # what the tracker took, frame by frame
+    t = np.concatenate([b.t_s for b in got])
+    n = int(np.sum(t_ns_all * 1e-9 < target_frame(19).t_end_s))
+    assert t.tobytes() == (t_ns_all[:n] * 1e-9).tobytes()          # the daemon's own floats, in time order
+    assert np.concatenate([b.gyro_rad_s for b in got]).tobytes() == g_all[:n].tobytes()
+    assert np.concatenate([b.accel_g for b in got]).tobytes() == a_all[:n].tobytes()
+    res = replay_recording(tmp_path / "rec.mcap")
+    c = res.comparison
+    assert c["gyro_samples_recorded"] is True
+    assert c["detections_equal"] and c["commands_equal"] and c["commands_compared"] == 20, c
+    assert np.array_equal(res.frames["head_pan_deg"], res.recorded["head_pan_deg"])
+    assert np.array_equal(res.frames["head_tilt_deg"], res.recorded["head_tilt_deg"])
+    g = d.tracker.recon
+    assert g.commands.angles_at(1.9)[0] - g.angles_at(1.9)[0] > 1.0   # the two attitudes do differ here

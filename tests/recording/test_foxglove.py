@@ -1,11 +1,13 @@
 """Recordings in Foxglove's schemas, read back by the official ``mcap`` reader with its protobuf
 decoder (``mcap-protobuf-support``): a route to the file that shares nothing with our reader.
 
-Checks: every channel is a Foxglove well-known schema in protobuf or one of the documented custom
-JSON schemas (docs/recordings.md); the transforms chain world -> head_est -> lidar and give the
-head rotation of :func:`foveatrack.reconstruction.rotation_matrix` at the recorded estimate (and
+Checks: every channel is a Foxglove well-known schema in protobuf, one of the documented custom
+JSON schemas (docs/recordings.md) or /imu's protobuf ``foveatrack.ImuSamples``; the transforms chain
+world -> head_est -> lidar and give the head rotation of :func:`foveatrack.reconstruction.rotation_matrix` at the recorded estimate (and
 world -> head_true the recorded truth); the PointCloud decoded by protobuf is the frame our reader
-returns, to the bit; the channel table the writer predicts names the ids the file's summary has."""
+returns, to the bit, and so are the IMU samples of a gyro run; the channel table the writer predicts
+names the ids the file's summary has.  Each check runs on fig12 and on its variant with the lidar's
+IMU on the head and attitude = "gyro"."""
 
 import json
 import math
@@ -19,21 +21,25 @@ from mcap_protobuf.decoder import DecoderFactory
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.recording import RecordingReader, RecordingWriter
 from foveatrack.recording.foxglove_view import head_quaternion
-from foveatrack.recording.format import CHANNELS_META_NAME, RECORD_SCHEMAS
+from foveatrack.recording.format import CHANNELS_META_NAME, IMU_SCHEMA_NAME, RECORD_SCHEMAS
 
 ROOT = Path(__file__).resolve().parents[2]
 WELL_KNOWN = {"foxglove.PointCloud", "foxglove.FrameTransforms", "foxglove.SceneUpdate", "foxglove.Log"}
 
 
-@pytest.fixture(scope="module")
-def sim_rec(tmp_path_factory):
-    """0.6 s of fig12-tracking recorded as ``simulate --out`` records it (from a child process)."""
+@pytest.fixture(scope="module", params=["fig12", "fig12-gyro"])
+def sim_rec(request, tmp_path_factory):
+    """0.6 s of fig12-tracking (and of its gyro variant) recorded as ``simulate --out`` records it
+    (from a child process)."""
+    from sim.attitude_study import scene_variant
     from sim.loop import ClosedLoop
     from sim.recorder import SimRecorder, recording_meta
     from sim.scene import load_scene, with_run_overrides
 
     path = tmp_path_factory.mktemp("fox") / "run.mcap"
-    scene = with_run_overrides(load_scene(ROOT / "scenes" / "fig12-tracking.toml"), 0.6, None)
+    src = ROOT / "scenes" / "fig12-tracking.toml"
+    scene = (scene_variant(src, "gyro", duration_s=0.6) if request.param == "fig12-gyro"
+             else with_run_overrides(load_scene(src), 0.6, None))
     loop = ClosedLoop(scene)
     from foveatrack.recording.writer_process import RecordingProcess
 
@@ -71,17 +77,19 @@ def test_every_channel_is_well_known_or_documented(sim_rec):
     for ch in summary.channels.values():
         sc = summary.schemas[ch.schema_id]
         seen.add(ch.topic)
-        if sc.name in WELL_KNOWN:
+        if sc.name in WELL_KNOWN or sc.name == IMU_SCHEMA_NAME:
             assert (ch.message_encoding, sc.encoding) == ("protobuf", "protobuf"), ch.topic
+            assert (sc.name == IMU_SCHEMA_NAME) == (ch.topic == "/imu")
         else:
             assert sc.name in custom, (ch.topic, sc.name)
             assert (ch.message_encoding, sc.encoding) == ("json", "jsonschema"), ch.topic
             assert json.loads(sc.data)["title"] == sc.name
     assert {"/points", "/tf", "/scene", "/detections", "/head", "/commands", "/truth"} <= seen
+    assert ("/imu" in seen) == (RecordingReader(path).meta["tracker_effective"].get("attitude") == "gyro")
     # and every protobuf message decodes under its schema with the official decoder
     with open(path, "rb") as fh:
         n = sum(1 for _ in make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
-            topics=["/points", "/tf", "/scene", "/log"]))
+            topics=["/points", "/tf", "/scene", "/log", "/imu"]))
     assert n == sum(summary.statistics.channel_message_counts[c.id] for c in summary.channels.values()
                     if c.message_encoding == "protobuf")
 
@@ -143,6 +151,29 @@ def test_pointcloud_decoded_by_protobuf_is_the_frame_our_reader_returns(sim_rec)
         assert np.array_equal(arr["dt"].astype(np.int64) * extra[16] + f.t_ns, f.t_ns_points)
         assert np.array_equal(arr["reflectivity"], f.reflectivity)
     assert [f.frame_index for f in ours] == list(range(len(ours)))
+
+
+def test_imu_samples_decoded_by_protobuf_are_the_batches_our_reader_returns(sim_rec):
+    # the gyro run: one message a frame, right after its points, with the head gyro's 20 samples of
+    # the frame (the first also the 5 s at rest before it); the plain run records none
+    path, log = sim_rec
+    ours = list(RecordingReader(path).imu())
+    with open(path, "rb") as fh:
+        theirs = [(m.log_time, d) for _s, _c, m, d in
+                  make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/imu"])]
+    assert len(theirs) == len(ours)
+    if not ours:
+        assert RecordingReader(path).meta["tracker_effective"].get("attitude") is None
+        return
+    assert len(ours) == len(log["t_end_s"])
+    assert [len(b) for b in ours] == [1000 + 20] + [20] * (len(ours) - 1)     # 200 Hz, rest_before_s 5
+    for k, (b, (t, d)) in enumerate(zip(ours, theirs)):
+        assert t == b.t_ns == d.t_ns == round(log["t_end_s"][k] * 1e9) and b.frame_id == d.frame_id == k
+        assert np.array(d.t_s).tobytes() == b.t_s.tobytes()
+        assert np.stack([d.gyro_x_rad_s, d.gyro_y_rad_s, d.gyro_z_rad_s], 1).tobytes() == b.gyro_rad_s.tobytes()
+        assert len(d.accel_x_g) == 0 and b.accel_g is None      # the simulated head IMU has no accelerometer
+        # the samples of the frame: from the previous frame's end (on the 5 ms grid) to before its own
+        assert b.t_s[-1] < log["t_end_s"][k] and (k == 0 or round(b.t_s[0] * 1e9) == ours[k - 1].t_ns)
 
 
 def test_the_channel_table_names_the_ids_of_the_summary(sim_rec):

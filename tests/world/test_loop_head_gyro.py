@@ -70,7 +70,64 @@ def test_gyro_beats_command_dead_reckoning_with_a_miscalibrated_table():
     assert gyro["head_angle_error_deg"]["max"] < 0.5
 
 
-def test_replay_of_a_gyro_run_says_the_imu_was_not_recorded(tmp_path, capsys):
+def _recorded_gyro_run(path, imu: bool = True, duration_s: float = 3.0):
+    """fig12-predictive (its commands follow the world estimate, so the head's angles) with the head
+    gyro and attitude = "gyro", the tracker's table nominal (command dead reckoning then runs degrees
+    off the gyro's), recorded as simulate records it; ``imu=False``: as recordings were made before
+    the IMU channel existed.  Returns the loop's per-frame log."""
+    from foveatrack.recording import RecordingWriter
+    from sim.recorder import SimRecorder, recording_meta
+
+    class WithoutImu(SimRecorder):
+        def __call__(self, frame, out, loop):
+            fed, loop.imu_fed = loop.imu_fed, None
+            try:
+                super().__call__(frame, out, loop)
+            finally:
+                loop.imu_fed = fed
+
+    sc = scene_variant(SCENES / "fig12-predictive.toml", "gyro", duration_s=duration_s)
+    sc = replace(sc, gimbal=replace(sc.gimbal, speed_table="nominal"))
+    loop = ClosedLoop(sc)
+    with RecordingWriter(path, recording_meta(sc, loop), created_utc="fixed") as w:
+        loop.frame_hook = (SimRecorder if imu else WithoutImu)(w)
+        return loop.run()
+
+
+@pytest.mark.slow
+def test_a_recorded_gyro_run_replays_to_the_bit(tmp_path):
+    # replay feeds the recorded gyro samples to the tracker before each frame, as the loop did: the
+    # commands, detections and head estimates are the run's, frame by frame, to the bit
+    from foveatrack.recording import RecordingReader
+    from foveatrack.replay import replay_recording
+
+    log = _recorded_gyro_run(tmp_path / "gyro.mcap")
+    res = replay_recording(tmp_path / "gyro.mcap")
+    c = res.comparison
+    n = len(log["t_end_s"])
+    assert c["gyro_samples_recorded"] is True
+    assert c["detections_equal"] and c["commands_equal"] and c["commands_compared"] == n, c
+    assert c["max_detection_xyz_diff_m"] == 0.0 and c["tracker_config_as_recorded"] is True
+    assert np.array_equal(res.frames["command"], log["command"])
+    assert np.array_equal(res.frames["detected"], log["detected"])
+    assert np.array_equal(res.frames["head_pan_deg"], res.recorded["head_pan_deg"])
+    assert np.array_equal(res.frames["head_tilt_deg"], res.recorded["head_tilt_deg"])
+    assert sum(len(b) for b in RecordingReader(tmp_path / "gyro.mcap").imu()) == 1000 + 20 * n
+    # the same run recorded without its samples (as before the channel): replay falls back to the
+    # commands' dead reckoning and says so; with the nominal table its head estimate then leaves the
+    # run's, and so do commands (measured: 26 of 30) and detections (6: the world-frame D), so the
+    # equality above is the gyro's doing, not a coincidence of the two attitudes
+    _recorded_gyro_run(tmp_path / "old.mcap", imu=False)
+    old = replay_recording(tmp_path / "old.mcap")
+    assert old.comparison["gyro_samples_recorded"] is False
+    assert np.array_equal(old.recorded["head_pan_deg"], res.recorded["head_pan_deg"])
+    off = np.hypot(old.frames["head_pan_deg"] - old.recorded["head_pan_deg"],
+                   old.frames["head_tilt_deg"] - old.recorded["head_tilt_deg"])
+    assert off.max() > 0.5
+    assert old.comparison["frames_command_differs"] > n // 2
+
+
+def test_replay_of_a_gyro_run_from_the_cli_is_the_run(tmp_path, capsys):
     from foveatrack.cli import main
 
     text = (SCENES / "fig12-tracking.toml").read_text().replace("[gimbal]\n", "[imu]\n\n[gimbal]\n", 1)
@@ -81,7 +138,20 @@ def test_replay_of_a_gyro_run_says_the_imu_was_not_recorded(tmp_path, capsys):
     assert main(["simulate", str(scene), "--duration", "1", "--out", str(tmp_path / "out"), "--no-progress"]) == 0
     capsys.readouterr()
     assert main(["replay", str(tmp_path / "out" / "run.mcap")]) == 0
-    assert "recordings hold no IMU samples" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "same as recorded: all 10 detections and 10 commands identical" in out
+    assert "no IMU samples" not in out
+
+
+def test_replay_with_the_gyro_of_a_recording_without_imu_samples_says_so(tmp_path, capsys):
+    # a recording made before the IMU channel (format 2, fig12, no [imu]) replayed with attitude = "gyro"
+    from foveatrack.cli import main
+
+    cfg = tmp_path / "gyro.toml"
+    cfg.write_text('[tracker]\nattitude = "gyro"\n')
+    fixture = Path(__file__).resolve().parents[1] / "recording" / "fixtures" / "fig12-v2.mcap"
+    assert main(["replay", str(fixture), "--tracker-config", str(cfg)]) == 0
+    assert "the recording holds no IMU samples" in capsys.readouterr().out
 
 
 def test_head_angle_error_is_the_rotation_between_the_attitudes():
