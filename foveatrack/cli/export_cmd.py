@@ -3,7 +3,8 @@
 ``--lvx OUT`` writes a Livox Viewer LVX v1.1 file (:mod:`foveatrack.livox.lvx_export`) that Livox
 Viewer, the vendor SDK's tools and ``livox-lvx`` read; ``--csv`` / ``--npz`` write every point
 (:func:`foveatrack.recording.export_points`); ``--trajectory F.csv|F.npz`` the recorded detections,
-head, truth and commands (:func:`foveatrack.recording.export_trajectory`).  Several at once are fine.
+head, truth and commands (:func:`foveatrack.recording.export_trajectory`); ``--imu F.csv|F.npz`` the IMU
+samples fed to the tracker (:func:`foveatrack.recording.export_imu`).  Several at once are fine.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ def register(sub) -> None:
     p.add_argument("--csv", metavar="OUT.csv", help="every point as CSV")
     p.add_argument("--npz", metavar="OUT.npz", help="every point as NPZ")
     p.add_argument("--trajectory", metavar="F.csv|F.npz", help="detections, head, truth and commands over time")
+    p.add_argument("--imu", metavar="F.csv|F.npz", help="the IMU samples fed to the tracker (gyro, accel)")
     p.add_argument("--data-type", type=int, metavar="N",
                    help="LVX point data type: 0 Cartesian, 1 spherical, 2/3 extended, 4/5 dual, 7/8 triple "
                         "(default: what the device sends, Mid-40 0, others 2)")
@@ -32,9 +34,9 @@ def cmd_export(args) -> int:
     from foveatrack.errors import UserError
 
     outs = [("--lvx", args.lvx, (".lvx",)), ("--csv", args.csv, (".csv",)), ("--npz", args.npz, (".npz",)),
-            ("--trajectory", args.trajectory, (".csv", ".npz"))]
+            ("--trajectory", args.trajectory, (".csv", ".npz")), ("--imu", args.imu, (".csv", ".npz"))]
     if not any(path for _, path, _ in outs):
-        raise UserError("export: give at least one of --lvx, --csv, --npz, --trajectory")
+        raise UserError("export: give at least one of --lvx, --csv, --npz, --trajectory, --imu")
     rec = Path(args.recording)
     if not rec.is_file():
         raise UserError(f"{rec}: no such recording")
@@ -55,11 +57,13 @@ def cmd_export(args) -> int:
               f"{r.devices} device{'s' if r.devices > 1 else ''}), {r.frames} frames -> {args.lvx}{extra}")
     elif args.data_type is not None or args.device:
         raise UserError("--data-type and --device are for --lvx")
-    from foveatrack.recording import export_points, export_trajectory
+    from foveatrack.recording import export_imu, export_points, export_trajectory
 
     for flag, path in (("--csv", args.csv), ("--npz", args.npz)):
         if path:
             print(f"{export_points(rec, path)} points -> {path}")
     if args.trajectory:
         print(f"{export_trajectory(rec, args.trajectory)} records -> {args.trajectory}")
+    if args.imu:
+        print(f"{export_imu(rec, args.imu)} IMU samples -> {args.imu}")
     return 0

@@ -1,4 +1,4 @@
-"""Exporting a recording's points and trajectory as CSV or NPZ."""
+"""Exporting a recording's points, trajectory and IMU samples as CSV or NPZ."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import numpy as np
 
 from foveatrack.errors import UserError
 from foveatrack.metrics import flatten
-from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRUTH
+from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, IMU, POINTS, TRUTH
 from foveatrack.recording.reader import RecordingReader
 
 
@@ -75,6 +75,11 @@ def export_trajectory(
     out_path = Path(out_path)
     kind = out_kind(out_path)
     channels = tuple(channels)
+    arrays_not_records = {POINTS: "export_points", IMU: "export_imu"}
+    for ch in channels:
+        if ch in arrays_not_records:
+            raise UserError(f"export of channel {ch!r}: its messages are arrays, not records; "
+                            f"use {arrays_not_records[ch]}")
     rows = [(m.channel, flatten(m.record, lists=True)) for m in RecordingReader(recording).messages(channels)]
     if kind == "csv":
         keys: list[str] = []
@@ -103,3 +108,28 @@ def export_trajectory(
                     arrays[f"{ch}.{k}"] = np.array(["" if v is None else str(v) for v in vals])
         np.savez_compressed(out_path, **arrays)
     return len(rows)
+
+
+def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike) -> int:
+    """Write the IMU samples fed to the tracker (the ``imu`` channel) to CSV or NPZ (by suffix);
+    returns the sample count.  Columns: ``frame_index`` (the frame they were fed before), ``t_s`` [s]
+    as fed, ``gyro_{x,y,z}_rad_s``, and ``accel_{x,y,z}_g`` where the source has an accelerometer
+    (NaN, an empty CSV cell, for samples without).  A recording without the channel is an error
+    that says so (recordings of runs without an IMU, or made before the channel existed)."""
+    out_path = Path(out_path)
+    out_kind(out_path)
+    batches = list(RecordingReader(recording).imu())
+    if not batches:
+        raise UserError(f"{recording} holds no IMU samples (a run without an IMU on the head, or a recording "
+                        f"made before foveatrack recorded them)")
+    n = [len(b) for b in batches]
+    acc = [b.accel_g if b.accel_g is not None else np.full((len(b), 3), np.nan) for b in batches]
+    gyro = np.concatenate([b.gyro_rad_s.reshape(-1, 3) for b in batches])
+    accel = np.concatenate([a.reshape(-1, 3) for a in acc])
+    cols = {"frame_index": np.repeat([b.frame_id for b in batches], n).astype(np.int64),
+            "t_s": np.concatenate([b.t_s for b in batches])}
+    cols.update((f"gyro_{a}_rad_s", gyro[:, i]) for i, a in enumerate("xyz"))
+    if not np.isnan(accel).all():
+        cols.update((f"accel_{a}_g", accel[:, i]) for i, a in enumerate("xyz"))
+    write_columns(out_path, cols, nan_as_empty=True)
+    return int(cols["t_s"].shape[0])

@@ -143,3 +143,40 @@ def test_a_recording_with_imu_batches_streams_to_the_live_view(tmp_path):
     with RecordingWriter(tmp_path / "r.mcap", META) as w:
         write_all(w)
     assert stream_recording(tmp_path / "r.mcap", port=0, speed=1e6) == 18
+
+
+def test_export_writes_every_sample_with_its_frame_and_refuses_a_recording_without_them(tmp_path, capsys):
+    import csv
+
+    from foveatrack.cli import main
+    from foveatrack.errors import UserError
+    from foveatrack.recording import export_imu, export_trajectory
+
+    rec = tmp_path / "r.mcap"
+    with RecordingWriter(rec, META, created_utc="fixed") as w:
+        write_all(w)
+    assert main(["export", str(rec), "--imu", str(tmp_path / "imu.npz")]) == 0
+    assert "IMU samples ->" in capsys.readouterr().out
+    z = np.load(tmp_path / "imu.npz")
+    want = list(batches())
+    assert z["t_s"].tobytes() == np.concatenate([b[2] for b in want]).tobytes()
+    assert z["frame_index"].tolist() == [k for k, _, t_s, _, _ in want for _ in t_s]
+    gyro = np.concatenate([b[3] for b in want])
+    assert np.array_equal(np.stack([z[f"gyro_{a}_rad_s"] for a in "xyz"], axis=1), gyro)
+    # accel only where the source gave it (frame 2); NaN elsewhere
+    accel = np.stack([z[f"accel_{a}_g"] for a in "xyz"], axis=1)
+    in_frame_2 = z["frame_index"] == 2
+    assert np.array_equal(accel[in_frame_2], want[2][4]) and np.isnan(accel[~in_frame_2]).all()
+    n = export_imu(rec, tmp_path / "imu.csv")
+    with open(tmp_path / "imu.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert n == len(rows) == len(z["t_s"]) and float(rows[0]["t_s"]) == z["t_s"][0]
+    assert rows[0]["accel_x_g"] == "" and rows[0]["gyro_x_rad_s"] != ""
+    # asked of the record export, the channel is named with where to go instead of failing in a decoder
+    with pytest.raises(UserError, match="'imu'.*export_imu"):
+        export_trajectory(rec, tmp_path / "t.csv", channels=[IMU])
+    bare = tmp_path / "bare.mcap"
+    with RecordingWriter(bare, META, created_utc="fixed") as w:
+        w.write_detection(1, 0, False)
+    assert main(["export", str(bare), "--imu", str(tmp_path / "none.csv")]) == 2
+    assert "holds no IMU samples" in capsys.readouterr().err
