@@ -14,7 +14,8 @@ from typing import Iterable, Iterator
 from foveatrack.errors import UserError
 from foveatrack.recording import mcap_walk as mw
 from foveatrack.recording.format import (CHANNELS_META_NAME, FORMAT, IMU, MCAP_MAGIC, META_NAME, POINTS,
-                                         READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message, PointsFrame,
+                                         READABLE_VERSIONS, RECORD_SCHEMAS, VIEW_CHANNELS, ImuSamples, Message,
+                                         PointsFrame,
                                          _decode_points, _decode_points_pb, decode_imu_pb)
 
 
@@ -406,7 +407,9 @@ class RecordingReader:
     # ------------------------------------------------------------------ public reading
 
     def messages(self, channels: Iterable[str] | str | None = None) -> Iterator[Message]:
-        """Messages in file order, optionally only those of ``channels`` (names without '/')."""
+        """Messages in file order, optionally only those of ``channels`` (names without '/').  A
+        channel this version does not know gives its JSON records, or its raw bytes if they are not
+        JSON (a later version's binary channel: read past, not taken for damage)."""
         want = {channels} if isinstance(channels, str) else None if channels is None else set(channels)
         pb = self.info.get("format_version") != "1"
         mm_grid = self.info.get("format_version") not in ("1", "2")
@@ -423,8 +426,15 @@ class RecordingReader:
                     record = _decode_points_pb(data, mm_grid) if pb else _decode_points(data)
                 elif name == IMU:
                     record = decode_imu_pb(data)
-                else:
+                elif name in RECORD_SCHEMAS:
                     record = json.loads(data)
+                else:
+                    # a channel this version does not know (written by a later one): JSON if it is,
+                    # else its raw bytes; never "damaged" for being new
+                    try:
+                        record = json.loads(data)
+                    except ValueError:
+                        record = bytes(data)
             except (ValueError, KeyError, TypeError) as exc:
                 raise UserError(f"{self.path}: a {name} message at t_ns={log_time} is damaged: {exc}") from None
             yield Message(name, int(log_time), record)

@@ -247,3 +247,22 @@ def test_a_damaged_last_chunk_is_skipped_and_reported(tmp_path):
     (d,) = r.damage
     assert d.lost == {"points": 1} and d.lost_exact and d.start_byte == start_last
     assert r.problem.startswith(f"skipped bytes {start_last}-") and "1 frame and 0 other records lost" in r.problem
+
+
+def test_a_binary_channel_of_a_later_version_is_read_past_not_taken_for_damage(tmp_path):
+    # A recording with a channel this version does not know, protobuf-encoded (as /imu was new once):
+    # its bytes come through as they are, a JSON channel it does not know as records, the rest as usual.
+    import foxglove
+
+    path = tmp_path / "later.mcap"
+    with RecordingWriter(path, {"seed": 1}, created_utc="fixed") as w:
+        w.write_detection(1_000, 0, False)
+        later = foxglove.Channel("/later_binary", message_encoding="protobuf", context=w.context,
+                                 schema=foxglove.Schema(name="x.Later", encoding="protobuf", data=b""))
+        later.log(b"\x08\x96\x01\xff", log_time=2_000)
+        w.write("later_json", 3_000, {"a": 1})
+    msgs = list(RecordingReader(path).messages())
+    got = {m.channel: m.record for m in msgs}
+    assert got["later_binary"] == b"\x08\x96\x01\xff"
+    assert got["later_json"] == {"t_ns": 3_000, "a": 1}
+    assert got["detections"]["detected"] is False
