@@ -47,13 +47,17 @@ def wrap_deg(a):
     return float(w) if np.ndim(w) == 0 else w
 
 
-def bearing_deg(x: float, y: float, z: float) -> tuple[float, float]:
-    """Azimuth and elevation [deg] of a point (lidar or any right-handed X-fwd/Y-left/Z-up frame)."""
+def bearing_deg(x: float, y: float, z: float, hypot_xy: float | None = None) -> tuple[float, float]:
+    """Azimuth and elevation [deg] of a point (lidar or any right-handed X-fwd/Y-left/Z-up frame).
+    ``hypot_xy``: ``np.hypot(x, y)`` if the caller has it (the box kernel computes it with the same
+    libm ``hypot``), to spare numpy's scalar call."""
     # x + 0.0 turns -0.0 into +0.0: straight overhead (x = y = 0) has az 0, not atan2(0, -0.0) = 180.
     # math.atan2/math.degrees give numpy's bits on scalars (libm atan2, x * (180/pi)); math.hypot
     # does not (CPython's own algorithm differs from libm's hypot in the last bit), so np.hypot stays.
     az = wrap_deg(math.degrees(math.atan2(y, x + 0.0)))
-    el = math.degrees(math.atan2(z, float(np.hypot(x, y))))
+    if hypot_xy is None:
+        hypot_xy = float(np.hypot(x, y))
+    el = math.degrees(math.atan2(z, hypot_xy))
     return az, el
 
 
@@ -130,30 +134,37 @@ def detect_points(xyz: np.ndarray, t_ns: np.ndarray, space=None, *, test_xyz: np
 def detect_in_box(xyz: np.ndarray, t_ns: np.ndarray, box, rot: np.ndarray, offset: np.ndarray) -> Detection | None:
     """Algorithm 1 with a box D in one kernel call (:func:`foveatrack.kernels.box_median_kernel`):
     the same detection as :func:`detect_points` with ``test_xyz = (xyz + offset) @ rot.T``."""
+    lo, hi = box_bounds(box)
+    return box_detection(xyz, t_ns, np.ascontiguousarray(rot, dtype=np.float64),
+                         np.asarray(offset, dtype=np.float64), lo, hi)
+
+
+def box_detection(xyz: np.ndarray, t_ns: np.ndarray, rot: np.ndarray, offset: np.ndarray, lo: np.ndarray,
+                  hi: np.ndarray) -> Detection | None:
+    """:func:`detect_in_box` for a caller that holds D's bounds (``lo``, ``hi``: (3,) float64, see
+    :func:`box_bounds`) and a float64 C-contiguous ``rot`` (3, 3) and ``offset`` (3,) (the tracker,
+    every frame)."""
     global _box_median_kernel
     if _box_median_kernel is None:   # numba loads on first use, not on import
         from foveatrack.kernels import box_median_kernel as _box_median_kernel
     xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
     t_ns = np.ascontiguousarray(t_ns, dtype=np.int64).reshape(-1)
-    rot = np.ascontiguousarray(rot, dtype=np.float64)
-    offset = np.asarray(offset, dtype=np.float64)
-    lo, hi = _box_bounds(box)
     if t_ns.shape[0] < xyz.shape[0]:   # malformed input: the general route reports it
         return _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi)
     p = np.empty(3)
-    n, t_med_ns = _box_median_kernel(xyz, t_ns, rot, offset, lo, hi, p)
+    n, t_med_ns, hypot_xy = _box_median_kernel(xyz, t_ns, rot, offset, lo, hi, p)
     if n == 0:
         return None
     if n < 0:   # a zero median: its sign is numpy's sort's business (see the kernel)
         return _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi)
-    return _detection(p, t_med_ns, n)
+    return _detection(p, t_med_ns, n, hypot_xy)
 
 
 _box_median_kernel = None
 _BOX_BOUNDS: dict = {}
 
 
-def _box_bounds(box) -> tuple[np.ndarray, np.ndarray]:
+def box_bounds(box) -> tuple[np.ndarray, np.ndarray]:
     """``box.min_xyz``, ``box.max_xyz`` as float64 arrays, made once per distinct box."""
     key = (tuple(box.min_xyz), tuple(box.max_xyz))
     b = _BOX_BOUNDS.get(key)
@@ -182,11 +193,12 @@ def _median_detection(pts: np.ndarray, t_ns: np.ndarray) -> Detection:
     return _detection(p, _median_rows(t_ns.astype(np.float64)), int(pts.shape[0]))
 
 
-def _detection(p: np.ndarray, t_med_ns: float, n: int) -> Detection:
-    """A Detection from the median position ``p`` (3,), median time [ns] and the point count.
+def _detection(p: np.ndarray, t_med_ns: float, n: int, hypot_xy: float | None = None) -> Detection:
+    """A Detection from the median position ``p`` (3,), median time [ns] and the point count
+    (``hypot_xy``: see :func:`bearing_deg`).
     ``|p|`` as ``np.linalg.norm`` computes it for a vector (``sqrt(p.dot(p))``), without its checks."""
     x, y, z = p.tolist()
-    az, el = bearing_deg(x, y, z)
+    az, el = bearing_deg(x, y, z, hypot_xy)
     return _make_detection(float(t_med_ns) * 1e-9, p, n, az, el, math.sqrt(p.dot(p)))
 
 

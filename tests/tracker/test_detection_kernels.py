@@ -71,12 +71,29 @@ def test_box_median_kernel_matches_numpy_median(pan, tilt, n):
     else:   # few points: a box around everything, so the medians see them all
         lo, hi = np.full(3, -1e9), np.full(3, 1e9)
     out = np.empty(3)
-    k, t_med = box_median_kernel(xyz, t_ns, rot, offset, lo, hi, out)
+    k, t_med, hypot_xy = box_median_kernel(xyz, t_ns, rot, offset, lo, hi, out)
     k_ref, p_ref, t_ref = _numpy_box_median(xyz, t_ns, rot, offset, lo, hi)
     assert abs(k) == k_ref
     if k_ref:
         assert k > 0 and t_med == t_ref
         assert out.tobytes() == p_ref.tobytes()
+        assert hypot_xy == float(np.hypot(p_ref[0], p_ref[1]))
+
+
+@pytest.mark.parametrize("x, y", [(3.0, 4.0), (1e-310, 3e-310), (1e300, 1e300), (0.1, 0.2), (-7.25, 1e-9),
+                                  (123.456, -0.001)])
+def test_box_median_kernels_hypot_is_numpys(x, y):
+    """The kernel's hypot of the median (the elevation's denominator) has np.hypot's bits (both call
+    libm's hypot; CPython's math.hypot differs in the last bit on some inputs), also where scaling
+    matters (subnormal, huge), and over many random points."""
+    rng = np.random.default_rng(7)
+    pts = np.vstack([[x, y, 1.0], rng.normal(0, 30, (2000, 3))])
+    lo, hi = np.full(3, -1e308), np.full(3, 1e308)
+    for p in pts:
+        out = np.empty(3)
+        k, _, hypot_xy = box_median_kernel(p[None, :].copy(), np.zeros(1, np.int64), np.eye(3), np.zeros(3),
+                                           lo, hi, out)
+        assert k == 1 and hypot_xy == float(np.hypot(p[0], p[1]))
 
 
 def test_a_zero_median_takes_numpys_route_bit_for_bit():
@@ -85,7 +102,7 @@ def test_a_zero_median_takes_numpys_route_bit_for_bit():
     xyz = np.array([[5.0, -0.0, 1.0], [6.0, 0.0, 2.0], [7.0, 0.0, -0.0], [8.0, -0.0, 0.0], [9.0, 1.0, 0.0]])
     t_ns = np.arange(5, dtype=np.int64) * 1000
     box = Box((1.0, -5.0, -5.0), (20.0, 5.0, 5.0))
-    k, _ = box_median_kernel(xyz, t_ns, np.eye(3), np.zeros(3), np.array(box.min_xyz), np.array(box.max_xyz),
+    k, _, _ = box_median_kernel(xyz, t_ns, np.eye(3), np.zeros(3), np.array(box.min_xyz), np.array(box.max_xyz),
                              np.empty(3))
     assert k == -5
     a = detect_in_box(xyz, t_ns, box, np.eye(3), np.zeros(3))
