@@ -133,7 +133,10 @@ class _AxisIntegrator:
             sb = k.sig_run
             s0 = k.s_run
             var_b += (sb * (s0 + k.direction * (t - k.t))) ** 2 - (sb * s0) ** 2
-        var = max(self._var0 + var_b + k.var_timing + self.q * max(t - self.t0, 0.0), 0.0)
+        var = self._var0 + var_b + k.var_timing
+        if self.q:   # the ripple's random walk (none by default: adding q * dt = 0.0 would change no bit)
+            var += self.q * max(t - self.t0, 0.0)
+        var = max(var, 0.0)
         if self.wrap and not -180.0 < ang <= 180.0:   # in range: wrap_deg returns it unchanged
             ang = wrap_deg(ang)
         return ang, v, math.sqrt(var)
@@ -150,11 +153,11 @@ class _AxisIntegrator:
             self.times.pop()
             last = self.knots[-1]
         idx = -1 if direction == 0 else (64 if byte == TURBO else byte)
+        if idx == last.idx and direction == last.direction:   # the same speed (its byte was checked then)
+            return
         v_tgt = 0.0 if direction == 0 else direction * self.table.speed_deg_s(byte)
         if not math.isfinite(v_tgt):
             raise ValueError(f"byte {byte} has no known speed in the {self.table.axis} table")
-        if idx == last.idx and direction == last.direction:
-            return
         ang, v = self._advance(last, t_eff)
         S = last.S.copy()
         if last.idx >= 0:

@@ -39,7 +39,7 @@ import numpy as np
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
 from foveatrack.control import (STOP, HeadCommand, deadband_p, head_command, head_errors_deg,
                                 limit_for_stops, speed_to_axis)
-from foveatrack.detection import Detection, detect, detect_in_box, frozen_maker, wrap_deg
+from foveatrack.detection import Detection, box_bounds, box_detection, detect, frozen_maker, wrap_deg
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.gyro_attitude import GyroAttitude
@@ -331,6 +331,12 @@ class Tracker:
         self.last_pan_error_deg = 0.0
         self.lost_since_s: float | None = None
         self.last_command: HeadCommand = STOP
+        # A box D (the common case) is tested by one kernel call with its bounds made once here:
+        # (lo, hi, in the world frame?), or None for any other D.
+        space = config.space
+        self._box = None
+        if isinstance(space, Box):
+            self._box = box_bounds(space) + (getattr(space, "frame", "lidar") == "world",)
 
     def rebased(self, t0_s: float, pan_deg: float, tilt_deg: float) -> "Tracker":
         """A fresh tracker (state and filters restarted) with this one's configuration and speed table,
@@ -384,17 +390,19 @@ class Tracker:
 
     # ------------------------------------------------------------------------------------------
     def _detect(self, frame: Frame) -> Detection | None:
-        space = self.config.space
-        test_xyz = None
-        in_world = space is not None and getattr(space, "frame", "lidar") == "world"
-        if isinstance(space, Box):   # the common D, in one pass
+        """Algorithm 1 on the frame, D tested in its own frame (the lidar's, or the world at the
+        head's estimated pose at mid-frame)."""
+        if self._box is not None:   # the common D, in one pass
+            lo, hi, in_world = self._box
             if in_world:
                 rot, offset = self.recon.rotation_at(frame.t_mid_s), self.recon.lidar_offset_m
             else:
                 rot, offset = _IDENTITY, _ZERO3
-            det = detect_in_box(frame.xyz, frame.t_ns, space, rot, offset)
+            det = box_detection(frame.xyz, frame.t_ns, rot, offset, lo, hi)
         else:
-            if in_world and frame.n_points:
+            space = self.config.space
+            test_xyz = None
+            if space is not None and getattr(space, "frame", "lidar") == "world" and frame.n_points:
                 test_xyz = self.recon.lidar_to_world(frame.xyz, frame.t_mid_s)
             det = detect(frame, space, test_xyz=test_xyz)
         if det is not None and det.n_points < self.config.min_points:
