@@ -54,7 +54,9 @@ def bearing_deg(x: float, y: float, z: float, hypot_xy: float | None = None) -> 
     # x + 0.0 turns -0.0 into +0.0: straight overhead (x = y = 0) has az 0, not atan2(0, -0.0) = 180.
     # math.atan2/math.degrees give numpy's bits on scalars (libm atan2, x * (180/pi)); math.hypot
     # does not (CPython's own algorithm differs from libm's hypot in the last bit), so np.hypot stays.
-    az = wrap_deg(math.degrees(math.atan2(y, x + 0.0)))
+    az = math.degrees(math.atan2(y, x + 0.0))
+    if not -180.0 < az <= 180.0:   # in range: wrap_deg returns it unchanged
+        az = wrap_deg(az)
     if hypot_xy is None:
         hypot_xy = float(np.hypot(x, y))
     el = math.degrees(math.atan2(z, hypot_xy))

@@ -52,7 +52,7 @@ from foveatrack.speed_table import TURBO, AxisTable, SpeedTable
 
 def rotation_matrix(pan_deg: float, tilt_deg: float) -> np.ndarray:
     """``R_z(pan) @ R_y(-tilt)``: head (tilt-stage) coordinates -> world (see module docstring)."""
-    p = math.radians(wrap_deg(pan_deg))
+    p = math.radians(pan_deg if -180.0 < pan_deg <= 180.0 else wrap_deg(pan_deg))   # wrap_deg keeps these
     t = math.radians(tilt_deg)
     cp, sp, ct, st = math.cos(p), math.sin(p), math.cos(t), math.sin(t)
     return np.array([cp * ct, -sp, -cp * st,
@@ -167,7 +167,7 @@ class _AxisIntegrator:
         if self.wrap:
             ang = wrap_deg(ang)
         self.knots.append(_Knot(t_eff, ang, v, v_tgt, idx, direction, S, var_t,
-                                float(np.sum((self.sig_b * S) ** 2)),
+                                float(((self.sig_b * S) ** 2).sum()),
                                 float(self.sig_b[idx]) if idx >= 0 else 0.0, float(S[idx]) if idx >= 0 else 0.0))
         self.times.append(t_eff)
         # bound memory: keep knots within history_s of the newest (always >= 2)
@@ -258,8 +258,10 @@ class Reconstructor(HeadPose):
         """Record that ``cmd`` was written to the head at ``t_s`` (commands in time order)."""
         t_eff = t_s + self.effect_delay_s
         memo, self._memo = self._memo, {}
-        self.pan.command(t_eff, cmd.pan_dir, cmd.pan_byte)
-        self.tilt.command(t_eff, cmd.tilt_dir, cmd.tilt_byte)
+        if cmd is not self.last_command or t_eff <= max(self.pan.times[-1], self.tilt.times[-1]):
+            # (the same command later changes neither axis: each would return at its first test)
+            self.pan.command(t_eff, cmd.pan_dir, cmd.pan_byte)
+            self.tilt.command(t_eff, cmd.tilt_dir, cmd.tilt_byte)
         self.last_command = cmd
         self.last_send_t_s = t_s
         # A command changes nothing before its effect time: answers for earlier instants still

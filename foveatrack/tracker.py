@@ -331,6 +331,7 @@ class Tracker:
         self.last_pan_error_deg = 0.0
         self.lost_since_s: float | None = None
         self.last_command: HeadCommand = STOP
+        self._head_errors = config.error_frame == "head" or config.controller == "predictive"
         # A box D (the common case) is tested by one kernel call with its bounds made once here:
         # (lo, hi, in the world frame?), or None for any other D.
         space = config.space
@@ -356,8 +357,7 @@ class Tracker:
         world = sigma_w = None
         if det is not None:
             hp, ht, sp, st = self.recon.angles_at(det.t_s)
-            use_head = cfg.error_frame == "head" or cfg.controller == "predictive"
-            if use_head:
+            if self._head_errors:
                 err_pan, err_tilt = head_errors_deg(det.xyz, ht, cfg.lidar_offset_m)
             else:   # lidar_errors_deg(det.xyz): the detection's bearing, already computed
                 err_pan, err_tilt = det.az_deg, det.el_deg
@@ -465,11 +465,17 @@ class Tracker:
     def _to_command(self, v_pan: float, v_tilt: float, send_t: float) -> tuple[HeadCommand, float, float, bool]:
         cfg = self.config
         t_act = send_t + self.recon.effect_delay_s
-        tilt_a, s_tilt = self.recon.tilt_at(t_act)
-        v_tilt, lim_t = limit_for_stops(v_tilt, tilt_a, s_tilt, *cfg.tilt_limits_deg, cfg.tilt_margin_deg,
-                                        cfg.stop_lookahead_s)
+        # A zero speed needs no stop limit (limit_for_stops returns (0.0, False) without the angle):
+        # the head's estimate at t_act is only worked out for a moving axis.
+        lim_t = False
+        if v_tilt != 0.0:
+            tilt_a, s_tilt = self.recon.tilt_at(t_act)
+            v_tilt, lim_t = limit_for_stops(v_tilt, tilt_a, s_tilt, *cfg.tilt_limits_deg, cfg.tilt_margin_deg,
+                                            cfg.stop_lookahead_s)
+        else:
+            v_tilt = 0.0   # as limit_for_stops returns it (+0.0 for -0.0)
         lim_p = False
-        if cfg.pan_limits_deg is not None:
+        if cfg.pan_limits_deg is not None and v_pan != 0.0:
             pan_a, _, s_pan, _ = self.recon.angles_at(t_act)
             v_pan, lim_p = limit_for_stops(v_pan, pan_a, s_pan, *cfg.pan_limits_deg, cfg.tilt_margin_deg,
                                            cfg.stop_lookahead_s)
