@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import abc
 import bisect
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -269,9 +270,12 @@ class Reconstructor(HeadPose):
         # Only the instants asked since the previous command are carried (older ones are not asked
         # again in practice, and the memo stays small).
         t_first = max(self.pan.times[0], self.tilt.times[0])
-        fresh = list(memo.items())[self._n_carried:] if self._n_carried else memo.items()
-        self._memo = {k: v for k, v in fresh if t_first <= k < t_eff}
-        self._n_carried = len(self._memo)
+        # (a loop: a comprehension's own call costs more than it saves over these few entries)
+        carried = self._memo
+        for t, ans in itertools.islice(memo.items(), self._n_carried, None):
+            if t_first <= t < t_eff:
+                carried[t] = ans
+        self._n_carried = len(carried)
 
     def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
         """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180]."""
