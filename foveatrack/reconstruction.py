@@ -204,7 +204,7 @@ class HeadPose(abc.ABC):
         distance from the pan axis and ``r`` the distance from the head centre (radians inside)."""
         p, t, sp, st = self.angles_at(detection.t_s)
         q = np.asarray(detection.xyz, float) + self.lidar_offset_m
-        w = rotation_matrix(p, t) @ q
+        w = rotation_matrix(p, t).dot(q)   # R @ q's bits (the same BLAS gemv), without matmul's ~0.5 us
         w0, w1, _ = w.tolist()
         rho = math.hypot(w0, w1)
         r = math.sqrt(q.dot(q))   # np.linalg.norm(q), without its checks
