@@ -85,6 +85,7 @@ class _AxisIntegrator:
         self.limits = limits
         self.wrap = wrap
         self.sig_b = np.nan_to_num(table.speeds_array()[1], nan=0.0)
+        self._sig_b_list = self.sig_b.tolist()
         self.sigma0 = sigma0
         self._var0 = sigma0 ** 2
         self.timing_sigma_s = timing_sigma_s
@@ -160,16 +161,18 @@ class _AxisIntegrator:
         if not math.isfinite(v_tgt):
             raise ValueError(f"byte {byte} has no known speed in the {self.table.axis} table")
         ang, v = self._advance(last, t_eff)
-        S = last.S.copy()
         if last.idx >= 0:
+            S = last.S.copy()
             S[last.idx] += last.direction * (t_eff - last.t)
+            var_bytes = float(((self.sig_b * S) ** 2).sum())
+        else:   # the axis was stopped: no byte's time grew (a knot's S is never written after this)
+            S, var_bytes = last.S, last.var_bytes
         dv = v_tgt - last.v_tgt
         var_t = last.var_timing + (dv * self.timing_sigma_s) ** 2
         if self.wrap:
             ang = wrap_deg(ang)
-        self.knots.append(_Knot(t_eff, ang, v, v_tgt, idx, direction, S, var_t,
-                                float(((self.sig_b * S) ** 2).sum()),
-                                float(self.sig_b[idx]) if idx >= 0 else 0.0, float(S[idx]) if idx >= 0 else 0.0))
+        self.knots.append(_Knot(t_eff, ang, v, v_tgt, idx, direction, S, var_t, var_bytes,
+                                self._sig_b_list[idx] if idx >= 0 else 0.0, float(S[idx]) if idx >= 0 else 0.0))
         self.times.append(t_eff)
         # bound memory: keep knots within history_s of the newest (always >= 2)
         cut = bisect.bisect_left(self.times, t_eff - self.history_s) - 1
