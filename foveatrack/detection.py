@@ -133,32 +133,37 @@ def detect_points(xyz: np.ndarray, t_ns: np.ndarray, space=None, *, test_xyz: np
     return _median_detection(xyz[keep], t_ns[keep])
 
 
-def detect_in_box(xyz: np.ndarray, t_ns: np.ndarray, box, rot: np.ndarray, offset: np.ndarray) -> Detection | None:
+LEVEL = (1.0, 0.0, 1.0, 0.0)   # (cos pan, sin pan, cos tilt, sin tilt) of pan = tilt = 0: no turn
+
+
+def detect_in_box(xyz: np.ndarray, t_ns: np.ndarray, box, trig=LEVEL, offset=(0.0, 0.0, 0.0)) -> Detection | None:
     """Algorithm 1 with a box D in one kernel call (:func:`foveatrack.kernels.box_median_kernel`):
-    the same detection as :func:`detect_points` with ``test_xyz = (xyz + offset) @ rot.T``."""
+    the same detection as :func:`detect_points` with ``test_xyz = (xyz + offset) @ R.T``, where
+    ``R = rotation_matrix(pan, tilt)`` and ``trig = head_trig(pan, tilt)`` (the cosines and sines it
+    is made of, :mod:`foveatrack.reconstruction`)."""
     lo, hi = box_bounds(box)
-    return box_detection(xyz, t_ns, np.ascontiguousarray(rot, dtype=np.float64),
-                         np.asarray(offset, dtype=np.float64), lo, hi)
+    return box_detection(xyz, t_ns, tuple(float(v) for v in trig), np.asarray(offset, dtype=np.float64), lo, hi)
 
 
-def box_detection(xyz: np.ndarray, t_ns: np.ndarray, rot: np.ndarray, offset: np.ndarray, lo: np.ndarray,
-                  hi: np.ndarray) -> Detection | None:
+def box_detection(xyz: np.ndarray, t_ns: np.ndarray, trig: tuple[float, float, float, float],
+                  offset: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Detection | None:
     """:func:`detect_in_box` for a caller that holds D's bounds (``lo``, ``hi``: (3,) float64, see
-    :func:`box_bounds`) and a float64 C-contiguous ``rot`` (3, 3) and ``offset`` (3,) (the tracker,
-    every frame)."""
+    :func:`box_bounds`), the pose's ``trig`` as floats and ``offset`` (3,) float64 (the tracker, every
+    frame)."""
     global _box_median_kernel
     if _box_median_kernel is None:   # numba loads on first use, not on import
         from foveatrack.kernels import box_median_kernel as _box_median_kernel
     xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
     t_ns = np.ascontiguousarray(t_ns, dtype=np.int64).reshape(-1)
     if t_ns.shape[0] < xyz.shape[0]:   # malformed input: the general route reports it
-        return _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi)
+        return _detect_in_box_general(xyz, t_ns, trig, offset, lo, hi)
     p = np.empty(3)
-    n, t_med_ns, hypot_xy = _box_median_kernel(xyz, t_ns, rot, offset, lo, hi, p)
+    cp, sp, ct, st = trig
+    n, t_med_ns, hypot_xy = _box_median_kernel(xyz, t_ns, cp, sp, ct, st, offset, lo, hi, p)
     if n == 0:
         return None
     if n < 0:   # a zero median: its sign is numpy's sort's business (see the kernel)
-        return _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi)
+        return _detect_in_box_general(xyz, t_ns, trig, offset, lo, hi)
     return _detection(p, t_med_ns, n, hypot_xy)
 
 
@@ -179,12 +184,13 @@ def box_bounds(box) -> tuple[np.ndarray, np.ndarray]:
     return b
 
 
-def _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi) -> Detection | None:
+def _detect_in_box_general(xyz, t_ns, trig, offset, lo, hi) -> Detection | None:
     """:func:`detect_in_box` with numpy's medians (:func:`_median_detection`)."""
     from foveatrack.kernels import box_members_kernel
 
     idx = np.empty(xyz.shape[0], dtype=np.int64)
-    n = box_members_kernel(xyz, rot, offset, lo, hi, idx)
+    cp, sp, ct, st = trig
+    n = box_members_kernel(xyz, cp, sp, ct, st, offset, lo, hi, idx)
     if n == 0:
         return None
     return _median_detection(xyz[idx[:n]], t_ns[idx[:n]])
@@ -232,5 +238,5 @@ def compile_all() -> None:
 
     box = Box((0.0, 0.0, 0.0), (2.0, 2.0, 2.0))
     t_ns = np.zeros(1, dtype=np.int64)
-    detect_in_box(np.ones((1, 3)), t_ns, box, np.eye(3), np.zeros(3))
-    detect_in_box(np.array([[1.0, 0.0, 1.0]]), t_ns, box, np.eye(3), np.zeros(3))   # a zero median
+    detect_in_box(np.ones((1, 3)), t_ns, box, LEVEL, np.zeros(3))
+    detect_in_box(np.array([[1.0, 0.0, 1.0]]), t_ns, box, LEVEL, np.zeros(3))   # a zero median

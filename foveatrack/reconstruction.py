@@ -51,11 +51,17 @@ from foveatrack.detection import Detection, wrap_deg
 from foveatrack.speed_table import TURBO, AxisTable, SpeedTable
 
 
-def rotation_matrix(pan_deg: float, tilt_deg: float) -> np.ndarray:
-    """``R_z(pan) @ R_y(-tilt)``: head (tilt-stage) coordinates -> world (see module docstring)."""
+def head_trig(pan_deg: float, tilt_deg: float) -> tuple[float, float, float, float]:
+    """``(cos pan, sin pan, cos tilt, sin tilt)`` of a head pose [deg]: what :func:`rotation_matrix`
+    is made of (the box kernel, :func:`foveatrack.kernels.box_median_kernel`, makes R from them)."""
     p = math.radians(pan_deg if -180.0 < pan_deg <= 180.0 else wrap_deg(pan_deg))   # wrap_deg keeps these
     t = math.radians(tilt_deg)
-    cp, sp, ct, st = math.cos(p), math.sin(p), math.cos(t), math.sin(t)
+    return math.cos(p), math.sin(p), math.cos(t), math.sin(t)
+
+
+def rotation_matrix(pan_deg: float, tilt_deg: float) -> np.ndarray:
+    """``R_z(pan) @ R_y(-tilt)``: head (tilt-stage) coordinates -> world (see module docstring)."""
+    cp, sp, ct, st = head_trig(pan_deg, tilt_deg)
     return np.array([cp * ct, -sp, -cp * st,
                      sp * ct, cp, -sp * st,
                      st, 0.0, ct]).reshape(3, 3)

@@ -39,17 +39,16 @@ import numpy as np
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
 from foveatrack.control import (STOP, HeadCommand, deadband_p, head_command, head_errors_deg,
                                 limit_for_stops, speed_to_axis)
-from foveatrack.detection import Detection, box_bounds, box_detection, detect, frozen_maker, wrap_deg
+from foveatrack.detection import LEVEL, Detection, box_bounds, box_detection, detect, frozen_maker, wrap_deg
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.gyro_attitude import GyroAttitude
 from foveatrack.predictive import BearingFilter
-from foveatrack.reconstruction import Reconstructor
+from foveatrack.reconstruction import Reconstructor, head_trig
 from foveatrack.space_of_interest import Box, SpaceOfInterest, space_from_mapping
 from foveatrack.speed_table import SpeedTable
 
 
-_IDENTITY = np.eye(3)
 _ZERO3 = np.zeros(3)
 
 
@@ -395,10 +394,11 @@ class Tracker:
         if self._box is not None:   # the common D, in one pass
             lo, hi, in_world = self._box
             if in_world:
-                rot, offset = self.recon.rotation_at(frame.t_mid_s), self.recon.lidar_offset_m
+                pan, tilt, _, _ = self.recon.angles_at(frame.t_mid_s)
+                trig, offset = head_trig(pan, tilt), self.recon.lidar_offset_m
             else:
-                rot, offset = _IDENTITY, _ZERO3
-            det = box_detection(frame.xyz, frame.t_ns, rot, offset, lo, hi)
+                trig, offset = LEVEL, _ZERO3
+            det = box_detection(frame.xyz, frame.t_ns, trig, offset, lo, hi)
         else:
             space = self.config.space
             test_xyz = None
