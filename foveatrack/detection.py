@@ -141,22 +141,25 @@ def detect_in_box(xyz: np.ndarray, t_ns: np.ndarray, box, trig=LEVEL, offset=(0.
     the same detection as :func:`detect_points` with ``test_xyz = (xyz + offset) @ R.T``, where
     ``R = rotation_matrix(pan, tilt)`` and ``trig = head_trig(pan, tilt)`` (the cosines and sines it
     is made of, :mod:`foveatrack.reconstruction`)."""
+    xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
+    t_ns = np.ascontiguousarray(t_ns, dtype=np.int64).reshape(-1)
     lo, hi = box_bounds(box)
-    return box_detection(xyz, t_ns, tuple(float(v) for v in trig), np.asarray(offset, dtype=np.float64), lo, hi)
+    trig = tuple(float(v) for v in trig)
+    offset = np.asarray(offset, dtype=np.float64)
+    if t_ns.shape[0] < xyz.shape[0]:   # malformed input: the general route reports it
+        return _detect_in_box_general(xyz, t_ns, trig, offset, lo, hi)
+    return box_detection(xyz, t_ns, trig, offset, lo, hi)
 
 
 def box_detection(xyz: np.ndarray, t_ns: np.ndarray, trig: tuple[float, float, float, float],
                   offset: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Detection | None:
-    """:func:`detect_in_box` for a caller that holds D's bounds (``lo``, ``hi``: (3,) float64, see
-    :func:`box_bounds`), the pose's ``trig`` as floats and ``offset`` (3,) float64 (the tracker, every
-    frame)."""
+    """:func:`detect_in_box` for a caller that holds its arguments as the kernel takes them, as the
+    tracker does every frame: a :class:`~foveatrack.frames.Frame`'s ``xyz`` (N, 3) float64 and
+    ``t_ns`` (N,) int64 (contiguous, of one length), the pose's ``trig`` as floats, ``offset`` (3,)
+    and D's bounds ``lo``, ``hi`` (3,) float64 (:func:`box_bounds`)."""
     global _box_median_kernel
     if _box_median_kernel is None:   # numba loads on first use, not on import
         from foveatrack.kernels import box_median_kernel as _box_median_kernel
-    xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
-    t_ns = np.ascontiguousarray(t_ns, dtype=np.int64).reshape(-1)
-    if t_ns.shape[0] < xyz.shape[0]:   # malformed input: the general route reports it
-        return _detect_in_box_general(xyz, t_ns, trig, offset, lo, hi)
     p = np.empty(3)
     cp, sp, ct, st = trig
     n, t_med_ns, hypot_xy = _box_median_kernel(xyz, t_ns, cp, sp, ct, st, offset, lo, hi, p)
