@@ -11,7 +11,7 @@
 
 Each call is timed with ``time.perf_counter`` (``thread_time`` costs ~1 us a call here, a system
 call); a process's figure is each frame's median over its runs (a call preempted on the shared
-machine is an outlier there, so on one thread this is the call's CPU), averaged over the frames.
+machine is an outlier there, so this comes close to the call's CPU time), averaged over the frames.
 
 ``--old DIR`` measures a second source tree (e.g. an old commit exported with ``git archive`` into DIR)
 in turn with this one: each round runs one process per tree, alternating, so both see the same load;
@@ -191,7 +191,9 @@ def main() -> None:
         return
     if args.child:
         import foveatrack
-        json.dump({"source": foveatrack.__file__, **measure(names, args.runs)}, sys.stdout)
+        import sim
+        res = measure(names, args.runs)
+        json.dump({"source": [foveatrack.__file__, sim.__file__], **res}, sys.stdout)
         return
     trees = {"this tree": ROOT} if args.old is None else {"old": args.old.resolve(), "this tree": ROOT}
     results: dict = {t: [] for t in trees}
@@ -204,8 +206,8 @@ def main() -> None:
                 cmd += ["--only", args.only]
             r = subprocess.run(cmd, env=env, cwd=tree, check=True, capture_output=True, text=True)
             res = json.loads(r.stdout)
-            if not Path(res.pop("source")).is_relative_to(tree):
-                raise SystemExit(f"{label}: the child imported foveatrack from outside {tree}")
+            if not all(Path(f).is_relative_to(tree) for f in res.pop("source")):
+                raise SystemExit(f"{label}: the child imported foveatrack or sim from outside {tree}")
             results[label].append(res)
     load1 = os.getloadavg()
     print(f"Tracker.process per frame [ms]: median over {args.rounds} processes per tree (alternating), each "
