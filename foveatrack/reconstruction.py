@@ -129,12 +129,16 @@ class _AxisIntegrator:
 
     def state(self, t: float) -> tuple[float, float, float]:
         """(angle, speed, sigma) at t."""
-        i = bisect.bisect_right(self.times, t) - 1
-        if i >= 0:
-            k = self.knots[i]
-        else:   # before all retained history: the earliest knot's angle
-            k = self.knots[0]
-            t = k.t
+        times = self.times
+        if t >= times[-1]:   # the usual: since the newest knot
+            k = self.knots[-1]
+        else:
+            i = bisect.bisect_right(times, t) - 1
+            if i >= 0:
+                k = self.knots[i]
+            else:   # before all retained history: the earliest knot's angle
+                k = self.knots[0]
+                t = k.t
         ang, v = self._advance(k, t)
         var_b = k.var_bytes
         if k.idx >= 0:   # only the running byte's time has grown since the knot
