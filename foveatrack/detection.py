@@ -47,13 +47,19 @@ def wrap_deg(a):
     return float(w) if np.ndim(w) == 0 else w
 
 
-def bearing_deg(x: float, y: float, z: float) -> tuple[float, float]:
-    """Azimuth and elevation [deg] of a point (lidar or any right-handed X-fwd/Y-left/Z-up frame)."""
+def bearing_deg(x: float, y: float, z: float, hypot_xy: float | None = None) -> tuple[float, float]:
+    """Azimuth and elevation [deg] of a point (lidar or any right-handed X-fwd/Y-left/Z-up frame).
+    ``hypot_xy``: ``np.hypot(x, y)`` if the caller has it (the box kernel computes it with the same
+    libm ``hypot``), to spare numpy's scalar call."""
     # x + 0.0 turns -0.0 into +0.0: straight overhead (x = y = 0) has az 0, not atan2(0, -0.0) = 180.
     # math.atan2/math.degrees give numpy's bits on scalars (libm atan2, x * (180/pi)); math.hypot
     # does not (CPython's own algorithm differs from libm's hypot in the last bit), so np.hypot stays.
-    az = wrap_deg(math.degrees(math.atan2(y, x + 0.0)))
-    el = math.degrees(math.atan2(z, float(np.hypot(x, y))))
+    az = math.degrees(math.atan2(y, x + 0.0))
+    if not -180.0 < az <= 180.0:   # in range: wrap_deg returns it unchanged
+        az = wrap_deg(az)
+    if hypot_xy is None:
+        hypot_xy = float(np.hypot(x, y))
+    el = math.degrees(math.atan2(z, hypot_xy))
     return az, el
 
 
@@ -127,33 +133,48 @@ def detect_points(xyz: np.ndarray, t_ns: np.ndarray, space=None, *, test_xyz: np
     return _median_detection(xyz[keep], t_ns[keep])
 
 
-def detect_in_box(xyz: np.ndarray, t_ns: np.ndarray, box, rot: np.ndarray, offset: np.ndarray) -> Detection | None:
+LEVEL = (1.0, 0.0, 1.0, 0.0)   # (cos pan, sin pan, cos tilt, sin tilt) of pan = tilt = 0: no turn
+
+
+def detect_in_box(xyz: np.ndarray, t_ns: np.ndarray, box, trig=LEVEL, offset=(0.0, 0.0, 0.0)) -> Detection | None:
     """Algorithm 1 with a box D in one kernel call (:func:`foveatrack.kernels.box_median_kernel`):
-    the same detection as :func:`detect_points` with ``test_xyz = (xyz + offset) @ rot.T``."""
+    the same detection as :func:`detect_points` with ``test_xyz = (xyz + offset) @ R.T``, where
+    ``R = rotation_matrix(pan, tilt)`` and ``trig = head_trig(pan, tilt)`` (the cosines and sines it
+    is made of, :mod:`foveatrack.reconstruction`)."""
+    xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
+    t_ns = np.ascontiguousarray(t_ns, dtype=np.int64).reshape(-1)
+    lo, hi = box_bounds(box)
+    trig = tuple(float(v) for v in trig)
+    offset = np.asarray(offset, dtype=np.float64)
+    if t_ns.shape[0] < xyz.shape[0]:   # malformed input: the general route reports it
+        return _detect_in_box_general(xyz, t_ns, trig, offset, lo, hi)
+    return box_detection(xyz, t_ns, trig, offset, lo, hi)
+
+
+def box_detection(xyz: np.ndarray, t_ns: np.ndarray, trig: tuple[float, float, float, float],
+                  offset: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Detection | None:
+    """:func:`detect_in_box` for a caller that holds its arguments as the kernel takes them, as the
+    tracker does every frame: a :class:`~foveatrack.frames.Frame`'s ``xyz`` (N, 3) float64 and
+    ``t_ns`` (N,) int64 (contiguous, of one length), the pose's ``trig`` as floats, ``offset`` (3,)
+    and D's bounds ``lo``, ``hi`` (3,) float64 (:func:`box_bounds`)."""
     global _box_median_kernel
     if _box_median_kernel is None:   # numba loads on first use, not on import
         from foveatrack.kernels import box_median_kernel as _box_median_kernel
-    xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
-    t_ns = np.ascontiguousarray(t_ns, dtype=np.int64).reshape(-1)
-    rot = np.ascontiguousarray(rot, dtype=np.float64)
-    offset = np.asarray(offset, dtype=np.float64)
-    lo, hi = _box_bounds(box)
-    if t_ns.shape[0] < xyz.shape[0]:   # malformed input: the general route reports it
-        return _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi)
     p = np.empty(3)
-    n, t_med_ns = _box_median_kernel(xyz, t_ns, rot, offset, lo, hi, p)
+    cp, sp, ct, st = trig
+    n, t_med_ns, hypot_xy = _box_median_kernel(xyz, t_ns, cp, sp, ct, st, offset, lo, hi, p)
     if n == 0:
         return None
     if n < 0:   # a zero median: its sign is numpy's sort's business (see the kernel)
-        return _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi)
-    return _detection(p, t_med_ns, n)
+        return _detect_in_box_general(xyz, t_ns, trig, offset, lo, hi)
+    return _detection(p, t_med_ns, n, hypot_xy)
 
 
 _box_median_kernel = None
 _BOX_BOUNDS: dict = {}
 
 
-def _box_bounds(box) -> tuple[np.ndarray, np.ndarray]:
+def box_bounds(box) -> tuple[np.ndarray, np.ndarray]:
     """``box.min_xyz``, ``box.max_xyz`` as float64 arrays, made once per distinct box."""
     key = (tuple(box.min_xyz), tuple(box.max_xyz))
     b = _BOX_BOUNDS.get(key)
@@ -166,12 +187,13 @@ def _box_bounds(box) -> tuple[np.ndarray, np.ndarray]:
     return b
 
 
-def _detect_in_box_general(xyz, t_ns, rot, offset, lo, hi) -> Detection | None:
+def _detect_in_box_general(xyz, t_ns, trig, offset, lo, hi) -> Detection | None:
     """:func:`detect_in_box` with numpy's medians (:func:`_median_detection`)."""
     from foveatrack.kernels import box_members_kernel
 
     idx = np.empty(xyz.shape[0], dtype=np.int64)
-    n = box_members_kernel(xyz, rot, offset, lo, hi, idx)
+    cp, sp, ct, st = trig
+    n = box_members_kernel(xyz, cp, sp, ct, st, offset, lo, hi, idx)
     if n == 0:
         return None
     return _median_detection(xyz[idx[:n]], t_ns[idx[:n]])
@@ -182,11 +204,12 @@ def _median_detection(pts: np.ndarray, t_ns: np.ndarray) -> Detection:
     return _detection(p, _median_rows(t_ns.astype(np.float64)), int(pts.shape[0]))
 
 
-def _detection(p: np.ndarray, t_med_ns: float, n: int) -> Detection:
-    """A Detection from the median position ``p`` (3,), median time [ns] and the point count.
+def _detection(p: np.ndarray, t_med_ns: float, n: int, hypot_xy: float | None = None) -> Detection:
+    """A Detection from the median position ``p`` (3,), median time [ns] and the point count
+    (``hypot_xy``: see :func:`bearing_deg`).
     ``|p|`` as ``np.linalg.norm`` computes it for a vector (``sqrt(p.dot(p))``), without its checks."""
     x, y, z = p.tolist()
-    az, el = bearing_deg(x, y, z)
+    az, el = bearing_deg(x, y, z, hypot_xy)
     return _make_detection(float(t_med_ns) * 1e-9, p, n, az, el, math.sqrt(p.dot(p)))
 
 
@@ -218,5 +241,5 @@ def compile_all() -> None:
 
     box = Box((0.0, 0.0, 0.0), (2.0, 2.0, 2.0))
     t_ns = np.zeros(1, dtype=np.int64)
-    detect_in_box(np.ones((1, 3)), t_ns, box, np.eye(3), np.zeros(3))
-    detect_in_box(np.array([[1.0, 0.0, 1.0]]), t_ns, box, np.eye(3), np.zeros(3))   # a zero median
+    detect_in_box(np.ones((1, 3)), t_ns, box, LEVEL, np.zeros(3))
+    detect_in_box(np.array([[1.0, 0.0, 1.0]]), t_ns, box, LEVEL, np.zeros(3))   # a zero median

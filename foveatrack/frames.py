@@ -37,10 +37,10 @@ class Frame:
     ----------
     t_start_s, t_end_s : float [s]
         The frame's half-open interval ``[t_start_s, t_end_s)``.
-    xyz : (N, 3) float64 [m]
+    xyz : (N, 3) float64 [m], C-contiguous (copied if given otherwise)
         Points in the lidar frame (X forward, Y left, Z up).  May contain NaN/inf and (0,0,0)
         "no return" points; detection ignores them.
-    t_ns : (N,) int64 [ns]
+    t_ns : (N,) int64 [ns], contiguous
         Per-point timestamps, all inside the interval.
     reflectivity : (N,) uint8 or None
         Livox reflectivity byte per point, if known.
@@ -53,8 +53,9 @@ class Frame:
     reflectivity: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        xyz = np.asarray(self.xyz, dtype=np.float64).reshape(-1, 3)
-        t_ns = np.asarray(self.t_ns, dtype=np.int64).reshape(-1)
+        # Contiguous, so the tracker's box kernel takes them as they are (no check per frame).
+        xyz = np.ascontiguousarray(self.xyz, dtype=np.float64).reshape(-1, 3)
+        t_ns = np.ascontiguousarray(self.t_ns, dtype=np.int64).reshape(-1)
         if xyz.shape[0] != t_ns.shape[0]:
             raise ValueError(f"xyz has {xyz.shape[0]} points but t_ns has {t_ns.shape[0]}")
         object.__setattr__(self, "xyz", xyz)

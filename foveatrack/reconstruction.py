@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import abc
 import bisect
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -50,11 +51,17 @@ from foveatrack.detection import Detection, wrap_deg
 from foveatrack.speed_table import TURBO, AxisTable, SpeedTable
 
 
+def head_trig(pan_deg: float, tilt_deg: float) -> tuple[float, float, float, float]:
+    """``(cos pan, sin pan, cos tilt, sin tilt)`` of a head pose [deg]: what :func:`rotation_matrix`
+    is made of (the box kernel, :func:`foveatrack.kernels.box_median_kernel`, makes R from them)."""
+    p = math.radians(pan_deg if -180.0 < pan_deg <= 180.0 else wrap_deg(pan_deg))   # wrap_deg keeps these
+    t = math.radians(tilt_deg)
+    return math.cos(p), math.sin(p), math.cos(t), math.sin(t)
+
+
 def rotation_matrix(pan_deg: float, tilt_deg: float) -> np.ndarray:
     """``R_z(pan) @ R_y(-tilt)``: head (tilt-stage) coordinates -> world (see module docstring)."""
-    p = math.radians(wrap_deg(pan_deg))
-    t = math.radians(tilt_deg)
-    cp, sp, ct, st = math.cos(p), math.sin(p), math.cos(t), math.sin(t)
+    cp, sp, ct, st = head_trig(pan_deg, tilt_deg)
     return np.array([cp * ct, -sp, -cp * st,
                      sp * ct, cp, -sp * st,
                      st, 0.0, ct]).reshape(3, 3)
@@ -84,6 +91,7 @@ class _AxisIntegrator:
         self.limits = limits
         self.wrap = wrap
         self.sig_b = np.nan_to_num(table.speeds_array()[1], nan=0.0)
+        self._sig_b_list = self.sig_b.tolist()
         self.sigma0 = sigma0
         self._var0 = sigma0 ** 2
         self.timing_sigma_s = timing_sigma_s
@@ -121,19 +129,26 @@ class _AxisIntegrator:
 
     def state(self, t: float) -> tuple[float, float, float]:
         """(angle, speed, sigma) at t."""
-        i = bisect.bisect_right(self.times, t) - 1
-        if i >= 0:
-            k = self.knots[i]
-        else:   # before all retained history: the earliest knot's angle
-            k = self.knots[0]
-            t = k.t
+        times = self.times
+        if t >= times[-1]:   # the usual: since the newest knot
+            k = self.knots[-1]
+        else:
+            i = bisect.bisect_right(times, t) - 1
+            if i >= 0:
+                k = self.knots[i]
+            else:   # before all retained history: the earliest knot's angle
+                k = self.knots[0]
+                t = k.t
         ang, v = self._advance(k, t)
         var_b = k.var_bytes
         if k.idx >= 0:   # only the running byte's time has grown since the knot
             sb = k.sig_run
             s0 = k.s_run
             var_b += (sb * (s0 + k.direction * (t - k.t))) ** 2 - (sb * s0) ** 2
-        var = max(self._var0 + var_b + k.var_timing + self.q * max(t - self.t0, 0.0), 0.0)
+        var = self._var0 + var_b + k.var_timing
+        if self.q:   # the ripple's random walk (none by default: adding q * dt = 0.0 would change no bit)
+            var += self.q * max(t - self.t0, 0.0)
+        var = max(var, 0.0)
         if self.wrap and not -180.0 < ang <= 180.0:   # in range: wrap_deg returns it unchanged
             ang = wrap_deg(ang)
         return ang, v, math.sqrt(var)
@@ -150,22 +165,24 @@ class _AxisIntegrator:
             self.times.pop()
             last = self.knots[-1]
         idx = -1 if direction == 0 else (64 if byte == TURBO else byte)
+        if idx == last.idx and direction == last.direction:   # the same speed (its byte was checked then)
+            return
         v_tgt = 0.0 if direction == 0 else direction * self.table.speed_deg_s(byte)
         if not math.isfinite(v_tgt):
             raise ValueError(f"byte {byte} has no known speed in the {self.table.axis} table")
-        if idx == last.idx and direction == last.direction:
-            return
         ang, v = self._advance(last, t_eff)
-        S = last.S.copy()
         if last.idx >= 0:
+            S = last.S.copy()
             S[last.idx] += last.direction * (t_eff - last.t)
+            var_bytes = float(((self.sig_b * S) ** 2).sum())
+        else:   # the axis was stopped: no byte's time grew (a knot's S is never written after this)
+            S, var_bytes = last.S, last.var_bytes
         dv = v_tgt - last.v_tgt
         var_t = last.var_timing + (dv * self.timing_sigma_s) ** 2
         if self.wrap:
             ang = wrap_deg(ang)
-        self.knots.append(_Knot(t_eff, ang, v, v_tgt, idx, direction, S, var_t,
-                                float(np.sum((self.sig_b * S) ** 2)),
-                                float(self.sig_b[idx]) if idx >= 0 else 0.0, float(S[idx]) if idx >= 0 else 0.0))
+        self.knots.append(_Knot(t_eff, ang, v, v_tgt, idx, direction, S, var_t, var_bytes,
+                                self._sig_b_list[idx] if idx >= 0 else 0.0, float(S[idx]) if idx >= 0 else 0.0))
         self.times.append(t_eff)
         # bound memory: keep knots within history_s of the newest (always >= 2)
         cut = bisect.bisect_left(self.times, t_eff - self.history_s) - 1
@@ -200,7 +217,7 @@ class HeadPose(abc.ABC):
         distance from the pan axis and ``r`` the distance from the head centre (radians inside)."""
         p, t, sp, st = self.angles_at(detection.t_s)
         q = np.asarray(detection.xyz, float) + self.lidar_offset_m
-        w = rotation_matrix(p, t) @ q
+        w = rotation_matrix(p, t).dot(q)   # R @ q's bits (the same BLAS gemv), without matmul's ~0.5 us
         w0, w1, _ = w.tolist()
         rho = math.hypot(w0, w1)
         r = math.sqrt(q.dot(q))   # np.linalg.norm(q), without its checks
@@ -255,8 +272,10 @@ class Reconstructor(HeadPose):
         """Record that ``cmd`` was written to the head at ``t_s`` (commands in time order)."""
         t_eff = t_s + self.effect_delay_s
         memo, self._memo = self._memo, {}
-        self.pan.command(t_eff, cmd.pan_dir, cmd.pan_byte)
-        self.tilt.command(t_eff, cmd.tilt_dir, cmd.tilt_byte)
+        if cmd is not self.last_command or t_eff <= max(self.pan.times[-1], self.tilt.times[-1]):
+            # (the same command later changes neither axis: each would return at its first test)
+            self.pan.command(t_eff, cmd.pan_dir, cmd.pan_byte)
+            self.tilt.command(t_eff, cmd.tilt_dir, cmd.tilt_byte)
         self.last_command = cmd
         self.last_send_t_s = t_s
         # A command changes nothing before its effect time: answers for earlier instants still
@@ -264,9 +283,12 @@ class Reconstructor(HeadPose):
         # Only the instants asked since the previous command are carried (older ones are not asked
         # again in practice, and the memo stays small).
         t_first = max(self.pan.times[0], self.tilt.times[0])
-        fresh = list(memo.items())[self._n_carried:] if self._n_carried else memo.items()
-        self._memo = {k: v for k, v in fresh if t_first <= k < t_eff}
-        self._n_carried = len(self._memo)
+        # (a loop: a comprehension's own call costs more than it saves over these few entries)
+        carried = self._memo
+        for t, ans in itertools.islice(memo.items(), self._n_carried, None):
+            if t_first <= t < t_eff:
+                carried[t] = ans
+        self._n_carried = len(carried)
 
     def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
         """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180]."""

@@ -39,17 +39,16 @@ import numpy as np
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys
 from foveatrack.control import (STOP, HeadCommand, deadband_p, head_command, head_errors_deg,
                                 limit_for_stops, speed_to_axis)
-from foveatrack.detection import Detection, detect, detect_in_box, frozen_maker, wrap_deg
+from foveatrack.detection import LEVEL, Detection, box_bounds, box_detection, detect, frozen_maker, wrap_deg
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.gyro_attitude import GyroAttitude
 from foveatrack.predictive import BearingFilter
-from foveatrack.reconstruction import Reconstructor
+from foveatrack.reconstruction import Reconstructor, head_trig
 from foveatrack.space_of_interest import Box, SpaceOfInterest, space_from_mapping
 from foveatrack.speed_table import SpeedTable
 
 
-_IDENTITY = np.eye(3)
 _ZERO3 = np.zeros(3)
 
 
@@ -331,6 +330,13 @@ class Tracker:
         self.last_pan_error_deg = 0.0
         self.lost_since_s: float | None = None
         self.last_command: HeadCommand = STOP
+        self._head_errors = config.error_frame == "head" or config.controller == "predictive"
+        # A box D (the common case) is tested by one kernel call with its bounds made once here:
+        # (lo, hi, in the world frame?), or None for any other D.
+        space = config.space
+        self._box = None
+        if isinstance(space, Box):
+            self._box = box_bounds(space) + (getattr(space, "frame", "lidar") == "world",)
 
     def rebased(self, t0_s: float, pan_deg: float, tilt_deg: float) -> "Tracker":
         """A fresh tracker (state and filters restarted) with this one's configuration and speed table,
@@ -350,8 +356,7 @@ class Tracker:
         world = sigma_w = None
         if det is not None:
             hp, ht, sp, st = self.recon.angles_at(det.t_s)
-            use_head = cfg.error_frame == "head" or cfg.controller == "predictive"
-            if use_head:
+            if self._head_errors:
                 err_pan, err_tilt = head_errors_deg(det.xyz, ht, cfg.lidar_offset_m)
             else:   # lidar_errors_deg(det.xyz): the detection's bearing, already computed
                 err_pan, err_tilt = det.az_deg, det.el_deg
@@ -384,17 +389,20 @@ class Tracker:
 
     # ------------------------------------------------------------------------------------------
     def _detect(self, frame: Frame) -> Detection | None:
-        space = self.config.space
-        test_xyz = None
-        in_world = space is not None and getattr(space, "frame", "lidar") == "world"
-        if isinstance(space, Box):   # the common D, in one pass
+        """Algorithm 1 on the frame, D tested in its own frame (the lidar's, or the world at the
+        head's estimated pose at mid-frame)."""
+        if self._box is not None:   # the common D, in one pass
+            lo, hi, in_world = self._box
             if in_world:
-                rot, offset = self.recon.rotation_at(frame.t_mid_s), self.recon.lidar_offset_m
+                pan, tilt, _, _ = self.recon.angles_at(frame.t_mid_s)
+                trig, offset = head_trig(pan, tilt), self.recon.lidar_offset_m
             else:
-                rot, offset = _IDENTITY, _ZERO3
-            det = detect_in_box(frame.xyz, frame.t_ns, space, rot, offset)
+                trig, offset = LEVEL, _ZERO3
+            det = box_detection(frame.xyz, frame.t_ns, trig, offset, lo, hi)
         else:
-            if in_world and frame.n_points:
+            space = self.config.space
+            test_xyz = None
+            if space is not None and getattr(space, "frame", "lidar") == "world" and frame.n_points:
                 test_xyz = self.recon.lidar_to_world(frame.xyz, frame.t_mid_s)
             det = detect(frame, space, test_xyz=test_xyz)
         if det is not None and det.n_points < self.config.min_points:
@@ -457,11 +465,17 @@ class Tracker:
     def _to_command(self, v_pan: float, v_tilt: float, send_t: float) -> tuple[HeadCommand, float, float, bool]:
         cfg = self.config
         t_act = send_t + self.recon.effect_delay_s
-        tilt_a, s_tilt = self.recon.tilt_at(t_act)
-        v_tilt, lim_t = limit_for_stops(v_tilt, tilt_a, s_tilt, *cfg.tilt_limits_deg, cfg.tilt_margin_deg,
-                                        cfg.stop_lookahead_s)
+        # A zero speed needs no stop limit (limit_for_stops returns (0.0, False) without the angle):
+        # the head's estimate at t_act is only worked out for a moving axis.
+        lim_t = False
+        if v_tilt != 0.0:
+            tilt_a, s_tilt = self.recon.tilt_at(t_act)
+            v_tilt, lim_t = limit_for_stops(v_tilt, tilt_a, s_tilt, *cfg.tilt_limits_deg, cfg.tilt_margin_deg,
+                                            cfg.stop_lookahead_s)
+        else:
+            v_tilt = 0.0   # as limit_for_stops returns it (+0.0 for -0.0)
         lim_p = False
-        if cfg.pan_limits_deg is not None:
+        if cfg.pan_limits_deg is not None and v_pan != 0.0:
             pan_a, _, s_pan, _ = self.recon.angles_at(t_act)
             v_pan, lim_p = limit_for_stops(v_pan, pan_a, s_pan, *cfg.pan_limits_deg, cfg.tilt_margin_deg,
                                            cfg.stop_lookahead_s)

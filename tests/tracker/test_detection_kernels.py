@@ -5,7 +5,8 @@ import pytest
 
 from foveatrack.detection import detect_in_box, detect_points
 from foveatrack.kernels import box_median_kernel, box_members_kernel
-from foveatrack.reconstruction import rotation_matrix
+from foveatrack.detection import LEVEL
+from foveatrack.reconstruction import head_trig, rotation_matrix
 from foveatrack.space_of_interest import Box
 
 
@@ -25,15 +26,15 @@ def _cloud(seed, n):
 def test_box_members_match_the_generic_route(pan, tilt, n):
     xyz, t_ns = _cloud(n, n)
     box = Box((-5.0, -20.0, -3.0), (25.0, 10.0, 8.0), frame="world")
-    rot = rotation_matrix(pan, tilt)
+    rot, trig = rotation_matrix(pan, tilt), head_trig(pan, tilt)
     offset = np.array([0.05, -0.02, 0.1])
     idx = np.empty(n, dtype=np.int64)
-    k = box_members_kernel(xyz, rot, offset, np.array(box.min_xyz), np.array(box.max_xyz), idx)
+    k = box_members_kernel(xyz, *trig, offset, np.array(box.min_xyz), np.array(box.max_xyz), idx)
     with np.errstate(invalid="ignore"):
         w = (xyz + offset) @ rot.T
         ref = np.isfinite(xyz).all(axis=1) & (xyz != 0).any(axis=1) & box.contains(w)
     np.testing.assert_array_equal(idx[:k], np.flatnonzero(ref))
-    a = detect_in_box(xyz, t_ns, box, rot, offset)
+    a = detect_in_box(xyz, t_ns, box, trig, offset)
     b = detect_points(xyz, t_ns, box, test_xyz=w)
     assert (a is None) == (b is None) == (k == 0)
     if a is not None:
@@ -41,11 +42,25 @@ def test_box_members_match_the_generic_route(pan, tilt, n):
         np.testing.assert_array_equal(a.xyz, b.xyz)
 
 
+def test_the_kernels_turn_is_rotation_matrixs_to_the_bit():
+    """The kernel makes R from the pose's cosines and sines as rotation_matrix does: a box one ulp
+    wide around a point turned with rotation_matrix's entries (same order of sums) holds it."""
+    rng = np.random.default_rng(9)
+    idx = np.empty(1, dtype=np.int64)
+    for _ in range(1000):
+        pan, tilt = float(rng.uniform(-400.0, 400.0)), float(rng.uniform(-90.0, 90.0))
+        rot, offset, p = rotation_matrix(pan, tilt), rng.normal(0, 0.1, 3), rng.normal(0, 20, 3)
+        q = p + offset
+        w = np.array([rot[k, 0] * q[0] + rot[k, 1] * q[1] + rot[k, 2] * q[2] for k in range(3)])
+        assert box_members_kernel(p[None, :].copy(), *head_trig(pan, tilt), offset, w, np.nextafter(w, np.inf),
+                                  idx) == 1
+
+
 def test_box_edges_are_half_open_like_box_contains():
     box = Box((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
     xyz = np.array([[0.0, 0.5, 0.5], [1.0, 0.5, 0.5], [0.5, 0.0, 0.999], [0.5, 0.5, 1.0]])
     idx = np.empty(4, dtype=np.int64)
-    k = box_members_kernel(xyz, np.eye(3), np.zeros(3), np.zeros(3), np.ones(3), idx)
+    k = box_members_kernel(xyz, *LEVEL, np.zeros(3), np.zeros(3), np.ones(3), idx)
     assert list(idx[:k]) == list(np.flatnonzero(box.contains(xyz))) == [0, 2]
 
 
@@ -66,17 +81,35 @@ def _numpy_box_median(xyz, t_ns, rot, offset, lo, hi):
 def test_box_median_kernel_matches_numpy_median(pan, tilt, n):
     xyz, t_ns = _cloud(100 + n, n)
     rot, offset = rotation_matrix(pan, tilt), np.array([0.05, -0.02, 0.1])
+    trig = head_trig(pan, tilt)
     if n > 7:
         lo, hi = np.array([-5.0, -20.0, -3.0]), np.array([25.0, 10.0, 8.0])
     else:   # few points: a box around everything, so the medians see them all
         lo, hi = np.full(3, -1e9), np.full(3, 1e9)
     out = np.empty(3)
-    k, t_med = box_median_kernel(xyz, t_ns, rot, offset, lo, hi, out)
+    k, t_med, hypot_xy = box_median_kernel(xyz, t_ns, *trig, offset, lo, hi, out)
     k_ref, p_ref, t_ref = _numpy_box_median(xyz, t_ns, rot, offset, lo, hi)
     assert abs(k) == k_ref
     if k_ref:
         assert k > 0 and t_med == t_ref
         assert out.tobytes() == p_ref.tobytes()
+        assert hypot_xy == float(np.hypot(p_ref[0], p_ref[1]))
+
+
+@pytest.mark.parametrize("x, y", [(3.0, 4.0), (1e-310, 3e-310), (1e300, 1e300), (0.1, 0.2), (-7.25, 1e-9),
+                                  (123.456, -0.001)])
+def test_box_median_kernels_hypot_is_numpys(x, y):
+    """The kernel's hypot of the median (the elevation's denominator) has np.hypot's bits (both call
+    libm's hypot; CPython's math.hypot differs in the last bit on some inputs), also where scaling
+    matters (subnormal, huge), and over many random points."""
+    rng = np.random.default_rng(7)
+    pts = np.vstack([[x, y, 1.0], rng.normal(0, 30, (2000, 3))])
+    lo, hi = np.full(3, -1e308), np.full(3, 1e308)
+    for p in pts:
+        out = np.empty(3)
+        k, _, hypot_xy = box_median_kernel(p[None, :].copy(), np.zeros(1, np.int64), *LEVEL, np.zeros(3),
+                                           lo, hi, out)
+        assert k == 1 and hypot_xy == float(np.hypot(p[0], p[1]))
 
 
 def test_a_zero_median_takes_numpys_route_bit_for_bit():
@@ -85,10 +118,10 @@ def test_a_zero_median_takes_numpys_route_bit_for_bit():
     xyz = np.array([[5.0, -0.0, 1.0], [6.0, 0.0, 2.0], [7.0, 0.0, -0.0], [8.0, -0.0, 0.0], [9.0, 1.0, 0.0]])
     t_ns = np.arange(5, dtype=np.int64) * 1000
     box = Box((1.0, -5.0, -5.0), (20.0, 5.0, 5.0))
-    k, _ = box_median_kernel(xyz, t_ns, np.eye(3), np.zeros(3), np.array(box.min_xyz), np.array(box.max_xyz),
-                             np.empty(3))
+    k, _, _ = box_median_kernel(xyz, t_ns, *LEVEL, np.zeros(3), np.array(box.min_xyz), np.array(box.max_xyz),
+                                np.empty(3))
     assert k == -5
-    a = detect_in_box(xyz, t_ns, box, np.eye(3), np.zeros(3))
+    a = detect_in_box(xyz, t_ns, box, LEVEL, np.zeros(3))
     b = detect_points(xyz, t_ns, box)
     assert a.xyz.tobytes() == b.xyz.tobytes() and (a.t_s, a.n_points, a.az_deg, a.el_deg, a.range_m) == \
         (b.t_s, b.n_points, b.az_deg, b.el_deg, b.range_m)
@@ -99,11 +132,12 @@ def test_detect_in_box_equals_detect_points_to_the_bit(seed):
     xyz, t_ns = _cloud(seed, 3000)
     box = Box((-5.0, -20.0, -3.0), (25.0, 10.0, 8.0), frame="world")
     rot, offset = rotation_matrix(20.0 * seed, 7.0 * seed), np.array([0.05, -0.02, 0.1])
+    trig = head_trig(20.0 * seed, 7.0 * seed)
     # the generic route tests D on points turned exactly as the kernel turns them
     q = xyz + offset
     with np.errstate(invalid="ignore"):
             w = np.stack([rot[k, 0] * q[:, 0] + rot[k, 1] * q[:, 1] + rot[k, 2] * q[:, 2] for k in range(3)], axis=1)
-    a = detect_in_box(xyz, t_ns, box, rot, offset)
+    a = detect_in_box(xyz, t_ns, box, trig, offset)
     with np.errstate(invalid="ignore"):
         b = detect_points(xyz, t_ns, box, test_xyz=w)
     assert a.xyz.tobytes() == b.xyz.tobytes()

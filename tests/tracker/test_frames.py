@@ -56,3 +56,16 @@ def test_reflectivity_follows_points_and_frame_validates():
         Frame(0, 0.1, np.zeros((2, 3)), np.zeros(3, np.int64))
     with pytest.raises(ValueError):
         FrameSlicer(0.0)
+
+
+def test_a_frame_holds_contiguous_arrays_whatever_it_was_given():
+    """The tracker hands a frame's arrays to its box kernel as they are (no check per frame), so a
+    Frame makes them contiguous: a Fortran-ordered or strided input is copied, values unchanged."""
+    rng = np.random.default_rng(2)
+    xyz_c = rng.normal(0, 10, (50, 3))
+    t_c = np.arange(0, 100_000_000, 1_000_000, dtype=np.int64)[:50]
+    for xyz, t_ns in ((np.asfortranarray(xyz_c), t_c), (xyz_c, np.repeat(t_c, 2)[::2]),
+                      (np.hstack([xyz_c, xyz_c])[:, :3], t_c)):
+        f = Frame(0.0, 0.1, xyz, t_ns)
+        assert f.xyz.flags.c_contiguous and f.t_ns.flags.c_contiguous
+        assert f.xyz.tobytes() == xyz_c.tobytes() and f.t_ns.tobytes() == t_c.tobytes()

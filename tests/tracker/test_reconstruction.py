@@ -166,3 +166,51 @@ def test_a_second_command_at_the_same_instant_replaces_the_first():
     for u in np.linspace(0.0, t + 1.0, 200):
         assert twice.angles_at(u) == once.angles_at(u)
     assert len(twice.pan.knots) == len(once.pan.knots)
+
+
+def test_a_repeated_command_object_integrates_as_a_fresh_equal_one():
+    """on_command skips both axes when the very command object it ran last comes again later (the
+    tracker's commands are shared instances, :func:`foveatrack.control.head_command`): the knots and
+    every answer equal those of a reconstruction fed equal but distinct commands (which take every
+    test), also when a repeat comes at the same instant."""
+    from foveatrack.control import head_command
+
+    table = SpeedTable.nominal()
+    kw = dict(pan0_deg=170.0, tilt0_deg=5.0, latency_s=0.007, dead_time_s=0.04, accel_deg_s2=40.0, history_s=3.0)
+    shared, fresh = Reconstructor(table, **kw), Reconstructor(table, **kw)
+    rng = np.random.default_rng(5)
+    t, n_repeats = 0.0, 0
+    key = (0, 0, 0, 0)
+    for _ in range(400):
+        if rng.random() < 0.4:   # a new command; otherwise the last one again
+            pd, td = int(rng.integers(-1, 2)), int(rng.integers(-1, 2))
+            key = (pd, int(rng.integers(1, 64)) if pd else 0, td, int(rng.integers(1, 64)) if td else 0)
+        else:
+            n_repeats += 1
+        shared.on_command(t, head_command(*key))
+        fresh.on_command(t, HeadCommand(*key))
+        if rng.random() < 0.1:   # the same command again at the same instant
+            shared.on_command(t, head_command(*key))
+            fresh.on_command(t, HeadCommand(*key))
+        for u in (t - 0.03, t + 0.01, t + 0.05):
+            assert shared.angles_at(u) == fresh.angles_at(u)
+        t += float(rng.uniform(0.05, 0.15))
+    assert n_repeats > 150
+    for a, b in ((shared.pan, fresh.pan), (shared.tilt, fresh.tilt)):
+        assert a.times == b.times
+        assert [(k.angle, k.v, k.v_tgt, k.idx, k.var_timing, k.var_bytes) for k in a.knots] == \
+            [(k.angle, k.v, k.v_tgt, k.idx, k.var_timing, k.var_bytes) for k in b.knots]
+
+
+def test_to_world_turns_with_matmuls_bits():
+    """to_world turns the point with ``R.dot(q)`` (cheaper than ``R @ q``); both are numpy's BLAS
+    matrix-vector product, so the world position has matmul's bits (checked over many poses)."""
+    rng = np.random.default_rng(4)
+    table = SpeedTable.nominal()
+    for _ in range(2000):
+        pan, tilt = float(rng.uniform(-180, 180)), float(rng.uniform(-89, 89))
+        offset = rng.normal(0, 0.1, 3)
+        rec = Reconstructor(table, pan0_deg=pan, tilt0_deg=tilt, lidar_offset_m=offset, sigma0_deg=0.1)
+        xyz = rng.normal(0, 30, 3)
+        w, _ = rec.to_world(Detection(0.0, xyz, 5, 0.0, 0.0, 1.0))
+        assert w.tobytes() == (rotation_matrix(pan, tilt) @ (xyz + offset)).tobytes()
