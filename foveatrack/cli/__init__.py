@@ -46,9 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
     try:
+        # inside the try: a Ctrl-C while the command modules import (a second or so) is an interruption too
+        args = build_parser().parse_args(argv)
         return int(args.func(args) or 0)
     except UserError as exc:
         print(f"foveatrack: error: {exc}", file=sys.stderr)
