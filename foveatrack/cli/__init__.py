@@ -65,6 +65,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("foveatrack: interrupted", file=sys.stderr)
         return 130
+    except ImportError as exc:
+        # a Ctrl-C inside a compiled module's initialisation (scipy's pybind11 ones) comes out as
+        # "ImportError: initialization failed" caused by the KeyboardInterrupt
+        if isinstance(exc.__cause__, KeyboardInterrupt):
+            print("foveatrack: interrupted", file=sys.stderr)
+            return 130
+        raise
 
 
 if __name__ == "__main__":  # pragma: no cover
