@@ -30,7 +30,9 @@ unused rest of its last block); nothing reads a stream after its effect.
 
 from __future__ import annotations
 
-from concurrent.futures import Future, ThreadPoolExecutor
+import queue
+import threading
+import weakref
 
 import numpy as np
 
@@ -43,23 +45,97 @@ _make_chunk = frozen_maker(ScanChunk)   # a frame's slice of a batch, once per f
                                         # frozen dataclass's per-field __setattr__
 
 
+class Job:
+    """One piece of work handed to the worker, and its outcome (:meth:`result`).
+
+    Why not ``concurrent.futures``: a Future keeps its state under a ``threading.Condition`` that
+    the waiting thread and the worker both enter, and entering it (``Condition.__enter__``, Python
+    code around the lock) is not safe against a Ctrl-C.  A KeyboardInterrupt that lands just after
+    the loop's thread took the lock, before its ``with`` block began, left the lock taken for good:
+    the worker then blocked in ``set_result`` for ever, and with it the pool's ``shutdown(wait=True)``
+    and the interpreter's exit (``concurrent.futures`` joins its workers there), while the writer
+    process waited for a ``close`` that never came (docs/interrupts.md).  Here the waiting thread
+    waits on a bare lock that only the worker releases, once, and the worker takes no lock the
+    waiting thread could hold: a KeyboardInterrupt at any bytecode of the wait leaves the worker free.
+    """
+
+    __slots__ = ("_fn", "_args", "_done", "_finished", "_value", "_error")
+
+    def __init__(self, fn, args: tuple):
+        self._fn, self._args = fn, args
+        self._done = threading.Lock()
+        self._done.acquire()         # released by the worker when the outcome is in
+        self._finished = False
+        self._value = self._error = None
+
+    @classmethod
+    def done_now(cls, fn, args: tuple) -> "Job":
+        """Done at once on the caller's thread (an error raised here, as the call itself would)."""
+        job = cls(None, ())
+        job._value = fn(*args)
+        job._finished = True
+        job._done.release()
+        return job
+
+    def run(self) -> None:
+        """On the worker: do the work, keep its outcome, and let the waiting thread go on."""
+        try:
+            self._value = self._fn(*self._args)
+        except BaseException as exc:  # noqa: BLE001 - raised by result() on the thread that asks
+            self._error = exc
+        self._fn = self._args = None
+        self._finished = True        # before the release: a wait cut short after the lock was taken
+        self._done.release()         # (by a Ctrl-C) leaves it taken, and later calls must not wait on it
+
+    def result(self):
+        """The work's return value (waiting for it), or its exception raised here."""
+        if not self._finished:
+            self._done.acquire()
+            self._done.release()
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+
+def _work(jobs: queue.SimpleQueue) -> None:
+    """The worker's loop: the jobs in the order handed over, until None."""
+    while (job := jobs.get()) is not None:
+        job.run()
+        job = None      # the outcome belongs to the waiting thread: not kept alive until the next job
+
+
 class Ahead:
-    """The worker thread.  After :meth:`close`, everything that used it works synchronously."""
+    """The worker thread.  After :meth:`close`, everything that used it works synchronously.
+
+    Safe against a Ctrl-C on the thread that uses it (docs/interrupts.md): the worker is a daemon
+    thread (an interpreter that exits never waits for it) and blocks on nothing but its queue, and
+    :meth:`close` may be called again after an interrupted one."""
 
     def __init__(self):
-        self._pool: ThreadPoolExecutor | None = ThreadPoolExecutor(1, thread_name_prefix="sim-ahead")
+        self._closed = False
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        # an Ahead dropped without close(): its worker ends too, after the jobs handed over
+        weakref.finalize(self, self._jobs.put, None)
+        thread = threading.Thread(target=_work, args=(self._jobs,), name="sim-ahead", daemon=True)
+        thread.start()
+        self._thread = thread
 
-    def submit(self, fn, *args) -> Future:
-        if self._pool is None:           # closed: do it now, on the caller's thread
-            f: Future = Future()
-            f.set_result(fn(*args))
-            return f
-        return self._pool.submit(fn, *args)
+    def submit(self, fn, *args) -> Job:
+        if self._closed:                 # closed: do it now, on the caller's thread
+            return Job.done_now(fn, args)
+        job = Job(fn, args)
+        self._jobs.put(job)
+        return job
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)
-            self._pool = None
+        """Let the worker do every job handed over (their results stay to be taken), then end it and
+        wait for it: from then on the scan model and the streams are the caller's alone."""
+        self._closed = True
+        if self._thread is not None:
+            self._jobs.put(None)         # one more None if an interrupted close() put one: harmless
+            self._thread.join()
+            self._thread = None
 
 
 class ScanAhead:
@@ -76,14 +152,14 @@ class ScanAhead:
         self.period_s = period_s
         self.batch_frames = batch_frames
         self._ahead = ahead
-        self._next: tuple[int, Future] | None = None             # (first frame, its batch in flight)
+        self._next: tuple[int, Job] | None = None             # (first frame, its batch in flight)
         self._batch: tuple[int, ScanChunk] | None = None         # (first frame, its points)
         self._cuts: list[int] = []                               # frame starts in the batch's points
 
     def _frame_k(self, f: int) -> int:
         return self.model.index_at_time(f * self.period_s)
 
-    def _submit(self, f0: int) -> tuple[int, Future]:
+    def _submit(self, f0: int) -> tuple[int, Job]:
         k0, k1 = self._frame_k(f0), self._frame_k(f0 + self.batch_frames)
         return f0, self._ahead.submit(self.model.scan, k0, k1 - k0)
 

@@ -210,12 +210,12 @@ class ClosedLoop:
         period = self.tracker.config.period_s
         n_frames = int(round(self.scene.duration_s / period))
         worker = None
-        if ahead:
-            self.worked_ahead = True
-            worker = Ahead()
-            self._scan_ahead = ScanAhead(self.scan, period, worker)
-            self.sensor.draw_ahead(worker)
         try:
+            if ahead:       # inside the try: a Ctrl-C during the set-up still ends the worker
+                self.worked_ahead = True
+                worker = Ahead()
+                self._scan_ahead = ScanAhead(self.scan, period, worker)
+                self.sensor.draw_ahead(worker)
             for k in range(n_frames):
                 self.step(k * period, (k + 1) * period)
                 if progress is not None:

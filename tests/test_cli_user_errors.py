@@ -146,3 +146,29 @@ def test_version_names_the_package_and_what_it_runs_on(capsys):
     for dist in DEPENDENCIES:   # every pinned dependency, with the version installed
         assert f"{dist} {installed_version(dist)}" in out
     assert "numba target" in out and len(out.strip().splitlines()) == 2
+
+
+@pytest.mark.parametrize("raised, interrupted", [
+    (KeyboardInterrupt(), True),
+    # what a Ctrl-C inside a compiled module's initialisation becomes (scipy's pybind11 modules)
+    (ImportError("initialization failed"), True),
+    (ImportError("No module named 'x'"), False),
+])
+def test_a_ctrl_c_anywhere_in_a_command_is_one_line_and_exit_code_130(raised, interrupted, monkeypatch, capsys):
+    import foveatrack.cli.warmup_cmd as warmup
+
+    def command(args):
+        if interrupted and isinstance(raised, ImportError):
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt as ctrl_c:
+                raise raised from ctrl_c
+        raise raised
+
+    monkeypatch.setattr(warmup, "cmd_warmup", command)
+    if not interrupted:
+        with pytest.raises(ImportError):
+            main(["warmup"])
+        return
+    code, err = _run(["warmup"], capsys)
+    assert code == 130 and err == "foveatrack: interrupted\n"

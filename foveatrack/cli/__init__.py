@@ -46,9 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
     try:
+        # inside the try: a Ctrl-C while the command modules import (a second or so) is an interruption too
+        args = build_parser().parse_args(argv)
         return int(args.func(args) or 0)
     except UserError as exc:
         print(f"foveatrack: error: {exc}", file=sys.stderr)
@@ -65,6 +65,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("foveatrack: interrupted", file=sys.stderr)
         return 130
+    except ImportError as exc:
+        # a Ctrl-C inside a compiled module's initialisation (scipy's pybind11 ones) comes out as
+        # "ImportError: initialization failed" caused by the KeyboardInterrupt
+        if isinstance(exc.__cause__, KeyboardInterrupt):
+            print("foveatrack: interrupted", file=sys.stderr)
+            return 130
+        raise
 
 
 if __name__ == "__main__":  # pragma: no cover

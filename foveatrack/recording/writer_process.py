@@ -164,6 +164,7 @@ class RecordingProcess(RecordCalls):
         self._ready = False
         self._error: BaseException | None = None
         self._closed = False
+        self._torn = False          # a message is (or may be) only partly in the pipe: see _send
         self._ring = _Ring.create()
         data_r, self._data = os.pipe()
         self._back_fd, back_w = os.pipe()
@@ -268,9 +269,13 @@ class RecordingProcess(RecordCalls):
             self._proc.kill()
             self._release()
             return
-        self._pending.append(("close", ()))
         try:
-            self._send()
+            # After a message cut short (a Ctrl-C in the middle of its write), nothing more is sent:
+            # the child would read it as the rest of that message.  The end of the pipe alone has
+            # it drop the cut message and complete the file with every message before it.
+            if not self._torn:
+                self._pending.append(("close", ()))
+                self._send()
         except (OSError, RuntimeError, UserError):
             pass        # the child's report or its exit code (below) says what went wrong
         finally:
@@ -315,19 +320,28 @@ class RecordingProcess(RecordCalls):
         self.messages_written += name in ("write", "write_points", "write_imu")
 
     def _send(self) -> None:
-        """One message: the pending calls pickled, then the bytes of the arrays they refer to."""
+        """One message: the pending calls pickled, then the bytes of the arrays they refer to.
+
+        A KeyboardInterrupt can land between two writes of a message (a signal cuts a write to a full
+        pipe short): the message is then marked torn, and only :meth:`close` may follow."""
+        if self._torn:
+            raise RuntimeError(f"a message to the recording process was cut short (interrupted); "
+                               f"close() completes {self.path} with what came before it")
         calls, self._pending = self._pending, []
         raws, self._arrays = self._arrays, []
         # the ring's end after this message's arrays: the child may say it has read that far once done
         body = pickle.dumps((calls, 0 if self._ring is None else self._ring.written), protocol=pickle.HIGHEST_PROTOCOL)
         parts = [_HEAD.pack(len(body), len(raws)) + b"".join(struct.pack("<Q", r.nbytes) for r in raws) + body,
                  *raws]
+        self._torn = True           # until the last byte is in the pipe
         try:
             _write_all(self._data, parts)
         except BrokenPipeError:
+            self._torn = False      # the child is gone: nothing to keep whole
             self._read_back()
             self._raise_reported()
             raise self._ended_early() from None
+        self._torn = False
         self._read_back()
 
     def _raise_reported(self) -> None:
@@ -442,7 +456,10 @@ def child_main(data_fd: int, back_fd: int, ring_fd: int | None = None, ring_byte
             if head is None:
                 break           # the caller is gone (closed without "close", or died): complete the file
             n_body, n_bufs = _HEAD.unpack(head)
-            lens = struct.unpack(f"<{n_bufs}Q", _read_exact(f, 8 * n_bufs)) if n_bufs else ()
+            raw_lens = _read_exact(f, 8 * n_bufs) if n_bufs else b""
+            if raw_lens is None:
+                break           # a message cut short by the caller's Ctrl-C: dropped, the file completed
+            lens = struct.unpack(f"<{n_bufs}Q", raw_lens)
             body = _read_exact(f, n_body)
             bufs = [_read_exact(f, k) for k in lens]
             if body is None or any(b is None for b in bufs):

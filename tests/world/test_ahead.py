@@ -2,6 +2,10 @@
 the wall time."""
 
 import math
+import subprocess
+import sys
+import textwrap
+import threading
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,7 +19,8 @@ from sim.scan.optics import SpeedNoise
 from sim.scene import load_scene
 from sim.sensor import scene_scan_model
 
-SCENES = Path(__file__).resolve().parents[2] / "scenes"
+ROOT = Path(__file__).resolve().parents[2]
+SCENES = ROOT / "scenes"
 
 
 def _run(scene, ahead):
@@ -141,3 +146,102 @@ def test_draws_ahead_equal_the_generators_own(block):
         worker.close()
     # after the worker is closed the stream goes on, drawing on the caller's thread
     assert np.array_equal(u_ahead.random(70_000), u_ref.random(70_000))
+
+
+# A Ctrl-C lands in the loop's thread at any bytecode boundary (the signal handler runs between two
+# instructions).  This child process raises KeyboardInterrupt at the n-th instruction the main thread
+# executes in each of the worker's hand-offs, for every n until the hand-off ends by itself, and
+# checks after each that the worker still ends (close() within 20 s, in a helper thread: the old
+# concurrent.futures hand-off left a lock taken there and hung for ever, worker and exit alike).
+INTERRUPTED = textwrap.dedent(
+    """
+    import os, sys, threading
+    sys.path.insert(0, {root!r})
+    from sim.ahead import Ahead
+
+    def interrupt_at(n, then=None):
+        count = [0]
+        def tracer(frame, event, arg):
+            frame.f_trace_opcodes = True
+            if event == "opcode":
+                count[0] += 1
+                if count[0] == n:
+                    sys.settrace(None)
+                    if then is not None:
+                        then()
+                    raise KeyboardInterrupt(f"{{frame.f_code.co_filename}}:{{frame.f_lineno}}")
+            return tracer
+        return tracer
+
+    def traced(fn, n, then=None):
+        sys.settrace(interrupt_at(n, then))
+        try:
+            fn()
+            return False
+        except KeyboardInterrupt:
+            return True
+        finally:
+            sys.settrace(None)
+
+    def ends(ahead, what):
+        closer = threading.Thread(target=ahead.close, daemon=True)
+        closer.start()
+        closer.join(20)
+        left = [t.name for t in threading.enumerate() if t.name.startswith("sim-ahead") and t.is_alive()]
+        if closer.is_alive() or left:
+            print("HANG", what, left, flush=True)
+            os._exit(3)
+
+    cases = 0
+    for case in ("wait", "wait_done", "submit", "close"):
+        for n in range(1, 10_000):
+            ahead = Ahead()
+            if case == "wait":      # the worker finishes while (or just after) the loop's thread waits
+                gate = threading.Event()
+                job = ahead.submit(lambda: (gate.wait(), 7)[1])
+                threading.Timer(0.2, gate.set).start()
+                hit = traced(job.result, n, then=gate.set)
+            elif case == "wait_done":   # the result is in before the wait starts
+                job = ahead.submit(int, 7)
+                job.result()
+                hit = traced(job.result, n)
+            elif case == "submit":
+                hit = traced(lambda: ahead.submit(int, 7), n)
+            else:
+                ahead.submit(int, 7)
+                hit = traced(ahead.close, n)
+            ends(ahead, f"{{case}} n={{n}}")
+            if not hit:         # n is past the hand-off's last instruction: every one was tried
+                break
+            cases += 1
+    print("ok", cases, flush=True)
+    """
+)
+
+
+@pytest.mark.slow
+def test_a_ctrl_c_at_any_instruction_of_a_hand_off_leaves_the_worker_free():
+    p = subprocess.run([sys.executable, "-c", INTERRUPTED.format(root=str(ROOT))], capture_output=True,
+                       text=True, timeout=600)
+    assert p.returncode == 0 and "HANG" not in p.stdout, p.stdout + p.stderr
+    assert int(p.stdout.split()[-1]) >= 4      # at least one interrupt in each kind of hand-off
+
+
+@pytest.mark.parametrize("where", ["set-up", "first frame", "mid-run"])
+def test_an_interrupted_run_leaves_no_worker_behind(where, monkeypatch):
+    scene = replace(load_scene(SCENES / "fig12-tracking.toml"), duration_s=2.0)
+    loop = ClosedLoop(scene)
+
+    def interrupt(*_):
+        raise KeyboardInterrupt
+
+    if where == "set-up":       # after the first draws were handed to the worker
+        real = loop.sensor.draw_ahead
+        monkeypatch.setattr(loop.sensor, "draw_ahead", lambda ahead: (real(ahead), interrupt()))
+        progress = None
+    else:
+        progress = interrupt if where == "first frame" else (lambda k, n: k == 12 and interrupt())
+    with pytest.raises(KeyboardInterrupt):
+        loop.run(progress, ahead=True)
+    assert loop._scan_ahead is None
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("sim-ahead")]
