@@ -350,14 +350,15 @@ class Calibrator:
                 # leg and the axis's last stop a coast early, as OUT does, to come home: the other
                 # axis's legs lost the corner from 5-8 deg behind the start), or, with the feature out of sight, as long as OUT
                 # took (time-symmetric return).  Seen, it may take longer than OUT: it starts from
-                # where OUT coasted to, and the ramp takes dead time + v / (2 a) more.
+                # where OUT coasted to, and the ramp takes dead time + v / (2 a) more (0.1 s + v / 40
+                # s^-1... at most settle_s: a slow leg that misses the reference by noise ends on time).
                 ahead = rate * frame.duration_s
                 if leg.repeat or not self._queue or self._queue[0][0] != leg.axis:
                     ahead = -(abs(rate) * (frame.duration_s + 0.15) + rate * rate / (2 * 100.0))
                 if self._missed == 0 and ang + ahead <= 0.0:
                     why = "reference"
                 elif ((self._missed > 0 and elapsed >= self._out_duration)
-                      or elapsed >= 2 * self._out_duration + p.settle_s):
+                      or elapsed >= self._out_duration + min(p.settle_s, 0.1 + abs(rate) / 40.0)):
                     why = "time"
             if why:
                 leg.t_stop_s, leg.end = now, why
