@@ -80,6 +80,7 @@ class LegRecord:
     t_stop_s: float | None = None
     ref_q: np.ndarray | None = None          # corner position at rest before the leg (lidar)
     samples: list = field(default_factory=list)   # (t_s, q (3,))
+    derot_deg_s: list = field(default_factory=list)   # per sample: the rate its frame was de-rotated with
     end: str = ""                            # why it stopped: excursion, dwell, lost, reference, time
     repeat: bool = False                     # the sweep's second run of the byte (from the far side)
 
