@@ -106,3 +106,23 @@ def test_seed_2_turbo_within_2_percent_with_a_reduced_plan():
     # every other measured byte within 2 % too, and the tilt still measured after the pan sweep
     assert all(r["error_pct"] is None or abs(r["error_pct"]) <= 2.0 for r in run.comparison)
     assert run.table.tilt.is_measured(63)
+
+
+def test_a_sample_de_rotated_at_a_stale_rate_is_left_out():
+    # seed 20: the corner was missed in two ramp frames, the next frame was de-rotated with the rate
+    # of 0.15 s before (13 instead of 19.6 deg/s) and its corner sat 0.2 deg behind the line
+    cal = _calibrator()
+    leg = _pan_leg(10.0, 11.3, theta0_deg=-7.9, noise_m=0.001)
+    t = np.array([x for x, _ in leg.samples])
+    w = np.where(t - 10.0 < T_RAMP_END, 0.0, -V_DEG_S)     # corner rate about Z: minus the pan rate
+    k = int(np.flatnonzero(t - 10.0 > T_RAMP_END + 0.05)[0])
+    w[k] = -V_DEG_S + 6.0
+    tq, q = leg.samples[k]
+    leg.samples[k] = (tq, _rotate_about(q[None], np.array([0.0, 0.0, 1.0]), np.radians([0.2]))[0])
+    leg.derot_deg_s = list(w)
+    ts, Q = cal._steady(leg)
+    assert tq not in ts and len(ts) >= 8
+    assert _slope_deg_s(ts, Q) == pytest.approx(V_DEG_S, rel=0.005)
+    leg.derot_deg_s = []                                    # without the record: kept, and the fit is pulled
+    ts2, Q2 = cal._steady(leg)
+    assert tq in ts2
