@@ -359,14 +359,15 @@ class Calibrator:
             else:
                 # back at the start reference, predicted one frame ahead: a fast byte coasts past it,
                 # and the next byte and a repeated OUT leg (below) start from there, their ramp behind
-                # the start.  A repeated byte's BACK leg and the axis's last stop a coast early, as OUT
-                # does, to come home (the other axis's legs lost the corner 5-8 deg behind the start).
+                # the start.  A repeated byte's BACK leg, and the last before the other axis's legs,
+                # stop a coast early, as OUT does, to come home (the other axis's legs lost the corner
+                # 5-8 deg behind the start; after the plan's last leg the return phase brings it home).
                 # Out of sight: as long as OUT took (time-symmetric return).  In sight it may take a
                 # little longer (it starts where OUT coasted to; its ramp takes dead time + v / (2 a)):
                 # 0.1 s + v / (40 deg/s^2), at most settle_s, so a slow leg that misses the reference
                 # by the corner's noise still ends on time.
                 ahead = rate * frame.duration_s
-                if leg.repeat or not self._queue or self._queue[0][0] != leg.axis:
+                if leg.repeat or (self._queue and self._queue[0][0] != leg.axis):
                     ahead = -(abs(rate) * (frame.duration_s + 0.15) + rate * rate / (2 * 100.0))
                 if self._missed == 0 and ang + ahead <= 0.0:
                     why = "reference"
