@@ -40,6 +40,11 @@ class CalibrationPlan:
     reference_s [s] static frames at the start; min_samples per leg fit; start_tilt_deg prior for
     the pan axis if the legs cannot tell it; latency_s subtracted from the measured delays (the link
     part, which the Reconstructor adds itself); return_tol_deg for the final return.
+    min_steady_samples: an OUT leg stopped at the excursion limit with fewer frames after its ramp
+    (``Calibrator._ramp_end_s``) is run again from the far side of the start (the BACK leg's
+    coast): the byte's run-up then lies behind the start and the steady part spans the excursion.
+    max_rest_s [s]: a rest lasts rest_s and, if the corner still moves then (a fast leg's
+    deceleration outlasts rest_s), until it stops, at most this long.
     """
 
     pan_bytes: tuple[int, ...] = DEFAULT_BYTES + (TURBO,)
@@ -53,6 +58,8 @@ class CalibrationPlan:
     start_tilt_deg: float = 0.0
     latency_s: float = 0.0
     return_tol_deg: float = 0.3
+    min_steady_samples: int = 8
+    max_rest_s: float = 1.5
 
     def __post_init__(self) -> None:
         for axis, bs in (("pan", self.pan_bytes), ("tilt", self.tilt_bytes)):
@@ -73,6 +80,9 @@ class LegRecord:
     t_stop_s: float | None = None
     ref_q: np.ndarray | None = None          # corner position at rest before the leg (lidar)
     samples: list = field(default_factory=list)   # (t_s, q (3,))
+    derot_deg_s: list = field(default_factory=list)   # per sample: the rate its frame was de-rotated with
+    end: str = ""                            # why it stopped: excursion, dwell, lost, reference, time
+    repeat: bool = False                     # the sweep's second run of the byte (from the far side)
 
 
 @dataclass

@@ -14,9 +14,13 @@ Procedure
 1. Reference: head stopped, ``reference_s`` of frames locate the corner near ``FeatureSpec.approx_xyz``.
 2. For each axis, for each byte of the plan, two legs: OUT (direction +1) until ``dwell_s`` has passed,
    the feature has turned ``max_excursion_deg`` from the reference or it is lost (three frames in a
-   row without it, once ``settle_s`` has passed), stop, rest ``rest_s``; BACK
-   (direction -1, same byte) until the feature is back at the reference (or as long as OUT lasted),
-   stop, rest.  Both directions are measured and the head stays near its start.
+   row without it, once ``settle_s`` has passed), stop, rest ``rest_s`` (longer, up to
+   ``max_rest_s``, while the corner still turns); BACK (direction -1, same byte) until the feature
+   is back at the reference (or, out of sight, as long as OUT lasted), stop, rest.  Both directions
+   are measured and the head stays near its start.  An OUT leg stopped by the excursion with fewer
+   than ``min_steady_samples`` frames after its ramp (a fast byte: ramp and stop fill the
+   excursion) is run again after its BACK leg, from where that leg coasted to behind the start, and
+   back (stopping a coast early to come home).
 3. Return: the slowest usable byte brings each axis back to the reference, then stop; done.
 
 Feature (per frame): points within ``radius_m`` of the predicted corner; three planes by sequential
@@ -32,15 +36,16 @@ direction in which the corner positions do not move (smallest eigenvector of the
 centred scatter of corner positions; falls back to the prior -- lidar Y for tilt, ``R_y(t0) z`` for pan
 -- if the legs are too short to tell).  This makes pan calibration independent of the unknown start
 tilt (an error of cos(tilt) otherwise).  The angle of the corner about that axis is fitted against the
-corner's time by least squares over the steady part of each leg (after ``settle_s``; the corners off
-the leg's smooth track left out, here and in the axis scatter):
+corner's time by least squares over the steady part of each leg (after ``settle_s``, and never
+before the leg's ramp has ended, :func:`fit_ramp`; the corners off the leg's smooth track left out,
+here and in the axis scatter):
 
 .. math:: \\theta(t) = a + b\\,t,\\quad \\hat v = \\mp b,\\quad
           \\sigma_{\\hat v} = \\sqrt{\\frac{\\sum r_i^2/(n-2)}{\\sum (t_i-\\bar t)^2}}
 
-(pan: the corner turns the opposite way about world-up in lidar coordinates).  The two legs are
-combined by inverse-variance weighting; half their difference (direction asymmetry) is added in
-quadrature to the uncertainty.  The line's crossing of the reference angle, minus the command time,
+(pan: the corner turns the opposite way about world-up in lidar coordinates).  The legs of each
+direction, then the two directions are combined by inverse-variance weighting; half the directions'
+difference (asymmetry) is added in quadrature to the uncertainty.  The line's crossing of the reference angle, minus the command time,
 is the entry's effective delay ``dead_time + v / (2 a)``; a line through those delays gives the dead
 time and acceleration written into the table.  Lidar origin is assumed on (or near, relative to the
 corner distance) the rotation axes only for the *online* excursion check; the estimate itself does
@@ -103,6 +108,68 @@ def on_smooth_track(t_s: np.ndarray, q_m: np.ndarray, n_sigma: float = 5.0, floo
     return keep
 
 
+def fit_ramp(t_s: np.ndarray, ang_deg: np.ndarray, t_from_s: float, min_n: int = 6,
+             min_speed_deg_s: float = 0.2) -> tuple[float, float, float, float] | None:
+    """The ramp of one leg: ``(t_end_s, v_deg_s, a_deg_s2, t0_s)``, where the head reaches its speed
+    (``t_end_s = t0 + |v| / a``), or None (fewer than ``min_n`` samples, slower than
+    ``min_speed_deg_s``, or no fit).
+
+    t_s : (n,) [s] increasing, the leg's sample times from its command on; ang_deg : (n,) [deg] the
+    corner's angle about the (prior) axis; t_from_s [s]: the command's arrival (command time +
+    link latency): the head cannot move before it.
+
+    The head's model of App. D.4 timing (as in :class:`PriorAxisCalibrator`'s timing fit and
+    :mod:`foveatrack.reconstruction`): still until ``t0`` (arrival + dead time), then constant
+    acceleration ``a`` up to the speed ``v``:
+
+    .. math:: \\theta(t) = \\theta_0 + \\mathrm{sgn}(v)\\,g(t - t_0),\\quad
+              g(\\tau) = \\begin{cases} 0 & \\tau < 0 \\\\ a\\tau^2/2 & \\tau < |v|/a \\\\
+              |v|(\\tau - |v|/(2a)) & \\text{else} \\end{cases}
+
+    fitted by scipy ``least_squares`` (soft-L1 loss, scale 0.05 deg: the corner's noise, so a wrong
+    corner 0.5-3 deg off does not move it) from four starting accelerations (5-300 deg/s^2), the best
+    kept.  A leg whose ramp had not ended when it stopped fits any ``|v| / a`` reaching past its last
+    sample: ``t_end_s`` then lies at or after it, and the leg has no steady part (which is the
+    truth: the seed-2 PTS-303 turbo legs of a 15 deg excursion read 9 % low from their ramp's tail).
+    """
+    from scipy.optimize import least_squares
+
+    t = np.asarray(t_s, float)
+    y = np.asarray(ang_deg, float)
+    if len(t) < min_n:
+        return None
+    k = max(3, len(t) // 3)
+    v0 = float(np.polyfit(t[-k:], y[-k:], 1)[0])
+    if not abs(v0) >= min_speed_deg_s:
+        return None
+    tc = t - t_from_s
+
+    def resid(p):
+        th0, t0, v, la = p
+        a = math.exp(la)
+        tau = tc - t0
+        tr = abs(v) / a
+        g = np.where(tau < 0, 0.0, np.where(tau < tr, 0.5 * a * tau ** 2, abs(v) * (tau - 0.5 * tr)))
+        return y - (th0 + math.copysign(1.0, v) * g)
+
+    best = None
+    lo = [-np.inf, 0.0, -np.inf, math.log(0.5)]
+    hi = [np.inf, max(float(tc[-1]), 1e-3), np.inf, math.log(5000.0)]
+    for a0 in (5.0, 20.0, 80.0, 300.0):
+        x0 = [float(y[0]), min(0.05, 0.5 * hi[1]), v0, math.log(a0)]
+        try:
+            fit = least_squares(resid, x0, loss="soft_l1", f_scale=0.05, bounds=(lo, hi))
+        except ValueError:
+            continue
+        if fit.success and (best is None or fit.cost < best.cost):
+            best = fit
+    if best is None:
+        return None
+    _, t0, v, la = best.x
+    a = math.exp(la)
+    return float(t_from_s + t0 + abs(v) / a), float(v), float(a), float(t_from_s + t0)
+
+
 class Calibrator:
     """State machine for Appendix D.4 (see module docstring).
 
@@ -119,7 +186,8 @@ class Calibrator:
         self.frames = 0
         self.frames_with_feature = 0
         self.legs: list[LegRecord] = []
-        self._queue = [(a, b, d) for a, bs in (("pan", plan.pan_bytes), ("tilt", plan.tilt_bytes))
+        # (axis, byte, direction, repeat)
+        self._queue = [(a, b, d, False) for a, bs in (("pan", plan.pan_bytes), ("tilt", plan.tilt_bytes))
                        for b in bs for d in (+1, -1)]
         self._phase = "reference"
         self._phase_t0: float | None = None
@@ -127,10 +195,16 @@ class Calibrator:
         self._ref_q: np.ndarray | None = None      # corner at the very start
         self._last_q: np.ndarray | None = None
         self._rest_samples: list = []
+        self._rest_t: list = []
         self._leg: LegRecord | None = None
         self._out_duration = 0.0
         self._missed = 0
         self._return_axis = None
+        self._ramp_cache: dict = {}
+        self._derot_deg_s = 0.0     # the rate the last frame's points were de-rotated with
+        self._recentre = False      # the return phase brings one axis home before the other's legs
+        self._recentre_side = 1.0
+        self._recentred = False
         self.report: CalibrationReport | None = None
         self.failure: str | None = None
         self._pan_prior = np.array([math.sin(math.radians(plan.start_tilt_deg)), 0.0,
@@ -184,13 +258,27 @@ class Calibrator:
             return None
         t_mid = float(t_s.mean())
         leg = self._leg
+        self._derot_deg_s = 0.0
         if leg is not None and self._phase == "move" and len(leg.samples) >= 2:
             # de-rotate points to t_mid with the leg's current rate about the prior axis
             tb, _, w = self._recent_motion(leg)                         # deg/s of the corner
+            self._derot_deg_s = w
             ax = self._prior_axis(leg.axis)
             xyz = _rotate_about(xyz, ax, np.radians(-w * (t_s - t_mid)))
             center = _rotate_about(center[None], ax, np.radians([w * (t_mid - tb)]))[0]
         found = find_corner(xyz, center, self.feature, self.rng)
+        if found is None and self._phase == "rest" and leg is not None and len(leg.samples) >= 2:
+            # the head coasts after a fast leg's stop (dead time, then the deceleration: 8 deg after
+            # 23 deg/s); look along the arc up to a coast at 10 deg/s^2
+            _, _, w = self._recent_motion(leg)
+            reach = abs(w) * 0.1 + w * w / (2 * 10.0)
+            if reach > 0.5 * self.feature.radius_m / max(float(np.linalg.norm(center)), 1e-3) * 57.3:
+                ax = self._prior_axis(leg.axis)
+                for frac in (0.25, 0.5, 0.75, 1.0):
+                    c = _rotate_about(center[None], ax, np.radians([math.copysign(frac * reach, w)]))[0]
+                    found = find_corner(xyz, c, self.feature, self.rng)
+                    if found is not None:
+                        break
         if found is None and self._missed >= 1 and self._ref_q is not None:
             found = find_corner(xyz, self._ref_q, self.feature, self.rng)   # lost: look near home
         if found is None:
@@ -233,7 +321,12 @@ class Calibrator:
         if self._phase == "rest":
             if m is not None:
                 self._rest_samples.append(m[1])
-            if elapsed >= p.rest_s:
+                self._rest_t.append(m[0])
+            # a fast leg's deceleration outlasts rest_s (23 deg/s at 40 deg/s^2: 0.6 s): the next leg
+            # would start on a moving head and its ramp would not be the model's (from rest)
+            if elapsed >= p.rest_s and (self._rest_still() or elapsed >= p.max_rest_s):
+                if elapsed - p.rest_s >= 0.5 * frame.duration_s and len(self._rest_samples) >= 5:
+                    self._rest_samples = self._rest_samples[-5:]     # the reference: the head at rest
                 return self._start_next_leg(now)
             return None
 
@@ -241,11 +334,13 @@ class Calibrator:
             leg = self._leg
             if m is not None:
                 leg.samples.append(m)
+                leg.derot_deg_s.append(self._derot_deg_s)
             ang = self._online_angle(leg.axis, self._last_q) if self._last_q is not None else 0.0
             rate = 0.0
             if len(leg.samples) >= 2:
                 _, a, w = self._recent_motion(leg)
                 ang, rate = _SIGN[leg.axis] * a, _SIGN[leg.axis] * w
+            why = ""
             if leg.direction > 0:
                 # stop early enough that dead time + deceleration + one frame stay inside the excursion
                 coast = abs(rate) * (frame.duration_s + 0.15) + rate * rate / (2 * 100.0)
@@ -255,24 +350,61 @@ class Calibrator:
                 # ended the leg after 0.2 s three times running in 3 of 200 simulated runs (the byte
                 # then unmeasured).  The price: up to settle_s of the ramp turned with the corner unseen.
                 lost = self._missed >= 3 and elapsed >= p.settle_s
-                end = lost or elapsed >= p.dwell_s or abs(ang) + coast >= p.max_excursion_deg
+                if lost:
+                    why = "lost"
+                elif elapsed >= p.dwell_s:
+                    why = "dwell"
+                elif abs(ang) + coast >= p.max_excursion_deg:
+                    why = "excursion"
             else:
-                # back at the start reference (predicted one frame ahead), or as long as OUT took
-                # (time-symmetric return when the feature is out of sight)
-                end = ((self._missed == 0 and ang + rate * frame.duration_s <= 0.0)
-                       or elapsed >= self._out_duration)
-            if end:
-                leg.t_stop_s = now
+                # back at the start reference, predicted one frame ahead: a fast byte coasts past it,
+                # and the next byte and a repeated OUT leg (below) start from there, their ramp behind
+                # the start.  A repeated byte's BACK leg, and the last before the other axis's legs,
+                # stop a coast early, as OUT does, to come home (the other axis's legs lost the corner
+                # 5-8 deg behind the start; after the plan's last leg the return phase brings it home).
+                # Out of sight: as long as OUT took (time-symmetric return).  In sight it may take a
+                # little longer (it starts where OUT coasted to; its ramp takes dead time + v / (2 a)):
+                # 0.1 s + v / (40 deg/s^2), at most settle_s, so a slow leg that misses the reference
+                # by the corner's noise still ends on time.
+                ahead = rate * frame.duration_s
+                if leg.repeat or (self._queue and self._queue[0][0] != leg.axis):
+                    ahead = -(abs(rate) * (frame.duration_s + 0.15) + rate * rate / (2 * 100.0))
+                if self._missed == 0 and ang + ahead <= 0.0:
+                    why = "reference"
+                elif ((self._missed > 0 and elapsed >= self._out_duration)
+                      or elapsed >= self._out_duration + min(p.settle_s, 0.1 + abs(rate) / 40.0)):
+                    why = "time"
+            if why:
+                leg.t_stop_s, leg.end = now, why
                 if leg.direction > 0:
                     self._out_duration = elapsed
+                    if (why == "excursion" and not leg.repeat
+                            and len(self._steady(leg)[0]) < p.min_steady_samples):
+                        # ramp and stop took the excursion: after the BACK leg (which ends past the
+                        # start by the byte's coast) run the byte again from there, so its ramp lies
+                        # behind the start and the steady part spans the excursion; that leg's BACK
+                        # stops early so that it coasts home
+                        self._queue[1:1] = [(leg.axis, leg.byte, +1, True), (leg.axis, leg.byte, -1, True)]
                 self._phase, self._phase_t0 = "rest", now
-                self._rest_samples = []
+                self._rest_samples, self._rest_t = [], []
                 return STOP
             return None
 
         if self._phase == "return":
             axis = self._return_axis
             ang = self._online_angle(axis, self._last_q) if self._last_q is not None else 0.0
+            if self._recentre:
+                # near enough (the next legs' excursion counts from the start reference): within
+                # 1 deg, or past it
+                if (abs(ang) <= max(p.return_tol_deg, 1.0) or ang * self._recentre_side <= 0
+                        or elapsed > 30.0 or self._missed >= 5):
+                    self._recentre = False
+                    self._phase, self._phase_t0 = "rest", now
+                    self._rest_samples, self._rest_t = [], []
+                    return STOP
+                d = -1 if self._recentre_side > 0 else 1
+                byte = self._return_byte(axis)
+                return HeadCommand(d, byte, 0, 0) if axis == "pan" else HeadCommand(0, 0, d, byte)
             if abs(ang) <= p.return_tol_deg or elapsed > 30.0 or self._missed >= 5:
                 if axis == "pan":
                     self._return_axis, self._phase_t0 = "tilt", now
@@ -285,6 +417,23 @@ class Calibrator:
             return HeadCommand(d, byte, 0, 0) if axis == "pan" else HeadCommand(0, 0, d, byte)
         return None
 
+    def _rest_still(self, n: int = 6, max_rate_deg_s: float = 1.0) -> bool:
+        """Whether the corner has stopped turning about the last leg's axis: the median of the pairwise
+        rates of the last ``n`` rest samples (Theil-Sen: a wrong corner does not move it) below
+        ``max_rate_deg_s`` (about 3 sigma of ~0.05 deg corner noise over 0.25 s of 20 Hz frames)."""
+        n = min(n, len(self._rest_t))
+        if self._leg is None:
+            return True
+        if n < 3:
+            return False     # not seen yet: a corner turning fast is smeared past finding (max_rest_s caps it)
+        t = np.array(self._rest_t[-n:])
+        Q = np.array(self._rest_samples[-n:])
+        ang = _angle_about(Q, self._prior_axis(self._leg.axis), Q[-1])
+        i, j = np.triu_indices(n, 1)
+        dt = t[j] - t[i]
+        ok = dt > 1e-6
+        return bool(abs(np.median((ang[j] - ang[i])[ok] / dt[ok])) < max_rate_deg_s)
+
     def _return_byte(self, axis: str) -> int:
         bs = [b for b in (self.plan.pan_bytes if axis == "pan" else self.plan.tilt_bytes) if b != TURBO]
         return sorted(bs)[len(bs) // 3] if bs else 8
@@ -294,8 +443,21 @@ class Calibrator:
         if not self._queue:
             self._phase, self._phase_t0, self._return_axis = "return", now, "pan"
             return None
-        axis, byte, d = self._queue.pop(0)
-        self._leg = LegRecord(axis, byte, d, now, ref_q=ref)
+        last = self._leg
+        if last is not None and not self._recentred and self._queue[0][0] != last.axis:
+            # the other axis's legs next: bring this one home first (a fast byte's last BACK leg
+            # coasts home only within 2-3 deg, and from 2.5 deg behind the start the tilt legs lost
+            # the corner after 1-2 s in 4 of 30 simulated units)
+            ang = self._online_angle(last.axis, self._last_q) if self._last_q is not None else 0.0
+            if abs(ang) > 1.0:
+                self._recentred = True
+                self._phase, self._phase_t0, self._return_axis = "return", now, last.axis
+                self._recentre, self._recentre_side = True, (1.0 if ang > 0 else -1.0)
+                d, b = (-1 if ang > 0 else 1), self._return_byte(last.axis)
+                return HeadCommand(d, b, 0, 0) if last.axis == "pan" else HeadCommand(0, 0, d, b)
+        self._recentred = False
+        axis, byte, d, repeat = self._queue.pop(0)
+        self._leg = LegRecord(axis, byte, d, now, ref_q=ref, repeat=repeat)
         self.legs.append(self._leg)
         self._phase, self._phase_t0 = "move", now
         return HeadCommand(d, byte, 0, 0) if axis == "pan" else HeadCommand(0, 0, d, byte)
@@ -304,11 +466,11 @@ class Calibrator:
     def _steady(self, leg: LegRecord) -> tuple[np.ndarray, np.ndarray]:
         if leg.t_stop_s is None:
             return np.empty(0), np.empty((0, 3))
-        s = [(t, q) for t, q in leg.samples if leg.t_cmd_s < t <= leg.t_stop_s]
-        if not s:
+        idx = [i for i, (t, _) in enumerate(leg.samples) if leg.t_cmd_s < t <= leg.t_stop_s]
+        if not idx:
             return np.empty(0), np.empty((0, 3))
-        t = np.array([x for x, _ in s])
-        Q = np.array([q for _, q in s])
+        t = np.array([leg.samples[i][0] for i in idx])
+        Q = np.array([leg.samples[i][1] for i in idx])
         start = leg.t_cmd_s + self.plan.settle_s
         if len(t) >= 4:
             # adaptive: a fast leg is steady once its frame-to-frame rate matches its final rate
@@ -321,10 +483,57 @@ class Calibrator:
                 bad = np.flatnonzero(np.abs(r - r_f) > max(0.05 * abs(r_f), noise))
                 t_steady = t[bad[-1] + 1] if bad.size else t[0]
                 start = min(start, t_steady)
+        t_ramp = self._ramp_end_s(leg)
+        if t_ramp is not None:
+            # never inside the ramp: its tail read as the speed (the rule above takes the rate of the
+            # last frames as final, which a leg that stopped while still accelerating never reached)
+            start = max(start, t_ramp + float(np.median(np.diff(t))))
         keep = t >= start
+        if len(leg.derot_deg_s) == len(leg.samples) and keep.sum() >= 3:
+            # a frame de-rotated at a stale rate (the corner missed in the frames before, in the
+            # ramp) puts the corner up to 0.2 deg off the line where the Mid-40 scanned it off the
+            # frame's middle time: seed 20's first turbo sample after two misses, 6 deg/s stale,
+            # read the leg 2.7 % low.  3 deg/s: about 0.07 deg (25 ms); the online rate's own noise
+            # is ~1.4 deg/s (0.05 deg corner noise over a 50 ms frame), which this rarely cuts.
+            w = np.array([leg.derot_deg_s[i] for i in idx])
+            ax = self._prior_axis(leg.axis)
+            ang = np.degrees(np.unwrap(np.radians(_angle_about(Q[keep], ax, Q[keep][-1]))))
+            r_line = float(np.polyfit(t[keep], ang, 1)[0])
+            keep &= (np.abs(w - r_line) <= 3.0) | (abs(r_line) < 3.0)
         t, Q = t[keep], Q[keep]
         on_track = on_smooth_track(t, Q)
         return t[on_track], Q[on_track]
+
+    def _ramp_end_s(self, leg: LegRecord) -> float | None:
+        """When the head reached the leg's speed [s] (:func:`fit_ramp` on the corner's angle about the
+        prior axis over the whole leg), or None (a slow or short leg: no ramp to tell)."""
+        key = (len(leg.samples), leg.t_stop_s)
+        hit = self._ramp_cache.get(id(leg))
+        if hit is not None and hit[0] is leg and hit[1] == key:
+            return hit[2]
+        s = [(t, q) for t, q in leg.samples if leg.t_cmd_s < t <= (leg.t_stop_s if leg.t_stop_s is not None else math.inf)]
+        out = None
+        if len(s) >= 6:
+            t = np.array([x for x, _ in s])
+            Q = np.array([q for _, q in s])
+            ang = np.degrees(np.unwrap(np.radians(_angle_about(Q, self._prior_axis(leg.axis), Q[-1]))))
+            r = fit_ramp(t, ang, leg.t_cmd_s + self.plan.latency_s)
+            out = None if r is None else r[0]
+        self._ramp_cache[id(leg)] = (leg, key, out)
+        return out
+
+    def _unmeasured_reason(self, axis: str, byte: int) -> str:
+        """Why a planned byte has no usable leg, and what to change in the plan."""
+        p = self.plan
+        short = [g for g in self.legs if g.axis == axis and g.byte == byte and g.end == "excursion"]
+        if short:
+            g = max(short, key=lambda g: g.t_stop_s - g.t_cmd_s)
+            te = self._ramp_end_s(g)
+            ramp = "" if te is None else f" (its ramp ended {te - g.t_cmd_s:.2f} s after the command)"
+            return (f"too few steady frames (< {p.min_samples}) after the ramp: the longest leg stopped at "
+                    f"the {p.max_excursion_deg:g} deg excursion {g.t_stop_s - g.t_cmd_s:.2f} s after its "
+                    f"command{ramp}; give the corner a larger max_excursion_deg if the FoV allows")
+        return f"feature lost or too few steady frames (< {p.min_samples}); try a longer dwell or excursion"
 
     def _leg_scatter(self, axis: str, min_arc_rms_m: float = 0.0) -> tuple[np.ndarray, int]:
         """Scatter matrix of the ``axis`` legs' steady corner positions about each leg's mean, and the
@@ -364,6 +573,7 @@ class Calibrator:
     def _estimate(self) -> tuple[SpeedTable, CalibrationReport]:
         axes = {a: self._axis_estimate(a) for a in ("pan", "tilt")}
         per = {"pan": {}, "tilt": {}}
+        fitted = []
         for leg in self.legs:
             t, Q = self._steady(leg)
             if len(t) < self.plan.min_samples:
@@ -377,12 +587,24 @@ class Calibrator:
             b = float(np.sum((t - tm) * (ang - ang.mean())) / stt)
             a0 = ang.mean() - b * tm
             res = ang - (a0 + b * t)
-            se = math.sqrt(float(np.sum(res ** 2)) / max(len(t) - 2, 1) / stt)
+            s2 = float(np.sum(res ** 2)) / max(len(t) - 2, 1)
             v = _SIGN[leg.axis] * leg.direction * b
             delay = None
             if abs(b) > 1e-6:
                 delay = (0.0 - a0) / b - leg.t_cmd_s - self.plan.latency_s   # reference angle is 0
-            per[leg.axis].setdefault(leg.byte, []).append((v, se, delay))
+            fitted.append((leg, v, s2, stt, len(t), delay))
+        # A short leg's residual variance (n - 2 = 2-7 degrees of freedom) can come out far below the
+        # corner's noise by chance and its leg then outweighs the others: seed 22's 5-frame turbo leg,
+        # 2.0 % high, took most of the weight from a 7-frame one (0.6 %).  Below 10 frames (where
+        # on_smooth_track does not run either) it is floored at the axis's median over longer legs.
+        floor = {}
+        for axis in ("pan", "tilt"):
+            long_s2 = [f[2] for f in fitted if f[0].axis == axis and f[4] >= 10]
+            floor[axis] = float(np.median(long_s2)) if long_s2 else 0.0
+        for leg, v, s2, stt, n, delay in fitted:
+            if n < 10:
+                s2 = max(s2, floor[leg.axis])
+            per[leg.axis].setdefault(leg.byte, []).append((v, math.sqrt(s2 / stt), delay, leg.direction))
         tables, unmeasured, asym = {}, {"pan": {}, "tilt": {}}, {"pan": {}, "tilt": {}}
         delays = []
         for axis in ("pan", "tilt"):
@@ -394,16 +616,23 @@ class Calibrator:
                     unmeasured[axis][byte] = "not in the plan (interpolated)"
                     continue
                 if not fits:
-                    unmeasured[axis][byte] = ("feature lost or too few steady frames "
-                                              f"(< {self.plan.min_samples}); try a longer dwell or excursion")
+                    unmeasured[axis][byte] = self._unmeasured_reason(axis, byte)
                     entries.append(SpeedEntry(byte, float("nan"), float("nan"), False, note="not measured"))
                     continue
-                vs = np.array([f[0] for f in fits])
-                ses = np.array([max(f[1], 1e-9) for f in fits])
-                w = 1 / ses ** 2
+                # per direction (a swept byte has two legs each way) by inverse variance, then the
+                # two directions alike, half their difference added in quadrature
+                per_dir = []
+                for dr in (+1, -1):
+                    fd = [f for f in fits if f[3] == dr]
+                    if fd:
+                        wd = 1 / np.array([max(f[1], 1e-9) for f in fd]) ** 2
+                        per_dir.append((float(np.sum(wd * [f[0] for f in fd]) / np.sum(wd)),
+                                        math.sqrt(1 / float(np.sum(wd)))))
+                vs = np.array([x[0] for x in per_dir])
+                w = 1 / np.array([x[1] for x in per_dir]) ** 2
                 v = float(np.sum(w * vs) / np.sum(w))
                 sig = math.sqrt(1 / float(np.sum(w)))
-                if len(fits) == 2:
+                if len(per_dir) == 2:
                     asym[axis][byte] = (float(vs[0]), float(vs[1]))
                     sig = math.hypot(sig, (vs[0] - vs[1]) / 2)
                 v = max(v, 0.0)
@@ -558,7 +787,9 @@ class PriorAxisCalibrator(Calibrator):
             acc = (math.exp(la_p), math.exp(la_t))
             return np.concatenate([ang - model(tau - d, v, acc[k]) for k, v, tau, ang in data])
 
-        x0 = [max(report.dead_time_s, 0.0), math.log(report.accel_deg_s2 or 20.0), math.log(report.accel_deg_s2 or 20.0)]
+        # the start inside the bounds: the delay line's slope can be ~0 (a few legs), its accel 1e4+
+        la0 = min(max(math.log(report.accel_deg_s2 or 20.0), math.log(0.2)), math.log(5e3))
+        x0 = [min(max(report.dead_time_s, 0.0), 0.9), la0, la0]
         fit = least_squares(resid, x0, loss="soft_l1", f_scale=0.1,
                             bounds=([0.0, math.log(0.1), math.log(0.1)], [1.0, math.log(1e4), math.log(1e4)]))
         if not fit.success:

@@ -8,7 +8,7 @@ from foveatrack.speed_table import TURBO
 ROOT = Path(__file__).resolve().parents[2]
 # A unit seed no scene, test or doc uses anywhere else (grep unit_seed): the calibration has never seen it.
 FRESH_UNIT = 4242
-# Every 4th pan byte + 63 + turbo, 11 tilt bytes, 4 s legs: ~170 s of virtual time (~30 s wall).
+# Every 4th pan byte + 63 + turbo, 11 tilt bytes, 4 s legs: ~200 s of virtual time (~20-60 s wall).
 # Bytes in between are interpolated (reported as unmeasured, "not in the plan").
 PLAN = dict(pan_bytes=tuple(range(4, 64, 4)) + (63, TURBO), tilt_bytes=(4, 8, 12, 16, 20, 24, 32, 40, 48, 56, 63),
             dwell_s=4.0)
