@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
 
 
@@ -207,10 +208,10 @@ def _median_detection(pts: np.ndarray, t_ns: np.ndarray) -> Detection:
 def _detection(p: np.ndarray, t_med_ns: float, n: int, hypot_xy: float | None = None) -> Detection:
     """A Detection from the median position ``p`` (3,), median time [ns] and the point count
     (``hypot_xy``: see :func:`bearing_deg`).
-    ``|p|`` as ``np.linalg.norm`` computes it for a vector (``sqrt(p.dot(p))``), without its checks."""
+    ``|p|`` summed in a fixed order (:func:`foveatrack.fixed_order.norm3`: not BLAS's, which differs per CPU)."""
     x, y, z = p.tolist()
     az, el = bearing_deg(x, y, z, hypot_xy)
-    return _make_detection(float(t_med_ns) * 1e-9, p, n, az, el, math.sqrt(p.dot(p)))
+    return _make_detection(float(t_med_ns) * 1e-9, p, n, az, el, norm3(p))
 
 
 def _median_rows(a: np.ndarray):

@@ -65,6 +65,7 @@ import numpy as np
 
 from foveatrack.control import HeadCommand
 from foveatrack.detection import wrap_deg
+from foveatrack.fixed_order import rows_times_mat3T
 from foveatrack.reconstruction import HeadPose, Reconstructor, rotation_matrix
 
 #: A rest stretch longer than this is folded into the bias estimate in pieces of this length, so a
@@ -337,7 +338,7 @@ class GyroAttitude(HeadPose):
         g = np.asarray(gyro_rad_s, float).reshape(-1, 3)
         if t_arr.size == 0:
             return
-        w_lidar = g @ self.R_lidar_imu.T
+        w_lidar = rows_times_mat3T(g, self.R_lidar_imu)   # g @ R.T, the same bits on every CPU
         for k in range(t_arr.size):
             t = float(t_arr[k])
             if self._t_prev is not None and t <= self._t_prev:

@@ -58,11 +58,19 @@ class BearingFilter:
         self.n_updates = 0
 
     def _predict_to(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(F x, F P F^T + Q)`` with ``F = [[1, dt], [0, 1]]`` and the white-acceleration
+        ``Q = q [[|dt|^3/3, dt^2/2], [dt^2/2, |dt|]]``, written out on floats in a fixed order (a BLAS
+        product's order differs per CPU: :mod:`foveatrack.fixed_order`; powers as products, not libm)."""
         dt = t_s - self.t_s
-        F = np.array([[1.0, dt], [0.0, 1.0]])
         adt = abs(dt)
-        Q = self.q_deg2_s3 * np.array([[adt ** 3 / 3, adt ** 2 / 2], [adt ** 2 / 2, adt]])
-        return F @ self.x, F @ self.P @ F.T + Q
+        q = self.q_deg2_s3
+        x0, x1 = self.x.tolist()
+        (p00, p01), (p10, p11) = self.P.tolist()
+        a00, a01 = p00 + dt * p10, p01 + dt * p11          # row 0 of F P (row 1 is P's)
+        q01 = q * (adt * adt / 2)
+        P = np.array([[a00 + a01 * dt + q * (adt * adt * adt / 3), a01 + q01],
+                      [p10 + p11 * dt + q01, p11 + q * adt]])
+        return np.array([x0 + dt * x1, x1]), P
 
     def update(self, t_s: float, theta_deg: float) -> None:
         if self.x is None:

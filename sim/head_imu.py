@@ -74,6 +74,7 @@ from typing import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from foveatrack.fixed_order import mats3_times_mat3, mats3_times_vec3, rows_times_mat3T
 from foveatrack.gyro_attitude import euler_xyz_matrix
 from foveatrack.imu_calib.imu_integration import GRAVITY_M_S2
 from sim.effects import effect_rng
@@ -125,7 +126,7 @@ class HeadGyro:
             _, tilt = head.angles_at(tm, wrap_pan=False)
             vp, vt = head.rates_at(tm)
             w[moving] = lidar_body_rate_rad_s(vp, tilt, vt)
-        w = w @ self.R_imu_lidar.T
+        w = rows_times_mat3T(w, self.R_imu_lidar)   # w @ R.T, the same bits on every CPU
         # the walk's first increment is after the first sample (the bias at it is bias0)
         walk = self.rng.normal(0.0, self._walk_sigma, (t.size, 3))
         if self._first:
@@ -164,8 +165,8 @@ def head_imu_truth(pose: Pose, X: np.ndarray, t_s: np.ndarray, h_s: float) -> tu
     offs = np.array([-h_s, -h_s / 2, 0.0, h_s / 2, h_s])
     pan, tilt = pose((t[:, None] + offs[None, :]).reshape(-1))
     R_wl = head_rotations(pan, tilt).reshape(n, 5, 3, 3)
-    R_wi = R_wl @ X[:3, :3]
-    p = R_wl @ X[:3, 3]                                   # (n, 5, 3): IMU positions
+    R_wi = mats3_times_mat3(R_wl, X[:3, :3])              # R_wl @ X_R, not BLAS's per-CPU order
+    p = mats3_times_vec3(R_wl, X[:3, 3])                  # (n, 5, 3): IMU positions
     rel = np.einsum("nji,njk->nik", R_wi[:, 1], R_wi[:, 3])   # R(t - h/2)^T R(t + h/2)
     gyro = Rotation.from_matrix(rel).as_rotvec().reshape(n, 3) / h_s
     a = (p[:, 4] - 2 * p[:, 2] + p[:, 0]) / h_s**2

@@ -40,6 +40,7 @@ from scipy.spatial.transform import Rotation
 
 from foveatrack.config_util import as_float, as_vec, check_keys
 from foveatrack.errors import UserError
+from foveatrack.fixed_order import mats3_times_mat3
 from foveatrack.imu_calib.imu_integration import GRAVITY_M_S2, ImuSamples
 from foveatrack.imu_calib.se3 import make_T, so3_exp, so3_log
 
@@ -183,7 +184,8 @@ class RigTrajectory:
         self.poses = poses_world_imu
         self.dwell_s = dwell_s
         self.move_s = move_s
-        self._phi = [so3_log(a[:3, :3].T @ b[:3, :3]) for a, b in zip(poses_world_imu, poses_world_imu[1:])]
+        self._phi = [so3_log(mats3_times_mat3(a[:3, :3].T, b[:3, :3]))   # not BLAS's per-CPU order
+                     for a, b in zip(poses_world_imu, poses_world_imu[1:])]
 
     def _segment(self, t: np.ndarray):
         per = self.dwell_s + self.move_s
@@ -209,7 +211,7 @@ class RigTrajectory:
             if moving[k]:
                 phi = self._phi[i[k]]
                 dp = self.poses[i[k] + 1][:3, 3] - T0[:3, 3]
-                R[k] = T0[:3, :3] @ so3_exp(s[k] * phi)
+                R[k] = mats3_times_mat3(T0[:3, :3], so3_exp(s[k] * phi))
                 p[k] = T0[:3, 3] + s[k] * dp
                 w[k] = sd[k] * phi
                 a[k] = sdd[k] * dp

@@ -28,6 +28,7 @@ import numpy as np
 
 from foveatrack.control import STOP
 from foveatrack.errors import UserError
+from foveatrack.fixed_order import mat3T_vec, norm3
 from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate, Limits
 from foveatrack.reconstruction import rotation_matrix
@@ -344,11 +345,11 @@ class ClosedLoop:
             traj = self.scene.targets[0].trajectory
             p = traj.position(np.array([t_mid]))[0]
             R = rotation_matrix(pan, tilt)
-            q = R.T @ p
+            q = mat3T_vec(R, p)   # R.T @ p in a fixed order (BLAS's differs per CPU)
             L.true_error_deg.append(math.degrees(math.atan2(math.hypot(q[1], q[2]), q[0])))
             L.true_az_deg.append(math.degrees(math.atan2(q[1], q[0])))
             L.true_el_deg.append(math.degrees(math.atan2(q[2], math.hypot(q[0], q[1]))))
-            L.target_range_m.append(math.sqrt(p.dot(p)))   # np.linalg.norm's own expression, its bits
+            L.target_range_m.append(norm3(p))
             L.target_lateral_m.append(float(p[1]))
             t_det = out.detection.t_s if out.detection is not None else t_mid
             L.target_xyz.append(traj.position(np.array([t_det]))[0])

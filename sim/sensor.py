@@ -13,6 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from foveatrack.fixed_order import norm3
 from foveatrack.livox.protocol import quantise_to_mm_grid
 from sim import effects as fx
 from sim import sensor_kernels as sk
@@ -149,7 +150,7 @@ class SceneSensor:
         t_mid_s = float(chunk.t_ns.mean()) * 1e-9
         for i, spec in enumerate(self.scene.targets[:len(d)]):
             c = spec.trajectory.position(np.array([t_mid_s]))[0]
-            d[i] = c / max(np.linalg.norm(c), 1e-9)
+            d[i] = c / max(norm3(c), 1e-9)
         chunk = replace(chunk, direction=d, status=np.zeros_like(chunk.status))
         t0, t1 = chunk.t_ns[0] * 1e-9, chunk.t_ns[-1] * 1e-9 + 1e-6
         self.returns(chunk, d, t0, t1)
@@ -183,7 +184,7 @@ class SceneSensor:
         reach = radius_m + v_max * 0.5 * (t1 - t0) * 1.01 + 1e-3
         # Beam divergence can catch a body just outside the central ray's path.
         if self._has["beam_footprint"]:
-            reach += np.linalg.norm(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
+            reach += norm3(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
         idx = np.empty(t_ns.size, dtype=np.int64)
         idx = idx[:wk.cone_candidates_kernel(d_world, status, c[0], c[1], c[2], reach, idx)]
         self.rays_cast_targets += idx.size

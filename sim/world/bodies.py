@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from foveatrack.fixed_order import dot3, norm3
 from sim.world.kernels import BOX, DISK, PLANE, PRIM_COLUMNS, RECT, SPHERE
 
 
@@ -36,20 +37,20 @@ def box(centre, half_extents, yaw_rad: float = 0.0) -> np.ndarray:
 
 def disk(centre, radius, normal=(0.0, 0.0, 1.0)) -> np.ndarray:
     n = np.asarray(normal, float)
-    return _row(DISK, centre, (radius, 0, 0), n / np.linalg.norm(n))
+    return _row(DISK, centre, (radius, 0, 0), n / norm3(n))
 
 
 def plane(point, normal) -> np.ndarray:
     n = np.asarray(normal, float)
-    return _row(PLANE, point, (0, 0, 0), n / np.linalg.norm(n))
+    return _row(PLANE, point, (0, 0, 0), n / norm3(n))
 
 
 def rect(centre, normal, axis_u, half_u, half_v) -> np.ndarray:
     n = np.asarray(normal, float)
-    n = n / np.linalg.norm(n)
+    n = n / norm3(n)     # fixed-order sums (foveatrack.fixed_order): BLAS's differ per CPU
     u = np.asarray(axis_u, float)
-    u = u - n * (u @ n)
-    return _row(RECT, centre, (half_u, half_v, 0), n, u / np.linalg.norm(u))
+    u = u - n * dot3(u, n)
+    return _row(RECT, centre, (half_u, half_v, 0), n, u / norm3(u))
 
 
 @dataclass(frozen=True)
@@ -66,11 +67,11 @@ class Body:
         r = 0.0
         for p in self.prims:
             kind = int(p[0])
-            centre = float(np.linalg.norm(p[1:4]))
+            centre = norm3(p[1:4])
             if kind == SPHERE or kind == DISK:
                 r = max(r, centre + p[4])
             elif kind == BOX:
-                r = max(r, centre + float(np.linalg.norm(p[4:7])))
+                r = max(r, centre + norm3(p[4:7]))
             else:
                 return math.inf
         return r
@@ -117,7 +118,7 @@ def ground(height_m: float) -> np.ndarray:
 def wall(centre, normal, width_m, height_m) -> np.ndarray:
     n = np.asarray(normal, float)
     u = np.cross((0, 0, 1), n)
-    if np.linalg.norm(u) < 1e-9:
+    if norm3(u) < 1e-9:
         u = np.array([1.0, 0, 0])
     return rect(centre, n, u, width_m / 2, height_m / 2)
 

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from foveatrack.fixed_order import norm3
+
 
 _straight_position_kernel = None
 _hover_heading_kernel = None
@@ -55,7 +57,7 @@ class Straight:
 
     @property
     def max_speed_m_s(self) -> float:
-        return float(np.linalg.norm(self.velocity_m_s))
+        return norm3(self.velocity_m_s)
 
 
 @dataclass(frozen=True)
@@ -171,16 +173,16 @@ class Manual:
             pos[i] = p
             a += -a * dt / self.tau_s + self.max_accel_m_s2 * math.sqrt(2 * dt / self.tau_s) * rng.standard_normal(3)
             off = p - c
-            dist = np.linalg.norm(off)
+            dist = norm3(off)   # fixed-order sums (foveatrack.fixed_order): BLAS's differ per CPU
             if dist > self.radius_m:
                 acc = -off / dist * self.max_accel_m_s2
             else:
                 acc = a.copy()
-                na = np.linalg.norm(acc)
+                na = norm3(acc)
                 if na > self.max_accel_m_s2:
                     acc *= self.max_accel_m_s2 / na
             v = v + acc * dt
-            nv = np.linalg.norm(v)
+            nv = norm3(v)
             if nv > self.max_speed_m_s:
                 v *= self.max_speed_m_s / nv
             p = p + v * dt

@@ -13,6 +13,11 @@ The promise (README, "Reproducibility"):
   variants (FMA, AVX2, AVX-512).  With those emulated as on an SSE2-only CPU as well, the exact scan
   model and every shipped scene's closed loop stay identical; the paraxial model and the slow motor
   drift (which call the C library's sin and cos) agree within ``ULP_PARAXIAL_DRIFT``.
+* numpy's BLAS (OpenBLAS, built for every x86-64 core and picking its kernels at load) would sum a
+  product in another order, or with fused multiply-adds, on another core; the per-frame and set-up
+  products are therefore written out in a fixed order (:mod:`foveatrack.fixed_order`), and every
+  digest must stay the same with OpenBLAS told (``OPENBLAS_CORETYPE``) to use each kernel set this CPU
+  can run: Haswell (also what Zen gets), SkylakeX, Sandybridge, Nehalem and Prescott (an SSE2/SSE3 one).
 
 Each comparison runs ``digests.py`` in fresh interpreters; ``.ci/run`` also runs this file with
 ``NUMBA_CPU_NAME=generic`` in the environment (the in-process digests then come from that target).
@@ -43,7 +48,8 @@ sys.path.insert(0, str(HERE))
 import digests  # noqa: E402
 
 
-def _run_digests(env_changes: dict[str, str | None], arrays: Path | None = None) -> dict[str, str]:
+def _run_digests(env_changes: dict[str, str | None], arrays: Path | None = None,
+                 stderr: list[str] | None = None) -> dict[str, str]:
     env = dict(os.environ)
     for k, v in env_changes.items():
         if v is None:
@@ -53,15 +59,19 @@ def _run_digests(env_changes: dict[str, str | None], arrays: Path | None = None)
     cmd = [sys.executable, str(HERE / "digests.py")] + (["--arrays", str(arrays)] if arrays else [])
     out = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert out.returncode == 0, out.stderr[-3000:]
+    if stderr is not None:
+        stderr.append(out.stderr)
     return json.loads(out.stdout)
 
 
 def _old_cpu_env() -> dict[str, str | None]:
-    """numba, numpy and glibc each told to act as on an x86-64 CPU with SSE2 only (no AVX, no FMA)."""
+    """numba, numpy, OpenBLAS and glibc each told to act as on an x86-64 CPU with SSE2 only (no AVX,
+    no FMA; OpenBLAS's oldest kernels are Prescott's, SSE3)."""
     from numpy._core import _multiarray_umath as mu
 
     found = [t for t in mu.__cpu_dispatch__ if mu.__cpu_features__.get(t)]
     env = {"NUMBA_CPU_NAME": "generic", "NUMBA_CPU_FEATURES": None,
+           "OPENBLAS_CORETYPE": "Prescott",
            "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX512F,-AVX512DQ,-AVX512VL,-AVX2,-FMA,-AVX"}
     if found:   # numpy refuses to disable a feature it would not dispatch to
         env["NPY_DISABLE_CPU_FEATURES"] = " ".join(found)
@@ -71,7 +81,8 @@ def _old_cpu_env() -> dict[str, str | None]:
 @pytest.fixture(scope="module")
 def native(tmp_path_factory):
     path = tmp_path_factory.mktemp("native") / "scan.npz"
-    return _run_digests({"NUMBA_CPU_NAME": None, "NUMBA_CPU_FEATURES": None}, path), path
+    return _run_digests({"NUMBA_CPU_NAME": None, "NUMBA_CPU_FEATURES": None, "OPENBLAS_CORETYPE": None},
+                        path), path
 
 
 def test_chunking_and_a_fresh_interpreter_change_no_bit(native):
@@ -105,3 +116,28 @@ def test_an_emulated_sse2_cpu_gives_the_same_runs(native, tmp_path):
         # unit directions: in ulps of 1 (2.2e-16), the scale of the vector, not of a small component
         ulp = np.max(np.abs(a[name] - b[name])) / np.spacing(1.0)
         assert ulp <= ULP_PARAXIAL_DRIFT, (name, float(ulp))
+
+
+# OpenBLAS core names -> what this CPU must have to run their kernels (numpy's feature names)
+OPENBLAS_CORES = {"Haswell": ("AVX2", "FMA3"), "Zen": ("AVX2", "FMA3"), "SkylakeX": ("AVX512_SKX",),
+                  "Sandybridge": ("AVX",), "Nehalem": ("SSE42",), "Prescott": ()}
+
+
+def test_every_openblas_kernel_set_gives_the_native_bits(native):
+    """The kernels OpenBLAS would pick on a Haswell, Zen, Skylake-X, Sandy Bridge, Nehalem or SSE3 CPU
+    change no digest (those this CPU cannot run are left out).  ``OPENBLAS_VERBOSE=2`` makes OpenBLAS
+    name the kernels it took, so a build that ignored the request could not pass unseen."""
+    from numpy._core import _multiarray_umath as mu
+
+    digests_native, _ = native
+    cores = [c for c, need in OPENBLAS_CORES.items() if all(mu.__cpu_features__.get(f) for f in need)]
+    taken, differ = set(), {}
+    for core in cores:
+        err: list[str] = []
+        got = _run_digests({"OPENBLAS_CORETYPE": core, "OPENBLAS_VERBOSE": "2"}, stderr=err)
+        used = [line.split(":", 1)[1].strip() for line in err[0].splitlines() if line.startswith("Core:")]
+        assert used, f"OpenBLAS did not say which kernels it took for {core}: {err[0][-500:]}"
+        taken.update(used)
+        differ[core] = sorted(k for k in digests_native if got[k] != digests_native[k])
+    assert differ == {c: [] for c in cores}
+    assert len(taken) >= 2, taken   # at least two kernel sets really compared (SSE3 runs anywhere)

@@ -29,6 +29,7 @@ from hypothesis import strategies as st
 
 from foveatrack.control import deadband_p, lidar_errors_deg
 from foveatrack.detection import bearing_deg, detect_points, valid_points
+from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import Tracker, TrackerConfig
@@ -47,7 +48,8 @@ def test_one_point_is_its_own_detection(p, t_ns):
     assert det is not None and det.n_points == 1
     assert np.array_equal(det.xyz, np.array(p))
     assert det.t_s == float(t_ns) * 1e-9
-    assert det.range_m == float(np.linalg.norm(p))
+    assert det.range_m == norm3(p)     # the fixed-order |p|, within rounding of numpy's (BLAS's) norm
+    assert abs(det.range_m - float(np.linalg.norm(p))) <= 6 * 2.0**-53 * det.range_m
     az, el = bearing_deg(*p)
     assert (det.az_deg, det.el_deg) == (az, el)
 

@@ -6,7 +6,7 @@ import pytest
 from fakes import FakeHead
 from foveatrack.control import HeadCommand
 from foveatrack.detection import Detection, wrap_deg
-from foveatrack.reconstruction import Reconstructor, rotation_matrix
+from foveatrack.reconstruction import Reconstructor, rotation_matrix, rotation_rows
 from foveatrack.speed_table import AxisTable, SpeedEntry, SpeedTable
 
 
@@ -202,9 +202,16 @@ def test_a_repeated_command_object_integrates_as_a_fresh_equal_one():
             [(k.angle, k.v, k.v_tgt, k.idx, k.var_timing, k.var_bytes) for k in b.knots]
 
 
-def test_to_world_turns_with_matmuls_bits():
-    """to_world turns the point with ``R.dot(q)`` (cheaper than ``R @ q``); both are numpy's BLAS
-    matrix-vector product, so the world position has matmul's bits (checked over many poses)."""
+def test_rotation_rows_are_rotation_matrixs_entries():
+    rng = np.random.default_rng(5)
+    for pan, tilt in zip(rng.uniform(-400, 400, 500), rng.uniform(-90, 90, 500)):
+        assert np.array(rotation_rows(pan, tilt)).tobytes() == rotation_matrix(pan, tilt).tobytes()
+
+
+def test_to_world_turns_as_lidar_to_world_and_the_box_kernel_do():
+    """to_world turns the point in the fixed order of :mod:`foveatrack.fixed_order` (not BLAS's, which
+    differs per CPU): the bits of ``lidar_to_world`` (the box kernel's turn), and ``R @ q`` within twice
+    the rounding bound of a 3-term dot product, ``2 * 3u sum |r_k q_k|`` (checked over many poses)."""
     rng = np.random.default_rng(4)
     table = SpeedTable.nominal()
     for _ in range(2000):
@@ -212,5 +219,9 @@ def test_to_world_turns_with_matmuls_bits():
         offset = rng.normal(0, 0.1, 3)
         rec = Reconstructor(table, pan0_deg=pan, tilt0_deg=tilt, lidar_offset_m=offset, sigma0_deg=0.1)
         xyz = rng.normal(0, 30, 3)
-        w, _ = rec.to_world(Detection(0.0, xyz, 5, 0.0, 0.0, 1.0))
-        assert w.tobytes() == (rotation_matrix(pan, tilt) @ (xyz + offset)).tobytes()
+        w, sigma = rec.to_world(Detection(0.0, xyz, 5, 0.0, 0.0, 1.0))
+        assert w.tobytes() == rec.lidar_to_world(xyz, 0.0)[0].tobytes()
+        R, q = rotation_matrix(pan, tilt), xyz + offset
+        bound = 6 * 2.0**-53 * (np.abs(R) @ np.abs(q)) * (1 + 1e-15)
+        assert np.all(np.abs(w - R @ q) <= bound)
+        assert math.isfinite(sigma) and sigma > 0
