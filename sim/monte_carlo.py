@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 # Machine properties, not tracking quality: left out of the metrics.
-MACHINE_KEYS = ("wall_s", "realtime_factor", "realtime_factor_after_first_frame", "first_frame_s",
+MACHINE_KEYS = ("wall_s", "realtime_factor", "realtime_factor_after_first_frame", "first_frame_s", "finish_s",
                 "time_per_frame_ms", "scene", "seed", "effects")
 
 

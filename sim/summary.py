@@ -10,7 +10,7 @@ import numpy as np
 from foveatrack.metrics import _stats, acquired_within_deg, head_angle_error_deg, tracking_metrics
 
 
-def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
+def summarize(scene, log: dict, wall_s: float, loop=None, finish_s: float = 0.0) -> dict:
     """Tracking error after acquisition, acquisition time, detections, points on target, speed.
 
     "In the FoV" (the acquisition clock's start) is the first frame whose true off-axis angle is
@@ -22,6 +22,9 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
     and ``time_per_frame_ms``: the mean wall time of each stage of a frame after the first (scan, ray casting and
     effects, tracker, ...), which is what the scene's fidelity costs; ``worked_ahead``: whether the scan
     and the effects' draws ran ahead on a second thread (:mod:`sim.ahead`; same results, other times).
+    ``finish_s``: wall seconds after the loop that the run still needed (the recording's completion:
+    a writer process finishing the frames it was handed), counted in ``realtime_factor_after_first_frame``
+    and reported as ``finish_s``.
     """
     half_fov = half_fov_deg(scene)
     err = log["true_error_deg"].astype(float)
@@ -39,8 +42,9 @@ def summarize(scene, log: dict, wall_s: float, loop=None) -> dict:
     m["realtime_factor"] = round(scene.duration_s / wall_s, 2) if wall_s > 0 else math.inf
     if loop is not None and loop.first_step_s is not None:
         n = loop.steps_timed   # the frames after the first (which loads or compiles the kernels)
-        rest_s = sum(loop.stage_s.values())
+        rest_s = sum(loop.stage_s.values()) + finish_s
         m["first_frame_s"] = round(loop.first_step_s, 3)
+        m["finish_s"] = round(finish_s, 6)
         m["realtime_factor_after_first_frame"] = (round(n * scene.tracker.period_s / rest_s, 2)
                                                   if n > 0 and rest_s > 0 else None)
         m["time_per_frame_ms"] = ({k: round(v / n * 1e3, 4) for k, v in loop.stage_s.items()} if n > 0 else None)

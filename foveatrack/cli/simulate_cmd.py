@@ -208,6 +208,7 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
         else:
             bar.update(1)
 
+    finish_s = 0.0
     try:
         log = loop.run(advance, ahead=ahead)
     finally:
@@ -215,11 +216,14 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
         if bar is not None:
             bar.close()
         if writer is not None:
+            # the run is done when its recording is: a writer process may still be on the last frames
+            t_close = time.perf_counter()
             writer.close()
+            finish_s = time.perf_counter() - t_close
         if live is not None:
             live.stop()
     wall = time.perf_counter() - t0
-    summary = summarize(scene, log, wall, loop)
+    summary = summarize(scene, log, wall, loop, finish_s)
     if writer is not None:
         summary["recording_written_by"] = "a child process" if child is not None else "the loop's thread"
     if out_dir is not None:

@@ -49,6 +49,20 @@ def test_simulate_summary_says_where_a_frame_goes(tmp_path, capsys):
     after_s = sum(per.values()) * (s["frames"] - 1) / 1e3
     assert 0 < s["first_frame_s"] and after_s + s["first_frame_s"] <= s["wall_s"] + 1e-3
     assert s["realtime_factor_after_first_frame"] == pytest.approx(0.1 * (s["frames"] - 1) / after_s, rel=0.01)
+    assert s["finish_s"] == 0.0
+
+
+@pytest.mark.parametrize("where", ["--second-core", "--one-thread"])
+def test_the_speed_simulate_prints_includes_finishing_its_recording(tmp_path, capsys, where):
+    # A writer process may still be writing the last frames when the loop ends: the run is not done
+    # until the file is, so that wait is part of the real-time factor the command prints.
+    assert main(["simulate", str(SCENES / "noisy-link.toml"), "--duration", "1", "--no-progress", "--json",
+                 "--out", str(tmp_path), where]) == 0
+    s = json.loads(capsys.readouterr().out)
+    after_s = sum(s["time_per_frame_ms"].values()) * (s["frames"] - 1) / 1e3
+    assert s["finish_s"] > 0 and s["first_frame_s"] + after_s + s["finish_s"] <= s["wall_s"] + 1e-3
+    assert s["realtime_factor_after_first_frame"] == pytest.approx(
+        0.1 * (s["frames"] - 1) / (after_s + s["finish_s"]), rel=0.01)
 
 
 def _run(scene):
