@@ -60,11 +60,15 @@ def hall_scene(scene_path):
 
 
 def _schedstat_cpu_s(pid: int) -> float:
-    """CPU seconds a process has run so far (Linux ``/proc/PID/schedstat``, ns; 0 where not there)."""
-    try:
-        return int(Path(f"/proc/{pid}/schedstat").read_text().split()[0]) * 1e-9
-    except (OSError, ValueError, IndexError):
-        return 0.0
+    """CPU seconds a process has run so far, all its threads (Linux ``/proc/PID/task/*/schedstat``, ns;
+    0 where not there)."""
+    total = 0
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            total += int((task / "schedstat").read_text().split()[0])
+        except (OSError, ValueError, IndexError):
+            pass
+    return total * 1e-9
 
 
 def _children_cpu_s() -> float:
