@@ -104,10 +104,12 @@ def string(buf, i: int) -> tuple[str, int]:
     return bytes(buf[i + 4:i + 4 + n]).decode("utf-8", "replace"), i + 4 + n
 
 
-def channel(content) -> tuple[int, str]:
+def channel(content) -> tuple[int, str, str]:
+    """A Channel record's (id, topic without its '/', message encoding)."""
     cid = U16.unpack_from(content, 0)[0]
-    topic, _ = string(content, 4)
-    return cid, topic.lstrip("/")
+    topic, i = string(content, 4)
+    encoding, _ = string(content, i)
+    return cid, topic.lstrip("/"), encoding
 
 
 def metadata(content) -> tuple[str, dict[str, str]]:

@@ -14,8 +14,7 @@ from typing import Iterable, Iterator
 from foveatrack.errors import UserError
 from foveatrack.recording import mcap_walk as mw
 from foveatrack.recording.format import (CHANNELS_META_NAME, FORMAT, IMU, MCAP_MAGIC, META_NAME, POINTS,
-                                         READABLE_VERSIONS, RECORD_SCHEMAS, VIEW_CHANNELS, ImuSamples, Message,
-                                         PointsFrame,
+                                         READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message, PointsFrame,
                                          _decode_points, _decode_points_pb, decode_imu_pb)
 
 
@@ -109,6 +108,7 @@ class RecordingReader:
         self._meta_channels: dict[int, str] = {}
         self._summary: tuple[int, int] | None = None
         self._channels_read: dict[int, str] = {}
+        self._binary: set[str] = set()     # channels whose Channel record names an encoding other than JSON
         self._summary_channels: dict[int, str] | None = None
         for _ in self._records(stop_after_meta=True):
             break
@@ -206,8 +206,10 @@ class RecordingReader:
                             frames += 1
                         yield name, log_time, bytes(content[mw.MSG_HEAD.size:])
                     elif rop == mw.OP_CHANNEL:
-                        cid, topic = mw.channel(content)
+                        cid, topic, encoding = mw.channel(content)
                         channels[cid] = topic
+                        if encoding != "json":
+                            self._binary.add(topic)
                     elif rop == mw.OP_METADATA and content[0] == CHANNELS_META_NAME:
                         self._add_channel_table(content[1])
                     elif rop == mw.OP_METADATA and not self.info and content[0] == META_NAME:
@@ -265,8 +267,10 @@ class RecordingReader:
                 if end > stop:
                     break
                 if op == mw.OP_CHANNEL:
-                    cid, topic = mw.channel(mm[pos + mw.REC.size:end])
+                    cid, topic, encoding = mw.channel(mm[pos + mw.REC.size:end])
                     out[cid] = topic
+                    if encoding != "json":
+                        self._binary.add(topic)
                 pos = end
         return out
 
@@ -408,8 +412,8 @@ class RecordingReader:
 
     def messages(self, channels: Iterable[str] | str | None = None) -> Iterator[Message]:
         """Messages in file order, optionally only those of ``channels`` (names without '/').  A
-        channel this version does not know gives its JSON records, or its raw bytes if they are not
-        JSON (a later version's binary channel: read past, not taken for damage)."""
+        channel this version does not know gives its records if its encoding is JSON, its raw bytes
+        otherwise (a later version's binary channel: read past, not taken for damage)."""
         want = {channels} if isinstance(channels, str) else None if channels is None else set(channels)
         pb = self.info.get("format_version") != "1"
         mm_grid = self.info.get("format_version") not in ("1", "2")
@@ -426,15 +430,12 @@ class RecordingReader:
                     record = _decode_points_pb(data, mm_grid) if pb else _decode_points(data)
                 elif name == IMU:
                     record = decode_imu_pb(data)
-                elif name in RECORD_SCHEMAS:
-                    record = json.loads(data)
+                elif name in self._binary:
+                    # a later version's binary channel, which this one does not know: its raw bytes,
+                    # not "damaged" for being new
+                    record = bytes(data)
                 else:
-                    # a channel this version does not know (written by a later one): JSON if it is,
-                    # else its raw bytes; never "damaged" for being new
-                    try:
-                        record = json.loads(data)
-                    except ValueError:
-                        record = bytes(data)
+                    record = json.loads(data)
             except (ValueError, KeyError, TypeError) as exc:
                 raise UserError(f"{self.path}: a {name} message at t_ns={log_time} is damaged: {exc}") from None
             yield Message(name, int(log_time), record)
