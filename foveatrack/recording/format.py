@@ -422,9 +422,7 @@ def encode_imu_pb(t_ns: int, frame_id: int, t_s: np.ndarray, gyro_rad_s: np.ndar
         cols += [*np.ascontiguousarray(accel_g.T)]
     parts = [bytes([1 << 3]), _varint(int(t_ns)), bytes([2 << 3]), _varint(int(frame_id) & (2**64 - 1))]
     if t_s.size:
-        for i, c in enumerate(cols):
-            parts += [_varint((_IMU_FIRST_COLUMN + i) << 3 | 2), _varint(c.nbytes),
-                      c.astype("<f8", copy=False).tobytes()]
+        parts += [_pb_len(_IMU_FIRST_COLUMN + i, c.astype("<f8", copy=False).tobytes()) for i, c in enumerate(cols)]
     return b"".join(parts)
 
 
