@@ -87,4 +87,9 @@ def _angle_about(q: np.ndarray, axis: np.ndarray, ref: np.ndarray) -> np.ndarray
     return np.degrees(np.arctan2(q @ e2, q @ e1))
 
 
+def _angle_about_unwrapped(q: np.ndarray, axis: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """:func:`_angle_about` [deg] unwrapped along the samples (no 360 deg jump where it crosses 180)."""
+    return np.degrees(np.unwrap(np.radians(_angle_about(q, axis, ref))))
+
+
 _SIGN = {"pan": -1.0, "tilt": +1.0}   # head speed = sign * d(angle of corner about axis)/dt

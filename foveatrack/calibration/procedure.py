@@ -59,7 +59,7 @@ import math
 
 import numpy as np
 
-from foveatrack.calibration.corner import _SIGN, _angle_about, _rotate_about, find_corner
+from foveatrack.calibration.corner import _SIGN, _angle_about, _angle_about_unwrapped, _rotate_about, find_corner
 from foveatrack.calibration.plan import CalibrationPlan, CalibrationReport, FeatureSpec, LegRecord
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.detection import valid_points
@@ -170,6 +170,26 @@ def fit_ramp(t_s: np.ndarray, ang_deg: np.ndarray, t_from_s: float, min_n: int =
     return float(t_from_s + t0 + abs(v) / a), float(v), float(a), float(t_from_s + t0)
 
 
+def _axis_command(axis: str, direction: int, byte: int) -> HeadCommand:
+    """Turn one axis (``"pan"`` or ``"tilt"``) at ``byte`` in ``direction``, the other still."""
+    return HeadCommand(direction, byte, 0, 0) if axis == "pan" else HeadCommand(0, 0, direction, byte)
+
+
+def _coast_deg(rate_deg_s: float, frame_s: float) -> float:
+    """The turn [deg] a leg allows for after a stop sent now at ``rate_deg_s``: a frame and 0.15 s at
+    the rate (the frame, dead time), then ``rate^2 / (2 * 100 deg/s^2)`` of deceleration."""
+    return abs(rate_deg_s) * (frame_s + 0.15) + rate_deg_s * rate_deg_s / (2 * 100.0)
+
+
+def _leg_samples(leg: LegRecord) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """A leg's samples from its command to its stop (to now while it runs): their indices in
+    ``leg.samples``, times (n,) [s] and corner positions (n, 3) [m]."""
+    stop = math.inf if leg.t_stop_s is None else leg.t_stop_s
+    idx = [i for i, (t, _) in enumerate(leg.samples) if leg.t_cmd_s < t <= stop]
+    return (idx, np.array([leg.samples[i][0] for i in idx], dtype=float),
+            np.array([leg.samples[i][1] for i in idx], dtype=float).reshape(-1, 3))
+
+
 class Calibrator:
     """State machine for Appendix D.4 (see module docstring).
 
@@ -239,8 +259,7 @@ class Calibrator:
         """
         recent = leg.samples[-(n_rates + 1):]
         t = np.array([x for x, _ in recent])
-        ang = _angle_about(np.array([q for _, q in recent]), self._prior_axis(leg.axis), self._ref_q)
-        ang = np.degrees(np.unwrap(np.radians(ang)))
+        ang = _angle_about_unwrapped(np.array([q for _, q in recent]), self._prior_axis(leg.axis), self._ref_q)
         rates = np.diff(ang) / np.maximum(np.diff(t), 1e-6)
         rate = float(np.median(rates))
         if abs(rates[-1] - rate) <= max_jump_deg_s:
@@ -343,7 +362,7 @@ class Calibrator:
             why = ""
             if leg.direction > 0:
                 # stop early enough that dead time + deceleration + one frame stay inside the excursion
-                coast = abs(rate) * (frame.duration_s + 0.15) + rate * rate / (2 * 100.0)
+                coast = _coast_deg(rate, frame.duration_s)
                 # lost: three frames in a row without the corner, counted once the leg has settled.
                 # Before, the head is still in its dead time and ramp, and a frame whose scan left one
                 # of the corner's planes thin (< min_plane_points: the lidar's pattern, not the head)
@@ -368,7 +387,7 @@ class Calibrator:
                 # by the corner's noise still ends on time.
                 ahead = rate * frame.duration_s
                 if leg.repeat or (self._queue and self._queue[0][0] != leg.axis):
-                    ahead = -(abs(rate) * (frame.duration_s + 0.15) + rate * rate / (2 * 100.0))
+                    ahead = -_coast_deg(rate, frame.duration_s)
                 if self._missed == 0 and ang + ahead <= 0.0:
                     why = "reference"
                 elif ((self._missed > 0 and elapsed >= self._out_duration)
@@ -404,7 +423,7 @@ class Calibrator:
                     return STOP
                 d = -1 if self._recentre_side > 0 else 1
                 byte = self._return_byte(axis)
-                return HeadCommand(d, byte, 0, 0) if axis == "pan" else HeadCommand(0, 0, d, byte)
+                return _axis_command(axis, d, byte)
             if abs(ang) <= p.return_tol_deg or elapsed > 30.0 or self._missed >= 5:
                 if axis == "pan":
                     self._return_axis, self._phase_t0 = "tilt", now
@@ -414,7 +433,7 @@ class Calibrator:
                 return STOP
             byte = self._return_byte(axis)
             d = -1 if ang > 0 else 1
-            return HeadCommand(d, byte, 0, 0) if axis == "pan" else HeadCommand(0, 0, d, byte)
+            return _axis_command(axis, d, byte)
         return None
 
     def _rest_still(self, n: int = 6, max_rate_deg_s: float = 1.0) -> bool:
@@ -454,28 +473,25 @@ class Calibrator:
                 self._phase, self._phase_t0, self._return_axis = "return", now, last.axis
                 self._recentre, self._recentre_side = True, (1.0 if ang > 0 else -1.0)
                 d, b = (-1 if ang > 0 else 1), self._return_byte(last.axis)
-                return HeadCommand(d, b, 0, 0) if last.axis == "pan" else HeadCommand(0, 0, d, b)
+                return _axis_command(last.axis, d, b)
         self._recentred = False
         axis, byte, d, repeat = self._queue.pop(0)
         self._leg = LegRecord(axis, byte, d, now, ref_q=ref, repeat=repeat)
         self.legs.append(self._leg)
         self._phase, self._phase_t0 = "move", now
-        return HeadCommand(d, byte, 0, 0) if axis == "pan" else HeadCommand(0, 0, d, byte)
+        return _axis_command(axis, d, byte)
 
     # ---- batch estimate ---------------------------------------------------------------------
     def _steady(self, leg: LegRecord) -> tuple[np.ndarray, np.ndarray]:
         if leg.t_stop_s is None:
             return np.empty(0), np.empty((0, 3))
-        idx = [i for i, (t, _) in enumerate(leg.samples) if leg.t_cmd_s < t <= leg.t_stop_s]
+        idx, t, Q = _leg_samples(leg)
         if not idx:
-            return np.empty(0), np.empty((0, 3))
-        t = np.array([leg.samples[i][0] for i in idx])
-        Q = np.array([leg.samples[i][1] for i in idx])
+            return t, Q
         start = leg.t_cmd_s + self.plan.settle_s
         if len(t) >= 4:
             # adaptive: a fast leg is steady once its frame-to-frame rate matches its final rate
-            ax = self._pan_prior if leg.axis == "pan" else np.array([0.0, 1.0, 0.0])
-            ang = _angle_about(Q, ax, Q[-1])
+            ang = _angle_about(Q, self._prior_axis(leg.axis), Q[-1])
             r = np.diff(ang) / np.diff(t)
             r_f = float(np.median(r[-2:]))
             noise = 2 * 0.05 / float(np.median(np.diff(t)))   # ~0.05 deg corner noise per frame
@@ -497,7 +513,7 @@ class Calibrator:
             # is ~1.4 deg/s (0.05 deg corner noise over a 50 ms frame), which this rarely cuts.
             w = np.array([leg.derot_deg_s[i] for i in idx])
             ax = self._prior_axis(leg.axis)
-            ang = np.degrees(np.unwrap(np.radians(_angle_about(Q[keep], ax, Q[keep][-1]))))
+            ang = _angle_about_unwrapped(Q[keep], ax, Q[keep][-1])
             r_line = float(np.polyfit(t[keep], ang, 1)[0])
             keep &= (np.abs(w - r_line) <= 3.0) | (abs(r_line) < 3.0)
         t, Q = t[keep], Q[keep]
@@ -511,12 +527,10 @@ class Calibrator:
         hit = self._ramp_cache.get(id(leg))
         if hit is not None and hit[0] is leg and hit[1] == key:
             return hit[2]
-        s = [(t, q) for t, q in leg.samples if leg.t_cmd_s < t <= (leg.t_stop_s if leg.t_stop_s is not None else math.inf)]
+        _, t, Q = _leg_samples(leg)
         out = None
-        if len(s) >= 6:
-            t = np.array([x for x, _ in s])
-            Q = np.array([q for _, q in s])
-            ang = np.degrees(np.unwrap(np.radians(_angle_about(Q, self._prior_axis(leg.axis), Q[-1]))))
+        if len(t) >= 6:
+            ang = _angle_about_unwrapped(Q, self._prior_axis(leg.axis), Q[-1])
             r = fit_ramp(t, ang, leg.t_cmd_s + self.plan.latency_s)
             out = None if r is None else r[0]
         self._ramp_cache[id(leg)] = (leg, key, out)
@@ -579,9 +593,7 @@ class Calibrator:
             if len(t) < self.plan.min_samples:
                 per[leg.axis].setdefault(leg.byte, []).append(None)
                 continue
-            ang = _angle_about(Q, axes[leg.axis], leg.ref_q)
-            ang = np.unwrap(np.radians(ang))
-            ang = np.degrees(ang)
+            ang = _angle_about_unwrapped(Q, axes[leg.axis], leg.ref_q)
             tm = t.mean()
             stt = float(np.sum((t - tm) ** 2))
             b = float(np.sum((t - tm) * (ang - ang.mean())) / stt)
@@ -767,12 +779,10 @@ class PriorAxisCalibrator(Calibrator):
             v = ax.speed_deg_s(leg.byte)
             if not ax.is_measured(leg.byte) or not v >= 0.2 or leg.t_stop_s is None or leg.ref_q is None:
                 continue
-            s = [(t, q) for t, q in leg.samples if leg.t_cmd_s < t <= leg.t_stop_s]
-            if len(s) < self.plan.min_samples:
+            _, t, Q = _leg_samples(leg)
+            if len(t) < self.plan.min_samples:
                 continue
-            t = np.array([x for x, _ in s])
-            Q = np.array([q for _, q in s])
-            ang = np.degrees(np.unwrap(np.radians(_angle_about(Q, axes[leg.axis], leg.ref_q))))
+            ang = _angle_about_unwrapped(Q, axes[leg.axis], leg.ref_q)
             ang = _SIGN[leg.axis] * leg.direction * ang
             data.append((0 if leg.axis == "pan" else 1, v, t - leg.t_cmd_s - self.plan.latency_s, ang))
         if len(data) < 4 or len({d[0] for d in data}) < 2:
