@@ -466,14 +466,13 @@ class Tracker:
         cfg = self.config
         t_act = send_t + self.recon.effect_delay_s
         # A zero speed needs no stop limit (limit_for_stops returns (0.0, False) without the angle):
-        # the head's estimate at t_act is only worked out for a moving axis.
+        # the head's estimate at t_act is only worked out for a moving axis.  (A -0.0 left as it is
+        # gives the same command: speed_to_axis takes either zero as stop.)
         lim_t = False
         if v_tilt != 0.0:
             tilt_a, s_tilt = self.recon.tilt_at(t_act)
             v_tilt, lim_t = limit_for_stops(v_tilt, tilt_a, s_tilt, *cfg.tilt_limits_deg, cfg.tilt_margin_deg,
                                             cfg.stop_lookahead_s)
-        else:
-            v_tilt = 0.0   # as limit_for_stops returns it (+0.0 for -0.0)
         lim_p = False
         if cfg.pan_limits_deg is not None and v_pan != 0.0:
             pan_a, _, s_pan, _ = self.recon.angles_at(t_act)
