@@ -447,8 +447,8 @@ class ImuFeed:
     moved past it) is dropped and counted in ``late``; one more than ``AHEAD_S`` after the frame's end
     (a wild timestamp, which would block every later sample) in ``bad_time``.  Samples before the
     first frame are the head's wait at start: they are released with it (the bias's first estimate).
-    The accelerometer's samples, where pushed, ride along (``released_accel_g``: those of the last
-    release, for the recording; None if none was ever pushed): the tracker uses only the gyro.
+    The accelerometer's samples, where pushed, ride along (the third of :meth:`release`'s values, for
+    the recording; None if none was ever pushed): the tracker uses only the gyro.
     """
 
     AHEAD_S = 5.0
@@ -458,7 +458,6 @@ class ImuFeed:
         self._g: list[np.ndarray] = []
         self._a: list[np.ndarray] = []
         self.has_accel = False
-        self.released_accel_g: np.ndarray | None = None
         self.not_before_s = -math.inf     # released up to here (and a rebased tracker's start)
         self.samples_in = 0
         self.samples_fed = 0
@@ -476,11 +475,11 @@ class ImuFeed:
             self.has_accel |= accel_g is not None
             self.samples_in += t.size
 
-    def release(self, t_end_s: float) -> tuple[np.ndarray, np.ndarray]:
+    def release(self, t_end_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The samples before ``t_end_s``: times [s], gyro (n, 3), accel (n, 3) or None (none pushed)."""
         if not self._t:
             self.not_before_s = max(self.not_before_s, t_end_s)
-            self.released_accel_g = np.empty((0, 3)) if self.has_accel else None
-            return np.empty(0), np.empty((0, 3))
+            return np.empty(0), np.empty((0, 3)), np.empty((0, 3)) if self.has_accel else None
         t = np.concatenate(self._t)
         g = np.concatenate(self._g)
         a = np.concatenate(self._a)
@@ -495,8 +494,7 @@ class ImuFeed:
         self._t, self._g, self._a = ([t[keep]], [g[keep]], [a[keep]]) if keep.any() else ([], [], [])
         self.not_before_s = max(self.not_before_s, t_end_s)
         self.samples_fed += int(now.sum())
-        self.released_accel_g = a[now] if self.has_accel else None
-        return t[now], g[now]
+        return t[now], g[now], a[now] if self.has_accel else None
 
     def restart(self, t0_s: float) -> None:
         """A new tracker starts at ``t0_s`` (a new sensor clock, a homed head): the pending samples

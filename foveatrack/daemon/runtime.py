@@ -314,7 +314,7 @@ class Daemon:
             t_ns, gyro, epoch, *acc = rx_imu.popleft()
             if epoch == self.epoch:
                 self.imu_feed.push(t_ns, gyro, acc[0] if acc else None)
-        t, g = self.imu_feed.release(t_end_s)
+        t, g, accel = self.imu_feed.release(t_end_s)
         self.tracker.on_imu(t, g)
         self.counters["imu_samples"] = self.imu_feed.samples_fed
         self.counters["imu_samples_bad_time"] = self.imu_feed.bad_time
@@ -322,7 +322,7 @@ class Daemon:
             self.log.event("warning", message="[tracker] attitude = \"gyro\" but no IMU samples from the lidar "
                            "after 20 frames: the head's angles come from the commands alone (a Mid-40 has no "
                            "IMU; a Horizon, Avia or Tele-15 streams it at 200 Hz unless its IMU push is off)")
-        return t, g, self.imu_feed.released_accel_g
+        return t, g, accel
 
     def _new_clock(self, epoch: int, t0_s: float) -> None:
         """Carry the tracker over to a new sensor clock starting at ``t0_s`` [s].

@@ -73,15 +73,15 @@ def test_imu_feed_releases_in_time_order_before_the_frame_end():
     f = ImuFeed()
     f.push([300_000_000, 100_000_000], [[3, 3, 3], [1, 1, 1]])
     f.push([200_000_000, 50_000_000_000], [[2, 2, 2], [9, 9, 9]])
-    t, g = f.release(0.25)
+    t, g, _ = f.release(0.25)
     assert t.tolist() == pytest.approx([0.1, 0.2], abs=1e-15) and g[:, 0].tolist() == [1, 2]
     assert f.bad_time == 1               # 50 s: more than AHEAD_S past the frame
     f.push([150_000_000], [[5, 5, 5]])   # late: before what was already released
-    t, g = f.release(0.35)
+    t, g, _ = f.release(0.35)
     assert t.tolist() == pytest.approx([0.3], abs=1e-15) and f.late == 1
     f.restart(10.0)
     f.push([9_000_000_000, 10_050_000_000], [[1, 1, 1], [2, 2, 2]])
-    t, _ = f.release(10.1)
+    t, _, _ = f.release(10.1)
     assert t.tolist() == pytest.approx([10.05], abs=1e-12)
 
 
