@@ -59,6 +59,14 @@ def hall_scene(scene_path):
     return scene_from_mapping(data, f"{scene_path} (in a hall)")
 
 
+def fig12_and_hall(duration_s: float | None = None) -> dict:
+    """``{"fig12": the shipped scene, "hall": it in the hall}``, the two scenes the speed benchmarks
+    measure; ``duration_s``: each run's virtual time (None: the file's)."""
+    scenes = {"fig12": load_scene(ROOT / "scenes" / "fig12-tracking.toml"),
+              "hall": hall_scene(ROOT / "scenes" / "fig12-tracking.toml")}
+    return scenes if duration_s is None else {k: replace(v, duration_s=duration_s) for k, v in scenes.items()}
+
+
 def _schedstat_cpu_s(pid: int) -> float:
     """CPU seconds a process has run so far, all its threads (Linux ``/proc/PID/task/*/schedstat``, ns;
     0 where not there)."""

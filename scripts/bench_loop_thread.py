@@ -18,24 +18,16 @@ import os
 import statistics
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_closed_loop import hall_scene  # noqa: E402
+from bench_closed_loop import fig12_and_hall  # noqa: E402
 from sim.loop import ClosedLoop  # noqa: E402
-from sim.scene import load_scene  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-SCENE = ROOT / "scenes" / "fig12-tracking.toml"
 
 
-def scenes(duration_s: float) -> dict:
-    shipped = replace(load_scene(SCENE), duration_s=duration_s)
-    hall = replace(hall_scene(SCENE), duration_s=duration_s)
-    return {"fig12": shipped, "hall": hall}
+
 
 
 def measure(scene, ahead: bool, repeat: int) -> tuple[list[float], list[dict[str, float]]]:
@@ -58,7 +50,7 @@ def main() -> None:
     ap.add_argument("--only", choices=("fig12", "hall"))
     ap.add_argument("--mode", choices=("one", "ahead"))
     args = ap.parse_args()
-    for name, scene in scenes(args.duration).items():
+    for name, scene in fig12_and_hall(args.duration).items():
         if args.only not in (None, name):
             continue
         for mode in ("one", "ahead"):

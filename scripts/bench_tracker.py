@@ -35,7 +35,6 @@ from pathlib import Path
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENE = ROOT / "scenes" / "fig12-tracking.toml"
 WAYS = ("in the loop", "replayed")
 
 
@@ -134,15 +133,9 @@ def replay(calls, config, table, warm: bool = True) -> list[float]:
 
 def scenes(names) -> dict:
     sys.path.insert(0, str(ROOT / "scripts"))
-    from bench_closed_loop import hall_scene
-    from sim.scene import load_scene
+    from bench_closed_loop import fig12_and_hall
 
-    out = {}
-    if "fig12" in names:
-        out["fig12"] = load_scene(SCENE)
-    if "hall" in names:
-        out["hall"] = hall_scene(SCENE)
-    return out
+    return {k: v for k, v in fig12_and_hall().items() if k in names}
 
 
 def _per_frame(runs: list[list[float]]) -> float:
