@@ -49,6 +49,13 @@ def sim_rec(request, tmp_path_factory):
     return path, log
 
 
+def official_decoded(path, topics):
+    """(log time, message) of ``topics``, each decoded by the official reader's protobuf decoder."""
+    with open(path, "rb") as fh:
+        return [(m.log_time, d) for _s, _c, m, d in
+                make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=topics)]
+
+
 def decoded(path):
     with open(path, "rb") as fh:
         r = make_reader(fh, decoder_factories=[DecoderFactory()])
@@ -87,21 +94,17 @@ def test_every_channel_is_well_known_or_documented(sim_rec):
     assert {"/points", "/tf", "/scene", "/detections", "/head", "/commands", "/truth"} <= seen
     assert ("/imu" in seen) == (RecordingReader(path).meta["tracker_effective"].get("attitude") == "gyro")
     # and every protobuf message decodes under its schema with the official decoder
-    with open(path, "rb") as fh:
-        n = sum(1 for _ in make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
-            topics=["/points", "/tf", "/scene", "/log", "/imu"]))
+    n = len(official_decoded(path, ["/points", "/tf", "/scene", "/log", "/imu"]))
     assert n == sum(summary.statistics.channel_message_counts[c.id] for c in summary.channels.values()
                     if c.message_encoding == "protobuf")
 
 
 def test_transforms_chain_world_to_lidar_at_the_recorded_poses(sim_rec):
     path, log = sim_rec
-    with open(path, "rb") as fh:
-        r = make_reader(fh, decoder_factories=[DecoderFactory()])
-        tfs = {}
-        for _s, ch, msg, dec in r.iter_decoded_messages(topics=["/tf"]):
-            for t in dec.transforms:
-                tfs[(msg.log_time, t.child_frame_id)] = t
+    tfs = {}
+    for log_time, dec in official_decoded(path, ["/tf"]):
+        for t in dec.transforms:
+            tfs[(log_time, t.child_frame_id)] = t
     rec = RecordingReader(path)
     heads = rec.records("head")
     truths = rec.records("truth")
@@ -128,9 +131,7 @@ def test_pointcloud_decoded_by_protobuf_is_the_frame_our_reader_returns(sim_rec)
 
     path, log = sim_rec
     ours = list(RecordingReader(path).points())
-    with open(path, "rb") as fh:
-        clouds = [(m.log_time, d) for _s, _c, m, d in
-                  make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/points"])]
+    clouds = official_decoded(path, ["/points"])
     assert len(clouds) == len(ours) == len(log["t_end_s"])
     for f, (t, pc) in zip(ours, clouds):
         assert pc.frame_id == "lidar" and t == f.t_ns
@@ -158,9 +159,7 @@ def test_imu_samples_decoded_by_protobuf_are_the_batches_our_reader_returns(sim_
     # the frame (the first also the 5 s at rest before it); the plain run records none
     path, log = sim_rec
     ours = list(RecordingReader(path).imu())
-    with open(path, "rb") as fh:
-        theirs = [(m.log_time, d) for _s, _c, m, d in
-                  make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/imu"])]
+    theirs = official_decoded(path, ["/imu"])
     assert len(theirs) == len(ours)
     if not ours:
         assert RecordingReader(path).meta["tracker_effective"].get("attitude") is None
