@@ -19,7 +19,7 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 from foveatrack.reconstruction import rotation_matrix
-from foveatrack.recording import RecordingReader, RecordingWriter
+from foveatrack.recording import RecordingReader
 from foveatrack.recording.foxglove_view import head_quaternion
 from foveatrack.recording.format import CHANNELS_META_NAME, IMU_SCHEMA_NAME, RECORD_SCHEMAS
 
