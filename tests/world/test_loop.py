@@ -48,7 +48,10 @@ def test_simulate_summary_says_where_a_frame_goes(tmp_path, capsys):
     # with the first frame they fit inside the run's wall time
     after_s = sum(per.values()) * (s["frames"] - 1) / 1e3
     assert 0 < s["first_frame_s"] and after_s + s["first_frame_s"] <= s["wall_s"] + 1e-3
-    assert s["realtime_factor_after_first_frame"] == pytest.approx(0.1 * (s["frames"] - 1) / after_s, rel=0.01)
+    # rel: the stage times come rounded to 0.1 us a frame; abs: the factor is rounded to 0.01, which
+    # at a factor below 1 (a loaded machine) is more than 1 % of it
+    assert s["realtime_factor_after_first_frame"] == pytest.approx(0.1 * (s["frames"] - 1) / after_s, rel=0.01,
+                                                                   abs=0.005)
     assert s["finish_s"] == 0.0
 
 
@@ -62,7 +65,7 @@ def test_the_speed_simulate_prints_includes_finishing_its_recording(tmp_path, ca
     after_s = sum(s["time_per_frame_ms"].values()) * (s["frames"] - 1) / 1e3
     assert s["finish_s"] > 0 and s["first_frame_s"] + after_s + s["finish_s"] <= s["wall_s"] + 1e-3
     assert s["realtime_factor_after_first_frame"] == pytest.approx(
-        0.1 * (s["frames"] - 1) / (after_s + s["finish_s"]), rel=0.01)
+        0.1 * (s["frames"] - 1) / (after_s + s["finish_s"]), rel=0.01, abs=0.005)   # as above
 
 
 def _run(scene):
