@@ -82,6 +82,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
                 truth = open(args.truth, "w", buffering=1)
             except OSError as exc:
                 raise UserError(f"--truth {args.truth}: cannot write ({exc.strerror})") from exc
+        if args.link:
+            _check_link_path(args.link)
         server = VirtualHeadServer(head, time.monotonic, baud=args.baud, truth=truth,
                                    truth_period_s=args.truth_period_s, link_path=args.link)
         try:
@@ -153,3 +155,19 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
+
+
+def _check_link_path(link: str) -> None:
+    """--link names a symlink we create (or replace, if it is one): say plainly what is wrong with it.
+
+    Without this a missing directory came out as an errno with our temporary name in it, and a regular
+    file at the path would have been replaced by the link.
+    """
+    import os
+
+    parent = os.path.dirname(os.path.abspath(link))
+    if not os.path.isdir(parent):
+        raise UserError(f"--link {link}: the directory {parent} does not exist")
+    if os.path.lexists(link) and not os.path.islink(link):
+        raise UserError(f"--link {link}: a file that is not a symlink is there already; "
+                        "name another path (the link is replaced only if it is one)")

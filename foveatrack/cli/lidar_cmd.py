@@ -194,6 +194,7 @@ def info_dict(optics, model: str) -> dict:
         "fov_deg": [round(fov[0], 4), round(fov[1], 4)],
         "point_rate_hz": optics.point_rate_hz,
         "channels": optics.channels,
+        "exact_fov_deg": [round(exact[0], 4), round(exact[1], 4)],
         "paraxial_fov_deg": [round(paraxial[0], 4), round(paraxial[1], 4)],
         "paraxial_error_deg": [round(paraxial[0] - exact[0], 4), round(paraxial[1] - exact[1], 4)],
         "repeat_period_s": period,
@@ -211,10 +212,13 @@ def cmd_info(args) -> int:
     optics = _load(args)
     info = info_dict(optics, args.model)
     err = info["paraxial_error_deg"]
+    # the second line names the other model, so it never repeats the first (with --model paraxial it did)
+    other = "paraxial" if args.model == "exact" else "exact"
+    fov_other = info[f"{other}_fov_deg"]
     _emit(args, info, [
         f"{info['name']}: FoV {info['fov_deg'][0]:.2f} x {info['fov_deg'][1]:.2f} deg ({args.model} model)",
-        f"  paraxial model of the same optics: {info['paraxial_fov_deg'][0]:.2f} x {info['paraxial_fov_deg'][1]:.2f} deg "
-        f"(error {err[0]:+.2f} / {err[1]:+.2f} deg)",
+        f"  {other} model of the same optics: {fov_other[0]:.2f} x {fov_other[1]:.2f} deg "
+        f"(the paraxial model is off by {err[0]:+.2f} / {err[1]:+.2f} deg)",
         f"  {info['point_rate_hz']} points/s, {info['channels']} channel(s), {len(optics.prisms)} prisms, "
         f"pattern repeats every {info['repeat_period_s']} s (noise-free)",
     ])

@@ -302,6 +302,10 @@ def _cores_flag(args) -> bool | None:
 
 
 def cmd_simulate(args) -> int:
+    if args.speed != 1.0 and args.live is None:
+        # --speed paces only the live view; without it the run goes as fast as it can, so the flag did nothing
+        raise UserError(f"--speed {args.speed:g} paces the live view: add --live, or leave --speed out "
+                        "(without --live the run goes as fast as the machine allows)")
     run_and_report(args.scene, args.out, args.json, args.plot, args.seed, args.duration, not args.no_progress,
                    live_port=args.live, speed=args.speed, ahead=_cores_flag(args), recording_process=_cores_flag(args))
     return 0

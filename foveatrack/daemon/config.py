@@ -170,6 +170,24 @@ class DaemonConfig:
         p = Path(self.recording.path.replace("{time}", now.strftime("%Y%m%dT%H%M%SZ")))
         return (p if p.is_absolute() else Path(self.path).parent / p).resolve()
 
+    def check_recording_dir(self) -> None:
+        """A UserError naming ``[recording] path`` when the recording could not be written there: its
+        directory missing (and ``make_dirs`` off) or not writable.  The daemon's start and
+        ``daemon --check`` ask the same question here (``--check`` used to pass such a config, and
+        the run then failed at once)."""
+        import os
+
+        path = self.recording_path()
+        if path is None:
+            return
+        parent = path.parent
+        if not parent.is_dir() and not self.recording.make_dirs:
+            raise UserError(f"{self.path} [recording] path: the directory {parent} does not exist; create it "
+                            "(a mistyped path would otherwise start a new tree) or set make_dirs = true in [recording]")
+        existing = next((d for d in (parent, *parent.parents) if d.exists()), None)
+        if existing is not None and (not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK)):
+            raise UserError(f"{self.path} [recording] path: {existing} is not a directory this user can write in")
+
 
 # What the daemon does when the head's link comes back after a disconnect.  The head reports no
 # pose, and one that lost power comes back at its power-on pose, so the dead reckoning is void:

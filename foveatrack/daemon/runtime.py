@@ -221,11 +221,12 @@ class Daemon:
         path = c.recording_path()
         if path is not None:
             r = c.recording
-            if not path.parent.is_dir() and not r.make_dirs:
+            try:
+                c.check_recording_dir()
+            except UserError:
                 self.client.close()
                 self.head.close()
-                raise UserError(f"{c.path} [recording] path: the directory {path.parent} does not exist; create it "
-                                "(a mistyped path would otherwise start a new tree) or set make_dirs = true in [recording]")
+                raise
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 writer = RecordingWriter(path, self._meta(), flush_every_frames=r.flush_every_frames,

@@ -1,0 +1,85 @@
+"""What bothered new users in their first hour (issue 30's list), each checked through the CLI as they
+ran it: an error that names what was wrong, never a line that contradicts itself or a flag that is
+silently ignored."""
+
+import os
+from pathlib import Path
+
+from foveatrack.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENE = str(ROOT / "scenes" / "fig12-tracking.toml")
+
+
+def _run(argv, capsys):
+    code = main(argv)
+    out = capsys.readouterr()
+    assert "Traceback" not in out.err
+    return code, out.out, out.err
+
+
+def test_lidar_info_with_the_paraxial_model_names_the_exact_one_second(capsys):
+    # before: "paraxial model of the same optics: 65.84 x 20.97 deg (error -15.86 ...)" under a first
+    # line that was the paraxial model already
+    code, out, _ = _run(["lidar", "info", "horizon", "--model", "paraxial"], capsys)
+    first, second = out.splitlines()[:2]
+    assert code == 0
+    assert "65.84 x 20.97 deg (paraxial model)" in first
+    assert "exact model of the same optics: 81.70 x 25.10 deg" in second
+    code, out, _ = _run(["lidar", "info", "horizon"], capsys)
+    assert "paraxial model of the same optics: 65.84 x 20.97 deg" in out.splitlines()[1]
+
+
+def test_gimbal_serve_link_into_a_missing_directory_names_it(tmp_path, capsys):
+    # before: "[Errno 2] No such file or directory: '/dev/pts/0' -> '.../head.tmp15475'"
+    link = tmp_path / "no-such-dir" / "head"
+    code, _, err = _run(["gimbal", "serve", "--link", str(link)], capsys)
+    assert code == 2
+    assert f"the directory {link.parent} does not exist" in err and ".tmp" not in err
+
+
+def test_gimbal_serve_link_never_replaces_a_regular_file(tmp_path, capsys):
+    kept = tmp_path / "notes.txt"
+    kept.write_text("mine")
+    code, _, err = _run(["gimbal", "serve", "--link", str(kept)], capsys)
+    assert code == 2 and "not a symlink" in err
+    assert kept.read_text() == "mine" and not kept.is_symlink()
+
+
+def test_simulate_speed_without_live_is_refused_not_ignored(capsys):
+    code, _, err = _run(["simulate", SCENE, "--speed", "3", "--duration", "0.2"], capsys)
+    assert code == 2 and "--speed 3 paces the live view: add --live" in err
+
+
+def _daemon_config(tmp_path, recording_path: str, make_dirs: bool) -> Path:
+    text = (ROOT / "examples" / "daemon-virtual.toml").read_text()
+    text = text.replace('path = "../out/runs/daemon-{time}.mcap"', f'path = "{recording_path}"')
+    text = text.replace("make_dirs = true", f"make_dirs = {'true' if make_dirs else 'false'}")
+    assert recording_path in text
+    cfg = tmp_path / "daemon.toml"
+    cfg.write_text(text)
+    for table in (ROOT / "examples").glob("*.json"):    # the speed table it names, beside it
+        (tmp_path / table.name).write_text(table.read_text())
+    return cfg
+
+
+def test_daemon_check_refuses_a_recording_directory_that_is_missing(tmp_path, capsys):
+    # before: --check passed, and the run then failed at once; the check comes before the devices
+    # are opened, so no head or lidar is needed to see it
+    cfg = _daemon_config(tmp_path, str(tmp_path / "no-such-dir" / "run-{time}.mcap"), make_dirs=False)
+    code, _, err = _run(["daemon", "--config", str(cfg), "--check"], capsys)
+    assert code == 2
+    assert "[recording] path: the directory" in err and "no-such-dir" in err and "does not exist" in err
+
+
+def test_daemon_check_refuses_a_recording_directory_it_cannot_write(tmp_path, capsys):
+    if os.geteuid() == 0:
+        # root writes anywhere; a file where the directory should be is unwritable for root too
+        (tmp_path / "blocked").write_text("")
+        where = tmp_path / "blocked" / "runs" / "run-{time}.mcap"
+    else:
+        (tmp_path / "ro").mkdir(mode=0o500)
+        where = tmp_path / "ro" / "run-{time}.mcap"
+    cfg = _daemon_config(tmp_path, str(where), make_dirs=True)
+    code, _, err = _run(["daemon", "--config", str(cfg), "--check"], capsys)
+    assert code == 2 and "is not a directory this user can write in" in err
