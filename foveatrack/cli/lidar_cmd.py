@@ -57,6 +57,9 @@ def register(sub) -> None:
                    help="voxel: paper Appendix C 100x100 grid; footprint: Livox's FoV coverage (the beam's "
                         "swath, as wide as its divergence's major axis); footprint-fixed: the area of a "
                         "footprint held aligned with az/el (docs/livox-files.md)")
+    p.add_argument("--compare", metavar="FILE.png",
+                   help="plot ours against Livox's published curve (mid40, horizon, tele15; --method footprint; "
+                        "runs to the curve's plateau, --duration ignored) and print the largest deviation")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr (shown on long runs)")
     p.set_defaults(func=cmd_coverage)
 
@@ -337,6 +340,18 @@ def coverage_curve(optics, scan, method, duration, progress=None):
 def cmd_coverage(args) -> int:
     optics = _load(args)
     scan = _scan_model(args, optics)
+    published = None
+    if args.compare:
+        from sim.scan.livox_published import PUBLISHED_STEP_S, published_coverage
+
+        if args.preset not in PUBLISHED_STEP_S:
+            raise UserError(f"--compare: Livox publishes a coverage curve only for {', '.join(PUBLISHED_STEP_S)}, "
+                            f"not {args.preset!r}")
+        if args.method != "footprint":
+            raise UserError(f"--compare: Livox's curve is the illuminated fraction; use --method footprint "
+                            f"(not {args.method})")
+        published = published_coverage(args.preset)
+        args.duration = float(published.times_s[published.compared_points()].max())  # to the curve's plateau
     t0 = time.perf_counter()
     n = int(round(args.duration * optics.point_rate_hz)) if args.method == "voxel" else None  # footprint: substeps
     with _Progress(args, f"{args.method} coverage", total=n) as bar:
@@ -353,9 +368,26 @@ def cmd_coverage(args) -> int:
         noise = f"{args.noise * 100:g} % speed noise" if args.noise else "no speed noise"
         plot_coverage([(f"{args.method}, {noise}", curve)],
                       f"{optics.name}: coverage, {args.method} definition (paper Fig. 6e)", args.plot)
-    _emit(args, result, [f"{optics.name}: {args.method} coverage after {args.duration:g} s: {curve.coverage[-1]:.1%} "
-                         f"of {curve.cells} cells; 50 % {_reached(curve.t50_s, args.duration)}, "
-                         f"90 % {_reached(curve.t90_s, args.duration)}"])
+    lines = [f"{optics.name}: {args.method} coverage after {args.duration:g} s: {curve.coverage[-1]:.1%} "
+             f"of {curve.cells} cells; 50 % {_reached(curve.t50_s, args.duration)}, "
+             f"90 % {_reached(curve.t90_s, args.duration)}"]
+    if published is not None:
+        import numpy as np
+
+        from foveatrack.cli.scan_plots import plot_coverage_vs_published
+
+        idx = published.compared_points()
+        ours = np.array([curve.coverage[np.argmin(np.abs(curve.times_s - t))] for t in published.times_s[idx]])
+        dev = ours - published.coverage[idx]
+        worst = int(np.argmax(np.abs(dev)))
+        result["livox"] = {"times_s": published.times_s[idx].tolist(), "coverage": published.coverage[idx].tolist(),
+                           "ours": ours.tolist(), "max_abs_deviation": float(abs(dev[worst])),
+                           "at_s": float(published.times_s[idx][worst])}
+        plot_coverage_vs_published(curve, published, f"{optics.name}: ours (footprint, exact refraction) "
+                                   f"against Livox's published curve", args.compare)
+        lines.append(f"against Livox's published curve: largest deviation {dev[worst]:+.3f} at "
+                     f"{published.times_s[idx][worst]:g} s; plot {args.compare}")
+    _emit(args, result, lines)
     return 0
 
 

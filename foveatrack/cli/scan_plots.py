@@ -100,6 +100,33 @@ def plot_coverage(curves, title: str, path) -> Path:
     return _save(fig, path)
 
 
+def plot_coverage_vs_published(curve, published, title: str, path) -> Path:
+    """Our coverage curve against Livox's published one (read off its figure; error bars: the reading's
+    +-), the +-0.03 band the presets are held to, and the largest deviation at the compared points."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    idx = published.compared_points()
+    t_pub, c_pub = published.times_s[idx], published.coverage[idx]
+    ours = np.array([curve.coverage[np.argmin(np.abs(curve.times_s - t))] for t in t_pub])
+    dev = ours - c_pub
+    worst = int(np.argmax(np.abs(dev)))
+    ax.fill_between(t_pub, 100 * (c_pub - 0.03), 100 * np.minimum(c_pub + 0.03, 1.0), color="0.85",
+                    label="Livox +- 0.03")
+    ax.errorbar(t_pub, 100 * c_pub, yerr=100 * published.plus_minus[idx], fmt="o", ms=3, color="k",
+                label="Livox (read off its figure)")
+    ax.plot(curve.times_s, 100 * curve.coverage, color="C0", label="ours (footprint, exact refraction)")
+    ax.annotate(f"largest deviation {dev[worst]:+.3f} at {t_pub[worst]:g} s", (t_pub[worst], 100 * ours[worst]),
+                xytext=(10, -30), textcoords="offset points", fontsize="small",
+                arrowprops=dict(arrowstyle="->", color="C3"), color="C3")
+    ax.set_xlabel("integration time [s]")
+    ax.set_ylabel("FoV coverage [%]")
+    ax.set_ylim(0, 101)
+    ax.set_xlim(0, float(t_pub.max()) * 1.02)
+    ax.legend(loc="lower right")
+    ax.set_title(title, fontsize="medium")
+    return _save(fig, path)
+
+
 def matplotlib_cmap(name: str):
     import matplotlib
 

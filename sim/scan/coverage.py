@@ -7,8 +7,9 @@ Three definitions, named wherever a figure is shown, because they answer differe
   scanner can never reach (outside the circular FoV, inside a central hole) are not counted.
 * ``footprint`` — Livox's FoV coverage definition (:func:`swath_coverage`), "the fraction of the FoV
   illuminated by laser beams" (Livox HAP manual: C = illuminated area / FoV area).  Its geometry is
-  inferred from Livox's Mid-40 curve as far as we have it (``LIVOX_MID40_COVERAGE``: approximate,
-  unverified values), which it meets within 0.05 at 0.1, 0.5 and 1 s: the 0.28 x 0.03 deg footprint travels with its narrow axis along the scan, so the beam
+  inferred from Livox's Mid-40 curve (``LIVOX_MID40_COVERAGE``, read off Livox's figure), which it
+  meets within 0.05 at 0.1, 0.5 and 1 s (0.044 at worst over 0.05-1.4 s: docs/livox-files.md): the
+  0.28 x 0.03 deg footprint travels with its narrow axis along the scan, so the beam
   sweeps a swath as wide as the divergence's major axis (0.28 deg) across its path.  Measured on a
   0.02 deg grid in the azimuthal-equidistant projection about the optical axis (the circular FoV is
   a disc there, distances are angles from the axis), the trajectory sub-sampled finely enough that
@@ -20,7 +21,7 @@ Three definitions, named wherever a figure is shown, because they answer differe
   trajectory sub-sampled so the swept path is painted.  A legitimate different measure (the spot of
   an emitter that does not turn with the scan) and this project's earlier "footprint"; it sweeps a
   0.03 deg swath where the beam moves along azimuth and 0.28 deg where it moves along elevation, so
-  it stays below Livox's figures (Mid-40: 11 / 46 / 71 % at 0.1 / 0.5 / 1 s against about 20 / 65 / 90).
+  it stays below Livox's figures (Mid-40: 11 / 46 / 71 % at 0.1 / 0.5 / 1 s against Livox's 19.5 / 68.3 / 92.3).
 
 "Can be reached" is decided from the optics, not from the run being measured: rays at uniformly
 random prism phases (prisms driven as a locked counter-rotating pair share one phase) sample every
@@ -41,11 +42,9 @@ from sim.scan.model import ScanModel
 from sim.scan.optics import RisleyOptics
 
 COVERAGE_METHODS = ("voxel", "footprint", "footprint-fixed")
-#: Reference Mid-40 FoV coverage against accumulation time {t [s]: fraction}: approximate values of
-#: the curve on the Livox wiki's "Livox MID-40/100 Point Cloud Characteristics" page, as recalled by
-#: the lead when this was built (about 20 / 60-70 / 90 %).  NOT re-read from the source: the page
-#: could not be retrieved here.  Replace them with the page's own values when it can be read.
-LIVOX_MID40_COVERAGE = {0.1: 0.20, 0.5: 0.65, 1.0: 0.90}
+#: Livox's Mid-40 FoV coverage against accumulation time {t [s]: fraction} at 0.1, 0.5 and 1 s, read off
+#: the figure on the Livox wiki's Point Cloud Characteristics page (sim.scan.livox_published, +-0.006).
+LIVOX_MID40_COVERAGE = {0.1: 0.195, 0.5: 0.683, 1.0: 0.923}
 SWATH_CELL_DEG = 0.02   # grid of the Livox definition: 14 cells across the Mid-40 swath
 VOXEL_GRID = 100  # paper Appendix C
 
@@ -261,7 +260,7 @@ def swath_coverage(model: ScanModel, duration_s: float, cell_deg: float | None =
                    substeps: int | None = None, reference_rays: int = 1_000_000, seed: int = 0,
                    chunk_points: int = 20_000, progress=None) -> CoverageCurve:
     """Livox's FoV coverage against accumulation time: the fraction of the FoV the beam's swath has
-    swept (see module docstring, ``footprint``; meets the reference Mid-40 curve, approximate values).
+    swept (see module docstring, ``footprint``; compared with Livox's published curves in docs/livox-files.md).
 
     model : the scan (its speed noise included); the swath is ``beam_divergence_deg[0]`` wide
     duration_s : > 0 [s]

@@ -25,7 +25,10 @@
   angle (horizontal span) and the channel spacing (the extra vertical span) are solved together
   for the datasheet FoV.  Speeds: the Mid-40's (our choice; Livox does not publish them).
 * ``tele15`` — Livox Tele-15: 14.5 (H) x 16.2 (V) deg, 240 k points/s, six lasers, beam divergence
-  0.02 x 0.12 deg (Livox Tele-15 datasheet; facts: livox.md).  Solved as the Avia.
+  0.02 x 0.12 deg (Livox Tele-15 datasheet; facts: livox.md).  Wedge and channel spacing solved as the
+  Avia's; its own speeds (``TELE15_RPM``, co-rotating), chosen so that its FoV coverage follows Livox's
+  published curve (``sim.scan.livox_published``; within 0.04, docs/livox-files.md).  The speeds do not
+  change the FoV.
 * ``mid100`` — Livox Mid-100: three Mid-40 heads in one housing, 98.4 x 38.4 deg, 300 k points/s
   (Livox Mid-40/Mid-100 datasheet).  Heads turned +30 / 0 / -30 deg about the vertical (HELIOS++
   ``livox-mid-100``: beam origins at -30, 0, +30 deg; 38.4 + 60 = 98.4).  Point ``k`` comes from
@@ -80,19 +83,22 @@ def horizon_optics(wedge_p12_deg: float, wedge_p3_deg: float) -> RisleyOptics:
 HORIZON = horizon_optics(HORIZON_WEDGE_P12_DEG, HORIZON_WEDGE_P3_DEG)
 
 # ---- the other Livox SDK v1 Risley units (scripts/solve_livox_presets.py) -----------------------------
-# Mid-40 speeds (HELIOS++ gives its Mid-70 the same 7294 / -4664); our choice for the Avia and Tele-15.
+# Mid-40 speeds (HELIOS++ gives its Mid-70 the same 7294 / -4664); our choice for the Avia (the Tele-15
+# has its own, TELE15_RPM, below).
 LIVOX_RPM = (7294.0, -4664.0)
 
 
 def stacked_optics(name: str, wedge_deg: float, channels: int, spacing_deg: float, point_rate_hz: int = 240_000,
-                   beam_divergence_deg: tuple[float, float] = (0.28, 0.03)) -> RisleyOptics:
+                   beam_divergence_deg: tuple[float, float] = (0.28, 0.03),
+                   rpm: tuple[float, float] = LIVOX_RPM) -> RisleyOptics:
     """The Mid-40 design with its own wedge angle and ``channels`` lasers stacked vertically
-    (``y_opt``) ``spacing_deg`` apart, centred on the axis (used by the solver and the presets)."""
+    (``y_opt``) ``spacing_deg`` apart, centred on the axis (used by the solver and the presets).
+    ``rpm``: the two prisms' speeds (the FoV does not depend on them)."""
     offsets = tuple((0.0, (c - (channels - 1) / 2) * spacing_deg) for c in range(channels))
     return RisleyOptics(
         prisms=(
-            Prism(wedge_deg=wedge_deg, index=N_BK7_LIKE, tilted_face="exit", rpm=LIVOX_RPM[0]),
-            Prism(wedge_deg=wedge_deg, index=N_BK7_LIKE, tilted_face="entry", rpm=LIVOX_RPM[1]),
+            Prism(wedge_deg=wedge_deg, index=N_BK7_LIKE, tilted_face="exit", rpm=rpm[0]),
+            Prism(wedge_deg=wedge_deg, index=N_BK7_LIKE, tilted_face="entry", rpm=rpm[1]),
         ),
         point_rate_hz=point_rate_hz,
         channel_offsets_deg=offsets,
@@ -117,8 +123,15 @@ MID100_HEAD_YAW_DEG = (30.0, 0.0, -30.0)
 
 MID70 = stacked_optics("mid70", MID70_WEDGE_DEG, 1, 0.0, point_rate_hz=100_000)
 AVIA = stacked_optics("avia", AVIA_WEDGE_DEG, 6, AVIA_CHANNEL_SPACING_DEG)
+# Tele-15 speeds, chosen for Livox's published coverage curve (docs/livox-files.md; the Mid-40's speeds
+# gave 0.62 at 0.1 s against Livox's 0.98).  Paraxially each petal of a two-prism pattern is the last
+# one turned by f1 / (f1 - f2) of a turn and petals come at |f1 - f2| per second: co-rotating prisms
+# with f1 / (f1 - f2) = the golden ratio (the most evenly spread turns) at |f1 - f2| = TELE15_PETAL_HZ.
+TELE15_PETAL_HZ = 206.0
+_GOLDEN = (1 + 5 ** 0.5) / 2
+TELE15_RPM = (round(60 * _GOLDEN * TELE15_PETAL_HZ, 1), round(60 * (_GOLDEN - 1) * TELE15_PETAL_HZ, 1))
 TELE15 = stacked_optics("tele15", TELE15_WEDGE_DEG, 6, TELE15_CHANNEL_SPACING_DEG,
-                        beam_divergence_deg=(0.02, 0.12))
+                        beam_divergence_deg=(0.02, 0.12), rpm=TELE15_RPM)
 MID100 = MID40.with_(name="mid100", point_rate_hz=300_000, channel_offsets_deg=((0.0, 0.0),) * 3,
                      head_yaw_deg=MID100_HEAD_YAW_DEG)
 

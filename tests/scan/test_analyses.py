@@ -145,8 +145,8 @@ def test_custom_optics_errors_name_the_key(table, message):
 
 @pytest.mark.slow
 def test_footprint_coverage_meets_the_reference_mid40_curve():
-    """Livox's FoV coverage (``--method footprint``, the beam's 0.28 deg swath) against the reference
-    Mid-40 values (approximate, not re-read from Livox's page: see LIVOX_MID40_COVERAGE), within 0.05;
+    """Livox's FoV coverage (``--method footprint``, the beam's 0.28 deg swath) against Livox's Mid-40
+    curve at 0.1, 0.5 and 1 s (read off its figure: LIVOX_MID40_COVERAGE), within 0.05;
     the fixed-orientation footprint stays far below."""
     curve = swath_coverage(ScanModel(PRESETS["mid40"]), 1.0)
     fixed = footprint_coverage(ScanModel(PRESETS["mid40"]), 0.1)
