@@ -41,46 +41,35 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOX_TYPES = {"u1": 1, "i1": 2, "u2": 3, "i2": 4, "u4": 5, "i4": 6, "f4": 7, "f8": 8}
 _FOX_TO_NP = {v: "<" + k for k, v in _FOX_TYPES.items()}
 
-_POINTCLOUD_SCHEMA = {
-    "title": "foxglove.PointCloud",
-    "type": "object",
-    "properties": {
-        "timestamp": {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}},
-        "frame_id": {"type": "string"},
-        "pose": {"type": "object"},
-        "point_stride": {"type": "integer"},
-        "fields": {"type": "array"},
-        "data": {"type": "string", "contentEncoding": "base64"},
-        "frame_index": {"type": "integer"},
-        "t_ns": {"type": "integer"},
-    },
-}
-
-
 def _obj(title: str, doc: str, props: dict) -> dict:
     return {"title": title, "description": doc, "type": "object",
             "properties": {"t_ns": {"type": "integer", "description": "log time [ns]"}, **props}}
 
 
-_NUM = {"type": ["number", "null"]}
-_XYZ = {"type": ["array", "null"], "items": {"type": "number"}, "minItems": 3, "maxItems": 3}
+# A field that can be missing is written as JSON null but declared with its one type: Foxglove's
+# JSON-schema parser (Studio's, as Lichtblick ships it) takes no union types such as ["number", "null"]
+# and leaves every panel of such a channel empty (tests/foxglove_json_schema.py).
+_NUM = {"type": "number", "description": "null where there is no value"}
+_XYZ = {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3,
+        "description": "[x, y, z]; null where there is none"}
+_NULLABLE = "; null where there is none"
 # The documented custom JSON schemas of the record channels (docs/recordings.md): the fields of
 # foveatrack.recording.records, so Foxglove's plot panel offers them by name.
 RECORD_SCHEMAS = {
     DETECTIONS: ("foveatrack.Detection", _obj("foveatrack.Detection", "Algorithm 1 on one frame (lidar frame)", {
         "frame_index": {"type": "integer"}, "detected": {"type": "boolean"}, "xyz_m": _XYZ,
         "n_points": {"type": "integer"}, "t_s": _NUM, "az_deg": _NUM, "el_deg": _NUM,
-        "state": {"type": ["string", "null"]}, "error_pan_deg": _NUM, "error_tilt_deg": _NUM})),
+        "state": {"type": "string", "description": "tracker state" + _NULLABLE}, "error_pan_deg": _NUM, "error_tilt_deg": _NUM})),
     HEAD: ("foveatrack.HeadEstimate", _obj("foveatrack.HeadEstimate", "the tracker's dead-reckoned head pose "
                                            "[deg] and reconstructed target [m, world]", {
         "pan_deg": {"type": "number"}, "tilt_deg": {"type": "number"}, "frame_id": {"type": "integer"},
         "sigma_pan_deg": _NUM, "sigma_tilt_deg": _NUM, "world_xyz_m": _XYZ, "world_sigma_m": _NUM})),
     COMMANDS: ("foveatrack.Command", _obj("foveatrack.Command", "a Pelco-D command as written to the head", {
-        "raw_hex": {"type": "string"}, "frame_id": {"type": ["integer", "null"]}, "source": {"type": "string"},
+        "raw_hex": {"type": "string"}, "frame_id": {"type": "integer", "description": "the frame it answers" + _NULLABLE}, "source": {"type": "string"},
         "send_t_s": {"type": "number"}, "written": {"type": "boolean"}, "host_written_s": {"type": "number"},
         "pan_dir": {"type": "integer"}, "pan_byte": {"type": "integer"}, "tilt_dir": {"type": "integer"},
         "tilt_byte": {"type": "integer"}, "limited": {"type": "array", "items": {"type": "string"}},
-        "tracker_command": {"type": ["array", "null"], "items": {"type": "integer"}}})),
+        "tracker_command": {"type": "array", "items": {"type": "integer"}, "description": "the tracker's command before the gate" + _NULLABLE}})),
     TRUTH: ("foveatrack.Truth", _obj("foveatrack.Truth", "simulation truth: head pose [deg], target [m, world]", {
         "frame_id": {"type": "integer"}, "pan_deg": {"type": "number"}, "tilt_deg": {"type": "number"},
         "target_xyz_m": _XYZ, "true_error_deg": _NUM, "points_on_target": {"type": "integer"}})),
@@ -89,8 +78,14 @@ RECORD_SCHEMAS = {
 }
 
 
-def _json_schema(name: str) -> dict:
-    return {"title": f"foveatrack.{name}", "type": "object", "properties": {"t_ns": {"type": "integer"}}}
+def json_schema_of(name: str) -> tuple[str, dict]:
+    """The (schema name, JSON schema) of a record channel: the documented one, or for a channel without
+    one (the daemon's events, a later version's channel) an object with its log time, which Foxglove's
+    parser accepts (a bare ``{"type": "object"}`` without properties it does not)."""
+    if name in RECORD_SCHEMAS:
+        return RECORD_SCHEMAS[name]
+    return f"foveatrack.{name}", {"title": f"foveatrack.{name}", "type": "object",
+                                  "properties": {"t_ns": {"type": "integer", "description": "log time [ns]"}}}
 
 
 def _to_jsonable(x: Any) -> Any:

@@ -28,7 +28,7 @@ from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, FrameTra
 
 from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, IMU, IMU_DESCRIPTOR, IMU_SCHEMA_NAME, LOG,
                                          METRICS, POINTS, RECORD_SCHEMAS, SCENE, TF, TRUTH, encode_imu_pb,
-                                         encode_points_pb)
+                                         encode_points_pb, json_schema_of)
 
 SEGMENT_FRAMES = 10        # a drawn trajectory is one line entity per 10 frames: each frame re-sends
                            # its segment, so short segments keep the bytes and the CPU per frame small
@@ -92,7 +92,7 @@ class FoxgloveChannels:
 
         ch = self._json.get(name)
         if ch is None:
-            schema_name, schema = RECORD_SCHEMAS.get(name, (f"foveatrack.{name}", {"type": "object"}))
+            schema_name, schema = json_schema_of(name)
             ch = foxglove.Channel("/" + name, schema=foxglove.Schema(
                 name=schema_name, encoding="jsonschema", data=json.dumps(schema).encode()),
                 message_encoding="json", context=self.context)
