@@ -12,7 +12,6 @@ the log (tracker state changes, the gate's interventions, daemon events).
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import foxglove.layouts as fl
@@ -25,7 +24,9 @@ def layout() -> fl.Layout:
         follow_tf="world", follow_mode="follow-none",
         topics={"/points": fl.BaseRendererPointCloudTopicSettings(visible=True, point_size=3, color_mode="colormap",
                                                                   color_field="reflectivity", color_map="turbo"),
-                "/scene": fl.BaseRendererSceneUpdateTopicSettings(visible=True)}))
+                "/scene": fl.BaseRendererSceneUpdateTopicSettings(visible=True),
+                # D and the trajectories' histories, re-sent once a second (what a seek restores)
+                "/scene_keyframe": fl.BaseRendererSceneUpdateTopicSettings(visible=True)}))
     error = fl.PlotPanel(title="controller's error per axis [deg]", config=fl.PlotConfig(
         show_legend=True, y_axis_label="deg", paths=[
             fl.PlotSeries(value="/detections.error_pan_deg", label="pan error (detection)"),
@@ -47,7 +48,12 @@ def layout() -> fl.Layout:
 
 
 def main() -> None:
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT / "docs" / "foxglove-layout.json"
+    import argparse
+
+    ap = argparse.ArgumentParser(description="write the Foxglove layout for recordings and the live view")
+    ap.add_argument("out", nargs="?", type=Path, default=ROOT / "docs" / "foxglove-layout.json",
+                    help="where to write it (default: docs/foxglove-layout.json)")
+    out = ap.parse_args().out     # (a bare sys.argv[1] once wrote the layout to a file named '--help')
     import json
 
     out.write_text(json.dumps(json.loads(layout().to_json()), indent=1) + "\n")

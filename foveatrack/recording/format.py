@@ -33,8 +33,11 @@ STANDARD_CHANNELS = (POINTS, DETECTIONS, COMMANDS, HEAD, TRUTH, METRICS)
 # drawn for Foxglove from the records (format 2); replay needs none of them
 TF = "tf"
 SCENE = "scene"
+# D and every trajectory's whole (thinned) history, once a second: Foxglove restores only the newest
+# message of a topic after a seek, and a live viewer sees only what is sent after it joins
+SCENE_KEYFRAME = "scene_keyframe"
 LOG = "log"
-VIEW_CHANNELS = (TF, SCENE, LOG)
+VIEW_CHANNELS = (TF, SCENE, SCENE_KEYFRAME, LOG)
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 # foxglove NumericType (docs.foxglove.dev, "NumericType")

@@ -27,9 +27,12 @@ from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, FrameTra
                                SpherePrimitive, Timestamp, Vector3)
 
 from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, IMU, IMU_DESCRIPTOR, IMU_SCHEMA_NAME, LOG,
-                                         METRICS, POINTS, RECORD_SCHEMAS, SCENE, TF, TRUTH, encode_imu_pb,
+                                         METRICS, POINTS, RECORD_SCHEMAS, SCENE, SCENE_KEYFRAME, TF, TRUTH,
+                                         encode_imu_pb,
                                          encode_points_pb, json_schema_of)
 
+KEYFRAME_FRAMES = 10       # /scene_keyframe: D and the histories every 10th head estimate (once a second)
+HISTORY_POINTS = 256       # a history longer than this is thinned to every 2nd point (deterministic)
 SEGMENT_FRAMES = 10        # a drawn trajectory is one line entity per 10 frames: each frame re-sends
                            # its segment, so short segments keep the bytes and the CPU per frame small
 
@@ -76,6 +79,7 @@ class FoxgloveChannels:
             self._json_channel(name)
         self._tf = FrameTransformsChannel("/" + TF, context=ctx)
         self._scene = SceneUpdateChannel("/" + SCENE, context=ctx)
+        self._keyframe = SceneUpdateChannel("/" + SCENE_KEYFRAME, context=ctx)
         self._log = LogChannel("/" + LOG, context=ctx)
         meta = meta or {}
         table = meta.get("tracker_table") or {}
@@ -84,6 +88,10 @@ class FoxgloveChannels:
         self._paths: dict[str, tuple[int, list]] = {}     # name -> (segment number, its points)
         self._state: str | None = None
         self._space_sent = False
+        self._history: dict[str, tuple[int, list]] = {}   # name -> (stride, every stride-th point)
+        self._seen_points: dict[str, int] = {}
+        self._path_colors: dict[str, tuple] = {}
+        self._head_count = 0
 
     # ------------------------------------------------------------------ channels
 
@@ -141,6 +149,9 @@ class FoxgloveChannels:
                 ents.append(self._path_point("reconstructed_trajectory", t_ns, rec["world_xyz_m"], (0.1, 0.5, 1.0)))
             if ents:
                 self._scene_update(t_ns, ents)
+            if self._head_count % KEYFRAME_FRAMES == 0:
+                self._scene_keyframe(t_ns)
+            self._head_count += 1
         elif name == TRUTH and rec.get("pan_deg") is not None:
             self._head_tf(t_ns, "head_true", "lidar_true", rec["pan_deg"], rec["tilt_deg"])
             xyz = rec.get("target_xyz_m")
@@ -191,9 +202,30 @@ class FoxgloveChannels:
             size=Vector3(x=size_m, y=size_m, z=size_m), color=self._color(rgb, 0.8))]
         return SceneEntity(timestamp=_ts(t_ns), frame_id=frame, id=ident, spheres=spheres)
 
+    def _scene_keyframe(self, t_ns) -> None:
+        """D and each trajectory's history so far as one line (entity ``name/history``), on their own
+        topic: the newest of these is what a seek restores and what a viewer who joins late gets."""
+        ents = self._space_entities(t_ns)
+        for name, (_stride, pts) in self._history.items():
+            rgb = self._path_colors[name]
+            ents.append(self._line(f"{name}/history", t_ns, pts, rgb))
+        self._note(SCENE_KEYFRAME)
+        self._keyframe.log(SceneUpdate(entities=ents), log_time=int(t_ns))
+
+    def _remember(self, name, xyz, rgb) -> None:
+        stride, pts = self._history.get(name, (1, []))
+        self._path_colors[name] = rgb
+        self._seen_points[name] = n = self._seen_points.get(name, 0) + 1
+        if (n - 1) % stride == 0:
+            pts.append(xyz)
+        if len(pts) > HISTORY_POINTS:        # thin: keep every 2nd point, then take every 2*stride-th
+            stride, pts = 2 * stride, pts[::2]
+        self._history[name] = (stride, pts)
+
     def _path_point(self, name, t_ns, xyz, rgb):
         """Add a point to trajectory ``name``: the entity ``name/N`` of its current segment grows by
         one point; a new segment starts at the last point of the one before (no gap)."""
+        self._remember(name, xyz, rgb)
         seg, pts = self._paths.get(name, (0, []))
         if len(pts) > SEGMENT_FRAMES:
             seg, pts = seg + 1, pts[-1:]

@@ -94,7 +94,7 @@ def test_every_channel_is_well_known_or_documented(sim_rec):
     assert {"/points", "/tf", "/scene", "/detections", "/head", "/commands", "/truth"} <= seen
     assert ("/imu" in seen) == (RecordingReader(path).meta["tracker_effective"].get("attitude") == "gyro")
     # and every protobuf message decodes under its schema with the official decoder
-    n = len(official_decoded(path, ["/points", "/tf", "/scene", "/log", "/imu"]))
+    n = len(official_decoded(path, ["/points", "/tf", "/scene", "/scene_keyframe", "/log", "/imu"]))
     assert n == sum(summary.statistics.channel_message_counts[c.id] for c in summary.channels.values()
                     if c.message_encoding == "protobuf")
 
@@ -235,3 +235,48 @@ def test_the_shipped_layout_names_channels_and_fields_a_recording_has(sim_rec):
     for v in values:
         topic, field = v.split(".", 1)
         assert topic in topics and field in topics[topic]["properties"], v
+
+
+def test_a_seek_or_a_late_viewer_gets_d_and_the_whole_history_within_a_second(tmp_path):
+    # before: D was sent once at 0.1 s and the trajectories in 10-frame segments on /scene, so a
+    # viewer who joined later, or a seek (which restores the newest message of each topic), lost them
+    from sim.loop import ClosedLoop
+    from sim.recorder import SimRecorder, recording_meta
+    from sim.scene import load_scene, with_run_overrides
+
+    from foveatrack.recording.writer import RecordingWriter
+
+    scene = with_run_overrides(load_scene(ROOT / "scenes" / "fig12-tracking.toml"), 2.5, None)
+    loop = ClosedLoop(scene)
+    path = tmp_path / "run.mcap"
+    with RecordingWriter(path, recording_meta(scene, loop)) as w:
+        loop.frame_hook = SimRecorder(w)
+        loop.run()
+    key = official_decoded(path, ["/scene_keyframe"])
+    heads = [t for t, _ in official_decoded(path, ["/tf"])]
+    assert len(key) >= 2 and heads
+    gaps = np.diff([heads[0], *[t for t, _ in key], heads[-1]])
+    assert gaps.max() <= 1.0e9 + 1, "a keyframe at least once a second"
+    assert RecordingReader(path).meta["tracker_table"].get("space")
+    for _t, msg in key:
+        assert "space_of_interest" in {e.id for e in msg.entities}
+    # the newest keyframe's trajectories reach back to the run's first truth and detection
+    last = {e.id: e for e in key[-1][1].entities}
+    first = RecordingReader(path).records("truth")[0]["target_xyz_m"]
+    line = last["true_trajectory/history"].lines[0].points
+    assert (line[0].x, line[0].y, line[0].z) == tuple(first)
+    assert len(line) >= 19          # every truth until the keyframe at 2.0 s (fewer than HISTORY_POINTS)
+    assert len(last["reconstructed_trajectory/history"].lines[0].points) >= 2
+
+
+def test_a_long_history_is_thinned_evenly_and_keeps_its_start():
+    from foveatrack.recording.foxglove_view import HISTORY_POINTS, FoxgloveChannels
+
+    view = FoxgloveChannels({})
+    for i in range(10 * HISTORY_POINTS + 3):
+        view._remember("p", (float(i), 0.0, 0.0), (1.0, 1.0, 1.0))
+    stride, pts = view._history["p"]
+    xs = [p[0] for p in pts]
+    assert len(pts) <= HISTORY_POINTS and xs[0] == 0.0
+    assert set(np.diff(xs)) == {float(stride)}
+    assert xs[-1] > 10 * HISTORY_POINTS - stride - 1

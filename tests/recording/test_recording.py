@@ -18,6 +18,7 @@ from foveatrack.recording import (
     export_points,
     export_trajectory,
 )
+from foveatrack.recording.format import VIEW_CHANNELS
 
 ROOT = Path(__file__).resolve().parents[2]
 META = {"scene_toml": "[scene]\nname = 'x'\n", "seed": 42, "params": {"deadband_deg": 0.5}}
@@ -67,7 +68,7 @@ def test_round_trip_is_exact(tmp_path):
     cmd = r.records("commands")[0]
     assert bytes.fromhex(cmd["raw_hex"]) == b"\xff\x01\x00\x04\x20\x00\x25" and cmd["note"] == "left"
     assert cmd["t_ns"] == frames[0][0] + 2000
-    assert {k: v for k, v in r.channels().items() if k not in ("tf", "scene", "log")} == {"points": 5, "detections": 5, "commands": 5, "head": 5, "truth": 5, "metrics": 5}
+    assert {k: v for k, v in r.channels().items() if k not in VIEW_CHANNELS} == {"points": 5, "detections": 5, "commands": 5, "head": 5, "truth": 5, "metrics": 5}
     # messages come back in the order they were written
     assert [m.channel for m in r.messages()][:6] == ["points", "detections", "commands", "head", "truth", "metrics"]
 
