@@ -87,3 +87,14 @@ class BackgroundModel:
             count[k] = c
             if c == nb:
                 self._dirty = True
+
+    def mark_box(self, lo_m: np.ndarray, hi_m: np.ndarray) -> None:
+        """Make every cube of the box ``[lo_m, hi_m]`` background at once (an object found to be
+        static scenery: :mod:`foveatrack.openloop.tracker`)."""
+        v = self.voxel_m
+        i0, i1 = np.floor(np.asarray(lo_m) / v).astype(np.int64), np.floor(np.asarray(hi_m) / v).astype(np.int64)
+        grid = np.stack(np.meshgrid(*[np.arange(a, b + 1) for a, b in zip(i0, i1)], indexing="ij"), -1).reshape(-1, 3)
+        keys = voxel_keys((grid + 0.5) * v, v)
+        for k in keys.tolist():
+            self._count[k] = max(self._count.get(k, 0), self.background_frames)
+        self._dirty = True

@@ -30,13 +30,20 @@ def cluster_labels(xyz: np.ndarray, tol_m: float, tol_rad: float) -> tuple[np.nd
     return labels, int(k)
 
 
-def objects_from_labels(xyz: np.ndarray, labels: np.ndarray, n: int) -> list[FrameObject]:
-    out = []
+def objects_from_labels(xyz: np.ndarray, labels: np.ndarray, n: int, min_points: int = 1,
+                        max_extent_m: float = np.inf) -> tuple[list[FrameObject], list[int]]:
+    """The clusters of at least ``min_points`` points and at most ``max_extent_m`` across (the
+    drone-like ones; a scene's scattered returns make thousands of small clusters not worth a
+    summary), and their labels."""
+    out, kept = [], []
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(n + 1))
-    for c in range(n):
+    sizes = np.diff(bounds)
+    for c in np.flatnonzero(sizes >= min_points).tolist():
         pts = xyz[order[bounds[c]:bounds[c + 1]]]
         med = np.median(pts, axis=0)
         ext = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
-        out.append(FrameObject(med, int(pts.shape[0]), ext, norm3(med)))
-    return out
+        if ext <= max_extent_m:
+            out.append(FrameObject(med, int(pts.shape[0]), ext, norm3(med)))
+            kept.append(c)
+    return out, kept

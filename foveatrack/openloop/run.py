@@ -55,7 +55,7 @@ def track_source(source, cfg: OpenLoopConfig | None = None, reference=None, prog
         frames["detected"] = np.zeros(0, bool)
     frames["xyz_m"] = frames["xyz_m"].reshape(-1, 3).astype(float)
     confirmed = [{"track_id": tr.track_id, "first_seen_s": tr.first_t_s, "confirmed_s": tr.confirmed_t_s,
-                  "hits": tr.hits, "mean_range_m": tr.mean_range_m} for tr in tracker.confirmed]
+                  "hits": tr.hits, "mean_range_m": tr.mean_range_m, "static": tr.static} for tr in tracker.confirmed]
     res = OpenLoopResult(getattr(source, "kind", "?"), str(getattr(source, "path", "?")), frames, confirmed)
     res.summary = summarize(frames, confirmed, cfg, reference, float(np.median(period)) if period else 0.1)
     return res
@@ -67,6 +67,7 @@ def summarize(frames: dict, confirmed: list, cfg: OpenLoopConfig, reference, per
     s = {"frames": int(det.size), "frames_tracked": int(det.sum()),
          "first_frame_s": float(t[0]) if t.size else None,
          "confirmed_tracks": len(confirmed), "confirmed": confirmed,
+         "confirmed_static": sum(bool(c["static"]) for c in confirmed),
          "d_given": cfg.space is not None}
     if det.any():
         s["first_tracked_s"] = float(t[np.argmax(det)])

@@ -21,7 +21,9 @@ Why stray sky returns never confirm: they are single returns along scattered bea
 (MMAUD seq1), so no ``min_points`` of them fall within one cluster gap (``max(cluster_tol_m,
 cluster_tol_rad * range)``: 3 m at 300 m) in ``confirm_hits`` frames at one place.  A static,
 drone-sized object seen from the first frame *is* confirmed (nothing tells it from a hovering drone
-in 0.3 s) and tracked until its cubes become background; with D given by the user (``space``) no
+in 0.3 s); once it has stayed within ``static_radius_m`` for ``static_window_s`` it is taken for
+scenery, dropped and its D made background (so a drone hovering that still for that long is lost
+too: a drone is found as a *moving* object).  With D given by the user (``space``) no
 acquisition is done: Algorithm 1 runs with that D on every frame, as the paper's tracker does.
 """
 
@@ -38,7 +40,7 @@ from foveatrack.detection import Detection, box_bounds, box_detection, detect, L
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 from foveatrack.openloop.background import BackgroundModel, voxel_keys
-from foveatrack.openloop.objects import FrameObject, cluster_labels, objects_from_labels
+from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.space_of_interest import Box, SpaceOfInterest, space_from_mapping
 
 _ZERO3 = np.zeros(3)
@@ -58,6 +60,9 @@ class OpenLoopConfig:
     gate_m : > 0 [m], max_speed_m_s : >= 0 [m/s]   association gate ``gate_m + max_speed_m_s * dt``
     confirm_hits : int >= 1, confirm_window : int >= confirm_hits   M of the first N frames
     lost_after_s : > 0 [s]             a track unseen this long is dropped
+    static_window_s : > 0 [s], static_radius_m : > 0 [m]   a confirmed track whose positions over
+                                       the last static_window_s all lie within static_radius_m of their
+                                       median is static scenery: dropped, its D made background
     d_half_m : > 0 [m]                 half-size of the box D around a tracked object
     space : D or None                  a hand-made D: no acquisition, Algorithm 1 with it on every frame
     """
@@ -74,11 +79,14 @@ class OpenLoopConfig:
     confirm_hits: int = 3
     confirm_window: int = 5
     lost_after_s: float = 1.0
+    static_window_s: float = 3.0
+    static_radius_m: float = 0.5
     d_half_m: float = 1.0
     space: SpaceOfInterest | None = None
 
     def __post_init__(self) -> None:
-        for k in ("voxel_m", "cluster_tol_m", "max_extent_m", "gate_m", "lost_after_s", "d_half_m"):
+        for k in ("voxel_m", "cluster_tol_m", "max_extent_m", "gate_m", "lost_after_s", "d_half_m",
+                  "static_window_s", "static_radius_m"):
             if not getattr(self, k) > 0:
                 raise UserError(f"{k} must be > 0, got {getattr(self, k)!r}")
         if not 0 <= self.background_dilate <= 2:
@@ -124,6 +132,8 @@ class Track:
     confirmed_t_s: float | None = None
     vel_m_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
     mean_range_m: float = 0.0
+    static: bool = False
+    history: list = field(default_factory=list)    # (t_s, xyz) of the hits in the last static_window_s
 
     @property
     def confirmed(self) -> bool:
@@ -142,6 +152,17 @@ class Track:
             self.vel_m_s = 0.5 * self.vel_m_s + 0.5 * v if self.hits > 1 else v
         self.xyz_m = np.asarray(xyz, float)
         self.t_s = t_s
+        self.history.append((t_s, self.xyz_m))
+
+    def is_static(self, t_s: float, window_s: float, radius_m: float) -> bool:
+        """Seen for at least ``window_s`` and every position in the last ``window_s`` within
+        ``radius_m`` of their median: scenery, not a drone (a drone moves)."""
+        self.history = [h for h in self.history if h[0] >= t_s - window_s]
+        if t_s - self.first_t_s < window_s or len(self.history) < 3:
+            return False
+        p = np.array([h[1] for h in self.history])
+        d = p - np.median(p, axis=0)
+        return bool(np.all(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2] <= radius_m * radius_m))
 
 
 @dataclass(frozen=True)
@@ -211,6 +232,7 @@ class OpenLoopTracker:
             for mask in hit_keys:
                 learn[fg_idx[mask]] = False
         self.background.learn(keys[learn])
+        self._drop_static(t)
         if self.tracked is None:
             live = [k for k in self.tracks if k.confirmed]
             if live:
@@ -229,55 +251,69 @@ class OpenLoopTracker:
                               d_lo, d_hi, frame.n_points, n_fg,
                               len(objs[0]), len(self.tracks), tuple(confirmed_now))
 
+    def _drop_static(self, t: float) -> None:
+        """Confirmed tracks that have not moved (:meth:`Track.is_static`) are scenery confirmed
+        before the background had learned it: dropped, and their D made background."""
+        cfg = self.cfg
+        for tr in [k for k in self.tracks if k.confirmed] + ([self.tracked] if self.tracked else []):
+            if tr.is_static(t, cfg.static_window_s, cfg.static_radius_m):
+                tr.static = True
+                self.background.mark_box(tr.xyz_m - cfg.d_half_m, tr.xyz_m + cfg.d_half_m)
+                if tr is self.tracked:
+                    self.tracked = None
+                else:
+                    self.tracks.remove(tr)
+
     def _objects(self, xyz: np.ndarray):
+        """The frame's drone-like objects (at least ``min_points`` returns, at most ``max_extent_m``
+        across), their labels and the point labels."""
         cfg = self.cfg
         if xyz.shape[0] == 0:
-            return [], np.empty(0, np.int64)
+            return [], [], np.empty(0, np.int64)
         labels, n = cluster_labels(xyz, cfg.cluster_tol_m, cfg.cluster_tol_rad)
-        return objects_from_labels(xyz, labels, n), labels
+        objs, kept = objects_from_labels(xyz, labels, n, cfg.min_points, cfg.max_extent_m)
+        return objs, kept, labels
 
     def _associate(self, objs_labels, t: float):
-        """Gated nearest-neighbour matching of objects to candidate tracks (nearest pairs first,
-        ties by order), new candidates from unmatched drone-like objects, confirmation, deletion.
-        Returns the ids confirmed this frame and the point masks of objects matched to confirmed
-        tracks (kept out of the background)."""
+        """Gated nearest-neighbour matching of the drone-like objects to candidate tracks (nearest
+        pairs first, ties by order: a stable sort), new candidates from unmatched objects,
+        confirmation, deletion.  Returns the ids confirmed this frame and the point masks of objects
+        matched to confirmed tracks (kept out of the background)."""
         cfg = self.cfg
-        objs, labels = objs_labels
-        drone_like = [o.n_points >= cfg.min_points and o.extent_m <= cfg.max_extent_m for o in objs]
-        pairs = []
-        for ti, tr in enumerate(self.tracks):
-            p = tr.predict(t)
-            gate = cfg.gate_m + cfg.max_speed_m_s * max(t - tr.t_s, 0.0)
-            for oi, o in enumerate(objs):
-                d = float(np.sqrt(np.sum((o.xyz_m - p) ** 2)))
-                if d <= gate:
-                    pairs.append((d, ti, oi))
-        pairs.sort()
-        used_t, used_o = set(), set()
-        confirmed_now, keep_out = [], []
+        objs, kept, labels = objs_labels
         for tr in self.tracks:
             tr.frames_seen += 1
-        for d, ti, oi in pairs:
+        pairs = []
+        if self.tracks and objs:
+            p = np.array([tr.predict(t) for tr in self.tracks])
+            gate = np.array([cfg.gate_m + cfg.max_speed_m_s * max(t - tr.t_s, 0.0) for tr in self.tracks])
+            o = np.array([ob.xyz_m for ob in objs])
+            d = o[None, :, :] - p[:, None, :]
+            dist = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
+            ti, oi = np.nonzero(dist <= gate[:, None])
+            order = np.argsort(dist[ti, oi], kind="stable")
+            pairs = list(zip(ti[order].tolist(), oi[order].tolist()))
+        used_t, used_o = set(), set()
+        confirmed_now, keep_out = [], []
+        for ti, oi in pairs:
             if ti in used_t or oi in used_o:
                 continue
             used_t.add(ti)
             used_o.add(oi)
-            tr, o = self.tracks[ti], objs[oi]
-            if drone_like[oi]:
-                tr.hits += 1
-                n = tr.hits
-                tr.mean_range_m += (o.range_m - tr.mean_range_m) / n
-            tr.update(o.xyz_m, t, cfg.max_speed_m_s)
+            tr, ob = self.tracks[ti], objs[oi]
+            tr.hits += 1
+            tr.mean_range_m += (ob.range_m - tr.mean_range_m) / tr.hits
+            tr.update(ob.xyz_m, t, cfg.max_speed_m_s)
             if not tr.confirmed and tr.hits >= cfg.confirm_hits and tr.frames_seen <= cfg.confirm_window:
                 tr.confirmed_t_s = t
                 self.confirmed.append(tr)
                 confirmed_now.append(tr.track_id)
             if tr.confirmed:
-                keep_out.append(labels == oi)
-        for oi, o in enumerate(objs):
-            if oi in used_o or not drone_like[oi]:
+                keep_out.append(labels == kept[oi])
+        for oi, ob in enumerate(objs):
+            if oi in used_o:
                 continue
-            tr = Track(self._next_id, o.xyz_m, t, t, frames_seen=1, hits=1, mean_range_m=o.range_m)
+            tr = Track(self._next_id, ob.xyz_m, t, t, frames_seen=1, hits=1, mean_range_m=ob.range_m)
             self._next_id += 1
             if cfg.confirm_hits == 1:
                 tr.confirmed_t_s = t
