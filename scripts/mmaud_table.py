@@ -147,10 +147,12 @@ found as a moving object against the static scene and the sky (`foveatrack/openl
 scene is learned from the scans over time and taken out, what is left is clustered into objects,
 a drone-sized object with at least 5 returns in 3 of its first 5 frames is confirmed, and from
 then on the paper's Algorithm 1 (the per-axis median, App. D.2) runs in a 2 m box D around it.
+The run writes the track as CSV, PNG plots, the distance to a reference if one is given, and with
+`--record` a Foxglove recording (MCAP) with the cloud, the track and each frame's D.
 
 ```
 foveatrack track MMAUD_DIR/point_cloud_processing/val/seq1/{sensor} \\
-    --reference MMAUD_DIR/point_cloud_processing/result/seq1 --csv track.csv --plot plots/
+    --reference MMAUD_DIR/point_cloud_processing/result/seq1 --csv track.csv --plot plots/ --record track.mcap
 ```
 
 ## MMAUD validation sequences ({sensor})

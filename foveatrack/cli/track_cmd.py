@@ -26,6 +26,8 @@ def register(sub) -> None:
                    help="a reference trajectory: CSV of time,x,y,z or a folder of <unix time>.npy estimates")
     p.add_argument("--csv", metavar="F.csv", help="write the track (one row per frame)")
     p.add_argument("--plot", metavar="DIR", help="write PNG plots into DIR")
+    p.add_argument("--record", metavar="F.mcap",
+                   help="write a Foxglove recording: the cloud, the track and the D of every frame")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=cmd_track)
 
@@ -42,6 +44,8 @@ def cmd_track(args) -> int:
 
     if args.csv:
         check_output_file(args.csv, "--csv")
+    if args.record:
+        check_output_file(args.record, "--record")
     cfg = OpenLoopConfig()
     if args.config:
         data, _ = read_toml(args.config, "open-loop config (--config)")
@@ -63,11 +67,20 @@ def cmd_track(args) -> int:
 
     bar = tqdm(total=len(source) if hasattr(source, "__len__") else None, desc="tracking", unit=" frame",
                file=sys.stderr, leave=False, disable=None)
+    recorder = None
+    notes = []
     try:
-        res = track_source(source, cfg, reference, progress=lambda k: bar.update(1))
+        if args.record:
+            from foveatrack.openloop.recording import TrackRecorder
+
+            recorder = TrackRecorder(args.record, {"input": str(args.source), "topic": args.topic})
+        res = track_source(source, cfg, reference, progress=lambda k: bar.update(1), observer=recorder)
     finally:
         bar.close()
-    notes = []
+        if recorder is not None:
+            recorder.close()   # what was recorded stays readable when a frame further on is bad
+    if recorder is not None:
+        notes.append(f"{recorder.writer.frames_written} frames -> {args.record} (Foxglove)")
     if args.csv:
         from foveatrack.openloop.run import write_track_csv
 

@@ -24,10 +24,12 @@ class OpenLoopResult:
     summary: dict = field(default_factory=dict)
 
 
-def track_source(source, cfg: OpenLoopConfig | None = None, reference=None, progress=None) -> OpenLoopResult:
+def track_source(source, cfg: OpenLoopConfig | None = None, reference=None, progress=None,
+                 observer=None) -> OpenLoopResult:
     """Run :class:`OpenLoopTracker` over ``source`` (an iterable of ``(arrival_s, Frame)``);
     ``reference``: ``(t_s, xyz_m)`` (:func:`~foveatrack.openloop.reference.load_reference`) or None;
-    ``progress``: called with each frame's index (a progress bar)."""
+    ``progress``: called with each frame's index (a progress bar); ``observer(k, arrival_s, frame,
+    out)`` after each frame (a recording: :class:`~foveatrack.openloop.recording.TrackRecorder`)."""
     cfg = cfg or OpenLoopConfig()
     tracker = OpenLoopTracker(cfg)
     cols = {k: [] for k in ("t_s", "arrival_s", "n_points", "n_foreground", "detected", "xyz_m", "det_t_s",
@@ -47,6 +49,8 @@ def track_source(source, cfg: OpenLoopConfig | None = None, reference=None, prog
         cols["track_id"].append(-1 if out.track_id is None else out.track_id)
         cols["state"].append(out.state)
         period.append(frame.duration_s)
+        if observer is not None:
+            observer(k, arrival_s, frame, out)
         if progress is not None:
             progress(k)
     frames = {k: np.asarray(v, dtype={"detected": bool, "state": object}.get(k, None)) for k, v in cols.items()}
