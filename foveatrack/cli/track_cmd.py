@@ -17,6 +17,8 @@ def register(sub) -> None:
     p.add_argument("source", metavar="SOURCE",
                    help="a .bag, a ROS 2 bag folder or .mcap/.db3, a folder of <unix time>.npy or .pcd frames")
     p.add_argument("--topic", help="the bag's point-cloud topic (without it, the bag's topics are listed)")
+    p.add_argument("--fixed-frame", metavar="FRAME",
+                   help="a bag's clouds turned into this frame with its /tf (a sensor that moved while recording)")
     p.add_argument("--rate-hz", type=float, default=10.0, metavar="HZ",
                    help="the lidar's frame rate (frame length for points without times; default 10)")
     p.add_argument("--config", metavar="FILE.toml", help="an [openloop] table (acquisition and tracking parameters)")
@@ -62,7 +64,7 @@ def cmd_track(args) -> int:
             raise UserError(f"--box: {exc}") from None
         cfg = replace(cfg, space=box)
     reference = load_reference(args.reference) if args.reference else None
-    source = open_source(args.source, args.topic, args.rate_hz)
+    source = open_source(args.source, args.topic, args.rate_hz, args.fixed_frame)
     from tqdm import tqdm
 
     bar = tqdm(total=len(source) if hasattr(source, "__len__") else None, desc="tracking", unit=" frame",

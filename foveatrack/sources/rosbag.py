@@ -25,6 +25,7 @@ import numpy as np
 
 from foveatrack.errors import UserError
 from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud
+from foveatrack.sources.tf import TF_TYPES, TfBuffer, apply
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 LIVOX_CUSTOM = ("livox_ros_driver2/msg/CustomMsg", "livox_ros_driver/msg/CustomMsg")
@@ -72,9 +73,10 @@ class BagSource:
 
     kind = "ros bag"
 
-    def __init__(self, path, topic: str | None, rate_hz: float = 10.0):
+    def __init__(self, path, topic: str | None, rate_hz: float = 10.0, fixed_frame: str | None = None):
         self.path = Path(path)
         self.rate_hz = check_rate(rate_hz)
+        self.fixed_frame = fixed_frame
         topics = self._topics()
         if topic is None:
             raise UserError(f"{self.path}: give the cloud topic with --topic; the bag has "
@@ -86,6 +88,10 @@ class BagSource:
             raise UserError(f"{self.path}: topic {topic} carries {msgtype}, which is not a point cloud "
                             f"this reads ({', '.join(CLOUD_TYPES)})")
         self.topic, self.msgtype, self.n_messages = topic, msgtype, n
+        self._tf_topics = [name for name, (t, _) in topics.items() if t in TF_TYPES]
+        if fixed_frame is not None and not self._tf_topics:
+            raise UserError(f"{self.path}: --fixed-frame {fixed_frame} needs a /tf topic (tf2_msgs/msg/TFMessage); "
+                            "the bag has " + describe_topics(topics))
 
     def __len__(self) -> int:
         return self.n_messages
@@ -109,6 +115,7 @@ class BagSource:
         except Exception as exc:
             raise UserError(f"{self.path}: not a readable bag ({_one_line(exc)})") from None
         try:
+            tf = self._read_tf(reader) if self.fixed_frame is not None else None
             conns = [c for c in reader.connections if c.topic == self.topic]
             msgs = reader.messages(connections=conns)
             k = 0
@@ -131,10 +138,33 @@ class BagSource:
                     fr = frame_from_pointcloud2(msg, self.rate_hz, where)
                 else:
                     fr = frame_from_livox_custom(msg, self.rate_hz, where)
+                if tf is not None and fr.n_points:
+                    R, t = tf.lookup(self.fixed_frame, msg.header.frame_id, _stamp_ns(msg), where)
+                    fr = type(fr)(fr.t_start_s, fr.t_end_s, apply(R, t, fr.xyz), fr.t_ns, fr.reflectivity)
                 k += 1
                 yield StampedFrame(log_ns * 1e-9, fr)
         finally:
             reader.close()
+
+
+    def _read_tf(self, reader) -> TfBuffer:
+        """Every transform of the bag's tf topics (``/tf_static``'s are static)."""
+        buf = TfBuffer()
+        conns = [c for c in reader.connections if c.topic in self._tf_topics]
+        try:
+            for conn, _log_ns, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, conn.msgtype)
+                static = conn.topic.rstrip("/").endswith("tf_static")
+                for ts in msg.transforms:
+                    tr, q = ts.transform.translation, ts.transform.rotation
+                    buf.add(ts.header.frame_id, ts.child_frame_id, _stamp_ns(ts),
+                            (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static)
+        except UserError:
+            raise
+        except Exception as exc:
+            raise UserError(f"{self.path}: the tf topics ({', '.join(self._tf_topics)}) are not readable "
+                            f"({_one_line(exc)})") from None
+        return buf
 
 
 def describe_topics(topics: dict[str, tuple[str, int]]) -> str:

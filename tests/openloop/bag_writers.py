@@ -21,7 +21,12 @@ def npy_frames(folder) -> list[tuple[int, np.ndarray]]:
 def _stores(ros1: bool):
     from rosbags.typesys import Stores, get_typestore
 
-    return livox_typestore(get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE))
+    store = livox_typestore(get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE))
+    if ros1:   # rosbags' Noetic store has no tf2_msgs; its definition is one line
+        from rosbags.typesys import get_types_from_msg
+
+        store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    return store
 
 
 def _header(store, ns: int, ros1: bool, frame_id="livox_frame"):
@@ -111,3 +116,50 @@ def write_pcd_folder(folder, frames, names) -> Path:
         pc = PointCloud.from_points(np.asarray(xyz, np.float64), ("x", "y", "z"), (np.float64,) * 3)
         pc.save(folder / f"{name}.pcd")
     return folder
+
+
+def write_bag_with_tf(path, frames, poses, *, ros1: bool, cloud_frame="livox", topic="/livox/lidar") -> Path:
+    """A PointCloud2 bag whose clouds are in ``cloud_frame``, with ``/tf`` world -> base at each
+    frame's stamp (``poses[k] = (R, t)``, points of base in world: ``R p + t``) and ``/tf_static``
+    base -> livox (a fixed 0.1 m lift).  Each cloud holds ``frames[k]``'s world points seen from
+    that pose, so turned back into ``world`` they are the frames again (to rounding)."""
+    from scipy.spatial.transform import Rotation
+
+    store = _stores(ros1)
+    tf_type = "tf2_msgs/msg/TFMessage"
+    T = store.types
+    lift = np.array([0.0, 0.0, 0.1])
+
+    def transform(ns, parent, child, R, t):
+        x, y, z, w = Rotation.from_matrix(R).as_quat()
+        return T["geometry_msgs/msg/TransformStamped"](
+            header=_header(store, ns, ros1, parent), child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=float(t[0]), y=float(t[1]), z=float(t[2])),
+                rotation=T["geometry_msgs/msg/Quaternion"](x=float(x), y=float(y), z=float(z), w=float(w))))
+
+    path = Path(path)
+    if ros1:
+        from rosbags.rosbag1 import Writer
+
+        w, ser = Writer(path), store.serialize_ros1
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        w, ser = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP), store.serialize_cdr
+    with w:
+        c_cloud = w.add_connection(topic, "sensor_msgs/msg/PointCloud2", typestore=store)
+        c_tf = w.add_connection("/tf", tf_type, typestore=store)
+        c_static = w.add_connection("/tf_static", tf_type, typestore=store)
+        ns0 = frames[0][0]
+        w.write(c_static, ns0, ser(T[tf_type](transforms=[transform(ns0, "base", cloud_frame, np.eye(3), lift)]),
+                                   tf_type))
+        for (ns, xyz), (R, t) in zip(frames, poses):
+            w.write(c_tf, ns, ser(T[tf_type](transforms=[transform(ns, "world", "base", R, t)]), tf_type))
+            valid = np.any(xyz != 0, axis=1)
+            local = np.zeros_like(xyz)
+            local[valid] = (xyz[valid] - t) @ R - lift      # world -> base -> livox
+            msg = pointcloud2(store, ns, local, ros1)
+            msg.header.frame_id = cloud_frame
+            w.write(c_cloud, ns + PERIOD_NS, ser(msg, "sensor_msgs/msg/PointCloud2"))
+    return path
