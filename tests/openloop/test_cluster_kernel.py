@@ -36,3 +36,27 @@ def test_chains_link_and_labels_follow_first_points():
     labels, k = cluster_labels(pts, 0.5, 0.0)
     assert k == 2
     np.testing.assert_array_equal(labels, [0, 1, 0, 0, 1])
+
+
+def test_points_too_far_apart_for_cube_numbers_take_every_pair():
+    # cubes of 1 mm over +-1e7 m do not fit an int64: the kernel tests every pair, with the same result
+    rng = np.random.default_rng(11)
+    pts = np.vstack([rng.normal(0, 0.001, size=(20, 3)), [[1e7, -1e7, 1e7], [-1e7, 1e7, -1e7]],
+                     rng.normal(5, 0.001, size=(20, 3))])
+    got, k = cluster_labels(pts, 0.002, 0.0)
+    want, kw = cluster_labels_numpy(pts, 0.002, 0.0)
+    assert k == kw
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_points_on_cube_boundaries_link_across_them(seed):
+    # points on a grid of exactly the cube size: every link crosses a cube face
+    rng = np.random.default_rng(100 + seed)
+    g = np.arange(-6, 7) * 0.5
+    pts = np.array(np.meshgrid(g, g, g[:3], indexing="ij")).reshape(3, -1).T
+    pts = pts[rng.random(len(pts)) < 0.5]
+    got, k = cluster_labels(pts, 0.5, 0.0)
+    want, kw = cluster_labels_numpy(pts, 0.5, 0.0)
+    assert k == kw
+    np.testing.assert_array_equal(got, want)
