@@ -45,7 +45,7 @@ def find_root(folder: Path) -> Path:
                     "point_cloud_processing folder)")
 
 
-def run_sequence(root: Path, seq: str, sensor: str) -> dict:
+def run_sequence(root: Path, seq: str, sensor: str, plot_dir: Path | None = None) -> dict:
     src_dir = root / "val" / seq / sensor
     ref = load_reference(root / "result" / seq)
     frames = [fr for _, fr in open_source(src_dir)]
@@ -72,7 +72,14 @@ def run_sequence(root: Path, seq: str, sensor: str) -> dict:
     in_field = np.flatnonzero(drone_n > 0)
     in_field_after = in_field[in_field >= k_acq]
     e = res.summary["reference"]["error"]
-    return {"seq": seq, "sensor": sensor, "frames": len(frames), "drone_frames": int(in_field.size),
+    plots = []
+    if plot_dir is not None:
+        from foveatrack.cli.track_plots import plot_all
+
+        out = plot_dir / f"{seq}-{sensor}"
+        out.mkdir(parents=True, exist_ok=True)
+        plots = plot_all(res, out)
+    return {"plots": plots, "seq": seq, "sensor": sensor, "frames": len(frames), "drone_frames": int(in_field.size),
             "first5_s": None if first5 is None else float(f["t_s"][first5] - f["t_s"][0]),
             "first5_returns": None if first5 is None else int(drone_n[first5]),
             "acquired_s": acq, "tracked": int(f["detected"].sum()),
@@ -105,14 +112,15 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("folder", type=Path)
     ap.add_argument("--sensor", default="livox_avia")
-    ap.add_argument("--docs", type=Path, help="also write the docs page here")
+    ap.add_argument("--docs", type=Path, help="also write the docs page here, its plots in docs/img/real-recordings/")
     a = ap.parse_args()
     try:
         root = find_root(a.folder)
         seqs = sorted(p.name for p in (root / "val").iterdir() if (p / a.sensor).is_dir())
         if not seqs:
             raise UserError(f"{root / 'val'}: no seqN/{a.sensor} folders")
-        rows = [run_sequence(root, s, a.sensor) for s in seqs]
+        plot_dir = a.docs.parent / "img" / "real-recordings" if a.docs else None
+        rows = [run_sequence(root, s, a.sensor, plot_dir) for s in seqs]
     except UserError as exc:
         print(f"mmaud_table: error: {exc}", file=sys.stderr)
         return 2
@@ -123,12 +131,12 @@ def main() -> int:
         print(f"{r['seq']}: tracking took {r['wall_s']:.2f} s wall, {r['cpu_s']:.2f} s CPU for {r['frames']} frames "
               f"(load average {r['load']:.2f} on {os.cpu_count()} cores)")
     if a.docs:
-        a.docs.write_text(docs_page(rows, env, a.sensor))
+        a.docs.write_text(docs_page(rows, env, a.sensor, a.docs.parent))
         print(f"-> {a.docs}")
     return 0
 
 
-def docs_page(rows: list[dict], env: str, sensor: str) -> str:
+def docs_page(rows: list[dict], env: str, sensor: str, docs_dir: Path) -> str:
     load = ", ".join(f"{r['seq']}: {r['wall_s']:.2f} s wall, {r['cpu_s']:.2f} s CPU, load average {r['load']:.2f} "
                      f"on {os.cpu_count()} cores" for r in rows)
     return f"""# Real recordings: tracking a drone in recordings people already have
@@ -165,6 +173,8 @@ tracker does not see the estimates); "stray sky returns" are points beyond {SKY_
 
 {table(rows)}
 
+{figures(rows, docs_dir)}
+
 ## Limits seen
 
 - Nothing tells a static drone-sized object from a hovering drone in the first 0.3 s: such an
@@ -178,6 +188,15 @@ tracker does not see the estimates); "stray sky returns" are points beyond {SKY_
 - The tests run on 18 frames cut from sequence 1 (`tests/openloop/mmaud_seq1/`, source and licence in
   its README), so the suite needs no network.
 """
+
+
+def figures(rows: list[dict], docs_dir: Path) -> str:
+    out = []
+    for r in rows:
+        for p in r["plots"]:
+            rel = Path(os.path.relpath(p, docs_dir)).as_posix()
+            out.append(f"![{r['seq']} {r['sensor']}: {p.stem}]({rel})")
+    return "\n\n".join(out)
 
 
 if __name__ == "__main__":
