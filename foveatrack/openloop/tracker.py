@@ -13,7 +13,9 @@ Per frame (points in the sensor frame, which is the world: the sensor does not m
    neighbour (gate ``gate_m + max_speed_m_s * dt``, nearest pairs first).  A candidate is
    *confirmed* when it has been hit in ``confirm_hits`` frames within its first ``confirm_window``
    frames, every hit an object of at least ``min_points`` returns and at most ``max_extent_m``
-   across (drone-sized).  The first confirmed candidate becomes the tracked object.
+   across (drone-sized).  While nothing is tracked, the confirmed object highest above the sensor's
+   XY plane (largest elevation: the drone is the object against the sky, scenery sits near the
+   horizon) becomes the tracked object.
 4. **Learning**: the cubes of every foreground point not in a confirmed track's D (or object) are
    counted toward the background.
 
@@ -182,6 +184,11 @@ class OpenLoopOutput:
     confirmed_now: tuple[int, ...]
 
 
+def _elevation(tr: Track) -> float:
+    x, y, z = tr.xyz_m.tolist()
+    return math.atan2(z, math.hypot(x, y))
+
+
 class OpenLoopTracker:
     """Frames of a fixed sensor in, one tracked object's position out (see the module docstring)."""
 
@@ -236,8 +243,9 @@ class OpenLoopTracker:
         if self.tracked is None:
             live = [k for k in self.tracks if k.confirmed]
             if live:
-                # the object confirmed now is tracked from this frame on: Algorithm 1 in its D here too
-                self.tracked = tr = live[0]
+                # the highest above the sensor's XY plane (the drone is the object against the sky;
+                # ties: the first confirmed), tracked from this frame on: Algorithm 1 in its D here too
+                self.tracked = tr = max(live, key=_elevation)
                 self.tracks.remove(tr)
                 c = tr.xyz_m
                 d_lo, d_hi = c - cfg.d_half_m, c + cfg.d_half_m

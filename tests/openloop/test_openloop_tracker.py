@@ -143,3 +143,21 @@ def test_static_drone_sized_object_is_dropped_as_scenery_and_a_moving_drone_is_t
     assert all(o.track_id == drone_track.track_id and o.detection is not None for o in late)
     errs = [np.linalg.norm(o.detection.xyz - d) for o, d in zip(late, truth[k_enter + cfg.confirm_hits:])]
     assert max(errs) < 0.15   # the median of 10 returns with 8 cm noise per axis
+
+
+def test_of_objects_confirmed_together_the_one_against_the_sky_is_tracked():
+    # a drone-sized object near the horizon and a drone overhead, both from the first frame: the
+    # drone (higher above the sensor's XY plane) is the one Algorithm 1 follows
+    rng = np.random.default_rng(9)
+    tr = OpenLoopTracker(OpenLoopConfig())
+    low = np.array([19.0, -7.0, -1.0])
+    outs = []
+    for k in range(6):
+        t = k * 0.1
+        drone = np.array([-0.5 - 0.1 * k, -1.0, 1.7])
+        pts = np.vstack([low + rng.normal(0, 0.1, size=(25, 3)), drone + rng.normal(0, 0.05, size=(30, 3))])
+        outs.append(tr.process(Frame(t, t + 0.1, pts, np.full(len(pts), int(round(t * 1e9)), np.int64))))
+    assert len(tr.confirmed) == 2 and tr.confirmed[0].confirmed_t_s == tr.confirmed[1].confirmed_t_s
+    high = max(tr.confirmed, key=lambda c: c.xyz_m[2])
+    assert outs[-1].track_id == high.track_id
+    assert np.linalg.norm(outs[-1].detection.xyz - np.array([-1.0, -1.0, 1.7])) < 0.1
