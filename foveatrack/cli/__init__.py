@@ -24,6 +24,7 @@ COMMAND_MODULES = (
     "foveatrack.cli.calibrate_imu_cmd",
     "foveatrack.cli.daemon_cmd",
     "foveatrack.cli.replay_cmd",
+    "foveatrack.cli.track_cmd",
     "foveatrack.cli.export_cmd",
     "foveatrack.cli.study_cmd",
 )

@@ -1,0 +1,123 @@
+"""Numba kernel of the open-loop tracker's hot loop: clustering a frame's foreground points into
+objects (:mod:`foveatrack.openloop.objects`).
+
+Kept apart from :mod:`foveatrack.kernels` (Algorithm 1's kernels) so the two can change apart; the
+same rules hold: arrays and scalars only, no fast-math, a plain-numpy twin compared in the tests
+(``tests/openloop/test_cluster_kernel.py``: :func:`foveatrack.openloop.objects.cluster_labels_numpy`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _root(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True)
+def _link(xyz, r, i, j, tol_m, tol_rad, parent):
+    """Join the clusters of points ``i`` and ``j`` if they are within the gap (see :func:`cluster_kernel`)."""
+    dx = xyz[j, 0] - xyz[i, 0]
+    dy = xyz[j, 1] - xyz[i, 1]
+    dz = xyz[j, 2] - xyz[i, 2]
+    d2 = dx * dx + dy * dy + dz * dz
+    tol = tol_rad * min(r[i], r[j])
+    if tol < tol_m:
+        tol = tol_m
+    if d2 <= tol * tol:
+        a = _root(parent, i)
+        b = _root(parent, j)
+        if a != b:
+            if a < b:
+                parent[b] = a
+            else:
+                parent[a] = b
+
+
+@njit(cache=True)
+def cluster_kernel(xyz, tol_m, tol_rad, labels):
+    """Single-linkage clusters of the points ``xyz`` (N, 3): points ``i`` and ``j`` are linked when
+
+    .. math:: |p_i - p_j| \\le \\max(\\mathrm{tol\\_m},\\ \\mathrm{tol\\_rad} \\cdot \\min(|p_i|, |p_j|))
+
+    (a gap that grows with range, as the beams spread), and a cluster is what links join.  Fills
+    ``labels`` (N,) int64 with 0, 1, 2, ... numbered in the order of each cluster's first point, and
+    returns the number of clusters.  Distances are compared squared, each a sum in the fixed order
+    x, y, z.
+
+    Only pairs in neighbouring cubes of side ``max(tol_m, tol_rad * max|p|)`` (no link is longer) are
+    tested: points sorted by cube, the 27 cubes around each point found by binary search.  Where the
+    cube numbers would not fit an int64 (points ~1e18 cubes apart), every pair is tested.  The
+    result does not depend on the order links are found: a cluster's root is its smallest index.
+    """
+    n = xyz.shape[0]
+    parent = np.arange(n)
+    r = np.empty(n)
+    rmax = 0.0
+    for i in range(n):
+        r[i] = math.sqrt(xyz[i, 0] * xyz[i, 0] + xyz[i, 1] * xyz[i, 1] + xyz[i, 2] * xyz[i, 2])
+        if r[i] > rmax:
+            rmax = r[i]
+    cell = tol_rad * rmax
+    if cell < tol_m:
+        cell = tol_m
+    ok = n > 0 and math.isfinite(rmax)
+    if ok:
+        lo = np.empty(3)
+        hi = np.empty(3)
+        for c in range(3):
+            lo[c] = xyz[0, c]
+            hi[c] = xyz[0, c]
+            for i in range(n):
+                lo[c] = min(lo[c], xyz[i, c])
+                hi[c] = max(hi[c], xyz[i, c])
+        span = 1.0
+        for c in range(3):
+            span *= math.floor((hi[c] - lo[c]) / cell) + 3.0
+        ok = span < 2.0 ** 62
+    if ok:
+        sy = np.int64(math.floor((hi[1] - lo[1]) / cell)) + 3
+        sz = np.int64(math.floor((hi[2] - lo[2]) / cell)) + 3
+        cx = np.empty(n, np.int64)
+        cy = np.empty(n, np.int64)
+        cz = np.empty(n, np.int64)
+        key = np.empty(n, np.int64)
+        for i in range(n):   # +1: a neighbour cube index of -1 stays >= 0
+            cx[i] = np.int64(math.floor((xyz[i, 0] - lo[0]) / cell)) + 1
+            cy[i] = np.int64(math.floor((xyz[i, 1] - lo[1]) / cell)) + 1
+            cz[i] = np.int64(math.floor((xyz[i, 2] - lo[2]) / cell)) + 1
+            key[i] = (cx[i] * sy + cy[i]) * sz + cz[i]
+        order = np.argsort(key, kind="mergesort")
+        skey = key[order]
+        for i in range(n):
+            for ax in range(-1, 2):
+                for ay in range(-1, 2):
+                    for az in range(-1, 2):
+                        k = ((cx[i] + ax) * sy + (cy[i] + ay)) * sz + (cz[i] + az)
+                        a = np.searchsorted(skey, k)
+                        while a < n and skey[a] == k:
+                            j = order[a]
+                            if j > i:
+                                _link(xyz, r, i, j, tol_m, tol_rad, parent)
+                            a += 1
+    else:
+        for i in range(n):
+            for j in range(i + 1, n):
+                _link(xyz, r, i, j, tol_m, tol_rad, parent)
+    k = 0
+    for i in range(n):
+        root = _root(parent, i)
+        if root == i:
+            labels[i] = k
+            k += 1
+        else:
+            labels[i] = labels[root]
+    return k

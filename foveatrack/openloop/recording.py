@@ -1,0 +1,60 @@
+"""A Foxglove-native recording of an open-loop run (the project's :class:`~foveatrack.recording.RecordingWriter`):
+the cloud (``/points``), the track (``/detections`` with the state and track id, drawn as a sphere, and
+the trajectory drawn from ``/head``'s ``world_xyz_m``), and the D Algorithm 1 used each frame
+(``/openloop_d``: a ``foxglove.SceneUpdate`` cube in the ``lidar`` frame, empty while searching).
+
+The sensor does not move, so the head estimate is pan = tilt = 0 on every frame: the ``lidar`` frame
+is the world, and Foxglove draws everything where the sensor saw it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+D_TOPIC = "/openloop_d"
+
+
+class TrackRecorder:
+    """``observer(k, arrival_s, frame, out)`` for :func:`foveatrack.openloop.run.track_source`;
+    use as a context manager (the file is closed on exit)."""
+
+    def __init__(self, path, meta: dict, overwrite: bool = False):
+        from foxglove.channels import SceneUpdateChannel
+
+        from foveatrack.recording import RecordingWriter
+
+        self.writer = RecordingWriter(path, {"source": "openloop", **meta}, overwrite=overwrite)
+        self._d = SceneUpdateChannel(D_TOPIC, context=self.writer.context)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.writer.close()
+
+    def __call__(self, k: int, arrival_s: float, frame, out) -> None:
+        from foxglove.messages import (Color, CubePrimitive, Pose, Quaternion, SceneEntity, SceneUpdate,
+                                       Timestamp, Vector3)
+
+        w = self.writer
+        t_ns = int(round(frame.t_end_s * 1e9))
+        w.write_points(t_ns, k, frame.xyz, frame.t_ns, frame.reflectivity)
+        det = out.detection
+        xyz = None if det is None else np.asarray(det.xyz, float)
+        w.write_detection(t_ns, k, det is not None, xyz_m=xyz, n_points=0 if det is None else det.n_points,
+                          state=out.state, track_id=out.track_id)
+        w.write_head_estimate(t_ns, 0.0, 0.0, frame_id=k, world_xyz_m=None if xyz is None else xyz.tolist())
+        cubes = []
+        if out.d_min_m is not None:
+            c, size = (out.d_min_m + out.d_max_m) / 2, out.d_max_m - out.d_min_m
+            cubes.append(CubePrimitive(
+                pose=Pose(position=Vector3(x=float(c[0]), y=float(c[1]), z=float(c[2])),
+                          orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+                size=Vector3(x=float(size[0]), y=float(size[1]), z=float(size[2])),
+                color=Color(r=1.0, g=0.8, b=0.0, a=0.15)))
+        ts = Timestamp(sec=t_ns // 1_000_000_000, nsec=t_ns % 1_000_000_000)
+        self._d.log(SceneUpdate(entities=[SceneEntity(timestamp=ts, frame_id="lidar", id="space_of_interest",
+                                                      cubes=cubes)]), log_time=t_ns)

@@ -1,0 +1,62 @@
+"""Dataset folders of numpy frames named by their time (the MMAUD layout).
+
+``<unix time>.npy`` per scan, e.g. ``1706255621.614239.npy``: an (N, 3) float array of x, y, z [m]
+in the sensor frame; rows of zeros are padding (MMAUD pads every frame to 24000 rows).  Frames are
+read in time order (the time in the name, read exactly: :func:`~foveatrack.sources.stamps.ns_from_file_stem`).
+An (N, 4) array's fourth column is taken as intensity and dropped.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from foveatrack.errors import UserError
+from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, ns_from_file_stem
+
+
+def timed_files(folder: Path, suffix: str) -> list[tuple[int, Path]]:
+    """``(stamp_ns, path)`` of the files ``<unix time><suffix>`` in ``folder``, oldest first; a
+    UserError naming the folder when there are none or one is not named by a time."""
+    files = [f for f in folder.iterdir() if f.is_file() and f.suffix.lower() == suffix]
+    if not files:
+        raise UserError(f"{folder}: no {suffix} files (an empty folder for frames)")
+    out = []
+    for f in files:
+        ns = ns_from_file_stem(f.name[: -len(suffix)])
+        if ns is None:
+            raise UserError(f"{f}: the file name is not a time (<unix seconds>[.fraction]{suffix} expected)")
+        out.append((ns, f))
+    out.sort()
+    for (a, fa), (b, fb) in zip(out, out[1:]):
+        if a == b:
+            raise UserError(f"{fb}: has the same time as {fa.name}")
+    return out
+
+
+class NpyFolderSource:
+    """Iterable of ``(arrival_s, Frame)`` over a folder of ``<unix time>.npy`` frames."""
+
+    kind = "npy folder"
+
+    def __init__(self, folder, rate_hz: float = 10.0):
+        self.path = Path(folder)
+        self.rate_hz = check_rate(rate_hz)
+        self.files = timed_files(self.path, ".npy")
+
+    def __len__(self) -> int:
+        return len(self.files)
+
+    def __iter__(self):
+        for ns, f in self.files:
+            try:
+                a = np.load(f, allow_pickle=False)
+            except (ValueError, OSError, EOFError) as exc:
+                why = "it holds pickled objects" if "pickle" in str(exc) else " ".join(str(exc).split())[:160]
+                raise UserError(f"{f}: not a readable .npy array of numbers ({why})") from None
+            if a.ndim != 2 or a.shape[1] not in (3, 4) or a.dtype.kind not in "fiu":
+                raise UserError(f"{f}: expected an (N, 3) array of x, y, z numbers, "
+                                f"got shape {a.shape} of {a.dtype}")
+            fr = frame_from_cloud(ns, a[:, :3], self.rate_hz)
+            yield StampedFrame(fr.t_end_s, fr)

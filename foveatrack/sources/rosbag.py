@@ -1,0 +1,255 @@
+"""ROS 1 bags (``.bag``) and ROS 2 bags (a bag folder, or its ``.mcap`` / ``.db3`` file) through
+``rosbags`` (pure Python, no ROS install): ``sensor_msgs/msg/PointCloud2`` and the Livox
+``CustomMsg`` of ``livox_ros_driver2`` (ROS 2) and ``livox_ros_driver`` (ROS 1).
+
+The Livox definitions are registered with rosbags' typestore here (a bag that embeds its own
+definitions, as ROS 1 bags and MCAP do, is read with those).
+
+PointCloud2: any field layout with ``x``, ``y``, ``z`` (any numeric type, either byte order);
+``intensity`` (or ``reflectivity``) is kept as reflectivity; a per-point time is read from the first
+of ``timestamp``, ``time``, ``t``, ``offset_time``.  Its unit is not in the message, so it is taken
+from its size (the drivers' conventions): values above 1e15 are absolute ns (livox_ros_driver2),
+above 1e8 absolute seconds (Hesai); smaller ones are offsets from ``header.stamp``, in ns when the
+field is an integer (Ouster ``t``, Livox ``offset_time``) and in seconds when it is a float
+(Velodyne ``time``).  CustomMsg: point time = ``timebase + offset_time`` [ns].
+
+The frame of a message starts at its ``header.stamp`` (:mod:`foveatrack.sources.stamps`); its
+arrival is the bag's log time.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from foveatrack.errors import UserError
+from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud
+from foveatrack.sources.tf import TF_TYPES, TfBuffer, apply
+
+POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+LIVOX_CUSTOM = ("livox_ros_driver2/msg/CustomMsg", "livox_ros_driver/msg/CustomMsg")
+CLOUD_TYPES = (POINTCLOUD2,) + LIVOX_CUSTOM
+
+LIVOX_CUSTOM_POINT_MSG = """\
+uint32 offset_time
+float32 x
+float32 y
+float32 z
+uint8 reflectivity
+uint8 tag
+uint8 line
+"""
+
+LIVOX_CUSTOM_MSG = """\
+std_msgs/Header header
+uint64 timebase
+uint32 point_num
+uint8 lidar_id
+uint8[3] rsvd
+{pkg}/CustomPoint[] points
+"""
+
+# PointField.datatype -> numpy type (sensor_msgs/msg/PointField)
+_POINTFIELD = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+_TIME_FIELDS = ("timestamp", "time", "t", "offset_time")
+
+
+def livox_typestore(base=None):
+    """A rosbags typestore with the ROS 2 standard messages and both Livox drivers' CustomMsg."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = base or get_typestore(Stores.LATEST)
+    types = {}
+    for pkg in ("livox_ros_driver2", "livox_ros_driver"):
+        types.update(get_types_from_msg(LIVOX_CUSTOM_POINT_MSG, f"{pkg}/msg/CustomPoint"))
+        types.update(get_types_from_msg(LIVOX_CUSTOM_MSG.format(pkg=pkg), f"{pkg}/msg/CustomMsg"))
+    store.register(types)
+    return store
+
+
+class BagSource:
+    """Iterable of ``(arrival_s, Frame)`` over one cloud topic of a ROS 1 or ROS 2 bag."""
+
+    kind = "ros bag"
+
+    def __init__(self, path, topic: str | None, rate_hz: float = 10.0, fixed_frame: str | None = None):
+        self.path = Path(path)
+        self.rate_hz = check_rate(rate_hz)
+        self.fixed_frame = fixed_frame
+        topics = self._topics()
+        if topic is None:
+            raise UserError(f"{self.path}: give the cloud topic with --topic; the bag has "
+                            + describe_topics(topics))
+        if topic not in topics:
+            raise UserError(f"{self.path}: no topic {topic!r}; the bag has " + describe_topics(topics))
+        msgtype, n = topics[topic]
+        if msgtype not in CLOUD_TYPES:
+            raise UserError(f"{self.path}: topic {topic} carries {msgtype}, which is not a point cloud "
+                            f"this reads ({', '.join(CLOUD_TYPES)})")
+        self.topic, self.msgtype, self.n_messages = topic, msgtype, n
+        self._tf_topics = [name for name, (t, _) in topics.items() if t in TF_TYPES]
+        if fixed_frame is not None and not self._tf_topics:
+            raise UserError(f"{self.path}: --fixed-frame {fixed_frame} needs a /tf topic (tf2_msgs/msg/TFMessage); "
+                            "the bag has " + describe_topics(topics))
+
+    def __len__(self) -> int:
+        return self.n_messages
+
+    def _reader(self):
+        from rosbags.highlevel import AnyReader
+
+        return AnyReader([self.path], default_typestore=livox_typestore())
+
+    def _topics(self) -> dict[str, tuple[str, int]]:
+        try:
+            with self._reader() as r:
+                return {name: (info.msgtype, info.msgcount) for name, info in r.topics.items()}
+        except Exception as exc:   # rosbags raises its own errors, KeyError/struct errors on damage
+            raise UserError(f"{self.path}: not a readable bag ({_one_line(exc)})") from None
+
+    def __iter__(self):
+        try:
+            reader = self._reader()
+            reader.open()
+        except Exception as exc:
+            raise UserError(f"{self.path}: not a readable bag ({_one_line(exc)})") from None
+        try:
+            tf = self._read_tf(reader) if self.fixed_frame is not None else None
+            conns = [c for c in reader.connections if c.topic == self.topic]
+            msgs = reader.messages(connections=conns)
+            k = 0
+            while True:
+                try:
+                    item = next(msgs)
+                except StopIteration:
+                    break
+                except Exception as exc:
+                    raise UserError(f"{self.path}: topic {self.topic}: the bag is damaged after message {k} "
+                                    f"({_one_line(exc)})") from None
+                conn, log_ns, raw = item
+                try:
+                    msg = reader.deserialize(raw, conn.msgtype)
+                except Exception as exc:
+                    raise UserError(f"{self.path}: topic {self.topic}: message {k} is not a readable "
+                                    f"{conn.msgtype} ({_one_line(exc)})") from None
+                where = f"{self.path}: topic {self.topic} ({conn.msgtype}) message {k}"
+                if conn.msgtype == POINTCLOUD2:
+                    fr = frame_from_pointcloud2(msg, self.rate_hz, where)
+                else:
+                    fr = frame_from_livox_custom(msg, self.rate_hz, where)
+                if tf is not None and fr.n_points:
+                    R, t = tf.lookup(self.fixed_frame, msg.header.frame_id, _stamp_ns(msg), where)
+                    fr = type(fr)(fr.t_start_s, fr.t_end_s, apply(R, t, fr.xyz), fr.t_ns, fr.reflectivity)
+                k += 1
+                yield StampedFrame(log_ns * 1e-9, fr)
+        finally:
+            reader.close()
+
+
+    def _read_tf(self, reader) -> TfBuffer:
+        """Every transform of the bag's tf topics (``/tf_static``'s are static)."""
+        buf = TfBuffer()
+        conns = [c for c in reader.connections if c.topic in self._tf_topics]
+        try:
+            for conn, _log_ns, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, conn.msgtype)
+                static = conn.topic.rstrip("/").endswith("tf_static")
+                for ts in msg.transforms:
+                    tr, q = ts.transform.translation, ts.transform.rotation
+                    buf.add(ts.header.frame_id, ts.child_frame_id, _stamp_ns(ts),
+                            (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static)
+        except UserError:
+            raise
+        except Exception as exc:
+            raise UserError(f"{self.path}: the tf topics ({', '.join(self._tf_topics)}) are not readable "
+                            f"({_one_line(exc)})") from None
+        return buf
+
+
+def describe_topics(topics: dict[str, tuple[str, int]]) -> str:
+    if not topics:
+        return "no topics"
+    parts = [f"{name} ({t}, {n} messages{'' if t in CLOUD_TYPES else ', not a cloud'})"
+             for name, (t, n) in sorted(topics.items())]
+    return "; ".join(parts)
+
+
+def _one_line(exc: BaseException) -> str:
+    s = " ".join(str(exc).split())
+    return s[:200] if s else type(exc).__name__
+
+
+def _stamp_ns(msg) -> int:
+    st = msg.header.stamp
+    # ROS 2 builtin_interfaces/Time (sec, nanosec); rosbags gives ROS 1 time the same fields
+    return int(st.sec) * 1_000_000_000 + int(st.nanosec)
+
+
+def pointcloud2_xyz(msg, where: str):
+    """``(xyz (N,3) float64, t (N,) float64 or None, time field name or None, intensity or None)``
+    of a PointCloud2, by its field layout."""
+    fields = {f.name: f for f in msg.fields}
+    missing = [k for k in ("x", "y", "z") if k not in fields]
+    if missing:
+        raise UserError(f"{where}: PointCloud2 has no field {', '.join(missing)} "
+                        f"(fields: {', '.join(fields) or 'none'})")
+    n = int(msg.width) * int(msg.height)
+    step = int(msg.point_step)
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if n and (step <= 0 or data.size < n * step):
+        raise UserError(f"{where}: PointCloud2 data holds {data.size} bytes, fewer than width*height*point_step "
+                        f"= {n}*{step}")
+    order = ">" if msg.is_bigendian else "<"
+
+    def column(name):
+        f = fields[name]
+        code = _POINTFIELD.get(int(f.datatype))
+        if code is None:
+            raise UserError(f"{where}: PointCloud2 field {name} has unknown datatype {f.datatype}")
+        dt = np.dtype(order + code)
+        if int(f.offset) + dt.itemsize > step:
+            raise UserError(f"{where}: PointCloud2 field {name} (offset {f.offset}) lies outside point_step {step}")
+        rec = np.dtype({"names": [name], "formats": [dt], "offsets": [int(f.offset)], "itemsize": step})
+        return np.frombuffer(data[: n * step].tobytes(), dtype=rec, count=n)[name]
+
+    xyz = np.empty((n, 3), dtype=np.float64)
+    for i, k in enumerate("xyz"):
+        xyz[:, i] = column(k)
+    tname = next((k for k in _TIME_FIELDS if k in fields), None)
+    t = column(tname) if tname else None
+    iname = next((k for k in ("intensity", "reflectivity") if k in fields), None)
+    inten = column(iname) if iname else None
+    return xyz, t, inten
+
+
+def frame_from_pointcloud2(msg, rate_hz: float, where: str):
+    stamp = _stamp_ns(msg)
+    xyz, t, inten = pointcloud2_xyz(msg, where)
+    t_ns = None
+    if t is not None and t.size:
+        tmax = float(np.max(np.abs(t)))
+        if tmax > 1e15:
+            t_ns = t.astype(np.int64)
+        elif tmax > 1e8:
+            t_ns = np.round(t.astype(np.float64) * 1e9).astype(np.int64)
+        elif t.dtype.kind in "iu":
+            t_ns = stamp + t.astype(np.int64)
+        else:
+            t_ns = stamp + np.round(t.astype(np.float64) * 1e9).astype(np.int64)
+    refl = None if inten is None else np.clip(inten, 0, 255).astype(np.uint8)
+    return frame_from_cloud(stamp, xyz, rate_hz, t_ns, refl)
+
+
+def frame_from_livox_custom(msg, rate_hz: float, where: str):
+    pts = msg.points
+    n = len(pts)
+    xyz = np.empty((n, 3), dtype=np.float64)
+    off = np.empty(n, dtype=np.int64)
+    refl = np.empty(n, dtype=np.uint8)
+    for i, p in enumerate(pts):
+        xyz[i, 0], xyz[i, 1], xyz[i, 2] = p.x, p.y, p.z
+        off[i] = p.offset_time
+        refl[i] = p.reflectivity
+    t_ns = int(msg.timebase) + off
+    return frame_from_cloud(_stamp_ns(msg), xyz, rate_hz, t_ns, refl)

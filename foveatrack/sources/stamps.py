@@ -1,0 +1,66 @@
+"""Times and frames common to every reader: a file name's time read exactly, and a frame made
+from one scan's points.
+
+A scan with one stamp (a file named by its time, a ROS message's ``header.stamp``) becomes the
+frame ``[stamp, stamp + 1/rate_hz)``: a Livox driver stamps a frame at its first point.  Points
+without a time of their own are given the stamp, so Algorithm 1's detection time (the median
+point time, :mod:`foveatrack.detection`) is the stamp.  Each reader yields ``(arrival_s, frame)``:
+a bag's log time, for files the frame's end (when the sensor had finished the scan).
+"""
+
+from __future__ import annotations
+
+import re
+from typing import NamedTuple
+
+import numpy as np
+
+from foveatrack.errors import UserError
+from foveatrack.frames import Frame
+
+_STEM = re.compile(r"^(\d+)(?:\.(\d{1,9}))?$")
+
+
+class StampedFrame(NamedTuple):
+    arrival_s: float
+    frame: Frame
+
+
+def ns_from_file_stem(stem: str) -> int | None:
+    """``"1706255621.614239"`` -> 1706255621614239000: decimal seconds to integer ns exactly
+    (through a float the last digits would round); None if the name is not a time."""
+    m = _STEM.match(stem)
+    if m is None:
+        return None
+    frac = (m.group(2) or "").ljust(9, "0")
+    return int(m.group(1)) * 1_000_000_000 + int(frac)
+
+
+def period_ns(rate_hz: float) -> int:
+    return int(round(1e9 / rate_hz))
+
+
+def frame_from_cloud(stamp_ns: int, xyz: np.ndarray, rate_hz: float, t_ns: np.ndarray | None = None,
+                     reflectivity: np.ndarray | None = None) -> Frame:
+    """The frame of one scan stamped ``stamp_ns``: valid points only (finite, not the (0, 0, 0)
+    padding / no-return marker), each at its own time ``t_ns`` or at the stamp."""
+    from foveatrack.detection import valid_points
+
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    keep = valid_points(xyz)
+    xyz = xyz[keep]
+    if t_ns is None:
+        t = np.full(xyz.shape[0], stamp_ns, dtype=np.int64)
+    else:
+        t = np.asarray(t_ns, dtype=np.int64).reshape(-1)[keep]
+    refl = None if reflectivity is None else np.asarray(reflectivity).reshape(-1)[keep]
+    t_end_ns = stamp_ns + period_ns(rate_hz)
+    if t.size:
+        t_end_ns = max(t_end_ns, int(t.max()) + 1)
+    return Frame(stamp_ns * 1e-9, t_end_ns * 1e-9, xyz, t, refl)
+
+
+def check_rate(rate_hz: float) -> float:
+    if not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise UserError(f"--rate-hz {rate_hz!r}: the frame rate must be a positive number")
+    return float(rate_hz)

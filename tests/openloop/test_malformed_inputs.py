@@ -1,0 +1,127 @@
+"""Inputs to ``foveatrack track`` a user can get wrong: each gives one clear line naming what was
+wrong (the file, topic, message type or field), exit status 2, no traceback."""
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import bag_writers as bw
+from foveatrack.cli import main
+
+FIXTURE = Path(__file__).parent / "mmaud_seq1" / "livox_avia"
+TOPIC = "/livox/lidar"
+
+
+@pytest.fixture(scope="module")
+def frames():
+    return bw.npy_frames(FIXTURE)[:4]
+
+
+def _fails(argv, capsys, *needles):
+    code = main(["track", *map(str, argv)])
+    out = capsys.readouterr()
+    err = out.err.strip()
+    assert code == 2, (code, out.out, err)
+    assert "Traceback" not in err and len(err.splitlines()) == 1, err
+    assert err.startswith("foveatrack: error: ")
+    for n in needles:
+        assert str(n) in err, (n, err)
+    return err
+
+
+def test_wrong_topic_names_it_and_lists_the_bags_topics(tmp_path, frames, capsys):
+    bag = bw.write_bag(tmp_path / "b", frames, "custom", ros1=False, extra_topics=("/status",))
+    _fails([bag, "--topic", "/velodyne_points"], capsys, "'/velodyne_points'", "/livox/lidar",
+           "livox_ros_driver2/msg/CustomMsg", "/status")
+
+
+def test_no_topic_lists_the_topics(tmp_path, frames, capsys):
+    bag = bw.write_bag(tmp_path / "b.bag", frames, "pointcloud2", ros1=True)
+    _fails([bag], capsys, "--topic", "/livox/lidar (sensor_msgs/msg/PointCloud2, 4 messages)")
+
+
+def test_topic_that_is_not_a_cloud_names_its_type(tmp_path, frames, capsys):
+    bag = bw.write_bag(tmp_path / "b.bag", frames, "pointcloud2", ros1=True, extra_topics=("/status",))
+    _fails([bag, "--topic", "/status"], capsys, "/status", "std_msgs/msg/String", "not a point cloud")
+
+
+def test_pointcloud2_without_z_names_the_field(tmp_path, frames, capsys):
+    bag = bw.write_bag(tmp_path / "b", frames, "pointcloud2", ros1=False, drop=("z",))
+    _fails([bag, "--topic", TOPIC], capsys, "no field z", "fields: x, y, intensity", TOPIC, "message 0")
+
+
+@pytest.mark.parametrize("ros1", [True, False], ids=["ros1-bag", "ros2-mcap"])
+def test_truncated_bag(tmp_path, frames, capsys, ros1):
+    bag = bw.write_bag(tmp_path / ("b.bag" if ros1 else "b"), frames, "custom", ros1=ros1)
+    f = bag if ros1 else next(bag.glob("*.mcap"))
+    data = f.read_bytes()
+    cut = tmp_path / ("cut.bag" if ros1 else "cut.mcap")
+    cut.write_bytes(data[: len(data) // 2])
+    _fails([cut, "--topic", TOPIC], capsys, str(cut))
+
+
+def test_pcd_with_a_bad_header(tmp_path, capsys):
+    d = tmp_path / "pcd"
+    d.mkdir()
+    (d / "1706255621.614239.pcd").write_bytes(b"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4\nDATA binary\n\x00\x00")
+    _fails([d], capsys, "1706255621.614239.pcd", "not a readable PCD", "bad header")
+
+
+def test_pcd_without_xyz_names_the_field(tmp_path, capsys):
+    from pypcd4 import PointCloud
+
+    d = tmp_path / "pcd"
+    d.mkdir()
+    PointCloud.from_points(np.ones((3, 2)), ("x", "y"), (np.float32, np.float32)).save(d / "1706255621.5.pcd")
+    _fails([d], capsys, "1706255621.5.pcd", "no field z")
+
+
+def test_empty_folder(tmp_path, capsys):
+    d = tmp_path / "frames"
+    d.mkdir()
+    _fails([d], capsys, str(d), "empty folder")
+
+
+def test_npy_of_the_wrong_shape_names_the_file(tmp_path, capsys):
+    d = tmp_path / "frames"
+    d.mkdir()
+    np.save(d / "1706255621.614239.npy", np.ones((10, 2)))
+    _fails([d], capsys, "1706255621.614239.npy", "shape (10, 2)")
+
+
+def test_npy_not_named_by_a_time(tmp_path, capsys):
+    d = tmp_path / "frames"
+    d.mkdir()
+    shutil.copy(next(FIXTURE.glob("*.npy")), d / "frame_0001.npy")
+    _fails([d], capsys, "frame_0001.npy", "not a time")
+
+
+def test_npy_that_is_not_an_array(tmp_path, capsys):
+    d = tmp_path / "frames"
+    d.mkdir()
+    (d / "1706255621.614239.npy").write_bytes(b"not numpy at all")
+    _fails([d], capsys, "1706255621.614239.npy", "not a readable .npy")
+
+
+def test_reference_csv_with_a_bad_row(tmp_path, capsys):
+    ref = tmp_path / "ref.csv"
+    ref.write_text("time,x,y,z\n1706255621.6,1,2,3\n1706255621.7,1,two,3\n")
+    _fails([FIXTURE, "--reference", ref], capsys, "ref.csv:3", "time, x, y, z")
+
+
+def test_missing_source_and_a_single_pcd_file(tmp_path, capsys):
+    _fails([tmp_path / "nothing.bag"], capsys, "nothing.bag", "no such file")
+    one = tmp_path / "scan.pcd"
+    one.write_text("x")
+    _fails([one], capsys, "scan.pcd", "folder of PCD files")
+
+
+def test_a_bad_box_and_a_bad_config(tmp_path, capsys):
+    _fails([FIXTURE, "--box", "0", "0", "0", "1", "-1", "1"], capsys, "--box", "min_xyz")
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[openloop]\nmin_points = 0\n")
+    _fails([FIXTURE, "--config", cfg], capsys, "c.toml", "min_points")
+    cfg.write_text("[openloop]\nconfirm_hitz = 3\n")
+    _fails([FIXTURE, "--config", cfg], capsys, "c.toml", "confirm_hitz")
