@@ -6,7 +6,7 @@ of a simulator or daemon recording (:mod:`foveatrack.recording`) through a fresh
 recorded send times, so with the recorded configuration the detections and commands come out
 identical (to the bit) to the recorded ones.  :func:`replay_lvx` runs the tracker over a Livox Viewer
 ``.lvx`` file (lidar only: the head is taken as frozen, so the commands are what the tracker *would*
-have sent).
+have sent, through the command gate a daemon runs).
 
 How a recording's tracker is rebuilt (``meta``):
 
@@ -48,7 +48,7 @@ import numpy as np
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame, FrameSlicer
-from foveatrack.gate import CommandGate
+from foveatrack.gate import CommandGate, Limits
 from foveatrack.recording.records import CommandRecord
 from foveatrack.replay.config import recorded_limits, load_tracker_table, tracker_config
 from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
@@ -222,6 +222,9 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
 
     cfg = TrackerConfig.from_mapping(tracker_table or {}, where=f"{config_name or 'default'} [tracker]")
     tracker = None
+    # The gate a daemon would run on this tracker's head (its stops, the tracker's own turbo rule); the
+    # head is frozen, so no write reaches it and the dead reckoning is told it stayed stopped.
+    gate = CommandGate(Limits(allow_turbo=cfg.allow_turbo, tilt_limits_deg=cfg.tilt_limits_deg))
     slicer = FrameSlicer(cfg.rate_hz)
     F = FrameArrays()
     fid = 0
@@ -234,8 +237,9 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
                 tracker = Tracker(cfg, SpeedTable.nominal(), t0_s=fr.t_start_s)
             send_t = fr.t_end_s + cfg.send_delay_s
             out = tracker.process(fr, send_t_s=send_t)
-            tracker.command_sent(send_t, STOP)   # the head is frozen
-            F.add(fid, fr, out, out.command)
+            cmd, _ = gate.decide(tracker, out, send_t)
+            gate.wrote(tracker, send_t, cmd, ok=False)   # the head is frozen: it keeps its STOP
+            F.add(fid, fr, out, cmd)
             fid += 1
 
     # no-return points are kept for their times (frames keep coming over the sky), then stripped
