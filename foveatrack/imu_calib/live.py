@@ -31,13 +31,19 @@ over a move, divided by the step angle; and gravity turns only with tilt (pan is
 
 Safety: the plan is checked against ``[head] tilt_limits_deg`` (with ``tilt_margin_deg``) and the
 speed bytes against ``max_pan_byte``/``max_tilt_byte`` before anything moves; every command also
-passes the daemon's limits (:class:`foveatrack.gate.Limits`) at the dead-reckoned tilt.  The head is
+passes the daemon's command gate (:class:`foveatrack.gate.CommandGate`, the ``[head]`` limits) with
+the dead-reckoned tilt and its uncertainty (the table's sigma over each move); a move it changes ends
+the run.  The head is
 stopped when the lidar falls silent for ``[daemon] watchdog_s``, on Ctrl-C / SIGTERM (``stop``), on
-any error and at the end (after driving back to the start pose when the run completes).
+any error and at the end (after driving back to the start pose when the run completes).  The lidar's
+gyro witnesses every move (:class:`foveatrack.turn_witness.TurnWitness`): a head that turns far more
+than commanded stops the run while it moves (before it can reach a stop the dead reckoning does not
+see coming), and one that turned far less, once it has stopped; the error names the axis and both turns.
 """
 
 from __future__ import annotations
 
+import math
 import queue
 import sys
 import threading
@@ -48,9 +54,11 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
+from foveatrack.gate import CommandGate, Proposal
 from foveatrack.imu_calib import handeye, procedure, registration
 from foveatrack.imu_calib.imu_integration import GRAVITY_M_S2, ImuSamples
 from foveatrack.imu_calib.se3 import so3_log
+from foveatrack.turn_witness import TurnMismatch, TurnWitness
 
 #: A window is static when no 0.25 s block of its gyro readings has a mean farther than this from the
 #: window's mean [deg/s] (BMI088 white noise: 0.2 deg/s per 200 Hz sample, 0.03 deg/s per block mean).
@@ -284,6 +292,16 @@ class _Rig:
         while self.latest_imu_s is None or self.latest_imu_s < t_s:
             self.poll(0.02)
 
+    def imu_between(self, t0_s: float, t1_s: float, since: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The IMU samples of ``[t0_s, t1_s)`` (sensor time) among the batches from index ``since`` on:
+        (t_s, gyro rad/s, acc g), in arrival order."""
+        bs = self.imu[since:]
+        if not bs:
+            return np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))
+        t = np.concatenate([b.t_ns for b in bs]) * 1e-9
+        m = (t >= t0_s) & (t < t1_s)
+        return t[m], np.vstack([b.gyro_rad_s for b in bs])[m], np.vstack([b.acc_g for b in bs])[m]
+
     def imu_samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every IMU sample so far, in time order, duplicates removed: (t_ns, gyro rad/s, acc g)."""
         t = np.concatenate([b.t_ns for b in self.imu])
@@ -353,26 +371,55 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
     inbox = _Answers(answers if answers is not None else sys.stdin) if by_hand else None
     windows, clouds = [], []
     tilt_now = [h.tilt0_deg]
-    limits = h.limits
+    tilt_var = [0.0]       # the dead reckoning's variance [deg^2]: each move's table sigma x its time, summed
+    gate = CommandGate(h.limits)
 
     def send(cmd: HeadCommand, last: HeadCommand | None) -> None:
-        gated, why = limits.apply(cmd, tilt_now[0])
+        sigma = math.sqrt(tilt_var[0])
+        gated, why = gate.decide(None, Proposal(cmd, tilt_now[0], sigma), time.monotonic())
         if why:
             rig._fail(f"the [head] limits of {config.path} stopped a planned move ({', '.join(why)}) at dead-reckoned "
-                      f"tilt {tilt_now[0]:.1f} deg")
+                      f"tilt {tilt_now[0]:.1f} +- {sigma:.1f} deg")
         _, ok = head.send(gated)
+        gate.wrote(None, time.monotonic(), gated, ok)
         if not ok and gated != last:
             rig._fail(f"the head's serial link [head] port {h.port!r} failed when a move changed its command "
                       f"(pose {rig.pose + 1})")
 
+    # The gyro watches every move: a head turning far more or less than the table says stops the run.
+    witness = TurnWitness(None if X0 is None else X0[:3, :3])
+    fed = [0]     # IMU batches given to the witness
+
+    def witness_feed() -> None:
+        t, g, _ = rig.imu_between(-np.inf, np.inf, since=fed[0])
+        fed[0] = len(rig.imu)
+        witness.add(t, g)
+
+    def witness_check(pan: AxisMove, tilt: AxisMove, el_s: float | None) -> None:
+        """Compare the gyro's turn with the commanded one: ``el_s`` seconds into the move (over-turn
+        only), or None once the head has stopped (both ways)."""
+        witness_feed()
+        t = math.inf if el_s is None else el_s
+        commanded = {ax: m.direction * m.speed_deg_s * min(t, m.duration_s) for ax, m in (("pan", pan), ("tilt", tilt))}
+        try:
+            witness.check(commanded, stopped=el_s is None)
+        except TurnMismatch as exc:
+            rig._fail(f"pose {rig.pose + 1}: {exc}")
+
     def move(pan: AxisMove, tilt: AxisMove) -> None:
         """Run one move (both axes at once, each for its own time), then STOP."""
+        w0, w1 = windows[-1]                  # the head stood still through the last pose's window
+        rig.wait_imu(w1)
+        witness.begin(*rig.imu_between(w0, w1))
+        fed[0] = len(rig.imu)
+        witness.add(*rig.imu_between(w1, np.inf)[:2])
         t0 = time.monotonic()
         dur = max(pan.duration_s, tilt.duration_s)
         tilt_start = tilt_now[0]
         last, last_t = None, 0.0
         while True:
             el = time.monotonic() - t0
+            witness_check(pan, tilt, el)
             if el >= dur:
                 break
             cmd = HeadCommand(pan.direction if el < pan.duration_s else 0, pan.byte if el < pan.duration_s else 0,
@@ -384,6 +431,8 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
             rig.poll(min(0.01, max(0.0, dur - el)))
         send(STOP, last)
         tilt_now[0] = tilt_start + tilt.direction * tilt.speed_deg_s * tilt.duration_s
+        if tilt.direction:
+            tilt_var[0] += (table.axis("tilt").sigma_deg_s(tilt.byte) * tilt.duration_s) ** 2
 
     t_wall0 = time.monotonic()
     try:
@@ -410,6 +459,9 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
             h_still = time.monotonic()
             s0 = stream.sensor_now_s(h_still) + plan.settle_s
             xyz, t_s = rig.take_window(s0, s0 + plan.dwell_s)
+            if not by_hand and i > 0:
+                rig.wait_imu(s0)
+                witness_check(*moves[i - 1], None)    # the head has stopped: the whole turn, both ways
             windows.append((s0, s0 + plan.dwell_s))
             clouds.append((xyz, t_s))
             if by_hand:
