@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.speed_table import TURBO
+from gimbal.head_facts import DEFAULT_HEAD, HeadFacts
 
 # Recorded in a command's ``limited`` list when STOP was sent because the frame was older than
 # ``stale_frame_s`` when processed (the daemon judges by the wall clock, so replay reads it from the
@@ -32,8 +33,8 @@ TILT_UNKNOWN = "tilt_unknown"
 # Two tilt margins, two layers: the tracker keeps TrackerConfig.tilt_margin_deg (3 deg) from a stop
 # by itself; the gate, the last line, refuses tilt toward a stop GATE_TILT_MARGIN_DEG (2 deg) from
 # it, so it only acts when the tracker did not (a bug, a misconfigured table).  The daemon's [head]
-# tilt_margin_deg and a scene's [gate] tilt_margin_deg set this one.
-GATE_TILT_MARGIN_DEG = 2.0
+# tilt_margin_deg and a scene's [gate] tilt_margin_deg set this one; its default is the head facts'.
+GATE_TILT_MARGIN_DEG = DEFAULT_HEAD.tilt_margin_deg
 
 
 @dataclass(frozen=True)
@@ -45,13 +46,21 @@ class Limits:
     tilt_limits_deg : (lo, hi) [deg]          the head's tilt stops
     tilt_margin_deg : >= 0 [deg]              no tilt motion toward a stop once the estimated tilt
                                               (+ its 2 sigma) is within this of it
+
+    Built from a head's facts (:meth:`of`); the defaults are :data:`gimbal.head_facts.DEFAULT_HEAD`'s.
     """
 
-    max_pan_byte: int = 0x3F
-    max_tilt_byte: int = 0x3F
-    allow_turbo: bool = False
-    tilt_limits_deg: tuple[float, float] = (-30.0, 60.0)
-    tilt_margin_deg: float = GATE_TILT_MARGIN_DEG
+    max_pan_byte: int = DEFAULT_HEAD.max_pan_byte
+    max_tilt_byte: int = DEFAULT_HEAD.max_tilt_byte
+    allow_turbo: bool = DEFAULT_HEAD.allow_turbo
+    tilt_limits_deg: tuple[float, float] = DEFAULT_HEAD.tilt_limits_deg
+    tilt_margin_deg: float = DEFAULT_HEAD.tilt_margin_deg
+
+    @classmethod
+    def of(cls, facts: HeadFacts) -> "Limits":
+        """The gate's limits for a head: its stops and the limits configured with it."""
+        return cls(facts.max_pan_byte, facts.max_tilt_byte, facts.allow_turbo, tuple(facts.tilt_limits_deg),
+                   facts.tilt_margin_deg)
 
     def apply(self, cmd: HeadCommand, tilt_deg: float, tilt_sigma_deg: float = 0.0) -> tuple[HeadCommand, list[str]]:
         """The command that may leave, and the reasons it was changed (empty if unchanged).
