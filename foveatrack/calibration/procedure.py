@@ -746,6 +746,8 @@ class PriorAxisCalibrator(Calibrator):
 
     start_tilt_sigma_deg : float > 0 [deg]  how well the start tilt (``plan.start_tilt_deg``) is
         known: exact in simulation; a levelled head with a known zero about 0.5 deg; give 90 if unknown
+        (it is also the tilt estimate's floor for the command gate: behind a gate with tilt stops, 90
+        refuses every tilt leg, since the stops cannot be kept without knowing the tilt)
     mount_sigma_deg : float > 0 [deg]       lidar Y vs the tilt axis (mounting), about 0.5 deg
     min_arc_rms_m : float >= 0 [m]          legs whose corner moved less are left out of the axis fit
     """
