@@ -12,6 +12,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from foveatrack.calibration import Calibrator
+from foveatrack.calibration.procedure import TILT_UNSEEN_MAX_S
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
@@ -61,9 +62,23 @@ class CalibrationDriver:
         axis; :meth:`Calibrator.tilt_since_start_deg`), which the command gate keeps from the stops."""
         cmd = self(frame, send_t_s)
         cal = self.calibrator
-        off_deg, off_sigma_deg = cal.tilt_since_start_deg(frame.t_end_s)
+        off_deg, off_sigma_deg, t_seen = cal.tilt_since_start_deg(frame.t_end_s)
+        if t_seen is not None and self._tilt_driven_s(t_seen, frame.t_end_s) > TILT_UNSEEN_MAX_S:
+            off_deg = off_sigma_deg = math.nan     # tilted too long unseen: the gate refuses more tilt
         return CalibrationOutput(cmd, head_tilt_deg=cal.plan.start_tilt_deg + off_deg,
                                  head_sigma_tilt_deg=math.hypot(cal.start_tilt_sigma_deg, off_sigma_deg))
+
+    def _tilt_driven_s(self, since_s: float, now_s: float) -> float:
+        """How long the procedure's commands drove the tilt between ``since_s`` and ``now_s`` [s]."""
+        total = 0.0
+        for k in range(len(self.sent) - 1, -1, -1):
+            t, cmd = self.sent[k]
+            t_next = self.sent[k + 1][0] if k + 1 < len(self.sent) else now_s
+            if t_next <= since_s:
+                break
+            if cmd.tilt_dir:
+                total += max(0.0, min(t_next, now_s) - max(t, since_s))
+        return total
 
     def refuse_limited(self, why: list[str], out: "CalibrationOutput") -> None:
         """The command gate changed one of the procedure's commands (``why`` non-empty): the leg under
@@ -72,10 +87,13 @@ class CalibrationDriver:
         tilt stop, an unknown tilt or a stale frame."""
         if why:
             done = sum(1 for leg in self.calibrator.legs if leg.t_stop_s is not None)
-            raise UserError(f"the command gate refused the calibration's command ({', '.join(why)}) at estimated "
-                            f"tilt {out.head_tilt_deg:.1f} +- {out.head_sigma_tilt_deg:.1f} deg after {done} legs: "
-                            "the plan would take the head past its limits; start it farther from its tilt stop "
-                            "(or with a smaller max_excursion_deg); no table was written")
+            where = (f"with the tilt unknown (the corner out of sight over {TILT_UNSEEN_MAX_S:g} s of tilt motion)"
+                     if not math.isfinite(out.head_tilt_deg) else
+                     f"at estimated tilt {out.head_tilt_deg:.1f} +- {out.head_sigma_tilt_deg:.1f} deg")
+            raise UserError(f"the command gate refused the calibration's command ({', '.join(why)}) {where} after "
+                            f"{done} legs: the plan would take the head past its limits, or out of the lidar's "
+                            "sight of it; start it farther from its tilt stop (or with a smaller max_excursion_deg); "
+                            "no table was written")
 
     def command_sent(self, t_s: float, cmd: HeadCommand) -> None:
         """The gate or the link changed a command: the procedure times its legs from its own commands

@@ -68,9 +68,9 @@ from foveatrack.frames import Frame
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable, axis_bytes
 
 
-#: The corner's angle noise about an axis, 1 sigma [deg] (about 5 mm at 6 m), and how long a tilt
-#: estimate from the corner stays usable without a new sighting [s] (a leg ends after three missed
-#: frames once settled; before, up to ``settle_s`` of its ramp may pass unseen).
+#: The corner's angle noise about an axis, 1 sigma [deg] (about 5 mm at 6 m), and how long the tilt
+#: may be driven with the corner out of sight before its estimate is void [s] (a leg ends after three
+#: missed frames once settled; before, up to ``settle_s`` of its ramp may pass unseen).
 TILT_CORNER_SIGMA_DEG = 0.1
 TILT_UNSEEN_MAX_S = 1.0
 
@@ -314,17 +314,19 @@ class Calibrator:
         corner, _ = found
         return t_mid, corner
 
-    def tilt_since_start_deg(self, t_s: float) -> tuple[float, float]:
-        """The head's tilt at ``t_s`` relative to the start reference as the corner shows it, and its
-        1-sigma uncertainty [deg] (for the command gate's tilt stops); NaN when the corner has not been
-        seen for ``TILT_UNSEEN_MAX_S`` (the gate then refuses tilt motion).
+    def tilt_since_start_deg(self, t_s: float) -> tuple[float, float, float | None]:
+        """The head's tilt at ``t_s`` relative to the start reference as the corner shows it, its 1-sigma
+        uncertainty [deg] (for the command gate's tilt stops), and when the corner was seen [s] (None:
+        no need, the head has not moved); NaN without any sighting.
 
         Before the reference is taken the head has been sent nothing but STOP: 0.  On a tilt leg the
         leg's robust recent angle and rate (:meth:`_recent_motion`) carried to ``t_s``; otherwise the
         corner's angle about the tilt axis at its last sighting.  The uncertainty: the corner's noise
-        plus the extrapolation (its rate times the time since the sighting)."""
+        plus the extrapolation (its rate times the time since the sighting).  How long the tilt was
+        driven since the sighting is the driver's to judge (:class:`foveatrack.calibration.drive.CalibrationDriver`):
+        pan legs leave the tilt where it was, however long the corner is out of sight."""
         if self._ref_q is None:
-            return 0.0, 0.0
+            return 0.0, 0.0, None
         leg = self._leg
         if self._phase == "move" and leg is not None and leg.axis == "tilt" and len(leg.samples) >= 2:
             t, a, w = self._recent_motion(leg)
@@ -332,11 +334,9 @@ class Calibrator:
         elif self._last_q is not None and self._last_t is not None:
             t, ang, rate = self._last_t, self._online_angle("tilt", self._last_q), 0.0
         else:
-            return math.nan, math.nan
+            return math.nan, math.nan, None
         dt = max(t_s - t, 0.0)
-        if dt > TILT_UNSEEN_MAX_S:
-            return math.nan, math.nan
-        return ang + rate * dt, TILT_CORNER_SIGMA_DEG + abs(rate) * dt
+        return ang + rate * dt, TILT_CORNER_SIGMA_DEG + abs(rate) * dt, t
 
     # ---- the state machine -------------------------------------------------------------------
     def step(self, frame: Frame) -> HeadCommand | None:

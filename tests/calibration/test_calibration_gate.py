@@ -103,3 +103,25 @@ def test_without_a_finite_tilt_the_gate_refuses_tilt_and_says_why():
         assert cmd == HeadCommand(1, 5, 0, 0) and why == [TILT_UNKNOWN]
     # pan alone needs no tilt estimate
     assert gate.decide(None, Proposal(HeadCommand(1, 5, 0, 0), math.nan, math.nan), 0.0) == (HeadCommand(1, 5, 0, 0), [])
+
+
+def test_the_tilt_estimate_outlives_the_corner_unless_the_tilt_moves_unseen():
+    # the corner last seen at t = 0; pan legs (any length) leave the tilt where it was, but more than
+    # TILT_UNSEEN_MAX_S of tilt motion out of sight voids the estimate (the gate then refuses tilt)
+    from types import SimpleNamespace
+
+    from foveatrack.calibration.drive import CalibrationDriver
+    from foveatrack.calibration.procedure import TILT_UNSEEN_MAX_S
+    from foveatrack.control import HeadCommand
+
+    commands = iter([HeadCommand(1, 20, 0, 0)] * 30 + [HeadCommand(0, 0, 1, 63)] * 30)
+    cal = SimpleNamespace(plan=SimpleNamespace(start_tilt_deg=10.0), start_tilt_sigma_deg=0.5, done=False,
+                          step=lambda frame: next(commands), tilt_since_start_deg=lambda t: (1.0, 0.1, 0.0))
+    driver = CalibrationDriver(cal)
+    tilts = []
+    for k in range(60):
+        frame = Frame(k / RATE_HZ, (k + 1) / RATE_HZ, np.zeros((0, 3)), np.zeros(0, np.int64))
+        tilts.append(driver.process(frame, frame.t_end_s).head_tilt_deg)
+    assert all(t == 11.0 for t in tilts[:30])                       # 1.5 s of pan, the corner unseen
+    first_nan = next(k for k, t in enumerate(tilts) if math.isnan(t))
+    assert (first_nan - 30) / RATE_HZ == pytest.approx(TILT_UNSEEN_MAX_S, abs=2 / RATE_HZ)
