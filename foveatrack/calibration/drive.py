@@ -62,6 +62,8 @@ class CalibrationDriver:
         axis; :meth:`Calibrator.tilt_since_start_deg`), which the command gate keeps from the stops."""
         cmd = self(frame, send_t_s)
         cal = self.calibrator
+        if not hasattr(cal, "tilt_since_start_deg"):
+            return CalibrationOutput(cmd)     # a procedure that cannot tell its tilt: NaN, the gate refuses tilt
         off_deg, off_sigma_deg, t_seen = cal.tilt_since_start_deg(frame.t_end_s)
         if t_seen is not None and self._tilt_driven_s(t_seen, frame.t_end_s) > TILT_UNSEEN_MAX_S:
             off_deg = off_sigma_deg = math.nan     # tilted too long unseen: the gate refuses more tilt
