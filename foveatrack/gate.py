@@ -14,21 +14,27 @@ instant (:meth:`Tracker.command_sent` replaces the command sent at that time).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.speed_table import TURBO
+from gimbal.head_facts import DEFAULT_HEAD, HeadFacts
 
 # Recorded in a command's ``limited`` list when STOP was sent because the frame was older than
 # ``stale_frame_s`` when processed (the daemon judges by the wall clock, so replay reads it from the
 # recording; the simulator by virtual time).
 STALE_FRAME = "stale_frame"
+# Recorded when tilt motion was refused because the driver gave no finite tilt estimate (or no finite
+# uncertainty) while the gate has tilt stops to keep: the gate fails closed.  A NaN compared with a
+# stop is False, so before this rule "tilt up at the stop" passed whenever the estimate was missing.
+TILT_UNKNOWN = "tilt_unknown"
 
 # Two tilt margins, two layers: the tracker keeps TrackerConfig.tilt_margin_deg (3 deg) from a stop
 # by itself; the gate, the last line, refuses tilt toward a stop GATE_TILT_MARGIN_DEG (2 deg) from
 # it, so it only acts when the tracker did not (a bug, a misconfigured table).  The daemon's [head]
-# tilt_margin_deg and a scene's [gate] tilt_margin_deg set this one.
-GATE_TILT_MARGIN_DEG = 2.0
+# tilt_margin_deg and a scene's [gate] tilt_margin_deg set this one; its default is the head facts'.
+GATE_TILT_MARGIN_DEG = DEFAULT_HEAD.tilt_margin_deg
 
 
 @dataclass(frozen=True)
@@ -40,16 +46,28 @@ class Limits:
     tilt_limits_deg : (lo, hi) [deg]          the head's tilt stops
     tilt_margin_deg : >= 0 [deg]              no tilt motion toward a stop once the estimated tilt
                                               (+ its 2 sigma) is within this of it
+
+    Built from a head's facts (:meth:`of`); the defaults are :data:`gimbal.head_facts.DEFAULT_HEAD`'s.
     """
 
-    max_pan_byte: int = 0x3F
-    max_tilt_byte: int = 0x3F
-    allow_turbo: bool = False
-    tilt_limits_deg: tuple[float, float] = (-30.0, 60.0)
-    tilt_margin_deg: float = GATE_TILT_MARGIN_DEG
+    max_pan_byte: int = DEFAULT_HEAD.max_pan_byte
+    max_tilt_byte: int = DEFAULT_HEAD.max_tilt_byte
+    allow_turbo: bool = DEFAULT_HEAD.allow_turbo
+    tilt_limits_deg: tuple[float, float] = DEFAULT_HEAD.tilt_limits_deg
+    tilt_margin_deg: float = DEFAULT_HEAD.tilt_margin_deg
+
+    @classmethod
+    def of(cls, facts: HeadFacts) -> "Limits":
+        """The gate's limits for a head: its stops and the limits configured with it."""
+        return cls(facts.max_pan_byte, facts.max_tilt_byte, facts.allow_turbo, tuple(facts.tilt_limits_deg),
+                   facts.tilt_margin_deg)
 
     def apply(self, cmd: HeadCommand, tilt_deg: float, tilt_sigma_deg: float = 0.0) -> tuple[HeadCommand, list[str]]:
-        """The command that may leave, and the reasons it was changed (empty if unchanged)."""
+        """The command that may leave, and the reasons it was changed (empty if unchanged).
+
+        ``tilt_deg``, ``tilt_sigma_deg``: the driver's estimate of the head's tilt and its 1 sigma [deg];
+        either not finite (a driver that does not know where its head points) refuses all tilt
+        motion (:data:`TILT_UNKNOWN`): the stops cannot be kept without it."""
         why = []
         pd, pb, td, tb = cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte
         if pb == TURBO and not self.allow_turbo:
@@ -60,11 +78,24 @@ class Limits:
             tb, why = self.max_tilt_byte, why + ["tilt_speed"]
         lo, hi = self.tilt_limits_deg
         s2 = 2.0 * max(tilt_sigma_deg, 0.0)
-        if td > 0 and tilt_deg + s2 >= hi - self.tilt_margin_deg:
+        if td != 0 and not (math.isfinite(tilt_deg) and math.isfinite(s2)):
+            td, tb, why = 0, 0, why + [TILT_UNKNOWN]
+        elif td > 0 and tilt_deg + s2 >= hi - self.tilt_margin_deg:
             td, tb, why = 0, 0, why + ["tilt_stop_up"]
         elif td < 0 and tilt_deg - s2 <= lo + self.tilt_margin_deg:
             td, tb, why = 0, 0, why + ["tilt_stop_down"]
         return HeadCommand(pd, pb if pd else 0, td, tb if td else 0), why
+
+
+@dataclass(frozen=True)
+class Proposal:
+    """A command a driver wants to send and its head's tilt estimate, as :meth:`CommandGate.decide`
+    reads them (a tracker's output has the same fields); for drivers without a controller output
+    (the live IMU calibration's pose steps)."""
+
+    command: HeadCommand
+    head_tilt_deg: float
+    head_sigma_tilt_deg: float
 
 
 class CommandGate:
@@ -81,13 +112,16 @@ class CommandGate:
     def decide(self, tracker, out, send_t_s: float, stale: bool = False) -> tuple[HeadCommand, list[str]]:
         """The command to write for the tracker output ``out`` sent at ``send_t_s``, and why it differs
         from the tracker's (empty: unchanged).  ``stale``: the frame was too old when processed (the
-        driver judges: wall clock, recording or virtual time); STOP is sent instead."""
+        driver judges: wall clock, recording or virtual time); STOP is sent instead.  ``out`` must
+        carry the driver's tilt estimate (``head_tilt_deg``, ``head_sigma_tilt_deg``): without a
+        finite one, tilt motion is refused.  ``tracker`` None: nothing dead-reckons from what is
+        sent (a driver that stops on any change)."""
         cmd, why = out.command, []
         if self.limits is not None:
             cmd, why = self.limits.apply(out.command, out.head_tilt_deg, out.head_sigma_tilt_deg)
         if stale:
             cmd, why = STOP, why + [STALE_FRAME]
-        if why:
+        if why and tracker is not None:
             tracker.command_sent(send_t_s, cmd)
         return cmd, why
 
@@ -98,6 +132,6 @@ class CommandGate:
         the head following the tracker).  Returns what the head now runs."""
         if ok:
             self.head_cmd = cmd
-        else:
+        elif tracker is not None:
             tracker.command_sent(send_t_s, self.head_cmd)
         return self.head_cmd

@@ -42,8 +42,9 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.errors import UserError
+from gimbal.head_facts import TURBO as HEAD_TURBO
 
-TURBO = 0xFF
+TURBO = HEAD_TURBO   # 0xFF, declared once with the head's facts
 AXES = ("pan", "tilt")
 UNITS = {"deg/s": 1.0, "rad/s": 180.0 / math.pi}
 FORMAT = "foveatrack-speed-table"

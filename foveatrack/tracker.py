@@ -47,6 +47,7 @@ from foveatrack.predictive import BearingFilter
 from foveatrack.reconstruction import Reconstructor, head_trig
 from foveatrack.space_of_interest import Box, SpaceOfInterest, space_from_mapping
 from foveatrack.speed_table import SpeedTable
+from gimbal.head_facts import DEFAULT_HEAD
 
 
 _ZERO3 = np.zeros(3)
@@ -85,7 +86,8 @@ class TrackerConfig:
     search_tilt_deg : float or None [deg]    tilt to return to while searching (None: keep)
     search_timeout_s : > 0 or None [s]       stop searching after this (None: never)
     send_delay_s : >= 0 [s]                  frame end -> command written (if the driver doesn't say)
-    latency_s : >= 0 [s]                     link latency (7.29 ms = one Pelco-D frame at 9600 baud)
+    latency_s : >= 0 [s]                     link latency (default: one Pelco-D frame at 9600 baud,
+                                             7.29 ms, gimbal.head_facts.DEFAULT_HEAD.frame_time_s)
     dead_time_s, accel_deg_s2 : or None      head timing (None: the speed table's)
     timing_sigma_s : >= 0 [s]                per-command timing uncertainty for the reconstruction
     pan0_deg, tilt0_deg : [deg]              head angles at start
@@ -118,7 +120,7 @@ class TrackerConfig:
     error_frame: str = "lidar"
     space: SpaceOfInterest | None = None
     min_points: int = 1
-    tilt_limits_deg: tuple[float, float] = (-30.0, 60.0)
+    tilt_limits_deg: tuple[float, float] = DEFAULT_HEAD.tilt_limits_deg
     pan_limits_deg: tuple[float, float] | None = None
     tilt_margin_deg: float = 3.0
     stop_lookahead_s: float = 0.3
@@ -128,7 +130,7 @@ class TrackerConfig:
     search_tilt_deg: float | None = None
     search_timeout_s: float | None = 60.0
     send_delay_s: float = 0.0
-    latency_s: float = 0.00729
+    latency_s: float = DEFAULT_HEAD.frame_time_s
     dead_time_s: float | None = None
     accel_deg_s2: float | None = None
     timing_sigma_s: float = 0.002

@@ -137,7 +137,8 @@ def main(argv=None) -> int:
                     print("  no .lvx written")
                 else:
                     print(f"  wrote {lvx[-1].name} ({lvx[-1].stat().st_size} bytes); foveatrack replay says:")
-                    r = subprocess.run(FOVEATRACK + ["replay", str(lvx[-1])], capture_output=True, text=True,
+                    r = subprocess.run(FOVEATRACK + ["replay", str(lvx[-1]), "--tracker-config",
+                                                    str(ROOT / "examples" / "daemon-virtual.toml")], capture_output=True, text=True,
                                        cwd=ROOT, timeout=600)
                     for ln in (r.stdout + r.stderr).strip().splitlines()[:6]:
                         print("    " + ln)

@@ -166,7 +166,8 @@ def run_calibration(scene: Scene, plan: CalibrationPlan | None = None, feature: 
     t_wall = time.perf_counter()
     k = 0
     while not driver.finished and k < n_max:
-        loop.step(k * period, (k + 1) * period)
+        _, out = loop.step(k * period, (k + 1) * period)
+        driver.refuse_limited(loop.last_limited, out)    # the scene's [gate] changed a command: an error
         k += 1
         if progress is not None:
             progress(k * period, scene.duration_s)

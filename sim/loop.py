@@ -147,8 +147,11 @@ class ClosedLoop:
         # The head's facts (its stops, start pose, Pelco-D at the scene's baud, the loop's send delay)
         # win over [tracker] by the one rule every driver applies (TrackerConfig.with_head); recorded,
         # so that replay rebuilds exactly this tracker.
+        gate = {} if scene.gate is None else dict(
+            max_pan_byte=scene.gate.max_pan_byte, max_tilt_byte=scene.gate.max_tilt_byte,
+            allow_turbo=scene.gate.allow_turbo, tilt_margin_deg=scene.gate.tilt_margin_deg)
         self.head_facts = HeadFacts((params.tilt_min_deg, params.tilt_max_deg), g.pan0_deg, tilt0, "D", g.baud,
-                                    g.send_delay_s)
+                                    g.send_delay_s, **gate)
         self.tracker_overrides = self.head_facts.tracker_values()
         self.tracker = Tracker(scene.tracker.with_head(self.head_facts, scene.tracker_table, f"{scene.path} [tracker]"),
                                table)
@@ -159,9 +162,7 @@ class ClosedLoop:
                             "(the lidar's IMU on the head, whose gyro it integrates)")
         self.gyro = HeadGyro(scene.imu, seed, tilt0) if scene.imu is not None else None
         # The daemon's gate (limits, stale frames): pass-through unless the scene has a [gate] table.
-        self.gate = CommandGate(None if scene.gate is None else Limits(
-            scene.gate.max_pan_byte, scene.gate.max_tilt_byte, scene.gate.allow_turbo,
-            (params.tilt_min_deg, params.tilt_max_deg), scene.gate.tilt_margin_deg))
+        self.gate = CommandGate(None if scene.gate is None else Limits.of(self.head_facts))
         self.last_command = STOP          # this frame's command as sent (after the gate)
         self.last_limited: list[str] = []  # why the gate changed it (empty: unchanged)
         self._pending: list[tuple[float, bytes]] = []

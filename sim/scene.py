@@ -32,7 +32,7 @@ import numpy as np
 
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys, read_toml
 from foveatrack.errors import UserError
-from foveatrack.gate import GATE_TILT_MARGIN_DEG
+from gimbal.head_facts import DEFAULT_HEAD
 
 # Effects a scene can ask for, with their parameters and defaults (sources in the docstring of
 # sim.effects).  Head/link effects act in gimbal/ and sim/virtual_uart.py.
@@ -84,10 +84,10 @@ class GateSpec:
     stale_frame_s : > 0 [s] or None: a frame older than this when its command is sent (virtual time:
         ``[gimbal] send_delay_s``) steers nothing, STOP is sent instead
     """
-    max_pan_byte: int = 0x3F
-    max_tilt_byte: int = 0x3F
-    allow_turbo: bool = True
-    tilt_margin_deg: float = GATE_TILT_MARGIN_DEG
+    max_pan_byte: int = DEFAULT_HEAD.max_pan_byte          # defaults: the head facts', as the daemon's
+    max_tilt_byte: int = DEFAULT_HEAD.max_tilt_byte
+    allow_turbo: bool = DEFAULT_HEAD.allow_turbo
+    tilt_margin_deg: float = DEFAULT_HEAD.tilt_margin_deg
     stale_frame_s: float | None = None
 
 

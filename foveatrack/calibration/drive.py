@@ -12,7 +12,9 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from foveatrack.calibration import Calibrator
+from foveatrack.calibration.procedure import TILT_UNSEEN_MAX_S
 from foveatrack.control import STOP, HeadCommand
+from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 
 
@@ -55,8 +57,45 @@ class CalibrationDriver:
         return self.calibrator.done
 
     def process(self, frame: Frame, send_t_s: float) -> "CalibrationOutput":
-        """The :class:`foveatrack.controller.Controller` step: this frame's command to send."""
-        return CalibrationOutput(self(frame, send_t_s))
+        """The :class:`foveatrack.controller.Controller` step: this frame's command to send, with the
+        head's tilt as the procedure sees it (the start tilt plus the corner's turn about the tilt
+        axis; :meth:`Calibrator.tilt_since_start_deg`), which the command gate keeps from the stops."""
+        cmd = self(frame, send_t_s)
+        cal = self.calibrator
+        if not hasattr(cal, "tilt_since_start_deg"):
+            return CalibrationOutput(cmd)     # a procedure that cannot tell its tilt: NaN, the gate refuses tilt
+        off_deg, off_sigma_deg, t_seen = cal.tilt_since_start_deg(frame.t_end_s)
+        if t_seen is not None and self._tilt_driven_s(t_seen, frame.t_end_s) > TILT_UNSEEN_MAX_S:
+            off_deg = off_sigma_deg = math.nan     # tilted too long unseen: the gate refuses more tilt
+        return CalibrationOutput(cmd, head_tilt_deg=cal.plan.start_tilt_deg + off_deg,
+                                 head_sigma_tilt_deg=math.hypot(cal.start_tilt_sigma_deg, off_sigma_deg))
+
+    def _tilt_driven_s(self, since_s: float, now_s: float) -> float:
+        """How long the procedure's commands drove the tilt between ``since_s`` and ``now_s`` [s]."""
+        total = 0.0
+        for k in range(len(self.sent) - 1, -1, -1):
+            t, cmd = self.sent[k]
+            t_next = self.sent[k + 1][0] if k + 1 < len(self.sent) else now_s
+            if t_next <= since_s:
+                break
+            if cmd.tilt_dir:
+                total += max(0.0, min(t_next, now_s) - max(t, since_s))
+        return total
+
+    def refuse_limited(self, why: list[str], out: "CalibrationOutput") -> None:
+        """The command gate changed one of the procedure's commands (``why`` non-empty): the leg under
+        way would be timed wrong and its speed measured wrong, so the run ends with an error (the
+        driver stops the head).  The plan's speed bytes are cut to the limits beforehand, so this is a
+        tilt stop, an unknown tilt or a stale frame."""
+        if why:
+            done = sum(1 for leg in self.calibrator.legs if leg.t_stop_s is not None)
+            where = (f"with the tilt unknown (the corner out of sight over {TILT_UNSEEN_MAX_S:g} s of tilt motion)"
+                     if not math.isfinite(out.head_tilt_deg) else
+                     f"at estimated tilt {out.head_tilt_deg:.1f} +- {out.head_sigma_tilt_deg:.1f} deg")
+            raise UserError(f"the command gate refused the calibration's command ({', '.join(why)}) {where} after "
+                            f"{done} legs: the plan would take the head past its limits, or out of the lidar's "
+                            "sight of it; start it farther from its tilt stop (or with a smaller max_excursion_deg); "
+                            "no table was written")
 
     def command_sent(self, t_s: float, cmd: HeadCommand) -> None:
         """The gate or the link changed a command: the procedure times its legs from its own commands
@@ -88,7 +127,12 @@ def drive_calibration(calibrator: Calibrator, frames: Iterable[Frame], send: Cal
     for frame in frames:
         t = frame.t_end_s + send_delay_s
         out = driver.process(frame, t)
-        cmd = out.command if gate is None else gate.decide(driver, out, t)[0]
+        cmd = out.command
+        if gate is not None:
+            cmd, why = gate.decide(driver, out, t)
+            if why:
+                send(t, STOP)
+                driver.refuse_limited(why, out)
         send(t, cmd)
         if driver.finished:
             break

@@ -68,6 +68,13 @@ from foveatrack.frames import Frame
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable, axis_bytes
 
 
+#: The corner's angle noise about an axis, 1 sigma [deg] (about 5 mm at 6 m), and how long the tilt
+#: may be driven with the corner out of sight before its estimate is void [s] (a leg ends after three
+#: missed frames once settled; before, up to ``settle_s`` of its ramp may pass unseen).
+TILT_CORNER_SIGMA_DEG = 0.1
+TILT_UNSEEN_MAX_S = 1.0
+
+
 def on_smooth_track(t_s: np.ndarray, q_m: np.ndarray, n_sigma: float = 5.0, floor_m: float = 1e-3,
                     min_n: int = 10, max_rounds: int = 5) -> np.ndarray:
     """Which corner positions of a steady leg lie on its smooth track (bool mask); the others are
@@ -214,6 +221,8 @@ class Calibrator:
         self._ref_samples: list = []
         self._ref_q: np.ndarray | None = None      # corner at the very start
         self._last_q: np.ndarray | None = None
+        self._last_t: float | None = None           # when the corner was last seen (sensor time) [s]
+        self.start_tilt_sigma_deg = 0.5              # how well plan.start_tilt_deg is known [deg]
         self._rest_samples: list = []
         self._rest_t: list = []
         self._leg: LegRecord | None = None
@@ -305,6 +314,30 @@ class Calibrator:
         corner, _ = found
         return t_mid, corner
 
+    def tilt_since_start_deg(self, t_s: float) -> tuple[float, float, float | None]:
+        """The head's tilt at ``t_s`` relative to the start reference as the corner shows it, its 1-sigma
+        uncertainty [deg] (for the command gate's tilt stops), and when the corner was seen [s] (None:
+        no need, the head has not moved); NaN without any sighting.
+
+        Before the reference is taken the head has been sent nothing but STOP: 0.  On a tilt leg the
+        leg's robust recent angle and rate (:meth:`_recent_motion`) carried to ``t_s``; otherwise the
+        corner's angle about the tilt axis at its last sighting.  The uncertainty: the corner's noise
+        plus the extrapolation (its rate times the time since the sighting).  How long the tilt was
+        driven since the sighting is the driver's to judge (:class:`foveatrack.calibration.drive.CalibrationDriver`):
+        pan legs leave the tilt where it was, however long the corner is out of sight."""
+        if self._ref_q is None:
+            return 0.0, 0.0, None
+        leg = self._leg
+        if self._phase == "move" and leg is not None and leg.axis == "tilt" and len(leg.samples) >= 2:
+            t, a, w = self._recent_motion(leg)
+            ang, rate = _SIGN["tilt"] * a, _SIGN["tilt"] * w
+        elif self._last_q is not None and self._last_t is not None:
+            t, ang, rate = self._last_t, self._online_angle("tilt", self._last_q), 0.0
+        else:
+            return math.nan, math.nan, None
+        dt = max(t_s - t, 0.0)
+        return ang + rate * dt, TILT_CORNER_SIGMA_DEG + abs(rate) * dt, t
+
     # ---- the state machine -------------------------------------------------------------------
     def step(self, frame: Frame) -> HeadCommand | None:
         if self.done:
@@ -315,6 +348,7 @@ class Calibrator:
         if m is not None:
             self.frames_with_feature += 1
             self._last_q = m[1]
+            self._last_t = m[0]
             self._missed = 0
         else:
             self._missed += 1
@@ -712,6 +746,8 @@ class PriorAxisCalibrator(Calibrator):
 
     start_tilt_sigma_deg : float > 0 [deg]  how well the start tilt (``plan.start_tilt_deg``) is
         known: exact in simulation; a levelled head with a known zero about 0.5 deg; give 90 if unknown
+        (it is also the tilt estimate's floor for the command gate: behind a gate with tilt stops, 90
+        refuses every tilt leg, since the stops cannot be kept without knowing the tilt)
     mount_sigma_deg : float > 0 [deg]       lidar Y vs the tilt axis (mounting), about 0.5 deg
     min_arc_rms_m : float >= 0 [m]          legs whose corner moved less are left out of the axis fit
     """
@@ -722,6 +758,7 @@ class PriorAxisCalibrator(Calibrator):
         if not (start_tilt_sigma_deg > 0 and mount_sigma_deg > 0):
             raise UserError("start_tilt_sigma_deg and mount_sigma_deg must be > 0 [deg]")
         self.prior_sigma_deg = {"pan": float(start_tilt_sigma_deg), "tilt": float(mount_sigma_deg)}
+        self.start_tilt_sigma_deg = float(start_tilt_sigma_deg)
         self.min_arc_rms_m = float(min_arc_rms_m)
 
     def _axis_estimate(self, axis: str) -> np.ndarray:

@@ -1,7 +1,8 @@
 """``foveatrack replay RECORDING``: re-run detection and control over a recording, deterministically.
 
 RECORDING is a foveatrack recording (``.mcap``, from the simulator or the daemon) or a Livox Viewer
-``.lvx`` file (lidar only, head frozen).  Prints the metrics (tracking error from truth when the
+``.lvx`` file (lidar only, head frozen; it carries no tracker configuration, so ``--tracker-config``
+with a space of interest is required).  Prints the metrics (tracking error from truth when the
 recording has it, detection bearing errors otherwise), whether the replayed detections and commands
 equal the recorded ones, and with ``--tracker-config`` what would have changed.
 """
@@ -15,7 +16,8 @@ def register(sub) -> None:
     p = sub.add_parser("replay", help="re-run detection and control over a recording (.mcap) or a .lvx file")
     p.add_argument("recording", metavar="RECORDING", help="a foveatrack .mcap recording or a Livox Viewer .lvx")
     p.add_argument("--tracker-config", metavar="FILE.toml",
-                   help="use this [tracker] table (a scene, a daemon config or a bare table) instead of the recorded one")
+                   help="use this [tracker] table (a scene, a daemon config or a bare table) instead of the recorded one; "
+                        "it must set a space of interest ([tracker.space]); an .lvx needs one")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     p.add_argument("--plot", metavar="DIR", help="write Fig. 14a/b/c equivalents as PNG into DIR")
     p.add_argument("--export-points", metavar="F.csv|F.npz", help="export every recorded point")

@@ -30,8 +30,8 @@ from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_k
 from foveatrack.errors import UserError
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig
-from foveatrack.gate import GATE_TILT_MARGIN_DEG, Limits
-from gimbal.head_facts import HeadFacts
+from foveatrack.gate import Limits
+from gimbal.head_facts import DEFAULT_HEAD, HeadFacts
 
 
 @dataclass(frozen=True)
@@ -51,20 +51,21 @@ class LidarConfig:
 @dataclass(frozen=True)
 class HeadConfig:
     port: str                           # required: a missing port once became /dev/ttyUSB0 silently
-    baud: int = 9600
+    baud: int = DEFAULT_HEAD.baud
     address: int = 1
-    protocol: str = "D"
+    protocol: str = DEFAULT_HEAD.protocol
     speed_table: str = "nominal"
     pan_speed_max_deg_s: float = 15.0
     tilt_speed_max_deg_s: float = 2.0
     pan_turbo_deg_s: float = 20.0
-    max_pan_byte: int = 0x3F
-    max_tilt_byte: int = 0x3F
-    allow_turbo: bool = False
-    tilt_limits_deg: tuple[float, float] = (-30.0, 60.0)
-    tilt_margin_deg: float = GATE_TILT_MARGIN_DEG   # the gate's (foveatrack.gate), inside the tracker's 3 deg
-    pan0_deg: float = 0.0
-    tilt0_deg: float = 0.0
+    # the head's facts and limits: defaults from gimbal.head_facts.DEFAULT_HEAD, declared there once
+    max_pan_byte: int = DEFAULT_HEAD.max_pan_byte
+    max_tilt_byte: int = DEFAULT_HEAD.max_tilt_byte
+    allow_turbo: bool = DEFAULT_HEAD.allow_turbo
+    tilt_limits_deg: tuple[float, float] = DEFAULT_HEAD.tilt_limits_deg
+    tilt_margin_deg: float = DEFAULT_HEAD.tilt_margin_deg   # the gate's, inside the tracker's 3 deg
+    pan0_deg: float = DEFAULT_HEAD.pan0_deg
+    tilt0_deg: float = DEFAULT_HEAD.tilt0_deg
     on_reconnect: str = "stop"          # what a reconnected head's unknown pose gets: ON_RECONNECT
     home_pan_deg: float | None = None   # where "home" drives the head (default pan0_deg, tilt0_deg)
     home_tilt_deg: float | None = None
@@ -86,15 +87,15 @@ class HeadConfig:
 
     @property
     def facts(self) -> HeadFacts:
-        """The head's facts (stops, start pose, protocol, baud) the tracker and the gate read; the
-        daemon measures each send, so no fixed send delay."""
-        return HeadFacts(self.tilt_limits_deg, self.pan0_deg, self.tilt0_deg, self.protocol, self.baud, None)
+        """The head's facts (stops, start pose, protocol, baud, limits) the tracker and the gate read;
+        the daemon measures each send, so no fixed send delay."""
+        return HeadFacts(self.tilt_limits_deg, self.pan0_deg, self.tilt0_deg, self.protocol, self.baud, None,
+                         self.max_pan_byte, self.max_tilt_byte, self.allow_turbo, self.tilt_margin_deg)
 
     @property
     def limits(self) -> Limits:
         """The command gate's limits for this head (:mod:`foveatrack.gate`)."""
-        return Limits(self.max_pan_byte, self.max_tilt_byte, self.allow_turbo, self.tilt_limits_deg,
-                      self.tilt_margin_deg)
+        return Limits.of(self.facts)
 
     @property
     def frame_time_s(self) -> float:

@@ -31,13 +31,19 @@ over a move, divided by the step angle; and gravity turns only with tilt (pan is
 
 Safety: the plan is checked against ``[head] tilt_limits_deg`` (with ``tilt_margin_deg``) and the
 speed bytes against ``max_pan_byte``/``max_tilt_byte`` before anything moves; every command also
-passes the daemon's limits (:class:`foveatrack.gate.Limits`) at the dead-reckoned tilt.  The head is
+passes the daemon's command gate (:class:`foveatrack.gate.CommandGate`, the ``[head]`` limits) with
+the dead-reckoned tilt and its uncertainty (the table's sigma over each move); a move it changes ends
+the run.  The head is
 stopped when the lidar falls silent for ``[daemon] watchdog_s``, on Ctrl-C / SIGTERM (``stop``), on
-any error and at the end (after driving back to the start pose when the run completes).
+any error and at the end (after driving back to the start pose when the run completes).  The lidar's
+gyro witnesses every move (:class:`foveatrack.turn_witness.TurnWitness`): a head that turns far more
+than commanded stops the run while it moves (before it can reach a stop the dead reckoning does not
+see coming), and one that turned far less, once it has stopped; the error names the axis and both turns.
 """
 
 from __future__ import annotations
 
+import math
 import queue
 import sys
 import threading
@@ -48,9 +54,11 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
+from foveatrack.gate import CommandGate, Proposal
 from foveatrack.imu_calib import handeye, procedure, registration
 from foveatrack.imu_calib.imu_integration import GRAVITY_M_S2, ImuSamples
 from foveatrack.imu_calib.se3 import so3_log
+from foveatrack.turn_witness import TurnMismatch, TurnWitness
 
 #: A window is static when no 0.25 s block of its gyro readings has a mean farther than this from the
 #: window's mean [deg/s] (BMI088 white noise: 0.2 deg/s per 200 Hz sample, 0.03 deg/s per block mean).
@@ -284,6 +292,16 @@ class _Rig:
         while self.latest_imu_s is None or self.latest_imu_s < t_s:
             self.poll(0.02)
 
+    def imu_between(self, t0_s: float, t1_s: float, since: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The IMU samples of ``[t0_s, t1_s)`` (sensor time) among the batches from index ``since`` on:
+        (t_s, gyro rad/s, acc g), in arrival order."""
+        bs = self.imu[since:]
+        if not bs:
+            return np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))
+        t = np.concatenate([b.t_ns for b in bs]) * 1e-9
+        m = (t >= t0_s) & (t < t1_s)
+        return t[m], np.vstack([b.gyro_rad_s for b in bs])[m], np.vstack([b.acc_g for b in bs])[m]
+
     def imu_samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every IMU sample so far, in time order, duplicates removed: (t_ns, gyro rad/s, acc g)."""
         t = np.concatenate([b.t_ns for b in self.imu])
@@ -307,6 +325,80 @@ def static_spread_deg_s(t_s: np.ndarray, gyro_rad_s: np.ndarray, t0: float, t1: 
     return float(np.max(np.abs(means - g.mean(axis=0))))
 
 
+class _HeadDrive:
+    """The head's side of the run: each move's commands through the daemon's command gate (with the
+    dead-reckoned tilt and its uncertainty: the table's sigma over each move, summed in quadrature),
+    keep-alives, and the gyro's witness of every turn (:class:`foveatrack.turn_witness.TurnWitness`:
+    a head turning far more than commanded stops the run while it moves, one that turned far less
+    once it has stopped)."""
+
+    def __init__(self, config, head, rig: "_Rig", table, X0):
+        self.config, self.head, self.rig, self.table = config, head, rig, table
+        self.tilt_deg = config.head.tilt0_deg
+        self.tilt_var = 0.0                     # [deg^2]
+        self.gate = CommandGate(config.head.limits)
+        self.witness = TurnWitness(None if X0 is None else X0[:3, :3])
+        self.fed = 0                            # IMU batches given to the witness
+
+    def send(self, cmd: HeadCommand, last: HeadCommand | None) -> None:
+        sigma = math.sqrt(self.tilt_var)
+        gated, why = self.gate.decide(None, Proposal(cmd, self.tilt_deg, sigma), time.monotonic())
+        if why:
+            self.rig._fail(f"the [head] limits of {self.config.path} stopped a planned move ({', '.join(why)}) at "
+                           f"dead-reckoned tilt {self.tilt_deg:.1f} +- {sigma:.1f} deg")
+        _, ok = self.head.send(gated)
+        self.gate.wrote(None, time.monotonic(), gated, ok)
+        if not ok and gated != last:
+            self.rig._fail(f"the head's serial link [head] port {self.config.head.port!r} failed when a move changed "
+                           f"its command (pose {self.rig.pose + 1})")
+
+    def _witness(self, pan: AxisMove, tilt: AxisMove, el_s: float) -> None:
+        """The gyro's turn against the commanded one ``el_s`` seconds into the move (inf: the head has
+        stopped, judged both ways)."""
+        t, g, _ = self.rig.imu_between(-np.inf, np.inf, since=self.fed)
+        self.fed = len(self.rig.imu)
+        self.witness.add(t, g)
+        commanded = {ax: m.direction * m.speed_deg_s * min(el_s, m.duration_s) for ax, m in (("pan", pan), ("tilt", tilt))}
+        try:
+            self.witness.check(commanded, stopped=el_s == math.inf)
+        except TurnMismatch as exc:
+            self.rig._fail(f"pose {self.rig.pose + 1}: {exc}")
+
+    def move(self, pan: AxisMove, tilt: AxisMove, still: tuple[float, float]) -> None:
+        """Run one move (both axes at once, each for its own time), then STOP; ``still``: the sensor-time
+        window the head last stood still through (the witness's gyro bias and up direction)."""
+        rig = self.rig
+        rig.wait_imu(still[1])
+        self.witness.begin(*rig.imu_between(*still))
+        self.fed = len(rig.imu)
+        self.witness.add(*rig.imu_between(still[1], np.inf)[:2])
+        t0 = time.monotonic()
+        dur = max(pan.duration_s, tilt.duration_s)
+        tilt_start = self.tilt_deg
+        last, last_t = None, 0.0
+        while True:
+            el = time.monotonic() - t0
+            self._witness(pan, tilt, el)
+            if el >= dur:
+                break
+            cmd = HeadCommand(pan.direction if el < pan.duration_s else 0, pan.byte if el < pan.duration_s else 0,
+                              tilt.direction if el < tilt.duration_s else 0, tilt.byte if el < tilt.duration_s else 0)
+            self.tilt_deg = tilt_start + tilt.direction * tilt.speed_deg_s * min(el, tilt.duration_s)
+            if cmd != last or time.monotonic() - last_t >= KEEPALIVE_S:
+                self.send(cmd, last)
+                last, last_t = cmd, time.monotonic()
+            rig.poll(min(0.01, max(0.0, dur - el)))
+        self.send(STOP, last)
+        self.tilt_deg = tilt_start + tilt.direction * tilt.speed_deg_s * tilt.duration_s
+        if tilt.direction:
+            self.tilt_var += (self.table.axis("tilt").sigma_deg_s(tilt.byte) * tilt.duration_s) ** 2
+
+    def check_stopped(self, pan: AxisMove, tilt: AxisMove, t_still_s: float) -> None:
+        """After a move, once the head has stood still until sensor time ``t_still_s``: the whole turn."""
+        self.rig.wait_imu(t_still_s)
+        self._witness(pan, tilt, math.inf)
+
+
 def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None, prompt_out=None,
                   X0: np.ndarray | None = None, bootstrap_samples: int = 200, seed: int = 0,
                   max_s: float | None = None, stop: threading.Event | None = None, progress=None,
@@ -326,7 +418,7 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
     plan.check_axes()
     h = config.head
     offsets = plan.offsets_deg()
-    moves = []
+    moves, table = [], None
     if not by_hand:
         table = config.speed_table()
         lo, hi = h.tilt_limits_deg
@@ -352,39 +444,7 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
     out = prompt_out or sys.stderr
     inbox = _Answers(answers if answers is not None else sys.stdin) if by_hand else None
     windows, clouds = [], []
-    tilt_now = [h.tilt0_deg]
-    limits = h.limits
-
-    def send(cmd: HeadCommand, last: HeadCommand | None) -> None:
-        gated, why = limits.apply(cmd, tilt_now[0])
-        if why:
-            rig._fail(f"the [head] limits of {config.path} stopped a planned move ({', '.join(why)}) at dead-reckoned "
-                      f"tilt {tilt_now[0]:.1f} deg")
-        _, ok = head.send(gated)
-        if not ok and gated != last:
-            rig._fail(f"the head's serial link [head] port {h.port!r} failed when a move changed its command "
-                      f"(pose {rig.pose + 1})")
-
-    def move(pan: AxisMove, tilt: AxisMove) -> None:
-        """Run one move (both axes at once, each for its own time), then STOP."""
-        t0 = time.monotonic()
-        dur = max(pan.duration_s, tilt.duration_s)
-        tilt_start = tilt_now[0]
-        last, last_t = None, 0.0
-        while True:
-            el = time.monotonic() - t0
-            if el >= dur:
-                break
-            cmd = HeadCommand(pan.direction if el < pan.duration_s else 0, pan.byte if el < pan.duration_s else 0,
-                              tilt.direction if el < tilt.duration_s else 0, tilt.byte if el < tilt.duration_s else 0)
-            tilt_now[0] = tilt_start + tilt.direction * tilt.speed_deg_s * min(el, tilt.duration_s)
-            if cmd != last or time.monotonic() - last_t >= KEEPALIVE_S:
-                send(cmd, last)
-                last, last_t = cmd, time.monotonic()
-            rig.poll(min(0.01, max(0.0, dur - el)))
-        send(STOP, last)
-        tilt_now[0] = tilt_start + tilt.direction * tilt.speed_deg_s * tilt.duration_s
-
+    drive = None if by_hand else _HeadDrive(config, head, rig, table, X0)
     t_wall0 = time.monotonic()
     try:
         if head is not None:
@@ -406,10 +466,12 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
                         break
                     rig.poll(0.02)
             elif i > 0:
-                move(*moves[i - 1])
+                drive.move(*moves[i - 1], windows[-1])
             h_still = time.monotonic()
             s0 = stream.sensor_now_s(h_still) + plan.settle_s
             xyz, t_s = rig.take_window(s0, s0 + plan.dwell_s)
+            if not by_hand and i > 0:
+                drive.check_stopped(*moves[i - 1], s0)
             windows.append((s0, s0 + plan.dwell_s))
             clouds.append((xyz, t_s))
             if by_hand:
@@ -418,7 +480,7 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
                 progress(i + 1, plan.poses)
         rig.wait_imu(windows[-1][1])
         if head is not None and return_home:
-            move(*moves[-1])
+            drive.move(*moves[-1], windows[-1])
     finally:
         if head is not None:
             head.stop()

@@ -468,26 +468,9 @@ TIMESTAMP_TYPE_UTC = 3
 # The Cartesian wire grid (data types 0, 2, 4, 7: x, y, z int32 mm).  The simulator quantises its
 # points with these same two functions (sim/sensor.py), so a simulated point and the point a live
 # client decodes from the same packet are the same float64 bits, and a recording stores them exactly.
-MM_PER_M = 1000.0
-INT32_MM_MIN, INT32_MM_MAX = -(2**31), 2**31 - 1
-
-
-def m_to_mm(xyz_m) -> np.ndarray:
-    """Metres -> the int32 millimetres a Livox sends (round half to even, saturated at the int32 range:
-    ±2147 km, far past any range a sensor reports).  Any shape; NaN is not allowed."""
-    return np.rint(np.asarray(xyz_m, dtype=np.float64) * MM_PER_M).clip(INT32_MM_MIN, INT32_MM_MAX).astype(np.int32)
-
-
-def mm_to_m(mm) -> np.ndarray:
-    """int32 millimetres -> float64 metres: ``mm * 1e-3``, THE operation of every Cartesian point the
-    live client decodes and every point the simulator outputs (a product with 1e-3, not a quotient by
-    1000: the two differ in the last bit for some values, so nothing else may be used)."""
-    return np.multiply(np.asarray(mm, dtype=np.int32), 1e-3)
-
-
-def quantise_to_mm_grid(xyz_m) -> np.ndarray:
-    """Points [m] as a Livox reports them: on the int32 mm grid, in the client's float64 metres."""
-    return mm_to_m(m_to_mm(xyz_m))
+# They live in foveatrack.mm_grid, below both this protocol and the recordings (which pack points on
+# the grid); their names stay importable from here.
+from foveatrack.mm_grid import INT32_MM_MAX, INT32_MM_MIN, MM_PER_M, m_to_mm, mm_to_m, quantise_to_mm_grid  # noqa: E402,F401
 
 
 def packet_dtype(data_type: int) -> np.dtype:

@@ -126,7 +126,7 @@ MAX_GRID_MM = 8_192_000        # |x| < 8192 m; a frame with a point past it is s
 def mm_grid_f32(xyz_m: np.ndarray) -> np.ndarray | None:
     """The float32 grid values of points on the mm grid, or None when a point is off the grid (not
     a float64 the client could have decoded) or past ``MAX_GRID_MM``.  xyz_m: (n, 3) float64 [m]."""
-    from foveatrack.livox.protocol import m_to_mm, mm_to_m
+    from foveatrack.mm_grid import m_to_mm, mm_to_m
 
     with np.errstate(invalid="ignore"):      # NaN: off the grid (the check below says so)
         mm = m_to_mm(xyz_m)
@@ -137,7 +137,7 @@ def mm_grid_f32(xyz_m: np.ndarray) -> np.ndarray | None:
 
 def mm_grid_to_m(v: np.ndarray) -> np.ndarray:
     """float32 grid values -> the float64 metres they stand for (the client's own operation)."""
-    from foveatrack.livox.protocol import mm_to_m
+    from foveatrack.mm_grid import mm_to_m
 
     return mm_to_m(np.rint(v.astype(np.float64) * 1000.0).astype(np.int32))
 

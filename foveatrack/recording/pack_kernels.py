@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from foveatrack.livox.protocol import MM_PER_M
+from foveatrack.mm_grid import MM_PER_M
 from foveatrack.recording.format import GRID_PER_M, MAX_GRID_MM, packed_point_dtype
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.errors import UserError
-from foveatrack.livox.protocol import quantise_to_mm_grid
+from foveatrack.mm_grid import quantise_to_mm_grid
 from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD, IMU,
                                          MAX_GRID_MM, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable, imu_columns)
 from foveatrack.recording.foxglove_view import FoxgloveChannels

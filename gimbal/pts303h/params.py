@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from gimbal.errors import GimbalError
+from gimbal.head_facts import PTS303_TILT_STOPS_DEG
 from gimbal.pelco import MAX_SPEED_BYTE, PAN_TURBO
 
 
@@ -59,8 +60,8 @@ class HeadParams:
     unit_step_spread: float = 0.2
     ripple_rel: float = 0.02
     ripple_freq_hz: float = 1.5
-    tilt_min_deg: float = -30.0
-    tilt_max_deg: float = 60.0
+    tilt_min_deg: float = PTS303_TILT_STOPS_DEG[0]
+    tilt_max_deg: float = PTS303_TILT_STOPS_DEG[1]
     abs_set_quiet_s: float = 0.2
     reply_delay_s: float = 0.003
     tilt_zero: str = "zenith"

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from foveatrack.cli import main
+from foveatrack.errors import UserError
 from foveatrack.livox import protocol as P
 from foveatrack.livox.lvx import LvxDevice, write_lvx
 from foveatrack.replay import replay, replay_recording
@@ -92,6 +93,22 @@ def test_cli_json_plots_exports(sim_run, tmp_path, capsys):
     assert main(["replay", str(tmp_path / "none.mcap")]) == 2
 
 
+def _box_config(tmp_path) -> str:
+    """A bare [tracker] table with a space of interest in the lidar frame (what an .lvx replay needs)."""
+    cfg = tmp_path / "box.toml"
+    cfg.write_text('[tracker]\n[tracker.space]\nkind = "box"\nmin_xyz = [1.0, -60.0, -5.0]\nmax_xyz = [60.0, 60.0, 40.0]\n')
+    return str(cfg)
+
+
+def test_a_given_tracker_table_without_a_space_of_interest_is_an_error(sim_run, tmp_path):
+    path, _, _ = sim_run
+    bare = tmp_path / "bare.toml"
+    bare.write_text("[tracker]\ndeadband_deg = 0.5\n")
+    with pytest.raises(UserError, match=rf"{bare} \[tracker\]: no space of interest .*--tracker-config FILE"):
+        replay(path, str(bare))
+    assert main(["replay", str(path), "--tracker-config", str(bare)]) == 2
+
+
 def test_lvx_replay_detects_the_passing_uav(tmp_path, capsys):
     """A frozen-head pass (paper Fig. 13/14a) of a 0.6 m sphere written as a Livox Viewer file: the
     tracker's detections sit on the target (lidar frame = world frame, head frozen at 0; the
@@ -115,7 +132,12 @@ def test_lvx_replay_detects_the_passing_uav(tmp_path, capsys):
         frames.append([(0, p) for p in P.encode_data_packets(slots, r, t0, rate, data_type=0)])
     path = tmp_path / "pass.lvx"
     write_lvx(path, frames, [LvxDevice("1PQDH5B00100041", "", 0, 1, False, 0, 0, 0, 0, 0, 0)])
-    res = replay(path)
+    # an .lvx carries no tracker configuration: without a space of interest replay refuses (it would
+    # take every point, the ground too), and names how to give one
+    with pytest.raises(UserError, match=r"no space of interest.*--tracker-config FILE whose \[tracker.space\]"):
+        replay(path)
+    cfg = _box_config(tmp_path)
+    res = replay(path, cfg)
     f = res.frames
     assert res.source == "lvx" and len(f["t_end_s"]) == 20
     det = f["detected"]
@@ -126,7 +148,7 @@ def test_lvx_replay_detects_the_passing_uav(tmp_path, capsys):
     assert np.all(np.linalg.norm(f["det_xyz"][det], axis=1) < np.linalg.norm(truth, axis=1))   # ... on the near side
     # head frozen: the reconstruction never moves even though commands were computed
     assert np.all(f["head_pan_deg"] == 0.0) and np.any(f["command"][:, 0] != 0)
-    assert main(["replay", str(path), "--json", "--plot", str(tmp_path / "plots")]) == 0
+    assert main(["replay", str(path), "--tracker-config", cfg, "--json", "--plot", str(tmp_path / "plots")]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["metrics"]["detection"]["frames_with_detection"] == det.sum()
     # no head in a .lvx file: the Fig. 14 plots from the tracker's own estimates, no head-angle plot
@@ -157,7 +179,7 @@ def test_cli_directory_is_named_as_a_directory(tmp_path, capsys):
 
 def test_cli_empty_tracker_config_is_refused(sim_run, tmp_path, capsys):
     """An empty --tracker-config file was silently read as all defaults; it is refused, naming the
-    file. A bare `[tracker]` (explicitly empty) still means the defaults."""
+    file. A bare `[tracker]` (explicitly empty) is refused too: it names no space of interest (issue 25)."""
     path, _, _ = sim_run
     for text in ("", "# to do\n\n"):
         cfg = tmp_path / "empty.toml"
@@ -167,8 +189,8 @@ def test_cli_empty_tracker_config_is_refused(sim_run, tmp_path, capsys):
         assert f"--tracker-config {cfg}" in err and "empty" in err
     bare = tmp_path / "bare.toml"
     bare.write_text("[tracker]\n")
-    assert main(["replay", str(path), "--tracker-config", str(bare), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["config"] == str(bare)
+    assert main(["replay", str(path), "--tracker-config", str(bare), "--json"]) == 2
+    assert "no space of interest" in capsys.readouterr().err
 
 
 def test_bearing_percentiles_are_of_the_magnitude():

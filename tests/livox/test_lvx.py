@@ -206,13 +206,16 @@ def test_replay_refuses_a_bad_version_package_and_survives_an_empty_file(tmp_pat
     from foveatrack.replay import replay
 
     p, pkg = _one_frame_file(tmp_path)
+    cfg = tmp_path / "box.toml"      # an .lvx replay needs a space of interest
+    cfg.write_text('[tracker]\n[tracker.space]\nkind = "box"\nmin_xyz = [1.0, -60.0, -5.0]\nmax_xyz = [60.0, 60.0, 40.0]\n')
+    cfg = str(cfg)
     data = bytearray(p.read_bytes())
     data[pkg + 1] = 1
     p.write_bytes(bytes(data))
     with pytest.raises(UserError, match=rf"package at byte {pkg}: field version \(byte {pkg + 1}\) = 1"):
-        replay(p)
+        replay(p, cfg)
     write_lvx(tmp_path / "empty.lvx", [], [AVIA])
-    res = replay(tmp_path / "empty.lvx")
+    res = replay(tmp_path / "empty.lvx", cfg)
     det = res.metrics["detection"]
     assert det["frames"] == 0 and det["frames_with_detection"] == 0 and det["bearing_error_deg"]["rms"] is None
 
