@@ -8,7 +8,7 @@ subpackage of ``foveatrack`` (``foveatrack.recording``, ``foveatrack.livox``, ..
 import itself and what its row lists, nothing else; so the direction runs
 
     gimbal  <-  foveatrack (core)  <-  recording  <-  livox  <-  live_devices  <-  calibration, imu_calib,
-    replay, daemon  <-  sim  <-  cli
+    replay, daemon  <-  sim  <-  cli;   foveatrack (core)  <-  sources  <-  openloop (and recording)
 
 and no two units import each other (a cycle is two rows naming each other; the test says so).  Known
 exceptions, each with why it stays, are in :data:`KNOWN_EXCEPTIONS` (module -> target unit), reported
@@ -39,13 +39,17 @@ MAY_IMPORT: dict[str, set[str]] = {
     "foveatrack.calibration": {_CORE, "foveatrack.live_devices"},
     "foveatrack.imu_calib": {_CORE, "foveatrack.live_devices"},
     "foveatrack.replay": {_CORE, "foveatrack.recording", "foveatrack.livox", "gimbal"},
+    # frames from other programs' recordings (ROS bags, PCD, numpy folders), and the fixed sensor's
+    # open-loop tracker that consumes them and writes our recording
+    "foveatrack.sources": {_CORE},
+    "foveatrack.openloop": {_CORE, "foveatrack.sources", "foveatrack.recording"},
     "foveatrack.daemon": {_CORE, "foveatrack.recording", "foveatrack.livox", "foveatrack.live_devices", "gimbal"},
     "sim": {_CORE, "foveatrack.recording", "foveatrack.livox", "foveatrack.live_devices", "foveatrack.calibration",
             "foveatrack.imu_calib", "foveatrack.replay", "foveatrack.daemon", "gimbal"},
     # the composition root: everything, sim lazily inside its commands
     "foveatrack.cli": {_CORE, "foveatrack.recording", "foveatrack.livox", "foveatrack.live_devices",
                        "foveatrack.calibration", "foveatrack.imu_calib", "foveatrack.replay", "foveatrack.daemon",
-                       "gimbal", "sim"},
+                       "foveatrack.sources", "foveatrack.openloop", "gimbal", "sim"},
     "foveatrack.__main__": {"foveatrack.cli"},
 }
 
