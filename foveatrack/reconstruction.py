@@ -10,7 +10,9 @@ A command written at ``t_s`` takes effect at ``t_s + latency_s + dead_time_s`` (
 e.g. 7.29 ms for a Pelco-D frame at 9600 baud, plus adapter delays; dead time: the head's own).
 From then the speed ramps to the table speed of the new byte at ``accel_deg_s2`` (None: at once),
 integrated exactly (piecewise constant acceleration).  Tilt stops at ``tilt_limits_deg`` (the head
-physically stops there).
+physically stops there); the stop absorbs the speed, so after a hit the speed ramps from rest toward
+the commanded one (a reversal that braked into the stop leaves it at once), as in the head model
+(:mod:`gimbal.pts303h`, "Travel").
 
 Uncertainty growth (1 sigma, per axis, independent axes)
 --------------------------------------------------------
@@ -125,10 +127,41 @@ class _AxisIntegrator:
                 ang = k.angle + k.v * T + 0.5 * a * T * T + k.v_tgt * (tau - T)
                 v = k.v_tgt
         if self.limits is not None:
+            if self.accel is not None and k.v * k.v_tgt < 0.0:   # a reversal: did it reach a stop?
+                hit = self._reversal_at_stop(k, tau)
+                if hit is not None:
+                    ang, v = hit
             lo, hi = self.limits
-            if ang > hi or ang < lo:
+            if ang > hi or ang < lo:   # monotone motion into a stop: held there
                 ang, v = min(max(ang, lo), hi), 0.0
         return ang, v
+
+    def _reversal_at_stop(self, k: _Knot, tau: float) -> tuple[float, float] | None:
+        """Angle and speed ``tau`` after knot ``k`` if the deceleration of a reversal carried the head
+        into a stop first, else None.
+
+        The stop absorbs the speed (the device model's rule, :mod:`gimbal.pts303h.kinematics`): from
+        the hit the speed ramps from rest toward the (reversed) target, so the head leaves the stop
+        at once.  In closed form: with speed ``u`` toward the stop, gap ``g`` and deceleration ``b``,
+        the hit is at ``tau_h = 2g / (u + sqrt(u^2 - 2bg))`` (the earlier root, without cancellation).
+        """
+        side = 1.0 if k.v > 0.0 else -1.0
+        stop = self.limits[1] if side > 0 else self.limits[0]
+        u, b = abs(k.v), self.accel
+        g = max(side * (stop - k.angle), 0.0)
+        t_turn = u / b
+        reach = u * min(tau, t_turn) - 0.5 * b * min(tau, t_turn) ** 2   # travel toward the stop
+        if reach <= g:
+            return None
+        tau_hit = 2.0 * g / (u + math.sqrt(max(u * u - 2.0 * b * g, 0.0)))
+        s = tau - tau_hit
+        w = abs(k.v_tgt)
+        t_ramp = w / b
+        if s <= t_ramp:
+            away, v = 0.5 * b * s * s, b * s
+        else:
+            away, v = 0.5 * b * t_ramp * t_ramp + w * (s - t_ramp), w
+        return stop - side * away, -side * v
 
     def _knot_before(self, t: float) -> _Knot | None:
         i = bisect.bisect_right(self.times, t) - 1
