@@ -109,6 +109,7 @@ class _AxisIntegrator:
         self.history_s = history_s
         self.knots = [_Knot(t0, angle0, 0.0, 0.0, -1, 0, np.zeros(65), 0.0)]
         self.times = [t0]
+        self.forgot_before = -math.inf   # the motion before this time was trimmed from the history
 
     def _advance(self, k: _Knot, t: float) -> tuple[float, float]:
         """Angle and speed at time t >= k.t."""
@@ -168,7 +169,8 @@ class _AxisIntegrator:
         return self.knots[i] if i >= 0 else None
 
     def state(self, t: float) -> tuple[float, float, float]:
-        """(angle, speed, sigma) at t."""
+        """(angle, speed, sigma) at t; before the kept history (``history_s`` behind the newest
+        command), unknown: NaN angle and speed with infinite sigma."""
         times = self.times
         if t >= times[-1]:   # the usual: since the newest knot
             k = self.knots[-1]
@@ -176,7 +178,9 @@ class _AxisIntegrator:
             i = bisect.bisect_right(times, t) - 1
             if i >= 0:
                 k = self.knots[i]
-            else:   # before all retained history: the earliest knot's angle
+            elif self.forgot_before > -math.inf:   # the commands in force then are forgotten
+                return math.nan, math.nan, math.inf
+            else:   # before the start pose: the head rested there (homed) until then
                 k = self.knots[0]
                 t = k.t
         ang, v = self._advance(k, t)
@@ -229,6 +233,7 @@ class _AxisIntegrator:
         if cut > 0:
             del self.knots[:cut]
             del self.times[:cut]
+            self.forgot_before = self.times[0]
 
 
 class HeadPose(abc.ABC):
@@ -280,7 +285,10 @@ class Reconstructor(HeadPose):
     timing_sigma_s : float >= 0       uncertainty of each command's effect time [s]
     random_walk_deg2_s : float >= 0   speed-ripple random walk [deg^2/s]
     lidar_offset_m : (3,)             lidar origin in tilt-stage coordinates [m]
-    history_s : float > 0             how far back ``angles_at`` can look precisely [s]
+    history_s : float > 0             how far back ``angles_at`` can look [s]: commands older than this
+                                      before the newest are forgotten, and an instant before the kept
+                                      ones is answered NaN with infinite sigma (unknown), never with
+                                      a confident angle
     """
 
     def __init__(self, speed_table: SpeedTable, *, pan0_deg: float = 0.0, tilt0_deg: float = 0.0,
@@ -332,7 +340,12 @@ class Reconstructor(HeadPose):
         self._n_carried = len(carried)
 
     def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
-        """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180]."""
+        """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180].
+
+        Before the start time ``t0_s``: the start pose (the head rested there).  Older than the kept
+        history (``history_s`` before the newest command, once that has forgotten anything): NaN
+        angles with infinite sigmas.  The drivers only ask about the current frame and the next
+        command's effect, well inside the history."""
         # A frame asks about a few instants several times (D's frame, the detection, the command's
         # effect, the driver's log); an answer only changes with a command effective before it.
         hit = self._memo.get(t_s)
