@@ -354,3 +354,15 @@ def test_speed_to_axis_respects_caps_and_known_bytes(table, v, cap, allow_turbo,
         assert s <= abs(v) + 1e-12
     if b == TURBO:
         assert allow_turbo
+
+
+@pytest.mark.parametrize("speed, sigma", [(-1.0, 0.1), (-math.inf, 0.1), (1.0, -0.1), (-0.0, -1e-300)])
+def test_axis_table_refuses_what_a_table_file_refuses(speed, sigma):
+    """A negative speed (a magnitude: the direction is the command's) or sigma is refused when the
+    table is built in code too, as SpeedTable.from_dict refuses it in a file (802524f took it); NaN
+    still means unknown."""
+    from foveatrack.errors import UserError
+
+    with pytest.raises(UserError, match="must be >= 0"):
+        AxisTable("tilt", (SpeedEntry(5, 1.0, 0.1), SpeedEntry(9, speed, sigma)))
+    AxisTable("tilt", (SpeedEntry(5, 1.0, 0.1), SpeedEntry(9, math.nan, math.nan)))
