@@ -196,7 +196,8 @@ class GyroAttitude(HeadPose):
     noise_density_deg_s_rthz : > 0      gyro white noise [deg/s/sqrt(Hz)] (BMI088: 0.014)
     bias_walk_deg_s_rts : >= 0          gyro bias random walk [deg/s/sqrt(s)]
     rest_margin_s : >= 0 [s]            wait this long after the expected stop before trusting rest
-    history_s : > 0 [s]                 how far back ``angles_at`` answers from samples
+    history_s : > 0 [s]                 how far back ``angles_at`` answers from samples (older, once
+                                        samples were dropped: NaN with infinite sigma)
     """
 
     def __init__(self, commands: Reconstructor, *, imu_rotation_deg=(0.0, 0.0, 0.0),
@@ -220,6 +221,7 @@ class GyroAttitude(HeadPose):
         self._pan: list[float] = []
         self._tilt: list[float] = []
         self._sig: list[float] = []
+        self._trimmed = False             # samples older than history_s were dropped
         self._pan_unwrap_deg = 0.0        # turns added to keep the stored pan continuous
         self._w_prev: np.ndarray | None = None   # previous sample's bias-corrected rate (lidar frame)
         self._t_prev: float | None = None
@@ -315,6 +317,8 @@ class GyroAttitude(HeadPose):
             return pan, tilt, sp, st
         i = bisect.bisect_right(T, t_s)
         if i == 0:
+            if self._trimmed:   # older than the kept samples: unknown, not the oldest kept angle
+                return math.nan, math.nan, math.inf, math.inf
             return wrap_deg(self._pan[0]), self._tilt[0], self._sig[0], self._sig[0]
         t0, t1 = T[i - 1], T[i]
         u = (t_s - t0) / (t1 - t0)
@@ -435,6 +439,7 @@ class GyroAttitude(HeadPose):
         if len(self._t) > 64 and self._t[-1] - self._t[0] > 1.5 * self.history_s:
             cut = bisect.bisect_left(self._t, self._t[-1] - self.history_s)
             del self._t[:cut], self._pan[:cut], self._tilt[:cut], self._sig[:cut]
+            self._trimmed = True
 
 
 class ImuFeed:

@@ -10,7 +10,9 @@ A command written at ``t_s`` takes effect at ``t_s + latency_s + dead_time_s`` (
 e.g. 7.29 ms for a Pelco-D frame at 9600 baud, plus adapter delays; dead time: the head's own).
 From then the speed ramps to the table speed of the new byte at ``accel_deg_s2`` (None: at once),
 integrated exactly (piecewise constant acceleration).  Tilt stops at ``tilt_limits_deg`` (the head
-physically stops there).
+physically stops there); the stop absorbs the speed, so after a hit the speed ramps from rest toward
+the commanded one (a reversal that braked into the stop leaves it at once), as in the head model
+(:mod:`gimbal.pts303h`, "Travel").
 
 Uncertainty growth (1 sigma, per axis, independent axes)
 --------------------------------------------------------
@@ -107,6 +109,7 @@ class _AxisIntegrator:
         self.history_s = history_s
         self.knots = [_Knot(t0, angle0, 0.0, 0.0, -1, 0, np.zeros(65), 0.0)]
         self.times = [t0]
+        self.forgot_before = -math.inf   # the motion before this time was trimmed from the history
 
     def _advance(self, k: _Knot, t: float) -> tuple[float, float]:
         """Angle and speed at time t >= k.t."""
@@ -125,17 +128,49 @@ class _AxisIntegrator:
                 ang = k.angle + k.v * T + 0.5 * a * T * T + k.v_tgt * (tau - T)
                 v = k.v_tgt
         if self.limits is not None:
+            if self.accel is not None and k.v * k.v_tgt < 0.0:   # a reversal: did it reach a stop?
+                hit = self._reversal_at_stop(k, tau)
+                if hit is not None:
+                    ang, v = hit
             lo, hi = self.limits
-            if ang > hi or ang < lo:
+            if ang > hi or ang < lo:   # monotone motion into a stop: held there
                 ang, v = min(max(ang, lo), hi), 0.0
         return ang, v
+
+    def _reversal_at_stop(self, k: _Knot, tau: float) -> tuple[float, float] | None:
+        """Angle and speed ``tau`` after knot ``k`` if the deceleration of a reversal carried the head
+        into a stop first, else None.
+
+        The stop absorbs the speed (the device model's rule, :mod:`gimbal.pts303h.kinematics`): from
+        the hit the speed ramps from rest toward the (reversed) target, so the head leaves the stop
+        at once.  In closed form: with speed ``u`` toward the stop, gap ``g`` and deceleration ``b``,
+        the hit is at ``tau_h = 2g / (u + sqrt(u^2 - 2bg))`` (the earlier root, without cancellation).
+        """
+        side = 1.0 if k.v > 0.0 else -1.0
+        stop = self.limits[1] if side > 0 else self.limits[0]
+        u, b = abs(k.v), self.accel
+        g = max(side * (stop - k.angle), 0.0)
+        t_turn = u / b
+        reach = u * min(tau, t_turn) - 0.5 * b * min(tau, t_turn) ** 2   # travel toward the stop
+        if reach <= g:
+            return None
+        tau_hit = 2.0 * g / (u + math.sqrt(max(u * u - 2.0 * b * g, 0.0)))
+        s = tau - tau_hit
+        w = abs(k.v_tgt)
+        t_ramp = w / b
+        if s <= t_ramp:
+            away, v = 0.5 * b * s * s, b * s
+        else:
+            away, v = 0.5 * b * t_ramp * t_ramp + w * (s - t_ramp), w
+        return stop - side * away, -side * v
 
     def _knot_before(self, t: float) -> _Knot | None:
         i = bisect.bisect_right(self.times, t) - 1
         return self.knots[i] if i >= 0 else None
 
     def state(self, t: float) -> tuple[float, float, float]:
-        """(angle, speed, sigma) at t."""
+        """(angle, speed, sigma) at t; before the kept history (``history_s`` behind the newest
+        command), unknown: NaN angle and speed with infinite sigma."""
         times = self.times
         if t >= times[-1]:   # the usual: since the newest knot
             k = self.knots[-1]
@@ -143,7 +178,9 @@ class _AxisIntegrator:
             i = bisect.bisect_right(times, t) - 1
             if i >= 0:
                 k = self.knots[i]
-            else:   # before all retained history: the earliest knot's angle
+            elif self.forgot_before > -math.inf:   # the commands in force then are forgotten
+                return math.nan, math.nan, math.inf
+            else:   # before the start pose: the head rested there (homed) until then
                 k = self.knots[0]
                 t = k.t
         ang, v = self._advance(k, t)
@@ -196,6 +233,7 @@ class _AxisIntegrator:
         if cut > 0:
             del self.knots[:cut]
             del self.times[:cut]
+            self.forgot_before = self.times[0]
 
 
 class HeadPose(abc.ABC):
@@ -247,7 +285,10 @@ class Reconstructor(HeadPose):
     timing_sigma_s : float >= 0       uncertainty of each command's effect time [s]
     random_walk_deg2_s : float >= 0   speed-ripple random walk [deg^2/s]
     lidar_offset_m : (3,)             lidar origin in tilt-stage coordinates [m]
-    history_s : float > 0             how far back ``angles_at`` can look precisely [s]
+    history_s : float > 0             how far back ``angles_at`` can look [s]: commands older than this
+                                      before the newest are forgotten, and an instant before the kept
+                                      ones is answered NaN with infinite sigma (unknown), never with
+                                      a confident angle
     """
 
     def __init__(self, speed_table: SpeedTable, *, pan0_deg: float = 0.0, tilt0_deg: float = 0.0,
@@ -299,7 +340,12 @@ class Reconstructor(HeadPose):
         self._n_carried = len(carried)
 
     def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
-        """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180]."""
+        """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180].
+
+        Before the start time ``t0_s``: the start pose (the head rested there).  Older than the kept
+        history (``history_s`` before the newest command, once that has forgotten anything): NaN
+        angles with infinite sigmas.  The drivers only ask about the current frame and the next
+        command's effect, well inside the history."""
         # A frame asks about a few instants several times (D's frame, the detection, the command's
         # effect, the driver's log); an answer only changes with a command effective before it.
         hit = self._memo.get(t_s)

@@ -94,6 +94,12 @@ class AxisTable:
             if e.byte in seen:
                 raise UserError(f"{self.axis}: speed byte {e.byte} is listed twice")
             seen.add(e.byte)
+            # as from_dict checks a file: a speed is a magnitude (the direction is the command's)
+            if e.speed_deg_s < 0:
+                raise UserError(f"{self.axis}: speed byte {e.byte}: speed must be >= 0 (a magnitude), "
+                                f"got {e.speed_deg_s}")
+            if e.sigma_deg_s < 0:
+                raise UserError(f"{self.axis}: speed byte {e.byte}: sigma must be >= 0, got {e.sigma_deg_s}")
         speed = np.full(65, np.nan)
         sigma = np.full(65, np.nan)
         knots = sorted((e for e in self.entries if math.isfinite(e.speed_deg_s) and e.byte != TURBO),

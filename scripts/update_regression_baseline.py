@@ -5,6 +5,9 @@ effect in a pinned scene), and commit the new file with a message saying why the
 
     python scripts/update_regression_baseline.py            # all pinned scenes
     python scripts/update_regression_baseline.py --check    # print the comparison only, write nothing
+    python scripts/update_regression_baseline.py --scene noisy-link   # only the named scene(s); the
+                                                            # others keep their stored values (another
+                                                            # machine's last digits stay where they are)
     python scripts/update_regression_baseline.py --monte-carlo [--seeds N] [--scheduler tcp://HOST:8786]
                                                             # tests/regression/baseline_mc.json: each
                                                             # scene over N seeds (default 8), mean and spread
@@ -32,8 +35,11 @@ def update_monte_carlo(args) -> int:
 
     seeds = seeds_for(args.seeds)
     old = json.loads(BASELINE_MC.read_text()) if BASELINE_MC.exists() else None
+    names = sorted(args.scene or CASES)
+    if args.scene and (old is None or old["seeds"] != seeds):
+        raise SystemExit("--scene with --monte-carlo needs a baseline over the same seeds to keep the other scenes")
     with make_executor(args.scheduler, args.workers) as ex:
-        spreads = monte_carlo(sorted(CASES), seeds, ex, progress=True)
+        spreads = monte_carlo(names, seeds, ex, progress=True)
     for name, spread in spreads.items():
         if old is not None and name in old["scenes"]:
             table, failures = compare_spread_to_baseline(spread, old["scenes"][name], TOLERANCES)
@@ -41,6 +47,8 @@ def update_monte_carlo(args) -> int:
                   f"{'  (WORSE: ' + '; '.join(failures) + ')' if failures else ''}\n{table}\n")
     if args.check:
         return 0
+    if args.scene:   # the other scenes keep their stored spreads
+        spreads = {**old["scenes"], **spreads}
     BASELINE_MC.write_text(json.dumps({
         "format": "foveatrack-regression-monte-carlo", "version": 1,
         "note": "per pinned scene and flattened metric of sim.summary.summarize: mean, sample sd, runs "
@@ -58,12 +66,16 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=MC_SEEDS, help=f"seeds per scene (default {MC_SEEDS})")
     ap.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
     ap.add_argument("--scheduler", default=None, help="a Dask scheduler, tcp://HOST:8786, instead of local processes")
+    ap.add_argument("--scene", action="append", choices=sorted(CASES), default=None,
+                    help="regenerate only this pinned scene (repeatable); the others keep their stored values")
     args = ap.parse_args(argv)
     if args.monte_carlo:
         return update_monte_carlo(args)
     old = json.loads(BASELINE.read_text())["scenes"] if BASELINE.exists() else {}
-    scenes = {}
+    scenes = {name: old[name] for name in CASES if args.scene and name not in args.scene and name in old}
     for name in CASES:
+        if name in scenes:
+            continue
         m = run_case(name)
         scenes[name] = m
         if name in old:

@@ -139,8 +139,10 @@ class ClosedLoop:
             uart_fx.add("drop")
         if scene.has("uart_echo"):
             uart_fx.add("echo")
+        # each random link effect draws from its own stream, keyed by its scene name
         self.uart = VirtualUart(
-            g.baud, uart_fx, rng=fx.effect_rng(seed, "uart") if uart_fx & {"bit_errors", "drop"} else None,
+            g.baud, uart_fx, rngs={e: fx.effect_rng(seed, name) for e, name in
+                                   (("bit_errors", "uart_bit_errors"), ("drop", "uart_drops")) if e in uart_fx},
             bit_error_rate=scene.effect_params.get("uart_bit_error_rate", 0.0),
             drop_rate=scene.effect_params.get("uart_drop_rate", 0.0))
         table = load_tracker_table(g.speed_table, self.head, f"{scene.path} [gimbal] speed_table")

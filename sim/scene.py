@@ -7,7 +7,8 @@ and what is allowed.  Tables::
     [scene]      name, duration_s, seed, effects = [...]
     [effects]    parameters of the listed effects (optional; documented defaults)
     [lidar]      preset = "mid40" | "prototype" | "horizon" (or custom optics: point_rate_hz,
-                 prisms, ...), model = "exact" | "paraxial"
+                 prisms, ...), model = "exact" | "paraxial", min_range_m / max_range_m (the range
+                 envelope, always applied; default: the preset's, sim.scan.presets.RANGE_ENVELOPE_M)
     [gimbal]     family, unit_seed, baud, feedback, address, pan0_deg, tilt0_deg,
                  frozen (true: the head never moves; the tracker still runs),
                  speed_table = "truth" | "nominal" | "path/to/table.json", send_delay_s
@@ -111,6 +112,18 @@ class Scene:
     gate: GateSpec | None = None
     imu: Any = None        # sim.imu.ImuSpec, only if the scene has [imu]
     imu_poses: Any = None  # sim.imu.PoseSchedule, only if the scene has [imu_poses]
+    # (blind zone, maximum range) [m] of the lidar, always applied; None: the Mid-40's
+    range_envelope_m: tuple[float, float] | None = None
+
+    @property
+    def lidar_range_m(self) -> tuple[float, float]:
+        """The lidar's range envelope (min, max) [m]: ``[lidar] min_range_m / max_range_m``, else the
+        preset's (:data:`sim.scan.presets.RANGE_ENVELOPE_M`)."""
+        if self.range_envelope_m is not None:
+            return self.range_envelope_m
+        from sim.scan.presets import DEFAULT_RANGE_ENVELOPE_M
+
+        return DEFAULT_RANGE_ENVELOPE_M
 
     def has(self, effect: str) -> bool:
         return effect in self.effects
@@ -178,7 +191,7 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         else:
             params[k] = as_float(v, k, we, lo=0)
 
-    optics, scan_model = _lidar(data.get("lidar", {"preset": "mid40"}), f"{where} [lidar]")
+    optics, scan_model, envelope = _lidar(data.get("lidar", {"preset": "mid40"}), f"{where} [lidar]")
     base_dir = Path(where).parent if Path(where).is_file() else None
     gimbal = _gimbal(data.get("gimbal", {}), f"{where} [gimbal]", base_dir)
     targets = data.get("target", [])
@@ -205,7 +218,7 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         targets=target_specs,
         background_prims=np.array(prims).reshape(-1, 13), background_reflectivity=np.array(refl, dtype=float),
         tracker=tracker, tracker_table=tracker_table, imu=imu, imu_poses=imu_poses,
-        gate=_gate(data["gate"], f"{where} [gate]") if "gate" in data else None,
+        gate=_gate(data["gate"], f"{where} [gate]") if "gate" in data else None, range_envelope_m=envelope,
     )
 
 
@@ -224,26 +237,36 @@ def _imu(data: Mapping, where: str):
     return imu, poses
 
 
+# A point's coordinates go out as int32 millimetres: beyond this range they would saturate and bend
+# its bearing, so no maximum range may exceed it [m].
+MAX_RANGE_LIMIT_M = 2_147_483.647
+
+
 def _lidar(t: Mapping, w: str):
     from sim.scan.optics import OpticsError, optics_from_table, optics_overrides
-    from sim.scan.presets import PRESETS
+    from sim.scan.presets import DEFAULT_RANGE_ENVELOPE_M, PRESETS, RANGE_ENVELOPE_M
 
     check_keys(t, ["preset", "model", "point_rate_hz", "prisms", "channel_offsets_deg", "beam_divergence_deg", "name",
-                   "head_yaw_deg"], w)
+                   "head_yaw_deg", "min_range_m", "max_range_m"], w)
     model = as_choice(t.get("model", "exact"), "model", w, ("exact", "paraxial"))
-    rest = {k: v for k, v in t.items() if k not in ("preset", "model")}
+    rest = {k: v for k, v in t.items() if k not in ("preset", "model", "min_range_m", "max_range_m")}
+    preset = None if "prisms" in t else t.get("preset", "mid40")
+    lo, hi = RANGE_ENVELOPE_M.get(preset, DEFAULT_RANGE_ENVELOPE_M) if isinstance(preset, str) else DEFAULT_RANGE_ENVELOPE_M
+    lo = as_float(t.get("min_range_m", lo), "min_range_m", w, lo=0)
+    hi = as_float(t.get("max_range_m", hi), "max_range_m", w, lo=0, hi=MAX_RANGE_LIMIT_M)
+    if not lo < hi:
+        raise UserError(f"{w}: min_range_m = {lo} must be below max_range_m = {hi}")
     try:
-        if "prisms" in t:
+        if preset is None:
             if "preset" in t:
                 raise UserError(f"{w}: give either preset or prisms, not both")
-            return optics_from_table(rest, where=w), model
-        preset = t.get("preset", "mid40")
+            return optics_from_table(rest, where=w), model, (lo, hi)
         if preset not in PRESETS:
             raise UserError(f"{w}: preset {preset!r} unknown; allowed: {', '.join(PRESETS)} (or give prisms)")
         optics = PRESETS[preset]
         if rest:
             optics = optics.with_(**optics_overrides(rest, w))
-        return optics, model
+        return optics, model, (lo, hi)
     except OpticsError as exc:
         msg = str(exc)
         raise UserError(msg if msg.startswith(w) else f"{w}: {msg}") from None

@@ -3,7 +3,8 @@
 One object serves every driver of a scene's lidar — the closed loop (:mod:`sim.loop`) and the
 real-time virtual Livox (:mod:`sim.lidar_server`) — so both produce the same points for the same
 beams.  Each effect owns a random stream keyed by its name (:func:`sim.effects.effect_rng`); an
-effect the scene does not list is never called.
+effect the scene does not list is never called.  The lidar's range envelope (blind zone, maximum
+range: ``Scene.lidar_range_m``) is always applied and takes no draws.
 """
 
 from __future__ import annotations
@@ -72,6 +73,8 @@ class SceneSensor:
         self._refl_byte_table = np.clip(np.round(self._refl_table * 100), 0, 255).astype(np.uint8)
         self._range_limit_m = (fx.range_limit_m(self._refl_table, scene.param("range_80pct_m"))
                                if scene.has("return_probability") else np.zeros(self._refl_table.size))
+        # The range envelope, always on: the blind zone and the maximum range (sim.scan.presets).
+        self._min_range_m, self._max_range_m = scene.lidar_range_m
         # The noise effects' scales, as their draw functions compute them (sim.effects).
         self._range_noise_m = self._param_if("range_noise", "range_noise_m")
         self._angular_noise_rad = math.radians(self._param_if("angular_noise", "angular_noise_deg"))
@@ -129,7 +132,8 @@ class SceneSensor:
         k = sk.assemble_returns_kernel(
             prim, chunk.status, rng_m, chunk.direction, chunk.t_ns, self._range_limit_m, self._refl_byte_table,
             self._target_prim_end, u_return, u_dropout, self._dropout_rate, range_normals, self._range_noise_m,
-            angular_normals, self._angular_noise_rad, True, xyz, pt_ns, refl_byte, on_target)
+            angular_normals, self._angular_noise_rad, True, self._min_range_m, self._max_range_m,
+            xyz, pt_ns, refl_byte, on_target)
         xyz, pt_ns, refl_byte, on_target = xyz[:k], pt_ns[:k], refl_byte[:k], on_target[:k]
         if has["sunlight"] and n:
             # Sunlight false alarms are appended, then the frame is put back in time order (stable:
@@ -232,6 +236,10 @@ class SceneSensor:
             return xyz, pt_ns, refl_byte, on_target
         pick = rng.choice(np.flatnonzero(ok), n_false, replace=False)
         r = rng.uniform(0.5, self.scene.param("sunlight_max_range_m"), n_false)
+        inside = (r >= self._min_range_m) & (r <= self._max_range_m)   # the envelope gates them too
+        if not inside.all():
+            pick, r = pick[inside], r[inside]
+            n_false = r.size
         xyz = np.vstack([xyz, quantise_to_mm_grid(chunk.direction[pick] * r[:, None])])
         pt_ns = np.concatenate([pt_ns, chunk.t_ns[pick]])
         refl_byte = np.concatenate([refl_byte, np.full(n_false, 1, dtype=np.uint8)])

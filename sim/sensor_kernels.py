@@ -54,7 +54,7 @@ def count_hits_kernel(prim, status):
 @njit(cache=True, nogil=True, error_model="numpy")
 def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m, refl_byte_table, target_prim_end,
                             u_return, u_dropout, dropout_rate, range_normals, range_noise_m, angular_normals,
-                            angular_noise_rad, mm_grid,
+                            angular_noise_rad, mm_grid, min_range_m, max_range_m,
                             out_xyz, out_t_ns, out_refl, out_on_target):
     """Points of the hits, effects applied, in scan order; returns how many were kept.
 
@@ -72,6 +72,10 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
       :func:`sim.effects.range_noise_draws`, here without its two array operations);
     * ``angular_normals`` (standard normals, 3 per hit, flat or (H, 3)): ``0.0 + angular_noise_rad * z``
       [rad] is added to the direction, which is then renormalised (:func:`sim.effects.angular_noise_draws`).
+
+    The range envelope, always on: a hit whose measured range (after the range noise) is below
+    ``min_range_m`` (the blind zone) or above ``max_range_m`` gives no point; it takes no draw, so
+    the effects' streams are the same with any envelope.
 
     ``refl_byte_table``: the Livox reflectivity byte per primitive; a primitive below
     ``target_prim_end`` belongs to a target (``out_on_target``).  ``mm_grid``: the points go out on
@@ -104,6 +108,8 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
             continue
         if use_rn:
             r = r + (0.0 + range_noise_m * range_normals[h])
+        if not (min_range_m <= r <= max_range_m):   # the blind zone and beyond the maximum range
+            continue
         dx = d_lidar[j, 0]
         dy = d_lidar[j, 1]
         dz = d_lidar[j, 2]

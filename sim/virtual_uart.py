@@ -12,8 +12,10 @@ Effects a scene can ask for (names in ``effects``):
 * ``'echo'``: RS-485 half duplex with the receiver always on: the sender hears its own bytes, at
   the times they finish on the wire; collect them with :meth:`VirtualUart.pop_echo`.
 
-Randomness comes from the ``rng`` passed in (one stream for this line); an effect that is not
-enabled draws no random numbers, so enabling one effect never changes another's stream.
+Randomness: each random effect draws from its own stream (``rngs``, one Generator per effect; or
+one ``rng`` from which a child stream is spawned for each of 'bit_errors' and 'drop', both always,
+in that order).  An effect that is not enabled draws no random numbers, and no effect draws from
+another's stream, so enabling one effect never changes another's draws.
 Time is always an argument; nothing here reads a clock.
 """
 
@@ -33,7 +35,9 @@ class VirtualUart:
 
     baud : int > 0 [bit/s]
     effects : subset of {'bit_errors', 'drop', 'echo'}
-    rng : numpy Generator, required when 'bit_errors' or 'drop' is enabled
+    rng : numpy Generator, from which each random effect's stream is spawned (module docstring)
+    rngs : {'bit_errors': Generator, 'drop': Generator}, each random effect's own stream (instead of
+        ``rng``); one of the two is required when 'bit_errors' or 'drop' is enabled
     bit_error_rate : probability in [0, 1] per data bit ('bit_errors')
     drop_rate : probability in [0, 1] per byte ('drop')
     echo : bool, same as putting 'echo' in effects
@@ -47,6 +51,7 @@ class VirtualUart:
         bit_error_rate: float = 1e-4,
         drop_rate: float = 1e-3,
         echo: bool = False,
+        rngs: dict[str, np.random.Generator] | None = None,
     ) -> None:
         effects = frozenset(effects)
         unknown = effects - EFFECTS
@@ -58,11 +63,17 @@ class VirtualUart:
             raise ValueError("bit_error_rate and drop_rate must be probabilities in [0, 1]")
         if echo:
             effects = effects | {"echo"}
-        if effects & {"bit_errors", "drop"} and rng is None:
-            raise ValueError("UART effects 'bit_errors' / 'drop' need an rng (numpy Generator)")
+        if rng is not None and rngs is not None:
+            raise ValueError("give either rng (one stream, spawned per effect) or rngs (one per effect)")
+        if rng is not None and effects & _RANDOM_EFFECTS:   # (spawning draws nothing from rng)
+            rngs = dict(zip(("bit_errors", "drop"), rng.spawn(2)))
+        rngs = dict(rngs or {})
+        missing = sorted(e for e in effects & _RANDOM_EFFECTS if e not in rngs)
+        if missing:
+            raise ValueError(f"UART effects {missing} need an rng (numpy Generator), or their own in rngs")
         self.baud = baud
         self.effects = effects
-        self.rng = rng
+        self.rngs = rngs
         self.bit_error_rate = float(bit_error_rate)
         self.drop_rate = float(drop_rate)
         self._line_free_s = -np.inf
@@ -110,12 +121,12 @@ class VirtualUart:
             self._echo.extend((float(t), bytes((b,))) for t, b in zip(ends, data))
         out = np.frombuffer(data, dtype=np.uint8).copy()
         if "bit_errors" in self.effects:
-            flips = self.rng.random((n, 8)) < self.bit_error_rate
+            flips = self.rngs["bit_errors"].random((n, 8)) < self.bit_error_rate
             out ^= (flips * (1 << np.arange(8))).sum(axis=1).astype(np.uint8)
             self.bits_flipped += int(flips.sum())
         keep = np.ones(n, dtype=bool)
         if "drop" in self.effects:
-            keep = self.rng.random(n) >= self.drop_rate
+            keep = self.rngs["drop"].random(n) >= self.drop_rate
             self.bytes_dropped += int(n - keep.sum())
         return [(float(t), bytes((int(b),))) for t, b, k in zip(ends, out, keep) if k]
 

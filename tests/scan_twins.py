@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.scan.kernels import RAY_GRAZING, RAY_OK, RAY_TIR
+from sim.scan.kernels import RAY_GRAZING, RAY_INVALID, RAY_OK, RAY_TIR
 
 
 def phase_revs_twin(k0, r_exact_fractions, phase0_rev, count):
@@ -30,9 +30,11 @@ def _refract_twin(d, m, eta, status):
     grazing = ci <= 0.0
     k = 1.0 - eta * eta * (1.0 - ci * ci)
     tir = (k < 0.0) & ~grazing
+    invalid = ~grazing & ~tir & ~(k >= 0.0)   # NaN: neither test decides
     ok = status == RAY_OK
     status[ok & grazing] = RAY_GRAZING
     status[ok & tir] = RAY_TIR
+    status[ok & invalid] = RAY_INVALID
     g = eta * ci - np.sqrt(np.where(k < 0.0, 0.0, k))
     return eta * d - g[:, None] * m
 

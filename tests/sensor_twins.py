@@ -9,8 +9,10 @@ from sim.effects import detection_probability
 from sim.scan.kernels import RAY_OK
 
 
-def returns_twin(prim, status, range_m, d_lidar, t_ns, refl_table, target_prim_end, rngs, params):
-    """``rngs``: effect name -> Generator for the listed effects; ``params``: effect parameters."""
+def returns_twin(prim, status, range_m, d_lidar, t_ns, refl_table, target_prim_end, rngs, params,
+                 envelope_m=(0.0, np.inf)):
+    """``rngs``: effect name -> Generator for the listed effects; ``params``: effect parameters;
+    ``envelope_m``: (blind zone, maximum range) [m], applied to the measured range."""
     idx = np.flatnonzero((prim >= 0) & (status == RAY_OK))
     r = range_m[idx]
     refl = refl_table[prim[idx]]
@@ -22,6 +24,7 @@ def returns_twin(prim, status, range_m, d_lidar, t_ns, refl_table, target_prim_e
         keep &= rngs["dropouts"].random(idx.size) >= params["dropout_rate"]
     if "range_noise" in rngs:
         r = r + rngs["range_noise"].normal(0.0, params["range_noise_m"], idx.size)
+    keep &= (r >= envelope_m[0]) & (r <= envelope_m[1])
     if "angular_noise" in rngs and idx.size:
         d = d + rngs["angular_noise"].normal(0.0, math.radians(params["angular_noise_deg"]), d.shape)
         d = d / np.linalg.norm(d, axis=1, keepdims=True)

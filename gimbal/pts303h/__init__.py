@@ -20,7 +20,9 @@ integrated it ("Gimbal angle calibration").  This model is what makes that calib
   and phase are drawn per unit.  Because the ripple is a fixed function of time, the angle has a
   closed form on each segment (below) and no integration step exists to change the answer.
 * **Travel.**  Pan is continuous (wraps to (-180, 180]); tilt stops at ``tilt_min_deg`` /
-  ``tilt_max_deg`` and holds there (speed 0) while commanded into the stop.
+  ``tilt_max_deg`` and holds there (speed 0) while commanded into the stop.  The stop absorbs the
+  speed: from a hit the base speed ramps again from rest, so a command reversing tilt whose
+  deceleration still carries the head into the stop moves it away from the stop at once.
 * **Feedback.**  ``'none'`` (the paper: queries go unanswered), ``'at-rest'`` (the family's bench
   notes: correct only when stopped, checksum-valid garbage while moving), ``'always'``.  Replies go
   out in the envelope (D or P) the query came in.

@@ -242,7 +242,14 @@ class _Axis:
         self._extend(plan)
 
     def _extend(self, plan: list[_Seg]) -> None:
-        """Append planned segments (NaN p0 = continue from the previous one), cutting at a stop."""
+        """Append planned segments (NaN p0 = continue from the previous one), cutting at a stop.
+
+        A stop absorbs the head's speed: at a hit the rest of the plan (made for motion through the
+        stop) is dropped, and from the hit the base speed ramps again from rest toward the commanded
+        speed.  Commanded into the stop, the head is held there (pinned); commanded away (a reversal
+        whose deceleration still carried the head into the stop), it leaves at once; commanded to
+        stop, it rests there.
+        """
         for s in plan:
             if s.t1 <= s.t0:
                 continue
@@ -257,8 +264,16 @@ class _Axis:
                     if t_hit > s.t0:
                         s.t1 = t_hit
                         self._append(s)
-                    pushed = self.target_speed * side > 0
-                    self._append(_Seg(t_hit, _INF, stop, 0.0, 0.0, 0.0, side if pushed else 0))
+                    v_target = self.target_speed
+                    if v_target * side < 0:   # commanded away: ramp from rest at the stop
+                        t_reach = t_hit + abs(v_target) / self.accel
+                        self._extend([
+                            _Seg(t_hit, t_reach, stop, 0.0, math.copysign(self.accel, v_target), s.r),
+                            _Seg(t_reach, _INF, math.nan, v_target, 0.0, s.r),
+                        ])
+                    else:
+                        pushed = v_target * side > 0
+                        self._append(_Seg(t_hit, _INF, stop, 0.0, 0.0, 0.0, side if pushed else 0))
                     return
             self._append(s)
 

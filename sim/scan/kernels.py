@@ -11,6 +11,8 @@ Ray status codes (per ray, never a silent NaN):
   :math:`1 - \\eta^2 (1 - \\cos^2\\theta_i)` was negative.  Direction is set to (0, 0, 0).
 * ``RAY_GRAZING`` (2): the ray met a face at or past grazing incidence
   (:math:`\\cos\\theta_i \\le 0`): it does not reach that face from the right side.
+* ``RAY_INVALID`` (3): the ray could not be traced: a prism angle (or an input) was NaN or infinite,
+  so neither test above could decide.  Direction is set to (0, 0, 0), never NaN.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from numba import njit
 RAY_OK = 0
 RAY_TIR = 1
 RAY_GRAZING = 2
+RAY_INVALID = 3
 
 TWO_PI = 2.0 * math.pi
 _SPLIT_BITS = 26
@@ -102,6 +105,7 @@ _HALF_PI = 0.5 * math.pi
 # Ray status as float64 inside the SIMD loops (mixed-width integer selects would not vectorise).
 _F_TIR = float(RAY_TIR)
 _F_GRAZING = float(RAY_GRAZING)
+_F_INVALID = float(RAY_INVALID)
 
 
 @njit(cache=True, inline="always", fastmath=_FASTMATH, error_model="numpy")
@@ -143,7 +147,8 @@ def _refract(dx, dy, dz, mx, my, mz, eta, st):
     """
     ci = dx * mx + dy * my + dz * mz
     k = 1.0 - eta * eta * (1.0 - ci * ci)
-    fail = _F_GRAZING if ci <= 0.0 else (_F_TIR if k < 0.0 else 0.0)
+    # a NaN (from a NaN prism angle) fails every comparison: invalid, not OK
+    fail = _F_GRAZING if ci <= 0.0 else (_F_TIR if k < 0.0 else (0.0 if k >= 0.0 else _F_INVALID))
     st = fail if st == 0.0 else st
     g = eta * ci - math.sqrt(max(k, 0.0))
     return eta * dx - g * mx, eta * dy - g * my, eta * dz - g * mz, st
@@ -154,7 +159,7 @@ def _refract_flat(dx, dy, dz, eta, st):
     """:func:`_refract` for the face perpendicular to the axis (m = +z), with the zeros folded in:
     ``t = (eta dx, eta dy, cos theta_t)``."""
     k = 1.0 - eta * eta * (1.0 - dz * dz)
-    fail = _F_GRAZING if dz <= 0.0 else (_F_TIR if k < 0.0 else 0.0)
+    fail = _F_GRAZING if dz <= 0.0 else (_F_TIR if k < 0.0 else (0.0 if k >= 0.0 else _F_INVALID))
     st = fail if st == 0.0 else st
     return eta * dx, eta * dy, math.sqrt(max(k, 0.0)), st
 
@@ -202,9 +207,10 @@ def _store_block(out_dir, status, j0, m, bx, by, bz, bs):
     st_blk = status[j0:j0 + m]
     for i in range(m):
         keep = 1.0 if bs[i] == 0.0 else 0.0
-        out_blk[3 * i] = bz[i] * keep
-        out_blk[3 * i + 1] = bx[i] * keep
-        out_blk[3 * i + 2] = by[i] * keep
+        nan_free = bs[i] != _F_INVALID   # NaN * 0 is NaN: an invalid ray's zeros are selected
+        out_blk[3 * i] = bz[i] * keep if nan_free else 0.0
+        out_blk[3 * i + 1] = bx[i] * keep if nan_free else 0.0
+        out_blk[3 * i + 2] = by[i] * keep if nan_free else 0.0
         st_blk[i] = np.uint8(bs[i])
 
 
@@ -331,6 +337,7 @@ __all__ = [
     "RAY_OK",
     "RAY_TIR",
     "RAY_GRAZING",
+    "RAY_INVALID",
     "phase_revs_kernel",
     "trace_exact_kernel",
     "scan_exact_kernel",

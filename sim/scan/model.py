@@ -20,6 +20,16 @@ import numpy as np
 from sim.scan import kernels
 from sim.scan.optics import RisleyOptics, SpeedNoise
 
+_INT64_MAX = 2**63 - 1
+
+
+def check_times_fit_ns(k0: int, count: int, rate_hz: int) -> None:
+    """Refuse points whose time ``floor(k * 1e9 / rate)`` [ns] would not fit int64 (about 292 years
+    of scanning): the kernels would wrap it silently."""
+    if count > 0 and ((int(k0) + int(count) - 1) * 1_000_000_000) // int(rate_hz) > _INT64_MAX:
+        raise ValueError(f"points {k0} .. {int(k0) + int(count) - 1} at {rate_hz} points/s are past the int64 "
+                         f"nanosecond clock (about 292 years of scanning)")
+
 SCAN_MODELS = ("exact", "paraxial")
 
 
@@ -34,7 +44,7 @@ class ScanChunk:
     direction : (N, 3) float64     unit beam direction, lidar frame (X fwd, Y left, Z up);
                                    (0, 0, 0) where ``status != RAY_OK``
     channel : (N,) uint8           transceiver channel (Livox line id)
-    status : (N,) uint8            :data:`~sim.scan.kernels.RAY_OK`, ``RAY_TIR`` or ``RAY_GRAZING``
+    status : (N,) uint8            :data:`~sim.scan.kernels.RAY_OK`, ``RAY_TIR``, ``RAY_GRAZING`` or ``RAY_INVALID``
     """
 
     k0: int
@@ -142,6 +152,7 @@ class ScanModel:
         return ((np.arange(count, dtype=np.int64) + (k0 % c)) % c).astype(np.int64)
 
     def times_ns(self, k0: int, count: int) -> np.ndarray:
+        check_times_fit_ns(k0, count, self.optics.point_rate_hz)
         out = np.empty(count, dtype=np.int64)
         kernels.point_times_ns_kernel(int(k0), int(self.optics.point_rate_hz), out)
         return out
@@ -191,6 +202,7 @@ class ScanModel:
             return self.scan_composed(k0, count)
         k0 = int(k0)
         count = int(count)
+        check_times_fit_ns(k0, count, self.optics.point_rate_hz)
         noise = self.speed_noise
         segment_s = 1.0
         if noise is not None and count:

@@ -35,9 +35,23 @@
   head ``k mod 3``; the heads share one prism phase (:attr:`RisleyOptics.head_yaw_deg`).
 
 ``DATASHEET_FOV_DEG`` holds each preset's datasheet FoV; a test holds every preset within 0.5 deg.
+
+Range envelope (``RANGE_ENVELOPE_M``, always on: :class:`sim.sensor.SceneSensor` returns no point
+nearer than the blind zone or farther than the maximum range):
+
+* maximum range: the datasheet range at 80 % reflectivity (``shared/facts/livox.md``, Specs: Mid-40
+  and Horizon 260 m, Tele-15 500 m) carried to 100 % diffuse reflectivity by the facts' own
+  scaling, maximum range ~ sqrt(reflectivity) (130 m at 20 % vs 260 m at 80 %): 290.7 m and 559.0 m.
+  No diffuse target returns from farther (``return_probability`` has its 50 % point for a 100 %
+  target there); the Mid-70, Avia and Mid-100 (not in the facts) take the Mid-40's.
+* blind zone: the facts give none for these units; 1 m is assumed (Livox's public manuals give
+  0.5 m for the later HAP; the Mid-70 is sold on its 0.05 m, taken here).  A scene can set
+  both: ``[lidar] min_range_m`` / ``max_range_m``.
 """
 
 from __future__ import annotations
+
+import math
 
 from sim.scan.optics import Prism, RisleyOptics
 
@@ -137,6 +151,22 @@ MID100 = MID40.with_(name="mid100", point_rate_hz=300_000, channel_offsets_deg=(
 
 PRESETS: dict[str, RisleyOptics] = {"prototype": PROTOTYPE, "mid40": MID40, "horizon": HORIZON, "mid70": MID70,
                                     "avia": AVIA, "tele15": TELE15, "mid100": MID100}
+
+#: Datasheet range at 80 % reflectivity [m] (facts: livox.md, Specs), and the maximum range it gives
+#: at 100 % diffuse reflectivity (range ~ sqrt(reflectivity), the facts' 130 m @ 20 % vs 260 m @ 80 %).
+RANGE_80PCT_M = {"mid40": 260.0, "horizon": 260.0, "tele15": 500.0}
+BLIND_ZONE_M = 1.0   # assumed: not in the facts (module docstring)
+
+
+def _max_range_m(range_80pct_m: float) -> float:
+    return range_80pct_m * math.sqrt(1.0 / 0.8)
+
+
+#: (blind zone, maximum range) [m] per preset (module docstring); custom optics take the Mid-40's.
+RANGE_ENVELOPE_M: dict[str, tuple[float, float]] = {
+    name: (0.05 if name == "mid70" else BLIND_ZONE_M, _max_range_m(RANGE_80PCT_M.get(name, RANGE_80PCT_M["mid40"])))
+    for name in PRESETS}
+DEFAULT_RANGE_ENVELOPE_M = RANGE_ENVELOPE_M["mid40"]
 
 # Multi-line spinning comparison scanners (not Risley; the lidar-IMU calibration): sim/scan/spinning.py.
 from sim.scan.spinning import SPINNING_PRESETS  # noqa: E402,F401

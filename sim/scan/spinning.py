@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.scan.kernels import RAY_OK
-from sim.scan.model import ScanChunk
+from sim.scan.model import ScanChunk, check_times_fit_ns
 
 
 @dataclass(frozen=True)
@@ -87,7 +87,9 @@ class SpinningScanModel:
         az = np.radians((firing % per_turn) * o.azimuth_step_deg)
         ce = self._cos_el[beam]
         direction = np.column_stack([ce * np.cos(az), ce * np.sin(az), self._sin_el[beam]])
-        t_ns = (k * 1_000_000_000) // o.point_rate_hz
+        check_times_fit_ns(k0, count, o.point_rate_hz)
+        rate = int(o.point_rate_hz)   # q / r split: k * 1e9 alone would wrap int64 after 9.2e9 points
+        t_ns = (k // rate) * 1_000_000_000 + ((k % rate) * 1_000_000_000) // rate
         return ScanChunk(k0=int(k0), t_ns=t_ns.astype(np.int64), direction=direction,
                          channel=beam.astype(np.uint8), status=np.full(count, RAY_OK, dtype=np.uint8))
 

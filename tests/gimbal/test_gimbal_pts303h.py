@@ -183,6 +183,31 @@ def test_lower_stop_holds_too_and_a_stop_command_releases_the_push():
     assert h.at_rest(2.5) and h.state_at(2.5).tilt_deg == PARAMS.tilt_min_deg
 
 
+def test_a_reversal_while_braking_into_a_stop_is_honoured():
+    """Driven down at full speed from 0.2 deg above the lower stop and reversed at times spanning
+    the stop hit: the head never passes the stop, rests on it for no sampled instant (the stop
+    absorbs the speed and the reversed command moves it away at once), and ends at least where
+    turning round at the latest (v / accel after the reversal takes effect) would leave it.
+    802524f dropped the reversal once the braking reached the stop: the head stayed at -30 deg."""
+    p = HeadParams(ripple_rel=0.0)
+    stop = p.tilt_min_deg
+    hits = 0
+    for t_rev in np.arange(0.0, 0.301, 0.01):
+        h = PTS303H(p, tilt0_deg=stop + 0.2)
+        v = h.true_speed_deg_s("tilt", 0x3F)
+        h.receive(P.encode_pan_tilt(1, 0, 0, -1, 0x3F), 0.0)
+        h.receive(P.encode_pan_tilt(1, 0, 0, 1, 0x3F), float(t_rev))
+        t = np.linspace(0.0, 3.0, 3001)
+        tilt = h.angles_at(t)[1]
+        assert tilt.min() >= stop
+        hits += tilt.min() == stop
+        assert np.all(tilt[t > t_rev + p.dead_time_s + 1e-3] > stop)
+        ramp_s = v / p.tilt_accel_deg_s2
+        t_up = 3.0 - (t_rev + p.dead_time_s + ramp_s)   # time since the latest turn-round
+        assert tilt[-1] >= stop + 0.5 * v * ramp_s + v * (t_up - ramp_s) - 1e-9
+    assert hits >= 10   # the sweep does reach the stop
+
+
 def test_history_is_bounded_and_causality_is_enforced():
     h = PTS303H()
     h.receive(P.encode_pan_tilt(1, 1, 0x20, 0, 0), 0.0)

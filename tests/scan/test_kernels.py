@@ -196,3 +196,23 @@ def test_swath_painting_matches_twin_and_sweeps_a_strip_of_its_width():
         area = n * 0.01**2
         want = 2.0 * 0.28 + np.pi * 0.14**2
         assert abs(area / want - 1) < 0.02, (ang, area, want)
+
+
+def test_times_past_the_int64_nanosecond_clock_are_refused():
+    """floor(k * 1e9 / rate) past int64 (about 292 years of scanning) is an error, not a silent wrap
+    (802524f wrapped); the last index that fits still gives its exact time, on every route."""
+    from sim.scan.model import ScanModel
+    from sim.scan.presets import PRESETS
+    from sim.scan.spinning import SPINNING_PRESETS, SpinningScanModel
+
+    m = ScanModel(PRESETS["mid40"])
+    rate = PRESETS["mid40"].point_rate_hz
+    k_last = ((2**63 - 1) * rate) // 10**9   # the last index whose time fits
+    assert int(m.times_ns(k_last - 1, 2)[-1]) == (k_last * 10**9) // rate
+    for call in (lambda: m.times_ns(k_last, 2), lambda: m.scan(k_last, 2), lambda: m.scan_composed(k_last, 2)):
+        with pytest.raises(ValueError, match="int64"):
+            call()
+    spin = SpinningScanModel(next(iter(SPINNING_PRESETS.values())))
+    k = 10**10   # k * 1e9 alone would pass int64; the time itself fits
+    got = spin.scan(k, 3).t_ns
+    assert [int(x) for x in got] == [((k + j) * 10**9) // spin.optics.point_rate_hz for j in range(3)]

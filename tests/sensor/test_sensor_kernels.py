@@ -29,11 +29,12 @@ def _rays(seed, n):
 
 @pytest.mark.parametrize("listed", [c for k in range(len(EFFECTS) + 1) for c in itertools.combinations(EFFECTS, k)])
 @pytest.mark.parametrize("n", [0, 1, 4000])
-def test_kernel_matches_twin(listed, n):
+@pytest.mark.parametrize("envelope", [(0.0, np.inf), (5.0, 70.0)])
+def test_kernel_matches_twin(listed, n, envelope):
     prim, status, range_m, d, t_ns, refl = _rays(n + len(listed), n)
     seeds = {e: 100 + i for i, e in enumerate(EFFECTS)}
     twin = returns_twin(prim, status, range_m, d, t_ns, refl, 2,
-                        {e: np.random.default_rng(seeds[e]) for e in listed}, PARAMS)
+                        {e: np.random.default_rng(seeds[e]) for e in listed}, PARAMS, envelope)
     n_hit = sk.count_hits_kernel(prim, status)
     g = {e: np.random.default_rng(seeds[e]) for e in listed}
     draws = {
@@ -48,11 +49,11 @@ def test_kernel_matches_twin(listed, n):
     args = (prim, status, range_m, d, t_ns, fx.range_limit_m(refl, PARAMS["range_80pct_m"]),
             refl_byte, 2, draws["return_probability"], draws["dropouts"], PARAMS["dropout_rate"] if "dropouts" in g else 0.0,
             draws["range_noise"], PARAMS["range_noise_m"], draws["angular_noise"], np.radians(PARAMS["angular_noise_deg"]))
-    k = sk.assemble_returns_kernel(*args, False, *out)
+    k = sk.assemble_returns_kernel(*args, False, *envelope, *out)
     got = tuple(a[:k] for a in out)
     # on the mm grid in the same pass: the bits of quantise_to_mm_grid applied afterwards
     out_mm = (np.empty((n_hit, 3)), np.empty(n_hit, np.int64), np.empty(n_hit, np.uint8), np.empty(n_hit, np.bool_))
-    assert sk.assemble_returns_kernel(*args, True, *out_mm) == k
+    assert sk.assemble_returns_kernel(*args, True, *envelope, *out_mm) == k
     assert np.array_equal(out_mm[0][:k].view(np.int64), quantise_to_mm_grid(got[0]).view(np.int64))
     for a, b in zip(out_mm[1:], got[1:]):
         np.testing.assert_array_equal(a[:k], b)
@@ -65,10 +66,15 @@ def test_kernel_matches_twin(listed, n):
     # the generators end in the same state: the draws were the same calls
     for e in listed:
         twin_g = np.random.default_rng(seeds[e])
-        returns_twin(prim, status, range_m, d, t_ns, refl, 2, {e: twin_g}, PARAMS)
+        returns_twin(prim, status, range_m, d, t_ns, refl, 2, {e: twin_g}, PARAMS, envelope)
         assert g[e].bit_generator.state == twin_g.bit_generator.state
     if "return_probability" in listed and n > 100:
         assert 0 < k < n_hit                     # past the range limit some returns are lost
+    if n > 100:   # every point inside the envelope (on the measured range); with one, some left out
+        r_out = np.linalg.norm(got[0], axis=1)
+        assert np.all((r_out >= envelope[0] - 1e-9) & (r_out <= envelope[1] + 1e-9))
+        if envelope[1] < np.inf and not listed:
+            assert k < n_hit
 
 
 def test_mm_grid_kernel_is_quantise_to_mm_grid_to_the_bit():

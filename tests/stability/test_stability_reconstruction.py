@@ -16,7 +16,9 @@ Bounds asserted (4 h of virtual time, commands changing every 0.5-20 s, pan and 
 * against the PTS-303H device model (its own speed table, acceleration and dead time, no ripple):
   pan within 1e-6 deg after 2 h of random commands;
 * every rotation R (at any pan up to 1e12 deg and at every check of the 4 h run) has
-  |R R^T - I| <= 1e-12 and |det R - 1| <= 1e-12.
+  |R R^T - I| <= 1e-12 and |det R - 1| <= 1e-12;
+* the history limit: an instant inside ``history_s`` of the newest command is answered to the bit as
+  by a reckoning that keeps everything; one before the kept commands is NaN with infinite sigma.
 """
 
 from __future__ import annotations
@@ -147,3 +149,43 @@ def test_reconstruction_follows_the_device_model_for_two_hours(unit_seed, seed):
             worst = max(worst, abs(deg_diff(rec.angles_at(float(tc))[0], truth)))
         t += dt
     assert worst <= 1e-6
+
+
+# ------------------------------------------------------------------------------------------------
+# the history limit
+
+
+@examples(20)
+@given(st.integers(0, 2**32 - 1), st.floats(5.0, 60.0))
+def test_history_limit_answers_unknown_never_a_confident_angle(seed, history_s):
+    """Random commands for 5 history lengths: an instant inside the kept history is answered to the
+    bit as by a reckoning that keeps everything; an instant before it is NaN with infinite sigma
+    (802524f answered the oldest kept knot's angle with its small sigma: 127.7 deg, sigma 0,
+    against 87.6 deg).  Before any trim, an instant before the start is the start pose."""
+    table = SpeedTable.nominal()
+    kw = dict(pan0_deg=10.0, tilt0_deg=5.0, sigma0_deg=0.1, tilt_limits_deg=(-30.0, 60.0))
+    rec = Reconstructor(table, history_s=history_s, **kw)
+    full = Reconstructor(table, history_s=math.inf, **kw)
+    assert rec.angles_at(-1.0) == full.angles_at(-1.0) == (10.0, 5.0, 0.1, 0.1)
+    rng = np.random.default_rng(seed)
+    t, end = 0.0, 5.0 * history_s
+    while t < end:
+        dp, dt = int(rng.integers(-1, 2)), int(rng.integers(-1, 2))
+        cmd = HeadCommand(dp, int(rng.integers(1, 64)) if dp else 0, dt, int(rng.integers(1, 64)) if dt else 0)
+        rec.on_command(t, cmd)
+        full.on_command(t, cmd)
+        t_cmd = t
+        t += float(rng.uniform(0.1, history_s / 4))
+        for tc in rng.uniform(0.0, t, 8):
+            tc = float(tc)
+            got, want = rec.angles_at(tc), full.angles_at(tc)
+            if tc >= t_cmd - history_s:   # inside the promised history: untouched by the trim
+                assert got == want
+                continue
+            for k, axis in enumerate((rec.pan, rec.tilt)):
+                if axis.times[0] > 0.0 and tc < axis.times[0]:   # the start was trimmed: unknown
+                    assert math.isnan(got[k]) and got[k + 2] == math.inf
+                else:   # older than promised but still kept: still right
+                    assert got[k] == want[k] and got[k + 2] == want[k + 2]
+    old = rec.angles_at(-1.0)
+    assert math.isnan(old[0]) and math.isnan(old[1]) and old[2] == old[3] == math.inf

@@ -11,6 +11,7 @@ boundary.
 Bounds asserted
 ---------------
 * status is RAY_OK / RAY_TIR / RAY_GRAZING, never anything else; no NaN or inf ever comes out;
+* a NaN or infinite prism angle: RAY_INVALID with a (0, 0, 0) direction; the rays beside it unchanged;
 * valid rays are unit vectors to 1e-12; invalid rays are exactly (0, 0, 0);
 * kernel and twin agree on the status of every ray farther than 1e-12 from a boundary, and on the
   direction to 1e-12 (4e-8 when the TIR radicand is below 1e-6, where sqrt amplifies rounding:
@@ -30,7 +31,7 @@ from hypothesis import strategies as st
 
 from scan_twins import trace_exact_twin
 from sim.scan import kernels
-from sim.scan.kernels import RAY_GRAZING, RAY_OK, RAY_TIR, trace_exact_kernel
+from sim.scan.kernels import RAY_GRAZING, RAY_INVALID, RAY_OK, RAY_TIR, trace_exact_kernel
 from sim.scan.model import ScanModel
 from sim.scan.optics import Prism, RisleyOptics
 from stability_util import angle_between, examples
@@ -274,3 +275,31 @@ def test_mixed_stack_has_both_statuses_and_only_valid_rays_count():
     assert np.all(np.abs(np.linalg.norm(chunk.direction[chunk.valid], axis=1) - 1) <= 1e-12)
     par = ScanModel(optics, model="paraxial").scan(0, 20_000)
     assert par.valid.all() and np.all(np.abs(np.linalg.norm(par.direction, axis=1) - 1) <= 1e-12)
+
+
+# ------------------------------------------------------------------------------------------------
+# prism angles that are not numbers
+
+
+@examples(40)
+@given(st.integers(0, 2**32 - 1), st.sampled_from([math.nan, math.inf, -math.inf]), st.booleans())
+def test_non_finite_prism_angles_are_invalid_rays_not_ok_nans(seed, bad, second_prism):
+    """A NaN or infinite prism angle gives RAY_INVALID and a (0, 0, 0) direction (802524f: RAY_OK with
+    a NaN direction), in the kernel and its twin; the finite rays beside
+    them are the same bits as when traced alone."""
+    rng = np.random.default_rng(seed)
+    n = 64
+    revs = rng.uniform(0, 1, (n, 2))
+    bad_rows = rng.random(n) < 0.3
+    revs_bad = revs.copy()
+    revs_bad[bad_rows, int(second_prism)] = bad
+    args = (np.zeros(n, np.int64), np.array([[0.0, 0.0, 1.0]]), np.array([18.0, 18.0]), [1.51, 1.51],
+            [True, False])
+    d_k, s_k = _run_kernel(revs_bad, *args)
+    d_t, s_t = _run_twin(revs_bad, *args)
+    assert np.all(s_k[bad_rows] == RAY_INVALID) and np.all(s_t[bad_rows] == RAY_INVALID)
+    assert np.all(d_k[bad_rows] == 0.0) and np.all(d_t[bad_rows] == 0.0)
+    assert np.all(np.isfinite(d_k)) and np.all(np.isfinite(d_t))
+    d_ok, s_ok = _run_kernel(revs, *args)
+    assert np.array_equal(d_k[~bad_rows].view(np.int64), d_ok[~bad_rows].view(np.int64))
+    assert np.array_equal(s_k[~bad_rows], s_ok[~bad_rows])

@@ -78,7 +78,7 @@ def test_unlisted_effects_draw_nothing_and_cost_nothing(monkeypatch):
     scene = short("fig14a-frozen-pass", 1.0, effects=frozenset())
     loop_a, log_a = _run(scene)
     assert all(v == 0 for v in loop_a.draw_calls.values())
-    assert loop_a.scan.noise_draws == 0 and loop_a.uart.rng is None
+    assert loop_a.scan.noise_draws == 0 and loop_a.uart.rngs == {}
     # With the effects' code paths removed altogether, the run is identical.
     for name in ("return_draws", "dropout_draws", "range_noise_draws", "angular_noise_draws", "footprint_offsets"):
         monkeypatch.setattr(fx, name, lambda *a, **k: pytest.fail("an unlisted effect was called"))
