@@ -137,10 +137,11 @@ class _Receiver(threading.Thread):
                     if b.epoch != self.epoch:
                         if self.first_t_ns is not None:
                             self.span_done_ns += self.last_t_ns - self.first_t_ns
-                        self.epoch, self.first_t_ns = b.epoch, None
+                        self.epoch, self.first_t_ns, self.last_t_ns = b.epoch, None, None
                     if self.first_t_ns is None:
                         self.first_t_ns = int(b.t_ns[0])
-                    self.last_t_ns = t_last
+                    # a late packet is handed on after newer ones (sensor_time): the span ends at the newest
+                    self.last_t_ns = t_last if self.last_t_ns is None else max(self.last_t_ns, t_last)
                     self.points_in += len(b)
                     xyz, t_ns, refl = b.xyz, b.t_ns, b.reflectivity
                     ret = np.any(xyz != 0.0, axis=1)
@@ -606,6 +607,7 @@ class Daemon:
             d.update({f"lidar_{k}": v for k, v in rx.counters.items()})
             d["queue_dropped_batches"] = rx.dropped_batches
             d["queue_dropped_points"] = rx.dropped_points
+            d["lidar_points_accepted"] = rx.points_in     # past the clock guard (sensor_time)
             if rx.first_t_ns is not None and rate_known(self):
                 span = (rx.last_t_ns - rx.first_t_ns + rx.span_done_ns) * 1e-9
                 expected = span * self.client.decoder.point_rate_hz
