@@ -257,6 +257,9 @@ class Daemon:
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
         self.rx = _Receiver(self.client, self.q, self.stop_ev)
         self.rx.want_imu = self.imu_feed is not None
+        # IMU packets are held only for a tracker that takes its attitude from them (issue 26: every
+        # packet of a Horizon was kept otherwise, ~1 MB/min)
+        self.client.decoder.keep_imu = self.rx.want_imu
 
     def _open_live(self) -> None:
         """The live view: a second sink of the recording's channels (a writer without a file when
