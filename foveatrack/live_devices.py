@@ -47,6 +47,10 @@ def open_head(config):
         head = HeadClient(open_path, baud=h.baud, address=h.address, protocol=h.protocol, open_guard=guard)
     except GimbalError as exc:
         raise UserError(f"{config.path} [head]: {exc}") from None
+    if not head.connected and head.stats.open_locked:
+        raise UserError(f"{config.path} [head]: port {h.port!r} is in use by another process (it holds the port's "
+                        "exclusive lock): another daemon or program drives this head; stop it first, or give "
+                        "this one its own head")
     if not head.connected:
         # A port that is wrong at start (a typo, an adapter not plugged in, a regular file, a server not
         # started) would otherwise leave the driver commanding no head, silently: the link reconnects by

@@ -498,6 +498,7 @@ class Daemon:
         last_watchdog_stop = -1e9
         head_up = self.head.connected
         last_refusals, last_refusal_log = 0, -math.inf
+        last_locked, last_lock_log = 0, -math.inf
         lidar_up = False
         frame_times = deque(maxlen=50)
         pending: deque = deque()
@@ -567,6 +568,14 @@ class Daemon:
                 if not silent and watchdog_tripped:
                     watchdog_tripped = False
                     self.log.event("lidar_resumed")
+                locked = getattr(self.head.stats, "open_locked", 0)
+                if locked != last_locked:
+                    # another process took the head's port while its link was down: never written to
+                    if last_locked == 0 or now - last_lock_log >= 10.0:
+                        self.log.event("head_locked", port=c.head.port, reason=self.head.client.last_open_error,
+                                       attempts=locked)
+                        last_lock_log = now
+                    last_locked = locked
                 refusals = self.head.stats.open_refusals
                 if refusals != last_refusals:
                     # another device holds the head's path: never written to (foveatrack.serial_identity)
