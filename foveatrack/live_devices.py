@@ -195,8 +195,8 @@ class LidarStream:
     def counters(self) -> dict:
         """The clock guard's counters (``clock_jumps``, ``lost_slots``, ``late_points``,
         ``duplicate_points``, ``stale_points``, ``early_points``, ``bad_time_points``, each kind also
-        as ``*_segments``: :mod:`foveatrack.sensor_time`)."""
-        return dict(self.guard.counters)
+        as ``*_segments``: :mod:`foveatrack.sensor_time`) and ``accepted_points``."""
+        return {**self.guard.counters, "accepted_points": self.guard.accepted_points}
 
     def poll(self, timeout_s: float) -> tuple[float, list]:
         """``(host monotonic time, [Accepted, ...])`` of what arrived within ``timeout_s``."""

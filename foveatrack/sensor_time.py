@@ -337,6 +337,13 @@ class SensorTimeGuard:
             self.counters["lost_slots"] -= before - after
             self._starts.insert(g + 1, int(tg[0]))
             self._ends.insert(g + 1, int(tg[-1]))
+            # a gap filled whole joins its neighbours: a stream of swapped packets stays one interval
+            if self._missing(int(tg[-1]), b) == 0 and self._missing_inside(tg) == 0:
+                self._ends[g + 1] = self._ends[g + 2]
+                del self._starts[g + 2], self._ends[g + 2]
+            if self._missing(a, int(tg[0])) == 0:
+                self._ends[g] = self._ends[g + 1]
+                del self._starts[g + 1], self._ends[g + 1]
         self._keep(xyz, t, refl)
 
     def _keep(self, xyz, t, refl) -> None:

@@ -313,3 +313,12 @@ def test_memory_is_bounded_under_loss():
     sent = [p for k, p in enumerate(wire(20000)) if k % 3]    # a third of the packets lost, 20 s
     deliver(g, sent)
     assert len(g._starts) <= 1.0 * 1000 and g.held_points == 0
+
+
+def test_filled_gaps_join_so_what_is_remembered_stays_small():
+    g = SensorTimeGuard(point_rate_hz=RATE)
+    sent = wire(3000)
+    for k in range(1, 2999, 2):                               # every pair swapped
+        sent[k], sent[k + 1] = sent[k + 1], sent[k]
+    deliver(g, sent, 1)
+    assert len(g._starts) == 1 and g.counters["lost_slots"] == 0

@@ -619,7 +619,6 @@ class Daemon:
             d.update({f"lidar_{k}": v for k, v in rx.counters.items()})
             d["queue_dropped_batches"] = rx.dropped_batches
             d["queue_dropped_points"] = rx.dropped_points
-            d["lidar_points_accepted"] = rx.points_in     # past the clock guard (sensor_time)
             if rx.first_t_ns is not None and rate_known(self):
                 span = (rx.last_t_ns - rx.first_t_ns + rx.span_done_ns) * 1e-9
                 expected = span * self.client.decoder.point_rate_hz

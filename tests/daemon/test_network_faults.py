@@ -59,7 +59,7 @@ def _run(tmp_path, fault):
         wait_for(lambda: state.exists(), 120, "the fault to be over", list(procs.values()))
         frames = lambda: ([e["frames"] for e in log_events(log) if e["event"] == "progress"] or [0])[-1]  # noqa: E731
         f0 = frames()
-        wait_for(lambda: frames() >= f0 + 10, 60, "10 more frames", list(procs.values()))
+        wait_for(lambda: frames() >= f0 + 15, 60, "15 more frames", list(procs.values()))
         assert terminate(procs["lidar"]) == 0, (tmp_path / "l.err").read_text()
         drops = udp_drops(data_port)
         assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
@@ -105,7 +105,8 @@ def test_a_network_fault_is_counted_by_name_and_loses_no_real_point(tmp_path, fa
     t = np.array([d["t_ns"] for d in dets])
     assert np.all(np.diff(t) == 100_000_000)           # every frame, in order
     detected = np.array([d["detected"] for d in dets])
-    assert len(detected) >= 60 and detected[30:].mean() >= 0.9, (len(detected), np.flatnonzero(~detected))
+    during = detected[t >= 2.9e9]                     # the fault starts 3 s into the lidar's stream
+    assert len(during) >= 25 and during.mean() >= 0.9, (len(during), np.flatnonzero(~detected))
     # what was recorded is the real stream: each point once (a duplicate recorded twice as many), in order
     for fr in RecordingReader(rec).points():
         assert np.all(np.diff(fr.t_ns_points) > 0), fr.frame_index
