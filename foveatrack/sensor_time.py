@@ -145,6 +145,7 @@ class SensorTimeGuard:
         self._starts: list[int] = []           # accepted intervals [start, end] of the last memory_s
         self._ends: list[int] = []
         self._tail: list = []                  # accepted (xyz, t, refl) not yet handed on
+        self._tail_sorted = True               # ... in time order (no late packet among them)
         self._cand = _Candidate()
         self.accepted_points = 0
         self.counters: Counter = Counter(
@@ -298,12 +299,17 @@ class SensorTimeGuard:
         first, last = int(t[0]), int(t[-1])
         if self.last_t_ns is not None:
             self.counters["lost_slots"] += self._missing(self.last_t_ns, first)
-        self.counters["lost_slots"] += self._missing_inside(t)
         # remembered as runs without a missing slot: a late packet may still fill any hole
         gap_ok = 1.5 * self.slot_ns if self.slot_ns else MIN_CUT_S * 1e9
-        holes = np.flatnonzero(np.diff(t) > gap_ok) + 1
-        run_starts = [first, *t[holes].tolist()]
-        run_ends = [*t[holes - 1].tolist(), last]
+        d = np.diff(t)
+        holes = np.flatnonzero(d > gap_ok)
+        if holes.size:
+            if self.slot_ns is not None:
+                self.counters["lost_slots"] += int(np.sum(np.rint(d[holes] / self.slot_ns) - 1))
+            run_starts = [first, *t[holes + 1].tolist()]
+            run_ends = [*t[holes].tolist(), last]
+        else:
+            run_starts, run_ends = [first], [last]
         if self._ends and run_starts[0] - self._ends[-1] <= gap_ok:
             self._ends[-1] = run_ends[0]
             run_starts, run_ends = run_starts[1:], run_ends[1:]
@@ -344,11 +350,12 @@ class SensorTimeGuard:
             if self._missing(a, int(tg[0])) == 0:
                 self._ends[g] = self._ends[g + 1]
                 del self._starts[g + 1], self._ends[g + 1]
-        self._keep(xyz, t, refl)
+        self._keep(xyz, t, refl, in_order=False)
 
-    def _keep(self, xyz, t, refl) -> None:
+    def _keep(self, xyz, t, refl, in_order: bool = True) -> None:
         self.accepted_points += len(t)
         self._tail.append((xyz, t, refl))
+        self._tail_sorted &= in_order
 
     def _emit(self, out: list[Accepted], upto_ns: int | None) -> None:
         """Hand on the held points at or before ``upto_ns`` (None: all), in time order."""
@@ -360,9 +367,10 @@ class SensorTimeGuard:
             xyz = np.concatenate([p[0] for p in self._tail])
             t = np.concatenate([p[1] for p in self._tail])
             refl = np.concatenate([p[2] for p in self._tail])
-        if t.size > 1 and np.any(np.diff(t) < 0):
+        if not self._tail_sorted:               # a late packet is among them
             o = np.argsort(t, kind="stable")
             xyz, t, refl = xyz[o], t[o], refl[o]
+            self._tail_sorted = True
         n = t.size if upto_ns is None else int(np.searchsorted(t, upto_ns, side="right"))
         self._tail = [(xyz[n:], t[n:], refl[n:])] if n < t.size else []
         if n == 0:
