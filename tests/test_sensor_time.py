@@ -126,7 +126,7 @@ def test_the_stream_via_livestream_resets_the_offset_on_a_new_clock():
     assert off0 == pytest.approx(s.last_packet_mono - 500.0 - 0.03 + 1e-5, abs=0.05)
     # the unit restarts: its new clock streams in real time, and is re-anchored once it has run
     # alone for the guard's confirm time (host time)
-    got, t_new = [], time.monotonic()
+    got = []
     for k in range(40):
         xyz, t, r = packets(0.01 * k, 10)
         c.batches = [PointBatch(xyz, r, t, r)]
@@ -134,7 +134,7 @@ def test_the_stream_via_livestream_resets_the_offset_on_a_new_clock():
         if s.epoch:
             break
         time.sleep(0.01)
-    assert s.epoch == 1 and time.monotonic() - t_new < 1.0
+    assert s.epoch == 1          # (how soon, in host time: test_a_restart_is_still_detected_within_a_second...)
     assert got[-1].epoch == 1 and s.offset_s == pytest.approx(off0 + 500.0, abs=0.6)
 
 
