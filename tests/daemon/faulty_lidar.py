@@ -11,8 +11,6 @@ import sys
 from collections import deque
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from foveatrack.livox.protocol import HEADER_DTYPE, IMU_DATA_TYPE   # noqa: E402
