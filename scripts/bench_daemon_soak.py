@@ -74,6 +74,15 @@ def rss_mb(pid: int) -> float | None:
     return None
 
 
+def cpu_s(pid: int) -> float | None:
+    """User + system CPU time the process used so far [s]."""
+    try:
+        f = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+        return (int(f[11]) + int(f[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=5.0)
@@ -146,6 +155,7 @@ watchdog_s = 2.0
                               env=env, stdout=subprocess.DEVNULL, stderr=open(out / "soak.err", "w"), cwd=ROOT)
     lidar.start()
     rss: list[tuple[float, float]] = []
+    cpu: list[tuple[float, float]] = []     # (run time, the daemon's CPU time so far) [s]
     loads: list[float] = []
     t0 = None
     try:
@@ -165,6 +175,7 @@ watchdog_s = 2.0
             r = rss_mb(daemon.pid)
             if r is not None:
                 rss.append((now - t0, r))
+                cpu.append((now - t0, cpu_s(daemon.pid)))
             loads.append(os.getloadavg()[0])
             if now >= next_minute:
                 print(f"  minute {int((now - t0) // 60)}: RSS {r:.1f} MB, load {os.getloadavg()[0]:.2f}", flush=True)
@@ -185,18 +196,20 @@ watchdog_s = 2.0
     import json
 
     stats = next((json.loads(x)["stats"] for x in log.read_text().splitlines() if '"event": "stop"' in x), {})
-    lat_by_frame: dict[int, float] = {}
+    # latency by minute of the lidar's stream (its clock starts at 0 with the run): frames are skipped
+    # when the daemon falls behind, so frame numbers do not count minutes
+    t_s, lat = [], []
     if not args.no_record:
         for m in RecordingReader(rec).messages("metrics"):
             if m.record.get("name") == "latency_ms":
-                lat_by_frame[int(m.record["frame_id"])] = float(m.record["value"])
-    fids = np.array(sorted(lat_by_frame))
-    lat = np.array([lat_by_frame[f] for f in fids])
+                t_s.append(m.t_ns * 1e-9)
+                lat.append(float(m.record["value"]))
+    t_s, lat = np.array(t_s), np.array(lat)
     minutes = int(np.ceil(args.minutes))
-    print(f"\n| minute | frames | latency p50 [ms] | p99 [ms] | max [ms] | RSS at end [MB] |")
-    print("|---:|---:|---:|---:|---:|---:|")
+    print("\n| minute | frames processed (of 600) | latency p50 [ms] | p99 [ms] | max [ms] | RSS at end [MB] | daemon CPU [% of a core] |")
+    print("|---:|---:|---:|---:|---:|---:|---:|")
     for k in range(minutes):
-        sel = (fids >= k * 600) & (fids < (k + 1) * 600)
+        sel = (t_s >= k * 60.0) & (t_s < (k + 1) * 60.0)
         r_end = [r for t, r in rss if t <= (k + 1) * 60.0]
         row = [f"{k + 1}", f"{int(sel.sum())}"]
         if sel.any():
@@ -205,6 +218,8 @@ watchdog_s = 2.0
         else:
             row += ["-", "-", "-"]
         row.append(f"{r_end[-1]:.1f}" if r_end else "-")
+        c = [(t, x) for t, x in cpu if k * 60.0 - 5.0 < t <= (k + 1) * 60.0 + 1e-6 and x is not None]
+        row.append(f"{100.0 * (c[-1][1] - c[0][1]) / (c[-1][0] - c[0][0]):.0f}" if len(c) >= 2 else "-")
         print("| " + " | ".join(row) + " |")
     after = [(t, r) for t, r in rss if t >= 60.0]
     if len(after) >= 2:
