@@ -47,6 +47,10 @@ def open_head(config):
         head = HeadClient(open_path, baud=h.baud, address=h.address, protocol=h.protocol, open_guard=guard)
     except GimbalError as exc:
         raise UserError(f"{config.path} [head]: {exc}") from None
+    if not head.connected and head.stats.open_locked:
+        raise UserError(f"{config.path} [head]: port {h.port!r} is in use by another process (it holds the port's "
+                        "exclusive lock): another daemon or program drives this head; stop it first, or give "
+                        "this one its own head")
     if not head.connected:
         # A port that is wrong at start (a typo, an adapter not plugged in, a regular file, a server not
         # started) would otherwise leave the driver commanding no head, silently: the link reconnects by
@@ -189,8 +193,10 @@ class LidarStream:
 
     @property
     def counters(self) -> dict:
-        """The clock guard's counters (``clock_jumps``, ``bad_time_segments``, ``bad_time_points``)."""
-        return dict(self.guard.counters)
+        """The clock guard's counters (``clock_jumps``, ``lost_slots``, ``late_points``,
+        ``duplicate_points``, ``stale_points``, ``early_points``, ``bad_time_points``, each kind also
+        as ``*_segments``: :mod:`foveatrack.sensor_time`) and ``accepted_points``."""
+        return {**self.guard.counters, "accepted_points": self.guard.accepted_points}
 
     def poll(self, timeout_s: float) -> tuple[float, list]:
         """``(host monotonic time, [Accepted, ...])`` of what arrived within ``timeout_s``."""
@@ -204,16 +210,15 @@ class LidarStream:
         # the slot rate is the unit's (the client learns its model at the handshake)
         rate = getattr(getattr(self.client, "decoder", None), "point_rate_hz", None)
         self.guard.slot_ns = 1e9 / rate if rate else None
+        accepted = self.guard.accepted_points
         for b in batches:
             if len(b):
                 out.extend(self.guard.push(b.xyz, b.t_ns, b.reflectivity, now))
-        for a in out:
-            # only points with believable times feed the watchdog and the clock offset
+        if self.guard.accepted_points != accepted:
+            # only points with believable times feed the watchdog and the clock offset (the guard's:
+            # its newest accepted point, of the current clock; a new clock is measured afresh)
             self.last_packet_mono = now
-            off = now - int(a.t_ns[-1]) * 1e-9
-            if a.epoch != getattr(self, "_offset_epoch", 0):
-                self._offset_epoch, self.offset_s = a.epoch, None   # a new sensor clock: measure afresh
-            self.offset_s = off if self.offset_s is None else min(self.offset_s, off)
+            self.offset_s = self.guard.offset_s
         return now, out
 
     def take_jumps(self) -> list:

@@ -62,6 +62,7 @@ class ClientStats:
     bad_replies: int = 0  # checksum-valid replies whose word is not an angle
     open_failures: int = 0
     open_refusals: int = 0  # reopens the open_guard refused (another device now holds the path)
+    open_locked: int = 0  # opens refused because another process holds the port's exclusive lock
     opens: int = 0
     disconnects: int = 0
 
@@ -145,14 +146,22 @@ class HeadClient:
                 self.stats.open_refusals += 1
                 self.last_open_error = why
                 return False
+        # A device path is locked (flock, pyserial's exclusive): a second process (another daemon with
+        # the same [head] port) cannot open it and write a STOP into a head the first one drives.
+        # URLs (socket://, rfc2217://) have no lock to take.
+        lock = {} if "://" in self.url else {"exclusive": True}
         try:
             self._ser = serial.serial_for_url(
                 self.url, baudrate=self.baud, timeout=_READ_SLICE_S,
-                write_timeout=self.write_timeout_s,
+                write_timeout=self.write_timeout_s, **lock,
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             self.stats.open_failures += 1
             self.last_open_error = str(exc) or type(exc).__name__
+            if lock and "exclusively lock" in self.last_open_error:
+                self.stats.open_locked += 1
+                self.last_open_error = (f"{self.url} is in use by another process, which holds its exclusive "
+                                        f"lock ({self.last_open_error})")
             self._ser = None
             return False
         self.stats.opens += 1

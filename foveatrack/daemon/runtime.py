@@ -137,10 +137,11 @@ class _Receiver(threading.Thread):
                     if b.epoch != self.epoch:
                         if self.first_t_ns is not None:
                             self.span_done_ns += self.last_t_ns - self.first_t_ns
-                        self.epoch, self.first_t_ns = b.epoch, None
+                        self.epoch, self.first_t_ns, self.last_t_ns = b.epoch, None, None
                     if self.first_t_ns is None:
                         self.first_t_ns = int(b.t_ns[0])
-                    self.last_t_ns = t_last
+                    # a late packet is handed on after newer ones (sensor_time): the span ends at the newest
+                    self.last_t_ns = t_last if self.last_t_ns is None else max(self.last_t_ns, t_last)
                     self.points_in += len(b)
                     xyz, t_ns, refl = b.xyz, b.t_ns, b.reflectivity
                     ret = np.any(xyz != 0.0, axis=1)
@@ -257,6 +258,9 @@ class Daemon:
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
         self.rx = _Receiver(self.client, self.q, self.stop_ev)
         self.rx.want_imu = self.imu_feed is not None
+        # IMU packets are held only for a tracker that takes its attitude from them (issue 26: every
+        # packet of a Horizon was kept otherwise, ~1 MB/min)
+        self.client.decoder.keep_imu = self.rx.want_imu
 
     def _open_live(self) -> None:
         """The live view: a second sink of the recording's channels (a writer without a file when
@@ -495,6 +499,7 @@ class Daemon:
         last_watchdog_stop = -1e9
         head_up = self.head.connected
         last_refusals, last_refusal_log = 0, -math.inf
+        last_locked, last_lock_log = 0, -math.inf
         lidar_up = False
         frame_times = deque(maxlen=50)
         pending: deque = deque()
@@ -564,6 +569,14 @@ class Daemon:
                 if not silent and watchdog_tripped:
                     watchdog_tripped = False
                     self.log.event("lidar_resumed")
+                locked = getattr(self.head.stats, "open_locked", 0)
+                if locked != last_locked:
+                    # another process took the head's port while its link was down: never written to
+                    if last_locked == 0 or now - last_lock_log >= 10.0:
+                        self.log.event("head_locked", port=c.head.port, reason=self.head.client.last_open_error,
+                                       attempts=locked)
+                        last_lock_log = now
+                    last_locked = locked
                 refusals = self.head.stats.open_refusals
                 if refusals != last_refusals:
                     # another device holds the head's path: never written to (foveatrack.serial_identity)

@@ -48,7 +48,7 @@ import datetime as _dt
 import ipaddress
 import struct
 import zlib
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
@@ -458,6 +458,8 @@ POINTS_PER_PACKET = {0: 100, 1: 100, 2: 96, 3: 96, 4: 48, 5: 48, 6: 1, 7: 30, 8:
 #: Returns per time slot of each point data type (dual 2, triple 3).
 RETURNS_PER_SLOT = {0: 1, 1: 1, 2: 1, 3: 1, 4: 2, 5: 2, 7: 3, 8: 3}
 IMU_DATA_TYPE = 6
+#: IMU packets a :class:`DataDecoder` holds for its reader at most: 10 s at the units' 200 Hz
+IMU_QUEUE_PACKETS = 2000
 POINT_DATA_TYPES = (0, 1, 2, 3, 4, 5, 7, 8)
 CARTESIAN_TYPES = (0, 2, 4, 7)
 SPHERICAL_TYPES = (1, 3, 5, 8)
@@ -630,25 +632,35 @@ class DataDecoder:
 
     point_rate_hz : float > 0 [points/s], the sensor's single-return point rate (gives per-point time)
     keep_no_return : keep (0, 0, 0) points (default: drop and count them)
+    keep_imu : hold IMU packets for :meth:`take_imu` (a reader that takes none sets it False: a
+        Horizon, Avia or Tele-15 streams 200 packets/s, ~1 MB/min that nothing would free)
+    imu_queue_packets : int >= 1, the most IMU packets held; beyond, the oldest go (counted)
 
     ``counters``: packets (accepted point packets), points (points returned), imu_packets,
+    imu_packets_unused (not held: ``keep_imu`` False), imu_packets_dropped (the queue was full),
     wire_points = returns + no_return_points (kept or not), and ``dropped`` {reason: count}.
     """
 
     point_rate_hz: float = 240_000.0
     keep_no_return: bool = False
+    keep_imu: bool = True
+    imu_queue_packets: int = IMU_QUEUE_PACKETS
     counters: Counter = field(default_factory=Counter)
     dropped: Counter = field(default_factory=Counter)
 
     def __post_init__(self) -> None:
         if not self.point_rate_hz > 0:
             raise UserError(f"point_rate_hz must be > 0, got {self.point_rate_hz!r}")
+        if not self.imu_queue_packets >= 1:
+            raise UserError(f"imu_queue_packets must be >= 1, got {self.imu_queue_packets!r}")
         self.last_err_code: int | None = None  # status code (err_code) of the newest accepted packet
-        self._imu: list[bytes] = []
+        self._imu: deque = deque(maxlen=int(self.imu_queue_packets))
 
     def take_imu(self) -> "ImuBatch":
-        """The IMU samples (data type 6) decoded since the last call, in arrival order."""
-        bufs, self._imu = self._imu, []
+        """The IMU samples (data type 6) decoded since the last call, in arrival order (at most the
+        newest ``imu_queue_packets``; nothing while ``keep_imu`` is False)."""
+        bufs = list(self._imu)
+        self._imu.clear()
         return decode_imu_packets(bufs)
 
     def decode(self, datagrams: Iterable[bytes]) -> list[PointBatch]:
@@ -662,6 +674,11 @@ class DataDecoder:
             self.last_err_code = int.from_bytes(buf[4:8], "little")
             if dt == IMU_DATA_TYPE:
                 self.counters["imu_packets"] += 1
+                if not self.keep_imu:
+                    self.counters["imu_packets_unused"] += 1
+                    continue
+                if len(self._imu) == self._imu.maxlen:
+                    self.counters["imu_packets_dropped"] += 1     # the oldest: nobody took them
                 self._imu.append(bytes(buf))
                 continue
             if runs and runs[-1][0] == dt:
