@@ -41,6 +41,19 @@ def check_output_file(path, flag: str) -> None:
         raise UserError(f"{flag} {path}: the directory {parent} is not writable")
 
 
+def output_dir(path, flag: str):
+    """The output directory ``path`` (given with ``flag``), created if missing; a UserError naming the
+    flag when it cannot be.  Returns it as a Path."""
+    from pathlib import Path
+
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"{flag} {out}: cannot create the directory ({exc.strerror or exc})") from None
+    return out
+
+
 def check_keys(data: Mapping, allowed: Sequence[str], where: str) -> None:
     if not isinstance(data, Mapping):
         raise UserError(f"{where}: expected a table/mapping, got {type(data).__name__}")

@@ -71,11 +71,9 @@ def cmd_replay(args) -> int:
     if args.plot:
         from foveatrack.cli.replay_plots import plot_all
 
-        out = Path(args.plot)
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise UserError(f"--plot {out}: cannot create the directory ({exc.strerror})") from None
+        from foveatrack.config_util import output_dir
+
+        out = output_dir(args.plot, "--plot")
         for f in plot_all(res, out):
             notes.append(f"plot -> {f}")
     if args.json:

@@ -44,11 +44,9 @@ def cmd_accuracy_vs_time(args) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers {args.workers}: must be >= 1")
-    out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UserError(f"--out {out}: cannot create the directory ({exc})") from None
+    from foveatrack.config_util import output_dir
+
+    out = output_dir(args.out, "--out")
     if args.from_json:
         try:
             saved = json.loads(Path(args.from_json).read_text())

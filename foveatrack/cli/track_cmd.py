@@ -36,7 +36,6 @@ def register(sub) -> None:
 
 def cmd_track(args) -> int:
     import json
-    from pathlib import Path
 
     from foveatrack.config_util import check_output_file, read_toml
     from foveatrack.errors import UserError
@@ -91,11 +90,9 @@ def cmd_track(args) -> int:
     if args.plot:
         from foveatrack.cli.track_plots import plot_all
 
-        out = Path(args.plot)
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise UserError(f"--plot {out}: cannot create the directory ({exc.strerror})") from None
+        from foveatrack.config_util import output_dir
+
+        out = output_dir(args.plot, "--plot")
         for f in plot_all(res, out):
             notes.append(f"plot -> {f}")
     if args.json:
