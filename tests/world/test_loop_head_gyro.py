@@ -148,7 +148,9 @@ def test_replay_with_the_gyro_of_a_recording_without_imu_samples_says_so(tmp_pat
     from foveatrack.cli import main
 
     cfg = tmp_path / "gyro.toml"
-    cfg.write_text('[tracker]\nattitude = "gyro"\n')
+    # a tracker config replaces the recorded one whole, so it names its space of interest (fig12's box)
+    cfg.write_text('[tracker]\nattitude = "gyro"\n[tracker.space]\nkind = "box"\nframe = "world"\n'
+                   'min_xyz = [1.0, -60.0, -0.7]\nmax_xyz = [60.0, 60.0, 40.0]\n')
     fixture = Path(__file__).resolve().parents[1] / "recording" / "fixtures" / "fig12-v2.mcap"
     assert main(["replay", str(fixture), "--tracker-config", str(cfg)]) == 0
     assert "the recording holds no IMU samples" in capsys.readouterr().out
