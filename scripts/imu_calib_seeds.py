@@ -46,6 +46,7 @@ def main(argv=None) -> int:
     ap.add_argument("--accumulate", default="0.1,0.2,0.5,1,2,5")
     ap.add_argument("--bootstrap", type=int, default=0, help="bootstrap resamples per solve (default 0: the "
                     "joint fit's covariance alone; the errors do not depend on it)")
+    ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--plot")
     ap.add_argument("--json")
     args = ap.parse_args(argv)
@@ -56,10 +57,18 @@ def main(argv=None) -> int:
         schedule = replace(schedule, count=args.poses)
     per_seed = []
     t0 = time.perf_counter()
+
+    def bar(total, desc):
+        if args.no_progress:
+            return None
+        from tqdm import tqdm
+
+        return tqdm(total=total, desc=f"seed {seed}: {desc}", file=sys.stderr, leave=False)
+
     for k in range(args.seeds):
         seed = args.first_seed + k
         scene = replace(base, seed=seed, imu_poses=schedule)
-        _, out = imu_rig.run(scene, [args.lidar], acc, bootstrap_samples=args.bootstrap)
+        _, out = imu_rig.run(scene, [args.lidar], acc, bootstrap_samples=args.bootstrap, progress_factory=bar)
         rows = [imu_rig.score_row(s) for _, s in out[args.lidar]]
         per_seed.append({"seed": seed, "rows": rows,
                          "removed": {r["accumulate_s"]: r["removed_pairs"] for r in rows if r["removed_pairs"]}})

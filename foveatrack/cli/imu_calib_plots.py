@@ -47,7 +47,8 @@ def plot_error_vs_accumulation(rows: list[dict], coverage: dict | None, path: st
             ax.axhline(sum(vals) / len(vals) * scale, color="grey", lw=1.0, ls=":")
             floors.append(ax)
     xl = "accumulation time per pose [s]"
-    ax_eq8.set(xscale="log", xlabel=xl, ylabel="eq. (8) error (mean over pose pairs)", ylim=(0, None),
+    top = max((r.get("eq8_mean_hi", r["eq8_mean"]) for r in rows), default=1.0)
+    ax_eq8.set(xscale="log", xlabel=xl, ylabel="eq. (8) error (mean over pose pairs)", ylim=(0, 1.2 * top),
                title="calibration error, eq. (8) (paper Fig. 11b)")
     ax_reg_r.set(xscale="log", yscale="log", xlabel=xl, ylabel="rotation [deg]",
                  title="lidar registration error per pose pair (mean)")
