@@ -99,8 +99,7 @@ def extrinsic_uncertainty(A, B, he: HandEyeResult, samples: int = 200, seed: int
     n = he.pairs_used
     if n < MIN_PAIRS_FOR_SIGMA:
         why = (f"only {n} pose pair{'s' if n != 1 else ''} ({n + 1} poses): too few to tell how good the extrinsic is, "
-               f"so no 1-sigma is given; it needs at least {MIN_PAIRS_FOR_SIGMA} pairs (the pairs cannot be checked "
-               "against each other either): use more poses")
+               f"so no 1-sigma is given; it needs at least {MIN_PAIRS_FOR_SIGMA} pairs: use more poses")
         return _none(0, why), [why]
     lin_rot, lin_tr = linearised_sigma(he)
     if samples > 0:
