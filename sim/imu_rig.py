@@ -9,7 +9,10 @@ most ``step_deg`` about a random axis and a translation of at most ``step_m`` in
 drawn until the step from the previous pose is 0.8-1.2 x ``step_deg`` and 0.8-1.2 x ``step_m`` (so the
 poses stay near home and every move turns and shifts the rig in all six degrees of freedom); the
 draws come from the scene's stream "imu_poses".  The IMU samples from the stream "imu"; each
-(lidar, pose) cloud from its own SceneSensor seeded from (seed, lidar index, pose).
+(lidar, pose) cloud from its own SceneSensor seeded from (seed, the lidar's name, pose): a lidar's
+clouds, and so its result, do not depend on which other lidars run beside it or in which order
+(issue 27: seeded by its place in ``--lidar``, the Mid-40 at 0.1 s gave 0.367 deg alone and 0.127 deg
+as the second lidar).
 
 The algorithms are :mod:`foveatrack.imu_calib`; this module only makes their input and scores them
 against the truth.
@@ -17,6 +20,7 @@ against the truth.
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -80,6 +84,11 @@ class RigData:
         return [inv_T(a) @ b for a, b in zip(self.lidar_poses, self.lidar_poses[1:])]
 
 
+def lidar_seed_key(name: str) -> int:
+    """A lidar's part of its clouds' seed: from its name (CRC-32, the same on every run and machine)."""
+    return zlib.crc32(name.encode("utf-8"))
+
+
 def scan_model_for(scene, name: str):
     """The scan model of a named lidar: a Risley preset (with the scene's motor noise, if listed)
     or a spinning one (:mod:`sim.scan.spinning`)."""
@@ -113,11 +122,11 @@ def simulate_rig(scene, lidars: list[str], max_accumulate_s: float, progress=Non
     imu = simulate_imu(traj, scene.imu.noise, schedule.duration_s, effect_rng(scene.seed, "imu"))
     windows = schedule.windows()
     clouds = {}
-    for li, name in enumerate(lidars):
+    for name in lidars:
         model = scan_model_for(scene, name)
         per_pose = []
         for p, (T, (t0, _t1)) in enumerate(zip(lidar_poses, windows)):
-            seed = int(np.random.SeedSequence([scene.seed, li, p]).generate_state(1)[0])
+            seed = int(np.random.SeedSequence([scene.seed, lidar_seed_key(name), p]).generate_state(1)[0])
             local = replace(scene, targets=(), seed=seed,
                             background_prims=prims_in_frame(scene.background_prims, T))
             sensor = SceneSensor(local)
@@ -156,6 +165,10 @@ class Score:
     imu_floor_translation_m: float
     lidar_floor_rotation_deg: float    # X error from the registered A and the true B: what the lidar allows
     lidar_floor_translation_m: float
+    rotation_rss_deg: float = float("nan")     # 1-sigma of the total angle (NaN: none given)
+    translation_rss_m: float = float("nan")
+    removed_pairs: tuple = ()
+    warnings: tuple = ()
 
 
 def score(data: RigData, result: procedure.CalibrationResult, lidar: str) -> Score:
@@ -169,7 +182,8 @@ def score(data: RigData, result: procedure.CalibrationResult, lidar: str) -> Sco
     X_true = data.X_true
     B_true = [inv_T(X_true) @ a @ X_true for a in A_true]
     imu_floor = _x_error(handeye.solve_handeye(A_true, result.B).X, X_true)
-    lidar_floor = _x_error(handeye.solve_handeye(result.A, B_true).X, X_true)
+    used = result.handeye.used       # the pairs the extrinsic kept (a slid registration is not the lidar's floor)
+    lidar_floor = _x_error(handeye.solve_handeye([result.A[i] for i in used], [B_true[i] for i in used]).X, X_true)
     return Score(
         lidar, result.accumulate_s, X,
         float(np.degrees(np.linalg.norm(so3_log(X[:3, :3] @ data.X_true[:3, :3].T)))),
@@ -177,7 +191,8 @@ def score(data: RigData, result: procedure.CalibrationResult, lidar: str) -> Sco
         float(np.mean(e8)), float(parts[:, 0].mean()), float(np.degrees(parts[:, 1].mean())),
         float(np.mean(reg_r)), float(np.mean(reg_t)),
         result.uncertainty.rotation_sigma_deg, result.uncertainty.translation_sigma_m, float(npts),
-        *imu_floor, *lidar_floor,
+        *imu_floor, *lidar_floor, result.uncertainty.rotation_rss_deg, result.uncertainty.translation_rss_m,
+        tuple(r.index for r in result.removed), tuple(result.warnings),
     )
 
 
@@ -215,6 +230,11 @@ def run(scene, lidars: list[str], accumulate_s=ACCUMULATE_DEFAULT_S, bootstrap_s
     return data, out
 
 
+def _finite_or_none(v) -> float | None:
+    """A figure for JSON: None where there is none (a 1-sigma not given is NaN)."""
+    return float(v) if np.isfinite(v) else None
+
+
 def score_row(s: Score) -> dict:
     """A :class:`Score` as plain JSON-ready numbers."""
     return {
@@ -223,11 +243,14 @@ def score_row(s: Score) -> dict:
         "rotation_error_deg": s.rotation_error_deg, "translation_error_m": s.translation_error_m,
         "registration_rotation_deg": s.registration_rotation_deg,
         "registration_translation_m": s.registration_translation_m,
-        "rotation_sigma_deg": [float(v) for v in s.rotation_sigma_deg],
-        "translation_sigma_m": [float(v) for v in s.translation_sigma_m],
+        "rotation_sigma_deg": [_finite_or_none(v) for v in s.rotation_sigma_deg],
+        "translation_sigma_m": [_finite_or_none(v) for v in s.translation_sigma_m],
         "imu_floor_rotation_deg": s.imu_floor_rotation_deg, "imu_floor_translation_m": s.imu_floor_translation_m,
         "lidar_floor_rotation_deg": s.lidar_floor_rotation_deg,
         "lidar_floor_translation_m": s.lidar_floor_translation_m,
+        "rotation_rss_sigma_deg": _finite_or_none(s.rotation_rss_deg),
+        "translation_rss_sigma_m": _finite_or_none(s.translation_rss_m),
+        "removed_pairs": list(s.removed_pairs), "warnings": list(s.warnings),
     }
 
 

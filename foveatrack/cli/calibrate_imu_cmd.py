@@ -10,8 +10,9 @@ The scene's ``[imu]`` gives the true mount and ``[imu_poses]`` the pose sequence
 (``docs/imu-calibration.md``).  For each lidar and accumulation time the procedure of
 :mod:`foveatrack.imu_calib.procedure` runs on the same poses and IMU data; the error of eq. (8)
 against the true lidar motion, and the extrinsic's error against the true mount, are printed.
-``--out`` gets the extrinsic of the first lidar at the longest accumulation, with its bootstrap
-1-sigma.  ``--plot``: eq. (8) error and extrinsic error against accumulation time (Fig. 11b) beside
+``--out`` gets the extrinsic of the first lidar at the longest accumulation, with its 1-sigma
+(:mod:`foveatrack.imu_calib.uncertainty`: none, ``null``, when the pairs are too few to give one)
+and the warnings of the solve (pairs removed, axes close together), which are also printed on stderr.  ``--plot``: eq. (8) error and extrinsic error against accumulation time (Fig. 11b) beside
 the coverage of the Risley lidars (Fig. 6e).
 
 Real rig (a Livox with an IMU on the daemon's head)::
@@ -93,27 +94,46 @@ def _extrinsic_json(score, res, truth=None) -> dict:
     return out
 
 
+def _sigma(values, digits: int):
+    """A 1-sigma for JSON: rounded, or None where none is given (NaN)."""
+    return [round(float(v), digits) if np.isfinite(v) else None for v in values]
+
+
 def extrinsic_record(res, lidar: str, accumulate_s: float) -> dict:
-    """The extrinsic file's fields, simulated or live: ``X``, its bootstrap 1-sigma, what solved it."""
+    """The extrinsic file's fields, simulated or live: ``X``, its 1-sigma, what solved it, warnings."""
     from scipy.spatial.transform import Rotation
 
     X = res.X
+    unc = res.uncertainty
     out = {
         "frame": "T_lidar_imu: the IMU's pose in the lidar frame (p_lidar = R p_imu + t)",
         "rotation_matrix": X[:3, :3].round(9).tolist(),
         "rotation_rpy_deg": Rotation.from_matrix(X[:3, :3]).as_euler("xyz", degrees=True).round(5).tolist(),
         "translation_m": X[:3, 3].round(6).tolist(),
-        "sigma_rotation_deg": np.round(res.uncertainty.rotation_sigma_deg, 5).tolist(),
-        "sigma_translation_m": np.round(res.uncertainty.translation_sigma_m, 6).tolist(),
-        "sigma_method": f"bootstrap over the {res.handeye.pairs_used} pose pairs "
-                        f"({res.uncertainty.samples} resamples), 1-sigma per axis",
+        "sigma_rotation_deg": _sigma(unc.rotation_sigma_deg, 5),
+        "sigma_translation_m": _sigma(unc.translation_sigma_m, 6),
+        # 1-sigma of the total rotation angle and translation distance (root of the summed per-axis variances)
+        "sigma_rotation_total_deg": _sigma([unc.rotation_rss_deg], 5)[0],
+        "sigma_translation_total_m": _sigma([unc.translation_rss_m], 6)[0],
+        "sigma_method": unc.method,
         "lidar": lidar,
         "accumulate_s": accumulate_s,
         "pairs": res.handeye.pairs_used,
+        "pairs_removed": [r.index + 1 for r in res.removed],
         "axis_spread_deg": round(res.handeye.axis_spread_deg, 3),
         "consistency_eq8_mean": float(np.mean(res.consistency())),
+        "warnings": list(res.warnings),
     }
     return out
+
+
+def _print_warnings(warnings, prefix: str = "") -> None:
+    for w in warnings:
+        print(f"calibrate-imu: warning: {prefix}{w}", file=sys.stderr)
+
+
+def _sigma_text(value, scale: float, unit: str, width: int, digits: int) -> str:
+    return f"{value * scale:{width}.{digits}f} {unit}" if value is not None else f"{'none':>{width}} {unit}"
 
 
 def cmd_calibrate_imu(args) -> int:
@@ -166,6 +186,9 @@ def cmd_calibrate_imu(args) -> int:
             json.dump(extrinsic, fh, indent=2)
             fh.write("\n")
     rows = [imu_rig.score_row(s) for name in lidars for _, s in results[name]]
+    for name in lidars:
+        for res, s in results[name]:
+            _print_warnings(res.warnings, f"{name}, {s.accumulate_s:g} s: ")
     if args.plot:
         from foveatrack.cli.imu_calib_plots import plot_error_vs_accumulation
 
@@ -178,13 +201,15 @@ def cmd_calibrate_imu(args) -> int:
         return 0
     print(f"scene {scene.name}: {len(data.lidar_poses)} static poses, {len(data.lidar_poses) - 1} pairs; "
           f"{wall_s:.1f} s wall")
-    print(f"{'lidar':8} {'T [s]':>6} {'pts/pose':>9} {'eq8':>8} {'rot err':>9} {'trans err':>10} "
-          f"{'1-sigma rot':>12} {'1-sigma tr':>11} {'reg rot':>8} {'reg tr':>8}")
+    # the 1-sigma beside each total error is that of the total (root of the summed per-axis variances)
+    print(f"{'lidar':8} {'T [s]':>6} {'pts/pose':>9} {'eq8':>8} {'rot err':>9} {'1-sigma':>9} {'trans err':>10} "
+          f"{'1-sigma':>10} {'reg rot':>8} {'reg tr':>8} {'removed':>7}")
     for r in rows:
         print(f"{r['lidar']:8} {r['accumulate_s']:6.1f} {r['points_per_pose']:9.0f} {r['eq8_mean']:8.5f} "
-              f"{r['rotation_error_deg']:7.4f} d {r['translation_error_m'] * 100:7.3f} cm "
-              f"{max(r['rotation_sigma_deg']):10.4f} d {max(r['translation_sigma_m']) * 100:8.3f} cm "
-              f"{r['registration_rotation_deg']:6.4f} d {r['registration_translation_m'] * 100:5.3f} cm")
+              f"{r['rotation_error_deg']:7.4f} d {_sigma_text(r['rotation_rss_sigma_deg'], 1, 'd', 7, 4)} "
+              f"{r['translation_error_m'] * 100:7.3f} cm {_sigma_text(r['translation_rss_sigma_m'], 100, 'cm', 7, 3)} "
+              f"{r['registration_rotation_deg']:6.4f} d {r['registration_translation_m'] * 100:5.3f} cm "
+              f"{','.join(str(i + 1) for i in r['removed_pairs']) or '-':>7}")
     for name in lidars:
         r = [x for x in rows if x["lidar"] == name][-1]
         print(f"what the noise allows ({name}, {r['accumulate_s']:g} s): true lidar motions with the IMU's -> "
@@ -263,9 +288,8 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
                         f"for {', '.join(f'{run.planned_deg[i]:.1f}' for i in short)} planned): the head's speed table "
                         f"is off ([head] speed_table = {cfg.head.speed_table!r}); calibrate it first "
                         "(foveatrack calibrate --config) for a better extrinsic")
-    extrinsic["warnings"] = warnings
-    for w in warnings:
-        print(f"calibrate-imu: warning: {w}", file=sys.stderr)
+    extrinsic["warnings"] = list(res.warnings) + warnings
+    _print_warnings(extrinsic["warnings"])
     with open(out, "w") as fh:
         json.dump(extrinsic, fh, indent=2)
         fh.write("\n")
@@ -282,8 +306,10 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
     e = extrinsic
     print(f"lidar-IMU extrinsic from {plan.poses} static poses ({e['mode']}), {plan.dwell_s:g} s each, "
           f"{run.wall_s:.0f} s wall; {run.imu_samples} IMU samples; gravity {e['gravity_m_s2']:.3f} m/s^2")
-    print(f"  rotation rpy {e['rotation_rpy_deg']} deg (1-sigma {e['sigma_rotation_deg']})")
-    print(f"  translation {e['translation_m']} m (1-sigma {e['sigma_translation_m']})")
+    print(f"  rotation rpy {e['rotation_rpy_deg']} deg (1-sigma per axis {e['sigma_rotation_deg']}, of the angle "
+          f"{e['sigma_rotation_total_deg']})")
+    print(f"  translation {e['translation_m']} m (1-sigma per axis {e['sigma_translation_m']}, of the distance "
+          f"{e['sigma_translation_total_m']})")
     print(f"  {res.handeye.pairs_used} pairs, rotation axes spread {res.handeye.axis_spread_deg:.1f} deg; translation "
           f"pinned by singular values {e['translation_singular_values']} (weakest along "
           f"{e['weakest_translation_direction']})")

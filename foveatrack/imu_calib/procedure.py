@@ -4,17 +4,23 @@
 2. The lidar's ``A_i``: each pose's cloud accumulated for ``accumulate_s`` from the start of its
    static window, registered to the previous pose's (:mod:`.registration`), seeded with the IMU's
    motion mapped through the nominal mount ``X0`` (the drawing's; ICP only refines within its basin).
-3. ``X`` from ``A_i X = X B_i`` (:mod:`.handeye`), with a bootstrap 1-sigma over the pairs.
+3. The pairs checked against each other (:mod:`.pair_check`): a pair that disagrees with the
+   others' extrinsic is registered again, seeded through that extrinsic instead of the nominal mount
+   (a wrong nominal mount is the usual reason a registration slides), and removed if it still
+   disagrees; every removal is named in a warning.
+4. ``X`` from ``A_i X = X B_i`` over the kept pairs (:mod:`.handeye`, the joint weighted fit), with
+   a 1-sigma never smaller than the pairs allow (:mod:`.uncertainty`) and warnings where the
+   motions determine ``X`` poorly (too few pairs, rotation axes close together).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from foveatrack.errors import UserError
-from foveatrack.imu_calib import handeye, registration
+from foveatrack.imu_calib import handeye, pair_check, registration, uncertainty
 from foveatrack.imu_calib.imu_integration import ImuMotion, ImuSamples, relative_motions
 from foveatrack.imu_calib.se3 import inv_T, se3_log
 
@@ -29,13 +35,16 @@ class PoseCloud:
 @dataclass(frozen=True)
 class CalibrationResult:
     X: np.ndarray                      # T_lidar_imu
-    uncertainty: handeye.Uncertainty
+    uncertainty: uncertainty.Uncertainty
     A: list
     B: list
     handeye: handeye.HandEyeResult
     registrations: list
     imu: ImuMotion
     accumulate_s: float
+    removed: list = field(default_factory=list)        # pair_check.RemovedPair, pairs left out of X
+    reregistered: list = field(default_factory=list)   # pairs registered a second time (index)
+    warnings: list = field(default_factory=list)       # what the user must hear, in words
 
     def consistency(self) -> np.ndarray:
         """Per pair ``|| Log(A_i) - Log(X B_i X^-1) ||`` with the registered ``A_i`` (eq. (8) without
@@ -68,6 +77,26 @@ def lidar_motions(clouds: list[PoseCloud], B: list, X0: np.ndarray, accumulate_s
     return out
 
 
+def solve_pairs(A: list, B: list, bootstrap_samples: int = 200, seed: int = 0, **handeye_kw):
+    """Screened pairs -> ``(HandEyeResult, Uncertainty, removed, warnings)``; ``HandEyeResult.used``
+    indexes ``A``."""
+    kept, removed = pair_check.screen_pairs(A, B, **handeye_kw)
+    he = handeye.solve_handeye([A[i] for i in kept], [B[i] for i in kept], **handeye_kw)
+    he = replace(he, used=np.asarray(kept, dtype=np.int64)[he.used])
+    unc, warnings = uncertainty.extrinsic_uncertainty([A[i] for i in he.used], [B[i] for i in he.used], he,
+                                                      samples=bootstrap_samples, seed=seed, **handeye_kw)
+    warnings = [r.describe() for r in removed] + warnings
+    if len(A) < pair_check.MIN_PAIRS_TO_CHECK:
+        warnings.append(f"{len(A)} pose pairs cannot be checked against each other (a slid registration would go "
+                        f"into the extrinsic unseen): use at least {pair_check.MIN_PAIRS_TO_CHECK + 1} poses")
+    if he.axis_spread_deg < handeye.WEAK_AXIS_SPREAD_DEG:
+        warnings.append(
+            f"the pairs' rotation axes spread only {he.axis_spread_deg:.1f} deg (< {handeye.WEAK_AXIS_SPREAD_DEG:g}): the "
+            "rotation about their common direction and the translation along it are weakly determined (see the "
+            "1-sigma); turn the rig about axes further apart (pan, tilt and roll, or both head axes)")
+    return he, unc, removed, warnings
+
+
 def calibrate(clouds: list[PoseCloud], imu: ImuSamples, windows: list[tuple[float, float]],
               accumulate_s: float, X0: np.ndarray | None = None, bootstrap_samples: int = 200, seed: int = 0,
               imu_motion: ImuMotion | None = None, progress=None, **handeye_kw) -> CalibrationResult:
@@ -78,6 +107,23 @@ def calibrate(clouds: list[PoseCloud], imu: ImuSamples, windows: list[tuple[floa
     motion = imu_motion or relative_motions(imu, windows)
     regs = lidar_motions(clouds, motion.B, X0, accumulate_s, progress=progress)
     A = [r.T for r in regs]
-    he = handeye.solve_handeye(A, motion.B, **handeye_kw)
-    unc = handeye.bootstrap_uncertainty(A, motion.B, he.X, samples=bootstrap_samples, seed=seed, **handeye_kw)
-    return CalibrationResult(he.X, unc, A, motion.B, he, regs, motion, accumulate_s)
+    kept, removed = pair_check.screen_pairs(A, motion.B, **handeye_kw)
+    again = []
+    if removed:
+        # Seed the disagreeing pairs through the others' extrinsic and register them again.
+        X_kept = handeye.solve_handeye([A[i] for i in kept], [motion.B[i] for i in kept], **handeye_kw).X
+        Xi = inv_T(X_kept)
+        for r in removed:
+            i = r.index
+            pts = [accumulated(clouds[k], accumulate_s) for k in (i, i + 1)]
+            regs[i] = registration.register(pts[1], pts[0], X_kept @ motion.B[i] @ Xi)
+            A[i] = regs[i].T
+            again.append(i)
+    he, unc, removed, warnings = solve_pairs(A, motion.B, bootstrap_samples, seed, **handeye_kw)
+    gone = {r.index for r in removed}
+    kept_again = [i for i in again if i not in gone]
+    if kept_again:
+        warnings.insert(0, f"pose pair{'s' if len(kept_again) > 1 else ''} {', '.join(str(i + 1) for i in kept_again)} "
+                        "disagreed with the others until registered again from the fitted extrinsic (the nominal "
+                        "mount seeded the registration too far off: give the drawing's mount)")
+    return CalibrationResult(he.X, unc, A, motion.B, he, regs, motion, accumulate_s, removed, again, warnings)

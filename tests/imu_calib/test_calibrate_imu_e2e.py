@@ -80,3 +80,15 @@ def test_cli_writes_the_extrinsic(tmp_path, capsys):
     assert x["pairs"] == 4
     assert summary["extrinsic"]["translation_m"] == x["translation_m"]
     assert abs(x["error_translation_m"]) < 0.1        # 4 pairs, 1 s: rough, but not lost
+
+
+def test_a_lidars_clouds_do_not_depend_on_its_place_in_the_list(tmp_path):
+    # Issue 27: the clouds were seeded with the lidar's index, so the Mid-40 at 0.1 s gave 0.367 deg
+    # alone and 0.127 deg as the second lidar.
+    path = tmp_path / "room3.toml"
+    path.write_text(open(ROOM).read().replace("count = 25", "count = 3"))
+    scene = load_scene(path)
+    alone = imu_rig.simulate_rig(scene, ["mid40"], 0.05)
+    second = imu_rig.simulate_rig(scene, ["horizon", "mid40"], 0.05)
+    for a, b in zip(alone.clouds["mid40"], second.clouds["mid40"]):
+        assert np.array_equal(a.xyz_m, b.xyz_m) and np.array_equal(a.t_s, b.t_s)
