@@ -83,3 +83,17 @@ def test_daemon_check_refuses_a_recording_directory_it_cannot_write(tmp_path, ca
     cfg = _daemon_config(tmp_path, str(where), make_dirs=True)
     code, _, err = _run(["daemon", "--config", str(cfg), "--check"], capsys)
     assert code == 2 and "is not a directory this user can write in" in err
+
+
+def test_simulate_and_replay_name_the_same_plots_alike(tmp_path, capsys):
+    # before: simulate wrote error.png, trajectory.png, ... and replay fig14b_error_vs_time.png,
+    # fig14c_trajectory.png, ... for the same figures
+    run = tmp_path / "run"
+    code, _, _ = _run(["simulate", SCENE, "--duration", "1", "--out", str(run), "--plot", "--no-progress",
+                       "--one-thread"], capsys)
+    assert code == 0
+    code, _, _ = _run(["replay", str(run / "run.mcap"), "--plot", str(tmp_path / "replay")], capsys)
+    assert code == 0
+    sim = {p.name for p in run.glob("*.png")}
+    assert sim == {p.name for p in (tmp_path / "replay").glob("*.png")}
+    assert {"error.png", "trajectory.png", "points_on_target.png", "head.png"} <= sim

@@ -2,15 +2,15 @@
 CLI edge only).  Drawn by the same functions as ``foveatrack simulate --plot`` (``sim_plots``), so a
 simulated run and its replay look alike.
 
-* fig14a_points_vs_lateral.png -- points per frame (a) along the target's path, (b) against its angle
+* points_on_target.png (paper Fig. 14a) -- points per frame (a) along the target's path, (b) against its angle
   off the lidar axis.  With truth (a simulator recording): the true points on the target and the
   detection's points, both against the true position; otherwise the detection's points against the
   tracker's own world estimate and bearing.
-* fig14b_error_vs_time.png -- the true error off the axis (truth) and the detection's bearing off the
+* error.png (paper Fig. 14b) -- the true error off the axis (truth) and the detection's bearing off the
   axis against time, the dead band, the acquisition and tracking phases shaded (paper Fig. 12 colours)
-* fig14c_trajectory.png -- the reconstructed target trajectory (the tracker's world estimates) against
+* trajectory.png (paper Fig. 14c) -- the reconstructed target trajectory (the tracker's world estimates) against
   truth: top view, height against time, and the reconstruction error
-* head_angles.png -- the head (true; in a daemon recording the daemon's own estimate, the head
+* head.png -- the head (true; in a daemon recording the daemon's own estimate, the head
   reports no pose) and the replay's dead reckoning, their difference per axis, the tilt stops when
   the tilt comes near one, and the tracker's state frame by frame (not for a ``.lvx`` file)
 
@@ -43,12 +43,12 @@ def plot_all(res, out_dir: Path) -> list[Path]:
     if truth is not None:
         files.append(sim_plots.plot_points_vs_position(
             truth["target_xyz_m"], truth["true_error_deg"], truth["points_on_target"],
-            f"{name}: points on the UAV per frame (replay)", out_dir / "fig14a_points_vs_lateral.png",
+            f"{name}: points on the UAV per frame (replay)", out_dir / sim_plots.POINTS_PNG,
             det_points=det_points))
     else:
         files.append(sim_plots.plot_points_vs_position(
             f["world_xyz"], bearing, None, f"{name}: points in the detection per frame (replay)",
-            out_dir / "fig14a_points_vs_lateral.png", det_points=det_points, source="tracker's"))
+            out_dir / sim_plots.POINTS_PNG, det_points=det_points, source="tracker's"))
 
     tr = res.metrics.get("tracking") or {}
     phases = {}
@@ -62,13 +62,13 @@ def plot_all(res, out_dir: Path) -> list[Path]:
         err_title = f"{name}: tracking error (replay; paper Fig. 14b)"
     files.append(sim_plots.plot_error_vs_time(
         t, None if truth is None else truth["true_error_deg"], err_title,
-        out_dir / "fig14b_error_vs_time.png", detected=det if truth is not None else None,
+        out_dir / sim_plots.ERROR_PNG, detected=det if truth is not None else None,
         bearing_error_deg=bearing, deadband_deg=db, **phases,
         deadband_axes_deg=None if db is None else (cfg.deadband_pan_deg, cfg.deadband_tilt_deg)))
 
     files.append(sim_plots.plot_trajectory(
         t, f["world_xyz"], f"{name}: reconstructed trajectory (replay; paper Fig. 14c)",
-        out_dir / "fig14c_trajectory.png", true_xyz=None if truth is None else truth["target_xyz_m"]))
+        out_dir / sim_plots.TRAJECTORY_PNG, true_xyz=None if truth is None else truth["target_xyz_m"]))
 
     if res.source != "lvx":
         if truth is not None:
@@ -80,7 +80,7 @@ def plot_all(res, out_dir: Path) -> list[Path]:
             pan, tilt, source = res.recorded["head_pan_deg"], res.recorded["head_tilt_deg"], "daemon's estimate"
             head_title = f"{name}: head angles (replay; the head's true pose is not measured)"
         files.append(sim_plots.plot_head(
-            t, pan, tilt, head_title, out_dir / "head_angles.png", est_label="replay's dead reckoning",
+            t, pan, tilt, head_title, out_dir / sim_plots.HEAD_PNG, est_label="replay's dead reckoning",
             residual_label="replay - " + ("true" if truth is not None else "daemon") + " [deg]",
             est_pan_deg=f["head_pan_deg"], est_tilt_deg=f["head_tilt_deg"], state=f["state"], source=source,
             tilt_limits_deg=None if cfg is None else cfg.tilt_limits_deg,

@@ -26,6 +26,13 @@ ACQ_C = "tab:pink"       # paper Fig. 12: pink, where first detection happens
 TRACK_C = "tab:green"    # paper Fig. 12: green, the active tracking phase
 STATE_C = {"waiting": "0.75", "tracking": "tab:green", "holding": "gold", "searching": "tab:pink"}
 
+# A run's plot files, the same for `simulate --plot`, `demo` and `replay --plot` (replay once named
+# them fig14a_points_vs_lateral.png, fig14b_error_vs_time.png, ... for the same figures)
+POINTS_PNG = "points_on_target.png"     # paper Fig. 14a
+ERROR_PNG = "error.png"                 # paper Fig. 14b / 12
+TRAJECTORY_PNG = "trajectory.png"       # paper Fig. 14c
+HEAD_PNG = "head.png"
+
 _AXIS_LABEL = ("x [m] (forward)", "y [m] (+ = left)", "z [m] (+ = up)")
 
 

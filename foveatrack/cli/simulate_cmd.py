@@ -282,16 +282,16 @@ def _plot_run(scene, log, summary, out_dir) -> list[Path]:
         if "true_az_deg" in log and "true_el_deg" in log:
             phases["axis_error_deg"] = (log["true_az_deg"], log["true_el_deg"])
     return [
-        sim_plots.plot_error_vs_time(t, log["true_error_deg"], err_title, out_dir / "error.png",
+        sim_plots.plot_error_vs_time(t, log["true_error_deg"], err_title, out_dir / sim_plots.ERROR_PNG,
                                      detected=log["detected"], half_fov_deg=summary["half_fov_deg"], **phases),
         sim_plots.plot_points_vs_position(
             log["target_xyz"], log["true_error_deg"], log["points_on_target"],
-            f"{name}: points on the UAV per frame{frozen}", out_dir / "points_on_target.png",
+            f"{name}: points on the UAV per frame{frozen}", out_dir / sim_plots.POINTS_PNG,
             half_fov_deg=summary["half_fov_deg"]),
         sim_plots.plot_trajectory(t, log["estimate_xyz"], f"{name}: reconstructed trajectory (paper Fig. 14c)",
-                                  out_dir / "trajectory.png", true_xyz=log["target_xyz"]),
+                                  out_dir / sim_plots.TRAJECTORY_PNG, true_xyz=log["target_xyz"]),
         sim_plots.plot_head(t, log["head_pan_deg"], log["head_tilt_deg"], f"{name}: head angles{frozen}",
-                            out_dir / "head.png", est_pan_deg=log["est_pan_deg"], est_tilt_deg=log["est_tilt_deg"],
+                            out_dir / sim_plots.HEAD_PNG, est_pan_deg=log["est_pan_deg"], est_tilt_deg=log["est_tilt_deg"],
                             state=log["state"], tilt_limits_deg=cfg.tilt_limits_deg,
                             tilt_margin_deg=cfg.tilt_margin_deg),
     ]

@@ -86,7 +86,8 @@ def test_cli_json_plots_exports(sim_run, tmp_path, capsys):
     assert z["x_m"].size == log["points"].sum()
     rows = trj.read_text().splitlines()
     assert len(rows) == len(log["t_end_s"]) + 1 and "true_error_deg" in rows[0]
-    names = ("fig14a_points_vs_lateral.png", "fig14b_error_vs_time.png", "fig14c_trajectory.png", "head_angles.png")
+    # the same names as simulate --plot gives the same figures
+    names = ("points_on_target.png", "error.png", "trajectory.png", "head.png")
     assert [Path(o.split(" -> ")[1]).name for o in s["outputs"] if o.startswith("plot")] == list(names)
     for name in names:
         assert (plots / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -153,7 +154,7 @@ def test_lvx_replay_detects_the_passing_uav(tmp_path, capsys):
     assert s["metrics"]["detection"]["frames_with_detection"] == det.sum()
     # no head in a .lvx file: the Fig. 14 plots from the tracker's own estimates, no head-angle plot
     assert sorted(p.name for p in (tmp_path / "plots").iterdir()) == [
-        "fig14a_points_vs_lateral.png", "fig14b_error_vs_time.png", "fig14c_trajectory.png"]
+        "error.png", "points_on_target.png", "trajectory.png"]
 
 
 def test_cli_directory_is_named_as_a_directory(tmp_path, capsys):
