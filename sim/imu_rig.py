@@ -103,11 +103,9 @@ def scan_model_for(scene, name: str):
     raise UserError(f"lidar {name!r} unknown; allowed: {', '.join(list(PRESETS) + list(SPINNING_PRESETS))}")
 
 
-def simulate_rig(scene, lidars: list[str], max_accumulate_s: float, progress=None) -> RigData:
-    """The rig's data: IMU samples over the whole sequence and, for each lidar, one cloud per pose
-    (the first ``max_accumulate_s`` of its static window)."""
-    from sim.sensor import SceneSensor
-
+def check_rig_scene(scene, max_accumulate_s: float) -> None:
+    """A UserError naming what the scene lacks for a simulated lidar-IMU calibration; the CLI asks
+    before it starts a progress bar (the error used to print glued onto a started one)."""
     if scene.imu is None:
         raise UserError(f"{scene.path}: the scene has no [imu] table (the IMU to calibrate; see docs/imu-calibration.md)")
     if scene.background_prims.shape[0] == 0:
@@ -116,6 +114,15 @@ def simulate_rig(scene, lidars: list[str], max_accumulate_s: float, progress=Non
     if max_accumulate_s > schedule.dwell_s + 1e-9:
         raise UserError(f"accumulation {max_accumulate_s:g} s is longer than the dwell per pose "
                         f"([imu_poses] dwell_s = {schedule.dwell_s:g} s)")
+
+
+def simulate_rig(scene, lidars: list[str], max_accumulate_s: float, progress=None) -> RigData:
+    """The rig's data: IMU samples over the whole sequence and, for each lidar, one cloud per pose
+    (the first ``max_accumulate_s`` of its static window)."""
+    from sim.sensor import SceneSensor
+
+    check_rig_scene(scene, max_accumulate_s)
+    schedule = scene.imu_poses or PoseSchedule()
     lidar_poses = pose_sequence(schedule, effect_rng(scene.seed, "imu_poses"))
     X = scene.imu.T_lidar_imu
     traj = RigTrajectory([T @ X for T in lidar_poses], schedule.dwell_s, schedule.move_s)

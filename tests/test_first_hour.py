@@ -97,3 +97,11 @@ def test_simulate_and_replay_name_the_same_plots_alike(tmp_path, capsys):
     sim = {p.name for p in run.glob("*.png")}
     assert sim == {p.name for p in (tmp_path / "replay").glob("*.png")}
     assert {"error.png", "trajectory.png", "points_on_target.png", "head.png"} <= sim
+
+
+def test_calibrate_imu_on_a_scene_without_imu_says_so_before_any_progress_bar(capsys):
+    # before: "\rsimulating scans:   0%| ... foveatrack: error: ... no [imu] table" on one line
+    code, _, err = _run(["calibrate-imu", SCENE], capsys)
+    assert code == 2
+    assert err.startswith("foveatrack: error:") and "no [imu] table" in err
+    assert "\r" not in err and "simulating" not in err

@@ -165,6 +165,8 @@ def cmd_calibrate_imu(args) -> int:
     lidars = [s.strip() for s in args.lidar.split(",") if s.strip()] if args.lidar else [scene.optics.name]
     for name in lidars:
         imu_rig.scan_model_for(scene, name)   # unknown names fail here, before any work
+    if acc:
+        imu_rig.check_rig_scene(scene, max(acc))   # and a scene without [imu]: before the progress bar
 
     def bar(total, desc):
         if args.no_progress:
