@@ -105,3 +105,23 @@ def test_calibrate_imu_on_a_scene_without_imu_says_so_before_any_progress_bar(ca
     assert code == 2
     assert err.startswith("foveatrack: error:") and "no [imu] table" in err
     assert "\r" not in err and "simulating" not in err
+
+
+def test_every_option_of_every_command_says_what_it_does():
+    # before: --no-progress on seven commands, gimbal serve --pan0-deg, lidar density --bins, ... had none
+    import argparse
+
+    from foveatrack.cli import build_parser
+
+    missing = []
+
+    def walk(parser, path):
+        for a in parser._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                for name, sub in a.choices.items():
+                    walk(sub, path + [name])
+            elif not isinstance(a, argparse._HelpAction) and not a.help:
+                missing.append(f"{' '.join(path)} {'/'.join(a.option_strings) or a.dest}")
+
+    walk(build_parser(), ["foveatrack"])
+    assert missing == []

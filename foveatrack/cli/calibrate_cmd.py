@@ -59,7 +59,7 @@ def register(sub) -> None:
                    "config's [head] port)")
     p.add_argument("--max-s", type=float, metavar="S", help="real hardware: give up after S seconds "
                    "(default: no limit)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_calibrate)
 
 

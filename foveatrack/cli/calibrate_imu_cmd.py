@@ -78,7 +78,7 @@ def register(sub) -> None:
     p.add_argument("--json", action="store_true", help="print a JSON summary instead of text")
     p.add_argument("--bootstrap", type=int, default=200, metavar="N", help="bootstrap resamples for the "
                    "1-sigma (default: %(default)s)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_calibrate_imu)
 
 

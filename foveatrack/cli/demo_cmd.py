@@ -27,7 +27,7 @@ def register(sub) -> None:
     p = sub.add_parser("demo", help="the quick-start demo: a closed-loop tracking run, metrics and plots")
     p.add_argument("--out", default="out/demo", help="directory for the recording, plots and summary")
     p.add_argument("--scene", default=None, help=f"scene file (default: scenes/{DEFAULT_SCENE})")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_demo)
 
 

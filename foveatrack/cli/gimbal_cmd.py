@@ -34,14 +34,14 @@ def register(subparsers) -> None:
     s.add_argument("--truth", metavar="FILE", help="write the true state as JSON lines here")
     s.add_argument("--truth-period-s", type=float, default=0.02, help="truth line period [s]")
     s.add_argument("--link", metavar="PATH", help="also make a symlink PATH to the pty")
-    s.add_argument("--pan0-deg", type=float, default=0.0)
-    s.add_argument("--tilt0-deg", type=float, default=0.0)
+    s.add_argument("--pan0-deg", type=float, default=0.0, help="the head's pan at power-on [deg] (default 0)")
+    s.add_argument("--tilt0-deg", type=float, default=0.0, help="the head's tilt at power-on [deg] (default 0)")
     s.set_defaults(func=cmd_serve)
 
     c = sub.add_parser("curves", help="plot true speed vs speed byte for unit seeds")
     c.add_argument("--plot", metavar="F.png", required=True, help="output PNG")
-    c.add_argument("--unit-seeds", type=seed_arg, nargs="+", default=[0, 1])
-    c.add_argument("--family", default="pts-303")
+    c.add_argument("--unit-seeds", type=seed_arg, nargs="+", default=[0, 1], help="simulated units to plot (default 0 1)")
+    c.add_argument("--family", default="pts-303", help="head family: pts-303 or heavy-worm")
     c.set_defaults(func=cmd_curves)
 
 

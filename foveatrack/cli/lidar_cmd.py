@@ -47,7 +47,7 @@ def register(sub) -> None:
 
     p = lsub.add_parser("density", help="radial density vs the analytic eq. (4) (paper Fig. 5)")
     common(p, duration=2.0)
-    p.add_argument("--bins", type=int, default=60)
+    p.add_argument("--bins", type=int, default=60, help="radial bins of the density profile (default 60)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr (shown on long runs)")
     p.set_defaults(func=cmd_density)
 
@@ -70,12 +70,12 @@ def register(sub) -> None:
                    help="prism 2 speed range [rpm]; negative ranges need '=': --rpm2=-12000:-1000")
     p.add_argument("--grid", type=int, default=30, metavar="N", help="N x N speeds (default 30)")
     p.add_argument("--cap", type=_positive, default=5.0, metavar="S", help="time cap in seconds (paper: 5)")
-    p.add_argument("--seed", type=seed_arg, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of the motor speed noise (default 0)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (tcp://host:port)")
-    p.add_argument("--no-progress", action="store_true")
-    p.add_argument("--json", action="store_true")
-    p.add_argument("--plot", metavar="FILE.png")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.add_argument("--json", action="store_true", help="print the map as JSON on stdout")
+    p.add_argument("--plot", metavar="FILE.png", help="write the map as a plot (paper Fig. 7)")
     p.set_defaults(func=cmd_coverage_map)
 
     from foveatrack.cli.lidar_serve import add_serve_parser  # the virtual lidar (issue 6)

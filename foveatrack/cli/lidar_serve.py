@@ -17,7 +17,7 @@ from foveatrack.errors import UserError
 def add_serve_parser(lsub) -> None:
     """Add ``serve`` to the ``foveatrack lidar`` sub-commands."""
     p = lsub.add_parser("serve", help="run a scene's lidar in real time as a Livox (SDK v1 over UDP)")
-    p.add_argument("scene", metavar="SCENE.toml")
+    p.add_argument("scene", metavar="SCENE.toml", help="the scene whose lidar, targets and background to serve")
     p.add_argument("--bind-ip", "--host-ip", dest="bind_ip", default="127.0.0.1",
                    help="the virtual lidar's own address (default 127.0.0.1)")
     p.add_argument("--cmd-port", type=int, default=65000, help="its command port (65000 as a real Livox; 0 = any)")

@@ -18,7 +18,7 @@ def register(sub) -> None:
     p.add_argument("--plot", action="store_true", help="write the Fig. 14 a/b/c plots into --out")
     p.add_argument("--seed", type=int, help="override the scene's seed")
     p.add_argument("--duration", type=float, metavar="S", help="override the scene's duration")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.add_argument("--live", nargs="?", const=8765, default=None, metavar="PORT",
                    help="serve the run to Foxglove (ws://127.0.0.1:PORT, default 8765), paced at --speed")
     p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",

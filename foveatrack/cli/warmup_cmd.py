@@ -17,7 +17,7 @@ from foveatrack.cli.demo_cmd import shipped_scene
 
 def register(sub) -> None:
     p = sub.add_parser("warmup", help="compile the numba kernels ahead (about a minute, once per install)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_warmup)
 
 
