@@ -52,7 +52,8 @@ from foveatrack.gate import CommandGate
 from foveatrack.recording.records import CommandRecord
 from foveatrack.replay.config import recorded_limits, load_tracker_table, tracker_config
 from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
-from foveatrack.replay.recorded import FrameArrays, TrackerRebased, recorded_frames
+from foveatrack.replay.recorded import (RECORDED_DTYPES, TRUTH_DTYPES, FrameArrays, TrackerRebased,
+                                        recorded_arrays, recorded_frames)
 from foveatrack.replay.result import ReplayResult
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import Tracker, TrackerConfig
@@ -147,12 +148,8 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     t_settled = (tracker.recon.last_send_t_s or 0.0) + 2.0
     final_pose = tuple(float(a) for a in tracker.recon.angles_at(t_settled)[:2])
     frames = F.arrays()
-    recorded = {k: np.asarray(v) for k, v in R.items()}
-    recorded["det_xyz"] = recorded["det_xyz"].reshape(-1, 3)
-    truth = None
-    if has_truth:
-        truth = {k: np.asarray(v) for k, v in T.items()}
-        truth["target_xyz_m"] = truth["target_xyz_m"].reshape(-1, 3)
+    recorded = recorded_arrays(R, RECORDED_DTYPES)
+    truth = recorded_arrays(T, TRUTH_DTYPES) if has_truth else None
     res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth,
                        final_pose_deg=final_pose, tracker_cfg=cfg)
     res.comparison = compare(frames, recorded)

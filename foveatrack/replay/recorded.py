@@ -53,6 +53,28 @@ class FrameArrays:
         return out
 
 
+# the recording's own per-frame values (replay_recording collects them); dtypes given so that a
+# recording with no frames (the daemon's when the lidar never sent data) yields empty arrays that
+# index and compare like those of any other
+RECORDED_DTYPES = {"detected": bool, "det_xyz": float, "det_n_points": np.int64, "error_pan_deg": float,
+                   "error_tilt_deg": float, "processing_ms": float, "latency_ms": float, "head_pan_deg": float,
+                   "head_tilt_deg": float}
+TRUTH_DTYPES = {"true_error_deg": float, "target_xyz_m": float, "points_on_target": np.int64, "pan_deg": float,
+                "tilt_deg": float}
+
+
+def recorded_arrays(lists: dict, dtypes: dict) -> dict[str, np.ndarray]:
+    """Per-frame lists as arrays of ``dtypes`` (xyz columns reshaped to (n, 3)); ``command`` stays a
+    list of (pan_dir, pan_byte, tilt_dir, tilt_byte) tuples or (None,) * 4 where none was recorded."""
+    out = {k: (np.asarray(v, dtype=dtypes[k]) if k in dtypes else np.asarray(v)) for k, v in lists.items()}
+    for k in ("det_xyz", "target_xyz_m"):
+        if k in out:
+            out[k] = out[k].reshape(-1, 3)
+    if "command" in lists:
+        out["command"] = np.asarray(lists["command"]) if lists["command"] else np.zeros((0, 4), object)
+    return out
+
+
 @dataclass(frozen=True)
 class TrackerRebased:
     """The daemon started a fresh tracker at this pose and sensor time (its ``tracker_rebased``

@@ -1,0 +1,53 @@
+"""Replay and export of recordings that are valid but unusual, or damaged in ways a reader must not
+trip over (issue 32): each ends in the data, the data with a warning naming what was lost, or a
+one-line error; never a traceback.
+
+* a recording with no frames (the daemon's after a run in which the lidar never sent data) is a
+  valid, empty result in replay and export."""
+
+import numpy as np
+
+from foveatrack.cli import main
+from foveatrack.replay import format_report, replay_recording
+
+from inprocess import inprocess_daemon
+
+
+class _Head:
+    connected = True
+
+    def send_frame(self, raw):
+        return True
+
+
+def daemon_recording_without_frames(tmp_path):
+    """What the daemon leaves when the lidar never sent a point: its metadata and the stop event."""
+    from foveatrack.daemon.runtime import _job_event
+
+    d, rec = inprocess_daemon(tmp_path, _Head())
+    d._record(_job_event, 0, {"event": "stop", "stats": dict(d.counters)})
+    d.recorder.close()
+    return rec
+
+
+def test_a_daemon_recording_without_frames_replays_as_an_empty_result(tmp_path, capsys):
+    rec = daemon_recording_without_frames(tmp_path)
+    res = replay_recording(rec)
+    assert res.frames["frame_index"].size == 0 and res.recorded["detected"].dtype == bool
+    c = res.comparison
+    assert c["detections_equal"] and c["commands_compared"] == 0 and not c["partial"]
+    assert res.metrics["detection"]["frames"] == 0
+    assert "no lidar frames" in format_report(res)
+    assert main(["replay", str(rec), "--json"]) == 0
+    assert main(["replay", str(rec), "--export-trajectory", str(tmp_path / "t.csv")]) == 0
+    assert (tmp_path / "t.csv").read_text().count("\n") == 1          # the header only
+    capsys.readouterr()
+
+
+def test_a_recording_without_frames_exports_empty_files(tmp_path, capsys):
+    rec = daemon_recording_without_frames(tmp_path)
+    assert main(["export", str(rec), "--csv", str(tmp_path / "p.csv"), "--lvx", str(tmp_path / "p.lvx"),
+                 "--npz", str(tmp_path / "p.npz"), "--trajectory", str(tmp_path / "t.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "0 points -> " in out
+    assert np.load(tmp_path / "p.npz")["t_ns"].size == 0
