@@ -52,7 +52,7 @@ from foveatrack.gate import CommandGate
 from foveatrack.recording.records import CommandRecord
 from foveatrack.replay.config import recorded_limits, load_tracker_table, tracker_config
 from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
-from foveatrack.replay.recorded import (RECORDED_DTYPES, TRUTH_DTYPES, FrameArrays, TrackerRebased,
+from foveatrack.replay.recorded import (RECORDED_DTYPES, TRUTH_DTYPES, FrameArrays, TimeOrder, TrackerRebased,
                                         recorded_arrays, recorded_frames)
 from foveatrack.replay.result import ReplayResult
 from foveatrack.speed_table import SpeedTable
@@ -64,6 +64,22 @@ def _reached_head(gate: CommandGate, tracker: Tracker, send_t: float, cmd: HeadC
     """What the head runs after a command sent at ``send_t``: the gate's rule for a write, with the
     outcome the recording gives (the daemon's ``written: false`` for a failed write)."""
     return gate.wrote(tracker, send_t, cmd, ok=record is None or record.reached_head)
+
+
+def _after_frame(tracker: Tracker, gate: CommandGate, order: TimeOrder, after: list) -> Tracker:
+    """The watchdog / shutdown STOPs and the daemon's rebases after a frame, in the order they happened;
+    returns the tracker (a fresh one where the daemon rebased)."""
+    for c in after:
+        if isinstance(c, TrackerRebased):
+            tracker = tracker.rebased(c.t0_s, c.pan_deg, c.tilt_deg)
+            gate.head_cmd = STOP
+            order.rebased()
+            continue
+        if order.command_out_of_order(tracker, c.send_time_s):
+            continue
+        tracker.command_sent(c.send_time_s, c.command)
+        _reached_head(gate, tracker, c.send_time_s, c.command, c)
+    return tracker
 
 
 def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
@@ -89,6 +105,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     T = {k: [] for k in ("true_error_deg", "target_xyz_m", "points_on_target", "pan_deg", "tilt_deg")}
     has_truth = False
     imu_recorded = False
+    order = TimeOrder()
     for rf in recorded_frames(reader):
         pts = rf.points
         k = int(pts.frame_index)
@@ -103,6 +120,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             t0 = (pts.t_ns - period_ns) * 1e-9
             c = rf.command
             send_t = float(c.send_t_s) if c is not None and c.send_t_s is not None else t1 + cfg.send_delay_s
+        if order.frame_out_of_order(tracker, k, t1, send_t):
+            tracker = _after_frame(tracker, gate, order, rf.after)
+            continue
         frame = Frame(t0, t1, pts.xyz, pts.t_ns_points, pts.reflectivity)
         for b in rf.imu:        # as the driver fed them: before the frame (a commands tracker ignores them)
             imu_recorded = True
@@ -138,13 +158,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             T["points_on_target"].append(0)
             T["pan_deg"].append(np.nan)
             T["tilt_deg"].append(np.nan)
-        for c in rf.after:   # watchdog / shutdown STOPs and the daemon's rebases, in the order they happened
-            if isinstance(c, TrackerRebased):
-                tracker = tracker.rebased(c.t0_s, c.pan_deg, c.tilt_deg)
-                gate.head_cmd = STOP
-                continue
-            tracker.command_sent(c.send_time_s, c.command)
-            _reached_head(gate, tracker, c.send_time_s, c.command, c)
+        tracker = _after_frame(tracker, gate, order, rf.after)
     t_settled = (tracker.recon.last_send_t_s or 0.0) + 2.0
     final_pose = tuple(float(a) for a in tracker.recon.angles_at(t_settled)[:2])
     frames = F.arrays()
@@ -169,12 +183,12 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     if reader.problem:
         res.comparison["recording_problem"] = reader.problem
     res.comparison["recording_complete"] = bool(reader.complete)
-    res.comparison["recording_damage"] = [d.describe() for d in reader.damage]
-    res.comparison.update(_gaps(frames, recorded, reader))
+    res.comparison["recording_damage"] = [d.describe() for d in reader.damage] + order.describe()
+    res.comparison.update(_gaps(frames, recorded, reader, order.frames + order.commands))
     return res
 
 
-def _gaps(frames: dict, recorded: dict, reader) -> dict:
+def _gaps(frames: dict, recorded: dict, reader, skipped_out_of_order: int = 0) -> dict:
     """Where frames are missing (a skipped damaged stretch), and whether that makes the comparison partial.
 
     A gap is a jump in the recorded frame index (both drivers number frames 0, 1, 2, ...), or damage
@@ -192,7 +206,7 @@ def _gaps(frames: dict, recorded: dict, reader) -> dict:
         gaps.append((int(i), int(fi[i - 1]), int(fi[i]), int(fi[i] - fi[i - 1] - 1)))
     # damage that lost records other than frames (e.g. a watchdog STOP) also leaves the reckoning short
     lost_other = any(not d.cut_short and (d.lost is None or sum(d.lost.values()) > 0) for d in reader.damage)
-    partial = bool(gaps) or lost_other or bool(reader.unattributed)
+    partial = bool(gaps) or lost_other or bool(reader.unattributed) or bool(skipped_out_of_order)
     out: dict = {"partial": partial, "frames_missing": int(sum(g[3] for g in gaps if g[3])), "gaps": []}
     for i, after, before, n in gaps:
         dp = frames["head_pan_deg"][i] - recorded["head_pan_deg"][i]

@@ -75,6 +75,52 @@ def recorded_arrays(lists: dict, dtypes: dict) -> dict[str, np.ndarray]:
     return out
 
 
+class TimeOrder:
+    """Frames and commands a replay cannot take because they go back in time: intact chunks read out
+    of order (e.g. a stretch of the file copied over an earlier one).  The tracker's dead reckoning
+    takes commands in time order only, so such a frame (with its command) or command is skipped and
+    counted; the replay's warning names them, and the comparison is partial."""
+
+    def __init__(self):
+        self.frames = 0
+        self.commands = 0
+        self.first_frame: int | None = None
+        self._last_t_end_s = -np.inf
+
+    def rebased(self) -> None:
+        self._last_t_end_s = -np.inf      # a new sensor clock: its frames start over
+
+    def frame_out_of_order(self, tracker, frame_index: int, t_end_s: float, send_t_s: float) -> bool:
+        last_send = tracker.recon.last_send_t_s
+        if t_end_s <= self._last_t_end_s or (last_send is not None and send_t_s < last_send) \
+                or not np.isfinite(send_t_s):
+            self.frames += 1
+            if self.first_frame is None:
+                self.first_frame = frame_index
+            return True
+        self._last_t_end_s = t_end_s
+        return False
+
+    def command_out_of_order(self, tracker, send_t_s) -> bool:
+        last_send = tracker.recon.last_send_t_s
+        if send_t_s is None or not np.isfinite(send_t_s) or (last_send is not None and send_t_s < last_send):
+            self.commands += 1
+            return True
+        return False
+
+    def describe(self) -> list[str]:
+        if not (self.frames or self.commands):
+            return []
+        what = []
+        if self.frames:
+            what.append(f"{self.frames} frame{'' if self.frames == 1 else 's'} (the first: frame "
+                        f"{self.first_frame})")
+        if self.commands:
+            what.append(f"{self.commands} command{'' if self.commands == 1 else 's'} outside any frame")
+        return [f"{' and '.join(what)} skipped: out of time order (intact data read out of order, e.g. "
+                f"a stretch of the file copied over an earlier one); the tracker takes them in time order only"]
+
+
 @dataclass(frozen=True)
 class TrackerRebased:
     """The daemon started a fresh tracker at this pose and sensor time (its ``tracker_rebased``
