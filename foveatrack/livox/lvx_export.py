@@ -48,6 +48,7 @@ class LvxExport:
     packets: int
     frames: int
     slot_collisions: int
+    problem: str | None = None        # the reader's warning: what a damaged recording lost (None: nothing)
 
 
 def _preset_of(meta: dict) -> str | None:
@@ -97,6 +98,7 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
     dt = DEFAULT_DATA_TYPE.get(dev_type, 2) if data_type is None else data_type
 
     frames = list(reader.points())
+    problem = reader.warning()
     if frames:
         t = np.concatenate([f.t_ns_points for f in frames])
         xyz = np.concatenate([f.xyz for f in frames])
@@ -107,7 +109,7 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
                for h, yaw in enumerate(yaws)]
     if not len(t):
         write_lvx(out_path, [], devices, frame_duration_ms)
-        return LvxExport(Path(out_path), dev_type, dt, n_heads, 0, 0, 0, 0)
+        return LvxExport(Path(out_path), dev_type, dt, n_heads, 0, 0, 0, 0, problem=problem)
     t_origin = int(t.min())
     slot = np.round((t - t_origin) * (rate / 1e9)).astype(np.int64)
     order = np.lexsort((np.arange(len(slot)), slot))
@@ -145,4 +147,5 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
         fr = sorted(packets.get(k, []), key=lambda x: (x[0], x[1]))
         lvx_frames.append([(h, pk) for _, h, pk in fr])
     write_lvx(out_path, lvx_frames, devices, frame_duration_ms)
-    return LvxExport(Path(out_path), dev_type, dt, n_heads, int(len(slot)), n_packets, len(lvx_frames), collisions)
+    return LvxExport(Path(out_path), dev_type, dt, n_heads, int(len(slot)), n_packets, len(lvx_frames), collisions,
+                     problem=problem)

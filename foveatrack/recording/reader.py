@@ -133,6 +133,17 @@ class RecordingReader:
                          f"closed (cut short, e.g. kill -9 or power loss); every whole chunk before it was read")
         return "; ".join(parts) if parts else None
 
+    def warning(self) -> str | None:
+        """The line a command prints after reading the whole recording (``replay`` and ``export`` alike):
+        ``WARNING: damaged recording, ...`` naming every skipped stretch and what it held, a ``note``
+        for a file whose writer was not closed, None for an intact closed file."""
+        problem = self.problem
+        if problem is None:
+            return None
+        if self.damage or self.unattributed:
+            return f"WARNING: damaged recording {self.path}, {problem}"
+        return f"note: {self.path}: {problem}"
+
     # ------------------------------------------------------------------ walking the file
 
     def _records(self, stop_after_meta: bool = False) -> Iterator[tuple[str, int, bytes]]:

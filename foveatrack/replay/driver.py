@@ -47,13 +47,13 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
-from foveatrack.frames import Frame, FrameSlicer
+from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate
 from foveatrack.recording.records import CommandRecord
 from foveatrack.replay.config import recorded_limits, load_tracker_table, tracker_config
 from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
-from foveatrack.replay.recorded import (RECORDED_DTYPES, TRUTH_DTYPES, FrameArrays, TimeOrder, TrackerRebased,
-                                        recorded_arrays, recorded_frames)
+from foveatrack.replay.recorded import (RECORDED_DTYPES, TRUTH_DTYPES, FrameArrays, LvxTimeline, TimeOrder,
+                                        TrackerRebased, recorded_arrays, recorded_frames)
 from foveatrack.replay.result import ReplayResult
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import Tracker, TrackerConfig
@@ -233,15 +233,14 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
 
     cfg = TrackerConfig.from_mapping(tracker_table or {}, where=f"{config_name or 'default'} [tracker]")
     tracker = None
-    slicer = FrameSlicer(cfg.rate_hz)
     F = FrameArrays()
     fid = 0
 
     def run(frames):
         nonlocal tracker, fid
-        for fr in frames:
+        for fr, new_clock in frames:
             fr = strip_no_return(fr)
-            if tracker is None:
+            if tracker is None or new_clock:
                 tracker = Tracker(cfg, SpeedTable.nominal(), t0_s=fr.t_start_s)
             send_t = fr.t_end_s + cfg.send_delay_s
             out = tracker.process(fr, send_t_s=send_t)
@@ -251,16 +250,19 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
 
     # no-return points are kept for their times (frames keep coming over the sky), then stripped
     with LvxReader(path, point_rate_hz=point_rate_hz, keep_no_return=True) as r:
+        timeline = LvxTimeline(cfg.rate_hz, r.frame_duration_ms)
         for lf in r.frames():
             b = lf.points
-            run(slicer.push(b.xyz, b.t_ns, b.reflectivity))
-        run(slicer.flush())
+            run(timeline.push(b.xyz, b.t_ns, b.reflectivity))
+        run(timeline.flush())
         problem = r.problem
     frames = F.arrays()
     res = ReplayResult("lvx", str(path), config_name or "default", frames, None, None, tracker_cfg=cfg)
     res.metrics = replay_metrics(frames, None, cfg)
     if problem:
         res.comparison["recording_problem"] = problem
+    res.comparison["lvx_time"] = timeline.counts
+    res.comparison["recording_damage"] = timeline.describe()
     return res
 
 

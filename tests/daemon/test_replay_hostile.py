@@ -72,3 +72,24 @@ def test_intact_chunks_out_of_order_are_skipped_and_named_not_a_traceback(sim_re
     assert main(["replay", str(bad)]) == 0
     out = capsys.readouterr().out
     assert "WARNING" in out and "out of time order" in out
+
+
+def test_export_reports_damage_as_replay_does(sim_recording, tmp_path, capsys):
+    """One flipped bit: replay said "1 frame and 9 other records lost" while export --csv / --lvx
+    printed their point counts with rc 0, a frame short, and nothing else."""
+    from mcap.reader import make_reader
+
+    path, log, _ = sim_recording
+    with open(path, "rb") as fh:
+        cks = sorted(c.chunk_start_offset for c in make_reader(fh).get_summary().chunk_indexes)
+    data = bytearray(open(path, "rb").read())
+    data[cks[len(cks) // 3] + 9 + 24] ^= 0x01          # one bit of a chunk's CRC
+    bad = tmp_path / "flip.mcap"
+    bad.write_bytes(bytes(data))
+    damage = replay_recording(bad).comparison["recording_damage"]
+    assert len(damage) == 1 and "1 frame and" in damage[0]
+    capsys.readouterr()
+    for flag, out in (("--csv", "p.csv"), ("--lvx", "p.lvx"), ("--npz", "p.npz"), ("--trajectory", "t.csv")):
+        assert main(["export", str(bad), flag, str(tmp_path / out)]) == 0
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("WARNING: damaged recording") and damage[0] in err[0], (flag, err)
