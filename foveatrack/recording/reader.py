@@ -293,8 +293,10 @@ class RecordingReader:
         stop = self.size if data_end is None else data_end
         found: list[int] = []
         p = pos
+        scan = mw.ByteScan(mm, stop, bytes([mw.OP_CHUNK, mw.OP_METADATA]))
+        self._last_scan = scan
         while True:
-            p = self._next_candidate(mm, p, stop)
+            p = scan.next(p)
             if p < 0:
                 return data_end, found
             if mm[p] == mw.OP_METADATA:
@@ -314,13 +316,6 @@ class RecordingReader:
             p += 1
 
     @staticmethod
-    def _next_candidate(mm, p: int, stop: int) -> int:
-        """The next byte at or after ``p`` that may start a chunk or a metadata record (-1: none)."""
-        a = mm.find(b"\x06", p, stop)
-        b = mm.find(bytes([mw.OP_METADATA]), p, stop)
-        return b if a < 0 else a if b < 0 else min(a, b)
-
-    @staticmethod
     def _channel_table_at(mm, p: int, stop: int) -> bool:
         """A whole channel-table metadata record starts at ``p`` (the writer puts one after the chunk
         where channels first appear: reading resumes there, so a damaged chunk does not take it along)."""
@@ -330,6 +325,9 @@ class RecordingReader:
         end = p + mw.REC.size + length
         if end > stop or length > (1 << 20):
             return False
+        name = CHANNELS_META_NAME.encode()
+        if mm[p + mw.REC.size:p + mw.REC.size + 4 + len(name)] != mw.U32.pack(len(name)) + name:
+            return False        # not its name: no copy of up to 1 MiB per metadata opcode byte
         try:
             name, _md = mw.metadata(mm[p + mw.REC.size:end])
         except mw.BadRecord:

@@ -1,0 +1,98 @@
+"""Hostile recordings (issue 32): the reader's cost is bounded by the file, whatever its bytes.
+
+Costs are asserted as work counted (bytes the reader's searches cover, bytes a decompressor may
+produce), never as wall-clock time."""
+
+import mmap
+
+import numpy as np
+import pytest
+
+from foveatrack.recording import RecordingReader, reader as reader_mod
+
+from test_damaged_recordings import write_run
+
+
+class CountingMmap(mmap.mmap):
+    """An mmap whose ``find`` counts the bytes each search may cover."""
+
+    scanned = 0
+
+    def find(self, sub, start=None, end=None):
+        q = super().find(sub, start, end)
+        stop = len(self) if end is None else end
+        CountingMmap.scanned += (q if q >= 0 else stop) - (start or 0) + 1
+        return q
+
+
+def test_resynchronising_over_a_long_damaged_stretch_costs_linear_work(tmp_path, monkeypatch):
+    """A stretch of 0x06 bytes (each a chunk opcode, none a metadata one): each candidate looked for
+    the next metadata opcode from scratch, so the work grew with the square of the stretch (a 242 kB
+    file took over 30 s)."""
+    p = tmp_path / "run.mcap"
+    write_run(p, n_frames=60)
+    data = bytearray(p.read_bytes())
+    a, b = len(data) // 4, len(data) * 3 // 4
+    data[a:b] = b"\x06" * (b - a)
+    q = tmp_path / "bad.mcap"
+    q.write_bytes(bytes(data))
+    monkeypatch.setattr(reader_mod.mmap, "mmap", CountingMmap)
+    CountingMmap.scanned = 0
+    r = RecordingReader(q)
+    n = sum(1 for _ in r.messages())
+    assert n > 0 and r.damage
+    assert CountingMmap.scanned < 20 * len(data), (CountingMmap.scanned, len(data))
+
+
+def _chunk(payload: bytes, usize: int) -> bytes:
+    import struct
+
+    from foveatrack.recording import mcap_walk as mw
+
+    body = mw.CHUNK_HEAD.pack(0, 0, usize, 0, 3) + b"lz4" + mw.U64.pack(len(payload)) + payload
+    return mw.REC.pack(mw.OP_CHUNK, len(body)) + body
+
+
+@pytest.mark.parametrize("claimed", [1000, 200 * 10**6])
+def test_an_lz4_chunk_never_decompresses_past_a_cap(claimed):
+    """lz4 chunks had no output cap: 2.5 MB became 864 MB.  Whether the header understates the size
+    (1000 bytes) or claims it all (a ratio no recording has), the chunk is damage and the
+    decompressor never produces the bulk of it."""
+    import tracemalloc
+
+    import lz4.frame
+
+    from foveatrack.recording import mcap_walk as mw
+
+    bomb = lz4.frame.compress(b"\0" * (200 * 10**6))         # ~0.8 MB that decompresses to 200 MB
+    buf = _chunk(bomb, claimed)
+    tracemalloc.start()
+    try:
+        with pytest.raises(mw.BadRecord):
+            mw.chunk_records(buf, 0, len(buf) - mw.REC.size)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20 * 10**6, peak
+
+
+def test_live_pacing_has_finite_waits(monkeypatch, tmp_path):
+    """--speed 1e-300 and --wait-s inf ended in OverflowError; a sensor clock jump in the recording
+    (power-on time to PTP time) made replay --live sleep for decades."""
+    from foveatrack.errors import UserError
+    from foveatrack.recording import live
+
+    slept = []
+    monkeypatch.setattr(live.time, "sleep", lambda s: slept.append(s))
+    for bad in (1e-300, 0.0, float("nan"), -1.0):
+        with pytest.raises(UserError, match="--speed"):
+            live.Pacer(bad)
+    p = live.Pacer(1.0)
+    for t in (5.0, 5.1, 1.7e9, 1.7e9 + 0.1, 3.0):       # a jump forward, one back
+        p.wait(t)
+    assert p.jumps == 2 and all(0 <= s <= 0.11 for s in slept), slept
+    rec = tmp_path / "r.mcap"
+    write_run(rec, n_frames=2)
+    for wait in (float("inf"), float("nan"), 1e12):
+        with pytest.raises(UserError, match="--wait-s"):
+            live.stream_recording(rec, 0, 1.0, wait)
