@@ -65,6 +65,8 @@ def cmd_export(args) -> int:
 
         r = export_lvx(rec, args.lvx, data_type=args.data_type, device=args.device, frame_duration_ms=args.frame_ms)
         extra = f"; {r.slot_collisions} points sharing a slot left out" if r.slot_collisions else ""
+        if r.time_gaps:
+            extra += f"; {r.time_gaps} gap(s) in the point times over 1 s (a sensor clock jump?) not filled with frames"
         print(f"{r.points} points in {r.packets} packets (data type {r.data_type}, device type {r.device_type}, "
               f"{r.devices} device{'s' if r.devices > 1 else ''}), {r.frames} frames -> {args.lvx}{extra}")
         warn(r.problem)

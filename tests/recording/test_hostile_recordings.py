@@ -96,3 +96,25 @@ def test_live_pacing_has_finite_waits(monkeypatch, tmp_path):
     for wait in (float("inf"), float("nan"), 1e12):
         with pytest.raises(UserError, match="--wait-s"):
             live.stream_recording(rec, 0, 1.0, wait)
+
+
+def test_export_lvx_over_a_sensor_clock_jump_allocates_by_points_not_by_time(tmp_path, capsys):
+    """Power-on time to PTP time between two frames made export --lvx size its slot grid by the
+    time between them (3.83 PiB).  Now both sides are written, every point at its recorded time,
+    and the unfilled gap is said."""
+    from foveatrack.cli import main
+    from foveatrack.livox.lvx import read_lvx
+    from foveatrack.recording import RecordingWriter
+
+    rec = tmp_path / "jump.mcap"
+    rng = np.random.default_rng(1)
+    times = []
+    with RecordingWriter(rec, {"point_rate_hz": 100_000.0}) as w:
+        for k, t_end in enumerate((2_000_000_000, 2_100_000_000, 1_700_000_000_000_000_000)):
+            t = t_end - 100_000_000 + np.arange(50) * 10_000
+            times.append(t)
+            w.write_points(t_end, k, rng.uniform(1, 20, (50, 3)), t, np.full(50, 7, np.uint8))
+    assert main(["export", str(rec), "--lvx", str(tmp_path / "j.lvx")]) == 0
+    assert "1 gap(s) in the point times" in capsys.readouterr().out
+    got = np.concatenate([b.t_ns for b in read_lvx(tmp_path / "j.lvx")])
+    assert np.array_equal(np.sort(got), np.concatenate(times))
