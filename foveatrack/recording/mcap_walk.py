@@ -53,8 +53,9 @@ def chunk_times(mm, pos: int, size: int) -> tuple[int, int] | None:
     return (t0, t1) if t0 <= t1 else None
 
 
-def chunk_records(mm, pos: int, length: int) -> list[tuple[int, bytes]]:
-    """The (opcode, content) records of the chunk at ``pos``: decompressed, size and CRC checked."""
+def chunk_records(mm, pos: int, length: int, require_crc: bool = False) -> list[tuple[int, bytes]]:
+    """The (opcode, content) records of the chunk at ``pos``: decompressed, size and CRC checked
+    (``require_crc``: a CRC of 0, MCAP's "not computed", is damage too: the writer computed them all)."""
     if chunk_length(mm, pos, len(mm)) != length:
         raise BadRecord("a chunk whose header does not hold together (damaged length or compression fields)")
     b = pos + REC.size
@@ -86,6 +87,8 @@ def chunk_records(mm, pos: int, length: int) -> list[tuple[int, bytes]]:
         raise BadRecord(f"a chunk that does not decompress ({type(exc).__name__})") from None
     if len(data) != usize:
         raise BadRecord(f"a chunk of {len(data)} bytes where its header says {usize}")
+    if crc == 0 and require_crc:
+        raise BadRecord("a chunk without a CRC (0) in a recording whose writer gave every chunk one")
     if crc != 0 and zlib.crc32(data) != crc:
         raise BadRecord("a chunk whose CRC does not match its contents")
     out = []

@@ -13,9 +13,9 @@ from typing import Iterable, Iterator
 
 from foveatrack.errors import UserError
 from foveatrack.recording import mcap_walk as mw
-from foveatrack.recording.format import (CHANNELS_META_NAME, FORMAT, IMU, MCAP_MAGIC, META_NAME, POINTS,
-                                         READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message, PointsFrame,
-                                         _decode_points, _decode_points_pb, decode_imu_pb)
+from foveatrack.recording.format import (CHANNELS_META_NAME, FORMAT, IMU, MCAP_MAGIC, META_CRC_KEY, META_NAME,
+                                         POINTS, READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message, PointsFrame,
+                                         _decode_points, _decode_points_pb, decode_imu_pb, meta_crc32)
 
 
 @dataclass(frozen=True)
@@ -110,6 +110,9 @@ class RecordingReader:
         self._channels_read: dict[int, str] = {}
         self._binary: set[str] = set()     # channels whose Channel record names an encoding other than JSON
         self._summary_channels: dict[int, str] | None = None
+        self._require_crc = False          # the writer says it gave every chunk a CRC (chunk_crcs)
+        #: the metadata record's checksum: True (verified), None (a recording made before it had one)
+        self.meta_checked: bool | None = None
         for _ in self._records(stop_after_meta=True):
             break
         if not self.info:
@@ -176,7 +179,7 @@ class RecordingReader:
                     if end > size:
                         raise mw.BadRecord(f"a record whose length field ({length} bytes) runs past the end of the file")
                     if op == mw.OP_CHUNK:
-                        recs = mw.chunk_records(mm, pos, length)
+                        recs = mw.chunk_records(mm, pos, length, self._require_crc)
                     elif op == mw.OP_MINDEX:
                         mw.message_index(mm, body, length)
                         recs = ()
@@ -307,7 +310,7 @@ class RecordingReader:
             length = mw.chunk_length(mm, p, stop)
             if length is not None:
                 try:
-                    mw.chunk_records(mm, p, length)
+                    mw.chunk_records(mm, p, length, self._require_crc)
                     if p > pos:
                         return p, found
                 except mw.BadRecord:
@@ -397,6 +400,13 @@ class RecordingReader:
                       (min(times), max(times)) if times else None, frames)
 
     def _set_meta(self, md: dict[str, str]) -> None:
+        if META_CRC_KEY in md:
+            if md[META_CRC_KEY] != meta_crc32(md):
+                raise UserError(f"{self.path}: its metadata record is damaged (checksum {META_CRC_KEY} "
+                                f"{md[META_CRC_KEY]!r}, its contents give {meta_crc32(md)!r}): the format version, "
+                                f"configuration and speed table in it cannot be trusted")
+            self.meta_checked = True
+        self._require_crc = md.get("chunk_crcs") == "required"
         if md.get("format") != FORMAT:
             raise UserError(f"{self.path} is an MCAP file but not a foveatrack recording (format {md.get('format')!r})")
         if md.get("format_version") not in READABLE_VERSIONS:

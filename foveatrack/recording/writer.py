@@ -14,7 +14,8 @@ import numpy as np
 from foveatrack.errors import UserError
 from foveatrack.livox.protocol import quantise_to_mm_grid
 from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD, IMU,
-                                         MAX_GRID_MM, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable, imu_columns)
+                                         MAX_GRID_MM, META_CRC_KEY, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable,
+                                         imu_columns, meta_crc32)
 from foveatrack.recording.foxglove_view import FoxgloveChannels
 from foveatrack.recording.pack_kernels import pack_points
 
@@ -165,7 +166,7 @@ class RecordingWriter(RecordCalls):
                                              writer_options=opts)
             except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types for I/O
                 raise UserError(f"cannot create recording {self.path}: {exc}") from None
-            self._w.write_metadata(META_NAME, {
+            md = {
                 "format": FORMAT,
                 "format_version": FORMAT_VERSION,
                 "meta_json": meta_json,
@@ -175,7 +176,10 @@ class RecordingWriter(RecordCalls):
                 "writer": f"foxglove-sdk {_sdk_version()}",
                 "created_utc": created_utc if created_utc is not None
                 else _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            })
+                "chunk_crcs": "required",      # the SDK writes every chunk's CRC: a 0 there is damage
+            }
+            md[META_CRC_KEY] = meta_crc32(md)
+            self._w.write_metadata(META_NAME, md)
         self._tabled = 0
         self._frames_since_flush = 0
         self.frames_written = 0

@@ -183,6 +183,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     if reader.problem:
         res.comparison["recording_problem"] = reader.problem
     res.comparison["recording_complete"] = bool(reader.complete)
+    res.comparison["metadata_checksum"] = "verified" if reader.meta_checked else "absent (an older recording)"
     res.comparison["recording_damage"] = [d.describe() for d in reader.damage] + order.describe()
     res.comparison.update(_gaps(frames, recorded, reader, order.frames + order.commands))
     return res

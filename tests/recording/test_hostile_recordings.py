@@ -118,3 +118,41 @@ def test_export_lvx_over_a_sensor_clock_jump_allocates_by_points_not_by_time(tmp
     assert "1 gap(s) in the point times" in capsys.readouterr().out
     got = np.concatenate([b.t_ns for b in read_lvx(tmp_path / "j.lvx")])
     assert np.array_equal(np.sort(got), np.concatenate(times))
+
+
+def test_a_damaged_metadata_record_is_named_as_damage(tmp_path, capsys):
+    """One bit turned format version 3 into 2 and every point decoded differently, without a word."""
+    from foveatrack.cli import main
+    from foveatrack.errors import UserError
+
+    p = tmp_path / "run.mcap"
+    write_run(p, n_frames=3)
+    data = bytearray(p.read_bytes())
+    i = data.index(b"format_version") + len("format_version") + 4
+    assert data[i:i + 1] == b"3"
+    data[i] ^= 0x01                                   # "3" -> "2"
+    q = tmp_path / "v2.mcap"
+    q.write_bytes(bytes(data))
+    with pytest.raises(UserError, match="metadata record is damaged"):
+        RecordingReader(q)
+    assert main(["export", str(q), "--csv", str(tmp_path / "p.csv")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "metadata record is damaged" in err[0]
+    assert RecordingReader(p).meta_checked
+
+
+def test_a_chunk_crc_of_zero_is_damage_where_the_writer_wrote_them(tmp_path):
+    from mcap.reader import make_reader
+
+    p = tmp_path / "run.mcap"
+    write_run(p, n_frames=6)
+    with open(p, "rb") as fh:
+        cks = sorted(c.chunk_start_offset for c in make_reader(fh).get_summary().chunk_indexes)
+    data = bytearray(p.read_bytes())
+    data[cks[3] + 9 + 24:cks[3] + 9 + 28] = bytes(4)      # CRC 0: "not computed"
+    q = tmp_path / "crc0.mcap"
+    q.write_bytes(bytes(data))
+    r = RecordingReader(q)
+    frames = [m.record.frame_index for m in r.messages("points")]
+    assert frames == [0, 1, 2, 4, 5]
+    assert len(r.damage) == 1 and "without a CRC" in r.damage[0].reason
