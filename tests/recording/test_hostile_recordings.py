@@ -156,3 +156,39 @@ def test_a_chunk_crc_of_zero_is_damage_where_the_writer_wrote_them(tmp_path):
     frames = [m.record.frame_index for m in r.messages("points")]
     assert frames == [0, 1, 2, 4, 5]
     assert len(r.damage) == 1 and "without a CRC" in r.damage[0].reason
+
+
+def test_a_recording_is_private_and_never_written_through_a_symlink(tmp_path):
+    """Recordings were created world-readable with the config inside, and the writer opened its path
+    following symlinks (check-then-open)."""
+    import os
+    import stat
+
+    from foveatrack.recording import RecordingWriter
+    from foveatrack.recording.writer import RecordingExistsError
+
+    p = tmp_path / "r.mcap"
+    write_run(p, n_frames=1)
+    assert stat.S_IMODE(p.stat().st_mode) == 0o600
+    target = tmp_path / "victim.txt"
+    link = tmp_path / "link.mcap"
+    os.symlink(target, link)                       # dangling: exists() is False for it
+    with pytest.raises(RecordingExistsError):
+        RecordingWriter(link, {})
+    assert not target.exists()
+    target.write_text("keep")
+    RecordingWriter(link, {}, overwrite=True).close()
+    assert target.read_text() == "keep" and not link.is_symlink()
+
+
+def test_the_writer_child_does_not_import_from_the_working_directory(tmp_path, monkeypatch):
+    """The writer child ran as ``python -c``: a signal.py in the working directory ran inside it."""
+    from foveatrack.recording.writer_process import RecordingProcess
+
+    marker = tmp_path / "ran"
+    (tmp_path / "signal.py").write_text(f"open({str(marker)!r}, 'w').close()\nraise SystemExit(3)\n")
+    monkeypatch.chdir(tmp_path)
+    with RecordingProcess().open(tmp_path / "p.mcap", {"seed": 1}) as w:
+        w.write_points(1000, 0, np.zeros((3, 3)), np.arange(3), np.zeros(3, np.uint8))
+    assert not marker.exists()
+    assert RecordingReader(tmp_path / "p.mcap").meta == {"seed": 1}
