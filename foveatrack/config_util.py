@@ -107,7 +107,7 @@ def read_toml(path, what: str, hint: str = "") -> tuple[dict, str]:
 
     path = Path(path)
     try:
-        text = path.read_text()
+        text = read_small_text(path, what)
     except FileNotFoundError:
         raise UserError(f"{path}: no such {what} file{f' ({hint})' if hint else ''}") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -116,3 +116,24 @@ def read_toml(path, what: str, hint: str = "") -> tuple[dict, str]:
         return tomllib.loads(text), text
     except tomllib.TOMLDecodeError as exc:
         raise UserError(f"{path}: not valid TOML ({exc})") from None
+    except RecursionError:    # tomllib recurses per level: a file nested 1000 deep
+        raise UserError(f"{path}: not a usable {what}: arrays or tables nested too deep") from None
+
+
+#: the largest text file a user gives as configuration (a scene, a config, a speed table) [bytes]
+MAX_CONFIG_BYTES = 16 << 20
+
+
+def read_small_text(path, what: str) -> str:
+    """The text of a regular file of at most :data:`MAX_CONFIG_BYTES`: a device or a FIFO
+    (``/dev/zero``: 3.5 GB, then MemoryError) or a huge file is a UserError naming it."""
+    from pathlib import Path
+
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        raise UserError(f"{path}: the {what} is not a regular file (a device, a FIFO or a directory)")
+    with open(path, "rb") as fh:
+        data = fh.read(MAX_CONFIG_BYTES + 1)
+    if len(data) > MAX_CONFIG_BYTES:
+        raise UserError(f"{path}: the {what} is over {MAX_CONFIG_BYTES >> 20} MiB: not a configuration file")
+    return data.decode()

@@ -236,6 +236,7 @@ class GyroAttitude(HeadPose):
         self.rest_samples = 0
         self.gaps = 0                     # steps longer than 3 nominal sample periods (lost packets)
         self.rests_refuted = 0            # rest stretches the gyro showed to be motion
+        self.nonfinite_samples = 0        # samples dropped for a NaN / inf time or rate
         self._rest_buf: list = []
         self._rest_undo = None
 
@@ -337,7 +338,8 @@ class GyroAttitude(HeadPose):
     # -- the gyro ---------------------------------------------------------------------------------
     def on_imu(self, t_s, gyro_rad_s) -> None:
         """Gyro samples in time order: ``t_s`` (N,) [s, sensor clock], ``gyro_rad_s`` (N, 3) in the
-        IMU's frame [rad/s].  Samples not after the last one are ignored (a duplicate packet)."""
+        IMU's frame [rad/s].  Samples not after the last one are ignored (a duplicate packet); samples
+        with a NaN or infinite time or rate are dropped and counted (``nonfinite_samples``)."""
         t_arr = np.asarray(t_s, float).reshape(-1)
         g = np.asarray(gyro_rad_s, float).reshape(-1, 3)
         if t_arr.size == 0:
@@ -345,6 +347,9 @@ class GyroAttitude(HeadPose):
         w_lidar = rows_times_mat3T(g, self.R_lidar_imu)   # g @ R.T, the same bits on every CPU
         for k in range(t_arr.size):
             t = float(t_arr[k])
+            if not (math.isfinite(t) and np.isfinite(w_lidar[k]).all()):
+                self.nonfinite_samples += 1   # one NaN would make the attitude NaN for good
+                continue
             if self._t_prev is not None and t <= self._t_prev:
                 continue
             self._sample(t, w_lidar[k])

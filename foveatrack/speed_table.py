@@ -288,14 +288,20 @@ class SpeedTable:
     @classmethod
     def load(cls, path) -> "SpeedTable":
         p = Path(path)
+        from foveatrack.config_util import read_small_text
+
         try:
-            text = p.read_text()
+            text = read_small_text(p, "speed table")    # not /dev/zero (3.5 GB, then MemoryError)
         except OSError as exc:
             raise UserError(f"speed table {p}: cannot read ({exc.strerror or exc})") from None
+        except UnicodeDecodeError:
+            raise UserError(f"speed table {p}: not a text file") from None
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise UserError(f"speed table {p}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+        except RecursionError:
+            raise UserError(f"speed table {p}: arrays or objects nested too deep") from None
         return cls.from_dict(data, where=f"speed table {p}")
 
     @classmethod

@@ -48,11 +48,22 @@ def _scaled_truth_table(data: dict, scale: float, accel_scale: float, where: str
             ax["accel_deg_s2"] *= accel_scale
     d["source"] = f"the unit's truth, speeds x {scale:g}, accelerations x {accel_scale:g} ({where}: mis-calibrated)"
     # one file per unit and scales, reused (the loop reads it when it starts)
-    out = Path(tempfile.gettempdir()) / "foveatrack-tables" / (
+    out = _private_dir() / (
         f"{g.get('family', 'pts-303')}-unit{g.get('unit_seed', 0)}-speed{scale:g}-accel{accel_scale:g}.json")
-    out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps(d))
     return str(out)
+
+
+_TABLES_DIR: Path | None = None
+
+
+def _private_dir() -> Path:
+    """This process's own directory for the tables (mode 0700, a name no one can guess: a fixed, shared
+    /tmp/foveatrack-tables let another user plant a symlink or a table there)."""
+    global _TABLES_DIR
+    if _TABLES_DIR is None or not _TABLES_DIR.is_dir():
+        _TABLES_DIR = Path(tempfile.mkdtemp(prefix="foveatrack-tables-"))
+    return _TABLES_DIR
 
 
 def scene_variant(path, attitude: str, *, table_scale: float | None = None, accel_scale: float | None = None,

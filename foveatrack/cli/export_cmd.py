@@ -5,6 +5,9 @@ Viewer, the vendor SDK's tools and ``livox-lvx`` read; ``--csv`` / ``--npz`` wri
 (:func:`foveatrack.recording.export_points`); ``--trajectory F.csv|F.npz`` the recorded detections,
 head, truth and commands (:func:`foveatrack.recording.export_trajectory`); ``--imu F.csv|F.npz`` the IMU
 samples fed to the tracker (:func:`foveatrack.recording.export_imu`).  Several at once are fine.
+
+A damaged recording is exported from everything the reader recovered, and ``export`` prints on stderr
+the warning ``replay`` prints: the bytes skipped and the frames and records lost with them.
 """
 
 from __future__ import annotations
@@ -28,10 +31,19 @@ def register(sub) -> None:
 
 
 def cmd_export(args) -> int:
+    import sys
     from pathlib import Path
 
     from foveatrack.config_util import check_output_file
     from foveatrack.errors import UserError
+
+    said: set[str] = set()
+
+    def warn(line: str | None) -> None:
+        """What a damaged recording lost, as ``replay`` says it: once, however many files are written."""
+        if line and line not in said:
+            said.add(line)
+            print(line, file=sys.stderr, flush=True)
 
     outs = [("--lvx", args.lvx, (".lvx",)), ("--csv", args.csv, (".csv",)), ("--npz", args.npz, (".npz",)),
             ("--trajectory", args.trajectory, (".csv", ".npz")), ("--imu", args.imu, (".csv", ".npz"))]
@@ -53,17 +65,20 @@ def cmd_export(args) -> int:
 
         r = export_lvx(rec, args.lvx, data_type=args.data_type, device=args.device, frame_duration_ms=args.frame_ms)
         extra = f"; {r.slot_collisions} points sharing a slot left out" if r.slot_collisions else ""
+        if r.time_gaps:
+            extra += f"; {r.time_gaps} gap(s) in the point times over 1 s (a sensor clock jump?) not filled with frames"
         print(f"{r.points} points in {r.packets} packets (data type {r.data_type}, device type {r.device_type}, "
               f"{r.devices} device{'s' if r.devices > 1 else ''}), {r.frames} frames -> {args.lvx}{extra}")
+        warn(r.problem)
     elif args.data_type is not None or args.device:
         raise UserError("--data-type and --device are for --lvx")
     from foveatrack.recording import export_imu, export_points, export_trajectory
 
     for flag, path in (("--csv", args.csv), ("--npz", args.npz)):
         if path:
-            print(f"{export_points(rec, path)} points -> {path}")
+            print(f"{export_points(rec, path, warn=warn)} points -> {path}")
     if args.trajectory:
-        print(f"{export_trajectory(rec, args.trajectory)} records -> {args.trajectory}")
+        print(f"{export_trajectory(rec, args.trajectory, warn=warn)} records -> {args.trajectory}")
     if args.imu:
-        print(f"{export_imu(rec, args.imu)} IMU samples -> {args.imu}")
+        print(f"{export_imu(rec, args.imu, warn=warn)} IMU samples -> {args.imu}")
     return 0

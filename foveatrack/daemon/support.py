@@ -3,7 +3,9 @@ the head here (the safety gate every command passes is :mod:`foveatrack.gate`, s
 
 from __future__ import annotations
 
+import errno
 import json
+import os
 import math
 import queue
 import sys
@@ -24,9 +26,13 @@ class JsonLog:
             from foveatrack.errors import UserError
 
             try:
-                self._fh = open(path, "a", buffering=1)
+                # not through a symlink (a planted link would append to any file the daemon can
+                # write); a new log is the owner's alone
+                fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o600)
+                self._fh = os.fdopen(fd, "a", buffering=1)
             except OSError as exc:
-                raise UserError(f"--log {path}: cannot write ({exc.strerror})") from None
+                why = "it is a symbolic link" if exc.errno == errno.ELOOP else exc.strerror
+                raise UserError(f"--log {path}: cannot write ({why})") from None
         self._lock = threading.Lock()
 
     def event(self, event: str, **fields) -> None:

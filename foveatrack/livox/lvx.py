@@ -243,6 +243,11 @@ class LvxReader:
             if end > n:
                 raise self._package_error(index, at, f"data_type {dt} needs {P.PACKET_LEN[dt] + 1} bytes, the "
                                                      f"frame has {n - off} left (overruns the frame)")
+            if ts_type != TIMESTAMP_TYPE_UTC:
+                ts = int.from_bytes(body[off + 11:off + 19], "little")
+                if ts >= P.MAX_TIMESTAMP_NS:
+                    raise self._package_error(index, at, f"field timestamp (byte {at + 11}) = 0x{ts:016x} ns, beyond "
+                                                         f"any sensor clock (>= 2^62 ns)")
             if ts_type == TIMESTAMP_TYPE_UTC:
                 try:
                     P._utc_ns(np.frombuffer(body, np.uint8, 8, off + 11)[None, :])

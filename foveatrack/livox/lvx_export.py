@@ -36,6 +36,12 @@ MULTI_HEAD_YAW_DEG = {"mid100": (30.0, 0.0, -30.0)}
 PRESET_DEVICE_TYPE = {**P.DEVICE_TYPES, "prototype": 1, "mid100": 1}
 
 
+#: a gap in the recorded point times up to this long [s] is filled with empty slots and frames, as a
+#: unit sends them; a longer one (a sensor clock that jumped, from power-on time to PTP time) is not:
+#: the slots and frames after it follow on, so no array or frame count is sized by a time span
+MAX_FILLED_GAP_S = 1.0
+
+
 @dataclass(frozen=True)
 class LvxExport:
     """What :func:`export_lvx` wrote."""
@@ -48,6 +54,8 @@ class LvxExport:
     packets: int
     frames: int
     slot_collisions: int
+    problem: str | None = None        # the reader's warning: what a damaged recording lost (None: nothing)
+    time_gaps: int = 0                # gaps in the points' times over MAX_FILLED_GAP_S, not filled with frames
 
 
 def _preset_of(meta: dict) -> str | None:
@@ -97,6 +105,7 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
     dt = DEFAULT_DATA_TYPE.get(dev_type, 2) if data_type is None else data_type
 
     frames = list(reader.points())
+    problem = reader.warning()
     if frames:
         t = np.concatenate([f.t_ns_points for f in frames])
         xyz = np.concatenate([f.xyz for f in frames])
@@ -107,7 +116,7 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
                for h, yaw in enumerate(yaws)]
     if not len(t):
         write_lvx(out_path, [], devices, frame_duration_ms)
-        return LvxExport(Path(out_path), dev_type, dt, n_heads, 0, 0, 0, 0)
+        return LvxExport(Path(out_path), dev_type, dt, n_heads, 0, 0, 0, 0, problem=problem)
     t_origin = int(t.min())
     slot = np.round((t - t_origin) * (rate / 1e9)).astype(np.int64)
     order = np.lexsort((np.arange(len(slot)), slot))
@@ -122,27 +131,44 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
     frame_ns = frame_duration_ms * 1_000_000
     packets: dict[int, list[tuple[int, bytes]]] = {}
     n_packets = 0
+    max_gap_slots = int(MAX_FILLED_GAP_S * head_rate)
     for h in range(n_heads):
         mine = slot % n_heads == h                       # head h fires slots h, h + H, ... (point k: head k mod H)
-        hs = slot[mine] // n_heads
-        if not hs.size:
+        hs_all = slot[mine] // n_heads
+        if not hs_all.size:
             continue
-        n_slots = int(hs.max()) + 1
-        grid = np.zeros((n_slots, per, 3))
-        grid_refl = np.zeros((n_slots, per), np.uint8)
-        grid[hs, 0] = xyz[mine]
-        grid_refl[hs, 0] = refl[mine]
-        t0_h = t_origin + int(round(h * 1e9 / rate))
-        pks = P.encode_data_packets(grid.reshape(-1, 3), grid_refl.reshape(-1), t0_h, head_rate, data_type=dt,
-                                    lidar_id=1)
-        n_per = P.POINTS_PER_PACKET[dt]
-        for k, pk in enumerate(pks):
-            t_pk = t0_h + int(round(k * n_per * 1e9 / head_rate))
-            packets.setdefault((t_pk - t_origin) // frame_ns, []).append((t_pk, h, pk))
-        n_packets += len(pks)
+        xyz_h, refl_h = xyz[mine], refl[mine]
+        # runs of slots without a gap over MAX_FILLED_GAP_S: the grid is never sized by a time span
+        # (a sensor clock jump once asked for 3.83 PiB); empty slots are filled inside a run only
+        cuts = np.flatnonzero(np.diff(hs_all) > max_gap_slots) + 1
+        for a, b in zip(np.concatenate(([0], cuts)), np.concatenate((cuts, [hs_all.size]))):
+            s0 = int(hs_all[a])
+            hs = hs_all[a:b] - s0
+            n_slots = int(hs[-1]) + 1
+            grid = np.zeros((n_slots, per, 3))
+            grid_refl = np.zeros((n_slots, per), np.uint8)
+            grid[hs, 0] = xyz_h[a:b]
+            grid_refl[hs, 0] = refl_h[a:b]
+            t0_h = t_origin + int(round(h * 1e9 / rate)) + int(round(s0 * 1e9 / head_rate))
+            pks = P.encode_data_packets(grid.reshape(-1, 3), grid_refl.reshape(-1), t0_h, head_rate, data_type=dt,
+                                        lidar_id=1)
+            n_per = P.POINTS_PER_PACKET[dt]
+            for k, pk in enumerate(pks):
+                t_pk = t0_h + int(round(k * n_per * 1e9 / head_rate))
+                packets.setdefault((t_pk - t_origin) // frame_ns, []).append((t_pk, h, pk))
+            n_packets += len(pks)
     lvx_frames = []
-    for k in range(max(packets) + 1):
-        fr = sorted(packets.get(k, []), key=lambda x: (x[0], x[1]))
+    gaps = 0
+    prev = None
+    for k in sorted(packets):
+        if prev is not None and k - prev > 1:
+            if (k - prev - 1) * frame_ns <= MAX_FILLED_GAP_S * 1e9:
+                lvx_frames.extend([] for _ in range(k - prev - 1))   # frames keep coming over the sky
+            else:
+                gaps += 1                                           # not a time span to fill with frames
+        prev = k
+        fr = sorted(packets[k], key=lambda x: (x[0], x[1]))
         lvx_frames.append([(h, pk) for _, h, pk in fr])
     write_lvx(out_path, lvx_frames, devices, frame_duration_ms)
-    return LvxExport(Path(out_path), dev_type, dt, n_heads, int(len(slot)), n_packets, len(lvx_frames), collisions)
+    return LvxExport(Path(out_path), dev_type, dt, n_heads, int(len(slot)), n_packets, len(lvx_frames), collisions,
+                     problem=problem, time_gaps=gaps)

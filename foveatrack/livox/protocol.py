@@ -529,6 +529,12 @@ def point_offsets_ns(n: int, point_rate_hz: float) -> np.ndarray:
     return np.round(np.arange(n) * (1e9 / point_rate_hz)).astype(np.int64)
 
 
+# The largest sensor timestamp taken [ns]: 2^62 ns is the year 2116 as PTP / UTC time and 146 years
+# after power-on; a u64 beyond it (a damaged or hostile packet) would wrap when read as int64 and
+# when the point offsets are added to it.
+MAX_TIMESTAMP_NS = 1 << 62
+
+
 def _utc_ns(ts_bytes: np.ndarray) -> np.ndarray:
     """PPS+GPS timestamps: year-2000 u8, month u8, day u8, hour u8, microseconds in the hour u32."""
     out = np.empty(ts_bytes.shape[0], np.int64)
@@ -543,14 +549,20 @@ def decode_packets_array(arr: np.ndarray, point_rate_hz: float, keep_no_return: 
     """Decode a structured array of whole packets of one data type (see :func:`packet_dtype`).
 
     Returns the batch and the number of no-return points removed (0 when ``keep_no_return``).
-    Raises :class:`PacketError` (``data_bad_timestamp``) for an invalid UTC timestamp.
+    Raises :class:`PacketError` (``data_bad_timestamp``) for an invalid UTC timestamp or one at or
+    beyond :data:`MAX_TIMESTAMP_NS`.
     """
     hdr = arr["hdr"]
     pts = arr["pts"]
     data_type = int(hdr["data_type"][0])
     n_pk, n_pt = pts.shape
-    ts = hdr["timestamp"].astype(np.int64)
     utc = hdr["timestamp_type"] == TIMESTAMP_TYPE_UTC
+    raw_ts = hdr["timestamp"]
+    if (raw_ts[~utc] >= MAX_TIMESTAMP_NS).any():
+        bad = int(raw_ts[~utc][raw_ts[~utc] >= MAX_TIMESTAMP_NS][0])
+        raise PacketError("data_bad_timestamp", f"timestamp 0x{bad:016x} ns is beyond any sensor clock "
+                                                f"(>= 2^62 ns)")
+    ts = raw_ts.astype(np.int64)
     if utc.any():
         raw = arr.view(np.uint8).reshape(n_pk, -1)[:, 10:18]
         try:

@@ -6,7 +6,7 @@ import csv
 import math
 import os
 from pathlib import Path
-from typing import Iterable
+from typing import Callable, Iterable
 
 import numpy as np
 
@@ -37,14 +37,27 @@ def write_columns(out_path: Path, cols: dict, nan_as_empty: bool = False) -> Non
             w.writerow(["" if nan_as_empty and isinstance(v, float) and math.isnan(v) else v for v in row])
 
 
-def export_points(recording: str | os.PathLike, out_path: str | os.PathLike) -> int:
+Warn = Callable[[str], None]
+
+
+def _warn_damage(reader: RecordingReader, warn: Warn | None) -> None:
+    """Tell ``warn`` what the reader skipped (the line ``replay`` prints), once the whole file was read."""
+    line = reader.warning()
+    if line is not None and warn is not None:
+        warn(line)
+
+
+def export_points(recording: str | os.PathLike, out_path: str | os.PathLike, warn: Warn | None = None) -> int:
     """Write all recorded points to CSV or NPZ (by suffix); returns the number of points.
 
     Columns / arrays: frame_index, frame_t_ns, t_ns, x_m, y_m, z_m, reflectivity (lidar frame).
+    ``warn`` gets the one-line warning of a damaged recording (what was skipped and lost).
     """
     out_path = Path(out_path)
     out_kind(out_path)
-    frames = list(RecordingReader(recording).points())
+    reader = RecordingReader(recording)
+    frames = list(reader.points())
+    _warn_damage(reader, warn)
     if frames:
         cols = {
             "frame_index": np.concatenate([np.full(len(f), f.frame_index, np.int64) for f in frames]),
@@ -65,6 +78,7 @@ def export_trajectory(
     recording: str | os.PathLike,
     out_path: str | os.PathLike,
     channels: Iterable[str] = (DETECTIONS, HEAD, TRUTH, COMMANDS),
+    warn: Warn | None = None,
 ) -> int:
     """Write the time series of ``channels`` to CSV or NPZ (by suffix); returns the row count.
 
@@ -80,7 +94,9 @@ def export_trajectory(
         if ch in arrays_not_records:
             raise UserError(f"export of channel {ch!r}: its messages are arrays, not records; "
                             f"use {arrays_not_records[ch]}")
-    rows = [(m.channel, flatten(m.record, lists=True)) for m in RecordingReader(recording).messages(channels)]
+    reader = RecordingReader(recording)
+    rows = [(m.channel, flatten(m.record, lists=True)) for m in reader.messages(channels)]
+    _warn_damage(reader, warn)
     if kind == "csv":
         keys: list[str] = []
         for _, r in rows:
@@ -110,7 +126,7 @@ def export_trajectory(
     return len(rows)
 
 
-def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike) -> int:
+def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike, warn: Warn | None = None) -> int:
     """Write the IMU samples fed to the tracker (the ``imu`` channel) to CSV or NPZ (by suffix);
     returns the sample count.  Columns: ``frame_index`` (the frame they were fed before), ``t_s`` [s]
     as fed, ``gyro_{x,y,z}_rad_s``, and ``accel_{x,y,z}_g`` where the source has an accelerometer
@@ -118,7 +134,9 @@ def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike) -> int
     that says so (recordings of runs without an IMU, or made before the channel existed)."""
     out_path = Path(out_path)
     out_kind(out_path)
-    batches = list(RecordingReader(recording).imu())
+    reader = RecordingReader(recording)
+    batches = list(reader.imu())
+    _warn_damage(reader, warn)
     if not batches:
         raise UserError(f"{recording} holds no IMU samples (a run without an IMU on the head, or a recording "
                         f"made before foveatrack recorded them)")

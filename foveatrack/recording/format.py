@@ -19,6 +19,17 @@ FORMAT_VERSION = "3"
 # 1: JSON + base64 points (python mcap writer); 2: Foxglove SDK, protobuf, float64 points;
 # 3: as 2, points on the Livox mm grid stored compactly (float32 on a 2^-11 m grid, time in its unit)
 READABLE_VERSIONS = ("1", "2", "3")
+META_CRC_KEY = "meta_crc32"    # the metadata record's own checksum (recordings made before it have none)
+
+
+def meta_crc32(md: dict) -> str:
+    """The checksum of a metadata record's keys and values (all but its own), as 8 hex digits: one bit
+    of the record can turn format version 3 into 2, or change a recorded gain, and MCAP has no CRC
+    for a metadata record."""
+    import zlib
+
+    body = json.dumps({k: v for k, v in md.items() if k != META_CRC_KEY}, sort_keys=True, ensure_ascii=True)
+    return f"{zlib.crc32(body.encode()):08x}"
 META_NAME = "foveatrack"
 CHANNELS_META_NAME = "foveatrack_channels"   # channel id -> name tables written as channels appear
 POINTS = "points"

@@ -68,23 +68,39 @@ class LiveServer:
         self.stop()
 
 
+MAX_WAIT_FOR_CLIENT_S = 3600.0     # --wait-s: an hour is plenty; inf made time.sleep overflow
+
+
 class Pacer:
     """Holds a producer of timestamped messages to ``speed`` x real time: :meth:`wait` sleeps until
     the wall clock has caught up with a virtual time [s] (speed > 0; speed = inf: no waiting)."""
 
+    #: the slowest pace taken: below it one recorded second would be hours of waiting
+    MIN_SPEED = 1e-3
+    #: a step of recorded time longer than this [s] (a sensor clock that jumped, e.g. power-on time to
+    #: PTP time) or back in time is not waited for: the pace starts again at that message
+    MAX_STEP_S = 10.0
+
     def __init__(self, speed: float = 1.0):
-        if not speed > 0:
-            raise UserError(f"--speed {speed}: must be > 0 (1 = real time, 2 = twice as fast)")
+        if not (speed >= self.MIN_SPEED):       # also NaN
+            raise UserError(f"--speed {speed}: must be at least {self.MIN_SPEED:g} (1 = real time, 2 = twice as "
+                            f"fast, inf = no waiting)")
         self.speed = float(speed)
         self._t0_wall: float | None = None
         self._t0_virtual = 0.0
+        self._last_virtual = 0.0
+        self.jumps = 0          # recorded-time steps not waited for (see MAX_STEP_S)
 
     def wait(self, t_virtual_s: float) -> None:
         now = time.monotonic()
-        if self._t0_wall is None:
-            self._t0_wall, self._t0_virtual = now, float(t_virtual_s)
+        t = float(t_virtual_s)
+        if self._t0_wall is None or not (0.0 <= t - self._last_virtual <= self.MAX_STEP_S):
+            if self._t0_wall is not None:
+                self.jumps += 1
+            self._t0_wall, self._t0_virtual, self._last_virtual = now, t, t
             return
-        due = self._t0_wall + (float(t_virtual_s) - self._t0_virtual) / self.speed
+        self._last_virtual = t
+        due = self._t0_wall + (t - self._t0_virtual) / self.speed
         if due > now:
             time.sleep(due - now)
 
@@ -99,8 +115,10 @@ def stream_recording(path, port: int = DEFAULT_PORT, speed: float = 1.0, wait_fo
     from foveatrack.recording.reader import RecordingReader
     from foveatrack.recording.writer import RecordingWriter
 
-    reader = RecordingReader(path)
+    if not 0.0 <= wait_for_client_s <= MAX_WAIT_FOR_CLIENT_S:
+        raise UserError(f"--wait-s {wait_for_client_s}: must be 0..{MAX_WAIT_FOR_CLIENT_S:g} s")
     pacer = Pacer(speed)
+    reader = RecordingReader(path)
     w = RecordingWriter(None, reader.meta)
     n = 0
     with LiveServer(w.context, port) as live:

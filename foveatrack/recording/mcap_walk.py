@@ -23,6 +23,7 @@ U16, U32, U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
 COMPRESSIONS = (b"", b"lz4", b"zstd")
 DATA_END_SIZE = 1 + 8 + 4
 FOOTER_SIZE = 1 + 8 + 8 + 8 + 4
+MAX_CHUNK_RATIO = 64        # uncompressed / compressed bytes a chunk may claim (+ 1 MiB): a cap on every decompression
 
 
 class BadRecord(Exception):
@@ -52,8 +53,9 @@ def chunk_times(mm, pos: int, size: int) -> tuple[int, int] | None:
     return (t0, t1) if t0 <= t1 else None
 
 
-def chunk_records(mm, pos: int, length: int) -> list[tuple[int, bytes]]:
-    """The (opcode, content) records of the chunk at ``pos``: decompressed, size and CRC checked."""
+def chunk_records(mm, pos: int, length: int, require_crc: bool = False) -> list[tuple[int, bytes]]:
+    """The (opcode, content) records of the chunk at ``pos``: decompressed, size and CRC checked
+    (``require_crc``: a CRC of 0, MCAP's "not computed", is damage too: the writer computed them all)."""
     if chunk_length(mm, pos, len(mm)) != length:
         raise BadRecord("a chunk whose header does not hold together (damaged length or compression fields)")
     b = pos + REC.size
@@ -62,16 +64,20 @@ def chunk_records(mm, pos: int, length: int) -> list[tuple[int, bytes]]:
     comp = mm[c0:c0 + clen]
     d0 = c0 + clen + 8
     raw = mm[d0:b + length]
+    if comp and usize > MAX_CHUNK_RATIO * len(raw) + (1 << 20):
+        # the writer's chunks hold one frame or a few: no decompressor may make more of them than this
+        raise BadRecord(f"a chunk with an implausible uncompressed size ({usize} bytes from {len(raw)})")
     try:
         if comp == b"lz4":
             import lz4.frame
 
-            data = lz4.frame.decompress(raw)
+            dec = lz4.frame.LZ4FrameDecompressor()
+            data = dec.decompress(raw, max_length=usize)     # never more than the header says
+            if not dec.eof:
+                raise BadRecord(f"a chunk that decompresses to more than the {usize} bytes its header says")
         elif comp == b"zstd":
             import zstandard
 
-            if usize > 64 * len(raw) + (1 << 20):
-                raise BadRecord("a chunk with an implausible uncompressed size")
             data = zstandard.ZstdDecompressor().decompress(raw, max_output_size=usize)
         else:
             data = raw
@@ -81,6 +87,8 @@ def chunk_records(mm, pos: int, length: int) -> list[tuple[int, bytes]]:
         raise BadRecord(f"a chunk that does not decompress ({type(exc).__name__})") from None
     if len(data) != usize:
         raise BadRecord(f"a chunk of {len(data)} bytes where its header says {usize}")
+    if crc == 0 and require_crc:
+        raise BadRecord("a chunk without a CRC (0) in a recording whose writer gave every chunk one")
     if crc != 0 and zlib.crc32(data) != crc:
         raise BadRecord("a chunk whose CRC does not match its contents")
     out = []
@@ -97,6 +105,30 @@ def chunk_records(mm, pos: int, length: int) -> list[tuple[int, bytes]]:
             out.append((op, mv[j:j + ln]))
         i = j + ln
     return out
+
+
+class ByteScan:
+    """The next position at or after ``p`` of any of ``values`` in ``mm[:stop]``, for a caller whose ``p``
+    only grows: each value's next position is found once and kept until ``p`` passes it, so a scan of
+    a stretch costs O(its length) however the values are spread (two ``find`` calls per candidate
+    made resynchronisation quadratic where one value was rare: a 242 kB file took over 30 s).
+    ``scanned`` counts the bytes the finds covered."""
+
+    def __init__(self, mm, stop: int, values: bytes):
+        self.mm, self.stop = mm, stop
+        self._next = {bytes([v]): -2 for v in values}   # -2: not looked for yet; -1: none left
+        self.scanned = 0
+
+    def next(self, p: int) -> int:
+        best = -1
+        for v, q in self._next.items():
+            if q != -1 and q < p:
+                q = self.mm.find(v, p, self.stop)
+                self.scanned += (q if q >= 0 else self.stop) - p + 1
+                self._next[v] = q
+            if q >= 0 and (best < 0 or q < best):
+                best = q
+        return best
 
 
 def string(buf, i: int) -> tuple[str, int]:

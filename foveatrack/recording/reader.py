@@ -13,9 +13,9 @@ from typing import Iterable, Iterator
 
 from foveatrack.errors import UserError
 from foveatrack.recording import mcap_walk as mw
-from foveatrack.recording.format import (CHANNELS_META_NAME, FORMAT, IMU, MCAP_MAGIC, META_NAME, POINTS,
-                                         READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message, PointsFrame,
-                                         _decode_points, _decode_points_pb, decode_imu_pb)
+from foveatrack.recording.format import (CHANNELS_META_NAME, FORMAT, IMU, MCAP_MAGIC, META_CRC_KEY, META_NAME,
+                                         POINTS, READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message, PointsFrame,
+                                         _decode_points, _decode_points_pb, decode_imu_pb, meta_crc32)
 
 
 @dataclass(frozen=True)
@@ -110,6 +110,9 @@ class RecordingReader:
         self._channels_read: dict[int, str] = {}
         self._binary: set[str] = set()     # channels whose Channel record names an encoding other than JSON
         self._summary_channels: dict[int, str] | None = None
+        self._require_crc = False          # the writer says it gave every chunk a CRC (chunk_crcs)
+        #: the metadata record's checksum: True (verified), None (a recording made before it had one)
+        self.meta_checked: bool | None = None
         for _ in self._records(stop_after_meta=True):
             break
         if not self.info:
@@ -132,6 +135,17 @@ class RecordingReader:
             parts.append(f"the file ends at byte {self.size} without its end-of-data record: the writer was not "
                          f"closed (cut short, e.g. kill -9 or power loss); every whole chunk before it was read")
         return "; ".join(parts) if parts else None
+
+    def warning(self) -> str | None:
+        """The line a command prints after reading the whole recording (``replay`` and ``export`` alike):
+        ``WARNING: damaged recording, ...`` naming every skipped stretch and what it held, a ``note``
+        for a file whose writer was not closed, None for an intact closed file."""
+        problem = self.problem
+        if problem is None:
+            return None
+        if self.damage or self.unattributed:
+            return f"WARNING: damaged recording {self.path}, {problem}"
+        return f"note: {self.path}: {problem}"
 
     # ------------------------------------------------------------------ walking the file
 
@@ -165,7 +179,7 @@ class RecordingReader:
                     if end > size:
                         raise mw.BadRecord(f"a record whose length field ({length} bytes) runs past the end of the file")
                     if op == mw.OP_CHUNK:
-                        recs = mw.chunk_records(mm, pos, length)
+                        recs = mw.chunk_records(mm, pos, length, self._require_crc)
                     elif op == mw.OP_MINDEX:
                         mw.message_index(mm, body, length)
                         recs = ()
@@ -282,8 +296,10 @@ class RecordingReader:
         stop = self.size if data_end is None else data_end
         found: list[int] = []
         p = pos
+        scan = mw.ByteScan(mm, stop, bytes([mw.OP_CHUNK, mw.OP_METADATA]))
+        self._last_scan = scan
         while True:
-            p = self._next_candidate(mm, p, stop)
+            p = scan.next(p)
             if p < 0:
                 return data_end, found
             if mm[p] == mw.OP_METADATA:
@@ -294,20 +310,13 @@ class RecordingReader:
             length = mw.chunk_length(mm, p, stop)
             if length is not None:
                 try:
-                    mw.chunk_records(mm, p, length)
+                    mw.chunk_records(mm, p, length, self._require_crc)
                     if p > pos:
                         return p, found
                 except mw.BadRecord:
                     pass
                 found.append(p)
             p += 1
-
-    @staticmethod
-    def _next_candidate(mm, p: int, stop: int) -> int:
-        """The next byte at or after ``p`` that may start a chunk or a metadata record (-1: none)."""
-        a = mm.find(b"\x06", p, stop)
-        b = mm.find(bytes([mw.OP_METADATA]), p, stop)
-        return b if a < 0 else a if b < 0 else min(a, b)
 
     @staticmethod
     def _channel_table_at(mm, p: int, stop: int) -> bool:
@@ -319,6 +328,9 @@ class RecordingReader:
         end = p + mw.REC.size + length
         if end > stop or length > (1 << 20):
             return False
+        name = CHANNELS_META_NAME.encode()
+        if mm[p + mw.REC.size:p + mw.REC.size + 4 + len(name)] != mw.U32.pack(len(name)) + name:
+            return False        # not its name: no copy of up to 1 MiB per metadata opcode byte
         try:
             name, _md = mw.metadata(mm[p + mw.REC.size:end])
         except mw.BadRecord:
@@ -388,6 +400,13 @@ class RecordingReader:
                       (min(times), max(times)) if times else None, frames)
 
     def _set_meta(self, md: dict[str, str]) -> None:
+        if META_CRC_KEY in md:
+            if md[META_CRC_KEY] != meta_crc32(md):
+                raise UserError(f"{self.path}: its metadata record is damaged (checksum {META_CRC_KEY} "
+                                f"{md[META_CRC_KEY]!r}, its contents give {meta_crc32(md)!r}): the format version, "
+                                f"configuration and speed table in it cannot be trusted")
+            self.meta_checked = True
+        self._require_crc = md.get("chunk_crcs") == "required"
         if md.get("format") != FORMAT:
             raise UserError(f"{self.path} is an MCAP file but not a foveatrack recording (format {md.get('format')!r})")
         if md.get("format_version") not in READABLE_VERSIONS:

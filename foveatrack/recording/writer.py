@@ -14,7 +14,8 @@ import numpy as np
 from foveatrack.errors import UserError
 from foveatrack.mm_grid import quantise_to_mm_grid
 from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD, IMU,
-                                         MAX_GRID_MM, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable, imu_columns)
+                                         MAX_GRID_MM, META_CRC_KEY, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable,
+                                         imu_columns, meta_crc32)
 from foveatrack.recording.foxglove_view import FoxgloveChannels
 from foveatrack.recording.pack_kernels import pack_points
 
@@ -79,6 +80,21 @@ class RecordCalls(abc.ABC):
         self.write(METRICS, t_ns, {"name": str(name), "value": value, **extra})
 
 
+def _create_private(path: Path, overwrite: bool, mode: int) -> None:
+    """Create the recording's file before the SDK opens it: exclusively (no check-then-open race) and
+    not through a symbolic link (with ``overwrite`` a link is replaced, never its target written), with
+    ``mode`` (0600 by default: a recording holds the configuration)."""
+    if overwrite and (path.is_symlink() or path.is_file()):
+        path.unlink()
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), mode)
+    except FileExistsError:
+        raise RecordingExistsError(path) from None
+    except OSError as exc:
+        raise UserError(f"cannot create recording {path}: {exc.strerror}") from None
+    os.close(fd)
+
+
 def check_options(path, meta, flush_every_frames, compression, compression_level, points_dtype,
                   overwrite) -> tuple[Path | None, str, int]:
     """Check a writer's options as :class:`RecordingWriter` takes them (a :class:`UserError` names the
@@ -125,6 +141,7 @@ class RecordingWriter(RecordCalls):
         a 2^-11 m grid, format 3), any other frame as float64.  "float32": every frame compact, points
         off the grid rounded to the nearest mm (at most 0.5 mm)
     fsync : also fsync the file at each flush
+    file_mode : the new file's permissions (default 0600: a recording holds the configuration; 0o644 to share)
     created_utc : None stamps the wall-clock time; the simulator passes a fixed text so that one
         scene and seed give the same file to the bit
     """
@@ -140,6 +157,7 @@ class RecordingWriter(RecordCalls):
         fsync: bool = False,
         overwrite: bool = False,
         created_utc: str | None = None,
+        file_mode: int = 0o600,
     ):
         import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
@@ -160,12 +178,13 @@ class RecordingWriter(RecordCalls):
             comp = {"lz4": MCAPCompression.Lz4, "zstd": MCAPCompression.Zstd, "none": None}[compression]
             opts = MCAPWriteOptions(compression=comp, profile="foveatrack", chunk_size=None,
                                     compression_threads=0, compression_level=level)
+            _create_private(self.path, overwrite, file_mode)
             try:
                 self._w = foxglove.open_mcap(self.path, allow_overwrite=True, context=self.context,
                                              writer_options=opts)
             except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types for I/O
                 raise UserError(f"cannot create recording {self.path}: {exc}") from None
-            self._w.write_metadata(META_NAME, {
+            md = {
                 "format": FORMAT,
                 "format_version": FORMAT_VERSION,
                 "meta_json": meta_json,
@@ -175,7 +194,10 @@ class RecordingWriter(RecordCalls):
                 "writer": f"foxglove-sdk {_sdk_version()}",
                 "created_utc": created_utc if created_utc is not None
                 else _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            })
+                "chunk_crcs": "required",      # the SDK writes every chunk's CRC: a 0 there is damage
+            }
+            md[META_CRC_KEY] = meta_crc32(md)
+            self._w.write_metadata(META_NAME, md)
         self._tabled = 0
         self._frames_since_flush = 0
         self.frames_written = 0

@@ -177,7 +177,8 @@ class RecordingProcess(RecordCalls):
             except (ImportError, AttributeError, OSError):
                 pass        # the default 64 KiB pipe: the caller waits on the child more often
             self._proc = subprocess.Popen(
-                [sys.executable, "-c", _CHILD, str(data_r), str(back_w), *ring_args],
+                # -P: the working directory is not on the child's path (a signal.py there ran in it)
+                [sys.executable, "-P", "-c", _CHILD, str(data_r), str(back_w), *ring_args],
                 pass_fds=(data_r, back_w, *([] if self._ring is None else [self._ring.fd])),
                 stdin=subprocess.DEVNULL, env=_child_env())
         except BaseException:

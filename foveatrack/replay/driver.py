@@ -47,12 +47,13 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
-from foveatrack.frames import Frame, FrameSlicer
+from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate, Limits
 from foveatrack.recording.records import CommandRecord
 from foveatrack.replay.config import recorded_limits, load_tracker_table, tracker_config
 from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
-from foveatrack.replay.recorded import FrameArrays, TrackerRebased, recorded_frames
+from foveatrack.replay.recorded import (RECORDED_DTYPES, TRUTH_DTYPES, FrameArrays, LvxTimeline, TimeOrder,
+                                        TrackerRebased, recorded_arrays, recorded_frames)
 from foveatrack.replay.result import ReplayResult
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import Tracker, TrackerConfig
@@ -73,6 +74,22 @@ def _reached_head(gate: CommandGate, tracker: Tracker, send_t: float, cmd: HeadC
     """What the head runs after a command sent at ``send_t``: the gate's rule for a write, with the
     outcome the recording gives (the daemon's ``written: false`` for a failed write)."""
     return gate.wrote(tracker, send_t, cmd, ok=record is None or record.reached_head)
+
+
+def _after_frame(tracker: Tracker, gate: CommandGate, order: TimeOrder, after: list) -> Tracker:
+    """The watchdog / shutdown STOPs and the daemon's rebases after a frame, in the order they happened;
+    returns the tracker (a fresh one where the daemon rebased)."""
+    for c in after:
+        if isinstance(c, TrackerRebased):
+            tracker = tracker.rebased(c.t0_s, c.pan_deg, c.tilt_deg)
+            gate.head_cmd = STOP
+            order.rebased()
+            continue
+        if order.command_out_of_order(tracker, c.send_time_s):
+            continue
+        tracker.command_sent(c.send_time_s, c.command)
+        _reached_head(gate, tracker, c.send_time_s, c.command, c)
+    return tracker
 
 
 def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
@@ -100,6 +117,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     T = {k: [] for k in ("true_error_deg", "target_xyz_m", "points_on_target", "pan_deg", "tilt_deg")}
     has_truth = False
     imu_recorded = False
+    order = TimeOrder()
     for rf in recorded_frames(reader):
         pts = rf.points
         k = int(pts.frame_index)
@@ -114,6 +132,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             t0 = (pts.t_ns - period_ns) * 1e-9
             c = rf.command
             send_t = float(c.send_t_s) if c is not None and c.send_t_s is not None else t1 + cfg.send_delay_s
+        if order.frame_out_of_order(tracker, k, t1, send_t):
+            tracker = _after_frame(tracker, gate, order, rf.after)
+            continue
         frame = Frame(t0, t1, pts.xyz, pts.t_ns_points, pts.reflectivity)
         for b in rf.imu:        # as the driver fed them: before the frame (a commands tracker ignores them)
             imu_recorded = True
@@ -149,22 +170,12 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             T["points_on_target"].append(0)
             T["pan_deg"].append(np.nan)
             T["tilt_deg"].append(np.nan)
-        for c in rf.after:   # watchdog / shutdown STOPs and the daemon's rebases, in the order they happened
-            if isinstance(c, TrackerRebased):
-                tracker = tracker.rebased(c.t0_s, c.pan_deg, c.tilt_deg)
-                gate.head_cmd = STOP
-                continue
-            tracker.command_sent(c.send_time_s, c.command)
-            _reached_head(gate, tracker, c.send_time_s, c.command, c)
+        tracker = _after_frame(tracker, gate, order, rf.after)
     t_settled = (tracker.recon.last_send_t_s or 0.0) + 2.0
     final_pose = tuple(float(a) for a in tracker.recon.angles_at(t_settled)[:2])
     frames = F.arrays()
-    recorded = {k: np.asarray(v) for k, v in R.items()}
-    recorded["det_xyz"] = recorded["det_xyz"].reshape(-1, 3)
-    truth = None
-    if has_truth:
-        truth = {k: np.asarray(v) for k, v in T.items()}
-        truth["target_xyz_m"] = truth["target_xyz_m"].reshape(-1, 3)
+    recorded = recorded_arrays(R, RECORDED_DTYPES)
+    truth = recorded_arrays(T, TRUTH_DTYPES) if has_truth else None
     res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth,
                        final_pose_deg=final_pose, tracker_cfg=cfg)
     res.comparison = compare(frames, recorded)
@@ -184,12 +195,13 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     if reader.problem:
         res.comparison["recording_problem"] = reader.problem
     res.comparison["recording_complete"] = bool(reader.complete)
-    res.comparison["recording_damage"] = [d.describe() for d in reader.damage]
-    res.comparison.update(_gaps(frames, recorded, reader))
+    res.comparison["metadata_checksum"] = "verified" if reader.meta_checked else "absent (an older recording)"
+    res.comparison["recording_damage"] = [d.describe() for d in reader.damage] + order.describe()
+    res.comparison.update(_gaps(frames, recorded, reader, order.frames + order.commands))
     return res
 
 
-def _gaps(frames: dict, recorded: dict, reader) -> dict:
+def _gaps(frames: dict, recorded: dict, reader, skipped_out_of_order: int = 0) -> dict:
     """Where frames are missing (a skipped damaged stretch), and whether that makes the comparison partial.
 
     A gap is a jump in the recorded frame index (both drivers number frames 0, 1, 2, ...), or damage
@@ -207,7 +219,7 @@ def _gaps(frames: dict, recorded: dict, reader) -> dict:
         gaps.append((int(i), int(fi[i - 1]), int(fi[i]), int(fi[i] - fi[i - 1] - 1)))
     # damage that lost records other than frames (e.g. a watchdog STOP) also leaves the reckoning short
     lost_other = any(not d.cut_short and (d.lost is None or sum(d.lost.values()) > 0) for d in reader.damage)
-    partial = bool(gaps) or lost_other or bool(reader.unattributed)
+    partial = bool(gaps) or lost_other or bool(reader.unattributed) or bool(skipped_out_of_order)
     out: dict = {"partial": partial, "frames_missing": int(sum(g[3] for g in gaps if g[3])), "gaps": []}
     for i, after, before, n in gaps:
         dp = frames["head_pan_deg"][i] - recorded["head_pan_deg"][i]
@@ -239,15 +251,14 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
     # The gate a daemon would run on this tracker's head (its stops, the tracker's own turbo rule); the
     # head is frozen, so no write reaches it and the dead reckoning is told it stayed stopped.
     gate = CommandGate(Limits(allow_turbo=cfg.allow_turbo, tilt_limits_deg=cfg.tilt_limits_deg))
-    slicer = FrameSlicer(cfg.rate_hz)
     F = FrameArrays()
     fid = 0
 
     def run(frames):
         nonlocal tracker, fid
-        for fr in frames:
+        for fr, new_clock in frames:
             fr = strip_no_return(fr)
-            if tracker is None:
+            if tracker is None or new_clock:
                 tracker = Tracker(cfg, SpeedTable.nominal(), t0_s=fr.t_start_s)
             send_t = fr.t_end_s + cfg.send_delay_s
             out = tracker.process(fr, send_t_s=send_t)
@@ -258,16 +269,19 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
 
     # no-return points are kept for their times (frames keep coming over the sky), then stripped
     with LvxReader(path, point_rate_hz=point_rate_hz, keep_no_return=True) as r:
+        timeline = LvxTimeline(cfg.rate_hz, r.frame_duration_ms)
         for lf in r.frames():
             b = lf.points
-            run(slicer.push(b.xyz, b.t_ns, b.reflectivity))
-        run(slicer.flush())
+            run(timeline.push(b.xyz, b.t_ns, b.reflectivity))
+        run(timeline.flush())
         problem = r.problem
     frames = F.arrays()
     res = ReplayResult("lvx", str(path), config_name or "default", frames, None, None, tracker_cfg=cfg)
     res.metrics = replay_metrics(frames, None, cfg)
     if problem:
         res.comparison["recording_problem"] = problem
+    res.comparison["lvx_time"] = timeline.counts
+    res.comparison["recording_damage"] = timeline.describe()
     return res
 
 

@@ -53,6 +53,147 @@ class FrameArrays:
         return out
 
 
+# the recording's own per-frame values (replay_recording collects them); dtypes given so that a
+# recording with no frames (the daemon's when the lidar never sent data) yields empty arrays that
+# index and compare like those of any other
+RECORDED_DTYPES = {"detected": bool, "det_xyz": float, "det_n_points": np.int64, "error_pan_deg": float,
+                   "error_tilt_deg": float, "processing_ms": float, "latency_ms": float, "head_pan_deg": float,
+                   "head_tilt_deg": float}
+TRUTH_DTYPES = {"true_error_deg": float, "target_xyz_m": float, "points_on_target": np.int64, "pan_deg": float,
+                "tilt_deg": float}
+
+
+def recorded_arrays(lists: dict, dtypes: dict) -> dict[str, np.ndarray]:
+    """Per-frame lists as arrays of ``dtypes`` (xyz columns reshaped to (n, 3)); ``command`` stays a
+    list of (pan_dir, pan_byte, tilt_dir, tilt_byte) tuples or (None,) * 4 where none was recorded."""
+    out = {k: (np.asarray(v, dtype=dtypes[k]) if k in dtypes else np.asarray(v)) for k, v in lists.items()}
+    for k in ("det_xyz", "target_xyz_m"):
+        if k in out:
+            out[k] = out[k].reshape(-1, 3)
+    if "command" in lists:
+        out["command"] = np.asarray(lists["command"]) if lists["command"] else np.zeros((0, 4), object)
+    return out
+
+
+class TimeOrder:
+    """Frames and commands a replay cannot take because they go back in time: intact chunks read out
+    of order (e.g. a stretch of the file copied over an earlier one).  The tracker's dead reckoning
+    takes commands in time order only, so such a frame (with its command) or command is skipped and
+    counted; the replay's warning names them, and the comparison is partial."""
+
+    def __init__(self):
+        self.frames = 0
+        self.commands = 0
+        self.first_frame: int | None = None
+        self._last_t_end_s = -np.inf
+
+    def rebased(self) -> None:
+        self._last_t_end_s = -np.inf      # a new sensor clock: its frames start over
+
+    def frame_out_of_order(self, tracker, frame_index: int, t_end_s: float, send_t_s: float) -> bool:
+        last_send = tracker.recon.last_send_t_s
+        if t_end_s <= self._last_t_end_s or (last_send is not None and send_t_s < last_send) \
+                or not np.isfinite(send_t_s):
+            self.frames += 1
+            if self.first_frame is None:
+                self.first_frame = frame_index
+            return True
+        self._last_t_end_s = t_end_s
+        return False
+
+    def command_out_of_order(self, tracker, send_t_s) -> bool:
+        last_send = tracker.recon.last_send_t_s
+        if send_t_s is None or not np.isfinite(send_t_s) or (last_send is not None and send_t_s < last_send):
+            self.commands += 1
+            return True
+        return False
+
+    def describe(self) -> list[str]:
+        if not (self.frames or self.commands):
+            return []
+        what = []
+        if self.frames:
+            what.append(f"{self.frames} frame{'' if self.frames == 1 else 's'} (the first: frame "
+                        f"{self.first_frame})")
+        if self.commands:
+            what.append(f"{self.commands} command{'' if self.commands == 1 else 's'} outside any frame")
+        return [f"{' and '.join(what)} skipped: out of time order (intact data read out of order, e.g. "
+                f"a stretch of the file copied over an earlier one); the tracker takes them in time order only"]
+
+
+class LvxTimeline:
+    """An ``.lvx`` file's points cut into tracker frames, with the live driver's checks of sensor time
+    (:class:`foveatrack.sensor_time.SensorTimeGuard`) on a clock the file gives: LVX frame ``k`` of
+    ``frame_duration_ms`` is taken to arrive at ``k * frame_duration_ms``.  A package with a wild
+    time (one stamped 18 minutes late once made the slicer restart there and drop every point after
+    it as late: 9 frames of 31, silently) is dropped and counted; a real change of sensor clock
+    starts a fresh stream (the slicer again from its first point); and no file yields more tracker
+    frames than the time its LVX frames span, plus the tolerance, allows.
+
+    :meth:`push` / :meth:`flush` return ``(frame, new_clock)`` pairs (``new_clock``: the first frame on
+    a sensor clock other than the one before); :attr:`counts` and :meth:`describe` say what was dropped.
+    """
+
+    def __init__(self, rate_hz: float, frame_duration_ms: int):
+        from foveatrack.frames import FrameSlicer
+        from foveatrack.sensor_time import SensorTimeGuard
+
+        self.guard = SensorTimeGuard()
+        self.slicer = FrameSlicer(rate_hz)
+        self.frame_s = max(int(frame_duration_ms), 1) * 1e-3
+        self._k = 0
+        self._epoch = 0
+        self._new_clock = False
+
+    def push(self, xyz, t_ns, reflectivity) -> list:
+        host_s = self._k * self.frame_s
+        self._k += 1
+        t_ns = np.asarray(t_ns, np.int64)
+        order = np.argsort(t_ns, kind="stable")     # devices' packets interleave within a frame
+        out = []
+        for acc in self.guard.push(np.asarray(xyz)[order], t_ns[order], np.asarray(reflectivity)[order], host_s):
+            if acc.epoch != self._epoch:            # a new sensor clock: the old stream ends here
+                out += self._tag(self.slicer.flush())
+                self.slicer.reset()
+                self._epoch = acc.epoch
+                self._new_clock = True
+            out += self._tag(self.slicer.push(acc.xyz, acc.t_ns, acc.reflectivity))
+        return out
+
+    def flush(self) -> list:
+        return self._tag(self.slicer.flush())
+
+    def _tag(self, frames) -> list:
+        out = []
+        for fr in frames:
+            out.append((fr, self._new_clock))
+            self._new_clock = False
+        return out
+
+    @property
+    def counts(self) -> dict:
+        g, s = self.guard.counters, self.slicer
+        return {"bad_time_points": int(g["bad_time_points"] + self.guard.held_points),
+                "bad_time_packets_runs": int(g["bad_time_segments"] + (1 if self.guard.held_points else 0)),
+                "clock_jumps": int(g["clock_jumps"]), "late_points": int(s.late_points),
+                "slicer_restarts": int(s.restarts), "gap_dropped_points": int(s.gap_dropped_points)}
+
+    def describe(self) -> list[str]:
+        c = self.counts
+        parts = []
+        if c["bad_time_points"]:
+            parts.append(f"{c['bad_time_points']} points dropped for a time that does not continue the stream "
+                         f"({c['bad_time_packets_runs']} run(s) of packets, e.g. a damaged timestamp)")
+        if c["late_points"]:
+            parts.append(f"{c['late_points']} points dropped as late (older than a frame already cut)")
+        if c["slicer_restarts"] or c["gap_dropped_points"]:
+            parts.append(f"{c['slicer_restarts']} restart(s) of the frame slicer at a time gap, "
+                         f"{c['gap_dropped_points']} points dropped with them")
+        if c["clock_jumps"]:
+            parts.append(f"{c['clock_jumps']} change(s) of the sensor clock (each starts a fresh tracker)")
+        return ["; ".join(parts)] if parts else []
+
+
 @dataclass(frozen=True)
 class TrackerRebased:
     """The daemon started a fresh tracker at this pose and sensor time (its ``tracker_rebased``

@@ -35,6 +35,8 @@ def format_report(res: ReplayResult) -> str:
              + (f", bearing error off the lidar axis [deg]: rms {be['rms']:.3f}, p95 |.| {be['p95']:.3f}, "
                 f"max |.| {be['max']:.3f}" if be["rms"] is not None else "")
              + f"; states {d['states']}")
+    if not d["frames"]:
+        L.append("  the recording holds no lidar frames (e.g. the lidar never sent data): nothing to replay")
     if c.get("recording_damage"):
         L.insert(1, "  WARNING: damaged recording, " + "; ".join(c["recording_damage"]))
     if c.get("gyro_samples_recorded") is False:

@@ -213,3 +213,21 @@ def test_a_command_replaced_at_the_same_instant_leaves_the_rest_alone():
     g.on_command(1.1, HeadCommand(1, 40, 0, 0))
     g.on_command(1.1, STOP)
     assert not g.at_rest(1.1) and g.at_rest(3.0)
+
+
+def test_a_nan_sample_is_dropped_and_counted_not_integrated():
+    # issue 32: one NaN sample made the head estimate NaN for good; it is now dropped and counted, and
+    # the estimate is the one without it (within the one missing step's share)
+    t = np.arange(0, int(5 * RATE_HZ) + 1) / RATE_HZ
+    pan, tilt = 25.0 * t, np.full_like(t, 20.0)
+    w = lidar_body_rate_rad_s(np.full_like(t, 25.0), tilt, np.zeros_like(t))
+    bad = w.copy()
+    bad[300, 1] = np.nan
+    t_bad = t.copy()
+    t_bad[500] = np.inf
+    g = _source(0.0, 20.0, history_s=60.0)
+    g.on_imu(t_bad, bad)
+    assert g.nonfinite_samples == 2
+    dp, dt = _errors(g, t[::50], pan[::50], tilt[::50])
+    assert np.isfinite(dp).all() and np.isfinite(dt).all()
+    assert np.abs(dp).max() < 1e-6 and np.abs(dt).max() < 1e-6

@@ -1,0 +1,303 @@
+"""Mutation fuzzing of the file paths (issue 32): recordings, .lvx files, scenes and daemon configs
+through the real CLI, each trial in a forked child under an address-space limit and a timeout.
+
+Every trial ends in one of: ``clean error`` (rc 2, one line), ``warning+partial`` (rc 0 and a
+WARNING / note on the output), ``same`` (rc 0, the output the intact file gives), ``silent difference``
+(rc 0, no warning, another output than the intact file's; for scenes and configs a mutated value may
+rightly change the output: "silent" is meaningful for recordings and .lvx files only), ``traceback`` (any other exception,
+MemoryError included), ``hang`` (over the timeout).  The inputs of tracebacks, hangs and silent
+differences are kept in ``--keep DIR`` (seed and trial in the name) for the regression corpus.
+
+Usage::
+
+    python scripts/fuzz_files.py --minutes 5 --seed 1 [--campaign mcap-replay ...] [--keep DIR]
+
+Campaigns: ``mcap-replay`` (replay --json), ``mcap-export`` (export --csv), ``lvx-replay`` (replay
+--json of a .lvx), ``scene`` (simulate --duration 1), ``config`` (daemon --check).  Same seed, same
+mutations.  Prints the table of the issue, one row per campaign.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import contextlib
+import os
+import resource
+import shutil
+import signal
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+OUTCOMES = ("clean error", "warning+partial", "same", "silent difference", "traceback", "hang")
+AS_LIMIT_BYTES = 4 << 30
+TIMEOUT_S = 30.0
+
+
+# ----------------------------------------------------------------------------------------- mutations
+def mutate_bytes(data: bytes, rng: np.random.Generator) -> bytes:
+    """One of: flip a bit, set a byte, copy 64 KiB (or less) to an earlier offset, cut the tail,
+    insert random bytes, overwrite a run with a wild u64 (0x7fff... or a clock jump)."""
+    d = bytearray(data)
+    n = len(d)
+    kind = int(rng.integers(6))
+    i = int(rng.integers(n))
+    if kind == 0:
+        d[i] ^= 1 << int(rng.integers(8))
+    elif kind == 1:
+        d[i] = int(rng.integers(256))
+    elif kind == 2:
+        src = int(rng.integers(n // 2, n))
+        dst = int(rng.integers(0, max(src, 1)))
+        L = min(65536, n - src)
+        d[dst:dst + L] = d[src:src + L]
+    elif kind == 3:
+        del d[i:]
+    elif kind == 4:
+        d[i:i] = rng.integers(0, 256, int(rng.integers(1, 64)), dtype=np.uint8).tobytes()
+    else:
+        v = (0x7FFF_FFFF_FFFF_FFFF, 0xFFFF_FFFF_FFFF_FFFF, 1_700_000_000_000_000_000)[int(rng.integers(3))]
+        d[i:i + 8] = v.to_bytes(8, "little")[: max(0, min(8, n - i))]
+    return bytes(d)
+
+
+TOML_VALUES = ["[]", "1", "-1", "1e308", "nan", "inf", '"\\u0000"', '"/dev/zero"', "{}", "true", '""',
+               "[" * 1000 + "]" * 1000, "100000", "0"]
+
+
+def mutate_toml(text: str, rng: np.random.Generator) -> str:
+    """One of: a value replaced by a hostile one, a line dropped, a line doubled, a table nested deep,
+    many copies of an array of tables."""
+    lines = text.splitlines()
+    kind = int(rng.integers(5))
+    i = int(rng.integers(len(lines)))
+    if kind == 0 and "=" in lines[i]:
+        k = lines[i].split("=", 1)[0]
+        lines[i] = f"{k}= {TOML_VALUES[int(rng.integers(len(TOML_VALUES)))]}"
+    elif kind == 1:
+        del lines[i]
+    elif kind == 2:
+        lines.insert(i, lines[i])
+    elif kind == 3:
+        lines.append("x = " + "{a = " * 600 + "1" + "}" * 600)
+    else:
+        blocks = [ln for ln in lines if ln.startswith("[[")]
+        if blocks:
+            start = lines.index(blocks[0])
+            end = next((j for j in range(start + 1, len(lines)) if lines[j].startswith("[")), len(lines))
+            lines += lines[start:end] * int(rng.integers(2, 2000))
+    return "\n".join(lines) + "\n"
+
+
+# ----------------------------------------------------------------------------------------- trials
+def run_cli(args: list[str]) -> tuple[int, str]:
+    """``foveatrack ARGS`` in this process: (rc, stdout + stderr); an exception escapes."""
+    from foveatrack.cli import main
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
+        rc = main(args)
+    return int(rc or 0), out.getvalue()
+
+
+def trial(args: list[str], timeout_s: float) -> tuple[str, int | None, str]:
+    """Run one CLI call in a forked child (limits apply to it alone): (kind, rc, output)."""
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:     # the child
+        os.close(r)
+        code = 0
+        try:
+            resource.setrlimit(resource.RLIMIT_AS, (AS_LIMIT_BYTES, AS_LIMIT_BYTES))
+            rc, text = run_cli(args)
+            payload = f"rc {rc}\n{text}"
+        except SystemExit as exc:
+            payload = f"rc {exc.code if isinstance(exc.code, int) else 2}\n"
+        except BaseException as exc:   # noqa: BLE001 - what the fuzzer looks for
+            import traceback
+
+            payload = "traceback\n" + "".join(traceback.format_exception(exc))[-4000:]
+        with os.fdopen(w, "w") as fh:
+            fh.write(payload)
+        os._exit(code)
+    os.close(w)
+    t_end = time.monotonic() + timeout_s
+    chunks = []
+    os.set_blocking(r, False)
+    while True:
+        try:
+            b = os.read(r, 65536)
+            if b:
+                chunks.append(b)
+            elif b == b"":
+                done, _ = os.waitpid(pid, os.WNOHANG)
+                if done:
+                    break
+        except BlockingIOError:
+            pass
+        if time.monotonic() > t_end:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            os.close(r)
+            return "hang", None, ""
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            try:
+                while b := os.read(r, 65536):
+                    chunks.append(b)
+            except BlockingIOError:
+                pass
+            break
+        time.sleep(0.005)
+    os.close(r)
+    text = b"".join(chunks).decode(errors="replace")
+    if text.startswith("traceback") or not text:
+        return "traceback", None, text or "child died (signal or memory)"
+    first, _, rest = text.partition("\n")
+    return "ok", int(first.split()[1]), rest
+
+
+def classify(kind: str, rc: int | None, out: str, baseline: str, normalise) -> str:
+    if kind != "ok":
+        return kind
+    if rc == 2:
+        return "clean error"
+    if rc != 0:
+        return "traceback"
+    if "WARNING" in out or "note:" in out or '"recording_damage": [\n' in out or '"recording_problem"' in out:
+        return "warning+partial"
+    return "same" if normalise(out) == normalise(baseline) else "silent difference"
+
+
+# ----------------------------------------------------------------------------------------- inputs
+def make_inputs(work: Path) -> dict:
+    """The intact files each campaign mutates: a simulator recording of the daemon test scene, its
+    .lvx export, the scene and an example daemon config."""
+    from foveatrack.recording import RecordingWriter
+    from sim.loop import ClosedLoop
+    from sim.recorder import SimRecorder, recording_meta
+    from sim.scene import load_scene
+
+    scene_path = ROOT / "tests" / "daemon" / "scene_track.toml"
+    scene = load_scene(scene_path)
+    scene_text = scene_path.read_text().replace("duration_s = 3.0", "duration_s = 1.0")
+    loop = ClosedLoop(load_scene(scene_path))
+    rec = work / "intact.mcap"
+    with RecordingWriter(rec, recording_meta(scene, loop), created_utc="fixed") as w:
+        loop.frame_hook = SimRecorder(w)
+        loop.run()
+    lvx = work / "intact.lvx"
+    run_cli(["export", str(rec), "--lvx", str(lvx)])
+    configs = sorted((ROOT / "examples").glob("*.toml"))
+    daemon_cfg = next((p for p in configs if "[lidar]" in p.read_text() and "[head]" in p.read_text()), None)
+    cfg_text = None
+    if daemon_cfg:   # a speed table named relative to the example would not be found beside the copy
+        import re
+
+        cfg_text = re.sub(r'(?m)^speed_table\s*=.*$', 'speed_table = "nominal"', daemon_cfg.read_text())
+        cfg_text = re.sub(r'(?m)^port\s*=.*$', 'port = "loop://"', cfg_text)   # --check opens the head's port
+    return {"mcap": rec.read_bytes(), "lvx": lvx.read_bytes(), "scene": scene_text, "config": cfg_text}
+
+
+def _drop_paths(text: str) -> str:
+    """The output without what changes from run to run: paths, wall times, progress bars."""
+    return "\n".join(ln for ln in text.splitlines()
+                     if "->" not in ln and "/" not in ln and " wall" not in ln and "frame/s" not in ln)
+
+
+CAMPAIGNS = {
+    # name: (input key, file suffix, argv given the mutated path and an output dir)
+    "mcap-replay": ("mcap", ".mcap", lambda p, o: ["replay", str(p), "--json"]),
+    "mcap-export": ("mcap", ".mcap", lambda p, o: ["export", str(p), "--csv", str(o / "p.csv")]),
+    "lvx-replay": ("lvx", ".lvx", lambda p, o: ["replay", str(p), "--json"]),
+    "scene": ("scene", ".toml", lambda p, o: ["simulate", str(p), "--duration", "1"]),
+    "config": ("config", ".toml", lambda p, o: ["daemon", "--config", str(p), "--check"]),
+}
+
+
+def normaliser(name: str):
+    if name == "mcap-export":
+        return lambda out: _drop_paths(out) + "|" + out.split(" points")[0]
+    if name.endswith("replay"):
+        import json
+
+        def norm(out):
+            try:
+                d = json.loads(out)
+            except ValueError:
+                return out
+            d.pop("path", None)
+            d.get("comparison", {}).pop("metadata_checksum", None)
+            return json.dumps(d, sort_keys=True)
+        return norm
+    return _drop_paths
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--minutes", type=float, default=1.0, help="wall time over all campaigns (default 1)")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--campaign", action="append", choices=sorted(CAMPAIGNS), help="default: all")
+    ap.add_argument("--keep", metavar="DIR", help="keep the inputs of tracebacks, hangs and silent differences")
+    ap.add_argument("--timeout-s", type=float, default=TIMEOUT_S)
+    a = ap.parse_args()
+    names = a.campaign or list(CAMPAIGNS)
+    work = Path(tempfile.mkdtemp(prefix="foveatrack-fuzz-"))
+    keep = Path(a.keep) if a.keep else None
+    if keep:
+        keep.mkdir(parents=True, exist_ok=True)
+    try:
+        inputs = make_inputs(work)
+        table = {}
+        budget_s = a.minutes * 60.0 / len(names)
+        for ci, name in enumerate(names):
+            key, suffix, argv = CAMPAIGNS[name]
+            base = inputs[key]
+            if base is None:
+                print(f"{name}: no intact input (no example daemon config)", file=sys.stderr)
+                continue
+            rng = np.random.default_rng([a.seed, ci])
+            out_dir = work / name
+            out_dir.mkdir()
+            intact = out_dir / f"intact{suffix}"
+            (intact.write_text if isinstance(base, str) else intact.write_bytes)(base)
+            _, _, baseline = trial(argv(intact, out_dir), a.timeout_s)
+            norm = normaliser(name)
+            counts = dict.fromkeys(OUTCOMES, 0)
+            t_end = time.monotonic() + budget_s
+            k = 0
+            while time.monotonic() < t_end:
+                data = mutate_toml(base, rng) if isinstance(base, str) else mutate_bytes(base, rng)
+                p = out_dir / f"t{suffix}"
+                (p.write_text if isinstance(data, str) else p.write_bytes)(data)
+                for f in out_dir.glob("p.*"):
+                    f.unlink()
+                kind, rc, out = trial(argv(p, out_dir), a.timeout_s)
+                outcome = classify(kind, rc, out, baseline, norm)
+                counts[outcome] += 1
+                if keep and outcome in ("traceback", "hang", "silent difference"):
+                    shutil.copy(p, keep / f"{name}-seed{a.seed}-trial{k}{suffix}")
+                    (keep / f"{name}-seed{a.seed}-trial{k}.txt").write_text(out)
+                k += 1
+                if k % 20 == 0:
+                    print(f"{name}: {k} trials {counts}", file=sys.stderr, flush=True)
+            table[name] = (k, counts)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    print(f"seed {a.seed}, {a.minutes:g} min, limits {AS_LIMIT_BYTES >> 30} GiB address space, {a.timeout_s:g} s")
+    print("| campaign | trials | " + " | ".join(OUTCOMES) + " |")
+    print("|---|---|" + "---|" * len(OUTCOMES))
+    for name, (k, c) in table.items():
+        print(f"| {name} | {k} | " + " | ".join(str(c[o]) for o in OUTCOMES) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
