@@ -150,8 +150,12 @@ class LvxTimeline:
         self._k += 1
         t_ns = np.asarray(t_ns, np.int64)
         order = np.argsort(t_ns, kind="stable")     # devices' packets interleave within a frame
+        return self._slice(self.guard.push(np.asarray(xyz)[order], t_ns[order], np.asarray(reflectivity)[order],
+                                           host_s))
+
+    def _slice(self, accepted) -> list:
         out = []
-        for acc in self.guard.push(np.asarray(xyz)[order], t_ns[order], np.asarray(reflectivity)[order], host_s):
+        for acc in accepted:
             if acc.epoch != self._epoch:            # a new sensor clock: the old stream ends here
                 out += self._tag(self.slicer.flush())
                 self.slicer.reset()
@@ -161,7 +165,8 @@ class LvxTimeline:
         return out
 
     def flush(self) -> list:
-        return self._tag(self.slicer.flush())
+        # the guard holds the newest points back to put an overtaken packet in order: hand them on first
+        return self._slice(self.guard.flush()) + self._tag(self.slicer.flush())
 
     def _tag(self, frames) -> list:
         out = []
@@ -173,6 +178,7 @@ class LvxTimeline:
     @property
     def counts(self) -> dict:
         g, s = self.guard.counters, self.slicer
+        # after flush() what the guard still holds is a candidate clock that never continued: bad time
         return {"bad_time_points": int(g["bad_time_points"] + self.guard.held_points),
                 "bad_time_packets_runs": int(g["bad_time_segments"] + (1 if self.guard.held_points else 0)),
                 "clock_jumps": int(g["clock_jumps"]), "late_points": int(s.late_points),

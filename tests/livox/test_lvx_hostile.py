@@ -29,6 +29,13 @@ def test_a_timestamp_beyond_int64_is_a_packet_error_not_a_wrap():
         P.decode_packets_array(arr, 240_000.0)
 
 
+def _box_config(tmp_path) -> str:
+    """An .lvx carries no tracker configuration, and replay refuses one without a space of interest."""
+    cfg = tmp_path / "box.toml"
+    cfg.write_text('[tracker]\n[tracker.space]\nkind = "box"\nmin_xyz = [1.0, -60.0, -5.0]\nmax_xyz = [60.0, 60.0, 40.0]\n')
+    return str(cfg)
+
+
 def test_a_package_stamped_0x7fff_is_named_in_the_lvx_and_in_replay(tmp_path):
     from foveatrack.replay import replay
 
@@ -39,7 +46,7 @@ def test_a_package_stamped_0x7fff_is_named_in_the_lvx_and_in_replay(tmp_path):
     with pytest.raises(UserError, match=rf"package at byte {pkg}: field timestamp \(byte {pkg + 11}\)"):
         list(read_lvx(p))
     with pytest.raises(UserError, match="beyond any sensor clock"):
-        replay(p)
+        replay(p, _box_config(tmp_path))
 
 
 RATE_HZ = 24_000.0     # a slow point rate keeps the file small: 96 points per 4 ms packet
@@ -69,8 +76,9 @@ def test_one_package_stamped_18_minutes_late_is_dropped_counted_and_the_rest_rep
     every other frame is replayed as without it."""
     from foveatrack.replay import format_report, replay
 
-    good = replay(_stream_file(tmp_path, name="good.lvx"))
-    bad = replay(_stream_file(tmp_path, late_package=(300, 18 * 60 * 10**9), name="late.lvx"))
+    cfg = _box_config(tmp_path)
+    good = replay(_stream_file(tmp_path, name="good.lvx"), cfg)
+    bad = replay(_stream_file(tmp_path, late_package=(300, 18 * 60 * 10**9), name="late.lvx"), cfg)
     n = len(good.frames["t_end_s"])
     assert n >= 30
     assert len(bad.frames["t_end_s"]) == n
