@@ -54,6 +54,14 @@ def output_dir(path, flag: str):
     return out
 
 
+def as_table(value, key: str, where: str) -> Mapping:
+    """``[key]`` of a TOML file, which must be a table (``tracker = 1`` gave "'int' object is not
+    iterable" from deep inside the loader)."""
+    if not isinstance(value, Mapping):
+        raise UserError(f"{where}: [{key}] must be a table, got {value!r}")
+    return value
+
+
 def check_keys(data: Mapping, allowed: Sequence[str], where: str) -> None:
     if not isinstance(data, Mapping):
         raise UserError(f"{where}: expected a table/mapping, got {type(data).__name__}")

@@ -55,6 +55,11 @@ GEOMETRIES = ("quadrotor", "sphere", "box")
 BACKGROUND_TYPES = ("ground", "wall", "room", "box")
 
 
+# A scene is read from a file someone may have made by mistake or on purpose: every target and
+# background body is ray-cast for every beam, so their counts are capped (a swarm of birds fits).
+MAX_TARGETS = 256
+MAX_BACKGROUND = 4096
+
 @dataclass(frozen=True)
 class TargetSpec:
     body: Any  # sim.world.bodies.Body
@@ -197,10 +202,14 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
     targets = data.get("target", [])
     if not isinstance(targets, list):
         raise UserError(f"{where}: [[target]] must be an array of tables")
+    if len(targets) > MAX_TARGETS:    # 100 000 ran on for ever, the ray cast's cost growing with each
+        raise UserError(f"{where}: {len(targets)} [[target]] tables; at most {MAX_TARGETS} in one scene")
     target_specs = tuple(_target(t, f"{where} [[target]] #{i + 1}", duration, seed + i) for i, t in enumerate(targets))
     bg = data.get("background", [])
     if not isinstance(bg, list):
         raise UserError(f"{where}: [[background]] must be an array of tables")
+    if len(bg) > MAX_BACKGROUND:
+        raise UserError(f"{where}: {len(bg)} [[background]] tables; at most {MAX_BACKGROUND} in one scene")
     prims, refl = [], []
     for i, b in enumerate(bg):
         p, r = _background(b, f"{where} [[background]] #{i + 1}")
@@ -251,6 +260,8 @@ def _lidar(t: Mapping, w: str):
     model = as_choice(t.get("model", "exact"), "model", w, ("exact", "paraxial"))
     rest = {k: v for k, v in t.items() if k not in ("preset", "model", "min_range_m", "max_range_m")}
     preset = None if "prisms" in t else t.get("preset", "mid40")
+    if preset is not None and not isinstance(preset, str):    # a list or a table: "unhashable" traceback before
+        raise UserError(f"{w}: preset must be a name ({', '.join(PRESETS)}), got {preset!r}")
     lo, hi = RANGE_ENVELOPE_M.get(preset, DEFAULT_RANGE_ENVELOPE_M) if isinstance(preset, str) else DEFAULT_RANGE_ENVELOPE_M
     lo = as_float(t.get("min_range_m", lo), "min_range_m", w, lo=0)
     hi = as_float(t.get("max_range_m", hi), "max_range_m", w, lo=0, hi=MAX_RANGE_LIMIT_M)

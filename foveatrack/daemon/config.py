@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
 
-from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys, read_toml
+from foveatrack.config_util import as_bool, as_choice, as_float, as_table, as_vec, check_keys, read_toml
 from foveatrack.errors import UserError
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig
@@ -249,8 +249,10 @@ def _head(t: Mapping, w: str) -> HeadConfig:
         raise UserError(f"{w}: port is required (the head's serial device, best a /dev/serial/by-id/ name, or a "
                         "pyserial URL such as socket://host:port); there is no default")
     if "port" in t:
-        if not isinstance(t["port"], str) or not t["port"]:
-            raise UserError(f"{w}: port must be a device path (/dev/ttyUSB0) or a pyserial URL (socket://host:port)")
+        if not isinstance(t["port"], str) or not t["port"] or "\x00" in t["port"]:
+            # (a NUL reached the OS as "ValueError: embedded null byte")
+            raise UserError(f"{w}: port must be a device path (/dev/ttyUSB0) or a pyserial URL (socket://host:port)"
+                            + (", without a NUL character" if isinstance(t["port"], str) and "\x00" in t["port"] else ""))
         kw["port"] = t["port"]
     if "baud" in t:
         from gimbal.client import STANDARD_BAUDS   # the scene's rule too (sim/scene.py)
@@ -351,13 +353,14 @@ def config_from_mapping(data: Mapping, where: str = "daemon config", text: str =
     for k in ("lidar", "head"):
         if k not in data:
             raise UserError(f"{where}: missing [{k}] table (see examples/daemon-virtual.toml)")
-    lidar = _lidar(data["lidar"], f"{where} [lidar]")
-    head = _head(data["head"], f"{where} [head]")
-    tt = dict(data.get("tracker", {}))
+    tables = {k: as_table(data.get(k, {}), k, where) for k in ("lidar", "head", "tracker", "recording", "daemon")}
+    lidar = _lidar(tables["lidar"], f"{where} [lidar]")
+    head = _head(tables["head"], f"{where} [head]")
+    tt = dict(tables["tracker"])
     tracker = TrackerConfig.from_mapping(tt, where=f"{where} [tracker]")
     cfg = DaemonConfig(where, text, lidar, head, tt, tracker,
-                       _recording(data.get("recording", {}), f"{where} [recording]"),
-                       _loop(data.get("daemon", {}), f"{where} [daemon]"))
+                       _recording(tables["recording"], f"{where} [recording]"),
+                       _loop(tables["daemon"], f"{where} [daemon]"))
     cfg = replace(cfg, tracker=tracker.with_head(head.facts, tt, f"{where} [tracker]"))
     if head.speed_table != "nominal":
         p = Path(head.speed_table)

@@ -13,10 +13,10 @@ from foveatrack.tracker import TrackerConfig
 
 def load_tracker_table(path: str | os.PathLike) -> dict:
     """The ``[tracker]`` table of a TOML file (a scene, a daemon config, or a bare tracker table)."""
-    from foveatrack.config_util import read_toml
+    from foveatrack.config_util import as_table, read_toml
 
     data, _ = read_toml(path, "tracker config (--tracker-config)")
-    return dict(data.get("tracker", data))
+    return dict(as_table(data.get("tracker", data), "tracker", f"{path}"))
 
 
 def _overrides(meta: dict) -> dict:
