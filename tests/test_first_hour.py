@@ -125,3 +125,28 @@ def test_every_option_of_every_command_says_what_it_does():
 
     walk(build_parser(), ["foveatrack"])
     assert missing == []
+
+
+FIG12_V2 = str(ROOT / "tests" / "recording" / "fixtures" / "fig12-v2.mcap")
+
+
+def test_export_imu_of_a_run_without_imu_writes_nothing_else_first(tmp_path, capsys):
+    # before: the points were written, then the IMU export failed
+    code, _, err = _run(["export", FIG12_V2, "--csv", str(tmp_path / "p.csv"), "--imu", str(tmp_path / "i.csv")],
+                        capsys)
+    assert code == 2 and "holds no IMU samples" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_trajectory_csv_has_no_column_that_is_always_blank(tmp_path, capsys):
+    # before: xyz_m and world_xyz_m came beside xyz_m[0..2] and world_xyz_m[0..2], blank in every row
+    import csv
+
+    out = tmp_path / "t.csv"
+    code, _, _ = _run(["export", FIG12_V2, "--trajectory", str(out)], capsys)
+    assert code == 0
+    rows = list(csv.reader(out.open()))
+    header, body = rows[0], rows[1:]
+    assert "xyz_m[0]" in header and "xyz_m" not in header and "world_xyz_m" not in header
+    blank = [h for i, h in enumerate(header) if all(r[i] == "" for r in body)]
+    assert blank == [], blank

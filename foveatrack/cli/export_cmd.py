@@ -60,6 +60,14 @@ def cmd_export(args) -> int:
             if Path(path).suffix.lower() not in suffixes:
                 raise UserError(f"{flag} {path}: the file name must end in {' or '.join(suffixes)}")
             check_output_file(path, flag)
+    if args.data_type is not None or args.device:
+        if not args.lvx:
+            raise UserError("--data-type and --device are for --lvx")
+    from foveatrack.recording import export_imu, export_points, export_trajectory
+
+    # the IMU samples first: a recording without them is an error, and it must come before any other
+    # output is written (it came last, after the points had been written)
+    n_imu = export_imu(rec, args.imu, warn=warn) if args.imu else None
     if args.lvx:
         from foveatrack.livox.lvx_export import export_lvx
 
@@ -70,15 +78,12 @@ def cmd_export(args) -> int:
         print(f"{r.points} points in {r.packets} packets (data type {r.data_type}, device type {r.device_type}, "
               f"{r.devices} device{'s' if r.devices > 1 else ''}), {r.frames} frames -> {args.lvx}{extra}")
         warn(r.problem)
-    elif args.data_type is not None or args.device:
-        raise UserError("--data-type and --device are for --lvx")
-    from foveatrack.recording import export_imu, export_points, export_trajectory
 
     for flag, path in (("--csv", args.csv), ("--npz", args.npz)):
         if path:
             print(f"{export_points(rec, path, warn=warn)} points -> {path}")
     if args.trajectory:
         print(f"{export_trajectory(rec, args.trajectory, warn=warn)} records -> {args.trajectory}")
-    if args.imu:
-        print(f"{export_imu(rec, args.imu, warn=warn)} IMU samples -> {args.imu}")
+    if n_imu is not None:
+        print(f"{n_imu} IMU samples -> {args.imu}")
     return 0

@@ -101,7 +101,9 @@ def export_trajectory(
         keys: list[str] = []
         for _, r in rows:
             keys.extend(k for k in r if k not in keys)
-        keys = ["t_ns"] + [k for k in keys if k != "t_ns"]
+        # a list field is its columns k[0], k[1], ...; where it was null it also came as k, a column
+        # that was blank in every row (xyz_m, world_xyz_m)
+        keys = ["t_ns"] + [k for k in keys if k != "t_ns" and f"{k}[0]" not in keys]
         with open(out_path, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["channel", *keys])
@@ -114,7 +116,7 @@ def export_trajectory(
             keys = []
             for r in recs:
                 keys.extend(k for k in r if k not in keys)
-            for k in keys:
+            for k in [k for k in keys if f"{k}[0]" not in keys]:     # (a null list: see the CSV above)
                 vals = [r.get(k) for r in recs]
                 if all(isinstance(v, (int, float, bool)) for v in vals):
                     arrays[f"{ch}.{k}"] = np.array(vals)
