@@ -11,7 +11,11 @@ Frames (``FrameTransforms`` on ``/tf``)::
     world -> head_true -> lidar_true    simulation only: the true head pose
 
 so the cloud (frame ``lidar``) sits in the world where the tracker believes it is, and the drift of
-the estimate shows as the offset between ``head_est`` and ``head_true``.  Head coordinates are the
+the estimate shows as the offset between ``head_est`` and ``head_true``.  Both chains of a frame travel
+in one ``/tf`` message (log time: the head estimate's), because a seek restores only the newest message
+of a topic: the head estimate's transforms wait for the frame's truth, which the simulator writes after
+it; once a frame has passed without a truth (the daemon, a replay of its recording) they are sent as
+they come, so only the first frame of such a run waits, until the next frame's points.  Head coordinates are the
 tracker's (:func:`foveatrack.reconstruction.rotation_matrix`): ``world = R_z(pan) R_y(-tilt)
 (p_lidar + lidar_offset_m)``, X forward, Y left, Z up, pan + = left, tilt + = up.
 """
@@ -92,6 +96,8 @@ class FoxgloveChannels:
         self._seen_points: dict[str, int] = {}
         self._path_colors: dict[str, tuple] = {}
         self._head_count = 0
+        self._pending_tf: tuple[int, list] | None = None   # the head estimate's transforms, awaiting the truth
+        self._truth_expected: bool | None = None            # None: not known yet (the first frame)
 
     # ------------------------------------------------------------------ channels
 
@@ -115,6 +121,7 @@ class FoxgloveChannels:
     # ------------------------------------------------------------------ records
 
     def log_points(self, t_ns: int, frame_id: int, packed: np.ndarray, dt_unit_ns: int = 1) -> None:
+        self._frame_passed()
         self._note(POINTS)
         self._points.log(encode_points_pb(t_ns, frame_id, packed, dt_unit_ns), log_time=int(t_ns))
 
@@ -143,7 +150,12 @@ class FoxgloveChannels:
     def _derive(self, name: str, t_ns: int, rec: dict) -> None:
         """Transforms, scene entities and log lines from a record just written."""
         if name == HEAD and rec.get("pan_deg") is not None:
-            self._head_tf(t_ns, "head_est", "lidar", rec["pan_deg"], rec["tilt_deg"])
+            self._frame_passed()
+            tfs = self._head_tf(t_ns, "head_est", "lidar", rec["pan_deg"], rec["tilt_deg"])
+            if self._truth_expected is False:
+                self._log_tf(t_ns, tfs)
+            else:
+                self._pending_tf = (t_ns, tfs)
             ents = [] if self._space_sent else self._space_entities(t_ns)
             if rec.get("world_xyz_m") is not None:
                 ents.append(self._path_point("reconstructed_trajectory", t_ns, rec["world_xyz_m"], (0.1, 0.5, 1.0)))
@@ -153,7 +165,13 @@ class FoxgloveChannels:
                 self._scene_keyframe(t_ns)
             self._head_count += 1
         elif name == TRUTH and rec.get("pan_deg") is not None:
-            self._head_tf(t_ns, "head_true", "lidar_true", rec["pan_deg"], rec["tilt_deg"])
+            self._truth_expected = True
+            tfs = self._head_tf(t_ns, "head_true", "lidar_true", rec["pan_deg"], rec["tilt_deg"])
+            if self._pending_tf is not None:
+                (t_ns_head, est), self._pending_tf = self._pending_tf, None
+                self._log_tf(t_ns_head, est + tfs)
+            else:
+                self._log_tf(t_ns, tfs)
             xyz = rec.get("target_xyz_m")
             if xyz is not None:
                 self._scene_update(t_ns, [self._sphere("true_uav", t_ns, "world", xyz, 0.5, (0.1, 0.9, 0.2)),
@@ -175,17 +193,33 @@ class FoxgloveChannels:
                            f"{ev}: " + json.dumps({k: v for k, v in rec.items() if k not in ("event", "t_ns")},
                                                   default=str), name)
 
-    def _head_tf(self, t_ns, head, lidar, pan_deg, tilt_deg) -> None:
+    def _head_tf(self, t_ns, head, lidar, pan_deg, tilt_deg) -> list:
+        """The transforms world -> ``head`` -> ``lidar`` at pan, tilt [deg]."""
         x, y, z, w = head_quaternion(float(pan_deg), float(tilt_deg))
         ox, oy, oz = self.lidar_offset_m
         ts = _ts(t_ns)
-        self._note(TF)
-        self._tf.log(FrameTransforms(transforms=[
+        return [
             FrameTransform(timestamp=ts, parent_frame_id="world", child_frame_id=head,
                            translation=Vector3(x=0.0, y=0.0, z=0.0), rotation=Quaternion(x=x, y=y, z=z, w=w)),
             FrameTransform(timestamp=ts, parent_frame_id=head, child_frame_id=lidar,
                            translation=Vector3(x=ox, y=oy, z=oz), rotation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
-        ]), log_time=int(t_ns))
+        ]
+
+    def _log_tf(self, t_ns, transforms) -> None:
+        self._note(TF)
+        self._tf.log(FrameTransforms(transforms=transforms), log_time=int(t_ns))
+
+    def _frame_passed(self) -> None:
+        """A new frame (or the end) came with a head estimate's transforms still waiting: no truth
+        follows a head estimate in this run; send them, and the next ones as they come."""
+        if self._pending_tf is not None:
+            (t_ns, tfs), self._pending_tf = self._pending_tf, None
+            self._truth_expected = False
+            self._log_tf(t_ns, tfs)
+
+    def finish(self) -> None:
+        """Send what still waits (the last head estimate's transforms); the writer calls it on close."""
+        self._frame_passed()
 
     def _scene_update(self, t_ns, entities) -> None:
         self._note(SCENE)

@@ -278,6 +278,7 @@ class RecordingWriter(RecordCalls):
         if self._closed:
             return
         try:
+            self.view.finish()      # the last head estimate's transforms, if they still wait
             if self._w is not None:
                 self._w.close()
                 if self.fsync:

@@ -102,13 +102,19 @@ def test_every_channel_is_well_known_or_documented(sim_rec):
 def test_transforms_chain_world_to_lidar_at_the_recorded_poses(sim_rec):
     path, log = sim_rec
     tfs = {}
-    for log_time, dec in official_decoded(path, ["/tf"]):
+    msgs = official_decoded(path, ["/tf"])
+    for log_time, dec in msgs:
         for t in dec.transforms:
             tfs[(log_time, t.child_frame_id)] = t
     rec = RecordingReader(path)
     heads = rec.records("head")
     truths = rec.records("truth")
     assert heads and len(truths) == len(heads)
+    # one message a frame with both chains: a seek restores only the newest message of a topic, and
+    # it alone resolves lidar and lidar_true (before: two messages a frame, the last the true chain)
+    assert [t for t, _ in msgs] == [h["t_ns"] for h in heads]
+    for _t, dec in msgs:
+        assert sorted(t.child_frame_id for t in dec.transforms) == ["head_est", "head_true", "lidar", "lidar_true"]
     for h, tr in zip(heads, truths):
         t = h["t_ns"]
         lidar = tfs[(t, "lidar")]
@@ -280,3 +286,41 @@ def test_a_long_history_is_thinned_evenly_and_keeps_its_start():
     assert len(pts) <= HISTORY_POINTS and xs[0] == 0.0
     assert set(np.diff(xs)) == {float(stride)}
     assert xs[-1] > 10 * HISTORY_POINTS - stride - 1
+
+
+def test_one_tf_message_a_frame_without_truth_is_at_most_one_frame_late(tmp_path):
+    # the daemon writes no truth: the first frame's transforms wait until the next frame's points
+    # (a frame without truth), every later frame's go out with its head estimate, the last on close
+    from foveatrack.recording.writer import RecordingWriter
+
+    path = tmp_path / "daemon-like.mcap"
+    with RecordingWriter(path, {}) as w:
+        for k in range(4):
+            t = (k + 1) * 100_000_000
+            w.write_points(t, k, np.zeros((1, 3)), np.array([t]))
+            w.write_head_estimate(t, 10.0 * k, 1.0, frame_id=k)
+    msgs = official_decoded(path, ["/tf"])
+    assert [t for t, _ in msgs] == [(k + 1) * 100_000_000 for k in range(4)]
+    for k, (_t, dec) in enumerate(msgs):
+        assert [t.child_frame_id for t in dec.transforms] == ["head_est", "lidar"]
+        rot = quat_to_matrix(dec.transforms[0].rotation)
+        np.testing.assert_allclose(rot, rotation_matrix(10.0 * k, 1.0), atol=1e-12)
+
+
+def test_the_live_view_gets_each_frames_tf_before_the_next_frame_ends():
+    # what a viewer of `daemon --live` sees: the first frame's /tf with the second frame's points,
+    # every later one with its own head estimate
+    from foveatrack.recording.foxglove_view import FoxgloveChannels
+
+    view = FoxgloveChannels({})
+    sent = []
+    view._log_tf = lambda t_ns, tfs: sent.append((t_ns, len(tfs)))     # the SDK's messages hide their fields
+    packed = np.zeros(0, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("dt", "<i2"), ("reflectivity", "u1")])
+    for k in range(3):
+        t = (k + 1) * 100
+        view.log_points(t, k, packed)
+        assert [s[0] for s in sent] == [100 * (i + 1) for i in range(k)]      # frame 0 still waits at k = 0
+        view.log_json("head", t, b"{}", {"pan_deg": 1.0, "tilt_deg": 2.0})
+        assert [s[0] for s in sent] == [100 * (i + 1) for i in range(k if k == 0 else k + 1)]
+    view.finish()
+    assert sent == [(100 * (i + 1), 2) for i in range(3)]       # world -> head_est -> lidar
