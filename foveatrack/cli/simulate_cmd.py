@@ -177,7 +177,8 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
     if out_dir is not None or live_port is not None:
         # In a child process or on the loop's own thread, never a thread of its own: the SDK holds the
         # interpreter lock while it encodes and compresses (docs/recordings.md)
-        options = dict(meta=recording_meta(scene, loop), overwrite=True, created_utc="virtual time (simulation)")
+        options = dict(meta=recording_meta(scene, loop), overwrite=True, created_utc="virtual time (simulation)",
+                       log_time=scene.start_utc_ns)    # log times in UTC from the scene's start_utc
         writer = child.open(out_dir / "run.mcap", **options) if child is not None else \
             RecordingWriter(None if out_dir is None else out_dir / "run.mcap", **options)
         recorder = SimRecorder(writer)

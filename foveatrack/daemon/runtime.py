@@ -230,7 +230,8 @@ class Daemon:
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 writer = RecordingWriter(path, self._meta(), flush_every_frames=r.flush_every_frames,
-                                         compression=r.compression, points_dtype=r.points_dtype, overwrite=r.overwrite)
+                                         compression=r.compression, points_dtype=r.points_dtype, overwrite=r.overwrite,
+                                         log_time="host")   # log times: the host's UTC; messages: the Livox clock
             except (OSError, UserError) as exc:
                 self.client.close()
                 self.head.close()
@@ -265,7 +266,8 @@ class Daemon:
         from foveatrack.recording.live import LiveServer
 
         if self.recorder is None:
-            self.recorder = RecordingThread(RecordingWriter(None, self._meta()), self.cfg.recording.queue_frames)
+            self.recorder = RecordingThread(RecordingWriter(None, self._meta(), log_time="host"),
+                                            self.cfg.recording.queue_frames)
         try:
             self.live = LiveServer(self.recorder.writer.context, self.live_port)
         except Exception:

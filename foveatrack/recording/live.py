@@ -89,6 +89,18 @@ class Pacer:
             time.sleep(due - now)
 
 
+def _log_time_of(info: dict) -> int | str:
+    """The log clock a recording was written with (its metadata's ``log_time``): the offset [ns], or
+    "host" (a daemon's recording is served in the host's time now); 0 for one made before UTC log times."""
+    text = str(info.get("log_time", "t_ns+0"))
+    if text == "host_utc":
+        return "host"
+    try:
+        return max(0, int(text.removeprefix("t_ns+")))
+    except ValueError:
+        return 0
+
+
 def stream_recording(path, port: int = DEFAULT_PORT, speed: float = 1.0, wait_for_client_s: float = 0.0,
                      say=None) -> int:
     """Serve a recording on the live view, paced at ``speed`` x its recorded time: its records as
@@ -101,7 +113,7 @@ def stream_recording(path, port: int = DEFAULT_PORT, speed: float = 1.0, wait_fo
 
     reader = RecordingReader(path)
     pacer = Pacer(speed)
-    w = RecordingWriter(None, reader.meta)
+    w = RecordingWriter(None, reader.meta, log_time=_log_time_of(reader.info))
     n = 0
     with LiveServer(w.context, port) as live:
         if say is not None:
