@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 import queue
 import signal
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -276,6 +277,9 @@ class Daemon:
             self.head.close()
             raise
         self.log.event("live_view", url=self.live.url)
+        # on stderr too, as simulate and replay say it: the JSON log is for machines
+        print(f"live view on {self.live.url} (Foxglove: Open connection -> Foxglove WebSocket)",
+              file=sys.stderr, flush=True)
 
     # -------------------------------------------------------------------------------- helpers
     def sensor_now_s(self, mono: float | None = None) -> float | None:
