@@ -142,6 +142,9 @@ def test_pointcloud_decoded_by_protobuf_is_the_frame_our_reader_returns(sim_rec)
     start = RecordingReader(path).info["log_time"]
     for f, (t, pc) in zip(ours, clouds):
         assert pc.frame_id == "lidar" and start == "t_ns+1767225600000000000" and t == f.t_ns + 1767225600 * 10**9
+        # a pose, as the schema has it: identity, the points in frame lidar (before: none)
+        assert pc.HasField("pose") and pc.pose.HasField("orientation") and pc.pose.orientation.w == 1.0
+        assert (pc.pose.position.x, pc.pose.position.y, pc.pose.position.z) == (0.0, 0.0, 0.0)
         assert pc.timestamp.seconds * 10**9 + pc.timestamp.nanos == f.t_ns
         names = {fl.name: fl for fl in pc.fields}
         assert set(names) == {"x", "y", "z", "dt", "reflectivity"}
