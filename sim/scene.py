@@ -4,7 +4,7 @@ A scene lists everything a closed-loop run simulates, and nothing else: an effec
 ``[scene] effects`` draws no random numbers and costs no time.  Every error names the file, the key
 and what is allowed.  Tables::
 
-    [scene]      name, duration_s, seed, effects = [...]
+    [scene]      name, duration_s, seed, effects = [...], start_utc (the recording's log times, UTC)
     [effects]    parameters of the listed effects (optional; documented defaults)
     [lidar]      preset = "mid40" | "prototype" | "horizon" (or custom optics: point_rate_hz,
                  prisms, ...), model = "exact" | "paraxial", min_range_m / max_range_m (the range
@@ -119,6 +119,9 @@ class Scene:
     imu_poses: Any = None  # sim.imu.PoseSchedule, only if the scene has [imu_poses]
     # (blind zone, maximum range) [m] of the lidar, always applied; None: the Mid-40's
     range_envelope_m: tuple[float, float] | None = None
+    # UTC at virtual time 0 [ns since 1970]: the recording's log times (what Foxglove's timeline
+    # shows); fixed by the scene (default START_UTC), never the wall clock: same seed, same bits
+    start_utc_ns: int = 1_767_225_600_000_000_000
 
     @property
     def lidar_range_m(self) -> tuple[float, float]:
@@ -168,7 +171,8 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
                       "imu_poses"], where)
     sc = data.get("scene", {})
     w = f"{where} [scene]"
-    check_keys(sc, ["name", "duration_s", "seed", "effects", "description"], w)
+    check_keys(sc, ["name", "duration_s", "seed", "effects", "description", "start_utc"], w)
+    start_utc_ns = utc_ns(sc.get("start_utc", START_UTC), f"{w} start_utc")
     duration = as_float(sc.get("duration_s", 10.0), "duration_s", w, lo=0, lo_open=True, hi=86400 * 2)
     seed = sc.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -228,7 +232,30 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         background_prims=np.array(prims).reshape(-1, 13), background_reflectivity=np.array(refl, dtype=float),
         tracker=tracker, tracker_table=tracker_table, imu=imu, imu_poses=imu_poses,
         gate=_gate(data["gate"], f"{where} [gate]") if "gate" in data else None, range_envelope_m=envelope,
+        start_utc_ns=start_utc_ns,
     )
+
+
+START_UTC = "2026-01-01T00:00:00Z"     # a scene's start_utc unless it gives one (docs/recordings.md)
+assert Scene.start_utc_ns == 1_767_225_600_000_000_000      # START_UTC, the dataclass's default
+
+
+def utc_ns(text, where: str) -> int:
+    """ns since 1970-01-01 UTC of an ISO 8601 time with its zone ("2026-01-01T00:00:00Z",
+    "2026-06-01T14:30:00+02:00"); a UserError naming ``where`` otherwise."""
+    import datetime as dt
+
+    try:
+        t = dt.datetime.fromisoformat(str(text)) if isinstance(text, str) else None
+    except ValueError:
+        t = None
+    if isinstance(text, dt.datetime):       # TOML's own date-time (start_utc = 2026-01-01T00:00:00Z)
+        t = text
+    if t is None or t.tzinfo is None or t.year < 1970:
+        raise UserError(f"{where}: {text!r} is not a UTC date and time with its zone after 1970, "
+                        f'e.g. "2026-01-01T00:00:00Z"')
+    d = t - dt.datetime(1970, 1, 1, tzinfo=dt.timezone.utc)
+    return (d.days * 86400 + d.seconds) * 1_000_000_000 + d.microseconds * 1000
 
 
 def _imu(data: Mapping, where: str):

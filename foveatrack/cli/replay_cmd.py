@@ -28,7 +28,11 @@ def register(sub) -> None:
     p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
                    help="with --live: recorded seconds per wall second (default 1 = as recorded)")
     p.add_argument("--wait-s", type=float, default=3.0, metavar="S",
-                   help="with --live: seconds to wait for a viewer to connect before streaming (default 3)")
+                   help="with --live: wait until a viewer connects, at most S seconds, then stream "
+                        "(default 3; 0: stream at once)")
+    p.add_argument("--linger-s", type=float, default=30.0, metavar="S",
+                   help="with --live: after the last message, keep serving a connected viewer until it "
+                        "disconnects, at most S seconds (default 30; 0: close at once)")
     p.set_defaults(func=cmd_replay)
 
 
@@ -52,7 +56,7 @@ def cmd_replay(args) -> int:
         from foveatrack.recording.live import check_port, stream_recording
 
         n = stream_recording(args.recording, check_port(args.live), args.speed, max(args.wait_s, 0.0),
-                             say=lambda t: print(t, file=sys.stderr, flush=True))
+                             say=lambda t: print(t, file=sys.stderr, flush=True), linger_s=max(args.linger_s, 0.0))
         print(f"live view: served {n} messages", file=sys.stderr)
     elif args.live is not None:
         raise UserError("--live serves foveatrack recordings (.mcap); a .lvx file has no records to show")

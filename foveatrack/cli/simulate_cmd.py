@@ -23,6 +23,9 @@ def register(sub) -> None:
                    help="serve the run to Foxglove (ws://127.0.0.1:PORT, default 8765), paced at --speed")
     p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
                    help="with --live: virtual seconds per wall second (default 1 = real time)")
+    p.add_argument("--linger-s", type=float, default=30.0, metavar="S",
+                   help="with --live: after the run, keep serving a connected viewer until it disconnects, "
+                        "at most S seconds (default 30; 0: close at once)")
     cores = p.add_mutually_exclusive_group()
     cores.add_argument("--one-thread", action="store_true",
                        help="do not trace the scan and draw the random values of the coming frames on a second "
@@ -115,7 +118,8 @@ def _others_running() -> int:
 
 
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
-                   quiet=False, live_port=None, speed=1.0, ahead=None, recording_process=None) -> dict:
+                   quiet=False, live_port=None, speed=1.0, ahead=None, recording_process=None,
+                   linger_s=0.0) -> dict:
     """Run a scene and report it (the ``simulate`` command).  ``ahead``: trace the scan ahead on a second
     thread; ``recording_process``: write the recording from a child process.  None: both where a core is
     free (:func:`core_free`); the results and the file are the same either way."""
@@ -129,14 +133,14 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     child = writer_process.RecordingProcess() if recording_process and out and live_port is None else None
     try:
         return _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed,
-                               spare if ahead is None else ahead, child)
+                               spare if ahead is None else ahead, child, linger_s)
     finally:
         if child is not None:
             child.close()       # a no-op after the run closed it; ends the child if the run failed early
 
 
 def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed, ahead,
-                    child) -> dict:
+                    child, linger_s=0.0) -> dict:
     import time
 
     import numpy as np
@@ -177,7 +181,8 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
     if out_dir is not None or live_port is not None:
         # In a child process or on the loop's own thread, never a thread of its own: the SDK holds the
         # interpreter lock while it encodes and compresses (docs/recordings.md)
-        options = dict(meta=recording_meta(scene, loop), overwrite=True, created_utc="virtual time (simulation)")
+        options = dict(meta=recording_meta(scene, loop), overwrite=True, created_utc="virtual time (simulation)",
+                       log_time=scene.start_utc_ns)    # log times in UTC from the scene's start_utc
         writer = child.open(out_dir / "run.mcap", **options) if child is not None else \
             RecordingWriter(None if out_dir is None else out_dir / "run.mcap", **options)
         recorder = SimRecorder(writer)
@@ -209,8 +214,10 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
             bar.update(1)
 
     finish_s = 0.0
+    ran = False
     try:
         log = loop.run(advance, ahead=ahead)
+        ran = True
     finally:
         notice.done()
         if bar is not None:
@@ -221,6 +228,8 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
             writer.close()
             finish_s = time.perf_counter() - t_close
         if live is not None:
+            if ran:     # a viewer still watching keeps the server up (not after Ctrl-C or an error)
+                live.linger(linger_s, lambda t: print(t, file=sys.stderr, flush=True))
             live.stop()
     wall = time.perf_counter() - t0
     summary = summarize(scene, log, wall, loop, finish_s)
@@ -307,5 +316,6 @@ def cmd_simulate(args) -> int:
         raise UserError(f"--speed {args.speed:g} paces the live view: add --live, or leave --speed out "
                         "(without --live the run goes as fast as the machine allows)")
     run_and_report(args.scene, args.out, args.json, args.plot, args.seed, args.duration, not args.no_progress,
-                   live_port=args.live, speed=args.speed, ahead=_cores_flag(args), recording_process=_cores_flag(args))
+                   live_port=args.live, speed=args.speed, ahead=_cores_flag(args), recording_process=_cores_flag(args),
+                   linger_s=max(args.linger_s, 0.0))
     return 0

@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 import queue
 import signal
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -231,7 +232,8 @@ class Daemon:
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 writer = RecordingWriter(path, self._meta(), flush_every_frames=r.flush_every_frames,
-                                         compression=r.compression, points_dtype=r.points_dtype, overwrite=r.overwrite)
+                                         compression=r.compression, points_dtype=r.points_dtype, overwrite=r.overwrite,
+                                         log_time="host")   # log times: the host's UTC; messages: the Livox clock
             except (OSError, UserError) as exc:
                 self.client.close()
                 self.head.close()
@@ -269,7 +271,8 @@ class Daemon:
         from foveatrack.recording.live import LiveServer
 
         if self.recorder is None:
-            self.recorder = RecordingThread(RecordingWriter(None, self._meta()), self.cfg.recording.queue_frames)
+            self.recorder = RecordingThread(RecordingWriter(None, self._meta(), log_time="host"),
+                                            self.cfg.recording.queue_frames)
         try:
             self.live = LiveServer(self.recorder.writer.context, self.live_port)
         except Exception:
@@ -278,6 +281,9 @@ class Daemon:
             self.head.close()
             raise
         self.log.event("live_view", url=self.live.url)
+        # on stderr too, as simulate and replay say it: the JSON log is for machines
+        print(f"live view on {self.live.url} (Foxglove: Open connection -> Foxglove WebSocket)",
+              file=sys.stderr, flush=True)
 
     # -------------------------------------------------------------------------------- helpers
     def sensor_now_s(self, mono: float | None = None) -> float | None:

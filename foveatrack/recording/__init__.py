@@ -10,11 +10,13 @@ docs/recordings.md lists every channel):
 - an MCAP Metadata record ``foveatrack`` written first, with string values ``format`` =
   "foveatrack-recording", ``format_version`` = "3", ``meta_json`` (the writer's ``meta`` dict as JSON:
   scene/config text, seed, ...), ``foveatrack_version``, ``numpy_version``, ``python_version``,
-  ``writer``, ``created_utc``; after the chunk where channels first appear, a Metadata record
+  ``writer``, ``created_utc``, ``log_time`` (how the MCAP log times were made: "t_ns+OFFSET" [ns], the
+  simulator's scene start in UTC, or "host_utc", the daemon's host clock; absent before: t_ns itself);
+  after the chunk where channels first appear, a Metadata record
   ``foveatrack_channels`` (``channels_json``: channel id -> name) so that a damaged chunk does not take
   the channel names along.
-- channel ``/points``: ``foxglove.PointCloud`` in protobuf, one message per lidar frame, log time = the
-  frame's ``t_ns``, ``frame_id`` "lidar", packed points (little-endian, no padding): x, y, z [m, lidar
+- channel ``/points``: ``foxglove.PointCloud`` in protobuf, one message per lidar frame, log time from the
+  frame's ``t_ns`` (above; its ``timestamp`` is ``t_ns``), ``frame_id`` "lidar", ``pose`` identity, packed points (little-endian, no padding): x, y, z [m, lidar
   frame X forward, Y left, Z up], ``dt`` (point time − frame ``t_ns`` in the unit of protobuf field 16,
   [ns], absent = 1; int16 where that holds it, else int32), ``reflectivity`` uint8; the frame index in
   protobuf field 15 (fields 15 and 16 are not in the schema; decoders skip them).  x, y, z of a frame

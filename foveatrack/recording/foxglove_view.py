@@ -11,7 +11,11 @@ Frames (``FrameTransforms`` on ``/tf``)::
     world -> head_true -> lidar_true    simulation only: the true head pose
 
 so the cloud (frame ``lidar``) sits in the world where the tracker believes it is, and the drift of
-the estimate shows as the offset between ``head_est`` and ``head_true``.  Head coordinates are the
+the estimate shows as the offset between ``head_est`` and ``head_true``.  Both chains of a frame travel
+in one ``/tf`` message (log time: the head estimate's), because a seek restores only the newest message
+of a topic: the head estimate's transforms wait for the frame's truth, which the simulator writes after
+it; once a frame has passed without a truth (the daemon, a replay of its recording) they are sent as
+they come, so only the first frame of such a run waits, until the next frame's points.  Head coordinates are the
 tracker's (:func:`foveatrack.reconstruction.rotation_matrix`): ``world = R_z(pan) R_y(-tilt)
 (p_lidar + lidar_offset_m)``, X forward, Y left, Z up, pan + = left, tilt + = up.
 """
@@ -46,6 +50,17 @@ def head_quaternion(pan_deg: float, tilt_deg: float) -> tuple[float, float, floa
     return (-sz * sy, cz * sy, cy * sz, cz * cy)
 
 
+def log_clock(log_time: int | str):
+    """t_ns -> MCAP log time [ns]: ``t_ns + log_time`` (an int), or the host's UTC clock ("host")."""
+    if log_time == "host":
+        import time
+
+        return lambda _t_ns: time.time_ns()
+    if isinstance(log_time, bool) or not isinstance(log_time, int) or log_time < 0:
+        raise ValueError(f"log_time must be an offset >= 0 [ns] or 'host', got {log_time!r}")
+    return lambda t_ns: int(t_ns) + log_time
+
+
 def _ts(t_ns: int):
     return Timestamp(int(t_ns) // 1_000_000_000, int(t_ns) % 1_000_000_000)
 
@@ -56,13 +71,17 @@ class FoxgloveChannels:
 
     meta : the recording's meta (its ``tracker_table`` gives D and the lidar offset)
     points_dtype : "float64" (exact) or "float32" (x, y, z of the packed points)
+    log_time : the MCAP log time of a message of time ``t_ns`` (the sensor's or the simulator's clock,
+        which the messages keep): an int, ``t_ns`` + that many ns (the simulator: its scene's start
+        in UTC), or "host": the host's clock (UTC) when the message is logged (the daemon)
     """
 
-    def __init__(self, meta: dict | None = None, points_dtype: str = "float64"):
+    def __init__(self, meta: dict | None = None, points_dtype: str = "float64", log_time: int | str = 0):
         import foxglove
         from foxglove.channels import FrameTransformsChannel, LogChannel, SceneUpdateChannel
 
         self.context = foxglove.Context()
+        self._lt = log_clock(log_time)
         ctx = self.context
         self.first_log_order: list[str] = []     # channel names in the order of their first message
         self._seen: set[str] = set()
@@ -92,6 +111,8 @@ class FoxgloveChannels:
         self._seen_points: dict[str, int] = {}
         self._path_colors: dict[str, tuple] = {}
         self._head_count = 0
+        self._pending_tf: tuple[int, list] | None = None   # the head estimate's transforms, awaiting the truth
+        self._truth_expected: bool | None = None            # None: not known yet (the first frame)
 
     # ------------------------------------------------------------------ channels
 
@@ -115,8 +136,9 @@ class FoxgloveChannels:
     # ------------------------------------------------------------------ records
 
     def log_points(self, t_ns: int, frame_id: int, packed: np.ndarray, dt_unit_ns: int = 1) -> None:
+        self.end_frame()
         self._note(POINTS)
-        self._points.log(encode_points_pb(t_ns, frame_id, packed, dt_unit_ns), log_time=int(t_ns))
+        self._points.log(encode_points_pb(t_ns, frame_id, packed, dt_unit_ns), log_time=self._lt(t_ns))
 
     def log_imu(self, t_ns: int, frame_id: int, t_s: np.ndarray, gyro_rad_s: np.ndarray,
                 accel_g: np.ndarray | None = None) -> None:
@@ -128,11 +150,11 @@ class FoxgloveChannels:
                 name=IMU_SCHEMA_NAME, encoding="protobuf", data=IMU_DESCRIPTOR),
                 message_encoding="protobuf", context=self.context)
         self._note(IMU)
-        self._imu.log(encode_imu_pb(t_ns, frame_id, t_s, gyro_rad_s, accel_g), log_time=int(t_ns))
+        self._imu.log(encode_imu_pb(t_ns, frame_id, t_s, gyro_rad_s, accel_g), log_time=self._lt(t_ns))
 
     def log_json(self, name: str, t_ns: int, payload: bytes, rec: dict) -> None:
         self._note(name)
-        self._json_channel(name).log(payload, log_time=int(t_ns))
+        self._json_channel(name).log(payload, log_time=self._lt(t_ns))
         try:
             self._derive(name, int(t_ns), rec)
         except (KeyError, TypeError, ValueError, IndexError):
@@ -143,7 +165,12 @@ class FoxgloveChannels:
     def _derive(self, name: str, t_ns: int, rec: dict) -> None:
         """Transforms, scene entities and log lines from a record just written."""
         if name == HEAD and rec.get("pan_deg") is not None:
-            self._head_tf(t_ns, "head_est", "lidar", rec["pan_deg"], rec["tilt_deg"])
+            self.end_frame()
+            tfs = self._head_tf(t_ns, "head_est", "lidar", rec["pan_deg"], rec["tilt_deg"])
+            if self._truth_expected is False:
+                self._log_tf(t_ns, tfs)
+            else:
+                self._pending_tf = (t_ns, tfs)
             ents = [] if self._space_sent else self._space_entities(t_ns)
             if rec.get("world_xyz_m") is not None:
                 ents.append(self._path_point("reconstructed_trajectory", t_ns, rec["world_xyz_m"], (0.1, 0.5, 1.0)))
@@ -153,7 +180,13 @@ class FoxgloveChannels:
                 self._scene_keyframe(t_ns)
             self._head_count += 1
         elif name == TRUTH and rec.get("pan_deg") is not None:
-            self._head_tf(t_ns, "head_true", "lidar_true", rec["pan_deg"], rec["tilt_deg"])
+            self._truth_expected = True
+            tfs = self._head_tf(t_ns, "head_true", "lidar_true", rec["pan_deg"], rec["tilt_deg"])
+            if self._pending_tf is not None:
+                (t_ns_head, est), self._pending_tf = self._pending_tf, None
+                self._log_tf(t_ns_head, est + tfs)
+            else:
+                self._log_tf(t_ns, tfs)
             xyz = rec.get("target_xyz_m")
             if xyz is not None:
                 self._scene_update(t_ns, [self._sphere("true_uav", t_ns, "world", xyz, 0.5, (0.1, 0.9, 0.2)),
@@ -175,21 +208,38 @@ class FoxgloveChannels:
                            f"{ev}: " + json.dumps({k: v for k, v in rec.items() if k not in ("event", "t_ns")},
                                                   default=str), name)
 
-    def _head_tf(self, t_ns, head, lidar, pan_deg, tilt_deg) -> None:
+    def _head_tf(self, t_ns, head, lidar, pan_deg, tilt_deg) -> list:
+        """The transforms world -> ``head`` -> ``lidar`` at pan, tilt [deg]."""
         x, y, z, w = head_quaternion(float(pan_deg), float(tilt_deg))
         ox, oy, oz = self.lidar_offset_m
         ts = _ts(t_ns)
-        self._note(TF)
-        self._tf.log(FrameTransforms(transforms=[
+        return [
             FrameTransform(timestamp=ts, parent_frame_id="world", child_frame_id=head,
                            translation=Vector3(x=0.0, y=0.0, z=0.0), rotation=Quaternion(x=x, y=y, z=z, w=w)),
             FrameTransform(timestamp=ts, parent_frame_id=head, child_frame_id=lidar,
                            translation=Vector3(x=ox, y=oy, z=oz), rotation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
-        ]), log_time=int(t_ns))
+        ]
+
+    def _log_tf(self, t_ns, transforms) -> None:
+        self._note(TF)
+        self._tf.log(FrameTransforms(transforms=transforms), log_time=self._lt(t_ns))
+
+    def end_frame(self) -> None:
+        """A frame ends (the next one's points come, or the end): if its head estimate's transforms
+        still wait, no truth follows a head estimate in this run; send them, and the next ones as they
+        come."""
+        if self._pending_tf is not None:
+            (t_ns, tfs), self._pending_tf = self._pending_tf, None
+            self._truth_expected = False
+            self._log_tf(t_ns, tfs)
+
+    def finish(self) -> None:
+        """Send what still waits (the last head estimate's transforms); the writer calls it on close."""
+        self.end_frame()
 
     def _scene_update(self, t_ns, entities) -> None:
         self._note(SCENE)
-        self._scene.log(SceneUpdate(entities=entities), log_time=int(t_ns))
+        self._scene.log(SceneUpdate(entities=entities), log_time=self._lt(t_ns))
 
     @staticmethod
     def _color(rgb, a=1.0):
@@ -210,7 +260,7 @@ class FoxgloveChannels:
             rgb = self._path_colors[name]
             ents.append(self._line(f"{name}/history", t_ns, pts, rgb))
         self._note(SCENE_KEYFRAME)
-        self._keyframe.log(SceneUpdate(entities=ents), log_time=int(t_ns))
+        self._keyframe.log(SceneUpdate(entities=ents), log_time=self._lt(t_ns))
 
     def _remember(self, name, xyz, rgb) -> None:
         stride, pts = self._history.get(name, (1, []))
@@ -272,4 +322,4 @@ class FoxgloveChannels:
     def _log_line(self, t_ns, level, text, name) -> None:
         lv = {2: LogLevel.Info, 3: LogLevel.Warning, 4: LogLevel.Error}[level]
         self._note(LOG)
-        self._log.log(Log(timestamp=_ts(t_ns), level=lv, message=text, name=str(name)), log_time=int(t_ns))
+        self._log.log(Log(timestamp=_ts(t_ns), level=lv, message=text, name=str(name)), log_time=self._lt(t_ns))

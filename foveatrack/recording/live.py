@@ -27,10 +27,42 @@ def check_port(port, what: str = "--live") -> int:
     return p
 
 
+DEFAULT_LINGER_S = 30.0    # after a run, the server stays this long at most while a viewer is connected
+
+
+class _Viewers:
+    """The SDK's server listener: who is subscribed to what.  A viewer is a client with at least
+    one subscription (the SDK tells subscriptions, not connections; a disconnect unsubscribes all)."""
+
+    def __init__(self):
+        import threading
+
+        self._subs: set[tuple[int, int]] = set()
+        self.cond = threading.Condition()
+        self.changes = 0
+
+    def on_subscribe(self, client, channel) -> None:
+        with self.cond:
+            self._subs.add((client.id, channel.id))
+            self.changes += 1
+            self.cond.notify_all()
+
+    def on_unsubscribe(self, client, channel) -> None:
+        with self.cond:
+            self._subs.discard((client.id, channel.id))
+            self.cond.notify_all()
+
+    @property
+    def count(self) -> int:
+        with self.cond:
+            return len({c for c, _ch in self._subs})
+
+
 class LiveServer:
     """Serve ``context``'s channels on ``ws://host:port`` (host: loopback only; port 0: any free one).
 
-    ``port`` is the bound port.  ``stop()`` closes it (also on exit as a context manager).
+    ``port`` is the bound port.  ``stop()`` closes it (also on exit as a context manager);
+    :meth:`wait_for_viewer` and :meth:`linger` wait for a viewer to come and to go.
     """
 
     def __init__(self, context, port: int = DEFAULT_PORT, host: str = "127.0.0.1", name: str = "foveatrack"):
@@ -44,7 +76,9 @@ class LiveServer:
             raise UserError(f"live view host {host!r}: only a loopback address (127.0.0.0/8, ::1) is served")
         port = check_port(port)
         try:
-            self._server = foxglove.start_server(name=name, host=host, port=port, context=context)
+            self._viewers = _Viewers()
+            self._server = foxglove.start_server(name=name, host=host, port=port, context=context,
+                                                 server_listener=self._viewers)
         except Exception as exc:  # noqa: BLE001 - the SDK's own error type for a port in use
             raise UserError(f"--live {port}: cannot serve on {host}:{port} ({exc}); choose another port "
                             f"or 0 for any free one") from None
@@ -55,6 +89,36 @@ class LiveServer:
     def url(self) -> str:
         return f"ws://{self.host}:{self.port}"
 
+    @property
+    def viewers(self) -> int:
+        """Clients subscribed to at least one channel now."""
+        return self._viewers.count
+
+    def wait_for_viewer(self, timeout_s: float, settle_s: float = 0.25) -> bool:
+        """Wait until a viewer subscribes (True) or ``timeout_s`` passes (False); then until its
+        subscriptions stop coming for ``settle_s`` (the SDK reports them one channel at a time), so
+        that it gets the first message of every channel it asked for."""
+        v = self._viewers
+        with v.cond:
+            if not v.cond.wait_for(lambda: v.count > 0, timeout=max(0.0, timeout_s)):
+                return False
+            for _ in range(20):     # at most 20 settle periods
+                seen = v.changes
+                v.cond.wait_for(lambda: v.changes != seen, timeout=settle_s)
+                if v.changes == seen:
+                    break
+            return True
+
+    def linger(self, timeout_s: float = DEFAULT_LINGER_S, say=None) -> bool:
+        """After a run: while a viewer is connected, keep serving until it leaves or ``timeout_s``
+        passes (True: every viewer left; also when none was there)."""
+        if self.viewers == 0 or timeout_s <= 0:
+            return self.viewers == 0
+        if say is not None:
+            say(f"live view: the run has ended; serving until the viewer disconnects (at most "
+                f"{timeout_s:g} s, --linger-s)")
+        with self._viewers.cond:
+            return self._viewers.cond.wait_for(lambda: self._viewers.count == 0, timeout=timeout_s)
 
     def stop(self) -> None:
         if self._server is not None:
@@ -105,12 +169,25 @@ class Pacer:
             time.sleep(due - now)
 
 
+def _log_time_of(info: dict) -> int | str:
+    """The log clock a recording was written with (its metadata's ``log_time``): the offset [ns], or
+    "host" (a daemon's recording is served in the host's time now); 0 for one made before UTC log times."""
+    text = str(info.get("log_time", "t_ns+0"))
+    if text == "host_utc":
+        return "host"
+    try:
+        return max(0, int(text.removeprefix("t_ns+")))
+    except ValueError:
+        return 0
+
+
 def stream_recording(path, port: int = DEFAULT_PORT, speed: float = 1.0, wait_for_client_s: float = 0.0,
-                     say=None) -> int:
+                     say=None, linger_s: float = 0.0) -> int:
     """Serve a recording on the live view, paced at ``speed`` x its recorded time: its records as
     recorded, with the transforms and scene entities drawn from them (a format-1 recording too).
-    ``wait_for_client_s``: give a client that long to connect before the first message.  Returns the
-    number of messages served."""
+    ``wait_for_client_s``: wait until a viewer subscribes, at most that long, before the first message;
+    ``linger_s``: after the last, keep serving a connected viewer until it leaves, at most that long.
+    Returns the number of messages served."""
     from foveatrack.recording.format import IMU, POINTS
     from foveatrack.recording.reader import RecordingReader
     from foveatrack.recording.writer import RecordingWriter
@@ -119,14 +196,19 @@ def stream_recording(path, port: int = DEFAULT_PORT, speed: float = 1.0, wait_fo
         raise UserError(f"--wait-s {wait_for_client_s}: must be 0..{MAX_WAIT_FOR_CLIENT_S:g} s")
     pacer = Pacer(speed)
     reader = RecordingReader(path)
-    w = RecordingWriter(None, reader.meta)
+    w = RecordingWriter(None, reader.meta, log_time=_log_time_of(reader.info))
     n = 0
     with LiveServer(w.context, port) as live:
         if say is not None:
             say(f"live view on {live.url} (Foxglove: Open connection -> Foxglove WebSocket), "
                 f"{speed:g}x recorded time")
         if wait_for_client_s > 0:
-            time.sleep(wait_for_client_s)
+            if say is not None:
+                say(f"live view: waiting up to {wait_for_client_s:g} s for a viewer to connect (--wait-s)")
+            seen = live.wait_for_viewer(wait_for_client_s)
+            if say is not None:
+                say("live view: a viewer connected; streaming" if seen else
+                    f"live view: no viewer within {wait_for_client_s:g} s; streaming anyway")
         for m in reader.messages():
             pacer.wait(m.t_ns * 1e-9)
             if m.channel == POINTS:
@@ -140,4 +222,5 @@ def stream_recording(path, port: int = DEFAULT_PORT, speed: float = 1.0, wait_fo
                 w.write(m.channel, m.t_ns, rec)
             n += 1
         w.close()
+        live.linger(linger_s, say)
     return n

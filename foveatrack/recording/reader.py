@@ -67,8 +67,23 @@ class Damage:
                      f" lost ({', '.join(f'{k} {v}' for k, v in sorted(self.lost.items()))})")
         if self.lost_t_ns is not None:
             t0, t1 = self.lost_t_ns
-            what += f", log time {t0 / 1e9:.3f} s" if t0 == t1 else f", log times {t0 / 1e9:.3f}-{t1 / 1e9:.3f} s"
+            what += f", log time {_log_time_text(t0)}" if t0 == t1 else \
+                f", log times {_log_time_text(t0)} to {_log_time_text(t1)}"
         return what
+
+
+def _log_time_text(t_ns: int) -> str:
+    """A log time as people read it: UTC where it is one (a recording since log times in UTC), else
+    seconds (virtual or sensor time, as older recordings logged)."""
+    if t_ns < UTC_LOG_TIMES_FROM_NS:
+        return f"{t_ns / 1e9:.3f} s"
+    import datetime as dt
+
+    return dt.datetime.fromtimestamp(t_ns // 10**9, dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S") + \
+        f".{t_ns % 10**9 // 10**6:03d} UTC"
+
+
+UTC_LOG_TIMES_FROM_NS = 10**18    # 2001-09-09: no sensor or virtual clock runs that long
 
 
 class RecordingReader:
@@ -430,8 +445,10 @@ class RecordingReader:
     # ------------------------------------------------------------------ public reading
 
     def messages(self, channels: Iterable[str] | str | None = None) -> Iterator[Message]:
-        """Messages in file order, optionally only those of ``channels`` (names without '/').  A
-        channel this version does not know gives its records if its encoding is JSON, its raw bytes
+        """Messages in file order, optionally only those of ``channels`` (names without '/'); a
+        message's ``t_ns`` is its record's own (the sensor's or simulator's clock), not the MCAP log
+        time, which may be UTC (``log_time`` in the metadata; the view channels' messages: the log
+        time).  A channel this version does not know gives its records if its encoding is JSON, its raw bytes
         otherwise (a later version's binary channel: read past, not taken for damage)."""
         want = {channels} if isinstance(channels, str) else None if channels is None else set(channels)
         pb = self.info.get("format_version") != "1"
@@ -456,8 +473,8 @@ class RecordingReader:
                 else:
                     record = json.loads(data)
             except (ValueError, KeyError, TypeError) as exc:
-                raise UserError(f"{self.path}: a {name} message at t_ns={log_time} is damaged: {exc}") from None
-            yield Message(name, int(log_time), record)
+                raise UserError(f"{self.path}: a {name} message at log time {log_time} ns is damaged: {exc}") from None
+            yield Message(name, _record_t_ns(record, log_time), record)
 
     def points(self) -> Iterator[PointsFrame]:
         """The lidar frames, in order."""
@@ -480,3 +497,12 @@ class RecordingReader:
         for name, _t, _d in self._records():
             out[name] = out.get(name, 0) + 1
         return out
+
+
+def _record_t_ns(record, log_time: int) -> int:
+    """The time a record carries (a JSON record's ``t_ns``, a frame's or IMU batch's ``t_ns``); the
+    log time for one without (a later version's binary channel).  Before log times in UTC both were
+    the same."""
+    t = record.get("t_ns") if isinstance(record, dict) else getattr(record, "t_ns", None)
+    return int(t) if isinstance(t, int) and not isinstance(t, bool) else int(log_time)
+

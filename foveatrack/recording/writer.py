@@ -144,6 +144,11 @@ class RecordingWriter(RecordCalls):
     file_mode : the new file's permissions (default 0600: a recording holds the configuration; 0o644 to share)
     created_utc : None stamps the wall-clock time; the simulator passes a fixed text so that one
         scene and seed give the same file to the bit
+    log_time : the MCAP log time of each message (what Foxglove's timeline shows), in UTC: an int
+        offset [ns] added to the message's ``t_ns`` (the simulator: its scene's ``start_utc``), or
+        "host" for the host's clock when the message is written (the daemon).  Every message keeps its
+        own ``t_ns`` (the sensor's or simulator's clock), which is what a reader and replay use;
+        0 (default) logs ``t_ns`` itself
     """
 
     def __init__(
@@ -158,6 +163,7 @@ class RecordingWriter(RecordCalls):
         overwrite: bool = False,
         created_utc: str | None = None,
         file_mode: int = 0o600,
+        log_time: int | str = 0,
     ):
         import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
@@ -167,7 +173,7 @@ class RecordingWriter(RecordCalls):
         self.flush_every_frames = int(flush_every_frames)
         self.fsync = fsync
         self._xyz_dtype = points_dtype
-        self.view = FoxgloveChannels(json.loads(meta_json), points_dtype)
+        self.view = FoxgloveChannels(json.loads(meta_json), points_dtype, log_time)
         self.context = self.view.context
         self._w = None
         from foveatrack import __version__
@@ -195,6 +201,7 @@ class RecordingWriter(RecordCalls):
                 "created_utc": created_utc if created_utc is not None
                 else _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                 "chunk_crcs": "required",      # the SDK writes every chunk's CRC: a 0 there is damage
+                "log_time": "host_utc" if log_time == "host" else f"t_ns+{int(log_time)}",
             }
             md[META_CRC_KEY] = meta_crc32(md)
             self._w.write_metadata(META_NAME, md)
@@ -258,6 +265,7 @@ class RecordingWriter(RecordCalls):
         refl = np.zeros(n, np.uint8) if reflectivity is None else np.asarray(reflectivity).reshape(-1)
         if tp.shape[0] != n or refl.shape[0] != n:
             raise ValueError(f"xyz has {n} points but t_ns_points {tp.shape[0]} and reflectivity {refl.shape[0]}")
+        self.view.end_frame()     # what of the last frame still waits goes in its chunk
         if self._frames_since_flush >= self.flush_every_frames:
             self.flush()
         dt = tp - int(t_ns)
@@ -300,6 +308,7 @@ class RecordingWriter(RecordCalls):
         if self._closed:
             return
         try:
+            self.view.finish()      # the last head estimate's transforms, if they still wait
             if self._w is not None:
                 self._w.close()
                 if self.fsync:

@@ -38,6 +38,7 @@ import numpy as np
 
 from foveatrack.errors import UserError
 from foveatrack.recording.format import imu_columns
+from foveatrack.recording.foxglove_view import log_clock
 from foveatrack.recording.writer import RecordCalls, check_options
 
 _HEAD = struct.Struct("<QI")        # pickle bytes, number of arrays; then a <Q per array (its bytes)
@@ -193,7 +194,8 @@ class RecordingProcess(RecordCalls):
 
     def open(self, path, meta: dict | None = None, flush_every_frames: int = 1, compression: str = "zstd",
              compression_level: int | None = None, points_dtype: str = "float64", fsync: bool = False,
-             overwrite: bool = False, created_utc: str | None = None) -> "RecordingProcess":
+             overwrite: bool = False, created_utc: str | None = None,
+             log_time: int | str = 0) -> "RecordingProcess":
         """Give the child the file to write, with :class:`RecordingWriter`'s options; returns self."""
         if self.path is not None:
             raise ValueError(f"this writer process already writes {self.path}")
@@ -201,9 +203,10 @@ class RecordingProcess(RecordCalls):
             raise ValueError("a writer process writes a file: give a path (a live view needs RecordingWriter)")
         path, _, _ = check_options(path, meta, flush_every_frames, compression, compression_level,
                                    points_dtype, overwrite)
+        log_clock(log_time)         # a wrong one named here, not in the child
         self.path = path.absolute()
         self._call("open", str(self.path), meta, flush_every_frames, compression, compression_level,
-                   points_dtype, fsync, True, created_utc)
+                   points_dtype, fsync, True, created_utc, log_time)
         self._send()
         return self
 
@@ -475,9 +478,9 @@ def child_main(data_fd: int, back_fd: int, ring_fd: int | None = None, ring_byte
                     continue
                 try:
                     if name == "open":
-                        path, meta, flush_every, comp, level, dtype, fsync, overwrite, created = args
+                        path, meta, flush_every, comp, level, dtype, fsync, overwrite, created, log_time = args
                         writer = RecordingWriter(Path(path), meta, flush_every, comp, level, dtype, fsync,
-                                                 overwrite, created)
+                                                 overwrite, created, log_time)
                     else:
                         getattr(writer, name)(*(_rebuilt_array(a, bufs, ring) for a in args))
                 except Exception as exc:  # noqa: BLE001 - reported to the caller, which raises it

@@ -54,6 +54,7 @@ def _detections(rec):
 
 
 def test_three_processes_track_and_replay(tmp_path):
+    started_utc_ns = time.time_ns()
     procs, link, truth, rec, log = _setup(tmp_path)
     try:
         time.sleep(6.0)
@@ -90,6 +91,16 @@ def test_three_processes_track_and_replay(tmp_path):
     assert r.records("commands")[-1]["raw_hex"] == "ff010000000001"   # Pelco-D stop, address 1
     lat = [m["value"] for m in r.records("metrics") if m["name"] == "latency_ms"]
     assert len(lat) == stats["frames"] and np.median(lat) < 100.0
+    # log times: the host's clock (UTC) while it ran; the messages keep the Livox clock (seconds
+    # since the simulated sensor started), which is what replay reads
+    from mcap.reader import make_reader
+
+    with open(rec, "rb") as fh:
+        logs = [(c.topic, m.log_time) for _s, c, m in make_reader(fh).iter_messages(topics=["/points", "/head"])]
+    assert logs and all(started_utc_ns <= t <= time.time_ns() for _c, t in logs)
+    assert r.info["log_time"] == "host_utc"
+    frames = list(r.points())
+    assert all(0 < f.t_ns < 3600 * 10**9 for f in frames)
     # replay: the same detections and commands, bit for bit
     res = replay_recording(rec)
     assert res.comparison["detections_equal"] and res.comparison["commands_equal"], res.comparison

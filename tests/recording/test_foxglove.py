@@ -30,7 +30,7 @@ WELL_KNOWN = {"foxglove.PointCloud", "foxglove.FrameTransforms", "foxglove.Scene
 @pytest.fixture(scope="module", params=["fig12", "fig12-gyro"])
 def sim_rec(request, tmp_path_factory):
     """0.6 s of fig12-tracking (and of its gyro variant) recorded as ``simulate --out`` records it
-    (from a child process)."""
+    (from a child process, log times from the scene's start in UTC)."""
     from sim.attitude_study import scene_variant
     from sim.loop import ClosedLoop
     from sim.recorder import SimRecorder, recording_meta
@@ -43,7 +43,7 @@ def sim_rec(request, tmp_path_factory):
     loop = ClosedLoop(scene)
     from foveatrack.recording.writer_process import RecordingProcess
 
-    with RecordingProcess().open(path, recording_meta(scene, loop)) as w:
+    with RecordingProcess().open(path, recording_meta(scene, loop), log_time=scene.start_utc_ns) as w:
         loop.frame_hook = SimRecorder(w)
         log = loop.run()
     return path, log
@@ -102,13 +102,19 @@ def test_every_channel_is_well_known_or_documented(sim_rec):
 def test_transforms_chain_world_to_lidar_at_the_recorded_poses(sim_rec):
     path, log = sim_rec
     tfs = {}
-    for log_time, dec in official_decoded(path, ["/tf"]):
+    msgs = official_decoded(path, ["/tf"])
+    for _log_time, dec in msgs:
         for t in dec.transforms:
-            tfs[(log_time, t.child_frame_id)] = t
+            tfs[(t.timestamp.seconds * 10**9 + t.timestamp.nanos, t.child_frame_id)] = t
     rec = RecordingReader(path)
     heads = rec.records("head")
     truths = rec.records("truth")
     assert heads and len(truths) == len(heads)
+    # one message a frame with both chains: a seek restores only the newest message of a topic, and
+    # it alone resolves lidar and lidar_true (before: two messages a frame, the last the true chain)
+    assert [t for t, _ in msgs] == [h["t_ns"] + 1767225600 * 10**9 for h in heads]
+    for _t, dec in msgs:
+        assert sorted(t.child_frame_id for t in dec.transforms) == ["head_est", "head_true", "lidar", "lidar_true"]
     for h, tr in zip(heads, truths):
         t = h["t_ns"]
         lidar = tfs[(t, "lidar")]
@@ -133,8 +139,12 @@ def test_pointcloud_decoded_by_protobuf_is_the_frame_our_reader_returns(sim_rec)
     ours = list(RecordingReader(path).points())
     clouds = official_decoded(path, ["/points"])
     assert len(clouds) == len(ours) == len(log["t_end_s"])
+    start = RecordingReader(path).info["log_time"]
     for f, (t, pc) in zip(ours, clouds):
-        assert pc.frame_id == "lidar" and t == f.t_ns
+        assert pc.frame_id == "lidar" and start == "t_ns+1767225600000000000" and t == f.t_ns + 1767225600 * 10**9
+        # a pose, as the schema has it: identity, the points in frame lidar (before: none)
+        assert pc.HasField("pose") and pc.pose.HasField("orientation") and pc.pose.orientation.w == 1.0
+        assert (pc.pose.position.x, pc.pose.position.y, pc.pose.position.z) == (0.0, 0.0, 0.0)
         assert pc.timestamp.seconds * 10**9 + pc.timestamp.nanos == f.t_ns
         names = {fl.name: fl for fl in pc.fields}
         assert set(names) == {"x", "y", "z", "dt", "reflectivity"}
@@ -167,7 +177,8 @@ def test_imu_samples_decoded_by_protobuf_are_the_batches_our_reader_returns(sim_
     assert len(ours) == len(log["t_end_s"])
     assert [len(b) for b in ours] == [1000 + 20] + [20] * (len(ours) - 1)     # 200 Hz, rest_before_s 5
     for k, (b, (t, d)) in enumerate(zip(ours, theirs)):
-        assert t == b.t_ns == d.t_ns == round(log["t_end_s"][k] * 1e9) and b.frame_id == d.frame_id == k
+        assert t - 1767225600 * 10**9 == b.t_ns == d.t_ns == round(log["t_end_s"][k] * 1e9)
+        assert b.frame_id == d.frame_id == k
         assert np.array(d.t_s).tobytes() == b.t_s.tobytes()
         assert np.stack([d.gyro_x_rad_s, d.gyro_y_rad_s, d.gyro_z_rad_s], 1).tobytes() == b.gyro_rad_s.tobytes()
         assert len(d.accel_x_g) == 0 and b.accel_g is None      # the simulated head IMU has no accelerometer
@@ -280,3 +291,91 @@ def test_a_long_history_is_thinned_evenly_and_keeps_its_start():
     assert len(pts) <= HISTORY_POINTS and xs[0] == 0.0
     assert set(np.diff(xs)) == {float(stride)}
     assert xs[-1] > 10 * HISTORY_POINTS - stride - 1
+
+
+def test_one_tf_message_a_frame_without_truth_is_at_most_one_frame_late(tmp_path):
+    # the daemon writes no truth: the first frame's transforms wait until the next frame's points
+    # (a frame without truth), every later frame's go out with its head estimate, the last on close
+    from foveatrack.recording.writer import RecordingWriter
+
+    path = tmp_path / "daemon-like.mcap"
+    with RecordingWriter(path, {}) as w:
+        for k in range(4):
+            t = (k + 1) * 100_000_000
+            w.write_points(t, k, np.zeros((1, 3)), np.array([t]))
+            w.write_head_estimate(t, 10.0 * k, 1.0, frame_id=k)
+    msgs = official_decoded(path, ["/tf"])
+    assert [t for t, _ in msgs] == [(k + 1) * 100_000_000 for k in range(4)]
+    for k, (_t, dec) in enumerate(msgs):
+        assert [t.child_frame_id for t in dec.transforms] == ["head_est", "lidar"]
+        rot = quat_to_matrix(dec.transforms[0].rotation)
+        np.testing.assert_allclose(rot, rotation_matrix(10.0 * k, 1.0), atol=1e-12)
+
+
+def test_the_live_view_gets_each_frames_tf_before_the_next_frame_ends():
+    # what a viewer of `daemon --live` sees: the first frame's /tf with the second frame's points,
+    # every later one with its own head estimate
+    from foveatrack.recording.foxglove_view import FoxgloveChannels
+
+    view = FoxgloveChannels({})
+    sent = []
+    view._log_tf = lambda t_ns, tfs: sent.append((t_ns, len(tfs)))     # the SDK's messages hide their fields
+    packed = np.zeros(0, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("dt", "<i2"), ("reflectivity", "u1")])
+    for k in range(3):
+        t = (k + 1) * 100
+        view.log_points(t, k, packed)
+        assert [s[0] for s in sent] == [100 * (i + 1) for i in range(k)]      # frame 0 still waits at k = 0
+        view.log_json("head", t, b"{}", {"pan_deg": 1.0, "tilt_deg": 2.0})
+        assert [s[0] for s in sent] == [100 * (i + 1) for i in range(k if k == 0 else k + 1)]
+    view.finish()
+    assert sent == [(100 * (i + 1), 2) for i in range(3)]       # world -> head_est -> lidar
+
+
+def test_log_times_are_utc_from_the_scenes_start_and_records_keep_the_simulator_clock(tmp_path):
+    # before: log time = virtual time (from 0.1 s), so Foxglove showed 1970-01-01
+    import datetime as dt
+
+    from sim.loop import ClosedLoop
+    from sim.recorder import SimRecorder, recording_meta
+    from sim.scene import load_scene, scene_from_mapping, with_run_overrides
+
+    from foveatrack.recording.writer import RecordingWriter
+
+    src = ROOT / "scenes" / "fig12-tracking.toml"
+    default = load_scene(src)
+    assert default.start_utc_ns == 1767225600 * 10**9         # 2026-01-01T00:00:00Z, documented
+    import tomllib
+    data = tomllib.loads(src.read_text())
+    data["scene"]["start_utc"] = "2026-06-01T14:30:00+02:00"
+    scene = with_run_overrides(scene_from_mapping(data, str(src)), 0.3, None)
+    start = dt.datetime(2026, 6, 1, 12, 30, tzinfo=dt.timezone.utc)
+    assert scene.start_utc_ns == int(start.timestamp()) * 10**9
+    loop = ClosedLoop(scene)
+    path = tmp_path / "run.mcap"
+    with RecordingWriter(path, recording_meta(scene, loop), log_time=scene.start_utc_ns) as w:
+        loop.frame_hook = SimRecorder(w)
+        loop.run()
+    with open(path, "rb") as fh:
+        logs = [(c.topic, m.log_time, m.data) for _s, c, m in make_reader(fh).iter_messages()]
+    assert all(dt.datetime.fromtimestamp(t / 1e9, dt.timezone.utc).date() == start.date() for _c, t, _d in logs)
+    heads = [json.loads(d) for c, _t, d in logs if c == "/head"]
+    assert heads and [t for c, t, _d in logs if c == "/head"] == [h["t_ns"] + scene.start_utc_ns for h in heads]
+    assert heads[0]["t_ns"] < 10**9                            # the record keeps the simulator's clock
+    ours = RecordingReader(path)
+    assert [m.t_ns for m in ours.messages("head")] == [h["t_ns"] for h in heads]
+    assert [f.t_ns for f in ours.points()] == [h["t_ns"] for h in heads]
+
+
+@pytest.mark.parametrize("text", ["2026-01-01T00:00:00", "yesterday", "1960-01-01T00:00:00Z", 5])
+def test_a_wrong_start_utc_is_named(text):
+    import tomllib
+
+    from sim.scene import scene_from_mapping
+
+    from foveatrack.errors import UserError
+
+    src = ROOT / "scenes" / "fig12-tracking.toml"
+    data = tomllib.loads(src.read_text())
+    data["scene"]["start_utc"] = text
+    with pytest.raises(UserError, match=r"\[scene\] start_utc: .* e\.g\. \"2026-01-01T00:00:00Z\""):
+        scene_from_mapping(data, str(src))

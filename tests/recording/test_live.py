@@ -109,3 +109,59 @@ def test_live_flags_are_checked(args, msg, capsys):
     code = main(["simulate", str(ROOT / "scenes" / "fig12-tracking.toml"), "--duration", "0.2", "--no-progress",
                  *args])
     assert code != 0 and msg in capsys.readouterr().err
+
+
+def test_replay_live_waits_for_a_viewer_and_serves_it_until_it_leaves(tmp_path):
+    # before: --wait-s was a fixed sleep, and the server closed with the last message, under a viewer
+    import threading
+
+    from foveatrack.recording.live import stream_recording
+
+    path = tmp_path / "run.mcap"
+    rng = np.random.default_rng(3)
+    with RecordingWriter(path, META) as w:
+        for k in range(3):
+            log_frame(w, k, rng)
+    said, result = [], {}
+    port = _free_port()
+    th = threading.Thread(target=lambda: result.setdefault("n", stream_recording(
+        path, port, speed=1000.0, wait_for_client_s=60.0, say=said.append, linger_s=60.0)))
+    th.start()
+    try:
+        deadline = time.monotonic() + 20
+        while not any("waiting up to 60 s" in s for s in said) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+        assert th.is_alive() and "n" not in result        # nothing streamed yet: it waits for a viewer
+        with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=10) as ws:
+            channels = advertised_channels(ws, until_topic="/head")
+            subs = subscribe_all(ws, channels)
+            got = []
+            deadline = time.monotonic() + 20
+            while len([t for t, _, _ in got if t == "/head"]) < 3 and time.monotonic() < deadline:
+                got += received(ws, channels, subs)
+            assert [t for t, _, _ in got].count("/head") == 3     # the whole recording, from its start
+            time.sleep(0.5)
+            assert th.is_alive(), "the server stays up while the viewer is connected"
+            assert any("until the viewer disconnects" in s for s in said)
+        th.join(20)
+        assert not th.is_alive() and result["n"] == 3 * 4     # closed once the viewer left (4 records a frame)
+    finally:
+        th.join(70)
+
+
+def test_no_viewer_no_waiting_after_the_run():
+    # wait_for_viewer gives up after its timeout; linger returns at once when nobody watches
+    w = RecordingWriter(None, META)
+    with LiveServer(w.context, 0) as live:
+        assert live.wait_for_viewer(0.2) is False and live.viewers == 0
+        assert live.linger(60.0) is True
+    w.close()
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
