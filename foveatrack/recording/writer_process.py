@@ -480,7 +480,7 @@ def child_main(data_fd: int, back_fd: int, ring_fd: int | None = None, ring_byte
                     if name == "open":
                         path, meta, flush_every, comp, level, dtype, fsync, overwrite, created, log_time = args
                         writer = RecordingWriter(Path(path), meta, flush_every, comp, level, dtype, fsync,
-                                                 overwrite, created, log_time)
+                                                 overwrite, created, log_time=log_time)
                     else:
                         getattr(writer, name)(*(_rebuilt_array(a, bufs, ring) for a in args))
                 except Exception as exc:  # noqa: BLE001 - reported to the caller, which raises it
