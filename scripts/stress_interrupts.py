@@ -39,7 +39,7 @@ def children(pid: int) -> list[int]:
 
 
 def recording_state(path: Path) -> str:
-    """'none' (no file yet), 'complete', or 'incomplete: why'."""
+    """'none' (no file yet), 'complete', or 'incomplete (N frames): why'."""
     if not path.exists():
         return "none"
     from foveatrack.recording import RecordingReader
@@ -48,7 +48,8 @@ def recording_state(path: Path) -> str:
         r = RecordingReader(path)
     except Exception as exc:  # noqa: BLE001 - a file the run left unreadable is what is counted here
         return f"incomplete: {type(exc).__name__}: {exc}"
-    return "complete" if r.complete else f"incomplete: {r.problem}"
+    frames = sum(1 for _ in r.points())       # a full walk: only then is r.complete known
+    return "complete" if r.complete else f"incomplete ({frames} frames): {r.problem}"
 
 
 def one_run(root: Path, scene: Path, delay_s: float, timeout_s: float, hang_dir: Path, k: int) -> dict:
@@ -130,11 +131,15 @@ def main(argv=None) -> int:
         rs = [r for r in runs if r["rc"] == rc and not r["hung"]]
         print(f"exit {rc}: {n}{delays(rs)}; said 'foveatrack: interrupted': {sum(r['said_interrupted'] for r in rs)}, "
               f"printed a traceback: {sum(r['traceback'] for r in rs)}")
-    rec = collections.Counter(r["recording"].split(":")[0] for r in runs if not r["hung"])
+    rec = collections.Counter(r["recording"].split(" ")[0].rstrip(":") for r in runs if not r["hung"])
     print("recordings: " + ", ".join(f"{k} {v}" for k, v in sorted(rec.items())))
     for r in runs:
         if r["recording"].startswith("incomplete"):
             print(f"  SIGINT at {r['delay_s']:.3f} s: {r['recording']}")
+    for r in runs:      # what went unexpectedly: the end of its stderr
+        if not r["hung"] and (r["recording"].startswith("incomplete") or r["traceback"] and r["delay_s"] > 0.5):
+            tail = "\n".join("    " + line for line in r["stderr"].strip().splitlines()[-12:])
+            print(f"  SIGINT at {r['delay_s']:.3f} s, exit {r['rc']}, recording {r['recording']}:\n{tail}")
     print(f"{time.monotonic() - t0:.0f} s; load at the end {os.getloadavg()[0]:.2f}")
     return 1 if hangs else 0
 
