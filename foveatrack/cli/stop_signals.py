@@ -37,8 +37,9 @@ def interrupts_remembered():
 
     Python runs a signal's handler in whatever Python code runs at that moment, also in a weakref
     callback or a ``__del__`` run by the garbage collector, where an exception is printed
-    ("Exception ignored in ...") and dropped: the Ctrl-C is then lost and the run goes on
-    (docs/interrupts.md; ``simulate --duration 3000`` went on for its 3000 s).  Only where Python's
+    ("Exception ignored in ...") and dropped, and code that catches it can drop it silently: the
+    Ctrl-C is then lost and the run goes on (docs/interrupts.md; ``simulate --duration 3000`` went on
+    for its 3000 s).  Only where Python's
     own handler is in place (not in a thread, not under another handler)."""
     if threading.current_thread() is not threading.main_thread() or \
             signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
