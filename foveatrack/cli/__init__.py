@@ -11,6 +11,7 @@ import argparse
 import importlib
 import sys
 
+from foveatrack.cli.stop_signals import interrupts_remembered
 from foveatrack.errors import UserError
 
 # Command-group modules, in the order `foveatrack --help` lists them.
@@ -47,6 +48,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    with interrupts_remembered():     # a Ctrl-C lost in a __del__ or weakref callback is raised again
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
     try:
         # inside the try: a Ctrl-C while the command modules import (a second or so) is an interruption too
         args = build_parser().parse_args(argv)

@@ -146,6 +146,7 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
     import numpy as np
     from tqdm import tqdm
 
+    from foveatrack.cli.stop_signals import raise_if_interrupted
     from foveatrack.recording import RecordingWriter
     from sim.loop import ClosedLoop
     from sim.recorder import SimRecorder, recording_meta
@@ -206,6 +207,7 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
 
     def advance(k, total):
         nonlocal bar
+        raise_if_interrupted()      # a Ctrl-C that was lost on its way (docs/interrupts.md) stops the run here
         if bar is None:
             notice.done()
             bar = tqdm(total=total, initial=k, desc=scene.name, unit="frame", disable=not progress,

@@ -163,6 +163,7 @@ class RecordingProcess(RecordCalls):
         self._arrays: list = []
         self._back = b""
         self._ready = False
+        self._child_gone = False    # the end of its report pipe was read: the child has exited
         self._error: BaseException | None = None
         self._closed = False
         self._torn = False          # a message is (or may be) only partly in the pipe: see _send
@@ -219,8 +220,8 @@ class RecordingProcess(RecordCalls):
             if not select.select([self._back_fd], [], [], timeout_s)[0]:
                 raise TimeoutError(f"the recording process did not start within {timeout_s:g} s")
             self._read_back()
-            if self._proc.poll() is not None and not self._ready:
-                raise RuntimeError(f"the recording process exited with code {self._proc.returncode} at its start")
+            if self._child_gone and not self._ready:
+                raise RuntimeError(f"the recording process exited with code {self._proc.wait()} at its start")
 
     # ------------------------------------------------------------------ the calls
 
@@ -248,12 +249,18 @@ class RecordingProcess(RecordCalls):
         return _ARRAY, len(self._arrays) - 1, a.dtype.str, a.shape
 
     def _wait_for_child(self) -> None:
-        """The ring is full: wait for the child to read on (or say why it cannot)."""
+        """The ring is full: wait for the child to read on (or say why it cannot).
+
+        Whether the child still runs is read from its report pipe (its end: the child has exited),
+        not asked of ``Popen.poll()``: a Ctrl-C lands here more than anywhere when the child is
+        behind, and ``poll()`` takes the Popen's lock with a bare ``acquire()`` before its ``try``.
+        A KeyboardInterrupt just after that acquire left the lock taken, and :meth:`close`'s wait
+        for the child then blocked on it for ever (docs/interrupts.md)."""
         import time
 
         self._read_back()
         self._raise_reported()
-        if self._proc.poll() is not None:
+        if self._child_gone:
             raise self._ended_early()
         time.sleep(0.0005)
 
@@ -355,7 +362,10 @@ class RecordingProcess(RecordCalls):
             raise err
 
     def _ended_early(self) -> RuntimeError:
-        return RuntimeError(f"the recording process ended early (exit code {self._proc.poll()}); "
+        """The error for a child that stopped reading: it has exited, or exits now (it stops reading
+        only at its end), so its exit code is waited for (``wait()``, unlike ``poll()``, takes the
+        Popen's lock in a ``with``: a Ctrl-C cannot leave it taken)."""
+        return RuntimeError(f"the recording process ended early (exit code {self._proc.wait()}); "
                             f"{self.path} holds what it wrote up to then")
 
     def _read_back(self) -> None:
@@ -365,6 +375,7 @@ class RecordingProcess(RecordCalls):
             try:
                 while chunk := os.read(self._back_fd, 1 << 16):
                     self._back += chunk
+                self._child_gone = True     # the pipe's end: only the child held its other end
             except BlockingIOError:
                 pass
         while len(self._back) >= 8:

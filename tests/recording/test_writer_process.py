@@ -189,6 +189,64 @@ CALLER = textwrap.dedent(
 )
 
 
+# A Ctrl-C lands in the caller's thread at any bytecode boundary (the signal handler runs between two
+# instructions), and where the child is behind, mostly in the ring's wait for it (_wait_for_child).
+# That wait once asked Popen.poll() whether the child still ran; poll() takes the Popen's lock with a
+# bare acquire() before its try, so a KeyboardInterrupt just after the acquire left the lock taken,
+# and close()'s wait for the child blocked on it for ever (the SIGINT test below hung;
+# docs/interrupts.md).  This child process raises KeyboardInterrupt at the n-th instruction of one
+# round of that wait (callees included), for every n until the round ends by itself, and checks after
+# each that close() still ends (within 20 s, in a helper thread).
+INTERRUPTED_WAIT = textwrap.dedent(
+    """
+    import os, sys, threading
+    sys.path.insert(0, {root!r})
+    from foveatrack.recording.writer_process import RecordingProcess
+
+    def interrupt_at(n):
+        count = [0]
+        def tracer(frame, event, arg):
+            frame.f_trace_opcodes = True
+            if event == "opcode":
+                count[0] += 1
+                if count[0] == n:
+                    sys.settrace(None)
+                    raise KeyboardInterrupt(f"{{frame.f_code.co_filename}}:{{frame.f_lineno}}")
+            return tracer
+        return tracer
+
+    cases = 0
+    for n in range(1, 10_000):
+        w = RecordingProcess()      # unopened: close() ends the child at once and waits for it
+        sys.settrace(interrupt_at(n))
+        try:
+            w._wait_for_child()
+            hit = False
+        except KeyboardInterrupt:
+            hit = True
+        finally:
+            sys.settrace(None)
+        closer = threading.Thread(target=w.close, daemon=True)
+        closer.start()
+        closer.join(20)
+        if closer.is_alive():
+            print("HANG", n, flush=True)
+            os._exit(3)
+        if not hit:         # n is past the wait's last instruction: every one was tried
+            break
+        cases += 1
+    print("ok", cases, flush=True)
+    """
+)
+
+
+def test_a_ctrl_c_at_any_instruction_of_the_wait_for_the_child_leaves_close_able_to_end():
+    p = subprocess.run([sys.executable, "-c", INTERRUPTED_WAIT.format(root=str(ROOT))], capture_output=True,
+                       text=True, timeout=600)
+    assert p.returncode == 0 and "HANG" not in p.stdout, p.stdout + p.stderr
+    assert int(p.stdout.split()[-1]) >= 10      # the wait was interrupted at each of its instructions
+
+
 @pytest.mark.slow
 def test_kill_9_of_the_caller_loses_nothing_the_child_got(tmp_path):
     # the child reads to the end of the pipe and completes the file (the loop's-thread writer would
