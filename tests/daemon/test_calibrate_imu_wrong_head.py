@@ -54,6 +54,9 @@ def test_a_head_turning_far_more_than_its_table_says_stops_the_calibration(tmp_p
         p = subprocess.run([sys.executable, "-m", "foveatrack", "calibrate-imu", "--config", str(cfg), "--out", str(out),
                             "--poses", "9", "--dwell-s", "2", "--settle-s", "0.4", "--max-s", "300"], cwd=ROOT,
                            env=env(), capture_output=True, text=True, timeout=400)
+        # the STOP went out as the run ended; the head decelerates before its truth says rest (the
+        # server was stopped at once, and its last row caught it mid-deceleration now and then)
+        wait_for(lambda: _at_rest(truth), 20, "the head at rest after the STOP", procs)
     finally:
         for q in procs:
             terminate(q)
@@ -71,3 +74,11 @@ def test_a_head_turning_far_more_than_its_table_says_stops_the_calibration(tmp_p
     print(f"stopped on {axis}: measured {measured} for {commanded} commanded; the head's highest tilt {max_tilt:.1f} deg")
     assert max_tilt < TILT_LIMITS[1] - 2.0, max_tilt
     assert rows[-1]["tilt_speed_deg_s"] == 0.0 and rows[-1]["pan_speed_deg_s"] == 0.0
+
+
+def _at_rest(truth) -> bool:
+    try:
+        rows = read_truth(truth)
+    except (OSError, ValueError):      # a row being written
+        return False
+    return bool(rows) and rows[-1]["tilt_speed_deg_s"] == 0.0 and rows[-1]["pan_speed_deg_s"] == 0.0
