@@ -49,6 +49,34 @@ def wait_for(pred, timeout_s: float, what: str, procs=()):
     raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
 
 
+
+def head_clock_zero(err: Path) -> str | None:
+    """The monotonic time of head time 0, from ``gimbal serve``'s banner on stderr (None until it is there)."""
+    import re
+
+    try:
+        m = re.search(r"time\.monotonic\(\) = ([0-9.]+)", err.read_text())
+    except OSError:
+        return None
+    return m.group(1) if m else None
+
+
+def start_head_and_lidar(d: Path, head_args: list[str], scene, bport: int, procs: list,
+                         lidar_timeout_s: float = 120.0) -> None:
+    """``gimbal serve`` on a pty linked at ``d/head`` (truth in ``d/truth.jsonl``), then ``lidar serve
+    SCENE`` following that truth, each appended to ``procs`` as it starts (so the caller's cleanup
+    stops whatever did start).  The head's clock zero is given to the lidar: estimated, it shifts the
+    pose the lidar sees whenever a truth line is read sooner than before, and a shift during a leg
+    reads as speed (seen: a tilt rate 3 % high on a loaded machine); a real head and lidar have no
+    such link."""
+    link, truth = d / "head", d / "truth.jsonl"
+    procs.append(start(["gimbal", "serve", "--link", str(link), "--truth", str(truth), *head_args],
+                       d / "head.out", d / "head.err"))
+    zero = wait_for(lambda: head_clock_zero(d / "head.err"), 20, "the head's pty and clock zero", procs)
+    procs.append(start(["lidar", "serve", str(scene), "--cmd-port", "0", "--broadcast-port", str(bport),
+                        "--head-truth", str(truth), "--head-clock-zero", zero], d / "l.out", d / "l.err"))
+    wait_for(lambda: first_line(d / "l.out"), lidar_timeout_s, "the virtual lidar", procs)
+
 def first_line(path: Path) -> str | None:
     try:
         txt = path.read_text()

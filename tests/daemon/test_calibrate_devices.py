@@ -15,7 +15,8 @@ import time
 
 import pytest
 
-from daemon_procs import ROOT, device_config, env, first_line, free_udp_port, start, terminate, wait_for
+from daemon_procs import (ROOT, device_config, env, first_line, free_udp_port, start, start_head_and_lidar, terminate,
+                          wait_for)
 from foveatrack.calibration import CalibrationPlan
 from foveatrack.calibration.live import plan_within_limits
 from foveatrack.cli import main
@@ -38,15 +39,6 @@ def _config(tmp_path, link, bport, **head):
     return device_config(tmp_path / "d.toml", link, bport, WATCHDOG_S, head={"pan0_deg": 23.0, "tilt0_deg": 6.5, **head})
 
 
-def _clock_zero(head_out) -> str | None:
-    """The monotonic time of head time 0, from ``gimbal serve``'s banner on stderr."""
-    try:
-        m = re.search(r"time\.monotonic\(\) = ([0-9.]+)", head_out.read_text())
-    except OSError:
-        return None
-    return m.group(1) if m else None
-
-
 def _calibrate(cfg, out, *extra) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "foveatrack", "calibrate", "--config", str(cfg), "--corner", *CORNER,
                              "--out", str(out), "--json", "--max-s", "90", *extra], cwd=ROOT, env=env(),
@@ -66,18 +58,10 @@ def test_calibrates_a_head_through_its_serial_port_and_the_lidar_stream(tmp_path
     link, truth = tmp_path / "head", tmp_path / "truth.jsonl"
     bport = free_udp_port()
     cfg = _config(tmp_path, link, bport, allow_turbo=False, max_pan_byte=50)
-    procs = [start(["gimbal", "serve", "--link", str(link), "--truth", str(truth), "--unit-seed", str(UNIT),
-                    "--pan0-deg", "23", "--tilt0-deg", "6.5"], tmp_path / "head.out", tmp_path / "head.err")]
+    procs = []
     try:
-        wait_for(lambda: _clock_zero(tmp_path / "head.err"), 20, "the head's pty and clock zero", procs)
-        # The head's clock zero, given: estimated, it shifts the pose the lidar sees whenever a
-        # truth line is read sooner than before, and a shift during a leg reads as speed (seen: a
-        # tilt rate 3 % high on a loaded machine).  A real head and lidar have no such link.
-        procs.append(start(["lidar", "serve", str(ROOT / "scenes" / "calibration-room.toml"), "--cmd-port", "0",
-                            "--broadcast-port", str(bport), "--head-truth", str(truth),
-                            "--head-clock-zero", _clock_zero(tmp_path / "head.err")],
-                           tmp_path / "l.out", tmp_path / "l.err"))
-        wait_for(lambda: first_line(tmp_path / "l.out"), 60, "the virtual lidar", procs)
+        start_head_and_lidar(tmp_path, ["--unit-seed", str(UNIT), "--pan0-deg", "23", "--tilt0-deg", "6.5"],
+                             ROOT / "scenes" / "calibration-room.toml", bport, procs, lidar_timeout_s=60)
         out = tmp_path / "table.json"
         # Pan byte 60 and turbo are beyond this config's limits: left out, and said so.
         p = _calibrate(cfg, out, "--pan-bytes", "40,60,turbo", "--tilt-bytes", "63", "--dwell-s", "3")

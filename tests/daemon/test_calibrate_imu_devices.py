@@ -29,7 +29,8 @@ import time
 import numpy as np
 import pytest
 
-from daemon_procs import ROOT, device_config, env, first_line, free_udp_port, start, terminate, wait_for
+from daemon_procs import (ROOT, device_config, env, first_line, free_udp_port, start, start_head_and_lidar, terminate,
+                          wait_for)
 from foveatrack.cli import main
 from foveatrack.imu_calib.se3 import so3_log
 from sim.scene import load_scene
@@ -63,28 +64,15 @@ def _config(tmp_path, link, bport, table: str = "nominal") -> str:
                              lidar={"point_rate_hz": 100000}))
 
 
-def _clock_zero(path) -> str | None:
-    try:
-        m = re.search(r"time\.monotonic\(\) = ([0-9.]+)", path.read_text())
-    except OSError:
-        return None
-    return m.group(1) if m else None
-
-
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
     """The head and the lidar, started once for the module: (config path, head link, truth file, dir)."""
     d = tmp_path_factory.mktemp("imurig")
     link, truth = d / "head", d / "truth.jsonl"
     bport = free_udp_port()
-    procs = [start(["gimbal", "serve", "--family", "heavy-worm", "--link", str(link), "--truth", str(truth),
-                    "--pan0-deg", "31", "--tilt0-deg", "-12"], d / "head.out", d / "head.err")]
+    procs = []
     try:
-        wait_for(lambda: _clock_zero(d / "head.err"), 20, "the head's pty and clock zero", procs)
-        procs.append(start(["lidar", "serve", str(SCENE), "--cmd-port", "0", "--broadcast-port", str(bport),
-                            "--head-truth", str(truth), "--head-clock-zero", _clock_zero(d / "head.err")],
-                           d / "l.out", d / "l.err"))
-        wait_for(lambda: first_line(d / "l.out"), 120, "the virtual lidar", procs)
+        start_head_and_lidar(d, ["--family", "heavy-worm", "--pan0-deg", "31", "--tilt0-deg", "-12"], SCENE, bport, procs)
         yield _config(d, link, bport, _unit_table(d)), link, truth, d
     finally:
         for q in procs:

@@ -17,7 +17,7 @@ import sys
 
 import pytest
 
-from daemon_procs import ROOT, device_config, env, first_line, free_udp_port, start, terminate, wait_for
+from daemon_procs import ROOT, device_config, env, free_udp_port, start_head_and_lidar, terminate, wait_for
 from sim.virtual_head import read_truth
 
 pytestmark = [pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pty"), pytest.mark.slow]
@@ -26,25 +26,13 @@ SCENE = ROOT / "scenes" / "imu-calibration-head.toml"
 TILT_LIMITS = (-30.0, 60.0)
 
 
-def _clock_zero(path) -> str | None:
-    try:
-        m = re.search(r"time\.monotonic\(\) = ([0-9.]+)", path.read_text())
-    except OSError:
-        return None
-    return m.group(1) if m else None
-
-
 def test_a_head_turning_far_more_than_its_table_says_stops_the_calibration(tmp_path):
     link, truth = tmp_path / "head", tmp_path / "truth.jsonl"
     bport = free_udp_port()
-    procs = [start(["gimbal", "serve", "--family", "heavy-worm", "--link", str(link), "--truth", str(truth),
-                    "--pan0-deg", "31", "--tilt0-deg", "-12"], tmp_path / "head.out", tmp_path / "head.err")]
+    procs = []
     try:
-        wait_for(lambda: _clock_zero(tmp_path / "head.err"), 20, "the head's pty and clock zero", procs)
-        procs.append(start(["lidar", "serve", str(SCENE), "--cmd-port", "0", "--broadcast-port", str(bport),
-                            "--head-truth", str(truth), "--head-clock-zero", _clock_zero(tmp_path / "head.err")],
-                           tmp_path / "l.out", tmp_path / "l.err"))
-        wait_for(lambda: first_line(tmp_path / "l.out"), 120, "the virtual lidar", procs)
+        start_head_and_lidar(tmp_path, ["--family", "heavy-worm", "--pan0-deg", "31", "--tilt0-deg", "-12"], SCENE,
+                             bport, procs)
         # a PTS-303's [head] (examples/daemon-virtual.toml) at this head's start pose
         head = {"speed_table": str(ROOT / "examples" / "pts303h-unit3-speed-table.json"), "pan_speed_max_deg_s": 15.0,
                 "tilt_speed_max_deg_s": 2.0, "tilt_limits_deg": list(TILT_LIMITS), "tilt_margin_deg": 2.0,
