@@ -106,7 +106,6 @@ class FoxgloveChannels:
         self._space = table.get("space") if isinstance(table.get("space"), dict) else None
         self._paths: dict[str, tuple[int, list]] = {}     # name -> (segment number, its points)
         self._state: str | None = None
-        self._space_sent = False
         self._history: dict[str, tuple[int, list]] = {}   # name -> (stride, every stride-th point)
         self._seen_points: dict[str, int] = {}
         self._path_colors: dict[str, tuple] = {}
@@ -171,11 +170,10 @@ class FoxgloveChannels:
                 self._log_tf(t_ns, tfs)
             else:
                 self._pending_tf = (t_ns, tfs)
-            ents = [] if self._space_sent else self._space_entities(t_ns)
+            # D is on /scene_keyframe (the first at this very head estimate), not sent here again
             if rec.get("world_xyz_m") is not None:
-                ents.append(self._path_point("reconstructed_trajectory", t_ns, rec["world_xyz_m"], (0.1, 0.5, 1.0)))
-            if ents:
-                self._scene_update(t_ns, ents)
+                self._scene_update(t_ns, [self._path_point("reconstructed_trajectory", t_ns, rec["world_xyz_m"],
+                                                           (0.1, 0.5, 1.0))])
             if self._head_count % KEYFRAME_FRAMES == 0:
                 self._scene_keyframe(t_ns)
             self._head_count += 1
@@ -291,8 +289,6 @@ class FoxgloveChannels:
 
     def _space_entities(self, t_ns) -> list:
         """D of the tracker config (box or vertical cylinder; a sector or a learned map is not drawn)."""
-
-        self._space_sent = True
         s = self._space
         if not s:
             return []
