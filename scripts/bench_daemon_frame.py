@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from foveatrack.daemon.runtime import _job_frame  # noqa: E402
 from foveatrack.daemon.support import RecordingThread  # noqa: E402
 from foveatrack.frames import strip_no_return  # noqa: E402
-from foveatrack.gate import Limits  # noqa: E402
+from foveatrack.gate import CommandGate, Limits  # noqa: E402
 from foveatrack.frames import FrameSlicer  # noqa: E402
 from foveatrack.livox import protocol as P  # noqa: E402
 from foveatrack.recording import RecordingWriter  # noqa: E402
@@ -90,7 +90,7 @@ def run(batches, rate_hz: float, record: bool) -> dict:
     slicer = FrameSlicer(10.0)
     table = SpeedTable.nominal()
     tracker = Tracker(TrackerConfig.from_mapping(TRACKER, where="bench [tracker]"), table)
-    limits = Limits()
+    gate = CommandGate(Limits())     # the daemon's gate, as it decides (and tells the tracker)
     rec = None
     tmp = tempfile.TemporaryDirectory()
     if record:
@@ -107,7 +107,7 @@ def run(batches, rate_hz: float, record: bool) -> dict:
             for fr in slicer.push(batch.xyz, batch.t_ns, batch.reflectivity):
                 fr = strip_no_return(fr)
                 out = tracker.process(fr, send_t_s=fr.t_end_s + 0.002)
-                cmd, why = limits.apply(out.command, out.head_tilt_deg, out.head_sigma_tilt_deg)
+                cmd, why = gate.decide(tracker, out, fr.t_end_s + 0.002)
                 raw = encode_pan_tilt(1, cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte)
                 t_done = time.perf_counter()
                 proc.append(t_done - t_push)
