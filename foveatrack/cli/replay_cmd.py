@@ -74,7 +74,6 @@ def cmd_replay(args) -> int:
         notes.append(f"{n} frames -> {args.export_trajectory}")
     if args.plot:
         from foveatrack.cli.replay_plots import plot_all
-
         from foveatrack.config_util import output_dir
 
         out = output_dir(args.plot, "--plot")

@@ -89,7 +89,6 @@ def cmd_track(args) -> int:
         notes.append(f"{n} frames -> {args.csv}")
     if args.plot:
         from foveatrack.cli.track_plots import plot_all
-
         from foveatrack.config_util import output_dir
 
         out = output_dir(args.plot, "--plot")
