@@ -1,5 +1,5 @@
 """A frame's foreground points clustered into objects (single linkage with a gap that grows with
-range: :func:`foveatrack.cluster_kernels.cluster_kernel`), each summarised for acquisition."""
+range: :func:`foveatrack.openloop.kernels.cluster_kernel`), each summarised for acquisition."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ class FrameObject:
 
 def cluster_labels(xyz: np.ndarray, tol_m: float, tol_rad: float) -> tuple[np.ndarray, int]:
     """Cluster labels (0.. in order of first point) and the number of clusters."""
-    from foveatrack.cluster_kernels import cluster_kernel
+    from foveatrack.openloop.kernels import cluster_kernel
 
     xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
     labels = np.empty(xyz.shape[0], dtype=np.int64)

@@ -1,4 +1,4 @@
-"""Plain-numpy twin of :func:`foveatrack.cluster_kernels.cluster_kernel` (all pairs at once, the
+"""Plain-numpy twin of :func:`foveatrack.openloop.kernels.cluster_kernel` (all pairs at once, the
 components by scipy), for the tests to compare against."""
 
 import numpy as np
