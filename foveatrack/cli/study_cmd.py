@@ -36,10 +36,18 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_accuracy_vs_time)
 
 
+def _load() -> float | None:
+    """The machine's 1-minute load average (None where the OS has none): the report names it."""
+    try:
+        return os.getloadavg()[0]
+    except (OSError, AttributeError):
+        return None
+
+
 def cmd_accuracy_vs_time(args) -> int:
     from foveatrack.cli import study_plots
     from sim.study.report import write_report
-    from sim.study.runner import json_ready, run_study
+    from sim.study.runner import cpu_name, json_ready, run_study
     from sim.sweep import make_executor
 
     if args.workers is not None and args.workers < 1:
@@ -58,6 +66,7 @@ def cmd_accuracy_vs_time(args) -> int:
             raise UserError(f"--from-json {args.from_json}: not a study result (no 'results'/'meta')")
         results, meta = saved["results"], saved["meta"]
     else:
+        load_start = _load()
         t0 = time.perf_counter()
         with make_executor(args.scheduler, args.workers) as ex:
             results = json_ready(run_study("quick" if args.quick else "full", ex, progress=not args.no_progress))
@@ -66,7 +75,8 @@ def cmd_accuracy_vs_time(args) -> int:
             argv += ["--workers", str(args.workers)]
         meta = {"command": " ".join(argv), "wall_s": time.perf_counter() - t0,
                 "workers": args.workers or (f"Dask at {args.scheduler}" if args.scheduler else os.cpu_count()),
-                "scheduler": args.scheduler, "cpus": os.cpu_count()}
+                "scheduler": args.scheduler, "cpus": os.cpu_count(), "cpu": cpu_name(),
+                "load_1min_start": load_start, "load_1min_end": _load()}
         (out / RESULTS).write_text(json.dumps({"meta": meta, "results": results}, indent=1))
     images = study_plots.write_plots(results, out / IMG_SUBDIR)
     rel = {k: str(Path(p).relative_to(out)) for k, p in images.items()}

@@ -8,7 +8,26 @@ from pathlib import Path
 from foveatrack.cli.scan_plots import _plt, _save
 
 FILES = {"scan": "scan-model.png", "fidelity": "sim-fidelity.png", "sensing": "sensing-window.png",
-         "coverage": "coverage.png", "calibration": "calibration.png", "rate": "point-rate.png"}
+         "coverage": "coverage.png", "calibration": "calibration.png", "rate": "point-rate.png",
+         "levers": "levers.png"}
+
+
+def _log_axis(ax, which: str = "both") -> None:
+    """A log axis with labels on the decades only (minor labels overlapped on short ranges)."""
+    from matplotlib.ticker import LogLocator, NullFormatter
+
+    for name in ("x", "y") if which == "both" else (which,):
+        axis = ax.xaxis if name == "x" else ax.yaxis
+        (ax.set_xscale if name == "x" else ax.set_yscale)("log")
+        axis.set_major_locator(LogLocator(base=10, numticks=8))
+        axis.set_minor_formatter(NullFormatter())
+
+
+def _mean_half(iv):
+    """(mean, half-width or 0) of a study interval, (None, None) if missing."""
+    if not iv:
+        return None, None
+    return iv["mean"], iv["half"] or 0.0
 
 
 def _finite(v) -> bool:
@@ -34,8 +53,7 @@ def plot_scan(axis: dict, path) -> Path:
         prof = o["paraxial_vs_off_axis"]
         b.plot([p["off_axis_deg"] for p in prof], [p["p95_deg"] for p in prof], "-" + mk, label=o["optics"])
     a.axhline(floor, color="0.7", ls=":", lw=0.8)
-    a.set_xscale("log")
-    a.set_yscale("log")
+    _log_axis(a)
     a.set_xlabel("time per ray [ns] (min of repeats, one core)")
     a.set_ylabel("angular error vs exact, p95 [deg]  (exact drawn on the dotted floor)")
     a.set_title("Scan model: error vs time per ray (float32 not offered)")
@@ -48,31 +66,28 @@ def plot_scan(axis: dict, path) -> Path:
 
 
 def plot_fidelity(axis: dict, path) -> Path:
+    """Paired change of the tracking error against the CPU ratio, both with their intervals, on linear
+    axes: a change of zero is a point on the zero line (it was drawn at 1e-4 on a log axis)."""
     plt = _plt()
     keys = list(axis)
     fig, axes = plt.subplots(1, len(keys), figsize=(6.5 * len(keys), 4.8), squeeze=False)
     for ax, key in zip(axes[0], keys):
         res = axis[key]
-        # one legend entry per setting, each its own colour and marker: settings that cost about the
-        # same sit on top of each other, and their labels ran together ("basefine10ms")
         markers = "osD^vP<>Xph"
         for i, r in enumerate(res["rows"]):
-            x, y = r["cpu_per_virtual_s"], r["d_error_rms_all_deg"]
+            x, xe = _mean_half(r.get("cost_ratio"))
+            y, ye = _mean_half(r.get("delta", {}).get("error_rms_all_deg"))
             if not (_finite(x) and _finite(y)):
                 continue
             ref = r["setting"] == res["reference"]
-            ax.plot(x, max(y, 1e-4), "*" if ref else markers[i % len(markers)], ms=13 if ref else 7,
-                    mfc="none" if not ref else None, mew=1.4, ls="none",
-                    label=f"{r['setting']} (reference)" if ref else r["setting"])
-        fl = res["noise_floor"].get("error_rms_all_deg")
-        if _finite(fl) and fl > 0:
-            ax.axhline(fl, color="0.5", ls="--", lw=0.8, label=f"seed-to-seed spread {fl:.3g} deg")
+            ax.errorbar(x, y, xerr=xe, yerr=ye, fmt="*" if ref else markers[i % len(markers)], ms=13 if ref else 7,
+                        mfc="none" if not ref else None, mew=1.2, capsize=2, lw=0.8,
+                        label=f"{r['setting']} (reference)" if ref else r["setting"])
+        ax.axhline(0.0, color="0.5", ls="--", lw=0.8)
         ax.legend(fontsize=7, loc="best", ncols=2)
-        ax.set_yscale("log")
-        ax.set_xscale("log")
-        ax.set_xlabel("CPU seconds per virtual second")
-        ax.set_ylabel("|tracking error rms - reference| [deg] (0 drawn at 1e-4)")
-        ax.set_title(f"{res['scene']} ({res['duration_s']:g} s, {len(res['seeds'])} seeds)")
+        ax.set_xlabel("CPU relative to the reference (same seed)")
+        ax.set_ylabel("Δ tracking error rms vs reference, paired [deg]")
+        ax.set_title(f"{res['scene']} ({res['duration_s']:g} s, {len(res['seeds'])} seeds, 95 % intervals)")
     fig.suptitle("Simulation fidelity: effect on tracking vs cost (reference: all-exact)")
     return _save(fig, path)
 
@@ -84,12 +99,14 @@ def plot_sensing(axis: dict, path) -> Path:
         rows = res["rows"]
         w = [r["window_ms"] for r in rows]
         lab = f"{target}: {res['scene']}"
-        axes[0].plot(w, [r["p_detect"] for r in rows], "o-", label=lab)
-        axes[1].plot(w, [r["bearing_rms_deg"] for r in rows], "o-", label=lab)
-        axes[2].plot(w, [None if r["latency_mean_s"] is None else 1000 * r["latency_mean_s"] for r in rows], "o-", label=lab)
-    for ax, yl in zip(axes, ("detection probability (target in FoV)", "bearing error rms [deg]",
+        for ax, key, scale in ((axes[0], "p_detect", 1.0), (axes[1], "error_rms_all_deg", 1.0),
+                               (axes[2], "latency_mean_s", 1000.0)):
+            mh = [_mean_half((r.get("ci") or {}).get(key)) for r in rows]
+            ax.errorbar(w, [None if m is None else scale * m for m, _ in mh],
+                        yerr=[0.0 if h is None else scale * h for _, h in mh], fmt="o-", capsize=2, label=lab)
+    for ax, yl in zip(axes, ("detection probability (target in FoV)", "tracking error rms, all frames [deg]",
                              "control latency, mean [ms]")):
-        ax.set_xscale("log")
+        _log_axis(ax, "x")
         ax.set_xlabel("accumulation window [ms]")
         ax.set_ylabel(yl)
         ax.legend(fontsize=7)
@@ -130,11 +147,11 @@ def plot_calibration(axis: dict, path) -> Path:
     if nom is not None:
         axes[0].axhline(nom["table_err_all_pct"], color="0.5", ls=":", label="no calibration (nominal table)")
         axes[1].axhline(nom["pointing_rms_deg"], color="0.5", ls=":", label="no calibration (nominal table)")
-    axes[0].set_yscale("log")
+    _log_axis(axes[0], "y")
     axes[0].set_xlabel("calibration time [virtual s on the head]")
     axes[0].set_ylabel("speed-table error, rms [%]")
     axes[0].set_title("Speed table vs calibration time (cf. paper Fig. 11b)")
-    axes[1].set_yscale("log")
+    _log_axis(axes[1], "y")
     axes[1].set_xlabel("calibration time [virtual s on the head]")
     axes[1].set_ylabel("head pointing reconstruction error, rms [deg]")
     axes[1].set_title("Dead reckoning with that table (fig12-tracking)")
@@ -142,7 +159,7 @@ def plot_calibration(axis: dict, path) -> Path:
         if "pointing_t_s" in r and r["tilt_prior"] and r["plan"] != "truth":
             lab = "nominal" if r["plan"] == "nominal" else f"{r['plan']} {r['dwell_s']:g} s"
             axes[2].plot(r["pointing_t_s"], r["pointing_err_deg"], lw=0.9, label=lab)
-    axes[2].set_yscale("log")
+    _log_axis(axes[2], "y")
     axes[2].set_xlabel("time in fig12-tracking [s]")
     axes[2].set_ylabel("pointing reconstruction error [deg]")
     axes[2].set_title("Error growth during tracking (first seed)")
@@ -156,16 +173,41 @@ def plot_rate(axis: dict, path) -> Path:
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.5))
     for key, res in axis.items():
         for r in res["rows"]:
-            for ax, x in ((a, r["tracker_ms_per_frame"]), (b, r["sim_ms_per_frame"])):
-                if _finite(x) and _finite(r["error_rms_all_deg"]):
-                    ax.plot(x, r["error_rms_all_deg"], "o" if r["preset"] == "mid40" else "s", ms=8)
-                    ax.annotate(f"{res['scene']}: {r['preset']}", (x, r["error_rms_all_deg"]),
-                                textcoords="offset points", xytext=(4, 3), fontsize=7)
+            ci = r.get("ci") or {}
+            y, ye = _mean_half(ci.get("error_rms_all_deg"))
+            for ax, k in ((a, "tracker_ms_per_frame"), (b, "sim_ms_per_frame")):
+                x, xe = _mean_half(ci.get(k))
+                if _finite(x) and _finite(y):
+                    ax.errorbar(x, y, xerr=xe, yerr=ye, fmt="o" if r["preset"] == "mid40" else "s", ms=8, capsize=2)
+                    ax.annotate(f"{res['scene']}: {r['preset']}", (x, y), textcoords="offset points", xytext=(4, 3),
+                                fontsize=7)
     a.set_xlabel("tracker CPU per frame [ms] (runs on the real system)")
     b.set_xlabel("whole simulated frame, CPU [ms]")
     for ax in (a, b):
         ax.set_ylabel("tracking error rms over all frames [deg]")
-    fig.suptitle("Point rate / channels: Mid-40 100 k single channel vs Horizon 240 k six channels")
+    fig.suptitle("Point rate / channels: Mid-40 100 k single channel vs Horizon 240 k six channels (95 % intervals)")
+    return _save(fig, path)
+
+
+def plot_levers(axis: dict, path) -> Path:
+    """Per lever: the paired change of the tracking error and of the world position error, and the
+    CPU ratio, each with its interval."""
+    plt = _plt()
+    rows = axis["rows"]
+    fig, axes = plt.subplots(1, 3, figsize=(16, 0.45 * len(rows) + 1.8), sharey=True)
+    ys = list(range(len(rows)))[::-1]
+    for ax, get, xl in ((axes[0], lambda r: r["delta"]["error_rms_acq_deg"], "Δ tracking error after acquisition [deg]"),
+                        (axes[1], lambda r: r["delta"]["recon_rms_m"], "Δ world position error rms [m]"),
+                        (axes[2], lambda r: r["cost_ratio"], "CPU relative to the paper's loop")):
+        for y, r in zip(ys, rows):
+            m, h = _mean_half(get(r))
+            if _finite(m):
+                ax.errorbar(m, y, xerr=h, fmt="o", capsize=3, color="C0")
+        ax.axvline(1.0 if ax is axes[2] else 0.0, color="0.5", ls="--", lw=0.8)
+        ax.set_xlabel(xl)
+    axes[0].set_yticks(ys, [r["lever"] for r in rows])
+    fig.suptitle(f"Levers on {axis['scene']} ({axis['duration_s']:g} s, {len(axis['seeds'])} seeds, 95 % intervals, "
+                 "paired with the reference)")
     return _save(fig, path)
 
 
@@ -181,4 +223,5 @@ def write_plots(results: dict, img_dir) -> dict[str, Path]:
         "coverage": plot_coverage(ax["sensing"], windows, img_dir / FILES["coverage"]),
         "calibration": plot_calibration(ax["calibration"], img_dir / FILES["calibration"]),
         "rate": plot_rate(ax["rate"], img_dir / FILES["rate"]),
+        **({"levers": plot_levers(ax["levers"], img_dir / FILES["levers"])} if ax.get("levers") else {}),
     }

@@ -10,7 +10,12 @@ One module per axis, each with ``tasks(size) -> [task]`` (picklable frozen datac
   control latency; coverage vs accumulation time (paper Fig. 6e);
 * :mod:`sim.study.calibration_time` -- dwell per speed byte: speed-table and reconstruction error
   (the shape of paper Fig. 11b);
-* :mod:`sim.study.point_rate`      -- Mid-40 vs Horizon: tracking error vs compute per frame.
+* :mod:`sim.study.point_rate`      -- Mid-40 vs Horizon: tracking error vs compute per frame;
+* :mod:`sim.study.levers`          -- controller, recording, head ripple, scan model in the loop,
+  attitude source, speed table: tracking and world-position error vs CPU relative to the paper's loop.
+
+Every closed-loop number keeps its per-seed values and a 95 % interval (:mod:`sim.study.stats`);
+the Pareto fronts (:mod:`sim.study.pareto`) rank only differences outside those intervals.
 
 :func:`sim.study.runner.run_study` (``size`` = ``"quick"`` | ``"full"``, an executor from
 :func:`sim.sweep.make_executor`) runs them all through :func:`sim.sweep.run_tasks`;

@@ -37,6 +37,7 @@ from foveatrack.metrics import angle_between_deg
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO
 from sim.study.common import Timer, load_study_scene, run_loop, seeds_for, strip_private
+from sim.study.stats import interval
 
 PLANS = {
     "tiny": ((8, 32), (32, 63)),
@@ -250,9 +251,11 @@ def collect(results) -> dict:
         ok = [r for _, r in runs if "failure" not in r]
         row = {"plan": plan, "dwell_s": dwell, "tilt_prior": prior, "runs": len(runs), "failed": len(runs) - len(ok),
                "bytes": None if plan not in PLANS else [len(b) for b in PLANS[plan]]}
+        row["ci"] = {}
         for k in KEYS:
-            vals = [r[k] for r in ok if r.get(k) is not None]
-            row[k] = float(np.mean(vals)) if vals else None
+            iv = interval([r.get(k) for r in ok])
+            row[k] = None if iv is None else iv["mean"]
+            row["ci"][k] = iv
         first = next((r for r in ok if "pointing_err_deg" in r), None)
         if first is not None:
             row["pointing_t_s"] = first["pointing_t_s"]
@@ -270,6 +273,8 @@ def pareto_points(axis_result: dict) -> list[dict]:
         if r["plan"] == "truth" or not r["tilt_prior"] or r["table_err_all_pct"] is None or r["cal_virtual_s"] is None:
             continue
         label = "no calibration (nominal table)" if r["plan"] == "nominal" else f"{r['plan']} plan, dwell {r['dwell_s']:g} s"
+        e = r["ci"].get("table_err_all_pct") or {}
         pts.append({"group": "speed table", "label": label, "cost": r["cal_virtual_s"], "error": r["table_err_all_pct"],
+                    "error_lo": e.get("lo"), "error_hi": e.get("hi"),
                     "pointing_rms_deg": r["pointing_rms_deg"], "offered": True})
     return pts

@@ -43,24 +43,25 @@ class StudySize:
     cal_seeds: int
     cal_check_s: float              # fig12 run with the calibrated table [virtual s]
     rate_duration_s: dict           # point-rate axis, per scene key
+    levers_duration_s: float        # levers axis (fig12-tracking), virtual seconds per run
 
 
 FULL = StudySize(
-    name="full", seeds=5, fidelity_duration_s={"fig12": 15.0, "crossing": 3.0},
+    name="full", seeds=8, fidelity_duration_s={"fig12": 15.0, "far": 20.0},
     scan_rays=400_000, scan_repeats=5, interp_steps=(2, 4, 8, 16),
-    windows_ms=(25, 50, 100, 200, 400), sensing_duration_s={"near": 15.0, "mid": 15.0, "far": 15.0}, sensing_seeds=4,
+    windows_ms=(25, 50, 100, 200, 400), sensing_duration_s={"near": 15.0, "mid": 15.0, "far": 15.0}, sensing_seeds=8,
     coverage_s=1.0, coverage_rays=1_000_000,
-    dwells_s=(1.0, 2.0, 4.0, 8.0), cal_plans=("sparse", "dense"), cal_seeds=2, cal_check_s=30.0,
-    rate_duration_s={"fig12": 15.0, "crossing": 3.0},
+    dwells_s=(1.0, 2.0, 4.0, 8.0), cal_plans=("sparse", "dense"), cal_seeds=4, cal_check_s=30.0,
+    rate_duration_s={"fig12": 15.0, "far": 20.0}, levers_duration_s=15.0,
 )
 
 QUICK = StudySize(
-    name="quick", seeds=1, fidelity_duration_s={"fig12": 2.0, "crossing": 1.0},
+    name="quick", seeds=2, fidelity_duration_s={"fig12": 2.0, "far": 1.0},
     scan_rays=20_000, scan_repeats=2, interp_steps=(4,),
     windows_ms=(50, 200), sensing_duration_s={"near": 2.0, "mid": 2.0, "far": 2.0}, sensing_seeds=1,
     coverage_s=0.3, coverage_rays=100_000,
     dwells_s=(1.0,), cal_plans=("tiny",), cal_seeds=1, cal_check_s=3.0,
-    rate_duration_s={"fig12": 2.0, "crossing": 1.0},
+    rate_duration_s={"fig12": 2.0, "far": 1.0}, levers_duration_s=2.0,
 )
 
 SIZES = {"full": FULL, "quick": QUICK}
@@ -68,7 +69,6 @@ SIZES = {"full": FULL, "quick": QUICK}
 # The study's scenes: shipped files, keyed by the role they play.
 SCENE_FILES = {
     "fig12": "fig12-tracking.toml",        # near target, tracked (paper Fig. 12 / 14b)
-    "crossing": "fast-crossing-close.toml",  # faster than the head can turn
     "far": "far-target-range-limit.toml",  # 150 m, near the range limit
 }
 
@@ -147,7 +147,7 @@ def loop_metrics(scene, log: dict) -> dict:
     """Tracking metrics of one run: the project's summary plus ones defined on every frame.
 
     ``error_rms_all_deg``: rms of the true off-axis angle of the target over *all* frames (defined
-    even when the target is never acquired, e.g. the fast crossing); ``detect_frac``: frames with a
+    even when the target is never acquired); ``detect_frac``: frames with a
     detection / frames; the rest is :func:`sim.summary.summarize` (error after acquisition etc.).
     """
     from sim.summary import summarize
@@ -168,15 +168,27 @@ def loop_metrics(scene, log: dict) -> dict:
 
 
 def run_loop(scene, head_grid_s: float | None = None, target_motion: str = "per_point", frame_hook=None,
-             time_tracker: bool = False) -> dict:
+             time_tracker: bool = False, record_to: Path | None = None) -> dict:
     """Run a scene's closed loop; metrics, CPU/wall time and, if asked, the tracker's own CPU time.
 
     ``tracker_cpu_s`` times ``Tracker.process`` alone (the part that runs on real hardware); the
     rest of ``cpu_s`` is the simulation of the world, the scanner, the link and the head.
+    ``record_to``: also write the run's recording there on the loop's thread (as ``simulate --out
+    --one-thread``), inside the timed block, closing the file included.
     """
     from sim.loop import ClosedLoop
 
     loop = ClosedLoop(scene, frame_hook=frame_hook, head_grid_s=head_grid_s, target_motion=target_motion)
+    writer = None
+    if record_to is not None:
+        from foveatrack.recording import RecordingWriter
+        from sim.recorder import SimRecorder, recording_meta
+
+        if frame_hook is not None:
+            raise ValueError("run_loop: record_to and frame_hook together are not supported")
+        writer = RecordingWriter(record_to, meta=recording_meta(scene, loop), overwrite=True,
+                                 created_utc="virtual time (simulation)", log_time=scene.start_utc_ns)
+        loop.frame_hook = SimRecorder(writer)
     tracker_cpu = [0.0]
     if time_tracker:
         inner = loop.tracker.process
@@ -189,7 +201,11 @@ def run_loop(scene, head_grid_s: float | None = None, target_motion: str = "per_
 
         loop.tracker.process = timed
     with Timer() as t:
-        log = loop.run()
+        try:
+            log = loop.run()
+        finally:
+            if writer is not None:
+                writer.close()
     m = loop_metrics(scene, log)
     m.update(cpu_s=t.cpu_s, wall_s=t.wall_s, virtual_s=scene.duration_s,
              cpu_per_virtual_s=t.cpu_s / scene.duration_s, rays=loop.rays_total)

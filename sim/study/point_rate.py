@@ -1,6 +1,6 @@
 """Axis 5 -- point rate / channels: Mid-40 (100 k points/s, one channel) vs Horizon (240 k/s, six).
 
-The same scenes (``fig12-tracking`` and ``fast-crossing-close``, shortened) with the lidar swapped
+The same scenes (``fig12-tracking`` and ``far-target-range-limit``, shortened) with the lidar swapped
 (``Scene.optics``); everything else as shipped.  Measured: tracking error (rms over all frames,
 and after acquisition), points on the target per frame, detections; and compute per frame, split
 into the tracker's own CPU time (``Tracker.process``: the part that runs on real hardware, which
@@ -12,11 +12,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-import numpy as np
-
 from sim.study.common import load_study_scene, run_loop, seeds_for, strip_private
+from sim.study.stats import interval
 
-SCENE_KEYS = ("fig12", "crossing")
+SCENE_KEYS = ("fig12", "far")
 PRESETS = ("mid40", "horizon")
 
 
@@ -64,10 +63,11 @@ def collect(results) -> dict:
             runs = [r for t, r in results if t.scene_key == key and t.preset == p]
             if not runs:
                 continue
-            row = {"preset": p, "seeds": len(runs)}
+            row = {"preset": p, "seeds": len(runs), "ci": {}}
             for k in KEYS:
-                vals = [r[k] for r in runs if r.get(k) is not None]
-                row[k] = float(np.mean(vals)) if vals else None
+                iv = interval([r.get(k) for r in runs])
+                row[k] = None if iv is None else iv["mean"]
+                row["ci"][k] = iv
             rows.append(row)
         scene = next((t.scene for t, _ in results if t.scene_key == key), None)
         if scene is not None:
@@ -76,7 +76,15 @@ def collect(results) -> dict:
 
 
 def pareto_points(axis_result: dict) -> list[dict]:
-    """(cost = tracker CPU ms per frame, error = tracking error rms over all frames) per scene."""
-    return [{"group": res["scene"], "label": r["preset"], "cost": r["tracker_ms_per_frame"],
-             "error": r["error_rms_all_deg"], "sim_ms_per_frame": r["sim_ms_per_frame"], "offered": True}
-            for res in axis_result.values() for r in res["rows"]]
+    """(cost = tracker CPU ms per frame, error = tracking error rms over all frames), each with its
+    interval over seeds, per scene."""
+    pts = []
+    for res in axis_result.values():
+        for r in res["rows"]:
+            c, e = r["ci"]["tracker_ms_per_frame"], r["ci"]["error_rms_all_deg"]
+            if c is None or e is None:
+                continue
+            pts.append({"group": res["scene"], "label": r["preset"], "cost": c["mean"], "cost_lo": c["lo"],
+                        "cost_hi": c["hi"], "error": e["mean"], "error_lo": e["lo"], "error_hi": e["hi"],
+                        "sim_ms_per_frame": r["sim_ms_per_frame"], "offered": True})
+    return pts

@@ -8,6 +8,7 @@ import math
 from sim.study.calibration_time import PLANS
 from sim.study.sensing import target_scene
 from sim.study.runner import TARGETS
+from sim.study.stats import LEVEL, excludes_zero, fmt as _ci, interval
 
 COMMAND = "foveatrack study accuracy-vs-time --out docs --workers 2"
 
@@ -22,6 +23,29 @@ def _table(head: list[str], rows: list[list[str]]) -> list[str]:
     out = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     out += ["| " + " | ".join(r) + " |" for r in rows]
     return out + [""]
+
+
+def _delta(iv) -> str:
+    """A paired change with its interval; **bold** where the interval excludes zero (a measured effect)."""
+    if iv is None:
+        return "-"
+    txt = _ci(iv)
+    return f"**{txt}**" if excludes_zero(iv) else txt
+
+
+def _ci_of(row: dict, key: str, scale: float = 1.0, digits: str = "{:.3g}") -> str:
+    iv = (row.get("ci") or {}).get(key)
+    if iv is None:
+        return _f(row.get(key))
+    if scale != 1.0:
+        iv = dict(iv, mean=iv["mean"] * scale, half=None if iv["half"] is None else iv["half"] * scale)
+    return _ci(iv, digits)
+
+
+def seeds_vs_width(values: list[float], level: float = LEVEL) -> list[tuple[int, float | None]]:
+    """Half-width of the interval of the mean from the first n per-seed values, n = 2..len: what
+    more seeds buy."""
+    return [(n, interval(values[:n], level)["half"]) for n in range(2, len(values) + 1)]
 
 
 def _img(images: dict, key: str, alt: str) -> list[str]:
@@ -41,17 +65,19 @@ def headlines(res: dict) -> list[str]:
         rows = {r["setting"]: r for r in f["rows"]}
         ref, cheap = rows.get(f["reference"]), rows.get("all-cheap")
         if ref and cheap:
-            out.append(f"- Simulation fidelity, {f['scene']}: all-exact costs {_f(ref['cpu_per_virtual_s'])} CPU s per "
-                       f"virtual s, all-cheap {_f(cheap['cpu_per_virtual_s'])}; the tracking error rms moves by "
-                       f"{_f(cheap['d_error_rms_all_deg'])} deg (seed-to-seed spread "
-                       f"{_f(f['noise_floor']['error_rms_all_deg'])} deg).")
+            d = cheap["delta"]["error_rms_all_deg"]
+            moved = [r["setting"] for r in f["rows"] if excludes_zero(r["delta"]["error_rms_all_deg"])]
+            out.append(f"- Simulation fidelity, {f['scene']}: all-cheap costs {_ci(cheap['cost_ratio'])} of all-exact's CPU "
+                       f"and changes the tracking error rms by {_ci(d)} deg ({int(LEVEL * 100)} % interval over "
+                       f"{cheap['seeds']} paired seeds); settings whose change is outside the noise: "
+                       f"{', '.join(moved) if moved else 'none'}.")
     for target, t in ax["sensing"]["targets"].items():
         rows = t["rows"]
         if rows:
             a, b = rows[0], rows[-1]
             out.append(f"- Sensing, {target} ({t['scene']}): window {a['window_ms']:g} -> {b['window_ms']:g} ms takes "
-                       f"detection probability {_f(a['p_detect'], '{:.2f}')} -> {_f(b['p_detect'], '{:.2f}')}, bearing "
-                       f"error rms {_f(a['bearing_rms_deg'])} -> {_f(b['bearing_rms_deg'])} deg, latency "
+                       f"detection probability {_ci_of(a, 'p_detect', digits='{:.2f}')} -> {_ci_of(b, 'p_detect', digits='{:.2f}')}, "
+                       f"tracking error rms over all frames {_ci_of(a, 'error_rms_all_deg')} -> {_ci_of(b, 'error_rms_all_deg')} deg, latency "
                        f"{_f(None if a['latency_mean_s'] is None else 1000 * a['latency_mean_s'], '{:.0f}')} -> "
                        f"{_f(None if b['latency_mean_s'] is None else 1000 * b['latency_mean_s'], '{:.0f}')} ms.")
     for name, c in ax["sensing"]["coverage"].items():
@@ -70,10 +96,18 @@ def headlines(res: dict) -> list[str]:
         rows = {x["preset"]: x for x in r["rows"]}
         if "mid40" in rows and "horizon" in rows:
             m, h = rows["mid40"], rows["horizon"]
-            out.append(f"- Point rate, {r['scene']}: Horizon tracker {_f(h['tracker_ms_per_frame'])} ms/frame vs Mid-40 "
-                       f"{_f(m['tracker_ms_per_frame'])}; tracking error rms {_f(h['error_rms_all_deg'])} vs "
-                       f"{_f(m['error_rms_all_deg'])} deg; points on target {_f(h['points_on_target_per_frame'])} vs "
+            out.append(f"- Point rate, {r['scene']}: Horizon tracker {_ci_of(h, 'tracker_ms_per_frame')} ms/frame vs Mid-40 "
+                       f"{_ci_of(m, 'tracker_ms_per_frame')}; tracking error rms {_ci_of(h, 'error_rms_all_deg')} vs "
+                       f"{_ci_of(m, 'error_rms_all_deg')} deg; points on target {_f(h['points_on_target_per_frame'])} vs "
                        f"{_f(m['points_on_target_per_frame'])} per frame.")
+    lv = ax.get("levers")
+    if lv:
+        for r in lv["rows"]:
+            if r["lever"] == lv["reference"]:
+                continue
+            d, dm = r["delta"]["error_rms_acq_deg"], r["delta"]["recon_rms_m"]
+            out.append(f"- Lever, {r['lever']} ({lv['scene']}): tracking error after acquisition {_delta(d)} deg, "
+                       f"world position {_delta(dm)} m, CPU x{_ci(r['cost_ratio'])} of the paper's loop.")
     return out + [""]
 
 
@@ -85,7 +119,14 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
     L += [f"Generated by `{meta.get('command', COMMAND)}` ({res['size']} study: {res['tasks']} runs, "
           f"{_f(meta.get('wall_s'), '{:.0f}')} s wall on {meta.get('workers', '?')} workers"
           f"{' at ' + meta['scheduler'] if meta.get('scheduler') else ''}, {_f(res['task_cpu_s'], '{:.0f}')} s of "
-          f"measured CPU).  Regenerate with `{COMMAND}`; `--quick` runs a small version in about a minute.", "",
+          f"measured CPU; CPU: {meta.get('cpu', 'not recorded')}, load {_f(meta.get('load_1min_start'), '{:.1f}')} at the "
+          f"start and {_f(meta.get('load_1min_end'), '{:.1f}')} at the end).  Regenerate with `{COMMAND}`; `--quick` runs "
+          "a small version in about a minute.", "",
+          f"Every closed-loop figure is a mean over seeds with its {int(LEVEL * 100)} % Student-t interval (`mean ± "
+          "half-width`); the per-seed values are in the JSON.  Changes against a reference are paired by seed, and "
+          "**bold** marks a change whose interval excludes zero: only those are measured effects.  Costs are also "
+          "given as ratios to a reference measured in the same run, which carry across machines better than "
+          "seconds do.", "",
           "Every axis is a measured curve.  **Cost** of a simulation setting is the CPU time of the worker process "
           "(`time.process_time`) per virtual second or per frame: the study runs on shared machines, where wall "
           "time also measures the neighbours (wall time is in the JSON next to it).  Each worker loads numba's "
@@ -121,14 +162,17 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
         L += [f"**{f['scene']}** (shortened to {f['duration_s']:g} s, seeds {', '.join(map(str, f['seeds']))}; "
               f"seed-to-seed spread: error rms {_f(fl['error_rms_all_deg'])} deg, points on target "
               f"{_f(fl['points_on_target_per_frame'])} per frame):", ""]
-        L += _table(["setting", "footprint", "target", "head grid [ms]", "CPU s / virtual s", "error rms [deg]",
-                     "abs Δ error rms [deg]", "points on target / frame", "abs Δ points", "detections / frame"],
+        L += _table(["setting", "footprint", "target", "head grid [ms]", "CPU vs reference", "error rms, all frames [deg]",
+                     "Δ error rms, all [deg]", "Δ error rms after acq. [deg]", "Δ acquisition [s]",
+                     "points on target / frame", "Δ points"],
                     [[r["setting"], r["footprint"], r["target_motion"].replace("_", "-"), _f(r["head_grid_ms"], "{:g}", none="exact (pieces)"),
-                      _f(r["cpu_per_virtual_s"]), _f(r["error_rms_all_deg"]), _f(r["d_error_rms_all_deg"]),
-                      _f(r["points_on_target_per_frame"]), _f(r["d_points_on_target_per_frame"]), _f(r["detect_frac"], "{:.2f}")]
+                      _ci(r["cost_ratio"]), _ci_of(r, "error_rms_all_deg"), _delta(r["delta"]["error_rms_all_deg"]),
+                      _delta(r["delta"]["error_rms_acq_deg"]), _delta(r["delta"]["acquisition_s"]),
+                      _f(r["points_on_target_per_frame"]), _delta(r["delta"]["points_on_target_per_frame"])]
                      for r in f["rows"]])
-    L += ["Error rms is over all frames (the target's true off-axis angle), defined even when the fast "
-          "crossing is never acquired.", ""]
+    L += ["Error rms over all frames is the target's true off-axis angle at every frame; after acquisition, "
+          "from the first of five frames in a row within the dead band + 1 deg.  `fast-crossing-close` is no longer "
+          "used here: the tracker never acquires it, so its error measured the crossing, not the setting.", ""]
     L += _img(images, "fidelity", "simulation fidelity vs cost")
 
     # 3 ----------------------------------------------------------------------------------------
@@ -143,12 +187,15 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
           "the acquisition, is measured.", ""]
     for target, t in ax["sensing"]["targets"].items():
         L += [f"**{target}** ({t['scene']}, {_f(t['duration_s'], '{:g}')} s per run):", ""]
-        L += _table(["window [ms]", "seeds", "detections / frames in FoV", "P(detect)", "bearing rms [deg]",
-                     "bearing p95 [deg]", "latency mean [ms]", "points / detection", "tracking error rms [deg]"],
+        L += _table(["window [ms]", "seeds", "detections / frames in FoV", "P(detect)", "tracking error rms, all frames [deg]",
+                     "tracking error after acq. [deg]", "latency mean [ms]", "bearing rms, detected frames only [deg]",
+                     "points / detection"],
                     [[_f(r["window_ms"], "{:g}"), str(r["seeds"]), f"{r['detections']} / {r['frames_in_fov']}",
-                      _f(r["p_detect"], "{:.3f}"), _f(r["bearing_rms_deg"]), _f(r["bearing_p95_deg"]),
-                      _f(None if r["latency_mean_s"] is None else 1000 * r["latency_mean_s"], "{:.0f}"),
-                      _f(r["points_per_detection"], "{:.1f}"), _f(r["error_rms_all_deg"])] for r in t["rows"]])
+                      _ci_of(r, "p_detect"), _ci_of(r, "error_rms_all_deg"), _ci_of(r, "error_rms_acq_deg"),
+                      _ci_of(r, "latency_mean_s", 1000.0, "{:.0f}"), _ci_of(r, "bearing_rms_deg"),
+                      _f(r["points_per_detection"], "{:.1f}")] for r in t["rows"]])
+    L += ["The bearing error is measured on detected frames only, so it favours windows that rarely detect "
+          "(selection); the front below ranks windows by the tracking error over all frames instead.", ""]
     L += _img(images, "sensing", "sensing window")
     cov = ax["sensing"]["coverage"]
     if cov:
@@ -179,12 +226,12 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
                 [[r["plan"], _f(r["dwell_s"], "{:g}") if r["plan"] not in ("nominal", "truth") else "-",
                   "yes" if r["tilt_prior"] else "no", f"{r['runs'] - r['failed']}/{r['runs']}",
                   _f(r["cal_virtual_s"], "{:.0f}", none="inf" if r["plan"] == "truth" else "-"),
-                  _f(r["table_err_measured_pct"]), _f(r["table_err_all_pct"]),
+                  _ci_of(r, "table_err_measured_pct"), _ci_of(r, "table_err_all_pct"),
                   f"{_f(r['table_abs_pan_deg_s'])} / {_f(r['table_abs_tilt_deg_s'])}",
                   _f(None if r.get("table_dead_time_s") is None else 1000 * r["table_dead_time_s"], "{:.0f}"),
                   _f(r.get("table_accel_deg_s2")),
-                  _f(r["pointing_rms_deg"]), _f(r["pointing_max_deg"]), _f(r.get("pointing_rms_true_timing_deg")),
-                  _f(r["recon_rms_m"])] for r in cal["rows"]])
+                  _ci_of(r, "pointing_rms_deg"), _f(r["pointing_max_deg"]), _f(r.get("pointing_rms_true_timing_deg")),
+                  _ci_of(r, "recon_rms_m")] for r in cal["rows"]])
     tim = next((r for r in cal["rows"] if r.get("true_dead_time_s") is not None), None)
     if tim is not None:
         L += [f"The head's true timing: dead time {_f(1000 * tim['true_dead_time_s'], '{:.0f}')} ms, acceleration "
@@ -214,16 +261,42 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
                      "error rms all [deg]", "error rms after acquisition [deg]", "acquisition [s]",
                      "tracker CPU / frame [ms]", "simulated frame CPU [ms]"],
                     [[x["preset"], str(x["seeds"]), _f(x["points_per_frame"], "{:.0f}"), _f(x["points_on_target_per_frame"]),
-                      _f(x["detect_frac"], "{:.2f}"), _f(x["error_rms_all_deg"]), _f(x["error_rms_acq_deg"]),
-                      _f(x["acquisition_s"]), _f(x["tracker_ms_per_frame"]), _f(x["sim_ms_per_frame"])] for x in r["rows"]])
+                      _f(x["detect_frac"], "{:.2f}"), _ci_of(x, "error_rms_all_deg"), _ci_of(x, "error_rms_acq_deg"),
+                      _ci_of(x, "acquisition_s"), _ci_of(x, "tracker_ms_per_frame"), _ci_of(x, "sim_ms_per_frame")]
+                     for x in r["rows"]])
     L += _img(images, "rate", "point rate")
+
+    # 6 ----------------------------------------------------------------------------------------
+    lv = ax.get("levers")
+    if lv:
+        L += ["## 6. The levers: controller, recording, head ripple, scan model, attitude source, speed table", "",
+              f"Each lever changed alone from {lv['scene']} as shipped (the **reference**: the paper's Algorithm 2, "
+              f"the unit's true speed table, no recording), {_f(lv['duration_s'], '{:g}')} s, seeds "
+              f"{', '.join(map(str, lv['seeds']))}.  Δ is the paired change against the reference (bold: outside "
+              "the noise).  The world position error is the reconstructed target against the truth: the speed "
+              "table moves it, the pointing hardly.", ""]
+        L += _table(["lever", "CPU vs reference", "CPU per frame [ms]", "error after acq. [deg]", "Δ error after acq. [deg]",
+                     "Δ error, all frames [deg]", "acquisition [s]", "Δ acquisition [s]", "world position rms [m]",
+                     "Δ world position [m]"],
+                    [[r["lever"], _ci(r["cost_ratio"]), _ci(r["ms_per_frame"]), _ci(r["ci"]["error_rms_acq_deg"]),
+                      _delta(r["delta"]["error_rms_acq_deg"]), _delta(r["delta"]["error_rms_all_deg"]),
+                      _ci(r["ci"]["acquisition_s"]), _delta(r["delta"]["acquisition_s"]), _ci(r["ci"]["recon_rms_m"]),
+                      _delta(r["delta"]["recon_rms_m"])] for r in lv["rows"]])
+        ref = next((r for r in lv["rows"] if r["lever"] == lv["reference"]), None)
+        vals = (ref or {}).get("ci", {}).get("error_rms_acq_deg")
+        if vals and vals["n"] >= 3:
+            L += ["What more seeds buy: the half-width of the reference's interval of the tracking error after "
+                  "acquisition, from its first n seeds (it falls about as 1/sqrt(n) once the spread is known):", ""]
+            L += _table(["seeds", "half-width [deg]"], [[str(n), _f(h)] for n, h in seeds_vs_width(vals["values"])])
+        L += _img(images, "levers", "levers")
 
     # Pareto --------------------------------------------------------------------------------------
     L += ["## Pareto front: for a target accuracy, the cheapest settings", "",
-          "Per axis and scene/target, the measured settings that no other beats on both cost and error, then for "
-          "each target accuracy the cheapest setting that meets it (\"-\": none measured does).  Read the "
-          "simulation-fidelity fronts with the seed-to-seed spreads of section 2 beside them: a deviation below the "
-          "spread is not a measurable effect, and CPU costs within ~10 % of each other are timing noise.", ""]
+          "Per axis and scene/target, the measured settings that no other beats *beyond the noise* (better on one "
+          "axis with the two intervals apart, and not worse beyond the noise on the other), then for each target "
+          "accuracy the cheapest setting whose whole error interval meets it (\"-\": none measured does).  Where "
+          "other settings meet the target at a cost that cannot be told apart from the cheapest one's, they are "
+          "named beside it: the study does not rank them.", ""]
     cheaper = [o["optics"] for o in ax["scan"]["optics"]
                if next(r for r in o["rows"] if r["model"] == "exact")["ns_per_ray"]
                < next(r for r in o["rows"] if r["model"] == "paraxial")["ns_per_ray"]]
@@ -232,11 +305,12 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
               "no approximation of the scan model is on the front.", ""]
     names = {
         "scan": ("p95 angular error [deg]", "ns per ray"),
-        "fidelity": ("abs Δ tracking error rms vs all-exact [deg]", "CPU s per virtual s"),
-        "sensing": ("bearing error rms [deg]", "control latency [ms]"),
+        "fidelity": ("|Δ tracking error rms| vs all-exact, paired [deg]", "CPU relative to all-exact"),
+        "sensing": ("tracking error rms over all frames [deg]", "control latency [ms]"),
         "sensing_detect": ("detection probability (at least)", "control latency [ms]"),
         "calibration": ("speed-table error, all bytes [%]", "calibration time [s]"),
         "rate": ("tracking error rms [deg]", "tracker CPU per frame [ms]"),
+        "levers": ("tracking error rms after acquisition [deg]", "CPU relative to the paper's loop"),
     }
     for axis, groups in res["pareto"].items():
         err_name, cost_name = names[axis]
@@ -244,9 +318,13 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
             front = ", ".join(f"{p['label']} ({_f(p['cost'])}, {_f(1 - p['error'] if axis == 'sensing_detect' else p['error'])})"
                               for p in g["front"])
             L += [f"**{axis} / {group}** -- error: {err_name}; cost: {cost_name}.  Front (cost, error): {front or '-'}", ""]
-            L += _table(["target", "cheapest setting", "cost", "error"],
+            L += _table(["target", "cheapest setting", "cost", "error (upper end of its interval)",
+                         "same cost within noise"],
                         [[("P >= " if axis == "sensing_detect" else "<= ") + _f(c["target"], "{:g}"), c["label"] or "-",
-                          _f(c["cost"]), _f(1 - c["error"] if (axis == "sensing_detect" and c["error"] is not None) else c["error"])]
+                          _f(c["cost"]),
+                          (f"{_f(1 - c['error'])} ({_f(1 - c['error_hi'])})" if axis == "sensing_detect" and c["error"] is not None
+                           else f"{_f(c['error'])} ({_f(c.get('error_hi'))})" if c["error"] is not None else "-"),
+                          ", ".join(c.get("cost_ties") or []) or "-"]
                          for c in g["cheapest"]])
     L += ["## Regenerate", "", "```", COMMAND, "```", "",
           "Add `--scheduler tcp://HOST:8786` to run the same tasks on a Dask cluster, `--quick` for the small "

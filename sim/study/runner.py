@@ -9,20 +9,21 @@ from __future__ import annotations
 
 import math
 
-from sim.study import calibration_time, pareto, point_rate, scan_fidelity, sensing, sim_fidelity
+from sim.study import calibration_time, levers, pareto, point_rate, scan_fidelity, sensing, sim_fidelity
 from sim.study.common import SIZES, StudySize, warm_up
 from sim.sweep import run_tasks
 
-AXES = ("scan", "fidelity", "sensing", "calibration", "rate")
+AXES = ("scan", "fidelity", "sensing", "calibration", "rate", "levers")
 
 # Target accuracies of the closing Pareto table, per axis (in that axis's error unit).
 TARGETS = {
     "scan": (1.0, 0.1, 0.01, 0.001),
     "fidelity": (0.5, 0.25, 0.1, 0.05),
-    "sensing": (0.5, 0.25, 0.1, 0.05),
+    "sensing": (10.0, 5.0, 3.0, 2.0),
     "sensing_detect": (0.5, 0.8, 0.95),
     "calibration": (25.0, 10.0, 5.0, 2.0),
-    "rate": (5.0, 3.0, 2.0, 1.0),
+    "rate": (10.0, 5.0, 3.0, 2.0),
+    "levers": (5.0, 3.0, 2.0, 1.0),
 }
 
 
@@ -34,20 +35,21 @@ def execute(task) -> dict:
 
 def build_tasks(size: StudySize) -> list:
     tasks = (scan_fidelity.tasks(size) + sim_fidelity.tasks(size) + sensing.tasks(size)
-             + calibration_time.tasks(size) + point_rate.tasks(size))
+             + calibration_time.tasks(size) + point_rate.tasks(size) + levers.tasks(size))
     return sorted(tasks, key=lambda t: -t.cost_hint)
 
 
 def assemble(size: StudySize, results: list[tuple[object, dict]]) -> dict:
     """The study's results (JSON-ready apart from non-finite floats) from ``(task, result)`` pairs."""
     by = {a: [(t, r) for t, r in results if t.axis == a] for a in ("scan", "fidelity", "sensing", "coverage",
-                                                                 "calibration", "rate")}
+                                                                 "calibration", "rate", "levers")}
     axes = {
         "scan": scan_fidelity.collect(by["scan"]),
         "fidelity": sim_fidelity.collect(by["fidelity"]),
         "sensing": sensing.collect(by["sensing"] + by["coverage"], size.windows_ms),
         "calibration": calibration_time.collect(by["calibration"]),
         "rate": point_rate.collect(by["rate"]),
+        "levers": levers.collect(by["levers"]),
     }
     points = {
         "scan": scan_fidelity.pareto_points(axes["scan"]),
@@ -55,9 +57,9 @@ def assemble(size: StudySize, results: list[tuple[object, dict]]) -> dict:
         "sensing": sensing.pareto_points(axes["sensing"]),
         "calibration": calibration_time.pareto_points(axes["calibration"]),
         "rate": point_rate.pareto_points(axes["rate"]),
+        "levers": levers.pareto_points(axes["levers"]),
     }
-    points["sensing_detect"] = [dict(p, error=None if p["p_detect"] is None else 1.0 - p["p_detect"])
-                                for p in points["sensing"]]
+    points["sensing_detect"] = [_miss_point(p) for p in points["sensing"]]
     front = {}
     for axis, pts in points.items():
         front[axis] = {}
@@ -67,11 +69,37 @@ def assemble(size: StudySize, results: list[tuple[object, dict]]) -> dict:
             for target in targets:
                 err = 1.0 - target if axis == "sensing_detect" else target
                 c = pareto.cheapest_for(gp, err)
+                ties = [] if c is None else [p["label"] for p in pareto.cost_ties(gp, c, err)]
                 cheapest.append({"target": target, "label": c["label"] if c else None,
-                                 "cost": c["cost"] if c else None, "error": c["error"] if c else None})
+                                 "cost": c["cost"] if c else None, "error": c["error"] if c else None,
+                                 "error_hi": c.get("error_hi", c["error"]) if c else None, "cost_ties": ties})
             front[axis][group] = {"front": pareto.pareto_front(gp), "cheapest": cheapest, "points": gp}
     cpu = sum(r.get("cpu_s", 0.0) + r.get("cal_cpu_s", 0.0) for _, r in results)
     return {"size": size.name, "tasks": len(results), "task_cpu_s": cpu, "axes": axes, "pareto": front}
+
+
+def _miss_point(p: dict) -> dict:
+    """A sensing point with error = 1 - detection probability (its interval turned round)."""
+    ci = p.get("p_detect_ci")
+    out = dict(p, error=None if p["p_detect"] is None else 1.0 - p["p_detect"], error_lo=None, error_hi=None)
+    if ci is not None and p["p_detect"] is not None:
+        out["error_lo"], out["error_hi"] = 1.0 - ci["hi"], 1.0 - ci["lo"]
+    return out
+
+
+def cpu_name() -> str:
+    """The CPU's model name (``/proc/cpuinfo``; ``platform.processor()`` elsewhere): costs in seconds
+    do not carry across machines, so the report names the one that measured them."""
+    import platform
+
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
 
 
 def run_study(size: str | StudySize, executor, progress: bool = True) -> dict:

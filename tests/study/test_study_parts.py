@@ -41,6 +41,46 @@ def test_cheapest_for_a_target_is_the_brute_force_minimum(seed):
             assert got in pareto_front(pts)   # the cheapest meeting a target is always on the front
 
 
+def _iv(c, ch, e, eh, label):
+    return {"group": "g", "label": label, "cost": c, "cost_lo": c - ch, "cost_hi": c + ch,
+            "error": e, "error_lo": e - eh, "error_hi": e + eh}
+
+
+def test_within_the_noise_nothing_is_ranked():
+    """Two settings whose cost and error intervals overlap are both on the front; a target is met only
+    by the upper end of an error interval; a cost tie is named, not ranked."""
+    from sim.study.pareto import cost_ties
+
+    a = _iv(1.00, 0.10, 0.50, 0.20, "a")
+    b = _iv(1.05, 0.10, 0.40, 0.20, "b")      # cheaper/better than neither beyond the noise
+    c = _iv(3.00, 0.10, 0.45, 0.01, "c")      # clearly dearer than a, error within a's: dominated
+    front = pareto_front([a, b, c])
+    assert [p["label"] for p in front] == ["a", "b"]
+    assert cheapest_for([a, b, c], 0.40) is None            # upper ends: a 0.70, b 0.60, c 0.46
+    assert cheapest_for([a, b, c], 0.55)["label"] == "c"   # a's and b's means meet it, their intervals do not
+    assert cheapest_for([a, b, c], 0.65)["label"] == "b"
+    assert cheapest_for([a, b, c], 0.70)["label"] == "a"
+    assert [p["label"] for p in cost_ties([a, b, c], a, 0.70)] == ["b"]
+
+
+@pytest.mark.parametrize("n", [2, 3, 5, 8])
+def test_interval_is_the_student_t_interval(n):
+    from scipy import stats
+
+    from sim.study.stats import abs_bounds, excludes_zero, interval, paired_delta
+
+    x = np.random.default_rng(n).normal(3.0, 0.7, n)
+    iv = interval(x)
+    lo, hi = stats.t.interval(0.95, n - 1, loc=np.mean(x), scale=stats.sem(x))
+    assert iv["lo"] == pytest.approx(lo, rel=1e-12) and iv["hi"] == pytest.approx(hi, rel=1e-12)
+    assert iv["values"] == list(x)
+    d = paired_delta({s: v for s, v in enumerate(x)}, {s: v for s, v in enumerate(x)})
+    assert d["mean"] == 0.0 and not excludes_zero(d) and abs_bounds(d) == (0.0, 0.0)
+    assert excludes_zero(paired_delta({s: v + 1 for s, v in enumerate(x)}, {s: v for s, v in enumerate(x)}))
+    assert interval([1.0])["half"] is None and not excludes_zero(interval([1.0]))
+    assert interval([None, float("nan")]) is None
+
+
 def test_pareto_ignores_points_without_a_number():
     pts = [{"label": "a", "cost": None, "error": 0.0}, {"label": "b", "cost": 1.0, "error": math.nan},
            {"label": "c", "cost": 2.0, "error": 1.0}]

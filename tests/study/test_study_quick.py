@@ -10,7 +10,7 @@ import pytest
 from foveatrack.cli import main
 
 SECTIONS = ("## 1. Scan model fidelity", "## 2. Simulation fidelity", "## 3. Sensing time",
-            "## 4. Calibration time", "## 5. Point rate / channels",
+            "## 4. Calibration time", "## 5. Point rate / channels", "## 6. The levers",
             "## Pareto front: for a target accuracy, the cheapest settings", "## Regenerate")
 
 
@@ -28,12 +28,13 @@ def test_cli_writes_report_plots_and_json(quick):
     for s in SECTIONS:
         assert s in text
     pngs = sorted(p.name for p in (out / "img" / "study").glob("*.png"))
-    assert len(pngs) == 6
+    assert len(pngs) == 7
     for name in pngs:   # every plot is linked from the report, relative to it
         assert f"](img/study/{name})" in text
         assert (out / "img" / "study" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "float32 is not offered" in text
     assert res["size"] == "quick" and meta["command"].startswith("foveatrack study accuracy-vs-time --quick")
+    assert meta["cpu"] and meta["cpu"] in text   # costs in seconds name the machine that measured them
 
 
 def test_report_is_a_function_of_the_saved_results(quick, tmp_path):
@@ -72,6 +73,11 @@ def test_fidelity_reference_deviates_from_itself_by_nothing(quick):
     for f in res["axes"]["fidelity"].values():
         ref = next(r for r in f["rows"] if r["setting"] == f["reference"])
         assert ref["d_error_rms_all_deg"] == 0.0 and ref["d_points_on_target_per_frame"] == 0.0
+        d = ref["delta"]["error_rms_all_deg"]
+        assert d["mean"] == 0.0 and d["half"] == 0.0 and d["n"] == len(f["seeds"]) >= 2
+        assert ref["cost_ratio"]["values"] == [1.0] * len(f["seeds"])
+        for r in f["rows"]:     # every setting's per-seed values are kept, in seed order
+            assert len(r["ci"]["error_rms_all_deg"]["values"]) == len(f["seeds"])
 
 
 def test_sensing_numbers_obey_their_definitions(quick):
@@ -85,6 +91,7 @@ def test_sensing_numbers_obey_their_definitions(quick):
         floor = g.send_delay_s + 70 / g.baud
         for r in t["rows"]:
             assert r["seeds"] == 1
+            assert r["ci"]["p_detect"]["values"] == [r["p_detect"]]
             assert r["p_detect"] == pytest.approx(r["detections"] / r["frames_in_fov"])
             if r["latency_mean_s"] is not None:
                 assert floor <= r["latency_mean_s"] <= floor + r["window_ms"] / 1000
@@ -126,3 +133,20 @@ def test_pareto_tables_in_the_report_are_consistent_with_the_points(quick):
                 err = 1 - c["target"] if axis == "sensing_detect" else c["target"]
                 best = cheapest_for(g["points"], err)
                 assert c["label"] == (best["label"] if best else None)
+                if best is not None:     # recommended only if its whole error interval meets the target
+                    assert c["error_hi"] <= err + 1e-15
+
+
+def test_levers_that_must_not_change_the_loop_do_not(quick):
+    """Recording a run, or carrying an IMU whose gyro is not used, must leave every tracking metric
+    of the same seed as it was; the reference's paired change is zero by construction."""
+    _, res, _ = quick
+    lv = res["axes"]["levers"]
+    rows = {r["lever"]: r for r in lv["rows"]}
+    assert set(rows) == set(__import__("sim.study.levers", fromlist=["LEVERS"]).LEVERS)
+    for lever in ("recording on", "IMU, commands", lv["reference"]):
+        for k in ("error_rms_all_deg", "recon_rms_m"):
+            d = rows[lever]["delta"][k]
+            assert d["values"] == [0.0] * len(lv["seeds"]), (lever, k, d)
+    # the recording's own work costs CPU (written and closed inside the timed block)
+    assert all(v > 1.0 for v in rows["recording on"]["cost_ratio"]["values"])
