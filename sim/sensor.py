@@ -22,7 +22,7 @@ from sim.scan.kernels import RAY_OK
 from sim.scan.model import ScanModel
 from sim.scan.optics import SpeedNoise
 from sim.world import kernels as wk
-from sim.world.trajectories import heading_rad
+from sim.world.trajectories import body_yaw_rad
 
 _NONE = np.zeros(0)          # an effect that is off: no draws
 EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")
@@ -196,7 +196,7 @@ class SceneSensor:
             return
         t_pose = t_ns[idx] * 1e-9 if self.target_motion == "per_point" else np.full(idx.size, t_mid)
         pos = traj.position(t_pose)
-        yaw = heading_rad(traj.velocity(t_pose))
+        yaw = body_yaw_rad(traj, t_pose)
         prims = spec.body.prims
         if not self._has["beam_footprint"]:
             wk.cast_moving_kernel(idx, d_world, pos, yaw, prims, offset, rng_m, prim)

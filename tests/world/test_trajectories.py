@@ -51,3 +51,36 @@ def test_circle_speed_and_heading():
     np.testing.assert_allclose(np.linalg.norm(c.position(t)[:, :2], axis=1), 20.0)
     yaw = tr.heading_rad(c.velocity(np.array([0.0])))
     assert abs(yaw[0] - np.pi / 2) < 1e-12  # counter-clockwise: heading +y at angle 0
+
+
+def _wrap_deg(a):
+    return (np.degrees(a) + 180.0) % 360.0 - 180.0
+
+
+def test_a_body_that_stops_keeps_its_heading():
+    """A waypoint flight heading +y slows to rest at its last waypoint: the body's yaw stays near 90 deg
+    through the stop and while it hovers (it snapped to 0 below 1e-4 m/s: a 90 deg turn in one step)."""
+    w = tr.Waypoints(((10, -5, 2), (10, 5, 2)), 2.0)           # along +y, clamped: v = 0 at both ends
+    t = np.linspace(-1.0, w._t_end + 10.0, 4001)
+    yaw = tr.body_yaw_rad(w, t)
+    assert np.all(np.abs(_wrap_deg(yaw) - 90.0) < 1e-6)       # before the start too: the heading it will have
+    assert np.max(np.abs(_wrap_deg(np.diff(yaw)))) < 1e-6
+
+
+def test_body_yaw_is_a_function_of_the_time_alone():
+    """However the run is cut into frames, each point's yaw is the same (hover lookup on absolute times)."""
+    m = tr.Manual((20, 0, 5), 10.0, 15.0, 5.0, 6.0, seed=3)    # flies 6 s, then hovers
+    t = np.sort(np.random.default_rng(1).uniform(0.0, 12.0, 3000))
+    whole = tr.body_yaw_rad(m, t)
+    pieces = np.concatenate([tr.body_yaw_rad(m, c) for c in np.array_split(t, 37)])
+    assert np.array_equal(whole, pieces)
+    moving = np.linalg.norm(m.velocity(t)[:, :2], axis=1) > 1e-4
+    assert np.array_equal(whole[moving], tr.heading_rad(m.velocity(t[moving])))   # moving: the old heading, bit for bit
+    hover = t > 6.0
+    assert np.ptp(whole[hover]) == 0.0      # one heading while it hovers
+
+
+def test_near_zero_and_zero_speed_give_a_steady_yaw():
+    for v in ((0.0, 0.0, 0.0), (0.0, 1e-5, 0.0), (0.0, 0.0, 0.3)):    # at rest, creeping, climbing
+        yaw = tr.body_yaw_rad(tr.Straight((10, 0, 2), v), np.linspace(0, 20, 400))
+        assert np.all(yaw == 0.0) and np.all(np.isfinite(yaw))
