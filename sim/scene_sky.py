@@ -93,7 +93,7 @@ def _birds(t, w: str, index: int, duration_s: float, seed: int) -> list:
     if centre.max_speed_m_s < slo:
         raise UserError(f"{w}.trajectory: the flock flies at up to {centre.max_speed_m_s:.1f} m/s; birds fly at "
                         f"{slo:g}-{shi:g} m/s")
-    members = sky.flock_offsets(rng, count, radius, centre, b0) if count > 1 else [centre]
+    members = sky.flock_offsets(rng, count, radius, sky.SharedPath(centre), b0) if count > 1 else [centre]
     out = []
     for k, traj in enumerate(members):
         b = min(max(b0 * (1.0 + spread * (2.0 * rng.random() - 1.0)), lo), hi) if count > 1 else b0

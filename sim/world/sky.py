@@ -168,6 +168,32 @@ def flap_schedule(rng: np.random.Generator, frequency_hz: float, duration_s: flo
                         np.array(starts), np.array(kinds))
 
 
+class SharedPath:
+    """A flock centre's trajectory shared by its birds: remembers the last times asked for and what
+    it answered (the birds of a flock ask about the same frame mid-time one after another), and
+    gives a copy of the same values -- the same bits, one evaluation instead of one per bird."""
+
+    def __init__(self, trajectory):
+        self.trajectory = trajectory
+        self.max_speed_m_s = trajectory.max_speed_m_s
+        self._memo: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+    def _ask(self, what: str, t_s):
+        t = np.asarray(t_s, dtype=np.float64).reshape(-1)
+        last = self._memo.get(what)
+        if last is not None and last[0].shape == t.shape and np.array_equal(last[0], t):
+            return last[1].copy()
+        out = getattr(self.trajectory, what)(t)
+        self._memo[what] = (t.copy(), out.copy())
+        return out
+
+    def position(self, t_s):
+        return self._ask("position", t_s)
+
+    def velocity(self, t_s):
+        return self._ask("velocity", t_s)
+
+
 @dataclass(frozen=True)
 class FlockMember:
     """One bird of a flock: the flock centre's trajectory plus the bird's own offset, its slot plus
