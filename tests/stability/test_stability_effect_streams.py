@@ -9,7 +9,8 @@ with each effect removed in turn.  Every other effect's draws are compared with 
 * the per-hit sensor effects (return probability, dropouts, range and angular noise), as the arrays
   their draw functions return, concatenated: the hits per frame follow the head and the scan, so
   the runs may draw different counts, and the sequences must agree on their common length;
-* sunlight and motor speed noise, whose draws depend on the scan alone: the stream's end state.
+* sunlight, stray returns and motor speed noise, whose draws depend on the scan alone: the stream's
+  end state.
 
 Bound: equal to the bit.  On 802524f removing ``uart_drops`` changed the bit errors of most frames
 (the two shared one stream).
@@ -30,8 +31,9 @@ from sim.virtual_uart import VirtualUart
 
 ROOT = Path(__file__).resolve().parents[2]
 EVERY = ["range_noise", "motor_speed_noise", "return_probability", "angular_noise", "dropouts", "sunlight",
-         "beam_footprint", "uart_bit_errors", "uart_drops", "uart_echo", "head_ripple"]
-PARAMS = {"uart_bit_error_rate": 0.01, "uart_drop_rate": 0.02, "dropout_rate": 0.05, "sunlight_rate": 1e-3}
+         "beam_footprint", "uart_bit_errors", "uart_drops", "uart_echo", "head_ripple", "stray_returns"]
+PARAMS = {"uart_bit_error_rate": 0.01, "uart_drop_rate": 0.02, "dropout_rate": 0.05, "sunlight_rate": 1e-3,
+          "stray_rate_hz": 20.0}
 PER_HIT = {"return_probability": "return_draws", "dropouts": "dropout_draws", "range_noise": "range_noise_normals",
            "angular_noise": "angular_noise_normals"}
 
@@ -75,6 +77,8 @@ def _run(effects, monkeypatch):
     loop.run()
     monkeypatch.undo()
     states = {"sunlight": loop.sensor.rngs["sunlight"].bit_generator.state if "sunlight" in effects else None,
+              "stray_returns": (loop.sensor.rngs["stray_returns"].bit_generator.state
+                                if "stray_returns" in effects else None),
               "motor_speed_noise": loop.scan.noise_draws}
     return {e: np.concatenate(v) if v else np.zeros(0) for e, v in drawn.items()}, link, states
 
@@ -115,6 +119,8 @@ def test_removing_one_effect_leaves_every_other_effects_draws(removed, full_run,
         assert np.array_equal(a[:n], b[:n]), f"{effect}'s draws changed when {removed} was removed"
     if removed != "sunlight":
         assert states["sunlight"] == states_all["sunlight"]
+    if removed != "stray_returns":
+        assert states["stray_returns"] == states_all["stray_returns"]
     if removed != "motor_speed_noise":
         assert states["motor_speed_noise"] == states_all["motor_speed_noise"]
     kept_all, flips_all = _link_draws(link_all)
