@@ -38,7 +38,9 @@ Outcomes (:class:`PoseCheckResult` ``kind``):
   estimate (the head looks where the map has nothing yet): nothing is said.
 * ``ok`` -- the best offset is within ``bound_deg`` on each axis the background makes observable,
   and at least ``min_match`` of the points on mapped cells match there: the offset is the dead
-  reckoning's drift, and the driver corrects it (:meth:`foveatrack.tracker.Tracker.correct_pose`).
+  reckoning's drift, and the driver corrects it (:meth:`foveatrack.tracker.Tracker.correct_pose`), by
+  ``correction_gain`` of it (each check is a fresh measurement against the map: half of each averages
+  their noise, ~0.1-0.2 deg in pan, and still follows a drift).
 * ``mismatch`` -- the best offset is beyond ``bound_deg``, or nothing in the window matches: the
   pose is unknown (the daemon's ``head_pose_unknown``, STOP, re-homing where ``[head] on_reconnect =
   "home"``).
@@ -93,6 +95,9 @@ class PoseCheckConfig:
     min_contrast : float in (0, 1]     an axis is observable when the best match stands this far above the
                                        median match along it
     min_correction_deg : float >= 0    smaller offsets are left alone (noise)
+    correction_gain : float in (0, 1]  the share of an offset applied: each check measures the pose anew
+                                       against the map, so a gain below 1 averages the checks' noise (0.5:
+                                       the error's spread 1/sqrt(3) of one check's) and still follows a drift
     plateau_frac : float in [0, 0.1]   offsets whose match is within this of the best are its plateau
     extend_below_deg : float >= 0      frames at rest checked within this extend the map
     map_frames : int >= 1              frames at rest at the start pose that make the first map
@@ -112,12 +117,13 @@ class PoseCheckConfig:
     range_tol_m: float = 0.15
     range_tol_rel: float = 0.01
     min_range_m: float = 1.0
-    max_points: int = 1500
+    max_points: int = 1000
     min_points: int = 200
     min_coverage: float = 0.3
     min_match: float = 0.6
     min_contrast: float = 0.08
     min_correction_deg: float = 0.1
+    correction_gain: float = 0.5
     plateau_frac: float = 0.003
     extend_below_deg: float = 0.5
     map_frames: int = 10
@@ -156,6 +162,7 @@ class PoseCheckConfig:
                   ("min_coverage", 0 < c.min_coverage <= 1, "in (0, 1]"), ("min_match", 0 < c.min_match <= 1, "in (0, 1]"),
                   ("min_contrast", 0 < c.min_contrast <= 1, "in (0, 1]"),
                   ("min_correction_deg", c.min_correction_deg >= 0, ">= 0"),
+                  ("correction_gain", 0 < c.correction_gain <= 1, "in (0, 1]"),
                   ("plateau_frac", 0 <= c.plateau_frac <= 0.1, "in [0, 0.1]"),
                   ("extend_below_deg", c.extend_below_deg >= 0, ">= 0"), ("map_frames", c.map_frames >= 1, ">= 1"),
                   ("slow_deg_s", c.slow_deg_s > 0, "> 0"), ("rest_deg_s", c.rest_deg_s > 0, "> 0"), ("period_s", c.period_s >= 0, ">= 0"),
@@ -466,7 +473,9 @@ class PoseCheck:
         return res
 
     def correction(self, res: PoseCheckResult) -> tuple[float, float]:
-        """The offset [deg] a driver applies for an ``ok`` result: (0, 0) below ``min_correction_deg``."""
+        """The offset [deg] a driver applies for an ``ok`` result: ``correction_gain`` of the offset
+        found, (0, 0) below ``min_correction_deg``."""
         if res.kind != "ok" or max(abs(res.dpan_deg), abs(res.dtilt_deg)) < self.cfg.min_correction_deg:
             return 0.0, 0.0
-        return res.dpan_deg, res.dtilt_deg
+        g = self.cfg.correction_gain
+        return g * res.dpan_deg, g * res.dtilt_deg

@@ -50,6 +50,7 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.daemon.config import DaemonConfig
+from foveatrack.daemon.pose_guard import PoseGuard
 from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, format_status
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
 from foveatrack.gate import CommandGate
@@ -198,6 +199,7 @@ class Daemon:
         self.pose_state: str | None = None  # None (known), "unknown", "homing" (after a head reconnect)
         self._home_steps: list = []         # (host time, step) of the homing under way
         self.last_frame_end_s: float | None = None
+        self.pose_guard = PoseGuard(config)   # the head's pose against the background ([pose_check])
 
     # -------------------------------------------------------------------------------- setup
     def _meta(self) -> dict:
@@ -421,6 +423,7 @@ class Daemon:
             self.imu_feed.restart(t0_s)
         self._last_send_t = -math.inf
         self.gate.head_cmd = STOP
+        self.pose_guard.rebased()
 
     def _record(self, fn, *args):
         if self.recorder is not None:
@@ -435,6 +438,9 @@ class Daemon:
             return
         t_begin = time.monotonic()
         frame = strip_no_return(frame)
+        if self.pose_guard.before_frame(self, frame, t_begin):   # mapped, or its background disagrees
+            self.last_pts = frame.n_points
+            return
         now_s = self.sensor_now_s()
         send_t = self._send_time((frame.t_end_s if now_s is None else max(now_s, frame.t_end_s))
                                  + float(np.median(self._compute_s)))
@@ -482,6 +488,7 @@ class Daemon:
         from foveatrack.detection import compile_all
 
         compile_all()   # before data flows: a first-call compile would stall the first frame
+        self.pose_guard.compile()
         self._open()
         old = {}
         if self.install_signals and threading.current_thread() is threading.main_thread():
@@ -709,6 +716,8 @@ class Daemon:
         notes = [self.rx.unit_note] if getattr(self, "rx", None) is not None and self.rx.unit_note else []
         if self.cfg.head.speed_table == "nominal":
             notes.append("head UNCALIBRATED (nominal speed table)")
+        if self.pose_guard.warnings:
+            notes.append("head speed table off (background)")
         if getattr(self, "head", None) is not None and self.head.refused:
             notes.append("head path holds another device: refused")
         lost = self.lost_pct()
