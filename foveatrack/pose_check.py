@@ -55,9 +55,10 @@ through it is *unobservable* in that frame: it is neither corrected nor taken as
 a mismatch.  Pan is checked only where the background has structure in azimuth (walls, trees,
 poles, buildings).
 
-A speed table from another unit: the pan corrections are, to first order, the table's relative
-error times the pan travel since the previous check.  :class:`ScaleWitness` fits that ratio and warns
-when it exceeds ``table_warn_rel`` over at least ``table_warn_travel_deg`` of travel.
+A speed table from another unit: the pan drift between two checks is, to first order, the table's
+relative error times the pan travel between them.  :class:`ScaleWitness` fits that ratio and warns
+when it exceeds ``table_warn_rel`` (and 4 of its standard errors) over at least
+``table_warn_travel_deg`` of travel.
 
 The hot loop (every point of a frame, for every candidate offset) is the numba kernel
 :func:`match_counts_kernel`; its plain-numpy twin is in ``tests/test_pose_check.py``.
@@ -131,7 +132,7 @@ class PoseCheckConfig:
     rest_deg_s: float = 1.0
     period_s: float = 0.5
     table_warn_rel: float = 0.1
-    table_warn_travel_deg: float = 60.0
+    table_warn_travel_deg: float = 30.0
 
     @classmethod
     def from_mapping(cls, data: Mapping, where: str = "[pose_check]") -> "PoseCheckConfig":
@@ -374,35 +375,63 @@ def check_pose(q, pan_deg, tilt_deg, bg: BackgroundMap, cfg: PoseCheckConfig) ->
 
 
 class ScaleWitness:
-    """Fits ``pan correction = k * pan travel since the previous check`` (least squares through 0);
-    ``k`` is minus the speed table's relative error (a table 10 % fast overestimates every turn by 10
-    %, and the background pulls it back by -10 % of the travel)."""
+    """Fits ``pan drift = k * pan travel`` (least squares through 0) over the checks, each a point of
+    the drift the dead reckoning alone would have had by then (the offset found plus every correction
+    applied) against the pan travel it reckoned (signed, unwrapped), both since a reference check;
+    ``-k`` is the speed table's relative error (a table 10 % fast overestimates every turn by 10 %: the
+    background finds the head 10 % of the travel short of the estimate).  Cumulative, so one check's
+    noise is not differenced into every step.  The table's error depends on the byte (units
+    differ most at low bytes: unit 7's speeds are 40 % above unit 3's at byte 10, 4 % at byte 50), so
+    ``k`` is the error of the bytes the run used, weighted by their travel.
 
-    def __init__(self, warn_rel: float, warn_travel_deg: float):
-        self.warn_rel, self.warn_travel_deg = warn_rel, warn_travel_deg
-        self.sxy = self.sxx = 0.0
+    It warns once the travel reaches ``warn_travel_deg``, ``|k|`` reaches ``warn_rel``, and ``k`` stands
+    at least ``sigmas`` standard errors from 0 (each check's pan offset is noisy by ~0.1-0.2 deg)."""
+
+    def __init__(self, warn_rel: float, warn_travel_deg: float, sigmas: float = 4.0):
+        self.warn_rel, self.warn_travel_deg, self.sigmas = warn_rel, warn_travel_deg, sigmas
+        self.sxy = self.sxx = self.syy = 0.0
+        self.n = 0
         self.travel_deg = 0.0
         self.warned = False
+        self._last_travel = 0.0
 
-    def add(self, travel_deg: float, correction_deg: float) -> None:
-        self.sxy += travel_deg * correction_deg
+    def restart(self) -> None:
+        """A new reference (the tracker was rebased): the next point's travel counts from 0 again."""
+        self._last_travel = 0.0
+
+    def add(self, travel_deg: float, drift_deg: float) -> None:
+        """The dead reckoning's pan travel [deg] since the reference and its drift [deg] (true - estimate,
+        corrections undone) since then."""
+        self.sxy += travel_deg * drift_deg
         self.sxx += travel_deg * travel_deg
-        self.travel_deg += abs(travel_deg)
+        self.syy += drift_deg * drift_deg
+        self.n += 1
+        self.travel_deg += abs(travel_deg - self._last_travel)
+        self._last_travel = travel_deg
 
     @property
     def table_error_rel(self) -> float | None:
         """The speed table's relative error seen so far (+ = the table's speeds too high), or None."""
         return -self.sxy / self.sxx if self.sxx > 0 else None
 
+    @property
+    def table_error_sigma(self) -> float | None:
+        """The standard error of :attr:`table_error_rel`, or None."""
+        if self.n < 3 or self.sxx <= 0:
+            return None
+        ss = max(self.syy - self.sxy * self.sxy / self.sxx, 0.0)
+        return math.sqrt(ss / (self.n - 1) / self.sxx)
+
     def warning(self) -> str | None:
         """A warning, once, when the table looks like another unit's."""
-        e = self.table_error_rel
-        if self.warned or e is None or self.travel_deg < self.warn_travel_deg or abs(e) < self.warn_rel:
+        e, s = self.table_error_rel, self.table_error_sigma
+        if (self.warned or e is None or s is None or self.travel_deg < self.warn_travel_deg
+                or abs(e) < self.warn_rel or abs(e) < self.sigmas * s):
             return None
         self.warned = True
-        return (f"the background says the pan speed table is {100 * e:+.0f} % off over {self.travel_deg:.0f} deg of "
-                "pan travel: a speed table of another unit, or a head that slips? Measure this head's table "
-                "(foveatrack calibrate) and set [head] speed_table")
+        return (f"the background says the pan speed table is {100 * e:+.0f} % (+-{100 * s:.0f} %) off over "
+                f"{self.travel_deg:.0f} deg of pan travel: a speed table of another unit, or a head that slips? "
+                "Measure this head's table (foveatrack calibrate) and set [head] speed_table")
 
 
 class PoseCheck:
@@ -411,7 +440,8 @@ class PoseCheck:
     Drivers call :meth:`map_frame` at the known start pose until :attr:`mapped`, then :meth:`on_frame`
     with each frame and the tracker's dead reckoning (``angles_at(t_s) -> (pan, tilt, ...)``); the result
     is None (not checked) or a :class:`PoseCheckResult`, whose offset the driver applies (``ok``:
-    :meth:`correction`) or takes as an unknown pose (``mismatch``).
+    :meth:`correction`, which also tells the witness of the speed table what was applied) or takes as an
+    unknown pose (``mismatch``).
     """
 
     def __init__(self, cfg: PoseCheckConfig, lidar_offset_m=(0.0, 0.0, 0.0)):
@@ -421,7 +451,8 @@ class PoseCheck:
         self.next_check_s = -math.inf
         self.checks = {k: 0 for k in KINDS}
         self.witness = ScaleWitness(cfg.table_warn_rel, cfg.table_warn_travel_deg)
-        self._last_pan: float | None = None
+        self._applied_pan = 0.0          # pan corrections applied since the reference [deg]
+        self._ref: list | None = None    # [uncorrected pan at the last check, travel so far, drift at the reference]
 
     @property
     def mapped(self) -> bool:
@@ -439,7 +470,9 @@ class PoseCheck:
         """The tracker restarted (a homing, a new lidar clock): the next check may come at once, and the
         pan travel starts again from the new pose."""
         self.next_check_s = -math.inf
-        self._last_pan = None
+        self._applied_pan = 0.0
+        self._ref = None
+        self.witness.restart()
 
     def on_frame(self, xyz, t_ns, t_start_s: float, t_end_s: float, angles_at) -> PoseCheckResult | None:
         """Check one frame (points ``xyz`` (N, 3) lidar frame, times ``t_ns`` (N,)) against the map,
@@ -464,9 +497,16 @@ class PoseCheck:
         self.checks[res.kind] += 1
         if res.kind == "ok":
             if res.pan_observable:
-                if self._last_pan is not None:
-                    self.witness.add(((pans[1] - self._last_pan + 180.0) % 360.0) - 180.0, res.dpan_deg)
-                self._last_pan = pans[1] + res.dpan_deg
+                # the dead reckoning without the corrections: where it would say the head is, and how far
+                # the background puts the head from that
+                u = float(pans[1]) - self._applied_pan
+                drift = res.dpan_deg + self._applied_pan
+                if self._ref is None:
+                    self._ref = [u, 0.0, drift]
+                else:
+                    self._ref[1] += ((u - self._ref[0] + 180.0) % 360.0) - 180.0
+                    self._ref[0] = u
+                    self.witness.add(self._ref[1], drift - self._ref[2])
             at_rest = turn <= c.rest_deg_s * dur
             if at_rest and max(abs(res.dpan_deg), abs(res.dtilt_deg)) <= c.extend_below_deg:
                 self.map.add(q, pan + res.dpan_deg, tilt + res.dtilt_deg, only_new=True)
@@ -478,4 +518,5 @@ class PoseCheck:
         if res.kind != "ok" or max(abs(res.dpan_deg), abs(res.dtilt_deg)) < self.cfg.min_correction_deg:
             return 0.0, 0.0
         g = self.cfg.correction_gain
+        self._applied_pan += g * res.dpan_deg      # the driver applies it: the witness undoes it
         return g * res.dpan_deg, g * res.dtilt_deg

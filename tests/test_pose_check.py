@@ -201,18 +201,24 @@ def test_reconstructor_shift_moves_the_estimate_from_then_on_only():
 
 
 def test_the_scale_witness_names_a_table_of_another_unit_once():
+    rng = np.random.default_rng(3)
     w = ScaleWitness(0.1, 60.0)
-    for travel in (10.0, -15.0, 20.0, 12.0):          # a table 14 % fast: corrections -14 % of the travel
-        w.add(travel, -0.14 * travel)
+    travel = 0.0
+    for step in (10.0, -15.0, 20.0, 12.0):            # a table 14 % fast: the head 14 % of the travel short
+        travel += step
+        w.add(travel, -0.14 * travel + rng.normal(0, 0.15))
     assert w.warning() is None                         # 57 deg of travel: not yet
-    w.add(-8.0, 0.14 * 8.0)
+    w.add(travel - 8.0, -0.14 * (travel - 8.0))
     msg = w.warning()
-    assert msg and "+14 %" in msg and "speed_table" in msg
+    assert msg and "speed_table" in msg and "65 deg of pan travel" in msg, msg
+    assert w.table_error_rel == pytest.approx(0.14, abs=0.015)
     assert w.warning() is None
+    # a good table: the checks' noise alone (0.2 deg a check) over a long back-and-forth never warns
     ok = ScaleWitness(0.1, 60.0)
-    for travel in (30.0, -30.0, 40.0):
-        ok.add(travel, 0.03 * travel)
-    assert ok.warning() is None and ok.table_error_rel == pytest.approx(-0.03)
+    for t in np.arange(300) * 0.5:
+        ok.add(20.0 * math.sin(0.3 * t), float(rng.normal(0, 0.2)))
+    assert ok.travel_deg > 60.0 and ok.warning() is None
+    assert abs(ok.table_error_rel) < 4 * ok.table_error_sigma
 
 
 def test_config_errors_name_the_key():

@@ -82,6 +82,8 @@ def test_a_head_that_lost_power_behind_a_live_link_is_pose_unknown_within_2_s_an
     finally:
         stop_all(procs)
     assert not unknown_before and abs(before["pan_deg"]) > 7.0
+    # the head's own table: the background never called it another unit's
+    assert not [e for e in log_events(log) if e["event"] == "warning" and "speed table" in e["message"]]
     # no mismatch before the cut: the check said nothing wrong of a head that was where it was told
     events = log_events(log)
     assert got["why"] == "pose_check", got
@@ -108,3 +110,21 @@ def test_a_head_that_lost_power_behind_a_live_link_is_pose_unknown_within_2_s_an
     # replay repeats the corrections and the homing: the same detections and commands
     c = replay_recording(rec).comparison
     assert not c["partial"] and c["detections_equal"] and c["commands_equal"], c
+
+
+def test_a_speed_table_of_another_unit_is_a_warning_within_a_minute(tmp_path):
+    # issue 26: a unit-3 table on a unit-7 head ran 30 s with pan 8.6 deg off and no warning
+    procs, truth, rec, log = _setup(tmp_path, unit_seed=7, table_unit=3)
+    try:
+        t_map = event(log, "pose_map")["t_mono_s"]
+        warn = wait_for(lambda: next((e for e in log_events(log) if e["event"] == "warning"
+                                      and "speed table" in e["message"]), None), 120, "the speed-table warning",
+                        list(procs.values()))
+        assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
+    finally:
+        stop_all(procs)
+    print(f"warned {warn['t_mono_s'] - t_map:.1f} s after the map: {warn['message']}")
+    assert warn["t_mono_s"] - t_map <= 60.0, warn
+    # unit 7 turns faster than unit 3 at the low bytes a tracker uses: the table's speeds are too low
+    assert warn["table_error_rel"] < -0.1, warn
+    assert event(log, "stop")["stats"].get("pose_checks_mismatch", 0) == 0
