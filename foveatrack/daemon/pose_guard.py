@@ -19,6 +19,21 @@ the daemon does with each result.
     background says the table is another unit's.
 
 The map is kept across a homing or a new lidar clock: the world did not move.
+
+Identity of a link that reappears (issue 26: a link re-created to another head was followed, and
+drove it).  The path's device identity (:mod:`foveatrack.serial_identity`) accepts a re-created link
+(a restarted head server, udev's by-id link of a replugged adapter), so the head behind it must answer
+as ours before it is driven:
+
+* its Pelco address: a position query answered from our address (a head with feedback) is logged as
+  ``head_identity`` with ``by = "address"`` and the pose it reports; the paper's head never answers;
+* the pose check: our lidar sits on our head, so once the homing has moved the head behind the link, the
+  background must say the lidar is at home.  The first conclusive check after the homing decides:
+  ``ok`` -> ``head_identity`` (``by = "pose_check"``, verified); ``mismatch`` -> ``head_identity_refused``
+  (another head moved, ours did not): the daemon writes nothing more to the link (no STOP, no homing)
+  until it is restarted with the right head on the link.
+
+Without ``[pose_check]`` and without an answer, ``head_identity`` says ``verified = false`` and why.
 """
 
 from __future__ import annotations
@@ -35,6 +50,7 @@ class PoseGuard:
         pc = config.pose_check
         self.check = PoseCheck(pc, config.tracker.lidar_offset_m) if pc.enabled else None
         self.warnings: list[str] = []
+        self.identity_pending = False   # a link came back: the first conclusive check after homing decides
 
     def compile(self) -> None:
         """Compile (or load from numba's cache) the kernel before data flows."""
@@ -62,6 +78,23 @@ class PoseGuard:
             return True
         return self._check(d, frame, now)
 
+    def link_back(self, d) -> None:
+        """The head's link reappeared: ask the head behind it for its position (answers prove our Pelco
+        address), and leave the rest to the pose check after the homing (module docstring)."""
+        h = d.cfg.head
+        pose = None
+        query = getattr(d.head.client, "query_position", None)
+        if query is not None:
+            pose = query()
+        if pose is not None:
+            d.log.event("head_identity", verified=True, by="address", address=h.address, port=h.port,
+                        pan_deg=pose[0], tilt_deg=pose[1])
+        self.identity_pending = self.check is not None
+        if self.check is None and pose is None:
+            d.log.event("head_identity", verified=False, port=h.port, address=h.address,
+                        why="no answer to a position query (the paper's head never answers) and no [pose_check] "
+                            "to see the head move the lidar: the head behind the link is driven unverified")
+
     def rebased(self) -> None:
         if self.check is not None:
             self.check.rebased()
@@ -74,6 +107,12 @@ class PoseGuard:
         if res is None:
             return False
         d.counters[f"pose_checks_{res.kind}"] += 1
+        if self.identity_pending and res.kind != "inconclusive":
+            self.identity_pending = False
+            if res.kind == "mismatch":
+                return self._refuse(d, frame, res, now)
+            d.log.event("head_identity", verified=True, by="pose_check", port=d.cfg.head.port,
+                        dpan_deg=round(res.dpan_deg, 3), dtilt_deg=round(res.dtilt_deg, 3))
         if res.kind == "ok":
             dp, dt = self.check.correction(res)
             t_s = frame.t_start_s
@@ -106,3 +145,22 @@ class PoseGuard:
             d.counters["frames_pose_unknown"] += 1
             return True
         return False
+
+    def _refuse(self, d, frame, res, now: float) -> bool:
+        """The head behind a reappeared link moved, but our lidar did not: another head.  Nothing more is
+        written to the link (the daemon's pose state "refused")."""
+        from foveatrack.daemon.runtime import _job_event
+
+        h = d.cfg.head
+        why = (f"[head] port {h.port} reappeared and was homed to {list(h.home_deg)} deg, but the lidar's background "
+               f"puts the lidar {res.dpan_deg:+.1f} deg pan / {res.dtilt_deg:+.1f} deg tilt from there (match "
+               f"{res.match:.2f}): the head behind the link is not the one the lidar sits on; nothing more is "
+               "written to it; restart the daemon once the right head is on the link")
+        d.pose_state = "refused"
+        d.counters["head_identity_refused"] += 1
+        d.counters["frames_pose_unknown"] += 1
+        d.log.event("head_identity_refused", port=h.port, why=why, frames_sent=d.head.stats.frames_sent,
+                    **res.as_event())
+        d._record(_job_event, ns(frame.t_end_s), {"event": "head_identity_refused", "why": why})
+        print(f"foveatrack daemon: {why}", file=__import__("sys").stderr, flush=True)
+        return True

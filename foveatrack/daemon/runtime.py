@@ -391,6 +391,8 @@ class Daemon:
 
     def _pose_tick(self, now: float) -> None:
         h = self.cfg.head
+        if self.pose_state == "refused":    # another head behind the link: nothing is written to it
+            return
         if not self.head.connected or h.on_reconnect == "stop":
             # STOP every second: while the link is down each try is the reopen, so the first frame a
             # reopened link carries is STOP; with "stop" it holds the head until the daemon restarts
@@ -601,13 +603,14 @@ class Daemon:
                     head_up = self.head.connected
                     self.counters["head_link_up" if head_up else "head_link_down"] += 1
                     self.log.event("head_connected" if head_up else "head_disconnected", stats=asdict(self.head.stats))
-                    if c.head.on_reconnect != "keep":
+                    if c.head.on_reconnect != "keep" and self.pose_state != "refused":
                         if not head_up and self.pose_state is None:
                             self._pose_unknown(now, "link_lost")
                         elif head_up:
                             if self.pose_state is None:     # lost and back between two ticks
                                 self._pose_unknown(now, "link_lost")
-                            self._reconnected(now)
+                            self.pose_guard.link_back(self)   # is it our head? (pose_guard: identity)
+                            self._reconnected(time.monotonic())   # (the query took a while: the homing's quiet line counts from now)
                 if self.pose_state is not None:
                     self._pose_tick(now)
                 if now >= next_progress:
@@ -701,7 +704,7 @@ class Daemon:
         out = self.last_out
         state = "watchdog" if watchdog else ("no lidar" if out is None else out.state.value)
         if self.pose_state is not None:
-            state = "pose unknown" if self.pose_state == "unknown" else "homing"
+            state = {"unknown": "pose unknown", "refused": "head refused"}.get(self.pose_state, "homing")
         elif self.head.refused:
             state = "head refused" 
         self.status.show(format_status(rate, getattr(self, "last_pts", 0), state,
@@ -738,7 +741,9 @@ class Daemon:
     def _shutdown(self, old_handlers) -> None:
         self.stop_ev.set()
         t_s = self.sensor_now_s()
-        if t_s is not None:
+        if self.pose_state == "refused":     # another head behind the link: not even a STOP
+            pass
+        elif t_s is not None:
             t_s = self._send_time(t_s)
             self.tracker.command_sent(t_s, STOP)
             rec, _ = self._send(STOP, "shutdown", t_s)

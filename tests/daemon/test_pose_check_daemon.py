@@ -128,3 +128,41 @@ def test_a_speed_table_of_another_unit_is_a_warning_within_a_minute(tmp_path):
     # unit 7 turns faster than unit 3 at the low bytes a tracker uses: the table's speeds are too low
     assert warn["table_error_rel"] < -0.1, warn
     assert event(log, "stop")["stats"].get("pose_checks_mismatch", 0) == 0
+
+
+def test_a_link_recreated_to_another_head_is_refused_once_the_background_says_so(tmp_path):
+    # issue 26: the link re-created to a different head (unit 7) was connected within a second and driven
+    # (97 commands, 14.5 deg).  Our lidar sits on our head: the other head's homing moves nothing it sees.
+    procs, truth, rec, log = _setup(
+        tmp_path, head_extra='on_reconnect = "home"\nhome_pan_deg = 0.0\nhome_tilt_deg = 0.0\nhome_wait_s = 3.0')
+    try:
+        wait_for(lambda: (rows := read_truth(str(truth))) and abs(rows[-1]["pan_deg"]) > 7.0, 120,
+                 "the head to turn 7 deg", list(procs.values()))
+        procs["head"].kill()              # our head's link goes (its pose stays where it was: the lidar sees it)
+        procs["head"].wait(5)
+        time.sleep(1.0)
+        procs["other"] = start(["gimbal", "serve", "--link", str(tmp_path / "head"), "--truth",
+                                str(tmp_path / "other.jsonl"), "--unit-seed", "7"], tmp_path / "o.out", tmp_path / "o.err")
+        refused = wait_for(lambda: event(log, "head_identity_refused"), 90, "the refusal", [procs["daemon"]])
+        n = len([e for e in log_events(log) if e["event"] == "progress"])
+        wait_for(lambda: len([e for e in log_events(log) if e["event"] == "progress"]) >= n + 3, 60,
+                 "3 s more of the daemon", [procs["daemon"]])
+        assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
+    finally:
+        stop_all(procs)
+    events = log_events(log)
+    names = [e["event"] for e in events]
+    # the link came back (the re-created link names "the head" to the device check), was homed, and the
+    # first check after the homing found the lidar where the other head's move could not have put it
+    assert names.index("head_connected") < names.index("head_homed") < names.index("head_identity_refused")
+    assert "not the one the lidar sits on" in refused["why"] and str(tmp_path / "head") in refused["why"]
+    assert abs(refused["dpan_deg"]) > 3.0 or refused["match"] < 0.6, refused
+    assert not [e for e in events if e["event"] == "head_identity" and e.get("verified")]
+    assert "not the one the lidar sits on" in (tmp_path / "d.err").read_text()
+    # nothing written to the other head after the refusal: no tracking, no STOP, not at shutdown either
+    stats = event(log, "stop")["stats"]
+    assert stats["head_frames_sent"] == refused["frames_sent"], (stats["head_frames_sent"], refused["frames_sent"])
+    assert stats["head_identity_refused"] == 1
+    # what it did get: the homing's STOP and two absolute sets, and no tracker command
+    other = read_truth(str(tmp_path / "other.jsonl"))
+    assert max(abs(r["pan_deg"]) for r in other) < 0.5, "the other head was not turned by tracking"
