@@ -166,3 +166,31 @@ def test_a_link_recreated_to_another_head_is_refused_once_the_background_says_so
     # what it did get: the homing's STOP and two absolute sets, and no tracker command
     other = read_truth(str(tmp_path / "other.jsonl"))
     assert max(abs(r["pan_deg"]) for r in other) < 0.5, "the other head was not turned by tracking"
+
+
+def test_the_same_head_back_on_its_link_is_verified_by_the_background_and_tracked_again(tmp_path):
+    # the counterpart of the refusal: our own head restarted (at its power-on pose) behind the link; the
+    # homing moves the lidar, and the background agrees
+    procs, truth, rec, log = _setup(
+        tmp_path, head_extra='on_reconnect = "home"\nhome_pan_deg = 0.0\nhome_tilt_deg = 0.0\nhome_wait_s = 3.0')
+    try:
+        wait_for(lambda: (rows := read_truth(str(truth))) and abs(rows[-1]["pan_deg"]) > 7.0, 120,
+                 "the head to turn 7 deg", list(procs.values()))
+        procs["head"].kill()
+        procs["head"].wait(5)
+        time.sleep(1.0)
+        procs["head"] = start(["gimbal", "serve", "--link", str(tmp_path / "head"), "--truth", str(truth),
+                               "--unit-seed", "3"], tmp_path / "head2.out", tmp_path / "head2.err")
+        ok = wait_for(lambda: next((e for e in log_events(log) if e["event"] == "head_identity"), None), 90,
+                      "the head's identity", [procs["daemon"]])
+        f0 = _frames(log)
+        wait_for(lambda: _frames(log) >= f0 + 30, 120, "30 frames after it", [procs["daemon"], procs["lidar"]])
+        assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
+    finally:
+        stop_all(procs)
+    assert ok["verified"] and ok["by"] == "pose_check", ok
+    names = [e["event"] for e in log_events(log)]
+    assert "head_identity_refused" not in names and names.index("head_homed") < names.index("head_identity")
+    stats = event(log, "stop")["stats"]
+    assert stats["frames"] > 0 and stats.get("pose_checks_mismatch", 0) == 0
+    assert stats["commands_written"] > 0
