@@ -231,3 +231,28 @@ def test_config_errors_name_the_key():
     with pytest.raises(UserError, match="enabled"):
         PoseCheckConfig.from_mapping({"enabled": 1})
     assert PoseCheckConfig.from_mapping({"enabled": True, "map_frames": 5}).map_frames == 5
+
+
+def test_a_daemon_config_names_the_file_and_the_pose_check_key(tmp_path):
+    from foveatrack.daemon import load_config
+
+    base = """
+[lidar]
+sensor_ip = "127.0.0.1"
+host_ip = "127.0.0.1"
+[head]
+port = "/dev/null"
+"""
+    p = tmp_path / "d.toml"
+    p.write_text(base + "[pose_check]\nenabled = true\nbound_deg = 0.0\n")
+    with pytest.raises(UserError) as e:
+        load_config(p)
+    assert str(p) in str(e.value) and "[pose_check]" in str(e.value) and "bound_deg" in str(e.value)
+    p.write_text("pose_check = 3\n" + base)
+    with pytest.raises(UserError, match=r"\[pose_check\] must be a table"):
+        load_config(p)
+    p.write_text(base + "[pose_check]\nenabled = true\nbound_deg = 2.0\n")
+    cfg = load_config(p)
+    assert cfg.pose_check.enabled and cfg.pose_check.bound_deg == 2.0
+    p.write_text(base)
+    assert not load_config(p).pose_check.enabled
