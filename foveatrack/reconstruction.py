@@ -236,6 +236,34 @@ class _AxisIntegrator:
             self.forgot_before = self.times[0]
 
 
+    def shift(self, t: float, d: float) -> None:
+        """From ``t`` on, the angle is ``d`` [deg] more: a correction of the dead reckoning by an outside
+        witness (:mod:`foveatrack.pose_check`).  A knot at ``t`` continues the motion in force there
+        (speed, ramp, byte time) from the shifted angle; the later knots move by ``d`` with it."""
+        i = bisect.bisect_right(self.times, t)
+        if i == 0:                       # before the start pose: the whole history moves
+            later = self.knots
+        else:
+            k = self.knots[i - 1]
+            ang, v = self._advance(k, t)
+            if k.idx >= 0:
+                S = k.S.copy()
+                S[k.idx] += k.direction * (t - k.t)
+                var_bytes = float(((self.sig_b * S) ** 2).sum())
+            else:
+                S, var_bytes = k.S, k.var_bytes
+            ang += d
+            if self.wrap:
+                ang = wrap_deg(ang)
+            knot = _Knot(t, ang, v, k.v_tgt, k.idx, k.direction, S, k.var_timing, var_bytes, k.sig_run,
+                         float(S[k.idx]) if k.idx >= 0 else 0.0)
+            self.knots.insert(i, knot)
+            self.times.insert(i, t)
+            later = self.knots[i + 1:]
+        for k in later:
+            k.angle = wrap_deg(k.angle + d) if self.wrap else k.angle + d
+
+
 class HeadPose(abc.ABC):
     """What a source of head angles gives the tracker once it has ``angles_at(t_s)`` -> ``(pan_deg,
     tilt_deg, sigma_pan_deg, sigma_tilt_deg)`` and ``lidar_offset_m``: the head's rotation, points and
@@ -338,6 +366,14 @@ class Reconstructor(HeadPose):
             if t_first <= t < t_eff:
                 carried[t] = ans
         self._n_carried = len(carried)
+
+    def shift(self, t_s: float, dpan_deg: float, dtilt_deg: float) -> None:
+        """From ``t_s`` on, the estimated angles are ``(dpan_deg, dtilt_deg)`` more (the pose check's
+        correction of the drift, :mod:`foveatrack.pose_check`); the commands' timing is kept."""
+        self.pan.shift(t_s, dpan_deg)
+        self.tilt.shift(t_s, dtilt_deg)
+        self._memo = {}
+        self._n_carried = 0
 
     def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
         """(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg) at ``t_s``; pan wrapped to (-180, 180].

@@ -348,6 +348,17 @@ class Tracker:
         cfg = replace(self.config, pan0_deg=float(pan_deg), tilt0_deg=float(tilt_deg))
         return Tracker(cfg, self.table, t0_s=float(t0_s))
 
+    def correct_pose(self, t_s: float, dpan_deg: float, dtilt_deg: float) -> bool:
+        """Move the dead reckoning by ``(dpan_deg, dtilt_deg)`` from sensor time ``t_s`` on (the pose
+        check's drift correction, :mod:`foveatrack.pose_check`; the daemon's ``pose_corrected`` event,
+        which replay repeats).  False where the attitude is not dead-reckoned from the commands
+        (``attitude = "gyro"``: the gyro is its own witness), and nothing is changed."""
+        shift = getattr(self.recon, "shift", None)
+        if shift is None:
+            return False
+        shift(float(t_s), float(dpan_deg), float(dtilt_deg))
+        return True
+
     # ------------------------------------------------------------------------------------------
     def process(self, frame: Frame, send_t_s: float | None = None) -> TrackOutput:
         cfg = self.config

@@ -29,6 +29,12 @@ from dataclasses import dataclass
 
 import serial
 
+try:
+    from termios import error as TermiosError   # tcdrain on a pty whose other side went away (EIO)
+except ImportError:  # pragma: no cover - not POSIX
+    class TermiosError(Exception):
+        pass
+
 from gimbal.errors import GimbalError
 from gimbal.framing import PelcoParser
 from gimbal.pelco import (
@@ -201,7 +207,9 @@ class HeadClient:
         except serial.SerialTimeoutException:
             self.stats.write_timeouts += 1
             return False
-        except (serial.SerialException, OSError):
+        except (serial.SerialException, OSError, TermiosError):
+            # (pyserial's flush is termios.tcdrain, whose error is no OSError: a head server killed
+            # between the write and the drain raised it out of the daemon's loop)
             self.stats.write_failures += 1
             self._drop_port()
             return False

@@ -168,6 +168,16 @@ class VirtualHeadServer:
                 self._write_truth(now)
                 self._next_truth = max(self._next_truth + self.truth_period_s, now)
 
+    def power_cycle(self) -> None:
+        """The head loses power and comes back now, while its pty (the link) stays up: the fault a
+        daemon cannot see on the link (issue 26), only in the world its lidar sees.  Replies still
+        queued are lost with the power."""
+        with self.model_lock:
+            now = self.now()
+            self.head.power_cycle(now)
+            self._tx.clear()
+            self._write_truth(now)
+
     def _receive(self, data: bytes, now: float) -> None:
         times = []
         t = max(now, self._rx_free)

@@ -75,6 +75,12 @@ def cmd_serve(args: argparse.Namespace) -> int:
         stop["flag"] = True
 
     old = {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    power_cuts = {"n": 0}
+
+    def _on_power_cut(signum, frame):  # noqa: ARG001
+        power_cuts["n"] += 1
+
+    old[signal.SIGUSR1] = signal.signal(signal.SIGUSR1, _on_power_cut)
     truth = None
     try:
         if args.truth:
@@ -93,10 +99,16 @@ def cmd_serve(args: argparse.Namespace) -> int:
         print(path, flush=True)
         print(f"virtual PTS-303H ({args.family}, unit {args.unit_seed}, address {args.address}, "
               f"{args.baud} baud, feedback {args.feedback}) on {server.path}; truth t_s = 0 at "
-              f"time.monotonic() = {server.clock_zero:.6f}; Ctrl-C stops",
+              f"time.monotonic() = {server.clock_zero:.6f}; Ctrl-C stops, SIGUSR1 cuts its power (the pty stays)",
               file=sys.stderr, flush=True)
         try:
-            server.run(lambda: stop["flag"])
+            done = 0
+            while not stop["flag"]:
+                if power_cuts["n"] != done:     # SIGUSR1: a power cut behind the live link
+                    done = power_cuts["n"]
+                    server.power_cycle()
+                    print(f"power cycled at head time {server.now():.6f} s", file=sys.stderr, flush=True)
+                server.step()
         finally:
             server.close()
     finally:

@@ -16,6 +16,8 @@ Tables::
     [recording]  path ("{time}" becomes the UTC start time; its directory must exist unless
                  make_dirs = true), flush_every_frames, compression, points_dtype, queue_frames, overwrite
     [daemon]     watchdog_s, max_frame_backlog, stale_frame_s, batch_queue, status_period_s, log
+    [pose_check] the head's pose checked against the background (foveatrack.pose_check.PoseCheckConfig:
+                 enabled, bound_deg, ...; off unless enabled = true)
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from typing import Any, Mapping
 
 from foveatrack.config_util import as_bool, as_choice, as_float, as_table, as_vec, check_keys, read_toml
 from foveatrack.errors import UserError
+from foveatrack.pose_check import PoseCheckConfig
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig
 from foveatrack.gate import Limits
@@ -135,6 +138,7 @@ class DaemonConfig:
     tracker: TrackerConfig
     recording: RecordingConfig
     loop: LoopConfig
+    pose_check: PoseCheckConfig = PoseCheckConfig()
 
     @property
     def tracker_overrides(self) -> dict:
@@ -349,7 +353,7 @@ def _loop(t: Mapping, w: str) -> LoopConfig:
 
 
 def config_from_mapping(data: Mapping, where: str = "daemon config", text: str = "") -> DaemonConfig:
-    check_keys(data, ["lidar", "head", "tracker", "recording", "daemon"], where)
+    check_keys(data, ["lidar", "head", "tracker", "recording", "daemon", "pose_check"], where)
     for k in ("lidar", "head"):
         if k not in data:
             raise UserError(f"{where}: missing [{k}] table (see examples/daemon-virtual.toml)")
@@ -360,7 +364,9 @@ def config_from_mapping(data: Mapping, where: str = "daemon config", text: str =
     tracker = TrackerConfig.from_mapping(tt, where=f"{where} [tracker]")
     cfg = DaemonConfig(where, text, lidar, head, tt, tracker,
                        _recording(tables["recording"], f"{where} [recording]"),
-                       _loop(tables["daemon"], f"{where} [daemon]"))
+                       _loop(tables["daemon"], f"{where} [daemon]"),
+                       PoseCheckConfig.from_mapping(as_table(data.get("pose_check", {}), "pose_check", where),
+                                                    f"{where} [pose_check]"))
     cfg = replace(cfg, tracker=tracker.with_head(head.facts, tt, f"{where} [tracker]"))
     if head.speed_table != "nominal":
         p = Path(head.speed_table)

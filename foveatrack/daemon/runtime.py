@@ -50,6 +50,7 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.daemon.config import DaemonConfig
+from foveatrack.daemon.pose_guard import PoseGuard
 from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, format_status
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
 from foveatrack.gate import CommandGate
@@ -198,6 +199,7 @@ class Daemon:
         self.pose_state: str | None = None  # None (known), "unknown", "homing" (after a head reconnect)
         self._home_steps: list = []         # (host time, step) of the homing under way
         self.last_frame_end_s: float | None = None
+        self.pose_guard = PoseGuard(config)   # the head's pose against the background ([pose_check])
 
     # -------------------------------------------------------------------------------- setup
     def _meta(self) -> dict:
@@ -389,6 +391,8 @@ class Daemon:
 
     def _pose_tick(self, now: float) -> None:
         h = self.cfg.head
+        if self.pose_state == "refused":    # another head behind the link: nothing is written to it
+            return
         if not self.head.connected or h.on_reconnect == "stop":
             # STOP every second: while the link is down each try is the reopen, so the first frame a
             # reopened link carries is STOP; with "stop" it holds the head until the daemon restarts
@@ -421,6 +425,7 @@ class Daemon:
             self.imu_feed.restart(t0_s)
         self._last_send_t = -math.inf
         self.gate.head_cmd = STOP
+        self.pose_guard.rebased()
 
     def _record(self, fn, *args):
         if self.recorder is not None:
@@ -435,6 +440,9 @@ class Daemon:
             return
         t_begin = time.monotonic()
         frame = strip_no_return(frame)
+        if self.pose_guard.before_frame(self, frame, t_begin):   # mapped, or its background disagrees
+            self.last_pts = frame.n_points
+            return
         now_s = self.sensor_now_s()
         send_t = self._send_time((frame.t_end_s if now_s is None else max(now_s, frame.t_end_s))
                                  + float(np.median(self._compute_s)))
@@ -482,6 +490,7 @@ class Daemon:
         from foveatrack.detection import compile_all
 
         compile_all()   # before data flows: a first-call compile would stall the first frame
+        self.pose_guard.compile()
         self._open()
         old = {}
         if self.install_signals and threading.current_thread() is threading.main_thread():
@@ -594,13 +603,14 @@ class Daemon:
                     head_up = self.head.connected
                     self.counters["head_link_up" if head_up else "head_link_down"] += 1
                     self.log.event("head_connected" if head_up else "head_disconnected", stats=asdict(self.head.stats))
-                    if c.head.on_reconnect != "keep":
+                    if c.head.on_reconnect != "keep" and self.pose_state != "refused":
                         if not head_up and self.pose_state is None:
                             self._pose_unknown(now, "link_lost")
                         elif head_up:
                             if self.pose_state is None:     # lost and back between two ticks
                                 self._pose_unknown(now, "link_lost")
-                            self._reconnected(now)
+                            self.pose_guard.link_back(self)   # is it our head? (pose_guard: identity)
+                            self._reconnected(time.monotonic())   # (the query took a while: the homing's quiet line counts from now)
                 if self.pose_state is not None:
                     self._pose_tick(now)
                 if now >= next_progress:
@@ -694,7 +704,7 @@ class Daemon:
         out = self.last_out
         state = "watchdog" if watchdog else ("no lidar" if out is None else out.state.value)
         if self.pose_state is not None:
-            state = "pose unknown" if self.pose_state == "unknown" else "homing"
+            state = {"unknown": "pose unknown", "refused": "head refused"}.get(self.pose_state, "homing")
         elif self.head.refused:
             state = "head refused" 
         self.status.show(format_status(rate, getattr(self, "last_pts", 0), state,
@@ -709,6 +719,8 @@ class Daemon:
         notes = [self.rx.unit_note] if getattr(self, "rx", None) is not None and self.rx.unit_note else []
         if self.cfg.head.speed_table == "nominal":
             notes.append("head UNCALIBRATED (nominal speed table)")
+        if self.pose_guard.warnings:
+            notes.append("head speed table off (background)")
         if getattr(self, "head", None) is not None and self.head.refused:
             notes.append("head path holds another device: refused")
         lost = self.lost_pct()
@@ -729,7 +741,9 @@ class Daemon:
     def _shutdown(self, old_handlers) -> None:
         self.stop_ev.set()
         t_s = self.sensor_now_s()
-        if t_s is not None:
+        if self.pose_state == "refused":     # another head behind the link: not even a STOP
+            pass
+        elif t_s is not None:
             t_s = self._send_time(t_s)
             self.tracker.command_sent(t_s, STOP)
             rec, _ = self._send(STOP, "shutdown", t_s)

@@ -53,7 +53,7 @@ from foveatrack.recording.records import CommandRecord
 from foveatrack.replay.config import recorded_limits, load_tracker_table, tracker_config
 from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
 from foveatrack.replay.recorded import (RECORDED_DTYPES, TRUTH_DTYPES, FrameArrays, LvxTimeline, TimeOrder,
-                                        TrackerRebased, recorded_arrays, recorded_frames)
+                                        PoseCorrected, TrackerRebased, recorded_arrays, recorded_frames)
 from foveatrack.replay.result import ReplayResult
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import Tracker, TrackerConfig
@@ -84,6 +84,9 @@ def _after_frame(tracker: Tracker, gate: CommandGate, order: TimeOrder, after: l
             tracker = tracker.rebased(c.t0_s, c.pan_deg, c.tilt_deg)
             gate.head_cmd = STOP
             order.rebased()
+            continue
+        if isinstance(c, PoseCorrected):
+            tracker.correct_pose(c.t_s, c.dpan_deg, c.dtilt_deg)
             continue
         if order.command_out_of_order(tracker, c.send_time_s):
             continue

@@ -210,6 +210,15 @@ class TrackerRebased:
     reason: str
 
 
+@dataclass(frozen=True)
+class PoseCorrected:
+    """The daemon's pose check moved the dead reckoning by this much from sensor time ``t_s`` (its
+    ``pose_corrected`` event, :mod:`foveatrack.daemon.pose_guard`); replay does the same at the same place."""
+    t_s: float
+    dpan_deg: float
+    dtilt_deg: float
+
+
 @dataclass
 class RecordedFrame:
     """One frame of a recording with the typed records that belong to it (None where absent) and the
@@ -220,7 +229,7 @@ class RecordedFrame:
     command: CommandRecord | None = None       # the tracker's command for this frame, as sent
     truth: TruthRecord | None = None
     metrics: dict = field(default_factory=dict)
-    after: list = field(default_factory=list)   # [CommandRecord | TrackerRebased] in the order they happened
+    after: list = field(default_factory=list)   # [CommandRecord | TrackerRebased | PoseCorrected] in order
     imu: list = field(default_factory=list)     # [ImuSamples] fed to the tracker before this frame
 
     @property
@@ -248,6 +257,8 @@ def recorded_frames(reader):
             if e.get("event") == "tracker_rebased":
                 cur.after.append(TrackerRebased(float(e["t0_s"]), float(e["pan_deg"]), float(e["tilt_deg"]),
                                                 str(e.get("reason", "?"))))
+            elif e.get("event") == "pose_corrected":
+                cur.after.append(PoseCorrected(float(e["t_s"]), float(e["dpan_deg"]), float(e["dtilt_deg"])))
             continue
         rec = parse(m.channel, m.record)
         if isinstance(rec, CommandRecord):

@@ -78,11 +78,10 @@ class PTS303H:
         f_pan, f_tilt = params.ripple_freq_hz * np.exp(0.1 * rr.standard_normal(2))
         ph_pan, ph_tilt = rr.uniform(0, 2 * np.pi, 2)
         self._garbage_rng = np.random.default_rng(s_garbage)
-        self._pan = _Axis("pan", float(pan0_deg), params.pan_accel_deg_s2, None,
-                          2 * np.pi * f_pan, float(ph_pan), t0_s)
-        self._tilt = _Axis("tilt", float(tilt0_deg), params.tilt_accel_deg_s2,
-                           (params.tilt_min_deg, params.tilt_max_deg),
-                           2 * np.pi * f_tilt, float(ph_tilt), t0_s)
+        self._ripple = (2 * np.pi * f_pan, float(ph_pan), 2 * np.pi * f_tilt, float(ph_tilt))
+        self._power_on_deg = (float(pan0_deg), float(tilt0_deg))
+        self._power_up(t0_s)
+        self.power_cycles = 0
         self._parser = PelcoParser("DP")
         self._presets: dict[int, tuple[float, float]] = {}
         self._t_now = float(t0_s)
@@ -90,6 +89,26 @@ class PTS303H:
         self._rx_times: deque[float] = deque(maxlen=9)
         self.frames_received = 0
         self.frames_ignored = 0
+
+    def _power_up(self, t_s: float) -> None:
+        """Both axes at rest at the power-on pose from ``t_s``."""
+        p = self.params
+        w_pan, ph_pan, w_tilt, ph_tilt = self._ripple
+        self._pan = _Axis("pan", self._power_on_deg[0], p.pan_accel_deg_s2, None, w_pan, ph_pan, t_s)
+        self._tilt = _Axis("tilt", self._power_on_deg[1], p.tilt_accel_deg_s2, (p.tilt_min_deg, p.tilt_max_deg),
+                           w_tilt, ph_tilt, t_s)
+
+    def power_cycle(self, t_s: float) -> None:
+        """The head lost power and came back at ``t_s`` (a brown-out, a loose supply plug; its serial
+        link may stay up): it stands at its power-on pose (``pan0_deg``, ``tilt0_deg``), with no memory of
+        its motion (angles before ``t_s`` are no longer known to the model) and a fresh frame parser;
+        its presets, kept in non-volatile memory, survive."""
+        t_s = max(float(t_s), self._t_now)
+        self._power_up(t_s)
+        self._parser = PelcoParser("DP")
+        self._rx_times.clear()
+        self._t_now = t_s
+        self.power_cycles += 1
 
     # -- facts about the unit --------------------------------------------------------------
     def true_speed_deg_s(self, axis: str, byte: int) -> float:
