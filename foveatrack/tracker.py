@@ -350,10 +350,15 @@ class Tracker:
 
     # ------------------------------------------------------------------------------------------
     def process(self, frame: Frame, send_t_s: float | None = None) -> TrackOutput:
+        return self.steer(frame, self._detect(frame), send_t_s)
+
+    def steer(self, frame: Frame, det: Detection | None, send_t_s: float | None = None) -> TrackOutput:
+        """Algorithm 2 (and the lost-target states) on a detection of ``frame`` made by the caller:
+        :meth:`process`'s Algorithm 1, or the sky tracker's in the fixated track's D
+        (:mod:`foveatrack.sky.controller`)."""
         cfg = self.config
         t_now = frame.t_end_s
         send_t = t_now + cfg.send_delay_s if send_t_s is None else send_t_s
-        det = self._detect(frame)
         err_pan = err_tilt = None
         world = sigma_w = None
         if det is not None:

@@ -196,7 +196,8 @@ class SkyTrack:
 
 @dataclass(frozen=True)
 class TrackView:
-    """A track as a frame leaves it (a copy: the output does not change with later frames)."""
+    """A track as a frame leaves it (a copy: the output does not change with later frames); its
+    position is the filter's at the frame's mid time."""
     track_id: int
     confirmed: bool
     label: str
@@ -313,8 +314,8 @@ class SkyTracker:
         deleted = self._prune(t_mid)
         for tr in self.tracks:
             tr.label, tr.features = classify(tr, cfg.classifier)
-        views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, tr.kf.p.copy(), tr.kf.v.copy(), tr.hit_now,
-                                tr.in_view, dict(tr.features)) for tr in self.tracks)
+        views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, tr.kf.predicted(t_mid)[0], tr.kf.v.copy(),
+                                tr.hit_now, tr.in_view, dict(tr.features)) for tr in self.tracks)
         return SkyFrameOutput(t1, views, fovea_det, frame.n_points, int(fg_idx.size), len(objs),
                               tuple(confirmed_now), tuple(deleted))
 
