@@ -22,19 +22,19 @@ configuration asks for it.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from foveatrack.detection import Detection, bearing_deg
+from foveatrack.errors import UserError
 from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_rows
 from foveatrack.sky.attention import Attention, AttentionConfig, bearing_off_axis_deg, threat_score
 from foveatrack.sky.tracks import SkyFrameOutput, SkyTracker, SkyTrackerConfig
-from foveatrack.speed_table import SpeedTable
-from foveatrack.tracker import Tracker, TrackerConfig, TrackOutput
+from foveatrack.tracker import Tracker, TrackOutput
 
 
 @dataclass(frozen=True)
@@ -78,13 +78,35 @@ class SkyControlOutput:
     def head_sigma_tilt_deg(self):
         return self.track.head_sigma_tilt_deg
 
+    def __getattr__(self, name):
+        if name == "track":
+            raise AttributeError(name)
+        # the rest of a TrackOutput (errors, head estimate) as the paper tracker steered this frame
+        # (toward the aim point during a saccade)
+        return getattr(self.track, name)
+
+
+def sky_configs_from_mapping(data: Mapping, where: str, field_half_angle_deg: float | None = None
+                             ) -> tuple[SkyTrackerConfig, AttentionConfig]:
+    """The ``[tracker.sky]`` table: the sky tracker's keys, with ``[tracker.sky.attention]`` and
+    ``[tracker.sky.classifier]`` sub-tables.  ``field_half_angle_deg``: the lidar's, used unless
+    the table sets it."""
+    if not isinstance(data, Mapping):
+        raise UserError(f"{where}: expected a table, got {data!r}")
+    data = dict(data)
+    att = data.pop("attention", {})
+    cfg = SkyTrackerConfig.from_mapping(data, where)
+    if "field_half_angle_deg" not in data and field_half_angle_deg is not None:
+        cfg = replace(cfg, field_half_angle_deg=float(field_half_angle_deg))
+    return cfg, AttentionConfig.from_mapping(att, where + ".attention")
+
 
 class SkyController:
     """Frames in, head commands out, every object tracked (module docstring)."""
 
-    def __init__(self, tracker_cfg: TrackerConfig, table: SpeedTable, sky_cfg: SkyTrackerConfig | None = None,
-                 attention_cfg: AttentionConfig | None = None, *, t0_s: float = 0.0):
-        self.tracker = Tracker(tracker_cfg, table, t0_s=t0_s)
+    def __init__(self, tracker: Tracker, sky_cfg: SkyTrackerConfig | None = None,
+                 attention_cfg: AttentionConfig | None = None):
+        self.tracker = tracker
         self.sky = SkyTracker(sky_cfg)
         self.attention = Attention(attention_cfg or AttentionConfig())
 
