@@ -179,6 +179,11 @@ class ClosedLoop:
         self._pending: list[tuple[float, bytes]] = []
         self._encoded: dict[tuple, bytes] = {}   # Pelco-D bytes per (pan_dir, pan_byte, tilt_dir, tilt_byte)
         self.log = FrameLog()
+        # Multi-object scenes (Scene.multi_object): every object's truth per frame (sim.objects_truth);
+        # kept apart from the log, whose arrays the regression and determinism digests cover.
+        self.objects_log: list[list] = []
+        self.last_objects: list | None = None
+        self._strays_seen = 0
         self.bytes_sent = 0
         self.echo_bytes = 0
         self.last_sent: tuple[float, bytes] | None = None  # (time, Pelco-D bytes) of this frame's command
@@ -283,6 +288,13 @@ class ClosedLoop:
         # 4-5. ray casting and the effects the scene lists.
         xyz, pt_ns, refl_byte, on_target = self.sensor.returns(chunk, d_world, t0, t1)
         frame = Frame(t0, t1, xyz, pt_ns, refl_byte)
+        if scene.multi_object:
+            from sim.objects_truth import objects_truth
+
+            strays = self.sensor.last_strays_m if scene.has("stray_returns") else np.zeros((0, 3))
+            self.last_objects = objects_truth(scene, t_mid, self.sensor.last_object_rays, strays, self._strays_seen)
+            self._strays_seen += len(strays)
+            self.objects_log.append(self.last_objects)
         c4 = clock()
         # 6. the tracker and the link; the gyro's samples of this frame (and before) come first.
         self.imu_fed = None

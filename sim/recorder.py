@@ -11,6 +11,8 @@ The per-frame records are :mod:`foveatrack.recording.records`' (the daemon write
 * head: the tracker's reconstruction (``pan_deg``, ``tilt_deg``, sigmas, ``world_xyz_m``)
 * truth (simulation only): true head pose and target position at frame mid, true error
 * imu (scenes with ``[imu]``): the head gyro's samples fed to the tracker before the frame
+* truth_objects (multi-object scenes, ``Scene.multi_object``): every object's id, class, position,
+  velocity, size and the rays that hit it, one record per object and frame (sim.objects_truth)
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ import json
 import numpy as np
 
 from foveatrack.recording import RecordingWriter
-from foveatrack.recording.records import CommandRecord, TruthRecord, ns, write_record, write_tracker_frame
+from foveatrack.recording.records import (CommandRecord, ObjectTruthRecord, TruthRecord, ns, write_record,
+                                          write_tracker_frame)
 
 
 def recording_meta(scene, loop) -> dict:
@@ -70,4 +73,6 @@ class SimRecorder:
         write_record(w, TruthRecord(t_end, fid, L.head_pan_deg[-1], L.head_tilt_deg[-1],
                                     tuple(float(v) for v in np.asarray(L.target_xyz[-1])), L.true_error_deg[-1],
                                     L.points_on_target[-1]))
+        for o in loop.last_objects or ():
+            write_record(w, ObjectTruthRecord(t_end, fid, o.id, o.cls, o.xyz_m, o.velocity_m_s, o.size_m, o.rays_hit))
         self.frame_id += 1

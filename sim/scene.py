@@ -16,6 +16,9 @@ and what is allowed.  Tables::
                  reflectivity, [target.trajectory] type = straight | circle | figure8 |
                  waypoints | manual (+ its parameters)
     [[background]] type = ground | wall | room | box (+ its parameters), reflectivity
+    [[bird]]     a bird or a flock (count): id, count, wingspan_m, ..., [bird.trajectory] (its centre)
+    [[tree]]     a trunk and a crown swaying in the wind: id, base_m, height_m, crown_radius_m, ...
+                 (birds and trees: sim.scene_sky; [[target]] also takes id and class)
     [tracker]    foveatrack.tracker.TrackerConfig keys
     [imu]        an IMU on the lidar (only then simulated): rotation_deg, translation_m (its pose in
                  the lidar frame), nominal_*, noise keys (sim.imu; defaults: BMI088)
@@ -49,6 +52,8 @@ EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     "uart_drops": {"uart_drop_rate": 1e-3},
     "uart_echo": {},
     "head_ripple": {},
+    # insects and dust: isolated returns at short range, at a rate per second (sim.sensor)
+    "stray_returns": {"stray_rate_hz": 2.0, "stray_min_range_m": 1.0, "stray_max_range_m": 15.0},
 }
 TRAJECTORY_TYPES = ("straight", "circle", "figure8", "waypoints", "manual")
 GEOMETRIES = ("quadrotor", "sphere", "box")
@@ -64,6 +69,8 @@ MAX_BACKGROUND = 4096
 class TargetSpec:
     body: Any  # sim.world.bodies.Body
     trajectory: Any  # a sim.world.trajectories object
+    id: str = "drone-1"     # the truth's name for it (recordings of multi-object scenes)
+    cls: str = "drone"      # "drone" or "clutter" (a balloon, a box carried by the wind)
 
 
 @dataclass(frozen=True)
@@ -122,6 +129,14 @@ class Scene:
     # UTC at virtual time 0 [ns since 1970]: the recording's log times (what Foxglove's timeline
     # shows); fixed by the scene (default START_UTC), never the wall clock: same seed, same bits
     start_utc_ns: int = 1_767_225_600_000_000_000
+    # birds and tree crowns (sim.world.sky.SkyObject), only if the scene lists [[bird]] / [[tree]]
+    others: tuple = ()
+
+    @property
+    def multi_object(self) -> bool:
+        """The scene's world holds more than one drone, or birds, trees or stray returns: its
+        recording then carries the truth of every object (sim.recorder)."""
+        return len(self.targets) > 1 or bool(self.others) or self.has("stray_returns")
 
     @property
     def lidar_range_m(self) -> tuple[float, float]:
@@ -168,7 +183,7 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
     from foveatrack.tracker import TrackerConfig
 
     check_keys(data, ["scene", "effects", "lidar", "gimbal", "target", "background", "tracker", "gate", "imu",
-                      "imu_poses"], where)
+                      "imu_poses", "bird", "tree"], where)
     sc = data.get("scene", {})
     w = f"{where} [scene]"
     check_keys(sc, ["name", "duration_s", "seed", "effects", "description", "start_utc"], w)
@@ -199,6 +214,9 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
             params[k] = v
         else:
             params[k] = as_float(v, k, we, lo=0)
+    if "stray_returns" in effects and not params["stray_min_range_m"] < params["stray_max_range_m"]:
+        raise UserError(f"{we}: stray_min_range_m = {params['stray_min_range_m']} must be below "
+                        f"stray_max_range_m = {params['stray_max_range_m']}")
 
     optics, scan_model, envelope = _lidar(data.get("lidar", {"preset": "mid40"}), f"{where} [lidar]")
     base_dir = Path(where).parent if Path(where).is_file() else None
@@ -208,7 +226,10 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         raise UserError(f"{where}: [[target]] must be an array of tables")
     if len(targets) > MAX_TARGETS:    # 100 000 ran on for ever, the ray cast's cost growing with each
         raise UserError(f"{where}: {len(targets)} [[target]] tables; at most {MAX_TARGETS} in one scene")
-    target_specs = tuple(_target(t, f"{where} [[target]] #{i + 1}", duration, seed + i) for i, t in enumerate(targets))
+    target_specs = tuple(_target(t, f"{where} [[target]] #{i + 1}", duration, seed + i, i) for i, t in enumerate(targets))
+    from sim.scene_sky import sky_objects
+
+    others, trunk_prims, trunk_refl = sky_objects(data, where, duration, seed, target_specs)
     bg = data.get("background", [])
     if not isinstance(bg, list):
         raise UserError(f"{where}: [[background]] must be an array of tables")
@@ -219,6 +240,8 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         p, r = _background(b, f"{where} [[background]] #{i + 1}")
         prims.extend(p)
         refl.extend([r] * len(p))
+    prims.extend(trunk_prims)     # the trees' trunks: static, after the scene's own background
+    refl.extend(trunk_refl)
     tracker_raw = data.get("tracker", {})
     if not isinstance(tracker_raw, Mapping):
         raise UserError(f"{where}: [tracker] must be a table of tracker keys, got {tracker_raw!r}")
@@ -232,7 +255,7 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         background_prims=np.array(prims).reshape(-1, 13), background_reflectivity=np.array(refl, dtype=float),
         tracker=tracker, tracker_table=tracker_table, imu=imu, imu_poses=imu_poses,
         gate=_gate(data["gate"], f"{where} [gate]") if "gate" in data else None, range_envelope_m=envelope,
-        start_utc_ns=start_utc_ns,
+        start_utc_ns=start_utc_ns, others=others,
     )
 
 
@@ -376,10 +399,12 @@ def _gimbal(t: Mapping, w: str, base_dir: Path | None = None) -> GimbalSpec:
     return spec
 
 
-def _target(t: Mapping, w: str, duration_s: float, seed: int) -> TargetSpec:
-    from sim.world import bodies, trajectories as tr
+def _target(t: Mapping, w: str, duration_s: float, seed: int, index: int = 0) -> TargetSpec:
+    from sim.world import bodies
 
-    check_keys(t, ["geometry", "span_m", "radius_m", "size_m", "reflectivity", "trajectory"], w)
+    check_keys(t, ["geometry", "span_m", "radius_m", "size_m", "reflectivity", "trajectory", "id", "class"], w)
+    obj_id = object_id(t.get("id", f"drone-{index + 1}"), w)
+    cls = as_choice(t.get("class", "drone"), "class", w, ("drone", "clutter"))
     geom = as_choice(t.get("geometry", "quadrotor"), "geometry", w, GEOMETRIES)
     refl = as_float(t.get("reflectivity", 0.3), "reflectivity", w, lo=0, lo_open=True, hi=1)
     if geom == "quadrotor":
@@ -391,10 +416,23 @@ def _target(t: Mapping, w: str, duration_s: float, seed: int) -> TargetSpec:
         if min(size) <= 0:
             raise UserError(f"{w}: size_m must be positive, got {list(size)}")
         body = bodies.box_body(size, refl)
-    traj = t.get("trajectory")
+    return TargetSpec(body, trajectory_from_table(t.get("trajectory"), w, "target", duration_s, seed), obj_id, cls)
+
+
+def object_id(v, w: str) -> str:
+    """A scene object's id: a short name without spaces or slashes (a flock's birds are ``id/k``)."""
+    if not isinstance(v, str) or not v or len(v) > 64 or any(c.isspace() or c == "/" for c in v):
+        raise UserError(f"{w}: id must be a name of 1-64 characters without spaces or '/', got {v!r}")
+    return v
+
+
+def trajectory_from_table(traj, w: str, table: str, duration_s: float, seed: int):
+    """The ``[<table>.trajectory]`` of a scene object (a drone, a flock's centre)."""
+    from sim.world import trajectories as tr
+
     wt = f"{w}.trajectory"
     if not isinstance(traj, Mapping):
-        raise UserError(f"{w}: missing [target.trajectory] table (type = {' | '.join(TRAJECTORY_TYPES)})")
+        raise UserError(f"{w}: missing [{table}.trajectory] table (type = {' | '.join(TRAJECTORY_TYPES)})")
     kind = as_choice(traj.get("type"), "type", wt, TRAJECTORY_TYPES)
     keys = {
         "straight": ["start_m", "velocity_m_s"],
@@ -431,7 +469,7 @@ def _target(t: Mapping, w: str, duration_s: float, seed: int) -> TargetSpec:
                                duration_s, seed, as_float(traj.get("tau_s", 1.5), "tau_s", wt, lo=0, lo_open=True))
     if trajectory.max_speed_m_s > 20.0 + 1e-9:
         raise UserError(f"{wt}: the target flies at up to {trajectory.max_speed_m_s:.1f} m/s; the model covers <= 20 m/s")
-    return TargetSpec(body, trajectory)
+    return trajectory
 
 
 def _background(b: Mapping, w: str):

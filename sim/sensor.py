@@ -25,7 +25,8 @@ from sim.world import kernels as wk
 from sim.world.trajectories import heading_rad
 
 _NONE = np.zeros(0)          # an effect that is off: no draws
-EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts")
+EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts", "stray_returns")
+STRAY_REFLECTIVITY = 0.1      # an insect's or a dust grain's return: weak
 # The kind of value each effect takes from its stream, for the effects that take one kind only (these
 # can be drawn ahead: sim.ahead.DrawsAhead); sunlight mixes kinds and is drawn frame by frame.
 ONE_KIND_STREAMS = {"range_noise": "normal", "angular_noise": "normal", "return_probability": "uniform",
@@ -67,8 +68,13 @@ class SceneSensor:
                 self._sources[effect] = DrawsAhead(self.rngs[effect], kind, None, block=_NORMALS_BLOCK)
         self._bg = np.ascontiguousarray(scene.background_prims)
         refl = [spec.body.reflectivity for spec in scene.targets]
+        refl += [obj.body.reflectivity for obj in scene.others]      # birds, crowns (sim.world.sky)
         if self._bg.shape[0]:
             refl.append(scene.background_reflectivity)
+        # Stray near returns (insects, dust): one more row, after the background (sim.effects)
+        self._stray_prim = sum(r.size for r in refl)
+        if scene.has("stray_returns"):
+            refl.append(np.array([STRAY_REFLECTIVITY]))
         self._refl_table = np.concatenate(refl) if refl else np.zeros(0)
         self._refl_byte_table = np.clip(np.round(self._refl_table * 100), 0, 255).astype(np.uint8)
         self._range_limit_m = (fx.range_limit_m(self._refl_table, scene.param("range_80pct_m"))
@@ -81,10 +87,18 @@ class SceneSensor:
         self._dropout_rate = self._param_if("dropouts", "dropout_rate")
         # Which effects act, asked once (a frame asked the scene eight times).
         self._has = {name: scene.has(name) for name in
-                     ("return_probability", "dropouts", "range_noise", "angular_noise", "sunlight", "beam_footprint")}
+                     ("return_probability", "dropouts", "range_noise", "angular_noise", "sunlight", "beam_footprint",
+                      "stray_returns")}
         self._target_prim_end = sum(spec.body.prims.shape[0] for spec in scene.targets)
         # Per target, what sizes its per-frame cull (computed once: both walk Python objects).
         self._cull = [(spec.body.bounding_radius_m, spec.trajectory.max_speed_m_s) for spec in scene.targets]
+        self._cull_others = [(obj.bounding_radius_m, obj.trajectory.max_speed_m_s) for obj in scene.others]
+        # Multi-object scenes: the first primitive of each object (drones, then birds and crowns), for
+        # the rays that hit each (``last_object_rays``) and the stray returns placed (``last_strays_m``).
+        self._object_prim_start = np.cumsum([0] + [spec.body.prims.shape[0] for spec in scene.targets]
+                                            + [obj.body.prims.shape[0] for obj in scene.others])
+        self.last_object_rays: np.ndarray | None = None
+        self.last_strays_m = np.zeros((0, 3))
         # Work counters (timing-free evidence that a scene costs only what it holds).
         self.rays_total = 0
         self.rays_cast_targets = 0
@@ -109,10 +123,19 @@ class SceneSensor:
         for spec, cull in zip(scene.targets, self._cull):
             self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
             offset += spec.body.prims.shape[0]
+        for obj, cull in zip(scene.others, self._cull_others):
+            self._cast_target(obj, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
+            offset += obj.body.prims.shape[0]
         self.rays_total += n
         if self._bg.shape[0]:
             self.rays_cast_background += n
             wk.cast_static_kernel(d_world, self._bg, offset, rng_m, prim)
+        if has["stray_returns"]:
+            self._strays(chunk, d_world, t0, t1, rng_m, prim)
+        if scene.multi_object:
+            on = (prim >= 0) & (prim < self._object_prim_start[-1]) & (chunk.status == RAY_OK)
+            which = np.searchsorted(self._object_prim_start, prim[on], side="right") - 1
+            self.last_object_rays = np.bincount(which, minlength=self._object_prim_start.size - 1)
         # 5. effects, each only if listed (draws in a fixed order, one call per effect and frame),
         # applied to the hits and gathered in scan order in one pass.
         n_hit = sk.count_hits_kernel(prim, chunk.status)
@@ -180,6 +203,26 @@ class SceneSensor:
         self.draw_calls[effect] += 1
         return self._sources[effect]
 
+    def _strays(self, chunk, d_world, t0, t1, rng_m, prim):
+        """Insects and dust (effect ``stray_returns``): Poisson(rate x frame length) returns, each on a
+        ray drawn uniformly from the chunk (the rays are uniform in time) at a range uniform in
+        [min, max]; a stray nearer than what the ray hit replaces that return (a lidar reports the
+        first), one on a ray that left no prism (status not OK) or beyond the hit is lost.  Draws: the
+        count, then the rays, then the ranges, from the effect's own stream."""
+        rng = self._stream("stray_returns")
+        n = len(chunk)
+        k = int(rng.poisson(self.scene.param("stray_rate_hz") * (t1 - t0)))
+        self.last_strays_m = np.zeros((0, 3))
+        if k == 0 or n == 0:
+            return
+        rays = rng.integers(0, n, k)
+        r = rng.uniform(self.scene.param("stray_min_range_m"), self.scene.param("stray_max_range_m"), k)
+        ok = (chunk.status[rays] == RAY_OK) & (r < rng_m[rays])
+        rays, r = rays[ok], r[ok]
+        rng_m[rays] = r
+        prim[rays] = self._stray_prim
+        self.last_strays_m = d_world[rays] * r[:, None]      # world frame, for the truth
+
     def _cast_target(self, spec, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset):
         traj = spec.trajectory
         t_mid = 0.5 * (t0 + t1)
@@ -196,10 +239,20 @@ class SceneSensor:
             return
         t_pose = t_ns[idx] * 1e-9 if self.target_motion == "per_point" else np.full(idx.size, t_mid)
         pos = traj.position(t_pose)
-        yaw = heading_rad(traj.velocity(t_pose))
+        fixed_yaw = getattr(spec, "fixed_yaw", None)      # a tree's crown keeps its yaw
+        yaw = heading_rad(traj.velocity(t_pose)) if fixed_yaw is None else np.full(idx.size, fixed_yaw)
         prims = spec.body.prims
+        flap = getattr(spec, "flap", None)
+        if flap is not None:     # a bird: its wings at each ray's own time
+            flap_rad = flap.angle_rad(t_pose)
+
+            def cast(rays, d, r, p):
+                wk.cast_flapping_kernel(rays, d, pos, yaw, flap_rad, prims, spec.hinge, offset, r, p)
+        else:
+            def cast(rays, d, r, p):
+                wk.cast_moving_kernel(rays, d, pos, yaw, prims, offset, r, p)
         if not self._has["beam_footprint"]:
-            wk.cast_moving_kernel(idx, d_world, pos, yaw, prims, offset, rng_m, prim)
+            cast(idx, d_world, rng_m, prim)
             return
         # Beam footprint: sub-rays over the divergence ellipse; the return is the nearest sub-ray
         # range if at least half of the sub-rays hit (a partial hit on a thin arm may still return).
@@ -218,7 +271,7 @@ class SceneSensor:
             sub /= np.linalg.norm(sub, axis=1, keepdims=True)
             r = np.full(idx.size, np.inf)
             p = np.full(idx.size, -1, dtype=np.int64)
-            wk.cast_moving_kernel(local, sub, pos, yaw, prims, offset, r, p)
+            cast(local, sub, r, p)
             hits += p >= 0
             nearer = r < best
             best[nearer] = r[nearer]

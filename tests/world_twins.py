@@ -98,3 +98,30 @@ def heading_twin(velocity, default=0.0):
     yaw = np.arctan2(vy, vx)
     yaw[~(vx * vx + vy * vy > 1e-8)] = default
     return yaw
+
+
+def cast_flapping_twin(d, pos, yaw, flap, prims, hinge):
+    """``cast_flapping_kernel`` with matrices: the ray into the body frame (``R_z(yaw)^T``), then for a
+    hinged primitive of sign ``s`` into its rest frame by ``R_x(-s phi)`` about its hinge point."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    rt = np.stack([np.stack([c, s, np.zeros_like(c)], 1), np.stack([-s, c, np.zeros_like(c)], 1),
+                   np.tile([0.0, 0.0, 1.0], (len(c), 1))], 1)  # R^T per ray
+    o = np.einsum("nij,nj->ni", rt, -pos)
+    dl = np.einsum("nij,nj->ni", rt, d)
+    cols = []
+    for p, (sign, hy, hz) in zip(prims, hinge):
+        if sign == 0:
+            cols.append(hit_twin(p, o, dl))
+            continue
+        a = -sign * flap
+        ca, sa = np.cos(a), np.sin(a)
+        rx = np.stack([np.stack([np.ones_like(a), np.zeros_like(a), np.zeros_like(a)], 1),
+                       np.stack([np.zeros_like(a), ca, -sa], 1), np.stack([np.zeros_like(a), sa, ca], 1)], 1)
+        h = np.array([0.0, hy, hz])
+        o2 = np.einsum("nij,nj->ni", rx, o - h) + h
+        d2 = np.einsum("nij,nj->ni", rx, dl)
+        cols.append(hit_twin(p, o2, d2))
+    ts = np.stack(cols, axis=1)
+    best = np.argmin(ts, axis=1)
+    rng = ts[np.arange(len(d)), best]
+    return rng, np.where(np.isfinite(rng), best, -1)

@@ -37,6 +37,9 @@ DETECTIONS = "detections"
 COMMANDS = "commands"
 HEAD = "head"
 TRUTH = "truth"
+# simulation truth of every object of a multi-object scene (drones, birds, trees, stray returns), one
+# record per object and frame; written only by scenes with more than one object (sim.recorder)
+TRUTH_OBJECTS = "truth_objects"
 METRICS = "metrics"
 DAEMON_EVENTS = "daemon"     # the daemon's events (tracker_rebased, head_pose_unknown, ...), JSON
 IMU = "imu"                  # the IMU samples fed to the tracker before each frame (protobuf ImuSamples)
@@ -92,12 +95,26 @@ RECORD_SCHEMAS = {
 }
 
 
+# Record channels that only some recordings have: their schema is declared when the first record
+# comes (RECORD_SCHEMAS' channels are declared in every recording).
+OPTIONAL_RECORD_SCHEMAS = {
+    TRUTH_OBJECTS: ("foveatrack.ObjectTruth", _obj("foveatrack.ObjectTruth", "simulation truth of one object at "
+                                                   "frame mid [m, world]", {
+        "frame_id": {"type": "integer"}, "id": {"type": "string"},
+        "class": {"type": "string", "description": "drone, bird, tree or clutter"}, "xyz_m": _XYZ,
+        "velocity_m_s": _XYZ, "size_m": {"type": "number"},
+        "rays_hit": {"type": "integer", "description": "rays of the frame that hit it, before the effects"}})),
+}
+
+
 def json_schema_of(name: str) -> tuple[str, dict]:
     """The (schema name, JSON schema) of a record channel: the documented one, or for a channel without
     one (the daemon's events, a later version's channel) an object with its log time, which Foxglove's
     parser accepts (a bare ``{"type": "object"}`` without properties it does not)."""
     if name in RECORD_SCHEMAS:
         return RECORD_SCHEMAS[name]
+    if name in OPTIONAL_RECORD_SCHEMAS:
+        return OPTIONAL_RECORD_SCHEMAS[name]
     return f"foveatrack.{name}", {"title": f"foveatrack.{name}", "type": "object",
                                   "properties": {"t_ns": {"type": "integer", "description": "log time [ns]"}}}
 

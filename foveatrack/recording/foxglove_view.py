@@ -32,10 +32,11 @@ from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, FrameTra
 
 from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, IMU, IMU_DESCRIPTOR, IMU_SCHEMA_NAME, LOG,
                                          METRICS, POINTS, RECORD_SCHEMAS, SCENE, SCENE_KEYFRAME, TF, TRUTH,
-                                         encode_imu_pb,
-                                         encode_points_pb, json_schema_of)
+                                         TRUTH_OBJECTS, encode_imu_pb, encode_points_pb, json_schema_of)
 
 KEYFRAME_FRAMES = 10       # /scene_keyframe: D and the histories every 10th head estimate (once a second)
+_CLASS_COLOURS = {"drone": (0.1, 0.9, 0.2), "bird": (0.9, 0.7, 0.1), "tree": (0.2, 0.5, 0.2),
+                  "clutter": (0.7, 0.7, 0.7)}     # the truth of each object (/truth_objects), by class
 HISTORY_POINTS = 256       # a history longer than this is thinned to every 2nd point (deterministic)
 SEGMENT_FRAMES = 10        # a drawn trajectory is one line entity per 10 frames: each frame re-sends
                            # its segment, so short segments keep the bytes and the CPU per frame small
@@ -200,6 +201,11 @@ class FoxgloveChannels:
                 self._state = state
         elif name == COMMANDS and rec.get("limited"):
             self._log_line(t_ns, 3, f"the gate changed the command: {', '.join(rec['limited'])}", "gate")
+        elif name == TRUTH_OBJECTS:
+            # every object of a multi-object scene where it truly is, coloured by class
+            colour = _CLASS_COLOURS.get(rec.get("class"), (0.6, 0.6, 0.6))
+            size = max(float(rec.get("size_m") or 0.3), 0.3)
+            self._scene_update(t_ns, [self._sphere(f"true_{rec['id']}", t_ns, "world", rec["xyz_m"], size, colour)])
         elif name not in (METRICS, TRUTH, HEAD, DETECTIONS, COMMANDS):
             ev = rec.get("event")
             self._log_line(t_ns, 2, json.dumps(rec, default=str) if ev is None else

@@ -13,6 +13,7 @@ HeadEstimateRecord     /head           the tracker's estimate: head pose and tar
 CommandRecord          /commands       a command as written to the head (Pelco bytes), and why
                                        the gate changed it
 TruthRecord            /truth          simulation only: the true head pose and target
+ObjectTruthRecord      /truth_objects  simulation only, multi-object scenes: every object's truth
 =====================  ==============  =====================================================
 
 The IMU samples fed to the tracker (``/imu``) are arrays, not a JSON record:
@@ -28,7 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRUTH
+from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRUTH, TRUTH_OBJECTS
 
 
 def ns(t_s: float) -> int:
@@ -215,6 +216,34 @@ class TruthRecord:
                    int(r.get("points_on_target", 0)))
 
 
+@dataclass(frozen=True)
+class ObjectTruthRecord:
+    """Simulation truth of one object of a multi-object scene at frame mid (``t_ns`` = frame end):
+    its id and class ("drone", "bird", "tree", "clutter": a stray near return), position [m] and
+    velocity [m/s] in the world, size [m] (a drone's span, a bird's wingspan, a crown's diameter)
+    and the rays of the frame that hit it (before the effects act)."""
+
+    CHANNEL = TRUTH_OBJECTS
+    t_ns: int
+    frame_id: int
+    id: str
+    cls: str
+    true_world_m: tuple
+    true_velocity_m_s: tuple
+    size_m: float
+    rays_hit: int
+
+    def to_json(self) -> dict:
+        return {"frame_id": self.frame_id, "id": self.id, "class": self.cls, "xyz_m": _xyz(self.true_world_m),
+                "velocity_m_s": _xyz(self.true_velocity_m_s), "size_m": self.size_m, "rays_hit": self.rays_hit}
+
+    @classmethod
+    def from_json(cls, r: dict) -> "ObjectTruthRecord":
+        return cls(int(r["t_ns"]), int(r.get("frame_id", -1)), str(r.get("id", "")), str(r.get("class", "")),
+                   tuple(r.get("xyz_m") or (math.nan,) * 3), tuple(r.get("velocity_m_s") or (math.nan,) * 3),
+                   _nan(r.get("size_m")), int(r.get("rays_hit", 0)))
+
+
 def write_record(writer, rec) -> None:
     """Write a typed record on its channel."""
     writer.write(rec.CHANNEL, rec.t_ns, rec.to_json())
@@ -237,7 +266,8 @@ def write_tracker_frame(writer, frame_id: int, frame, out, imu=None) -> int:
 
 
 PARSERS = {DETECTIONS: DetectionRecord.from_json, HEAD: HeadEstimateRecord.from_json,
-           COMMANDS: CommandRecord.from_json, TRUTH: TruthRecord.from_json}
+           COMMANDS: CommandRecord.from_json, TRUTH: TruthRecord.from_json,
+           TRUTH_OBJECTS: ObjectTruthRecord.from_json}
 
 
 def parse(channel: str, record: dict):

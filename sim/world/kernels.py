@@ -652,3 +652,52 @@ def hover_heading_kernel(velocity, default, yaw):
         vy = velocity[j, 1]
         if not vx * vx + vy * vy > 1e-8:
             yaw[j] = default
+
+
+@njit(cache=True, nogil=True)
+def cast_flapping_kernel(idx, d_world, pos, yaw, flap_rad, prims, hinge, prim_offset, out_range, out_prim):
+    """:func:`cast_moving_kernel` for a body with hinged parts (a bird's wings, :mod:`sim.world.sky`),
+    each ray at its own time and wing angle ``flap_rad[i]``.
+
+    ``hinge`` (M, 3): per primitive ``(sign, y_h, z_h)``; a primitive with sign 0 is traced in the
+    body frame as :func:`cast_moving_kernel` traces it; one with sign ``s`` is turned by ``s * phi``
+    about the body's x axis through ``(0, y_h, z_h)``, so the ray is moved by the inverse turn into
+    the part's rest frame: :math:`o'' = R_x(-s\\phi)(o' - h) + h`, :math:`d'' = R_x(-s\\phi) d'`
+    (a rigid motion: the range along the unit ray is unchanged).  Numpy twin:
+    ``tests/world_twins.py`` ``cast_flapping_twin``."""
+    for i in range(idx.shape[0]):
+        j = idx[i]
+        c = math.cos(yaw[i])
+        s = math.sin(yaw[i])
+        px = -pos[i, 0]
+        py = -pos[i, 1]
+        pz = -pos[i, 2]
+        ox = c * px + s * py
+        oy = -s * px + c * py
+        oz = pz
+        wx = d_world[j, 0]
+        wy = d_world[j, 1]
+        dx = c * wx + s * wy
+        dy = -s * wx + c * wy
+        dz = d_world[j, 2]
+        cf = math.cos(flap_rad[i])
+        sf = math.sin(flap_rad[i])
+        for m in range(prims.shape[0]):
+            sign = hinge[m, 0]
+            if sign == 0.0:
+                t = _hit_prim(prims, m, ox, oy, oz, dx, dy, dz)
+            else:
+                # R_x(a) with a = -sign * phi: cos a = cf, sin a = -sign * sf
+                sa = -sign * sf
+                hy = hinge[m, 1]
+                hz = hinge[m, 2]
+                ry = oy - hy
+                rz = oz - hz
+                oy2 = ry * cf - rz * sa + hy
+                oz2 = ry * sa + rz * cf + hz
+                dy2 = dy * cf - dz * sa
+                dz2 = dy * sa + dz * cf
+                t = _hit_prim(prims, m, ox, oy2, oz2, dx, dy2, dz2)
+            if t < out_range[j]:
+                out_range[j] = t
+                out_prim[j] = prim_offset + m

@@ -1,0 +1,70 @@
+"""Cost of a closed-loop frame against the number of objects in the sky (issue 28, the world half).
+
+Runs ``drone-and-flock`` (a Mid-40 at 100 k points/s, a quadrotor, the ground) on one numba thread with
+the flock cut to 0, 5, 20 and 80 birds, and the swarm and tree-line scenes as shipped, each after a
+warm-up frame, and prints per run: the objects, the wall time per frame after the first (best of the
+repetitions), the real-time factor, the ray-casting stage's share of it (where the objects cost), and
+the machine's load average (a shared machine's timings move with it).  No recording is written.
+
+Usage: python scripts/bench_sky_objects.py [--duration S] [--repeat N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import os
+import tomllib
+from pathlib import Path
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+from sim.loop import ClosedLoop  # noqa: E402
+from sim.scene import scene_from_mapping  # noqa: E402
+
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+
+
+def _scene(name: str, duration_s: float, birds: int | None = None):
+    m = tomllib.loads((SCENES / f"{name}.toml").read_text())
+    m = copy.deepcopy(m)
+    m["scene"]["duration_s"] = duration_s
+    if birds is not None:
+        if birds == 0:
+            m.pop("bird", None)
+        else:
+            m["bird"][0]["count"] = birds
+    return scene_from_mapping(m, str(SCENES / f"{name}.toml"))
+
+
+def _frame_ms(scene, repeat: int) -> tuple[float, float]:
+    best, cast = float("inf"), 0.0
+    for _ in range(repeat):
+        loop = ClosedLoop(scene)
+        loop.run()
+        n = max(loop.steps_timed, 1)
+        total = sum(loop.stage_s.values()) / n
+        if total < best:
+            best, cast = total, loop.stage_s["ray casting + effects"] / n
+    return best * 1e3, cast * 1e3
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=5.0)
+    ap.add_argument("--repeat", type=int, default=2)
+    a = ap.parse_args()
+    runs = [(f"drone-and-flock, {n} birds", _scene("drone-and-flock", a.duration, n)) for n in (0, 5, 20, 80)]
+    runs += [(name, _scene(name, a.duration)) for name in ("swarm-of-five", "drone-tree-line", "two-drones-crossing")]
+    ClosedLoop(_scene("drone-and-flock", 0.2, 5)).run()      # numba's cache / compilation, once
+    print(f"{'scene':34s} {'objects':>7s} {'ms/frame':>9s} {'x real time':>11s} {'cast+effects ms':>15s}")
+    for label, scene in runs:
+        ms, cast = _frame_ms(scene, a.repeat)
+        n_obj = len(scene.targets) + len(scene.others)
+        period_ms = scene.tracker.period_s * 1e3
+        print(f"{label:34s} {n_obj:7d} {ms:9.2f} {period_ms / ms:11.0f} {cast:15.2f}")
+    print("load average (1, 5, 15 min): " + ", ".join(f"{x:.2f}" for x in os.getloadavg()))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,324 @@
+"""The sky besides the drones (sim.world.sky, sim.scene_sky): birds, flocks, swaying trees, stray near
+returns, several drones, and the truth of every object in the recording."""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from foveatrack.errors import UserError
+from sim.loop import ClosedLoop
+from sim.scene import load_scene, scene_from_mapping
+from sim.world import kernels as K
+from sim.world import sky
+from world_twins import cast_flapping_twin
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+NEW_SCENES = ("two-drones-crossing", "drone-and-flock", "drone-tree-line", "swarm-of-five")
+
+
+def _mapping(name: str) -> dict:
+    return tomllib.loads((SCENES / f"{name}.toml").read_text())
+
+
+# ---------------------------------------------------------------------------------------- the kernel
+
+def test_flapping_cast_matches_numpy_twin():
+    rng = np.random.default_rng(8)
+    bird = sky.bird_body(0.9)
+    n = 20_000
+    pos = np.column_stack([np.full(n, 9.0), rng.uniform(-0.1, 0.1, n), rng.uniform(-0.1, 0.1, n)])
+    aim = pos + rng.normal(0, 0.3, (n, 3))
+    d = aim / np.linalg.norm(aim, axis=1, keepdims=True)
+    yaw = rng.uniform(-np.pi, np.pi, n)
+    flap = rng.uniform(-0.6, 1.2, n)
+    r = np.full(n, np.inf)
+    p = np.full(n, -1, dtype=np.int64)
+    K.cast_flapping_kernel(np.arange(n, dtype=np.int64), d, pos, yaw, flap, bird.body.prims, bird.hinge, 0, r, p)
+    rt, pt = cast_flapping_twin(d, pos, yaw, flap, bird.body.prims, bird.hinge)
+    assert set(p[p >= 0]) == {0, 1, 2}, "body and both wings are hit"
+    assert np.array_equal(p, pt)
+    f = np.isfinite(r)
+    np.testing.assert_allclose(r[f], rt[f], rtol=1e-12)
+
+
+def test_a_raised_wing_is_where_the_hinge_puts_it():
+    # Wings up 90 deg: a ray straight down through where the left wing's middle would be at rest
+    # misses it, and a ray at the raised wing's middle hits it at the expected range.
+    bird = sky.bird_body(1.0)
+    b, half_w = 1.0, 0.06
+    y_mid = half_w + (b / 2 - half_w) / 2
+    pos = np.array([[0.0, 0.0, -10.0]])
+    one = np.array([0], dtype=np.int64)
+
+    def cast(d, phi):
+        r, p = np.array([np.inf]), np.array([-1], dtype=np.int64)
+        K.cast_flapping_kernel(one, np.array([d]) / np.linalg.norm(d), pos, np.zeros(1), np.array([phi]),
+                               bird.body.prims, bird.hinge, 0, r, p)
+        return r[0], p[0]
+
+    assert cast(np.array([0.0, y_mid, -10.0]), 0.0)[1] == 1
+    assert cast(np.array([0.0, y_mid, -10.0]), math.pi / 2)[1] == -1
+    # raised, the wing stands on its hinge (0, 0.06, 0.03) and reaches up 0.44 m, its 15 mm thickness
+    # now along y: a ray from the origin toward -y, the bird 5 m away with the wing's middle at the
+    # ray's height, meets its face at 5 - 0.06 - 0.0075 m (the body lies below the ray)
+    rr, pp = np.array([np.inf]), np.array([-1], dtype=np.int64)
+    K.cast_flapping_kernel(one, np.array([[0.0, -1.0, 0.0]]), np.array([[0.0, -5.0, -0.25]]), np.zeros(1),
+                           np.array([math.pi / 2]), bird.body.prims, bird.hinge, 0, rr, pp)
+    assert pp[0] == 1 and abs(rr[0] - (5.0 - half_w - 0.0075)) < 1e-9
+
+
+# ---------------------------------------------------------------------------------------- birds
+
+def test_wingbeat_follows_pennycuick_and_falls_with_wingspan():
+    assert 12.5 < sky.wingbeat_hz(0.2) < 15.0
+    assert 5.5 < sky.wingbeat_hz(0.65) < 7.5
+    assert 3.5 < sky.wingbeat_hz(1.5) < 4.5
+    spans = np.linspace(0.2, 1.5, 30)
+    assert np.all(np.diff([sky.wingbeat_hz(b) for b in spans]) < 0)
+
+
+def test_flap_schedule_glides_the_share_asked_and_flaps_whole_beats():
+    rng = np.random.default_rng(3)
+    f = sky.wingbeat_hz(0.5)
+    s = sky.flap_schedule(rng, f, 600.0, 0.4)
+    t = np.arange(0.0, 600.0, 0.01)
+    assert abs((~s.flapping(t)).mean() - 0.4) < 0.07
+    # every flapping bout lasts whole wingbeats: the wing is back at the glide angle when it ends
+    ends = s.bout_start_s[1:][s.bout_flaps[:-1]]
+    np.testing.assert_allclose(s.angle_rad(ends - 1e-9), s.phi0_rad, atol=1e-6)
+    assert sky.flap_schedule(rng, f, 10.0, 1.0).flapping(t[:1000]).sum() == 0
+    assert sky.flap_schedule(rng, f, 10.0, 0.0).flapping(t[:1000]).all()
+
+
+def _resolved_hit_counts(glide_fraction: float, wingspan_m: float, duration_s: float = 4.0, step_s: float = 0.002):
+    """Rays that hit a bird flying straight over the lidar (12 m up, 5 m/s), seen from below by a
+    fovea that resolves it: every ``step_s`` a 48 x 48 raster of rays 2.5 cm apart at its height,
+    centred on it, through the sensor's own casting path (:class:`sim.sensor.SceneSensor`)."""
+    from sim.scan.model import ScanChunk
+    from sim.sensor import SceneSensor
+
+    scene = scene_from_mapping({
+        "scene": {"name": "bird-overhead", "duration_s": duration_s, "seed": 5},
+        "bird": [{"id": "b", "wingspan_m": wingspan_m, "glide_fraction": glide_fraction,
+                  "trajectory": {"type": "straight", "start_m": [-10.0, 0.0, 12.0], "velocity_m_s": [5.0, 0.0, 0.0]}}],
+    })
+    sensor = SceneSensor(scene)
+    bird = scene.others[0]
+    g = (np.arange(48) - 23.5) * 0.025 * wingspan_m / 0.6
+    gx, gy = (a.ravel() for a in np.meshgrid(g, g))
+    counts = []
+    times = np.arange(0.0, duration_s, step_s)
+    for t0 in np.arange(0.0, duration_s, 0.1):        # one sensor call per 100 ms, as the loop makes
+        ts = times[(times >= t0 - 1e-12) & (times < t0 + 0.1 - 1e-12)]
+        t_ns = np.repeat(np.round(ts * 1e9).astype(np.int64), gx.size)
+        c = bird.trajectory.position(ts)
+        aim = np.column_stack([np.repeat(c[:, 0], gx.size) + np.tile(gx, ts.size),
+                               np.repeat(c[:, 1], gx.size) + np.tile(gy, ts.size), np.repeat(c[:, 2], gx.size)])
+        d = aim / np.linalg.norm(aim, axis=1, keepdims=True)
+        chunk = ScanChunk(0, t_ns, d, np.zeros(t_ns.size, np.uint8), np.zeros(t_ns.size, np.uint8))
+        xyz, pt_ns, _, _ = sensor.returns(chunk, d, t0, t0 + 0.1)
+        counts.append(np.bincount(np.searchsorted(ts, pt_ns * 1e-9 - 1e-12), minlength=ts.size))
+    return times, np.concatenate(counts)
+
+
+def _peak_hz(counts, step_s):
+    c = (counts - counts.mean()) * np.hanning(counts.size)
+    n = 16 * counts.size                           # zero-padded: the peak to a small part of a bin
+    power = np.abs(np.fft.rfft(c, n)) ** 2
+    freq = np.fft.rfftfreq(n, step_s)
+    band = (freq > 1.0) & (freq < 40.0)
+    return freq[band][np.argmax(power[band])], freq, power
+
+
+@pytest.mark.parametrize("wingspan_m", [0.3, 1.4])
+def test_bird_flapping_period_is_seen_in_the_hit_count(wingspan_m):
+    """A resolved bird flapping all the time: its hit count rises and falls at its wingbeat
+    frequency (the wings' area seen from below follows cos phi); gliding, that frequency is absent
+    (the count changes only slowly, as the bird is seen more or less obliquely)."""
+    f_beat = sky.wingbeat_hz(wingspan_m)
+    _, counts = _resolved_hit_counts(0.0, wingspan_m)
+    assert counts.min() > 50, "the bird is resolved: dozens of rays on it at every step"
+    peak, freq, power = _peak_hz(counts, 0.002)
+    assert abs(peak - f_beat) < 0.1, (peak, f_beat)
+    _, glide = _resolved_hit_counts(1.0, wingspan_m)
+    _, _, power_glide = _peak_hz(glide, 0.002)
+    near = np.abs(freq - f_beat) < 0.3
+    assert power_glide[near].max() < 0.01 * power[near].max(), "gliding, the wingbeat is not in the count"
+
+
+def test_flock_birds_keep_apart_and_fly_at_bird_speeds():
+    scene = load_scene(SCENES / "drone-and-flock.toml")
+    birds = [o for o in scene.others if o.cls == "bird"]
+    assert len(birds) == 20 and len({o.id for o in birds}) == 20
+    t = np.linspace(0.0, scene.duration_s, 201)
+    pos = np.stack([o.trajectory.position(t) for o in birds])          # (20, T, 3)
+    speed = np.linalg.norm(np.stack([o.trajectory.velocity(t) for o in birds]), axis=2)
+    assert 5.0 <= speed.min() and speed.max() <= 20.0
+    gaps = np.linalg.norm(pos[:, None] - pos[None, :], axis=3)
+    gaps[np.arange(20), np.arange(20)] = np.inf
+    assert gaps.min() > 0.6, "two birds of the flock stay a wingspan apart"
+    assert 0.6 * 0.9 - 1e-9 <= min(o.size_m for o in birds) and max(o.size_m for o in birds) <= 0.6 * 1.1 + 1e-9
+
+
+# ---------------------------------------------------------------------------------------- trees
+
+def test_crown_sways_at_its_stated_frequency_and_amplitude():
+    rng = np.random.default_rng(11)
+    path = sky.crown_sway(rng, (30.0, 0.0, 6.0), 0.3, 0.1, 0.25, 90.0, 2000.0)
+    t = np.arange(0.0, 2000.0, 0.1)
+    p = path.position(t)
+    y = p[:, 1] - 0.0          # along the wind (toward +y)
+    x = p[:, 0] - 30.0         # across it
+    assert abs(np.sqrt(np.mean(y ** 2)) - 0.25) < 0.25 * 0.25
+    assert abs(np.sqrt(np.mean(x ** 2)) - 0.125) < 0.125 * 0.25
+    power = np.abs(np.fft.rfft(y - y.mean())) ** 2
+    freq = np.fft.rfftfreq(y.size, 0.1)
+    smooth = np.convolve(power, np.ones(200) / 200, mode="same")
+    assert abs(freq[np.argmax(smooth)] - 0.3) < 0.03
+    np.testing.assert_array_equal(p[:, 2], 6.0)
+
+
+def test_tree_line_scene_has_trunks_in_the_background_and_crowns_that_move():
+    scene = load_scene(SCENES / "drone-tree-line.toml")
+    crowns = [o for o in scene.others if o.cls == "tree"]
+    assert len(crowns) == 5
+    plain = scene_from_mapping({k: v for k, v in _mapping("drone-tree-line").items() if k != "tree"})
+    assert scene.background_prims.shape[0] == plain.background_prims.shape[0] + 5
+    for c in crowns:
+        p = c.trajectory.position(np.linspace(0, 20, 101))
+        assert 0.05 < np.ptp(p[:, 1]) < 3.0
+
+
+# ---------------------------------------------------------------------------------------- streams
+
+def _positions(obj, t):
+    return obj.trajectory.position(t)
+
+
+def test_adding_birds_changes_no_drones_path_and_no_other_flocks_draws():
+    base = _mapping("swarm-of-five")
+    with_birds = copy.deepcopy(base)
+    flock_a = {"id": "a", "count": 5, "wingspan_m": 0.4,
+               "trajectory": {"type": "straight", "start_m": [40.0, 10.0, 8.0], "velocity_m_s": [0.0, -7.0, 0.0]}}
+    flock_b = {"id": "b", "count": 7, "wingspan_m": 1.0,
+               "trajectory": {"type": "manual", "centre_m": [50.0, 0.0, 10.0], "radius_m": 10.0,
+                              "max_speed_m_s": 12.0, "max_accel_m_s2": 3.0}}
+    with_birds["bird"] = [flock_a]
+    both = copy.deepcopy(base)
+    both["bird"] = [flock_b, flock_a]
+    s0, s1, s2 = (scene_from_mapping(m) for m in (base, with_birds, both))
+    t = np.linspace(0.0, 15.0, 301)
+    for a, b, c in zip(s0.targets, s1.targets, s2.targets):   # drone-5 flies a seeded "manual" path
+        np.testing.assert_array_equal(_positions(a, t), _positions(b, t))
+        np.testing.assert_array_equal(_positions(a, t), _positions(c, t))
+    a1 = [o for o in s1.others if o.id.startswith("a/")]
+    a2 = [o for o in s2.others if o.id.startswith("a/")]
+    assert len(a1) == len(a2) == 5
+    for x, y in zip(a1, a2):
+        np.testing.assert_array_equal(_positions(x, t), _positions(y, t))
+        np.testing.assert_array_equal(x.flap.angle_rad(t), y.flap.angle_rad(t))
+
+
+def test_stray_returns_draw_only_when_listed_and_from_their_own_stream():
+    m = _mapping("swarm-of-five")
+    plain = replace(scene_from_mapping(m), duration_s=1.0)
+    loop = ClosedLoop(plain)
+    loop.run()
+    assert loop.draw_calls["stray_returns"] == 0
+    m2 = copy.deepcopy(m)
+    m2["scene"]["effects"] = m["scene"]["effects"] + ["stray_returns"]
+    m2["effects"] = {"stray_rate_hz": 40.0, "stray_min_range_m": 2.0, "stray_max_range_m": 6.0}
+    strays = replace(scene_from_mapping(m2), duration_s=5.0)
+    loop = ClosedLoop(strays)
+    loop.run()
+    assert loop.draw_calls["stray_returns"] == 50
+    clutter = [o for frame in loop.objects_log for o in frame if o.cls == "clutter"]
+    assert 120 < len(clutter) <= 260, len(clutter)            # Poisson(200), less those lost
+    r = np.array([np.linalg.norm(o.xyz_m) for o in clutter])
+    assert r.min() >= 2.0 and r.max() <= 6.0
+    assert len({o.id for o in clutter}) == len(clutter)
+
+
+# ---------------------------------------------------------------------------------------- scenes
+
+@pytest.mark.parametrize("table, key, value, says", [
+    ("bird", "wingspan_m", 2.0, "wingspan_m"),
+    ("bird", "count", 0, "count"),
+    ("bird", "glide_fraction", 1.5, "glide_fraction"),
+    ("bird", "colour", "red", "colour"),
+    ("bird", "trajectory", {"type": "straight", "start_m": [30, 0, 5], "velocity_m_s": [0, 2, 0]}, "5-20 m/s"),
+    ("bird", "trajectory", {"type": "straight", "start_m": [30, 0, 5], "velocity_m_s": [0, 25, 0]}, "20 m/s"),
+    ("bird", "id", "two words", "id"),
+    ("tree", "base_m", None, "base_m"),
+    ("tree", "crown_radius_m", 9.0, "crown_radius_m"),
+    ("tree", "sway_frequency_hz", 0.0, "sway_frequency_hz"),
+    ("tree", "id", "drone", "id 'drone' is used twice"),
+    ("target", "class", "bird", "class"),
+])
+def test_scene_errors_are_one_line_and_name_the_field(table, key, value, says):
+    m = _mapping("drone-and-flock")
+    m["tree"] = [{"id": "t", "base_m": [40.0, 20.0, -1.5]}]
+    t = m[table][0]
+    if value is None:
+        del t[key]
+    else:
+        t[key] = value
+    with pytest.raises(UserError) as exc:
+        scene_from_mapping(m, "s.toml")
+    msg = str(exc.value)
+    assert "\n" not in msg and says in msg and "s.toml" in msg, msg
+
+
+def test_stray_range_errors_name_the_field():
+    m = _mapping("drone-tree-line")
+    m["effects"] = {"stray_min_range_m": 9.0, "stray_max_range_m": 4.0}
+    with pytest.raises(UserError, match=r"stray_min_range_m = 9.0 must be below stray_max_range_m"):
+        scene_from_mapping(m, "s.toml")
+    m = _mapping("two-drones-crossing")
+    m["effects"] = {"stray_rate_hz": 5.0}
+    with pytest.raises(UserError, match="stray_rate_hz belongs to effect 'stray_returns'"):
+        scene_from_mapping(m, "s.toml")
+
+
+@pytest.mark.parametrize("name", NEW_SCENES)
+def test_new_scenes_record_the_truth_of_every_object(name, tmp_path):
+    from foveatrack.cli import main
+    from foveatrack.recording import RecordingReader
+
+    out = tmp_path / name
+    assert main(["simulate", str(SCENES / f"{name}.toml"), "--duration", "1", "--out", str(out), "--no-progress",
+                 "--one-thread"]) == 0
+    scene = load_scene(SCENES / f"{name}.toml")
+    recs = RecordingReader(out / "run.mcap").records("truth_objects")
+    ids = {r["id"]: r["class"] for r in recs if r["class"] != "clutter"}
+    want = {s.id: s.cls for s in scene.targets} | {o.id: o.cls for o in scene.others}
+    assert ids == want
+    frames = {r["frame_id"] for r in recs}
+    assert len(frames) == 10
+    per_frame = [r for r in recs if r["frame_id"] == 5 and r["class"] != "clutter"]
+    assert len(per_frame) == len(want)
+    for r in per_frame:
+        assert len(r["xyz_m"]) == 3 and len(r["velocity_m_s"]) == 3 and r["size_m"] > 0
+    if name == "two-drones-crossing":
+        a = next(r for r in per_frame if r["id"] == "drone-a")
+        np.testing.assert_allclose(a["xyz_m"], [25.0, 6.0 - 1.2 * 0.55, 2.0], atol=1e-9)
+        np.testing.assert_allclose(a["velocity_m_s"], [0.0, -1.2, 0.0], atol=1e-12)
+    assert sum(r["rays_hit"] for r in recs if r["class"] == "drone") > 0
+
+
+def test_single_target_scenes_write_no_object_truth(tmp_path):
+    from foveatrack.recording import RecordingReader
+    from foveatrack.cli import main
+
+    assert not load_scene(SCENES / "fig12-tracking.toml").multi_object
+    out = tmp_path / "fig12"
+    assert main(["simulate", str(SCENES / "fig12-tracking.toml"), "--duration", "0.5", "--out", str(out),
+                 "--no-progress", "--one-thread"]) == 0
+    assert "truth_objects" not in RecordingReader(out / "run.mcap").channels()
