@@ -33,6 +33,7 @@ from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_rows
 from foveatrack.sky.attention import Attention, AttentionConfig, bearing_off_axis_deg, threat_score
+from foveatrack.space_of_interest import Box
 from foveatrack.sky.tracks import SkyFrameOutput, SkyTracker, SkyTrackerConfig
 from foveatrack.tracker import Tracker, TrackOutput
 
@@ -107,7 +108,11 @@ class SkyController:
     def __init__(self, tracker: Tracker, sky_cfg: SkyTrackerConfig | None = None,
                  attention_cfg: AttentionConfig | None = None):
         self.tracker = tracker
-        self.sky = SkyTracker(sky_cfg)
+        # the paper tracker's D, when it is a box in the world, bounds what the sky tracker looks at
+        # (the scenes' D keeps the ground out)
+        space = tracker.config.space
+        region = space if isinstance(space, Box) and getattr(space, "frame", "lidar") == "world" else None
+        self.sky = SkyTracker(sky_cfg, region)
         self.attention = Attention(attention_cfg or AttentionConfig())
 
     @property

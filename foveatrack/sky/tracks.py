@@ -7,7 +7,9 @@ Per frame:
    :class:`~foveatrack.openloop.background.BackgroundModel`, fed world coordinates.  The rosette's
    incommensurable pattern covers the field over time (paper Fig. 6), so every cube of a tree, a
    roof or the ground is hit in ``background_frames`` frames; a flying object moves through cubes.
-   Points of confirmed tracks' objects are never learned (a hovering drone stays foreground).
+   Points of a confirmed track's object are not learned when the object is where the track's
+   motion predicted it (within ``protect_m``): a hovering drone stays foreground, while a "track"
+   that hops between the scraps of half-learned scenery protects nothing and the scenery settles.
 3. The remaining points are clustered into objects (:func:`foveatrack.openloop.objects.cluster_labels`,
    single linkage with a gap growing with range, the numba kernel with its numpy twin); an object
    has at least ``min_points`` returns and at most ``max_extent_m`` across.  Each object: median
@@ -48,7 +50,7 @@ from scipy.optimize import linear_sum_assignment
 from foveatrack.config_util import as_float, check_keys
 from foveatrack.detection import Detection, box_bounds, box_detection
 from foveatrack.errors import UserError
-from foveatrack.fixed_order import mat3T_vec
+from foveatrack.fixed_order import mat3T_vec, norm3
 from foveatrack.frames import Frame
 from foveatrack.openloop.background import BackgroundModel, voxel_keys
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
@@ -80,6 +82,8 @@ class SkyTrackerConfig:
     field_half_angle_deg : > 0 or None     the lidar's field around its axis (None: every track in view)
     static_window_s, static_radius_m       a confirmed track that stayed put this long is scenery
     d_half_m : > 0 [m]           half-size of the fixated track's D (Algorithm 1)
+    protect_m : > 0 [m]          a confirmed track's object is kept out of the background only when
+                                 it lies this close to the track's prediction (below)
     history_s : > 0 [s]          how long a track keeps its measurements (the classifier's window)
     pose_nodes : int >= 2        head poses asked per frame for the per-point turn
     """
@@ -89,7 +93,7 @@ class SkyTrackerConfig:
     background_dilate: int = 1
     cluster_tol_m: float = 0.5
     cluster_tol_rad: float = 0.01
-    min_points: int = 3
+    min_points: int = 2
     max_extent_m: float = 3.0
     q_m2_s3: float = 20.0
     r_m2: float = 0.04
@@ -97,13 +101,14 @@ class SkyTrackerConfig:
     gate_chi2: float = 16.27
     gate_max_m: float = 5.0
     confirm_hits: int = 3
-    confirm_window: int = 5
-    lost_after_s: float = 1.0
+    confirm_window: int = 15
+    lost_after_s: float = 2.0
     lost_out_of_view_s: float = 5.0
     field_half_angle_deg: float | None = None
     static_window_s: float = 3.0
     static_radius_m: float = 0.5
     d_half_m: float = 1.0
+    protect_m: float = 1.0
     history_s: float = 3.0
     pose_nodes: int = 11
     classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
@@ -111,7 +116,7 @@ class SkyTrackerConfig:
     def __post_init__(self) -> None:
         for k in ("voxel_m", "cluster_tol_m", "max_extent_m", "q_m2_s3", "r_m2", "v0_sigma_m_s", "gate_chi2",
                   "gate_max_m", "lost_after_s", "lost_out_of_view_s", "static_window_s", "static_radius_m",
-                  "d_half_m", "history_s"):
+                  "d_half_m", "protect_m", "history_s"):
             if not getattr(self, k) > 0:
                 raise UserError(f"{k} must be > 0, got {getattr(self, k)!r}")
         if self.field_half_angle_deg is not None and not 0 < self.field_half_angle_deg <= 180:
@@ -225,8 +230,11 @@ class SkyFrameOutput:
 class SkyTracker:
     """Frames of the moving head in, tracks of every moving object out (module docstring)."""
 
-    def __init__(self, cfg: SkyTrackerConfig | None = None):
+    def __init__(self, cfg: SkyTrackerConfig | None = None, region=None):
+        """``region``: a world-frame space of interest (anything with ``contains(xyz)``, e.g. the
+        scene's world box D that keeps the ground out); points outside it are not looked at."""
         self.cfg = cfg or SkyTrackerConfig()
+        self.region = region
         c = self.cfg
         self.background = BackgroundModel(c.voxel_m, c.background_frames, c.background_dilate)
         self.tracks: list[SkyTrack] = []
@@ -247,6 +255,9 @@ class SkyTracker:
         if not valid.all():
             xyz, t_ns = xyz[valid], t_ns[valid]
         world = lidar_to_world_per_point(xyz, t_ns, pose, t0, t1, cfg.pose_nodes)
+        if self.region is not None and world.shape[0]:
+            inside = np.asarray(self.region.contains(world), bool)
+            xyz, t_ns, world = xyz[inside], t_ns[inside], world[inside]
         keys = voxel_keys(world, cfg.voxel_m)
         fg_idx = np.flatnonzero(~self.background.is_background(keys))
         objs, point_obj = self._objects(world[fg_idx], t_ns[fg_idx])
@@ -286,12 +297,14 @@ class SkyTracker:
             if i == fov and fovea_det is not None:
                 z = np.array(self._to_world(fovea_det.xyz, fovea_det.t_s, pose))
                 tz = fovea_det.t_s
+            pred = tr.kf.predicted(ob.t_s)[0]
+            protect = tr.confirmed and norm3(ob.xyz_m - pred) <= cfg.protect_m
             self._hit(tr, tz, z, ob)
             if not tr.confirmed and tr.hits >= cfg.confirm_hits and tr.frames_seen <= cfg.confirm_window:
                 tr.confirmed_t_s = t_mid
                 self.confirmed_ever.append(tr.track_id)
                 confirmed_now.append(tr.track_id)
-            if tr.confirmed:
+            if protect:
                 learn &= point_obj != j
         if fov is not None and fovea_det is not None and not self.tracks[fov].hit_now:
             # seen by Algorithm 1 though no object matched (too few points for an object)
