@@ -106,6 +106,10 @@ class TrackerConfig:
     gyro_bias_walk_deg_s_rts : >= 0          gyro bias random walk; gyro only
     gyro_rest_margin_s : >= 0 [s]            after a STOP, wait this long past the expected
                                              deceleration before taking the head as at rest
+
+    A ``sky`` sub-table (``[tracker.sky]``) is not a setting of this tracker: it asks the driver for
+    the multi-object tracker and its attention (:mod:`foveatrack.sky.controller`), which drives the
+    head through this one; it is checked there.
     """
 
     rate_hz: float = 10.0
@@ -161,7 +165,7 @@ class TrackerConfig:
         """Validate a mapping (TOML table).  Unknown keys and bad values raise UserError naming
         ``where``, the key and what is allowed."""
         names = [f.name for f in fields(cls)]
-        check_keys(data, names + ["deadband_deg", "gain_1_s"], where)
+        check_keys(data, names + ["deadband_deg", "gain_1_s", "sky"], where)
         kw: dict = {}
         f = lambda k, **a: as_float(data[k], k, where, **a)  # noqa: E731
         for k in data:
@@ -195,6 +199,9 @@ class TrackerConfig:
                 kw[k] = as_choice(data[k], k, where, cls.SEARCHES)
             elif k == "space":
                 kw[k] = None if data[k] is None else space_from_mapping(data[k], f"{where}.space")
+            elif k == "sky":   # the multi-object opt-in: read by the driver (foveatrack.sky.controller)
+                if not isinstance(data[k], Mapping):
+                    raise UserError(f"{where}: sky must be a table of the sky tracker's keys, got {data[k]!r}")
             elif k == "min_points":
                 v = data[k]
                 if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -361,10 +368,15 @@ class Tracker:
 
     # ------------------------------------------------------------------------------------------
     def process(self, frame: Frame, send_t_s: float | None = None) -> TrackOutput:
+        return self.steer(frame, self._detect(frame), send_t_s)
+
+    def steer(self, frame: Frame, det: Detection | None, send_t_s: float | None = None) -> TrackOutput:
+        """Algorithm 2 (and the lost-target states) on a detection of ``frame`` made by the caller:
+        :meth:`process`'s Algorithm 1, or the sky tracker's in the fixated track's D
+        (:mod:`foveatrack.sky.controller`)."""
         cfg = self.config
         t_now = frame.t_end_s
         send_t = t_now + cfg.send_delay_s if send_t_s is None else send_t_s
-        det = self._detect(frame)
         err_pan = err_tilt = None
         world = sigma_w = None
         if det is not None:

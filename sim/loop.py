@@ -157,7 +157,16 @@ class ClosedLoop:
         self.tracker_overrides = self.head_facts.tracker_values()
         self.tracker = Tracker(scene.tracker.with_head(self.head_facts, scene.tracker_table, f"{scene.path} [tracker]"),
                                table)
-        self.controller = controller if controller is not None else self.tracker
+        # [tracker.sky]: every object tracked, the fovea shared by saccades (foveatrack.sky.controller),
+        # the head driven through the tracker above; its output per frame in sky_log
+        self.sky = None
+        self.sky_log: list = []
+        if controller is None and "sky" in scene.tracker_table:
+            from foveatrack.sky.controller import SkyController, sky_configs_from_mapping
+            from sim.summary import half_fov_deg
+            self.sky = SkyController(self.tracker, *sky_configs_from_mapping(
+                scene.tracker_table["sky"], f"{scene.path} [tracker.sky]", half_fov_deg(scene)))
+        self.controller = controller if controller is not None else (self.sky or self.tracker)
         # The lidar's gyro on the head, only when the scene has [imu] (its own random stream).
         if self.tracker.config.attitude == "gyro" and scene.imu is None:
             raise UserError(f"{scene.path} [tracker]: attitude = \"gyro\" needs an [imu] table "
@@ -323,6 +332,8 @@ class ClosedLoop:
             self.last_sent = (send_t, data)
         c6 = clock()
         self._log(t0, t1, frame, int(on_target.sum()), out, mid_pose_deg)
+        if self.sky is not None:
+            self.sky_log.append(out)
         if self.frame_hook is not None:
             self.frame_hook(frame, out, self)
         c7 = clock()

@@ -43,13 +43,16 @@ MAY_IMPORT: dict[str, set[str]] = {
     # open-loop tracker that consumes them and writes our recording
     "foveatrack.sources": {_CORE},
     "foveatrack.openloop": {_CORE, "foveatrack.sources", "foveatrack.recording"},
+    # many objects seen from the moving head: the open-loop tracker's background and clustering,
+    # used on world coordinates
+    "foveatrack.sky": {_CORE, "foveatrack.openloop"},
     "foveatrack.daemon": {_CORE, "foveatrack.recording", "foveatrack.livox", "foveatrack.live_devices", "gimbal"},
-    "sim": {_CORE, "foveatrack.recording", "foveatrack.livox", "foveatrack.live_devices", "foveatrack.calibration",
+    "sim": {_CORE, "foveatrack.sky", "foveatrack.recording", "foveatrack.livox", "foveatrack.live_devices", "foveatrack.calibration",
             "foveatrack.imu_calib", "foveatrack.replay", "foveatrack.daemon", "gimbal"},
     # the composition root: everything, sim lazily inside its commands
     "foveatrack.cli": {_CORE, "foveatrack.recording", "foveatrack.livox", "foveatrack.live_devices",
                        "foveatrack.calibration", "foveatrack.imu_calib", "foveatrack.replay", "foveatrack.daemon",
-                       "foveatrack.sources", "foveatrack.openloop", "gimbal", "sim"},
+                       "foveatrack.sources", "foveatrack.openloop", "foveatrack.sky", "gimbal", "sim"},
     "foveatrack.__main__": {"foveatrack.cli"},
 }
 

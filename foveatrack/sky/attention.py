@@ -1,0 +1,145 @@
+"""Which track the fovea serves: the priority track, with saccades to every other confirmed drone
+that has gone too long without the fovea (issue 28).
+
+Threat score of a confirmed track (0 for tentative ones), with ``d`` its distance to the protected
+point ``protected_xyz_m`` and ``s`` its closing speed on it (``-v . (p - c) / |p - c|``, > 0 when
+it comes nearer; negative values count as 0)::
+
+    score = class_weight[label] * (1 + s / closing_ref_m_s) * distance_ref_m / (distance_ref_m + d)
+
+``class_weight``: drone 1.0, unknown 0.5 (not classified yet: a drone until shown otherwise, but
+after the drones), bird 0.05, clutter 0.  So a drone closing at 10 m/s counts twice one hovering at
+the same distance, and one at ``distance_ref_m`` half one at the protected point.  Ties go to the
+lower id.
+
+Schedule (evaluated after each frame, for the next):
+
+* the *priority track* is the highest score (an operator's pin, :meth:`Attention.pin`, overrides it
+  while the pinned track lives);
+* a *revisit* is due for every other confirmed drone whose clock -- its last frame in the fovea, the
+  end of its last revisit, or its confirmation -- is older than ``revisit_s``; the most overdue one is
+  served first;
+* a revisit fixation lasts until the track has been in the fovea for ``dwell_s``, or
+  ``saccade_timeout_s`` after it started if the head never got there (a track the head cannot
+  reach does not hold the fovea); then the fovea returns to the priority track.
+
+A track is *in the fovea* when its predicted bearing lies within ``fovea_half_angle_deg`` of the
+lidar's axis at the frame's mid pose (the rosette's dense centre, paper Fig. 6).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from foveatrack.config_util import as_float, as_vec, check_keys
+from foveatrack.errors import UserError
+
+CLASS_WEIGHT = {"drone": 1.0, "unknown": 0.5, "bird": 0.05, "clutter": 0.0}
+
+
+@dataclass(frozen=True)
+class AttentionConfig:
+    """Parameters of :class:`Attention` (a ``[sky.attention]`` table; module docstring)."""
+    protected_xyz_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    distance_ref_m: float = 50.0
+    closing_ref_m_s: float = 10.0
+    revisit_s: float = 3.0
+    dwell_s: float = 0.5
+    saccade_timeout_s: float = 2.0
+    fovea_half_angle_deg: float = 3.0
+
+    @classmethod
+    def from_mapping(cls, data: Mapping, where: str) -> "AttentionConfig":
+        check_keys(data, [f.name for f in fields(cls)], where)
+        kw = {}
+        for k, v in data.items():
+            if k == "protected_xyz_m":
+                kw[k] = as_vec(v, k, where, 3)
+            else:
+                kw[k] = as_float(v, k, where, lo=0, lo_open=True)
+        return cls(**kw)
+
+
+def threat_score(view, cfg: AttentionConfig) -> float:
+    """The module docstring's score of a :class:`~foveatrack.sky.tracks.TrackView`."""
+    if not view.confirmed:
+        return 0.0
+    c = cfg.protected_xyz_m
+    px, py, pz = view.xyz_m.tolist()
+    vx, vy, vz = view.velocity_m_s.tolist()
+    dx, dy, dz = px - c[0], py - c[1], pz - c[2]
+    d = math.sqrt(dx * dx + dy * dy + dz * dz)
+    closing = max(0.0, -(vx * dx + vy * dy + vz * dz) / d) if d > 0 else 0.0
+    return (CLASS_WEIGHT.get(view.label, 0.0) * (1.0 + closing / cfg.closing_ref_m_s)
+            * cfg.distance_ref_m / (cfg.distance_ref_m + d))
+
+
+@dataclass
+class Attention:
+    """The fixation schedule (module docstring).  :meth:`update` after each frame; :attr:`target`
+    is the track id the fovea serves next (None: no confirmed track)."""
+    cfg: AttentionConfig = field(default_factory=AttentionConfig)
+    target: int | None = None
+    priority: int | None = None
+    revisit: int | None = None           # the track of the current revisit fixation, if any
+    pinned: int | None = None
+    served_s: dict = field(default_factory=dict)
+    _revisit_start_s: float = 0.0
+    _revisit_dwell_s: float = 0.0
+
+    def pin(self, track_id: int | None) -> None:
+        """An operator's choice: this track is the priority while it lives (None: unpin)."""
+        self.pinned = track_id
+
+    def update(self, t_s: float, views, in_fovea: set[int], dt_s: float) -> int | None:
+        cfg = self.cfg
+        live = {v.track_id: v for v in views if v.confirmed}
+        for tid in live:            # a new track's clock starts when it is confirmed
+            self.served_s.setdefault(tid, t_s)
+        for tid in in_fovea:
+            if tid in live:
+                self.served_s[tid] = t_s
+        self.served_s = {k: t for k, t in self.served_s.items() if k in live}
+        if self.pinned is not None and self.pinned not in live:
+            self.pinned = None
+        scores = sorted(((-threat_score(v, cfg), tid) for tid, v in live.items()))
+        best = scores[0][1] if scores and scores[0][0] < 0.0 else None
+        self.priority = self.pinned if self.pinned is not None else best
+        # the revisit in progress: count its time in the fovea, end it when served or timed out
+        if self.revisit is not None:
+            if self.revisit not in live:
+                self.revisit = None
+            else:
+                if self.revisit in in_fovea:
+                    self._revisit_dwell_s += dt_s
+                if self._revisit_dwell_s >= cfg.dwell_s or t_s - self._revisit_start_s >= cfg.saccade_timeout_s:
+                    self.served_s[self.revisit] = t_s     # served, or given up on: its clock restarts
+                    self.revisit = None
+        if self.revisit is None and self.priority is not None:
+            first = {}
+            for tid, v in live.items():
+                if tid != self.priority and v.label == "drone":
+                    first[tid] = self.served_s[tid]
+            due = sorted((t, tid) for tid, t in first.items() if t_s - t > cfg.revisit_s)
+            if due:
+                self.revisit = due[0][1]
+                self._revisit_start_s = t_s
+                self._revisit_dwell_s = 0.0
+        self.target = self.revisit if self.revisit is not None else self.priority
+        return self.target
+
+
+def bearing_off_axis_deg(p_world, rows, offset) -> float:
+    """Angle [deg] between the lidar's axis (pose ``rows``: :func:`foveatrack.reconstruction.rotation_rows`)
+    and the world point ``p_world``."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
+    x, y, z = np.asarray(p_world, np.float64).reshape(3).tolist()
+    ox, oy, oz = np.asarray(offset, np.float64).reshape(3).tolist()
+    qx = r00 * x + r10 * y + r20 * z - ox
+    qy = r01 * x + r11 * y + r21 * z - oy
+    qz = r02 * x + r12 * y + r22 * z - oz
+    return math.degrees(math.atan2(math.hypot(qy, qz), qx))

@@ -1,0 +1,143 @@
+"""Drone, bird or clutter, from what the lidar measures of a track over its last ``history_s``.
+
+Features (each from the track's hits in the window; sums by ``math.fsum``: exact, so the same bits
+everywhere):
+
+``hits``            measurements in the window
+``size_m``          median of the largest side of the object's bounding box
+``speed_m_s``       the filter's speed
+``net_speed_m_s``   straight-line distance from the first to the last position over the time between
+                    (a tree crown swaying in the wind goes back and forth: near 0)
+``manoeuvre_m_s2``  change of the least-squares velocity between the window's first and second half,
+                    per second (a bird weaves, a drone on a mission flies straight or turns slowly)
+``flap_cv``         coefficient of variation (std / mean) of the box's vertical side: a flapping
+                    bird's wings sweep up and down (sim: 40 deg amplitude), a drone's rotor disc
+                    does not
+``flap_period_s``   the apparent period of the vertical side: the lag of the first autocorrelation
+                    peak above 0.5, if the window holds two periods (None otherwise).  Wingbeats of
+                    4-14 Hz are faster than the 10 Hz frames: this is the aliased period, periodic
+                    only while the bird flaps steadily; it counts as flapping evidence when found.
+
+Rules, in order (thresholds in :class:`ClassifierConfig`; documented in docs/sky-tracks.md):
+
+1. fewer than ``min_hits`` hits: ``unknown``;
+2. ``net_speed_m_s < clutter_net_speed_m_s``: ``clutter`` (trees, static returns; a drone hovering
+   that still is called clutter too -- a hover is found by the operator, not by this rule);
+3. ``flap_cv >= bird_flap_cv`` or a ``flap_period_s`` found or
+   ``manoeuvre_m_s2 >= bird_manoeuvre_m_s2`` or ``speed_m_s >= bird_speed_m_s``: ``bird``;
+4. otherwise ``drone``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from collections.abc import Mapping
+
+from foveatrack.config_util import as_float, check_keys
+from foveatrack.errors import UserError
+
+LABELS = ("unknown", "clutter", "bird", "drone")
+
+
+@dataclass(frozen=True)
+class ClassifierConfig:
+    """Thresholds of :func:`classify` (a ``[sky.classifier]`` table)."""
+    min_hits: int = 8
+    clutter_net_speed_m_s: float = 0.4
+    bird_flap_cv: float = 0.35
+    bird_manoeuvre_m_s2: float = 6.0
+    bird_speed_m_s: float = 30.0
+    min_flap_period_s: float = 0.2
+    flap_autocorr: float = 0.5
+
+    @classmethod
+    def from_mapping(cls, data: Mapping, where: str) -> "ClassifierConfig":
+        check_keys(data, [f.name for f in fields(cls)], where)
+        kw = {}
+        for k, v in data.items():
+            if k == "min_hits":
+                if isinstance(v, bool) or not isinstance(v, int) or v < 2:
+                    raise UserError(f"{where}: min_hits must be an integer >= 2, got {v!r}")
+                kw[k] = v
+            else:
+                kw[k] = as_float(v, k, where, lo=0)
+        return cls(**kw)
+
+
+def _mean(xs) -> float:
+    return math.fsum(xs) / len(xs)
+
+
+def _slope(ts, xs) -> float:
+    tm, xm = _mean(ts), _mean(xs)
+    den = math.fsum((t - tm) * (t - tm) for t in ts)
+    return 0.0 if den == 0.0 else math.fsum((t - tm) * (x - xm) for t, x in zip(ts, xs)) / den
+
+
+def _velocity(h) -> list[float]:
+    ts = [x[0] for x in h]
+    return [_slope(ts, [float(x[1][a]) for x in h]) for a in range(3)]
+
+
+def _norm(v) -> float:
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+def flap_period_s(ts, zs, min_period_s: float, threshold: float) -> float | None:
+    """Apparent period of the series ``zs`` sampled at ``ts`` (about evenly): the lag of the first
+    normalised autocorrelation peak above ``threshold`` with at least two periods in the window."""
+    n = len(zs)
+    if n < 6:
+        return None
+    dt = (ts[-1] - ts[0]) / (n - 1)
+    m = _mean(zs)
+    d = [z - m for z in zs]
+    var = math.fsum(x * x for x in d)
+    if var <= 0.0 or dt <= 0.0:
+        return None
+    ac = [math.fsum(d[i] * d[i + k] for i in range(n - k)) / var for k in range(n // 2 + 1)]
+    for k in range(1, len(ac) - 1):
+        if k * dt >= min_period_s and ac[k] >= threshold and ac[k] >= ac[k - 1] and ac[k] >= ac[k + 1]:
+            return k * dt
+    return None
+
+
+def features(track) -> dict:
+    """The features of a track (module docstring) from its ``history`` and filter."""
+    h = track.history
+    f = {"hits": len(h), "speed_m_s": track.kf.speed_m_s}
+    if len(h) < 2:
+        return f
+    ts = [x[0] for x in h]
+    span = ts[-1] - ts[0]
+    zs = [float(x[2][2]) for x in h]
+    f["size_m"] = sorted(float(max(x[2].tolist())) for x in h)[len(h) // 2]
+    p0, p1 = h[0][1].tolist(), h[-1][1].tolist()
+    f["net_speed_m_s"] = _norm([p1[a] - p0[a] for a in range(3)]) / span if span > 0 else 0.0
+    zm = _mean(zs)
+    f["flap_cv"] = math.sqrt(_mean([(z - zm) * (z - zm) for z in zs])) / zm if zm > 0 else 0.0
+    half = len(h) // 2
+    if half >= 3:
+        a, b = h[:half], h[half:]
+        va, vb = _velocity(a), _velocity(b)
+        dt = _mean([x[0] for x in b]) - _mean([x[0] for x in a])
+        f["manoeuvre_m_s2"] = _norm([vb[i] - va[i] for i in range(3)]) / dt if dt > 0 else 0.0
+    f["flap_period_s"] = None
+    return f
+
+
+def classify(track, cfg: ClassifierConfig) -> tuple[str, dict]:
+    """``(label, features)`` of a track (module docstring)."""
+    f = features(track)
+    if f["hits"] < cfg.min_hits:
+        return "unknown", f
+    ts = [x[0] for x in track.history]
+    f["flap_period_s"] = flap_period_s(ts, [float(x[2][2]) for x in track.history], cfg.min_flap_period_s,
+                                       cfg.flap_autocorr)
+    if f["net_speed_m_s"] < cfg.clutter_net_speed_m_s:
+        return "clutter", f
+    if (f["flap_cv"] >= cfg.bird_flap_cv or f["flap_period_s"] is not None
+            or f.get("manoeuvre_m_s2", 0.0) >= cfg.bird_manoeuvre_m_s2 or f["speed_m_s"] >= cfg.bird_speed_m_s):
+        return "bird", f
+    return "drone", f

@@ -1,0 +1,157 @@
+"""The head shared between many tracks: the sky tracker sees every object, the attention picks the
+track the fovea serves, and the paper's tracker drives the head to it (issue 28).
+
+Per frame (a :class:`foveatrack.controller.Controller`, driven like the paper's tracker):
+
+1. :class:`~foveatrack.sky.tracks.SkyTracker` takes the frame at the pose the tracker's dead
+   reckoning gives (:class:`foveatrack.reconstruction.Reconstructor`) and measures the fixated
+   track with Algorithm 1 in its D (paper App. D.2);
+2. the head is steered by :meth:`foveatrack.tracker.Tracker.steer`, the paper's Algorithm 2 (App.
+   D.3: dead band, proportional speed, the stop limits, the speed table):
+
+   * on that Algorithm 1 detection when the fovea saw the track;
+   * during a saccade (the fixated track coasting, or out of the field), on its predicted position
+     turned into the lidar frame -- an aim point, a :class:`~foveatrack.detection.Detection` with
+     ``n_points = 0``, which the output does not report as a detection;
+   * with no confirmed track, on nothing: the paper's hold, search sweep and wait;
+3. :class:`~foveatrack.sky.attention.Attention` chooses the track for the next frame.
+
+The paper's single-target tracker stays the default everywhere; this runs only where a scene or a
+configuration asks for it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from foveatrack.detection import Detection, bearing_deg
+from foveatrack.errors import UserError
+from foveatrack.fixed_order import norm3
+from foveatrack.frames import Frame
+from foveatrack.reconstruction import rotation_rows
+from foveatrack.sky.attention import Attention, AttentionConfig, bearing_off_axis_deg, threat_score
+from foveatrack.space_of_interest import Box
+from foveatrack.sky.tracks import SkyFrameOutput, SkyTracker, SkyTrackerConfig
+from foveatrack.tracker import Tracker, TrackOutput
+
+
+@dataclass(frozen=True)
+class SkyControlOutput:
+    """One frame: the paper tracker's output for the head (``track``), every track (``sky``), the
+    track the fovea served and the one it serves next, the tracks in the fovea, the threat scores.
+    ``detection`` is Algorithm 1's in the fixated track's D (None during a saccade)."""
+    track: TrackOutput
+    sky: SkyFrameOutput
+    fixated: int | None
+    next_target: int | None
+    in_fovea: tuple[int, ...]
+    scores: dict
+
+    # what the drivers read of a controller's output (sim.loop, the command gate)
+    @property
+    def command(self):
+        return self.track.command
+
+    @property
+    def state(self):
+        return self.track.state
+
+    @property
+    def detection(self):
+        return self.sky.fovea_detection
+
+    @property
+    def world_xyz(self):
+        return self.track.world_xyz if self.sky.fovea_detection is not None else None
+
+    @property
+    def world_sigma_m(self):
+        return self.track.world_sigma_m if self.sky.fovea_detection is not None else None
+
+    @property
+    def head_tilt_deg(self):
+        return self.track.head_tilt_deg
+
+    @property
+    def head_sigma_tilt_deg(self):
+        return self.track.head_sigma_tilt_deg
+
+    def __getattr__(self, name):
+        if name == "track":
+            raise AttributeError(name)
+        # the rest of a TrackOutput (errors, head estimate) as the paper tracker steered this frame
+        # (toward the aim point during a saccade)
+        return getattr(self.track, name)
+
+
+def sky_configs_from_mapping(data: Mapping, where: str, field_half_angle_deg: float | None = None
+                             ) -> tuple[SkyTrackerConfig, AttentionConfig]:
+    """The ``[tracker.sky]`` table: the sky tracker's keys, with ``[tracker.sky.attention]`` and
+    ``[tracker.sky.classifier]`` sub-tables.  ``field_half_angle_deg``: the lidar's, used unless
+    the table sets it."""
+    if not isinstance(data, Mapping):
+        raise UserError(f"{where}: expected a table, got {data!r}")
+    data = dict(data)
+    att = data.pop("attention", {})
+    cfg = SkyTrackerConfig.from_mapping(data, where)
+    if "field_half_angle_deg" not in data and field_half_angle_deg is not None:
+        cfg = replace(cfg, field_half_angle_deg=float(field_half_angle_deg))
+    return cfg, AttentionConfig.from_mapping(att, where + ".attention")
+
+
+class SkyController:
+    """Frames in, head commands out, every object tracked (module docstring)."""
+
+    def __init__(self, tracker: Tracker, sky_cfg: SkyTrackerConfig | None = None,
+                 attention_cfg: AttentionConfig | None = None):
+        self.tracker = tracker
+        # the paper tracker's D, when it is a box in the world, bounds what the sky tracker looks at
+        # (the scenes' D keeps the ground out)
+        space = tracker.config.space
+        region = space if isinstance(space, Box) and getattr(space, "frame", "lidar") == "world" else None
+        self.sky = SkyTracker(sky_cfg, region)
+        self.attention = Attention(attention_cfg or AttentionConfig())
+
+    @property
+    def recon(self):
+        return self.tracker.recon
+
+    def process(self, frame: Frame, send_t_s: float | None = None) -> SkyControlOutput:
+        recon = self.tracker.recon
+        fix = self.attention.target
+        sky = self.sky.process(frame, recon, fix)
+        det = sky.fovea_detection
+        view = next((v for v in sky.tracks if v.track_id == fix), None)
+        if det is None and view is not None:
+            det = self._aim(view.xyz_m, frame.t_end_s)
+        out = self.tracker.steer(frame, det, send_t_s)
+        t_mid = 0.5 * (frame.t_start_s + frame.t_end_s)
+        pan, tilt, _, _ = recon.angles_at(t_mid)
+        rows = rotation_rows(pan, tilt)
+        half = self.attention.cfg.fovea_half_angle_deg
+        in_fovea = {v.track_id for v in sky.tracks
+                    if v.confirmed and bearing_off_axis_deg(v.xyz_m, rows, recon.lidar_offset_m) <= half}
+        nxt = self.attention.update(frame.t_end_s, sky.tracks, in_fovea, frame.t_end_s - frame.t_start_s)
+        scores = {v.track_id: threat_score(v, self.attention.cfg) for v in sky.tracks if v.confirmed}
+        return SkyControlOutput(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores)
+
+    def command_sent(self, t_s: float, cmd) -> None:
+        self.tracker.command_sent(t_s, cmd)
+
+    def on_imu(self, t_s, gyro_rad_s) -> None:
+        self.tracker.on_imu(t_s, gyro_rad_s)
+
+    def _aim(self, p_world: np.ndarray, t_s: float) -> Detection:
+        """The track's position as the lidar would see it at ``t_s`` (an aim point, ``n_points = 0``)."""
+        recon = self.tracker.recon
+        pan, tilt, _, _ = recon.angles_at(t_s)
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_rows(pan, tilt)
+        x, y, z = np.asarray(p_world, np.float64).tolist()
+        ox, oy, oz = np.asarray(recon.lidar_offset_m, np.float64).reshape(3).tolist()
+        q = np.array([r00 * x + r10 * y + r20 * z - ox, r01 * x + r11 * y + r21 * z - oy,
+                      r02 * x + r12 * y + r22 * z - oz])
+        az, el = bearing_deg(*q.tolist())
+        return Detection(t_s, q, 0, az, el, norm3(q))

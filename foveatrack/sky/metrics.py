@@ -1,0 +1,114 @@
+"""The figures the field judges a multi-object tracker by (issue 28), from the tracks a run output
+and the truth of the drones.
+
+GOSPA (A. S. Rahmathullah, A. F. Garcia-Fernandez, L. Svensson, "Generalized optimal sub-pattern
+assignment metric", FUSION 2017, arXiv:1601.05585), with ``alpha = 2``, cut-off ``c`` and order
+``p``, between the estimates ``X`` and the truths ``Y`` of one instant::
+
+    GOSPA = ( min over assignments  sum_assigned min(d, c)^p  +  c^p / 2 (|X| + |Y| - 2 |assigned|) )^(1/p)
+
+where a pair at ``d >= c`` counts as one missed and one false (``c^p / 2`` each), which is the same.
+Found by scipy's ``linear_sum_assignment`` on ``min(d, c)^p``; the parts are reported as Stone Soup
+reports them (``localisation`` = the assigned pairs' sum of ``d^p``, ``missed`` and ``false`` = their
+count times ``c^p / 2``, each before the root); ``tests/sky/test_gospa.py`` checks them against
+Stone Soup's ``GOSPAMetric``.
+
+Per drone, with tracks matched to drones at each frame by the same assignment (cut-off
+``match_m``; only confirmed tracks, any class):
+
+``time_to_confirm_s``   first frame a track is matched minus the first frame the drone is visible
+``continuity``          share of the frames from that first match on with a matched track
+``id_switches``         times the matched track's id changes (gaps without a match do not count)
+``fovea_share``         share of its visible frames the drone spends in the fovea
+``longest_revisit_gap_s``  the longest stretch (after its first confirmation) out of the fovea
+
+and ``false_drone_tracks``: confirmed tracks labelled drone at some frame without being matched to a
+drone at that frame, counted once per id (birds, trees, clutter called drones), and per hour of run.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+
+def _pair_distances(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    d = X[:, None, :] - Y[None, :, :]
+    d2 = d * d
+    return np.sqrt(d2[..., 0] + d2[..., 1] + d2[..., 2])
+
+
+def gospa(estimates, truths, c: float, p: float = 2.0) -> dict:
+    """GOSPA of one instant (module docstring): ``distance``, ``localisation``, ``missed``, ``false``,
+    and ``assignment``: (estimate index, truth index) pairs closer than ``c``."""
+    X = np.asarray(estimates, np.float64).reshape(-1, 3)
+    Y = np.asarray(truths, np.float64).reshape(-1, 3)
+    half = c ** p / 2.0
+    loc, pairs = 0.0, []
+    if X.shape[0] and Y.shape[0]:
+        d = _pair_distances(X, Y)
+        cost = np.minimum(d, c) ** p
+        rows, cols = linear_sum_assignment(cost)
+        for i, j in zip(rows.tolist(), cols.tolist()):
+            if d[i, j] < c:
+                loc += float(cost[i, j])
+                pairs.append((i, j))
+    n = len(pairs)
+    missed = half * (Y.shape[0] - n)
+    false = half * (X.shape[0] - n)
+    return {"distance": (loc + missed + false) ** (1.0 / p), "localisation": loc, "missed": missed,
+            "false": false, "assignment": pairs}
+
+
+def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0) -> dict:
+    """The per-drone figures and the false drone tracks (module docstring).
+
+    times_s : (T,) frame times [s]
+    drones : id -> {"xyz_m": (T, 3), "visible": (T,) bool, "in_fovea": (T,) bool or None}
+    tracks_per_frame : T lists of (track_id, label, xyz_m) of the confirmed tracks
+    """
+    t = np.asarray(times_s, np.float64)
+    ids = sorted(drones)
+    T = t.size
+    matched = {d: [None] * T for d in ids}
+    false_ids: set[int] = set()
+    for k in range(T):
+        tr = tracks_per_frame[k]
+        live = [d for d in ids if np.all(np.isfinite(drones[d]["xyz_m"][k]))]
+        g = gospa([x for _, _, x in tr], [drones[d]["xyz_m"][k] for d in live], match_m) if tr else \
+            {"assignment": []}
+        hit = set()
+        for i, j in g["assignment"]:
+            matched[live[j]][k] = tr[i][0]
+            hit.add(i)
+        for i, (tid, label, _) in enumerate(tr):
+            if label == "drone" and i not in hit:
+                false_ids.add(tid)
+    dt = float(np.median(np.diff(t))) if T > 1 else 0.0
+    out = {}
+    for d in ids:
+        vis = np.asarray(drones[d]["visible"], bool)
+        m = matched[d]
+        first_vis = int(np.argmax(vis)) if vis.any() else None
+        first = next((k for k in range(T) if m[k] is not None), None)
+        r = {"time_to_confirm_s": None if first is None or first_vis is None else float(t[first] - t[first_vis]),
+             "continuity": 0.0, "id_switches": 0, "track_ids": sorted({x for x in m if x is not None})}
+        if first is not None:
+            seen = [x for x in m[first:] if x is not None]
+            r["continuity"] = len(seen) / (T - first)
+            r["id_switches"] = sum(1 for a, b in zip(seen, seen[1:]) if a != b)
+        fov = drones[d].get("in_fovea")
+        if fov is not None:
+            fov = np.asarray(fov, bool)
+            r["fovea_share"] = float(fov[vis].mean()) if vis.any() else 0.0
+            gap, longest = 0, 0
+            for k in range(first if first is not None else T, T):
+                gap = 0 if fov[k] else gap + 1
+                longest = max(longest, gap)
+            r["longest_revisit_gap_s"] = longest * dt
+        out[d] = r
+    hours = (t[-1] - t[0] + dt) / 3600.0 if T else math.nan
+    return {"drones": out, "false_drone_tracks": sorted(false_ids),
+            "false_drone_tracks_per_hour": len(false_ids) / hours if hours > 0 else math.nan}

@@ -1,0 +1,428 @@
+"""Every moving object in the field, tracked from the moving head (issue 28).
+
+Per frame:
+
+1. The points go into the world at each point's head pose (:mod:`foveatrack.sky.world_points`).
+2. The static scene is learned in world cubes and taken out: the open-loop tracker's
+   :class:`~foveatrack.openloop.background.BackgroundModel`, fed world coordinates.  The rosette's
+   incommensurable pattern covers the field over time (paper Fig. 6), so every cube of a tree, a
+   roof or the ground is hit in ``background_frames`` frames; a flying object moves through cubes.
+   Points of a confirmed track's object are not learned when the object is where the track's
+   motion predicted it (within ``protect_m``): a hovering drone stays foreground, while a "track"
+   that hops between the scraps of half-learned scenery protects nothing and the scenery settles.
+3. The remaining points are clustered into objects (:func:`foveatrack.openloop.objects.cluster_labels`,
+   single linkage with a gap growing with range, the numba kernel with its numpy twin); an object
+   has at least ``min_points`` returns and at most ``max_extent_m`` across.  Each object: median
+   position and time of its points, point count, bounding-box sides.
+4. Association: global nearest neighbour.  The cost of track ``i`` and object ``j`` is the squared
+   Mahalanobis distance of the object from the track's prediction (:mod:`foveatrack.sky.motion`); a
+   pair is allowed when it is at most ``gate_chi2`` (16.27: 99.9 % of a chi-square of 3 degrees of
+   freedom) and the object is at most ``gate_max_m`` from the prediction.  scipy's
+   ``linear_sum_assignment`` picks the assignment with the most allowed pairs, and among those the
+   least total cost (forbidden pairs cost more than all allowed ones together, and are dropped).
+5. Each matched track's filter takes its object's median; the fixated track (the one the fovea
+   serves, :mod:`foveatrack.sky.attention`) takes the paper's Algorithm 1 instead: the per-axis
+   median of the foreground points inside its D, a box of ``d_half_m`` around its prediction (in the
+   world, tested at the frame's mid pose as the tracker's world D is), without the points of objects
+   matched to other tracks -- a bird flying through the drone's D does not pull its median.
+6. Unmatched objects start tentative tracks.  A tentative track is confirmed after ``confirm_hits``
+   hits in its first ``confirm_window`` frames, and dropped if it is not.  A track not seen for
+   ``lost_after_s`` while its prediction lies in the lidar's field (``field_half_angle_deg`` around
+   the optical axis), or for ``lost_out_of_view_s`` while it is outside (the head looks elsewhere),
+   is deleted; so is one merged with another track's object (an object matched to another track
+   lies in its gate while none is left for it: two clusters became one) for longer.  A confirmed track whose positions over ``static_window_s`` stay within
+   ``static_radius_m`` of their median is scenery (a part of a tree the background has not learned
+   yet): dropped, and its D made background (as in the open-loop tracker).
+
+Ids are integers from 0 in the order tracks are created, never reused.  Everything is a function of
+the frames and the pose: no random numbers, sums in a fixed order, a stable assignment.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from collections.abc import Mapping
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from foveatrack.config_util import as_float, check_keys
+from foveatrack.detection import Detection, box_bounds, box_detection
+from foveatrack.errors import UserError
+from foveatrack.fixed_order import mat3T_vec, norm3
+from foveatrack.frames import Frame
+from foveatrack.openloop.background import BackgroundModel, voxel_keys
+from foveatrack.openloop.objects import cluster_labels, objects_from_labels
+from foveatrack.reconstruction import head_trig, rotation_rows
+from foveatrack.sky.classify import ClassifierConfig, classify
+from foveatrack.sky.motion import ConstantVelocityFilter
+from foveatrack.sky.world_points import lidar_to_world_per_point
+from foveatrack.space_of_interest import Box
+
+_BIG = 1e12
+
+
+@dataclass(frozen=True)
+class SkyTrackerConfig:
+    """Parameters of :class:`SkyTracker` (a scene's ``[sky]`` table; units in the names).
+
+    voxel_m, background_frames, background_dilate     the world background (open-loop's meaning)
+    cluster_tol_m, cluster_tol_rad                    cluster gap ``max(tol_m, tol_rad * range)``
+    min_points : int >= 1        returns an object needs
+    max_extent_m : > 0 [m]       largest side of an object (bigger: scenery, not tracked)
+    q_m2_s3 : > 0                white-acceleration density of the filter (20: ~4.5 m/s^2 in 1 s)
+    r_m2 : > 0                   variance of a cluster median per axis
+    v0_sigma_m_s : > 0           velocity uncertainty of a new track
+    gate_chi2 : > 0              largest squared Mahalanobis distance of an allowed pair
+    gate_max_m : > 0 [m]         largest distance of an allowed pair from the prediction
+    confirm_hits, confirm_window : ints    M hits of the first N frames
+    lost_after_s : > 0 [s]       unseen this long while in the field: deleted
+    lost_out_of_view_s : > 0 [s] unseen this long while out of the field: deleted
+    field_half_angle_deg : > 0 or None     the lidar's field around its axis (None: every track in view)
+    static_window_s, static_radius_m       a confirmed track that stayed put this long is scenery
+    d_half_m : > 0 [m]           half-size of the fixated track's D (Algorithm 1)
+    protect_m : > 0 [m]          a confirmed track's object is kept out of the background only when
+                                 it lies this close to the track's prediction (below)
+    history_s : > 0 [s]          how long a track keeps its measurements (the classifier's window)
+    pose_nodes : int >= 2        head poses asked per frame for the per-point turn
+    """
+
+    voxel_m: float = 0.3
+    background_frames: int = 10
+    background_dilate: int = 1
+    cluster_tol_m: float = 0.5
+    cluster_tol_rad: float = 0.01
+    min_points: int = 2
+    max_extent_m: float = 3.0
+    q_m2_s3: float = 20.0
+    r_m2: float = 0.04
+    v0_sigma_m_s: float = 10.0
+    gate_chi2: float = 16.27
+    gate_max_m: float = 5.0
+    confirm_hits: int = 3
+    confirm_window: int = 15
+    lost_after_s: float = 2.0
+    lost_out_of_view_s: float = 5.0
+    field_half_angle_deg: float | None = None
+    static_window_s: float = 3.0
+    static_radius_m: float = 0.5
+    d_half_m: float = 1.0
+    protect_m: float = 1.0
+    history_s: float = 3.0
+    pose_nodes: int = 11
+    classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
+
+    def __post_init__(self) -> None:
+        for k in ("voxel_m", "cluster_tol_m", "max_extent_m", "q_m2_s3", "r_m2", "v0_sigma_m_s", "gate_chi2",
+                  "gate_max_m", "lost_after_s", "lost_out_of_view_s", "static_window_s", "static_radius_m",
+                  "d_half_m", "protect_m", "history_s"):
+            if not getattr(self, k) > 0:
+                raise UserError(f"{k} must be > 0, got {getattr(self, k)!r}")
+        if self.field_half_angle_deg is not None and not 0 < self.field_half_angle_deg <= 180:
+            raise UserError(f"field_half_angle_deg must be in (0, 180], got {self.field_half_angle_deg!r}")
+        if not 0 <= self.background_dilate <= 2:
+            raise UserError(f"background_dilate must be 0, 1 or 2, got {self.background_dilate!r}")
+        for k in ("background_frames", "min_points", "confirm_hits"):
+            if getattr(self, k) < 1:
+                raise UserError(f"{k} must be >= 1, got {getattr(self, k)!r}")
+        if self.pose_nodes < 2:
+            raise UserError(f"pose_nodes must be >= 2, got {self.pose_nodes!r}")
+        if self.confirm_window < self.confirm_hits:
+            raise UserError("confirm_window must be >= confirm_hits")
+
+    @classmethod
+    def from_mapping(cls, data: Mapping, where: str) -> "SkyTrackerConfig":
+        names = [f.name for f in fields(cls)]
+        check_keys(data, names, where)
+        kw = {}
+        for f in fields(cls):
+            if f.name not in data:
+                continue
+            v = data[f.name]
+            if f.name == "classifier":
+                kw[f.name] = ClassifierConfig.from_mapping(v, where + ".classifier")
+            elif isinstance(f.default, int) and not isinstance(f.default, bool):
+                if isinstance(v, bool) or not isinstance(v, int):
+                    raise UserError(f"{where}: {f.name} must be an integer, got {v!r}")
+                kw[f.name] = v
+            else:
+                kw[f.name] = as_float(v, f.name, where, allow_none=f.name == "field_half_angle_deg")
+        try:
+            return cls(**kw)
+        except UserError as exc:
+            raise UserError(f"{where}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class SkyObject:
+    """One cluster of a frame, in the world: median position [m] and time [s] of its points, their
+    count, and the sides of their bounding box (x, y, z) [m]."""
+    xyz_m: np.ndarray
+    t_s: float
+    n_points: int
+    sides_m: np.ndarray
+
+    @property
+    def extent_m(self) -> float:
+        return float(self.sides_m.max())
+
+
+@dataclass
+class SkyTrack:
+    """A tentative or confirmed track.  ``history``: (t_s, xyz_m, sides_m, n_points) of its hits in
+    the last ``history_s`` (the classifier reads it)."""
+    track_id: int
+    kf: ConstantVelocityFilter
+    first_t_s: float
+    last_hit_t_s: float
+    frames_seen: int = 1
+    hits: int = 1
+    confirmed_t_s: float | None = None
+    label: str = "unknown"
+    features: dict = field(default_factory=dict)
+    history: list = field(default_factory=list)
+    in_view: bool = True
+    hit_now: bool = False
+    merged_t_s: float = -math.inf
+
+    @property
+    def confirmed(self) -> bool:
+        return self.confirmed_t_s is not None
+
+    @property
+    def xyz_m(self) -> np.ndarray:
+        return self.kf.p
+
+    @property
+    def velocity_m_s(self) -> np.ndarray:
+        return self.kf.v
+
+
+@dataclass(frozen=True)
+class TrackView:
+    """A track as a frame leaves it (a copy: the output does not change with later frames); its
+    position is the filter's at the frame's mid time."""
+    track_id: int
+    confirmed: bool
+    label: str
+    xyz_m: np.ndarray
+    velocity_m_s: np.ndarray
+    hit: bool
+    in_view: bool
+    features: dict
+
+
+@dataclass(frozen=True)
+class SkyFrameOutput:
+    """One frame: every live track, the fixated track's Algorithm 1 detection (lidar frame) if it was
+    asked for and seen, the counts, and the ids confirmed / deleted this frame."""
+    t_s: float
+    tracks: tuple[TrackView, ...]
+    fovea_detection: Detection | None
+    n_points: int
+    n_foreground: int
+    n_objects: int
+    confirmed_now: tuple[int, ...]
+    deleted_now: tuple[int, ...]
+
+
+class SkyTracker:
+    """Frames of the moving head in, tracks of every moving object out (module docstring)."""
+
+    def __init__(self, cfg: SkyTrackerConfig | None = None, region=None):
+        """``region``: a world-frame space of interest (anything with ``contains(xyz)``, e.g. the
+        scene's world box D that keeps the ground out); points outside it are not looked at."""
+        self.cfg = cfg or SkyTrackerConfig()
+        self.region = region
+        c = self.cfg
+        self.background = BackgroundModel(c.voxel_m, c.background_frames, c.background_dilate)
+        self.tracks: list[SkyTrack] = []
+        self.confirmed_ever: list[int] = []
+        self._next_id = 0
+        self._cos_field = None if c.field_half_angle_deg is None else math.cos(math.radians(c.field_half_angle_deg))
+
+    # ------------------------------------------------------------------------------------------
+    def process(self, frame: Frame, pose, fovea_track_id: int | None = None) -> SkyFrameOutput:
+        """One frame.  ``pose``: the head's pose estimate (``angles_at(t_s)``, ``lidar_offset_m``: a
+        :class:`~foveatrack.reconstruction.Reconstructor`).  ``fovea_track_id``: the track the fovea
+        serves this frame, measured by Algorithm 1 in its D."""
+        cfg = self.cfg
+        t0, t1 = frame.t_start_s, frame.t_end_s
+        t_mid = 0.5 * (t0 + t1)
+        xyz, t_ns = frame.xyz, frame.t_ns
+        valid = np.isfinite(xyz).all(axis=1) & (xyz != 0.0).any(axis=1)
+        if not valid.all():
+            xyz, t_ns = xyz[valid], t_ns[valid]
+        world = lidar_to_world_per_point(xyz, t_ns, pose, t0, t1, cfg.pose_nodes)
+        if self.region is not None and world.shape[0]:
+            inside = np.asarray(self.region.contains(world), bool)
+            xyz, t_ns, world = xyz[inside], t_ns[inside], world[inside]
+        keys = voxel_keys(world, cfg.voxel_m)
+        fg_idx = np.flatnonzero(~self.background.is_background(keys))
+        objs, point_obj = self._objects(world[fg_idx], t_ns[fg_idx])
+        pan, tilt, _, _ = pose.angles_at(t_mid)
+        rows = rotation_rows(pan, tilt)
+        off = np.asarray(pose.lidar_offset_m, np.float64).reshape(3)
+        for tr in self.tracks:
+            tr.frames_seen += 1
+            tr.hit_now = False
+            tr.in_view = self._in_view(tr.kf.predicted(t_mid)[0], rows, off)
+        match, allowed = self._associate(objs, t_mid)
+        obj_track = {j: i for i, j in match}
+        # A confirmed track left without an object while an object matched to another track lies in
+        # its gate has merged with it (two clusters became one): it coasts and is not lost meanwhile.
+        for i, tr in enumerate(self.tracks):
+            if tr.confirmed and i not in {a for a, _ in match} and any(allowed[i, j] for j in obj_track):
+                tr.merged_t_s = t_mid
+        # Algorithm 1 for the fixated track: its D, without the points of other tracks' objects
+        fovea_det = None
+        fov = next((i for i, tr in enumerate(self.tracks) if tr.track_id == fovea_track_id), None)
+        if fov is not None:
+            tr = self.tracks[fov]
+            keep = np.ones(fg_idx.size, bool)
+            for j, i in obj_track.items():
+                if i != fov:
+                    keep &= point_obj != j
+            sel = fg_idx[keep]
+            c = tr.kf.predicted(t_mid)[0]
+            lo, hi = box_bounds(Box(tuple((c - cfg.d_half_m).tolist()), tuple((c + cfg.d_half_m).tolist())))
+            fovea_det = box_detection(np.ascontiguousarray(xyz[sel]), np.ascontiguousarray(t_ns[sel]),
+                                      head_trig(pan, tilt), off, lo, hi)
+        confirmed_now = []
+        learn = np.ones(fg_idx.size, bool)
+        for i, j in match:
+            tr, ob = self.tracks[i], objs[j]
+            z, tz = ob.xyz_m, ob.t_s
+            if i == fov and fovea_det is not None:
+                z = np.array(self._to_world(fovea_det.xyz, fovea_det.t_s, pose))
+                tz = fovea_det.t_s
+            pred = tr.kf.predicted(ob.t_s)[0]
+            protect = tr.confirmed and norm3(ob.xyz_m - pred) <= cfg.protect_m
+            self._hit(tr, tz, z, ob)
+            if not tr.confirmed and tr.hits >= cfg.confirm_hits and tr.frames_seen <= cfg.confirm_window:
+                tr.confirmed_t_s = t_mid
+                self.confirmed_ever.append(tr.track_id)
+                confirmed_now.append(tr.track_id)
+            if protect:
+                learn &= point_obj != j
+        if fov is not None and fovea_det is not None and not self.tracks[fov].hit_now:
+            # seen by Algorithm 1 though no object matched (too few points for an object)
+            tr = self.tracks[fov]
+            tr.kf.update(fovea_det.t_s, self._to_world(fovea_det.xyz, fovea_det.t_s, pose))
+            tr.last_hit_t_s, tr.hit_now = fovea_det.t_s, True
+        for j, ob in enumerate(objs):
+            if j not in obj_track:
+                tr = SkyTrack(self._next_id, ConstantVelocityFilter(ob.t_s, ob.xyz_m, cfg.q_m2_s3, cfg.r_m2,
+                                                                    cfg.v0_sigma_m_s), ob.t_s, ob.t_s)
+                tr.history.append((ob.t_s, ob.xyz_m, ob.sides_m, ob.n_points))
+                tr.hit_now = True
+                self._next_id += 1
+                if cfg.confirm_hits == 1:
+                    tr.confirmed_t_s = t_mid
+                    self.confirmed_ever.append(tr.track_id)
+                    confirmed_now.append(tr.track_id)
+                self.tracks.append(tr)
+        self.background.learn(keys[fg_idx[learn]])
+        deleted = self._prune(t_mid)
+        for tr in self.tracks:
+            tr.label, tr.features = classify(tr, cfg.classifier)
+        views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, tr.kf.predicted(t_mid)[0], tr.kf.v.copy(),
+                                tr.hit_now, tr.in_view, dict(tr.features)) for tr in self.tracks)
+        return SkyFrameOutput(t1, views, fovea_det, frame.n_points, int(fg_idx.size), len(objs),
+                              tuple(confirmed_now), tuple(deleted))
+
+    # ------------------------------------------------------------------------------------------
+    @staticmethod
+    def _to_world(xyz_lidar, t_s, pose) -> np.ndarray:
+        p, t, _, _ = pose.angles_at(t_s)
+        q = np.asarray(xyz_lidar, np.float64).reshape(3) + np.asarray(pose.lidar_offset_m, np.float64).reshape(3)
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_rows(p, t)
+        x, y, z = q.tolist()
+        return np.array([r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z])
+
+    def _in_view(self, p_world: np.ndarray, rows, offset: np.ndarray) -> bool:
+        """Is the world point inside the lidar's field at the frame's mid pose?"""
+        if self._cos_field is None:
+            return True
+        q = mat3T_vec(np.array(rows), p_world) - offset
+        x, y, z = q.tolist()
+        r = math.sqrt(x * x + y * y + z * z)
+        return r > 0 and x >= self._cos_field * r
+
+    def _objects(self, world: np.ndarray, t_ns: np.ndarray) -> tuple[list[SkyObject], np.ndarray]:
+        """The frame's objects and, per foreground point, the index of its object (-1: none)."""
+        cfg = self.cfg
+        point_obj = np.full(world.shape[0], -1, np.int64)
+        if world.shape[0] == 0:
+            return [], point_obj
+        labels, n = cluster_labels(world, cfg.cluster_tol_m, cfg.cluster_tol_rad)
+        found, kept = objects_from_labels(world, labels, n, cfg.min_points, cfg.max_extent_m)
+        objs = []
+        for j, (fo, lab) in enumerate(zip(found, kept)):
+            m = labels == lab
+            pts = world[m]
+            point_obj[m] = j
+            t_s = float(np.median(t_ns[m])) * 1e-9
+            objs.append(SkyObject(fo.xyz_m, t_s, fo.n_points, pts.max(axis=0) - pts.min(axis=0)))
+        return objs, point_obj
+
+    def _associate(self, objs: list[SkyObject], t_s: float) -> tuple[list[tuple[int, int]], np.ndarray]:
+        """Gated global nearest neighbour (module docstring): ``(track index, object index)`` pairs, and
+        the allowed pairs (tracks x objects)."""
+        cfg = self.cfg
+        if not self.tracks or not objs:
+            return [], np.zeros((len(self.tracks), len(objs)), bool)
+        P = np.empty((len(self.tracks), 3))
+        V = np.empty((len(self.tracks), 3))
+        for i, tr in enumerate(self.tracks):
+            P[i], V[i] = tr.kf.predicted(t_s)
+        O = np.array([ob.xyz_m for ob in objs])
+        d = O[None, :, :] - P[:, None, :]
+        d2 = d * d
+        e = d2 / (V[:, None, :] + cfg.r_m2)
+        cost = e[..., 0] + e[..., 1] + e[..., 2]
+        dist2 = d2[..., 0] + d2[..., 1] + d2[..., 2]
+        allowed = (cost <= cfg.gate_chi2) & (dist2 <= cfg.gate_max_m * cfg.gate_max_m)
+        if not allowed.any():
+            return [], allowed
+        c = np.where(allowed, cost, _BIG)
+        rows, cols = linear_sum_assignment(c)
+        return [(int(i), int(j)) for i, j in zip(rows, cols) if allowed[i, j]], allowed
+
+    def _hit(self, tr: SkyTrack, t_s: float, z: np.ndarray, ob: SkyObject) -> None:
+        tr.kf.update(t_s, z)
+        tr.hits += 1
+        tr.last_hit_t_s = t_s
+        tr.hit_now = True
+        tr.history.append((t_s, np.asarray(z, float), ob.sides_m, ob.n_points))
+
+    def _prune(self, t_s: float) -> list[int]:
+        """Drop failed candidates, tracks lost too long and static scenery; returns their ids."""
+        cfg = self.cfg
+        keep, gone = [], []
+        for tr in self.tracks:
+            tr.history = [h for h in tr.history if h[0] >= t_s - cfg.history_s]
+            unseen = t_s - max(tr.last_hit_t_s, tr.merged_t_s)
+            lost = unseen > (cfg.lost_after_s if tr.in_view else cfg.lost_out_of_view_s)
+            failed = not tr.confirmed and tr.frames_seen >= cfg.confirm_window and tr.hits < cfg.confirm_hits
+            if lost or failed:
+                gone.append(tr.track_id)
+            elif tr.confirmed and self._static(tr, t_s):
+                c = np.median(np.array([h[1] for h in tr.history]), axis=0)
+                self.background.mark_box(c - cfg.d_half_m, c + cfg.d_half_m)
+                gone.append(tr.track_id)
+            else:
+                keep.append(tr)
+        self.tracks = keep
+        return gone
+
+    def _static(self, tr: SkyTrack, t_s: float) -> bool:
+        cfg = self.cfg
+        h = [x for x in tr.history if x[0] >= t_s - cfg.static_window_s]
+        if t_s - tr.first_t_s < cfg.static_window_s or len(h) < 3:
+            return False
+        p = np.array([x[1] for x in h])
+        d = p - np.median(p, axis=0)
+        return bool(np.all(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+                           <= cfg.static_radius_m * cfg.static_radius_m))

@@ -1,0 +1,79 @@
+"""The fovea's schedule: priority by threat score, revisits of the other drones, return, pin."""
+
+import numpy as np
+
+from foveatrack.sky.attention import Attention, AttentionConfig, threat_score
+from foveatrack.sky.tracks import TrackView
+
+
+def view(tid, xyz, vel=(0, 0, 0), label="drone", confirmed=True):
+    return TrackView(tid, confirmed, label, np.array(xyz, float), np.array(vel, float), True, True, {})
+
+
+def test_threat_score_orders_class_closing_speed_and_distance():
+    cfg = AttentionConfig(protected_xyz_m=(0.0, 0.0, 0.0))
+    near = view(0, [20, 0, 0])
+    far = view(1, [80, 0, 0])
+    closing = view(2, [80, 0, 0], vel=(-10, 0, 0))
+    leaving = view(3, [80, 0, 0], vel=(10, 0, 0))
+    bird = view(4, [20, 0, 0], label="bird")
+    s = {v.track_id: threat_score(v, cfg) for v in (near, far, closing, leaving, bird)}
+    assert s[0] > s[1] and s[2] == 2 * s[1] and s[3] == s[1] and s[4] < s[1]
+    assert threat_score(view(5, [20, 0, 0], confirmed=False), cfg) == 0.0
+
+
+def _run(att, views_fn, fovea_fn, duration_s, dt=0.1):
+    """The schedule over time; ``fovea_fn(target)``: the ids in the fovea given the target served."""
+    served = []
+    for k in range(int(round(duration_s / dt))):
+        t = (k + 1) * dt
+        target = att.target
+        served.append((t, target))
+        att.update(t, views_fn(t), fovea_fn(target), dt)
+    return served
+
+
+def test_revisits_each_other_drone_and_returns_to_the_priority():
+    cfg = AttentionConfig(revisit_s=2.0, dwell_s=0.3, saccade_timeout_s=1.0)
+    att = Attention(cfg)
+    views = [view(0, [20, 0, 0]), view(1, [60, 10, 0]), view(2, [70, -10, 0]), view(3, [30, 5, 0], label="bird")]
+    served = _run(att, lambda t: views, lambda target: set() if target is None else {target}, 12.0)
+    ids = [s for _, s in served if s is not None]
+    assert ids.count(0) > 0.6 * len(ids)                   # the priority (nearest drone) most of the time
+    assert 3 not in ids                                    # birds are not revisited
+    for tid in (1, 2):                                     # each other drone at least once per revisit time
+        times = [t for t, s in served if s == tid]
+        gaps = np.diff([0.0] + times + [12.0])
+        assert times and gaps.max() <= cfg.revisit_s + cfg.dwell_s + 2 * cfg.saccade_timeout_s, (tid, gaps)
+    # after each revisit the fovea comes back to the priority track
+    for (t0, a), (t1, b) in zip(served, served[1:]):
+        if a in (1, 2) and b != a:
+            assert b in (0, 1, 2)
+
+
+def test_a_revisit_that_never_reaches_the_track_times_out():
+    cfg = AttentionConfig(revisit_s=1.0, dwell_s=0.3, saccade_timeout_s=0.5)
+    att = Attention(cfg)
+    views = [view(0, [20, 0, 0]), view(1, [60, 10, 0])]
+    served = _run(att, lambda t: views, lambda target: {0} if target == 0 else set(), 6.0)
+    runs, cur = [], 0
+    for _, s in served:
+        if s == 1:
+            cur += 1
+        elif cur:
+            runs.append(cur)
+            cur = 0
+    assert runs and max(runs) <= 6                         # never longer than the timeout (5 frames + 1)
+    assert [s for _, s in served].count(0) > len(served) // 2
+
+
+def test_pin_overrides_the_score_while_the_track_lives():
+    att = Attention(AttentionConfig(revisit_s=100.0))
+    views = [view(0, [20, 0, 0]), view(1, [60, 10, 0])]
+    att.update(0.1, views, set(), 0.1)
+    assert att.target == 0
+    att.pin(1)
+    att.update(0.2, views, set(), 0.1)
+    assert att.target == 1
+    att.update(0.3, views[:1], set(), 0.1)                 # the pinned track is gone: unpinned
+    assert att.target == 0 and att.pinned is None

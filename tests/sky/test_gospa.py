@@ -1,0 +1,86 @@
+"""Our GOSPA (foveatrack.sky.metrics.gospa) against Stone Soup's GOSPAMetric on the same tracks: a
+third-party implementation nobody here wrote (test-only dependency)."""
+
+import datetime
+
+import numpy as np
+import pytest
+
+from foveatrack.sky.metrics import drone_metrics, gospa
+
+stonesoup = pytest.importorskip("stonesoup", reason="stonesoup is a test dependency (pip install -e '.[test]')")
+from stonesoup.metricgenerator.ospametric import GOSPAMetric  # noqa: E402
+from stonesoup.types.state import State  # noqa: E402
+
+
+def _states(points, when):
+    return [State(np.asarray(p, float).reshape(3, 1), timestamp=when) for p in points]
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_gospa_equals_stone_soup(seed):
+    rng = np.random.default_rng(seed)
+    when = datetime.datetime(2026, 1, 1)
+    truths = rng.uniform(-30, 30, (rng.integers(0, 7), 3))
+    if len(truths) == 0 and seed % 2:   # Stone Soup needs one state at least (for its timestamp)
+        truths = rng.uniform(-30, 30, (1, 3))
+    # estimates: some truths with noise (some far off the cut-off), plus false ones
+    est = [t + rng.normal(0, rng.choice([0.2, 2.0, 20.0]), 3) for t in truths if rng.random() < 0.8]
+    est += list(rng.uniform(-30, 30, (rng.integers(0, 4), 3)))
+    c, p = float(rng.choice([1.0, 5.0, 10.0])), float(rng.choice([1.0, 2.0, 3.0]))
+    if not len(est):
+        est = [rng.uniform(-30, 30, 3)]
+    ours = gospa(np.array(est).reshape(-1, 3), truths, c, p)
+    ss = GOSPAMetric(c=c, p=p)
+    theirs, _ = ss.compute_gospa_metric(_states(est, when), _states(truths, when))
+    for k in ("distance", "localisation", "missed", "false"):
+        assert abs(ours[k] - float(theirs.value[k])) <= 1e-9, (k, ours[k], theirs.value[k])
+
+
+def test_gospa_of_nothing_is_zero():
+    assert gospa(np.empty((0, 3)), np.empty((0, 3)), 5.0)["distance"] == 0.0
+
+
+def test_gospa_over_a_run_of_tracks_equals_stone_soup():
+    # Two drones over 30 frames, three tracks (one false, one lost for a while): the per-frame distance
+    rng = np.random.default_rng(7)
+    t0 = datetime.datetime(2026, 1, 1)
+    for k in range(30):
+        when = t0 + datetime.timedelta(seconds=0.1 * k)
+        truths = [np.array([30.0, 5 - 0.2 * k, 3.0]), np.array([30.0, -5 + 0.2 * k, 3.3])]
+        est = [truths[0] + rng.normal(0, 0.1, 3)]
+        if not 10 <= k < 15:
+            est.append(truths[1] + rng.normal(0, 0.1, 3))
+        if k % 3 == 0:
+            est.append(np.array([60.0, rng.uniform(-5, 5), 4.0]))
+        ours = gospa(est, truths, 5.0, 2.0)
+        theirs, _ = GOSPAMetric(c=5.0, p=2.0).compute_gospa_metric(_states(est, when), _states(truths, when))
+        assert abs(ours["distance"] - float(theirs.value["distance"])) <= 1e-9
+
+
+def test_drone_metrics_count_switches_gaps_and_false_tracks():
+    T = 50
+    t = 0.1 * np.arange(T)
+    xyz = np.stack([np.full(T, 30.0), np.linspace(-5, 5, T), np.full(T, 3.0)], 1)
+    vis = np.arange(T) >= 5
+    fov = (np.arange(T) % 10) < 6
+    tracks = []
+    for k in range(T):
+        tr = []
+        if 8 <= k < 20:
+            tr.append((1, "drone", xyz[k]))
+        elif 22 <= k:
+            tr.append((2, "drone", xyz[k]))          # a new id after a gap: one switch
+        if k == 30:
+            tr.append((9, "drone", np.array([50.0, 0, 0])))   # a false drone track
+        if k == 31:
+            tr.append((10, "bird", np.array([50.0, 0, 0])))   # a bird: not a false drone track
+        tracks.append(tr)
+    m = drone_metrics(t, {"a": {"xyz_m": xyz, "visible": vis, "in_fovea": fov}}, tracks)
+    a = m["drones"]["a"]
+    assert a["time_to_confirm_s"] == pytest.approx(0.3)
+    assert a["id_switches"] == 1 and a["track_ids"] == [1, 2]
+    assert a["continuity"] == pytest.approx(40 / 42)
+    assert a["longest_revisit_gap_s"] == pytest.approx(0.4)
+    assert m["false_drone_tracks"] == [9]
+    assert m["false_drone_tracks_per_hour"] == pytest.approx(3600 / 5.0)
