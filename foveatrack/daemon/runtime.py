@@ -54,11 +54,14 @@ from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, form
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
 from foveatrack.frame_step import FrameStep, StepRecord
 from foveatrack.gate import LINK_DOWN, CommandGate
+from foveatrack.errors import UserError
 from foveatrack.gyro_attitude import ImuFeed
 from foveatrack.live_devices import LidarStream, open_devices
 from foveatrack.recording.format import DAEMON_EVENTS
 from foveatrack.recording.records import CommandRecord, ns, write_record, write_tracker_frame
+from foveatrack.reconstruction import rotation_matrix
 from foveatrack.tracker import Tracker
+from foveatrack.turn_witness import MoveWitness, TurnMismatch
 
 FORMAT_SOURCE = "daemon"
 ABS_SET_QUIET_S = 0.3     # line quiet before a Pelco absolute set (the PTS family needs 0.2 s)
@@ -206,6 +209,9 @@ class Daemon:
         self.step = FrameStep(Tracker(config.tracker, self.table), self.gate, self.sink)
         # attitude = "gyro": the lidar's IMU samples, held until the frame they precede
         self.imu_feed = ImuFeed() if config.tracker.attitude == "gyro" else None
+        # ... and the same gyro witnesses every move of the head against its command (a slipping gear,
+        # a wrong speed table, another head on the port stop the run: foveatrack.turn_witness)
+        self.witness = MoveWitness(self.table) if self.imu_feed is not None else None
         self.slicer = FrameSlicer(config.tracker.rate_hz)
         self.counters: Counter = Counter(frames_stale=0)
         self.proc_ms: list[float] = []
@@ -341,7 +347,24 @@ class Daemon:
     def _send_own(self, cmd: HeadCommand, source: str, send_t_s: float) -> None:
         """A command of the daemon's own (watchdog, shutdown, a new sensor clock), through the step,
         recorded."""
-        self._record(write_record, self._command_record(self.step.own_command(send_t_s, cmd, source), source))
+        rec = self.step.own_command(send_t_s, cmd, source)
+        if self.witness is not None:
+            self.witness.command(send_t_s, rec.head_command)
+        self._record(write_record, self._command_record(rec, source))
+
+    def _witness(self, frame: Frame, imu: tuple, step: StepRecord) -> None:
+        """The frame's gyro samples, then the command the head runs from the send time, to the witness;
+        a head that turned far from its commands ends the run (the head is stopped on the way out)."""
+        t, g, accel = imu
+        up = None
+        if accel is None:     # no accelerometer readings: up from the dead reckoning's pose
+            up = rotation_matrix(*self.tracker.recon.angles_at(frame.t_mid_s)[:2])[2]
+        try:
+            self.witness.samples(t, g, accel, up_guess=up)
+        except TurnMismatch as exc:
+            self.log.event("turn_mismatch", message=str(exc), frames=self.counters["frames"])
+            raise UserError(f"{exc}; the head was stopped ([head] port {self.cfg.head.port!r})") from None
+        self.witness.command(step.send_t_s, step.head_command)
 
     def _take_imu(self, t_end_s: float) -> tuple:
         """The gyro samples before this frame's end (of this clock only), which the step feeds to the
@@ -440,6 +463,8 @@ class Daemon:
     def _rebase_tracker(self, t0_s: float, pan_deg: float, tilt_deg: float) -> None:
         """A fresh tracker whose dead reckoning starts at ``(pan_deg, tilt_deg)`` at sensor time ``t0_s``."""
         self.step.rebase(self.tracker.rebased(t0_s, pan_deg, tilt_deg))   # replay repeats it from the event
+        if self.witness is not None:
+            self.witness = MoveWitness(self.table)
         if self.imu_feed is not None:
             self.imu_feed.restart(t0_s)
         self._last_send_t = -math.inf
@@ -474,6 +499,8 @@ class Daemon:
                          stop_why=(LINK_DOWN,) if not was_up and reconnect_unknown else ())
         out = step.output
         rec, t_written = self._command_record(step, "tracker", fid), self.sink.t_written
+        if self.witness is not None:
+            self._witness(frame, imu, step)
         self.counters["frames_stale"] += stale
         if step.limited:
             self.counters["commands_limited"] += 1
