@@ -31,7 +31,7 @@ import numpy as np
 
 from foveatrack.calibration import CalibrationPlan, CalibrationReport, FeatureSpec, PriorAxisCalibrator
 from foveatrack.calibration.drive import drive_calibration
-from foveatrack.daemon.config import DaemonConfig
+from foveatrack.device_config import DaemonConfig
 from foveatrack.errors import UserError
 from foveatrack.frames import FrameSlicer, strip_no_return
 from foveatrack.gate import CommandGate

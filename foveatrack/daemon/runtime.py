@@ -49,7 +49,7 @@ from dataclasses import asdict
 import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
-from foveatrack.daemon.config import DaemonConfig
+from foveatrack.device_config import DaemonConfig
 from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, format_status
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
 from foveatrack.frame_step import FrameStep, StepRecord
