@@ -50,13 +50,14 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.device_config import DaemonConfig
+from foveatrack.daemon.receiver import LidarReceiver
 from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, format_status
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
 from foveatrack.frame_step import FrameStep, StepRecord
 from foveatrack.gate import LINK_DOWN, CommandGate
 from foveatrack.errors import UserError
 from foveatrack.gyro_attitude import ImuFeed
-from foveatrack.live_devices import LidarStream, open_devices
+from foveatrack.live_devices import open_devices
 from foveatrack.recording.format import DAEMON_EVENTS
 from foveatrack.recording.records import CommandRecord, ns, write_record, write_tracker_frame
 from foveatrack.reconstruction import rotation_matrix
@@ -83,85 +84,6 @@ def _job_frame(w, fid, frame, out, cmd_rec, proc_ms, lat_ms, imu=None):
 
 def _job_event(w, t_ns, rec: dict):
     w.write(DAEMON_EVENTS, t_ns, rec)
-
-
-class _Receiver(threading.Thread):
-    """Owns the lidar's :class:`~foveatrack.live_devices.LidarStream`; hands (host time, xyz, t_ns,
-    reflectivity) to the control loop."""
-
-    def __init__(self, client, q: queue.Queue, stop: threading.Event):
-        super().__init__(name="livox-receiver", daemon=True)
-        self.client, self.q, self.stop_ev = client, q, stop
-        self.stream = LidarStream(client)
-        self.dropped_batches = 0
-        self.dropped_points = 0
-        self.points_in = 0
-        self.first_t_ns: int | None = None
-        self.last_t_ns: int | None = None
-        self.span_done_ns = 0        # sensor time spanned by earlier clock epochs (a restarted lidar)
-        self.error: BaseException | None = None
-        self.counters: dict = {}
-        # what the unit reports (LivoxClient.take_events), for the control loop's log and status line
-        self.unit_events: queue.SimpleQueue = queue.SimpleQueue()
-        self.unit_note = ""
-        self.epoch = 0
-        # The lidar's IMU samples (data type 6) for a tracker that takes its attitude from the gyro:
-        # (t_ns, gyro_rad_s, clock epoch, acc_g) batches, taken by the control loop.
-        self.want_imu = False
-        self.imu: deque = deque(maxlen=4096)
-
-    @property
-    def offset_s(self) -> float | None:
-        return self.stream.offset_s
-
-    @property
-    def last_packet_mono(self) -> float | None:
-        return self.stream.last_packet_mono
-
-    def run(self) -> None:
-        try:
-            self.client.start_sampling()
-            while not self.stop_ev.is_set():
-                now, batches = self.stream.poll(0.02)
-                if self.want_imu:
-                    imu = self.client.take_imu()
-                    if len(imu.t_ns):
-                        self.imu.append((imu.t_ns, imu.gyro_rad_s, self.stream.epoch, imu.acc_g))
-                self.counters = {**self.client.counters, **self.stream.counters}
-                for jump in self.stream.take_jumps():   # the sensor clock restarted or jumped: re-anchored
-                    self.unit_events.put(jump.as_event())
-                for ev in self.client.take_events():
-                    self.unit_events.put(ev)
-                    st = self.client.unit_status()
-                    bad = st["work_state_name"] not in (None, "normal")
-                    self.unit_note = ", ".join(([f"lidar {st['work_state_name']}"] if bad else []) + st["problems"])
-                for b in batches:
-                    if not len(b):
-                        continue
-                    t_last = int(b.t_ns[-1])
-                    if b.epoch != self.epoch:
-                        if self.first_t_ns is not None:
-                            self.span_done_ns += self.last_t_ns - self.first_t_ns
-                        self.epoch, self.first_t_ns, self.last_t_ns = b.epoch, None, None
-                    if self.first_t_ns is None:
-                        self.first_t_ns = int(b.t_ns[0])
-                    # a late packet is handed on after newer ones (sensor_time): the span ends at the newest
-                    self.last_t_ns = t_last if self.last_t_ns is None else max(self.last_t_ns, t_last)
-                    self.points_in += len(b)
-                    xyz, t_ns, refl = b.xyz, b.t_ns, b.reflectivity
-                    ret = np.any(xyz != 0.0, axis=1)
-                    if not ret.all():
-                        # no-return points carry no data, but the last one carries the time, so
-                        # frames keep coming while the lidar sees only sky (stripped in the loop)
-                        ret[-1] = True
-                        xyz, t_ns, refl = xyz[ret], t_ns[ret], refl[ret]
-                    try:
-                        self.q.put_nowait((now, xyz, t_ns, refl, b.epoch))
-                    except queue.Full:
-                        self.dropped_batches += 1
-                        self.dropped_points += len(t_ns)
-        except BaseException as exc:  # noqa: BLE001 - reported by the control loop
-            self.error = exc
 
 
 class _HeadSink:
@@ -290,7 +212,7 @@ class Daemon:
         if self.live_port is not None:
             self._open_live()
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
-        self.rx = _Receiver(self.client, self.q, self.stop_ev)
+        self.rx = LidarReceiver(self.client, self.q, self.stop_ev)
         self.rx.want_imu = self.imu_feed is not None
         # IMU packets are held only for a tracker that takes its attitude from them (issue 26: every
         # packet of a Horizon was kept otherwise, ~1 MB/min)
