@@ -98,10 +98,8 @@ class FrameLog:
 
 
 class _UartSink:
-    """The simulator's command sink: Pelco-D bytes into the virtual UART (10 bits per byte at the
-    scene's baud, its link effects), delivered to the head model at their arrival times by
-    :meth:`ClosedLoop.step`.  The UART always takes the bytes (a dropped byte is the link's effect,
-    unknown to the sender)."""
+    """The simulator's command sink: Pelco-D bytes into the virtual UART (baud timing, link effects:
+    a dropped byte is unknown to the sender, so every write "reached the head")."""
 
     def __init__(self, loop: "ClosedLoop"):
         self.loop = loop
@@ -213,8 +211,7 @@ class ClosedLoop:
         self.first_step_s: float | None = None
 
     @property
-    def controller(self):
-        """What drives the head: the tracker, or the controller given in its place."""
+    def controller(self):     # what drives the head: the tracker, or the controller given in its place
         return self.frame_step.controller
 
     @controller.setter
@@ -315,8 +312,7 @@ class ClosedLoop:
         xyz, pt_ns, refl_byte, on_target = self.sensor.returns(chunk, d_world, t0, t1)
         frame = Frame(t0, t1, xyz, pt_ns, refl_byte)
         c4 = clock()
-        # 6. the one step (foveatrack.frame_step): the controller, the gate, the link; the gyro's
-        # samples of this frame (and before) go to the controller first.
+        # 6. the one step (foveatrack.frame_step): the gyro's samples, the controller, the gate, the link.
         self.imu_fed = None
         imu = None
         if self.gyro is not None:
