@@ -1,7 +1,7 @@
 """The command gate: the one way a tracker's command reaches a head, in every driver.
 
-The simulator, replay and the daemon each run a frame through :meth:`foveatrack.tracker.Tracker.process`
-and then through :class:`CommandGate`, so the command path the hardware uses is the one the
+Every driver runs a frame through its controller and then through :class:`CommandGate`, in the one
+step :class:`foveatrack.frame_step.FrameStep`, so the command path the hardware uses is the one the
 simulator exercises and replay re-enacts::
 
     tracker command --decide()--> limits (speed bytes, turbo, tilt stops) --> stale frame -> STOP
@@ -29,6 +29,9 @@ STALE_FRAME = "stale_frame"
 # uncertainty) while the gate has tilt stops to keep: the gate fails closed.  A NaN compared with a
 # stop is False, so before this rule "tilt up at the stop" passed whenever the estimate was missing.
 TILT_UNKNOWN = "tilt_unknown"
+# Recorded when the daemon wrote STOP because the head's link was down: whatever a reopened link
+# carries first is STOP, and from then on the head's pose is unknown.
+LINK_DOWN = "link_down"
 
 # Two tilt margins, two layers: the tracker keeps TrackerConfig.tilt_margin_deg (3 deg) from a stop
 # by itself; the gate, the last line, refuses tilt toward a stop GATE_TILT_MARGIN_DEG (2 deg) from
@@ -109,10 +112,12 @@ class CommandGate:
         self.limits = limits
         self.head_cmd: HeadCommand = STOP   # what the head last received (it starts stopped)
 
-    def decide(self, tracker, out, send_t_s: float, stale: bool = False) -> tuple[HeadCommand, list[str]]:
+    def decide(self, tracker, out, send_t_s: float, stale: bool = False,
+               stop_why: tuple[str, ...] = ()) -> tuple[HeadCommand, list[str]]:
         """The command to write for the tracker output ``out`` sent at ``send_t_s``, and why it differs
         from the tracker's (empty: unchanged).  ``stale``: the frame was too old when processed (the
-        driver judges: wall clock, recording or virtual time); STOP is sent instead.  ``out`` must
+        driver judges: wall clock, recording or virtual time); STOP is sent instead, as for any of the
+        driver's ``stop_why`` reasons (the daemon's head link is down: :data:`LINK_DOWN`).  ``out`` must
         carry the driver's tilt estimate (``head_tilt_deg``, ``head_sigma_tilt_deg``): without a
         finite one, tilt motion is refused.  ``tracker`` None: nothing dead-reckons from what is
         sent (a driver that stops on any change)."""
@@ -121,6 +126,8 @@ class CommandGate:
             cmd, why = self.limits.apply(out.command, out.head_tilt_deg, out.head_sigma_tilt_deg)
         if stale:
             cmd, why = STOP, why + [STALE_FRAME]
+        if stop_why:
+            cmd, why = STOP, why + list(stop_why)
         if why and tracker is not None:
             tracker.command_sent(send_t_s, cmd)
         return cmd, why

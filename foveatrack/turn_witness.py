@@ -104,3 +104,97 @@ class TurnWitness:
                     f"{self.abs_tol_deg:g} deg + {100 * self.rel_tol:.0f} %): far {'more' if abs(m) > abs(c) else 'less'} "
                     "than the speed table says -- another head on the port, a wrong [head] speed_table or a "
                     "slipping gear")
+
+
+class MoveWitness:
+    """The witness for a head moved frame by frame by a controller (the daemon's tracker): each move,
+    from a still stretch to the next (the head given STOP and settled), is one :class:`TurnWitness`
+    move, checked for over-turning while it runs and both ways once the head has settled.
+
+    A driver calls :meth:`samples` with each frame's gyro samples (sensor time, before the frame's
+    end) and then :meth:`command` with what the head runs from the frame's send time on.  The turn
+    commanded is integrated from the speed table (``direction * speed(byte)`` over each command's time;
+    the dead time and the ramps are within the tolerance).  A move that starts without a still stretch
+    of :attr:`STILL_MIN_S` before it (the head given a new motion before it settled) is not witnessed
+    (counted in :attr:`unwitnessed`).  ``up_guess``: the IMU's up direction where the lidar sends no
+    accelerometer readings (the driver's estimate: ``R_imu_lidar R(pan, tilt)^T z``)."""
+
+    SETTLE_S = 1.0      # after a STOP reaches the head: its dead time and deceleration, then still
+    STILL_MIN_S = 0.5   # the shortest still stretch a move's bias and up may come from
+    KEEP_S = 2.0        # gyro samples kept while still (the newest still stretch)
+
+    def __init__(self, table, R_lidar_imu=None, rel_tol: float = 0.5, abs_tol_deg: float = 3.0):
+        self.table = table
+        self.witness = TurnWitness(R_lidar_imu, rel_tol, abs_tol_deg)
+        self.head = None                 # the command the head runs (None: STOP, as it starts)
+        self.cmds: list = []             # (t_s, HeadCommand) of the move under witness
+        self.moving = False
+        self.still_since = -math.inf     # sensor time since which the head has stood still (at rest at the start)
+        self.t_stop = math.inf           # when the move under witness was given STOP
+        self._t = np.zeros(0)
+        self._g = np.zeros((0, 3))
+        self._a = np.zeros((0, 3))
+        self.moves_checked = 0
+        self.unwitnessed = 0
+
+    def _commanded_deg(self, t_end_s: float) -> dict:
+        out = {"pan": 0.0, "tilt": 0.0}
+        for k, (t, c) in enumerate(self.cmds):
+            t_next = self.cmds[k + 1][0] if k + 1 < len(self.cmds) else t_end_s
+            dt = max(0.0, min(t_next, t_end_s) - t)
+            for ax, d, b in (("pan", c.pan_dir, c.pan_byte), ("tilt", c.tilt_dir, c.tilt_byte)):
+                if d:
+                    out[ax] += d * self.table.axis(ax).speed_deg_s(b) * dt
+        return out
+
+    def samples(self, t_s, gyro_rad_s, acc=None, up_guess=None) -> None:
+        """This frame's gyro samples (and accelerometer's, any unit; None: ``up_guess`` stands for
+        them); raises :class:`TurnMismatch` if the move under witness turned far from its command."""
+        t = np.asarray(t_s, float)
+        if not len(t):
+            return
+        g = np.asarray(gyro_rad_s, float)
+        a = np.asarray(acc, float) if acc is not None else np.tile(np.asarray(up_guess, float), (len(t), 1))
+        if self.moving:
+            self.witness.add(t, g)
+            t_last = float(t[-1])
+            commanded = self._commanded_deg(t_last)
+            if any(not math.isfinite(v) for v in commanded.values()):
+                self.moving = False      # a byte the table does not know: not witnessed
+                self.unwitnessed += 1
+            elif t_last >= self.t_stop + self.SETTLE_S:
+                self.witness.check(commanded, stopped=True)
+                self.moving = False
+                self.moves_checked += 1
+            else:
+                self.witness.check(commanded, stopped=False)
+        keep = np.concatenate([self._t, t]) >= float(t[-1]) - self.KEEP_S
+        self._t = np.concatenate([self._t, t])[keep]
+        self._g = np.vstack([self._g, g])[keep]
+        self._a = np.vstack([self._a, a])[keep]
+
+    def command(self, t_s: float, cmd) -> None:
+        """The head runs ``cmd`` from ``t_s`` on (after the gate and the link)."""
+        if cmd == self.head or (self.head is None and cmd.is_stop):
+            return
+        was_still = self.head is None or self.head.is_stop
+        self.head = cmd
+        if self.moving:
+            self.cmds.append((t_s, cmd))
+            if cmd.is_stop:
+                self.t_stop = t_s
+            elif self.t_stop < math.inf:
+                self.t_stop = math.inf   # moving again before it settled: the same move goes on
+            return
+        if cmd.is_stop:
+            self.still_since = t_s + self.SETTLE_S
+            return
+        if not was_still:
+            return
+        still = (self._t >= self.still_since) & (self._t < t_s)
+        if still.sum() < 10 or self._t[still][-1] - self._t[still][0] < self.STILL_MIN_S:
+            self.unwitnessed += 1
+            self.still_since = math.inf  # until the head is given STOP again
+            return
+        self.witness.begin(self._t[still], self._g[still], self._a[still])
+        self.cmds, self.t_stop, self.moving = [(t_s, cmd)], math.inf, True

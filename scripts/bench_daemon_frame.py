@@ -31,6 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from foveatrack.daemon.runtime import _job_frame  # noqa: E402
 from foveatrack.daemon.support import RecordingThread  # noqa: E402
+from foveatrack.frame_step import FrameStep  # noqa: E402
 from foveatrack.frames import strip_no_return  # noqa: E402
 from foveatrack.gate import CommandGate, Limits  # noqa: E402
 from foveatrack.frames import FrameSlicer  # noqa: E402
@@ -85,12 +86,23 @@ def packets(seconds: float, dual: bool) -> list[list[bytes]]:
     return out
 
 
+class _EncodeSink:
+    """The daemon's sink without a port: the Pelco-D bytes encoded, not written."""
+
+    raw = b""
+
+    def send(self, cmd, send_t_s, source) -> bool:
+        self.raw = encode_pan_tilt(1, cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte)
+        return True
+
+
 def run(batches, rate_hz: float, record: bool) -> dict:
     dec = P.DataDecoder(rate_hz, keep_no_return=True)
     slicer = FrameSlicer(10.0)
     table = SpeedTable.nominal()
     tracker = Tracker(TrackerConfig.from_mapping(TRACKER, where="bench [tracker]"), table)
-    gate = CommandGate(Limits())     # the daemon's gate, as it decides (and tells the tracker)
+    sink = _EncodeSink()
+    step = FrameStep(tracker, CommandGate(Limits()), sink)   # the daemon's step: its gate, the bytes encoded
     rec = None
     tmp = tempfile.TemporaryDirectory()
     if record:
@@ -106,9 +118,8 @@ def run(batches, rate_hz: float, record: bool) -> dict:
             t_push = time.perf_counter()
             for fr in slicer.push(batch.xyz, batch.t_ns, batch.reflectivity):
                 fr = strip_no_return(fr)
-                out = tracker.process(fr, send_t_s=fr.t_end_s + 0.002)
-                cmd, why = gate.decide(tracker, out, fr.t_end_s + 0.002)
-                raw = encode_pan_tilt(1, cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte)
+                step_rec = step(fr, fr.t_end_s + 0.002)
+                out, cmd, raw = step_rec.output, step_rec.command, sink.raw
                 t_done = time.perf_counter()
                 proc.append(t_done - t_push)
                 pts.append(fr.n_points)

@@ -5,7 +5,8 @@
   it (the tracker's code and data come cold from the rest of the frame's work, as in use);
 * replayed: the tracker's calls in such a run are recorded once (every ``process(frame, send_t)``,
   every command the loop registers with ``command_sent``, the log's ``recon.angles_at``) and replayed
-  in order on fresh trackers built like the loop's (warm: the tracker's own work alone).  The replay
+  in order on fresh trackers built like the loop's, through the one frame step with a pass-through
+  gate (warm: the tracker's own work, and the step's few microseconds).  The replay
   checks that every output equals the run's (commands, states, detections, head estimates, world
   positions).
 
@@ -102,7 +103,20 @@ def replay(calls, config, table, warm: bool = True) -> list[float]:
     of 300 frames of ~70 kB each would otherwise find them in memory, not in the cache)."""
     from foveatrack.tracker import Tracker
 
+    try:
+        from foveatrack.frame_step import FrameStep, NoHead
+    except ImportError:
+        raise SystemExit("the replay runs the tracker through foveatrack.frame_step: --old needs a tree that "
+                         "has it") from None
+    from foveatrack.gate import CommandGate
+
+    class Written(NoHead):     # replay writes nothing; the run's own command_sent calls are replayed
+        def send(self, cmd, send_t_s, source) -> bool:
+            return True
+
     tracker = Tracker(config, table)
+    # the one frame step, with a pass-through gate: it adds no call to the tracker's
+    step = FrameStep(tracker, CommandGate(None), Written())
     clock = time.perf_counter
     spent = []
     for call in calls:
@@ -113,7 +127,7 @@ def replay(calls, config, table, warm: bool = True) -> list[float]:
                 frame.xyz.sum()
                 frame.t_ns.sum()
             c = clock()
-            out = tracker.process(frame, send_t)
+            out = step(frame, send_t).output
             spent.append(clock() - c)
             if out.command != want.command or out.state != want.state or not all(
                     _same(getattr(out, k), getattr(want, k)) for k in
@@ -125,7 +139,7 @@ def replay(calls, config, table, warm: bool = True) -> list[float]:
                                                        and out.detection.t_s == want.detection.t_s)):
                 raise SystemExit(f"replay's detection differs from the run's at t = {frame.t_end_s} s")
         elif kind == "sent":
-            tracker.command_sent(call[1], call[2])
+            step.own_command(call[1], call[2], "sent")
         else:
             tracker.recon.angles_at(call[1])
     return spent

@@ -29,6 +29,7 @@ import numpy as np
 from foveatrack.control import STOP
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import mat3T_vec, norm3
+from foveatrack.frame_step import FrameStep, NoHead
 from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate, Limits
 from foveatrack.reconstruction import rotation_matrix
@@ -94,6 +95,33 @@ class FrameLog:
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(v) for k, v in self.__dict__.items()}
+
+
+class _UartSink:
+    """The simulator's command sink: Pelco-D bytes into the virtual UART (baud timing, link effects:
+    a dropped byte is unknown to the sender, so every write "reached the head")."""
+
+    def __init__(self, loop: "ClosedLoop"):
+        self.loop = loop
+        self.encoded: dict[tuple, bytes] = {}   # Pelco-D bytes per (pan_dir, pan_byte, tilt_dir, tilt_byte)
+        self.spent_s = 0.0                      # wall time of the last send (the loop's "link" stage)
+
+    def send(self, c, send_t_s: float, source: str) -> bool:
+        c0 = time.perf_counter()
+        loop = self.loop
+        key = (c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte)
+        data = self.encoded.get(key)
+        if data is None:     # a run uses a few dozen distinct commands: encode each once
+            data = self.encoded[key] = encode_pan_tilt(loop.scene.gimbal.address, *key)
+        loop._pending.extend(loop.uart.send(data, send_t_s))
+        loop.bytes_sent += len(data)
+        if "echo" in loop.uart.effects:
+            # RS-485 echo: the host hears its own bytes.  The tracker reads no replies (the head
+            # reports nothing), so here they are only counted; a reply parser must skip them.
+            loop.echo_bytes += sum(len(b) for _, b in loop.uart.pop_echo())
+        loop.last_sent = (send_t_s, data)
+        self.spent_s = time.perf_counter() - c0
+        return True
 
 
 STAGES = ("head model: commands arrive", "scan", "beams into the world (head pose)", "ray casting + effects",
@@ -166,7 +194,6 @@ class ClosedLoop:
             from sim.summary import half_fov_deg
             self.sky = SkyController(self.tracker, *sky_configs_from_mapping(
                 scene.tracker_table["sky"], f"{scene.path} [tracker.sky]", half_fov_deg(scene)))
-        self.controller = controller if controller is not None else (self.sky or self.tracker)
         # The lidar's gyro on the head, only when the scene has [imu] (its own random stream).
         if self.tracker.config.attitude == "gyro" and scene.imu is None:
             raise UserError(f"{scene.path} [tracker]: attitude = \"gyro\" needs an [imu] table "
@@ -174,10 +201,12 @@ class ClosedLoop:
         self.gyro = HeadGyro(scene.imu, seed, tilt0) if scene.imu is not None else None
         # The daemon's gate (limits, stale frames): pass-through unless the scene has a [gate] table.
         self.gate = CommandGate(None if scene.gate is None else Limits.of(self.head_facts))
+        self.link = _UartSink(self)
+        self.frame_step = FrameStep(controller if controller is not None else (self.sky or self.tracker), self.gate,
+                                    NoHead() if g.frozen else self.link)
         self.last_command = STOP          # this frame's command as sent (after the gate)
         self.last_limited: list[str] = []  # why the gate changed it (empty: unchanged)
         self._pending: list[tuple[float, bytes]] = []
-        self._encoded: dict[tuple, bytes] = {}   # Pelco-D bytes per (pan_dir, pan_byte, tilt_dir, tilt_byte)
         self.log = FrameLog()
         # Multi-object scenes (Scene.multi_object): every object's truth per frame (sim.objects_truth);
         # kept apart from the log, whose arrays the regression and determinism digests cover.
@@ -194,6 +223,14 @@ class ClosedLoop:
         self.stage_s: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         self.steps_timed = 0
         self.first_step_s: float | None = None
+
+    @property
+    def controller(self):     # what drives the head: the tracker, or the controller given in its place
+        return self.frame_step.controller
+
+    @controller.setter
+    def controller(self, c) -> None:
+        self.frame_step.controller = c
 
     # Effect streams and work counters live in the sensor; these keep the loop's own view of them.
     @property
@@ -296,40 +333,26 @@ class ClosedLoop:
             self._strays_seen += len(strays)
             self.objects_log.append(self.last_objects)
         c4 = clock()
-        # 6. the tracker and the link; the gyro's samples of this frame (and before) come first.
+        # 6. the one step (foveatrack.frame_step): the gyro's samples, the controller, the gate, the link.
         self.imu_fed = None
+        imu = None
         if self.gyro is not None:
-            feed = getattr(self.controller, "on_imu", None)
             t_imu, gyro = self.gyro.samples_until(self.head, t1)
-            if feed is not None:
-                feed(t_imu, gyro)
+            if hasattr(self.controller, "on_imu"):
+                imu = [(t_imu, gyro)]
                 self.imu_fed = (t_imu, gyro)    # recorded with the frame (sim.recorder)
         send_t = t1 + scene.gimbal.send_delay_s
-        out = self.controller.process(frame, send_t)
-        c5 = clock()
         self.last_sent = None
-        self.last_limited = []
-        if scene.gimbal.frozen:
-            # The head is frozen (paper Fig. 13/14a): nothing is sent, and the controller (the tracker's
-            # dead reckoning) must know that its command never left.
-            self.controller.command_sent(send_t, STOP)
-        else:
-            stale_s = None if scene.gate is None else scene.gate.stale_frame_s
-            c, self.last_limited = self.gate.decide(self.controller, out, send_t,
-                                                    stale=stale_s is not None and send_t - t1 > stale_s)
-            self.gate.wrote(self.controller, send_t, c, ok=True)   # the virtual UART always takes the bytes
-            self.last_command = c
-            key = (c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte)
-            data = self._encoded.get(key)
-            if data is None:     # a run uses a few dozen distinct commands: encode each once
-                data = self._encoded[key] = encode_pan_tilt(scene.gimbal.address, *key)
-            self._pending.extend(self.uart.send(data, send_t))
-            self.bytes_sent += len(data)
-            if "echo" in self.uart.effects:
-                # RS-485 echo: the host hears its own bytes.  The tracker reads no replies (the head
-                # reports nothing), so here they are only counted; a reply parser must skip them.
-                self.echo_bytes += sum(len(b) for _, b in self.uart.pop_echo())
-            self.last_sent = (send_t, data)
+        self.link.spent_s = 0.0
+        stale_s = None if scene.gate is None else scene.gate.stale_frame_s
+        # The frozen head (paper Fig. 13/14a) gets nothing: its sink fails every write, so the
+        # controller (the tracker's dead reckoning) is told its command never left.
+        rec = self.frame_step(frame, send_t, imu=imu, stale=stale_s is not None and send_t - t1 > stale_s)
+        out = rec.output
+        self.last_limited = list(rec.limited)
+        if not scene.gimbal.frozen:
+            self.last_command = rec.command
+        c5 = clock() - self.link.spent_s      # the link's time is its own stage
         c6 = clock()
         self._log(t0, t1, frame, int(on_target.sum()), out, mid_pose_deg)
         if self.sky is not None:

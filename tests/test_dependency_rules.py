@@ -57,12 +57,9 @@ MAY_IMPORT: dict[str, set[str]] = {
 }
 
 # (importing module, imported unit): breaks of the table the code still has, each with its reason
-KNOWN_EXCEPTIONS = {
-    # The live speed-table calibration reads the daemon's device configuration (DaemonConfig: [lidar],
-    # [head], [daemon] watchdog_s) to open the same devices with the same limits.  The fix is the
-    # device configuration in a module of its own below both (issue 25); until then, this one edge.
-    ("foveatrack.calibration.live", "foveatrack.daemon"),
-}
+KNOWN_EXCEPTIONS: set[tuple[str, str]] = set()
+# (none left: the live calibration read the daemon's device configuration from foveatrack.daemon
+# until it moved below both, to foveatrack/device_config.py)
 
 
 def unit_of(module: str) -> str:

@@ -9,7 +9,7 @@ different defaults (a scene's [gate] allowed turbo, a daemon's [head] and the ga
 import ast
 from pathlib import Path
 
-from foveatrack.daemon.config import HeadConfig
+from foveatrack.device_config import HeadConfig
 from foveatrack.gate import Limits
 from foveatrack.speed_table import TURBO
 from foveatrack.tracker import TrackerConfig

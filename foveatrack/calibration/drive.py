@@ -8,14 +8,16 @@ with any command sink, so a real lidar + head driver reuses the same procedure.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from foveatrack.calibration import Calibrator
 from foveatrack.calibration.procedure import TILT_UNSEEN_MAX_S
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
+from foveatrack.frame_step import FrameSource, FrameStep
 from foveatrack.frames import Frame
+from foveatrack.gate import CommandGate
 
 
 @dataclass(frozen=True)
@@ -112,31 +114,38 @@ class CalibrationDriver:
         return self.current
 
 
-def drive_calibration(calibrator: Calibrator, frames: Iterable[Frame], send: Callable[[float, HeadCommand], None],
-                      send_delay_s: float = 0.0, gate=None) -> CalibrationDriver:
+class _CallSink:
+    """A command sink from a function ``send(t_s, command)`` (returns nothing: written; or the head's ok)."""
+
+    def __init__(self, send: Callable[[float, HeadCommand], object]):
+        self.fn = send
+
+    def send(self, cmd: HeadCommand, send_t_s: float, source: str) -> bool:
+        ok = self.fn(send_t_s, cmd)
+        return True if ok is None else bool(ok)
+
+
+def drive_calibration(calibrator: Calibrator, frames: FrameSource, send, send_delay_s: float = 0.0,
+                      gate=None) -> CalibrationDriver:
     """Run a calibration from any frame source into any command sink (a real lidar + head, a replay).
 
     ``frames`` yields consecutive frames (e.g. :class:`foveatrack.frames.FrameSlicer` over a live
-    Livox stream); ``send(t_s, command)`` writes the command (e.g. Pelco-D to the head's port) and
-    is called once per frame.  ``gate``: the :class:`foveatrack.gate.CommandGate` every command passes
-    on its way (the daemon's limits on a real head; None: commands pass unchanged).  Stops consuming
-    frames when the calibration is done (after sending a final STOP).  Returns the driver
+    Livox stream); ``send`` is a :class:`foveatrack.frame_step.CommandSink` or a function
+    ``send(t_s, command)`` that writes the command (e.g. Pelco-D to the head's port); it is called
+    once per frame, through the one frame step (:class:`foveatrack.frame_step.FrameStep`).  ``gate``:
+    the :class:`foveatrack.gate.CommandGate` every command passes on its way (the daemon's limits on a
+    real head; None: commands pass unchanged); a command it changes is replaced by STOP and ends the
+    run with an error (:meth:`CalibrationDriver.refuse_limited`).  Stops consuming frames when the
+    calibration is done (after sending a final STOP).  Returns the driver
     (``driver.calibrator.result()`` is the table).
     """
     driver = CalibrationDriver(calibrator)
+    sink = send if hasattr(send, "send") else _CallSink(send)
+    step = FrameStep(driver, gate if gate is not None else CommandGate(None), sink, source="calibration",
+                     stop_on_change=True)
     for frame in frames:
-        t = frame.t_end_s + send_delay_s
-        out = driver.process(frame, t)
-        cmd = out.command
-        if gate is not None:
-            cmd, why = gate.decide(driver, out, t)
-            if why:
-                send(t, STOP)
-                driver.refuse_limited(why, out)
-        send(t, cmd)
+        rec = step(frame, frame.t_end_s + send_delay_s)
+        driver.refuse_limited(list(rec.limited), rec.output)
         if driver.finished:
             break
     return driver
-
-
-# ---------------------------------------------------------------------------------------------------

@@ -31,7 +31,7 @@ import numpy as np
 
 from foveatrack.calibration import CalibrationPlan, CalibrationReport, FeatureSpec, PriorAxisCalibrator
 from foveatrack.calibration.drive import drive_calibration
-from foveatrack.daemon.config import DaemonConfig
+from foveatrack.device_config import DaemonConfig
 from foveatrack.errors import UserError
 from foveatrack.frames import FrameSlicer, strip_no_return
 from foveatrack.gate import CommandGate
@@ -134,7 +134,7 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
                         run["last_point_s"] = frame.t_ns[-1] * 1e-9 if frame.n_points else None
                         yield frame
 
-    def send(t_s, cmd) -> None:
+    def send(t_s, cmd) -> bool:
         """The command sink: the head's serial link, one Pelco frame per frame (a keep-alive too)."""
         _, ok = head.send(cmd)
         if not ok and cmd != run["written"]:
@@ -149,6 +149,7 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
             delay_ms.append((time.monotonic() - (run["last_point_s"] + stream.offset_s)) * 1e3)
         if progress is not None:
             progress(run["frames"], _legs(cal), legs_total)
+        return ok
 
     try:
         head.stop()

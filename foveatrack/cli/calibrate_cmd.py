@@ -209,7 +209,7 @@ def calibrate_devices(args) -> int:
     from foveatrack.cli.stop_signals import stop_on_signals
     from foveatrack.calibration import CalibrationPlan
     from foveatrack.calibration.live import calibrate_live, delay_summary_ms
-    from foveatrack.daemon.config import load_config
+    from foveatrack.device_config import load_config
 
     if not args.config:
         raise UserError("--lidar/--serial calibrate real devices: they need --config DAEMON.toml (the daemon's "

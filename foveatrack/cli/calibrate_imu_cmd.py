@@ -232,7 +232,7 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
     from dataclasses import replace
 
     from foveatrack.cli.stop_signals import stop_on_signals
-    from foveatrack.daemon.config import load_config
+    from foveatrack.device_config import load_config
     from foveatrack.imu_calib.live import RigPlan, calibrate_rig
 
     if not args.config:

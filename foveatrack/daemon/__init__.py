@@ -1,12 +1,12 @@
 """The real-time tracking daemon (``foveatrack daemon --config FILE``): Livox in, Pelco-D out.
 
-* :mod:`foveatrack.daemon.config` -- ``load_config(path) -> DaemonConfig`` (TOML, validated)
+* :mod:`foveatrack.device_config` -- ``load_config(path) -> DaemonConfig`` (TOML, validated)
 * :mod:`foveatrack.daemon.runtime` -- ``Daemon(config, log_path=None, status=None, duration_s=None).run()``
 * :mod:`foveatrack.daemon.support` -- ``JsonLog``, ``StatusLine``, ``RecordingThread``
 * ``Limits`` (the last safety gate) is :mod:`foveatrack.gate`'s, shared with the simulator and replay
 """
 
-from foveatrack.daemon.config import DaemonConfig, config_from_mapping, load_config
+from foveatrack.device_config import DaemonConfig, config_from_mapping, load_config
 from foveatrack.daemon.runtime import Daemon
 from foveatrack.gate import Limits
 

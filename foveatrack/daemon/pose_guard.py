@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from foveatrack.control import STOP
 from foveatrack.pose_check import PoseCheck
-from foveatrack.recording.records import ns, write_record
+from foveatrack.recording.records import ns
 
 
 class PoseGuard:
@@ -139,9 +139,7 @@ class PoseGuard:
             elif h.on_reconnect == "keep":
                 # held: nothing else stops the head while its pose is unknown on a live link
                 t_s = d._send_time(max(d.sensor_now_s(now) or frame.t_end_s, frame.t_end_s))
-                d.tracker.command_sent(t_s, STOP)
-                rec, _ = d._send(STOP, "pose_check", t_s)
-                d._record(write_record, rec)
+                d._send_own(STOP, "pose_check", t_s)     # through the one step, recorded
             d.counters["frames_pose_unknown"] += 1
             return True
         return False

@@ -49,21 +49,26 @@ from dataclasses import asdict
 import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
-from foveatrack.daemon.config import DaemonConfig
 from foveatrack.daemon.pose_guard import PoseGuard
+from foveatrack.daemon.receiver import LidarReceiver
+from foveatrack.device_config import DaemonConfig
 from foveatrack.daemon.support import JsonLog, RecordingThread, StatusLine, format_status
 from foveatrack.frames import Frame, FrameSlicer, strip_no_return
-from foveatrack.gate import CommandGate
+from foveatrack.frame_step import FrameStep, StepRecord
+from foveatrack.gate import LINK_DOWN, CommandGate
+from foveatrack.errors import UserError
 from foveatrack.gyro_attitude import ImuFeed
-from foveatrack.live_devices import LidarStream, open_devices
+from foveatrack.live_devices import open_devices
 from foveatrack.recording.format import DAEMON_EVENTS
 from foveatrack.recording.records import CommandRecord, ns, write_record, write_tracker_frame
+from foveatrack.reconstruction import rotation_matrix
 from foveatrack.tracker import Tracker
+from foveatrack.turn_witness import MoveWitness, TurnMismatch
 
 FORMAT_SOURCE = "daemon"
 ABS_SET_QUIET_S = 0.3     # line quiet before a Pelco absolute set (the PTS family needs 0.2 s)
 PROGRESS_PERIOD_S = 1.0
-LINK_DOWN = "link_down"   # a command's `limited` reason: STOP written while the head's link was down   # a "progress" log event (frames processed, ...) this often
+# a "progress" log event (frames processed, ...) every PROGRESS_PERIOD_S
 
 
 # ----------------------------------------------------------------------------------------- record jobs
@@ -82,83 +87,21 @@ def _job_event(w, t_ns, rec: dict):
     w.write(DAEMON_EVENTS, t_ns, rec)
 
 
-class _Receiver(threading.Thread):
-    """Owns the lidar's :class:`~foveatrack.live_devices.LidarStream`; hands (host time, xyz, t_ns,
-    reflectivity) to the control loop."""
+class _HeadSink:
+    """The daemon's command sink: Pelco bytes through :class:`~foveatrack.live_devices.HeadLink` to the
+    serial port; keeps the bytes and the host time of the last write for the command's record."""
 
-    def __init__(self, client, q: queue.Queue, stop: threading.Event):
-        super().__init__(name="livox-receiver", daemon=True)
-        self.client, self.q, self.stop_ev = client, q, stop
-        self.stream = LidarStream(client)
-        self.dropped_batches = 0
-        self.dropped_points = 0
-        self.points_in = 0
-        self.first_t_ns: int | None = None
-        self.last_t_ns: int | None = None
-        self.span_done_ns = 0        # sensor time spanned by earlier clock epochs (a restarted lidar)
-        self.error: BaseException | None = None
-        self.counters: dict = {}
-        # what the unit reports (LivoxClient.take_events), for the control loop's log and status line
-        self.unit_events: queue.SimpleQueue = queue.SimpleQueue()
-        self.unit_note = ""
-        self.epoch = 0
-        # The lidar's IMU samples (data type 6) for a tracker that takes its attitude from the gyro:
-        # (t_ns, gyro_rad_s, clock epoch, acc_g) batches, taken by the control loop.
-        self.want_imu = False
-        self.imu: deque = deque(maxlen=4096)
+    def __init__(self, daemon: "Daemon"):
+        self.daemon = daemon
+        self.raw: bytes = b""
+        self.t_written = math.nan
 
-    @property
-    def offset_s(self) -> float | None:
-        return self.stream.offset_s
-
-    @property
-    def last_packet_mono(self) -> float | None:
-        return self.stream.last_packet_mono
-
-    def run(self) -> None:
-        try:
-            self.client.start_sampling()
-            while not self.stop_ev.is_set():
-                now, batches = self.stream.poll(0.02)
-                if self.want_imu:
-                    imu = self.client.take_imu()
-                    if len(imu.t_ns):
-                        self.imu.append((imu.t_ns, imu.gyro_rad_s, self.stream.epoch, imu.acc_g))
-                self.counters = {**self.client.counters, **self.stream.counters}
-                for jump in self.stream.take_jumps():   # the sensor clock restarted or jumped: re-anchored
-                    self.unit_events.put(jump.as_event())
-                for ev in self.client.take_events():
-                    self.unit_events.put(ev)
-                    st = self.client.unit_status()
-                    bad = st["work_state_name"] not in (None, "normal")
-                    self.unit_note = ", ".join(([f"lidar {st['work_state_name']}"] if bad else []) + st["problems"])
-                for b in batches:
-                    if not len(b):
-                        continue
-                    t_last = int(b.t_ns[-1])
-                    if b.epoch != self.epoch:
-                        if self.first_t_ns is not None:
-                            self.span_done_ns += self.last_t_ns - self.first_t_ns
-                        self.epoch, self.first_t_ns, self.last_t_ns = b.epoch, None, None
-                    if self.first_t_ns is None:
-                        self.first_t_ns = int(b.t_ns[0])
-                    # a late packet is handed on after newer ones (sensor_time): the span ends at the newest
-                    self.last_t_ns = t_last if self.last_t_ns is None else max(self.last_t_ns, t_last)
-                    self.points_in += len(b)
-                    xyz, t_ns, refl = b.xyz, b.t_ns, b.reflectivity
-                    ret = np.any(xyz != 0.0, axis=1)
-                    if not ret.all():
-                        # no-return points carry no data, but the last one carries the time, so
-                        # frames keep coming while the lidar sees only sky (stripped in the loop)
-                        ret[-1] = True
-                        xyz, t_ns, refl = xyz[ret], t_ns[ret], refl[ret]
-                    try:
-                        self.q.put_nowait((now, xyz, t_ns, refl, b.epoch))
-                    except queue.Full:
-                        self.dropped_batches += 1
-                        self.dropped_points += len(t_ns)
-        except BaseException as exc:  # noqa: BLE001 - reported by the control loop
-            self.error = exc
+    def send(self, cmd: HeadCommand, send_t_s: float, source: str) -> bool:
+        d = self.daemon
+        self.raw, ok = d.head.send(cmd, source)
+        self.t_written = time.monotonic()
+        d.counters["commands_written" if ok else "commands_failed"] += 1
+        return ok
 
 
 class Daemon:
@@ -182,9 +125,16 @@ class Daemon:
         self.limits = h.limits
         self.gate = CommandGate(self.limits)
         self.table = config.speed_table()
-        self.tracker = Tracker(config.tracker, self.table)
+        self.sink = _HeadSink(self)
+        # The one frame step: tracker -> gate -> serial port; a failed write leaves the head on its
+        # last command and the gate tells the dead reckoning (seen without it: ~9 deg of pan while a
+        # head was unplugged).
+        self.step = FrameStep(Tracker(config.tracker, self.table), self.gate, self.sink)
         # attitude = "gyro": the lidar's IMU samples, held until the frame they precede
         self.imu_feed = ImuFeed() if config.tracker.attitude == "gyro" else None
+        # ... and the same gyro witnesses every move of the head against its command (a slipping gear,
+        # a wrong speed table, another head on the port stop the run: foveatrack.turn_witness)
+        self.witness = MoveWitness(self.table) if self.imu_feed is not None else None
         self.slicer = FrameSlicer(config.tracker.rate_hz)
         self.counters: Counter = Counter(frames_stale=0)
         self.proc_ms: list[float] = []
@@ -200,6 +150,10 @@ class Daemon:
         self._home_steps: list = []         # (host time, step) of the homing under way
         self.last_frame_end_s: float | None = None
         self.pose_guard = PoseGuard(config)   # the head's pose against the background ([pose_check])
+
+    @property
+    def tracker(self) -> Tracker:
+        return self.step.controller
 
     # -------------------------------------------------------------------------------- setup
     def _meta(self) -> dict:
@@ -260,7 +214,7 @@ class Daemon:
         if self.live_port is not None:
             self._open_live()
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
-        self.rx = _Receiver(self.client, self.q, self.stop_ev)
+        self.rx = LidarReceiver(self.client, self.q, self.stop_ev)
         self.rx.want_imu = self.imu_feed is not None
         # IMU packets are held only for a tracker that takes its attitude from them (issue 26: every
         # packet of a Horizon was kept otherwise, ~1 MB/min)
@@ -305,30 +259,46 @@ class Daemon:
         self._last_send_t = t_s
         return t_s
 
-    def _send(self, cmd: HeadCommand, source: str, send_t_s: float, fid=None, tracker_cmd=None, why=()):
-        raw, ok = self.head.send(cmd, source)
-        t_written = time.monotonic()
-        self.counters["commands_written" if ok else "commands_failed"] += 1
-        # A failed write leaves the head on its last command; the gate tells the dead reckoning (seen
-        # without it: ~9 deg of pan while a head was unplugged).
-        self.gate.wrote(self.tracker, send_t_s, cmd, ok)
-        t = tracker_cmd
-        rec = CommandRecord(ns(send_t_s), raw, cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte, frame_id=fid,
-                            source=source, send_t_s=float(send_t_s), written=bool(ok), host_written_s=t_written,
-                            limited=tuple(why),
-                            tracker_command=None if t is None else (t.pan_dir, t.pan_byte, t.tilt_dir, t.tilt_byte))
-        return rec, t_written
+    def _command_record(self, rec: StepRecord, source: str, fid=None) -> CommandRecord:
+        """The recording's record of a command the step wrote (the tracker's when the gate changed it)."""
+        cmd, t = rec.command, rec.proposed
+        return CommandRecord(ns(rec.send_t_s), self.sink.raw, cmd.pan_dir, cmd.pan_byte, cmd.tilt_dir, cmd.tilt_byte,
+                             frame_id=fid, source=source, send_t_s=float(rec.send_t_s), written=rec.reached_head,
+                             host_written_s=self.sink.t_written, limited=rec.limited,
+                             tracker_command=None if rec.output is None else (t.pan_dir, t.pan_byte, t.tilt_dir,
+                                                                              t.tilt_byte))
 
-    def _feed_imu(self, t_end_s: float) -> tuple:
-        """The gyro samples before this frame's end go to the tracker first (of this clock only);
-        returns them, with the accelerometer's where the lidar sent it, for the recording."""
+    def _send_own(self, cmd: HeadCommand, source: str, send_t_s: float) -> None:
+        """A command of the daemon's own (watchdog, shutdown, a new sensor clock), through the step,
+        recorded."""
+        rec = self.step.own_command(send_t_s, cmd, source)
+        if self.witness is not None:
+            self.witness.command(send_t_s, rec.head_command)
+        self._record(write_record, self._command_record(rec, source))
+
+    def _witness(self, frame: Frame, imu: tuple, step: StepRecord) -> None:
+        """The frame's gyro samples, then the command the head runs from the send time, to the witness;
+        a head that turned far from its commands ends the run (the head is stopped on the way out)."""
+        t, g, accel = imu
+        up = None
+        if accel is None:     # no accelerometer readings: up from the dead reckoning's pose
+            up = rotation_matrix(*self.tracker.recon.angles_at(frame.t_mid_s)[:2])[2]
+        try:
+            self.witness.samples(t, g, accel, up_guess=up)
+        except TurnMismatch as exc:
+            self.log.event("turn_mismatch", message=str(exc), frames=self.counters["frames"])
+            raise UserError(f"{exc}; the head was stopped ([head] port {self.cfg.head.port!r})") from None
+        self.witness.command(step.send_t_s, step.head_command)
+
+    def _take_imu(self, t_end_s: float) -> tuple:
+        """The gyro samples before this frame's end (of this clock only), which the step feeds to the
+        tracker first; returns them, with the accelerometer's where the lidar sent it."""
         rx_imu = getattr(self.rx, "imu", None)
         while rx_imu:
             t_ns, gyro, epoch, *acc = rx_imu.popleft()
             if epoch == self.epoch:
                 self.imu_feed.push(t_ns, gyro, acc[0] if acc else None)
         t, g, accel = self.imu_feed.release(t_end_s)
-        self.tracker.on_imu(t, g)
         self.counters["imu_samples"] = self.imu_feed.samples_fed
         self.counters["imu_samples_bad_time"] = self.imu_feed.bad_time
         if self.counters["frames"] == 20 and self.imu_feed.samples_in == 0:
@@ -348,9 +318,7 @@ class Daemon:
         if not math.isfinite(t_stop):
             t_stop = 0.0
         if not old.last_command.is_stop:
-            old.command_sent(t_stop, STOP)
-            rec, _ = self._send(STOP, "clock_jump", t_stop)
-            self._record(write_record, rec)
+            self._send_own(STOP, "clock_jump", t_stop)
         pan, tilt, _, _ = old.recon.angles_at(t_stop + 5.0)    # decelerated long since
         self._rebase_tracker(t0_s, pan, tilt)
         self.slicer.reset()
@@ -420,11 +388,12 @@ class Daemon:
 
     def _rebase_tracker(self, t0_s: float, pan_deg: float, tilt_deg: float) -> None:
         """A fresh tracker whose dead reckoning starts at ``(pan_deg, tilt_deg)`` at sensor time ``t0_s``."""
-        self.tracker = self.tracker.rebased(t0_s, pan_deg, tilt_deg)   # replay repeats it from the event
+        self.step.rebase(self.tracker.rebased(t0_s, pan_deg, tilt_deg))   # replay repeats it from the event
+        if self.witness is not None:
+            self.witness = MoveWitness(self.table)
         if self.imu_feed is not None:
             self.imu_feed.restart(t0_s)
         self._last_send_t = -math.inf
-        self.gate.head_cmd = STOP
         self.pose_guard.rebased()
 
     def _record(self, fn, *args):
@@ -446,26 +415,25 @@ class Daemon:
         now_s = self.sensor_now_s()
         send_t = self._send_time((frame.t_end_s if now_s is None else max(now_s, frame.t_end_s))
                                  + float(np.median(self._compute_s)))
-        imu = self._feed_imu(frame.t_end_s) if self.imu_feed is not None else None
-        out = self.tracker.process(frame, send_t_s=send_t)
+        imu = self._take_imu(frame.t_end_s) if self.imu_feed is not None else None
         fid = self.frame_id
         self.frame_id += 1
         # A frame this old steers nothing: its bearing is stale, and while the loop is catching up
         # (a stall, a start-up burst) the clock offset may still be settling, which would misplace
         # the command in the dead reckoning.  STOP is sent and recorded instead (replay repeats it).
         stale = now_s is not None and now_s - frame.t_end_s > self.cfg.loop.stale_frame_s
-        cmd, why = self.gate.decide(self.tracker, out, send_t, stale)
         reconnect_unknown = self.cfg.head.on_reconnect != "keep"
         was_up = self.head.connected
-        if not was_up and reconnect_unknown:
-            # whatever a reopened link carries first is STOP: from then on the head's pose is unknown
-            if not cmd.is_stop:
-                self.tracker.command_sent(send_t, STOP)
-            cmd, why = STOP, [*why, LINK_DOWN]
+        # whatever a reopened link carries first is STOP: from then on the head's pose is unknown
+        step = self.step(frame, send_t, imu=None if imu is None else [imu[:2]], stale=stale,
+                         stop_why=(LINK_DOWN,) if not was_up and reconnect_unknown else ())
+        out = step.output
+        rec, t_written = self._command_record(step, "tracker", fid), self.sink.t_written
+        if self.witness is not None:
+            self._witness(frame, imu, step)
         self.counters["frames_stale"] += stale
-        if why:
+        if step.limited:
             self.counters["commands_limited"] += 1
-        rec, t_written = self._send(cmd, "tracker", send_t, fid, out.command, why)
         if was_up and not self.head.connected and reconnect_unknown and self.pose_state is None:
             self._pose_unknown(t_written, "link_lost")
         proc = t_written - t_arrival
@@ -575,10 +543,7 @@ class Daemon:
                     last_watchdog_stop = now
                     t_s = self.sensor_now_s(now)
                     if t_s is not None and watchdog_tripped:
-                        t_s = self._send_time(t_s)
-                        self.tracker.command_sent(t_s, STOP)
-                        rec, _ = self._send(STOP, "watchdog", t_s)
-                        self._record(write_record, rec)
+                        self._send_own(STOP, "watchdog", self._send_time(t_s))
                     else:
                         self.head.stop()
                 if not silent and watchdog_tripped:
@@ -745,9 +710,7 @@ class Daemon:
             pass
         elif t_s is not None:
             t_s = self._send_time(t_s)
-            self.tracker.command_sent(t_s, STOP)
-            rec, _ = self._send(STOP, "shutdown", t_s)
-            self._record(write_record, rec)
+            self._send_own(STOP, "shutdown", t_s)
         else:
             self.head.stop()
         self.rx.join(2.0)

@@ -54,6 +54,7 @@ import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
 from foveatrack.errors import UserError
+from foveatrack.frame_step import FrameStep
 from foveatrack.gate import CommandGate, Proposal
 from foveatrack.imu_calib import handeye, procedure, registration
 from foveatrack.imu_calib.imu_integration import GRAVITY_M_S2, ImuSamples
@@ -325,6 +326,16 @@ def static_spread_deg_s(t_s: np.ndarray, gyro_rad_s: np.ndarray, t0: float, t1: 
     return float(np.max(np.abs(means - g.mean(axis=0))))
 
 
+class _SerialSink:
+    """The head's serial link as a command sink (:class:`foveatrack.live_devices.HeadLink`)."""
+
+    def __init__(self, head):
+        self.head = head
+
+    def send(self, cmd: HeadCommand, send_t_s: float, source: str) -> bool:
+        return self.head.send(cmd)[1]
+
+
 class _HeadDrive:
     """The head's side of the run: each move's commands through the daemon's command gate (with the
     dead-reckoned tilt and its uncertainty: the table's sigma over each move, summed in quadrature),
@@ -336,19 +347,30 @@ class _HeadDrive:
         self.config, self.head, self.rig, self.table = config, head, rig, table
         self.tilt_deg = config.head.tilt0_deg
         self.tilt_var = 0.0                     # [deg^2]
+        # The one frame step (foveatrack.frame_step) with this object as its controller: each move's
+        # command is proposed by time (no frames), through the daemon's gate, to the serial port; a
+        # command the gate changes is replaced by STOP and ends the run (send).
         self.gate = CommandGate(config.head.limits)
+        self.step = FrameStep(self, self.gate, _SerialSink(head), source="imu_calibration", stop_on_change=True)
+        self._proposed: HeadCommand = STOP
         self.witness = TurnWitness(None if X0 is None else X0[:3, :3])
         self.fed = 0                            # IMU batches given to the witness
 
+    def process(self, frame, send_t_s: float) -> Proposal:
+        """The controller's side of the step: the move's command and the dead-reckoned tilt."""
+        return Proposal(self._proposed, self.tilt_deg, math.sqrt(self.tilt_var))
+
+    def command_sent(self, t_s: float, cmd: HeadCommand) -> None:
+        """The gate changed a command or a write failed: :meth:`send` ends the run on either (a keep-alive
+        lost changes nothing), so the moves' dead reckoning has nothing to take from it."""
+
     def send(self, cmd: HeadCommand, last: HeadCommand | None) -> None:
-        sigma = math.sqrt(self.tilt_var)
-        gated, why = self.gate.decide(None, Proposal(cmd, self.tilt_deg, sigma), time.monotonic())
-        if why:
-            self.rig._fail(f"the [head] limits of {self.config.path} stopped a planned move ({', '.join(why)}) at "
-                           f"dead-reckoned tilt {self.tilt_deg:.1f} +- {sigma:.1f} deg")
-        _, ok = self.head.send(gated)
-        self.gate.wrote(None, time.monotonic(), gated, ok)
-        if not ok and gated != last:
+        self._proposed = cmd
+        rec = self.step(None, time.monotonic())
+        if rec.limited:
+            self.rig._fail(f"the [head] limits of {self.config.path} stopped a planned move ({', '.join(rec.limited)}) at "
+                           f"dead-reckoned tilt {self.tilt_deg:.1f} +- {math.sqrt(self.tilt_var):.1f} deg")
+        if not rec.reached_head and cmd != last:
             self.rig._fail(f"the head's serial link [head] port {self.config.head.port!r} failed when a move changed "
                            f"its command (pose {self.rig.pose + 1})")
 

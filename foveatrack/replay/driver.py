@@ -45,8 +45,9 @@ from pathlib import Path
 
 import numpy as np
 
-from foveatrack.control import STOP, HeadCommand
+from foveatrack.control import HeadCommand
 from foveatrack.errors import UserError
+from foveatrack.frame_step import FrameStep, NoHead
 from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate, Limits
 from foveatrack.recording.records import CommandRecord
@@ -69,30 +70,33 @@ def require_space(cfg: TrackerConfig, where: str) -> None:
                         "table sets it (a daemon config such as examples/daemon-virtual.toml, or a scene)")
 
 
-def _reached_head(gate: CommandGate, tracker: Tracker, send_t: float, cmd: HeadCommand,
-                  record: CommandRecord | None) -> HeadCommand:
-    """What the head runs after a command sent at ``send_t``: the gate's rule for a write, with the
-    outcome the recording gives (the daemon's ``written: false`` for a failed write)."""
-    return gate.wrote(tracker, send_t, cmd, ok=record is None or record.reached_head)
+class _RecordedOutcome:
+    """Replay's command sink: nothing is written; whether the head got a command is what the recording
+    says (the daemon's ``written: false`` for a failed write; a command without a record reached it).
+    The driver names the record before each step (:attr:`record`)."""
+
+    def __init__(self):
+        self.record: CommandRecord | None = None
+
+    def send(self, cmd: HeadCommand, send_t_s: float, source: str) -> bool:
+        return self.record is None or self.record.reached_head
 
 
-def _after_frame(tracker: Tracker, gate: CommandGate, order: TimeOrder, after: list) -> Tracker:
-    """The watchdog / shutdown STOPs and the daemon's rebases after a frame, in the order they happened;
-    returns the tracker (a fresh one where the daemon rebased)."""
+def _after_frame(step: FrameStep, sink: _RecordedOutcome, order: TimeOrder, after: list) -> None:
+    """The watchdog / shutdown STOPs and the daemon's rebases after a frame, in the order they happened
+    (a fresh tracker where the daemon rebased)."""
     for c in after:
         if isinstance(c, TrackerRebased):
-            tracker = tracker.rebased(c.t0_s, c.pan_deg, c.tilt_deg)
-            gate.head_cmd = STOP
+            step.rebase(step.controller.rebased(c.t0_s, c.pan_deg, c.tilt_deg))
             order.rebased()
             continue
         if isinstance(c, PoseCorrected):
-            tracker.correct_pose(c.t_s, c.dpan_deg, c.dtilt_deg)
+            step.controller.correct_pose(c.t_s, c.dpan_deg, c.dtilt_deg)
             continue
-        if order.command_out_of_order(tracker, c.send_time_s):
+        if order.command_out_of_order(step.controller, c.send_time_s):
             continue
-        tracker.command_sent(c.send_time_s, c.command)
-        _reached_head(gate, tracker, c.send_time_s, c.command, c)
-    return tracker
+        sink.record = c
+        step.own_command(c.send_time_s, c.command, c.source or "")
 
 
 def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
@@ -109,8 +113,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
         require_space(cfg, where)
     rec_cfg = tracker_config(meta)
     table = SpeedTable.from_dict(meta["speed_table"], where=f"{path}: recorded speed table")
-    tracker = Tracker(cfg, table, t0_s=float(meta.get("tracker_t0_s", 0.0)))
-    gate = CommandGate(recorded_limits(meta))
+    sink = _RecordedOutcome()
+    step = FrameStep(Tracker(cfg, table, t0_s=float(meta.get("tracker_t0_s", 0.0))), CommandGate(recorded_limits(meta)),
+                     sink)
     period = rec_cfg.period_s
     period_ns = int(round(1e9 / rec_cfg.rate_hz))
     send_delay_sim = rec_cfg.send_delay_s
@@ -135,18 +140,17 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             t0 = (pts.t_ns - period_ns) * 1e-9
             c = rf.command
             send_t = float(c.send_t_s) if c is not None and c.send_t_s is not None else t1 + cfg.send_delay_s
-        if order.frame_out_of_order(tracker, k, t1, send_t):
-            tracker = _after_frame(tracker, gate, order, rf.after)
+        if order.frame_out_of_order(step.controller, k, t1, send_t):
+            _after_frame(step, sink, order, rf.after)
             continue
         frame = Frame(t0, t1, pts.xyz, pts.t_ns_points, pts.reflectivity)
-        for b in rf.imu:        # as the driver fed them: before the frame (a commands tracker ignores them)
-            imu_recorded = True
-            tracker.on_imu(b.t_s, b.gyro_rad_s)
-        out = tracker.process(frame, send_t_s=send_t)
-        # a frame the driver found stale (the daemon: by its wall clock) is stale here too
-        cmd, _ = gate.decide(tracker, out, send_t, stale=rf.stale)
-        _reached_head(gate, tracker, send_t, cmd, rf.command)
-        F.add(k, frame, out, cmd)
+        # the IMU as the driver fed it: before the frame (a commands tracker ignores it); a frame the
+        # driver found stale (the daemon: by its wall clock) is stale here too
+        imu_recorded = imu_recorded or bool(rf.imu)
+        sink.record = rf.command
+        rec = step(frame, send_t, imu=[(b.t_s, b.gyro_rad_s) for b in rf.imu], stale=rf.stale)
+        out = rec.output
+        F.add(k, frame, out, rec.command)
         d = rf.detection
         R["detected"].append(d is not None and d.detected)
         R["det_xyz"].append(np.full(3, np.nan) if d is None or d.xyz_m is None else np.asarray(d.xyz_m, float))
@@ -173,7 +177,8 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             T["points_on_target"].append(0)
             T["pan_deg"].append(np.nan)
             T["tilt_deg"].append(np.nan)
-        tracker = _after_frame(tracker, gate, order, rf.after)
+        _after_frame(step, sink, order, rf.after)
+    tracker = step.controller
     t_settled = (tracker.recon.last_send_t_s or 0.0) + 2.0
     final_pose = tuple(float(a) for a in tracker.recon.angles_at(t_settled)[:2])
     frames = F.arrays()
@@ -250,24 +255,21 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
     cfg = TrackerConfig.from_mapping(tracker_table or {}, where=f"{config_name or 'default'} [tracker]")
     require_space(cfg, f"{path}: a Livox Viewer file carries no tracker configuration" if tracker_table is None
                   else f"{config_name or 'the given'} [tracker]")
-    tracker = None
     # The gate a daemon would run on this tracker's head (its stops, the tracker's own turbo rule); the
-    # head is frozen, so no write reaches it and the dead reckoning is told it stayed stopped.
-    gate = CommandGate(Limits(allow_turbo=cfg.allow_turbo, tilt_limits_deg=cfg.tilt_limits_deg))
+    # head is frozen, so no write reaches it (NoHead) and the dead reckoning is told it stayed stopped.
+    step = FrameStep(None, CommandGate(Limits(allow_turbo=cfg.allow_turbo, tilt_limits_deg=cfg.tilt_limits_deg)),
+                     NoHead())
     F = FrameArrays()
     fid = 0
 
     def run(frames):
-        nonlocal tracker, fid
+        nonlocal fid
         for fr, new_clock in frames:
             fr = strip_no_return(fr)
-            if tracker is None or new_clock:
-                tracker = Tracker(cfg, SpeedTable.nominal(), t0_s=fr.t_start_s)
-            send_t = fr.t_end_s + cfg.send_delay_s
-            out = tracker.process(fr, send_t_s=send_t)
-            cmd, _ = gate.decide(tracker, out, send_t)
-            gate.wrote(tracker, send_t, cmd, ok=False)   # the head is frozen: it keeps its STOP
-            F.add(fid, fr, out, cmd)
+            if step.controller is None or new_clock:
+                step.rebase(Tracker(cfg, SpeedTable.nominal(), t0_s=fr.t_start_s))
+            rec = step(fr, fr.t_end_s + cfg.send_delay_s)
+            F.add(fid, fr, rec.output, rec.command)
             fid += 1
 
     # no-return points are kept for their times (frames keep coming over the sky), then stripped

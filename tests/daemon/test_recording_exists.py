@@ -6,7 +6,7 @@ the user renaming files by hand before every start.)"""
 import pytest
 
 from foveatrack.daemon import Daemon, load_config
-from foveatrack.daemon.config import DaemonConfig
+from foveatrack.device_config import DaemonConfig
 from foveatrack.errors import UserError
 from foveatrack.recording import RecordingExistsError, RecordingReader, RecordingWriter
 

@@ -1,5 +1,7 @@
-"""The daemon's TOML configuration, validated on load (every error names the file, the key and
-what is allowed).  Example: ``examples/daemon-virtual.toml``; reference: ``docs/daemon.md``.
+"""The device configuration: the daemon's TOML file, validated on load (every error names the file,
+the key and what is allowed).  It names the lidar, the head and their limits, so the daemon and the
+live calibrations (speed table, IMU) read it from here, below all three (issue 25: the calibration
+imported it from the daemon package).  Example: ``examples/daemon-virtual.toml``; reference: ``docs/daemon.md``.
 
 Tables::
 
