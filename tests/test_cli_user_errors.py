@@ -172,3 +172,24 @@ def test_a_ctrl_c_anywhere_in_a_command_is_one_line_and_exit_code_130(raised, in
         return
     code, err = _run(["warmup"], capsys)
     assert code == 130 and err == "foveatrack: interrupted\n"
+
+
+@pytest.mark.parametrize("command", [["replay"], ["export", "--csv", "PTS"]])
+@pytest.mark.parametrize("content, wrong", [
+    (b"\x8f\x11garbage, not a lidar file" * 4, "byte 0, field signature"),
+    (b"livox_tech".ljust(16, b"\0") + bytes([1, 1, 0, 0]) + bytes(9), "byte 20, field magic_code: 0x00000000"),
+])
+def test_a_damaged_lvx_is_named_by_its_lvx_header_not_the_mcap_magic(tmp_path, capsys, command, content, wrong):
+    """A garbage file named .lvx was reported as lacking the MCAP magic (replay and export read it as a
+    recording); a .lvx whose signature is right but magic is not asked replay for a tracker config."""
+    lvx = tmp_path / "scan.lvx"
+    lvx.write_bytes(content)
+    argv = [a.replace("PTS", str(tmp_path / "p.csv")) for a in command]
+    code, err = _run(argv[:1] + [str(lvx)] + argv[1:], capsys)
+    assert code != 0 and len(err.strip().splitlines()) == 1, err
+    if command[0] == "export" and content.startswith(b"livox_tech"):
+        wrong = "is already a Livox .lvx file"    # export reads no .lvx at all: that is what it says
+    else:
+        assert "is not a readable Livox .lvx v1.1 file" in err
+    assert wrong in err and "MCAP" not in err, err
+    assert not (tmp_path / "p.csv").exists()

@@ -36,6 +36,7 @@ def cmd_export(args) -> int:
 
     from foveatrack.config_util import check_output_file
     from foveatrack.errors import UserError
+    from foveatrack.recording.format import MCAP_MAGIC
 
     said: set[str] = set()
 
@@ -53,8 +54,14 @@ def cmd_export(args) -> int:
     if not rec.is_file():
         raise UserError(f"{rec}: no such recording")
     with open(rec, "rb") as fh:
-        if fh.read(10) == b"livox_tech":
-            raise UserError(f"{rec} is already a Livox .lvx file; export reads foveatrack .mcap recordings")
+        head = fh.read(10)
+    if head == b"livox_tech":
+        raise UserError(f"{rec} is already a Livox .lvx file; export reads foveatrack .mcap recordings")
+    if rec.suffix.lower() == ".lvx" and not head.startswith(MCAP_MAGIC):
+        # named .lvx but not one: its LVX header's problem, not "no MCAP magic"
+        from foveatrack.livox.lvx import LvxReader
+
+        LvxReader(rec).close()
     for flag, path, suffixes in outs:
         if path:
             if Path(path).suffix.lower() not in suffixes:

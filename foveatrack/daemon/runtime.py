@@ -212,13 +212,27 @@ class Daemon:
 
             self.head.journal = CommandJournal(path.with_name(path.name + ".commands.jsonl"))
         if self.live_port is not None:
-            self._open_live()
+            try:
+                self._open_live()
+            except Exception:
+                self._forget_unused_recording()
+                raise
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
         self.rx = LidarReceiver(self.client, self.q, self.stop_ev)
         self.rx.want_imu = self.imu_feed is not None
         # IMU packets are held only for a tracker that takes its attitude from them (issue 26: every
         # packet of a Horizon was kept otherwise, ~1 MB/min)
         self.client.decoder.keep_imu = self.rx.want_imu
+
+    def _forget_unused_recording(self) -> None:
+        """A start that failed after the recording was created (a live port in use) removes it and
+        its command journal: nothing was written to either yet (the loop and the head's first STOP
+        come later, in :meth:`run`), and an empty ``daemon-*.mcap`` per failed start only misleads."""
+        if self.recording_path is None:
+            return
+        for p in (self.recording_path, self.recording_path.with_name(self.recording_path.name + ".commands.jsonl")):
+            p.unlink(missing_ok=True)
+        self.recording_path = None
 
     def _open_live(self) -> None:
         """The live view: a second sink of the recording's channels (a writer without a file when

@@ -129,12 +129,38 @@ class RecordingReader:
         #: the metadata record's checksum: True (verified), None (a recording made before it had one)
         self.meta_checked: bool | None = None
         for _ in self._records(stop_after_meta=True):
-            break
+            break      # our writer puts its metadata before any message: a message first is not ours
         if not self.info:
-            raise UserError(
-                f"{self.path} is not a foveatrack recording: no complete '{META_NAME}' metadata record"
-                f"{' (' + self.problem + ')' if self.problem else ''}"
-            )
+            raise UserError(f"{self.path} is not a foveatrack recording: {self._why_no_meta()}")
+
+    def _why_no_meta(self) -> str:
+        """Why a file that starts with the MCAP magic has no metadata record of ours, in words: a
+        valid MCAP from another program (its Header names the writer), one of ours cut short before
+        its metadata, or damage."""
+        with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            profile = library = None
+            try:
+                op, length = mw.REC.unpack_from(mm, len(MCAP_MAGIC))
+                if op == mw.OP_HEADER and len(MCAP_MAGIC) + mw.REC.size + length <= self.size:
+                    profile, i = mw.string(mm, len(MCAP_MAGIC) + mw.REC.size)
+                    library, _ = mw.string(mm, i)
+            except struct.error:
+                pass
+            closed = self._data_end_pos(mm) is not None
+        no_meta = f"no '{META_NAME}' metadata record"
+        if self.damage:
+            return f"{no_meta} ({self.problem})"
+        if profile is None:
+            return f"{no_meta} and no MCAP Header record after the magic"
+        if profile != "foveatrack":
+            by = f"written by {library!r}" if library else "whose Header names no writer"
+            return (f"{'a valid' if closed else 'an unfinished'} MCAP file {by} (profile {profile!r}) with {no_meta}: "
+                    f"foveatrack replays and exports only what 'simulate --out' and 'daemon' record "
+                    f"(Foxglove opens any MCAP)")
+        if closed:
+            return f"{no_meta} in a closed file of profile 'foveatrack' (its metadata was never written)"
+        return (f"{no_meta}: the file ends at byte {self.size} before it, its writer not closed (cut short "
+                f"right after it started, e.g. kill -9 or power loss)")
 
     # ------------------------------------------------------------------ reporting
 

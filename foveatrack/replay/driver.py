@@ -50,6 +50,7 @@ from foveatrack.errors import UserError
 from foveatrack.frame_step import FrameStep, NoHead
 from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate, Limits
+from foveatrack.recording.format import MCAP_MAGIC
 from foveatrack.recording.records import CommandRecord
 from foveatrack.replay.config import recorded_limits, load_tracker_table, tracker_config
 from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
@@ -298,6 +299,11 @@ def replay(path: str | os.PathLike, tracker_config_path: str | None = None) -> R
     table = load_tracker_table(tracker_config_path) if tracker_config_path else None
     with open(p, "rb") as fh:
         head = fh.read(16)
-    if head.startswith(b"livox_tech"):
+    if head.startswith(b"livox_tech") or (p.suffix.lower() == ".lvx" and not head.startswith(MCAP_MAGIC)):
+        from foveatrack.livox.lvx import LvxReader
+
+        # the file's header first (a .lvx that is not one is named by the LVX field that is wrong, not
+        # as lacking the MCAP magic; a damaged one before the missing tracker configuration)
+        LvxReader(p).close()
         return replay_lvx(p, table, tracker_config_path)
     return replay_recording(p, table, tracker_config_path)

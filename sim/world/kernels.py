@@ -178,7 +178,12 @@ def cast_static_kernel(d_world, prims, prim_offset, out_range, out_prim):
             p_blk[i] = bp[i]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+# The helpers called once per block (this one, the block loops, the per-block constants) are
+# compiled as functions of their own, not inlined by numba: inlined, they made cast_static_kernel's
+# first compile 70 s of CPU (its body was typed twice, for row and block arrays); now ~25 s, with the
+# same bits and time per frame.  The per-ray helpers (_hit_prim, _pair_hit, _plane_point) stay
+# inlined: called per ray across a function boundary they measured several times slower.
+@njit(cache=True, error_model="numpy")
 def _cast_prims(prims, prim_offset, bx, by, bz, n, br, bp):
     """Every primitive, in table order, against ``n`` rays given as x, y, z arrays."""
     m = 0
@@ -205,7 +210,7 @@ def _cast_prims(prims, prim_offset, bx, by, bz, n, br, bp):
         m += 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _opposed_rects(prims, m):
     """Rows ``m`` and ``m + 1`` are rectangles on parallel planes with exactly opposite normals and
     the origin strictly between them (a room's opposite walls, or its floor and ceiling): a ray from
@@ -219,7 +224,7 @@ def _opposed_rects(prims, m):
     return (num_a > _EPS and num_b > _EPS) or (num_a < -_EPS and num_b < -_EPS)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _rect_constants(prims, m):
     """What :func:`_cast_flat_block` hoists for rectangle ``m``: ``num = n . c``, the centre, the
     in-plane axes u and v = n x u, the half sizes."""
@@ -229,7 +234,7 @@ def _rect_constants(prims, m):
             ux, uy, uz, ny * uz - nz * uy, nz * ux - nx * uz, nx * uy - ny * ux, prims[m, 4], prims[m, 5])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _pair_constants(prims, m):
     """Rectangle ``m``'s normal, whether its plane lies on the positive side (``num > 0``), and
     both rectangles' :func:`_rect_constants`."""
@@ -261,7 +266,7 @@ def _pair_hit(K, dx, dy, dz):
     return t, (0 if on_a else 1) if ok else -1
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _cast_pair_block(K, label, bx, by, bz, n, br, bp):
     """Two opposed rectangles (:func:`_opposed_rects`) against a block: one plane test per ray."""
     for i in range(n):
@@ -271,7 +276,7 @@ def _cast_pair_block(K, label, bx, by, bz, n, br, bp):
         bp[i] = label + w if hit else bp[i]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _cast_room_block(K0, K1, K2, label, bx, by, bz, n, br, bp):
     """Three opposed pairs (a room) against a block in one pass, pair by pair for each ray (table
     order, as casting them one by one): the ray's range and id stay in registers between them."""
@@ -293,7 +298,7 @@ def _cast_room_block(K0, K1, K2, label, bx, by, bz, n, br, bp):
         bp[i] = label + 4 + w if hit else p
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _cast_flat_block(prims, m, kind, label, bx, by, bz, n, br, bp):
     """Plane, rectangle or disk ``m`` against the ``n`` rays of a block, updating the block's
     nearest range ``br`` and primitive ``bp``.  One loop per kind and ``&`` instead of ``and``: a

@@ -55,6 +55,20 @@ def test_a_busy_lidar_port_fails_the_start_without_a_recording(tmp_path):
     assert not (tmp_path / "runs").exists()
 
 
+def test_a_busy_live_port_fails_the_start_without_a_recording(tmp_path):
+    """The live view is opened after the recording (it serves the recording's channels): a port in
+    use failed the start and left a recording with no frame and an empty command journal."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        d = _daemon(tmp_path, "loop://")
+        d.live_port = s.getsockname()[1]
+        with pytest.raises(UserError, match=f"--live {d.live_port}: cannot serve"):
+            d._open()
+    assert list((tmp_path / "runs").iterdir()) == []
+    assert d.recording_path is None     # the end-of-run line names no recording
+
+
 def test_a_recording_path_that_cannot_be_created_is_a_user_error(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("")

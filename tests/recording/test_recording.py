@@ -200,6 +200,42 @@ def test_non_recordings_give_clear_errors(tmp_path):
         RecordingReader(other)
 
 
+def test_an_mcap_of_another_program_is_named_so_not_cut_short(tmp_path):
+    """A valid MCAP written by the official writer, with messages and no foveatrack metadata, was
+    called "cut short (kill -9 or power loss)": the reader stopped at its first message and took the
+    file for unfinished.  It is named for what it is, on one line, and one of ours cut short before
+    its metadata still says so."""
+    from mcap.writer import Writer
+
+    other = tmp_path / "ros.mcap"
+    with open(other, "wb") as fh:
+        w = Writer(fh)
+        w.start(profile="ros2", library="someone-else 1.0")
+        sid = w.register_schema(name="X", encoding="jsonschema", data=b"{}")
+        cid = w.register_channel(topic="/x", message_encoding="json", schema_id=sid)
+        for i in range(3):
+            w.add_message(cid, log_time=i, data=b'{"a": 1}', publish_time=i)
+        w.finish()
+    with pytest.raises(UserError) as exc:
+        RecordingReader(other)
+    msg = str(exc.value)
+    assert "\n" not in msg and "cut short" not in msg and "kill -9" not in msg
+    assert "ros.mcap is not a foveatrack recording: a valid MCAP file written by 'someone-else 1.0'" in msg
+    assert "(profile 'ros2') with no 'foveatrack' metadata record" in msg
+
+    ours = tmp_path / "ours.mcap"
+    write_sample(ours, n_frames=1, n_points=3)
+    data = ours.read_bytes()
+    meta_at = 8                       # after the magic: walk the records to the first Metadata (0x0C)
+    while data[meta_at] != 0x0C:
+        meta_at += 9 + int.from_bytes(data[meta_at + 1:meta_at + 9], "little")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[:meta_at])
+    with pytest.raises(UserError, match=r"cut\.mcap is not a foveatrack recording: no 'foveatrack' metadata "
+                                        r"record: the file ends at byte \d+ before it, its writer not closed"):
+        RecordingReader(cut)
+
+
 def test_export_points_csv_and_npz(tmp_path):
     p = tmp_path / "r.mcap"
     frames = write_sample(p, n_frames=3, n_points=10)

@@ -1,0 +1,87 @@
+"""The first run's numba compile, kernel by kernel: ``foveatrack warmup`` on an empty cache.
+
+    python scripts/bench_first_compile.py [--top 25] [--kernel cast_static]
+
+Runs :func:`foveatrack.cli.warmup_cmd.warm_up` with ``NUMBA_CACHE_DIR`` pointed at a new temporary
+directory (the cache next to the sources is neither read nor touched), and prints the wall time, the
+process's CPU time, and the CPU seconds of each kernel's own compile (exclusive: a kernel's figure does
+not include the helpers it calls that numba compiles as functions of their own).  CPU seconds are the
+figure to compare on a shared machine: the wall time grows with the load, the CPU time barely.
+``--kernel cast_static`` times that one kernel's compile alone (the world's background cast, the
+largest before it was split into non-inlined block helpers).  Say the load (``uptime``) with a figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from collections import defaultdict
+
+if __name__ == "__main__" and "NUMBA_CACHE_DIR" not in os.environ:
+    # numba reads the variable at import: set it, then run this script again in a fresh interpreter
+    with tempfile.TemporaryDirectory(prefix="numba-cold-") as cache:
+        os.environ["NUMBA_CACHE_DIR"] = cache
+        import subprocess
+
+        sys.exit(subprocess.call([sys.executable] + sys.argv))
+
+
+def _listen() -> dict[str, float]:
+    from numba.core import event
+
+    own: dict[str, float] = defaultdict(float)
+    stack: list[list[float]] = []
+
+    class Compiles(event.Listener):
+        def on_start(self, ev):
+            stack.append([time.process_time(), 0.0])
+
+        def on_end(self, ev):
+            t0, inner = stack.pop()
+            t = time.process_time() - t0
+            f = ev.data["dispatcher"].py_func
+            own[f"{f.__module__}.{f.__qualname__}"] += t - inner
+            if stack:
+                stack[-1][1] += t
+
+    event.register("numba:compile", Compiles())
+    return own
+
+
+def _cast_static() -> None:
+    import numpy as np
+
+    from sim.world import kernels as K
+
+    d = np.random.default_rng(0).normal(size=(1000, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    prims = np.zeros((6, 13))
+    prims[:, 0] = K.RECT
+    K.cast_static_kernel(d, prims, 0, np.full(1000, np.inf), np.full(1000, -1, np.int64))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--top", type=int, default=25, help="kernels listed (default 25)")
+    ap.add_argument("--kernel", choices=["cast_static"], help="compile this kernel alone")
+    args = ap.parse_args()
+    own = _listen()
+    t0, c0 = time.perf_counter(), time.process_time()
+    if args.kernel:
+        _cast_static()
+    else:
+        from foveatrack.cli.warmup_cmd import warm_up
+
+        warm_up(progress=False)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    print(f"{args.kernel or 'foveatrack warmup'}, empty cache: wall {wall:.1f} s, CPU {cpu:.1f} s, "
+          f"of it numba compiles {sum(own.values()):.1f} s CPU; load {os.getloadavg()[0]:.1f}")
+    for name, t in sorted(own.items(), key=lambda kv: -kv[1])[:args.top]:
+        print(f"  {t:6.2f} s  {name}")
+
+
+if __name__ == "__main__":
+    main()
