@@ -7,8 +7,8 @@ Three definitions, named wherever a figure is shown, because they answer differe
   scanner can never reach (outside the circular FoV, inside a central hole) are not counted.
 * ``footprint`` — Livox's FoV coverage definition (:func:`swath_coverage`), "the fraction of the FoV
   illuminated by laser beams" (Livox HAP manual: C = illuminated area / FoV area).  Its geometry is
-  inferred from Livox's Mid-40 curve (``LIVOX_MID40_COVERAGE``, read off Livox's figure), which it
-  meets within 0.05 at 0.1, 0.5 and 1 s (0.044 at worst over 0.05-1.4 s: docs/livox-files.md): the
+  inferred from Livox's Mid-40 curve (``LIVOX_MID40_COVERAGE``, read off Livox's figure), which the
+  ``mid40`` preset meets within 0.03 at every 0.05 s to 1.4 s (docs/livox-files.md): the
   0.28 x 0.03 deg footprint travels with its narrow axis along the scan, so the beam
   sweeps a swath as wide as the divergence's major axis (0.28 deg) across its path.  Measured on a
   0.02 deg grid in the azimuthal-equidistant projection about the optical axis (the circular FoV is

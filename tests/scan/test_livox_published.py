@@ -49,34 +49,35 @@ def test_published_curves_as_read():
 
 
 @pytest.mark.slow
-def test_tele15_follows_livox_published_curve():
-    """The Tele-15 design (co-rotating prisms, golden-ratio petal turn, 206 petals/s) within 0.045 of
-    Livox's curve at every 0.01 s to its plateau.  The Mid-40 speeds it had before were 0.36 below at
-    0.1 s (0.62 against 0.98).  The issue's 0.03 is not reached (0.040 high at 0.01 s, 0.035 low at
-    0.07 s): ``test_presets_within_issue_tolerance``."""
-    t, dev = deviations("tele15")
-    assert np.max(np.abs(dev)) <= 0.045, dict(zip(t.round(2).tolist(), dev.round(3).tolist()))
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 27's 0.03 is not met: tele15 +0.040 at 0.01 s (-0.035 at 0.07 s), "
-                                      "horizon -0.048 at 0.35 s, mid40 -0.044 at 0.7 s (docs/livox-files.md)")
-def test_presets_within_issue_tolerance():
-    worst = {name: float(np.max(np.abs(deviations(name)[1]))) for name in ("tele15", "horizon", "mid40")}
-    assert all(v <= ISSUE_TOLERANCE for v in worst.values()), worst
+@pytest.mark.parametrize("preset", ["mid40", "tele15", "horizon"])
+def test_preset_follows_livox_published_curve(preset):
+    """Every published point (0.05 s steps, Tele-15 0.01 s, up to the plateau) within 0.03 (issue 27).
+    Before the speeds were fitted (scripts/fit_livox_presets.py): mid40 0.044 low at 0.7 s, tele15 0.040
+    high at 0.01 s, horizon 0.048 low at 0.35 s."""
+    t, dev = deviations(preset)
+    assert np.max(np.abs(dev)) <= ISSUE_TOLERANCE, dict(zip(t.round(2).tolist(), dev.round(3).tolist()))
 
 
 @pytest.mark.slow
 def test_horizon_line_spacing_in_0_1_s_matches_livox_statement():
     """Livox: in 0.1 s the centre's lines are 0.2 deg apart on average (most 0.1-0.3), the two side
-    circles' 0.4 deg (most 0.2-0.8).  Measured on vertical cuts (sim.scan.line_spacing): the averages
-    within 25 % of Livox's and the median gap inside each stated range."""
+    circles' 0.4 deg (most 0.2-0.8).  Measured on vertical cuts (sim.scan.line_spacing,
+    scripts/horizon_line_spacing.py): the averages within 25 % of Livox's, the median gap inside each
+    stated range, and most side gaps inside 0.2-0.8 deg."""
     got = horizon_line_spacing(PRESETS["horizon"], 0.1)
     for region, (average, (lo, hi)) in LIVOX_HORIZON_SPACING.items():
         s = got[region]
         assert abs(s["mean_deg"] - average) <= 0.25 * average, (region, s)
         assert lo <= s["median_deg"] <= hi, (region, s)
+    assert got["sides"]["fraction_in_range"] > 0.5, got["sides"]
     assert got["sides"]["mean_deg"] > 1.5 * got["centre"]["mean_deg"]   # sparser at the sides, as Livox says
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="centre: 44 % of the gaps in 0.1-0.3 deg, not most; lines sweeping right "
+                                      "and left cross, so a cut near a crossing sees small gaps (docs/livox-files.md)")
+def test_horizon_centre_most_line_gaps_in_livox_range():
+    assert horizon_line_spacing(PRESETS["horizon"], 0.1)["centre"]["fraction_in_range"] > 0.5
 
 
 def test_lidar_coverage_compare_plots_ours_against_livox(tmp_path, capsys):
