@@ -28,6 +28,10 @@ def register(sub) -> None:
                         "at least 10000; a file claiming more is crafted or damaged, and replay says where it stopped)")
     p.add_argument("--live", nargs="?", const=8765, default=None, metavar="PORT",
                    help="first serve the recording to Foxglove (ws://127.0.0.1:PORT, default 8765), paced at --speed")
+    p.add_argument("--live-origin", action="append", default=[], metavar="ORIGIN",
+                   help="with --live: also let a web page at ORIGIN (scheme://host[:port]; * for any) read the live "
+                        "view; by default only clients without an Origin (the Foxglove app, scripts) and Foxglove's "
+                        "web app (https://app.foxglove.dev) are served, so another page in a local browser cannot read it")
     p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
                    help="with --live: recorded seconds per wall second (default 1 = as recorded)")
     p.add_argument("--wait-s", type=float, default=3.0, metavar="S",
@@ -59,8 +63,11 @@ def cmd_replay(args) -> int:
         from foveatrack.recording.live import check_port, stream_recording
 
         n = stream_recording(args.recording, check_port(args.live), args.speed, max(args.wait_s, 0.0),
-                             say=lambda t: print(t, file=sys.stderr, flush=True), linger_s=max(args.linger_s, 0.0))
+                             say=lambda t: print(t, file=sys.stderr, flush=True), linger_s=max(args.linger_s, 0.0),
+                             allowed_origins=args.live_origin)
         print(f"live view: served {n} messages", file=sys.stderr)
+    elif args.live_origin and args.live is None:
+        raise UserError("--live-origin is for the live view: add --live")
     elif args.live is not None:
         raise UserError("--live serves foveatrack recordings (.mcap); a .lvx file has no records to show")
     if args.max_frames is not None and args.max_frames < 1:
