@@ -59,3 +59,16 @@ def test_corpus_file_ends_cleanly(entry, tmp_path):
     else:
         assert expect == "ok"
         assert rc == 0 and not errors, (entry["what"], rc, out[-3000:])
+
+
+@pytest.mark.parametrize("name,argv", [("config-nested.toml", ["daemon", "--config", "{file}", "--check"]),
+                                       ("crc-zero.mcap", ["replay", "{file}", "--json"])])
+def test_the_harness_tells_the_same_in_process_and_as_a_subprocess(name, argv):
+    """``fuzz_files.py --mode subprocess`` (python -m foveatrack, a fresh interpreter) classifies a
+    trial as the in-process mode does."""
+    argv = [a.format(file=CORPUS / name) for a in argv]
+    got = {}
+    for mode in ("inprocess", "subprocess"):
+        kind, rc, out = fuzz_files.trial(argv, TIMEOUT_S, mode)
+        got[mode] = fuzz_files.classify(kind, rc, out, "", lambda text: text)
+    assert got["inprocess"] == got["subprocess"] in ("clean error", "warning+partial"), got
