@@ -18,7 +18,8 @@ TruthRecord            /truth          simulation only: the true head pose and t
 The IMU samples fed to the tracker (``/imu``) are arrays, not a JSON record:
 :class:`foveatrack.recording.format.ImuSamples`, written by :func:`write_tracker_frame`.
 
-``from_json`` takes a record as read (missing keys of older files become None / defaults);
+``from_json`` takes a record as read (missing keys of older files become None / defaults; a field
+of the wrong type, from a damaged or crafted file, raises :class:`RecordError` naming it);
 ``to_json`` gives the dict to write, its keys in the order the writers have always used (a run
 records the same bytes as before).
 """

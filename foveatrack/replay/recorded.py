@@ -9,7 +9,8 @@ import numpy as np
 
 from foveatrack.gate import STALE_FRAME
 from foveatrack.recording.format import DAEMON_EVENTS, IMU, METRICS, POINTS
-from foveatrack.recording.records import CommandRecord, DetectionRecord, HeadEstimateRecord, TruthRecord, parse
+from foveatrack.recording.records import (CommandRecord, DetectionRecord, HeadEstimateRecord, RecordError, TruthRecord,
+                                          parse)
 
 
 class FrameArrays:
@@ -234,7 +235,6 @@ def recorded_frames(reader):
     their type (a damaged or crafted file whose chunk CRC holds) is a UserError naming the file, the
     channel, the record's time and the field."""
     from foveatrack.errors import UserError
-    from foveatrack.recording.records import RecordError
 
     cur = None
     for m in reader.messages():
@@ -251,8 +251,6 @@ def recorded_frames(reader):
 
 
 def _event_float(e: dict, key: str) -> float:
-    from foveatrack.recording.records import RecordError
-
     v = e.get(key)
     if not isinstance(v, (int, float)) or isinstance(v, bool):
         raise RecordError(f"field {key!r}: {v!r} is not a number")
@@ -261,8 +259,6 @@ def _event_float(e: dict, key: str) -> float:
 
 def _take(cur, m):
     """Add message ``m`` to the frame ``cur``; returns a new frame where ``m`` starts one, else None."""
-    from foveatrack.recording.records import RecordError
-
     if m.channel == POINTS:
         return RecordedFrame(m.record)
     if cur is None:
