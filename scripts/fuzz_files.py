@@ -252,7 +252,9 @@ CAMPAIGNS = {
     # name: (input key, file suffix, argv given the mutated path and an output dir)
     "mcap-replay": ("mcap", ".mcap", lambda p, o: ["replay", str(p), "--json"]),
     "mcap-export": ("mcap", ".mcap", lambda p, o: ["export", str(p), "--csv", str(o / "p.csv")]),
-    "lvx-replay": ("lvx", ".lvx", lambda p, o: ["replay", str(p), "--json"]),
+    # an .lvx carries no tracker configuration: replay takes the daemon config's (its space of interest)
+    "lvx-replay": ("lvx", ".lvx", lambda p, o: ["replay", str(p), "--json", "--tracker-config",
+                                                str(o.parent / "tracker.toml")]),
     "scene": ("scene", ".toml", lambda p, o: ["simulate", str(p), "--duration", "1"]),
     "config": ("config", ".toml", lambda p, o: ["daemon", "--config", str(p), "--check"]),
 }
@@ -316,20 +318,26 @@ def main() -> int:
     table = {}
     try:
         inputs = make_inputs(work)
+        (work / "tracker.toml").write_text(inputs["config"] or "")
         budget_s = math.inf if minutes is None else minutes * 60.0 / len(names)
-        for ci, name in enumerate(names):
+        for name in names:
             n_max = math.inf if a.trials is None else ISSUE_TRIALS[name] if a.trials == "issue" else int(a.trials)
             key, suffix, argv = CAMPAIGNS[name]
             base = inputs[key]
             if base is None:
                 print(f"{name}: no intact input (no example daemon config)", file=sys.stderr)
                 continue
-            rng = np.random.default_rng([a.seed, ci])
+            # the campaign's place in CAMPAIGNS, not in this selection: one campaign run alone mutates as in all
+            rng = np.random.default_rng([a.seed, list(CAMPAIGNS).index(name)])
             out_dir = work / name
             out_dir.mkdir()
             intact = out_dir / f"intact{suffix}"
             (intact.write_text if isinstance(base, str) else intact.write_bytes)(base)
-            _, _, baseline = trial(argv(intact, out_dir), a.timeout_s, a.mode)
+            kind, rc, baseline = trial(argv(intact, out_dir), a.timeout_s, a.mode)
+            if (kind, rc) != ("ok", 0):     # every trial would be measured against a failure
+                print(f"{name}: the intact input itself ends in {kind}, rc {rc}: {baseline.strip()[-300:]}",
+                      file=sys.stderr, flush=True)
+                return 1
             norm = normaliser(name)
             counts = dict.fromkeys(OUTCOMES, 0)
             t_end = time.monotonic() + budget_s
