@@ -5,12 +5,19 @@ Every trial ends in one of: ``clean error`` (rc 2, one line), ``warning+partial`
 WARNING / note on the output), ``same`` (rc 0, the output the intact file gives), ``silent difference``
 (rc 0, no warning, another output than the intact file's; for scenes and configs a mutated value may
 rightly change the output: "silent" is meaningful for recordings and .lvx files only), ``traceback`` (any other exception,
-MemoryError included), ``hang`` (over the timeout).  The inputs of tracebacks, hangs and silent
-differences are kept in ``--keep DIR`` (seed and trial in the name) for the regression corpus.
+or a child that died), ``hang`` (over the timeout), ``memory error`` (MemoryError under the address-space limit).
+
+Two ways to run a trial (``--mode``): ``inprocess`` (default, fast) calls the CLI's ``main`` in a child
+forked from this process, which has imported foveatrack and compiled its kernels once; ``subprocess``
+starts ``python -m foveatrack`` afresh for each trial (the real entry point, interpreter start-up and
+imports included: slower, for checking that the in-process trials tell the truth).  The inputs of
+tracebacks, hangs, memory errors and silent differences are kept in ``--keep DIR`` (seed and trial in
+the name) for the regression corpus (``tests/corpus``).
 
 Usage::
 
     python scripts/fuzz_files.py --minutes 5 --seed 1 [--campaign mcap-replay ...] [--keep DIR]
+    python scripts/fuzz_files.py --trials 2371 --seed 7 --campaign mcap-export --mode subprocess
 
 Campaigns: ``mcap-replay`` (replay --json), ``mcap-export`` (export --csv), ``lvx-replay`` (replay
 --json of a .lvx), ``scene`` (simulate --duration 1), ``config`` (daemon --check).  Same seed, same
@@ -20,8 +27,9 @@ mutations.  Prints the table of the issue, one row per campaign.
 from __future__ import annotations
 
 import argparse
-import io
 import contextlib
+import io
+import math
 import os
 import resource
 import shutil
@@ -36,7 +44,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-OUTCOMES = ("clean error", "warning+partial", "same", "silent difference", "traceback", "hang")
+OUTCOMES = ("clean error", "warning+partial", "same", "silent difference", "traceback", "hang", "memory error")
 AS_LIMIT_BYTES = 4 << 30
 TIMEOUT_S = 30.0
 
@@ -107,8 +115,12 @@ def run_cli(args: list[str]) -> tuple[int, str]:
     return int(rc or 0), out.getvalue()
 
 
-def trial(args: list[str], timeout_s: float) -> tuple[str, int | None, str]:
-    """Run one CLI call in a forked child (limits apply to it alone): (kind, rc, output)."""
+def trial(args: list[str], timeout_s: float, mode: str = "inprocess") -> tuple[str, int | None, str]:
+    """Run one CLI call, limits applying to it alone: (kind, rc, output); kind is "ok", "traceback",
+    "memory error" or "hang".  ``inprocess``: ``main`` in a forked child; ``subprocess``: ``python -m
+    foveatrack`` in a fresh interpreter."""
+    if mode == "subprocess":
+        return _trial_subprocess(args, timeout_s)
     r, w = os.pipe()
     pid = os.fork()
     if pid == 0:     # the child
@@ -120,13 +132,19 @@ def trial(args: list[str], timeout_s: float) -> tuple[str, int | None, str]:
             payload = f"rc {rc}\n{text}"
         except SystemExit as exc:
             payload = f"rc {exc.code if isinstance(exc.code, int) else 2}\n"
+        except MemoryError as exc:
+            import traceback
+
+            payload = "memory error\n" + "".join(traceback.format_exception(exc))[-4000:]
         except BaseException as exc:   # noqa: BLE001 - what the fuzzer looks for
             import traceback
 
             payload = "traceback\n" + "".join(traceback.format_exception(exc))[-4000:]
-        with os.fdopen(w, "w") as fh:
-            fh.write(payload)
-        os._exit(code)
+        try:
+            with os.fdopen(w, "w") as fh:
+                fh.write(payload)
+        finally:
+            os._exit(code)
     os.close(w)
     t_end = time.monotonic() + timeout_s
     chunks = []
@@ -136,10 +154,6 @@ def trial(args: list[str], timeout_s: float) -> tuple[str, int | None, str]:
             b = os.read(r, 65536)
             if b:
                 chunks.append(b)
-            elif b == b"":
-                done, _ = os.waitpid(pid, os.WNOHANG)
-                if done:
-                    break
         except BlockingIOError:
             pass
         if time.monotonic() > t_end:
@@ -149,19 +163,41 @@ def trial(args: list[str], timeout_s: float) -> tuple[str, int | None, str]:
             return "hang", None, ""
         done, status = os.waitpid(pid, os.WNOHANG)
         if done:
-            try:
-                while b := os.read(r, 65536):
-                    chunks.append(b)
-            except BlockingIOError:
-                pass
+            os.set_blocking(r, True)
+            while b := os.read(r, 65536):
+                chunks.append(b)
             break
         time.sleep(0.005)
     os.close(r)
     text = b"".join(chunks).decode(errors="replace")
-    if text.startswith("traceback") or not text:
-        return "traceback", None, text or "child died (signal or memory)"
+    for kind in ("traceback", "memory error"):
+        if text.startswith(kind + "\n"):
+            return kind, None, text
+    if not text:
+        return "traceback", None, f"child died (wait status {status}: a signal, or memory)"
     first, _, rest = text.partition("\n")
     return "ok", int(first.split()[1]), rest
+
+
+def _limit_child() -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (AS_LIMIT_BYTES, AS_LIMIT_BYTES))
+
+
+def _trial_subprocess(args: list[str], timeout_s: float) -> tuple[str, int | None, str]:
+    import subprocess
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    try:
+        p = subprocess.run([sys.executable, "-m", "foveatrack", *args], capture_output=True, text=True,
+                           timeout=timeout_s, preexec_fn=_limit_child, env=env, stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:
+        return "hang", None, ""
+    text = p.stdout + p.stderr
+    if "MemoryError" in p.stderr and "Traceback" in p.stderr:
+        return "memory error", None, text
+    if "Traceback (most recent call last)" in p.stderr or p.returncode not in (0, 2):
+        return "traceback", None, text
+    return "ok", p.returncode, text
 
 
 def classify(kind: str, rc: int | None, out: str, baseline: str, normalise) -> str:
@@ -216,7 +252,9 @@ CAMPAIGNS = {
     # name: (input key, file suffix, argv given the mutated path and an output dir)
     "mcap-replay": ("mcap", ".mcap", lambda p, o: ["replay", str(p), "--json"]),
     "mcap-export": ("mcap", ".mcap", lambda p, o: ["export", str(p), "--csv", str(o / "p.csv")]),
-    "lvx-replay": ("lvx", ".lvx", lambda p, o: ["replay", str(p), "--json"]),
+    # an .lvx carries no tracker configuration: replay takes the daemon config's (its space of interest)
+    "lvx-replay": ("lvx", ".lvx", lambda p, o: ["replay", str(p), "--json", "--tracker-config",
+                                                str(o.parent / "tracker.toml")]),
     "scene": ("scene", ".toml", lambda p, o: ["simulate", str(p), "--duration", "1"]),
     "config": ("config", ".toml", lambda p, o: ["daemon", "--config", str(p), "--check"]),
 }
@@ -240,62 +278,92 @@ def normaliser(name: str):
     return _drop_paths
 
 
+# the trials per campaign of the issue's table (issue 32), run on 802524f
+ISSUE_TRIALS = {"mcap-replay": 2371, "mcap-export": 2371, "lvx-replay": 6524, "scene": 6009, "config": 17913}
+
+
+def print_table(table: dict, header: str, file=sys.stdout) -> None:
+    print(header, file=file)
+    print("| campaign | trials | " + " | ".join(OUTCOMES) + " |", file=file)
+    print("|---|---|" + "---|" * len(OUTCOMES), file=file)
+    for name, (k, c) in table.items():
+        print(f"| {name} | {k} | " + " | ".join(str(c[o]) for o in OUTCOMES) + " |", file=file, flush=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--minutes", type=float, default=1.0, help="wall time over all campaigns (default 1)")
+    ap.add_argument("--minutes", type=float, default=None,
+                    help="wall time over all campaigns (default 1, or no limit with --trials)")
+    ap.add_argument("--trials", metavar="N|issue", default=None,
+                    help="trials per campaign (a number, or 'issue': the counts of issue 32's table); "
+                         "with --minutes the campaign also stops at its share of the time")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--campaign", action="append", choices=sorted(CAMPAIGNS), help="default: all")
-    ap.add_argument("--keep", metavar="DIR", help="keep the inputs of tracebacks, hangs and silent differences")
+    ap.add_argument("--mode", choices=("inprocess", "subprocess"), default="inprocess",
+                    help="inprocess: the CLI's main in a forked child (fast, default); subprocess: "
+                         "python -m foveatrack per trial")
+    ap.add_argument("--keep", metavar="DIR", help="keep the inputs of tracebacks, hangs, memory errors and "
+                                                  "silent differences")
+    ap.add_argument("--table", metavar="FILE", help="also write the table there after every campaign")
     ap.add_argument("--timeout-s", type=float, default=TIMEOUT_S)
     a = ap.parse_args()
     names = a.campaign or list(CAMPAIGNS)
+    minutes = a.minutes if a.minutes is not None else (None if a.trials else 1.0)
     work = Path(tempfile.mkdtemp(prefix="foveatrack-fuzz-"))
     keep = Path(a.keep) if a.keep else None
     if keep:
         keep.mkdir(parents=True, exist_ok=True)
+    header = (f"seed {a.seed}, mode {a.mode}, " + (f"{minutes:g} min, " if minutes else "")
+              + f"limits {AS_LIMIT_BYTES >> 30} GiB address space, {a.timeout_s:g} s")
+    table = {}
     try:
         inputs = make_inputs(work)
-        table = {}
-        budget_s = a.minutes * 60.0 / len(names)
-        for ci, name in enumerate(names):
+        (work / "tracker.toml").write_text(inputs["config"] or "")
+        budget_s = math.inf if minutes is None else minutes * 60.0 / len(names)
+        for name in names:
+            n_max = math.inf if a.trials is None else ISSUE_TRIALS[name] if a.trials == "issue" else int(a.trials)
             key, suffix, argv = CAMPAIGNS[name]
             base = inputs[key]
             if base is None:
                 print(f"{name}: no intact input (no example daemon config)", file=sys.stderr)
                 continue
-            rng = np.random.default_rng([a.seed, ci])
+            # the campaign's place in CAMPAIGNS, not in this selection: one campaign run alone mutates as in all
+            rng = np.random.default_rng([a.seed, list(CAMPAIGNS).index(name)])
             out_dir = work / name
             out_dir.mkdir()
             intact = out_dir / f"intact{suffix}"
             (intact.write_text if isinstance(base, str) else intact.write_bytes)(base)
-            _, _, baseline = trial(argv(intact, out_dir), a.timeout_s)
+            kind, rc, baseline = trial(argv(intact, out_dir), a.timeout_s, a.mode)
+            if (kind, rc) != ("ok", 0):     # every trial would be measured against a failure
+                print(f"{name}: the intact input itself ends in {kind}, rc {rc}: {baseline.strip()[-300:]}",
+                      file=sys.stderr, flush=True)
+                return 1
             norm = normaliser(name)
             counts = dict.fromkeys(OUTCOMES, 0)
             t_end = time.monotonic() + budget_s
             k = 0
-            while time.monotonic() < t_end:
+            while k < n_max and time.monotonic() < t_end:
                 data = mutate_toml(base, rng) if isinstance(base, str) else mutate_bytes(base, rng)
                 p = out_dir / f"t{suffix}"
                 (p.write_text if isinstance(data, str) else p.write_bytes)(data)
                 for f in out_dir.glob("p.*"):
                     f.unlink()
-                kind, rc, out = trial(argv(p, out_dir), a.timeout_s)
+                kind, rc, out = trial(argv(p, out_dir), a.timeout_s, a.mode)
                 outcome = classify(kind, rc, out, baseline, norm)
                 counts[outcome] += 1
-                if keep and outcome in ("traceback", "hang", "silent difference"):
+                if keep and outcome in ("traceback", "hang", "memory error", "silent difference"):
                     shutil.copy(p, keep / f"{name}-seed{a.seed}-trial{k}{suffix}")
                     (keep / f"{name}-seed{a.seed}-trial{k}.txt").write_text(out)
                 k += 1
                 if k % 20 == 0:
                     print(f"{name}: {k} trials {counts}", file=sys.stderr, flush=True)
             table[name] = (k, counts)
+            if a.table:
+                with open(a.table, "w") as fh:
+                    print_table(table, header, fh)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    print(f"seed {a.seed}, {a.minutes:g} min, limits {AS_LIMIT_BYTES >> 30} GiB address space, {a.timeout_s:g} s")
-    print("| campaign | trials | " + " | ".join(OUTCOMES) + " |")
-    print("|---|---|" + "---|" * len(OUTCOMES))
-    for name, (k, c) in table.items():
-        print(f"| {name} | {k} | " + " | ".join(str(c[o]) for o in OUTCOMES) + " |")
+    print_table(table, header)
     return 0
 
 

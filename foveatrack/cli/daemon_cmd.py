@@ -17,6 +17,10 @@ def register(sub) -> None:
     p.add_argument("--check", action="store_true", help="validate the config, print it, and exit")
     p.add_argument("--live", nargs="?", const=8765, default=None, metavar="PORT",
                    help="serve the tracking to Foxglove on ws://127.0.0.1:PORT (default 8765)")
+    p.add_argument("--live-origin", action="append", default=[], metavar="ORIGIN",
+                   help="with --live: also let a web page at ORIGIN (scheme://host[:port]; * for any) read the live "
+                        "view; by default only clients without an Origin (the Foxglove app, scripts) and Foxglove's "
+                        "web app (https://app.foxglove.dev) are served, so another page in a local browser cannot read it")
     p.set_defaults(func=cmd_daemon)
 
 
@@ -46,8 +50,10 @@ def cmd_daemon(args) -> int:
         from foveatrack.recording.live import check_port
 
         live = check_port(args.live)
+    elif args.live_origin:
+        raise UserError("--live-origin is for the live view: add --live")
     d = Daemon(cfg, log_path=args.log, status=False if args.no_status else None, duration_s=args.duration_s,
-               live_port=live)
+               live_port=live, live_origins=args.live_origin)
     code = d.run()
     s = d.final_stats
     timing = (f"processing p99 {s['processing_ms_p99']} ms, latency p99 {s.get('latency_ms_p99', float('nan'))} ms"

@@ -26,6 +26,9 @@ def register(sub) -> None:
                         "(default: what the device sends, Mid-40 0, others 2)")
     p.add_argument("--device", metavar="NAME",
                    help="LVX device (mid40, horizon, tele15, mid70, avia, mid100); default: the recording's preset")
+    p.add_argument("--max-frames", type=int, default=None, metavar="N",
+                   help="read at most N frames (default: one per 8 bytes of the file, at least 10000; a file "
+                        "claiming more is crafted or damaged, and export warns where it stopped)")
     p.add_argument("--frame-ms", type=int, default=50, metavar="MS", help="LVX frame length (default 50, as Livox Viewer)")
     p.set_defaults(func=cmd_export)
 
@@ -67,6 +70,9 @@ def cmd_export(args) -> int:
             if Path(path).suffix.lower() not in suffixes:
                 raise UserError(f"{flag} {path}: the file name must end in {' or '.join(suffixes)}")
             check_output_file(path, flag)
+    if args.max_frames is not None and args.max_frames < 1:
+        raise UserError(f"--max-frames {args.max_frames}: give a whole number of frames >= 1")
+    cap = args.max_frames
     if args.data_type is not None or args.device:
         if not args.lvx:
             raise UserError("--data-type and --device are for --lvx")
@@ -74,11 +80,12 @@ def cmd_export(args) -> int:
 
     # the IMU samples first: a recording without them is an error, and it must come before any other
     # output is written (it came last, after the points had been written)
-    n_imu = export_imu(rec, args.imu, warn=warn) if args.imu else None
+    n_imu = export_imu(rec, args.imu, warn=warn, max_frames=cap) if args.imu else None
     if args.lvx:
         from foveatrack.livox.lvx_export import export_lvx
 
-        r = export_lvx(rec, args.lvx, data_type=args.data_type, device=args.device, frame_duration_ms=args.frame_ms)
+        r = export_lvx(rec, args.lvx, data_type=args.data_type, device=args.device, frame_duration_ms=args.frame_ms,
+                       max_frames=cap)
         extra = f"; {r.slot_collisions} points sharing a slot left out" if r.slot_collisions else ""
         if r.time_gaps:
             extra += f"; {r.time_gaps} gap(s) in the point times over 1 s (a sensor clock jump?) not filled with frames"
@@ -88,9 +95,9 @@ def cmd_export(args) -> int:
 
     for flag, path in (("--csv", args.csv), ("--npz", args.npz)):
         if path:
-            print(f"{export_points(rec, path, warn=warn)} points -> {path}")
+            print(f"{export_points(rec, path, warn=warn, max_frames=cap)} points -> {path}")
     if args.trajectory:
-        print(f"{export_trajectory(rec, args.trajectory, warn=warn)} records -> {args.trajectory}")
+        print(f"{export_trajectory(rec, args.trajectory, warn=warn, max_frames=cap)} records -> {args.trajectory}")
     if n_imu is not None:
         print(f"{n_imu} IMU samples -> {args.imu}")
     return 0

@@ -23,8 +23,15 @@ def register(sub) -> None:
     p.add_argument("--export-points", metavar="F.csv|F.npz", help="export every recorded point")
     p.add_argument("--export-trajectory", metavar="F.csv|F.npz",
                    help="export the replay's per-frame detections, commands, head and world estimates (and truth)")
+    p.add_argument("--max-frames", type=int, default=None, metavar="N",
+                   help="read at most N frames of a .mcap recording (default: one per 8 bytes of the file, "
+                        "at least 10000; a file claiming more is crafted or damaged, and replay says where it stopped)")
     p.add_argument("--live", nargs="?", const=8765, default=None, metavar="PORT",
                    help="first serve the recording to Foxglove (ws://127.0.0.1:PORT, default 8765), paced at --speed")
+    p.add_argument("--live-origin", action="append", default=[], metavar="ORIGIN",
+                   help="with --live: also let a web page at ORIGIN (scheme://host[:port]; * for any) read the live "
+                        "view; by default only clients without an Origin (the Foxglove app, scripts) and Foxglove's "
+                        "web app (https://app.foxglove.dev) are served, so another page in a local browser cannot read it")
     p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
                    help="with --live: recorded seconds per wall second (default 1 = as recorded)")
     p.add_argument("--wait-s", type=float, default=3.0, metavar="S",
@@ -56,18 +63,23 @@ def cmd_replay(args) -> int:
         from foveatrack.recording.live import check_port, stream_recording
 
         n = stream_recording(args.recording, check_port(args.live), args.speed, max(args.wait_s, 0.0),
-                             say=lambda t: print(t, file=sys.stderr, flush=True), linger_s=max(args.linger_s, 0.0))
+                             say=lambda t: print(t, file=sys.stderr, flush=True), linger_s=max(args.linger_s, 0.0),
+                             allowed_origins=args.live_origin)
         print(f"live view: served {n} messages", file=sys.stderr)
+    elif args.live_origin and args.live is None:
+        raise UserError("--live-origin is for the live view: add --live")
     elif args.live is not None:
         raise UserError("--live serves foveatrack recordings (.mcap); a .lvx file has no records to show")
-    res = replay(args.recording, args.tracker_config)
+    if args.max_frames is not None and args.max_frames < 1:
+        raise UserError(f"--max-frames {args.max_frames}: give a whole number of frames >= 1")
+    res = replay(args.recording, args.tracker_config, args.max_frames)
     notes = []
     if args.export_points:
         if res.source == "lvx":
             raise UserError("--export-points reads foveatrack recordings; for a .lvx file use its own tools")
         from foveatrack.recording import export_points
 
-        n = export_points(args.recording, args.export_points)
+        n = export_points(args.recording, args.export_points, max_frames=args.max_frames)
         notes.append(f"{n} points -> {args.export_points}")
     if args.export_trajectory:
         n = export_replay_trajectory(res, args.export_trajectory)
@@ -86,6 +98,9 @@ def cmd_replay(args) -> int:
         damage = res.comparison.get("recording_damage")
         if damage:   # stdout is for the machine; a person watching must still see that bytes were skipped
             print(f"foveatrack replay: WARNING: damaged recording, {'; '.join(damage)}", file=sys.stderr)
+        if res.comparison.get("recording_capped"):
+            print(f"foveatrack replay: WARNING: {args.recording} read in part: {res.comparison['recording_capped']}",
+                  file=sys.stderr)
     else:
         print(format_report(res))
         for n in notes:

@@ -23,6 +23,10 @@ def register(sub) -> None:
                    help="serve the run to Foxglove (ws://127.0.0.1:PORT, default 8765), paced at --speed")
     p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
                    help="with --live: virtual seconds per wall second (default 1 = real time)")
+    p.add_argument("--live-origin", action="append", default=[], metavar="ORIGIN",
+                   help="with --live: also let a web page at ORIGIN (scheme://host[:port]; * for any) read the live "
+                        "view; by default only clients without an Origin (the Foxglove app, scripts) and Foxglove's "
+                        "web app (https://app.foxglove.dev) are served, so another page in a local browser cannot read it")
     p.add_argument("--linger-s", type=float, default=30.0, metavar="S",
                    help="with --live: after the run, keep serving a connected viewer until it disconnects, "
                         "at most S seconds (default 30; 0: close at once)")
@@ -119,7 +123,7 @@ def _others_running() -> int:
 
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
                    quiet=False, live_port=None, speed=1.0, ahead=None, recording_process=None,
-                   linger_s=0.0) -> dict:
+                   linger_s=0.0, live_origins=()) -> dict:
     """Run a scene and report it (the ``simulate`` command).  ``ahead``: trace the scan ahead on a second
     thread; ``recording_process``: write the recording from a child process.  None: both where a core is
     free (:func:`core_free`); the results and the file are the same either way."""
@@ -133,14 +137,14 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     child = writer_process.RecordingProcess() if recording_process and out and live_port is None else None
     try:
         return _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed,
-                               spare if ahead is None else ahead, child, linger_s)
+                               spare if ahead is None else ahead, child, linger_s, live_origins)
     finally:
         if child is not None:
             child.close()       # a no-op after the run closed it; ends the child if the run failed early
 
 
 def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed, ahead,
-                    child, linger_s=0.0) -> dict:
+                    child, linger_s=0.0, live_origins=()) -> dict:
     import time
 
     import numpy as np
@@ -191,7 +195,7 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
         if live_port is not None:
             from foveatrack.recording.live import LiveServer
 
-            live = LiveServer(writer.context, live_port)
+            live = LiveServer(writer.context, live_port, allowed_origins=live_origins)
             print(f"live view on {live.url} (Foxglove: Open connection -> Foxglove WebSocket), "
                   f"{speed:g}x real time", file=sys.stderr, flush=True)
 
@@ -313,11 +317,13 @@ def _cores_flag(args) -> bool | None:
 
 
 def cmd_simulate(args) -> int:
+    if args.live_origin and args.live is None:
+        raise UserError("--live-origin is for the live view: add --live")
     if args.speed != 1.0 and args.live is None:
         # --speed paces only the live view; without it the run goes as fast as it can, so the flag did nothing
         raise UserError(f"--speed {args.speed:g} paces the live view: add --live, or leave --speed out "
                         "(without --live the run goes as fast as the machine allows)")
     run_and_report(args.scene, args.out, args.json, args.plot, args.seed, args.duration, not args.no_progress,
                    live_port=args.live, speed=args.speed, ahead=_cores_flag(args), recording_process=_cores_flag(args),
-                   linger_s=max(args.linger_s, 0.0))
+                   linger_s=max(args.linger_s, 0.0), live_origins=args.live_origin)
     return 0

@@ -112,9 +112,11 @@ class Daemon:
     """
 
     def __init__(self, config: DaemonConfig, log_path: str | None = None, status: bool | None = None,
-                 duration_s: float | None = None, install_signals: bool = True, live_port: int | None = None):
+                 duration_s: float | None = None, install_signals: bool = True, live_port: int | None = None,
+                 live_origins=()):
         self.cfg = config
         self.live_port = live_port      # serve the recording's channels on ws://127.0.0.1:PORT
+        self.live_origins = tuple(live_origins)    # origins of web pages also let read it (--live-origin)
         self.live = None
         self.log = JsonLog(log_path or config.loop.log)
         self.status = StatusLine(enabled=status)
@@ -244,7 +246,7 @@ class Daemon:
             self.recorder = RecordingThread(RecordingWriter(None, self._meta(), log_time="host"),
                                             self.cfg.recording.queue_frames)
         try:
-            self.live = LiveServer(self.recorder.writer.context, self.live_port)
+            self.live = LiveServer(self.recorder.writer.context, self.live_port, allowed_origins=self.live_origins)
         except Exception:
             self.recorder.close()
             self.client.close()

@@ -71,13 +71,15 @@ def _preset_of(meta: dict) -> str | None:
 
 
 def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_type: int | None = None,
-               device: str | None = None, frame_duration_ms: int = 50) -> LvxExport:
+               device: str | None = None, frame_duration_ms: int = 50, max_frames: int | None = None) -> LvxExport:
     """Write the points of ``recording`` to ``out_path`` as LVX v1.1.
 
     data_type : SDK v1 point data type 0-5, 7, 8 (default: the device's own, see DEFAULT_DATA_TYPE)
     device : preset / device name (mid40, horizon, tele15, mid70, avia, mid100); default from the
         recording's scene, else by point rate (100 k/s Mid-40, otherwise Horizon)
     frame_duration_ms : LVX frame length [ms], 1..1000 (Livox Viewer writes 50)
+    max_frames : the cap on frames read (default the reader's for the file's size; ``problem`` says
+        when it stopped the reading)
     """
     from foveatrack.recording import RecordingReader
 
@@ -86,7 +88,7 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
                         "(6 is IMU, which recordings do not hold)")
     if not 1 <= frame_duration_ms <= 1000:
         raise UserError(f"frame duration {frame_duration_ms} ms: must be 1..1000")
-    reader = RecordingReader(recording)
+    reader = RecordingReader(recording, max_frames)
     meta = reader.meta or {}
     name = device or _preset_of(meta)
     rate = meta.get("point_rate_hz")

@@ -47,15 +47,17 @@ def _warn_damage(reader: RecordingReader, warn: Warn | None) -> None:
         warn(line)
 
 
-def export_points(recording: str | os.PathLike, out_path: str | os.PathLike, warn: Warn | None = None) -> int:
+def export_points(recording: str | os.PathLike, out_path: str | os.PathLike, warn: Warn | None = None,
+                  max_frames: int | None = None) -> int:
     """Write all recorded points to CSV or NPZ (by suffix); returns the number of points.
 
     Columns / arrays: frame_index, frame_t_ns, t_ns, x_m, y_m, z_m, reflectivity (lidar frame).
-    ``warn`` gets the one-line warning of a damaged recording (what was skipped and lost).
+    ``warn`` gets the one-line warning of a damaged recording (what was skipped and lost) or of one
+    read in part (``max_frames``: the cap on frames, default the reader's for the file's size).
     """
     out_path = Path(out_path)
     out_kind(out_path)
-    reader = RecordingReader(recording)
+    reader = RecordingReader(recording, max_frames)
     frames = list(reader.points())
     _warn_damage(reader, warn)
     if frames:
@@ -79,6 +81,7 @@ def export_trajectory(
     out_path: str | os.PathLike,
     channels: Iterable[str] = (DETECTIONS, HEAD, TRUTH, COMMANDS),
     warn: Warn | None = None,
+    max_frames: int | None = None,
 ) -> int:
     """Write the time series of ``channels`` to CSV or NPZ (by suffix); returns the row count.
 
@@ -94,7 +97,7 @@ def export_trajectory(
         if ch in arrays_not_records:
             raise UserError(f"export of channel {ch!r}: its messages are arrays, not records; "
                             f"use {arrays_not_records[ch]}")
-    reader = RecordingReader(recording)
+    reader = RecordingReader(recording, max_frames)
     rows = [(m.channel, flatten(m.record, lists=True)) for m in reader.messages(channels)]
     _warn_damage(reader, warn)
     if kind == "csv":
@@ -128,7 +131,8 @@ def export_trajectory(
     return len(rows)
 
 
-def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike, warn: Warn | None = None) -> int:
+def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike, warn: Warn | None = None,
+               max_frames: int | None = None) -> int:
     """Write the IMU samples fed to the tracker (the ``imu`` channel) to CSV or NPZ (by suffix);
     returns the sample count.  Columns: ``frame_index`` (the frame they were fed before), ``t_s`` [s]
     as fed, ``gyro_{x,y,z}_rad_s``, and ``accel_{x,y,z}_g`` where the source has an accelerometer
@@ -136,7 +140,7 @@ def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike, warn: 
     that says so (recordings of runs without an IMU, or made before the channel existed)."""
     out_path = Path(out_path)
     out_kind(out_path)
-    reader = RecordingReader(recording)
+    reader = RecordingReader(recording, max_frames)
     batches = list(reader.imu())
     _warn_damage(reader, warn)
     if not batches:

@@ -3,7 +3,10 @@ SDK's server, on loopback.
 
 The server is a second sink of the writer's ``foxglove.Context`` (:class:`RecordingWriter`, with
 ``path=None`` when nothing is written to disk): a client (Foxglove's app: "Open connection" ->
-``ws://127.0.0.1:PORT``) sees exactly the channels of a recording, as they are logged.
+``ws://127.0.0.1:PORT``) sees exactly the channels of a recording, as they are logged.  PORT is
+served by :class:`foveatrack.recording.origin_gate.OriginGate`, which refuses a web page's connection
+unless its ``Origin`` is allowed (``--live-origin``; Foxglove's web app is), in front of the SDK's
+server on a free loopback port.
 """
 
 from __future__ import annotations
@@ -65,8 +68,13 @@ class LiveServer:
     :meth:`wait_for_viewer` and :meth:`linger` wait for a viewer to come and to go.
     """
 
-    def __init__(self, context, port: int = DEFAULT_PORT, host: str = "127.0.0.1", name: str = "foveatrack"):
+    def __init__(self, context, port: int = DEFAULT_PORT, host: str = "127.0.0.1", name: str = "foveatrack",
+                 allowed_origins=(), say=None):
+        import sys
+
         import foxglove
+
+        from foveatrack.recording.origin_gate import OriginGate
 
         try:
             loopback = ipaddress.ip_address(host).is_loopback
@@ -75,15 +83,33 @@ class LiveServer:
         if not loopback:
             raise UserError(f"live view host {host!r}: only a loopback address (127.0.0.0/8, ::1) is served")
         port = check_port(port)
+        for o in allowed_origins:
+            if o != "*" and "://" not in o:
+                raise UserError(f"--live-origin {o!r}: an origin is scheme://host[:port], e.g. http://localhost:3000 "
+                                f"(or * for any web page)")
+        if say is None:
+            def say(text):
+                print(text, file=sys.stderr, flush=True)
+
+        def refused(origin):
+            say(f"live view: refused a connection from the web page at origin {origin!r} (allow it with "
+                f"--live-origin {origin})")
+
+        self._server = self._gate = None
         try:
             self._viewers = _Viewers()
-            self._server = foxglove.start_server(name=name, host=host, port=port, context=context,
+            # the SDK on a free port; the port asked for is the gate's, which checks each handshake's Origin
+            self._server = foxglove.start_server(name=name, host=host, port=0, context=context,
                                                  server_listener=self._viewers)
-        except Exception as exc:  # noqa: BLE001 - the SDK's own error type for a port in use
+            self._gate = OriginGate(host, port, int(self._server.port), allowed_origins, refused)
+        except Exception as exc:  # noqa: BLE001 - the SDK's own error type, or OSError, for a port in use
+            if self._server is not None:
+                self._server.stop()
+                self._server = None
             raise UserError(f"--live {port}: cannot serve on {host}:{port} ({exc}); choose another port "
                             f"or 0 for any free one") from None
         self.host = host
-        self.port = int(self._server.port)
+        self.port = int(self._gate.port)
 
     @property
     def url(self) -> str:
@@ -121,6 +147,9 @@ class LiveServer:
             return self._viewers.cond.wait_for(lambda: self._viewers.count == 0, timeout=timeout_s)
 
     def stop(self) -> None:
+        if self._gate is not None:
+            self._gate.stop()
+            self._gate = None
         if self._server is not None:
             self._server.stop()
             self._server = None
@@ -182,7 +211,7 @@ def _log_time_of(info: dict) -> int | str:
 
 
 def stream_recording(path, port: int = DEFAULT_PORT, speed: float = 1.0, wait_for_client_s: float = 0.0,
-                     say=None, linger_s: float = 0.0) -> int:
+                     say=None, linger_s: float = 0.0, allowed_origins=()) -> int:
     """Serve a recording on the live view, paced at ``speed`` x its recorded time: its records as
     recorded, with the transforms and scene entities drawn from them (a format-1 recording too).
     ``wait_for_client_s``: wait until a viewer subscribes, at most that long, before the first message;
@@ -198,7 +227,7 @@ def stream_recording(path, port: int = DEFAULT_PORT, speed: float = 1.0, wait_fo
     reader = RecordingReader(path)
     w = RecordingWriter(None, reader.meta, log_time=_log_time_of(reader.info))
     n = 0
-    with LiveServer(w.context, port) as live:
+    with LiveServer(w.context, port, allowed_origins=allowed_origins, say=say) as live:
         if say is not None:
             say(f"live view on {live.url} (Foxglove: Open connection -> Foxglove WebSocket), "
                 f"{speed:g}x recorded time")

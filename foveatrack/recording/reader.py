@@ -85,6 +85,19 @@ def _log_time_text(t_ns: int) -> str:
 
 UTC_LOG_TIMES_FROM_NS = 10**18    # 2001-09-09: no sensor or virtual clock runs that long
 
+# The cap on lidar frames read from one file.  A frame takes ~31 bytes on disk at the least (an empty
+# frame alone in a zstd chunk of 1000, flush_every_frames' maximum; ~300 bytes one per chunk), but a
+# crafted chunk of identical messages claims a frame per 0.25 byte within the decompression cap
+# (mcap_walk.MAX_CHUNK_RATIO): a 1 MB file, 4 M frames and gigabytes of replay and export.  So a file
+# yields at most one frame per MIN_BYTES_PER_FRAME of its size, and any file FRAME_CAP_FLOOR frames.
+MIN_BYTES_PER_FRAME = 8
+FRAME_CAP_FLOOR = 10_000
+
+
+def frame_cap(size_bytes: int) -> int:
+    """The most lidar frames a recording of ``size_bytes`` is read for (see MIN_BYTES_PER_FRAME)."""
+    return max(FRAME_CAP_FLOOR, int(size_bytes) // MIN_BYTES_PER_FRAME)
+
 
 class RecordingReader:
     """Read a recording, also one cut short or damaged: nothing that was recorded and is intact is lost.
@@ -100,14 +113,23 @@ class RecordingReader:
     definition was in a damaged chunk are attributed by the channel table the writer puts in the
     metadata (or the file's summary, for recordings written before it did); messages of a channel
     that no intact record names are counted in ``problem``.
+    Reading stops after ``max_frames`` lidar frames (default :func:`frame_cap` of the file's size: a
+    crafted file claiming millions of frames ends in bounded memory and time); ``capped`` then says
+    where, and ``problem`` and :meth:`warning` say so.
     Raises UserError naming the file if it is not a foveatrack recording.
     """
 
-    def __init__(self, path: str | os.PathLike):
+    def __init__(self, path: str | os.PathLike, max_frames: int | None = None):
         self.path = Path(path)
         if not self.path.is_file():
             raise UserError(f"recording {self.path} does not exist or is not a file")
         self.size = self.path.stat().st_size
+        if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, int)
+                                       or max_frames < 1):
+            raise UserError(f"max_frames {max_frames!r}: give a whole number of frames >= 1")
+        self.max_frames = frame_cap(self.size) if max_frames is None else max_frames
+        #: (byte offset where reading stopped, frames read) when the frame cap stopped it, else None
+        self.capped: tuple[int, int] | None = None
         with open(self.path, "rb") as fh:
             head = fh.read(len(MCAP_MAGIC))
         if head != MCAP_MAGIC:
@@ -172,10 +194,23 @@ class RecordingReader:
             n = sum(self.unattributed.values())
             parts.append(f"{n} message(s) of channel id(s) {sorted(self.unattributed)} skipped: their channel "
                          f"was defined in a damaged chunk")
+        if self.capped is not None:
+            parts.append(self.capped_text())
         if not parts and self.complete is False:
             parts.append(f"the file ends at byte {self.size} without its end-of-data record: the writer was not "
                          f"closed (cut short, e.g. kill -9 or power loss); every whole chunk before it was read")
         return "; ".join(parts) if parts else None
+
+    def capped_text(self) -> str | None:
+        """One line naming what the frame cap left unread (None: it did not stop the reading)."""
+        if self.capped is None:
+            return None
+        pos, n = self.capped
+        why = ("--max-frames" if self.max_frames != frame_cap(self.size) else
+               f"at most one frame per {MIN_BYTES_PER_FRAME} bytes of the file, and any file {FRAME_CAP_FLOOR}: "
+               f"more is a crafted or damaged file; --max-frames N raises it")
+        return (f"reading stopped at byte {pos} of {self.size} after {n} frames, the cap on frames per file "
+                f"({why}): the rest of the file was not read")
 
     def warning(self) -> str | None:
         """The line a command prints after reading the whole recording (``replay`` and ``export`` alike):
@@ -186,6 +221,8 @@ class RecordingReader:
             return None
         if self.damage or self.unattributed:
             return f"WARNING: damaged recording {self.path}, {problem}"
+        if self.capped is not None:
+            return f"WARNING: recording {self.path} read in part: {problem}"
         return f"note: {self.path}: {problem}"
 
     # ------------------------------------------------------------------ walking the file
@@ -195,6 +232,7 @@ class RecordingReader:
         self.complete = False
         self.damage = []
         self.unattributed = {}
+        self.capped = None
         size = self.size
         with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
             data_end = self._data_end_pos(mm)
@@ -258,6 +296,9 @@ class RecordingReader:
                             self.unattributed[cid] = self.unattributed.get(cid, 0) + 1
                             continue
                         if name == POINTS:
+                            if frames >= self.max_frames:
+                                self.capped = (pos, frames)
+                                return
                             frames += 1
                         yield name, log_time, bytes(content[mw.MSG_HEAD.size:])
                     elif rop == mw.OP_CHANNEL:

@@ -19,7 +19,8 @@ ObjectTruthRecord      /truth_objects  simulation only, multi-object scenes: eve
 The IMU samples fed to the tracker (``/imu``) are arrays, not a JSON record:
 :class:`foveatrack.recording.format.ImuSamples`, written by :func:`write_tracker_frame`.
 
-``from_json`` takes a record as read (missing keys of older files become None / defaults);
+``from_json`` takes a record as read (missing keys of older files become None / defaults; a field
+of the wrong type, from a damaged or crafted file, raises :class:`RecordError` naming it);
 ``to_json`` gives the dict to write, its keys in the order the writers have always used (a run
 records the same bytes as before).
 """
@@ -48,6 +49,70 @@ def _xyz(v):
 
 def _nan(v) -> float:
     return math.nan if v is None else float(v)
+
+
+class RecordError(ValueError):
+    """A record read back whose field is missing or not of its type (a damaged or crafted file): the
+    reader's caller names the file and the record."""
+
+
+_MISSING = object()
+
+
+def _field(r: dict, key: str, default=_MISSING):
+    if not isinstance(r, dict):
+        raise RecordError(f"not a JSON object but {type(r).__name__}")
+    if key in r:
+        return r[key]
+    if default is _MISSING:
+        raise RecordError(f"no field {key!r}")
+    return default
+
+
+def _is_num(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _int_f(r: dict, key: str, default=_MISSING, nullable: bool = False) -> int | None:
+    v = _field(r, key, default)
+    if v is None and nullable:
+        return None
+    if not isinstance(v, int) or isinstance(v, bool):
+        raise RecordError(f"field {key!r}: {v!r} is not a whole number")
+    return v
+
+
+def _num_f(r: dict, key: str, nan_if_none: bool = False) -> float | None:
+    """An optional number (None stays None, or NaN with ``nan_if_none``)."""
+    v = _field(r, key, None)
+    if v is None:
+        return math.nan if nan_if_none else None
+    if not _is_num(v):
+        raise RecordError(f"field {key!r}: {v!r} is not a number")
+    return v if not nan_if_none else float(v)
+
+
+def _str_f(r: dict, key: str) -> str | None:
+    v = _field(r, key, None)
+    if v is not None and not isinstance(v, str):
+        raise RecordError(f"field {key!r}: {v!r} is not a string")
+    return v
+
+
+def _bool_f(r: dict, key: str, default=None) -> bool | None:
+    v = _field(r, key, default)
+    if v is not None and not isinstance(v, bool):
+        raise RecordError(f"field {key!r}: {v!r} is not true or false")
+    return v
+
+
+def _vec_f(r: dict, key: str, n: int = 3, default=None) -> tuple | None:
+    v = _field(r, key, default)
+    if v is None:
+        return None
+    if not isinstance(v, (list, tuple)) or len(v) != n or not all(_is_num(x) or x is None for x in v):
+        raise RecordError(f"field {key!r}: {v!r} is not {n} numbers")
+    return tuple(v)
 
 
 @dataclass(frozen=True)
@@ -85,9 +150,9 @@ class DetectionRecord:
 
     @classmethod
     def from_json(cls, r: dict) -> "DetectionRecord":
-        return cls(int(r["t_ns"]), int(r.get("frame_index", -1)), bool(r.get("detected", False)),
-                   None if r.get("xyz_m") is None else tuple(r["xyz_m"]), int(r.get("n_points", 0)), r.get("t_s"),
-                   r.get("az_deg"), r.get("el_deg"), r.get("state"), r.get("error_pan_deg"), r.get("error_tilt_deg"))
+        return cls(_int_f(r, "t_ns"), _int_f(r, "frame_index", -1), _bool_f(r, "detected", False),
+                   _vec_f(r, "xyz_m"), _int_f(r, "n_points", 0), _num_f(r, "t_s"), _num_f(r, "az_deg"),
+                   _num_f(r, "el_deg"), _str_f(r, "state"), _num_f(r, "error_pan_deg"), _num_f(r, "error_tilt_deg"))
 
 
 @dataclass(frozen=True)
@@ -119,9 +184,9 @@ class HeadEstimateRecord:
 
     @classmethod
     def from_json(cls, r: dict) -> "HeadEstimateRecord":
-        return cls(int(r["t_ns"]), int(r.get("frame_id", -1)), _nan(r.get("pan_deg")), _nan(r.get("tilt_deg")),
-                   r.get("sigma_pan_deg"), r.get("sigma_tilt_deg"),
-                   None if r.get("world_xyz_m") is None else tuple(r["world_xyz_m"]), r.get("world_sigma_m"))
+        return cls(_int_f(r, "t_ns"), _int_f(r, "frame_id", -1), _num_f(r, "pan_deg", True),
+                   _num_f(r, "tilt_deg", True), _num_f(r, "sigma_pan_deg"), _num_f(r, "sigma_tilt_deg"),
+                   _vec_f(r, "world_xyz_m"), _num_f(r, "world_sigma_m"))
 
 
 @dataclass(frozen=True)
@@ -183,10 +248,22 @@ class CommandRecord:
 
     @classmethod
     def from_json(cls, r: dict) -> "CommandRecord":
-        tc = r.get("tracker_command")
-        return cls(int(r["t_ns"]), bytes.fromhex(r.get("raw_hex", "")), r.get("pan_dir"), r.get("pan_byte"),
-                   r.get("tilt_dir"), r.get("tilt_byte"), r.get("frame_id"), r.get("source"), r.get("send_t_s"),
-                   r.get("written"), r.get("host_written_s"), tuple(r.get("limited", ())),
+        raw = _str_f(r, "raw_hex") or ""
+        try:
+            raw_b = bytes.fromhex(raw)
+        except ValueError:
+            raise RecordError(f"field 'raw_hex': {raw[:40]!r} is not hexadecimal") from None
+        limited = _field(r, "limited", ())
+        if not isinstance(limited, (list, tuple)) or not all(isinstance(x, str) for x in limited):
+            raise RecordError(f"field 'limited': {limited!r} is not a list of names")
+        tc = _field(r, "tracker_command", None)
+        if tc is not None and (not isinstance(tc, (list, tuple)) or len(tc) != 4
+                               or not all(isinstance(x, int) and not isinstance(x, bool) for x in tc)):
+            raise RecordError(f"field 'tracker_command': {tc!r} is not 4 whole numbers")
+        return cls(_int_f(r, "t_ns"), raw_b, *(_int_f(r, k, None, True) for k in ("pan_dir", "pan_byte", "tilt_dir",
+                                                                                "tilt_byte")),
+                   _int_f(r, "frame_id", None, True), _str_f(r, "source"), _num_f(r, "send_t_s"),
+                   _bool_f(r, "written"), _num_f(r, "host_written_s"), tuple(limited),
                    None if tc is None else tuple(tc))
 
 
@@ -211,9 +288,9 @@ class TruthRecord:
 
     @classmethod
     def from_json(cls, r: dict) -> "TruthRecord":
-        return cls(int(r["t_ns"]), int(r.get("frame_id", -1)), _nan(r.get("pan_deg")), _nan(r.get("tilt_deg")),
-                   tuple(r.get("target_xyz_m", (math.nan,) * 3)), r.get("true_error_deg"),
-                   int(r.get("points_on_target", 0)))
+        return cls(_int_f(r, "t_ns"), _int_f(r, "frame_id", -1), _num_f(r, "pan_deg", True),
+                   _num_f(r, "tilt_deg", True), _vec_f(r, "target_xyz_m", 3, (math.nan,) * 3),
+                   _num_f(r, "true_error_deg"), _int_f(r, "points_on_target", 0))
 
 
 @dataclass(frozen=True)
@@ -271,6 +348,10 @@ PARSERS = {DETECTIONS: DetectionRecord.from_json, HEAD: HeadEstimateRecord.from_
 
 
 def parse(channel: str, record: dict):
-    """The typed record of a JSON record read from ``channel`` (the dict itself on other channels)."""
+    """The typed record of a JSON record read from ``channel`` (the dict itself on other channels);
+    :class:`RecordError` naming the field for one whose fields are missing or not of their type."""
     p = PARSERS.get(channel)
-    return record if p is None else p(record)
+    if p is None:
+        return record
+    _field(record, "t_ns")
+    return p(record)

@@ -101,11 +101,12 @@ def _after_frame(step: FrameStep, sink: _RecordedOutcome, order: TimeOrder, afte
 
 
 def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
-                     config_name: str | None = None) -> ReplayResult:
-    """Re-run the tracker over a foveatrack recording (simulator or daemon)."""
+                     config_name: str | None = None, max_frames: int | None = None) -> ReplayResult:
+    """Re-run the tracker over a foveatrack recording (simulator or daemon); ``max_frames``: the cap
+    on frames read (default the reader's for the file's size, :func:`foveatrack.recording.reader.frame_cap`)."""
     from foveatrack.recording import RecordingReader
 
-    reader = RecordingReader(path)
+    reader = RecordingReader(path, max_frames)
     meta = reader.meta
     source = meta.get("source", "?")
     where = f"{config_name} [tracker]" if config_name else "recorded [tracker]"
@@ -206,6 +207,8 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     res.comparison["recording_complete"] = bool(reader.complete)
     res.comparison["metadata_checksum"] = "verified" if reader.meta_checked else "absent (an older recording)"
     res.comparison["recording_damage"] = [d.describe() for d in reader.damage] + order.describe()
+    if reader.capped is not None:
+        res.comparison["recording_capped"] = reader.capped_text()
     res.comparison.update(_gaps(frames, recorded, reader, order.frames + order.commands))
     return res
 
@@ -291,8 +294,10 @@ def replay_lvx(path: str | os.PathLike, tracker_table: dict | None = None, confi
     return res
 
 
-def replay(path: str | os.PathLike, tracker_config_path: str | None = None) -> ReplayResult:
-    """Replay a recording (``.mcap``) or a Livox Viewer file (``.lvx``), by content."""
+def replay(path: str | os.PathLike, tracker_config_path: str | None = None,
+           max_frames: int | None = None) -> ReplayResult:
+    """Replay a recording (``.mcap``) or a Livox Viewer file (``.lvx``), by content; ``max_frames``:
+    the cap on a recording's frames (an ``.lvx`` is capped by the time its frames span)."""
     p = Path(path)
     if not p.is_file():
         raise UserError(f"{p}: no such recording")
@@ -306,4 +311,4 @@ def replay(path: str | os.PathLike, tracker_config_path: str | None = None) -> R
         # as lacking the MCAP magic; a damaged one before the missing tracker configuration)
         LvxReader(p).close()
         return replay_lvx(p, table, tracker_config_path)
-    return replay_recording(p, table, tracker_config_path)
+    return replay_recording(p, table, tracker_config_path, max_frames)

@@ -9,7 +9,8 @@ import numpy as np
 
 from foveatrack.gate import STALE_FRAME
 from foveatrack.recording.format import DAEMON_EVENTS, IMU, METRICS, POINTS
-from foveatrack.recording.records import CommandRecord, DetectionRecord, HeadEstimateRecord, TruthRecord, parse
+from foveatrack.recording.records import (CommandRecord, DetectionRecord, HeadEstimateRecord, RecordError, TruthRecord,
+                                          parse)
 
 
 class FrameArrays:
@@ -239,40 +240,67 @@ class RecordedFrame:
 
 
 def recorded_frames(reader):
-    """Yield a :class:`RecordedFrame` per frame of the recording."""
+    """Yield a :class:`RecordedFrame` per frame of the recording.  A record whose fields are not of
+    their type (a damaged or crafted file whose chunk CRC holds) is a UserError naming the file, the
+    channel, the record's time and the field."""
+    from foveatrack.errors import UserError
+
     cur = None
     for m in reader.messages():
-        if m.channel == POINTS:
+        try:
+            new = _take(cur, m)
+        except RecordError as exc:
+            raise UserError(f"{reader.path}: a {m.channel} record at time {m.t_ns} ns is damaged: {exc}") from None
+        if new is not None:
             if cur is not None:
                 yield cur
-            cur = RecordedFrame(m.record)
-            continue
-        if cur is None:
-            continue
-        if m.channel == IMU:
-            cur.imu.append(m.record)
-            continue
-        if m.channel == DAEMON_EVENTS:
-            e = m.record
-            if e.get("event") == "tracker_rebased":
-                cur.after.append(TrackerRebased(float(e["t0_s"]), float(e["pan_deg"]), float(e["tilt_deg"]),
-                                                str(e.get("reason", "?"))))
-            elif e.get("event") == "pose_corrected":
-                cur.after.append(PoseCorrected(float(e["t_s"]), float(e["dpan_deg"]), float(e["dtilt_deg"])))
-            continue
-        rec = parse(m.channel, m.record)
-        if isinstance(rec, CommandRecord):
-            if rec.frame_id is None:
-                cur.after.append(rec)
-            elif rec.from_tracker and cur.command is None:
-                cur.command = rec
-        elif isinstance(rec, DetectionRecord) and cur.detection is None:
-            cur.detection = rec
-        elif isinstance(rec, HeadEstimateRecord) and cur.head is None:
-            cur.head = rec
-        elif isinstance(rec, TruthRecord) and cur.truth is None:
-            cur.truth = rec
-        elif m.channel == METRICS:
-            cur.metrics.setdefault(rec["name"], rec["value"])
+            cur = new
     if cur is not None:
         yield cur
+
+
+def _event_float(e: dict, key: str) -> float:
+    v = e.get(key)
+    if not isinstance(v, (int, float)) or isinstance(v, bool):
+        raise RecordError(f"field {key!r}: {v!r} is not a number")
+    return float(v)
+
+
+def _take(cur, m):
+    """Add message ``m`` to the frame ``cur``; returns a new frame where ``m`` starts one, else None."""
+    if m.channel == POINTS:
+        return RecordedFrame(m.record)
+    if cur is None:
+        return None
+    if m.channel == IMU:
+        cur.imu.append(m.record)
+        return None
+    if m.channel == DAEMON_EVENTS:
+        e = m.record
+        if not isinstance(e, dict):
+            raise RecordError(f"not a JSON object but {type(e).__name__}")
+        if e.get("event") == "tracker_rebased":
+            cur.after.append(TrackerRebased(_event_float(e, "t0_s"), _event_float(e, "pan_deg"),
+                                            _event_float(e, "tilt_deg"), str(e.get("reason", "?"))))
+        elif e.get("event") == "pose_corrected":
+            cur.after.append(PoseCorrected(_event_float(e, "t_s"), _event_float(e, "dpan_deg"),
+                                           _event_float(e, "dtilt_deg")))
+        return None
+    rec = parse(m.channel, m.record)
+    if isinstance(rec, CommandRecord):
+        if rec.frame_id is None:
+            cur.after.append(rec)
+        elif rec.from_tracker and cur.command is None:
+            cur.command = rec
+    elif isinstance(rec, DetectionRecord) and cur.detection is None:
+        cur.detection = rec
+    elif isinstance(rec, HeadEstimateRecord) and cur.head is None:
+        cur.head = rec
+    elif isinstance(rec, TruthRecord) and cur.truth is None:
+        cur.truth = rec
+    elif m.channel == METRICS:
+        if not isinstance(rec, dict) or not isinstance(rec.get("name"), str) or not (
+                rec.get("value") is None or isinstance(rec.get("value"), (int, float))):
+            raise RecordError(f"not a metric (a name and a number): {str(rec)[:80]}")
+        cur.metrics.setdefault(rec["name"], rec["value"])
+    return None

@@ -39,6 +39,8 @@ def format_report(res: ReplayResult) -> str:
         L.append("  the recording holds no lidar frames (e.g. the lidar never sent data): nothing to replay")
     if c.get("recording_damage"):
         L.insert(1, "  WARNING: damaged recording, " + "; ".join(c["recording_damage"]))
+    if c.get("recording_capped"):
+        L.insert(1, f"  WARNING: {res.path} read in part: {c['recording_capped']}")
     if c.get("gyro_samples_recorded") is False:
         L.append("  attitude = \"gyro\", but the recording holds no IMU samples (made before they were recorded, or "
                  "the run had no IMU): the replay's head angles come from its commands alone, so they and what "
@@ -70,7 +72,7 @@ def format_report(res: ReplayResult) -> str:
                      f"open loop: same points, the head moved as recorded")
     for k, v in res.recorded_metrics.items():
         L.append(f"  recorded {k}: p50 {v['p50']:.2f}, p99 {v['p99']:.2f}, max {v['max']:.2f}")
-    if c.get("recording_problem") and not c.get("recording_damage"):
+    if c.get("recording_problem") and not c.get("recording_damage") and not c.get("recording_capped"):
         L.append(f"  note: {c['recording_problem']}")
     return "\n".join(L)
 
