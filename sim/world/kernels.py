@@ -343,6 +343,21 @@ def _plane_point(dx, dy, dz, nx, ny, nz, num, cx, cy, cz):
     return den, t, dx * t - cx, dy * t - cy, dz * t - cz
 
 
+@njit(cache=True, inline="always")
+def _ray_in_body(d_world, j, pos, yaw, i):
+    """Ray ``j`` (from the origin along ``d_world[j]``) in the frame of a body at ``pos[i]`` with heading
+    ``yaw[i]`` [rad] about +Z: :math:`o' = R^T(0 - p)`, :math:`d' = R^T d`, as ``(ox, oy, oz, dx, dy, dz)``."""
+    c = math.cos(yaw[i])
+    s = math.sin(yaw[i])
+    px = -pos[i, 0]
+    py = -pos[i, 1]
+    pz = -pos[i, 2]
+    wx = d_world[j, 0]
+    wy = d_world[j, 1]
+    return (c * px + s * py, -s * px + c * py, pz,
+            c * wx + s * wy, -s * wx + c * wy, d_world[j, 2])
+
+
 @njit(cache=True, nogil=True)
 def cast_moving_kernel(idx, d_world, pos, yaw, prims, prim_offset, out_range, out_prim):
     """Nearest hit of rays ``idx`` against a moving rigid body, each ray at its own time.
@@ -353,19 +368,7 @@ def cast_moving_kernel(idx, d_world, pos, yaw, prims, prim_offset, out_range, ou
     """
     for i in range(idx.shape[0]):
         j = idx[i]
-        c = math.cos(yaw[i])
-        s = math.sin(yaw[i])
-        px = -pos[i, 0]
-        py = -pos[i, 1]
-        pz = -pos[i, 2]
-        ox = c * px + s * py
-        oy = -s * px + c * py
-        oz = pz
-        wx = d_world[j, 0]
-        wy = d_world[j, 1]
-        dx = c * wx + s * wy
-        dy = -s * wx + c * wy
-        dz = d_world[j, 2]
+        ox, oy, oz, dx, dy, dz = _ray_in_body(d_world, j, pos, yaw, i)
         for m in range(prims.shape[0]):
             t = _hit_prim(prims, m, ox, oy, oz, dx, dy, dz)
             if t < out_range[j]:
@@ -672,19 +675,7 @@ def cast_flapping_kernel(idx, d_world, pos, yaw, flap_rad, prims, hinge, prim_of
     ``tests/world_twins.py`` ``cast_flapping_twin``."""
     for i in range(idx.shape[0]):
         j = idx[i]
-        c = math.cos(yaw[i])
-        s = math.sin(yaw[i])
-        px = -pos[i, 0]
-        py = -pos[i, 1]
-        pz = -pos[i, 2]
-        ox = c * px + s * py
-        oy = -s * px + c * py
-        oz = pz
-        wx = d_world[j, 0]
-        wy = d_world[j, 1]
-        dx = c * wx + s * wy
-        dy = -s * wx + c * wy
-        dz = d_world[j, 2]
+        ox, oy, oz, dx, dy, dz = _ray_in_body(d_world, j, pos, yaw, i)
         cf = math.cos(flap_rad[i])
         sf = math.sin(flap_rad[i])
         for m in range(prims.shape[0]):
