@@ -145,3 +145,31 @@ def read_small_text(path, what: str) -> str:
     if len(data) > MAX_CONFIG_BYTES:
         raise UserError(f"{path}: the {what} is over {MAX_CONFIG_BYTES >> 20} MiB: not a configuration file")
     return data.decode()
+
+
+def dataclass_from_mapping(cls, data: Mapping, where: str, parsers: Mapping | None = None,
+                           none_ok: Sequence[str] = ()):
+    """A frozen dataclass of settings from its TOML table: unknown keys refused; a field whose default
+    is an int must be an integer; ``parsers[name](value, where.name)`` reads a field of its own kind
+    (a sub-table); every other value is a float (None allowed for the fields in ``none_ok``).  The
+    class's own checks (``__post_init__``) name ``where`` too."""
+    from dataclasses import fields
+
+    check_keys(data, [f.name for f in fields(cls)], where)
+    kw = {}
+    for f in fields(cls):
+        if f.name not in data:
+            continue
+        v = data[f.name]
+        if parsers and f.name in parsers:
+            kw[f.name] = parsers[f.name](v, f"{where}.{f.name}")
+        elif isinstance(f.default, int) and not isinstance(f.default, bool):
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise UserError(f"{where}: {f.name} must be an integer, got {v!r}")
+            kw[f.name] = v
+        else:
+            kw[f.name] = as_float(v, f.name, where, allow_none=f.name in none_ok)
+    try:
+        return cls(**kw)
+    except UserError as exc:
+        raise UserError(f"{where}: {exc}") from None

@@ -32,12 +32,12 @@ acquisition is done: Algorithm 1 runs with that D on every frame, as the paper's
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from collections.abc import Mapping
 
 import numpy as np
 
-from foveatrack.config_util import as_float, check_keys
+from foveatrack.config_util import dataclass_from_mapping
 from foveatrack.detection import Detection, box_bounds, box_detection, detect, LEVEL
 from foveatrack.errors import UserError
 from foveatrack.frames import Frame
@@ -101,25 +101,7 @@ class OpenLoopConfig:
 
     @classmethod
     def from_mapping(cls, data: Mapping, where: str) -> "OpenLoopConfig":
-        names = [f.name for f in fields(cls)]
-        check_keys(data, names, where)
-        kw = {}
-        for f in fields(cls):
-            if f.name not in data:
-                continue
-            if f.name == "space":
-                kw["space"] = space_from_mapping(data["space"], where + ".space")
-            elif f.type == "int" or isinstance(f.default, int):
-                v = data[f.name]
-                if isinstance(v, bool) or not isinstance(v, int):
-                    raise UserError(f"{where}: {f.name} must be an integer, got {v!r}")
-                kw[f.name] = v
-            else:
-                kw[f.name] = as_float(data[f.name], f.name, where)
-        try:
-            return cls(**kw)
-        except UserError as exc:
-            raise UserError(f"{where}: {exc}") from None
+        return dataclass_from_mapping(cls, data, where, parsers={"space": space_from_mapping})
 
 
 @dataclass

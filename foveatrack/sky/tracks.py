@@ -41,13 +41,13 @@ the frames and the pose: no random numbers, sums in a fixed order, a stable assi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from collections.abc import Mapping
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from foveatrack.config_util import as_float, check_keys
+from foveatrack.config_util import dataclass_from_mapping
 from foveatrack.detection import Detection, box_bounds, box_detection
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import mat3T_vec, norm3
@@ -133,25 +133,8 @@ class SkyTrackerConfig:
 
     @classmethod
     def from_mapping(cls, data: Mapping, where: str) -> "SkyTrackerConfig":
-        names = [f.name for f in fields(cls)]
-        check_keys(data, names, where)
-        kw = {}
-        for f in fields(cls):
-            if f.name not in data:
-                continue
-            v = data[f.name]
-            if f.name == "classifier":
-                kw[f.name] = ClassifierConfig.from_mapping(v, where + ".classifier")
-            elif isinstance(f.default, int) and not isinstance(f.default, bool):
-                if isinstance(v, bool) or not isinstance(v, int):
-                    raise UserError(f"{where}: {f.name} must be an integer, got {v!r}")
-                kw[f.name] = v
-            else:
-                kw[f.name] = as_float(v, f.name, where, allow_none=f.name == "field_half_angle_deg")
-        try:
-            return cls(**kw)
-        except UserError as exc:
-            raise UserError(f"{where}: {exc}") from None
+        return dataclass_from_mapping(cls, data, where, parsers={"classifier": ClassifierConfig.from_mapping},
+                                      none_ok=("field_half_angle_deg",))
 
 
 @dataclass(frozen=True)
