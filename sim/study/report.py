@@ -16,7 +16,7 @@ COMMAND = "foveatrack study accuracy-vs-time --out docs --workers 2"
 def _f(v, fmt="{:.3g}", none="-") -> str:
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return none
-    return fmt.format(v)
+    return fmt.format(v + 0.0 if isinstance(v, float) else v)     # + 0.0: no "-0" for a zero bound
 
 
 def _table(head: list[str], rows: list[list[str]]) -> list[str]:

@@ -52,7 +52,7 @@ def abs_bounds(iv: dict | None) -> tuple[float, float] | None:
         return None
     lo, hi = iv["lo"], iv["hi"]
     if lo <= 0.0 <= hi:
-        return 0.0, max(-lo, hi)
+        return 0.0, max(-lo, hi) + 0.0      # + 0.0: never -0.0
     return min(abs(lo), abs(hi)), max(abs(lo), abs(hi))
 
 
