@@ -39,3 +39,21 @@ def pytest_collection_modifyitems(config, items):
         rel = Path(str(item.fspath)).relative_to(tests_dir)
         if rel.parts[0] in SLOW_FOLDERS:
             item.add_marker(pytest.mark.slow)
+
+
+import signal as _signal
+import threading as _threading
+
+import pytest as _pytest
+
+
+@_pytest.fixture(autouse=True)
+def _python_signal_handling():
+    """Every test starts with Python's own SIGINT and SIGTERM handling.  In a whole-suite run in random
+    order (seed 1816365757), a handler left behind by an earlier in-process run made the Ctrl-C tests
+    see no KeyboardInterrupt, and a child started under it ignored SIGINT; each passes alone.  Which
+    run left it is not found yet (see the session note): this keeps tests independent meanwhile."""
+    if _threading.current_thread() is _threading.main_thread():
+        _signal.signal(_signal.SIGINT, _signal.default_int_handler)
+        _signal.signal(_signal.SIGTERM, _signal.SIG_DFL)
+    yield
