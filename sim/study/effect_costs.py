@@ -38,7 +38,7 @@ def _fig12_data() -> dict:
 
 def excluded() -> dict[str, str]:
     """Effects the axis leaves out, each with why."""
-    return {e: "already listed by fig12 (in the reference)" for e in _fig12_data()["scene"].get("effects", [])}
+    return {e: "already listed by fig12, the reference" for e in _fig12_data()["scene"].get("effects", [])}
 
 
 EXCLUDED = excluded()
