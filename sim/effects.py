@@ -25,6 +25,16 @@ Sources of the defaults:
   ``rho cos(theta)``, theta the angle between the beam and the surface normal (the lidar equation
   for an extended target; Kashani et al. 2015, "A review of LIDAR radiometric processing", Sensors
   15, sec. 2): the effective reflectivity is ``rho |cos theta|``;
+* mixed pixels (``mixed_pixels``, on ``beam_footprint``'s sub-rays, equal shares of the beam) — a
+  footprint partly on a near edge and partly on a surface behind: each sub-ray returns ``rho / r^2``;
+  surfaces closer in range than the pulse can resolve give one echo at the power-weighted mean range
+  (the "mixed pixel" between them: Hebert and Krotkov 1992, "3-D measurements from imaging laser
+  radars: how good are they?", Image Vision Comput. 10(3), sec. 3.2; Tang et al. 2007, Autom.
+  Constr. 16, mixed pixels at edges), farther ones separate echoes of which a single-return unit
+  reports the strongest; the echo's power is its share of the beam (scaling the effective
+  reflectivity).  Resolution ``c tau / 2`` = 0.75 m for a 5 ns pulse: an assumption typical of
+  905 nm pulsed lidars (Livox publishes no pulse width), as is "strongest" (the Mid-40 has one
+  return mode; the Horizon's default single return is the strongest, per its SDK's return modes);
 * weather (``weather``: fog, haze, dust, rain given as a visibility) — extinction
   ``alpha = 3.912 / V (lambda / 550 nm)^-q`` (Koschmieder's law; Kim, McArthur, Korevaar 2001,
   "Comparison of laser beam propagation at 785 nm and 1550 nm in fog and haze for optical wireless
@@ -123,10 +133,11 @@ def footprint_offsets(divergence_deg: tuple[float, float], subrays: int) -> np.n
     return np.array(pts)
 
 
-def return_gain(cos_incidence, range_m, extinction_1_m: float) -> np.ndarray:
-    """Returned power against a clear head-on return: ``|cos theta| exp(-2 alpha R)`` (effects
-    ``incidence`` and ``weather``; pass ``cos_incidence = 1`` or ``extinction_1_m = 0`` for one off)."""
-    return np.asarray(cos_incidence, float) * np.exp(-2.0 * extinction_1_m * np.asarray(range_m, float))
+def return_gain(ray_gain, range_m, extinction_1_m: float) -> np.ndarray:
+    """Returned power against a clear head-on return of the whole beam: ``g exp(-2 alpha R)``, ``g``
+    = ``|cos theta|`` (effect ``incidence``) times the share of the beam in the echo (effect
+    ``mixed_pixels``); pass ``ray_gain = 1`` or ``extinction_1_m = 0`` for either off."""
+    return np.asarray(ray_gain, float) * np.exp(-2.0 * extinction_1_m * np.asarray(range_m, float))
 
 
 def range_noise_sigma_m(range_m, range_limit_m_, range_noise_m: float, noise_limit_m: float) -> np.ndarray:

@@ -59,6 +59,9 @@ EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     # returned power against the incidence angle (Lambertian): no parameters
     "incidence": {},
     # fog / haze / dust as a visibility: extinction, droplet returns near the sensor
+    # a beam's footprint on a near edge and a far surface: one echo, mixed or the stronger (sub-rays
+    # of beam_footprint)
+    "mixed_pixels": {"mixed_resolution_m": 0.75},
     "weather": {"weather_visibility_m": 1000.0, "weather_clutter_prob": 0.002, "weather_clutter_min_m": 1.0,
                 "weather_clutter_max_m": 10.0},
 }
@@ -227,6 +230,9 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
 
     if "range_noise_model" in effects and "range_noise" not in effects:
         raise UserError(f"{w}: effect 'range_noise_model' shapes the range noise; list 'range_noise' too")
+    if "mixed_pixels" in effects and "beam_footprint" not in effects:
+        raise UserError(f"{w}: effect 'mixed_pixels' splits the beam into beam_footprint's sub-rays; "
+                        "list 'beam_footprint' too")
     if "weather" in effects:
         if not params["weather_visibility_m"] > 0:
             raise UserError(f"{we}: weather_visibility_m must be > 0, got {params['weather_visibility_m']}")

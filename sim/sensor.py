@@ -92,6 +92,7 @@ class SceneSensor:
         self._noise_limit_m = self._param_if("range_noise_model", "noise_limit_m")
         self._extinction_1_m = (fx.extinction_1_m(scene.param("weather_visibility_m")) if scene.has("weather") else 0.0)
         self._cos = _NONE            # this frame's |cos incidence| per ray (effect incidence)
+        self._share = _NONE          # this frame's share of the beam in its echo (effect mixed_pixels)
         # A Livox's rain/fog suppression (the SDK's lidar command 0x03, sim.virtual_lidar): drops the
         # droplet returns of the weather effect; their draws are taken either way.
         self.rain_fog_suppression = False
@@ -105,7 +106,7 @@ class SceneSensor:
         # Which effects act, asked once (a frame asked the scene eight times).
         self._has = {name: scene.has(name) for name in
                      ("return_probability", "dropouts", "range_noise", "angular_noise", "sunlight", "beam_footprint",
-                      "stray_returns", "incidence", "weather")}
+                      "stray_returns", "incidence", "weather", "mixed_pixels")}
         self._target_prim_end = sum(spec.body.prims.shape[0] for spec in scene.targets)
         # Per target, what sizes its per-frame cull (computed once: both walk Python objects).
         self._cull = [(spec.body.bounding_radius_m, spec.trajectory.max_speed_m_s) for spec in scene.targets]
@@ -138,6 +139,8 @@ class SceneSensor:
         prim.fill(-1)
         if has["incidence"]:
             self._cos = np.ones(n)
+        if has["mixed_pixels"]:
+            self._share = np.ones(n)
         offset = 0
         for spec, cull in zip(scene.targets, self._cull):
             self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
@@ -181,7 +184,7 @@ class SceneSensor:
             prim, chunk.status, rng_m, chunk.direction, chunk.t_ns, self._range_limit_m, self._refl_byte_table,
             self._target_prim_end, u_return, u_dropout, self._dropout_rate, range_normals, self._range_noise_m,
             angular_normals, self._angular_noise_rad, True, self._min_range_m, self._max_range_m,
-            self._refl_table, self._cos if has["incidence"] else _NONE, self._extinction_1_m, self._noise_limit_m,
+            self._refl_table, self._ray_gain(), self._extinction_1_m, self._noise_limit_m,
             clutter, CLUTTER_REFLECTIVITY_BYTE, xyz, pt_ns, refl_byte, on_target)
         xyz, pt_ns, refl_byte, on_target = xyz[:k], pt_ns[:k], refl_byte[:k], on_target[:k]
         if has["sunlight"] and n:
@@ -229,6 +232,16 @@ class SceneSensor:
         self.draw_calls[effect] += 1
         return self._sources[effect]
 
+    def _ray_gain(self) -> np.ndarray:
+        """Per ray, the power gain of incidence and of the footprint's share (empty: neither listed)."""
+        if self._has["incidence"] and self._has["mixed_pixels"]:
+            return self._cos * self._share
+        if self._has["incidence"]:
+            return self._cos
+        if self._has["mixed_pixels"]:
+            return self._share
+        return _NONE
+
     def _droplets(self, chunk) -> np.ndarray:
         """Droplet returns of the weather effect: per ray the range of its droplet (inf: none), or
         none at all while the rain/fog suppression is on (drawn either way: the stream does not
@@ -262,6 +275,8 @@ class SceneSensor:
         prim[rays] = self._stray_prim
         if self._has["incidence"]:
             self._cos[rays] = 1.0      # an insect or a grain: no surface to be oblique to
+        if self._has["mixed_pixels"]:
+            self._share[rays] = 1.0
         self.last_strays_m = d_world[rays] * r[:, None]      # world frame, for the truth
 
     def _cast_target(self, spec, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset):
@@ -304,6 +319,10 @@ class SceneSensor:
         e_az = np.cross(up, d)
         e_az /= np.maximum(np.linalg.norm(e_az, axis=1, keepdims=True), 1e-12)
         e_el = np.cross(d, e_az)
+        if self._has["mixed_pixels"]:
+            self._mixed(offs, d, e_az, e_el, cast, idx, rng_m, prim, offset, prims.shape[0])
+            self._incidence_on(spec, idx, d_world, pos, yaw, rng_m, prim, offset, flap)
+            return
         hits = np.zeros(idx.size, dtype=np.int64)
         best = np.full(idx.size, np.inf)
         best_prim = np.full(idx.size, -1, dtype=np.int64)
@@ -323,6 +342,37 @@ class SceneSensor:
         rng_m[idx[take]] = best[take]
         prim[idx[take]] = best_prim[take]
         self._incidence_on(spec, idx, d_world, pos, yaw, rng_m, prim, offset, flap)
+
+    def _mixed(self, offs, d, e_az, e_el, cast, idx, rng_m, prim, offset, n_prims):
+        """Mixed pixels (effect ``mixed_pixels``): each sub-ray of the candidate beams against this
+        body and the static background, then one echo per beam (:func:`sim.sensor_kernels.
+        mixed_pixel_kernel`); a beam whose footprint touches the body takes it if nearer than what
+        an earlier body gave.  Moving objects behind (other drones, birds, crowns) are not mixed in."""
+        k = idx.size
+        sub_r = np.full((k, len(offs)), np.inf)
+        sub_p = np.full((k, len(offs)), -1, dtype=np.int64)
+        local = np.arange(k, dtype=np.int64)
+        bg_offset = int(self._object_prim_start[-1])
+        for s, (a, b) in enumerate(offs):
+            sub = d + a * e_az + b * e_el
+            sub /= np.linalg.norm(sub, axis=1, keepdims=True)
+            r = np.full(k, np.inf)
+            p = np.full(k, -1, dtype=np.int64)
+            cast(local, sub, r, p)
+            if self._bg.shape[0]:
+                wk.cast_static_kernel(sub, self._bg, bg_offset, r, p)
+            sub_r[:, s] = r
+            sub_p[:, s] = p
+        touched = np.any((sub_p >= offset) & (sub_p < offset + n_prims), axis=1)
+        out_r = np.empty(k)
+        out_p = np.empty(k, dtype=np.int64)
+        share = np.empty(k)
+        sk.mixed_pixel_kernel(sub_r, sub_p, self._refl_table, float(self.scene.param("mixed_resolution_m")),
+                              out_r, out_p, share)
+        take = touched & (out_r < rng_m[idx])
+        rng_m[idx[take]] = out_r[take]
+        prim[idx[take]] = out_p[take]
+        self._share[idx[take]] = share[take]
 
     def _incidence_on(self, spec, idx, d_world, pos, yaw, rng_m, prim, offset, flap):
         """|cos incidence| of the rays ``idx`` that hit this body (effect incidence), along the

@@ -62,7 +62,7 @@ def _refl_byte(refl, gain):
 def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m, refl_byte_table, target_prim_end,
                             u_return, u_dropout, dropout_rate, range_normals, range_noise_m, angular_normals,
                             angular_noise_rad, mm_grid, min_range_m, max_range_m,
-                            refl_table, cos_incidence, extinction_1_m, noise_limit_m, clutter_range_m, clutter_refl_byte,
+                            refl_table, ray_gain, extinction_1_m, noise_limit_m, clutter_range_m, clutter_refl_byte,
                             out_xyz, out_t_ns, out_refl, out_on_target):
     """Points of the hits, effects applied, in scan order; returns how many were kept.
 
@@ -83,8 +83,9 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
     * ``angular_normals`` (standard normals, 3 per hit, flat or (H, 3)): ``0.0 + angular_noise_rad * z``
       [rad] is added to the direction, which is then renormalised (:func:`sim.effects.angular_noise_draws`).
 
-    The return's power gain against a clear, head-on return (:func:`sim.effects.return_gain`):
-    ``cos_incidence[j]`` (effect ``incidence``; empty: off) times the two-way transmission
+    The return's power gain against a clear, head-on return of the whole beam
+    (:func:`sim.effects.return_gain`): ``ray_gain[j]`` (empty: off; effect ``incidence``'s
+    ``|cos theta|`` times effect ``mixed_pixels``' share of the beam in the echo) times the two-way transmission
     ``exp(-2 extinction_1_m r)`` (effect ``weather``; 0: off).  It scales the effective reflectivity,
     so the range limit by ``sqrt(gain)`` (:func:`sim.effects.range_limit_m`), the range noise of the
     model, and the reflectivity byte (``refl_table[m] * gain``, :func:`_refl_byte`).
@@ -109,7 +110,7 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
     use_rn = range_normals.shape[0] > 0
     an = angular_normals.reshape(-1)
     use_an = an.shape[0] > 0
-    use_inc = cos_incidence.shape[0] > 0
+    use_inc = ray_gain.shape[0] > 0
     use_ext = extinction_1_m > 0.0
     use_gain = use_inc or use_ext
     use_model = noise_limit_m > 0.0
@@ -126,7 +127,7 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
         if keep:
             h += 1
             if use_inc:
-                gain = cos_incidence[j]
+                gain = ray_gain[j]
             if use_ext:
                 gain = gain * math.exp(-2.0 * extinction_1_m * r)
             r_max = range_limit_m[m]
@@ -200,3 +201,62 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
         out_on_target[k] = m < target_prim_end
         k += 1
     return k
+
+
+@njit(cache=True, nogil=True)
+def mixed_pixel_kernel(sub_r, sub_prim, refl_table, resolution_m, out_r, out_prim, out_share):
+    """One echo per beam from its footprint's sub-rays (effect ``mixed_pixels``, :mod:`sim.effects`).
+
+    Row ``k``: the ranges ``sub_r[k]`` (inf: nothing) and primitives of the S sub-rays of one beam,
+    equal shares of its energy.  Each sub-ray returns power ``rho / r^2`` (``refl_table[prim]``).
+    Sorted by range, sub-rays closer than ``resolution_m`` to the previous one merge into one echo
+    (a pulse cannot resolve them): its range is the power-weighted mean of theirs -- a mixed pixel
+    between the surfaces.  The beam reports its strongest echo (ties: the nearer): ``out_r[k]``,
+    ``out_prim[k]`` (the echo's strongest sub-ray's primitive) and ``out_share[k]``, the share of
+    the beam's energy in that echo (its sub-rays / S), which scales the echo's power; inf, -1, 0
+    when no sub-ray hits anything."""
+    n, s = sub_r.shape
+    order = np.empty(s, dtype=np.int64)
+    for k in range(n):
+        m = 0
+        for i in range(s):             # the sub-rays that hit, by range (insertion sort: S <= 64)
+            if sub_prim[k, i] < 0:
+                continue
+            r = sub_r[k, i]
+            j = m
+            while j > 0 and sub_r[k, order[j - 1]] > r:
+                order[j] = order[j - 1]
+                j -= 1
+            order[j] = i
+            m += 1
+        best_p = -1.0
+        best_r = math.inf
+        best_prim = -1
+        best_share = 0.0
+        a = 0
+        while a < m:
+            b = a + 1
+            while b < m and sub_r[k, order[b]] - sub_r[k, order[b - 1]] <= resolution_m:
+                b += 1
+            p_sum = 0.0
+            pr_sum = 0.0
+            p_max = -1.0
+            prim_max = -1
+            for q in range(a, b):
+                i = order[q]
+                r = sub_r[k, i]
+                p = refl_table[sub_prim[k, i]] / (r * r)
+                p_sum += p
+                pr_sum += p * r
+                if p > p_max:
+                    p_max = p
+                    prim_max = sub_prim[k, i]
+            if p_sum > best_p:           # strictly stronger: of equal echoes the nearer stays
+                best_p = p_sum
+                best_r = pr_sum / p_sum
+                best_prim = prim_max
+                best_share = (b - a) / s
+            a = b
+        out_r[k] = best_r
+        out_prim[k] = best_prim
+        out_share[k] = best_share

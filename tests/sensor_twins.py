@@ -91,3 +91,29 @@ def returns_twin(prim, status, range_m, d_lidar, t_ns, refl_table, target_prim_e
 def rngs_normal_scale(sigma_m, z):
     """``rng.normal(0, sigma)``'s expression from its standard normals: ``0.0 + sigma * z``."""
     return 0.0 + sigma_m * z
+
+
+def mixed_pixel_twin(sub_r, sub_prim, refl_table, resolution_m):
+    """One echo per beam, written from the model's words (sim.effects, mixed pixels): group the hit
+    sub-rays by range gaps <= resolution, power rho / r^2, the strongest group (the nearer of equal
+    ones) at its power-weighted range."""
+    n, s = sub_r.shape
+    out_r, out_p, out_share = np.full(n, np.inf), np.full(n, -1, dtype=np.int64), np.zeros(n)
+    for k in range(n):
+        hit = np.flatnonzero(sub_prim[k] >= 0)
+        if hit.size == 0:
+            continue
+        hit = hit[np.argsort(sub_r[k, hit], kind="stable")]
+        r = sub_r[k, hit]
+        p = refl_table[sub_prim[k, hit]] / (r * r)
+        groups = np.split(np.arange(hit.size), np.flatnonzero(np.diff(r) > resolution_m) + 1)
+        best = None
+        for g in groups:
+            pg = p[g].sum()
+            if best is None or pg > best[0]:
+                best = (pg, g)
+        pg, g = best
+        out_r[k] = np.sum(p[g] * r[g]) / pg
+        out_p[k] = sub_prim[k, hit[g[np.argmax(p[g])]]]
+        out_share[k] = g.size / s
+    return out_r, out_p, out_share
