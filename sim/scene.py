@@ -65,6 +65,11 @@ EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     "weather": {"weather_visibility_m": 1000.0, "weather_clutter_prob": 0.002, "weather_clutter_min_m": 1.0,
                 "weather_clutter_max_m": 10.0},
 }
+# Effects that act on another's draws or sub-rays, with what each needs listed beside it.
+EFFECT_REQUIRES: dict[str, tuple[str, ...]] = {
+    "range_noise_model": ("range_noise",),      # shapes the range noise's sigma
+    "mixed_pixels": ("beam_footprint",),        # splits the beam into its sub-rays
+}
 TRAJECTORY_TYPES = ("straight", "circle", "figure8", "waypoints", "manual")
 GEOMETRIES = ("quadrotor", "sphere", "box")
 BACKGROUND_TYPES = ("ground", "wall", "room", "box")
@@ -228,11 +233,10 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         raise UserError(f"{we}: stray_min_range_m = {params['stray_min_range_m']} must be below "
                         f"stray_max_range_m = {params['stray_max_range_m']}")
 
-    if "range_noise_model" in effects and "range_noise" not in effects:
-        raise UserError(f"{w}: effect 'range_noise_model' shapes the range noise; list 'range_noise' too")
-    if "mixed_pixels" in effects and "beam_footprint" not in effects:
-        raise UserError(f"{w}: effect 'mixed_pixels' splits the beam into beam_footprint's sub-rays; "
-                        "list 'beam_footprint' too")
+    for e, needs in EFFECT_REQUIRES.items():
+        missing = [n for n in needs if e in effects and n not in effects]
+        if missing:
+            raise UserError(f"{w}: effect {e!r} acts on {', '.join(map(repr, missing))}; list it too")
     if "weather" in effects:
         if not params["weather_visibility_m"] > 0:
             raise UserError(f"{we}: weather_visibility_m must be > 0, got {params['weather_visibility_m']}")

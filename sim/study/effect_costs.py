@@ -12,8 +12,10 @@ seed with fig12 as shipped (the **reference**):
 
 Excluded (:data:`EXCLUDED`): the effects fig12 already lists (range noise, motor speed noise, the
 return probability): adding them changes nothing, and measuring them removed would answer another
-question (what the reference's own effects cost).  An effect that needs another to be listed
-(``range_noise_model`` shapes ``range_noise``) is measured on fig12, which lists it.
+question (what the reference's own effects cost).  An effect that needs another listed
+(:data:`sim.scene.EFFECT_REQUIRES`: ``range_noise_model`` shapes ``range_noise``, ``mixed_pixels``
+splits ``beam_footprint``'s beams) is added with what it needs and fig12 lacks; its row is named
+so (``mixed_pixels + beam_footprint``), and the needed effect's own row shows its share.
 
 Each run first runs a short throwaway loop with the same effect, so that its kernels are loaded
 from numba's cache (or compiled) before anything is timed.
@@ -52,6 +54,16 @@ def measured_effects() -> list[str]:
     return [e for e in EFFECT_DEFAULTS if e not in skip]
 
 
+def label(effect: str | None) -> str:
+    """The row's name: the effect, with what it needs and fig12 lacks (``mixed_pixels + beam_footprint``)."""
+    if effect is None:
+        return REFERENCE
+    from sim.scene import EFFECT_REQUIRES
+
+    listed = _fig12_data()["scene"].get("effects", [])
+    return " + ".join([effect] + [e for e in EFFECT_REQUIRES.get(effect, ()) if e not in listed])
+
+
 def effect_scene(effect: str | None, duration_s: float, seed: int):
     """fig12-tracking with ``effect`` added to its list (None: as shipped), at ``duration_s``, ``seed``."""
     from sim.scene import EFFECT_DEFAULTS, scene_from_mapping
@@ -62,7 +74,10 @@ def effect_scene(effect: str | None, duration_s: float, seed: int):
     if effect is not None:
         if effect not in EFFECT_DEFAULTS:
             raise ValueError(f"unknown effect {effect!r}; allowed: {', '.join(EFFECT_DEFAULTS)}")
-        data["scene"]["effects"] = list(data["scene"].get("effects", [])) + [effect]
+        from sim.scene import EFFECT_REQUIRES
+
+        listed = list(data["scene"].get("effects", []))
+        data["scene"]["effects"] = listed + [e for e in EFFECT_REQUIRES.get(effect, ()) if e not in listed] + [effect]
     return scene_from_mapping(data, f"{SCENES_DIR / SCENE_FILES['fig12']} (+ {effect or 'nothing'})")
 
 
@@ -80,7 +95,7 @@ class EffectTask:
 
     @property
     def label(self) -> str:
-        return self.effect or REFERENCE
+        return label(self.effect)
 
     def run(self) -> dict:
         run_loop(effect_scene(self.effect, 0.2, self.seed))      # the effect's kernels loaded, untimed

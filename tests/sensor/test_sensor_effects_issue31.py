@@ -362,3 +362,20 @@ def test_mixed_pixels_at_a_box_edge_in_front_of_a_wall(gap_m):
         assert between["mixed"] > 5
     else:
         assert between["mixed"] == 0
+
+
+@pytest.mark.parametrize("effects, params, words", [
+    (["range_noise_model"], {}, ["range_noise_model", "'range_noise'", "list it too"]),
+    (["mixed_pixels"], {}, ["mixed_pixels", "'beam_footprint'"]),
+    (["weather"], {"weather_visibility_m": 0.0}, ["weather_visibility_m", "> 0"]),
+    (["weather"], {"weather_clutter_prob": 2.0}, ["weather_clutter_prob", "[0, 1]"]),
+    (["weather"], {"weather_clutter_min_m": 20.0}, ["weather_clutter_min_m", "below"]),
+    (["incidence"], {"noise_limit_m": 0.1}, ["noise_limit_m", "range_noise_model", "does not list"]),
+])
+def test_scene_errors_name_what_is_wrong(effects, params, words):
+    from foveatrack.errors import UserError
+
+    with pytest.raises(UserError) as e:
+        scene_from_mapping({"scene": {"effects": effects}, "effects": params}, "bad.toml")
+    for w in words + ["bad.toml"]:
+        assert w in str(e.value)

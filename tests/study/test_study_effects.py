@@ -81,3 +81,11 @@ def test_effects_route_user_errors(tmp_path, capsys):
                  "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "moonlight" in err and "range_noise" in err and "weather" in err
+
+
+def test_an_effect_that_needs_another_is_measured_with_it():
+    scene = ec.effect_scene("mixed_pixels", 1.0, 5)
+    assert scene.has("mixed_pixels") and scene.has("beam_footprint")
+    assert ec.label("mixed_pixels") == "mixed_pixels + beam_footprint"
+    assert ec.label("range_noise_model") == "range_noise_model"        # fig12 lists range_noise
+    assert ec.effect_scene("range_noise_model", 1.0, 5).has("range_noise")
