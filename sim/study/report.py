@@ -329,9 +329,10 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
                            else f"{_f(c['error'])} ({_f(c.get('error_hi'))})" if c["error"] is not None else "-"),
                           ", ".join(c.get("cost_ties") or []) or "-"]
                          for c in g["cheapest"]])
-    L += ["## Regenerate", "", "```", COMMAND, "```", "",
+    L += ["## Regenerate", "", "```", COMMAND, EFFECTS_COMMAND, "```", "",
           "Add `--scheduler tcp://HOST:8786` to run the same tasks on a Dask cluster, `--quick` for the small "
-          "version; `--from-json FILE` rewrites the report and plots from saved results without rerunning.", ""]
+          "version; `--from-json FILE` rewrites the report and plots from saved results without rerunning.  The "
+          "second command runs section 7 alone and writes it into the existing results and page.", ""]
     return "\n".join(L)
 
 
