@@ -279,10 +279,10 @@ def test_listing_a_new_effect_changes_no_other_effects_draws(effect, monkeypatch
 
 
 def test_the_fog_scene_thins_the_drone_and_its_droplets_stay_out_of_the_tracker_space():
-    """scenes/drone-in-fog.toml: the fog takes most of the drone's points at 60 m (two-way
-    transmission 0.15, its head-on range limit 62 m: fewer than 3/4 of the clear-air points remain; 6 s
-    hold ~30 of them); the droplet returns (within
-    10 m) are outside the tracker's space D, which starts 15 m out, so no detection is a droplet."""
+    """scenes/drone-in-fog.toml: the fog takes many of the drone's points at 60 m (two-way
+    transmission 0.39: the partial-beam hits of its thin arms fall below the range limit; fewer
+    than 3/4 of the clear-air points remain over 6 s); the droplet returns (within 10 m) are
+    outside the tracker's space D, which starts 15 m out, so no detection is a droplet."""
     from sim.summary import summarize
 
     fog = replace(load_scene(SCENES / "drone-in-fog.toml"), duration_s=6.0)
