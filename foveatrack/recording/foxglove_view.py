@@ -86,8 +86,8 @@ class FoxgloveChannels:
         ctx = self.context
         self.first_log_order: list[str] = []     # channel names in the order of their first message
         self._seen: set[str] = set()
-        # the SDK's own foxglove.PointCloud schema, on a plain channel: the points are encoded by the
-        # SDK (foxglove.messages.PointCloud.encode) with the frame index appended (format.encode_points_pb)
+        # the SDK's own foxglove.PointCloud schema, on a plain channel: the points are encoded as the
+        # SDK encodes them, from a template made once per layout (format.encode_points_pb)
         probe = foxglove.channels.PointCloudChannel("/_schema_probe", context=ctx)
         pc_schema = probe.schema()
         probe.close()
@@ -135,10 +135,10 @@ class FoxgloveChannels:
 
     # ------------------------------------------------------------------ records
 
-    def log_points(self, t_ns: int, frame_id: int, packed: np.ndarray, dt_unit_ns: int = 1) -> None:
+    def log_points(self, t_ns: int, packed: np.ndarray) -> None:
         self.end_frame()
         self._note(POINTS)
-        self._points.log(encode_points_pb(t_ns, frame_id, packed, dt_unit_ns), log_time=self._lt(t_ns))
+        self._points.log(encode_points_pb(t_ns, packed), log_time=self._lt(t_ns))
 
     def log_imu(self, t_ns: int, frame_id: int, t_s: np.ndarray, gyro_rad_s: np.ndarray,
                 accel_g: np.ndarray | None = None) -> None:
