@@ -120,6 +120,8 @@ def check_options(path, meta, flush_every_frames, compression, compression_level
 
 
 COMPRESSIONS = ("lz4", "zstd", "none")
+# json.dumps(rec, default=_to_jsonable) to the byte, without building an encoder per record (~5 us each)
+_RECORD_JSON = json.JSONEncoder(default=_to_jsonable)
 
 
 class RecordingWriter(RecordCalls):
@@ -245,7 +247,7 @@ class RecordingWriter(RecordCalls):
             raise ValueError(f"bad channel name {channel!r}")
         t_ns = self._add(channel, t_ns)
         rec = {"t_ns": t_ns, **record}
-        self.view.log_json(channel, t_ns, json.dumps(rec, default=_to_jsonable).encode(), rec)
+        self.view.log_json(channel, t_ns, _RECORD_JSON.encode(rec).encode(), rec)
 
     def write_points(
         self,
