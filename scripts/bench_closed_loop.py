@@ -201,7 +201,7 @@ def recording_floor(xyz, t_ns, reflectivity) -> tuple[str, float]:
 
     from foveatrack.recording.pack_kernels import pack_points
 
-    packed, _ = pack_points(xyz, t_ns - t_ns[-1], reflectivity)
+    packed = pack_points(xyz, int(t_ns[-1]), t_ns, reflectivity)
     data = packed.tobytes()
     zstd = zstandard.ZstdCompressor(level=1)
     return (f"recording: zstd level 1 of the frame's {len(packed)} packed points ({len(data) / 1e3:.0f} kB)",

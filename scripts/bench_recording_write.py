@@ -128,14 +128,14 @@ def main() -> None:
     ap.add_argument("--levels", action="store_true", help="with --scene: the compressions and levels on the "
                                                           "loop's thread (size and CPU of each)")
     a = ap.parse_args()
-    cases = [("format 3, zstd 1 (default)", RecordingWriter, {}),
-             ("format 3, zstd 3", RecordingWriter, {"compression_level": 3}),
-             ("format 3, lz4", RecordingWriter, {"compression": "lz4"}),
-             ("format 3, none", RecordingWriter, {"compression": "none"}),
-             ("format 3, zstd 1, points off the mm grid (float64)", RecordingWriter, {"off_grid": True}),
-             ("format 3, zstd 1, from a writer process", writer_process, {}),
-             ("format 3, zstd 1, + 20 IMU samples a frame", RecordingWriter, {"imu": True}),
-             ("format 3, zstd 1, + 20 IMU samples, writer process", writer_process, {"imu": True})]
+    cases = [("format 4, zstd 1 (default)", RecordingWriter, {}),
+             ("format 4, zstd 3", RecordingWriter, {"compression_level": 3}),
+             ("format 4, lz4", RecordingWriter, {"compression": "lz4"}),
+             ("format 4, none", RecordingWriter, {"compression": "none"}),
+             ("format 4, zstd 1, points off the mm grid (float64)", RecordingWriter, {"off_grid": True}),
+             ("format 4, zstd 1, from a writer process", writer_process, {}),
+             ("format 4, zstd 1, + 20 IMU samples a frame", RecordingWriter, {"imu": True}),
+             ("format 4, zstd 1, + 20 IMU samples, writer process", writer_process, {"imu": True})]
     if a.old:
         spec = importlib.util.spec_from_file_location("old_writer", a.old)
         mod = importlib.util.module_from_spec(spec)
@@ -155,12 +155,12 @@ def main() -> None:
 
 
 def scene_report(scene: str, old_cls, levels: bool = False, gyro: bool = False) -> None:
-    runs = [("format 3, zstd 1, on the loop's thread (--one-thread)", False, None, {}),
-            ("format 3, zstd 1, from a writer process (simulate --out)", True, None, {})]
+    runs = [("format 4, zstd 1, on the loop's thread (--one-thread)", False, None, {}),
+            ("format 4, zstd 1, from a writer process (simulate --out)", True, None, {})]
     if levels:
         runs += [(f"format 3, {c} {lv}, on the loop's thread", False, None, {"compression": c, "compression_level": lv})
                  for c, lv in (("lz4", 0), ("zstd", 2), ("zstd", 3), ("zstd", 4), ("zstd", 6))]
-        runs.append(("format 3, none, on the loop's thread", False, None, {"compression": "none"}))
+        runs.append(("format 4, none, on the loop's thread", False, None, {"compression": "none"}))
     if old_cls is not None:
         runs.insert(0, ("python mcap writer (format 1, lz4)", False, old_cls, {}))
     print(f"{scene}{' (gyro variant)' if gyro else ''}: closed loop without / with the recording")

@@ -4,11 +4,11 @@ Why MCAP: it is the ROS 2 default log container, append-only and chunked, with p
 summary at the end that a reader does not need.  Everything up to the last *completed chunk* of a
 file cut short (kill -9, power loss) is readable, and Foxglove Studio / ``mcap`` CLI open the files.
 
-Layout of a recording (``profile`` "foveatrack", format version 3, written with the Foxglove SDK;
+Layout of a recording (``profile`` "foveatrack", format version 4, written with the Foxglove SDK;
 docs/recordings.md lists every channel):
 
 - an MCAP Metadata record ``foveatrack`` written first, with string values ``format`` =
-  "foveatrack-recording", ``format_version`` = "3", ``meta_json`` (the writer's ``meta`` dict as JSON:
+  "foveatrack-recording", ``format_version`` = "4", ``meta_json`` (the writer's ``meta`` dict as JSON:
   scene/config text, seed, ...), ``foveatrack_version``, ``numpy_version``, ``python_version``,
   ``writer``, ``created_utc``, ``log_time`` (how the MCAP log times were made: "t_ns+OFFSET" [ns], the
   simulator's scene start in UTC, or "host_utc", the daemon's host clock; absent before: t_ns itself);
@@ -17,9 +17,10 @@ docs/recordings.md lists every channel):
   the channel names along.
 - channel ``/points``: ``foxglove.PointCloud`` in protobuf, one message per lidar frame, log time from the
   frame's ``t_ns`` (above; its ``timestamp`` is ``t_ns``), ``frame_id`` "lidar", ``pose`` identity, packed points (little-endian, no padding): x, y, z [m, lidar
-  frame X forward, Y left, Z up], ``dt`` (point time − frame ``t_ns`` in the unit of protobuf field 16,
-  [ns], absent = 1; int16 where that holds it, else int32), ``reflectivity`` uint8; the frame index in
-  protobuf field 15 (fields 15 and 16 are not in the schema; decoders skip them).  x, y, z of a frame
+  frame X forward, Y left, Z up], ``age_ns`` int32 (frame ``t_ns`` − point time [ns], >= 0),
+  ``reflectivity`` uint8, and no field outside Foxglove's schema: the frame index is read from the
+  frame's ``/detections`` record (format 3 put it and the unit of its ``dt`` in protobuf fields 15
+  and 16, read by ``format.decode_points_legacy_v2_v3``).  x, y, z of a frame
   on the Livox mm grid (``foveatrack.livox.protocol.mm_to_m`` of int32 mm, as the client decodes and
   the simulator outputs) are float32 multiples of 2^-11 m within 0.25 mm of the point, from which
   ``rint(1000 v)`` is the mm value exactly; any other frame is float64.  Either way replay gets the
@@ -37,7 +38,7 @@ docs/recordings.md lists every channel):
   head_est -> lidar, world -> head_true -> lidar_true), ``/scene`` (SceneUpdate), ``/log`` (Log).
 
 Format 1 (before the SDK: JSON ``/points`` with base64 data, a channel table in the first metadata
-record) and format 2 (float64 or plain float32 x, y, z, ``dt_ns`` int32) are still read.
+record), format 2 (float64 or plain float32 x, y, z, ``dt_ns`` int32) and format 3 are still read.
 
 Crash safety: records go into the current chunk; the chunk is completed and handed to the OS by
 :meth:`RecordingWriter.flush` and automatically when a new frame starts after ``flush_every_frames``

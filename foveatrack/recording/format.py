@@ -15,10 +15,12 @@ from typing import Any
 import numpy as np
 
 FORMAT = "foveatrack-recording"
-FORMAT_VERSION = "3"
+FORMAT_VERSION = "4"
 # 1: JSON + base64 points (python mcap writer); 2: Foxglove SDK, protobuf, float64 points;
-# 3: as 2, points on the Livox mm grid stored compactly (float32 on a 2^-11 m grid, time in its unit)
-READABLE_VERSIONS = ("1", "2", "3")
+# 3: as 2, points on the Livox mm grid stored compactly (float32 on a 2^-11 m grid, time in its unit);
+# 4: as 3, each /points message within Foxglove's PointCloud schema: the point times as int32
+#    ``age_ns`` (frame time - point time, >= 0), the frame index taken from the frame's /detections
+READABLE_VERSIONS = ("1", "2", "3", "4")
 META_CRC_KEY = "meta_crc32"    # the metadata record's own checksum (recordings made before it have none)
 
 
@@ -132,11 +134,12 @@ def _to_jsonable(x: Any) -> Any:
 
 
 @functools.lru_cache(maxsize=None)     # built once per layout: a dtype costs ~10 us, a frame's packing ~20
-def packed_point_dtype(xyz_dtype: str = "float64", dt_dtype: str = "<i4") -> np.dtype:
-    """Packed point layout of the ``/points`` channel (format 3): x, y, z, ``dt`` (point time - frame
-    time, in the frame's ``dt_unit_ns``), reflectivity."""
+def packed_point_dtype(xyz_dtype: str = "float64") -> np.dtype:
+    """Packed point layout of the ``/points`` channel (format 4): x, y, z [m], ``age_ns`` (frame time
+    ``t_ns`` - point time [ns]: >= 0 for a frame's points, which precede its end; what Foxglove colours
+    by), reflectivity."""
     f = {"float64": "<f8", "float32": "<f4"}[xyz_dtype]
-    return np.dtype([("x", f), ("y", f), ("z", f), ("dt", dt_dtype), ("reflectivity", "u1")])
+    return np.dtype([("x", f), ("y", f), ("z", f), ("age_ns", "<i4"), ("reflectivity", "u1")])
 
 
 # ------------------------------------------------------------------ format 3: points on the mm grid
@@ -170,28 +173,17 @@ def mm_grid_to_m(v: np.ndarray) -> np.ndarray:
     return mm_to_m(np.rint(v.astype(np.float64) * 1000.0).astype(np.int32))
 
 
-def pack_points_numpy(xyz: np.ndarray, dt_ns: np.ndarray, reflectivity: np.ndarray) -> tuple[np.ndarray, int]:
-    """The packed points of a frame and the unit of their ``dt`` [ns] (numpy twin of
-    :func:`foveatrack.recording.pack_kernels.pack_points`, which the writer uses)."""
+def pack_points_numpy(xyz: np.ndarray, age_ns: np.ndarray, reflectivity: np.ndarray) -> np.ndarray:
+    """The packed points of a frame (numpy twin of :func:`foveatrack.recording.pack_kernels.pack_points`,
+    which the writer uses): float32 on the mm grid when the frame is on it, float64 otherwise.
+    ``age_ns``: frame time - point time [ns], within int32 (the caller checks)."""
     grid = mm_grid_f32(xyz)
-    unit, dt_type = time_unit_ns(dt_ns)
-    out = np.empty(len(dt_ns), packed_point_dtype("float64" if grid is None else "float32", dt_type))
+    out = np.empty(len(age_ns), packed_point_dtype("float64" if grid is None else "float32"))
     src = xyz if grid is None else grid
     out["x"], out["y"], out["z"] = src[:, 0], src[:, 1], src[:, 2]
-    out["dt"] = dt_ns // unit
+    out["age_ns"] = age_ns
     out["reflectivity"] = reflectivity
-    return out, unit
-
-
-def time_unit_ns(dt_ns: np.ndarray) -> tuple[int, str]:
-    """The coarsest exact unit of the point times relative to the frame time (their gcd; 1 if all
-    are 0) and the narrowest integer type that holds them in it: int16 or int32.  A simulated Mid-40
-    frame: 10 000 ns (100 k points/s) and int16; a live frame's packet stamps usually give 1 ns."""
-    if not dt_ns.size:
-        return 1, "<i2"
-    unit = int(np.gcd.reduce(np.abs(dt_ns))) or 1
-    lo, hi = int(dt_ns.min()) // unit, int(dt_ns.max()) // unit
-    return unit, "<i2" if -(2**15) <= lo and hi < 2**15 else "<i4"
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -242,13 +234,14 @@ def _decode_points(data: bytes) -> PointsFrame:
 
 
 
-# ------------------------------------------------------------------ format 2: protobuf foxglove.PointCloud
+# ------------------------------------------------------------------ formats 2-4: protobuf foxglove.PointCloud
 # foxglove.PointCloud (https://docs.foxglove.dev/docs/visualization/message-schemas/point-cloud):
 # 1 timestamp {1 seconds, 2 nanos}, 2 frame_id, 3 pose, 4 point_stride (fixed32), 5 fields (repeated
-# {1 name, 2 offset fixed32, 3 type enum}), 6 data.  Field 15 (varint) carries the frame index: a field
-# the schema does not define, which protobuf decoders (Foxglove's among them) skip.
-FRAME_INDEX_FIELD = 15
-DT_UNIT_FIELD = 16      # format 3: the unit of the ``dt`` field [ns] (varint; absent: 1)
+# {1 name, 2 offset fixed32, 3 type enum}), 6 data.  Format 4 writes these fields and no other.
+# Formats 2 and 3 also wrote two varints the schema does not define (decoders skip them): field 15,
+# the frame index, and field 16 (format 3), the unit of their ``dt`` field [ns] (absent: 1).
+LEGACY_FRAME_INDEX_FIELD = 15
+LEGACY_DT_UNIT_FIELD = 16
 
 
 def _varint(v: int) -> bytes:
@@ -263,32 +256,33 @@ def _varint(v: int) -> bytes:
             return bytes(out)
 
 
-@functools.lru_cache(maxsize=1)     # made once: building it costs ~6 us, a frame's whole message ~20
-def _identity_pose():
-    from foxglove.messages import Pose, Quaternion, Vector3
-
-    return Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
-
-
-def encode_points_pb(t_ns: int, frame_id: int, packed: np.ndarray, dt_unit_ns: int = 1) -> bytes:
-    """One frame as a foxglove.PointCloud (protobuf), frame ``lidar``, with the frame index in field
-    15 and the unit of ``dt`` in field 16.  ``packed``: an array of :func:`packed_point_dtype`.  The
-    Foxglove SDK encodes the message without its point data; the data (field 6, bytes) is appended to
-    it, so the point data is copied once, not four times (a message's fields may come in any order)."""
-    from foxglove.messages import PackedElementField, PackedElementFieldNumericType as NT, PointCloud, Timestamp
+@functools.lru_cache(maxsize=None)     # one per layout: the SDK's encoding of it costs ~15 us a frame
+def _cloud_tail(dtype: np.dtype) -> bytes:
+    """Fields 2-5 of a PointCloud of packed points of ``dtype`` as the Foxglove SDK encodes them:
+    frame ``lidar``, pose identity (the points are in frame ``lidar``), the stride and the fields."""
+    from foxglove.messages import PackedElementField, PackedElementFieldNumericType as NT, PointCloud, Pose
+    from foxglove.messages import Quaternion, Vector3
 
     types = {"<f8": NT.Float64, "<f4": NT.Float32, "<i4": NT.Int32, "<i2": NT.Int16, "|u1": NT.Uint8}
     fields = [PackedElementField(name=name, offset=int(off), type=types[dt_.str])
-              for name, (dt_, off) in packed.dtype.fields.items()]
+              for name, (dt_, off) in dtype.fields.items()]
+    pose = Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+    return PointCloud(frame_id="lidar", pose=pose, point_stride=dtype.itemsize, fields=fields).encode()
+
+
+def encode_points_pb(t_ns: int, packed: np.ndarray) -> bytes:
+    """One frame as a foxglove.PointCloud (protobuf, format 4), the bytes the SDK's
+    ``PointCloud(...).encode()`` gives (tests/recording/test_pointcloud_schema.py): field 1 (the
+    frame's time) made here, fields 2-5 the layout's (:func:`_cloud_tail`), then the point data
+    (field 6), appended so that it is copied once.  ``packed``: an array of :func:`packed_point_dtype`."""
     t_ns = int(t_ns)
-    # pose: identity (the points are in frame ``lidar``); a PointCloud without one is outside the schema
-    head = PointCloud(timestamp=Timestamp(t_ns // 1_000_000_000, t_ns % 1_000_000_000), frame_id="lidar",
-                      pose=_identity_pose(),
-                      point_stride=packed.dtype.itemsize, fields=fields).encode()
+    sec, nsec = divmod(t_ns, 1_000_000_000)
+    ts = (b"\x08" + _varint(sec) if sec else b"") + (b"\x10" + _varint(nsec) if nsec else b"")
     data = memoryview(np.ascontiguousarray(packed)).cast("B")
-    unit = b"" if dt_unit_ns == 1 else _varint(DT_UNIT_FIELD << 3) + _varint(int(dt_unit_ns))
-    return b"".join((head, bytes([6 << 3 | 2]), _varint(data.nbytes), data,
-                     bytes([FRAME_INDEX_FIELD << 3]), _varint(int(frame_id)), unit))
+    tail = _cloud_tail(packed.dtype)
+    if not data.nbytes:             # proto3: an empty bytes field is not written
+        return b"".join((b"\x0a", _varint(len(ts)), ts, tail))
+    return b"".join((b"\x0a", _varint(len(ts)), ts, tail, b"\x32", _varint(data.nbytes), data))
 
 
 def _pb_fields(buf, i: int = 0, n: int | None = None):
@@ -326,16 +320,14 @@ def _read_varint(buf, i: int) -> tuple[int, int]:
         shift += 7
 
 
-def _decode_points_pb(data: bytes, mm_grid: bool = False) -> PointsFrame:
-    """A /points message of format 2 or 3 (``mm_grid``: format 3, where float32 x, y, z are mm-grid
-    values, :func:`mm_grid_to_m`; in format 2 they were plain float32)."""
+def _cloud_fields(data: bytes) -> tuple[int, np.ndarray, dict[int, int]]:
+    """(time [ns], the packed points, the varints of fields 15 and 16 if present) of a PointCloud."""
     mv = memoryview(data)
-    dt_unit = 1
     sec = nsec = 0
     stride = 0
     fields: list[tuple[str, int, int]] = []
     raw = b""
-    frame_index = -1
+    extra: dict[int, int] = {}
     for fno, _wt, v in _pb_fields(mv):
         if fno == 1:
             for f2, _w2, v2 in _pb_fields(v):
@@ -357,20 +349,39 @@ def _decode_points_pb(data: bytes, mm_grid: bool = False) -> PointsFrame:
             fields.append((name, off, typ))
         elif fno == 6:
             raw = v
-        elif fno == FRAME_INDEX_FIELD:
-            frame_index = v
-        elif fno == DT_UNIT_FIELD:
-            dt_unit = v
+        elif fno in (LEGACY_FRAME_INDEX_FIELD, LEGACY_DT_UNIT_FIELD):
+            extra[fno] = v
     if not stride or len(raw) % stride:
         raise ValueError(f"point data of {len(raw)} bytes is not a whole number of {stride}-byte points")
     dt = np.dtype({"names": [f[0] for f in fields], "formats": [_FOX_TO_NP[f[2]] for f in fields],
                    "offsets": [f[1] for f in fields], "itemsize": stride})
-    arr = np.frombuffer(raw, dtype=dt)
-    t_ns = sec * 1_000_000_000 + nsec
+    return sec * 1_000_000_000 + nsec, np.frombuffer(raw, dtype=dt), extra
+
+
+def _cloud_xyz(arr: np.ndarray, mm_grid: bool) -> np.ndarray:
     xyz = np.stack([arr["x"], arr["y"], arr["z"]], axis=1)
-    xyz = mm_grid_to_m(xyz) if mm_grid and xyz.dtype == np.float32 else xyz.astype(np.float64)
+    return mm_grid_to_m(xyz) if mm_grid and xyz.dtype == np.float32 else xyz.astype(np.float64)
+
+
+def decode_points_v4(data: bytes) -> PointsFrame:
+    """A /points message of format 4.  Its frame index is not in it: ``frame_index`` is -1 here, and
+    the reader takes it from the frame's /detections record (:func:`foveatrack.recording.reader.with_frame_index`)."""
+    t_ns, arr, _ = _cloud_fields(data)
+    if "age_ns" not in arr.dtype.names:
+        raise ValueError("a format-4 point cloud without its age_ns field")
+    return PointsFrame(t_ns, -1, _cloud_xyz(arr, True), t_ns - arr["age_ns"].astype(np.int64),
+                       arr["reflectivity"].astype(np.uint8))
+
+
+def decode_points_legacy_v2_v3(data: bytes, mm_grid: bool = False) -> PointsFrame:
+    """A /points message of format 2 or 3 (``mm_grid``: format 3, where float32 x, y, z are mm-grid
+    values, :func:`mm_grid_to_m`; in format 2 they were plain float32): the frame index in field 15,
+    point times as ``dt_ns`` (format 2) or ``dt`` in the unit of field 16 (format 3), from the frame time."""
+    t_ns, arr, extra = _cloud_fields(data)
+    dt_unit = extra.get(LEGACY_DT_UNIT_FIELD, 1)
+    frame_index = extra.get(LEGACY_FRAME_INDEX_FIELD, -1)
     dt_ns = arr["dt"].astype(np.int64) * dt_unit if "dt" in arr.dtype.names else arr["dt_ns"].astype(np.int64)
-    return PointsFrame(t_ns, frame_index, xyz, dt_ns + t_ns, arr["reflectivity"].astype(np.uint8))
+    return PointsFrame(t_ns, frame_index, _cloud_xyz(arr, mm_grid), dt_ns + t_ns, arr["reflectivity"].astype(np.uint8))
 
 
 # ------------------------------------------------------------------ /imu: the tracker's IMU samples

@@ -22,6 +22,7 @@ tracker's (:func:`foveatrack.reconstruction.rotation_matrix`): ``world = R_z(pan
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 
@@ -62,6 +63,11 @@ def log_clock(log_time: int | str):
     return lambda t_ns: int(t_ns) + log_time
 
 
+@functools.lru_cache(maxsize=64)        # a handful of colours, each made once
+def _colour(rgb: tuple, a: float):
+    return Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
+
+
 def _ts(t_ns: int):
     return Timestamp(int(t_ns) // 1_000_000_000, int(t_ns) % 1_000_000_000)
 
@@ -86,8 +92,8 @@ class FoxgloveChannels:
         ctx = self.context
         self.first_log_order: list[str] = []     # channel names in the order of their first message
         self._seen: set[str] = set()
-        # the SDK's own foxglove.PointCloud schema, on a plain channel: the points are encoded by the
-        # SDK (foxglove.messages.PointCloud.encode) with the frame index appended (format.encode_points_pb)
+        # the SDK's own foxglove.PointCloud schema, on a plain channel: the points are encoded as the
+        # SDK encodes them, from a template made once per layout (format.encode_points_pb)
         probe = foxglove.channels.PointCloudChannel("/_schema_probe", context=ctx)
         pc_schema = probe.schema()
         probe.close()
@@ -135,10 +141,10 @@ class FoxgloveChannels:
 
     # ------------------------------------------------------------------ records
 
-    def log_points(self, t_ns: int, frame_id: int, packed: np.ndarray, dt_unit_ns: int = 1) -> None:
+    def log_points(self, t_ns: int, packed: np.ndarray) -> None:
         self.end_frame()
         self._note(POINTS)
-        self._points.log(encode_points_pb(t_ns, frame_id, packed, dt_unit_ns), log_time=self._lt(t_ns))
+        self._points.log(encode_points_pb(t_ns, packed), log_time=self._lt(t_ns))
 
     def log_imu(self, t_ns: int, frame_id: int, t_s: np.ndarray, gyro_rad_s: np.ndarray,
                 accel_g: np.ndarray | None = None) -> None:
@@ -247,7 +253,7 @@ class FoxgloveChannels:
 
     @staticmethod
     def _color(rgb, a=1.0):
-        return Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
+        return _colour(tuple(rgb), a)
 
     def _sphere(self, ident, t_ns, frame, xyz, size_m, rgb):
         spheres = [] if xyz is None else [SpherePrimitive(
@@ -266,12 +272,12 @@ class FoxgloveChannels:
         self._note(SCENE_KEYFRAME)
         self._keyframe.log(SceneUpdate(entities=ents), log_time=self._lt(t_ns))
 
-    def _remember(self, name, xyz, rgb) -> None:
+    def _remember(self, name, p3, rgb) -> None:
         stride, pts = self._history.get(name, (1, []))
         self._path_colors[name] = rgb
         self._seen_points[name] = n = self._seen_points.get(name, 0) + 1
         if (n - 1) % stride == 0:
-            pts.append(xyz)
+            pts.append(p3)
         if len(pts) > HISTORY_POINTS:        # thin: keep every 2nd point, then take every 2*stride-th
             stride, pts = 2 * stride, pts[::2]
         self._history[name] = (stride, pts)
@@ -279,18 +285,20 @@ class FoxgloveChannels:
     def _path_point(self, name, t_ns, xyz, rgb):
         """Add a point to trajectory ``name``: the entity ``name/N`` of its current segment grows by
         one point; a new segment starts at the last point of the one before (no gap)."""
-        self._remember(name, xyz, rgb)
+        # one Point3 per point, made once: a segment is re-sent every frame, a history every keyframe
+        p3 = Point3(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
+        self._remember(name, p3, rgb)
         seg, pts = self._paths.get(name, (0, []))
         if len(pts) > SEGMENT_FRAMES:
             seg, pts = seg + 1, pts[-1:]
-        pts.append(xyz)
+        pts.append(p3)
         self._paths[name] = (seg, pts)
         return self._line(f"{name}/{seg}", t_ns, pts, rgb)
 
     def _line(self, ident, t_ns, pts, rgb):
+        """A line strip through ``pts`` (Point3) as entity ``ident``, frame world."""
         lines = [LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=2.0, scale_invariant=True,
-                               points=[Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in pts],
-                               color=self._color(rgb))] if len(pts) >= 2 else []
+                               points=pts, color=self._color(rgb))] if len(pts) >= 2 else []
         return SceneEntity(timestamp=_ts(t_ns), frame_id="world", id=ident, lines=lines)
 
     def _space_entities(self, t_ns) -> list:

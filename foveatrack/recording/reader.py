@@ -13,9 +13,10 @@ from typing import Iterable, Iterator
 
 from foveatrack.errors import UserError
 from foveatrack.recording import mcap_walk as mw
-from foveatrack.recording.format import (CHANNELS_META_NAME, FORMAT, IMU, MCAP_MAGIC, META_CRC_KEY, META_NAME,
-                                         POINTS, READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message, PointsFrame,
-                                         _decode_points, _decode_points_pb, decode_imu_pb, meta_crc32)
+from foveatrack.recording.format import (CHANNELS_META_NAME, DETECTIONS, FORMAT, IMU, MCAP_MAGIC, META_CRC_KEY,
+                                         META_NAME, POINTS, READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message,
+                                         PointsFrame, _decode_points, decode_imu_pb, decode_points_legacy_v2_v3,
+                                         decode_points_v4, meta_crc32)
 
 
 @dataclass(frozen=True)
@@ -518,8 +519,14 @@ class RecordingReader:
         time).  A channel this version does not know gives its records if its encoding is JSON, its raw bytes
         otherwise (a later version's binary channel: read past, not taken for damage)."""
         want = {channels} if isinstance(channels, str) else None if channels is None else set(channels)
-        pb = self.info.get("format_version") != "1"
-        mm_grid = self.info.get("format_version") not in ("1", "2")
+        if self.info.get("format_version") in ("1", "2", "3"):
+            return self._messages(want)
+        # format 4: a frame's index is in its /detections record, read along whether asked for or not
+        inner = None if want is None else want | {DETECTIONS} if POINTS in want else want
+        return with_frame_index(self._messages(inner), want)
+
+    def _messages(self, want: set[str] | None) -> Iterator[Message]:
+        version = self.info.get("format_version")
         for name, log_time, data in self._records():
             if want is None and name in VIEW_CHANNELS:
                 continue        # drawn for Foxglove from the records (protobuf); asked for by name: raw bytes
@@ -530,7 +537,9 @@ class RecordingReader:
                 continue
             try:
                 if name == POINTS:
-                    record = _decode_points_pb(data, mm_grid) if pb else _decode_points(data)
+                    record = (_decode_points(data) if version == "1" else
+                              decode_points_legacy_v2_v3(data, version == "3") if version in ("2", "3") else
+                              decode_points_v4(data))
                 elif name == IMU:
                     record = decode_imu_pb(data)
                 elif name in self._binary:
@@ -564,6 +573,45 @@ class RecordingReader:
         for name, _t, _d in self._records():
             out[name] = out.get(name, 0) + 1
         return out
+
+
+def with_frame_index(messages: Iterable[Message], want: set[str] | None) -> Iterator[Message]:
+    """Format 4's messages with each frame's index filled in (those of ``want``, all if None): a frame
+    (``/points``, with ``frame_index`` -1) waits, with what follows it, for the first ``/detections``
+    record after it (every driver writes one right after the points, in the same chunk), whose
+    ``frame_index`` it takes.  A frame without one before the next frame or the end (a file of points
+    alone) takes the frame before it's index + 1 (the first: 0)."""
+    from dataclasses import replace
+
+    held: list[Message] = []
+    last = -1
+
+    def release(k: int) -> Iterator[Message]:
+        pts = held[0]
+        if want is None or POINTS in want:
+            yield Message(pts.channel, pts.t_ns, replace(pts.record, frame_index=k))
+        yield from (m for m in held[1:] if want is None or m.channel in want)
+        held.clear()
+
+    for m in messages:
+        if m.channel == POINTS:
+            if held:
+                last += 1
+                yield from release(last)
+            held.append(m)
+            continue
+        if not held:
+            if want is None or m.channel in want:
+                yield m
+            continue
+        held.append(m)
+        if m.channel == DETECTIONS and isinstance(m.record, dict):
+            k = m.record.get("frame_index")
+            if isinstance(k, int) and not isinstance(k, bool):
+                last = k
+                yield from release(k)
+    if held:
+        yield from release(last + 1)
 
 
 def _record_t_ns(record, log_time: int) -> int:

@@ -460,7 +460,7 @@ def child_main(data_fd: int, back_fd: int, ring_fd: int | None = None, ring_byte
     from foveatrack.recording.writer import RecordingWriter
 
     # load the packing kernels now, while the caller still sets up (0.5 s the first time in a process)
-    pack_points(np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros(1, np.uint8))
+    pack_points(np.zeros((1, 3)), 0, np.zeros(1, np.int64), np.zeros(1, np.uint8))
     ring = None if ring_fd is None else _Ring(ring_fd, ring_bytes)
     _report(back_fd, "ready", None)
     writer = None

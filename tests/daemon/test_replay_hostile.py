@@ -57,10 +57,17 @@ def test_intact_chunks_out_of_order_are_skipped_and_named_not_a_traceback(sim_re
     """64 KiB of the file's second half copied over an earlier stretch: the copied chunks are intact (their
     CRCs verify) but go back in time after them; replay skipped nothing and crashed with "commands must
     come in time order".  Now the frames the tracker cannot take are skipped, counted and named."""
+    from mcap.reader import make_reader
+
     path, log, _ = sim_recording
     data = bytearray(open(path, "rb").read())
-    n = len(data)
-    data[n // 5:n // 5 + 65536] = data[n // 2:n // 2 + 65536]
+    # two whole chunks (with their message indexes) of the middle copied over the chunks a fifth in:
+    # at chunk boundaries, so the copies are intact whatever size a chunk has (a fixed 64 KiB held a
+    # whole chunk of format 3 but none of format 4's larger ones)
+    with open(path, "rb") as fh:
+        cks = sorted(c.chunk_start_offset for c in make_reader(fh).get_summary().chunk_indexes)
+    src, end, dst = cks[len(cks) // 2], cks[len(cks) // 2 + 2], cks[len(cks) // 5]
+    data[dst:dst + end - src] = data[src:end]
     bad = tmp_path / "ooo.mcap"
     bad.write_bytes(bytes(data))
     res = replay_recording(bad)

@@ -130,9 +130,10 @@ def test_transforms_chain_world_to_lidar_at_the_recorded_poses(sim_rec):
 
 
 def test_pointcloud_decoded_by_protobuf_is_the_frame_our_reader_returns(sim_rec):
-    # Format 3: the simulator's points are on the Livox mm grid, so x, y, z travel as float32 metres
+    # Format 4: the simulator's points are on the Livox mm grid, so x, y, z travel as float32 metres
     # (Foxglove draws them within 0.25 mm of the point) from which rint(1000 v) gives the mm exactly;
-    # the point times as int16 in the unit of protobuf field 16 (10 us: the Mid-40's 100 k points/s).
+    # the point times as int32 age_ns (frame time - point time), nothing outside the schema
+    # (tests/recording/test_pointcloud_schema.py checks it with Foxglove's own class).
     from google.protobuf.unknown_fields import UnknownFieldSet
 
     path, log = sim_rec
@@ -147,19 +148,19 @@ def test_pointcloud_decoded_by_protobuf_is_the_frame_our_reader_returns(sim_rec)
         assert (pc.pose.position.x, pc.pose.position.y, pc.pose.position.z) == (0.0, 0.0, 0.0)
         assert pc.timestamp.seconds * 10**9 + pc.timestamp.nanos == f.t_ns
         names = {fl.name: fl for fl in pc.fields}
-        assert set(names) == {"x", "y", "z", "dt", "reflectivity"}
-        dt = np.dtype({"names": ["x", "y", "z", "dt", "reflectivity"],
-                       "formats": ["<f4", "<f4", "<f4", "<i2", "u1"],
-                       "offsets": [names[n].offset for n in ("x", "y", "z", "dt", "reflectivity")],
+        assert set(names) == {"x", "y", "z", "age_ns", "reflectivity"}
+        dt = np.dtype({"names": ["x", "y", "z", "age_ns", "reflectivity"],
+                       "formats": ["<f4", "<f4", "<f4", "<i4", "u1"],
+                       "offsets": [names[n].offset for n in ("x", "y", "z", "age_ns", "reflectivity")],
                        "itemsize": pc.point_stride})
-        assert pc.point_stride == 15
+        assert pc.point_stride == 17
         arr = np.frombuffer(pc.data, dt)
         v = np.stack([arr["x"], arr["y"], arr["z"]], 1).astype(np.float64)
         assert np.abs(v - f.xyz).max() <= 0.25e-3                       # drawn where the point is
         assert np.array_equal(np.rint(v * 1000) * 1e-3, f.xyz)          # and exact through the mm
-        extra = {u.field_number: u.data for u in UnknownFieldSet(pc)}
-        assert extra[16] == 10_000
-        assert np.array_equal(arr["dt"].astype(np.int64) * extra[16] + f.t_ns, f.t_ns_points)
+        assert list(UnknownFieldSet(pc)) == []
+        assert arr["age_ns"].min() >= 0 and arr["age_ns"].max() <= 100_000_000    # the frame's 100 ms
+        assert np.array_equal(f.t_ns - arr["age_ns"].astype(np.int64), f.t_ns_points)
         assert np.array_equal(arr["reflectivity"], f.reflectivity)
     assert [f.frame_index for f in ours] == list(range(len(ours)))
 
@@ -315,15 +316,16 @@ def test_one_tf_message_a_frame_without_truth_is_at_most_one_frame_late(tmp_path
 def test_the_live_view_gets_each_frames_tf_before_the_next_frame_ends():
     # what a viewer of `daemon --live` sees: the first frame's /tf with the second frame's points,
     # every later one with its own head estimate
+    from foveatrack.recording.format import packed_point_dtype
     from foveatrack.recording.foxglove_view import FoxgloveChannels
 
     view = FoxgloveChannels({})
     sent = []
     view._log_tf = lambda t_ns, tfs: sent.append((t_ns, len(tfs)))     # the SDK's messages hide their fields
-    packed = np.zeros(0, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("dt", "<i2"), ("reflectivity", "u1")])
+    packed = np.zeros(0, packed_point_dtype("float32"))
     for k in range(3):
         t = (k + 1) * 100
-        view.log_points(t, k, packed)
+        view.log_points(t, packed)
         assert [s[0] for s in sent] == [100 * (i + 1) for i in range(k)]      # frame 0 still waits at k = 0
         view.log_json("head", t, b"{}", {"pan_deg": 1.0, "tilt_deg": 2.0})
         assert [s[0] for s in sent] == [100 * (i + 1) for i in range(k if k == 0 else k + 1)]

@@ -121,7 +121,8 @@ def test_export_lvx_over_a_sensor_clock_jump_allocates_by_points_not_by_time(tmp
 
 
 def test_a_damaged_metadata_record_is_named_as_damage(tmp_path, capsys):
-    """One bit turned format version 3 into 2 and every point decoded differently, without a word."""
+    """One bit turned format version 3 into 2 and every point decoded differently, without a word
+    (now: 4 into 3, format 3's decoding of the points)."""
     from foveatrack.cli import main
     from foveatrack.errors import UserError
 
@@ -129,8 +130,8 @@ def test_a_damaged_metadata_record_is_named_as_damage(tmp_path, capsys):
     write_run(p, n_frames=3)
     data = bytearray(p.read_bytes())
     i = data.index(b"format_version") + len("format_version") + 4
-    assert data[i:i + 1] == b"3"
-    data[i] ^= 0x01                                   # "3" -> "2"
+    assert data[i:i + 1] == b"4"
+    data[i] ^= 0x07                                   # "4" -> "3"
     q = tmp_path / "v2.mcap"
     q.write_bytes(bytes(data))
     with pytest.raises(UserError, match="metadata record is damaged"):

@@ -11,7 +11,7 @@ from websockets.sync.client import connect
 
 from foveatrack.errors import UserError
 from foveatrack.recording import RecordingWriter
-from foveatrack.recording.format import _decode_points_pb
+from foveatrack.recording.format import decode_points_v4
 from foveatrack.recording.live import LiveServer, Pacer
 from foveatrack.recording.records import DetectionRecord, HeadEstimateRecord, TruthRecord, write_record
 from foxglove_ws import advertised_channels, received, subscribe_all
@@ -55,9 +55,9 @@ def test_a_websocket_client_subscribes_and_receives_the_channels():
     w.close()
     assert want <= set(got), set(got)
     for log_time, payload in got["/points"]:
-        f = _decode_points_pb(payload, mm_grid=True)     # format 3: a float32 cloud is on the mm grid
+        f = decode_points_v4(payload)     # the frame index is the /detections record's
         k, xyz = sent[f.t_ns]
-        assert log_time == f.t_ns and f.frame_index == k and np.array_equal(f.xyz, xyz)
+        assert log_time == f.t_ns and np.array_equal(f.xyz, xyz)
     det = json.loads(got["/detections"][0][1])
     assert det["detected"] is True and det["xyz_m"] == [12.0, 0.1, 0.2]
 

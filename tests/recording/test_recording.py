@@ -53,7 +53,7 @@ def test_round_trip_is_exact(tmp_path):
     frames = write_sample(p)
     r = RecordingReader(p)
     assert r.meta == META
-    assert r.info["format_version"] == "3" and "numpy_version" in r.info
+    assert r.info["format_version"] == "4" and "numpy_version" in r.info
     got = list(r.points())
     assert r.complete and r.problem is None
     assert len(got) == len(frames)

@@ -1,15 +1,15 @@
-"""Format 3 points: exact and compact when they are on the Livox mm grid, exact float64 otherwise.
+"""Points of formats 3 and 4: exact and compact when they are on the Livox mm grid, exact float64 otherwise.
 
 x, y, z on the mm grid are stored as the float32 multiple of 2^-11 m nearest to the point; the reader
-takes k = rint(1000 v) [mm] and returns the client's k * 1e-3.  Point times are stored in the coarsest
-exact unit (their gcd) as int16 where that holds them."""
+takes k = rint(1000 v) [mm] and returns the client's k * 1e-3.  Point times (format 4) as int32
+``age_ns``, the frame time - the point time."""
 
 import numpy as np
 import pytest
 
 from foveatrack.livox.protocol import m_to_mm, mm_to_m
 from foveatrack.recording import RecordingReader, RecordingWriter
-from foveatrack.recording.format import MAX_GRID_MM, mm_grid_f32, mm_grid_to_m, time_unit_ns
+from foveatrack.recording.format import MAX_GRID_MM, mm_grid_f32, mm_grid_to_m
 
 
 def _all_mm_round_trip(lo: int, hi: int) -> None:
@@ -43,14 +43,6 @@ def test_past_the_bound_or_off_the_grid_there_is_no_grid_encoding():
     assert off.size and mm_grid_f32(np.stack([off / 1000.0] * 3, 1)) is None
 
 
-def test_time_unit_and_type():
-    assert time_unit_ns(np.array([-96_450_000, -1_910_000, 0])) == (10_000, "<i2")
-    assert time_unit_ns(np.array([-96_450_001, -2, 0])) == (1, "<i4")
-    assert time_unit_ns(np.array([-400_000_000, -10_000])) == (10_000, "<i4")     # 40 000 units: int32
-    assert time_unit_ns(np.zeros(3, np.int64)) == (1, "<i2")
-    assert time_unit_ns(np.zeros(0, np.int64)) == (1, "<i2")
-
-
 def _frames(on_grid: bool, far: bool = False, n=3000):
     rng = np.random.default_rng(5)
     out = []
@@ -77,7 +69,7 @@ def test_frames_come_back_to_the_bit(tmp_path, on_grid, far):
     for f, (t, xyz, tp, refl) in zip(got, frames, strict=True):
         assert np.array_equal(f.xyz.view(np.int64), xyz.view(np.int64))
         assert np.array_equal(f.t_ns_points, tp) and np.array_equal(f.reflectivity, refl)
-    # the grid encoding is what makes the file small: 15 bytes a point against 29
+    # the grid encoding is what makes the file small: about 15 bytes a point against 26-28
     per_point = p.stat().st_size / sum(len(f) for f in got)
     assert (per_point < 17) == (on_grid and not far)
 
@@ -89,7 +81,7 @@ def test_float32_refuses_points_past_the_bound(tmp_path):
             w.write_points(t, 0, xyz, tp, refl)
 
 
-@pytest.mark.parametrize("case", ["grid", "grid-i4", "off-grid", "far", "nan", "empty", "one", "same-time"])
+@pytest.mark.parametrize("case", ["grid", "off-grid", "far", "nan", "empty", "one", "same-time", "after-end"])
 def test_pack_kernel_gives_the_numpy_twins_bytes(case):
     from foveatrack.recording.format import pack_points_numpy
     from foveatrack.recording.pack_kernels import pack_points
@@ -103,14 +95,17 @@ def test_pack_kernel_gives_the_numpy_twins_bytes(case):
         xyz[-1, 1] = MAX_GRID_MM * 1e-3
     if case == "nan":
         xyz[3, 2] = np.nan
-    span = 100_000 if case == "grid-i4" else 30_000       # offsets in 10 us units: past int16 or not
-    dt = -np.sort(rng.choice(span, n, replace=False)).astype(np.int64) * 10_000
+    t = 7_000_000_000
+    tp = t - np.sort(rng.choice(100_000, n, replace=False)).astype(np.int64) * 1_003
     if case == "same-time":
-        dt[:] = -5_000_000
+        tp[:] = t - 5_000_000
+    if case == "after-end":         # a writer may give points up to 2.1 s either side of the frame time
+        tp[0] = t + 2**31 - 1
+        tp[1] = t - 2**31 + 1
     refl = rng.integers(0, 256, n).astype(np.uint8)
-    a, ua = pack_points(xyz, dt, refl)
-    b, ub = pack_points_numpy(xyz, dt, refl)
-    assert ua == ub and a.dtype == b.dtype and a.tobytes() == b.tobytes()
-    expect_f32 = case in ("grid", "grid-i4", "empty", "one", "same-time")
+    a = pack_points(xyz, t, tp, refl)
+    b = pack_points_numpy(xyz, t - tp, refl)
+    assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    expect_f32 = case in ("grid", "empty", "one", "same-time", "after-end")
     assert (a.dtype["x"] == np.float32) == expect_f32
-    assert a.dtype["dt"] == (np.int32 if case == "grid-i4" else np.int16)
+    assert a.dtype["age_ns"] == np.int32 and np.array_equal(t - a["age_ns"].astype(np.int64), tp)
