@@ -30,15 +30,13 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields, replace
-from typing import Any
+from typing import Any, ClassVar
 
 from foveatrack.device_config import HeadConfig, LidarConfig
 from foveatrack.errors import UserError
 from foveatrack.gate import Limits
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig
-
-SOURCES = ("simulator", "daemon")
 
 
 def _tuples(d: Mapping) -> dict:
@@ -54,6 +52,7 @@ def _lists(d: Mapping) -> dict:
 class SimulatorOrigin:
     """Where a simulator run came from: its scene (name, file, text as read), seed, effects and
     ``[gimbal]`` settings (``sim.scene.GimbalSpec`` as a table: the simulator's own type)."""
+    source: ClassVar[str] = "simulator"
     scene_name: str
     scene_path: str | None
     scene_text: str | None
@@ -74,6 +73,7 @@ class SimulatorOrigin:
 @dataclass(frozen=True)
 class DaemonOrigin:
     """Where a daemon run came from: its config file (path, text as read), head and lidar settings."""
+    source: ClassVar[str] = "daemon"
     config_path: str | None
     config_text: str | None
     head: HeadConfig | Mapping[str, Any]
@@ -119,13 +119,14 @@ class RecordingMeta:
     tracker_t0_s: float = 0.0
     point_rate_hz: float | None = None
     half_fov_deg: float | None = None
-    #: ``tracker_effective`` of a recording written before this object (None otherwise): what replay
-    #: checks its rebuilt configuration against
+    #: a recording of the earlier form (:func:`from_legacy_dict`), and its ``tracker_effective`` where it
+    #: has one (what replay checks its rebuilt configuration against)
+    legacy: bool = False
     legacy_effective: Mapping[str, Any] | None = None
 
     @property
     def source(self) -> str:
-        return "simulator" if isinstance(self.origin, SimulatorOrigin) else "daemon"
+        return self.origin.source
 
     @property
     def head(self) -> "RecordedHead":
@@ -146,23 +147,31 @@ class RecordingMeta:
     def from_dict(cls, meta: Mapping, where: str = "recording") -> "RecordingMeta":
         """The typed metadata of a recording's ``meta`` dict, of this form or an earlier one
         (:func:`from_legacy_dict`); a UserError naming ``where`` and what is missing otherwise."""
-        if "tracker" not in meta or "tracker_table" in meta:
-            return from_legacy_dict(meta, where)
-        src = meta.get("source")
-        if src not in SOURCES:
-            raise UserError(f"{where}: recording source {src!r} is not 'simulator' or 'daemon'")
-        for k in ("head_values", "speed_table"):
-            if k not in meta:
-                raise UserError(f"{where}: the recording's metadata has no {k!r}")
-        return cls(TrackerConfig.from_mapping(meta["tracker"], where=f"{where}: recorded [tracker]"),
-                   _tuples(meta["head_values"]), _speed_table(meta, where), recorded_limits(meta),
-                   _origin(meta), float(meta.get("tracker_t0_s", 0.0)), meta.get("point_rate_hz"),
-                   meta.get("half_fov_deg"))
+        try:
+            if "tracker" not in meta or "tracker_table" in meta:
+                return from_legacy_dict(meta, where)
+            src = meta.get("source")
+            if src not in (SimulatorOrigin.source, DaemonOrigin.source):
+                raise UserError(f"{where}: recording source {src!r} is not 'simulator' or 'daemon'")
+            for k in ("tracker", "head_values"):
+                if not isinstance(meta.get(k), Mapping):
+                    raise UserError(f"{where}: the recording's metadata has no {k!r} table")
+            return cls(TrackerConfig.from_mapping(meta["tracker"], where=f"{where}: recorded [tracker]"),
+                       _tuples(meta["head_values"]), _speed_table(meta, where), recorded_limits(meta),
+                       _origin(meta), float(meta.get("tracker_t0_s", 0.0)), meta.get("point_rate_hz"),
+                       meta.get("half_fov_deg"))
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            # a metadata dict no foveatrack run wrote (a hand-made or damaged one)
+            raise UserError(f"{where}: the recording's metadata does not hold a run's configuration "
+                            f"({type(exc).__name__}: {exc})") from None
 
-    def tracker_as_recorded(self) -> bool:
+    def tracker_as_recorded(self) -> bool | None:
         """The rebuilt configuration is the one the recording says ran (JSON-normalised: tuples as
-        lists): the table of this form, or an earlier recording's ``tracker_effective``."""
-        if self.legacy_effective is not None:
+        lists): the table of this form, or an earlier recording's ``tracker_effective``; None for an
+        earlier recording without one (it does not say)."""
+        if self.legacy:
+            if self.legacy_effective is None:
+                return None
             return json.loads(json.dumps(self.tracker.effective())) == self.legacy_effective
         return TrackerConfig.from_mapping(json.loads(json.dumps(self.tracker.to_mapping()))) == self.tracker
 
@@ -184,7 +193,7 @@ def _speed_table(meta: Mapping, where: str) -> SpeedTable:
 
 
 def _origin(meta: Mapping) -> SimulatorOrigin | DaemonOrigin:
-    return SimulatorOrigin.from_dict(meta) if meta.get("source") == "simulator" else DaemonOrigin.from_dict(meta)
+    return SimulatorOrigin.from_dict(meta) if meta.get("source") == SimulatorOrigin.source else DaemonOrigin.from_dict(meta)
 
 
 def recorded_limits(meta: Mapping) -> Limits | None:
@@ -222,15 +231,13 @@ def from_legacy_dict(meta: Mapping, where: str = "recording") -> RecordingMeta:
     [head], and the recording left that key out of its overrides)."""
     try:
         head_values = _legacy_head_values(meta)
-    except (KeyError, TypeError) as exc:
-        raise UserError(f"{where}: the recording's metadata lacks the head's values ({exc})") from None
     except UserError as exc:
         raise UserError(f"{where}: {exc}") from None
     table = dict(meta.get("tracker_table") or {})
     tracker = replace(TrackerConfig.from_mapping(table, where=f"{where}: recorded [tracker]"), **head_values)
     return RecordingMeta(tracker, head_values, _speed_table(meta, where), recorded_limits(meta), _origin(meta),
                          float(meta.get("tracker_t0_s", 0.0)), meta.get("point_rate_hz"), meta.get("half_fov_deg"),
-                         legacy_effective=meta.get("tracker_effective"))
+                         legacy=True, legacy_effective=meta.get("tracker_effective"))
 
 
 def recorded_tracker(meta: Mapping | None) -> TrackerConfig | None:

@@ -196,9 +196,10 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
         # replayed tracker's head angles come from its commands alone, so they, the world estimates
         # and the commands may differ from the run for that reason.
         res.comparison["gyro_samples_recorded"] = imu_recorded
-    if tracker_table is None and (meta.legacy_effective is not None or "tracker" in reader.meta):
+    as_recorded = meta.tracker_as_recorded()
+    if tracker_table is None and as_recorded is not None:
         # the configuration replay rebuilt is the one the recording says ran
-        res.comparison["tracker_config_as_recorded"] = meta.tracker_as_recorded()
+        res.comparison["tracker_config_as_recorded"] = as_recorded
     res.metrics = replay_metrics(frames, truth, cfg, meta.half_fov_deg)
     res.recorded_metrics = recorded_metrics(recorded, truth, rec_cfg, frames)
     if reader.problem:

@@ -82,7 +82,7 @@ def test_no_recording_written_now_carries_a_raw_tracker_table(tmp_path):
     for meta in (sim_meta, json.loads(json.dumps(d._meta()))):
         assert not {"tracker_table", "tracker_overrides", "tracker_effective"} & set(meta), sorted(meta)
         rm = RecordingMeta.from_dict(meta)
-        assert rm.legacy_effective is None and json.loads(json.dumps(rm.to_dict())) == meta   # read back as written
+        assert not rm.legacy and json.loads(json.dumps(rm.to_dict())) == meta   # read back as written
     assert RecordingMeta.from_dict(json.loads(json.dumps(d._meta()))).tracker == d.tracker.config
 
 
@@ -92,7 +92,7 @@ def test_recordings_of_the_earlier_form_are_read_by_the_legacy_path(path):
     raw = RecordingReader(path).meta
     assert "tracker_table" in raw
     meta = RecordingMeta.from_dict(raw)
-    assert meta.source == raw["source"] and meta.speed_table.to_dict() == raw["speed_table"]
+    assert meta.legacy and meta.source == raw["source"] and meta.speed_table.to_dict() == raw["speed_table"]
     if "tracker_overrides" in raw:
         assert meta.tracker.tilt_limits_deg == tuple(raw["tracker_overrides"]["tilt_limits_deg"])
     assert recorded_tracker(raw) == meta.tracker
