@@ -112,3 +112,14 @@ def test_the_foxglove_view_takes_d_and_the_lidar_offset_from_the_configuration_t
     assert FoxgloveChannels(RecordingMeta.from_dict({**meta, "tracker": sector.to_mapping()}).to_dict())._space_entities(0) == []
     # a meta of a caller's own names no tracker: nothing drawn, nothing fails
     assert FoxgloveChannels({"seed": 1})._space_entities(0) == []
+
+
+@pytest.mark.parametrize("meta", [{"source": "daemon", "tracker": 3, "head_values": {}},
+                                  {"source": "daemon", "tracker": {}, "head_values": {}},
+                                  {"source": "elsewhere", "tracker": {}, "head_values": {}},
+                                  {"source": "simulator", "tracker_table": {}}])
+def test_metadata_no_run_wrote_is_a_one_line_error_naming_the_recording(meta):
+    from foveatrack.errors import UserError
+
+    with pytest.raises(UserError, match=r"^x\.mcap: "):
+        RecordingMeta.from_dict(meta, "x.mcap")
