@@ -204,3 +204,26 @@ def _space_from_mapping(data: Mapping, where: str) -> SpaceOfInterest:
     if isinstance(dilate, bool) or not isinstance(dilate, int) or not 0 <= dilate <= 3:
         raise UserError(f"{where}: dilate must be an integer 0..3, got {dilate!r}")
     return BackgroundMap(as_float(data.get("voxel_m", 0.25), "voxel_m", where, lo=0, lo_open=True), dilate, outer)
+
+
+def space_to_mapping(space: SpaceOfInterest) -> dict:
+    """D as the config table :func:`space_from_mapping` reads back to an equal D (JSON-plain: lists,
+    no infinity -- a sector's unbounded range is the key left out, as in a config file).  A learned
+    background map gives its settings: its voxels are learned by the run, not configured."""
+    if isinstance(space, Box):
+        return {"kind": "box", "frame": space.frame, "min_xyz": list(space.min_xyz), "max_xyz": list(space.max_xyz)}
+    if isinstance(space, Cylinder):
+        return {"kind": "cylinder", "frame": space.frame, "center_xy": list(space.center_xy),
+                "radius_m": space.radius_m, "z_min_m": space.z_min_m, "z_max_m": space.z_max_m}
+    if isinstance(space, Sector):
+        out = {"kind": "sector", "frame": space.frame, "az_min_deg": space.az_min_deg, "az_max_deg": space.az_max_deg,
+               "el_min_deg": space.el_min_deg, "el_max_deg": space.el_max_deg, "r_min_m": space.r_min_m}
+        if space.r_max_m != float("inf"):
+            out["r_max_m"] = space.r_max_m
+        return out
+    if isinstance(space, BackgroundMap):
+        out = {"kind": "background", "voxel_m": space.voxel_m, "dilate": space.dilate}
+        if space.outer is not None:
+            out["outer"] = space_to_mapping(space.outer)
+        return out
+    raise TypeError(f"not a space of interest: {space!r}")

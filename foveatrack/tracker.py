@@ -45,7 +45,7 @@ from foveatrack.frames import Frame
 from foveatrack.gyro_attitude import GyroAttitude
 from foveatrack.predictive import BearingFilter
 from foveatrack.reconstruction import Reconstructor, head_trig
-from foveatrack.space_of_interest import Box, SpaceOfInterest, space_from_mapping
+from foveatrack.space_of_interest import Box, SpaceOfInterest, space_from_mapping, space_to_mapping
 from foveatrack.speed_table import SpeedTable
 from gimbal.head_facts import DEFAULT_HEAD
 
@@ -253,6 +253,15 @@ class TrackerConfig:
         # the commands) still rebuilds as recorded.
         skip = () if self.attitude == "gyro" else ("attitude",) + self.GYRO_KEYS
         return {f.name: plain(getattr(self, f.name)) for f in fields(self) if f.name not in skip}
+
+    def to_mapping(self) -> dict:
+        """Every setting as the ``[tracker]`` table :meth:`from_mapping` reads back to an equal
+        configuration (JSON-plain: tuples as lists, D as its table): the body of configuration a
+        recording keeps of the run (:class:`foveatrack.recording.run_meta.RecordingMeta`)."""
+        def plain(v):
+            return [plain(x) for x in v] if isinstance(v, tuple) else v
+        return {f.name: space_to_mapping(self.space) if f.name == "space" and self.space is not None
+                else plain(getattr(self, f.name)) for f in fields(self)}
 
     def with_head(self, facts, table: Mapping | None = None, where: str = "[tracker]") -> "TrackerConfig":
         """This configuration with the head's facts (:class:`gimbal.head_facts.HeadFacts`).

@@ -175,14 +175,13 @@ class ClosedLoop:
             drop_rate=scene.effect_params.get("uart_drop_rate", 0.0))
         table = load_tracker_table(g.speed_table, self.head, f"{scene.path} [gimbal] speed_table")
         # The head's facts (its stops, start pose, Pelco-D at the scene's baud, the loop's send delay)
-        # win over [tracker] by the one rule every driver applies (TrackerConfig.with_head); recorded,
-        # so that replay rebuilds exactly this tracker.
+        # win over [tracker] by the one rule every driver applies (TrackerConfig.with_head); the
+        # recording keeps the configuration that results (sim.recorder.recording_meta).
         gate = {} if scene.gate is None else dict(
             max_pan_byte=scene.gate.max_pan_byte, max_tilt_byte=scene.gate.max_tilt_byte,
             allow_turbo=scene.gate.allow_turbo, tilt_margin_deg=scene.gate.tilt_margin_deg)
         self.head_facts = HeadFacts((params.tilt_min_deg, params.tilt_max_deg), g.pan0_deg, tilt0, "D", g.baud,
                                     g.send_delay_s, **gate)
-        self.tracker_overrides = self.head_facts.tracker_values()
         self.tracker = Tracker(scene.tracker.with_head(self.head_facts, scene.tracker_table, f"{scene.path} [tracker]"),
                                table)
         # [tracker.sky]: every object tracked, the fovea shared by saccades (foveatrack.sky.controller),

@@ -17,38 +17,28 @@ The per-frame records are :mod:`foveatrack.recording.records`' (the daemon write
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 
 from foveatrack.recording import RecordingWriter
+from foveatrack.recording.run_meta import RecordingMeta, SimulatorOrigin
 from foveatrack.recording.records import (CommandRecord, ObjectTruthRecord, TruthRecord, ns, write_record,
                                           write_tracker_frame)
 
 
 def recording_meta(scene, loop) -> dict:
+    """The recording's metadata (:class:`foveatrack.recording.run_meta.RecordingMeta`) from what the loop
+    runs: its tracker's configuration (with any change made in code, e.g. a Monte-Carlo gain), speed
+    table and gate, never from the scene's raw ``[tracker]`` table."""
     from dataclasses import asdict
 
     from sim.summary import half_fov_deg
 
-    return {
-        "source": "simulator",
-        "scene_name": scene.name,
-        "scene_path": scene.path,
-        "scene_text": scene.text,
-        "seed": scene.seed,
-        "effects": sorted(scene.effects),
-        "tracker_table": json.loads(json.dumps(scene.tracker_table, default=str)),
-        "tracker_overrides": {k: list(v) if isinstance(v, tuple) else v for k, v in loop.tracker_overrides.items()},
-        "speed_table": loop.tracker.table.to_dict(),
-        "rate_hz": loop.tracker.config.rate_hz,
-        "tracker_effective": loop.tracker.config.effective(),   # the configuration that ran, every setting
-        "point_rate_hz": scene.optics.point_rate_hz,
-        "gimbal": asdict(scene.gimbal),
-        "half_fov_deg": half_fov_deg(scene),    # replay's "in the FoV", as the simulator's summary has it
-        # the gate's limits (absent: commands passed unchanged), for replay to run the same gate
-        **({"limits": asdict(loop.gate.limits)} if loop.gate.limits is not None else {}),
-    }
+    origin = SimulatorOrigin(scene.name, scene.path, scene.text, scene.seed, tuple(sorted(scene.effects)),
+                             asdict(scene.gimbal))
+    return RecordingMeta(loop.tracker.config, loop.head_facts.tracker_values(), loop.tracker.table,
+                         loop.gate.limits, origin, point_rate_hz=scene.optics.point_rate_hz,
+                         # replay's "in the FoV", as the simulator's summary has it
+                         half_fov_deg=half_fov_deg(scene)).to_dict()
 
 
 class SimRecorder:

@@ -159,13 +159,13 @@ class Daemon:
 
     # -------------------------------------------------------------------------------- setup
     def _meta(self) -> dict:
+        from foveatrack.recording.run_meta import DaemonOrigin, RecordingMeta
+
+        # what runs (the tracker's configuration with the head's facts, its table, the gate), typed
         c = self.cfg
-        return {"source": FORMAT_SOURCE, "config_path": c.path, "config_text": c.text,
-                "tracker_table": dict(c.tracker_table), "tracker_overrides": c.tracker_overrides,
-                "tracker_t0_s": 0.0, "speed_table": self.table.to_dict(), "rate_hz": c.tracker.rate_hz,
-                "tracker_effective": c.tracker.effective(),   # the configuration that runs, every setting
-                "point_rate_hz": c.lidar.point_rate_hz, "head": asdict(c.head), "lidar": asdict(c.lidar),
-                "limits": asdict(self.limits)}
+        return RecordingMeta(self.tracker.config, c.head.facts.tracker_values(), self.table, self.limits,
+                             DaemonOrigin(c.path, c.text, c.head, c.lidar), tracker_t0_s=0.0,
+                             point_rate_hz=c.lidar.point_rate_hz).to_dict()
 
     def _open(self):
         from foveatrack.errors import UserError

@@ -34,6 +34,8 @@ from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, FrameTra
 from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, IMU, IMU_DESCRIPTOR, IMU_SCHEMA_NAME, LOG,
                                          METRICS, POINTS, RECORD_SCHEMAS, SCENE, SCENE_KEYFRAME, TF, TRUTH,
                                          TRUTH_OBJECTS, encode_imu_pb, encode_points_pb, json_schema_of)
+from foveatrack.recording.run_meta import recorded_tracker
+from foveatrack.space_of_interest import Box, Cylinder
 
 KEYFRAME_FRAMES = 10       # /scene_keyframe: D and the histories every 10th head estimate (once a second)
 _CLASS_COLOURS = {"drone": (0.1, 0.9, 0.2), "bird": (0.9, 0.7, 0.1), "tree": (0.2, 0.5, 0.2),
@@ -76,7 +78,8 @@ class FoxgloveChannels:
     """The channels of a recording on one ``foxglove.Context``, and the visual messages derived from
     the records (transforms, scene entities, log lines).
 
-    meta : the recording's meta (its ``tracker_table`` gives D and the lidar offset)
+    meta : the recording's meta (the tracker configuration that ran gives D and the lidar offset:
+        :func:`foveatrack.recording.run_meta.recorded_tracker`)
     points_dtype : "float64" (exact) or "float32" (x, y, z of the packed points)
     log_time : the MCAP log time of a message of time ``t_ns`` (the sensor's or the simulator's clock,
         which the messages keep): an int, ``t_ns`` + that many ns (the simulator: its scene's start
@@ -107,10 +110,10 @@ class FoxgloveChannels:
         self._scene = SceneUpdateChannel("/" + SCENE, context=ctx)
         self._keyframe = SceneUpdateChannel("/" + SCENE_KEYFRAME, context=ctx)
         self._log = LogChannel("/" + LOG, context=ctx)
-        meta = meta or {}
-        table = meta.get("tracker_table") or {}
-        self.lidar_offset_m = tuple(float(v) for v in table.get("lidar_offset_m", (0.0, 0.0, 0.0)))
-        self._space = table.get("space") if isinstance(table.get("space"), dict) else None
+        # D and the lidar offset of the configuration that ran (the typed metadata, any form it was written in)
+        tracker = recorded_tracker(meta)
+        self.lidar_offset_m = (0.0, 0.0, 0.0) if tracker is None else tuple(tracker.lidar_offset_m)
+        self._space = None if tracker is None else tracker.space
         self._paths: dict[str, tuple[int, list]] = {}     # name -> (segment number, its points)
         self._state: str | None = None
         self._history: dict[str, tuple[int, list]] = {}   # name -> (stride, every stride-th point)
@@ -302,30 +305,26 @@ class FoxgloveChannels:
         return SceneEntity(timestamp=_ts(t_ns), frame_id="world", id=ident, lines=lines)
 
     def _space_entities(self, t_ns) -> list:
-        """D of the tracker config (box or vertical cylinder; a sector or a learned map is not drawn)."""
+        """D of the tracker config (box or vertical cylinder; a sector or a learned map is not drawn, nor
+        a cylinder without its heights: the +-1e9 m of its defaults)."""
         s = self._space
-        if not s:
+        if not isinstance(s, (Box, Cylinder)) or (isinstance(s, Cylinder) and max(abs(s.z_min_m), abs(s.z_max_m)) >= 1e9):
             return []
-        frame = "world" if s.get("frame") == "world" else "lidar"
+        frame = "world" if s.frame == "world" else "lidar"
         ident = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
         col = self._color((1.0, 0.8, 0.0), 0.12)
-        try:
-            if s.get("kind") == "box":
-                lo, hi = np.asarray(s["min_xyz"], float), np.asarray(s["max_xyz"], float)
-                c, size = (lo + hi) / 2, hi - lo
-                prim = {"cubes": [CubePrimitive(pose=Pose(position=Vector3(x=c[0], y=c[1], z=c[2]), orientation=ident),
-                                                size=Vector3(x=size[0], y=size[1], z=size[2]), color=col)]}
-            elif s.get("kind") == "cylinder":
-                cx, cy = (float(v) for v in s.get("center_xy", (0.0, 0.0)))
-                z0, z1 = float(s["z_min_m"]), float(s["z_max_m"])
-                d = 2 * float(s["radius_m"])
-                prim = {"cylinders": [CylinderPrimitive(
-                    pose=Pose(position=Vector3(x=cx, y=cy, z=(z0 + z1) / 2), orientation=ident),
-                    size=Vector3(x=d, y=d, z=z1 - z0), bottom_scale=1.0, top_scale=1.0, color=col)]}
-            else:
-                return []
-        except (KeyError, TypeError, ValueError):
-            return []
+        if isinstance(s, Box):
+            lo, hi = np.asarray(s.min_xyz, float), np.asarray(s.max_xyz, float)
+            c, size = (lo + hi) / 2, hi - lo
+            prim = {"cubes": [CubePrimitive(pose=Pose(position=Vector3(x=c[0], y=c[1], z=c[2]), orientation=ident),
+                                            size=Vector3(x=size[0], y=size[1], z=size[2]), color=col)]}
+        else:
+            cx, cy = (float(v) for v in s.center_xy)
+            z0, z1 = float(s.z_min_m), float(s.z_max_m)
+            d = 2 * float(s.radius_m)
+            prim = {"cylinders": [CylinderPrimitive(
+                pose=Pose(position=Vector3(x=cx, y=cy, z=(z0 + z1) / 2), orientation=ident),
+                size=Vector3(x=d, y=d, z=z1 - z0), bottom_scale=1.0, top_scale=1.0, color=col)]}
         # frame_locked: D stays where it is defined whatever the transforms do later
         return [SceneEntity(timestamp=_ts(t_ns), frame_id=frame, id="space_of_interest", frame_locked=True, **prim)]
 

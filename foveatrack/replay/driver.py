@@ -10,11 +10,14 @@ have sent, through the command gate a daemon runs).
 
 How a recording's tracker is rebuilt (``meta``):
 
-* simulator (``sim.recorder.recording_meta``): ``[tracker]`` table + what
-  :class:`sim.loop.ClosedLoop` sets from ``[gimbal]`` (start pose, the family's tilt stops,
-  ``latency_s`` = a Pelco-D frame's time on the wire, ``send_delay_s``); frame ``k`` is ``[k, k+1) / rate_hz`` and its command
+Both drivers record the configuration that ran, typed (:class:`foveatrack.recording.run_meta.RecordingMeta`:
+every tracker setting with the head's facts applied, the speed table, the gate's limits); replay
+rebuilds its tracker from that (recordings of the earlier form, with the raw ``[tracker]`` table, by
+:func:`foveatrack.recording.run_meta.from_legacy_dict`).
+
+* simulator (``sim.recorder.recording_meta``): frame ``k`` is ``[k, k+1) / rate_hz`` and its command
   was written at ``t_end + send_delay_s``.
-* daemon (:mod:`foveatrack.daemon.runtime`): ``[tracker]`` table + ``tracker_overrides``; frames end
+* daemon (:mod:`foveatrack.daemon.runtime`): frames end
   at the recorded ``t_ns``; the send time is the command's ``send_t_s``; commands the safety gate
   limited, and the watchdog's and shutdown's STOPs, are registered where they happened; a command
   whose write failed (``written: false``) is replaced, at the same instant, by the last one that
@@ -52,7 +55,8 @@ from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate, Limits
 from foveatrack.recording.format import MCAP_MAGIC
 from foveatrack.recording.records import CommandRecord
-from foveatrack.replay.config import recorded_limits, load_tracker_table, tracker_config
+from foveatrack.recording.run_meta import RecordingMeta
+from foveatrack.replay.config import load_tracker_table, tracker_config
 from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
 from foveatrack.replay.recorded import (RECORDED_DTYPES, TRUTH_DTYPES, FrameArrays, LvxTimeline, TimeOrder,
                                         PoseCorrected, TrackerRebased, recorded_arrays, recorded_frames)
@@ -107,17 +111,15 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     from foveatrack.recording import RecordingReader
 
     reader = RecordingReader(path, max_frames)
-    meta = reader.meta
-    source = meta.get("source", "?")
+    meta = RecordingMeta.from_dict(reader.meta, str(path))   # the configuration that ran, typed
+    source = meta.source
     where = f"{config_name} [tracker]" if config_name else "recorded [tracker]"
     cfg = tracker_config(meta, tracker_table, where)
     if tracker_table is not None:     # the recorded configuration replays as it ran, space or none
         require_space(cfg, where)
-    rec_cfg = tracker_config(meta)
-    table = SpeedTable.from_dict(meta["speed_table"], where=f"{path}: recorded speed table")
+    rec_cfg = meta.tracker
     sink = _RecordedOutcome()
-    step = FrameStep(Tracker(cfg, table, t0_s=float(meta.get("tracker_t0_s", 0.0))), CommandGate(recorded_limits(meta)),
-                     sink)
+    step = FrameStep(Tracker(cfg, meta.speed_table, t0_s=meta.tracker_t0_s), CommandGate(meta.limits), sink)
     period = rec_cfg.period_s
     period_ns = int(round(1e9 / rec_cfg.rate_hz))
     send_delay_sim = rec_cfg.send_delay_s
@@ -194,13 +196,11 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
         # replayed tracker's head angles come from its commands alone, so they, the world estimates
         # and the commands may differ from the run for that reason.
         res.comparison["gyro_samples_recorded"] = imu_recorded
-    if tracker_table is None and "tracker_effective" in meta:
-        # the configuration replay rebuilt is the one that ran (JSON-normalised: tuples as lists)
-        import json
-
-        res.comparison["tracker_config_as_recorded"] = (
-            json.loads(json.dumps(cfg.effective())) == meta["tracker_effective"])
-    res.metrics = replay_metrics(frames, truth, cfg, meta.get("half_fov_deg"))
+    as_recorded = meta.tracker_as_recorded()
+    if tracker_table is None and as_recorded is not None:
+        # the configuration replay rebuilt is the one the recording says ran
+        res.comparison["tracker_config_as_recorded"] = as_recorded
+    res.metrics = replay_metrics(frames, truth, cfg, meta.half_fov_deg)
     res.recorded_metrics = recorded_metrics(recorded, truth, rec_cfg, frames)
     if reader.problem:
         res.comparison["recording_problem"] = reader.problem

@@ -74,4 +74,6 @@ def test_overwrite_true_replaces_it(tmp_path):
     d = _daemon(tmp_path, p, "overwrite = true")
     d._open()
     _close(d)
-    assert RecordingReader(p).meta["source"] == "daemon"
+    meta = RecordingReader(p).meta
+    # the typed configuration that runs, without the raw [tracker] table beside it (issue 25)
+    assert meta["source"] == "daemon" and "tracker" in meta and "tracker_table" not in meta

@@ -27,6 +27,13 @@ ROOT = Path(__file__).resolve().parents[2]
 WELL_KNOWN = {"foxglove.PointCloud", "foxglove.FrameTransforms", "foxglove.SceneUpdate", "foxglove.Log"}
 
 
+def _ran(path):
+    """The tracker configuration a recording says ran (its typed metadata)."""
+    from foveatrack.recording.run_meta import RecordingMeta
+
+    return RecordingMeta.from_dict(RecordingReader(path).meta).tracker
+
+
 @pytest.fixture(scope="module", params=["fig12", "fig12-gyro"])
 def sim_rec(request, tmp_path_factory):
     """0.6 s of fig12-tracking (and of its gyro variant) recorded as ``simulate --out`` records it
@@ -92,7 +99,7 @@ def test_every_channel_is_well_known_or_documented(sim_rec):
             assert (ch.message_encoding, sc.encoding) == ("json", "jsonschema"), ch.topic
             assert json.loads(sc.data)["title"] == sc.name
     assert {"/points", "/tf", "/scene", "/detections", "/head", "/commands", "/truth"} <= seen
-    assert ("/imu" in seen) == (RecordingReader(path).meta["tracker_effective"].get("attitude") == "gyro")
+    assert ("/imu" in seen) == (_ran(path).attitude == "gyro")
     # and every protobuf message decodes under its schema with the official decoder
     n = len(official_decoded(path, ["/points", "/tf", "/scene", "/scene_keyframe", "/log", "/imu"]))
     assert n == sum(summary.statistics.channel_message_counts[c.id] for c in summary.channels.values()
@@ -173,7 +180,7 @@ def test_imu_samples_decoded_by_protobuf_are_the_batches_our_reader_returns(sim_
     theirs = official_decoded(path, ["/imu"])
     assert len(theirs) == len(ours)
     if not ours:
-        assert RecordingReader(path).meta["tracker_effective"].get("attitude") is None
+        assert _ran(path).attitude == "commands"
         return
     assert len(ours) == len(log["t_end_s"])
     assert [len(b) for b in ours] == [1000 + 20] + [20] * (len(ours) - 1)     # 200 Hz, rest_before_s 5
@@ -269,7 +276,7 @@ def test_a_seek_or_a_late_viewer_gets_d_and_the_whole_history_within_a_second(tm
     assert len(key) >= 2 and heads
     gaps = np.diff([heads[0], *[t for t, _ in key], heads[-1]])
     assert gaps.max() <= 1.0e9 + 1, "a keyframe at least once a second"
-    assert RecordingReader(path).meta["tracker_table"].get("space")
+    assert _ran(path).space is not None
     for _t, msg in key:
         assert "space_of_interest" in {e.id for e in msg.entities}
     # the newest keyframe's trajectories reach back to the run's first truth and detection
