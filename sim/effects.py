@@ -12,6 +12,33 @@ Sources of the defaults:
 * sunlight false alarms < 0.01 % — Livox specification ("false alarm rate < 0.01 %"), placed at
   uniform random ranges along the beam;
 * motor speed noise 1 % — the paper's Fig. 7 simulation.
+
+Head and timing (no datasheet of the PTS-303H exists, ``/work/shared/facts/gimbal-pelco.md``; where no
+source gives a value it is a stated assumption, with why it is plausible):
+
+* ``head_thermal_drift`` — the speed curve scales by ``1 + head_speed_coeff_per_k * head_delta_t_k``
+  against the curve the tracker's table was calibrated on.  Coefficient -0.1 %/K, an assumption: a
+  brushed DC gear motor at fixed voltage loses speed as its copper winding's resistance rises
+  (+0.39 %/K, the resistivity of copper) and gains as its ferrite magnet weakens (about -0.2 %/K,
+  which raises the no-load speed by as much); at a load of a third of stall torque the net is about
+  -0.1 %/K (worm-gear grease thinning when warm pulls the other way, so the sign is the uncertain
+  part).  ``head_delta_t_k`` 20 K: calibrated indoors at 20 degC, running in the afternoon sun at
+  40 degC.  Deterministic: no random draws.
+* ``head_dead_time_jitter`` — each command's dead time is ``dead_time_s`` plus a uniform spread of
+  ``dead_time_jitter_s`` = 20 ms around it (centred: the mean dead time, which the tracker's table
+  holds, is unchanged).  An assumption: the head's controller acts on a command at its next control
+  tick, and a 50 Hz tick (20 ms) is typical of the 8-bit controllers of such heads.  Its own stream.
+* ``link_latency_jitter`` — host and link latency: each command's bytes reach the wire later than the
+  time the host stamps on the write by an exponential delay of mean ``link_latency_jitter_s`` = 1 ms
+  (the host never learns it).  An assumption: a USB-serial adapter sends a write in the next 1 ms
+  USB full-speed frame (0-1 ms), and a non-real-time Linux host's wake-up latency adds a few tenths
+  of a ms with a tail of ms; an exponential of mean 1 ms covers both.  Its own stream.
+* ``lidar_clock_drift`` — the lidar's free-running clock (no PTP/PPS) runs at
+  ``1 + lidar_clock_drift_ppm * 1e-6`` of true time: -20 ppm, the slow end of a common +-20 ppm
+  crystal (an assumption: Livox publishes no clock tolerance).  The slow end is the harder one: the
+  host - sensor offset, kept as a minimum over packets (``foveatrack.daemon.runtime``), does not
+  follow a clock that falls behind, so the tracker's sensor time of "now" lags the true one by
+  ``|ppm| * elapsed``.  Deterministic: no random draws.
 """
 
 from __future__ import annotations
@@ -96,3 +123,50 @@ def footprint_offsets(divergence_deg: tuple[float, float], subrays: int) -> np.n
     ang = np.linspace(0, 2 * math.pi, max(subrays - 1, 0), endpoint=False)
     pts = [(0.0, 0.0)] + [(a * math.cos(t), b * math.sin(t)) for t in ang]
     return np.array(pts)
+
+
+# ------------------------------------------------------------------------------------------------
+# head and timing effects
+# ------------------------------------------------------------------------------------------------
+def thermal_speed_scale(coeff_per_k: float, delta_t_k: float) -> float:
+    """The head's speeds now over its calibrated curve: ``1 + coeff_per_k * delta_t_k``."""
+    return 1.0 + coeff_per_k * delta_t_k
+
+
+def link_latency_draw(rng, mean_s: float) -> float:
+    """One command's extra delay [s] from the host's write to the wire: exponential of mean ``mean_s``."""
+    return float(rng.exponential(mean_s))
+
+
+class LidarClock:
+    """The lidar's free-running clock, and the host's view of it as the daemon keeps it.
+
+    Sensor time = true time ``* (1 + drift_ppm * 1e-6)``, both from power-on at virtual time 0 (a
+    point's ns: ``t_ns + rint(t_ns * drift_ppm * 1e-6)``, exact to 1 ns).  The host maps its time to
+    sensor time with ``offset = min(host receive time - sensor time)`` over what it has received, as
+    :mod:`foveatrack.daemon.runtime` does (receive time = the point's true time: no transit delay).
+    """
+
+    def __init__(self, drift_ppm: float):
+        self.drift_ppm = float(drift_ppm)
+        self._k = self.drift_ppm * 1e-6
+        self.offset_s = 0.0      # host - sensor at power-on (both clocks read 0 then)
+
+    def sensor_ns(self, t_ns: np.ndarray) -> np.ndarray:
+        t_ns = np.asarray(t_ns, dtype=np.int64)
+        return t_ns + np.rint(t_ns * self._k).astype(np.int64)
+
+    def sensor_s(self, t_s: float) -> float:
+        """Sensor time [s] of a true time (on the ns grid of :meth:`sensor_ns`)."""
+        t_ns = round(t_s * 1e9)
+        return (t_ns + round(t_ns * self._k)) * 1e-9
+
+    def observe(self, host_s: float, sensor_s: float) -> None:
+        """A packet whose last point has sensor time ``sensor_s`` arrived at ``host_s``."""
+        self.offset_s = min(self.offset_s, host_s - sensor_s)
+
+    def host_to_sensor(self, host_s: float) -> float:
+        return host_s - self.offset_s
+
+    def sensor_to_host(self, sensor_s: float) -> float:
+        return sensor_s + self.offset_s

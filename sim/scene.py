@@ -54,6 +54,17 @@ EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     "head_ripple": {},
     # insects and dust: isolated returns at short range, at a rate per second (sim.sensor)
     "stray_returns": {"stray_rate_hz": 2.0, "stray_min_range_m": 1.0, "stray_max_range_m": 15.0},
+    # the head and timing side (sources and stated assumptions in sim.effects, "Head and timing")
+    "head_thermal_drift": {"head_delta_t_k": 20.0, "head_speed_coeff_per_k": -0.001},
+    "head_dead_time_jitter": {"dead_time_jitter_s": 0.02},
+    "link_latency_jitter": {"link_latency_jitter_s": 0.001},
+    "lidar_clock_drift": {"lidar_clock_drift_ppm": -20.0},
+}
+# [effects] keys that may be negative, with their bounds (every other key is >= 0)
+SIGNED_EFFECT_PARAMS: dict[str, tuple[float, float]] = {
+    "head_delta_t_k": (-60.0, 60.0),             # from the calibration's temperature [K]
+    "head_speed_coeff_per_k": (-0.01, 0.01),     # relative speed change per kelvin [1/K]
+    "lidar_clock_drift_ppm": (-150.0, 150.0),    # inside the daemon's clock guard (DRIFT_PPM 200)
 }
 TRAJECTORY_TYPES = ("straight", "circle", "figure8", "waypoints", "manual")
 GEOMETRIES = ("quadrotor", "sphere", "box")
@@ -212,8 +223,15 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
             if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 64:
                 raise UserError(f"{we}: footprint_subrays must be an integer in [1, 64], got {v!r}")
             params[k] = v
+        elif k in SIGNED_EFFECT_PARAMS:
+            lo, hi = SIGNED_EFFECT_PARAMS[k]
+            params[k] = as_float(v, k, we, lo=lo, hi=hi)
         else:
             params[k] = as_float(v, k, we, lo=0)
+    if "head_thermal_drift" in effects and not 1.0 + params["head_speed_coeff_per_k"] * params["head_delta_t_k"] > 0.5:
+        raise UserError(f"{we}: head_speed_coeff_per_k * head_delta_t_k = "
+                        f"{params['head_speed_coeff_per_k'] * params['head_delta_t_k']:g} would more than halve "
+                        "the head's speeds; the drift model covers changes above -0.5")
     if "stray_returns" in effects and not params["stray_min_range_m"] < params["stray_max_range_m"]:
         raise UserError(f"{we}: stray_min_range_m = {params['stray_min_range_m']} must be below "
                         f"stray_max_range_m = {params['stray_max_range_m']}")

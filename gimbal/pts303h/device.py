@@ -39,6 +39,13 @@ class PTS303H:
     address : int, logical (DIP-switch) address; frames for other addresses are ignored
     pan0_deg, tilt0_deg : [deg] initial pose (tilt within the stops)
     t0_s : [s] virtual time the head starts at (at rest)
+    speed_scale : float > 0, the unit's speeds now over its curve at the temperature it was
+        calibrated at (thermal drift of the speed curve, ``1 + coefficient * delta_T``; 1: none).
+        The unit's curve itself (:meth:`calibrated_speed_deg_s`) is unchanged
+    dead_time_jitter_s : float >= 0 [s], width of the uniform spread of each command's dead time
+        around ``params.dead_time_s`` (the head's controller starts a command on its next tick)
+    dead_time_rng : numpy Generator, the jitter's own stream (one uniform per frame addressed to
+        the head, in arrival order); needed when ``dead_time_jitter_s > 0``
     """
 
     def __init__(
@@ -50,6 +57,9 @@ class PTS303H:
         pan0_deg: float = 0.0,
         tilt0_deg: float = 0.0,
         t0_s: float = 0.0,
+        speed_scale: float = 1.0,
+        dead_time_jitter_s: float = 0.0,
+        dead_time_rng: np.random.Generator | None = None,
     ) -> None:
         if feedback not in FEEDBACK_MODES:
             raise GimbalError(f"feedback={feedback!r} is not allowed; use one of {FEEDBACK_MODES}")
@@ -60,7 +70,16 @@ class PTS303H:
                 f"tilt0_deg={tilt0_deg} is outside the stops "
                 f"[{params.tilt_min_deg}, {params.tilt_max_deg}]"
             )
+        if not (math.isfinite(speed_scale) and speed_scale > 0):
+            raise GimbalError(f"speed_scale={speed_scale!r} is not allowed; must be > 0")
+        if not (math.isfinite(dead_time_jitter_s) and dead_time_jitter_s >= 0):
+            raise GimbalError(f"dead_time_jitter_s={dead_time_jitter_s!r} is not allowed; must be >= 0")
+        if dead_time_jitter_s > 0 and dead_time_rng is None:
+            raise GimbalError("dead_time_jitter_s > 0 needs dead_time_rng (the jitter's random stream)")
         self.params = params
+        self.speed_scale = float(speed_scale)
+        self.dead_time_jitter_s = float(dead_time_jitter_s)
+        self._dead_time_rng = dead_time_rng if dead_time_jitter_s > 0 else None
         self.unit_seed = int(unit_seed)
         self.feedback = feedback
         self.address = address
@@ -72,8 +91,13 @@ class PTS303H:
         self._tilt_table = unit_speed_table(
             np.random.default_rng(s_tilt), params.tilt_speed_max_deg_s, None, params
         )
-        self._pan_speeds = self._pan_table.tolist()
-        self._tilt_speeds = self._tilt_table.tolist()
+        if self.speed_scale != 1.0:   # thermal drift: every speed of the curve by the same factor
+            self._pan_table_now = self._pan_table * self.speed_scale
+            self._tilt_table_now = self._tilt_table * self.speed_scale
+        else:
+            self._pan_table_now, self._tilt_table_now = self._pan_table, self._tilt_table
+        self._pan_speeds = self._pan_table_now.tolist()
+        self._tilt_speeds = self._tilt_table_now.tolist()
         rr = np.random.default_rng(s_ripple)
         f_pan, f_tilt = params.ripple_freq_hz * np.exp(0.1 * rr.standard_normal(2))
         ph_pan, ph_tilt = rr.uniform(0, 2 * np.pi, 2)
@@ -112,16 +136,26 @@ class PTS303H:
 
     # -- facts about the unit --------------------------------------------------------------
     def true_speed_deg_s(self, axis: str, byte: int) -> float:
-        """The unit's true (ripple-free, steady) speed [deg/s] for a speed byte on an axis."""
+        """The unit's true (ripple-free, steady) speed [deg/s] for a speed byte on an axis, now
+        (with the thermal drift ``speed_scale``)."""
+        self._check_axis_byte(axis, byte)
+        return float((self._pan_table_now if axis == "pan" else self._tilt_table_now)[byte])
+
+    def calibrated_speed_deg_s(self, axis: str, byte: int) -> float:
+        """The unit's speed curve at the temperature it was calibrated at (no thermal drift): what a
+        perfect calibration made then holds."""
+        self._check_axis_byte(axis, byte)
+        return float((self._pan_table if axis == "pan" else self._tilt_table)[byte])
+
+    def _check_axis_byte(self, axis: str, byte: int) -> None:
         if axis not in AXES:
             raise GimbalError(f"axis={axis!r}; use 'pan' or 'tilt'")
         if not isinstance(byte, (int, np.integer)) or not 0 <= byte <= 255:
             raise GimbalError(f"speed byte {byte!r} out of range 0-255")
-        return float((self._pan_table if axis == "pan" else self._tilt_table)[byte])
 
     def speed_table(self, axis: str) -> np.ndarray:
-        """Copy of the unit's speed per byte (256 entries) for ``axis``."""
-        return (self._pan_table if axis == "pan" else self._tilt_table).copy()
+        """Copy of the unit's speed per byte (256 entries) for ``axis``, now (thermal drift included)."""
+        return (self._pan_table_now if axis == "pan" else self._tilt_table_now).copy()
 
     @property
     def ripple_freq_hz(self) -> tuple[float, float]:
@@ -271,6 +305,8 @@ class PTS303H:
         self.frames_received += 1
         p = self.params
         te = t + p.dead_time_s
+        if self._dead_time_rng is not None:   # one draw per frame for this head, whatever its kind
+            te = max(t, te + self.dead_time_jitter_s * (self._dead_time_rng.random() - 0.5))
         kind = cmd.kind
         if kind == "pan_tilt" or kind == "stop":
             self._check_causal(te)
@@ -293,8 +329,8 @@ class PTS303H:
                 return []
             self._check_causal(te)
             pan, tilt = self._presets[cmd.preset]
-            self._pan.goto(te, pan, self._pan_table[MAX_SPEED_BYTE])
-            self._tilt.goto(te, tilt, self._tilt_table[MAX_SPEED_BYTE])
+            self._pan.goto(te, pan, self._pan_table_now[MAX_SPEED_BYTE])
+            self._tilt.goto(te, tilt, self._tilt_table_now[MAX_SPEED_BYTE])
             return []
         if kind in ("set_pan", "set_tilt"):
             if self._line_quiet_before_frame(cmd) < p.abs_set_quiet_s or not word_is_angle(
@@ -304,10 +340,10 @@ class PTS303H:
                 return []
             self._check_causal(te)
             if kind == "set_pan":
-                self._pan.goto(te, word_to_pan_deg(cmd.word), self._pan_table[MAX_SPEED_BYTE])
+                self._pan.goto(te, word_to_pan_deg(cmd.word), self._pan_table_now[MAX_SPEED_BYTE])
             else:
                 tilt = word_to_tilt_deg(cmd.word, p.tilt_zero)
-                self._tilt.goto(te, tilt, self._tilt_table[MAX_SPEED_BYTE])
+                self._tilt.goto(te, tilt, self._tilt_table_now[MAX_SPEED_BYTE])
             return []
         if kind in ("query_pan", "query_tilt"):
             return self._answer(cmd, t)
