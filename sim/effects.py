@@ -39,6 +39,13 @@ source gives a value it is a stated assumption, with why it is plausible):
   host - sensor offset, kept as a minimum over packets (``foveatrack.daemon.runtime``), does not
   follow a clock that falls behind, so the tracker's sensor time of "now" lags the true one by
   ``|ppm| * elapsed``.  Deterministic: no random draws.
+* ``head_backlash`` — each axis's worm gear has ``head_backlash_deg`` = 0.2 deg of free play: on a
+  reversal the motor turns that far before the output follows (:mod:`gimbal.pts303h.kinematics`).
+  An assumption: a comparable worm-gear head states +-0.1 deg preset accuracy (BIT-PT850, the head
+  facts), which its play cannot exceed by much; light worm gears of this class have 0.1-0.5 deg.
+  The play starts centred (the output half the play from either end).  Deterministic: no draws.
+  The head's exact constant-acceleration pieces are then not used: each point's pose comes from
+  the head model (the slow route, as with ``head_ripple``).
 """
 
 from __future__ import annotations

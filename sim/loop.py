@@ -173,6 +173,8 @@ class ClosedLoop:
         if scene.has("head_dead_time_jitter"):
             head_fx["dead_time_jitter_s"] = scene.param("dead_time_jitter_s")
             head_fx["dead_time_rng"] = fx.effect_rng(seed, "head_dead_time_jitter")
+        if scene.has("head_backlash"):
+            head_fx["backlash_deg"] = scene.param("head_backlash_deg")
         self.head = PTS303H(params, unit_seed=g.unit_seed, feedback=g.feedback, address=g.address,
                             pan0_deg=g.pan0_deg, tilt0_deg=tilt0, **head_fx)
         # the lidar's free-running clock (the tracker's time), and the host's latency to the line

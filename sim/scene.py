@@ -59,6 +59,7 @@ EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     "head_dead_time_jitter": {"dead_time_jitter_s": 0.02},
     "link_latency_jitter": {"link_latency_jitter_s": 0.001},
     "lidar_clock_drift": {"lidar_clock_drift_ppm": -20.0},
+    "head_backlash": {"head_backlash_deg": 0.2},
 }
 # [effects] keys that may be negative, with their bounds (every other key is >= 0)
 SIGNED_EFFECT_PARAMS: dict[str, tuple[float, float]] = {
@@ -228,6 +229,9 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
             params[k] = as_float(v, k, we, lo=lo, hi=hi)
         else:
             params[k] = as_float(v, k, we, lo=0)
+    if "head_backlash" in effects and params["head_backlash_deg"] > 5.0:
+        raise UserError(f"{we}: head_backlash_deg must be <= 5 (a worn head has a degree or so), "
+                        f"got {params['head_backlash_deg']!r}")
     if "head_thermal_drift" in effects and not 1.0 + params["head_speed_coeff_per_k"] * params["head_delta_t_k"] > 0.5:
         raise UserError(f"{we}: head_speed_coeff_per_k * head_delta_t_k = "
                         f"{params['head_speed_coeff_per_k'] * params['head_delta_t_k']:g} would more than halve "

@@ -46,6 +46,9 @@ class PTS303H:
         around ``params.dead_time_s`` (the head's controller starts a command on its next tick)
     dead_time_rng : numpy Generator, the jitter's own stream (one uniform per frame addressed to
         the head, in arrival order); needed when ``dead_time_jitter_s > 0``
+    backlash_deg : float >= 0 [deg], the free play of each axis's worm gear: on a reversal the motor
+        turns this far before the output follows (see :class:`~gimbal.pts303h.kinematics._Axis`);
+        :meth:`pose_segments` then offers no constant-acceleration pieces (the output is not one)
     """
 
     def __init__(
@@ -60,6 +63,7 @@ class PTS303H:
         speed_scale: float = 1.0,
         dead_time_jitter_s: float = 0.0,
         dead_time_rng: np.random.Generator | None = None,
+        backlash_deg: float = 0.0,
     ) -> None:
         if feedback not in FEEDBACK_MODES:
             raise GimbalError(f"feedback={feedback!r} is not allowed; use one of {FEEDBACK_MODES}")
@@ -74,10 +78,13 @@ class PTS303H:
             raise GimbalError(f"speed_scale={speed_scale!r} is not allowed; must be > 0")
         if not (math.isfinite(dead_time_jitter_s) and dead_time_jitter_s >= 0):
             raise GimbalError(f"dead_time_jitter_s={dead_time_jitter_s!r} is not allowed; must be >= 0")
+        if not (math.isfinite(backlash_deg) and 0 <= backlash_deg <= 5):
+            raise GimbalError(f"backlash_deg={backlash_deg!r} is not allowed; 0 <= backlash_deg <= 5")
         if dead_time_jitter_s > 0 and dead_time_rng is None:
             raise GimbalError("dead_time_jitter_s > 0 needs dead_time_rng (the jitter's random stream)")
         self.params = params
         self.speed_scale = float(speed_scale)
+        self.backlash_deg = float(backlash_deg)
         self.dead_time_jitter_s = float(dead_time_jitter_s)
         self._dead_time_rng = dead_time_rng if dead_time_jitter_s > 0 else None
         self.unit_seed = int(unit_seed)
@@ -118,9 +125,10 @@ class PTS303H:
         """Both axes at rest at the power-on pose from ``t_s``."""
         p = self.params
         w_pan, ph_pan, w_tilt, ph_tilt = self._ripple
-        self._pan = _Axis("pan", self._power_on_deg[0], p.pan_accel_deg_s2, None, w_pan, ph_pan, t_s)
+        play = self.backlash_deg
+        self._pan = _Axis("pan", self._power_on_deg[0], p.pan_accel_deg_s2, None, w_pan, ph_pan, t_s, play)
         self._tilt = _Axis("tilt", self._power_on_deg[1], p.tilt_accel_deg_s2, (p.tilt_min_deg, p.tilt_max_deg),
-                           w_tilt, ph_tilt, t_s)
+                           w_tilt, ph_tilt, t_s, play)
 
     def power_cycle(self, t_s: float) -> None:
         """The head lost power and came back at ``t_s`` (a brown-out, a loose supply plug; its serial
@@ -198,7 +206,7 @@ class PTS303H:
 
     def pose_segments(self, t0_s: float, t1_s: float) -> tuple[np.ndarray, np.ndarray] | None:
         """The exact motion over ``[t0_s, t1_s]`` as constant-acceleration pieces, or None if the
-        speed ripple is on (then use :meth:`angles_at`).
+        speed ripple or the backlash is on (then use :meth:`angles_at`).
 
         Returns ``(pan, tilt)``, each (4, S) float64: rows ``t_start_s, angle_deg, speed_deg_s,
         accel_deg_s2`` of the kept pieces in time order (the one in force at ``t0_s`` among them;
@@ -212,7 +220,7 @@ class PTS303H:
             table, ripple = axis.pieces()
             if table[0, 0] > t0_s:
                 raise ValueError(f"{axis.name}: time {t0_s} is before the kept history (starts {table[0, 0]})")
-            if ripple:
+            if ripple or axis.half_play:   # no constant-acceleration pieces then
                 return None
             out.append(table)
         self.advance_to(t1_s)
@@ -351,9 +359,7 @@ class PTS303H:
         return []
 
     def angles_now(self, t: float) -> tuple[float, float]:
-        pan, _, _ = self._pan.state(t)
-        tilt, _, _ = self._tilt.state(t)
-        return float(wrap_pan_deg(pan)), tilt
+        return float(wrap_pan_deg(self._pan.output_at(t))), self._tilt.output_at(t)
 
     def _answer(self, cmd: PelcoCommand, t: float) -> list[tuple[float, bytes]]:
         if self.feedback == "none":

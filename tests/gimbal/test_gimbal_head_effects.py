@@ -79,3 +79,49 @@ def test_bad_effect_arguments_are_refused():
         PTS303H(speed_scale=0.0)
     with pytest.raises(GimbalError, match="dead_time_rng"):
         PTS303H(dead_time_jitter_s=0.01)
+
+
+@pytest.mark.parametrize("ripple", [0.0, 0.02])
+@pytest.mark.parametrize("play_deg", [0.2, 1.0])
+def test_a_reversal_loses_exactly_the_backlash_before_the_output_moves(play_deg, ripple):
+    """The same unit and commands with and without the play: the output lags the motor by half the
+    play while driven (mid-play at power-on), stands still on a reversal until the motor has turned
+    the whole play back, then leads by half the play.  Bound 1e-9 deg."""
+    p = HeadParams(ripple_rel=ripple)
+    motor, geared = PTS303H(p, unit_seed=2), PTS303H(p, unit_seed=2, backlash_deg=play_deg)
+    again = PTS303H(p, unit_seed=2, backlash_deg=play_deg)      # for the speeds (asking advances a head)
+    for h in (motor, geared, again):
+        h.receive(encode_pan_tilt(1, 1, 0x20, 1, 0x20), 0.0)     # left and up for 1.5 s
+        h.receive(encode_pan_tilt(1, -1, 0x20, -1, 0x20), 1.5)   # then reverse both
+    assert geared.pose_segments(0.0, 0.1) is None
+    assert (motor.pose_segments(0.0, 0.1) is None) == (ripple > 0)
+    t = np.linspace(0.0, 4.0, 40_001)
+    m_pan, m_tilt = motor.angles_at(t, wrap_pan=False)
+    g_pan, g_tilt = geared.angles_at(t, wrap_pan=False)
+    rates = again.rates_at(t)
+    h = play_deg / 2
+    eps = 1e-4   # samples this close (in motor angle) to a switch are not classified
+    for m, g, v in ((m_pan, g_pan, rates[0]), (m_tilt, g_tilt, rates[1])):
+        k_peak = int(np.argmax(m))
+        peak = m[k_peak]                       # within 1e-6 deg of the true turning point
+        before, back = np.arange(t.size) < k_peak, np.arange(t.size) > k_peak
+        first = before & (m - m[0] < h - eps)
+        assert first.sum() > 10 and np.allclose(g[first], m[0], atol=1e-9, rtol=0)   # half the play: still
+        fwd = before & (m - m[0] > h + eps)
+        assert fwd.sum() > 100 and np.allclose(g[fwd], m[fwd] - h, atol=1e-9, rtol=0)
+        held = back & (m > peak - play_deg + eps)
+        assert held.sum() > 10 and np.ptp(g[held]) < 1e-12                  # the output stands still
+        assert abs(g[held][0] - (peak - h)) < 1e-6
+        after = back & (m < peak - play_deg - eps)                            # the play lost, it follows
+        assert after.sum() > 100 and np.allclose(g[after], m[after] + h, atol=1e-9, rtol=0)
+        assert np.all(v[held] == 0.0) and np.all(v[first] == 0.0) and np.all(v[fwd] > 0) and np.all(v[after] < 0)
+
+
+def test_no_backlash_is_the_same_head_to_the_bit():
+    a, b = PTS303H(NO_RIPPLE, unit_seed=8), PTS303H(NO_RIPPLE, unit_seed=8, backlash_deg=0.0)
+    for h in (a, b):
+        h.receive(encode_pan_tilt(1, 1, 0x3F, -1, 0x3F), 0.0)
+        h.receive(encode_pan_tilt(1, -1, 0x10, 1, 0x3F), 0.7)
+    t = np.linspace(0, 2, 201)
+    assert all(np.array_equal(x, y) for x, y in zip(a.angles_at(t), b.angles_at(t)))
+    assert all(np.array_equal(x, y) for x, y in zip(a.pose_segments(0, 2), b.pose_segments(0, 2)))

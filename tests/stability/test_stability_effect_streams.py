@@ -14,7 +14,7 @@ with each effect removed in turn.  Every other effect's draws are compared with 
 * the head's dead-time jitter (one uniform per frame the head receives: the link's drops and bit
   errors change how many) and the host's link latency (one per command sent): the stream's end state
   is its own seed's stream after exactly that many draws, so nothing else drew from it;
-* the head's thermal drift and the lidar's clock drift draw nothing; listing them must change no
+* the head's thermal drift and backlash and the lidar's clock drift draw nothing; listing them must change no
   other effect's draws.
 
 Bound: equal to the bit.  On 802524f removing ``uart_drops`` changed the bit errors of most frames
@@ -37,7 +37,7 @@ from sim.virtual_uart import VirtualUart
 ROOT = Path(__file__).resolve().parents[2]
 EVERY = ["range_noise", "motor_speed_noise", "return_probability", "angular_noise", "dropouts", "sunlight",
          "beam_footprint", "uart_bit_errors", "uart_drops", "uart_echo", "head_ripple", "stray_returns",
-         "head_thermal_drift", "head_dead_time_jitter", "link_latency_jitter", "lidar_clock_drift"]
+         "head_thermal_drift", "head_dead_time_jitter", "link_latency_jitter", "lidar_clock_drift", "head_backlash"]
 PARAMS = {"uart_bit_error_rate": 0.01, "uart_drop_rate": 0.02, "dropout_rate": 0.05, "sunlight_rate": 1e-3,
           "stray_rate_hz": 20.0}
 PER_HIT = {"return_probability": "return_draws", "dropouts": "dropout_draws", "range_noise": "range_noise_normals",

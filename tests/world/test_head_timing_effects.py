@@ -23,7 +23,7 @@ from sim.scene import EFFECT_DEFAULTS, scene_from_mapping
 from sim.virtual_uart import VirtualUart
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
-NEW = ("head_thermal_drift", "head_dead_time_jitter", "link_latency_jitter", "lidar_clock_drift")
+NEW = ("head_thermal_drift", "head_dead_time_jitter", "link_latency_jitter", "lidar_clock_drift", "head_backlash")
 
 
 def fig12(effects, params=None, seconds=1.0):
@@ -45,6 +45,7 @@ def test_each_new_effect_is_registered_with_its_defaults():
     ("lidar_clock_drift_ppm", -151, "lidar_clock_drift_ppm must be >= -150"),
     ("head_speed_coeff_per_k", 0.009, "more than halve"),
     ("dead_time_jitter_s", -0.01, "dead_time_jitter_s must be >= 0"),
+    ("head_backlash_deg", 7.0, "head_backlash_deg must be <= 5"),
 ])
 def test_out_of_range_parameters_are_named(key, value, match):
     owner = next(e for e in NEW if key in EFFECT_DEFAULTS[e])
@@ -68,6 +69,16 @@ def test_thermal_drift_runs_the_head_hot_and_leaves_the_tracker_its_calibrated_t
     for b in (5, 20, 0x3F):
         assert table.pan.speed_deg_s(b) == loop.head.calibrated_speed_deg_s("pan", b)
         assert loop.head.true_speed_deg_s("pan", b) == pytest.approx(scale * table.pan.speed_deg_s(b), rel=1e-15)
+
+
+def test_backlash_reaches_the_head_and_the_tracker_does_not_know_it():
+    loop = ClosedLoop(fig12(["head_backlash"], {"head_backlash_deg": 0.5}, seconds=3.0))
+    log = loop.run()
+    assert loop.head.backlash_deg == 0.5 and loop.head._pan.half_play == 0.25
+    # mid-play at power-on: the first pan move loses a quarter degree against the dead reckoning
+    err = log["est_pan_deg"] - log["head_pan_deg"]
+    moved = np.abs(log["head_pan_deg"] - log["head_pan_deg"][0]) > 1.0
+    assert moved.sum() > 20 and np.mean(np.abs(np.abs(err[moved]) - 0.25) < 1e-6) > 0.8
 
 
 def _wire_times(scene, monkeypatch):
