@@ -175,6 +175,10 @@ class ClosedLoop:
             head_fx["dead_time_rng"] = fx.effect_rng(seed, "head_dead_time_jitter")
         if scene.has("head_backlash"):
             head_fx["backlash_deg"] = scene.param("head_backlash_deg")
+        if scene.has("head_wind"):
+            head_fx["deflection"] = fx.WindOnHead(scene.param("wind_speed_m_s"), scene.param("wind_turbulence"),
+                                                  scene.param("head_stiffness_nm_per_rad"),
+                                                  fx.effect_rng(seed, "head_wind"))
         self.head = PTS303H(params, unit_seed=g.unit_seed, feedback=g.feedback, address=g.address,
                             pan0_deg=g.pan0_deg, tilt0_deg=tilt0, **head_fx)
         # the lidar's free-running clock (the tracker's time), and the host's latency to the line

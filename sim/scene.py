@@ -60,6 +60,7 @@ EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     "link_latency_jitter": {"link_latency_jitter_s": 0.001},
     "lidar_clock_drift": {"lidar_clock_drift_ppm": -20.0},
     "head_backlash": {"head_backlash_deg": 0.2},
+    "head_wind": {"wind_speed_m_s": 8.0, "wind_turbulence": 0.2, "head_stiffness_nm_per_rad": 100.0},
 }
 # [effects] keys that may be negative, with their bounds (every other key is >= 0)
 SIGNED_EFFECT_PARAMS: dict[str, tuple[float, float]] = {
@@ -232,6 +233,12 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
     if "head_backlash" in effects and params["head_backlash_deg"] > 5.0:
         raise UserError(f"{we}: head_backlash_deg must be <= 5 (a worn head has a degree or so), "
                         f"got {params['head_backlash_deg']!r}")
+    if "head_wind" in effects:
+        if params["wind_speed_m_s"] > 40.0 or params["wind_turbulence"] > 1.0:
+            raise UserError(f"{we}: the wind model covers wind_speed_m_s <= 40 and wind_turbulence <= 1, got "
+                            f"{params['wind_speed_m_s']:g} and {params['wind_turbulence']:g}")
+        if not params["head_stiffness_nm_per_rad"] >= 1.0:
+            raise UserError(f"{we}: head_stiffness_nm_per_rad must be >= 1, got {params['head_stiffness_nm_per_rad']!r}")
     if "head_thermal_drift" in effects and not 1.0 + params["head_speed_coeff_per_k"] * params["head_delta_t_k"] > 0.5:
         raise UserError(f"{we}: head_speed_coeff_per_k * head_delta_t_k = "
                         f"{params['head_speed_coeff_per_k'] * params['head_delta_t_k']:g} would more than halve "

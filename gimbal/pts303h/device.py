@@ -49,6 +49,10 @@ class PTS303H:
     backlash_deg : float >= 0 [deg], the free play of each axis's worm gear: on a reversal the motor
         turns this far before the output follows (see :class:`~gimbal.pts303h.kinematics._Axis`);
         :meth:`pose_segments` then offers no constant-acceleration pieces (the output is not one)
+    deflection : callable or None, ``deflection(t_s) -> (pan_deg, tilt_deg, pan_deg_s, tilt_deg_s)``
+        for a float array of times: an elastic deflection of the output added to the geared motion
+        (the wind's torque on the head over the drive's stiffness, :class:`sim.effects.WindOnHead`)
+        and its rates; a pure function of time.  Also no constant-acceleration pieces then
     """
 
     def __init__(
@@ -64,6 +68,7 @@ class PTS303H:
         dead_time_jitter_s: float = 0.0,
         dead_time_rng: np.random.Generator | None = None,
         backlash_deg: float = 0.0,
+        deflection=None,
     ) -> None:
         if feedback not in FEEDBACK_MODES:
             raise GimbalError(f"feedback={feedback!r} is not allowed; use one of {FEEDBACK_MODES}")
@@ -85,6 +90,7 @@ class PTS303H:
         self.params = params
         self.speed_scale = float(speed_scale)
         self.backlash_deg = float(backlash_deg)
+        self.deflection = deflection
         self.dead_time_jitter_s = float(dead_time_jitter_s)
         self._dead_time_rng = dead_time_rng if dead_time_jitter_s > 0 else None
         self.unit_seed = int(unit_seed)
@@ -201,6 +207,9 @@ class PTS303H:
             return flat.reshape(t.shape), flat.reshape(t.shape)
         pan = self._pan.eval_position(flat)
         tilt = self._tilt.eval_position(flat)
+        if self.deflection is not None:
+            d_pan, d_tilt = self.deflection(flat)[:2]
+            pan, tilt = pan + d_pan, tilt + d_tilt
         self.advance_to(float(flat.max()))
         return (wrap_pan_deg(pan) if wrap_pan else pan).reshape(t.shape), tilt.reshape(t.shape)
 
@@ -220,7 +229,7 @@ class PTS303H:
             table, ripple = axis.pieces()
             if table[0, 0] > t0_s:
                 raise ValueError(f"{axis.name}: time {t0_s} is before the kept history (starts {table[0, 0]})")
-            if ripple or axis.half_play:   # no constant-acceleration pieces then
+            if ripple or axis.half_play or self.deflection is not None:   # no constant-acceleration pieces
                 return None
             out.append(table)
         self.advance_to(t1_s)
@@ -230,7 +239,11 @@ class PTS303H:
         """True (pan_speed_deg_s, tilt_speed_deg_s) at each time (vectorised, ripple included)."""
         t = np.asarray(t_s, dtype=float)
         flat = t.reshape(-1)
-        out = self._pan.eval(flat)[1].reshape(t.shape), self._tilt.eval(flat)[1].reshape(t.shape)
+        vp, vt = self._pan.eval(flat)[1], self._tilt.eval(flat)[1]
+        if self.deflection is not None and flat.size:
+            d = self.deflection(flat)
+            vp, vt = vp + d[2], vt + d[3]
+        out = vp.reshape(t.shape), vt.reshape(t.shape)
         if t.size:
             self.advance_to(float(t.max()))
         return out
@@ -239,6 +252,9 @@ class PTS303H:
         t = np.array([float(t_s)])
         pan, vp = self._pan.eval(t)
         tilt, vt = self._tilt.eval(t)
+        if self.deflection is not None:
+            d = self.deflection(t)
+            pan, tilt, vp, vt = pan + d[0], tilt + d[1], vp + d[2], vt + d[3]
         self.advance_to(float(t_s))
         return HeadState(float(t_s), float(wrap_pan_deg(pan[0])), float(tilt[0]),
                          float(vp[0]), float(vt[0]))
@@ -359,7 +375,11 @@ class PTS303H:
         return []
 
     def angles_now(self, t: float) -> tuple[float, float]:
-        return float(wrap_pan_deg(self._pan.output_at(t))), self._tilt.output_at(t)
+        pan, tilt = self._pan.output_at(t), self._tilt.output_at(t)
+        if self.deflection is not None:
+            d = self.deflection(np.array([float(t)]))
+            pan, tilt = pan + float(d[0][0]), tilt + float(d[1][0])
+        return float(wrap_pan_deg(pan)), tilt
 
     def _answer(self, cmd: PelcoCommand, t: float) -> list[tuple[float, bytes]]:
         if self.feedback == "none":

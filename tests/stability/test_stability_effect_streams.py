@@ -13,7 +13,8 @@ with each effect removed in turn.  Every other effect's draws are compared with 
   end state;
 * the head's dead-time jitter (one uniform per frame the head receives: the link's drops and bit
   errors change how many) and the host's link latency (one per command sent): the stream's end state
-  is its own seed's stream after exactly that many draws, so nothing else drew from it;
+  is its own seed's stream after exactly that many draws, so nothing else drew from it; the wind's
+  gust phases likewise (drawn once, when the head is built);
 * the head's thermal drift and backlash and the lidar's clock drift draw nothing; listing them must change no
   other effect's draws.
 
@@ -37,7 +38,8 @@ from sim.virtual_uart import VirtualUart
 ROOT = Path(__file__).resolve().parents[2]
 EVERY = ["range_noise", "motor_speed_noise", "return_probability", "angular_noise", "dropouts", "sunlight",
          "beam_footprint", "uart_bit_errors", "uart_drops", "uart_echo", "head_ripple", "stray_returns",
-         "head_thermal_drift", "head_dead_time_jitter", "link_latency_jitter", "lidar_clock_drift", "head_backlash"]
+         "head_thermal_drift", "head_dead_time_jitter", "link_latency_jitter", "lidar_clock_drift", "head_backlash",
+         "head_wind"]
 PARAMS = {"uart_bit_error_rate": 0.01, "uart_drop_rate": 0.02, "dropout_rate": 0.05, "sunlight_rate": 1e-3,
           "stray_rate_hz": 20.0}
 PER_HIT = {"return_probability": "return_draws", "dropouts": "dropout_draws", "range_noise": "range_noise_normals",
@@ -91,7 +93,9 @@ def _run(effects, monkeypatch):
               if "head_dead_time_jitter" in effects else None,
               "link_latency_jitter": (loop.link_jitter_rng.bit_generator.state, len(link),
                                       loop.scene.param("link_latency_jitter_s"))
-              if "link_latency_jitter" in effects else None}
+              if "link_latency_jitter" in effects else None,
+              "head_wind": (loop.head.deflection.phase, fx.effect_rng(loop.scene.seed, "head_wind").uniform(0, 2 * np.pi, 16))
+              if "head_wind" in effects else None}
     return {e: np.concatenate(v) if v else np.zeros(0) for e, v in drawn.items()}, link, states
 
 
@@ -135,6 +139,8 @@ def test_removing_one_effect_leaves_every_other_effects_draws(removed, full_run,
         assert states["stray_returns"] == states_all["stray_returns"]
     if removed != "motor_speed_noise":
         assert states["motor_speed_noise"] == states_all["motor_speed_noise"]
+    if removed != "head_wind":
+        assert np.array_equal(*states["head_wind"]) and np.array_equal(states["head_wind"][0], states_all["head_wind"][0])
     for own in ("head_dead_time_jitter", "link_latency_jitter"):
         if removed != own:
             state, n, param = states[own]

@@ -5,7 +5,10 @@ the closed loop applies them, and their physics with a bound.
 * link latency jitter: each command reaches the line later than the host's stamp by exactly its own
   stream's exponential draws;
 * lidar clock drift: the sensor's time is ``t (1 + ppm 1e-6)`` to 1 ns, and the clock guard
-  (foveatrack.sensor_time) reads such a clock as one stream: no clock jump, nothing dropped.
+  (foveatrack.sensor_time) reads such a clock as one stream: no clock jump, nothing dropped;
+* backlash: the dead reckoning is off by half the play once the head has moved (mid-play at start);
+* wind: a steady wind deflects the head by exactly its torque over the stiffness; gusts have the
+  stated rms and the rates are the deflection's derivative.
 """
 
 import tomllib
@@ -23,7 +26,8 @@ from sim.scene import EFFECT_DEFAULTS, scene_from_mapping
 from sim.virtual_uart import VirtualUart
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
-NEW = ("head_thermal_drift", "head_dead_time_jitter", "link_latency_jitter", "lidar_clock_drift", "head_backlash")
+NEW = ("head_thermal_drift", "head_dead_time_jitter", "link_latency_jitter", "lidar_clock_drift", "head_backlash",
+       "head_wind")
 
 
 def fig12(effects, params=None, seconds=1.0):
@@ -46,6 +50,8 @@ def test_each_new_effect_is_registered_with_its_defaults():
     ("head_speed_coeff_per_k", 0.009, "more than halve"),
     ("dead_time_jitter_s", -0.01, "dead_time_jitter_s must be >= 0"),
     ("head_backlash_deg", 7.0, "head_backlash_deg must be <= 5"),
+    ("wind_speed_m_s", 60.0, "wind model covers"),
+    ("head_stiffness_nm_per_rad", 0.0, "head_stiffness_nm_per_rad must be >= 1"),
 ])
 def test_out_of_range_parameters_are_named(key, value, match):
     owner = next(e for e in NEW if key in EFFECT_DEFAULTS[e])
@@ -155,3 +161,40 @@ def test_the_clock_guard_reads_a_drifting_clock_as_one_stream(ppm):
     assert accepted == pushed
     c = guard.counters
     assert c["clock_jumps"] == 0 and c["bad_time_points"] == 0 and c["duplicate_points"] == 0
+
+
+def test_steady_wind_deflects_the_head_by_its_torque_over_the_stiffness():
+    """No gusts: the deflection is 0.5 rho Cd A L U^2 / k, pan right and tilt down by half; the
+    geared motion is unchanged underneath (the same head without wind, plus the constant)."""
+    u, k = 10.0, 100.0
+    wind = fx.WindOnHead(u, 0.0, k, np.random.default_rng(0))
+    torque_nm = 0.5 * 1.225 * (1.2 * 0.02) * 0.05 * u * u
+    pan, tilt, vp, vt = wind(np.linspace(0, 10, 11))
+    assert np.allclose(pan, -np.degrees(torque_nm / k), rtol=1e-12) and np.allclose(tilt, pan / 2, rtol=1e-12)
+    assert np.all(vp == 0) and np.all(vt == 0)
+    assert 0.03 < -pan[0] < 0.05                          # 0.06 N m on 100 N m/rad: 0.034 deg
+    from gimbal.pelco import encode_pan_tilt
+    from gimbal.pts303h import PTS303H
+    calm, windy = PTS303H(unit_seed=1), PTS303H(unit_seed=1, deflection=wind)
+    for h in (calm, windy):
+        h.receive(encode_pan_tilt(1, 1, 0x30, 1, 0x30), 0.0)
+    t = np.linspace(0, 3, 31)
+    (pc, tc), (pw, tw) = calm.angles_at(t, wrap_pan=False), windy.angles_at(t, wrap_pan=False)
+    assert np.allclose(pw - pc, pan[0], atol=1e-12) and np.allclose(tw - tc, tilt[0], atol=1e-12)
+    assert windy.pose_segments(3.0, 3.1) is None
+
+
+def test_gusts_have_the_stated_rms_and_their_rates_are_the_derivative():
+    wind = fx.WindOnHead(8.0, 0.2, 100.0, fx.effect_rng(12, "head_wind"))
+    t = np.arange(0.0, 3000.0, 0.05)
+    v, dv = wind.speed(t)
+    assert v.mean() == pytest.approx(8.0, abs=0.1)
+    assert np.std(v) / 8.0 == pytest.approx(0.2, rel=0.15)           # 16 sinusoids: unit variance by construction
+    h = 1e-5
+    tt = np.array([1.0, 7.3, 123.4])
+    num = (wind(tt + h)[0] - wind(tt - h)[0]) / (2 * h)
+    assert np.allclose(wind(tt)[2], num, rtol=1e-5, atol=1e-9)
+    # the phases are the effect's own stream, drawn once
+    again = fx.WindOnHead(8.0, 0.2, 100.0, fx.effect_rng(12, "head_wind"))
+    assert np.array_equal(again.phase, wind.phase)
+    assert np.array_equal(wind.phase, fx.effect_rng(12, "head_wind").uniform(0, 2 * np.pi, 16))
