@@ -198,14 +198,21 @@ GUST_LENGTH_SCALE_M = 50.0         # Kaimal spectrum's length scale near the gro
 
 class WindOnHead:
     """The head's elastic deflection by the wind, a pure function of time (``gimbal.pts303h.PTS303H``'s
-    ``deflection``): ``(pan_deg, tilt_deg, pan_deg_s, tilt_deg_s)`` at an array of times.
+    ``deflection``): :meth:`angles_deg` and :meth:`rates_deg_s` at an array of times.
 
     v(t) = U (1 + I g(t)) with g a unit-variance sum of ``N_GUST`` sinusoids (random phases from
     ``rng``, drawn here once; a Kaimal spectrum's weights); deflection = 0.5 rho Cd A L v^2 / k,
     pan pushed right (negative) and tilt down by half as much.
+
+    The angles interpolate g linearly between nodes on a fixed grid of ``NODE_S`` (k * 1 ms, the same
+    nodes whatever is asked, so still a pure function of time): 16 sinusoids per node instead of per
+    point (a frame's 10 000 points share 101 nodes).  The error against the exact sum
+    (:meth:`angles_deg_exact`) is below :meth:`interpolation_bound_deg`: 3e-7 deg at 8 m/s, 1e-5 deg
+    at 40 m/s (tested).  The rates are exact.
     """
 
     N_GUST = 16
+    NODE_S = 0.001
 
     def __init__(self, speed_m_s: float, turbulence: float, stiffness_nm_per_rad: float, rng):
         f_hz = np.geomspace(0.02, 2.0, self.N_GUST)
@@ -221,18 +228,70 @@ class WindOnHead:
         self.deg_per_speed2 = math.degrees(0.5 * AIR_DENSITY_KG_M3 * HEAD_DRAG_AREA_M2 * HEAD_WIND_ARM_M
                                            / stiffness_nm_per_rad)
 
-    def speed(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Wind speed [m/s] and its rate [m/s^2] at each time."""
+    def _gust(self, t_s, rates: bool):
+        """g(t) (or its rate) as a sum in a fixed order over the sinusoids (no BLAS: its order
+        differs per CPU)."""
         t = np.asarray(t_s, dtype=float).reshape(-1)
-        if self.turbulence == 0.0:
-            return np.full(t.size, self.speed_m_s), np.zeros(t.size)
-        arg = np.outer(t, self.omega) + self.phase
-        g = np.sin(arg) @ self.amp
-        g_rate = np.cos(arg) @ (self.amp * self.omega)
-        return self.speed_m_s * (1.0 + self.turbulence * g), self.speed_m_s * self.turbulence * g_rate
+        out = np.zeros(t.size)
+        arg = np.empty(t.size)
+        trig = np.cos if rates else np.sin
+        for w, ph, a in zip(self.omega.tolist(), self.phase.tolist(), self.amp.tolist()):
+            np.multiply(t, w, out=arg)
+            arg += ph
+            trig(arg, out=arg)
+            arg *= a * w if rates else a
+            out += arg
+        return out
 
-    def __call__(self, t_s: np.ndarray):
-        v, dv = self.speed(t_s)
+    def speed(self, t_s: np.ndarray, exact: bool = True) -> np.ndarray:
+        """Wind speed [m/s] at each time (``exact=False``: g interpolated between the nodes)."""
+        if self.turbulence == 0.0:
+            return np.full(np.size(t_s), self.speed_m_s)
+        return self.speed_m_s * (1.0 + self.turbulence * (self._gust(t_s, False) if exact else self._gust_nodes(t_s)))
+
+    def _gust_nodes(self, t_s) -> np.ndarray:
+        t = np.asarray(t_s, dtype=float).reshape(-1)
+        u = t / self.NODE_S
+        k = np.floor(u)
+        frac = u - k
+        k0 = int(k.min()) if k.size else 0
+        if k.size and k.max() - k0 < 4 * k.size + 16:     # a span of nodes (a frame, a gyro batch)
+            nodes = np.arange(k0, int(k.max()) + 2)
+            g = self._gust(nodes * self.NODE_S, False)
+            i = (k - k0).astype(np.intp)
+        else:                                            # scattered times: only the nodes they need
+            nodes, inv = np.unique(np.concatenate([k, k + 1]), return_inverse=True)
+            g = self._gust(nodes * self.NODE_S, False)
+            i = inv[:k.size]
+            return g[i] + frac * (g[inv[k.size:]] - g[i])
+        return g[i] + frac * (g[i + 1] - g[i])
+
+    def speed_rate(self, t_s: np.ndarray) -> np.ndarray:
+        """Its rate [m/s^2] at each time."""
+        if self.turbulence == 0.0:
+            return np.zeros(np.size(t_s))
+        return self.speed_m_s * self.turbulence * self._gust(t_s, True)
+
+    def angles_deg(self, t_s: np.ndarray, exact: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Deflection (pan, tilt) [deg]: pan pushed right (negative), tilt down by half as much (the
+        gusts interpolated between the nodes unless ``exact``)."""
+        v = self.speed(t_s, exact)
         pan = -self.deg_per_speed2 * v * v
-        pan_rate = -self.deg_per_speed2 * 2.0 * v * dv
-        return pan, 0.5 * pan, pan_rate, 0.5 * pan_rate
+        return pan, 0.5 * pan
+
+    def interpolation_bound_deg(self) -> float:
+        """Bound on ``|angles_deg - angles_deg_exact|`` (pan; tilt half): a linear interpolation's
+        ``h^2 / 8 max|g''|``, with ``max|g''| <= sum a w^2`` and ``|d defl / d g| <= 2 c U^2 I (1 + I sum a)``."""
+        sum_a = float(np.sum(self.amp))
+        g2 = float(np.sum(self.amp * self.omega**2))
+        slope = 2.0 * self.deg_per_speed2 * self.speed_m_s**2 * self.turbulence * (1.0 + self.turbulence * sum_a)
+        return slope * self.NODE_S**2 / 8.0 * g2
+
+    def angles_deg_exact(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`angles_deg` with every sinusoid evaluated at each time (the reference)."""
+        return self.angles_deg(t_s, exact=True)
+
+    def rates_deg_s(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Their rates [deg/s]."""
+        pan_rate = -self.deg_per_speed2 * 2.0 * self.speed(t_s) * self.speed_rate(t_s)
+        return pan_rate, 0.5 * pan_rate

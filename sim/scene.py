@@ -39,7 +39,8 @@ from foveatrack.errors import UserError
 from gimbal.head_facts import DEFAULT_HEAD
 
 # Effects a scene can ask for, with their parameters and defaults (sources in the docstring of
-# sim.effects).  Head/link effects act in gimbal/ and sim/virtual_uart.py.
+# sim.effects).  Head effects act in gimbal/pts303h (sim/loop.py hands them over), link effects in
+# sim/virtual_uart.py and sim/loop.py.
 EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     "range_noise": {"range_noise_m": 0.02},
     "angular_noise": {"angular_noise_deg": 0.03},

@@ -49,10 +49,11 @@ class PTS303H:
     backlash_deg : float >= 0 [deg], the free play of each axis's worm gear: on a reversal the motor
         turns this far before the output follows (see :class:`~gimbal.pts303h.kinematics._Axis`);
         :meth:`pose_segments` then offers no constant-acceleration pieces (the output is not one)
-    deflection : callable or None, ``deflection(t_s) -> (pan_deg, tilt_deg, pan_deg_s, tilt_deg_s)``
-        for a float array of times: an elastic deflection of the output added to the geared motion
-        (the wind's torque on the head over the drive's stiffness, :class:`sim.effects.WindOnHead`)
-        and its rates; a pure function of time.  Also no constant-acceleration pieces then
+    deflection : object or None, an elastic deflection of the output added to the geared motion (the
+        wind's torque on the head over the drive's stiffness, :class:`sim.effects.WindOnHead`), a pure
+        function of time: ``deflection.angles_deg(t_s) -> (pan_deg, tilt_deg)`` and
+        ``deflection.rates_deg_s(t_s) -> (pan_deg_s, tilt_deg_s)`` for a float array of times.  Also
+        no constant-acceleration pieces then
     """
 
     def __init__(
@@ -208,7 +209,7 @@ class PTS303H:
         pan = self._pan.eval_position(flat)
         tilt = self._tilt.eval_position(flat)
         if self.deflection is not None:
-            d_pan, d_tilt = self.deflection(flat)[:2]
+            d_pan, d_tilt = self.deflection.angles_deg(flat)
             pan, tilt = pan + d_pan, tilt + d_tilt
         self.advance_to(float(flat.max()))
         return (wrap_pan_deg(pan) if wrap_pan else pan).reshape(t.shape), tilt.reshape(t.shape)
@@ -241,8 +242,8 @@ class PTS303H:
         flat = t.reshape(-1)
         vp, vt = self._pan.eval(flat)[1], self._tilt.eval(flat)[1]
         if self.deflection is not None and flat.size:
-            d = self.deflection(flat)
-            vp, vt = vp + d[2], vt + d[3]
+            d_pan, d_tilt = self.deflection.rates_deg_s(flat)
+            vp, vt = vp + d_pan, vt + d_tilt
         out = vp.reshape(t.shape), vt.reshape(t.shape)
         if t.size:
             self.advance_to(float(t.max()))
@@ -253,8 +254,8 @@ class PTS303H:
         pan, vp = self._pan.eval(t)
         tilt, vt = self._tilt.eval(t)
         if self.deflection is not None:
-            d = self.deflection(t)
-            pan, tilt, vp, vt = pan + d[0], tilt + d[1], vp + d[2], vt + d[3]
+            (d_pan, d_tilt), (r_pan, r_tilt) = self.deflection.angles_deg(t), self.deflection.rates_deg_s(t)
+            pan, tilt, vp, vt = pan + d_pan, tilt + d_tilt, vp + r_pan, vt + r_tilt
         self.advance_to(float(t_s))
         return HeadState(float(t_s), float(wrap_pan_deg(pan[0])), float(tilt[0]),
                          float(vp[0]), float(vt[0]))
@@ -377,8 +378,8 @@ class PTS303H:
     def angles_now(self, t: float) -> tuple[float, float]:
         pan, tilt = self._pan.output_at(t), self._tilt.output_at(t)
         if self.deflection is not None:
-            d = self.deflection(np.array([float(t)]))
-            pan, tilt = pan + float(d[0][0]), tilt + float(d[1][0])
+            d_pan, d_tilt = self.deflection.angles_deg(np.array([float(t)]))
+            pan, tilt = pan + float(d_pan[0]), tilt + float(d_tilt[0])
         return float(wrap_pan_deg(pan)), tilt
 
     def _answer(self, cmd: PelcoCommand, t: float) -> list[tuple[float, bytes]]:

@@ -169,7 +169,8 @@ def test_steady_wind_deflects_the_head_by_its_torque_over_the_stiffness():
     u, k = 10.0, 100.0
     wind = fx.WindOnHead(u, 0.0, k, np.random.default_rng(0))
     torque_nm = 0.5 * 1.225 * (1.2 * 0.02) * 0.05 * u * u
-    pan, tilt, vp, vt = wind(np.linspace(0, 10, 11))
+    t = np.linspace(0, 10, 11)
+    (pan, tilt), (vp, vt) = wind.angles_deg(t), wind.rates_deg_s(t)
     assert np.allclose(pan, -np.degrees(torque_nm / k), rtol=1e-12) and np.allclose(tilt, pan / 2, rtol=1e-12)
     assert np.all(vp == 0) and np.all(vt == 0)
     assert 0.03 < -pan[0] < 0.05                          # 0.06 N m on 100 N m/rad: 0.034 deg
@@ -187,13 +188,24 @@ def test_steady_wind_deflects_the_head_by_its_torque_over_the_stiffness():
 def test_gusts_have_the_stated_rms_and_their_rates_are_the_derivative():
     wind = fx.WindOnHead(8.0, 0.2, 100.0, fx.effect_rng(12, "head_wind"))
     t = np.arange(0.0, 3000.0, 0.05)
-    v, dv = wind.speed(t)
+    v = wind.speed(t)
     assert v.mean() == pytest.approx(8.0, abs=0.1)
     assert np.std(v) / 8.0 == pytest.approx(0.2, rel=0.15)           # 16 sinusoids: unit variance by construction
     h = 1e-5
     tt = np.array([1.0, 7.3, 123.4])
-    num = (wind(tt + h)[0] - wind(tt - h)[0]) / (2 * h)
-    assert np.allclose(wind(tt)[2], num, rtol=1e-5, atol=1e-9)
+    num = (wind.angles_deg_exact(tt + h)[0] - wind.angles_deg_exact(tt - h)[0]) / (2 * h)
+    assert np.allclose(wind.rates_deg_s(tt)[0], num, rtol=1e-5, atol=1e-9)
+    assert np.allclose(wind.rates_deg_s(tt)[1], num / 2, rtol=1e-5, atol=1e-9)
+    # the angles interpolate the gusts between 1 ms nodes: within the stated bound of the exact sum,
+    # and the same at a time however it is asked (a frame's span, scattered times, one time)
+    for u, stated in ((8.0, 3e-7), (40.0, 1e-5)):
+        w = fx.WindOnHead(u, 0.2, 100.0, fx.effect_rng(3, "head_wind"))
+        assert w.interpolation_bound_deg() < stated
+        frame = np.sort(np.random.default_rng(1).uniform(17.0, 17.1, 10_000))
+        assert np.max(np.abs(w.angles_deg(frame)[0] - w.angles_deg_exact(frame)[0])) <= w.interpolation_bound_deg()
+        scattered = np.concatenate([frame[:50], [1e4, 3.3]])
+        assert np.array_equal(w.angles_deg(scattered)[0][:50], w.angles_deg(frame)[0][:50])
+        assert w.angles_deg(frame[7:8])[0][0] == w.angles_deg(frame)[0][7]
     # the phases are the effect's own stream, drawn once
     again = fx.WindOnHead(8.0, 0.2, 100.0, fx.effect_rng(12, "head_wind"))
     assert np.array_equal(again.phase, wind.phase)
