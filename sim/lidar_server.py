@@ -201,6 +201,11 @@ class SceneSource:
         pan, tilt = self.pose(t_s)
         return self.returns(chunk, np.asarray(pan, float), np.asarray(tilt, float))
 
+    def set_rain_fog_suppression(self, on: bool) -> None:
+        """The unit's rain/fog suppression switched by the host (SDK lidar command 0x03): the
+        scene's droplet returns (effect ``weather``) are dropped while it is on."""
+        self.sensor.rain_fog_suppression = bool(on)
+
     def returns(self, chunk, pan_deg: np.ndarray, tilt_deg: np.ndarray):
         """Steps 3-5 of the closed loop for one scan chunk at the given per-point head pose
         (the ray casting and effects are :class:`sim.sensor.SceneSensor`'s, shared with the loop).
@@ -234,6 +239,9 @@ class _FollowingSource:
         if R.shape[0] == 0 or self.tail.zero is None or self.mono0 is None:
             return -math.inf
         return ((R[-1, 0] + self.tail.zero - self.mono0) * self.time_scale - ahead_s) * 1e9
+
+    def set_rain_fog_suppression(self, on: bool) -> None:
+        self.inner.set_rain_fog_suppression(on)
 
     def _pose(self, t_s):
         mono0 = self.mono0 if self.mono0 is not None else 0.0

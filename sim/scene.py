@@ -55,6 +55,16 @@ EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     "head_ripple": {},
     # insects and dust: isolated returns at short range, at a rate per second (sim.sensor)
     "stray_returns": {"stray_rate_hz": 2.0, "stray_min_range_m": 1.0, "stray_max_range_m": 15.0},
+    # range noise growing with range, falling with reflectivity (shapes range_noise's draws)
+    "range_noise_model": {"noise_limit_m": 0.15},
+    # returned power against the incidence angle (Lambertian): no parameters
+    "incidence": {},
+    # fog / haze / dust as a visibility: extinction, droplet returns near the sensor
+    # a beam's footprint on a near edge and a far surface: one echo, mixed or the stronger (sub-rays
+    # of beam_footprint)
+    "mixed_pixels": {"mixed_resolution_m": 0.75},
+    "weather": {"weather_visibility_m": 1000.0, "weather_clutter_prob": 0.002, "weather_clutter_min_m": 1.0,
+                "weather_clutter_max_m": 10.0},
     # the head and timing side (sources and stated assumptions in sim.effects, "Head and timing")
     "head_thermal_drift": {"head_delta_t_k": 20.0, "head_speed_coeff_per_k": -0.001},
     "head_dead_time_jitter": {"dead_time_jitter_s": 0.02},
@@ -62,6 +72,11 @@ EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     "lidar_clock_drift": {"lidar_clock_drift_ppm": -20.0},
     "head_backlash": {"head_backlash_deg": 0.2},
     "head_wind": {"wind_speed_m_s": 8.0, "wind_turbulence": 0.2, "head_stiffness_nm_per_rad": 100.0},
+}
+# Effects that act on another's draws or sub-rays, with what each needs listed beside it.
+EFFECT_REQUIRES: dict[str, tuple[str, ...]] = {
+    "range_noise_model": ("range_noise",),      # shapes the range noise's sigma
+    "mixed_pixels": ("beam_footprint",),        # splits the beam into its sub-rays
 }
 # [effects] keys that may be negative, with their bounds (every other key is >= 0)
 SIGNED_EFFECT_PARAMS: dict[str, tuple[float, float]] = {
@@ -248,6 +263,18 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         raise UserError(f"{we}: stray_min_range_m = {params['stray_min_range_m']} must be below "
                         f"stray_max_range_m = {params['stray_max_range_m']}")
 
+    for e, needs in EFFECT_REQUIRES.items():
+        missing = [n for n in needs if e in effects and n not in effects]
+        if missing:
+            raise UserError(f"{w}: effect {e!r} acts on {', '.join(map(repr, missing))}; list it too")
+    if "weather" in effects:
+        if not params["weather_visibility_m"] > 0:
+            raise UserError(f"{we}: weather_visibility_m must be > 0, got {params['weather_visibility_m']}")
+        if not params["weather_clutter_prob"] <= 1:
+            raise UserError(f"{we}: weather_clutter_prob must be in [0, 1], got {params['weather_clutter_prob']}")
+        if not params["weather_clutter_min_m"] < params["weather_clutter_max_m"]:
+            raise UserError(f"{we}: weather_clutter_min_m = {params['weather_clutter_min_m']} must be below "
+                            f"weather_clutter_max_m = {params['weather_clutter_max_m']}")
     optics, scan_model, envelope = _lidar(data.get("lidar", {"preset": "mid40"}), f"{where} [lidar]")
     base_dir = Path(where).parent if Path(where).is_file() else None
     gimbal = _gimbal(data.get("gimbal", {}), f"{where} [gimbal]", base_dir)

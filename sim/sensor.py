@@ -25,7 +25,9 @@ from sim.world import kernels as wk
 from sim.world.trajectories import body_yaw_rad
 
 _NONE = np.zeros(0)          # an effect that is off: no draws
-EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts", "stray_returns")
+EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts", "stray_returns",
+                  "weather")
+CLUTTER_REFLECTIVITY_BYTE = 1   # a droplet's return: the weakest diffuse byte (sim.effects, weather)
 STRAY_REFLECTIVITY = 0.1      # an insect's or a dust grain's return: weak
 # The kind of value each effect takes from its stream, for the effects that take one kind only (these
 # can be drawn ahead: sim.ahead.DrawsAhead); sunlight mixes kinds and is drawn frame by frame.
@@ -77,8 +79,24 @@ class SceneSensor:
             refl.append(np.array([STRAY_REFLECTIVITY]))
         self._refl_table = np.concatenate(refl) if refl else np.zeros(0)
         self._refl_byte_table = np.clip(np.round(self._refl_table * 100), 0, 255).astype(np.uint8)
-        self._range_limit_m = (fx.range_limit_m(self._refl_table, scene.param("range_80pct_m"))
-                               if scene.has("return_probability") else np.zeros(self._refl_table.size))
+        # The range limit per primitive: for the return probability, and for the range noise model
+        # (the datasheet's 260 m at 80 % where the scene does not list the return probability).
+        from sim.scene import EFFECT_DEFAULTS
+
+        range_80pct_m = (scene.param("range_80pct_m") if scene.has("return_probability")
+                         else EFFECT_DEFAULTS["return_probability"]["range_80pct_m"])
+        self._range_limit_m = (fx.range_limit_m(self._refl_table, range_80pct_m)
+                               if scene.has("return_probability") or scene.has("range_noise_model")
+                               else np.zeros(self._refl_table.size))
+        # Incidence, weather, the range noise model (sim.effects): their scales, asked once.
+        self._noise_limit_m = self._param_if("range_noise_model", "noise_limit_m")
+        self._extinction_1_m = (fx.extinction_1_m(scene.param("weather_visibility_m")) if scene.has("weather") else 0.0)
+        self._cos = _NONE            # this frame's |cos incidence| per ray (effect incidence)
+        self._share = _NONE          # this frame's share of the beam in its echo (effect mixed_pixels)
+        # A Livox's rain/fog suppression (the SDK's lidar command 0x03, sim.virtual_lidar): drops the
+        # droplet returns of the weather effect; their draws are taken either way.
+        self.rain_fog_suppression = False
+        self.last_clutter = 0        # droplet returns placed in the last frame (before suppression)
         # The range envelope, always on: the blind zone and the maximum range (sim.scan.presets).
         self._min_range_m, self._max_range_m = scene.lidar_range_m
         # The noise effects' scales, as their draw functions compute them (sim.effects).
@@ -88,7 +106,7 @@ class SceneSensor:
         # Which effects act, asked once (a frame asked the scene eight times).
         self._has = {name: scene.has(name) for name in
                      ("return_probability", "dropouts", "range_noise", "angular_noise", "sunlight", "beam_footprint",
-                      "stray_returns")}
+                      "stray_returns", "incidence", "weather", "mixed_pixels")}
         self._target_prim_end = sum(spec.body.prims.shape[0] for spec in scene.targets)
         # Per target, what sizes its per-frame cull (computed once: both walk Python objects).
         self._cull = [(spec.body.bounding_radius_m, spec.trajectory.max_speed_m_s) for spec in scene.targets]
@@ -119,6 +137,10 @@ class SceneSensor:
         rng_m.fill(np.inf)
         prim = np.empty(n, dtype=np.int64)
         prim.fill(-1)
+        if has["incidence"]:
+            self._cos = np.ones(n)
+        if has["mixed_pixels"]:
+            self._share = np.ones(n)
         offset = 0
         for spec, cull in zip(scene.targets, self._cull):
             self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
@@ -130,6 +152,8 @@ class SceneSensor:
         if self._bg.shape[0]:
             self.rays_cast_background += n
             wk.cast_static_kernel(d_world, self._bg, offset, rng_m, prim)
+            if has["incidence"]:
+                wk.cos_incidence_static_kernel(d_world, rng_m, prim, self._bg, offset, self._cos)
         if has["stray_returns"]:
             self._strays(chunk, d_world, t0, t1, rng_m, prim)
         if scene.multi_object:
@@ -148,15 +172,20 @@ class SceneSensor:
             range_normals = fx.range_noise_normals(self._stream("range_noise"), n_hit)
         if has["angular_noise"] and n_hit:
             angular_normals = fx.angular_noise_normals(self._stream("angular_noise"), n_hit)
-        xyz = np.empty((n_hit, 3))
-        pt_ns = np.empty(n_hit, dtype=np.int64)
-        refl_byte = np.empty(n_hit, dtype=np.uint8)
-        on_target = np.empty(n_hit, dtype=np.bool_)
+        clutter = _NONE
+        if has["weather"]:
+            clutter = self._droplets(chunk)
+        n_out = n_hit + int(np.isfinite(clutter).sum())
+        xyz = np.empty((n_out, 3))
+        pt_ns = np.empty(n_out, dtype=np.int64)
+        refl_byte = np.empty(n_out, dtype=np.uint8)
+        on_target = np.empty(n_out, dtype=np.bool_)
         k = sk.assemble_returns_kernel(
             prim, chunk.status, rng_m, chunk.direction, chunk.t_ns, self._range_limit_m, self._refl_byte_table,
             self._target_prim_end, u_return, u_dropout, self._dropout_rate, range_normals, self._range_noise_m,
             angular_normals, self._angular_noise_rad, True, self._min_range_m, self._max_range_m,
-            xyz, pt_ns, refl_byte, on_target)
+            self._refl_table, self._ray_gain(), self._extinction_1_m, self._noise_limit_m,
+            clutter, CLUTTER_REFLECTIVITY_BYTE, xyz, pt_ns, refl_byte, on_target)
         xyz, pt_ns, refl_byte, on_target = xyz[:k], pt_ns[:k], refl_byte[:k], on_target[:k]
         if has["sunlight"] and n:
             # Sunlight false alarms are appended, then the frame is put back in time order (stable:
@@ -203,6 +232,29 @@ class SceneSensor:
         self.draw_calls[effect] += 1
         return self._sources[effect]
 
+    def _ray_gain(self) -> np.ndarray:
+        """Per ray, the power gain of incidence and of the footprint's share (empty: neither listed)."""
+        if self._has["incidence"] and self._has["mixed_pixels"]:
+            return self._cos * self._share
+        if self._has["incidence"]:
+            return self._cos
+        if self._has["mixed_pixels"]:
+            return self._share
+        return _NONE
+
+    def _droplets(self, chunk) -> np.ndarray:
+        """Droplet returns of the weather effect: per ray the range of its droplet (inf: none), or
+        none at all while the rain/fog suppression is on (drawn either way: the stream does not
+        depend on the mode)."""
+        p = self.scene.param
+        rays, r = fx.weather_clutter_draws(self._stream("weather"), np.flatnonzero(chunk.status == RAY_OK),
+                                           p("weather_clutter_prob"), p("weather_clutter_min_m"), p("weather_clutter_max_m"))
+        self.last_clutter = int(rays.size)
+        clutter = np.full(len(chunk), np.inf)
+        if not self.rain_fog_suppression:
+            clutter[rays] = r
+        return clutter
+
     def _strays(self, chunk, d_world, t0, t1, rng_m, prim):
         """Insects and dust (effect ``stray_returns``): Poisson(rate x frame length) returns, each on a
         ray drawn uniformly from the chunk (the rays are uniform in time) at a range uniform in
@@ -221,6 +273,10 @@ class SceneSensor:
         rays, r = rays[ok], r[ok]
         rng_m[rays] = r
         prim[rays] = self._stray_prim
+        if self._has["incidence"]:
+            self._cos[rays] = 1.0      # an insect or a grain: no surface to be oblique to
+        if self._has["mixed_pixels"]:
+            self._share[rays] = 1.0
         self.last_strays_m = d_world[rays] * r[:, None]      # world frame, for the truth
 
     def _cast_target(self, spec, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset):
@@ -253,6 +309,7 @@ class SceneSensor:
                 wk.cast_moving_kernel(rays, d, pos, yaw, prims, offset, r, p)
         if not self._has["beam_footprint"]:
             cast(idx, d_world, rng_m, prim)
+            self._incidence_on(spec, idx, d_world, pos, yaw, rng_m, prim, offset, flap)
             return
         # Beam footprint: sub-rays over the divergence ellipse; the return is the nearest sub-ray
         # range if at least half of the sub-rays hit (a partial hit on a thin arm may still return).
@@ -262,6 +319,10 @@ class SceneSensor:
         e_az = np.cross(up, d)
         e_az /= np.maximum(np.linalg.norm(e_az, axis=1, keepdims=True), 1e-12)
         e_el = np.cross(d, e_az)
+        if self._has["mixed_pixels"]:
+            self._mixed(offs, d, e_az, e_el, cast, idx, rng_m, prim, offset, prims.shape[0])
+            self._incidence_on(spec, idx, d_world, pos, yaw, rng_m, prim, offset, flap)
+            return
         hits = np.zeros(idx.size, dtype=np.int64)
         best = np.full(idx.size, np.inf)
         best_prim = np.full(idx.size, -1, dtype=np.int64)
@@ -280,6 +341,44 @@ class SceneSensor:
         take = ret & (best < rng_m[idx])
         rng_m[idx[take]] = best[take]
         prim[idx[take]] = best_prim[take]
+        self._incidence_on(spec, idx, d_world, pos, yaw, rng_m, prim, offset, flap)
+
+    def _mixed(self, offs, d, e_az, e_el, cast, idx, rng_m, prim, offset, n_prims):
+        """Mixed pixels (effect ``mixed_pixels``): each sub-ray of the candidate beams against this
+        body and the static background, then one echo per beam (:func:`sim.sensor_kernels.
+        mixed_pixel_kernel`); a beam whose footprint touches the body takes it if nearer than what
+        an earlier body gave.  Moving objects behind (other drones, birds, crowns) are not mixed in."""
+        k = idx.size
+        sub_r = np.full((k, len(offs)), np.inf)
+        sub_p = np.full((k, len(offs)), -1, dtype=np.int64)
+        local = np.arange(k, dtype=np.int64)
+        bg_offset = int(self._object_prim_start[-1])
+        for s, (a, b) in enumerate(offs):
+            sub = d + a * e_az + b * e_el
+            sub /= np.linalg.norm(sub, axis=1, keepdims=True)
+            r = np.full(k, np.inf)
+            p = np.full(k, -1, dtype=np.int64)
+            cast(local, sub, r, p)
+            if self._bg.shape[0]:
+                wk.cast_static_kernel(sub, self._bg, bg_offset, r, p)
+            sub_r[:, s] = r
+            sub_p[:, s] = p
+        touched = np.any((sub_p >= offset) & (sub_p < offset + n_prims), axis=1)
+        out_r = np.empty(k)
+        out_p = np.empty(k, dtype=np.int64)
+        share = np.empty(k)
+        sk.mixed_pixel_kernel(sub_r, sub_p, self._refl_table, float(self.scene.param("mixed_resolution_m")),
+                              out_r, out_p, share)
+        take = touched & (out_r < rng_m[idx])
+        rng_m[idx[take]] = out_r[take]
+        prim[idx[take]] = out_p[take]
+        self._share[idx[take]] = share[take]
+
+    def _incidence_on(self, spec, idx, d_world, pos, yaw, rng_m, prim, offset, flap):
+        """|cos incidence| of the rays ``idx`` that hit this body (effect incidence), along the
+        central ray; a bird's flapping wings are left at 1 (their pose is not kept here)."""
+        if self._has["incidence"] and flap is None:
+            wk.cos_incidence_moving_kernel(idx, d_world, pos, yaw, rng_m, prim, spec.body.prims, offset, self._cos)
 
     def _sunlight(self, chunk, xyz, pt_ns, refl_byte, on_target):
         rng = self._stream("sunlight")

@@ -51,10 +51,18 @@ def count_hits_kernel(prim, status):
     return n
 
 
+@njit(cache=True, inline="always")
+def _refl_byte(refl, gain):
+    """The Livox reflectivity byte of a return of effective reflectivity ``refl * gain``:
+    ``clip(rint(100 refl gain), 0, 255)`` (numpy's round: half to even)."""
+    return np.uint8(min(max(np.rint(refl * gain * 100.0), 0.0), 255.0))
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m, refl_byte_table, target_prim_end,
                             u_return, u_dropout, dropout_rate, range_normals, range_noise_m, angular_normals,
                             angular_noise_rad, mm_grid, min_range_m, max_range_m,
+                            refl_table, ray_gain, extinction_1_m, noise_limit_m, clutter_range_m, clutter_refl_byte,
                             out_xyz, out_t_ns, out_refl, out_on_target):
     """Points of the hits, effects applied, in scan order; returns how many were kept.
 
@@ -67,11 +75,26 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
       the limit (z < -15) ``p > 1 - exp(z) - 2^-53 > 1 - 1e-6``, so a draw below ``1 - 1e-6`` is
       kept without the exponential (the same decision: only the cost changes);
     * ``u_dropout`` (uniform): kept if ``u >= dropout_rate``;
-    * ``range_normals`` (standard normals): ``0.0 + range_noise_m * z`` [m] is added to the range
-      (``rng.normal(0, range_noise_m)``'s own expression, value for value:
-      :func:`sim.effects.range_noise_draws`, here without its two array operations);
+    * ``range_normals`` (standard normals): ``0.0 + sigma * z`` [m] is added to the range, with
+      ``sigma = range_noise_m`` (``rng.normal(0, range_noise_m)``'s own expression, value for value:
+      :func:`sim.effects.range_noise_draws`, here without its two array operations), or with
+      ``noise_limit_m > 0`` (effect ``range_noise_model``) the sigma of
+      :func:`sim.effects.range_noise_sigma_m`, growing with range and falling with reflectivity;
     * ``angular_normals`` (standard normals, 3 per hit, flat or (H, 3)): ``0.0 + angular_noise_rad * z``
       [rad] is added to the direction, which is then renormalised (:func:`sim.effects.angular_noise_draws`).
+
+    The return's power gain against a clear, head-on return of the whole beam
+    (:func:`sim.effects.return_gain`): ``ray_gain[j]`` (empty: off; effect ``incidence``'s
+    ``|cos theta|`` times effect ``mixed_pixels``' share of the beam in the echo) times the two-way transmission
+    ``exp(-2 extinction_1_m r)`` (effect ``weather``; 0: off).  It scales the effective reflectivity,
+    so the range limit by ``sqrt(gain)`` (:func:`sim.effects.range_limit_m`), the range noise of the
+    model, and the reflectivity byte (``refl_table[m] * gain``, :func:`_refl_byte`).
+
+    ``clutter_range_m`` (effect ``weather``; empty: off): per ray, the range of a droplet's return
+    (inf: none).  The lidar reports its first return: a droplet nearer than the point the ray would
+    have given replaces it; on a ray that gives no point (nothing hit, lost to the effects) it is
+    the ray's point.  Its reflectivity byte is ``clutter_refl_byte``; it takes no draw here, and a
+    ray without a hit takes no hit index, so the other effects' draws go to the same hits.
 
     The range envelope, always on: a hit whose measured range (after the range noise) is below
     ``min_range_m`` (the blind zone) or above ``max_range_m`` gives no point; it takes no draw, so
@@ -87,28 +110,70 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
     use_rn = range_normals.shape[0] > 0
     an = angular_normals.reshape(-1)
     use_an = an.shape[0] > 0
+    use_inc = ray_gain.shape[0] > 0
+    use_ext = extinction_1_m > 0.0
+    use_gain = use_inc or use_ext
+    use_model = noise_limit_m > 0.0
+    use_clutter = clutter_range_m.shape[0] > 0
     h = -1
     k = 0
     for j in range(prim.shape[0]):
         m = prim[j]
-        if m < 0 or status[j] != RAY_OK:
-            continue
-        h += 1
+        ok = status[j] == RAY_OK
+        c = clutter_range_m[j] if (use_clutter and ok) else math.inf
+        keep = m >= 0 and ok
         r = range_m[j]
-        if use_ret:
+        gain = 1.0
+        if keep:
+            h += 1
+            if use_inc:
+                gain = ray_gain[j]
+            if use_ext:
+                gain = gain * math.exp(-2.0 * extinction_1_m * r)
             r_max = range_limit_m[m]
-            u = u_return[h]
-            # Within half the limit z < -16.6 (< -15 whatever the rounding): the draw alone decides,
-            # without the division (the same decision as the test below, which the others take).
-            if not (r < 0.5 * r_max and u < 0.999999):
-                z = min(max((r - r_max) / (0.03 * r_max), -50.0), 50.0)
-                if not (z < -15.0 and u < 0.999999) and not u < 1.0 / (1.0 + math.exp(z)):
-                    continue
-        if use_drop and not u_dropout[h] >= dropout_rate:
+            if use_gain:
+                r_max = r_max * math.sqrt(gain)
+            if use_ret:
+                u = u_return[h]
+                if not r_max > 0.0:       # no power comes back (a grazing ray)
+                    keep = False
+                # Within half the limit z < -16.6 (< -15 whatever the rounding): the draw alone decides,
+                # without the division (the same decision as the test below, which the others take).
+                elif not (r < 0.5 * r_max and u < 0.999999):
+                    z = min(max((r - r_max) / (0.03 * r_max), -50.0), 50.0)
+                    if not (z < -15.0 and u < 0.999999) and not u < 1.0 / (1.0 + math.exp(z)):
+                        keep = False
+            if keep and use_drop and not u_dropout[h] >= dropout_rate:
+                keep = False
+            if keep and use_rn:
+                sigma = range_noise_m
+                if use_model:
+                    q = r / r_max
+                    q = q * q * noise_limit_m
+                    sigma = math.sqrt(range_noise_m * range_noise_m + q * q)
+                r = r + (0.0 + sigma * range_normals[h])
+            if keep and not (min_range_m <= r <= max_range_m):   # the blind zone and beyond the maximum range
+                keep = False
+        if c < math.inf and (not keep or c < r):
+            # a droplet's return: the ray's first, or the only one it gives
+            if not (min_range_m <= c <= max_range_m):
+                continue
+            x = d_lidar[j, 0] * c
+            y = d_lidar[j, 1] * c
+            z = d_lidar[j, 2] * c
+            if mm_grid:
+                x = _on_mm_grid(x)
+                y = _on_mm_grid(y)
+                z = _on_mm_grid(z)
+            out_xyz[k, 0] = x
+            out_xyz[k, 1] = y
+            out_xyz[k, 2] = z
+            out_t_ns[k] = t_ns[j]
+            out_refl[k] = clutter_refl_byte
+            out_on_target[k] = False
+            k += 1
             continue
-        if use_rn:
-            r = r + (0.0 + range_noise_m * range_normals[h])
-        if not (min_range_m <= r <= max_range_m):   # the blind zone and beyond the maximum range
+        if not keep:
             continue
         dx = d_lidar[j, 0]
         dy = d_lidar[j, 1]
@@ -132,7 +197,66 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
         out_xyz[k, 1] = y
         out_xyz[k, 2] = z
         out_t_ns[k] = t_ns[j]
-        out_refl[k] = refl_byte_table[m]
+        out_refl[k] = _refl_byte(refl_table[m], gain) if use_gain else refl_byte_table[m]
         out_on_target[k] = m < target_prim_end
         k += 1
     return k
+
+
+@njit(cache=True, nogil=True)
+def mixed_pixel_kernel(sub_r, sub_prim, refl_table, resolution_m, out_r, out_prim, out_share):
+    """One echo per beam from its footprint's sub-rays (effect ``mixed_pixels``, :mod:`sim.effects`).
+
+    Row ``k``: the ranges ``sub_r[k]`` (inf: nothing) and primitives of the S sub-rays of one beam,
+    equal shares of its energy.  Each sub-ray returns power ``rho / r^2`` (``refl_table[prim]``).
+    Sorted by range, sub-rays closer than ``resolution_m`` to the previous one merge into one echo
+    (a pulse cannot resolve them): its range is the power-weighted mean of theirs -- a mixed pixel
+    between the surfaces.  The beam reports its strongest echo (ties: the nearer): ``out_r[k]``,
+    ``out_prim[k]`` (the echo's strongest sub-ray's primitive) and ``out_share[k]``, the share of
+    the beam's energy in that echo (its sub-rays / S), which scales the echo's power; inf, -1, 0
+    when no sub-ray hits anything."""
+    n, s = sub_r.shape
+    order = np.empty(s, dtype=np.int64)
+    for k in range(n):
+        m = 0
+        for i in range(s):             # the sub-rays that hit, by range (insertion sort: S <= 64)
+            if sub_prim[k, i] < 0:
+                continue
+            r = sub_r[k, i]
+            j = m
+            while j > 0 and sub_r[k, order[j - 1]] > r:
+                order[j] = order[j - 1]
+                j -= 1
+            order[j] = i
+            m += 1
+        best_p = -1.0
+        best_r = math.inf
+        best_prim = -1
+        best_share = 0.0
+        a = 0
+        while a < m:
+            b = a + 1
+            while b < m and sub_r[k, order[b]] - sub_r[k, order[b - 1]] <= resolution_m:
+                b += 1
+            p_sum = 0.0
+            pr_sum = 0.0
+            p_max = -1.0
+            prim_max = -1
+            for q in range(a, b):
+                i = order[q]
+                r = sub_r[k, i]
+                p = refl_table[sub_prim[k, i]] / (r * r)
+                p_sum += p
+                pr_sum += p * r
+                if p > p_max:
+                    p_max = p
+                    prim_max = sub_prim[k, i]
+            if p_sum > best_p:           # strictly stronger: of equal echoes the nearer stays
+                best_p = p_sum
+                best_r = pr_sum / p_sum
+                best_prim = prim_max
+                best_share = (b - a) / s
+            a = b
+        out_r[k] = best_r
+        out_prim[k] = best_prim
+        out_share[k] = best_share

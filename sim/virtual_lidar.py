@@ -524,6 +524,10 @@ class VirtualLivox:
             self._reply(frame, addr, ok + struct.pack("<fffiii", *self.extrinsic))
         elif cid == P.LIDAR_ID_RAIN_FOG and u.rain_fog and arg in (0, 1):
             self.feature = arg
+            # a scene's source drops its droplet returns (sim.sensor, effect weather) while it is on
+            switch = getattr(self.source, "set_rain_fog_suppression", None)
+            if switch is not None:
+                switch(bool(arg))
             self._reply(frame, addr, ok)
         elif cid == P.LIDAR_ID_SET_FAN and u.has_fan and arg in (0, 1):
             self.fan_on = bool(arg)

@@ -125,3 +125,20 @@ def cast_flapping_twin(d, pos, yaw, flap, prims, hinge):
     best = np.argmin(ts, axis=1)
     rng = ts[np.arange(len(d)), best]
     return rng, np.where(np.isfinite(rng), best, -1)
+
+
+def cos_incidence_twin(prim, p, d):
+    """|cos| between rays ``d`` (N,3) and the outward normal of one primitive at hit points ``p``
+    (N,3), both in the primitive's frame (written from the geometry, not the kernel)."""
+    kind = int(prim[0])
+    c = p - prim[1:4]
+    if kind == SPHERE:
+        n = c / np.linalg.norm(c, axis=1, keepdims=True)
+    elif kind == BOX:
+        u, v = prim[7:10], prim[10:13]
+        axes = np.stack([u, v, np.cross(u, v)])                   # (3, 3)
+        rel = np.abs(c @ axes.T) / prim[4:7]                      # offset / half extent per axis
+        n = axes[np.argmax(rel, axis=1)]                          # ties: the first axis, as the kernel
+    else:
+        n = np.tile(prim[7:10], (len(p), 1))
+    return np.abs(np.einsum("ij,ij->i", n, d))

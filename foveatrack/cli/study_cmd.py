@@ -33,6 +33,11 @@ def register(sub) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (tcp://host:port)")
     p.add_argument("--from-json", metavar="FILE", help="rewrite the report and plots from saved results (no runs)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.add_argument("--axis", choices=("all", "effects"), default="all",
+                   help="'effects': run only the effects axis (each effect a scene can list, on fig12) and "
+                        "update its section of DIR's existing report and JSON")
+    p.add_argument("--effects", metavar="NAME[,NAME...]",
+                   help="with --axis effects: only these effects (default: every one the axis measures)")
     p.set_defaults(func=cmd_accuracy_vs_time)
 
 
@@ -45,8 +50,6 @@ def _load() -> float | None:
 
 
 def cmd_accuracy_vs_time(args) -> int:
-    from foveatrack.cli import study_plots
-    from sim.study.report import write_report
     from sim.study.runner import cpu_name, json_ready, run_study
     from sim.sweep import make_executor
 
@@ -55,6 +58,12 @@ def cmd_accuracy_vs_time(args) -> int:
     from foveatrack.config_util import output_dir
 
     out = output_dir(args.out, "--out")
+    if args.effects and args.axis != "effects":
+        raise UserError("--effects: give it with --axis effects")
+    if args.axis == "effects":
+        if args.from_json:
+            raise UserError("--from-json rewrites the whole report; give it without --axis effects")
+        return _effects_axis(args, out)
     if args.from_json:
         try:
             saved = json.loads(Path(args.from_json).read_text())
@@ -78,8 +87,58 @@ def cmd_accuracy_vs_time(args) -> int:
                 "scheduler": args.scheduler, "cpus": os.cpu_count(), "cpu": cpu_name(),
                 "load_1min_start": load_start, "load_1min_end": _load()}
         (out / RESULTS).write_text(json.dumps({"meta": meta, "results": results}, indent=1))
+    return _write(results, meta, out)
+
+
+def _write(results: dict, meta: dict, out: Path) -> int:
+    from foveatrack.cli import study_plots
+    from sim.study.report import write_report
+
     images = study_plots.write_plots(results, out / IMG_SUBDIR)
     rel = {k: str(Path(p).relative_to(out)) for k, p in images.items()}
     (out / REPORT).write_text(write_report(results, rel, meta))
     print(f"wrote {out / REPORT}, {out / RESULTS} and {len(images)} plots in {out / IMG_SUBDIR}/", file=sys.stderr)
     return 0
+
+
+def _effects_axis(args, out: Path) -> int:
+    """Run the effects axis alone and write it into ``out``'s existing results and report (the rest
+    of the report is rewritten from the saved results, unchanged)."""
+    from sim.study.effect_costs import measured_effects, merge
+    from sim.study.runner import cpu_name, json_ready, run_effects_axis
+    from sim.sweep import make_executor
+
+    path = out / RESULTS
+    try:
+        saved = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise UserError(f"--axis effects: {path} does not exist; run the whole study into {out} first "
+                        "(foveatrack study accuracy-vs-time --out DIR)") from None
+    except (OSError, ValueError) as exc:
+        raise UserError(f"--axis effects: {path} is not a study result ({exc})") from None
+    if not isinstance(saved, dict) or "results" not in saved or "meta" not in saved:
+        raise UserError(f"--axis effects: {path} is not a study result (no 'results'/'meta')")
+    effects = None
+    if args.effects:
+        effects = [e.strip() for e in args.effects.split(",") if e.strip()]
+        allowed = measured_effects()
+        bad = [e for e in effects if e not in allowed]
+        if bad or not effects:
+            raise UserError(f"--effects {args.effects}: {', '.join(bad) or 'no name'} not measured by the axis; "
+                            f"allowed: {', '.join(allowed)}")
+    load_start = _load()
+    t0 = time.perf_counter()
+    with make_executor(args.scheduler, args.workers) as ex:
+        axis, cpu_s = run_effects_axis("quick" if args.quick else "full", ex, effects, progress=not args.no_progress)
+    argv = (["foveatrack study accuracy-vs-time --axis effects"] + (["--effects", args.effects] if args.effects else [])
+            + (["--quick"] if args.quick else []) + ["--out", str(args.out)]
+            + (["--workers", str(args.workers)] if args.workers else []))
+    results, meta = saved["results"], saved["meta"]
+    results.setdefault("axes", {})
+    results["axes"]["effects"] = json_ready(merge(results["axes"].get("effects"), axis))
+    results["axes"]["effects"]["run"] = {
+        "command": " ".join(argv), "wall_s": time.perf_counter() - t0, "cpu_s": cpu_s,
+        "workers": args.workers or (f"Dask at {args.scheduler}" if args.scheduler else os.cpu_count()),
+        "cpu": cpu_name(), "load_1min_start": load_start, "load_1min_end": _load()}
+    path.write_text(json.dumps({"meta": meta, "results": results}, indent=1))
+    return _write(results, meta, out)

@@ -12,7 +12,9 @@ One module per axis, each with ``tasks(size) -> [task]`` (picklable frozen datac
   (the shape of paper Fig. 11b);
 * :mod:`sim.study.point_rate`      -- Mid-40 vs Horizon: tracking error vs compute per frame;
 * :mod:`sim.study.levers`          -- controller, recording, head ripple, scan model in the loop,
-  attitude source, speed table: tracking and world-position error vs CPU relative to the paper's loop.
+  attitude source, speed table: tracking and world-position error vs CPU relative to the paper's loop;
+* :mod:`sim.study.effect_costs`    -- every effect a scene can list, added alone to fig12: CPU per frame
+  relative to fig12 as shipped and the change of the tracking error (``--axis effects`` runs it alone).
 
 Every closed-loop number keeps its per-seed values and a 95 % interval (:mod:`sim.study.stats`);
 the Pareto fronts (:mod:`sim.study.pareto`) rank only differences outside those intervals.

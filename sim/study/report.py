@@ -290,6 +290,9 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
             L += _table(["seeds", "half-width [deg]"], [[str(n), _f(h)] for n, h in seeds_vs_width(vals["values"])])
         L += _img(images, "levers", "levers")
 
+    # 7 ----------------------------------------------------------------------------------------
+    L += effects_section(ax.get("effects"))
+
     # Pareto --------------------------------------------------------------------------------------
     L += ["## Pareto front: for a target accuracy, the cheapest settings", "",
           "Per axis and scene/target, the measured settings that no other beats *beyond the noise* (better on one "
@@ -326,13 +329,47 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
                            else f"{_f(c['error'])} ({_f(c.get('error_hi'))})" if c["error"] is not None else "-"),
                           ", ".join(c.get("cost_ties") or []) or "-"]
                          for c in g["cheapest"]])
-    L += ["## Regenerate", "", "```", COMMAND, "```", "",
+    L += ["## Regenerate", "", "```", COMMAND, EFFECTS_COMMAND, "```", "",
           "Add `--scheduler tcp://HOST:8786` to run the same tasks on a Dask cluster, `--quick` for the small "
-          "version; `--from-json FILE` rewrites the report and plots from saved results without rerunning.", ""]
+          "version; `--from-json FILE` rewrites the report and plots from saved results without rerunning.  The "
+          "second command runs section 7 alone and writes it into the existing results and page.", ""]
     return "\n".join(L)
 
 
-__all__ = ["write_report", "headlines", "COMMAND", "TARGETS"]
+EFFECTS_COMMAND = "foveatrack study accuracy-vs-time --axis effects --out docs --workers 2"
+
+
+def effects_section(ef: dict | None) -> list[str]:
+    """Section 7 of the report: each effect a scene can list, added to fig12 alone
+    (:mod:`sim.study.effect_costs`); regenerated alone by :data:`EFFECTS_COMMAND`."""
+    if not ef or not ef.get("rows"):
+        return []
+    run = ef.get("run")
+    how = (f"Measured by `{run['command']}` ({_f(run.get('wall_s'), '{:.0f}')} s wall on {run.get('workers', '?')} "
+           f"workers, {_f(run.get('cpu_s'), '{:.0f}')} s of measured CPU; CPU: {run.get('cpu', 'not recorded')}, load "
+           f"{_f(run.get('load_1min_start'), '{:.1f}')} at the start and {_f(run.get('load_1min_end'), '{:.1f}')} at the "
+           "end)" if run else "Measured in the whole study's run (above)")
+    L = ["## 7. The effects: what each costs per frame and does to fig12's tracking", "",
+         f"Each effect a scene can list, added alone to {ef['scene']} at its documented default parameters "
+         f"(docs/scenes.md), {_f(ef['duration_s'], '{:g}')} s, seeds {', '.join(map(str, ef['seeds']))}, paired with "
+         f"fig12 as shipped (the **reference**).  CPU is the whole closed loop's per frame, as the paired ratio to "
+         f"the reference's on the same seed and in ms; Δ is the paired change (bold: outside the noise).  {how}.  "
+         f"Regenerate this section alone with `{EFFECTS_COMMAND}` (add `--effects NAME,...` for some of them; "
+         "the rest of the page is rewritten unchanged from the JSON).", ""]
+    excl = ef.get("excluded") or {}
+    if excl:
+        L += ["Not measured: " + "; ".join(f"{e} ({why})" for e, why in excl.items()) + ".", ""]
+    L += _table(["effect", "CPU per frame vs reference", "CPU per frame [ms]", "Δ CPU per frame [ms]",
+                 "error after acq. [deg]", "Δ error after acq. [deg]", "Δ error, all frames [deg]",
+                 "acquisition [s]", "Δ acquisition [s]"],
+                [[r["effect"], _ci(r["cost_ratio"]), _ci(r["ci"]["ms_per_frame"]), _delta(r["delta"]["ms_per_frame"]),
+                  _ci(r["ci"]["error_rms_acq_deg"]), _delta(r["delta"]["error_rms_acq_deg"]),
+                  _delta(r["delta"]["error_rms_all_deg"]), _ci(r["ci"]["acquisition_s"]),
+                  _delta(r["delta"]["acquisition_s"])] for r in ef["rows"]])
+    return L
+
+
+__all__ = ["write_report", "headlines", "effects_section", "COMMAND", "EFFECTS_COMMAND", "TARGETS"]
 
 
 def _orbit_m(target: str) -> float:

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import math
 
-from sim.study import calibration_time, levers, pareto, point_rate, scan_fidelity, sensing, sim_fidelity
+from sim.study import calibration_time, effect_costs, levers, pareto, point_rate, scan_fidelity, sensing, sim_fidelity
 from sim.study.common import SIZES, StudySize, warm_up
 from sim.sweep import run_tasks
 
-AXES = ("scan", "fidelity", "sensing", "calibration", "rate", "levers")
+AXES = ("scan", "fidelity", "sensing", "calibration", "rate", "levers", "effects")
 
 # Target accuracies of the closing Pareto table, per axis (in that axis's error unit).
 TARGETS = {
@@ -35,14 +35,14 @@ def execute(task) -> dict:
 
 def build_tasks(size: StudySize) -> list:
     tasks = (scan_fidelity.tasks(size) + sim_fidelity.tasks(size) + sensing.tasks(size)
-             + calibration_time.tasks(size) + point_rate.tasks(size) + levers.tasks(size))
+             + calibration_time.tasks(size) + point_rate.tasks(size) + levers.tasks(size) + effect_costs.tasks(size))
     return sorted(tasks, key=lambda t: -t.cost_hint)
 
 
 def assemble(size: StudySize, results: list[tuple[object, dict]]) -> dict:
     """The study's results (JSON-ready apart from non-finite floats) from ``(task, result)`` pairs."""
     by = {a: [(t, r) for t, r in results if t.axis == a] for a in ("scan", "fidelity", "sensing", "coverage",
-                                                                 "calibration", "rate", "levers")}
+                                                                 "calibration", "rate", "levers", "effects")}
     axes = {
         "scan": scan_fidelity.collect(by["scan"]),
         "fidelity": sim_fidelity.collect(by["fidelity"]),
@@ -50,6 +50,7 @@ def assemble(size: StudySize, results: list[tuple[object, dict]]) -> dict:
         "calibration": calibration_time.collect(by["calibration"]),
         "rate": point_rate.collect(by["rate"]),
         "levers": levers.collect(by["levers"]),
+        "effects": effect_costs.collect(by["effects"]),
     }
     points = {
         "scan": scan_fidelity.pareto_points(axes["scan"]),
@@ -100,6 +101,15 @@ def cpu_name() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine() or "unknown"
+
+
+def run_effects_axis(size: str | StudySize, executor, effects: list[str] | None = None,
+                     progress: bool = True) -> tuple[dict, float]:
+    """The effects axis alone (:mod:`sim.study.effect_costs`): its collected result and the CPU its
+    runs measured.  ``effects``: a subset of the measured effects (default: all of them)."""
+    size = SIZES[size] if isinstance(size, str) else size
+    results = run_tasks(execute, effect_costs.tasks(size, effects), executor, desc="effects", progress=progress)
+    return effect_costs.collect(results), sum(r.get("cpu_s", 0.0) for _, r in results)
 
 
 def run_study(size: str | StudySize, executor, progress: bool = True) -> dict:

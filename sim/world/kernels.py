@@ -376,6 +376,65 @@ def cast_moving_kernel(idx, d_world, pos, yaw, prims, prim_offset, out_range, ou
                 out_prim[j] = prim_offset + m
 
 
+@njit(cache=True, inline="always")
+def _cos_incidence(prims, m, px, py, pz, dx, dy, dz):
+    """|cos| of the angle between the ray ``d`` (unit) and the outward normal of primitive ``m`` at
+    the hit point ``p`` (both in the primitive's frame): a sphere's radial direction, a box's face
+    whose axis offset is largest relative to its half extent, a flat kind's normal."""
+    kind = int(prims[m, 0])
+    cx = px - prims[m, 1]
+    cy = py - prims[m, 2]
+    cz = pz - prims[m, 3]
+    if kind == SPHERE:
+        n = math.sqrt(cx * cx + cy * cy + cz * cz)
+        if n == 0.0:
+            return 1.0
+        return abs(cx * dx + cy * dy + cz * dz) / n
+    if kind == BOX:
+        ux, uy, uz = prims[m, 7], prims[m, 8], prims[m, 9]
+        vx, vy, vz = prims[m, 10], prims[m, 11], prims[m, 12]
+        wx = uy * vz - uz * vy
+        wy = uz * vx - ux * vz
+        wz = ux * vy - uy * vx
+        eu = abs(ux * cx + uy * cy + uz * cz) / prims[m, 4]
+        ev = abs(vx * cx + vy * cy + vz * cz) / prims[m, 5]
+        ew = abs(wx * cx + wy * cy + wz * cz) / prims[m, 6]
+        if eu >= ev and eu >= ew:
+            return abs(ux * dx + uy * dy + uz * dz)
+        if ev >= ew:
+            return abs(vx * dx + vy * dy + vz * dz)
+        return abs(wx * dx + wy * dy + wz * dz)
+    return abs(prims[m, 7] * dx + prims[m, 8] * dy + prims[m, 9] * dz)
+
+
+@njit(cache=True, nogil=True)
+def cos_incidence_static_kernel(d_world, range_m, prim, prims, prim_offset, out_cos):
+    """``out_cos[j]``: |cos| of the incidence angle for each ray ``j`` whose hit is one of the static
+    primitives ``prims`` (ids ``prim_offset + m``; ``range_m[j]`` along ``d_world[j]`` from the
+    origin); other rays are left as they are (effect ``incidence``, :mod:`sim.effects`)."""
+    for j in range(d_world.shape[0]):
+        m = prim[j] - prim_offset
+        if m < 0 or m >= prims.shape[0]:
+            continue
+        dx, dy, dz = d_world[j, 0], d_world[j, 1], d_world[j, 2]
+        r = range_m[j]
+        out_cos[j] = _cos_incidence(prims, m, dx * r, dy * r, dz * r, dx, dy, dz)
+
+
+@njit(cache=True, nogil=True)
+def cos_incidence_moving_kernel(idx, d_world, pos, yaw, range_m, prim, prims, prim_offset, out_cos):
+    """:func:`cos_incidence_static_kernel` for the rays ``idx`` against a moving body at ``pos[i]``,
+    ``yaw[i]`` (as :func:`cast_moving_kernel`): the hit point and the ray taken into the body frame."""
+    for i in range(idx.shape[0]):
+        j = idx[i]
+        m = prim[j] - prim_offset
+        if m < 0 or m >= prims.shape[0]:
+            continue
+        ox, oy, oz, dx, dy, dz = _ray_in_body(d_world, j, pos, yaw, i)
+        r = range_m[j]
+        out_cos[j] = _cos_incidence(prims, m, ox + dx * r, oy + dy * r, oz + dz * r, dx, dy, dz)
+
+
 @njit(cache=True, nogil=True)
 def cone_candidates_kernel(d_world, status, cx, cy, cz, radius, out_idx):
     """Indices of the valid rays (``status == RAY_OK``) passing within ``radius`` of the point c (and in

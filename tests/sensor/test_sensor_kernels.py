@@ -49,11 +49,12 @@ def test_kernel_matches_twin(listed, n, envelope):
     args = (prim, status, range_m, d, t_ns, fx.range_limit_m(refl, PARAMS["range_80pct_m"]),
             refl_byte, 2, draws["return_probability"], draws["dropouts"], PARAMS["dropout_rate"] if "dropouts" in g else 0.0,
             draws["range_noise"], PARAMS["range_noise_m"], draws["angular_noise"], np.radians(PARAMS["angular_noise_deg"]))
-    k = sk.assemble_returns_kernel(*args, False, *envelope, *out)
+    off = (refl, np.zeros(0), 0.0, 0.0, np.zeros(0), 1)     # incidence, weather, noise model: off
+    k = sk.assemble_returns_kernel(*args, False, *envelope, *off, *out)
     got = tuple(a[:k] for a in out)
     # on the mm grid in the same pass: the bits of quantise_to_mm_grid applied afterwards
     out_mm = (np.empty((n_hit, 3)), np.empty(n_hit, np.int64), np.empty(n_hit, np.uint8), np.empty(n_hit, np.bool_))
-    assert sk.assemble_returns_kernel(*args, True, *envelope, *out_mm) == k
+    assert sk.assemble_returns_kernel(*args, True, *envelope, *off, *out_mm) == k
     assert np.array_equal(out_mm[0][:k].view(np.int64), quantise_to_mm_grid(got[0]).view(np.int64))
     for a, b in zip(out_mm[1:], got[1:]):
         np.testing.assert_array_equal(a[:k], b)
@@ -75,6 +76,63 @@ def test_kernel_matches_twin(listed, n, envelope):
         assert np.all((r_out >= envelope[0] - 1e-9) & (r_out <= envelope[1] + 1e-9))
         if envelope[1] < np.inf and not listed:
             assert k < n_hit
+
+
+NEW = ("incidence", "weather", "range_noise_model", "clutter")
+
+
+@pytest.mark.parametrize("listed", [c for k in range(1, len(NEW) + 1) for c in itertools.combinations(NEW, k)])
+@pytest.mark.parametrize("base", [(), ("return_probability", "range_noise"), EFFECTS])
+def test_kernel_matches_twin_with_incidence_weather_noise_model(listed, base):
+    """The sensor effects of issue 31 (incidence, weather's extinction and droplets, the range noise
+    model), each with and without the older ones: kernel and twin give the same points, bit for bit
+    but for the angular noise's renormalisation, and the same draws."""
+    n = 3000
+    prim, status, range_m, d, t_ns, refl = _rays(7 + len(listed) + 3 * len(base), n)
+    rng = np.random.default_rng(len(listed))
+    cos = rng.uniform(0.0, 1.0, n) if "incidence" in listed else None
+    if cos is not None:
+        cos[:5] = 0.0        # grazing: no power comes back
+    ext = 0.01 if "weather" in listed else 0.0
+    limit = 0.15 if "range_noise_model" in listed else 0.0
+    clutter = None
+    if "clutter" in listed:
+        clutter = np.full(n, np.inf)
+        pick = rng.choice(n, 200, replace=False)
+        clutter[pick] = rng.uniform(0.5, 30.0, 200)
+    seeds = {e: 100 + i for i, e in enumerate(EFFECTS)}
+    envelope = (1.0, 80.0)
+    twin = returns_twin(prim, status, range_m, d, t_ns, refl, 2, {e: np.random.default_rng(seeds[e]) for e in base},
+                        PARAMS, envelope, cos, ext, limit, clutter)
+    n_hit = sk.count_hits_kernel(prim, status)
+    g = {e: np.random.default_rng(seeds[e]) for e in base}
+    none = np.zeros(0)
+    args = (prim, status, range_m, d, t_ns, fx.range_limit_m(refl, PARAMS["range_80pct_m"]),
+            np.clip(np.round(refl * 100), 0, 255).astype(np.uint8), 2,
+            fx.return_draws(g["return_probability"], n_hit) if "return_probability" in g else none,
+            fx.dropout_draws(g["dropouts"], n_hit) if "dropouts" in g else none,
+            PARAMS["dropout_rate"] if "dropouts" in g else 0.0,
+            fx.range_noise_normals(g["range_noise"], n_hit) if "range_noise" in g else none, PARAMS["range_noise_m"],
+            fx.angular_noise_normals(g["angular_noise"], n_hit) if "angular_noise" in g else none,
+            np.radians(PARAMS["angular_noise_deg"]), False, *envelope,
+            refl, none if cos is None else cos, ext, limit, none if clutter is None else clutter, 1)
+    m = n_hit + (0 if clutter is None else int(np.isfinite(clutter).sum()))
+    out = (np.empty((m, 3)), np.empty(m, np.int64), np.empty(m, np.uint8), np.empty(m, np.bool_))
+    k = sk.assemble_returns_kernel(*args, *out)
+    got = tuple(a[:k] for a in out)
+    assert k == len(twin[1])
+    np.testing.assert_allclose(got[0], twin[0], rtol=0, atol=1e-12)
+    if "angular_noise" not in base:
+        assert np.array_equal(got[0].view(np.int64), twin[0].view(np.int64))
+    for a, b in zip(got[1:], twin[1:]):
+        np.testing.assert_array_equal(a, b)
+    if "clutter" in listed:
+        # droplets appear at their ranges, weak and never on the target
+        r_got = np.linalg.norm(got[0], axis=1)
+        c_of = np.full(n, np.inf)
+        c_of[status == RAY_OK] = clutter[status == RAY_OK]
+        at_c = np.isclose(r_got, c_of[np.searchsorted(t_ns, got[1])], rtol=0, atol=1e-9)
+        assert at_c.sum() > 50 and np.all(got[2][at_c] == 1) and not np.any(got[3][at_c])
 
 
 def test_mm_grid_kernel_is_quantise_to_mm_grid_to_the_bit():

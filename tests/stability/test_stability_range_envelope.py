@@ -73,7 +73,8 @@ def test_kernel_keeps_exactly_the_hits_inside_the_envelope(seed, lo, span):
     out = (np.empty((n, 3)), np.empty(n, np.int64), np.empty(n, np.uint8), np.empty(n, np.bool_))
     none = np.zeros(0)
     k = sk.assemble_returns_kernel(prim, status, range_m, d, t_ns, np.full(1, 100.0), np.full(1, 20, np.uint8), 1,
-                                   none, none, 0.0, none, 0.0, none, 0.0, True, lo, hi, *out)
+                                   none, none, 0.0, none, 0.0, none, 0.0, True, lo, hi,
+                                   np.full(1, 0.2), none, 0.0, 0.0, none, 1, *out)
     inside = (range_m >= lo) & (range_m <= hi)
     assert k == int(inside.sum())
     np.testing.assert_array_equal(out[1][:k], t_ns[inside])

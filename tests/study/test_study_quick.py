@@ -10,7 +10,7 @@ import pytest
 from foveatrack.cli import main
 
 SECTIONS = ("## 1. Scan model fidelity", "## 2. Simulation fidelity", "## 3. Sensing time",
-            "## 4. Calibration time", "## 5. Point rate / channels", "## 6. The levers",
+            "## 4. Calibration time", "## 5. Point rate / channels", "## 6. The levers", "## 7. The effects",
             "## Pareto front: for a target accuracy, the cheapest settings", "## Regenerate")
 
 
