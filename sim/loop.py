@@ -47,20 +47,23 @@ from sim.virtual_uart import VirtualUart
 from sim.world import kernels as wk
 
 
-def truth_speed_table(head: PTS303H) -> SpeedTable:
-    """The unit's true speed curve as a table: what a perfect calibration would produce."""
+def truth_speed_table(head: PTS303H, calibrated: bool = False) -> SpeedTable:
+    """The unit's true speed curve as a table: what a perfect calibration would produce now, or with
+    ``calibrated`` at the temperature the unit was calibrated at (without the thermal drift)."""
+    speed = head.calibrated_speed_deg_s if calibrated else head.true_speed_deg_s
+
     def axis(name):
         bytes_ = list(range(64)) + ([TURBO] if name == "pan" else [])
         accel = head.params.pan_accel_deg_s2 if name == "pan" else head.params.tilt_accel_deg_s2
-        return AxisTable(name, tuple(SpeedEntry(b, head.true_speed_deg_s(name, b), 0.0, True, note="truth")
+        return AxisTable(name, tuple(SpeedEntry(b, speed(name, b), 0.0, True, note="truth")
                                      for b in bytes_), accel)
     return SpeedTable(axis("pan"), axis("tilt"), head=f"PTS-303H unit {head.unit_seed} (simulated)",
                       source="truth: the simulated unit's own curve", dead_time_s=head.params.dead_time_s)
 
 
 def load_tracker_table(spec: str, head: PTS303H, where: str) -> SpeedTable:
-    if spec == "truth":
-        return truth_speed_table(head)
+    if spec == "truth":   # calibrated before the run: a thermal drift since is not in it
+        return truth_speed_table(head, calibrated=True)
     if spec == "nominal":
         p = head.params
         return SpeedTable.nominal(p.pan_speed_max_deg_s, p.tilt_speed_max_deg_s, p.pan_turbo_deg_s)
@@ -113,7 +116,12 @@ class _UartSink:
         data = self.encoded.get(key)
         if data is None:     # a run uses a few dozen distinct commands: encode each once
             data = self.encoded[key] = encode_pan_tilt(loop.scene.gimbal.address, *key)
-        loop._pending.extend(loop.uart.send(data, send_t_s))
+        # the controller's time is the lidar's clock; the line runs on true time, later by the
+        # host and link latency the host never sees
+        wire_t_s = send_t_s if loop.clock is None else loop.clock.sensor_to_host(send_t_s)
+        if loop.link_jitter_rng is not None:
+            wire_t_s += fx.link_latency_draw(loop.link_jitter_rng, loop.scene.param("link_latency_jitter_s"))
+        loop._pending.extend(loop.uart.send(data, wire_t_s))
         loop.bytes_sent += len(data)
         if "echo" in loop.uart.effects:
             # RS-485 echo: the host hears its own bytes.  The tracker reads no replies (the head
@@ -158,8 +166,24 @@ class ClosedLoop:
         self.worked_ahead = False                     # run(ahead=True) was used
         params = HeadParams.for_family(g.family, **({} if scene.has("head_ripple") else {"ripple_rel": 0.0}))
         tilt0 = min(max(g.tilt0_deg, params.tilt_min_deg), params.tilt_max_deg)
+        head_fx = {}
+        if scene.has("head_thermal_drift"):
+            head_fx["speed_scale"] = fx.thermal_speed_scale(scene.param("head_speed_coeff_per_k"),
+                                                            scene.param("head_delta_t_k"))
+        if scene.has("head_dead_time_jitter"):
+            head_fx["dead_time_jitter_s"] = scene.param("dead_time_jitter_s")
+            head_fx["dead_time_rng"] = fx.effect_rng(seed, "head_dead_time_jitter")
+        if scene.has("head_backlash"):
+            head_fx["backlash_deg"] = scene.param("head_backlash_deg")
+        if scene.has("head_wind"):
+            head_fx["deflection"] = fx.WindOnHead(scene.param("wind_speed_m_s"), scene.param("wind_turbulence"),
+                                                  scene.param("head_stiffness_nm_per_rad"),
+                                                  fx.effect_rng(seed, "head_wind"))
         self.head = PTS303H(params, unit_seed=g.unit_seed, feedback=g.feedback, address=g.address,
-                            pan0_deg=g.pan0_deg, tilt0_deg=tilt0)
+                            pan0_deg=g.pan0_deg, tilt0_deg=tilt0, **head_fx)
+        # the lidar's free-running clock (the tracker's time), and the host's latency to the line
+        self.clock = fx.LidarClock(scene.param("lidar_clock_drift_ppm")) if scene.has("lidar_clock_drift") else None
+        self.link_jitter_rng = fx.effect_rng(seed, "link_latency_jitter") if scene.has("link_latency_jitter") else None
         uart_fx = set()
         if scene.has("uart_bit_errors"):
             uart_fx.add("bit_errors")
@@ -323,7 +347,13 @@ class ClosedLoop:
         c3 = clock()
         # 4-5. ray casting and the effects the scene lists.
         xyz, pt_ns, refl_byte, on_target = self.sensor.returns(chunk, d_world, t0, t1)
-        frame = Frame(t0, t1, xyz, pt_ns, refl_byte)
+        lidar_clock = self.clock
+        if lidar_clock is None:
+            frame = Frame(t0, t1, xyz, pt_ns, refl_byte)
+        else:   # the lidar stamps its points by its own clock; the host's offset follows the packets
+            frame = Frame(lidar_clock.sensor_s(t0), lidar_clock.sensor_s(t1), xyz, lidar_clock.sensor_ns(pt_ns),
+                          refl_byte)
+            lidar_clock.observe(t1, lidar_clock.sensor_s(t1))
         if scene.multi_object:
             from sim.objects_truth import objects_truth
 
@@ -337,6 +367,8 @@ class ClosedLoop:
         imu = None
         if self.gyro is not None:
             t_imu, gyro = self.gyro.samples_until(self.head, t1)
+            if lidar_clock is not None:    # the lidar's IMU is stamped by the same clock
+                t_imu = np.asarray(t_imu) * (1.0 + lidar_clock.drift_ppm * 1e-6)
             if hasattr(self.controller, "on_imu"):
                 imu = [(t_imu, gyro)]
                 self.imu_fed = (t_imu, gyro)    # recorded with the frame (sim.recorder)
@@ -346,7 +378,9 @@ class ClosedLoop:
         stale_s = None if scene.gate is None else scene.gate.stale_frame_s
         # The frozen head (paper Fig. 13/14a) gets nothing: its sink fails every write, so the
         # controller (the tracker's dead reckoning) is told its command never left.
-        rec = self.frame_step(frame, send_t, imu=imu, stale=stale_s is not None and send_t - t1 > stale_s)
+        stale = stale_s is not None and send_t - t1 > stale_s
+        send_t_tracker = send_t if lidar_clock is None else lidar_clock.host_to_sensor(send_t)
+        rec = self.frame_step(frame, send_t_tracker, imu=imu, stale=stale)
         out = rec.output
         self.last_limited = list(rec.limited)
         if not scene.gimbal.frozen:
@@ -382,7 +416,8 @@ class ClosedLoop:
         L.head_tilt_deg.append(tilt)
         # The tracker's dead reckoning at the same instant as the truth above (frame mid).
         if self.external_controller is None:
-            est_pan, est_tilt = self.tracker.recon.angles_at(t_mid)[:2]
+            t_est = t_mid if self.clock is None else self.clock.sensor_s(t_mid)   # the tracker's clock
+            est_pan, est_tilt = self.tracker.recon.angles_at(t_est)[:2]
         else:
             est_pan, est_tilt = math.nan, math.nan
         L.est_pan_deg.append(est_pan)

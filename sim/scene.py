@@ -39,7 +39,8 @@ from foveatrack.errors import UserError
 from gimbal.head_facts import DEFAULT_HEAD
 
 # Effects a scene can ask for, with their parameters and defaults (sources in the docstring of
-# sim.effects).  Head/link effects act in gimbal/ and sim/virtual_uart.py.
+# sim.effects).  Head effects act in gimbal/pts303h (sim/loop.py hands them over), link effects in
+# sim/virtual_uart.py and sim/loop.py.
 EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     "range_noise": {"range_noise_m": 0.02},
     "angular_noise": {"angular_noise_deg": 0.03},
@@ -64,11 +65,24 @@ EFFECT_DEFAULTS: dict[str, dict[str, Any]] = {
     "mixed_pixels": {"mixed_resolution_m": 0.75},
     "weather": {"weather_visibility_m": 1000.0, "weather_clutter_prob": 0.002, "weather_clutter_min_m": 1.0,
                 "weather_clutter_max_m": 10.0},
+    # the head and timing side (sources and stated assumptions in sim.effects, "Head and timing")
+    "head_thermal_drift": {"head_delta_t_k": 20.0, "head_speed_coeff_per_k": -0.001},
+    "head_dead_time_jitter": {"dead_time_jitter_s": 0.02},
+    "link_latency_jitter": {"link_latency_jitter_s": 0.001},
+    "lidar_clock_drift": {"lidar_clock_drift_ppm": -20.0},
+    "head_backlash": {"head_backlash_deg": 0.2},
+    "head_wind": {"wind_speed_m_s": 8.0, "wind_turbulence": 0.2, "head_stiffness_nm_per_rad": 100.0},
 }
 # Effects that act on another's draws or sub-rays, with what each needs listed beside it.
 EFFECT_REQUIRES: dict[str, tuple[str, ...]] = {
     "range_noise_model": ("range_noise",),      # shapes the range noise's sigma
     "mixed_pixels": ("beam_footprint",),        # splits the beam into its sub-rays
+}
+# [effects] keys that may be negative, with their bounds (every other key is >= 0)
+SIGNED_EFFECT_PARAMS: dict[str, tuple[float, float]] = {
+    "head_delta_t_k": (-60.0, 60.0),             # from the calibration's temperature [K]
+    "head_speed_coeff_per_k": (-0.01, 0.01),     # relative speed change per kelvin [1/K]
+    "lidar_clock_drift_ppm": (-150.0, 150.0),    # inside the daemon's clock guard (DRIFT_PPM 200)
 }
 TRAJECTORY_TYPES = ("straight", "circle", "figure8", "waypoints", "manual")
 GEOMETRIES = ("quadrotor", "sphere", "box")
@@ -227,8 +241,24 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
             if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 64:
                 raise UserError(f"{we}: footprint_subrays must be an integer in [1, 64], got {v!r}")
             params[k] = v
+        elif k in SIGNED_EFFECT_PARAMS:
+            lo, hi = SIGNED_EFFECT_PARAMS[k]
+            params[k] = as_float(v, k, we, lo=lo, hi=hi)
         else:
             params[k] = as_float(v, k, we, lo=0)
+    if "head_backlash" in effects and params["head_backlash_deg"] > 5.0:
+        raise UserError(f"{we}: head_backlash_deg must be <= 5 (a worn head has a degree or so), "
+                        f"got {params['head_backlash_deg']!r}")
+    if "head_wind" in effects:
+        if params["wind_speed_m_s"] > 40.0 or params["wind_turbulence"] > 1.0:
+            raise UserError(f"{we}: the wind model covers wind_speed_m_s <= 40 and wind_turbulence <= 1, got "
+                            f"{params['wind_speed_m_s']:g} and {params['wind_turbulence']:g}")
+        if not params["head_stiffness_nm_per_rad"] >= 1.0:
+            raise UserError(f"{we}: head_stiffness_nm_per_rad must be >= 1, got {params['head_stiffness_nm_per_rad']!r}")
+    if "head_thermal_drift" in effects and not 1.0 + params["head_speed_coeff_per_k"] * params["head_delta_t_k"] > 0.5:
+        raise UserError(f"{we}: head_speed_coeff_per_k * head_delta_t_k = "
+                        f"{params['head_speed_coeff_per_k'] * params['head_delta_t_k']:g} would more than halve "
+                        "the head's speeds; the drift model covers changes above -0.5")
     if "stray_returns" in effects and not params["stray_min_range_m"] < params["stray_max_range_m"]:
         raise UserError(f"{we}: stray_min_range_m = {params['stray_min_range_m']} must be below "
                         f"stray_max_range_m = {params['stray_max_range_m']}")

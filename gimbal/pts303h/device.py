@@ -39,6 +39,21 @@ class PTS303H:
     address : int, logical (DIP-switch) address; frames for other addresses are ignored
     pan0_deg, tilt0_deg : [deg] initial pose (tilt within the stops)
     t0_s : [s] virtual time the head starts at (at rest)
+    speed_scale : float > 0, the unit's speeds now over its curve at the temperature it was
+        calibrated at (thermal drift of the speed curve, ``1 + coefficient * delta_T``; 1: none).
+        The unit's curve itself (:meth:`calibrated_speed_deg_s`) is unchanged
+    dead_time_jitter_s : float >= 0 [s], width of the uniform spread of each command's dead time
+        around ``params.dead_time_s`` (the head's controller starts a command on its next tick)
+    dead_time_rng : numpy Generator, the jitter's own stream (one uniform per frame addressed to
+        the head, in arrival order); needed when ``dead_time_jitter_s > 0``
+    backlash_deg : float >= 0 [deg], the free play of each axis's worm gear: on a reversal the motor
+        turns this far before the output follows (see :class:`~gimbal.pts303h.kinematics._Axis`);
+        :meth:`pose_segments` then offers no constant-acceleration pieces (the output is not one)
+    deflection : object or None, an elastic deflection of the output added to the geared motion (the
+        wind's torque on the head over the drive's stiffness, :class:`sim.effects.WindOnHead`), a pure
+        function of time: ``deflection.angles_deg(t_s) -> (pan_deg, tilt_deg)`` and
+        ``deflection.rates_deg_s(t_s) -> (pan_deg_s, tilt_deg_s)`` for a float array of times.  Also
+        no constant-acceleration pieces then
     """
 
     def __init__(
@@ -50,6 +65,11 @@ class PTS303H:
         pan0_deg: float = 0.0,
         tilt0_deg: float = 0.0,
         t0_s: float = 0.0,
+        speed_scale: float = 1.0,
+        dead_time_jitter_s: float = 0.0,
+        dead_time_rng: np.random.Generator | None = None,
+        backlash_deg: float = 0.0,
+        deflection=None,
     ) -> None:
         if feedback not in FEEDBACK_MODES:
             raise GimbalError(f"feedback={feedback!r} is not allowed; use one of {FEEDBACK_MODES}")
@@ -60,7 +80,20 @@ class PTS303H:
                 f"tilt0_deg={tilt0_deg} is outside the stops "
                 f"[{params.tilt_min_deg}, {params.tilt_max_deg}]"
             )
+        if not (math.isfinite(speed_scale) and speed_scale > 0):
+            raise GimbalError(f"speed_scale={speed_scale!r} is not allowed; must be > 0")
+        if not (math.isfinite(dead_time_jitter_s) and dead_time_jitter_s >= 0):
+            raise GimbalError(f"dead_time_jitter_s={dead_time_jitter_s!r} is not allowed; must be >= 0")
+        if not (math.isfinite(backlash_deg) and 0 <= backlash_deg <= 5):
+            raise GimbalError(f"backlash_deg={backlash_deg!r} is not allowed; 0 <= backlash_deg <= 5")
+        if dead_time_jitter_s > 0 and dead_time_rng is None:
+            raise GimbalError("dead_time_jitter_s > 0 needs dead_time_rng (the jitter's random stream)")
         self.params = params
+        self.speed_scale = float(speed_scale)
+        self.backlash_deg = float(backlash_deg)
+        self.deflection = deflection
+        self.dead_time_jitter_s = float(dead_time_jitter_s)
+        self._dead_time_rng = dead_time_rng if dead_time_jitter_s > 0 else None
         self.unit_seed = int(unit_seed)
         self.feedback = feedback
         self.address = address
@@ -72,8 +105,13 @@ class PTS303H:
         self._tilt_table = unit_speed_table(
             np.random.default_rng(s_tilt), params.tilt_speed_max_deg_s, None, params
         )
-        self._pan_speeds = self._pan_table.tolist()
-        self._tilt_speeds = self._tilt_table.tolist()
+        if self.speed_scale != 1.0:   # thermal drift: every speed of the curve by the same factor
+            self._pan_table_now = self._pan_table * self.speed_scale
+            self._tilt_table_now = self._tilt_table * self.speed_scale
+        else:
+            self._pan_table_now, self._tilt_table_now = self._pan_table, self._tilt_table
+        self._pan_speeds = self._pan_table_now.tolist()
+        self._tilt_speeds = self._tilt_table_now.tolist()
         rr = np.random.default_rng(s_ripple)
         f_pan, f_tilt = params.ripple_freq_hz * np.exp(0.1 * rr.standard_normal(2))
         ph_pan, ph_tilt = rr.uniform(0, 2 * np.pi, 2)
@@ -94,9 +132,10 @@ class PTS303H:
         """Both axes at rest at the power-on pose from ``t_s``."""
         p = self.params
         w_pan, ph_pan, w_tilt, ph_tilt = self._ripple
-        self._pan = _Axis("pan", self._power_on_deg[0], p.pan_accel_deg_s2, None, w_pan, ph_pan, t_s)
+        play = self.backlash_deg
+        self._pan = _Axis("pan", self._power_on_deg[0], p.pan_accel_deg_s2, None, w_pan, ph_pan, t_s, play)
         self._tilt = _Axis("tilt", self._power_on_deg[1], p.tilt_accel_deg_s2, (p.tilt_min_deg, p.tilt_max_deg),
-                           w_tilt, ph_tilt, t_s)
+                           w_tilt, ph_tilt, t_s, play)
 
     def power_cycle(self, t_s: float) -> None:
         """The head lost power and came back at ``t_s`` (a brown-out, a loose supply plug; its serial
@@ -112,16 +151,26 @@ class PTS303H:
 
     # -- facts about the unit --------------------------------------------------------------
     def true_speed_deg_s(self, axis: str, byte: int) -> float:
-        """The unit's true (ripple-free, steady) speed [deg/s] for a speed byte on an axis."""
+        """The unit's true (ripple-free, steady) speed [deg/s] for a speed byte on an axis, now
+        (with the thermal drift ``speed_scale``)."""
+        self._check_axis_byte(axis, byte)
+        return float((self._pan_table_now if axis == "pan" else self._tilt_table_now)[byte])
+
+    def calibrated_speed_deg_s(self, axis: str, byte: int) -> float:
+        """The unit's speed curve at the temperature it was calibrated at (no thermal drift): what a
+        perfect calibration made then holds."""
+        self._check_axis_byte(axis, byte)
+        return float((self._pan_table if axis == "pan" else self._tilt_table)[byte])
+
+    def _check_axis_byte(self, axis: str, byte: int) -> None:
         if axis not in AXES:
             raise GimbalError(f"axis={axis!r}; use 'pan' or 'tilt'")
         if not isinstance(byte, (int, np.integer)) or not 0 <= byte <= 255:
             raise GimbalError(f"speed byte {byte!r} out of range 0-255")
-        return float((self._pan_table if axis == "pan" else self._tilt_table)[byte])
 
     def speed_table(self, axis: str) -> np.ndarray:
-        """Copy of the unit's speed per byte (256 entries) for ``axis``."""
-        return (self._pan_table if axis == "pan" else self._tilt_table).copy()
+        """Copy of the unit's speed per byte (256 entries) for ``axis``, now (thermal drift included)."""
+        return (self._pan_table_now if axis == "pan" else self._tilt_table_now).copy()
 
     @property
     def ripple_freq_hz(self) -> tuple[float, float]:
@@ -159,12 +208,15 @@ class PTS303H:
             return flat.reshape(t.shape), flat.reshape(t.shape)
         pan = self._pan.eval_position(flat)
         tilt = self._tilt.eval_position(flat)
+        if self.deflection is not None:
+            d_pan, d_tilt = self.deflection.angles_deg(flat)
+            pan, tilt = pan + d_pan, tilt + d_tilt
         self.advance_to(float(flat.max()))
         return (wrap_pan_deg(pan) if wrap_pan else pan).reshape(t.shape), tilt.reshape(t.shape)
 
     def pose_segments(self, t0_s: float, t1_s: float) -> tuple[np.ndarray, np.ndarray] | None:
         """The exact motion over ``[t0_s, t1_s]`` as constant-acceleration pieces, or None if the
-        speed ripple is on (then use :meth:`angles_at`).
+        speed ripple or the backlash is on (then use :meth:`angles_at`).
 
         Returns ``(pan, tilt)``, each (4, S) float64: rows ``t_start_s, angle_deg, speed_deg_s,
         accel_deg_s2`` of the kept pieces in time order (the one in force at ``t0_s`` among them;
@@ -178,7 +230,7 @@ class PTS303H:
             table, ripple = axis.pieces()
             if table[0, 0] > t0_s:
                 raise ValueError(f"{axis.name}: time {t0_s} is before the kept history (starts {table[0, 0]})")
-            if ripple:
+            if ripple or axis.half_play or self.deflection is not None:   # no constant-acceleration pieces
                 return None
             out.append(table)
         self.advance_to(t1_s)
@@ -188,7 +240,11 @@ class PTS303H:
         """True (pan_speed_deg_s, tilt_speed_deg_s) at each time (vectorised, ripple included)."""
         t = np.asarray(t_s, dtype=float)
         flat = t.reshape(-1)
-        out = self._pan.eval(flat)[1].reshape(t.shape), self._tilt.eval(flat)[1].reshape(t.shape)
+        vp, vt = self._pan.eval(flat)[1], self._tilt.eval(flat)[1]
+        if self.deflection is not None and flat.size:
+            d_pan, d_tilt = self.deflection.rates_deg_s(flat)
+            vp, vt = vp + d_pan, vt + d_tilt
+        out = vp.reshape(t.shape), vt.reshape(t.shape)
         if t.size:
             self.advance_to(float(t.max()))
         return out
@@ -197,6 +253,9 @@ class PTS303H:
         t = np.array([float(t_s)])
         pan, vp = self._pan.eval(t)
         tilt, vt = self._tilt.eval(t)
+        if self.deflection is not None:
+            (d_pan, d_tilt), (r_pan, r_tilt) = self.deflection.angles_deg(t), self.deflection.rates_deg_s(t)
+            pan, tilt, vp, vt = pan + d_pan, tilt + d_tilt, vp + r_pan, vt + r_tilt
         self.advance_to(float(t_s))
         return HeadState(float(t_s), float(wrap_pan_deg(pan[0])), float(tilt[0]),
                          float(vp[0]), float(vt[0]))
@@ -271,6 +330,8 @@ class PTS303H:
         self.frames_received += 1
         p = self.params
         te = t + p.dead_time_s
+        if self._dead_time_rng is not None:   # one draw per frame for this head, whatever its kind
+            te = max(t, te + self.dead_time_jitter_s * (self._dead_time_rng.random() - 0.5))
         kind = cmd.kind
         if kind == "pan_tilt" or kind == "stop":
             self._check_causal(te)
@@ -293,8 +354,8 @@ class PTS303H:
                 return []
             self._check_causal(te)
             pan, tilt = self._presets[cmd.preset]
-            self._pan.goto(te, pan, self._pan_table[MAX_SPEED_BYTE])
-            self._tilt.goto(te, tilt, self._tilt_table[MAX_SPEED_BYTE])
+            self._pan.goto(te, pan, self._pan_table_now[MAX_SPEED_BYTE])
+            self._tilt.goto(te, tilt, self._tilt_table_now[MAX_SPEED_BYTE])
             return []
         if kind in ("set_pan", "set_tilt"):
             if self._line_quiet_before_frame(cmd) < p.abs_set_quiet_s or not word_is_angle(
@@ -304,10 +365,10 @@ class PTS303H:
                 return []
             self._check_causal(te)
             if kind == "set_pan":
-                self._pan.goto(te, word_to_pan_deg(cmd.word), self._pan_table[MAX_SPEED_BYTE])
+                self._pan.goto(te, word_to_pan_deg(cmd.word), self._pan_table_now[MAX_SPEED_BYTE])
             else:
                 tilt = word_to_tilt_deg(cmd.word, p.tilt_zero)
-                self._tilt.goto(te, tilt, self._tilt_table[MAX_SPEED_BYTE])
+                self._tilt.goto(te, tilt, self._tilt_table_now[MAX_SPEED_BYTE])
             return []
         if kind in ("query_pan", "query_tilt"):
             return self._answer(cmd, t)
@@ -315,8 +376,10 @@ class PTS303H:
         return []
 
     def angles_now(self, t: float) -> tuple[float, float]:
-        pan, _, _ = self._pan.state(t)
-        tilt, _, _ = self._tilt.state(t)
+        pan, tilt = self._pan.output_at(t), self._tilt.output_at(t)
+        if self.deflection is not None:
+            d_pan, d_tilt = self.deflection.angles_deg(np.array([float(t)]))
+            pan, tilt = pan + float(d_pan[0]), tilt + float(d_tilt[0])
         return float(wrap_pan_deg(pan)), tilt
 
     def _answer(self, cmd: PelcoCommand, t: float) -> list[tuple[float, bytes]]:

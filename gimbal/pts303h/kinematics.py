@@ -28,6 +28,7 @@ class _Seg:
     a: float
     r: float  # ripple amplitude on this segment (0 for closed-loop position moves)
     pinned: int = 0  # +1 / -1: held at the upper / lower stop while pushed into it
+    slack0: float = 0.0  # backlash: motor - output angle at t0, in [-play/2, play/2] (set on append)
 
 
 def _pos(t0, p0, v0, a, r, omega, phi, tau):
@@ -62,6 +63,14 @@ def _speed(t0, v0, a, r, omega, phi, tau):
 class _Axis:
     """One axis's motion: the kept segments ``segs`` in time order, and the plan after them.
 
+    The segments are the motor's motion (commands, acceleration, stops act on it).  With a backlash
+    (``play_deg`` > 0, the worm gear's free play) the output angle lags it: the slack ``motor -
+    output`` stays in ``[-play/2, play/2]`` and the output moves only while the motor pushes the slack
+    against an end.  Every segment is monotone in motor angle (plans split at speed zero crossings;
+    the ripple, below 50 %, never reverses a speed), so on a segment starting with slack ``s0`` at motor
+    angle ``m0`` the output is, exactly, ``m(t) - clip(s0 + m(t) - m0, -play/2, play/2)`` (a play
+    operator).  At power-on the slack is 0: mid-play.
+
     ``segs`` changes only through :meth:`prune`, :meth:`_cut` and :meth:`_append`, which keep a
     mirror of the segments' ``(t0, p0, v0, a, r)`` in the columns ``_lo ..`` of ``_cols`` (a
     segment's fields other than ``t1`` never change once appended) and the number of kept
@@ -71,15 +80,16 @@ class _Axis:
 
     _COLS0 = 64
 
-    def __init__(self, name, p0, accel, stops, omega, phi, t_start=0.0):
+    def __init__(self, name, p0, accel, stops, omega, phi, t_start=0.0, play_deg=0.0):
         self.name = name
+        self.half_play = 0.5 * play_deg
         self.accel = accel
         self.stops = stops  # (lo, hi) or None
         self.omega = omega
         self.phi = phi
         self.segs: list[_Seg] = []
         self.target_speed = 0.0
-        self._set_cols(np.empty((5, self._COLS0)))
+        self._set_cols(np.empty((6, self._COLS0)))
         self._lo = 0
         self._n_ripple = 0   # kept segments with r != 0
         self._table = None   # (5, S) copy of the mirror, None after a change
@@ -109,9 +119,18 @@ class _Axis:
         )
 
     def state(self, t: float) -> tuple[float, float, _Seg]:
+        """The motor's angle and base speed at ``t``, and its segment."""
         s = self.segs[self._find(t)]
         p = _pos1(s.t0, s.p0, s.v0, s.a, s.r, self.omega, self.phi, t)
         return p, s.v0 + s.a * (t - s.t0), s
+
+    def output_at(self, t: float) -> float:
+        """The output angle at ``t`` (the motor's, less the backlash's slack)."""
+        p, _, s = self.state(t)
+        if not self.half_play:
+            return p
+        h = self.half_play
+        return p - min(max(s.slack0 + (p - s.p0), -h), h)
 
     def _tables(self) -> None:
         if self._table is None:   # after a change of the motion: one slice copy of the mirror
@@ -124,8 +143,13 @@ class _Axis:
         """The kept segments as five rows ``(t0, p0, v0, a, r)``, shared until the motion changes."""
         self._tables()
         if self._arrays is None:
-            self._arrays = tuple(self._table)
+            self._arrays = tuple(self._table[:5])
         return self._arrays
+
+    def _output(self, m: np.ndarray, idx: np.ndarray, p0: np.ndarray) -> np.ndarray:
+        """Output angles from motor angles ``m`` on segments ``idx`` (the play operator)."""
+        h = self.half_play
+        return m - np.clip(self._table[5][idx] + (m - p0[idx]), -h, h)
 
     def pieces(self) -> tuple[np.ndarray, bool]:
         """All kept segments as a (4, S) table (t0, p0, v0, a) and whether any has ripple."""
@@ -138,6 +162,10 @@ class _Axis:
         args = (t0[idx], v0[idx], a[idx], r[idx])
         p = _pos(t0[idx], p0[idx], v0[idx], a[idx], r[idx], self.omega, self.phi, t)
         v = _speed(*args, self.omega, self.phi, t)
+        if self.half_play:   # the output moves only with the slack against an end
+            slack = self._table[5][idx] + (p - p0[idx])
+            v = np.where(np.abs(slack) >= self.half_play, v, 0.0)
+            p = self._output(p, idx, p0)
         return p, v
 
     def eval_position(self, t: np.ndarray) -> np.ndarray:
@@ -147,9 +175,11 @@ class _Axis:
         t0, p0, v0, a, r = self.arrays()
         idx = self._segment_of(t0, t)
         if self._n_ripple:   # some kept segment has ripple (times may come in any order)
-            return _pos(t0[idx], p0[idx], v0[idx], a[idx], r[idx], self.omega, self.phi, t)
-        d = t - t0[idx]
-        return p0[idx] + v0[idx] * d + 0.5 * a[idx] * d * d   # _pos's order: the same bits
+            m = _pos(t0[idx], p0[idx], v0[idx], a[idx], r[idx], self.omega, self.phi, t)
+        else:
+            d = t - t0[idx]
+            m = p0[idx] + v0[idx] * d + 0.5 * a[idx] * d * d   # _pos's order: the same bits
+        return self._output(m, idx, p0) if self.half_play else m
 
     def _segment_of(self, t0: np.ndarray, t: np.ndarray) -> np.ndarray:
         idx = np.searchsorted(t0, t, side="right") - 1
@@ -283,14 +313,18 @@ class _Axis:
             if segs.pop().r != 0:
                 self._n_ripple -= 1
         if segs:
-            segs[-1].t1 = s.t0
+            prev = segs[-1]
+            prev.t1 = s.t0
+            if self.half_play:   # the slack carried over the previous (monotone) segment
+                h = self.half_play
+                s.slack0 = min(max(prev.slack0 + (s.p0 - prev.p0), -h), h)
         segs.append(s)
         if s.r != 0:
             self._n_ripple += 1
         n = len(segs)
         cap = self._cap
         if self._lo + n > cap:   # out of columns: move the kept ones to the front (or grow)
-            cols = np.empty((5, 2 * cap)) if 2 * n > cap else self._cols
+            cols = np.empty((6, 2 * cap)) if 2 * n > cap else self._cols
             cols[:, :n - 1] = self._cols[:, self._lo:self._lo + n - 1]
             self._mv.release()
             self._set_cols(cols)
@@ -303,6 +337,7 @@ class _Axis:
         mv[2 * cap + j] = s.v0
         mv[3 * cap + j] = s.a
         mv[4 * cap + j] = s.r
+        mv[5 * cap + j] = s.slack0
         self._table = None
 
     def _stop_hit(self, s: _Seg):

@@ -10,7 +10,13 @@ with each effect removed in turn.  Every other effect's draws are compared with 
   their draw functions return, concatenated: the hits per frame follow the head and the scan, so
   the runs may draw different counts, and the sequences must agree on their common length;
 * sunlight, stray returns and motor speed noise, whose draws depend on the scan alone: the stream's
-  end state.
+  end state;
+* the head's dead-time jitter (one uniform per frame the head receives: the link's drops and bit
+  errors change how many) and the host's link latency (one per command sent): the stream's end state
+  is its own seed's stream after exactly that many draws, so nothing else drew from it; the wind's
+  gust phases likewise (drawn once, when the head is built);
+* the head's thermal drift and backlash and the lidar's clock drift draw nothing; listing them must change no
+  other effect's draws.
 
 Bound: equal to the bit.  On 802524f removing ``uart_drops`` changed the bit errors of most frames
 (the two shared one stream).
@@ -31,7 +37,9 @@ from sim.virtual_uart import VirtualUart
 
 ROOT = Path(__file__).resolve().parents[2]
 EVERY = ["range_noise", "motor_speed_noise", "return_probability", "angular_noise", "dropouts", "sunlight",
-         "beam_footprint", "uart_bit_errors", "uart_drops", "uart_echo", "head_ripple", "stray_returns"]
+         "beam_footprint", "uart_bit_errors", "uart_drops", "uart_echo", "head_ripple", "stray_returns",
+         "head_thermal_drift", "head_dead_time_jitter", "link_latency_jitter", "lidar_clock_drift", "head_backlash",
+         "head_wind"]
 PARAMS = {"uart_bit_error_rate": 0.01, "uart_drop_rate": 0.02, "dropout_rate": 0.05, "sunlight_rate": 1e-3,
           "stray_rate_hz": 20.0}
 PER_HIT = {"return_probability": "return_draws", "dropouts": "dropout_draws", "range_noise": "range_noise_normals",
@@ -79,7 +87,15 @@ def _run(effects, monkeypatch):
     states = {"sunlight": loop.sensor.rngs["sunlight"].bit_generator.state if "sunlight" in effects else None,
               "stray_returns": (loop.sensor.rngs["stray_returns"].bit_generator.state
                                 if "stray_returns" in effects else None),
-              "motor_speed_noise": loop.scan.noise_draws}
+              "motor_speed_noise": loop.scan.noise_draws,
+              "head_dead_time_jitter": (loop.head._dead_time_rng.bit_generator.state, loop.head.frames_received,
+                                        loop.scene.param("dead_time_jitter_s"))
+              if "head_dead_time_jitter" in effects else None,
+              "link_latency_jitter": (loop.link_jitter_rng.bit_generator.state, len(link),
+                                      loop.scene.param("link_latency_jitter_s"))
+              if "link_latency_jitter" in effects else None,
+              "head_wind": (loop.head.deflection.phase, fx.effect_rng(loop.scene.seed, "head_wind").uniform(0, 2 * np.pi, 16))
+              if "head_wind" in effects else None}
     return {e: np.concatenate(v) if v else np.zeros(0) for e, v in drawn.items()}, link, states
 
 
@@ -123,6 +139,18 @@ def test_removing_one_effect_leaves_every_other_effects_draws(removed, full_run,
         assert states["stray_returns"] == states_all["stray_returns"]
     if removed != "motor_speed_noise":
         assert states["motor_speed_noise"] == states_all["motor_speed_noise"]
+    if removed != "head_wind":
+        assert np.array_equal(*states["head_wind"]) and np.array_equal(states["head_wind"][0], states_all["head_wind"][0])
+    for own in ("head_dead_time_jitter", "link_latency_jitter"):
+        if removed != own:
+            state, n, param = states[own]
+            fresh = fx.effect_rng(_scene(EVERY).seed, own)
+            if own == "head_dead_time_jitter":
+                fresh.random(n)
+            else:
+                for _ in range(n):
+                    fx.link_latency_draw(fresh, param)
+            assert n >= 10 and state == fresh.bit_generator.state, f"{own}'s stream was drawn by another effect"
     kept_all, flips_all = _link_draws(link_all)
     kept, flips = _link_draws(link)
     assert kept.size == kept_all.size == 7 * 50   # one Pelco-D frame per 100 ms frame
