@@ -102,6 +102,7 @@ import zlib
 import numpy as np
 
 from sim import random_kernels as rk
+from sim.portable_exp import exp_portable_np
 
 
 def effect_rng(seed: int, name: str) -> np.random.Generator:
@@ -165,7 +166,7 @@ def detection_probability(range_m: np.ndarray, reflectivity: np.ndarray, range_8
     """Probability of a return (the kernel computes the same per hit; this is for plots and twins)."""
     r_max = range_limit_m(reflectivity, range_80pct_m)
     z = (range_m - r_max) / (0.03 * r_max)
-    return 1.0 / (1.0 + np.exp(np.clip(z, -50, 50)))
+    return 1.0 / (1.0 + exp_portable_np(np.clip(z, -50, 50)))
 
 
 def footprint_offsets(divergence_deg: tuple[float, float], subrays: int) -> np.ndarray:
@@ -182,7 +183,7 @@ def return_gain(ray_gain, range_m, extinction_1_m: float) -> np.ndarray:
     """Returned power against a clear head-on return of the whole beam: ``g exp(-2 alpha R)``, ``g``
     = ``|cos theta|`` (effect ``incidence``) times the share of the beam in the echo (effect
     ``mixed_pixels``); pass ``ray_gain = 1`` or ``extinction_1_m = 0`` for either off."""
-    return np.asarray(ray_gain, float) * np.exp(-2.0 * extinction_1_m * np.asarray(range_m, float))
+    return np.asarray(ray_gain, float) * exp_portable_np(-2.0 * extinction_1_m * np.asarray(range_m, float))
 
 
 def range_noise_sigma_m(range_m, range_limit_m_, range_noise_m: float, noise_limit_m: float) -> np.ndarray:

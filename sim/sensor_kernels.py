@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 
 from foveatrack.livox.protocol import INT32_MM_MAX, INT32_MM_MIN, MM_PER_M
+from sim.portable_exp import exp_portable
 from sim.scan.kernels import RAY_OK
 
 # the client's conversion (foveatrack.livox.protocol.m_to_mm), as float bounds for the kernel
@@ -129,7 +130,7 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
             if use_inc:
                 gain = ray_gain[j]
             if use_ext:
-                gain = gain * math.exp(-2.0 * extinction_1_m * r)
+                gain = gain * exp_portable(-2.0 * extinction_1_m * r)
             r_max = range_limit_m[m]
             if use_gain:
                 r_max = r_max * math.sqrt(gain)
@@ -141,7 +142,7 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
                 # without the division (the same decision as the test below, which the others take).
                 elif not (r < 0.5 * r_max and u < 0.999999):
                     z = min(max((r - r_max) / (0.03 * r_max), -50.0), 50.0)
-                    if not (z < -15.0 and u < 0.999999) and not u < 1.0 / (1.0 + math.exp(z)):
+                    if not (z < -15.0 and u < 0.999999) and not u < 1.0 / (1.0 + exp_portable(z)):
                         keep = False
             if keep and use_drop and not u_dropout[h] >= dropout_rate:
                 keep = False

@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 
+from sim.portable_exp import exp_portable_np
 from sim.effects import detection_probability, range_limit_m, range_noise_sigma_m, return_gain
 from sim.scan.kernels import RAY_OK
 
@@ -36,7 +37,7 @@ def returns_twin(prim, status, range_m, d_lidar, t_ns, refl_table, target_prim_e
         u = rngs["return_probability"].random(idx.size)
         with np.errstate(divide="ignore", invalid="ignore"):
             z = np.clip((r - r_lim) / (0.03 * r_lim), -50, 50)
-            p = 1.0 / (1.0 + np.exp(z))
+            p = 1.0 / (1.0 + exp_portable_np(z))
         keep &= (u < p) & (r_lim > 0)
         if not use_gain:
             assert np.array_equal(u < p, u < detection_probability(r, refl, params["range_80pct_m"]))
