@@ -76,10 +76,10 @@ class Lifecycle:
                        host_ports=self.host_ports)
         for w in c.warnings():
             self.log.event("warning", message=w)
-        self.watchdog = WatchdogState()
-        self.link_seen = LinkSeen(head_up=self.head.connected)
         self.head.stop()
         self.rx.start()
+        self.watchdog = WatchdogState()
+        self.link_seen = LinkSeen(head_up=self.head.connected)   # after the first STOP, which may reopen it
 
     def _shutdown(self) -> None:
         self.stop_ev.set()
