@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from foveatrack.daemon.runtime import _job_frame  # noqa: E402
+from foveatrack.daemon.record_queue import _job_frame  # noqa: E402
 from foveatrack.daemon.support import RecordingThread  # noqa: E402
 from foveatrack.frame_step import FrameStep  # noqa: E402
 from foveatrack.frames import strip_no_return  # noqa: E402

@@ -101,7 +101,7 @@ class PoseGuard:
 
     def _check(self, d, frame, now: float) -> bool:
         """Check a frame; correct the drift, or take the pose as unknown (module docstring)."""
-        from foveatrack.daemon.runtime import _job_event
+        from foveatrack.daemon.record_queue import _job_event
 
         res = self.check.on_frame(frame.xyz, frame.t_ns, frame.t_start_s, frame.t_end_s, d.tracker.recon.angles_at)
         if res is None:
@@ -147,7 +147,7 @@ class PoseGuard:
     def _refuse(self, d, frame, res, now: float) -> bool:
         """The head behind a reappeared link moved, but our lidar did not: another head.  Nothing more is
         written to the link (the daemon's pose state "refused")."""
-        from foveatrack.daemon.runtime import _job_event
+        from foveatrack.daemon.record_queue import _job_event
 
         h = d.cfg.head
         why = (f"[head] port {h.port} reappeared and was homed to {list(h.home_deg)} deg, but the lidar's background "

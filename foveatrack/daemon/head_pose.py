@@ -1,0 +1,137 @@
+"""The head's link and pose: link events, a pose made unknown by a lost link, the homing that makes it
+known again, and the tracker rebased on the new pose (one role of :class:`foveatrack.daemon.runtime.Daemon`).
+
+``pose_state``: None (known), "unknown" (the link was lost: a head that lost power comes back at its
+power-on pose and reports none), "homing" (absolute moves under way, ``[head] on_reconnect = "home"``),
+"refused" (another head behind the link: :mod:`foveatrack.daemon.pose_guard`).  No frame is tracked
+while it is not None.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+
+from foveatrack.daemon.record_queue import _job_event
+from foveatrack.recording.records import ns
+from foveatrack.turn_witness import MoveWitness
+
+ABS_SET_QUIET_S = 0.3     # line quiet before a Pelco absolute set (the PTS family needs 0.2 s)
+
+
+@dataclass
+class LinkSeen:
+    """What the link's events were last logged from: up/down, and the port locked by or refused to
+    another process (logged again at most every 10 s while the count grows)."""
+    head_up: bool
+    locked: int = 0
+    lock_log: float = -math.inf
+    refusals: int = 0
+    refusal_log: float = -math.inf
+
+
+class HeadPose:
+    """The head's part of the daemon (a mixin of ``Daemon``; its state: ``pose_state``,
+    ``_home_steps``, ``link_seen``)."""
+
+    def _watch_head_link(self, now: float) -> None:
+        """The 10 Hz tick's look at the head's link: its events in the log, and a link lost and back
+        makes the pose unknown and homes the head as ``[head] on_reconnect`` says."""
+        c, seen = self.cfg, self.link_seen
+        locked = getattr(self.head.stats, "open_locked", 0)
+        if locked != seen.locked:
+            # another process took the head's port while its link was down: never written to
+            if seen.locked == 0 or now - seen.lock_log >= 10.0:
+                self.log.event("head_locked", port=c.head.port, reason=self.head.client.last_open_error,
+                               attempts=locked)
+                seen.lock_log = now
+            seen.locked = locked
+        refusals = self.head.stats.open_refusals
+        if refusals != seen.refusals:
+            # another device holds the head's path: never written to (foveatrack.serial_identity)
+            if seen.refusals == 0 or now - seen.refusal_log >= 10.0:
+                self.log.event("head_refused", reason=self.head.client.last_open_error, refusals=refusals)
+                seen.refusal_log = now
+            seen.refusals = refusals
+        if self.head.connected != seen.head_up:
+            head_up = seen.head_up = self.head.connected
+            self.counters["head_link_up" if head_up else "head_link_down"] += 1
+            self.log.event("head_connected" if head_up else "head_disconnected", stats=asdict(self.head.stats))
+            if c.head.on_reconnect != "keep" and self.pose_state != "refused":
+                if not head_up and self.pose_state is None:
+                    self._pose_unknown(now, "link_lost")
+                elif head_up:
+                    if self.pose_state is None:     # lost and back between two ticks
+                        self._pose_unknown(now, "link_lost")
+                    self.pose_guard.link_back(self)   # is it our head? (pose_guard: identity)
+                    self._reconnected(time.monotonic())   # (the query took a while: the homing's quiet line counts from now)
+        if self.pose_state is not None:
+            self._pose_tick(now)
+
+    def _pose_unknown(self, now: float, why: str) -> None:
+        """The head's link was lost (or a homing write failed): from now its pose is unknown (one that
+        lost power comes back at its power-on pose; the head reports none).  No frame is tracked until
+        :meth:`_reconnected` has done what ``[head] on_reconnect`` says."""
+        h = self.cfg.head
+        self.pose_state = "unknown"
+        self._home_steps = []
+        self.counters["head_pose_unknown"] += 1
+        self.log.event("head_pose_unknown", why=why, on_reconnect=h.on_reconnect, frames=self.counters["frames"])
+        self._record(_job_event, ns(self.sensor_now_s(now) or 0.0),
+                     {"event": "head_pose_unknown", "why": why, "on_reconnect": h.on_reconnect})
+
+    def _reconnected(self, now: float) -> None:
+        """The link is back (its first frame was STOP): home the head if the config says so."""
+        h = self.cfg.head
+        self.head.stop()
+        self._home_steps = []
+        if h.on_reconnect == "home":
+            from gimbal.pelco import encode_set_pan, encode_set_tilt
+
+            pan, tilt = h.home_deg
+            tz = getattr(self.head.client, "tilt_zero", "zenith")
+            quiet = ABS_SET_QUIET_S
+            # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile
+            self._home_steps = [(now + quiet, "pan", encode_set_pan(h.address, pan, h.protocol)),
+                                (now + 2 * quiet, "tilt", encode_set_tilt(h.address, tilt, h.protocol, tz)),
+                                (now + 2 * quiet + h.home_wait_worst_s, "done", None)]
+
+    def _pose_tick(self, now: float) -> None:
+        h = self.cfg.head
+        if self.pose_state == "refused":    # another head behind the link: nothing is written to it
+            return
+        if not self.head.connected or h.on_reconnect == "stop":
+            # STOP every second: while the link is down each try is the reopen, so the first frame a
+            # reopened link carries is STOP; with "stop" it holds the head until the daemon restarts
+            if now - getattr(self, "_last_unknown_stop", -math.inf) >= 1.0:
+                self._last_unknown_stop = now
+                self.head.stop()
+            return
+        while self._home_steps and now >= self._home_steps[0][0]:
+            _, step, raw = self._home_steps.pop(0)
+            if step in ("pan", "tilt"):
+                if not self.head.send_raw(raw, "homing"):
+                    self.log.event("head_homing_failed", step=step)
+                    return self._pose_unknown(now, "homing_write_failed")   # again once the link is back
+                self.pose_state = "homing"
+                self.log.event("head_homing", axis=step, home_deg=list(h.home_deg))
+            else:
+                t_s = self.sensor_now_s(now)
+                pan, tilt = h.home_deg
+                self._rebase_tracker(t_s if t_s is not None else 0.0, pan, tilt)
+                self.pose_state = None
+                self.counters["head_homed"] += 1
+                self.log.event("head_homed", pan_deg=pan, tilt_deg=tilt, t0_s=t_s, frames=self.counters["frames"])
+                self._record(_job_event, ns(t_s or 0.0), {"event": "tracker_rebased", "reason": "head_homed",
+                                                          "t0_s": t_s, "pan_deg": pan, "tilt_deg": tilt})
+
+    def _rebase_tracker(self, t0_s: float, pan_deg: float, tilt_deg: float) -> None:
+        """A fresh tracker whose dead reckoning starts at ``(pan_deg, tilt_deg)`` at sensor time ``t0_s``."""
+        self.step.rebase(self.tracker.rebased(t0_s, pan_deg, tilt_deg))   # replay repeats it from the event
+        if self.witness is not None:
+            self.witness = MoveWitness(self.table)
+        if self.imu_feed is not None:
+            self.imu_feed.restart(t0_s)
+        self._last_send_t = -math.inf
+        self.pose_guard.rebased()

@@ -1,0 +1,123 @@
+"""The daemon's recording: its metadata, the writer behind a queue, the live view, and the jobs the
+frame loop hands that queue (one role of :class:`foveatrack.daemon.runtime.Daemon`).
+
+The writer runs in :class:`~foveatrack.daemon.support.RecordingThread` behind a bounded job queue:
+the loop never waits on a disk (drops are counted).  A job is a function run on the writer's thread
+with the writer first: ``_job_frame`` writes a processed frame as every driver does
+(:mod:`foveatrack.recording.records`), ``_job_event`` one of the daemon's events.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from foveatrack.daemon.support import RecordingThread
+from foveatrack.recording.format import DAEMON_EVENTS
+from foveatrack.recording.records import write_record, write_tracker_frame
+
+def _job_frame(w, fid, frame, out, cmd_rec, proc_ms, lat_ms, imu=None):
+    """Write one processed frame as every driver does (:mod:`foveatrack.recording.records`); ``imu``:
+    the samples fed to the tracker before it (attitude = "gyro"), None otherwise."""
+    t_end = write_tracker_frame(w, fid, frame, out, imu)
+    if cmd_rec is not None:
+        write_record(w, cmd_rec)
+    w.write_metric(t_end, "processing_ms", proc_ms, frame_id=fid)
+    if lat_ms is not None:
+        w.write_metric(t_end, "latency_ms", lat_ms, frame_id=fid)
+
+
+def _job_event(w, t_ns, rec: dict):
+    w.write(DAEMON_EVENTS, t_ns, rec)
+
+
+class DaemonRecording:
+    """The recording's part of the daemon (a mixin of ``Daemon``; its state lives on the daemon:
+    ``recorder``, ``recording_path``, ``live``)."""
+
+    def _meta(self) -> dict:
+        from foveatrack.recording.run_meta import DaemonOrigin, RecordingMeta
+
+        # what runs (the tracker's configuration with the head's facts, its table, the gate), typed
+        c = self.cfg
+        return RecordingMeta(self.tracker.config, c.head.facts.tracker_values(), self.table, self.limits,
+                             DaemonOrigin(c.path, c.text, c.head, c.lidar), tracker_t0_s=0.0,
+                             point_rate_hz=c.lidar.point_rate_hz).to_dict()
+
+    def _open_recording(self) -> None:
+        """The recording file, its writer thread and the head's command journal, when the config asks
+        for a recording.  Called after the links are open: a path that cannot be used closes them."""
+        from foveatrack.errors import UserError
+        from foveatrack.recording import RecordingExistsError, RecordingWriter
+
+        c = self.cfg
+        path = c.recording_path()
+        if path is None:
+            return
+        r = c.recording
+        try:
+            c.check_recording_dir()
+        except UserError:
+            self.client.close()
+            self.head.close()
+            raise
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            writer = RecordingWriter(path, self._meta(), flush_every_frames=r.flush_every_frames,
+                                     compression=r.compression, points_dtype=r.points_dtype, overwrite=r.overwrite,
+                                     log_time="host")   # log times: the host's UTC; messages: the Livox clock
+        except (OSError, UserError) as exc:
+            self.client.close()
+            self.head.close()
+            if isinstance(exc, RecordingExistsError):
+                why = ("two starts within the same second gave the same '{time}' name; start again a "
+                       "second later" if "{time}" in r.path else
+                       "put '{time}' in it for a new file per start (e.g. path = \"runs/{time}.mcap\")")
+                raise UserError(f"{c.path} [recording] path: {path} already exists and is never overwritten "
+                                f"unless asked; {why}, or set overwrite = true in [recording] to replace it"
+                                ) from None
+            if isinstance(exc, UserError):
+                raise
+            raise UserError(f"{c.path} [recording] path: cannot create {path} ({exc.strerror or exc})") from None
+        # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
+        self.recorder = RecordingThread(writer, r.queue_frames)
+        self.recording_path = path
+        # the recording is written behind a queue: a journal of every frame for the head, written
+        # before the frame is, says what a killed daemon's head got (CommandJournal)
+        from foveatrack.live_devices import CommandJournal
+
+        self.head.journal = CommandJournal(path.with_name(path.name + ".commands.jsonl"))
+
+    def _forget_unused_recording(self) -> None:
+        """A start that failed after the recording was created (a live port in use) removes it and
+        its command journal: nothing was written to either yet (the loop and the head's first STOP
+        come later, in :meth:`run`), and an empty ``daemon-*.mcap`` per failed start only misleads."""
+        if self.recording_path is None:
+            return
+        for p in (self.recording_path, self.recording_path.with_name(self.recording_path.name + ".commands.jsonl")):
+            p.unlink(missing_ok=True)
+        self.recording_path = None
+
+    def _open_live(self) -> None:
+        """The live view: a second sink of the recording's channels (a writer without a file when
+        nothing is recorded), fed by the same recording thread."""
+        from foveatrack.recording import RecordingWriter
+        from foveatrack.recording.live import LiveServer
+
+        if self.recorder is None:
+            self.recorder = RecordingThread(RecordingWriter(None, self._meta(), log_time="host"),
+                                            self.cfg.recording.queue_frames)
+        try:
+            self.live = LiveServer(self.recorder.writer.context, self.live_port, allowed_origins=self.live_origins)
+        except Exception:
+            self.recorder.close()
+            self.client.close()
+            self.head.close()
+            raise
+        self.log.event("live_view", url=self.live.url)
+        # on stderr too, as simulate and replay say it: the JSON log is for machines
+        print(f"live view on {self.live.url} (Foxglove: Open connection -> Foxglove WebSocket)",
+              file=sys.stderr, flush=True)
+
+    def _record(self, fn, *args):
+        if self.recorder is not None:
+            self.recorder.submit(fn, *args)

@@ -1,0 +1,96 @@
+"""The daemon's figures and what went wrong, in words: the counters of the loop, the lidar, the head
+and the recording in one dict (the log's ``stop`` event, the CLI's last lines).  One role of
+:class:`foveatrack.daemon.runtime.Daemon`."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+import numpy as np
+
+
+def rate_known(d) -> bool:
+    return getattr(d, "client", None) is not None and d.client.decoder.point_rate_hz > 0
+
+
+class RunStats:
+    """The figures' part of the daemon (a mixin of ``Daemon``)."""
+
+    def stats(self) -> dict:
+        """All counters in one flat dict (loop, lidar, head, recording)."""
+        d = dict(self.counters)
+        rx = getattr(self, "rx", None)
+        if rx is not None:
+            d.update({f"lidar_{k}": v for k, v in rx.counters.items()})
+            d["queue_dropped_batches"] = rx.dropped_batches
+            d["queue_dropped_points"] = rx.dropped_points
+            if rx.first_t_ns is not None and rate_known(self):
+                span = (rx.last_t_ns - rx.first_t_ns + rx.span_done_ns) * 1e-9
+                expected = span * self.client.decoder.point_rate_hz
+                if expected > 0:
+                    d["lidar_points_missing_pct"] = round(max(0.0, 100.0 * (1 - rx.points_in / expected)), 3)
+                d["lidar_lost_pct"] = round(self.lost_pct() or 0.0, 3)
+        if getattr(self, "head", None) is not None:
+            d.update({f"head_{k}": v for k, v in asdict(self.head.stats).items()})
+        d["slicer_late_points"] = self.slicer.late_points
+        if self.recorder is not None:
+            d["recording_dropped"] = self.recorder.dropped
+            d["recording_jobs"] = self.recorder.written
+        for name, xs in (("processing_ms", self.proc_ms), ("latency_ms", self.lat_ms)):
+            if xs:
+                a = np.asarray(xs)
+                d[f"{name}_p50"] = round(float(np.percentile(a, 50)), 3)
+                d[f"{name}_p99"] = round(float(np.percentile(a, 99)), 3)
+                d[f"{name}_max"] = round(float(a.max()), 3)
+        return d
+
+    def problems(self) -> list[str]:
+        """What went wrong in the run, in words for the final stderr lines (empty when nothing did).
+
+        A run that received nothing from the lidar otherwise ended on "0 frames" with the reason
+        only in the log's counters (e.g. a mistyped ``sensor_ip``: every datagram was dropped as
+        ``lidar_foreign_source``)."""
+        out = []
+        rx = getattr(self, "rx", None)
+        if rx is not None and rx.last_packet_mono is None:
+            L = self.cfg.lidar
+            hp = self.host_ports
+            ports = f"data port {hp['data']}, command port {hp['cmd']}" + (
+                f", broadcasts on port {hp['broadcast']}" if hp["broadcast"] is not None else "")
+            msg = f"no lidar data arrived from [lidar] sensor_ip {L.sensor_ip} ({ports})"
+            foreign = sorted(self.client.foreign_addresses)
+            if foreign:
+                msg += (f"; {rx.counters.get('foreign_source', 0)} datagrams from {', '.join(foreign)} were dropped: "
+                        "is sensor_ip the lidar's address?")
+            else:
+                msg += (f"; nothing arrived at all: is the lidar on and on this network, and host_ip {L.host_ip} "
+                        "this host's address on it?")
+            out.append(msg)
+        failed = self.counters.get("commands_failed", 0)
+        if failed:
+            total = failed + self.counters.get("commands_written", 0)
+            out.append(f"{failed} of {total} head commands were not written to [head] port {self.cfg.head.port!r} "
+                       "(see head_* counters in the log)")
+        return out
+
+    @property
+    def no_lidar_data(self) -> bool:
+        """True when the run never received a lidar packet (the CLI exits non-zero)."""
+        rx = getattr(self, "rx", None)
+        return rx is not None and rx.last_packet_mono is None
+
+    def drops(self) -> int:
+        rx = self.rx
+        c = rx.counters
+        return (c.get("dropped_total", 0) + rx.dropped_batches + self.counters["frames_skipped"]
+                + (self.recorder.dropped if self.recorder else 0))
+
+    def lost_pct(self) -> float | None:
+        """Lidar points lost on the way [%]: the slots missing inside the stream (by time, as a
+        sequence number) against the slots the stream spanned."""
+        rx = getattr(self, "rx", None)
+        if rx is None or rx.first_t_ns is None or not rate_known(self):
+            return None
+        span_slots = (rx.last_t_ns - rx.first_t_ns + rx.span_done_ns) * 1e-9 * self.client.decoder.point_rate_hz
+        lost = rx.counters.get("lost_slots", 0)
+        return 100.0 * lost / span_slots if span_slots > 0 and lost else None
