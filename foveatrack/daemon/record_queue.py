@@ -15,6 +15,7 @@ from foveatrack.daemon.support import RecordingThread
 from foveatrack.recording.format import DAEMON_EVENTS
 from foveatrack.recording.records import write_record, write_tracker_frame
 
+
 def _job_frame(w, fid, frame, out, cmd_rec, proc_ms, lat_ms, imu=None):
     """Write one processed frame as every driver does (:mod:`foveatrack.recording.records`); ``imu``:
     the samples fed to the tracker before it (attitude = "gyro"), None otherwise."""
