@@ -98,7 +98,7 @@ class _HeadSink:
 
     def send(self, cmd: HeadCommand, send_t_s: float, source: str) -> bool:
         d = self.daemon
-        self.raw, ok = d.head.send(cmd, source)
+        self.raw, ok = d.head.send(cmd, source, send_t_s)   # the journal keeps the send time
         self.t_written = time.monotonic()
         d.counters["commands_written" if ok else "commands_failed"] += 1
         return ok
@@ -488,6 +488,10 @@ class Daemon:
         for w in c.warnings():
             self.log.event("warning", message=w)
         self.head.stop()
+        if self.recording_path is not None:   # a killed run's recording here: completed from its journal
+            from foveatrack.recording.recover import recover_directory
+
+            recover_directory(self.recording_path.parent, self.log.event, exclude=[self.recording_path])
         self.rx.start()
         period = 1.0 / c.tracker.rate_hz
         t_start = time.monotonic()

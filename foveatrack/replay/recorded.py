@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from foveatrack.gate import STALE_FRAME
-from foveatrack.recording.format import DAEMON_EVENTS, IMU, METRICS, POINTS
+from foveatrack.recording.format import COMMANDS, DAEMON_EVENTS, IMU, METRICS, POINTS
 from foveatrack.recording.records import (CommandRecord, DetectionRecord, HeadEstimateRecord, RecordError, TruthRecord,
                                           parse)
 
@@ -286,6 +286,8 @@ def _take(cur, m):
             cur.after.append(PoseCorrected(_event_float(e, "t_s"), _event_float(e, "dpan_deg"),
                                            _event_float(e, "dtilt_deg")))
         return None
+    if m.channel == COMMANDS and isinstance(m.record, dict) and m.record.get("journal_only") is True:
+        return None      # put back from the command journal; the run's dead reckoning never saw it (recover)
     rec = parse(m.channel, m.record)
     if isinstance(rec, CommandRecord):
         if rec.frame_id is None:
