@@ -49,6 +49,7 @@ from dataclasses import asdict
 import numpy as np
 
 from foveatrack.control import STOP, HeadCommand
+from foveatrack.daemon.homing_plan import Bearings, HomingConfirm, HomingPlan, plan_homing
 from foveatrack.daemon.pose_guard import PoseGuard
 from foveatrack.daemon.receiver import LidarReceiver
 from foveatrack.device_config import DaemonConfig
@@ -152,6 +153,10 @@ class Daemon:
         self._home_steps: list = []         # (host time, step) of the homing under way
         self.last_frame_end_s: float | None = None
         self.pose_guard = PoseGuard(config)   # the head's pose against the background ([pose_check])
+        self.bearings = Bearings()          # where the target was last seen: a homing goes there first
+        self._homing: HomingPlan | None = None
+        self._homing_confirm: HomingConfirm | None = None
+        self._homing_t0: float | None = None
 
     @property
     def tracker(self) -> Tracker:
@@ -338,6 +343,7 @@ class Daemon:
         pan, tilt, _, _ = old.recon.angles_at(t_stop + 5.0)    # decelerated long since
         self._rebase_tracker(t0_s, pan, tilt)
         self.slicer.reset()
+        self.bearings.clear()      # times of the old clock
         self.epoch = epoch
         self.counters["clock_epochs"] += 1
         self.log.event("tracker_rebased", reason="clock_jump", epoch=epoch, t0_s=t0_s, pan_deg=pan, tilt_deg=tilt,
@@ -362,16 +368,24 @@ class Daemon:
         h = self.cfg.head
         self.head.stop()
         self._home_steps = []
+        self._homing_t0 = now
         if h.on_reconnect == "home":
             from gimbal.pelco import encode_set_pan, encode_set_tilt
 
-            pan, tilt = h.home_deg
+            # the target's last trusted bearing first, else home; the worst-case wait to that goal
+            # (foveatrack.daemon.homing_plan); with a pose check, detections after its last "ok" are not trusted
+            g = self.pose_guard
+            trusted = None if g.check is None else (g.last_ok_t_s if g.last_ok_t_s is not None else -math.inf)
+            plan = self._homing = plan_homing(h, self.bearings, self.sensor_now_s(now), trusted)
+            self._homing_confirm = HomingConfirm() if g.check is not None else None
+            self.log.event("head_homing_plan", **plan.as_event())
+            pan, tilt = plan.pan_deg, plan.tilt_deg
             tz = getattr(self.head.client, "tilt_zero", "zenith")
             quiet = ABS_SET_QUIET_S
             # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile
             self._home_steps = [(now + quiet, "pan", encode_set_pan(h.address, pan, h.protocol)),
                                 (now + 2 * quiet, "tilt", encode_set_tilt(h.address, tilt, h.protocol, tz)),
-                                (now + 2 * quiet + h.home_wait_worst_s, "done", None)]
+                                (now + 2 * quiet + plan.wait_s, "done", None)]
 
     def _pose_tick(self, now: float) -> None:
         h = self.cfg.head
@@ -384,17 +398,23 @@ class Daemon:
                 self._last_unknown_stop = now
                 self.head.stop()
             return
-        while self._home_steps and now >= self._home_steps[0][0]:
+        confirmed = self.pose_state == "homing" and self._homing_confirm is not None and self._homing_confirm.confirmed
+        while self._home_steps and (now >= self._home_steps[0][0] or (confirmed and self._home_steps[0][1] == "done")):
             _, step, raw = self._home_steps.pop(0)
+            plan = self._homing
             if step in ("pan", "tilt"):
                 if not self.head.send_raw(raw, "homing"):
                     self.log.event("head_homing_failed", step=step)
                     return self._pose_unknown(now, "homing_write_failed")   # again once the link is back
                 self.pose_state = "homing"
-                self.log.event("head_homing", axis=step, home_deg=list(h.home_deg))
+                self.log.event("head_homing", axis=step, home_deg=[plan.pan_deg, plan.tilt_deg], goal=plan.goal,
+                               worst_case_s=round(plan.worst_case_s, 3))
             else:
                 t_s = self.sensor_now_s(now)
-                pan, tilt = h.home_deg
+                pan, tilt = plan.pan_deg, plan.tilt_deg
+                if confirmed:
+                    self.log.event("head_homing_confirmed", by="pose_check",
+                                   waited_s=round(now - (self._homing_t0 or now), 3), wait_s=plan.wait_s)
                 self._rebase_tracker(t_s if t_s is not None else 0.0, pan, tilt)
                 self.pose_state = None
                 self.counters["head_homed"] += 1
@@ -419,7 +439,11 @@ class Daemon:
     # -------------------------------------------------------------------------------- the frame
     def _process(self, frame: Frame, t_arrival: float) -> None:
         if self.pose_state is not None:
-            # the head's pose is unknown (it reconnected): no bearing can be turned into a command
+            # the head's pose is unknown (it reconnected): no bearing can be turned into a command; while
+            # it is homing, the background may show it arrived (foveatrack.daemon.homing_plan)
+            if self.pose_state == "homing" and self._homing_confirm is not None and self._home_steps:
+                self._homing_confirm.feed(self.pose_guard.check.at_pose(
+                    strip_no_return(frame).xyz, self._homing.pan_deg, self._homing.tilt_deg))
             self.counters["frames_pose_unknown"] += 1
             self.last_pts = frame.n_points
             return
@@ -465,6 +489,8 @@ class Daemon:
         self.proc_ms.append(proc * 1e3)
         self.counters["frames"] += 1
         self.counters["frames_detected"] += out.detection is not None
+        if out.detection is not None:
+            self.bearings.saw(frame.t_end_s, out.world_xyz)
         self.last_out, self.last_pts = out, frame.n_points
         self.last_frame_end_s = frame.t_end_s
         self._record(_job_frame, fid, frame, out, rec, proc * 1e3, lat, imu)
