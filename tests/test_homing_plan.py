@@ -81,3 +81,18 @@ def test_the_wait_ends_on_three_checks_at_rest_at_the_goal():
     assert not c2.feed(PoseCheckResult("mismatch", 8.0))     # a mismatch breaks the run
     c2.feed(_ok(0.1)), c2.feed(_ok(0.1))
     assert c2.feed(_ok(0.1))
+
+
+def test_a_moving_target_is_looked_for_where_it_went():
+    # crossing at -2.4 deg/s (0.5 m/s at 12 m): 7.7 s later it is 18.5 deg on
+    b = Bearings()
+    for k in range(11):
+        b.saw(7.0 + 0.1 * k, _at(3.0 - 2.4 * 0.1 * k, 4.0 + 0.03 * k))
+    p = plan_homing(HEAD, b, now_s=8.0 + 7.7)
+    assert p.goal == "last_bearing"
+    assert p.pan_deg == pytest.approx(3.0 - 2.4 * 8.7, abs=1e-6) and p.tilt_deg == pytest.approx(4.3 + 0.3 * 7.7)
+    # carried on by at most MAX_EXTRAPOLATION_DEG
+    assert plan_homing(HEAD, b, now_s=8.0 + 29.0).pan_deg == pytest.approx(0.6 - 30.0)
+    # a homing that must prove the head behind a reappeared link is ours goes home
+    p = plan_homing(HEAD, b, now_s=9.0, prove_identity=True)
+    assert p.goal == "home" and "reappeared" in p.why

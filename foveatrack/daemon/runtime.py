@@ -376,7 +376,7 @@ class Daemon:
             # (foveatrack.daemon.homing_plan); with a pose check, detections after its last "ok" are not trusted
             g = self.pose_guard
             trusted = None if g.check is None else (g.last_ok_t_s if g.last_ok_t_s is not None else -math.inf)
-            plan = self._homing = plan_homing(h, self.bearings, self.sensor_now_s(now), trusted)
+            plan = self._homing = plan_homing(h, self.bearings, self.sensor_now_s(now), trusted, g.identity_pending)
             self._homing_confirm = HomingConfirm() if g.check is not None else None
             self.log.event("head_homing_plan", **plan.as_event())
             pan, tilt = plan.pan_deg, plan.tilt_deg

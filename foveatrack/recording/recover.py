@@ -58,7 +58,6 @@ class Recovery:
     journal_only_added: int = 0      # the head got them; not replayed
     bad_lines: list[str] = field(default_factory=list)
     reader_problem: str | None = None
-    skipped_records: int = 0         # records of a channel this version cannot write back (later binary ones)
 
     def describe(self) -> str:
         """One line for people (``foveatrack recover`` prints it; the daemon logs it)."""
@@ -67,7 +66,8 @@ class Recovery:
                     + (f"; its journal {self.journal.name} holds {self.journal_lines} commands" if self.journal_lines
                        else ""))
         s = (f"{self.path}: recovered: {self.frames} frames and {self.records_copied} records read from the cut-short "
-             f"file, {self.commands_added} command(s) after its last record added from {self.journal.name}")
+             f"file, {self.commands_added} command(s) after its last record added from {self.journal.name}"
+             + ("" if self.journal.exists() else " (there is none: the file was only completed)"))
         if self.journal_only_added:
             s += (f", {self.journal_only_added} more the head got outside the dead reckoning (STOPs at start or while "
                   f"its pose was unknown, homing) added as journal_only")
@@ -75,8 +75,6 @@ class Recovery:
              f"commands (the journal has {self.journal_lines})"
         if self.bad_lines:
             s += f"; {len(self.bad_lines)} damaged journal line(s) skipped"
-        if self.skipped_records:
-            s += f"; {self.skipped_records} record(s) of an unknown binary channel not carried over"
         return s
 
 
@@ -178,11 +176,13 @@ def recover(path, journal=None, progress=None) -> Recovery:
                 writer.write(m.channel, m.t_ns, rec)
                 if m.channel == COMMANDS:
                     recorded_cmds.append(r)
-            else:
-                res.skipped_records += 1
-                continue
+            else:      # a later version's binary channel: this version cannot write it back
+                raise UserError(f"{path}: a {m.channel} message this foveatrack cannot write back (a later "
+                                "version's channel): recover it with the version that recorded it; nothing was changed")
             res.records_copied += 1
             last_t_ns = max(last_t_ns, m.t_ns)
+        if reader.capped is not None:      # the rewrite would lose what the cap left unread
+            raise UserError(f"{path}: {reader.capped_text()}; nothing was changed")
         res.reader_problem = reader.problem
         res.commands_recorded = len(recorded_cmds)
         used, after = _match(recorded_cmds, lines)
