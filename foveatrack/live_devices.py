@@ -100,7 +100,7 @@ class CommandJournal:
     """Every frame meant for the head, appended (one JSON line, flushed to the kernel) *before* it is
     written to the port: whatever a driver killed with SIGKILL got to the head is in it (the
     recording, written behind a queue, lost the frame in flight); ``foveatrack recover`` puts what
-    the recording lacks back from it (:mod:`foveatrack.recording.recover`).
+    the recording lacks back from it (:mod:`foveatrack.daemon.recover`).
 
     A line: ``t_mono_s`` (host monotonic time), ``t_unix_s`` (host UTC, for the recording's log
     time), ``raw_hex``, ``source`` (the daemon's: tracker, watchdog, ...; "" for a STOP outside the

@@ -1,5 +1,5 @@
 """``foveatrack recover RECORDING``: complete a recording cut short (kill -9, power loss) from its
-command journal (:mod:`foveatrack.recording.recover`).  A recording closed properly is left alone
+command journal (:mod:`foveatrack.daemon.recover`).  A recording closed properly is left alone
 (said so); a damaged journal line is named and skipped."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ def register(sub) -> None:
 def cmd_recover(args) -> int:
     import sys
 
-    from foveatrack.recording.recover import recover
+    from foveatrack.daemon.recover import recover
 
     for path in args.recording:
         res = recover(path, progress=lambda n: print(f"  {n} frames copied", file=sys.stderr, flush=True))

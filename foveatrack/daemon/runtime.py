@@ -515,7 +515,7 @@ class Daemon:
             self.log.event("warning", message=w)
         self.head.stop()
         if self.recording_path is not None:   # a killed run's recording here: completed from its journal
-            from foveatrack.recording.recover import recover_directory
+            from foveatrack.daemon.recover import recover_directory
 
             recover_directory(self.recording_path.parent, self.log.event, exclude=[self.recording_path])
         self.rx.start()

@@ -522,7 +522,7 @@ class RecordingReader:
 
     def logged_messages(self, channels: Iterable[str] | str | None = None) -> Iterator[tuple[int, Message]]:
         """``(MCAP log time [ns], message)`` as :meth:`messages` gives them (a recording rewritten
-        with its own log times: :mod:`foveatrack.recording.recover`)."""
+        with its own log times: :mod:`foveatrack.daemon.recover`)."""
         want = {channels} if isinstance(channels, str) else None if channels is None else set(channels)
         pb = self.info.get("format_version") != "1"
         mm_grid = self.info.get("format_version") not in ("1", "2")

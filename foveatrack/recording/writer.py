@@ -149,7 +149,7 @@ class RecordingWriter(RecordCalls):
         "host" for the host's clock when the message is written (the daemon).  Every message keeps its
         own ``t_ns`` (the sensor's or simulator's clock), which is what a reader and replay use;
         0 (default) logs ``t_ns`` itself; a callable ``t_ns -> log time`` whose ``name`` is what the
-        metadata says (a recording rewritten with its own log times: :mod:`foveatrack.recording.recover`)
+        metadata says (a recording rewritten with its own log times: :mod:`foveatrack.daemon.recover`)
     """
 
     def __init__(

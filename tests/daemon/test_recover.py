@@ -1,5 +1,5 @@
 """``foveatrack recover``: a recording cut short completed from its command journal
-(:mod:`foveatrack.recording.recover`), without processes: the daemon's own kill -9 is in
+(:mod:`foveatrack.daemon.recover`), without processes: the daemon's own kill -9 is in
 tests/daemon/test_faults.py."""
 
 import json
@@ -12,7 +12,7 @@ import pytest
 
 from foveatrack.cli import main
 from foveatrack.recording import RecordingReader, RecordingWriter
-from foveatrack.recording.recover import recover
+from foveatrack.daemon.recover import recover
 from gimbal.pelco import encode_pan_tilt, encode_set_pan, encode_stop
 
 STOP = encode_stop(1)
