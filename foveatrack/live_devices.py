@@ -20,8 +20,11 @@ clock error (0.1 ms per 100 s at 1 ppm).
 
 from __future__ import annotations
 
+import json
+import math
 import time
-from dataclasses import asdict, is_dataclass
+from dataclasses import asdict, dataclass, is_dataclass
+from pathlib import Path
 
 from foveatrack.control import HeadCommand
 from foveatrack.errors import UserError
@@ -84,20 +87,110 @@ def open_devices(config) -> tuple["HeadLink", object]:
     return HeadLink(head, config.head.address, config.head.protocol), lidar
 
 
+JOURNAL_SUFFIX = ".commands.jsonl"
+
+
+def journal_path(recording) -> Path:
+    """The command journal of a recording: ``<recording>.commands.jsonl`` beside it."""
+    recording = Path(recording)
+    return recording.with_name(recording.name + JOURNAL_SUFFIX)
+
+
 class CommandJournal:
     """Every frame meant for the head, appended (one JSON line, flushed to the kernel) *before* it is
     written to the port: whatever a driver killed with SIGKILL got to the head is in it (the
-    recording, written behind a queue, lost the frame in flight)."""
+    recording, written behind a queue, lost the frame in flight); ``foveatrack recover`` puts what
+    the recording lacks back from it (:mod:`foveatrack.daemon.recover`).
+
+    A line: ``t_mono_s`` (host monotonic time), ``t_unix_s`` (host UTC, for the recording's log
+    time), ``raw_hex``, ``source`` (the daemon's: tracker, watchdog, ...; "" for a STOP outside the
+    dead reckoning, "homing"), and ``send_t_s`` (the sensor time the dead reckoning gave it) where
+    there is one.  The file is held under an exclusive ``flock`` while open: recovery never touches
+    the journal (and so the recording) of a driver still running; the kernel drops the lock of a
+    killed one."""
 
     def __init__(self, path):
+        import fcntl
+
         self.path = str(path)
         self._f = open(self.path, "a", buffering=1)
+        try:
+            fcntl.flock(self._f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            pass      # another holder (never expected: one journal per new recording); journaling goes on
 
-    def write(self, raw: bytes, source: str = "") -> None:
-        self._f.write(f'{{"t_mono_s": {time.monotonic():.6f}, "raw_hex": "{raw.hex()}", "source": "{source}"}}\n')
+    def write(self, raw: bytes, source: str = "", send_t_s: float | None = None) -> None:
+        t = "" if send_t_s is None or not math.isfinite(send_t_s) else f', "send_t_s": {send_t_s!r}'
+        self._f.write(f'{{"t_mono_s": {time.monotonic():.6f}, "t_unix_s": {time.time():.6f}, '
+                      f'"raw_hex": "{raw.hex()}", "source": "{source}"{t}}}\n')
 
     def close(self) -> None:
         self._f.close()
+
+
+def journal_in_use(path) -> bool:
+    """Whether a running driver holds the journal at ``path`` (its :class:`CommandJournal` lock)."""
+    import fcntl
+
+    try:
+        with open(path, "rb") as f:
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return True
+            fcntl.flock(f, fcntl.LOCK_UN)
+    except FileNotFoundError:
+        return False
+    return False
+
+
+@dataclass(frozen=True)
+class JournalLine:
+    """One line of a command journal (:class:`CommandJournal`); ``line_no`` counts from 1."""
+    line_no: int
+    t_mono_s: float
+    raw: bytes
+    source: str
+    t_unix_s: float | None = None
+    send_t_s: float | None = None
+
+
+def read_journal(path) -> tuple[list[JournalLine], list[str]]:
+    """The journal's lines, and one sentence per line that could not be read (skipped): a line cut
+    short by a kill, or damaged.  Never raises for the contents; a missing file is an empty journal."""
+    lines: list[JournalLine] = []
+    bad: list[str] = []
+    try:
+        text = Path(path).read_bytes().decode("utf-8", errors="replace")
+    except FileNotFoundError:
+        return lines, bad
+    for i, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            r = json.loads(line)
+            if not isinstance(r, dict):
+                raise ValueError("not a JSON object")
+            t = r["t_mono_s"]
+            if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+                raise ValueError(f"t_mono_s {t!r} is not a time")
+            raw = bytes.fromhex(r["raw_hex"])
+            if not raw:
+                raise ValueError("raw_hex is empty")
+            src = r.get("source", "")
+            if not isinstance(src, str):
+                raise ValueError(f"source {src!r} is not a name")
+            extra = {}
+            for k in ("t_unix_s", "send_t_s"):
+                v = r.get(k)
+                if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
+                    extra[k] = float(v)
+            lines.append(JournalLine(i, float(t), raw, src, **extra))
+        except KeyError as exc:
+            bad.append(f"{path} line {i}: no field {exc} ({line[:60]!r}); skipped")
+        except (ValueError, TypeError) as exc:
+            bad.append(f"{path} line {i}: {exc} ({line[:60]!r}); skipped")
+    return lines, bad
 
 
 class HeadLink:
@@ -124,10 +217,11 @@ class HeadLink:
             return None
         return c.last_open_error
 
-    def send_raw(self, raw: bytes, source: str = "") -> bool:
-        """Write one prepared frame (journaled first); whether the link took it."""
+    def send_raw(self, raw: bytes, source: str = "", send_t_s: float | None = None) -> bool:
+        """Write one prepared frame (journaled first, with the sensor time ``send_t_s`` the dead
+        reckoning gave it where there is one); whether the link took it."""
         if self.journal is not None:
-            self.journal.write(raw, source)
+            self.journal.write(raw, source, send_t_s)
         return bool(self.client.send_frame(raw))
 
     def encode(self, cmd: HeadCommand) -> bytes:
@@ -139,10 +233,10 @@ class HeadLink:
             raw = self._encoded[key] = encode_pan_tilt(self.address, *key, self.protocol)
         return raw
 
-    def send(self, cmd: HeadCommand, source: str = "") -> tuple[bytes, bool]:
+    def send(self, cmd: HeadCommand, source: str = "", send_t_s: float | None = None) -> tuple[bytes, bool]:
         """Write ``cmd``; returns the bytes and whether the link took them."""
         raw = self.encode(cmd)
-        return raw, self.send_raw(raw, source)
+        return raw, self.send_raw(raw, source, send_t_s)
 
     def stop(self) -> None:
         from foveatrack.control import STOP

@@ -466,6 +466,15 @@ class PoseCheck:
         """A frame at a known pose, head at rest, into the map."""
         self.map.add(self._points(xyz)[0], pan_deg, tilt_deg)
 
+    def at_pose(self, xyz, pan_deg: float, tilt_deg: float) -> PoseCheckResult | None:
+        """One frame checked against the map with the head taken to be at rest at ``(pan_deg,
+        tilt_deg)``, nothing else changed (no map extension, no period): a homing's wait ends when
+        the background shows the head at the goal (:mod:`foveatrack.daemon.homing_plan`).  None
+        before the map is made."""
+        if not self.mapped:
+            return None
+        return check_pose(self._points(xyz)[0], pan_deg, tilt_deg, self.map, self.cfg)
+
     def rebased(self) -> None:
         """The tracker restarted (a homing, a new lidar clock): the next check may come at once, and the
         pan travel starts again from the new pose."""

@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "foveatrack.cli.replay_cmd",
     "foveatrack.cli.track_cmd",
     "foveatrack.cli.export_cmd",
+    "foveatrack.cli.recover_cmd",
     "foveatrack.cli.study_cmd",
 )
 

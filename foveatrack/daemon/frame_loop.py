@@ -39,7 +39,7 @@ class _HeadSink:
 
     def send(self, cmd: HeadCommand, send_t_s: float, source: str) -> bool:
         d = self.daemon
-        self.raw, ok = d.head.send(cmd, source)
+        self.raw, ok = d.head.send(cmd, source, send_t_s)   # the journal keeps the send time
         self.t_written = time.monotonic()
         d.counters["commands_written" if ok else "commands_failed"] += 1
         return ok
@@ -162,6 +162,7 @@ class FrameLoop:
         pan, tilt, _, _ = old.recon.angles_at(t_stop + 5.0)    # decelerated long since
         self._rebase_tracker(t0_s, pan, tilt)
         self.slicer.reset()
+        self.bearings.clear()      # times of the old clock
         self.epoch = epoch
         self.counters["clock_epochs"] += 1
         self.log.event("tracker_rebased", reason="clock_jump", epoch=epoch, t0_s=t0_s, pan_deg=pan, tilt_deg=tilt,
@@ -171,7 +172,11 @@ class FrameLoop:
 
     def _process(self, frame: Frame, t_arrival: float) -> None:
         if self.pose_state is not None:
-            # the head's pose is unknown (it reconnected): no bearing can be turned into a command
+            # the head's pose is unknown (it reconnected): no bearing can be turned into a command; while
+            # it is homing, the background may show it arrived (foveatrack.daemon.homing_plan)
+            if self.pose_state == "homing" and self._homing_confirm is not None and self._home_steps:
+                self._homing_confirm.feed(self.pose_guard.check.at_pose(
+                    strip_no_return(frame).xyz, self._homing.pan_deg, self._homing.tilt_deg))
             self.counters["frames_pose_unknown"] += 1
             self.last_pts = frame.n_points
             return
@@ -217,6 +222,8 @@ class FrameLoop:
         self.proc_ms.append(proc * 1e3)
         self.counters["frames"] += 1
         self.counters["frames_detected"] += out.detection is not None
+        if out.detection is not None:
+            self.bearings.saw(frame.t_end_s, out.world_xyz)
         self.last_out, self.last_pts = out, frame.n_points
         self.last_frame_end_s = frame.t_end_s
         self._record(_job_frame, fid, frame, out, rec, proc * 1e3, lat, imu)

@@ -13,6 +13,7 @@ import math
 import time
 from dataclasses import asdict, dataclass
 
+from foveatrack.daemon.homing_plan import HomingConfirm, plan_homing
 from foveatrack.daemon.record_queue import _job_event
 from foveatrack.recording.records import ns
 from foveatrack.turn_witness import MoveWitness
@@ -86,16 +87,24 @@ class HeadPose:
         h = self.cfg.head
         self.head.stop()
         self._home_steps = []
+        self._homing_t0 = now
         if h.on_reconnect == "home":
             from gimbal.pelco import encode_set_pan, encode_set_tilt
 
-            pan, tilt = h.home_deg
+            # the target's last trusted bearing first, else home; the worst-case wait to that goal
+            # (foveatrack.daemon.homing_plan); with a pose check, detections after its last "ok" are not trusted
+            g = self.pose_guard
+            trusted = None if g.check is None else (g.last_ok_t_s if g.last_ok_t_s is not None else -math.inf)
+            plan = self._homing = plan_homing(h, self.bearings, self.sensor_now_s(now), trusted, g.identity_pending)
+            self._homing_confirm = HomingConfirm() if g.check is not None else None
+            self.log.event("head_homing_plan", **plan.as_event())
+            pan, tilt = plan.pan_deg, plan.tilt_deg
             tz = getattr(self.head.client, "tilt_zero", "zenith")
             quiet = ABS_SET_QUIET_S
             # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile
             self._home_steps = [(now + quiet, "pan", encode_set_pan(h.address, pan, h.protocol)),
                                 (now + 2 * quiet, "tilt", encode_set_tilt(h.address, tilt, h.protocol, tz)),
-                                (now + 2 * quiet + h.home_wait_worst_s, "done", None)]
+                                (now + 2 * quiet + plan.wait_s, "done", None)]
 
     def _pose_tick(self, now: float) -> None:
         h = self.cfg.head
@@ -108,17 +117,23 @@ class HeadPose:
                 self._last_unknown_stop = now
                 self.head.stop()
             return
-        while self._home_steps and now >= self._home_steps[0][0]:
+        confirmed = self.pose_state == "homing" and self._homing_confirm is not None and self._homing_confirm.confirmed
+        while self._home_steps and (now >= self._home_steps[0][0] or (confirmed and self._home_steps[0][1] == "done")):
             _, step, raw = self._home_steps.pop(0)
+            plan = self._homing
             if step in ("pan", "tilt"):
                 if not self.head.send_raw(raw, "homing"):
                     self.log.event("head_homing_failed", step=step)
                     return self._pose_unknown(now, "homing_write_failed")   # again once the link is back
                 self.pose_state = "homing"
-                self.log.event("head_homing", axis=step, home_deg=list(h.home_deg))
+                self.log.event("head_homing", axis=step, home_deg=[plan.pan_deg, plan.tilt_deg], goal=plan.goal,
+                               worst_case_s=round(plan.worst_case_s, 3))
             else:
                 t_s = self.sensor_now_s(now)
-                pan, tilt = h.home_deg
+                pan, tilt = plan.pan_deg, plan.tilt_deg
+                if confirmed:
+                    self.log.event("head_homing_confirmed", by="pose_check",
+                                   waited_s=round(now - (self._homing_t0 or now), 3), wait_s=plan.wait_s)
                 self._rebase_tracker(t_s if t_s is not None else 0.0, pan, tilt)
                 self.pose_state = None
                 self.counters["head_homed"] += 1

@@ -77,6 +77,10 @@ class Lifecycle:
         for w in c.warnings():
             self.log.event("warning", message=w)
         self.head.stop()
+        if self.recording_path is not None:   # a killed run's recording here: completed from its journal
+            from foveatrack.daemon.recover import recover_directory
+
+            recover_directory(self.recording_path.parent, self.log.event, exclude=[self.recording_path])
         self.rx.start()
         self.watchdog = WatchdogState()
         self.link_seen = LinkSeen(head_up=self.head.connected)   # after the first STOP, which may reopen it

@@ -51,6 +51,7 @@ class PoseGuard:
         self.check = PoseCheck(pc, config.tracker.lidar_offset_m) if pc.enabled else None
         self.warnings: list[str] = []
         self.identity_pending = False   # a link came back: the first conclusive check after homing decides
+        self.last_ok_t_s: float | None = None   # the frame end of the last check that said "ok" [sensor s]
 
     def compile(self) -> None:
         """Compile (or load from numba's cache) the kernel before data flows."""
@@ -114,6 +115,7 @@ class PoseGuard:
             d.log.event("head_identity", verified=True, by="pose_check", port=d.cfg.head.port,
                         dpan_deg=round(res.dpan_deg, 3), dtilt_deg=round(res.dtilt_deg, 3))
         if res.kind == "ok":
+            self.last_ok_t_s = frame.t_end_s
             dp, dt = self.check.correction(res)
             t_s = frame.t_start_s
             if (dp or dt) and d.tracker.correct_pose(t_s, dp, dt):
@@ -150,7 +152,9 @@ class PoseGuard:
         from foveatrack.daemon.record_queue import _job_event
 
         h = d.cfg.head
-        why = (f"[head] port {h.port} reappeared and was homed to {list(h.home_deg)} deg, but the lidar's background "
+        plan = getattr(d, "_homing", None)     # where the homing drove it (foveatrack.daemon.homing_plan)
+        goal = list(h.home_deg) if plan is None else [round(plan.pan_deg, 2), round(plan.tilt_deg, 2)]
+        why = (f"[head] port {h.port} reappeared and was homed to {goal} deg, but the lidar's background "
                f"puts the lidar {res.dpan_deg:+.1f} deg pan / {res.dtilt_deg:+.1f} deg tilt from there (match "
                f"{res.match:.2f}): the head behind the link is not the one the lidar sits on; nothing more is "
                "written to it; restart the daemon once the right head is on the link")

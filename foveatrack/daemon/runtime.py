@@ -44,6 +44,7 @@ from collections import Counter, deque
 
 from foveatrack.daemon.frame_loop import FrameLoop, _HeadSink
 from foveatrack.daemon.head_pose import ABS_SET_QUIET_S, HeadPose  # noqa: F401  (ABS_SET_QUIET_S: its old home)
+from foveatrack.daemon.homing_plan import Bearings, HomingConfirm, HomingPlan
 from foveatrack.daemon.lifecycle import Lifecycle
 from foveatrack.daemon.pose_guard import PoseGuard
 from foveatrack.daemon.record_queue import DaemonRecording, _job_event, _job_frame  # noqa: F401
@@ -116,6 +117,10 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
         self.pending: deque = deque()             # complete frames not yet processed, (frame, host arrival)
         self.frame_times: deque = deque(maxlen=50)   # host times of the last frames processed (status rate)
         self.pose_guard = PoseGuard(config)   # the head's pose against the background ([pose_check])
+        self.bearings = Bearings()          # where the target was last seen: a homing goes there first
+        self._homing: HomingPlan | None = None
+        self._homing_confirm: HomingConfirm | None = None
+        self._homing_t0: float | None = None
 
     @property
     def tracker(self) -> Tracker:

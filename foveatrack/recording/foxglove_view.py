@@ -55,7 +55,11 @@ def head_quaternion(pan_deg: float, tilt_deg: float) -> tuple[float, float, floa
 
 
 def log_clock(log_time: int | str):
-    """t_ns -> MCAP log time [ns]: ``t_ns + log_time`` (an int), or the host's UTC clock ("host")."""
+    """t_ns -> MCAP log time [ns]: ``t_ns + log_time`` (an int), the host's UTC clock ("host"), or
+    ``log_time(t_ns)`` (a callable: a recording rewritten with its messages' own log times,
+    :mod:`foveatrack.daemon.recover`)."""
+    if callable(log_time):
+        return lambda t_ns: int(log_time(t_ns))
     if log_time == "host":
         import time
 

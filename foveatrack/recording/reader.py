@@ -518,6 +518,12 @@ class RecordingReader:
         time, which may be UTC (``log_time`` in the metadata; the view channels' messages: the log
         time).  A channel this version does not know gives its records if its encoding is JSON, its raw bytes
         otherwise (a later version's binary channel: read past, not taken for damage)."""
+        for _log_time, m in self.logged_messages(channels):
+            yield m
+
+    def logged_messages(self, channels: Iterable[str] | str | None = None) -> Iterator[tuple[int, Message]]:
+        """``(MCAP log time [ns], message)`` as :meth:`messages` gives them (a recording rewritten
+        with its own log times: :mod:`foveatrack.daemon.recover`)."""
         want = {channels} if isinstance(channels, str) else None if channels is None else set(channels)
         if self.info.get("format_version") in ("1", "2", "3"):
             return self._messages(want)
@@ -533,7 +539,7 @@ class RecordingReader:
             if want is not None and name not in want:
                 continue
             if name in VIEW_CHANNELS:
-                yield Message(name, int(log_time), data)
+                yield int(log_time), Message(name, int(log_time), data)
                 continue
             try:
                 if name == POINTS:
@@ -550,7 +556,7 @@ class RecordingReader:
                     record = json.loads(data)
             except (ValueError, KeyError, TypeError) as exc:
                 raise UserError(f"{self.path}: a {name} message at log time {log_time} ns is damaged: {exc}") from None
-            yield Message(name, _record_t_ns(record, log_time), record)
+            yield int(log_time), Message(name, _record_t_ns(record, log_time), record)
 
     def points(self) -> Iterator[PointsFrame]:
         """The lidar frames, in order."""
@@ -566,6 +572,12 @@ class RecordingReader:
     def records(self, channel: str) -> list[dict]:
         """All JSON records of one channel."""
         return [m.record for m in self.messages(channel)]
+
+    def closed(self) -> bool:
+        """Whether the file was closed by its writer (a valid footer and end-of-data record), from its
+        last bytes alone: a recording cut short (kill -9, power loss) is not."""
+        with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            return self._data_end_pos(mm) is not None
 
     def channels(self) -> dict[str, int]:
         """Message count per channel (reads the whole file)."""

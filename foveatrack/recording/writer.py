@@ -150,7 +150,8 @@ class RecordingWriter(RecordCalls):
         offset [ns] added to the message's ``t_ns`` (the simulator: its scene's ``start_utc``), or
         "host" for the host's clock when the message is written (the daemon).  Every message keeps its
         own ``t_ns`` (the sensor's or simulator's clock), which is what a reader and replay use;
-        0 (default) logs ``t_ns`` itself
+        0 (default) logs ``t_ns`` itself; a callable ``t_ns -> log time`` whose ``name`` is what the
+        metadata says (a recording rewritten with its own log times: :mod:`foveatrack.daemon.recover`)
     """
 
     def __init__(
@@ -165,7 +166,7 @@ class RecordingWriter(RecordCalls):
         overwrite: bool = False,
         created_utc: str | None = None,
         file_mode: int = 0o600,
-        log_time: int | str = 0,
+        log_time=0,
     ):
         import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
@@ -203,7 +204,8 @@ class RecordingWriter(RecordCalls):
                 "created_utc": created_utc if created_utc is not None
                 else _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                 "chunk_crcs": "required",      # the SDK writes every chunk's CRC: a 0 there is damage
-                "log_time": "host_utc" if log_time == "host" else f"t_ns+{int(log_time)}",
+                "log_time": (log_time.name if callable(log_time) else "host_utc" if log_time == "host"
+                             else f"t_ns+{int(log_time)}"),
             }
             md[META_CRC_KEY] = meta_crc32(md)
             self._w.write_metadata(META_NAME, md)

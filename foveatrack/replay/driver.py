@@ -130,7 +130,8 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     has_truth = False
     imu_recorded = False
     order = TimeOrder()
-    for rf in recorded_frames(reader):
+    commands: dict = {}
+    for rf in recorded_frames(reader, commands):
         pts = rf.points
         k = int(pts.frame_index)
         if source == "simulator":
@@ -205,6 +206,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     if reader.problem:
         res.comparison["recording_problem"] = reader.problem
     res.comparison["recording_complete"] = bool(reader.complete)
+    res.comparison["commands_in_recording"] = commands
     res.comparison["metadata_checksum"] = "verified" if reader.meta_checked else "absent (an older recording)"
     res.comparison["recording_damage"] = [d.describe() for d in reader.damage] + order.describe()
     if reader.capped is not None:

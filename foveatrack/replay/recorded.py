@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from foveatrack.gate import STALE_FRAME
-from foveatrack.recording.format import DAEMON_EVENTS, IMU, METRICS, POINTS
+from foveatrack.recording.format import COMMANDS, DAEMON_EVENTS, IMU, METRICS, POINTS
 from foveatrack.recording.records import (CommandRecord, DetectionRecord, HeadEstimateRecord, RecordError, TruthRecord,
                                           parse)
 
@@ -239,14 +239,20 @@ class RecordedFrame:
         return self.command is not None and STALE_FRAME in self.command.limited
 
 
-def recorded_frames(reader):
+def recorded_frames(reader, commands: dict | None = None):
     """Yield a :class:`RecordedFrame` per frame of the recording.  A record whose fields are not of
     their type (a damaged or crafted file whose chunk CRC holds) is a UserError naming the file, the
-    channel, the record's time and the field."""
+    channel, the record's time and the field.  ``commands``: a dict counting the command records
+    (``recorded``), those put back from the command journal (``from_journal``) and of those the ones
+    the run's dead reckoning never saw (``journal_only``, not replayed)."""
     from foveatrack.errors import UserError
 
     cur = None
     for m in reader.messages():
+        if commands is not None and m.channel == COMMANDS and isinstance(m.record, dict):
+            commands["recorded"] = commands.get("recorded", 0) + 1
+            for k in ("from_journal", "journal_only"):
+                commands[k] = commands.get(k, 0) + (m.record.get(k) is True)
         try:
             new = _take(cur, m)
         except RecordError as exc:
@@ -286,6 +292,8 @@ def _take(cur, m):
             cur.after.append(PoseCorrected(_event_float(e, "t_s"), _event_float(e, "dpan_deg"),
                                            _event_float(e, "dtilt_deg")))
         return None
+    if m.channel == COMMANDS and isinstance(m.record, dict) and m.record.get("journal_only") is True:
+        return None      # put back from the command journal; the run's dead reckoning never saw it (recover)
     rec = parse(m.channel, m.record)
     if isinstance(rec, CommandRecord):
         if rec.frame_id is None:

@@ -70,6 +70,11 @@ def format_report(res: ReplayResult) -> str:
                      f"{c['first_frames_detection_differs']}), {c['frames_command_differs']} of "
                      f"{c['commands_compared']} commands (first {c['first_frames_command_differs']}); "
                      f"open loop: same points, the head moved as recorded")
+    cmds = c.get("commands_in_recording") or {}
+    if cmds.get("from_journal"):
+        L.append(f"  commands: {cmds['recorded']} in the recording, {cmds['from_journal']} of them put back from the "
+                 f"command journal by 'foveatrack recover' ({cmds.get('journal_only', 0)} the head got outside the "
+                 f"dead reckoning: STOPs at start or while its pose was unknown, homing; not replayed)")
     for k, v in res.recorded_metrics.items():
         L.append(f"  recorded {k}: p50 {v['p50']:.2f}, p99 {v['p99']:.2f}, max {v['max']:.2f}")
     if c.get("recording_problem") and not c.get("recording_damage") and not c.get("recording_capped"):

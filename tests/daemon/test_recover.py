@@ -1,0 +1,137 @@
+"""``foveatrack recover``: a recording cut short completed from its command journal
+(:mod:`foveatrack.daemon.recover`), without processes: the daemon's own kill -9 is in
+tests/daemon/test_faults.py."""
+
+import json
+import os
+import shutil
+import stat
+
+import numpy as np
+import pytest
+
+from foveatrack.cli import main
+from foveatrack.recording import RecordingReader, RecordingWriter
+from foveatrack.daemon.recover import recover
+from gimbal.pelco import encode_pan_tilt, encode_set_pan, encode_stop
+
+STOP = encode_stop(1)
+LEFT = encode_pan_tilt(1, -1, 20, 0, 0)
+RIGHT = encode_pan_tilt(1, 1, 30, 0, 0)
+
+
+def _line(t, raw, source, send_t_s=None):
+    r = {"t_mono_s": t, "t_unix_s": 1.8e9 + t, "raw_hex": raw.hex(), "source": source}
+    if send_t_s is not None:
+        r["send_t_s"] = send_t_s
+    return json.dumps(r)
+
+
+def _cut_short(tmp_path, frames=5):
+    """A daemon-like recording of ``frames`` frames, each with a tracker command, copied while its writer
+    was still open (what kill -9 leaves), and a journal that holds those commands, a STOP at start
+    (never recorded), and three commands after the last recorded one."""
+    live, cut = tmp_path / "live.mcap", tmp_path / "rec.mcap"
+    w = RecordingWriter(live, {"source": "daemon", "config_text": "x"}, log_time="host")
+    journal = [_line(100.0, STOP, "")]
+    rng = np.random.default_rng(1)
+    for i in range(frames):
+        t_end = (i + 1) * 100_000_000
+        xyz = np.round(rng.uniform(1, 5, (50, 3)) * 1000) / 1000
+        w.write_points(t_end, i, xyz, np.linspace(t_end - 99_000_000, t_end, 50).astype(np.int64))
+        w.write_detection(t_end, i, False)
+        raw = LEFT if i % 2 else RIGHT
+        send = t_end * 1e-9 + 0.002
+        w.write_command(int(send * 1e9), raw, frame_id=i, source="tracker", send_t_s=send,
+                        host_written_s=100.1 + 0.1 * i, pan_dir=1, pan_byte=20, tilt_dir=0, tilt_byte=0)
+        journal.append(_line(100.1 + 0.1 * i - 0.0005, raw, "tracker", send))
+    w.flush()
+    shutil.copyfile(live, cut)
+    os.chmod(cut, 0o600)
+    w.close()
+    for k in range(3):     # the frames in flight: their commands reached the head, not the recording
+        send = (frames + 1 + k) * 0.1 + 0.002
+        journal.append(_line(100.1 + 0.1 * (frames + k), LEFT, "tracker", send))
+    (tmp_path / "rec.mcap.commands.jsonl").write_text("\n".join(journal) + "\n")
+    return cut, len(journal)
+
+
+def _official_commands(path):
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        r = make_reader(f)
+        summary = r.get_summary()
+        assert summary is not None and summary.statistics is not None
+        msgs = [(c.topic, json.loads(m.data)) for _s, c, m in r.iter_messages() if c.topic == "/commands"]
+    return [m for _t, m in msgs]
+
+
+def test_a_cut_short_recording_gets_every_journaled_command_back(tmp_path):
+    cut, n_journal = _cut_short(tmp_path)
+    before = RecordingReader(cut)
+    assert not before.closed() and len(before.records("commands")) == 5
+    log_times = [lt for lt, _m in before.logged_messages("points")]
+    res = recover(cut)
+    assert res.recovered and res.frames == 5 and res.commands_added == 3 and res.journal_only_added == 1
+    assert stat.S_IMODE(cut.stat().st_mode) == 0o600
+    assert not (tmp_path / ".rec.mcap.recovering").exists()
+    cmds = _official_commands(cut)           # the mcap package reads it: summary, statistics, every message
+    assert len(cmds) == n_journal == 9
+    added = [c for c in cmds if c.get("from_journal")]
+    assert [c["journal_line"] for c in added] == [1, 7, 8, 9]
+    assert added[0]["journal_only"] and added[0]["source"] == "unrecorded"
+    assert all(not c.get("journal_only") and c["source"] == "tracker" and c["frame_id"] is None
+               and c["raw_hex"] == LEFT.hex() for c in added[1:])
+    assert [c["send_t_s"] for c in added[1:]] == pytest.approx([0.602, 0.702, 0.802])
+    r = RecordingReader(cut)
+    assert r.closed() and len(list(r.points())) == 5 and r.meta["source"] == "daemon"
+    assert r.records("daemon")[-1]["event"] == "recovered"
+    # log times kept: the copied messages' are the original's
+    assert [lt for lt, _m in r.logged_messages("points")] == log_times
+
+
+def test_recover_of_a_complete_recording_is_a_no_op_that_says_so(tmp_path, capsys):
+    cut, _ = _cut_short(tmp_path)
+    assert main(["recover", str(cut)]) == 0
+    data = cut.read_bytes()
+    assert main(["recover", str(cut)]) == 0
+    out = capsys.readouterr().out
+    assert "complete (closed by its writer), nothing to recover" in out, out
+    assert cut.read_bytes() == data
+
+
+def test_a_damaged_journal_line_is_reported_and_skipped(tmp_path, capsys):
+    cut, n = _cut_short(tmp_path)
+    j = tmp_path / "rec.mcap.commands.jsonl"
+    lines = j.read_text().splitlines()
+    lines.insert(7, '{"t_mono_s": 100.6, "raw_hex": "ff01zz')       # cut in the middle (a crash while appending)
+    lines.insert(8, '{"t_mono_s": "soon", "raw_hex": "ff0100000001", "source": "tracker"}')
+    j.write_text("\n".join(lines) + "\n")
+    assert main(["recover", str(cut)]) == 0
+    cap = capsys.readouterr()
+    assert "line 8:" in cap.err and "line 9:" in cap.err and "skipped" in cap.err and "Traceback" not in cap.err
+    assert "2 damaged journal line(s) skipped" in cap.out
+    assert len(_official_commands(cut)) == n
+
+
+def test_a_journal_held_by_a_running_daemon_is_not_touched(tmp_path):
+    from foveatrack.errors import UserError
+    from foveatrack.live_devices import CommandJournal
+
+    cut, _ = _cut_short(tmp_path)
+    data = cut.read_bytes()
+    held = CommandJournal(tmp_path / "rec.mcap.commands.jsonl")
+    try:
+        with pytest.raises(UserError, match="held by a running process"):
+            recover(cut)
+    finally:
+        held.close()
+    assert cut.read_bytes() == data
+
+
+def test_not_a_recording_is_one_line(tmp_path, capsys):
+    p = tmp_path / "x.mcap"
+    p.write_bytes(b"hello")
+    assert main(["recover", str(p)]) == 2
+    assert "not a foveatrack recording" in capsys.readouterr().err

@@ -1,0 +1,98 @@
+"""Where a head of unknown pose is homed and how long the daemon waits blind
+(:mod:`foveatrack.daemon.homing_plan`, issue 26)."""
+
+import math
+from dataclasses import replace
+
+import pytest
+
+from foveatrack.daemon.homing_plan import (BEARING_MAX_AGE_S, Bearings, HomingConfirm, bearing_deg, plan_homing,
+                                           worst_case_s)
+from foveatrack.device_config import HeadConfig
+from foveatrack.pose_check import PoseCheckResult
+
+# the shipped example's head: pan 15 deg/s, tilt 2 deg/s, stops -30/60, home 0/0
+HEAD = HeadConfig(port="/dev/null", tilt_limits_deg=(-30.0, 60.0), on_reconnect="home", home_pan_deg=0.0,
+                  home_tilt_deg=0.0)
+
+
+def _at(pan, tilt, r=12.0):
+    p, t = math.radians(pan), math.radians(tilt)
+    return (r * math.cos(p) * math.cos(t), r * math.sin(p) * math.cos(t), r * math.sin(t))
+
+
+def test_bearing_of_a_world_point_is_the_pose_that_points_the_axis_at_it():
+    from foveatrack.reconstruction import rotation_matrix
+
+    for pan, tilt in ((0, 0), (-17.5, 4.0), (120.0, -20.0), (-170.0, 55.0)):
+        axis = rotation_matrix(pan, tilt)[:, 0] * 9.0          # the lidar's x axis in the world
+        assert bearing_deg(axis) == pytest.approx((pan, tilt), abs=1e-9)
+
+
+def test_the_last_trusted_bearing_is_searched_first():
+    b = Bearings()
+    b.saw(10.0, _at(-8.0, 3.0))
+    b.saw(11.0, _at(-9.0, 3.5))
+    p = plan_homing(HEAD, b, now_s=13.0)
+    assert p.goal == "last_bearing" and (p.pan_deg, p.tilt_deg) == pytest.approx((-9.0, 3.5))
+    # detections after the last "ok" pose check were placed with a pose since found wrong
+    p = plan_homing(HEAD, b, now_s=13.0, trusted_until_s=10.5)
+    assert (p.pan_deg, p.tilt_deg) == pytest.approx((-8.0, 3.0))
+    # nothing trusted, nothing seen, too old, or no sensor time: home
+    for plan in (plan_homing(HEAD, b, 13.0, trusted_until_s=-math.inf), plan_homing(HEAD, Bearings(), 13.0),
+                 plan_homing(HEAD, b, 11.0 + BEARING_MAX_AGE_S + 0.1), plan_homing(HEAD, b, None)):
+        assert plan.goal == "home" and (plan.pan_deg, plan.tilt_deg) == (0.0, 0.0), plan
+
+
+def test_a_bearing_beyond_the_stops_is_kept_inside_them():
+    b = Bearings()
+    b.saw(1.0, _at(190.0, 80.0))
+    p = plan_homing(HEAD, b, 2.0)
+    assert p.pan_deg == pytest.approx(-170.0) and p.tilt_deg == pytest.approx(60.0 - HEAD.tilt_margin_deg)
+
+
+def test_the_worst_case_is_the_move_to_this_goal_from_anywhere():
+    # before: 180/15 + 90/2 + 1 = 58 s for any goal; to tilt 0 the farther stop is 60 deg away: 43 s
+    assert HEAD.home_wait_worst_s == pytest.approx(58.0)
+    assert worst_case_s(HEAD, 0.0) == pytest.approx(12.0 + 30.0 + 1.0)
+    assert worst_case_s(HEAD, 15.0) == pytest.approx(12.0 + 22.5 + 1.0)     # the middle of the range: least
+    assert worst_case_s(HEAD, -30.0) == pytest.approx(58.0)                 # at a stop: the whole range
+    p = plan_homing(HEAD, None, 5.0)
+    assert p.wait_s == p.worst_case_s == pytest.approx(43.0)
+    assert "43.0" in str(p.as_event()["worst_case_s"])
+    # a configured home_wait_s is the user's word
+    assert plan_homing(replace(HEAD, home_wait_s=3.0), None, 5.0).wait_s == 3.0
+
+
+def _ok(dp, dt=0.0):
+    return PoseCheckResult("ok", dp, dt, 500, 0.9, 0.9, 0.9, True, True)
+
+
+def test_the_wait_ends_on_three_checks_at_rest_at_the_goal():
+    c = HomingConfirm()
+    assert not c.feed(None) and not c.feed(PoseCheckResult("inconclusive"))
+    assert not c.feed(_ok(4.0))             # still on the way (beyond 1.5 deg)
+    assert not c.feed(_ok(1.2)) and not c.feed(_ok(0.4))
+    assert not c.feed(_ok(-0.3))            # near, but moving: 1.5 deg between the three
+    assert not c.feed(_ok(-0.2))
+    assert c.feed(_ok(-0.25))               # three within 0.5 deg of each other
+    c2 = HomingConfirm()
+    c2.feed(_ok(0.1)), c2.feed(_ok(0.1))
+    assert not c2.feed(PoseCheckResult("mismatch", 8.0))     # a mismatch breaks the run
+    c2.feed(_ok(0.1)), c2.feed(_ok(0.1))
+    assert c2.feed(_ok(0.1))
+
+
+def test_a_moving_target_is_looked_for_where_it_went():
+    # crossing at -2.4 deg/s (0.5 m/s at 12 m): 7.7 s later it is 18.5 deg on
+    b = Bearings()
+    for k in range(11):
+        b.saw(7.0 + 0.1 * k, _at(3.0 - 2.4 * 0.1 * k, 4.0 + 0.03 * k))
+    p = plan_homing(HEAD, b, now_s=8.0 + 7.7)
+    assert p.goal == "last_bearing"
+    assert p.pan_deg == pytest.approx(3.0 - 2.4 * 8.7, abs=1e-6) and p.tilt_deg == pytest.approx(4.3 + 0.3 * 7.7)
+    # carried on by at most MAX_EXTRAPOLATION_DEG
+    assert plan_homing(HEAD, b, now_s=8.0 + 29.0).pan_deg == pytest.approx(0.6 - 30.0)
+    # a homing that must prove the head behind a reappeared link is ours goes home
+    p = plan_homing(HEAD, b, now_s=9.0, prove_identity=True)
+    assert p.goal == "home" and "reappeared" in p.why
