@@ -11,7 +11,10 @@ The promise (README, "Reproducibility"):
   pinning numba's code generation to the SSE2-only ``generic`` target).  What can still differ is the
   C library's and numpy's transcendental functions (sin, cos, atan2, ...), which pick CPU-specific
   variants (FMA, AVX2, AVX-512).  With those emulated as on an SSE2-only CPU as well, the exact scan
-  model and every shipped scene's closed loop stay identical; the paraxial model and the slow motor
+  model and every shipped scene's closed loop stay identical (the truth's angles, made by glibc's
+  atan2, to 1e-9 deg: its FMA and SSE2 variants differ in the last bit; the tracker's bearings use the
+  same atan2, so a command could differ where a bearing falls within an ulp of a speed byte's boundary --
+  that part holds by measurement, not by construction); the paraxial model and the slow motor
   drift (which call the C library's sin and cos) agree within ``ULP_PARAXIAL_DRIFT``.
 * numpy's BLAS (OpenBLAS, built for every x86-64 core and picking its kernels at load) would sum a
   product in another order, or with fused multiply-adds, on another core; the per-frame and set-up
