@@ -587,36 +587,37 @@ class RecordingReader:
         return out
 
 
-def with_frame_index(messages: Iterable[Message], want: set[str] | None) -> Iterator[Message]:
-    """Format 4's messages with each frame's index filled in (those of ``want``, all if None): a frame
-    (``/points``, with ``frame_index`` -1) waits, with what follows it, for the first ``/detections``
-    record after it (every driver writes one right after the points, in the same chunk), whose
-    ``frame_index`` it takes.  A frame without one before the next frame or the end (a file of points
-    alone) takes the frame before it's index + 1 (the first: 0)."""
+def with_frame_index(messages: Iterable[tuple[int, Message]], want: set[str] | None) -> Iterator[tuple[int, Message]]:
+    """Format 4's ``(log time, message)`` pairs with each frame's index filled in (those of ``want``,
+    all if None): a frame (``/points``, with ``frame_index`` -1) waits, with what follows it, for the
+    first ``/detections`` record after it (every driver writes one right after the points, in the same
+    chunk), whose ``frame_index`` it takes.  A frame without one before the next frame or the end (a
+    file of points alone) takes the frame before it's index + 1 (the first: 0)."""
     from dataclasses import replace
 
-    held: list[Message] = []
+    held: list[tuple[int, Message]] = []
     last = -1
 
-    def release(k: int) -> Iterator[Message]:
-        pts = held[0]
+    def release(k: int) -> Iterator[tuple[int, Message]]:
+        log_time, pts = held[0]
         if want is None or POINTS in want:
-            yield Message(pts.channel, pts.t_ns, replace(pts.record, frame_index=k))
-        yield from (m for m in held[1:] if want is None or m.channel in want)
+            yield log_time, Message(pts.channel, pts.t_ns, replace(pts.record, frame_index=k))
+        yield from (lm for lm in held[1:] if want is None or lm[1].channel in want)
         held.clear()
 
-    for m in messages:
+    for lm in messages:
+        m = lm[1]
         if m.channel == POINTS:
             if held:
                 last += 1
                 yield from release(last)
-            held.append(m)
+            held.append(lm)
             continue
         if not held:
             if want is None or m.channel in want:
-                yield m
+                yield lm
             continue
-        held.append(m)
+        held.append(lm)
         if m.channel == DETECTIONS and isinstance(m.record, dict):
             k = m.record.get("frame_index")
             if isinstance(k, int) and not isinstance(k, bool):
