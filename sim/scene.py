@@ -37,6 +37,7 @@ import numpy as np
 from foveatrack.config_util import as_bool, as_choice, as_float, as_vec, check_keys, read_toml
 from foveatrack.errors import UserError
 from gimbal.head_facts import DEFAULT_HEAD
+from sim.scene_objects import MAX_TARGETS, TRAJECTORY_TYPES, object_id, trajectory_from_table  # noqa: F401
 
 # Effects a scene can ask for, with their parameters and defaults (sources in the docstring of
 # sim.effects).  Head effects act in gimbal/pts303h (sim/loop.py hands them over), link effects in
@@ -84,14 +85,12 @@ SIGNED_EFFECT_PARAMS: dict[str, tuple[float, float]] = {
     "head_speed_coeff_per_k": (-0.01, 0.01),     # relative speed change per kelvin [1/K]
     "lidar_clock_drift_ppm": (-150.0, 150.0),    # inside the daemon's clock guard (DRIFT_PPM 200)
 }
-TRAJECTORY_TYPES = ("straight", "circle", "figure8", "waypoints", "manual")
 GEOMETRIES = ("quadrotor", "sphere", "box")
 BACKGROUND_TYPES = ("ground", "wall", "room", "box")
 
 
-# A scene is read from a file someone may have made by mistake or on purpose: every target and
-# background body is ray-cast for every beam, so their counts are capped (a swarm of birds fits).
-MAX_TARGETS = 256
+# A scene is read from a file someone may have made by mistake or on purpose: every background body
+# is ray-cast for every beam, so their count is capped (MAX_TARGETS, the objects': sim.scene_objects).
 MAX_BACKGROUND = 4096
 
 @dataclass(frozen=True)
@@ -474,59 +473,6 @@ def _target(t: Mapping, w: str, duration_s: float, seed: int, index: int = 0) ->
             raise UserError(f"{w}: size_m must be positive, got {list(size)}")
         body = bodies.box_body(size, refl)
     return TargetSpec(body, trajectory_from_table(t.get("trajectory"), w, "target", duration_s, seed), obj_id, cls)
-
-
-def object_id(v, w: str) -> str:
-    """A scene object's id: a short name without spaces or slashes (a flock's birds are ``id/k``)."""
-    if not isinstance(v, str) or not v or len(v) > 64 or any(c.isspace() or c == "/" for c in v):
-        raise UserError(f"{w}: id must be a name of 1-64 characters without spaces or '/', got {v!r}")
-    return v
-
-
-def trajectory_from_table(traj, w: str, table: str, duration_s: float, seed: int):
-    """The ``[<table>.trajectory]`` of a scene object (a drone, a flock's centre)."""
-    from sim.world import trajectories as tr
-
-    wt = f"{w}.trajectory"
-    if not isinstance(traj, Mapping):
-        raise UserError(f"{w}: missing [{table}.trajectory] table (type = {' | '.join(TRAJECTORY_TYPES)})")
-    kind = as_choice(traj.get("type"), "type", wt, TRAJECTORY_TYPES)
-    keys = {
-        "straight": ["start_m", "velocity_m_s"],
-        "circle": ["centre_m", "radius_m", "speed_m_s", "start_deg"],
-        "figure8": ["centre_m", "size_m", "period_s"],
-        "waypoints": ["points_m", "speed_m_s"],
-        "manual": ["centre_m", "radius_m", "max_speed_m_s", "max_accel_m_s2", "tau_s"],
-    }[kind]
-    check_keys(traj, ["type"] + keys, wt)
-    required = [k for k in keys if k not in ("start_deg", "tau_s")]
-    missing = [k for k in required if k not in traj]
-    if missing:
-        raise UserError(f"{wt}: type {kind!r} needs {', '.join(missing)}")
-    v3 = lambda k: as_vec(traj[k], k, wt, 3)  # noqa: E731
-    pos = lambda k, **a: as_float(traj[k], k, wt, lo=0, lo_open=True, **a)  # noqa: E731
-    if kind == "straight":
-        trajectory = tr.Straight(v3("start_m"), v3("velocity_m_s"))
-    elif kind == "circle":
-        trajectory = tr.Circle(v3("centre_m"), pos("radius_m"), as_float(traj["speed_m_s"], "speed_m_s", wt),
-                               as_float(traj.get("start_deg", 0.0), "start_deg", wt))
-    elif kind == "figure8":
-        trajectory = tr.FigureEight(v3("centre_m"), pos("size_m"), pos("period_s"))
-    elif kind == "waypoints":
-        pts = traj["points_m"]
-        if not isinstance(pts, list) or len(pts) < 2:
-            raise UserError(f"{wt}: points_m must be a list of at least 2 [x, y, z] points")
-        pts3 = tuple(as_vec(p, f"points_m[{i}]", wt, 3) for i, p in enumerate(pts))
-        for i in range(1, len(pts3)):
-            if pts3[i] == pts3[i - 1]:
-                raise UserError(f"{wt}: points_m[{i}] repeats points_m[{i - 1}]; consecutive waypoints must differ")
-        trajectory = tr.Waypoints(pts3, pos("speed_m_s"))
-    else:
-        trajectory = tr.Manual(v3("centre_m"), pos("radius_m"), pos("max_speed_m_s", hi=20), pos("max_accel_m_s2"),
-                               duration_s, seed, as_float(traj.get("tau_s", 1.5), "tau_s", wt, lo=0, lo_open=True))
-    if trajectory.max_speed_m_s > 20.0 + 1e-9:
-        raise UserError(f"{wt}: the target flies at up to {trajectory.max_speed_m_s:.1f} m/s; the model covers <= 20 m/s")
-    return trajectory
 
 
 def _background(b: Mapping, w: str):

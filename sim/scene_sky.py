@@ -33,7 +33,7 @@ TREE_KEYS = ["id", "base_m", "height_m", "crown_radius_m", "trunk_radius_m", "sw
 def sky_objects(data: Mapping[str, Any], where: str, duration_s: float, seed: int, targets) -> tuple:
     """``(objects, trunk_prims, trunk_reflectivities)`` of a scene's ``[[bird]]`` and ``[[tree]]``
     tables (empty when it has none: nothing is drawn)."""
-    from sim.scene import MAX_TARGETS
+    from sim.scene_objects import MAX_TARGETS
 
     ids = [spec.id for spec in targets]
     if len(set(ids)) < len(ids):
@@ -72,7 +72,7 @@ def _array(data, key: str, where: str) -> list:
 
 def _birds(t, w: str, index: int, duration_s: float, seed: int) -> list:
     from sim.effects import effect_rng
-    from sim.scene import object_id, trajectory_from_table
+    from sim.scene_objects import object_id, trajectory_from_table
     from sim.world import sky
 
     check_keys(t, BIRD_KEYS, w)
@@ -106,7 +106,7 @@ def _birds(t, w: str, index: int, duration_s: float, seed: int) -> list:
 
 def _tree(t, w: str, index: int, duration_s: float, seed: int):
     from sim.effects import effect_rng
-    from sim.scene import object_id
+    from sim.scene_objects import object_id
     from sim.world import bodies, sky
 
     check_keys(t, TREE_KEYS, w)
