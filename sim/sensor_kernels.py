@@ -32,6 +32,19 @@ def _on_mm_grid(x_m):
     return mm * 1e-3
 
 
+@njit(cache=True, inline="always")
+def _put_point(out_xyz, out_t_ns, k, x, y, z, t, mm_grid):
+    """Output point ``k``: its coordinates [m] (on the Livox mm grid where asked) and its time."""
+    if mm_grid:
+        x = _on_mm_grid(x)
+        y = _on_mm_grid(y)
+        z = _on_mm_grid(z)
+    out_xyz[k, 0] = x
+    out_xyz[k, 1] = y
+    out_xyz[k, 2] = z
+    out_t_ns[k] = t
+
+
 @njit(cache=True, nogil=True)
 def quantise_to_mm_grid_kernel(xyz_m, out):
     """``out[:] = quantise_to_mm_grid(xyz_m)`` (any float64 shape, flattened alike); the test of
@@ -159,17 +172,7 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
             # a droplet's return: the ray's first, or the only one it gives
             if not (min_range_m <= c <= max_range_m):
                 continue
-            x = d_lidar[j, 0] * c
-            y = d_lidar[j, 1] * c
-            z = d_lidar[j, 2] * c
-            if mm_grid:
-                x = _on_mm_grid(x)
-                y = _on_mm_grid(y)
-                z = _on_mm_grid(z)
-            out_xyz[k, 0] = x
-            out_xyz[k, 1] = y
-            out_xyz[k, 2] = z
-            out_t_ns[k] = t_ns[j]
+            _put_point(out_xyz, out_t_ns, k, d_lidar[j, 0] * c, d_lidar[j, 1] * c, d_lidar[j, 2] * c, t_ns[j], mm_grid)
             out_refl[k] = clutter_refl_byte
             out_on_target[k] = False
             k += 1
@@ -187,17 +190,7 @@ def assemble_returns_kernel(prim, status, range_m, d_lidar, t_ns, range_limit_m,
             dx /= norm
             dy /= norm
             dz /= norm
-        x = dx * r
-        y = dy * r
-        z = dz * r
-        if mm_grid:
-            x = _on_mm_grid(x)
-            y = _on_mm_grid(y)
-            z = _on_mm_grid(z)
-        out_xyz[k, 0] = x
-        out_xyz[k, 1] = y
-        out_xyz[k, 2] = z
-        out_t_ns[k] = t_ns[j]
+        _put_point(out_xyz, out_t_ns, k, dx * r, dy * r, dz * r, t_ns[j], mm_grid)
         out_refl[k] = _refl_byte(refl_table[m], gain) if use_gain else refl_byte_table[m]
         out_on_target[k] = m < target_prim_end
         k += 1
