@@ -60,6 +60,14 @@ def rotate_pan_tilt_kernel(d_lidar, pan_rad, tilt_rad, out):
 
 
 @njit(cache=True, inline="always")
+def _box_axes(prims, m):
+    """A box's unit axes u, v (its columns 7-12) and w = u x v, as nine floats."""
+    ux, uy, uz = prims[m, 7], prims[m, 8], prims[m, 9]
+    vx, vy, vz = prims[m, 10], prims[m, 11], prims[m, 12]
+    return ux, uy, uz, vx, vy, vz, uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+
+
+@njit(cache=True, inline="always")
 def _hit_prim(prims, m, ox, oy, oz, dx, dy, dz):
     """Smallest positive distance along the ray (o, d) to primitive ``m``; inf if missed."""
     kind = int(prims[m, 0])
@@ -80,11 +88,7 @@ def _hit_prim(prims, m, ox, oy, oz, dx, dy, dz):
         t = b + s
         return t if t > _EPS else math.inf
     if kind == BOX:
-        ux, uy, uz = prims[m, 7], prims[m, 8], prims[m, 9]
-        vx, vy, vz = prims[m, 10], prims[m, 11], prims[m, 12]
-        wx = uy * vz - uz * vy
-        wy = uz * vx - ux * vz
-        wz = ux * vy - uy * vx
+        ux, uy, uz, vx, vy, vz, wx, wy, wz = _box_axes(prims, m)
         t_near = -math.inf
         t_far = math.inf
         for axis in range(3):
@@ -391,11 +395,7 @@ def _cos_incidence(prims, m, px, py, pz, dx, dy, dz):
             return 1.0
         return abs(cx * dx + cy * dy + cz * dz) / n
     if kind == BOX:
-        ux, uy, uz = prims[m, 7], prims[m, 8], prims[m, 9]
-        vx, vy, vz = prims[m, 10], prims[m, 11], prims[m, 12]
-        wx = uy * vz - uz * vy
-        wy = uz * vx - ux * vz
-        wz = ux * vy - uy * vx
+        ux, uy, uz, vx, vy, vz, wx, wy, wz = _box_axes(prims, m)
         eu = abs(ux * cx + uy * cy + uz * cz) / prims[m, 4]
         ev = abs(vx * cx + vy * cy + vz * cz) / prims[m, 5]
         ew = abs(wx * cx + wy * cy + wz * cz) / prims[m, 6]
