@@ -218,8 +218,8 @@ class FrameLoop:
         if self.rx.offset_s is not None:
             t_last = frame.t_ns[-1] * 1e-9 if frame.n_points else frame.t_end_s
             lat = (t_written - (t_last + self.rx.offset_s)) * 1e3
-            self.lat_ms.append(lat)
-        self.proc_ms.append(proc * 1e3)
+            self.lat_ms.add(lat)
+        self.proc_ms.add(proc * 1e3)
         self.counters["frames"] += 1
         self.counters["frames_detected"] += out.detection is not None
         if out.detection is not None:
