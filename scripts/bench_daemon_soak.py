@@ -1,5 +1,6 @@
 """Soak of the real daemon at 480 k points/s (Horizon, dual return, both returns filled) with
-recording (issue 26): latency p50 / p99 / max and the daemon's RSS per minute.
+recording (issue 26): latency p50 / p99 / max and the RSS of the daemon and of its recording writer
+(a child process) per minute, and the RSS slopes after the warm-up.
 
 The daemon runs as ``foveatrack daemon`` in its own process, exactly as shipped, against a virtual
 Horizon (``sim.virtual_lidar.VirtualLivox``, data type 4, IMU at 200 Hz) on loopback and a bare pty
@@ -8,10 +9,13 @@ for the head (drained, never answered).  The lidar's returns are one second of a
 loop, each with a second return 0.3 m behind, so the sender costs little next to the daemon.
 
 Latency is the daemon's own ``latency_ms`` (host time of a frame's last point -> command written),
-read from its recording, grouped by minute of the run; RSS is sampled from ``/proc/PID/status``
-every 5 s (the value at each minute's end; growth per minute from minute 2 on).
+read from its recording, grouped by minute of the run, each minute's p99 also as a change from the
+first minute's; RSS is sampled from ``/proc/PID/status`` every 5 s for the daemon and for each of its
+child processes (the recording writer: ``foveatrack.recording.writer_process``); the table gives the
+value at each minute's end.  The slopes are least-squares fits over the samples after
+``--warmup-min`` (default 5) minutes, in MB/hour (the must-show of issue 26: under 1 MB/hour).
 
-    python scripts/bench_daemon_soak.py [--minutes 5] [--no-record] [--out DIR]
+    python scripts/bench_daemon_soak.py [--minutes 5] [--warmup-min 5] [--no-record] [--out DIR]
 """
 
 from __future__ import annotations
@@ -74,6 +78,29 @@ def rss_mb(pid: int) -> float | None:
     return None
 
 
+def child_pids(pid: int) -> list[int]:
+    """The direct children of ``pid`` (all its threads'), from /proc."""
+    out = set()
+    try:
+        for task in os.listdir(f"/proc/{pid}/task"):
+            try:
+                out.update(int(x) for x in open(f"/proc/{pid}/task/{task}/children").read().split())
+            except OSError:
+                pass
+    except OSError:
+        pass
+    return sorted(out)
+
+
+def slope_mb_h(samples: list[tuple[float, float]], after_s: float) -> tuple[float, int] | None:
+    """Least-squares RSS slope [MB/hour] of the ``(run time [s], RSS [MB])`` samples after ``after_s``."""
+    pts = [(t, r) for t, r in samples if t >= after_s]
+    if len(pts) < 3:
+        return None
+    tt, rr = np.array(pts).T
+    return float(np.polyfit(tt / 3600.0, rr, 1)[0]), len(pts)
+
+
 def cpu_s(pid: int) -> float | None:
     """User + system CPU time the process used so far [s]."""
     try:
@@ -86,6 +113,8 @@ def cpu_s(pid: int) -> float | None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=5.0)
+    ap.add_argument("--warmup-min", type=float, default=5.0,
+                    help="the RSS slopes are fitted after this many minutes (default 5)")
     ap.add_argument("--no-record", action="store_true", help="run without a recording")
     ap.add_argument("--out", default=None, help="directory for the config, log and recording (default: a temp dir)")
     args = ap.parse_args()
@@ -155,6 +184,8 @@ watchdog_s = 2.0
                               env=env, stdout=subprocess.DEVNULL, stderr=open(out / "soak.err", "w"), cwd=ROOT)
     lidar.start()
     rss: list[tuple[float, float]] = []
+    writer_rss: list[tuple[float, float]] = []   # the sum over the daemon's children (the writer)
+    load_at: list[tuple[float, float]] = []
     cpu: list[tuple[float, float]] = []     # (run time, the daemon's CPU time so far) [s]
     loads: list[float] = []
     t0 = None
@@ -176,9 +207,14 @@ watchdog_s = 2.0
             if r is not None:
                 rss.append((now - t0, r))
                 cpu.append((now - t0, cpu_s(daemon.pid)))
+            kids = [x for x in (rss_mb(c) for c in child_pids(daemon.pid)) if x is not None]
+            if kids:
+                writer_rss.append((now - t0, sum(kids)))
             loads.append(os.getloadavg()[0])
+            load_at.append((now - t0, loads[-1]))
             if now >= next_minute:
-                print(f"  minute {int((now - t0) // 60)}: RSS {r:.1f} MB, load {os.getloadavg()[0]:.2f}", flush=True)
+                w = f", writer RSS {writer_rss[-1][1]:.1f} MB" if kids else ""
+                print(f"  minute {int((now - t0) // 60)}: daemon RSS {r:.1f} MB{w}, load {loads[-1]:.2f}", flush=True)
                 next_minute += 60.0
             if daemon.poll() is not None:
                 raise SystemExit(f"the daemon exited ({daemon.returncode}): {(out / 'soak.err').read_text()}")
@@ -196,8 +232,9 @@ watchdog_s = 2.0
     import json
 
     stats = next((json.loads(x)["stats"] for x in log.read_text().splitlines() if '"event": "stop"' in x), {})
-    # latency by minute of the lidar's stream (its clock starts at 0 with the run): frames are skipped
-    # when the daemon falls behind, so frame numbers do not count minutes
+    # latency by minute of the lidar's stream, from the first frame processed (the lidar's clock starts
+    # when it does, before the daemon is ready when its kernels compile): frames are skipped when the
+    # daemon falls behind, so frame numbers do not count minutes
     t_s, lat = [], []
     if not args.no_record:
         for m in RecordingReader(rec).messages("metrics"):
@@ -205,27 +242,46 @@ watchdog_s = 2.0
                 t_s.append(m.t_ns * 1e-9)
                 lat.append(float(m.record["value"]))
     t_s, lat = np.array(t_s), np.array(lat)
+    if t_s.size:
+        t_s = t_s - t_s.min()
     minutes = int(np.ceil(args.minutes))
-    print("\n| minute | frames processed (of 600) | latency p50 [ms] | p99 [ms] | max [ms] | RSS at end [MB] | daemon CPU [% of a core] |")
-    print("|---:|---:|---:|---:|---:|---:|---:|")
+    print("\n| minute | frames processed (of 600) | latency p50 [ms] | p99 [ms] | p99 vs minute 1 | max [ms] "
+          "| daemon RSS [MB] | writer RSS [MB] | daemon CPU [% of a core] | load (1-min avg) |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    p99_first = None
+    over = []
     for k in range(minutes):
         sel = (t_s >= k * 60.0) & (t_s < (k + 1) * 60.0)
-        r_end = [r for t, r in rss if t <= (k + 1) * 60.0]
         row = [f"{k + 1}", f"{int(sel.sum())}"]
         if sel.any():
             x = lat[sel]
-            row += [f"{np.percentile(x, 50):.1f}", f"{np.percentile(x, 99):.1f}", f"{x.max():.1f}"]
+            p99 = float(np.percentile(x, 99))
+            p99_first = p99 if p99_first is None else p99_first
+            change = 100.0 * (p99 / p99_first - 1.0)
+            if abs(change) > 20.0:
+                over.append(k + 1)
+            row += [f"{np.percentile(x, 50):.1f}", f"{p99:.1f}", f"{change:+.0f} %", f"{x.max():.1f}"]
         else:
-            row += ["-", "-", "-"]
-        row.append(f"{r_end[-1]:.1f}" if r_end else "-")
+            row += ["-", "-", "-", "-"]
+        for series in (rss, writer_rss):
+            r_end = [r for t, r in series if t <= (k + 1) * 60.0]
+            row.append(f"{r_end[-1]:.1f}" if r_end else "-")
         c = [(t, x) for t, x in cpu if k * 60.0 - 5.0 < t <= (k + 1) * 60.0 + 1e-6 and x is not None]
         row.append(f"{100.0 * (c[-1][1] - c[0][1]) / (c[-1][0] - c[0][0]):.0f}" if len(c) >= 2 else "-")
+        ld = [x for t, x in load_at if k * 60.0 < t <= (k + 1) * 60.0 + 1e-6]
+        row.append(f"{np.mean(ld):.2f}" if ld else "-")
         print("| " + " | ".join(row) + " |")
-    after = [(t, r) for t, r in rss if t >= 60.0]
-    if len(after) >= 2:
-        tt, rr = np.array(after).T
-        slope = np.polyfit(tt / 60.0, rr, 1)[0]
-        print(f"\nRSS growth from minute 1 on: {slope:+.2f} MB/min (least squares over {len(after)} samples)")
+    if p99_first is not None:
+        print(f"\nlatency p99 within 20 % of minute 1's ({p99_first:.1f} ms): "
+              + ("every minute" if not over else f"NOT in minute(s) {', '.join(map(str, over))}"))
+    after_s = args.warmup_min * 60.0
+    print(f"RSS slope after minute {args.warmup_min:g} (least squares over the 5 s samples; the must-show: "
+          "under 1 MB/hour):")
+    total = [(t, r + w) for (t, r), (t2, w) in zip(rss, writer_rss) if abs(t - t2) < 1.0] if writer_rss else []
+    for name, series in (("daemon", rss), ("writer", writer_rss), ("daemon + writer", total)):
+        fit = slope_mb_h(series, after_s)
+        print(f"  {name:16s} " + ("- (too few samples)" if fit is None else
+                                  f"{fit[0]:+.2f} MB/hour ({fit[0] / 60.0:+.4f} MB/min, {fit[1]} samples)"))
     print(f"load average over the run: mean {np.mean(loads):.2f}, max {np.max(loads):.2f} (1-min, sampled every 5 s)")
     keys = ("frames", "frames_skipped", "frames_stale", "queue_dropped_points", "recording_dropped",
             "lidar_lost_slots", "lidar_duplicate_points", "lidar_clock_jumps", "lidar_imu_packets_unused")

@@ -34,7 +34,7 @@ class StatusDisplay:
         self.status.show(format_status(rate, getattr(self, "last_pts", 0), state,
                                        None if out is None else out.error_pan_deg,
                                        None if out is None else out.error_tilt_deg,
-                                       self.lat_ms[-1] if self.lat_ms else None, self.drops(), self.head.connected,
+                                       self.lat_ms.last, self.drops(), self.head.connected,
                                        ", ".join(self.status_notes())))
 
     def status_notes(self) -> list[str]:
