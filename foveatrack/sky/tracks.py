@@ -3,13 +3,15 @@
 Per frame:
 
 1. The points go into the world at each point's head pose (:mod:`foveatrack.sky.world_points`).
-2. The static scene is learned in world cubes and taken out: the open-loop tracker's
-   :class:`~foveatrack.openloop.background.BackgroundModel`, fed world coordinates.  The rosette's
-   incommensurable pattern covers the field over time (paper Fig. 6), so every cube of a tree, a
-   roof or the ground is hit in ``background_frames`` frames; a flying object moves through cubes.
-   Points of a confirmed track's object are not learned when the object is where the track's
-   motion predicted it (within ``protect_m``): a hovering drone stays foreground, while a "track"
-   that hops between the scraps of half-learned scenery protects nothing and the scenery settles.
+2. The static scene is learned per direction from the pivot and taken out
+   (:class:`~foveatrack.sky.range_background.RangeBackground`: each cell's range interval, with a
+   margin grown from its spread, so a swaying crown folds into one interval).  The rosette's
+   incommensurable pattern covers the field over time (paper Fig. 6).  The first ``warmup_s`` the
+   background learns alone.  Points of an object are kept out of the learning while its track may be
+   something flying (a tentative track off the scenery, a confirmed one that went ``protect_excursion_m``
+   or more) and the object is where the track's motion predicted it (within ``protect_m``).  Objects
+   mostly on *scenery in the making* (next to cells seen long ago, not yet background) give hits that
+   do not count toward confirmation.
 3. The remaining points are clustered into objects (:func:`foveatrack.openloop.objects.cluster_labels`,
    single linkage with a gap growing with range, the numba kernel with its numpy twin); an object
    has at least ``min_points`` returns and at most ``max_extent_m`` across.  Each object: median
@@ -26,13 +28,15 @@ Per frame:
    world, tested at the frame's mid pose as the tracker's world D is), without the points of objects
    matched to other tracks -- a bird flying through the drone's D does not pull its median.
 6. Unmatched objects start tentative tracks.  A tentative track is confirmed after ``confirm_hits``
-   hits in its first ``confirm_window`` frames, and dropped if it is not.  A track not seen for
-   ``lost_after_s`` while its prediction lies in the lidar's field (``field_half_angle_deg`` around
-   the optical axis), or for ``lost_out_of_view_s`` while it is outside (the head looks elsewhere),
+   hits off the scenery in its first ``confirm_window`` frames, and dropped if it is not.  A track not
+   seen for ``lost_after_s`` while where it was last seen lies in the lidar's field
+   (``field_half_angle_deg`` around the optical axis at the frame's pose), or for
+   ``lost_out_of_view_s`` while it does not (the head looks elsewhere),
    is deleted; so is one merged with another track's object (an object matched to another track
-   lies in its gate while none is left for it: two clusters became one) for longer.  A confirmed track whose positions over ``static_window_s`` stay within
-   ``static_radius_m`` of their median is scenery (a part of a tree the background has not learned
-   yet): dropped, and its D made background (as in the open-loop tracker).
+   lies in its gate while none is left for it: two clusters became one) for longer.  A confirmed
+   track that in ``static_window_s`` of life never got ``static_radius_m`` from where it was first
+   seen is scenery (a part of a tree the background has not learned yet): dropped, and its D made
+   background (as in the open-loop tracker).
 
 Ids are integers from 0 in the order tracks are created, never reused.  Everything is a function of
 the frames and the pose: no random numbers, sums in a fixed order, a stable assignment.
