@@ -98,12 +98,17 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--duration", type=float, default=None, help="override the scenes' duration [s]")
     ap.add_argument("--markdown", default=None)
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="[tracker.sky] keys to set for the run (numbers), e.g. warmup_s=0.8")
     a = ap.parse_args(argv)
     lines = []
     total_conf = Counter()
     for path in a.scenes:
         base = load_scene(path)
         sky = dict(base.tracker_table.get("sky", {}))
+        for kv in a.set:
+            k, _, v = kv.partition("=")
+            sky[k] = int(v) if v.lstrip("-").isdigit() else float(v)
         table = {**base.tracker_table, "sky": sky}
         fovea = float(sky.get("attention", {}).get("fovea_half_angle_deg", 3.0))
         rows = []

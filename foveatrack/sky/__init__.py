@@ -10,7 +10,8 @@
   each fixation (:class:`foveatrack.tracker.Tracker`'s)
 * :mod:`~foveatrack.sky.metrics` -- GOSPA, continuity, id switches, false tracks, fovea shares
 
-The clustering and the background model are the open-loop tracker's
-(:mod:`foveatrack.openloop.kernels`, :mod:`foveatrack.openloop.background`), used here on world
+* :mod:`~foveatrack.sky.range_background` -- the static scene learned per direction as a range interval
+
+The clustering is the open-loop tracker's (:mod:`foveatrack.openloop.kernels`), used here on world
 coordinates instead of the fixed sensor's.
 """

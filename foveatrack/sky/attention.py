@@ -19,6 +19,8 @@ Schedule (evaluated after each frame, for the next):
 * a *revisit* is due for every other confirmed drone whose clock -- its last frame in the fovea, the
   end of its last revisit, or its confirmation -- is older than ``revisit_s``; the most overdue one is
   served first;
+* with no confirmed track, the fovea goes to the tentative track with the most hits off the scenery
+  (at least ``verify_min_hits``): a saccade to verify what the field's sparse rim only hints at;
 * a revisit fixation lasts until the track has been in the fovea for ``dwell_s``, or
   ``saccade_timeout_s`` after it started if the head never got there (a track the head cannot
   reach does not hold the fovea); then the fovea returns to the priority track.
@@ -51,6 +53,7 @@ class AttentionConfig:
     dwell_s: float = 0.5
     saccade_timeout_s: float = 2.0
     fovea_half_angle_deg: float = 3.0
+    verify_min_hits: float = 1.0
 
     @classmethod
     def from_mapping(cls, data: Mapping, where: str) -> "AttentionConfig":
@@ -130,6 +133,13 @@ class Attention:
                 self._revisit_start_s = t_s
                 self._revisit_dwell_s = 0.0
         self.target = self.revisit if self.revisit is not None else self.priority
+        if self.target is None:
+            # nothing confirmed: look at the likeliest candidate (the most hits off the scenery, then
+            # the lower id), so that the fovea resolves what the sparse rim of the field only hints at
+            cands = sorted((-v.clear_hits, v.track_id) for v in views
+                           if not v.confirmed and v.clear_hits >= cfg.verify_min_hits)
+            if cands:
+                self.target = cands[0][1]
         return self.target
 
 

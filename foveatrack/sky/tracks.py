@@ -3,13 +3,15 @@
 Per frame:
 
 1. The points go into the world at each point's head pose (:mod:`foveatrack.sky.world_points`).
-2. The static scene is learned in world cubes and taken out: the open-loop tracker's
-   :class:`~foveatrack.openloop.background.BackgroundModel`, fed world coordinates.  The rosette's
-   incommensurable pattern covers the field over time (paper Fig. 6), so every cube of a tree, a
-   roof or the ground is hit in ``background_frames`` frames; a flying object moves through cubes.
-   Points of a confirmed track's object are not learned when the object is where the track's
-   motion predicted it (within ``protect_m``): a hovering drone stays foreground, while a "track"
-   that hops between the scraps of half-learned scenery protects nothing and the scenery settles.
+2. The static scene is learned per direction from the pivot and taken out
+   (:class:`~foveatrack.sky.range_background.RangeBackground`: each cell's range interval, with a
+   margin grown from its spread, so a swaying crown folds into one interval).  The rosette's
+   incommensurable pattern covers the field over time (paper Fig. 6).  The first ``warmup_s`` the
+   background learns alone.  Points of an object are kept out of the learning while its track may be
+   something flying (a tentative track off the scenery, a confirmed one that went ``protect_excursion_m``
+   or more) and the object is where the track's motion predicted it (within ``protect_m``).  Objects
+   mostly on *scenery in the making* (next to cells seen long ago, not yet background) give hits that
+   do not count toward confirmation.
 3. The remaining points are clustered into objects (:func:`foveatrack.openloop.objects.cluster_labels`,
    single linkage with a gap growing with range, the numba kernel with its numpy twin); an object
    has at least ``min_points`` returns and at most ``max_extent_m`` across.  Each object: median
@@ -26,13 +28,15 @@ Per frame:
    world, tested at the frame's mid pose as the tracker's world D is), without the points of objects
    matched to other tracks -- a bird flying through the drone's D does not pull its median.
 6. Unmatched objects start tentative tracks.  A tentative track is confirmed after ``confirm_hits``
-   hits in its first ``confirm_window`` frames, and dropped if it is not.  A track not seen for
-   ``lost_after_s`` while its prediction lies in the lidar's field (``field_half_angle_deg`` around
-   the optical axis), or for ``lost_out_of_view_s`` while it is outside (the head looks elsewhere),
+   hits off the scenery in its first ``confirm_window`` frames, and dropped if it is not.  A track not
+   seen for ``lost_after_s`` while where it was last seen lies in the lidar's field
+   (``field_half_angle_deg`` around the optical axis at the frame's pose), or for
+   ``lost_out_of_view_s`` while it does not (the head looks elsewhere),
    is deleted; so is one merged with another track's object (an object matched to another track
-   lies in its gate while none is left for it: two clusters became one) for longer.  A confirmed track whose positions over ``static_window_s`` stay within
-   ``static_radius_m`` of their median is scenery (a part of a tree the background has not learned
-   yet): dropped, and its D made background (as in the open-loop tracker).
+   lies in its gate while none is left for it: two clusters became one) for longer.  A confirmed
+   track that in ``static_window_s`` of life never got ``static_radius_m`` from where it was first
+   seen is scenery (a part of a tree the background has not learned yet): dropped, and its D made
+   background (as in the open-loop tracker).
 
 Ids are integers from 0 in the order tracks are created, never reused.  Everything is a function of
 the frames and the pose: no random numbers, sums in a fixed order, a stable assignment.
@@ -52,11 +56,11 @@ from foveatrack.detection import Detection, box_bounds, box_detection
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import mat3T_vec, norm3
 from foveatrack.frames import Frame
-from foveatrack.openloop.background import BackgroundModel, voxel_keys
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify
 from foveatrack.sky.motion import ConstantVelocityFilter
+from foveatrack.sky.range_background import RangeBackground
 from foveatrack.sky.world_points import lidar_to_world_per_point
 from foveatrack.space_of_interest import Box
 
@@ -67,7 +71,10 @@ _BIG = 1e12
 class SkyTrackerConfig:
     """Parameters of :class:`SkyTracker` (a scene's ``[sky]`` table; units in the names).
 
-    voxel_m, background_frames, background_dilate     the world background (open-loop's meaning)
+    cell_deg, background_frames, background_persist_frames, background_dilate,
+    background_margin_m, background_spread_gain, background_margin_max_m
+                                 the background's direction cells (:mod:`foveatrack.sky.range_background`)
+    warmup_s : >= 0 [s]          the background learns alone this long before tracks start
     cluster_tol_m, cluster_tol_rad                    cluster gap ``max(tol_m, tol_rad * range)``
     min_points : int >= 1        returns an object needs
     max_extent_m : > 0 [m]       largest side of an object (bigger: scenery, not tracked)
@@ -88,9 +95,14 @@ class SkyTrackerConfig:
     pose_nodes : int >= 2        head poses asked per frame for the per-point turn
     """
 
-    voxel_m: float = 0.3
-    background_frames: int = 10
-    background_dilate: int = 1
+    cell_deg: float = 0.3
+    background_frames: int = 3
+    background_persist_frames: int = 8
+    background_dilate: int = 3
+    background_margin_m: float = 0.5
+    background_spread_gain: float = 0.5
+    background_margin_max_m: float = 1.5
+    warmup_s: float = 1.0
     cluster_tol_m: float = 0.5
     cluster_tol_rad: float = 0.01
     min_points: int = 2
@@ -106,7 +118,8 @@ class SkyTrackerConfig:
     lost_out_of_view_s: float = 5.0
     field_half_angle_deg: float | None = None
     static_window_s: float = 3.0
-    static_radius_m: float = 0.5
+    static_radius_m: float = 1.5
+    protect_excursion_m: float = 1.0
     d_half_m: float = 1.0
     protect_m: float = 1.0
     history_s: float = 3.0
@@ -114,15 +127,18 @@ class SkyTrackerConfig:
     classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
 
     def __post_init__(self) -> None:
-        for k in ("voxel_m", "cluster_tol_m", "max_extent_m", "q_m2_s3", "r_m2", "v0_sigma_m_s", "gate_chi2",
+        for k in ("cell_deg", "background_margin_m", "background_margin_max_m", "cluster_tol_m", "max_extent_m", "q_m2_s3", "r_m2", "v0_sigma_m_s", "gate_chi2",
                   "gate_max_m", "lost_after_s", "lost_out_of_view_s", "static_window_s", "static_radius_m",
                   "d_half_m", "protect_m", "history_s"):
             if not getattr(self, k) > 0:
                 raise UserError(f"{k} must be > 0, got {getattr(self, k)!r}")
         if self.field_half_angle_deg is not None and not 0 < self.field_half_angle_deg <= 180:
             raise UserError(f"field_half_angle_deg must be in (0, 180], got {self.field_half_angle_deg!r}")
-        if not 0 <= self.background_dilate <= 2:
-            raise UserError(f"background_dilate must be 0, 1 or 2, got {self.background_dilate!r}")
+        if not 0 <= self.background_dilate <= 3:
+            raise UserError(f"background_dilate must be 0, 1, 2 or 3, got {self.background_dilate!r}")
+        for k in ("warmup_s", "background_spread_gain", "background_persist_frames"):
+            if not getattr(self, k) >= 0:
+                raise UserError(f"{k} must be >= 0, got {getattr(self, k)!r}")
         for k in ("background_frames", "min_points", "confirm_hits"):
             if getattr(self, k) < 1:
                 raise UserError(f"{k} must be >= 1, got {getattr(self, k)!r}")
@@ -145,6 +161,7 @@ class SkyObject:
     t_s: float
     n_points: int
     sides_m: np.ndarray
+    on_scenery: bool = False
 
     @property
     def extent_m(self) -> float:
@@ -161,6 +178,7 @@ class SkyTrack:
     last_hit_t_s: float
     frames_seen: int = 1
     hits: int = 1
+    clear_hits: int = 0
     confirmed_t_s: float | None = None
     label: str = "unknown"
     features: dict = field(default_factory=dict)
@@ -168,6 +186,10 @@ class SkyTrack:
     in_view: bool = True
     hit_now: bool = False
     merged_t_s: float = -math.inf
+    origin_xyz_m: np.ndarray | None = None
+    excursion_m: float = 0.0
+    last_xyz_m: np.ndarray | None = None
+    last_seen_in_view: bool = True
 
     @property
     def confirmed(self) -> bool:
@@ -194,6 +216,7 @@ class TrackView:
     hit: bool
     in_view: bool
     features: dict
+    clear_hits: int = 0
 
 
 @dataclass(frozen=True)
@@ -219,7 +242,10 @@ class SkyTracker:
         self.cfg = cfg or SkyTrackerConfig()
         self.region = region
         c = self.cfg
-        self.background = BackgroundModel(c.voxel_m, c.background_frames, c.background_dilate)
+        self.background = RangeBackground(c.cell_deg, c.background_frames, c.background_persist_frames,
+                                          c.background_dilate, c.background_margin_m, c.background_spread_gain,
+                                          c.background_margin_max_m)
+        self._t0_s: float | None = None
         self.tracks: list[SkyTrack] = []
         self.confirmed_ever: list[int] = []
         self._next_id = 0
@@ -241,9 +267,18 @@ class SkyTracker:
         if self.region is not None and world.shape[0]:
             inside = np.asarray(self.region.contains(world), bool)
             xyz, t_ns, world = xyz[inside], t_ns[inside], world[inside]
-        keys = voxel_keys(world, cfg.voxel_m)
-        fg_idx = np.flatnonzero(~self.background.is_background(keys))
-        objs, point_obj = self._objects(world[fg_idx], t_ns[fg_idx])
+        cells, ranges = self.background.cells(world)
+        if self._t0_s is None:
+            self._t0_s = t0
+        if t1 - self._t0_s <= cfg.warmup_s:
+            # the background learns alone: it has not seen the scenery long enough to tell it from
+            # what flies, and tracks started now would be the scenery's
+            self.background.learn(cells, ranges)
+            self.background.warmup_frames = self.background.frame_no
+            return SkyFrameOutput(t1, (), None, frame.n_points, 0, 0, (), ())
+        is_bg, near = self.background.is_background(cells, ranges)
+        fg_idx = np.flatnonzero(~is_bg)
+        objs, point_obj = self._objects(world[fg_idx], t_ns[fg_idx], near[fg_idx])
         pan, tilt, _, _ = pose.angles_at(t_mid)
         rows = rotation_rows(pan, tilt)
         off = np.asarray(pose.lidar_offset_m, np.float64).reshape(3)
@@ -251,6 +286,9 @@ class SkyTracker:
             tr.frames_seen += 1
             tr.hit_now = False
             tr.in_view = self._in_view(tr.kf.predicted(t_mid)[0], rows, off)
+            # lost while in view: where it was last seen is in the field now (a track that coasts out
+            # of the field on its own velocity is not "out of view": the head did not look away)
+            tr.last_seen_in_view = self._in_view(tr.last_xyz_m, rows, off)
         match, allowed = self._associate(objs, t_mid)
         obj_track = {j: i for i, j in match}
         # A confirmed track left without an object while an object matched to another track lies in
@@ -281,9 +319,14 @@ class SkyTracker:
                 z = np.array(self._to_world(fovea_det.xyz, fovea_det.t_s, pose))
                 tz = fovea_det.t_s
             pred = tr.kf.predicted(ob.t_s)[0]
-            protect = tr.confirmed and norm3(ob.xyz_m - pred) <= cfg.protect_m
+            # what a track sees is kept out of the background while it is where the track predicted it,
+            # as long as the track may be something flying: a tentative track off the scenery, or a
+            # confirmed one that has gone somewhere.  A confirmed track that stays put (a crown's part
+            # the background has not learned yet) protects nothing: its points are learned and it starves.
+            protect = norm3(ob.xyz_m - pred) <= cfg.protect_m and (
+                (not tr.confirmed and not ob.on_scenery) or (tr.confirmed and tr.excursion_m >= cfg.protect_excursion_m))
             self._hit(tr, tz, z, ob)
-            if not tr.confirmed and tr.hits >= cfg.confirm_hits and tr.frames_seen <= cfg.confirm_window:
+            if not tr.confirmed and tr.clear_hits >= cfg.confirm_hits and tr.frames_seen <= cfg.confirm_window:
                 tr.confirmed_t_s = t_mid
                 self.confirmed_ever.append(tr.track_id)
                 confirmed_now.append(tr.track_id)
@@ -292,26 +335,34 @@ class SkyTracker:
         if fov is not None and fovea_det is not None and not self.tracks[fov].hit_now:
             # seen by Algorithm 1 though no object matched (too few points for an object)
             tr = self.tracks[fov]
-            tr.kf.update(fovea_det.t_s, self._to_world(fovea_det.xyz, fovea_det.t_s, pose))
-            tr.last_hit_t_s, tr.hit_now = fovea_det.t_s, True
+            z = self._to_world(fovea_det.xyz, fovea_det.t_s, pose)
+            tr.kf.update(fovea_det.t_s, z)
+            tr.last_hit_t_s, tr.hit_now, tr.last_xyz_m = fovea_det.t_s, True, z
+            tr.excursion_m = max(tr.excursion_m, norm3(z - tr.origin_xyz_m))
         for j, ob in enumerate(objs):
             if j not in obj_track:
                 tr = SkyTrack(self._next_id, ConstantVelocityFilter(ob.t_s, ob.xyz_m, cfg.q_m2_s3, cfg.r_m2,
                                                                     cfg.v0_sigma_m_s), ob.t_s, ob.t_s)
                 tr.history.append((ob.t_s, ob.xyz_m, ob.sides_m, ob.n_points))
+                tr.origin_xyz_m = tr.last_xyz_m = np.asarray(ob.xyz_m, float)
                 tr.hit_now = True
+                tr.clear_hits = int(not ob.on_scenery)
                 self._next_id += 1
-                if cfg.confirm_hits == 1:
+                if cfg.confirm_hits == 1 and tr.clear_hits:
                     tr.confirmed_t_s = t_mid
                     self.confirmed_ever.append(tr.track_id)
                     confirmed_now.append(tr.track_id)
                 self.tracks.append(tr)
-        self.background.learn(keys[fg_idx[learn]])
+                if not ob.on_scenery:
+                    learn &= point_obj != j
+        keep = np.ones(cells.size, bool)
+        keep[fg_idx[~learn]] = False
+        self.background.learn(cells[keep], ranges[keep])
         deleted = self._prune(t_mid)
         for tr in self.tracks:
             tr.label, tr.features = classify(tr, cfg.classifier)
         views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, tr.kf.predicted(t_mid)[0], tr.kf.v.copy(),
-                                tr.hit_now, tr.in_view, dict(tr.features)) for tr in self.tracks)
+                                tr.hit_now, tr.in_view, dict(tr.features), tr.clear_hits) for tr in self.tracks)
         return SkyFrameOutput(t1, views, fovea_det, frame.n_points, int(fg_idx.size), len(objs),
                               tuple(confirmed_now), tuple(deleted))
 
@@ -333,7 +384,7 @@ class SkyTracker:
         r = math.sqrt(x * x + y * y + z * z)
         return r > 0 and x >= self._cos_field * r
 
-    def _objects(self, world: np.ndarray, t_ns: np.ndarray) -> tuple[list[SkyObject], np.ndarray]:
+    def _objects(self, world: np.ndarray, t_ns: np.ndarray, near: np.ndarray) -> tuple[list[SkyObject], np.ndarray]:
         """The frame's objects and, per foreground point, the index of its object (-1: none)."""
         cfg = self.cfg
         point_obj = np.full(world.shape[0], -1, np.int64)
@@ -347,7 +398,8 @@ class SkyTracker:
             pts = world[m]
             point_obj[m] = j
             t_s = float(np.median(t_ns[m])) * 1e-9
-            objs.append(SkyObject(fo.xyz_m, t_s, fo.n_points, pts.max(axis=0) - pts.min(axis=0)))
+            on_scenery = 2 * int(np.count_nonzero(near[m])) >= fo.n_points
+            objs.append(SkyObject(fo.xyz_m, t_s, fo.n_points, pts.max(axis=0) - pts.min(axis=0), on_scenery))
         return objs, point_obj
 
     def _associate(self, objs: list[SkyObject], t_s: float) -> tuple[list[tuple[int, int]], np.ndarray]:
@@ -376,9 +428,13 @@ class SkyTracker:
     def _hit(self, tr: SkyTrack, t_s: float, z: np.ndarray, ob: SkyObject) -> None:
         tr.kf.update(t_s, z)
         tr.hits += 1
+        tr.clear_hits += not ob.on_scenery
         tr.last_hit_t_s = t_s
         tr.hit_now = True
-        tr.history.append((t_s, np.asarray(z, float), ob.sides_m, ob.n_points))
+        z = np.asarray(z, float)
+        tr.history.append((t_s, z, ob.sides_m, ob.n_points))
+        tr.last_xyz_m = z
+        tr.excursion_m = max(tr.excursion_m, norm3(z - tr.origin_xyz_m))
 
     def _prune(self, t_s: float) -> list[int]:
         """Drop failed candidates, tracks lost too long and static scenery; returns their ids."""
@@ -387,8 +443,8 @@ class SkyTracker:
         for tr in self.tracks:
             tr.history = [h for h in tr.history if h[0] >= t_s - cfg.history_s]
             unseen = t_s - max(tr.last_hit_t_s, tr.merged_t_s)
-            lost = unseen > (cfg.lost_after_s if tr.in_view else cfg.lost_out_of_view_s)
-            failed = not tr.confirmed and tr.frames_seen >= cfg.confirm_window and tr.hits < cfg.confirm_hits
+            lost = unseen > (cfg.lost_after_s if tr.last_seen_in_view else cfg.lost_out_of_view_s)
+            failed = not tr.confirmed and tr.frames_seen >= cfg.confirm_window and tr.clear_hits < cfg.confirm_hits
             if lost or failed:
                 gone.append(tr.track_id)
             elif tr.confirmed and self._static(tr, t_s):
@@ -401,11 +457,7 @@ class SkyTracker:
         return gone
 
     def _static(self, tr: SkyTrack, t_s: float) -> bool:
+        """Scenery: in ``static_window_s`` of life it never got ``static_radius_m`` from where it
+        was first seen (a crown sways around its place; a drone on its way leaves it)."""
         cfg = self.cfg
-        h = [x for x in tr.history if x[0] >= t_s - cfg.static_window_s]
-        if t_s - tr.first_t_s < cfg.static_window_s or len(h) < 3:
-            return False
-        p = np.array([x[1] for x in h])
-        d = p - np.median(p, axis=0)
-        return bool(np.all(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
-                           <= cfg.static_radius_m * cfg.static_radius_m))
+        return t_s - tr.first_t_s >= cfg.static_window_s and tr.excursion_m < cfg.static_radius_m

@@ -1,0 +1,105 @@
+"""The sky tracker's background of direction cells (foveatrack/sky/range_background.py): the numba
+kernels against their numpy twins bit for bit, and what the model must do -- learn a swaying crown
+as background while a drone in front of it, or in the open sky, stays foreground; a stray return
+does not blind the cells behind it."""
+
+import math
+
+import numpy as np
+
+from foveatrack.sky import range_background as rb
+from foveatrack.sky.range_background import RangeBackground
+
+
+def _random_points(rng, n):
+    # every face of the cube map, a few points at the origin and on cell edges
+    p = rng.normal(size=(n, 3)) * rng.uniform(1, 80, (n, 1))
+    p[:5] = 0.0
+    p[5:10] = [[10.0, 10.0, 0.0], [-3.0, 3.0, 3.0], [0.0, 0.0, -7.0], [5.0, -5.0, 5.0], [1.0, 0.0, 0.0]]
+    return p
+
+
+def test_kernels_equal_their_numpy_twins_bit_for_bit():
+    rng = np.random.default_rng(7)
+    bg_k, bg_n = (RangeBackground(cell_deg=2.0, near_frames=5, warmup_frames=2),
+                  RangeBackground(cell_deg=2.0, near_frames=5, warmup_frames=2))
+    for frame in range(12):
+        pts = _random_points(rng, 400)
+        if frame % 3:       # a static patch seen again and again, so that cells become background
+            pts[10:110] = np.array([40.0, 3.0, 2.0]) + rng.normal(size=(100, 3)) * 2.0
+        cells_k, r_k = bg_k.cells(pts)
+        cells_n, r_n = rb.cells_numpy(pts, bg_n.du, bg_n.n)
+        assert np.array_equal(cells_k, cells_n)
+        assert r_k.tobytes() == r_n.tobytes()
+        out_k, near_k = bg_k.is_background(cells_k, r_k)
+        out_n, near_n = rb.background_numpy(cells_n, r_n, bg_n.n, bg_n.frames, bg_n.first_frame, bg_n.last_frame,
+                                            bg_n.r_min, bg_n.r_max, bg_n.min_frames, bg_n.persist_frames, bg_n.dilate,
+                                            bg_n.margin_min_m, bg_n.spread_gain, bg_n.margin_max_m, bg_n.frame_no,
+                                            bg_n.near_frames, bg_n.warmup_frames)
+        assert np.array_equal(out_k, out_n) and np.array_equal(near_k, near_n)
+        bg_k.learn(cells_k, r_k)
+        rb.learn_numpy(cells_n, r_n, bg_n.frame_no, bg_n.frames, bg_n.first_frame, bg_n.last_frame,
+                       bg_n.r_min, bg_n.r_max)
+        bg_n.frame_no += 1
+        for a in ("frames", "first_frame", "last_frame", "r_min", "r_max"):
+            assert getattr(bg_k, a).tobytes() == getattr(bg_n, a).tobytes(), a
+    assert out_k.any() and near_k.any() and not out_k.all()
+
+
+def _crown(rng, t, n=600, sway_m=0.5):
+    """A ball of 2 m radius 36 m out whose centre sways sideways (0.3 Hz), its near half sampled."""
+    c = np.array([36.0, 0.5 * sway_m * 2 * math.sin(2 * math.pi * 0.3 * t), 6.0])
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    d[:, 0] = -np.abs(d[:, 0])
+    return c + 2.0 * d
+
+
+def _ball(rng, c, n=20, r=0.2):
+    d = rng.normal(size=(n, 3))
+    return np.asarray(c) + r * d / np.linalg.norm(d, axis=1)[:, None]
+
+
+def test_a_swaying_crown_is_learned_and_a_drone_in_front_or_in_the_sky_is_not():
+    rng = np.random.default_rng(3)
+    bg = RangeBackground()
+    for k in range(60):        # 6 s: two sway periods
+        pts = _crown(rng, 0.1 * k)
+        cells, r = bg.cells(pts)
+        bg.learn(cells, r)
+    late = _crown(rng, 6.05)
+    cells, r = bg.cells(late)
+    out, _ = bg.is_background(cells, r)
+    assert out.mean() > 0.97, out.mean()
+    # a drone 2 m in front of the crown's near side, and one in the open sky 3 m above it
+    for c in ([32.0, 0.0, 6.0], [35.0, 0.0, 11.0]):
+        cells, r = bg.cells(_ball(rng, c))
+        out, near = bg.is_background(cells, r)
+        assert not out.any() and not near.any(), c
+
+
+def test_a_flying_object_and_a_stray_return_do_not_become_background():
+    rng = np.random.default_rng(4)
+    bg = RangeBackground()
+    stray = np.array([[3.0, 0.2, 0.4]])
+    for k in range(40):
+        # a drone of 0.35 m at 0.8 m/s, 33 m out, hit every frame (the fovea on it), learned all along
+        pts = _ball(rng, [33.0, 4.0 - 0.08 * k, 8.0], n=30, r=0.17)
+        if k == 5:
+            pts = np.vstack([pts, stray])
+        cells, r = bg.cells(pts)
+        out, _ = bg.is_background(cells, r)
+        assert not out.any(), k
+        bg.learn(cells, r)
+    # behind the stray, 30 m on: still foreground
+    far = np.array([[30.0, 2.0, 4.0]]) + rng.normal(size=(10, 3)) * 0.02
+    cells, r = bg.cells(far)
+    assert not bg.is_background(cells, r)[0].any()
+
+
+def test_mark_box_makes_the_box_background_from_its_near_side():
+    bg = RangeBackground()
+    bg.mark_box(np.array([35.0, -1.0, 4.0]), np.array([37.0, 1.0, 6.0]))
+    cells, r = bg.cells(np.array([[36.0, 0.0, 5.0], [38.0, 0.0, 5.2], [30.0, 0.0, 4.2], [36.0, 8.0, 5.0]]))
+    out, _ = bg.is_background(cells, r)
+    assert out.tolist() == [True, True, False, False]
