@@ -79,6 +79,10 @@ def test_a_first_demo_compiles_in_two_processes_and_its_first_frame_compiles_not
         assert needed in names
     mismatched = [(name, key, data) for name, key, data in entries if key != data]
     assert not mismatched
+    # and the next run finds the cache warm: no compile processes again
+    warm = subprocess.run([sys.executable, "-c", "from foveatrack.cli import kernel_compile as k; print(k.cache_is_cold())"],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert warm.stdout.strip() == "False", warm.stderr
 
 
 def test_a_compile_process_runs_the_other_groups_kernels_as_python(tmp_path):
