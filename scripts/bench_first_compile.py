@@ -1,11 +1,14 @@
 """The first run's numba compile, kernel by kernel: ``foveatrack warmup`` on an empty cache.
 
-    python scripts/bench_first_compile.py [--top 25] [--kernel cast_static]
+    python scripts/bench_first_compile.py [--top 25] [--kernel cast_static | --groups]
 
-Runs :func:`foveatrack.cli.warmup_cmd.warm_up` with ``NUMBA_CACHE_DIR`` pointed at a new temporary
-directory (the cache next to the sources is neither read nor touched), and prints the wall time, the
-process's CPU time, and the CPU seconds of each kernel's own compile (exclusive: a kernel's figure does
-not include the helpers it calls that numba compiles as functions of their own).  CPU seconds are the
+Runs :func:`foveatrack.cli.warmup_cmd.warm_up` in this one process (``split=False``) with
+``NUMBA_CACHE_DIR`` pointed at a new temporary directory (the cache next to the sources is neither
+read nor touched), and prints the wall time, the process's CPU time, and the CPU seconds of each
+kernel's own compile, per signature (exclusive: a kernel's figure does not include the helpers it
+calls that numba compiles as functions of their own; a kernel listed twice was compiled for two
+argument types).  ``--group 1`` / ``--group 2`` does what one compile process of a first run does
+(:mod:`foveatrack.cli.kernel_compile`) instead: how well the two processes share the work.  CPU seconds are the
 figure to compare on a shared machine: the wall time grows with the load, the CPU time barely.
 ``--kernel cast_static`` times that one kernel's compile alone (the world's background cast, the
 largest before it was split into non-inlined block helpers).  Say the load (``uptime``) with a figure.
@@ -43,7 +46,9 @@ def _listen() -> dict[str, float]:
             t0, inner = stack.pop()
             t = time.process_time() - t0
             f = ev.data["dispatcher"].py_func
-            own[f"{f.__module__}.{f.__qualname__}"] += t - inner
+            sig = ", ".join(str(a).split("(")[0] + ("[literal]" if "Literal" in str(a) else "")
+                            + ("[strided]" if "'A'" in str(a) else "") for a in ev.data["args"])
+            own[f"{f.__module__}.{f.__qualname__}({sig})"] += t - inner
             if stack:
                 stack[-1][1] += t
 
@@ -67,17 +72,25 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--top", type=int, default=25, help="kernels listed (default 25)")
     ap.add_argument("--kernel", choices=["cast_static"], help="compile this kernel alone")
+    ap.add_argument("--group", type=int, choices=[1, 2],
+                    help="compile what this compile process of a first run compiles (foveatrack.cli.kernel_compile)")
     args = ap.parse_args()
     own = _listen()
     t0, c0 = time.perf_counter(), time.process_time()
     if args.kernel:
         _cast_static()
+    elif args.group:
+        from foveatrack.cli.demo_cmd import DEFAULT_SCENE, shipped_scene
+        from foveatrack.cli.kernel_compile import compile_group
+
+        compile_group(args.group - 1, shipped_scene(DEFAULT_SCENE))
     else:
         from foveatrack.cli.warmup_cmd import warm_up
 
-        warm_up(progress=False)
+        warm_up(progress=False, split=False)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    print(f"{args.kernel or 'foveatrack warmup'}, empty cache: wall {wall:.1f} s, CPU {cpu:.1f} s, "
+    what = args.kernel or (f"compile group {args.group}" if args.group else "foveatrack warmup")
+    print(f"{what}, empty cache: wall {wall:.1f} s, CPU {cpu:.1f} s, "
           f"of it numba compiles {sum(own.values()):.1f} s CPU; load {os.getloadavg()[0]:.1f}")
     for name, t in sorted(own.items(), key=lambda kv: -kv[1])[:args.top]:
         print(f"  {t:6.2f} s  {name}")

@@ -31,16 +31,31 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_demo)
 
 
-def cmd_demo(args) -> int:
+def scan_analyses(optics, short: bool = False) -> dict:
+    """The demo's scan figures for ``optics``: the radial density (exact and paraxial, two-prism
+    scanners only) and the voxel coverage with 1 % speed noise.  ``short``: a few milliseconds of
+    each (the same kernels in the same types; for the first compile, :mod:`foveatrack.cli.kernel_compile`)."""
     import numpy as np
 
-    from foveatrack.cli.lidar_cmd import _pattern_plot, info_dict
-    from foveatrack.cli.scan_plots import plot_coverage, plot_density
-    from foveatrack.cli.simulate_cmd import run_and_report
     from sim.scan.coverage import voxel_coverage
     from sim.scan.density import radial_density
     from sim.scan.model import ScanModel
     from sim.scan.optics import SpeedNoise
+
+    density_s, coverage_s = (0.01, 0.01) if short else (1.0, 2.0)
+    out = {}
+    if len(optics.prisms) == 2:
+        out["density_exact"] = radial_density(ScanModel(optics), density_s)
+        out["density_paraxial"] = radial_density(ScanModel(optics, model="paraxial"), density_s)
+    noisy = ScanModel(optics, speed_noise=SpeedNoise(), rng=np.random.default_rng(0))
+    out["coverage"] = voxel_coverage(noisy, coverage_s)
+    return out
+
+
+def cmd_demo(args) -> int:
+    from foveatrack.cli.lidar_cmd import _pattern_plot, info_dict
+    from foveatrack.cli.scan_plots import plot_coverage, plot_density
+    from foveatrack.cli.simulate_cmd import run_and_report
     from sim.scene import load_scene
 
     out = Path(args.out)
@@ -54,12 +69,11 @@ def cmd_demo(args) -> int:
     print(f"lidar {optics.name}: FoV {info['fov_deg'][0]:.2f} x {info['fov_deg'][1]:.2f} deg exact "
           f"({info['paraxial_fov_deg'][0]:.2f} paraxial), {optics.point_rate_hz} points/s")
     _pattern_plot(optics, "exact", 0.1, scan_dir / "pattern.png")
-    if len(optics.prisms) == 2:
-        exact = radial_density(ScanModel(optics), 1.0)
-        para = radial_density(ScanModel(optics, model="paraxial"), 1.0)
-        plot_density(para, exact, f"{optics.name}: radial density, 1 s (paper Fig. 5, eq. 4)", scan_dir / "density.png")
-    noisy = ScanModel(optics, speed_noise=SpeedNoise(), rng=np.random.default_rng(0))
-    curve = voxel_coverage(noisy, 2.0)
+    figures = scan_analyses(optics)
+    if "density_exact" in figures:
+        plot_density(figures["density_paraxial"], figures["density_exact"],
+                     f"{optics.name}: radial density, 1 s (paper Fig. 5, eq. 4)", scan_dir / "density.png")
+    curve = figures["coverage"]
     plot_coverage([("voxel, 1 % speed noise", curve)], f"{optics.name}: coverage, voxel definition (paper Fig. 6e)",
                   scan_dir / "coverage.png")
     print(f"  coverage (voxel, 1 % speed noise): 50 % at {curve.t50_s:.2f} s, 90 % at {curve.t90_s:.2f} s")

@@ -129,6 +129,7 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     free (:func:`core_free`); the results and the file are the same either way."""
     from foveatrack.recording import writer_process
 
+    _compile_kernels_first(scene_path, progress)
     # asked only where the caller left the choice (it samples /proc/loadavg for ~10 ms)
     spare = core_free() if ahead is None or recording_process is None else None
     if recording_process is None:
@@ -141,6 +142,22 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     finally:
         if child is not None:
             child.close()       # a no-op after the run closed it; ends the child if the run failed early
+
+
+def _compile_kernels_first(scene_path, progress: bool) -> None:
+    """On a cold numba cache (a first run after an install), compile the run's kernels in two processes
+    at once (:mod:`foveatrack.cli.kernel_compile`) before anything else starts (the recording's child
+    process compiles its kernels too), not one after another inside the first frame."""
+    from foveatrack.cli import kernel_compile
+    from sim.scene import load_scene
+
+    if (os.cpu_count() or 1) < 2 or not kernel_compile.cache_is_cold():
+        return
+    try:
+        load_scene(scene_path)      # a scene the run will refuse: let it say why, without compiling first
+    except UserError:
+        return
+    kernel_compile.compile_split(scene_path, stream=sys.stderr if progress else None)
 
 
 def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed, ahead,

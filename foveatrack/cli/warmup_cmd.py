@@ -1,18 +1,20 @@
 """``foveatrack warmup``: compile the numba kernels ahead, once per install.
 
 The kernels are compiled on first use and cached next to the sources (``cache=True``), so the first
-``foveatrack demo`` after an install spends about a minute compiling inside its first frame.  This
-command does that work up front: it runs two frames of every shipped scene (which compiles the scan,
-world, sensor and tracker kernels in the argument types the closed loop uses) and the scan analyses the
-demo draws (radial density, voxel coverage), and the recording's point packing.  A second call only loads the cache and takes a few seconds.
+``foveatrack demo`` after an install compiles them before its first frame
+(:mod:`foveatrack.cli.kernel_compile`: two processes at once).  This command does that work up front:
+the demo scene's kernels in two processes (when the cache is cold), then two frames of every shipped
+scene (which compiles what the other scenes add: fog, flapping wings, mixed pixels, ...), the scan
+analyses and the recording's point packing.  A second call only loads the cache and takes a few seconds.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 
-from foveatrack.cli.demo_cmd import shipped_scene
+from foveatrack.cli.demo_cmd import DEFAULT_SCENE, scan_analyses, shipped_scene
 
 
 def register(sub) -> None:
@@ -21,9 +23,13 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_warmup)
 
 
-def warm_up(progress: bool = True) -> float:
-    """Run every kernel path the demo and the shipped scenes use once; returns the wall time [s]."""
+def warm_up(progress: bool = True, split: bool = True) -> float:
+    """Run every kernel path the demo and the shipped scenes use once; returns the wall time [s].
+    ``split``: on a cold cache and two cores or more, compile the demo scene's kernels in two
+    processes at once first (:func:`foveatrack.cli.kernel_compile.compile_split`)."""
     from tqdm import tqdm
+
+    from foveatrack.cli import kernel_compile
 
     from sim.loop import run_scene
     from sim.scan.coverage import voxel_coverage, voxel_grid
@@ -34,6 +40,8 @@ def warm_up(progress: bool = True) -> float:
     scenes_dir = shipped_scene("fig12-tracking.toml").parent
     paths = sorted(scenes_dir.glob("*.toml"))
     t0 = time.perf_counter()
+    if split and (os.cpu_count() or 1) >= 2 and kernel_compile.cache_is_cold():
+        kernel_compile.compile_split(shipped_scene(DEFAULT_SCENE), stream=sys.stderr if progress else None)
     with tqdm(total=len(paths) + 1, desc="compiling numba kernels", unit=" step", disable=not progress,
               file=sys.stderr) as bar:
         for path in paths:
@@ -45,21 +53,20 @@ def warm_up(progress: bool = True) -> float:
         optics = load_scene(shipped_scene("fig12-tracking.toml")).optics
         radial_density(ScanModel(optics), 0.01)
         voxel_coverage(ScanModel(optics), 0.01, voxel_grid(optics, reference_rays=20_000))
-        _warm_recording_kernels()
+        scan_analyses(optics, short=True)
+        warm_recording_kernels()
         bar.update(1)
     return time.perf_counter() - t0
 
 
-def _warm_recording_kernels() -> None:
-    """The recording's point packing (``simulate --out``, the daemon): a frame on the mm grid, int16
-    and int32 times."""
+def warm_recording_kernels() -> None:
+    """The recording's point packing (``simulate --out``, the daemon): a frame on the mm grid (its
+    kernels; a frame off the grid is packed by numpy), as the recording's child process warms it."""
     import numpy as np
 
     from foveatrack.recording.pack_kernels import pack_points
 
-    xyz = np.zeros((2, 3))
-    for dt in (np.array([0, -10_000], np.int64), np.array([0, -1_000_001], np.int64)):
-        pack_points(xyz, dt, np.zeros(2, np.uint8))
+    pack_points(np.zeros((2, 3)), 0, np.zeros(2, np.int64), np.zeros(2, np.uint8))
 
 
 def cmd_warmup(args) -> int:

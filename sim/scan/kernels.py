@@ -580,7 +580,9 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
     # Blocks start at absolute multiples of 256 points, so a point's phase (exact at its block's
     # start, + i r inside) does not depend on how the caller chunks the scan: the same bits for the
     # closed loop's 100 ms frames and the virtual lidar's packets.
-    j0 = 0
+    # np.int64, not the literal 0: numba's type inference first sees the literal, and a non-inlined
+    # callee given it is compiled a second time for Literal[int](0) (never run; ~10 s of CPU here)
+    j0 = np.int64(0)
     while j0 < n:
         m = min(_BLOCK - (k0 + j0) % _BLOCK, n - j0)
         _scan_block(k0 + j0, m, j0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
