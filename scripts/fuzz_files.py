@@ -305,6 +305,8 @@ def main() -> int:
     ap.add_argument("--keep", metavar="DIR", help="keep the inputs of tracebacks, hangs, memory errors and "
                                                   "silent differences")
     ap.add_argument("--table", metavar="FILE", help="also write the table there after every campaign")
+    ap.add_argument("--log", metavar="FILE", help="append one line per trial: campaign, trial, outcome, "
+                                                 "rc, seconds (to compare the two modes trial by trial)")
     ap.add_argument("--timeout-s", type=float, default=TIMEOUT_S)
     a = ap.parse_args()
     names = a.campaign or list(CAMPAIGNS)
@@ -316,6 +318,7 @@ def main() -> int:
     header = (f"seed {a.seed}, mode {a.mode}, " + (f"{minutes:g} min, " if minutes else "")
               + f"limits {AS_LIMIT_BYTES >> 30} GiB address space, {a.timeout_s:g} s")
     table = {}
+    log = open(a.log, "a") if a.log else None
     try:
         inputs = make_inputs(work)
         (work / "tracker.toml").write_text(inputs["config"] or "")
@@ -348,9 +351,12 @@ def main() -> int:
                 (p.write_text if isinstance(data, str) else p.write_bytes)(data)
                 for f in out_dir.glob("p.*"):
                     f.unlink()
+                t0 = time.monotonic()
                 kind, rc, out = trial(argv(p, out_dir), a.timeout_s, a.mode)
                 outcome = classify(kind, rc, out, baseline, norm)
                 counts[outcome] += 1
+                if log:
+                    print(f"{name}\t{k}\t{outcome}\t{rc}\t{time.monotonic() - t0:.3f}", file=log, flush=True)
                 if keep and outcome in ("traceback", "hang", "memory error", "silent difference"):
                     shutil.copy(p, keep / f"{name}-seed{a.seed}-trial{k}{suffix}")
                     (keep / f"{name}-seed{a.seed}-trial{k}.txt").write_text(out)
@@ -363,6 +369,8 @@ def main() -> int:
                     print_table(table, header, fh)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+        if log:
+            log.close()
     print_table(table, header)
     return 0
 
