@@ -3,7 +3,7 @@ through the real CLI, each trial in a forked child under an address-space limit 
 
 Every trial ends in one of: ``clean error`` (rc 2, one line), ``warning+partial`` (rc 0 and a
 WARNING / note on the output), ``same`` (rc 0, the output the intact file gives), ``silent difference``
-(rc 0, no warning, another output than the intact file's; for scenes and configs a mutated value may
+(rc 0, no warning, another output than the intact file's, the files it wrote included; for scenes and configs a mutated value may
 rightly change the output: "silent" is meaningful for recordings and .lvx files only), ``traceback`` (any other exception,
 or a child that died), ``hang`` (over the timeout), ``memory error`` (MemoryError under the address-space limit).
 
@@ -248,6 +248,15 @@ def _drop_paths(text: str) -> str:
                      if "->" not in ln and "/" not in ln and " wall" not in ln and "frame/s" not in ln)
 
 
+def output_digests(out_dir: Path) -> str:
+    """A line per file the command wrote (``p.*``) with its SHA-256: an export that prints the intact
+    file's point count but writes other points is a silent difference too."""
+    import hashlib
+
+    return "".join(f"\noutput {f.suffix} sha256 {hashlib.sha256(f.read_bytes()).hexdigest()}"
+                   for f in sorted(out_dir.glob("p.*")))
+
+
 CAMPAIGNS = {
     # name: (input key, file suffix, argv given the mutated path and an output dir)
     "mcap-replay": ("mcap", ".mcap", lambda p, o: ["replay", str(p), "--json"]),
@@ -337,6 +346,7 @@ def main() -> int:
             intact = out_dir / f"intact{suffix}"
             (intact.write_text if isinstance(base, str) else intact.write_bytes)(base)
             kind, rc, baseline = trial(argv(intact, out_dir), a.timeout_s, a.mode)
+            baseline += output_digests(out_dir)
             if (kind, rc) != ("ok", 0):     # every trial would be measured against a failure
                 print(f"{name}: the intact input itself ends in {kind}, rc {rc}: {baseline.strip()[-300:]}",
                       file=sys.stderr, flush=True)
@@ -353,6 +363,7 @@ def main() -> int:
                     f.unlink()
                 t0 = time.monotonic()
                 kind, rc, out = trial(argv(p, out_dir), a.timeout_s, a.mode)
+                out += output_digests(out_dir)
                 outcome = classify(kind, rc, out, baseline, norm)
                 counts[outcome] += 1
                 if log:
