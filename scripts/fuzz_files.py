@@ -299,6 +299,56 @@ def print_table(table: dict, header: str, file=sys.stdout) -> None:
         print(f"| {name} | {k} | " + " | ".join(str(c[o]) for o in OUTCOMES) + " |", file=file, flush=True)
 
 
+def print_table_from_logs(paths: list[str], file=sys.stdout) -> None:
+    """The table of ``--log`` files: per campaign, the trials logged (a trial logged twice, by two runs
+    of the same seed, is counted once: its first line) and the median seconds per trial."""
+    seen, table, secs = set(), {}, {}
+    for path in paths:
+        for line in open(path):
+            name, k, outcome, _rc, s = line.rstrip("\n").split("\t")
+            if (name, k) in seen:
+                continue
+            seen.add((name, k))
+            counts = table.setdefault(name, [0, dict.fromkeys(OUTCOMES, 0)])
+            counts[0] += 1
+            counts[1][outcome] += 1
+            secs.setdefault(name, []).append(float(s))
+    ordered = {n: tuple(table[n]) for n in CAMPAIGNS if n in table}
+    print_table(ordered, f"from {', '.join(Path(p).name for p in paths)}", file)
+    print("", file=file)
+    print("| campaign | median s per trial | the issue's trials | their time at that cost [h] |", file=file)
+    print("|---|---|---|---|", file=file)
+    for n in ordered:
+        med = float(np.median(secs[n]))
+        print(f"| {n} | {med:.2f} | {ISSUE_TRIALS[n]} | {ISSUE_TRIALS[n] * med / 3600:.1f} |", file=file)
+
+
+def _read_log(path: str) -> dict:
+    out = {}
+    for line in open(path):
+        name, k, outcome, _rc, _s = line.rstrip("\n").split("\t")
+        out.setdefault((name, int(k)), outcome)
+    return out
+
+
+def print_agreement(log_a: str, log_b: str, file=sys.stdout) -> int:
+    """Per campaign: the trials both logs hold and how many got the same outcome; 1 if any did not."""
+    a, b = _read_log(log_a), _read_log(log_b)
+    both = sorted(set(a) & set(b), key=lambda nk: (list(CAMPAIGNS).index(nk[0]), nk[1]))
+    print(f"| campaign | trials in both | same outcome | differ |  ({Path(log_a).name} vs {Path(log_b).name})",
+          file=file)
+    print("|---|---|---|---|", file=file)
+    for name in CAMPAIGNS:
+        ks = [nk for nk in both if nk[0] == name]
+        if ks:
+            same = sum(a[nk] == b[nk] for nk in ks)
+            print(f"| {name} | {len(ks)} | {same} | {len(ks) - same} |", file=file)
+    differ = [nk for nk in both if a[nk] != b[nk]]
+    for nk in differ:
+        print(f"{nk[0]} trial {nk[1]}: {a[nk]} vs {b[nk]}", file=file)
+    return 1 if differ else 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=None,
@@ -317,7 +367,19 @@ def main() -> int:
     ap.add_argument("--log", metavar="FILE", help="append one line per trial: campaign, trial, outcome, "
                                                  "rc, seconds (to compare the two modes trial by trial)")
     ap.add_argument("--timeout-s", type=float, default=TIMEOUT_S)
+    ap.add_argument("--from-log", metavar="FILE", nargs="+",
+                    help="print the table of the trials these --log files hold (runs of one campaign split "
+                         "over processes), the median seconds per trial beside it, and run nothing")
+    ap.add_argument("--agree", metavar=("LOG_IN", "LOG_SUB"), nargs=2,
+                    help="compare two --log files trial by trial (an in-process and a subprocess run of one "
+                         "seed): the trials both hold, how many got the same outcome, each that did not; "
+                         "run nothing")
     a = ap.parse_args()
+    if a.agree:
+        return print_agreement(*a.agree)
+    if a.from_log:
+        print_table_from_logs(a.from_log)
+        return 0
     names = a.campaign or list(CAMPAIGNS)
     minutes = a.minutes if a.minutes is not None else (None if a.trials else 1.0)
     work = Path(tempfile.mkdtemp(prefix="foveatrack-fuzz-"))
