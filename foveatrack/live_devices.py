@@ -112,8 +112,18 @@ class CommandJournal:
     def __init__(self, path):
         import fcntl
 
+        import errno
+        import os
+
         self.path = str(path)
-        self._f = open(self.path, "a", buffering=1)
+        try:
+            # never through a link (one planted beside a recording's name would append to any file the
+            # daemon can write); the owner's alone, as the recording is
+            fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o600)
+        except OSError as exc:
+            why = "it is a symbolic link" if exc.errno == errno.ELOOP else exc.strerror
+            raise UserError(f"command journal {self.path}: cannot write ({why})") from None
+        self._f = os.fdopen(fd, "a", buffering=1)
         try:
             fcntl.flock(self._f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:

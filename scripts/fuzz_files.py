@@ -3,7 +3,7 @@ through the real CLI, each trial in a forked child under an address-space limit 
 
 Every trial ends in one of: ``clean error`` (rc 2, one line), ``warning+partial`` (rc 0 and a
 WARNING / note on the output), ``same`` (rc 0, the output the intact file gives), ``silent difference``
-(rc 0, no warning, another output than the intact file's; for scenes and configs a mutated value may
+(rc 0, no warning, another output than the intact file's, the files it wrote included; for scenes and configs a mutated value may
 rightly change the output: "silent" is meaningful for recordings and .lvx files only), ``traceback`` (any other exception,
 or a child that died), ``hang`` (over the timeout), ``memory error`` (MemoryError under the address-space limit).
 
@@ -46,7 +46,8 @@ sys.path.insert(0, str(ROOT))
 
 OUTCOMES = ("clean error", "warning+partial", "same", "silent difference", "traceback", "hang", "memory error")
 AS_LIMIT_BYTES = 4 << 30
-TIMEOUT_S = 30.0
+TIMEOUT_S = 30.0           # of CPU time: a trial that computes longer is a hang
+WALL_S = 300.0             # of wall time: a trial that waits longer (a sleep, a blocked read) is a hang
 
 
 # ----------------------------------------------------------------------------------------- mutations
@@ -115,19 +116,23 @@ def run_cli(args: list[str]) -> tuple[int, str]:
     return int(rc or 0), out.getvalue()
 
 
-def trial(args: list[str], timeout_s: float, mode: str = "inprocess") -> tuple[str, int | None, str]:
+def trial(args: list[str], timeout_s: float, mode: str = "inprocess",
+          wall_s: float | None = None) -> tuple[str, int | None, str]:
     """Run one CLI call, limits applying to it alone: (kind, rc, output); kind is "ok", "traceback",
     "memory error" or "hang".  ``inprocess``: ``main`` in a forked child; ``subprocess``: ``python -m
-    foveatrack`` in a fresh interpreter."""
+    foveatrack`` in a fresh interpreter.  A hang is ``timeout_s`` of CPU time (RLIMIT_CPU) or
+    ``wall_s`` (default ``timeout_s``) of wall time: on a machine shared with busier processes a
+    niced trial of 1 s of CPU can wait 30 s for it, and was counted a hang by a wall limit alone."""
+    wall_s = timeout_s if wall_s is None else wall_s
     if mode == "subprocess":
-        return _trial_subprocess(args, timeout_s)
+        return _trial_subprocess(args, timeout_s, wall_s)
     r, w = os.pipe()
     pid = os.fork()
     if pid == 0:     # the child
         os.close(r)
         code = 0
         try:
-            resource.setrlimit(resource.RLIMIT_AS, (AS_LIMIT_BYTES, AS_LIMIT_BYTES))
+            _limit_child(timeout_s)
             rc, text = run_cli(args)
             payload = f"rc {rc}\n{text}"
         except SystemExit as exc:
@@ -146,7 +151,7 @@ def trial(args: list[str], timeout_s: float, mode: str = "inprocess") -> tuple[s
         finally:
             os._exit(code)
     os.close(w)
-    t_end = time.monotonic() + timeout_s
+    t_end = time.monotonic() + wall_s
     chunks = []
     os.set_blocking(r, False)
     while True:
@@ -158,11 +163,13 @@ def trial(args: list[str], timeout_s: float, mode: str = "inprocess") -> tuple[s
             pass
         if time.monotonic() > t_end:
             os.kill(pid, signal.SIGKILL)
-            os.waitpid(pid, 0)
+            _, _, usage = os.wait4(pid, 0)
+            LAST_CPU_S[0] = usage.ru_utime + usage.ru_stime
             os.close(r)
             return "hang", None, ""
-        done, status = os.waitpid(pid, os.WNOHANG)
+        done, status, usage = os.wait4(pid, os.WNOHANG)
         if done:
+            LAST_CPU_S[0] = usage.ru_utime + usage.ru_stime
             os.set_blocking(r, True)
             while b := os.read(r, 65536):
                 chunks.append(b)
@@ -173,25 +180,38 @@ def trial(args: list[str], timeout_s: float, mode: str = "inprocess") -> tuple[s
     for kind in ("traceback", "memory error"):
         if text.startswith(kind + "\n"):
             return kind, None, text
+    if not text and os.WIFSIGNALED(status) and os.WTERMSIG(status) in (signal.SIGXCPU, signal.SIGKILL):
+        return "hang", None, f"over {timeout_s:g} s of CPU time"
     if not text:
         return "traceback", None, f"child died (wait status {status}: a signal, or memory)"
     first, _, rest = text.partition("\n")
     return "ok", int(first.split()[1]), rest
 
 
-def _limit_child() -> None:
+LAST_CPU_S = [0.0]     # the CPU seconds of the last trial's process (user + system), for --log
+
+
+def _limit_child(cpu_s: float) -> None:
     resource.setrlimit(resource.RLIMIT_AS, (AS_LIMIT_BYTES, AS_LIMIT_BYTES))
+    # SIGXCPU at the soft limit, SIGKILL at the hard one (a handler that ignores SIGXCPU)
+    resource.setrlimit(resource.RLIMIT_CPU, (math.ceil(cpu_s), math.ceil(cpu_s) + 5))
 
 
-def _trial_subprocess(args: list[str], timeout_s: float) -> tuple[str, int | None, str]:
+def _trial_subprocess(args: list[str], timeout_s: float, wall_s: float) -> tuple[str, int | None, str]:
     import subprocess
 
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     try:
         p = subprocess.run([sys.executable, "-m", "foveatrack", *args], capture_output=True, text=True,
-                           timeout=timeout_s, preexec_fn=_limit_child, env=env, stdin=subprocess.DEVNULL)
+                           timeout=wall_s, preexec_fn=lambda: _limit_child(timeout_s), env=env,
+                           stdin=subprocess.DEVNULL)
     except subprocess.TimeoutExpired:
         return "hang", None, ""
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    LAST_CPU_S[0] = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    if p.returncode in (-signal.SIGXCPU, -signal.SIGKILL):
+        return "hang", None, f"over {timeout_s:g} s of CPU time"
     text = p.stdout + p.stderr
     if "MemoryError" in p.stderr and "Traceback" in p.stderr:
         return "memory error", None, text
@@ -248,6 +268,15 @@ def _drop_paths(text: str) -> str:
                      if "->" not in ln and "/" not in ln and " wall" not in ln and "frame/s" not in ln)
 
 
+def output_digests(out_dir: Path) -> str:
+    """A line per file the command wrote (``p.*``) with its SHA-256: an export that prints the intact
+    file's point count but writes other points is a silent difference too."""
+    import hashlib
+
+    return "".join(f"\noutput {f.suffix} sha256 {hashlib.sha256(f.read_bytes()).hexdigest()}"
+                   for f in sorted(out_dir.glob("p.*")))
+
+
 CAMPAIGNS = {
     # name: (input key, file suffix, argv given the mutated path and an output dir)
     "mcap-replay": ("mcap", ".mcap", lambda p, o: ["replay", str(p), "--json"]),
@@ -290,6 +319,57 @@ def print_table(table: dict, header: str, file=sys.stdout) -> None:
         print(f"| {name} | {k} | " + " | ".join(str(c[o]) for o in OUTCOMES) + " |", file=file, flush=True)
 
 
+def print_table_from_logs(paths: list[str], file=sys.stdout) -> None:
+    """The table of ``--log`` files: per campaign, the trials logged (a trial logged twice, by two runs
+    of the same seed, is counted once: its first line) and the median seconds per trial."""
+    seen, table, secs = set(), {}, {}
+    for path in paths:
+        for line in open(path):
+            name, k, outcome, _rc, wall, *cpu = line.rstrip("\n").split("\t")
+            if (name, k) in seen:
+                continue
+            seen.add((name, k))
+            counts = table.setdefault(name, [0, dict.fromkeys(OUTCOMES, 0)])
+            counts[0] += 1
+            counts[1][outcome] += 1
+            secs.setdefault(name, []).append((float(wall), float(cpu[0]) if cpu else math.nan))
+    ordered = {n: tuple(table[n]) for n in CAMPAIGNS if n in table}
+    print_table(ordered, f"from {', '.join(Path(p).name for p in paths)}", file)
+    print("", file=file)
+    print("| campaign | median wall s per trial | median CPU s per trial | the issue's trials | "
+          "their CPU time [h] |", file=file)
+    print("|---|---|---|---|---|", file=file)
+    for n in ordered:
+        wall, cpu = (float(np.nanmedian(c)) if not np.all(np.isnan(c)) else math.nan for c in zip(*secs[n]))
+        print(f"| {n} | {wall:.2f} | {cpu:.2f} | {ISSUE_TRIALS[n]} | {ISSUE_TRIALS[n] * cpu / 3600:.1f} |", file=file)
+
+
+def _read_log(path: str) -> dict:
+    out = {}
+    for line in open(path):
+        name, k, outcome, *_ = line.rstrip("\n").split("\t")
+        out.setdefault((name, int(k)), outcome)
+    return out
+
+
+def print_agreement(log_a: str, log_b: str, file=sys.stdout) -> int:
+    """Per campaign: the trials both logs hold and how many got the same outcome; 1 if any did not."""
+    a, b = _read_log(log_a), _read_log(log_b)
+    both = sorted(set(a) & set(b), key=lambda nk: (list(CAMPAIGNS).index(nk[0]), nk[1]))
+    print(f"| campaign | trials in both | same outcome | differ |  ({Path(log_a).name} vs {Path(log_b).name})",
+          file=file)
+    print("|---|---|---|---|", file=file)
+    for name in CAMPAIGNS:
+        ks = [nk for nk in both if nk[0] == name]
+        if ks:
+            same = sum(a[nk] == b[nk] for nk in ks)
+            print(f"| {name} | {len(ks)} | {same} | {len(ks) - same} |", file=file)
+    differ = [nk for nk in both if a[nk] != b[nk]]
+    for nk in differ:
+        print(f"{nk[0]} trial {nk[1]}: {a[nk]} vs {b[nk]}", file=file)
+    return 1 if differ else 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=None,
@@ -305,8 +385,26 @@ def main() -> int:
     ap.add_argument("--keep", metavar="DIR", help="keep the inputs of tracebacks, hangs, memory errors and "
                                                   "silent differences")
     ap.add_argument("--table", metavar="FILE", help="also write the table there after every campaign")
-    ap.add_argument("--timeout-s", type=float, default=TIMEOUT_S)
+    ap.add_argument("--log", metavar="FILE", help="append one line per trial: campaign, trial, outcome, "
+                                                 "rc, wall seconds, CPU seconds (to compare the two modes "
+                                                 "trial by trial)")
+    ap.add_argument("--timeout-s", type=float, default=TIMEOUT_S, help="CPU seconds a trial may take")
+    ap.add_argument("--wall-s", type=float, default=WALL_S, help="wall seconds a trial may take")
+    ap.add_argument("--start", type=int, default=0, metavar="K",
+                    help="begin at trial K (the mutations before it are made and dropped: a run resumed)")
+    ap.add_argument("--from-log", metavar="FILE", nargs="+",
+                    help="print the table of the trials these --log files hold (runs of one campaign split "
+                         "over processes), the median seconds per trial beside it, and run nothing")
+    ap.add_argument("--agree", metavar=("LOG_IN", "LOG_SUB"), nargs=2,
+                    help="compare two --log files trial by trial (an in-process and a subprocess run of one "
+                         "seed): the trials both hold, how many got the same outcome, each that did not; "
+                         "run nothing")
     a = ap.parse_args()
+    if a.agree:
+        return print_agreement(*a.agree)
+    if a.from_log:
+        print_table_from_logs(a.from_log)
+        return 0
     names = a.campaign or list(CAMPAIGNS)
     minutes = a.minutes if a.minutes is not None else (None if a.trials else 1.0)
     work = Path(tempfile.mkdtemp(prefix="foveatrack-fuzz-"))
@@ -314,8 +412,10 @@ def main() -> int:
     if keep:
         keep.mkdir(parents=True, exist_ok=True)
     header = (f"seed {a.seed}, mode {a.mode}, " + (f"{minutes:g} min, " if minutes else "")
-              + f"limits {AS_LIMIT_BYTES >> 30} GiB address space, {a.timeout_s:g} s")
+              + f"limits {AS_LIMIT_BYTES >> 30} GiB address space, {a.timeout_s:g} s CPU, {a.wall_s:g} s wall"
+              + (f", from trial {a.start}" if a.start else ""))
     table = {}
+    log = open(a.log, "a") if a.log else None
     try:
         inputs = make_inputs(work)
         (work / "tracker.toml").write_text(inputs["config"] or "")
@@ -333,7 +433,8 @@ def main() -> int:
             out_dir.mkdir()
             intact = out_dir / f"intact{suffix}"
             (intact.write_text if isinstance(base, str) else intact.write_bytes)(base)
-            kind, rc, baseline = trial(argv(intact, out_dir), a.timeout_s, a.mode)
+            kind, rc, baseline = trial(argv(intact, out_dir), a.timeout_s, a.mode, a.wall_s)
+            baseline += output_digests(out_dir)
             if (kind, rc) != ("ok", 0):     # every trial would be measured against a failure
                 print(f"{name}: the intact input itself ends in {kind}, rc {rc}: {baseline.strip()[-300:]}",
                       file=sys.stderr, flush=True)
@@ -341,28 +442,37 @@ def main() -> int:
             norm = normaliser(name)
             counts = dict.fromkeys(OUTCOMES, 0)
             t_end = time.monotonic() + budget_s
-            k = 0
+            for _ in range(a.start):        # the same mutations as a run from trial 0 would make
+                mutate_toml(base, rng) if isinstance(base, str) else mutate_bytes(base, rng)
+            k = a.start
             while k < n_max and time.monotonic() < t_end:
                 data = mutate_toml(base, rng) if isinstance(base, str) else mutate_bytes(base, rng)
                 p = out_dir / f"t{suffix}"
                 (p.write_text if isinstance(data, str) else p.write_bytes)(data)
                 for f in out_dir.glob("p.*"):
                     f.unlink()
-                kind, rc, out = trial(argv(p, out_dir), a.timeout_s, a.mode)
+                t0 = time.monotonic()
+                kind, rc, out = trial(argv(p, out_dir), a.timeout_s, a.mode, a.wall_s)
+                out += output_digests(out_dir)
                 outcome = classify(kind, rc, out, baseline, norm)
                 counts[outcome] += 1
+                if log:
+                    print(f"{name}\t{k}\t{outcome}\t{rc}\t{time.monotonic() - t0:.3f}\t{LAST_CPU_S[0]:.3f}",
+                          file=log, flush=True)
                 if keep and outcome in ("traceback", "hang", "memory error", "silent difference"):
                     shutil.copy(p, keep / f"{name}-seed{a.seed}-trial{k}{suffix}")
                     (keep / f"{name}-seed{a.seed}-trial{k}.txt").write_text(out)
                 k += 1
                 if k % 20 == 0:
                     print(f"{name}: {k} trials {counts}", file=sys.stderr, flush=True)
-            table[name] = (k, counts)
+            table[name] = (k - a.start, counts)
             if a.table:
                 with open(a.table, "w") as fh:
                     print_table(table, header, fh)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+        if log:
+            log.close()
     print_table(table, header)
     return 0
 

@@ -72,3 +72,23 @@ def test_the_harness_tells_the_same_in_process_and_as_a_subprocess(name, argv):
         kind, rc, out = fuzz_files.trial(argv, TIMEOUT_S, mode)
         got[mode] = fuzz_files.classify(kind, rc, out, "", lambda text: text)
     assert got["inprocess"] == got["subprocess"] in ("clean error", "warning+partial"), got
+
+
+def _spin(args):
+    while True:
+        pass
+
+
+def _sleep(args):
+    import time
+
+    time.sleep(3600)
+
+
+@pytest.mark.parametrize("body,cpu_s,wall_s,why", [(_spin, 1.0, 600.0, "over 1 s of CPU time"),
+                                                   (_sleep, 600.0, 2.0, "")])
+def test_a_trial_that_computes_or_waits_too_long_is_a_hang(monkeypatch, body, cpu_s, wall_s, why):
+    """A hang is either limit: CPU time (a loop, told apart from a trial slowed by a busy machine) or
+    wall time (a sleep); the forked child is gone after it."""
+    monkeypatch.setattr(fuzz_files, "run_cli", body)
+    assert fuzz_files.trial(["x"], cpu_s, "inprocess", wall_s) == ("hang", None, why)

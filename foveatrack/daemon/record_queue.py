@@ -79,14 +79,23 @@ class DaemonRecording:
             if isinstance(exc, UserError):
                 raise
             raise UserError(f"{c.path} [recording] path: cannot create {path} ({exc.strerror or exc})") from None
+        # the recording is written behind a queue: a journal of every frame for the head, written
+        # before the frame is, says what a killed daemon's head got (CommandJournal); opened before the
+        # writer's thread starts, so a journal that cannot be written leaves nothing running
+        from foveatrack.live_devices import CommandJournal
+
+        try:
+            journal = CommandJournal(path.with_name(path.name + ".commands.jsonl"))
+        except UserError:
+            writer.close()
+            path.unlink(missing_ok=True)
+            self.client.close()
+            self.head.close()
+            raise
         # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
         self.recorder = RecordingThread(writer, r.queue_frames)
         self.recording_path = path
-        # the recording is written behind a queue: a journal of every frame for the head, written
-        # before the frame is, says what a killed daemon's head got (CommandJournal)
-        from foveatrack.live_devices import CommandJournal
-
-        self.head.journal = CommandJournal(path.with_name(path.name + ".commands.jsonl"))
+        self.head.journal = journal
 
     def _forget_unused_recording(self) -> None:
         """A start that failed after the recording was created (a live port in use) removes it and

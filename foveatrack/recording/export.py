@@ -30,11 +30,33 @@ def write_columns(out_path: Path, cols: dict, nan_as_empty: bool = False) -> Non
     if out_kind(out_path) == "npz":
         np.savez_compressed(out_path, **cols)
         return
+    arrays = [np.asarray(c) for c in cols.values()]
     with open(out_path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(cols.keys())
-        for row in zip(*(np.asarray(c).tolist() for c in cols.values())):
+        if len(arrays) > 1 and all(a.ndim == 1 and a.dtype.kind in "biuf" for a in arrays):
+            _write_numeric_rows(fh, arrays, nan_as_empty)
+            return
+        for row in zip(*(a.tolist() for a in arrays)):
             w.writerow(["" if nan_as_empty and isinstance(v, float) and math.isnan(v) else v for v in row])
+
+
+_CSV_BLOCK_ROWS = 65536
+
+
+def _write_numeric_rows(fh, arrays: list, nan_as_empty: bool) -> None:
+    """The rows csv.writer writes for numeric columns (str of each Python number, no quoting needed,
+    \r\n), built a block of rows at a time: csv.writer's row-by-row calls took 4 s for 117 000
+    points (slower than a Mid-40 makes them)."""
+    n = len(arrays[0])
+    for start in range(0, n, _CSV_BLOCK_ROWS):
+        cells = []
+        for a in arrays:
+            col = list(map(str, a[start:start + _CSV_BLOCK_ROWS].tolist()))
+            if nan_as_empty and a.dtype.kind == "f":
+                col = ["" if c == "nan" else c for c in col]
+            cells.append(col)
+        fh.write("".join(",".join(row) + "\r\n" for row in zip(*cells)))
 
 
 Warn = Callable[[str], None]

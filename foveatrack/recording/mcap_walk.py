@@ -101,6 +101,8 @@ def chunk_records(mm, pos: int, length: int, require_crc: bool = False) -> list[
         j = i + REC.size
         if j + ln > n or (op == OP_MESSAGE and ln < MSG_HEAD.size):
             raise BadRecord("a chunk whose records do not add up")
+        if op == OP_CHANNEL:
+            channel(mv[j:j + ln])       # one that does not hold together makes the chunk damage
         if op in (OP_MESSAGE, OP_CHANNEL):
             out.append((op, mv[j:j + ln]))
         i = j + ln
@@ -132,15 +134,27 @@ class ByteScan:
 
 
 def string(buf, i: int) -> tuple[str, int]:
+    """The MCAP string (u32 length, UTF-8) at ``i`` and the position after it; one whose length runs
+    past the buffer is a BadRecord (it was cut silently, or a struct.error traceback)."""
+    if i + 4 > len(buf):
+        raise BadRecord(f"a string at byte {i} of a record of {len(buf)} bytes")
     n = U32.unpack_from(buf, i)[0]
+    if i + 4 + n > len(buf):
+        raise BadRecord(f"a string of {n} bytes at byte {i} of a record of {len(buf)} bytes")
     return bytes(buf[i + 4:i + 4 + n]).decode("utf-8", "replace"), i + 4 + n
 
 
 def channel(content) -> tuple[int, str, str]:
-    """A Channel record's (id, topic without its '/', message encoding)."""
+    """A Channel record's (id, topic without its '/', message encoding); one that does not hold
+    together is a BadRecord (a crafted chunk whose CRC holds gave a struct.error traceback)."""
+    if len(content) < 4:
+        raise BadRecord(f"a channel record of {len(content)} bytes")
     cid = U16.unpack_from(content, 0)[0]
-    topic, i = string(content, 4)
-    encoding, _ = string(content, i)
+    try:
+        topic, i = string(content, 4)
+        encoding, _ = string(content, i)
+    except BadRecord as exc:
+        raise BadRecord(f"a channel record that does not hold together ({exc})") from None
     return cid, topic.lstrip("/"), encoding
 
 

@@ -167,7 +167,7 @@ class RecordingReader:
                 if op == mw.OP_HEADER and len(MCAP_MAGIC) + mw.REC.size + length <= self.size:
                     profile, i = mw.string(mm, len(MCAP_MAGIC) + mw.REC.size)
                     library, _ = mw.string(mm, i)
-            except struct.error:
+            except (struct.error, mw.BadRecord):
                 pass
             closed = self._data_end_pos(mm) is not None
         no_meta = f"no '{META_NAME}' metadata record"
@@ -275,6 +275,8 @@ class RecordingReader:
                     elif op in (mw.OP_MESSAGE, mw.OP_CHANNEL):
                         if op == mw.OP_MESSAGE and length < mw.MSG_HEAD.size:
                             raise mw.BadRecord("a damaged message record")
+                        if op == mw.OP_CHANNEL:
+                            mw.channel(mm[body:end])
                         recs = ((op, memoryview(mm[body:end])),)
                     else:
                         recs = ()
@@ -364,7 +366,11 @@ class RecordingReader:
                 if end > stop:
                     break
                 if op == mw.OP_CHANNEL:
-                    cid, topic, encoding = mw.channel(mm[pos + mw.REC.size:end])
+                    try:
+                        cid, topic, encoding = mw.channel(mm[pos + mw.REC.size:end])
+                    except mw.BadRecord:    # the summary's CRC held: a writer's fault, not ours to name
+                        pos = end
+                        continue
                     out[cid] = topic
                     if encoding != "json":
                         self._binary.add(topic)
@@ -501,13 +507,15 @@ class RecordingReader:
         try:
             self.meta = json.loads(md.get("meta_json", "{}"))
             self._meta_channels = {int(k): v for k, v in json.loads(md.get("channels_json", "{}")).items()}
-        except (ValueError, AttributeError):
+            if not isinstance(self.meta, dict):
+                raise ValueError("not an object")
+        except (ValueError, AttributeError, TypeError, RecursionError):
             raise UserError(f"{self.path}: its metadata JSON is damaged") from None
 
     def _add_channel_table(self, md: dict[str, str]) -> None:
         try:
             self._meta_channels.update({int(k): v for k, v in json.loads(md.get("channels_json", "{}")).items()})
-        except (ValueError, AttributeError):
+        except (ValueError, AttributeError, TypeError, RecursionError):
             pass    # a damaged table: the Channel records (or the summary) still name the channels
 
     # ------------------------------------------------------------------ public reading
@@ -554,6 +562,11 @@ class RecordingReader:
                     record = bytes(data)
                 else:
                     record = json.loads(data)
+                    if not isinstance(record, dict):    # every record we write is an object
+                        raise TypeError(f"a JSON {type(record).__name__}, not an object")
+            except RecursionError:
+                raise UserError(f"{self.path}: a {name} message at log time {log_time} ns is damaged: JSON "
+                                f"nested too deep") from None
             except (ValueError, KeyError, TypeError) as exc:
                 raise UserError(f"{self.path}: a {name} message at log time {log_time} ns is damaged: {exc}") from None
             yield int(log_time), Message(name, _record_t_ns(record, log_time), record)

@@ -77,3 +77,39 @@ def test_overwrite_true_replaces_it(tmp_path):
     meta = RecordingReader(p).meta
     # the typed configuration that runs, without the raw [tracker] table beside it (issue 25)
     assert meta["source"] == "daemon" and "tracker" in meta and "tracker_table" not in meta
+
+
+def test_a_command_journal_planted_as_a_link_is_refused_and_its_target_untouched(tmp_path):
+    """Issue 32: the daemon opened the command journal beside its recording following links, with the
+    default mode (a link planted at ``run.mcap.commands.jsonl`` got every head command appended to
+    its target).  Now the start is a one-line error naming the journal, the target is as it was, and
+    nothing is left running or behind (the new recording is removed)."""
+    import threading
+
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    p = tmp_path / "run.mcap"
+    (tmp_path / "run.mcap.commands.jsonl").symlink_to(victim)
+    before = threading.active_count()
+    d = _daemon(tmp_path, p)
+    with pytest.raises(UserError, match=r"command journal .*run\.mcap\.commands\.jsonl: cannot write "
+                                        r"\(it is a symbolic link\)"):
+        d._open()
+    assert victim.read_text() == "precious\n"
+    assert not p.exists() and threading.active_count() == before
+
+
+def test_a_command_journal_is_the_owners_alone(tmp_path):
+    import os
+    import stat
+
+    from foveatrack.live_devices import CommandJournal
+
+    old = os.umask(0o022)
+    try:
+        j = CommandJournal(tmp_path / "r.mcap.commands.jsonl")
+    finally:
+        os.umask(old)
+    j.write(b"\xff\x01\x00\x00\x00\x00\x01")
+    j.close()
+    assert stat.S_IMODE(os.stat(tmp_path / "r.mcap.commands.jsonl").st_mode) == 0o600

@@ -303,3 +303,27 @@ def test_a_binary_channel_of_a_later_version_is_read_past_not_taken_for_damage(t
     assert got["later_binary"] == b"\x08\x96\x01\xff"
     assert got["later_json"] == {"t_ns": 3_000, "a": 1}
     assert got["detections"]["detected"] is False
+
+
+def test_csv_columns_are_written_as_csv_writer_writes_them(tmp_path):
+    """The block writer of numeric columns gives the bytes of csv.writer row by row (str of each
+    number, \\r\\n, a NaN as an empty cell on request), over more than one block."""
+    import math
+
+    from foveatrack.recording import export
+
+    rng = np.random.default_rng(0)
+    n = export._CSV_BLOCK_ROWS + 17
+    cols = {"i": rng.integers(-2**62, 2**62, n), "f64": rng.normal(size=n),
+            "f32": rng.normal(size=n).astype(np.float32), "u8": rng.integers(0, 255, n).astype(np.uint8),
+            "b": rng.random(n) < 0.5, "nan": np.where(rng.random(n) < 0.2, np.nan, rng.random(n)),
+            "odd": np.resize([np.inf, -np.inf, -0.0, 1e-300, 1e300], n)}
+    for nan_as_empty in (False, True):
+        want = tmp_path / "want.csv"
+        with open(want, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(cols)
+            for row in zip(*(c.tolist() for c in cols.values())):
+                w.writerow(["" if nan_as_empty and isinstance(v, float) and math.isnan(v) else v for v in row])
+        export.write_columns(tmp_path / "got.csv", cols, nan_as_empty)
+        assert (tmp_path / "got.csv").read_bytes() == want.read_bytes()
