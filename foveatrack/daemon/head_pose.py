@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 
 from foveatrack.daemon.homing_plan import HomingConfirm, plan_homing
 from foveatrack.daemon.record_queue import _job_event
@@ -89,6 +89,8 @@ class HeadPose:
         self._home_steps = []
         self._homing_t0 = now
         if h.on_reconnect == "home":
+            from gimbal.pelco import encode_set_pan, encode_set_tilt
+
             # the target's last trusted bearing first, else home; the worst-case wait to that goal
             # (foveatrack.daemon.homing_plan); with a pose check, detections after its last "ok" are not trusted
             g = self.pose_guard
@@ -96,10 +98,12 @@ class HeadPose:
             plan = self._homing = plan_homing(h, self.bearings, self.sensor_now_s(now), trusted, g.identity_pending)
             self._homing_confirm = HomingConfirm() if g.check is not None else None
             self.log.event("head_homing_plan", **plan.as_event())
+            pan, tilt = plan.pan_deg, plan.tilt_deg
+            tz = getattr(self.head.client, "tilt_zero", "zenith")
             quiet = ABS_SET_QUIET_S
-            # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile; the
-            # goals go through the one step, whose gate keeps the tilt inside the stops (_pose_tick)
-            self._home_steps = [(now + quiet, "pan", plan.pan_deg), (now + 2 * quiet, "tilt", plan.tilt_deg),
+            # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile
+            self._home_steps = [(now + quiet, "pan", encode_set_pan(h.address, pan, h.protocol)),
+                                (now + 2 * quiet, "tilt", encode_set_tilt(h.address, tilt, h.protocol, tz)),
                                 (now + 2 * quiet + plan.wait_s, "done", None)]
 
     def _pose_tick(self, now: float) -> None:
@@ -115,20 +119,15 @@ class HeadPose:
             return
         confirmed = self.pose_state == "homing" and self._homing_confirm is not None and self._homing_confirm.confirmed
         while self._home_steps and (now >= self._home_steps[0][0] or (confirmed and self._home_steps[0][1] == "done")):
-            _, step, goal_deg = self._home_steps.pop(0)
+            _, step, raw = self._home_steps.pop(0)
             plan = self._homing
             if step in ("pan", "tilt"):
-                rec = self.step.own_goal(step, goal_deg, "homing")
-                if not rec.reached_head:
-                    self.log.event("head_homing_failed", step=step, limited=list(rec.limited))
+                if not self.head.send_raw(raw, "homing"):
+                    self.log.event("head_homing_failed", step=step)
                     return self._pose_unknown(now, "homing_write_failed")   # again once the link is back
-                # the goal the gate let through is where the head goes: the wait's checks and the
-                # tracker rebased at the end use it
-                plan = self._homing = replace(plan, **{f"{step}_deg": rec.goal_deg})
                 self.pose_state = "homing"
-                extra = {"asked_deg": rec.asked_deg, "limited": list(rec.limited)} if rec.limited else {}
                 self.log.event("head_homing", axis=step, home_deg=[plan.pan_deg, plan.tilt_deg], goal=plan.goal,
-                               worst_case_s=round(plan.worst_case_s, 3), **extra)
+                               worst_case_s=round(plan.worst_case_s, 3))
             else:
                 t_s = self.sensor_now_s(now)
                 pan, tilt = plan.pan_deg, plan.tilt_deg

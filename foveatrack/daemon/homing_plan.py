@@ -14,10 +14,7 @@ the home view by then (issue 26: 0 of 160 frames detected afterwards).  Now:
   ``MAX_EXTRAPOLATION_DEG``: a UAV crossing at 2.4 deg/s is 18 deg on after a 7.7 s head restart,
   out of a Mid-40's view from where it was last seen); else home.  Home too when the homing must
   prove the head behind a reappeared link is ours (the pose check must see the lidar move: a goal
-  where it already points proves nothing).  The goal is not clamped here: the daemon writes it through
-  the one frame step (:meth:`foveatrack.frame_step.FrameStep.own_goal`), whose gate keeps the tilt
-  ``tilt_margin_deg`` inside the stops (:meth:`foveatrack.gate.Limits.clamp_tilt_goal`, the same rule as
-  for speed commands) and says why it moved it; pan is wrapped to [-180, 180) here.
+  where it already points proves nothing).  The tilt is kept ``tilt_margin_deg`` inside the stops.
 * **how long** (worst case): the head's pose is unknown (the PTS-303H reports none, and
   /work/shared/facts/gimbal-pelco.md states no power-on pose; a link cut while the head kept its
   power leaves it wherever its latched motion took it), so the wait is what the move to *this* goal
@@ -124,8 +121,7 @@ def worst_case_s(head, tilt_goal_deg: float) -> float:
     """The time the absolute move to tilt ``tilt_goal_deg`` (any pan) may take from anywhere [s]: 180 deg
     of pan, and the tilt from the farther stop (module docstring)."""
     lo, hi = head.tilt_limits_deg
-    goal = min(max(tilt_goal_deg, lo), hi)    # the head cannot go past a stop (the gate keeps it inside)
-    tilt_travel = max(goal - lo, hi - goal)
+    tilt_travel = max(tilt_goal_deg - lo, hi - tilt_goal_deg, 0.0)
     return 180.0 / head.pan_speed_max_deg_s + tilt_travel / head.tilt_speed_max_deg_s + RAMP_S
 
 
@@ -139,12 +135,14 @@ def plan_homing(head, bearings: Bearings | None, now_s: float | None,
     the homing must show the head behind a reappeared link is ours (home: module docstring)."""
     home_pan, home_tilt = head.home_deg
     b = None if bearings is None or now_s is None or prove_identity else bearings.last(trusted_until_s)
+    lo, hi = head.tilt_limits_deg
+    m = head.tilt_margin_deg
     if b is not None and now_s - b.t_s <= BEARING_MAX_AGE_S:
         age = max(now_s - b.t_s, 0.0)
         rp, rt = bearings.rate_deg_s(b)
         dp, dt = (min(max(r * age, -MAX_EXTRAPOLATION_DEG), MAX_EXTRAPOLATION_DEG) for r in (rp, rt))
         pan = (b.pan_deg + dp + 180.0) % 360.0 - 180.0
-        tilt = b.tilt_deg + dt
+        tilt = min(max(b.tilt_deg + dt, lo + m), hi - m)
         goal = "last_bearing"
         why = (f"the target was last seen at {b.pan_deg:.1f}/{b.tilt_deg:.1f} deg {age:.1f} s ago, moving "
                f"{rp:+.2f}/{rt:+.2f} deg/s")
@@ -163,7 +161,7 @@ class HomingConfirm:
     feed it each pose check at the goal pose (:class:`foveatrack.pose_check.PoseCheckResult` or None)."""
 
     def __init__(self):
-        self._ok: deque = deque(maxlen=CONFIRM_CHECKS)   # the last checks (a list grew while at rest there)
+        self._ok: list[tuple[float, float]] = []
         self.confirmed = False
 
     def feed(self, res) -> bool:
@@ -174,7 +172,7 @@ class HomingConfirm:
             self._ok.clear()
             return self.confirmed
         self._ok.append((res.dpan_deg, res.dtilt_deg))
-        recent = self._ok
+        recent = self._ok[-CONFIRM_CHECKS:]
         if len(recent) == CONFIRM_CHECKS and all(
                 max(v[k] for v in recent) - min(v[k] for v in recent) <= CONFIRM_REST_DEG for k in (0, 1)):
             self.confirmed = True
