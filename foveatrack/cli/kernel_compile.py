@@ -100,6 +100,14 @@ def compile_group(index: int, scene_path) -> None:
         scene = load_scene(path)
         with np.errstate(all="ignore"):     # the Python twins' divisions by zero (numba's error_model="numpy")
             run_scene(with_run_overrides(scene, duration_s=2 * scene.tracker.period_s), ahead=False)
+    if "sim.random_kernels" in GROUPS[index].modules:
+        # the run above is one-threaded; with a free core the run draws its streams ahead in blocks
+        # (sim.ahead.DrawsAhead), whose fill kernels it then calls: the demo compiled them in its own
+        # process whenever it found a core free (a whole-suite run of tests/test_kernel_compile.py)
+        from sim import random_kernels as rk
+
+        for fill in (rk.fill_uniform_kernel, rk.fill_standard_normal_kernel):
+            fill(np.random.default_rng(0), np.empty(4))
     if "sim.scan.kernels" in GROUPS[index].modules:
         from foveatrack.cli.demo_cmd import scan_analyses
 
