@@ -80,7 +80,7 @@ def main() -> None:
     if args.kernel:
         _cast_static()
     elif args.group:
-        from foveatrack.cli.demo_cmd import DEFAULT_SCENE, shipped_scene
+        from foveatrack.cli.demo_work import DEFAULT_SCENE, shipped_scene
         from foveatrack.cli.kernel_compile import compile_group
 
         compile_group(args.group - 1, shipped_scene(DEFAULT_SCENE))

@@ -10,18 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from foveatrack.errors import UserError
-
-DEFAULT_SCENE = "fig12-tracking.toml"
-
-
-def shipped_scene(name: str) -> Path:
-    """Path of a scene shipped in the repository's ``scenes/`` folder."""
-    path = Path(__file__).resolve().parents[2] / "scenes" / name
-    if not path.is_file():
-        raise UserError(f"shipped scene {name} not found at {path}; run from a checkout (pip install -e .)")
-    return path
-
+from foveatrack.cli.demo_work import DEFAULT_SCENE, scan_analyses, shipped_scene
 
 def register(sub) -> None:
     p = sub.add_parser("demo", help="the quick-start demo: a closed-loop tracking run, metrics and plots")
@@ -29,27 +18,6 @@ def register(sub) -> None:
     p.add_argument("--scene", default=None, help=f"scene file (default: scenes/{DEFAULT_SCENE})")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_demo)
-
-
-def scan_analyses(optics, short: bool = False) -> dict:
-    """The demo's scan figures for ``optics``: the radial density (exact and paraxial, two-prism
-    scanners only) and the voxel coverage with 1 % speed noise.  ``short``: a few milliseconds of
-    each (the same kernels in the same types; for the first compile, :mod:`foveatrack.cli.kernel_compile`)."""
-    import numpy as np
-
-    from sim.scan.coverage import voxel_coverage
-    from sim.scan.density import radial_density
-    from sim.scan.model import ScanModel
-    from sim.scan.optics import SpeedNoise
-
-    density_s, coverage_s = (0.01, 0.01) if short else (1.0, 2.0)
-    out = {}
-    if len(optics.prisms) == 2:
-        out["density_exact"] = radial_density(ScanModel(optics), density_s)
-        out["density_paraxial"] = radial_density(ScanModel(optics, model="paraxial"), density_s)
-    noisy = ScanModel(optics, speed_noise=SpeedNoise(), rng=np.random.default_rng(0))
-    out["coverage"] = voxel_coverage(noisy, coverage_s)
-    return out
 
 
 def cmd_demo(args) -> int:

@@ -90,7 +90,7 @@ def compile_group(index: int, scene_path) -> None:
     scene that calls fewer kernels does not leave the cache looking cold run after run."""
     import numpy as np
 
-    from foveatrack.cli.demo_cmd import DEFAULT_SCENE, shipped_scene
+    from foveatrack.cli.demo_work import DEFAULT_SCENE, shipped_scene
     from sim.loop import run_scene
     from sim.scene import load_scene, with_run_overrides
 
@@ -109,11 +109,11 @@ def compile_group(index: int, scene_path) -> None:
         for fill in (rk.fill_uniform_kernel, rk.fill_standard_normal_kernel):
             fill(np.random.default_rng(0), np.empty(4))
     if "sim.scan.kernels" in GROUPS[index].modules:
-        from foveatrack.cli.demo_cmd import scan_analyses
+        from foveatrack.cli.demo_work import scan_analyses
 
         scan_analyses(load_scene(scene_path).optics, short=True)      # the demo's scan figures, after its run
     if "foveatrack.recording.pack_kernels" in GROUPS[index].modules:
-        from foveatrack.cli.warmup_cmd import warm_recording_kernels
+        from foveatrack.cli.demo_work import warm_recording_kernels
 
         warm_recording_kernels()
 

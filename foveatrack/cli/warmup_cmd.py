@@ -14,7 +14,7 @@ import os
 import sys
 import time
 
-from foveatrack.cli.demo_cmd import DEFAULT_SCENE, scan_analyses, shipped_scene
+from foveatrack.cli.demo_work import DEFAULT_SCENE, scan_analyses, shipped_scene, warm_recording_kernels
 
 
 def register(sub) -> None:
@@ -57,16 +57,6 @@ def warm_up(progress: bool = True, split: bool = True) -> float:
         warm_recording_kernels()
         bar.update(1)
     return time.perf_counter() - t0
-
-
-def warm_recording_kernels() -> None:
-    """The recording's point packing (``simulate --out``, the daemon): a frame on the mm grid (its
-    kernels; a frame off the grid is packed by numpy), as the recording's child process warms it."""
-    import numpy as np
-
-    from foveatrack.recording.pack_kernels import pack_points
-
-    pack_points(np.zeros((2, 3)), 0, np.zeros(2, np.int64), np.zeros(2, np.uint8))
 
 
 def cmd_warmup(args) -> int:
