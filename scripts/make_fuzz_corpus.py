@@ -118,7 +118,7 @@ def first_payload(data: bytes, chunks, topic: str) -> tuple[bytes, str]:
     for pos, _ in chunks:
         for op, content in chunk_records(data, pos):
             if op == mw.OP_CHANNEL:
-                cid, name, enc = mw.channel(content)
+                cid, name, enc = content
                 names[cid] = (name, enc)
             elif op == mw.OP_MESSAGE:
                 cid = mw.MSG_HEAD.unpack_from(content, 0)[0]

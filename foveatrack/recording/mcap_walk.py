@@ -53,9 +53,11 @@ def chunk_times(mm, pos: int, size: int) -> tuple[int, int] | None:
     return (t0, t1) if t0 <= t1 else None
 
 
-def chunk_records(mm, pos: int, length: int, require_crc: bool = False) -> list[tuple[int, bytes]]:
-    """The (opcode, content) records of the chunk at ``pos``: decompressed, size and CRC checked
-    (``require_crc``: a CRC of 0, MCAP's "not computed", is damage too: the writer computed them all)."""
+def chunk_records(mm, pos: int, length: int, require_crc: bool = False) -> list[tuple[int, object]]:
+    """The records of the chunk at ``pos``: decompressed, size and CRC checked (``require_crc``: a CRC
+    of 0, MCAP's "not computed", is damage too: the writer computed them all).  Each is
+    ``(OP_MESSAGE, content)`` or ``(OP_CHANNEL, (id, topic, encoding))``: a channel is parsed here,
+    once, so that one which does not hold together makes the chunk damage."""
     if chunk_length(mm, pos, len(mm)) != length:
         raise BadRecord("a chunk whose header does not hold together (damaged length or compression fields)")
     b = pos + REC.size
@@ -102,8 +104,8 @@ def chunk_records(mm, pos: int, length: int, require_crc: bool = False) -> list[
         if j + ln > n or (op == OP_MESSAGE and ln < MSG_HEAD.size):
             raise BadRecord("a chunk whose records do not add up")
         if op == OP_CHANNEL:
-            channel(mv[j:j + ln])       # one that does not hold together makes the chunk damage
-        if op in (OP_MESSAGE, OP_CHANNEL):
+            out.append((op, channel(mv[j:j + ln])))
+        elif op == OP_MESSAGE:
             out.append((op, mv[j:j + ln]))
         i = j + ln
     return out

@@ -275,9 +275,8 @@ class RecordingReader:
                     elif op in (mw.OP_MESSAGE, mw.OP_CHANNEL):
                         if op == mw.OP_MESSAGE and length < mw.MSG_HEAD.size:
                             raise mw.BadRecord("a damaged message record")
-                        if op == mw.OP_CHANNEL:
-                            mw.channel(mm[body:end])
-                        recs = ((op, memoryview(mm[body:end])),)
+                        content = mw.channel(mm[body:end]) if op == mw.OP_CHANNEL else memoryview(mm[body:end])
+                        recs = ((op, content),)
                     else:
                         recs = ()
                 except mw.BadRecord as exc:
@@ -305,7 +304,7 @@ class RecordingReader:
                             frames += 1
                         yield name, log_time, bytes(content[mw.MSG_HEAD.size:])
                     elif rop == mw.OP_CHANNEL:
-                        cid, topic, encoding = mw.channel(content)
+                        cid, topic, encoding = content       # parsed (and checked) where it was read
                         channels[cid] = topic
                         if encoding != "json":
                             self._binary.add(topic)
