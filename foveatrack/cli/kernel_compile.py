@@ -72,6 +72,14 @@ def cache_is_cold() -> bool:
     return False
 
 
+def wants_split() -> bool:
+    """Whether a run should compile in :func:`compile_split` first: two cores or more, and a cold
+    cache (:func:`cache_is_cold`).  The one rule for ``simulate``, ``demo`` and ``warmup``."""
+    import os
+
+    return (os.cpu_count() or 1) >= 2 and cache_is_cold()
+
+
 def run_kernels_as_python(modules) -> None:
     """Replace every numba dispatcher bound in ``modules`` by its Python function, for the rest of
     this process (a compile process only: modules that keep a kernel they looked up keep this one)."""
@@ -152,13 +160,27 @@ def compile_split(scene_path, stream=None) -> float:
             time.sleep(0.05)
     finally:
         for _, _, proc, err in procs:
-            if proc.poll() is None:     # interrupted: do not leave a compile running
-                proc.kill()
-                proc.wait()
+            _end(proc)                  # interrupted: do not leave a compile running
             err.close()
     wall = time.perf_counter() - t0
     say(f"kernels compiled in {wall:.0f} s (cached next to the sources; later runs load them)")
     return wall
+
+
+def _end(proc) -> None:
+    """Kill and reap a compile process that has not ended, without ``Popen.poll()`` or ``wait()``: a
+    Ctrl-C just after ``poll()`` took the Popen's lock (the wait above polls) leaves it taken, and a
+    ``wait()`` then blocks for ever (docs/interrupts.md, the writer process's same wait)."""
+    import os
+    import signal
+
+    if proc.returncode is not None:
+        return
+    try:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.returncode = os.waitstatus_to_exitcode(os.waitpid(proc.pid, 0)[1])
+    except (ProcessLookupError, ChildProcessError):     # already reaped
+        pass
 
 
 def main(argv=None) -> int:

@@ -151,7 +151,7 @@ def _compile_kernels_first(scene_path, progress: bool) -> None:
     from foveatrack.cli import kernel_compile
     from sim.scene import load_scene
 
-    if (os.cpu_count() or 1) < 2 or not kernel_compile.cache_is_cold():
+    if not kernel_compile.wants_split():
         return
     try:
         load_scene(scene_path)      # a scene the run will refuse: let it say why, without compiling first

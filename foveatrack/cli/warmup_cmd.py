@@ -10,7 +10,6 @@ analyses and the recording's point packing.  A second call only loads the cache 
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 
@@ -33,14 +32,13 @@ def warm_up(progress: bool = True, split: bool = True) -> float:
 
     from sim.loop import run_scene
     from sim.scan.coverage import voxel_coverage, voxel_grid
-    from sim.scan.density import radial_density
     from sim.scan.model import ScanModel
     from sim.scene import load_scene, with_run_overrides
 
-    scenes_dir = shipped_scene("fig12-tracking.toml").parent
+    scenes_dir = shipped_scene(DEFAULT_SCENE).parent
     paths = sorted(scenes_dir.glob("*.toml"))
     t0 = time.perf_counter()
-    if split and (os.cpu_count() or 1) >= 2 and kernel_compile.cache_is_cold():
+    if split and kernel_compile.wants_split():
         kernel_compile.compile_split(shipped_scene(DEFAULT_SCENE), stream=sys.stderr if progress else None)
     with tqdm(total=len(paths) + 1, desc="compiling numba kernels", unit=" step", disable=not progress,
               file=sys.stderr) as bar:
@@ -50,10 +48,9 @@ def warm_up(progress: bool = True, split: bool = True) -> float:
             run_scene(with_run_overrides(scene, duration_s=2 * scene.tracker.period_s))
             bar.update(1)
         bar.set_postfix_str("scan analyses")
-        optics = load_scene(shipped_scene("fig12-tracking.toml")).optics
-        radial_density(ScanModel(optics), 0.01)
+        optics = load_scene(shipped_scene(DEFAULT_SCENE)).optics
         voxel_coverage(ScanModel(optics), 0.01, voxel_grid(optics, reference_rays=20_000))
-        scan_analyses(optics, short=True)
+        scan_analyses(optics, short=True)       # the demo's density (exact, paraxial) and coverage
         warm_recording_kernels()
         bar.update(1)
     return time.perf_counter() - t0
