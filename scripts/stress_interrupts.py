@@ -29,13 +29,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-
-def children(pid: int) -> list[int]:
-    """The direct children of ``pid`` (Linux /proc), e.g. a run's writer process."""
-    try:
-        return [int(c) for c in (Path(f"/proc/{pid}/task/{pid}/children").read_text().split())]
-    except OSError:
-        return []
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_daemon_soak import child_pids as children  # noqa: E402  (a run's writer process: /proc, every thread's)
 
 
 def recording_state(path: Path) -> str:
