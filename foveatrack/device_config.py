@@ -16,7 +16,9 @@ Tables::
                  on_reconnect ("stop" | "home" | "keep"), home_pan_deg, home_tilt_deg, home_wait_s
     [tracker]    foveatrack.tracker.TrackerConfig keys (rate_hz is the loop rate)
     [recording]  path ("{time}" becomes the UTC start time; its directory must exist unless
-                 make_dirs = true), flush_every_frames, compression, points_dtype, queue_frames, overwrite
+                 make_dirs = true), flush_every_frames, compression, points_dtype, queue_frames, overwrite,
+                 segment_minutes (default 60: a new file every hour, each complete, so memory stays bounded
+                 on long runs; 0: one file)
     [daemon]     watchdog_s, max_frame_backlog, stale_frame_s, batch_queue, status_period_s, log
     [pose_check] the head's pose checked against the background (foveatrack.pose_check.PoseCheckConfig:
                  enabled, bound_deg, ...; off unless enabled = true)
@@ -118,6 +120,7 @@ class RecordingConfig:
     queue_frames: int = 50
     overwrite: bool = False
     make_dirs: bool = False     # create a missing directory (else it must exist: a typo made a new tree)
+    segment_minutes: float | None = 60.0   # a new file every this many minutes, None: one (foveatrack.recording.segments)
 
 
 @dataclass(frozen=True)
@@ -331,6 +334,11 @@ def _recording(t: Mapping, w: str) -> RecordingConfig:
         kw["overwrite"] = as_bool(t["overwrite"], "overwrite", w)
     if "make_dirs" in t:
         kw["make_dirs"] = as_bool(t["make_dirs"], "make_dirs", w)
+    if "segment_minutes" in t:
+        m = as_float(t["segment_minutes"], "segment_minutes", w, lo=0, hi=10_080)
+        if 0 < m < 0.01:
+            raise UserError(f"{w}: segment_minutes {m} is under 0.01 (0.6 s); 0 keeps one file for the run")
+        kw["segment_minutes"] = m or None
     return RecordingConfig(**kw)
 
 

@@ -15,7 +15,10 @@ child processes (the recording writer: ``foveatrack.recording.writer_process``);
 value at each minute's end.  The slopes are least-squares fits over the samples after
 ``--warmup-min`` (default 5) minutes, in MB/hour (the must-show of issue 26: under 1 MB/hour).
 
-    python scripts/bench_daemon_soak.py [--minutes 5] [--warmup-min 5] [--no-record] [--out DIR]
+The recording is split into segments (``[recording] segment_minutes``, default here 5): the MCAP
+writer keeps ~250 B per chunk (one chunk a frame) until its file closes.
+
+    python scripts/bench_daemon_soak.py [--minutes 5] [--warmup-min 5] [--no-record] [--segment-minutes M] [--out DIR]
 """
 
 from __future__ import annotations
@@ -116,10 +119,12 @@ def main() -> int:
     ap.add_argument("--warmup-min", type=float, default=5.0,
                     help="the RSS slopes are fitted after this many minutes (default 5)")
     ap.add_argument("--no-record", action="store_true", help="run without a recording")
+    ap.add_argument("--segment-minutes", type=float, default=5.0,
+                    help="[recording] segment_minutes: a new file every this many minutes (default 5; 0: one "
+                         "file for the run, whose MCAP chunk index grows ~10 MB an hour until it closes)")
     ap.add_argument("--out", default=None, help="directory for the config, log and recording (default: a temp dir)")
     args = ap.parse_args()
     from foveatrack.livox import protocol as P
-    from foveatrack.recording import RecordingReader
     from sim.livox_units import HORIZON
     from sim.virtual_lidar import VirtualLivox
 
@@ -154,8 +159,11 @@ def main() -> int:
     s.close()
     lidar.broadcast_addr = ("127.0.0.1", bport)
     rec = out / "soak.mcap"
-    if rec.exists():
-        rec.unlink()
+    from foveatrack.recording.segments import following_segments, open_run
+
+    for p in [rec, *following_segments(rec)]:     # a run before this one in the same directory
+        p.unlink(missing_ok=True)
+    seg = f"{chr(10)}segment_minutes = {args.segment_minutes}" if args.segment_minutes > 0 else ""
     cfg = out / "soak.toml"
     cfg.write_text(f"""
 [lidar]
@@ -174,7 +182,7 @@ kind = "box"
 frame = "world"
 min_xyz = [1.0, -60.0, -0.7]
 max_xyz = [30.0, 60.0, 40.0]
-{"" if args.no_record else f'[recording]{chr(10)}path = "{rec}"{chr(10)}overwrite = true'}
+{"" if args.no_record else f'[recording]{chr(10)}path = "{rec}"{chr(10)}overwrite = true{seg}'}
 [daemon]
 watchdog_s = 2.0
 """)
@@ -197,7 +205,9 @@ watchdog_s = 2.0
                 t0 = time.monotonic()
             time.sleep(0.05)
         print(f"streaming {2 * RATE_HZ / 1e3:.0f} k points/s for {args.minutes:g} min "
-              f"({'no recording' if args.no_record else 'recording ' + str(rec)}) ...", flush=True)
+              f"({'no recording' if args.no_record else 'recording ' + str(rec)}"
+              f"{f', a new segment every {args.segment_minutes:g} min' if seg and not args.no_record else ''}) ...",
+              flush=True)
         end = t0 + args.minutes * 60.0
         next_minute = t0 + 60.0
         while time.monotonic() < end:
@@ -237,7 +247,7 @@ watchdog_s = 2.0
     # daemon falls behind, so frame numbers do not count minutes
     t_s, lat = [], []
     if not args.no_record:
-        for m in RecordingReader(rec).messages("metrics"):
+        for m in open_run(rec).messages("metrics"):       # every segment, in order
             if m.record.get("name") == "latency_ms":
                 t_s.append(m.t_ns * 1e-9)
                 lat.append(float(m.record["value"]))

@@ -171,6 +171,7 @@ class FrameLoop:
                                             "t0_s": t0_s, "pan_deg": pan, "tilt_deg": tilt})
 
     def _process(self, frame: Frame, t_arrival: float) -> None:
+        self._next_segment_if_due(t_arrival)      # before any of this frame's commands and records
         if self.pose_state is not None:
             # the head's pose is unknown (it reconnected): no bearing can be turned into a command; while
             # it is homing, the background may show it arrived (foveatrack.daemon.homing_plan)

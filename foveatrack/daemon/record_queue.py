@@ -93,9 +93,46 @@ class DaemonRecording:
             self.head.close()
             raise
         # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
-        self.recorder = RecordingThread(writer, r.queue_frames)
+        self.recorder = RecordingThread(writer, r.queue_frames, self._segment_path, r.overwrite)
         self.recording_path = path
         self.head.journal = journal
+        self._segment_t0 = None         # the segment clock starts at the first frame (not while no lidar is seen)
+
+    def _segment_path(self, k: int):
+        """The file of the recording's segment ``k`` (the writer's thread moves to it)."""
+        from foveatrack.recording.segments import segment_path
+
+        return segment_path(self.recording_path, k)
+
+    def _next_segment_if_due(self, now: float) -> None:
+        """At a frame boundary, on the loop's thread: after ``[recording] segment_minutes``, the
+        head's command journal moves to the next segment's (the commands of this frame on are
+        journaled there) and the jobs submitted from now on go to its file
+        (:class:`~foveatrack.daemon.support.RecordingThread`).  A journal that cannot be created
+        keeps the current segment (logged; tried again a segment later)."""
+        minutes = self.cfg.recording.segment_minutes
+        if minutes is None or self.recording_path is None:
+            return
+        if self._segment_t0 is None:
+            self._segment_t0 = now
+        if now - self._segment_t0 < minutes * 60.0:
+            return
+        from foveatrack.errors import UserError
+        from foveatrack.live_devices import CommandJournal, journal_path
+
+        self._segment_t0 = now
+        k = self.recorder.segment + 1
+        path = self._segment_path(k)
+        try:
+            journal = CommandJournal(journal_path(path))
+        except UserError as exc:
+            self.log.event("recording_segment_failed", index=k, path=str(path), error=str(exc))
+            return
+        old, self.head.journal = self.head.journal, journal
+        if old is not None:
+            old.close()
+        self.recorder.segment = k
+        self.log.event("recording_segment", index=k, path=str(path))
 
     def _forget_unused_recording(self) -> None:
         """A start that failed after the recording was created (a live port in use) removes it and

@@ -158,7 +158,7 @@ def recover(path, journal=None, progress=None) -> Recovery:
     recorded_cmds: list[dict] = []
     last_t_ns, last_log = 0, 0
     writer = RecordingWriter(tmp, meta, fsync=True, overwrite=True, created_utc=reader.info.get("created_utc"),
-                             log_time=clock, file_mode=mode)
+                             log_time=clock, file_mode=mode, segment_index=_segment_index(reader.info))
     try:
         for log_time, m in reader.logged_messages():
             clock.current = last_log = max(log_time, 0)
@@ -247,6 +247,12 @@ def unfinished_recordings(directory) -> list[Path]:
         except UserError:
             continue          # not a recording (cut short before its metadata): nothing to complete
     return out
+
+
+def _segment_index(info: dict) -> int:
+    """A segment's place in its run (:mod:`foveatrack.recording.segments`), kept by the rewrite."""
+    k = str(info.get("segment_index", "0"))
+    return int(k) if k.isdigit() else 0
 
 
 def recover_directory(directory, log_event=None, exclude=()) -> list[Recovery]:

@@ -96,10 +96,18 @@ class RecordingThread:
     ``submit(fn, *args)`` queues one write job (a callable taking the writer); when the bounded
     queue is full the job is dropped and counted in :attr:`dropped` (the control loop never waits
     for the disk).  ``close()`` writes everything queued, then closes the file.
+
+    Segments (``segment_path``: k -> the file of segment k): the loop sets :attr:`segment`, and every
+    job carries the segment it was submitted in; the first job of a new segment moves the writer to
+    its file first (:meth:`~foveatrack.recording.RecordingWriter.next_segment`), so a dropped job never
+    leaves the records of one segment in another's file.
     """
 
-    def __init__(self, writer, max_jobs: int):
+    def __init__(self, writer, max_jobs: int, segment_path=None, overwrite: bool = False):
         self.writer = writer
+        self.segment = 0
+        self._segment_path = segment_path
+        self.overwrite = overwrite
         self.q: queue.Queue = queue.Queue(maxsize=max_jobs)
         self.dropped = 0
         self.written = 0
@@ -113,7 +121,7 @@ class RecordingThread:
             self.dropped += 1
             return False
         try:
-            self.q.put_nowait((fn, args))
+            self.q.put_nowait((fn, args, self.segment))
             return True
         except queue.Full:
             self.dropped += 1
@@ -124,11 +132,13 @@ class RecordingThread:
             job = self.q.get()
             if job is None:
                 return
-            fn, args = job
+            fn, args, segment = job
             if self.error is not None:
                 continue
             t = time.perf_counter()
             try:
+                if segment != getattr(self.writer, "segment_index", 0):
+                    self.writer.next_segment(self._segment_path(segment), overwrite=self.overwrite, index=segment)
                 fn(self.writer, *args)
                 self.written += 1
             except BaseException as exc:  # noqa: BLE001 - reported by the daemon, recording stops

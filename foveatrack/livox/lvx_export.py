@@ -81,14 +81,14 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
     max_frames : the cap on frames read (default the reader's for the file's size; ``problem`` says
         when it stopped the reading)
     """
-    from foveatrack.recording import RecordingReader
+    from foveatrack.recording.segments import open_run
 
     if data_type is not None and data_type not in P.POINT_DATA_TYPES:
         raise UserError(f"LVX data type {data_type}: must be one of {list(P.POINT_DATA_TYPES)} "
                         "(6 is IMU, which recordings do not hold)")
     if not 1 <= frame_duration_ms <= 1000:
         raise UserError(f"frame duration {frame_duration_ms} ms: must be 1..1000")
-    reader = RecordingReader(recording, max_frames)
+    reader = open_run(recording, max_frames, segment_alone=True)
     meta = reader.meta or {}
     name = device or _preset_of(meta)
     rate = meta.get("point_rate_hz")

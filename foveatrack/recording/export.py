@@ -14,6 +14,7 @@ from foveatrack.errors import UserError
 from foveatrack.metrics import flatten
 from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, IMU, POINTS, TRUTH
 from foveatrack.recording.reader import RecordingReader
+from foveatrack.recording.segments import open_run
 
 
 def out_kind(out_path: Path) -> str:
@@ -79,7 +80,7 @@ def export_points(recording: str | os.PathLike, out_path: str | os.PathLike, war
     """
     out_path = Path(out_path)
     out_kind(out_path)
-    reader = RecordingReader(recording, max_frames)
+    reader = open_run(recording, max_frames, segment_alone=True)
     frames = list(reader.points())
     _warn_damage(reader, warn)
     if frames:
@@ -119,7 +120,7 @@ def export_trajectory(
         if ch in arrays_not_records:
             raise UserError(f"export of channel {ch!r}: its messages are arrays, not records; "
                             f"use {arrays_not_records[ch]}")
-    reader = RecordingReader(recording, max_frames)
+    reader = open_run(recording, max_frames, segment_alone=True)
     rows = [(m.channel, flatten(m.record, lists=True)) for m in reader.messages(channels)]
     _warn_damage(reader, warn)
     if kind == "csv":
@@ -162,7 +163,7 @@ def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike, warn: 
     that says so (recordings of runs without an IMU, or made before the channel existed)."""
     out_path = Path(out_path)
     out_kind(out_path)
-    reader = RecordingReader(recording, max_frames)
+    reader = open_run(recording, max_frames, segment_alone=True)
     batches = list(reader.imu())
     _warn_damage(reader, warn)
     if not batches:

@@ -241,6 +241,14 @@ class FoxgloveChannels:
         self._note(TF)
         self._tf.log(FrameTransforms(transforms=transforms), log_time=self._lt(t_ns))
 
+    def new_file(self) -> None:
+        """The MCAP sink was replaced by a new file (:meth:`RecordingWriter.next_segment`): its
+        channel ids count again from the first message, and its first head estimate sends a
+        keyframe (D and the histories), so the file alone shows them from its start."""
+        self.first_log_order = []
+        self._seen = set()
+        self._head_count = 0
+
     def end_frame(self) -> None:
         """A frame ends (the next one's points come, or the end): if its head estimate's transforms
         still wait, no truth follows a head estimate in this run; send them, and the next ones as they

@@ -152,6 +152,8 @@ class RecordingWriter(RecordCalls):
         own ``t_ns`` (the sensor's or simulator's clock), which is what a reader and replay use;
         0 (default) logs ``t_ns`` itself; a callable ``t_ns -> log time`` whose ``name`` is what the
         metadata says (a recording rewritten with its own log times: :mod:`foveatrack.daemon.recover`)
+    segment_index : this file's place in a run split into segments (0: the first, or the only file;
+        :meth:`next_segment` numbers the later ones; ``recover`` keeps a segment's)
     """
 
     def __init__(
@@ -167,8 +169,8 @@ class RecordingWriter(RecordCalls):
         created_utc: str | None = None,
         file_mode: int = 0o600,
         log_time=0,
+        segment_index: int = 0,
     ):
-        import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
         self.path, meta_json, level = check_options(path, meta, flush_every_frames, compression,
@@ -185,14 +187,10 @@ class RecordingWriter(RecordCalls):
             # chunk_size None: a chunk ends only at flush(), so a chunk holds whole frames; the SDK
             # writes the Schema and Channel records in the chunk of each channel's first message
             comp = {"lz4": MCAPCompression.Lz4, "zstd": MCAPCompression.Zstd, "none": None}[compression]
-            opts = MCAPWriteOptions(compression=comp, profile="foveatrack", chunk_size=None,
-                                    compression_threads=0, compression_level=level)
-            _create_private(self.path, overwrite, file_mode)
-            try:
-                self._w = foxglove.open_mcap(self.path, allow_overwrite=True, context=self.context,
-                                             writer_options=opts)
-            except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types for I/O
-                raise UserError(f"cannot create recording {self.path}: {exc}") from None
+            self._opts = MCAPWriteOptions(compression=comp, profile="foveatrack", chunk_size=None,
+                                          compression_threads=0, compression_level=level)
+            self._file_mode = file_mode
+            self._open_file(self.path, overwrite)
             md = {
                 "format": FORMAT,
                 "format_version": FORMAT_VERSION,
@@ -207,13 +205,58 @@ class RecordingWriter(RecordCalls):
                 "log_time": (log_time.name if callable(log_time) else "host_utc" if log_time == "host"
                              else f"t_ns+{int(log_time)}"),
             }
-            md[META_CRC_KEY] = meta_crc32(md)
-            self._w.write_metadata(META_NAME, md)
+            if segment_index:
+                md["segment_index"] = str(int(segment_index))
+            self._md = md
+            self._write_meta(md)
+        self.segment_index = int(segment_index)
         self._tabled = 0
         self._frames_since_flush = 0
         self.frames_written = 0
         self.messages_written = 0
         self._closed = False
+        self.flush()
+
+    def _open_file(self, path: Path, overwrite: bool) -> None:
+        import foxglove
+
+        _create_private(path, overwrite, self._file_mode)
+        try:
+            self._w = foxglove.open_mcap(path, allow_overwrite=True, context=self.context,
+                                         writer_options=self._opts)
+        except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types for I/O
+            raise UserError(f"cannot create recording {path}: {exc}") from None
+
+    def _write_meta(self, md: dict) -> None:
+        md = dict(md)
+        md[META_CRC_KEY] = meta_crc32(md)
+        self._w.write_metadata(META_NAME, md)
+
+    def next_segment(self, path: str | os.PathLike, overwrite: bool = False, index: int | None = None) -> None:
+        """Complete the current file (its last chunk, summary and footer) and go on in a new one at
+        ``path``, at a frame boundary (call it before the next frame's records).  Each segment is a
+        complete recording with the run's metadata and ``segment_index`` 1, 2, ... (the first file
+        has none); the MCAP writer keeps an index entry per chunk until its file closes (~250 B a
+        frame, ~10 MB an hour), so a run of any length holds at most one segment's.  ``index``: the
+        new segment's (default the next; a driver whose jobs for a segment were all dropped skips it).  The Foxglove
+        channels stay (the live view does not notice); the new file gets its own channel table and
+        D at its first head estimate (its first keyframe)."""
+        if self._closed or self._w is None:
+            raise ValueError("recording is closed" if self._closed else "a writer without a file has no segments")
+        path = Path(path)
+        self.view.end_frame()          # what of the last frame still waits goes in the old file
+        self._w.close()
+        self._w = None
+        if self.fsync:
+            _fsync(self.path)
+        self._open_file(path, overwrite)
+        self.path = path
+        self.segment_index = self.segment_index + 1 if index is None else int(index)
+        self._md["segment_index"] = str(self.segment_index)
+        self._write_meta(self._md)
+        self._tabled = 0
+        self.view.new_file()
+        self._frames_since_flush = 0
         self.flush()
 
     # ------------------------------------------------------------------ channels

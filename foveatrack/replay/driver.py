@@ -108,9 +108,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
                      config_name: str | None = None, max_frames: int | None = None) -> ReplayResult:
     """Re-run the tracker over a foveatrack recording (simulator or daemon); ``max_frames``: the cap
     on frames read (default the reader's for the file's size, :func:`foveatrack.recording.reader.frame_cap`)."""
-    from foveatrack.recording import RecordingReader
+    from foveatrack.recording.segments import open_run
 
-    reader = RecordingReader(path, max_frames)
+    reader = open_run(path, max_frames)      # a run split into segments: all of them, in order
     meta = RecordingMeta.from_dict(reader.meta, str(path))   # the configuration that ran, typed
     source = meta.source
     where = f"{config_name} [tracker]" if config_name else "recorded [tracker]"
@@ -206,6 +206,10 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     if reader.problem:
         res.comparison["recording_problem"] = reader.problem
     res.comparison["recording_complete"] = bool(reader.complete)
+    if getattr(reader, "parts", None):
+        res.comparison["recording_segments"] = len(reader.parts)
+        if reader.notes:
+            res.comparison["recording_segment_notes"] = reader.notes
     res.comparison["commands_in_recording"] = commands
     res.comparison["metadata_checksum"] = "verified" if reader.meta_checked else "absent (an older recording)"
     res.comparison["recording_damage"] = [d.describe() for d in reader.damage] + order.describe()

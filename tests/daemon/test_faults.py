@@ -35,13 +35,14 @@ def _lidar(tmp_path, bport, truth, name="l"):
                   "--head-truth", str(truth)], tmp_path / f"{name}.out", tmp_path / f"{name}.err")
 
 
-def _setup(tmp_path, data_port=0, speed_table=None, head_extra=(), config_extra=""):
+def _setup(tmp_path, data_port=0, speed_table=None, head_extra=(), config_extra="", recording_extra=""):
     link, truth, rec, log = tmp_path / "head", tmp_path / "truth.jsonl", tmp_path / "rec.mcap", tmp_path / "d.jsonl"
     bport = free_udp_port()
     if speed_table is None:
         speed_table = tmp_path / "unit3.json"
         truth_speed_table(PTS303H(unit_seed=3)).save(speed_table)
-    cfg = write_config(tmp_path / "d.toml", link, rec, bport, 0, data_port, speed_table=str(speed_table))
+    cfg = write_config(tmp_path / "d.toml", link, rec, bport, 0, data_port, speed_table=str(speed_table),
+                       recording_extra=recording_extra)
     if config_extra:
         txt = cfg.read_text()
         cfg.write_text(txt.replace("[tracker]\n", config_extra + "\n[tracker]\n", 1))
