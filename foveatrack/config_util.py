@@ -92,6 +92,15 @@ def as_choice(value, key: str, where: str, choices: Sequence[str]) -> str:
     return value
 
 
+def as_path_text(value, key: str, where: str, what: str) -> str:
+    """A file name given in a config: a non-empty string without a NUL character (a NUL reached the OS
+    as "ValueError: embedded null byte", a traceback); ``what`` says what the file is, for the error."""
+    if not isinstance(value, str) or not value or "\x00" in value:
+        nul = ", without a NUL character" if isinstance(value, str) and "\x00" in value else ""
+        raise UserError(f"{where}: {key} must be {what}{nul}")
+    return value
+
+
 def as_bool(value, key: str, where: str) -> bool:
     if not isinstance(value, bool):
         raise UserError(f"{where}: {key} must be true or false, got {value!r}")

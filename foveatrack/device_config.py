@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
 
-from foveatrack.config_util import as_bool, as_choice, as_float, as_table, as_vec, check_keys, read_toml
+from foveatrack.config_util import as_bool, as_choice, as_float, as_path_text, as_table, as_vec, check_keys, read_toml
 from foveatrack.errors import UserError
 from foveatrack.pose_check import PoseCheckConfig
 from foveatrack.speed_table import SpeedTable
@@ -275,10 +275,8 @@ def _head(t: Mapping, w: str) -> HeadConfig:
     if "protocol" in t:
         kw["protocol"] = as_choice(t["protocol"], "protocol", w, ("D", "P"))
     if "speed_table" in t:
-        v = t["speed_table"]
-        if not isinstance(v, str) or not v:
-            raise UserError(f"{w}: speed_table must be 'nominal' or the path of a calibrated table JSON")
-        kw["speed_table"] = v
+        kw["speed_table"] = as_path_text(t["speed_table"], "speed_table", w,
+                                         "'nominal' or the path of a calibrated table JSON")
     for k in ("pan_speed_max_deg_s", "tilt_speed_max_deg_s", "pan_turbo_deg_s"):
         if k in t:
             kw[k] = as_float(t[k], k, w, lo=0, lo_open=True, hi=360)
@@ -319,9 +317,7 @@ def _recording(t: Mapping, w: str) -> RecordingConfig:
     check_keys(t, [f for f in RecordingConfig.__dataclass_fields__], w)
     kw: dict = {}
     if "path" in t:
-        if not isinstance(t["path"], str) or not t["path"]:
-            raise UserError(f"{w}: path must be a file name (e.g. 'runs/{{time}}.mcap')")
-        kw["path"] = t["path"]
+        kw["path"] = as_path_text(t["path"], "path", w, "a file name (e.g. 'runs/{time}.mcap')")
     if "flush_every_frames" in t:
         kw["flush_every_frames"] = _int(t["flush_every_frames"], "flush_every_frames", w, 1, 1000)
     if "compression" in t:
@@ -356,9 +352,7 @@ def _loop(t: Mapping, w: str) -> LoopConfig:
     if "status_period_s" in t:
         kw["status_period_s"] = as_float(t["status_period_s"], "status_period_s", w, lo=0.05, hi=60)
     if "log" in t:
-        if not isinstance(t["log"], str) or not t["log"]:
-            raise UserError(f"{w}: log must be a file name for JSON lines")
-        kw["log"] = t["log"]
+        kw["log"] = as_path_text(t["log"], "log", w, "a file name for JSON lines")
     return LoopConfig(**kw)
 
 

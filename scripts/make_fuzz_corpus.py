@@ -339,6 +339,12 @@ def build(out: Path) -> list[dict]:
     add("config-tracker-1.toml", "tracker = 1\n" + no_tracker, check, "error", "tracker = 1", "tracker")
     add("config-nul-port.toml", re.sub(r'(?m)^port\s*=.*$', lambda m: 'port = "\\u0000"', cfg, count=1),
         check, "error", "a NUL in [head] port")
+    add("config-nul-recording-path.toml",
+        re.sub(r'(?m)^path\s*=.*$', lambda m: 'path = "\\u0000"', cfg, count=1), check, "error",
+        "a NUL in [recording] path (found by the full campaign: ValueError: embedded null byte)", "NUL")
+    add("config-nul-speed-table.toml",
+        re.sub(r'(?m)^speed_table\s*=.*$', lambda m: 'speed_table = "t\\u0000.json"', cfg, count=1), check, "error",
+        "a NUL in [head] speed_table", "NUL")
     add("config-devzero.toml", re.sub(r'(?m)^speed_table\s*=.*$', 'speed_table = "/dev/zero"', cfg), check, "error",
         "speed_table = '/dev/zero' (3.5 GB, then MemoryError)")
 
