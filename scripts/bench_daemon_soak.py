@@ -197,6 +197,9 @@ watchdog_s = 2.0
     cpu: list[tuple[float, float]] = []     # (run time, the daemon's CPU time so far) [s]
     loads: list[float] = []
     t0 = None
+    # SIGTERM as Ctrl-C: the daemon is stopped and the minutes so far reported (a bare SIGTERM ended
+    # this script at once and left the daemon running, orphaned)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         while t0 is None:
             if daemon.poll() is not None:
@@ -211,7 +214,12 @@ watchdog_s = 2.0
         end = t0 + args.minutes * 60.0
         next_minute = t0 + 60.0
         while time.monotonic() < end:
-            time.sleep(5.0)
+            try:
+                time.sleep(5.0)
+            except KeyboardInterrupt:
+                args.minutes = (time.monotonic() - t0) / 60.0
+                print(f"interrupted after {args.minutes:.1f} min: the minutes so far", flush=True)
+                break
             now = time.monotonic()
             r = rss_mb(daemon.pid)
             if r is not None:
