@@ -52,8 +52,13 @@ def cmd_daemon(args) -> int:
         live = check_port(args.live)
     elif args.live_origin:
         raise UserError("--live-origin is for the live view: add --live")
+    from foveatrack.daemon.heap import return_freed_memory
+
+    # a process that runs for days: freed frames go back to the system (not after a one-shot --check)
+    heap_fixed = return_freed_memory()
     d = Daemon(cfg, log_path=args.log, status=False if args.no_status else None, duration_s=args.duration_s,
                live_port=live, live_origins=args.live_origin)
+    d.heap_returns_freed = heap_fixed
     code = d.run()
     s = d.final_stats
     timing = (f"processing p99 {s['processing_ms_p99']} ms, latency p99 {s.get('latency_ms_p99', float('nan'))} ms"

@@ -72,7 +72,7 @@ class Lifecycle:
         c = self.cfg
         self.log.event("start", config=c.path, recording=str(self.recording_path) if self.recording_path else None,
                        lidar=asdict(c.lidar), head_port=c.head.port, head_open=self.head.connected,
-                       rate_hz=c.tracker.rate_hz,
+                       rate_hz=c.tracker.rate_hz, heap_returns_freed=self.heap_returns_freed,
                        host_ports=self.host_ports)
         for w in c.warnings():
             self.log.event("warning", message=w)

@@ -81,6 +81,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
         self.cfg = config
         self.live_port = live_port      # serve the recording's channels on ws://127.0.0.1:PORT
         self.live_origins = tuple(live_origins)    # origins of web pages also let read it (--live-origin)
+        self.heap_returns_freed: bool | None = None  # set by `foveatrack daemon` (foveatrack.daemon.heap)
         self.live = None
         self.log = JsonLog(log_path or config.loop.log)
         self.status = StatusLine(enabled=status)

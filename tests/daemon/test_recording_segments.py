@@ -42,6 +42,8 @@ def test_a_daemon_run_in_segments_is_whole_and_replays_to_the_bit(tmp_path):
         assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
     finally:
         stop_all(procs)
+    start = next(e for e in log_events(log) if e["event"] == "start")
+    assert start["heap_returns_freed"] is sys.platform.startswith("linux"), start   # foveatrack.daemon.heap
     events = [e for e in log_events(log) if e["event"] == "recording_segment"]
     parts = following_segments(rec)
     assert len(parts) >= 3 and [e["index"] for e in events] == list(range(1, len(parts) + 1)), events

@@ -1,0 +1,33 @@
+"""Freed frame memory handed back to the system (glibc), so a daemon's RSS follows what it holds.
+
+glibc serves an allocation of at least ``M_MMAP_THRESHOLD`` (128 kB at start) with its own mapping,
+returned to the system when freed -- but it raises that threshold to the size of each such block
+freed (up to 32 MB), so after the first frames a frame's arrays (48 k points at 480 k points/s:
+1.2 MB of x, y, z alone) come from the heap, and what a backlog freed stays there: the daemon's RSS
+rose in steps at every load spike and never came down (issue 26's soak: +31 MB an hour after the
+first 5 minutes, load 2-4).  A fixed threshold (``mallopt``) turns that adaptation off: every block of
+128 kB or more is mapped and unmapped, so freed frames leave the process at once
+(tests/daemon/test_heap.py shows the difference on 8 MB and 1.2 MB arrays).  The price is a fresh
+mapping's page faults for each large array, paid on the frame's own thread.
+"""
+
+from __future__ import annotations
+
+M_MMAP_THRESHOLD = -3          # glibc's malloc.h
+MMAP_THRESHOLD_BYTES = 128 * 1024
+
+
+def return_freed_memory(threshold_bytes: int = MMAP_THRESHOLD_BYTES) -> bool:
+    """Fix glibc's mmap threshold at ``threshold_bytes`` for this process; whether it was set (False
+    where the C library is not glibc: nothing changes there)."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+    mallopt.restype = ctypes.c_int
+    return mallopt(M_MMAP_THRESHOLD, int(threshold_bytes)) == 1
