@@ -141,3 +141,20 @@ def test_the_daemons_segment_minutes(tmp_path, value, expect):
     q = tmp_path / "default.toml"
     q.write_text(p.read_text().replace(f"segment_minutes = {value}\n", ""))
     assert load_config(q).recording.segment_minutes == 60.0      # bounded by default
+
+
+def test_export_of_the_first_segment_is_the_run_and_of_a_later_one_that_segment(tmp_path):
+    from foveatrack.recording.export import export_points
+
+    rng = np.random.default_rng(4)
+    first = tmp_path / "run.mcap"
+    w = RecordingWriter(first, META)
+    for i in range(6):
+        if i == 3:
+            w.next_segment(segment_path(first, 1))
+        _frame(w, i, rng)
+    w.close()
+    whole = np.load(tmp_path / "whole.npz") if export_points(first, tmp_path / "whole.npz") else None
+    part = np.load(tmp_path / "part.npz") if export_points(segment_path(first, 1), tmp_path / "part.npz") else None
+    assert sorted(set(whole["frame_index"])) == list(range(6))
+    assert sorted(set(part["frame_index"])) == [3, 4, 5]
