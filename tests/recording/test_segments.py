@@ -154,7 +154,8 @@ def test_export_of_the_first_segment_is_the_run_and_of_a_later_one_that_segment(
             w.next_segment(segment_path(first, 1))
         _frame(w, i, rng)
     w.close()
-    whole = np.load(tmp_path / "whole.npz") if export_points(first, tmp_path / "whole.npz") else None
-    part = np.load(tmp_path / "part.npz") if export_points(segment_path(first, 1), tmp_path / "part.npz") else None
+    assert export_points(first, tmp_path / "whole.npz") == 6 * 40
+    assert export_points(segment_path(first, 1), tmp_path / "part.npz") == 3 * 40
+    whole, part = np.load(tmp_path / "whole.npz"), np.load(tmp_path / "part.npz")
     assert sorted(set(whole["frame_index"])) == list(range(6))
     assert sorted(set(part["frame_index"])) == [3, 4, 5]
