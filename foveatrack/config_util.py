@@ -146,6 +146,8 @@ def read_small_text(path, what: str) -> str:
     (``/dev/zero``: 3.5 GB, then MemoryError) or a huge file is a UserError naming it."""
     from pathlib import Path
 
+    if "\x00" in str(path):      # the OS refuses it with "ValueError: embedded null byte" (a traceback)
+        raise UserError(f"{str(path)!r}: the {what}'s file name holds a NUL character")
     path = Path(path)
     if path.exists() and not path.is_file():
         raise UserError(f"{path}: the {what} is not a regular file (a device, a FIFO or a directory)")

@@ -322,6 +322,10 @@ def build(out: Path) -> list[dict]:
         "a scene preset that is not a name")
     add("scene-nested.toml", scene + "x = " + "[" * 1000 + "]" * 1000 + "\n", simulate, "error",
         "a TOML nested 1000 deep (RecursionError)")
+    add("scene-nul-speed-table.toml", re.sub(r'(?m)^speed_table\s*=.*$', lambda m: 'speed_table = "\\u0000"', scene,
+                                             count=1), simulate, "error",
+        "a NUL in [gimbal] speed_table (the full scene campaign's 4 tracebacks: ValueError: embedded null byte)",
+        "NUL")
 
     cfg = (ROOT / "examples" / "daemon-virtual.toml").read_text()
     cfg = re.sub(r'(?m)^speed_table\s*=.*$', 'speed_table = "nominal"', cfg)
