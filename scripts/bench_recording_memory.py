@@ -26,6 +26,7 @@ CHILD = r"""
 import sys, numpy as np
 sys.path.insert(0, sys.argv[1])
 from foveatrack.recording import RecordingWriter
+from foveatrack.recording.segments import segment_path
 def rss_mb():
     for line in open("/proc/self/status"):
         if line.startswith("VmRSS:"):
@@ -38,7 +39,7 @@ seg = int(sys.argv[5])
 def frame(k):
     t = k * 100_000_000
     if seg and k and k % seg == 0:
-        w.next_segment(path + f".part{k // seg:04d}")
+        w.next_segment(segment_path(path, k // seg))
     w.write_points(t, k, xyz, t + tn)
     w.write_metric(t, "processing_ms", 1.0, frame_id=k)
     w.write_metric(t, "latency_ms", 2.0, frame_id=k)
