@@ -1,8 +1,7 @@
 """A first run compiles the numba kernels in two processes at once (foveatrack.cli.kernel_compile):
 the demo on an empty cache says what it compiles, its own process then compiles nothing (every
 kernel its run and its scan figures call was compiled by the two processes and loads from the
-cache; the scan figures' kernels come from a third process beside the run), and the processes leave a
-consistent cache (each index entry names a data file of its
+cache), and the two processes leave a consistent cache (each index entry names a data file of its
 own signature; numba rewrites a whole index per signature, so two processes compiling one function
 could break that)."""
 
@@ -68,9 +67,6 @@ def test_a_first_demo_compiles_in_two_processes_and_its_first_frame_compiles_not
     for i, group in enumerate(kernel_compile.GROUPS):
         assert f"[{i + 1}/2] {group.name} ..." in err
         assert f"[{i + 1}/2] {group.name}: ready after " in err
-    # the scan figures' kernels in a third process, beside the run, ready before the figures
-    assert f"[+] {kernel_compile.FigureCompile.LABEL}: compiling beside the run ..." in err
-    assert f"[+] {kernel_compile.FigureCompile.LABEL}: ready after " in err
     assert "failed" not in err
     compiled = [line for line in run.stdout.splitlines() if line.startswith("COMPILED")]
     assert compiled == ["COMPILED []"], compiled      # the run and the scan figures loaded every kernel
@@ -79,8 +75,7 @@ def test_a_first_demo_compiles_in_two_processes_and_its_first_frame_compiles_not
     entries = list(_index_entries(cache))
     names = {name.split("-")[0] for name, _, _ in entries}
     for needed in ("kernels.scan_exact_kernel", "kernels.cast_static_kernel", "sensor_kernels.assemble_returns_kernel",
-                   "kernels.box_median_kernel", "pack_kernels.pack_grid_kernel", "kernels.trace_paraxial_kernel",
-                   "kernels.trace_exact_kernel"):
+                   "kernels.box_median_kernel", "pack_kernels.pack_grid_kernel", "kernels.trace_paraxial_kernel"):
         assert needed in names
     mismatched = [(name, key, data) for name, key, data in entries if key != data]
     assert not mismatched

@@ -8,7 +8,6 @@ eq. 4, coverage) for the same lidar.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from foveatrack.cli.demo_work import DEFAULT_SCENE, scan_analyses, shipped_scene
@@ -22,7 +21,6 @@ def register(sub) -> None:
 
 
 def cmd_demo(args) -> int:
-    from foveatrack.cli.kernel_compile import FigureCompile
     from foveatrack.cli.lidar_cmd import _pattern_plot, info_dict
     from foveatrack.cli.scan_plots import plot_coverage, plot_density
     from foveatrack.cli.simulate_cmd import run_and_report
@@ -30,15 +28,7 @@ def cmd_demo(args) -> int:
 
     out = Path(args.out)
     scene_path = args.scene or shipped_scene(DEFAULT_SCENE)
-    # a first run: the scan figures' kernels compile in a process of their own beside the run
-    compiling = FigureCompile.wanted(scene_path, stream=None if args.no_progress else sys.stderr)
-    try:
-        run_and_report(scene_path, out, plot=True, progress=not args.no_progress, figures=compiling)
-        if compiling is not None:
-            compiling.wait()
-    finally:
-        if compiling is not None:
-            compiling.close()
+    run_and_report(scene_path, out, plot=True, progress=not args.no_progress)
 
     optics = load_scene(scene_path).optics
     scan_dir = out / "scan"

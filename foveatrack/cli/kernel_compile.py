@@ -16,14 +16,7 @@ signatures to one function at once can leave the index naming the other one's da
 signature, and that the demo's first frame then compiles nothing).  The caller waits for both and
 then loads everything from the cache.
 
-The demo's scan figures after its run (the FoV line, density and coverage: ``trace_exact_kernel`` and
-the coverage kernels, ~10 s of CPU) are no part of any run, so the two processes the run waits for do
-not compile them: a third process (:class:`FigureCompile`) does, started when the group that owns the
-scan kernels is done, beside the other group and then the demo's run, and the demo waits for it only
-before its figures.
-
-``python -m foveatrack.cli.kernel_compile GROUP SCENE.toml`` is one such process (GROUP: 1, 2 or
-``figures``).
+``python -m foveatrack.cli.kernel_compile GROUP SCENE.toml`` is one such process (GROUP: 1 or 2).
 """
 
 from __future__ import annotations
@@ -59,29 +52,21 @@ GROUPS = (
 )
 
 
-# The process of the demo's scan figures starts once this group (the owner of sim.scan.kernels, whose
-# kernels the figures also call) is done: then it only loads that group's kernels and compiles its own.
-FIGURES_AFTER_GROUP = 0
-# A kernel only the scan figures call (through ScanModel.directions_from_revs): whether they are cached.
-FIGURES_SENTINEL = "sim.scan.kernels:trace_exact_kernel"
-
-
 def _dispatcher(spec: str):
     module, name = spec.split(":")
     return getattr(importlib.import_module(module), name)
 
 
-def cache_is_cold(sentinels=None) -> bool:
-    """Whether a kernel every first frame calls (or one of ``sentinels``) has no up-to-date cache entry
-    (a fresh clone, or its source changed since).  False where numba's cache cannot be read this way
-    (then a first frame compiles what it needs itself, as before, and says so)."""
-    if sentinels is None:
-        sentinels = [spec for group in GROUPS for spec in group.sentinels]
+def cache_is_cold() -> bool:
+    """Whether a kernel every first frame calls has no up-to-date cache entry (a fresh clone, or its
+    source changed since).  False where numba's cache cannot be read this way (then a first frame
+    compiles what it needs itself, as before, and says so)."""
     try:
-        for spec in sentinels:
-            # numba's own reader: empty when the file is missing, or its source stamp is stale
-            if not _dispatcher(spec)._cache._cache_file._load_index():
-                return True
+        for group in GROUPS:
+            for spec in group.sentinels:
+                # numba's own reader: empty when the file is missing, or its source stamp is stale
+                if not _dispatcher(spec)._cache._cache_file._load_index():
+                    return True
     except Exception:      # a numba without this layout: fall back to compiling in the first frame
         return False
     return False
@@ -131,136 +116,52 @@ def compile_group(index: int, scene_path) -> None:
 
         for fill in (rk.fill_uniform_kernel, rk.fill_standard_normal_kernel):
             fill(np.random.default_rng(0), np.empty(4))
+    if "sim.scan.kernels" in GROUPS[index].modules:
+        from foveatrack.cli.demo_work import scan_analyses
+
+        scan_analyses(load_scene(scene_path).optics, short=True)      # the demo's scan figures, after its run
     if "foveatrack.recording.pack_kernels" in GROUPS[index].modules:
         from foveatrack.cli.demo_work import warm_recording_kernels
 
         warm_recording_kernels()
 
 
-def compile_figures(scene_path) -> None:
-    """Compile the kernels of the demo's scan figures for the scene's lidar (the body of the figures
-    process): what the scan kernels' group left, that group's own kernels loaded from the cache; the
-    other group's, which the figures do not call, as Python (that group may still be compiling)."""
-    import numpy as np
-
-    from foveatrack.cli.demo_work import scan_analyses
-    from sim.scan.model import ScanModel
-    from sim.scene import load_scene
-
-    run_kernels_as_python([m for i, g in enumerate(GROUPS) if i != FIGURES_AFTER_GROUP for m in g.modules])
-    optics = load_scene(scene_path).optics
-    with np.errstate(all="ignore"):
-        scan_analyses(optics, short=True)
-        # the FoV line (sim.scan.fov): the same trace kernel, in the types the FoV search calls it with
-        ScanModel(optics).directions_from_revs(np.zeros((4, len(optics.prisms))), np.zeros(4, np.int64))
-
-
-def _saying(stream):
-    return (lambda text: print(text, file=stream, flush=True)) if stream is not None else (lambda text: None)
-
-
-class _CompileProcess:
-    """One ``python -m foveatrack.cli.kernel_compile WHAT SCENE.toml``, its stderr kept for the last
-    line of a failure."""
-
-    def __init__(self, what: str, scene_path, label: str):
-        self.label = label
-        self._err = tempfile.TemporaryFile()
-        cmd = [sys.executable, "-m", "foveatrack.cli.kernel_compile", what, str(scene_path)]
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=self._err)
-
-    def running(self) -> bool:
-        return self.proc.poll() is None
-
-    def outcome(self, t0: float, if_failed: str) -> str:
-        """How it ended, to say once it has: ready after how long since ``t0``, or why not."""
-        if self.proc.returncode == 0:
-            return f"  {self.label}: ready after {time.perf_counter() - t0:.0f} s"
-        self._err.seek(0)
-        lines = self._err.read().decode(errors="replace").strip().splitlines() or ["(no message)"]
-        return f"  {self.label}: the compile process failed (exit {self.proc.returncode}: {lines[-1]}); {if_failed}"
-
-    def end(self) -> None:
-        """Kill it if it still runs (an interrupted caller must not leave a compile running)."""
-        _end(self.proc)
-        self._err.close()
-
-
-class FigureCompile:
-    """The demo's scan-figure kernels compiled by a process of their own (:func:`compile_figures`),
-    beside the run: :meth:`start` it (:func:`compile_split` does, once the scan kernels' group is
-    done), :meth:`wait` for it before the figures, :meth:`close` it in any case.  Says on ``stream``
-    (None: silent) what it does."""
-
-    LABEL = "the scan figures' kernels"
-
-    def __init__(self, scene_path, stream=None):
-        self._scene_path = scene_path
-        self._say = _saying(stream)
-        self._process: _CompileProcess | None = None
-        self._t0 = time.perf_counter()
-
-    @classmethod
-    def wanted(cls, scene_path, stream=None) -> "FigureCompile | None":
-        """One for ``scene_path`` where it pays (two cores or more, the figures' kernels not cached),
-        else None (the figures then load or compile their kernels in the caller's process)."""
-        import os
-
-        if (os.cpu_count() or 1) < 2 or not cache_is_cold([FIGURES_SENTINEL]):
-            return None
-        return cls(scene_path, stream)
-
-    def start(self) -> None:
-        if self._process is None:
-            self._process = _CompileProcess("figures", self._scene_path, f"[+] {self.LABEL}")
-            self._say(f"  {self._process.label}: compiling beside the run ...")
-
-    def wait(self) -> None:
-        """Wait for the process (starting it first if nothing did) and say how it ended; the figures
-        compile what a failed process left, in the caller's process."""
-        self.start()
-        try:
-            while self._process.running():
-                time.sleep(0.05)
-            self._say(self._process.outcome(self._t0, "the figures compile what is missing"))
-        finally:
-            self._process.end()
-
-    def close(self) -> None:
-        if self._process is not None:
-            self._process.end()
-
-
-def compile_split(scene_path, stream=None, figures: FigureCompile | None = None) -> float:
+def compile_split(scene_path, stream=None) -> float:
     """Compile the kernels of a run of ``scene_path`` in one process per group, at once, and wait
     for them; says on ``stream`` (None: silent) what it compiles and when each group is ready.
-    ``figures``: started as soon as group :data:`FIGURES_AFTER_GROUP` is ready (not waited for).
     Returns the wall time [s].  A process that fails is reported; the run then compiles what is
     missing in its first frame, as without this."""
-    say = _saying(stream)
+    say = (lambda text: print(text, file=stream, flush=True)) if stream is not None else (lambda text: None)
     n = len(GROUPS)
     say(f"compiling the numba kernels, once per install (`foveatrack warmup` does it ahead), "
         f"{n} groups in {n} processes at once:")
     t0 = time.perf_counter()
-    procs: list[_CompileProcess] = []
+    procs = []
     try:
         for i, group in enumerate(GROUPS):
-            procs.append(_CompileProcess(str(i + 1), scene_path, f"[{i + 1}/{n}] {group.name}"))
-            say(f"  {procs[-1].label} ...")
-        waiting = list(enumerate(procs))
+            err = tempfile.TemporaryFile()
+            cmd = [sys.executable, "-m", "foveatrack.cli.kernel_compile", str(i + 1), str(scene_path)]
+            procs.append((i, group, subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err), err))
+            say(f"  [{i + 1}/{n}] {group.name} ...")
+        waiting = list(procs)
         while waiting:
             for item in list(waiting):
-                i, process = item
-                if process.running():
+                i, group, proc, err = item
+                if proc.poll() is None:
                     continue
                 waiting.remove(item)
-                say(process.outcome(t0, "the first frame compiles what is missing"))
-                if figures is not None and i == FIGURES_AFTER_GROUP and process.proc.returncode == 0:
-                    figures.start()
+                if proc.returncode == 0:
+                    say(f"  [{i + 1}/{n}] {group.name}: ready after {time.perf_counter() - t0:.0f} s")
+                else:
+                    err.seek(0)
+                    lines = err.read().decode(errors="replace").strip().splitlines() or ["(no message)"]
+                    say(f"  [{i + 1}/{n}] {group.name}: the compile process failed (exit {proc.returncode}: "
+                        f"{lines[-1]}); the first frame compiles what is missing")
             time.sleep(0.05)
     finally:
-        for process in procs:
-            process.end()
+        for _, _, proc, err in procs:
+            _end(proc)                  # interrupted: do not leave a compile running
+            err.close()
     wall = time.perf_counter() - t0
     say(f"kernels compiled in {wall:.0f} s (cached next to the sources; later runs load them)")
     return wall
@@ -284,14 +185,10 @@ def _end(proc) -> None:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 2 or argv[0] not in {str(i + 1) for i in range(len(GROUPS))} | {"figures"}:
-        print(f"usage: python -m foveatrack.cli.kernel_compile GROUP(1..{len(GROUPS)}|figures) SCENE.toml",
-              file=sys.stderr)
+    if len(argv) != 2 or argv[0] not in {str(i + 1) for i in range(len(GROUPS))}:
+        print(f"usage: python -m foveatrack.cli.kernel_compile GROUP(1..{len(GROUPS)}) SCENE.toml", file=sys.stderr)
         return 2
-    if argv[0] == "figures":
-        compile_figures(Path(argv[1]))
-    else:
-        compile_group(int(argv[0]) - 1, Path(argv[1]))
+    compile_group(int(argv[0]) - 1, Path(argv[1]))
     return 0
 
 

@@ -123,14 +123,13 @@ def _others_running() -> int:
 
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
                    quiet=False, live_port=None, speed=1.0, ahead=None, recording_process=None,
-                   linger_s=0.0, live_origins=(), figures=None) -> dict:
+                   linger_s=0.0, live_origins=()) -> dict:
     """Run a scene and report it (the ``simulate`` command).  ``ahead``: trace the scan ahead on a second
     thread; ``recording_process``: write the recording from a child process.  None: both where a core is
-    free (:func:`core_free`); the results and the file are the same either way.  ``figures``: a
-    :class:`~foveatrack.cli.kernel_compile.FigureCompile` to start beside the run (the demo's)."""
+    free (:func:`core_free`); the results and the file are the same either way."""
     from foveatrack.recording import writer_process
 
-    _compile_kernels_first(scene_path, progress, figures)
+    _compile_kernels_first(scene_path, progress)
     # asked only where the caller left the choice (it samples /proc/loadavg for ~10 ms)
     spare = core_free() if ahead is None or recording_process is None else None
     if recording_process is None:
@@ -145,25 +144,20 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
             child.close()       # a no-op after the run closed it; ends the child if the run failed early
 
 
-def _compile_kernels_first(scene_path, progress: bool, figures=None) -> None:
+def _compile_kernels_first(scene_path, progress: bool) -> None:
     """On a cold numba cache (a first run after an install), compile the run's kernels in two processes
     at once (:mod:`foveatrack.cli.kernel_compile`) before anything else starts (the recording's child
-    process compiles its kernels too), not one after another inside the first frame.  ``figures``
-    (cold scan-figure kernels) starts during that split, or at once when the run's kernels are cached."""
+    process compiles its kernels too), not one after another inside the first frame."""
     from foveatrack.cli import kernel_compile
     from sim.scene import load_scene
 
-    split = kernel_compile.wants_split()
-    if not split and figures is None:
+    if not kernel_compile.wants_split():
         return
     try:
         load_scene(scene_path)      # a scene the run will refuse: let it say why, without compiling first
     except UserError:
         return
-    if split:
-        kernel_compile.compile_split(scene_path, stream=sys.stderr if progress else None, figures=figures)
-    if figures is not None:
-        figures.start()             # a no-op where the split started it
+    kernel_compile.compile_split(scene_path, stream=sys.stderr if progress else None)
 
 
 def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed, ahead,

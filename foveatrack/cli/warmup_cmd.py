@@ -2,10 +2,10 @@
 
 The kernels are compiled on first use and cached next to the sources (``cache=True``), so the first
 ``foveatrack demo`` after an install compiles them before its first frame
-(:mod:`foveatrack.cli.kernel_compile`: two processes at once, and a third for the scan figures).  This
-command does that work up front: the demo scene's kernels in those processes (when the cache is cold),
-then two frames of every shipped scene (which compiles what the other scenes add: fog, flapping wings,
-mixed pixels, ...), the scan analyses and the recording's point packing.  A second call only loads the cache and takes a few seconds.
+(:mod:`foveatrack.cli.kernel_compile`: two processes at once).  This command does that work up front:
+the demo scene's kernels in two processes (when the cache is cold), then two frames of every shipped
+scene (which compiles what the other scenes add: fog, flapping wings, mixed pixels, ...), the scan
+analyses and the recording's point packing.  A second call only loads the cache and takes a few seconds.
 """
 
 from __future__ import annotations
@@ -39,14 +39,7 @@ def warm_up(progress: bool = True, split: bool = True) -> float:
     paths = sorted(scenes_dir.glob("*.toml"))
     t0 = time.perf_counter()
     if split and kernel_compile.wants_split():
-        stream = sys.stderr if progress else None
-        figures = kernel_compile.FigureCompile.wanted(shipped_scene(DEFAULT_SCENE), stream)
-        kernel_compile.compile_split(shipped_scene(DEFAULT_SCENE), stream=stream, figures=figures)
-        if figures is not None:
-            try:
-                figures.wait()
-            finally:
-                figures.close()
+        kernel_compile.compile_split(shipped_scene(DEFAULT_SCENE), stream=sys.stderr if progress else None)
     with tqdm(total=len(paths) + 1, desc="compiling numba kernels", unit=" step", disable=not progress,
               file=sys.stderr) as bar:
         for path in paths:
