@@ -113,6 +113,16 @@ def cpu_s(pid: int) -> float | None:
         return None
 
 
+def cpu_jiffies() -> tuple[int, int] | None:
+    """(steal, all) of the machine's CPU time so far [clock ticks], from /proc/stat: the share the
+    hypervisor gave to other guests, which slows every process here without showing in the load."""
+    try:
+        f = [int(x) for x in open("/proc/stat").readline().split()[1:]]
+        return f[7], sum(f[:8])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=5.0)
@@ -195,6 +205,7 @@ watchdog_s = 2.0
     writer_rss: list[tuple[float, float]] = []   # the sum over the daemon's children (the writer)
     load_at: list[tuple[float, float]] = []
     cpu: list[tuple[float, float]] = []     # (run time, the daemon's CPU time so far) [s]
+    steal: list[tuple[float, tuple[int, int] | None]] = []     # (run time, cpu_jiffies())
     loads: list[float] = []
     t0 = None
     # SIGTERM as Ctrl-C: the daemon is stopped and the minutes so far reported (a bare SIGTERM ended
@@ -230,6 +241,7 @@ watchdog_s = 2.0
                 writer_rss.append((now - t0, sum(kids)))
             loads.append(os.getloadavg()[0])
             load_at.append((now - t0, loads[-1]))
+            steal.append((now - t0, cpu_jiffies()))
             if now >= next_minute:
                 w = f", writer RSS {writer_rss[-1][1]:.1f} MB" if kids else ""
                 print(f"  minute {int((now - t0) // 60)}: daemon RSS {r:.1f} MB{w}, load {loads[-1]:.2f}", flush=True)
@@ -264,8 +276,8 @@ watchdog_s = 2.0
         t_s = t_s - t_s.min()
     minutes = int(np.ceil(args.minutes))
     print("\n| minute | frames processed (of 600) | latency p50 [ms] | p99 [ms] | p99 vs minute 1 | max [ms] "
-          "| daemon RSS [MB] | writer RSS [MB] | daemon CPU [% of a core] | load (1-min avg) |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| daemon RSS [MB] | writer RSS [MB] | daemon CPU [% of a core] | load (1-min avg) | host steal [%] |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     p99_first = None
     over = []
     for k in range(minutes):
@@ -288,6 +300,8 @@ watchdog_s = 2.0
         row.append(f"{100.0 * (c[-1][1] - c[0][1]) / (c[-1][0] - c[0][0]):.0f}" if len(c) >= 2 else "-")
         ld = [x for t, x in load_at if k * 60.0 < t <= (k + 1) * 60.0 + 1e-6]
         row.append(f"{np.mean(ld):.2f}" if ld else "-")
+        st = [x for t, x in steal if k * 60.0 - 5.0 < t <= (k + 1) * 60.0 + 1e-6 and x is not None]
+        row.append(f"{100.0 * (st[-1][0] - st[0][0]) / max(st[-1][1] - st[0][1], 1):.1f}" if len(st) >= 2 else "-")
         print("| " + " | ".join(row) + " |")
     if p99_first is not None:
         print(f"\nlatency p99 within 20 % of minute 1's ({p99_first:.1f} ms): "
