@@ -179,3 +179,20 @@ def test_compile_all_covers_what_the_tracker_calls():
                          check=True).stdout
     before, after = out.strip().split("] [")
     assert before.lstrip("[") == after.rstrip("]"), f"signatures (median, members) before/after: {out}"
+
+
+@pytest.mark.parametrize("kind", ["random", "sorted", "reversed", "ties", "two values", "huge"])
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5, 10, 11, 64, 1001, 4096])
+def test_the_median_selection_is_numpys_median(kind, n):
+    """The box kernel's median by selection (Wirth) against np.median, bit for bit, on the orders and
+    ties that break selection algorithms (sorted and reversed input, all-equal runs, two values)."""
+    from foveatrack.kernels import _median_select
+
+    rng = np.random.default_rng(n)
+    a = {"random": rng.normal(0, 30, n), "sorted": np.sort(rng.normal(0, 30, n)),
+         "reversed": np.sort(rng.normal(0, 30, n))[::-1].copy(), "ties": rng.integers(-3, 4, n).astype(float) + 0.5,
+         "two values": np.where(rng.random(n) < 0.5, 1.25, -7.5), "huge": rng.choice([1e308, -1e308, 3.0], n)}[kind]
+    want = np.median(a)
+    with np.errstate(over="ignore"):
+        got = _median_select(a.copy(), n)
+    assert np.float64(got).tobytes() == want.tobytes(), (got, want)
