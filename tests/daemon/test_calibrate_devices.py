@@ -83,8 +83,10 @@ def test_calibrates_a_head_through_its_serial_port_and_the_lidar_stream(tmp_path
         table = SpeedTable.load(out)
         assert table.pan.is_measured(40) and not table.pan.is_measured(60)
         # The head's own dead time is 40 ms; the virtual lidar follows the head's pose 20-30 ms late
-        # (its truth file's period + a batch), which the calibration cannot tell from dead time.
-        assert 0.0 <= summary["dead_time_s"] <= 0.12
+        # (its truth file's period + a batch), which the calibration cannot tell from dead time, and
+        # later on a loaded machine (0.177 s measured beside two busy loops, load 3).  The dead time's
+        # own bar is held on the one-process rig below, whose poses are exact.
+        assert 0.0 <= summary["dead_time_s"] <= 0.3
         assert summary["command_delay_ms"]["median"] < 100
         # The STOP was the last command; the head takes its dead time and up to 0.2 s of deceleration
         # (tilt 2 deg/s at 10 deg/s^2) to come to rest, and its truth file is 20 ms behind.
@@ -177,6 +179,8 @@ def test_live_calibration_is_as_accurate_as_the_simulated_one_when_the_lidar_kno
         summary = json.loads(stdout)
         assert {(r["axis"], r["byte"]) for r in summary["entries"]} == {("pan", 40), ("tilt", 63)}, (
             summary["unmeasured"], summary.get("counters"))
+        # the head's dead time (40 ms) plus how late the head model applies a command read from the pty
+        assert 0.0 <= summary["dead_time_s"] <= 0.12, summary["dead_time_s"]
     finally:
         lidar.stop()
         done.set()
