@@ -257,12 +257,7 @@ def _head(t: Mapping, w: str) -> HeadConfig:
     if "port" not in t:
         raise UserError(f"{w}: port is required (the head's serial device, best a /dev/serial/by-id/ name, or a "
                         "pyserial URL such as socket://host:port); there is no default")
-    if "port" in t:
-        if not isinstance(t["port"], str) or not t["port"] or "\x00" in t["port"]:
-            # (a NUL reached the OS as "ValueError: embedded null byte")
-            raise UserError(f"{w}: port must be a device path (/dev/ttyUSB0) or a pyserial URL (socket://host:port)"
-                            + (", without a NUL character" if isinstance(t["port"], str) and "\x00" in t["port"] else ""))
-        kw["port"] = t["port"]
+    kw["port"] = as_path_text(t["port"], "port", w, "a device path (/dev/ttyUSB0) or a pyserial URL (socket://host:port)")
     if "baud" in t:
         from gimbal.client import STANDARD_BAUDS   # the scene's rule too (sim/scene.py)
 
