@@ -134,7 +134,6 @@ def main() -> int:
                          "file for the run, whose MCAP chunk index grows ~10 MB an hour until it closes)")
     ap.add_argument("--out", default=None, help="directory for the config, log and recording (default: a temp dir)")
     args = ap.parse_args()
-    from foveatrack.livox import protocol as P
     from sim.livox_units import HORIZON
     from sim.virtual_lidar import VirtualLivox
 
@@ -296,11 +295,14 @@ watchdog_s = 2.0
         for series in (rss, writer_rss):
             r_end = [r for t, r in series if t <= (k + 1) * 60.0]
             row.append(f"{r_end[-1]:.1f}" if r_end else "-")
-        c = [(t, x) for t, x in cpu if k * 60.0 - 5.0 < t <= (k + 1) * 60.0 + 1e-6 and x is not None]
+        def over_minute(series):    # the minute's samples and the one before it: its rate of change
+            return [(t, x) for t, x in series if k * 60.0 - 5.0 < t <= (k + 1) * 60.0 + 1e-6 and x is not None]
+
+        c = over_minute(cpu)
         row.append(f"{100.0 * (c[-1][1] - c[0][1]) / (c[-1][0] - c[0][0]):.0f}" if len(c) >= 2 else "-")
         ld = [x for t, x in load_at if k * 60.0 < t <= (k + 1) * 60.0 + 1e-6]
         row.append(f"{np.mean(ld):.2f}" if ld else "-")
-        st = [x for t, x in steal if k * 60.0 - 5.0 < t <= (k + 1) * 60.0 + 1e-6 and x is not None]
+        st = [x for _, x in over_minute(steal)]
         row.append(f"{100.0 * (st[-1][0] - st[0][0]) / max(st[-1][1] - st[0][1], 1):.1f}" if len(st) >= 2 else "-")
         print("| " + " | ".join(row) + " |")
     if p99_first is not None:
