@@ -120,15 +120,16 @@ class OriginGate:
                 head += b
             origin = request_origin(head.split(b"\r\n\r\n", 1)[0])
             if not self.allows(origin):
-                body = b"Origin not allowed by the live view (foveatrack --live-origin)\n"
-                conn.sendall(b"HTTP/1.1 403 Forbidden\r\nContent-Type: text/plain\r\nContent-Length: "
-                             + str(len(body)).encode() + b"\r\nConnection: close\r\n\r\n" + body)
+                # said before the 403 goes out: whoever saw the refusal can find the line that explains it
                 with self._lock:
                     first = origin not in self.refused
                     if first:
                         self.refused.append(origin)
                 if first and self.on_refused is not None:
                     self.on_refused(origin)
+                body = b"Origin not allowed by the live view (foveatrack --live-origin)\n"
+                conn.sendall(b"HTTP/1.1 403 Forbidden\r\nContent-Type: text/plain\r\nContent-Length: "
+                             + str(len(body)).encode() + b"\r\nConnection: close\r\n\r\n" + body)
                 return
             conn.settimeout(None)
             up = socket.create_connection(self.upstream, timeout=REQUEST_TIMEOUT_S)
