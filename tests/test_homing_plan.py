@@ -96,3 +96,22 @@ def test_a_moving_target_is_looked_for_where_it_went():
     # a homing that must prove the head behind a reappeared link is ours goes home
     p = plan_homing(HEAD, b, now_s=9.0, prove_identity=True)
     assert p.goal == "home" and "reappeared" in p.why
+
+
+def test_a_blind_wait_that_nothing_ends_early_is_looked_through():
+    # the target crossing at -2.4 deg/s, last seen 1 s before the plan; the absolute sets go out 0.6 s
+    # later and tracking resumes after a 3 s wait: it is looked for where it will be then, 4.6 s on
+    b = Bearings()
+    for k in range(11):
+        b.saw(7.0 + 0.1 * k, _at(3.0 - 2.4 * 0.1 * k, 4.0))
+    head = replace(HEAD, home_wait_s=3.0)
+    now = 9.0
+    p = plan_homing(head, b, now, setup_s=0.6, wait_ends_early=False)
+    assert p.pan_deg == pytest.approx(0.6 - 2.4 * (1.0 + 0.6 + 3.0), abs=1e-6), p
+    assert p.wait_s == 3.0 and "4.6 s after" in p.why
+    # a pose check may end the wait at once: only the quiet line is looked through
+    p = plan_homing(head, b, now, setup_s=0.6, wait_ends_early=True)
+    assert p.pan_deg == pytest.approx(0.6 - 2.4 * 1.6, abs=1e-6)
+    # the worst-case wait (no home_wait_s, 43 s to tilt 4): carried on by at most MAX_EXTRAPOLATION_DEG
+    p = plan_homing(HEAD, b, now, setup_s=0.6, wait_ends_early=False)
+    assert p.pan_deg == pytest.approx(0.6 - 30.0)

@@ -95,12 +95,13 @@ class HeadPose:
             # (foveatrack.daemon.homing_plan); with a pose check, detections after its last "ok" are not trusted
             g = self.pose_guard
             trusted = None if g.check is None else (g.last_ok_t_s if g.last_ok_t_s is not None else -math.inf)
-            plan = self._homing = plan_homing(h, self.bearings, self.sensor_now_s(now), trusted, g.identity_pending)
+            quiet = ABS_SET_QUIET_S
+            plan = self._homing = plan_homing(h, self.bearings, self.sensor_now_s(now), trusted, g.identity_pending,
+                                              setup_s=2 * quiet, wait_ends_early=g.check is not None)
             self._homing_confirm = HomingConfirm() if g.check is not None else None
             self.log.event("head_homing_plan", **plan.as_event())
             pan, tilt = plan.pan_deg, plan.tilt_deg
             tz = getattr(self.head.client, "tilt_zero", "zenith")
-            quiet = ABS_SET_QUIET_S
             # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile
             self._home_steps = [(now + quiet, "pan", encode_set_pan(h.address, pan, h.protocol)),
                                 (now + 2 * quiet, "tilt", encode_set_tilt(h.address, tilt, h.protocol, tz)),

@@ -10,9 +10,13 @@ the home view by then (issue 26: 0 of 160 frames detected afterwards).  Now:
   (:class:`Bearings`: the world position of each detection as bearing angles), if it is no older than
   ``BEARING_MAX_AGE_S`` of sensor time and the head's pose was trusted then (a pose check that later
   said "mismatch" voids the detections after the last check that said "ok": they were placed with a
-  wrong pose), carried on to now at its rate over the last ``RATE_SPAN_S`` of detections (at most
+  wrong pose), carried on at its rate over the last ``RATE_SPAN_S`` of detections (at most
   ``MAX_EXTRAPOLATION_DEG``: a UAV crossing at 2.4 deg/s is 18 deg on after a 7.7 s head restart,
-  out of a Mid-40's view from where it was last seen); else home.  Home too when the homing must
+  out of a Mid-40's view from where it was last seen) to the moment tracking resumes: the absolute
+  sets' quiet line, and the blind wait too unless a pose check may end it early (carried on only to
+  the plan's time, a UAV crossing at 2 deg/s was 10-12 deg off when a 3.6 s homing ended, at the
+  rim of the view, and the paper's controller, which stops on every empty frame, took over 7 s to
+  catch it); else home.  Home too when the homing must
   prove the head behind a reappeared link is ours (the pose check must see the lidar move: a goal
   where it already points proves nothing).  The tilt is kept ``tilt_margin_deg`` inside the stops.
 * **how long** (worst case): the head's pose is unknown (the PTS-303H reports none, and
@@ -126,13 +130,17 @@ def worst_case_s(head, tilt_goal_deg: float) -> float:
 
 
 def plan_homing(head, bearings: Bearings | None, now_s: float | None,
-                trusted_until_s: float | None = None, prove_identity: bool = False) -> HomingPlan:
+                trusted_until_s: float | None = None, prove_identity: bool = False,
+                setup_s: float = 0.0, wait_ends_early: bool = True) -> HomingPlan:
     """Where to drive a head whose pose is unknown, and how long to wait (module docstring).
 
     head : :class:`foveatrack.device_config.HeadConfig`; bearings : the last detections' bearings;
     now_s : sensor time now (None: unknown, no bearing is recent); trusted_until_s : detections after
     this sensor time were placed with a pose since found wrong (None: all trusted); prove_identity:
-    the homing must show the head behind a reappeared link is ours (home: module docstring)."""
+    the homing must show the head behind a reappeared link is ours (home: module docstring);
+    setup_s : from now until the absolute sets are written [s]; wait_ends_early : a pose check may end
+    the blind wait at once (False: tracking resumes only after it, so the bearing is carried on
+    through it too)."""
     home_pan, home_tilt = head.home_deg
     b = None if bearings is None or now_s is None or prove_identity else bearings.last(trusted_until_s)
     lo, hi = head.tilt_limits_deg
@@ -140,12 +148,19 @@ def plan_homing(head, bearings: Bearings | None, now_s: float | None,
     if b is not None and now_s - b.t_s <= BEARING_MAX_AGE_S:
         age = max(now_s - b.t_s, 0.0)
         rp, rt = bearings.rate_deg_s(b)
-        dp, dt = (min(max(r * age, -MAX_EXTRAPOLATION_DEG), MAX_EXTRAPOLATION_DEG) for r in (rp, rt))
-        pan = (b.pan_deg + dp + 180.0) % 360.0 - 180.0
-        tilt = min(max(b.tilt_deg + dt, lo + m), hi - m)
+
+        def carried(lead_s):
+            dp, dt = (min(max(r * lead_s, -MAX_EXTRAPOLATION_DEG), MAX_EXTRAPOLATION_DEG) for r in (rp, rt))
+            return (b.pan_deg + dp + 180.0) % 360.0 - 180.0, min(max(b.tilt_deg + dt, lo + m), hi - m)
+
+        lead = age + max(setup_s, 0.0)
+        pan, tilt = carried(lead)
+        if not wait_ends_early:    # the wait depends on the goal's tilt (worst case): that of the goal before it
+            lead += head.home_wait_s if head.home_wait_s is not None else worst_case_s(head, tilt)
+            pan, tilt = carried(lead)
         goal = "last_bearing"
         why = (f"the target was last seen at {b.pan_deg:.1f}/{b.tilt_deg:.1f} deg {age:.1f} s ago, moving "
-               f"{rp:+.2f}/{rt:+.2f} deg/s")
+               f"{rp:+.2f}/{rt:+.2f} deg/s; looked for where it is {lead:.1f} s after it was seen")
     else:
         pan, tilt, goal = home_pan, home_tilt, "home"
         why = ("the homing must show the head behind the reappeared link is ours" if prove_identity else

@@ -229,19 +229,24 @@ def test_fault4_a_head_back_at_its_power_on_pose_is_homed_before_tracking_resume
     # no tracker command reached the head between its return and the end of homing
     homed_events = [e for e in r.records("daemon") if e.get("event") == "tracker_rebased"]
     assert homed_events and homed_events[-1]["reason"] == "head_homed"
-    # the dead reckoning agrees with where the head really is (a wrong pose once locked onto the ground)
-    est = r.records("head")[-1]
-    assert abs(est["pan_deg"] - rows[-1]["pan_deg"]) < 1.5, (est, rows[-1])
-    assert abs(est["tilt_deg"] - rows[-1]["tilt_deg"]) < 0.5, (est, rows[-1])
+    # the dead reckoning agrees with where the head really is (a wrong pose once locked onto the ground).
+    # Compared at rest: the head runs on after the last frame until the shutdown STOP and its ramp
+    # (up to 3.7 deg at 15 deg/s), so the last frame's estimate is not where the head stopped; replay,
+    # equal to the run to the bit (below), carries the dead reckoning through the STOP to rest.
+    pan_rest, tilt_rest = replay_recording(rec).final_pose_deg
+    assert abs(pan_rest - rows[-1]["pan_deg"]) < 1.0, ((pan_rest, tilt_rest), rows[-1])
+    assert abs(tilt_rest - rows[-1]["tilt_deg"]) < 0.5, ((pan_rest, tilt_rest), rows[-1])
     # tracking resumed: the UAV detected again after the homing, inside D (not the ground)
     dets = RecordingReader(rec).records("detections")
     t_home = homed_events[-1]["t0_s"]
     after = [d for d in dets if d["t_ns"] * 1e-9 > t_home]
     errs = [abs(d["error_pan_deg"]) for d in after if d["detected"]]
     assert len(errs) >= 10, errs
-    # the UAV drifted off while the head was down and homing; the head turns onto it again (how fast
-    # is the paper's controller's business: it stops on every empty frame; 4-6 s from 17 deg off)
-    assert min(errs[-3:]) < 5.0, errs
+    # the UAV drifted on while the head was down and homing: the homing looked for it where it would be
+    # when tracking resumed (0.2-3.4 deg off in 5 runs; looked for where it was when the plan was made,
+    # it was 10-12 deg off, at the rim, and the paper's controller, stopping on every empty frame, took
+    # over 7 s to bring it in), and the head stays on it
+    assert np.median(errs[:5]) < 5.0 and min(errs[-3:]) < 5.0, errs
     # the UAV is ~12 m away; nothing else is taken for it, also while the head was gone (frames are not
     # tracked from the moment its link was lost: a dead-reckoned world without a head once saw 23-32 m)
     assert all(np.linalg.norm(d["xyz_m"]) < 20.0 for d in dets if d["detected"])
