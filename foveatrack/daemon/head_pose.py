@@ -95,10 +95,10 @@ class HeadPose:
             # (foveatrack.daemon.homing_plan); with a pose check, detections after its last "ok" are not trusted
             g = self.pose_guard
             trusted = None if g.check is None else (g.last_ok_t_s if g.last_ok_t_s is not None else -math.inf)
-            quiet = ABS_SET_QUIET_S
+            quiet, confirmable = ABS_SET_QUIET_S, g.check is not None
             plan = self._homing = plan_homing(h, self.bearings, self.sensor_now_s(now), trusted, g.identity_pending,
-                                              setup_s=2 * quiet, wait_ends_early=g.check is not None)
-            self._homing_confirm = HomingConfirm() if g.check is not None else None
+                                              setup_s=2 * quiet, wait_ends_early=confirmable)
+            self._homing_confirm = HomingConfirm() if confirmable else None
             self.log.event("head_homing_plan", **plan.as_event())
             pan, tilt = plan.pan_deg, plan.tilt_deg
             tz = getattr(self.head.client, "tilt_zero", "zenith")

@@ -129,6 +129,12 @@ def worst_case_s(head, tilt_goal_deg: float) -> float:
     return 180.0 / head.pan_speed_max_deg_s + tilt_travel / head.tilt_speed_max_deg_s + RAMP_S
 
 
+def blind_wait_s(head, tilt_goal_deg: float) -> float:
+    """The blind wait after the absolute sets to tilt ``tilt_goal_deg`` [s]: ``home_wait_s`` where the
+    config gives it, else the worst case of the move (:func:`worst_case_s`)."""
+    return head.home_wait_s if head.home_wait_s is not None else worst_case_s(head, tilt_goal_deg)
+
+
 def plan_homing(head, bearings: Bearings | None, now_s: float | None,
                 trusted_until_s: float | None = None, prove_identity: bool = False,
                 setup_s: float = 0.0, wait_ends_early: bool = True) -> HomingPlan:
@@ -156,7 +162,7 @@ def plan_homing(head, bearings: Bearings | None, now_s: float | None,
         lead = age + max(setup_s, 0.0)
         pan, tilt = carried(lead)
         if not wait_ends_early:    # the wait depends on the goal's tilt (worst case): that of the goal before it
-            lead += head.home_wait_s if head.home_wait_s is not None else worst_case_s(head, tilt)
+            lead += blind_wait_s(head, tilt)
             pan, tilt = carried(lead)
         goal = "last_bearing"
         why = (f"the target was last seen at {b.pan_deg:.1f}/{b.tilt_deg:.1f} deg {age:.1f} s ago, moving "
@@ -166,9 +172,7 @@ def plan_homing(head, bearings: Bearings | None, now_s: float | None,
         why = ("the homing must show the head behind the reappeared link is ours" if prove_identity else
                "no detection while the pose was trusted" if b is None else
                f"the last detection is {now_s - b.t_s:.0f} s old (> {BEARING_MAX_AGE_S:.0f} s)")
-    worst = worst_case_s(head, tilt)
-    wait = head.home_wait_s if head.home_wait_s is not None else worst
-    return HomingPlan(pan, tilt, goal, wait, worst, why)
+    return HomingPlan(pan, tilt, goal, blind_wait_s(head, tilt), worst_case_s(head, tilt), why)
 
 
 class HomingConfirm:
