@@ -302,6 +302,13 @@ class PoseCheckResult:
     pan_observable: bool = False
     tilt_observable: bool = False
 
+    def vouches(self, within_deg: float = 1.0) -> bool:
+        """Whether this check vouches for the pose the detections before it were placed with: "ok" with
+        an offset within ``within_deg`` (drift between two checks is ~0.1 deg; a larger offset says the
+        pose was going wrong, e.g. a check of the frame in which the head lost power, "ok" at 2.85 deg,
+        match 0.65, after which the detections carried the dead reckoning's 13 deg/s)."""
+        return self.kind == "ok" and max(abs(self.dpan_deg), abs(self.dtilt_deg)) <= within_deg
+
     def as_event(self) -> dict:
         return {"kind": self.kind, "dpan_deg": round(self.dpan_deg, 3), "dtilt_deg": round(self.dtilt_deg, 3),
                 "points": self.points, "coverage": round(self.coverage, 3), "match": round(self.match, 3),

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import pytest
 
-from foveatrack.daemon.homing_plan import (BEARING_MAX_AGE_S, Bearings, HomingConfirm, bearing_deg, plan_homing,
+from foveatrack.daemon.homing_plan import (BEARING_MAX_AGE_S, Bearings, HomingConfirm, HomingSteps, bearing_deg, plan_homing,
                                            worst_case_s)
 from foveatrack.device_config import HeadConfig
 from foveatrack.pose_check import PoseCheckResult
@@ -68,19 +68,50 @@ def _ok(dp, dt=0.0):
     return PoseCheckResult("ok", dp, dt, 500, 0.9, 0.9, 0.9, True, True)
 
 
-def test_the_wait_ends_on_three_checks_at_rest_at_the_goal():
+def test_the_wait_ends_on_six_checks_at_rest_at_the_goal():
     c = HomingConfirm()
     assert not c.feed(None) and not c.feed(PoseCheckResult("inconclusive"))
     assert not c.feed(_ok(4.0))             # still on the way (beyond 1.5 deg)
     assert not c.feed(_ok(1.2)) and not c.feed(_ok(0.4))
-    assert not c.feed(_ok(-0.3))            # near, but moving: 1.5 deg between the three
-    assert not c.feed(_ok(-0.2))
-    assert c.feed(_ok(-0.25))               # three within 0.5 deg of each other
+    assert not c.feed(_ok(-0.3))            # near, but moving: 1.5 deg between them
+    for dp in (-0.2, -0.25, -0.1, -0.2):
+        assert not c.feed(_ok(dp))          # fewer than six at rest so far
+    assert c.feed(_ok(-0.15))               # six within 0.3 deg of each other
     c2 = HomingConfirm()
-    c2.feed(_ok(0.1)), c2.feed(_ok(0.1))
+    for _ in range(4):
+        c2.feed(_ok(0.1))
     assert not c2.feed(PoseCheckResult("mismatch", 8.0))     # a mismatch breaks the run
-    c2.feed(_ok(0.1)), c2.feed(_ok(0.1))
+    for _ in range(5):
+        assert not c2.feed(_ok(0.1))
     assert c2.feed(_ok(0.1))
+
+
+def test_a_slow_tilt_passing_through_the_goal_is_not_at_rest():
+    # a tilt set moves at 2 deg/s: 0.2 deg a frame at 10 Hz; three checks within 0.5 deg once ended
+    # a wait 1 deg short of the goal (the head still on its way)
+    c = HomingConfirm()
+    assert not any([c.feed(_ok(0.0, -1.5 + 0.2 * k)) for k in range(15)])   # through the goal and on
+    # then at rest 0.5 deg beyond it, with the checks' own scatter: confirmed by the sixth
+    assert [c.feed(_ok(0.0, 0.5 + d)) for d in (0.05, -0.05, 0.1, 0.0, 0.05, -0.1)] == [False] * 5 + [True]
+
+
+def test_each_homing_write_waits_its_gap_after_the_previous_write_as_it_was_made():
+    s = HomingSteps([(0.3, "pan", b"P"), (0.3, "tilt", b"T"), (3.0, "done", None)], t0=10.0)
+    assert s.pop_due(10.29) is None
+    assert s.pop_due(10.39) == ("pan", b"P")      # a late tick: the pan set 0.09 s late
+    assert s.pop_due(10.6) is None                 # nothing is due before the write is known
+    s.written(10.395)
+    assert s.pop_due(10.6) is None                 # planned at t0 + 0.6, but only 0.205 s after the pan
+    assert s.pop_due(10.69, confirmed=True) is None   # a confirmed wait skips only the "done" step
+    assert s.pop_due(10.695) == ("tilt", b"T")
+    s.written(10.70)
+    assert s.pop_due(13.6) is None and s
+    assert s.pop_due(13.6, confirmed=True) == ("done", None)   # the background confirmed it early
+    assert not s and s.pop_due(1e9) is None
+    t = HomingSteps([(0.3, "pan", b"P"), (3.0, "done", None)], t0=0.0)
+    t.pop_due(0.3), t.written(0.3)
+    assert t.pop_due(3.29) is None and t.pop_due(3.3) == ("done", None)
+    assert not HomingSteps() and HomingSteps().pop_due(5.0) is None
 
 
 def test_a_moving_target_is_looked_for_where_it_went():
@@ -115,3 +146,11 @@ def test_a_blind_wait_that_nothing_ends_early_is_looked_through():
     # the worst-case wait (no home_wait_s, 43 s to tilt 4): carried on by at most MAX_EXTRAPOLATION_DEG
     p = plan_homing(HEAD, b, now, setup_s=0.6, wait_ends_early=False)
     assert p.pan_deg == pytest.approx(0.6 - 30.0)
+
+
+def test_a_check_vouches_for_the_pose_only_when_it_found_little_to_correct():
+    # the check of the frame in which the head lost power: "ok" (within the 3 deg bound), 2.85 deg off
+    assert not PoseCheckResult("ok", -2.85, -1.8, 900, 0.6, 0.649).vouches()
+    assert PoseCheckResult("ok", -0.1, 0.05, 900, 0.9, 0.9).vouches()
+    assert not PoseCheckResult("mismatch", 0.0, 0.0).vouches() and not PoseCheckResult("inconclusive").vouches()
+    assert PoseCheckResult("ok", 0.0, -1.0).vouches() and not PoseCheckResult("ok", 0.0, -1.01).vouches()

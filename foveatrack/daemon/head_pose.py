@@ -13,7 +13,7 @@ import math
 import time
 from dataclasses import asdict, dataclass
 
-from foveatrack.daemon.homing_plan import HomingConfirm, plan_homing
+from foveatrack.daemon.homing_plan import HomingConfirm, HomingSteps, plan_homing
 from foveatrack.daemon.record_queue import _job_event
 from foveatrack.recording.records import ns
 from foveatrack.turn_witness import MoveWitness
@@ -76,7 +76,7 @@ class HeadPose:
         :meth:`_reconnected` has done what ``[head] on_reconnect`` says."""
         h = self.cfg.head
         self.pose_state = "unknown"
-        self._home_steps = []
+        self._home_steps = HomingSteps()
         self.counters["head_pose_unknown"] += 1
         self.log.event("head_pose_unknown", why=why, on_reconnect=h.on_reconnect, frames=self.counters["frames"])
         self._record(_job_event, ns(self.sensor_now_s(now) or 0.0),
@@ -86,15 +86,16 @@ class HeadPose:
         """The link is back (its first frame was STOP): home the head if the config says so."""
         h = self.cfg.head
         self.head.stop()
-        self._home_steps = []
+        self._home_steps = HomingSteps()
         self._homing_t0 = now
         if h.on_reconnect == "home":
             from gimbal.pelco import encode_set_pan, encode_set_tilt
 
             # the target's last trusted bearing first, else home; the worst-case wait to that goal
-            # (foveatrack.daemon.homing_plan); with a pose check, detections after its last "ok" are not trusted
+            # (foveatrack.daemon.homing_plan); with a pose check, detections after the last check that
+            # vouched for the pose are not trusted
             g = self.pose_guard
-            trusted = None if g.check is None else (g.last_ok_t_s if g.last_ok_t_s is not None else -math.inf)
+            trusted = None if g.check is None else (g.trusted_until_s if g.trusted_until_s is not None else -math.inf)
             quiet, confirmable = ABS_SET_QUIET_S, g.check is not None
             plan = self._homing = plan_homing(h, self.bearings, self.sensor_now_s(now), trusted, g.identity_pending,
                                               setup_s=2 * quiet, wait_ends_early=confirmable)
@@ -102,10 +103,12 @@ class HeadPose:
             self.log.event("head_homing_plan", **plan.as_event())
             pan, tilt = plan.pan_deg, plan.tilt_deg
             tz = getattr(self.head.client, "tilt_zero", "zenith")
-            # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile
-            self._home_steps = [(now + quiet, "pan", encode_set_pan(h.address, pan, h.protocol)),
-                                (now + 2 * quiet, "tilt", encode_set_tilt(h.address, tilt, h.protocol, tz)),
-                                (now + 2 * quiet + plan.wait_s, "done", None)]
+            # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile, and
+            # each step's gap counts from the previous write as it happened, not as it was planned (a
+            # late 10 Hz tick once left the tilt set 0.205 s after the pan set; the head ignored it)
+            self._home_steps = HomingSteps([(quiet, "pan", encode_set_pan(h.address, pan, h.protocol)),
+                                            (quiet, "tilt", encode_set_tilt(h.address, tilt, h.protocol, tz)),
+                                            (plan.wait_s, "done", None)], time.monotonic())  # after the STOP
 
     def _pose_tick(self, now: float) -> None:
         h = self.cfg.head
@@ -119,13 +122,14 @@ class HeadPose:
                 self.head.stop()
             return
         confirmed = self.pose_state == "homing" and self._homing_confirm is not None and self._homing_confirm.confirmed
-        while self._home_steps and (now >= self._home_steps[0][0] or (confirmed and self._home_steps[0][1] == "done")):
-            _, step, raw = self._home_steps.pop(0)
+        while (due := self._home_steps.pop_due(now, confirmed)) is not None:
+            step, raw = due
             plan = self._homing
             if step in ("pan", "tilt"):
                 if not self.head.send_raw(raw, "homing"):
                     self.log.event("head_homing_failed", step=step)
                     return self._pose_unknown(now, "homing_write_failed")   # again once the link is back
+                self._home_steps.written(time.monotonic())
                 self.pose_state = "homing"
                 self.log.event("head_homing", axis=step, home_deg=[plan.pan_deg, plan.tilt_deg], goal=plan.goal,
                                worst_case_s=round(plan.worst_case_s, 3))

@@ -9,8 +9,8 @@ the home view by then (issue 26: 0 of 160 frames detected afterwards).  Now:
 * **where** (:func:`plan_homing`): the target's last known bearing, where the tracker last saw it
   (:class:`Bearings`: the world position of each detection as bearing angles), if it is no older than
   ``BEARING_MAX_AGE_S`` of sensor time and the head's pose was trusted then (a pose check that later
-  said "mismatch" voids the detections after the last check that said "ok": they were placed with a
-  wrong pose), carried on at its rate over the last ``RATE_SPAN_S`` of detections (at most
+  said "mismatch" voids the detections after the last check that vouched for the pose, "ok" within
+  1 deg: they were placed with a wrong pose), carried on at its rate over the last ``RATE_SPAN_S`` of detections (at most
   ``MAX_EXTRAPOLATION_DEG``: a UAV crossing at 2.4 deg/s is 18 deg on after a 7.7 s head restart,
   out of a Mid-40's view from where it was last seen) to the moment tracking resumes: the absolute
   sets' quiet line, and the blind wait too unless a pose check may end it early (carried on only to
@@ -30,6 +30,8 @@ the home view by then (issue 26: 0 of 160 frames detected afterwards).  Now:
   the background map at the goal pose (:class:`HomingConfirm`); ``CONFIRM_CHECKS`` conclusive checks
   in a row that put the head within ``CONFIRM_DEG`` of the goal, agreeing with each other within
   ``CONFIRM_REST_DEG`` (at rest, not passing through), end the wait at once.
+* **when** (:class:`HomingSteps`): each write a quiet line after the previous one *as it was made*
+  (the head ignores an absolute set that follows another frame too closely).
 
 Pure: no I/O, no clock; the daemon (:meth:`foveatrack.daemon.runtime.Daemon._reconnected`,
 ``_pose_tick``) calls it.
@@ -44,9 +46,11 @@ from dataclasses import dataclass
 BEARING_MAX_AGE_S = 30.0   # a bearing older than this [s of sensor time] is not searched first
 RATE_SPAN_S = 1.0          # the bearing's rate is fitted over the detections of this last span [s]
 MAX_EXTRAPOLATION_DEG = 30.0   # the bearing is carried on at its rate by at most this much [deg]
-CONFIRM_CHECKS = 3         # conclusive pose checks in a row at the goal that end the wait
+CONFIRM_CHECKS = 6         # conclusive pose checks in a row at the goal that end the wait (0.5 s at 10 Hz)
 CONFIRM_DEG = 1.5          # |offset| from the goal each must be within [deg]
-CONFIRM_REST_DEG = 0.5     # and they must agree within this [deg] (the head at rest there)
+CONFIRM_REST_DEG = 0.3     # and they must agree within this [deg]: the head at rest there (a tilt set
+                           # moves at 2 deg/s: 1 deg over the six; three checks within 0.5 deg once
+                           # ended a wait 1 deg short of the goal, the head still on its way)
 RAMP_S = 1.0               # ramps and dead time added to the travel time [s]
 
 
@@ -196,3 +200,34 @@ class HomingConfirm:
                 max(v[k] for v in recent) - min(v[k] for v in recent) <= CONFIRM_REST_DEG for k in (0, 1)):
             self.confirmed = True
         return self.confirmed
+
+
+class HomingSteps:
+    """The homing's writes in order, each due ``gap_s`` after the previous write as it was really made
+    (not as planned: a 10 Hz tick that fired the pan set 0.09 s late left the tilt set 0.205 s after
+    it, under the PTS family's 0.2 s quiet line plus the frame's time on the wire, and the head
+    ignored it).  ``steps``: ``(gap_s, name, frame)``, the first gap counted from ``t0``; the last,
+    ``"done"``, may come early once the wait is confirmed (:class:`HomingConfirm`)."""
+
+    def __init__(self, steps=(), t0: float = 0.0):
+        self._steps = list(steps)
+        self.due = t0 + self._steps[0][0] if self._steps else math.inf
+
+    def __bool__(self) -> bool:
+        return bool(self._steps)
+
+    def pop_due(self, now: float, confirmed: bool = False):
+        """The next ``(name, frame)`` if it is due at host time ``now``, else None."""
+        if self._steps and (now >= self.due or (confirmed and self._steps[0][1] == "done")):
+            _, name, frame = self._steps.pop(0)
+            self.due = math.inf        # until written() says when the previous write was made
+            if name == "done":
+                self._steps.clear()
+            return name, frame
+        return None
+
+    def written(self, t: float) -> None:
+        """The popped frame went out at host time ``t``: the next step is due its gap after it."""
+        if self._steps:
+            self.due = t + self._steps[0][0]
+

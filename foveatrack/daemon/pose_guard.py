@@ -51,7 +51,9 @@ class PoseGuard:
         self.check = PoseCheck(pc, config.tracker.lidar_offset_m) if pc.enabled else None
         self.warnings: list[str] = []
         self.identity_pending = False   # a link came back: the first conclusive check after homing decides
-        self.last_ok_t_s: float | None = None   # the frame end of the last check that said "ok" [sensor s]
+        # the frame end of the last check that vouched for the pose (PoseCheckResult.vouches) [sensor s]:
+        # a homing trusts no detection after it
+        self.trusted_until_s: float | None = None
 
     def compile(self) -> None:
         """Compile (or load from numba's cache) the kernel before data flows."""
@@ -115,7 +117,8 @@ class PoseGuard:
             d.log.event("head_identity", verified=True, by="pose_check", port=d.cfg.head.port,
                         dpan_deg=round(res.dpan_deg, 3), dtilt_deg=round(res.dtilt_deg, 3))
         if res.kind == "ok":
-            self.last_ok_t_s = frame.t_end_s
+            if res.vouches():
+                self.trusted_until_s = frame.t_end_s
             dp, dt = self.check.correction(res)
             t_s = frame.t_start_s
             if (dp or dt) and d.tracker.correct_pose(t_s, dp, dt):

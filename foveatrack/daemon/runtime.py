@@ -44,7 +44,7 @@ from collections import Counter, deque
 
 from foveatrack.daemon.frame_loop import FrameLoop, _HeadSink
 from foveatrack.daemon.head_pose import ABS_SET_QUIET_S, HeadPose  # noqa: F401  (ABS_SET_QUIET_S: its old home)
-from foveatrack.daemon.homing_plan import Bearings, HomingConfirm, HomingPlan
+from foveatrack.daemon.homing_plan import Bearings, HomingConfirm, HomingPlan, HomingSteps
 from foveatrack.daemon.lifecycle import Lifecycle
 from foveatrack.daemon.pose_guard import PoseGuard
 from foveatrack.daemon.record_queue import DaemonRecording, _job_event, _job_frame  # noqa: F401
@@ -115,7 +115,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
         self.recording_path = None
         self.epoch = 0                      # the sensor clock's epoch (foveatrack.sensor_time)
         self.pose_state: str | None = None  # None (known), "unknown", "homing" (after a head reconnect)
-        self._home_steps: list = []         # (host time, step) of the homing under way
+        self._home_steps = HomingSteps()    # the writes of the homing under way
         self.last_frame_end_s: float | None = None
         self.pending: deque = deque()             # complete frames not yet processed, (frame, host arrival)
         self.frame_times: deque = deque(maxlen=50)   # host times of the last frames processed (status rate)
