@@ -93,6 +93,9 @@ class Attention:
     served_s: dict = field(default_factory=dict)
     _revisit_start_s: float = 0.0
     _revisit_dwell_s: float = 0.0
+    verifying: int | None = None         # the candidate the fovea is turned to while nothing is confirmed
+    _verify_start_s: float = 0.0
+    _verify_dwell_s: float = 0.0
 
     def pin(self, track_id: int | None) -> None:
         """An operator's choice: this track is the priority while it lives (None: unpin)."""
@@ -134,13 +137,31 @@ class Attention:
                 self._revisit_dwell_s = 0.0
         self.target = self.revisit if self.revisit is not None else self.priority
         if self.target is None:
-            # nothing confirmed: look at the likeliest candidate (the most hits off the scenery, then
-            # the lower id), so that the fovea resolves what the sparse rim of the field only hints at
-            cands = sorted((-v.clear_hits, v.track_id) for v in views
-                           if not v.confirmed and v.clear_hits >= cfg.verify_min_hits)
-            if cands:
-                self.target = cands[0][1]
+            self.target = self._verify(t_s, views, in_fovea, dt_s)
+        else:
+            self.verifying = None
         return self.target
+
+    def _verify(self, t_s: float, views, in_fovea: set[int], dt_s: float) -> int | None:
+        """Nothing confirmed: look at the likeliest candidate (the most hits off the scenery, then the
+        lower id), so that the fovea resolves what the sparse rim of the field only hints at.  Held
+        like a revisit, until it has been in the fovea for ``dwell_s`` or ``saccade_timeout_s`` has
+        passed (re-chosen every frame, the head turned to one rim candidate and back to another and
+        neither was ever in the fovea)."""
+        cfg = self.cfg
+        cands = {v.track_id: v for v in views if not v.confirmed and v.clear_hits >= cfg.verify_min_hits}
+        if self.verifying is not None:
+            if self.verifying in cands:
+                if self.verifying in in_fovea:
+                    self._verify_dwell_s += dt_s
+                if self._verify_dwell_s < cfg.dwell_s and t_s - self._verify_start_s < cfg.saccade_timeout_s:
+                    return self.verifying
+            self.verifying = None
+        order = sorted((-v.clear_hits, tid) for tid, v in cands.items())
+        if order:
+            self.verifying = order[0][1]
+            self._verify_start_s, self._verify_dwell_s = t_s, 0.0
+        return self.verifying
 
 
 def bearing_off_axis_deg(p_world, rows, offset) -> float:

@@ -1,6 +1,7 @@
 """The fovea's schedule: priority by threat score, revisits of the other drones, return, pin."""
 
 import numpy as np
+import pytest
 
 from foveatrack.sky.attention import Attention, AttentionConfig, threat_score
 from foveatrack.sky.tracks import TrackView
@@ -77,3 +78,31 @@ def test_pin_overrides_the_score_while_the_track_lives():
     assert att.target == 1
     att.update(0.3, views[:1], set(), 0.1)                 # the pinned track is gone: unpinned
     assert att.target == 0 and att.pinned is None
+
+
+def _cand(tid, hits):
+    return TrackView(tid, False, "unknown", np.zeros(3), np.zeros(3), True, True, {}, clear_hits=hits)
+
+
+def test_a_candidate_being_verified_holds_the_fovea_until_dwell_or_timeout():
+    # two rim candidates whose hit counts take turns leading: re-chosen every frame, the head turned to
+    # one and back to the other and neither reached the fovea (two-drones-crossing, seed 28)
+    cfg = AttentionConfig(dwell_s=0.5, saccade_timeout_s=2.0)
+    att = Attention(cfg)
+    targets = []
+    for k in range(30):
+        t = 0.1 * (k + 1)
+        lead = 2 + k
+        views = [_cand(0, lead if k % 2 else lead - 1), _cand(1, lead - 1 if k % 2 else lead)]
+        targets.append(att.update(t, views, set(), 0.1))
+    # held from the first choice until the 2 s timeout, then the leader of that frame
+    assert targets[:20] == [1] * 20 and targets[20] in (0, 1) and targets[21:] == [targets[20]] * 9
+    # in the fovea for dwell_s: done, the next choice is made afresh
+    att = Attention(cfg)
+    got = [att.update(0.1 * (k + 1), [_cand(0, 5), _cand(1, 3)], {0}, 0.1) for k in range(6)]
+    assert got == [0] * 6 and att._verify_dwell_s == 0.0 and att._verify_start_s == pytest.approx(0.6)
+    # a confirmed track takes the fovea at once; a candidate that dies is let go
+    att = Attention(cfg)
+    att.update(0.1, [_cand(0, 5), _cand(1, 3)], set(), 0.1)
+    assert att.update(0.2, [_cand(1, 3)], set(), 0.1) == 1
+    assert att.update(0.3, [_cand(1, 3), view(2, [20, 0, 0])], set(), 0.1) == 2 and att.verifying is None

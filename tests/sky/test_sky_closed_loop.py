@@ -73,13 +73,17 @@ def test_the_head_fixates_both_drones(crossing):
     assert len(set(served)) == 2, served
 
 
-@pytest.mark.xfail(strict=True, reason="not met: a saccade to a fixated track times out before it is in "
-                   "the fovea (docs/sky-tracks-figures.md)")
-def test_every_fixated_drone_is_brought_into_the_fovea(crossing):
-    loop, _ = crossing
+@pytest.mark.parametrize("seed_offset", range(8))
+def test_every_fixated_track_is_brought_into_the_fovea(seed_offset):
+    # seed 28 (the scene's own): the fovea went to one rim candidate, then the other, and both were
+    # deleted before either reached it (foveatrack/sky/attention.py: a candidate is now held)
+    base = load_scene(ROOT / "scenes" / "two-drones-crossing.toml")
+    table = {**base.tracker_table, "sky": {"attention": {"revisit_s": 3.0}}}
+    loop = ClosedLoop(dataclasses.replace(base, seed=base.seed + seed_offset, tracker_table=table, duration_s=8.0))
+    loop.run()
     ids = {o.fixated for o in loop.sky_log if o.fixated is not None}
     in_fovea = {i for o in loop.sky_log for i in o.in_fovea}
-    assert ids <= in_fovea
+    assert ids and ids <= in_fovea, (ids, in_fovea)
 
 
 def test_same_scene_same_bits(crossing):
