@@ -14,7 +14,9 @@ and returns one typed :class:`StepRecord`.  Whenever the gate or the sink change
 head, the controller (the tracker's dead reckoning) is told at the same instant, here and only here:
 no driver calls the controller or the gate itself (``tests/test_frame_step_rule.py`` reads the
 sources).  The driver's own commands (a watchdog's or a shutdown's STOP, one before a new sensor
-clock) go through :meth:`FrameStep.own_command`, the same way to the head.
+clock) go through :meth:`FrameStep.own_command`, the same way to the head, and so do its absolute
+goals (the daemon's homing, Pelco set-pan / set-tilt) through :meth:`FrameStep.own_goal`: the gate
+keeps a tilt goal inside the stops as it keeps a speed command, and says why it moved it.
 """
 
 from __future__ import annotations
@@ -45,6 +47,15 @@ class CommandSink(Protocol):
         ...
 
 
+class GoalSink(Protocol):
+    """A sink that can also write absolute goals (the daemon's serial port)."""
+
+    def send_goal(self, axis: str, goal_deg: float, source: str) -> bool:
+        """Write the absolute move of ``axis`` ("pan" or "tilt") to ``goal_deg``; True when the head
+        got it."""
+        ...
+
+
 class NoHead:
     """The sink of a head that gets nothing (a frozen head, an LVX replay): every write fails, so the
     controller is told the head kept its last command (STOP, as it started)."""
@@ -72,6 +83,21 @@ class StepRecord:
     limited: tuple[str, ...]
     reached_head: bool
     head_command: HeadCommand
+
+
+@dataclass(frozen=True)
+class GoalRecord:
+    """What one absolute goal did (:meth:`FrameStep.own_goal`).
+
+    axis : "pan" or "tilt"; asked_deg : the driver's goal; goal_deg : the goal written (after the gate;
+    None: refused, nothing written); limited : why the gate changed it; reached_head : the sink's word
+    """
+
+    axis: str
+    asked_deg: float
+    goal_deg: float | None
+    limited: tuple[str, ...]
+    reached_head: bool
 
 
 class FrameStep:
@@ -124,6 +150,15 @@ class FrameStep:
         ok = self.sink.send(cmd, send_t_s, source)
         head = self.gate.wrote(self.controller, send_t_s, cmd, ok)
         return StepRecord(send_t_s, None, cmd, cmd, (), bool(ok), head)
+
+    def own_goal(self, axis: str, goal_deg: float, source: str) -> GoalRecord:
+        """An absolute goal of the driver's own (the daemon's homing): decided by the gate, written by
+        the sink (``send_goal``).  The controller is not told: a driver homes a head whose pose is
+        unknown, and starts a fresh controller at the goals written (:meth:`rebase`)."""
+        goal, why = self.gate.decide_goal(axis, goal_deg)
+        ok = goal is not None and bool(self.sink.send_goal(axis, goal, source))
+        self.gate.wrote_goal(ok)
+        return GoalRecord(axis, float(goal_deg), goal, tuple(why), ok)
 
     def rebase(self, controller) -> None:
         """A fresh controller (its dead reckoning restarted) for a head that is stopped."""

@@ -32,6 +32,10 @@ TILT_UNKNOWN = "tilt_unknown"
 # Recorded when the daemon wrote STOP because the head's link was down: whatever a reopened link
 # carries first is STOP, and from then on the head's pose is unknown.
 LINK_DOWN = "link_down"
+# Recorded when an absolute tilt goal (a homing's: foveatrack.daemon.homing_plan) lay beyond a stop less
+# the margin and was moved onto that line; the tilt rule for goals is the one for speed commands.
+TILT_GOAL_UP = "tilt_goal_stop_up"
+TILT_GOAL_DOWN = "tilt_goal_stop_down"
 
 # Two tilt margins, two layers: the tracker keeps TrackerConfig.tilt_margin_deg (3 deg) from a stop
 # by itself; the gate, the last line, refuses tilt toward a stop GATE_TILT_MARGIN_DEG (2 deg) from
@@ -89,6 +93,18 @@ class Limits:
             td, tb, why = 0, 0, why + ["tilt_stop_down"]
         return HeadCommand(pd, pb if pd else 0, td, tb if td else 0), why
 
+    def clamp_tilt_goal(self, tilt_deg: float) -> tuple[float, list[str]]:
+        """An absolute tilt goal [deg] kept ``tilt_margin_deg`` inside the stops, and why it was moved
+        (empty if it was not): a goal at the margin's line is where a speed command toward the stop
+        would be refused."""
+        lo, hi = self.tilt_limits_deg
+        m = self.tilt_margin_deg
+        if tilt_deg > hi - m:
+            return hi - m, [TILT_GOAL_UP]
+        if tilt_deg < lo + m:
+            return lo + m, [TILT_GOAL_DOWN]
+        return tilt_deg, []
+
 
 @dataclass(frozen=True)
 class Proposal:
@@ -131,6 +147,27 @@ class CommandGate:
         if why and tracker is not None:
             tracker.command_sent(send_t_s, cmd)
         return cmd, why
+
+    def decide_goal(self, axis: str, goal_deg: float) -> tuple[float | None, list[str]]:
+        """An absolute goal (a Pelco set-pan / set-tilt: the daemon's homing) that may leave, and why it
+        differs from the one asked for: pan wrapped to [-180, 180), tilt kept inside the stops less the
+        margin (:meth:`Limits.clamp_tilt_goal`).  A goal that is not finite is refused (None,
+        :data:`TILT_UNKNOWN` or ``"pan_unknown"``): nothing is written."""
+        if not math.isfinite(goal_deg):
+            return None, [TILT_UNKNOWN if axis == "tilt" else "pan_unknown"]
+        if axis == "pan":
+            return (goal_deg + 180.0) % 360.0 - 180.0, []
+        if axis != "tilt":
+            raise ValueError(f"an absolute goal is for axis 'pan' or 'tilt', not {axis!r}")
+        if self.limits is None:
+            return goal_deg, []
+        return self.limits.clamp_tilt_goal(goal_deg)
+
+    def wrote_goal(self, ok: bool) -> None:
+        """After the sink wrote an absolute goal: the head moves there and stops, its latched motion
+        replaced (``ok`` False: it never got the bytes and keeps its last command)."""
+        if ok:
+            self.head_cmd = STOP
 
     def wrote(self, tracker, send_t_s: float, cmd: HeadCommand, ok: bool) -> HeadCommand:
         """After the sink wrote ``cmd`` (registered with the tracker at ``send_t_s``): ``ok`` False means

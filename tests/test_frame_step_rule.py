@@ -7,6 +7,11 @@ the simulator decided some STOPs outside it).  Every module of ``foveatrack``, `
 is parsed and every such call, at any depth, is an error -- except in the step and the gate
 themselves, inside a class that is a controller (it defines ``process`` and ``command_sent``: a
 tracker, an adapter that wraps one), and in the modules listed below with their reason.
+
+Absolute goals too (the daemon's homing: Pelco set-pan / set-tilt): before, the homing encoded and
+wrote them itself and clamped its own tilt goal, a second tilt rule beside the gate's (issue 26).  A
+goal is now decided by the gate (``decide_goal``) in :meth:`FrameStep.own_goal` and written by a sink's
+``send_goal``; encoding an absolute set is the daemon's sink's alone.
 """
 
 from __future__ import annotations
@@ -18,7 +23,10 @@ ROOT = Path(__file__).resolve().parents[1]
 SCANNED = ("foveatrack", "sim", "scripts")
 
 CONTROLLER_CALLS = {"process", "command_sent", "on_imu"}
-GATE_CALLS = {"decide", "wrote"}
+GATE_CALLS = {"decide", "wrote", "decide_goal", "wrote_goal", "clamp_tilt_goal", "send_goal"}
+# encoding an absolute move: only in the sink that writes the goal the gate decided
+ABSOLUTE_CALLS = {"encode_set_pan", "encode_set_tilt", "encode_set_pan_word", "encode_set_tilt_word"}
+ABSOLUTE_ALLOWED = {("foveatrack/daemon/frame_loop.py", "send_goal")}
 
 # module -> why it may call them
 ALLOWED = {
@@ -57,6 +65,23 @@ def step_bypasses(source: str, name: str = "<source>") -> list[str]:
         f = node.func
         if isinstance(f, ast.Attribute) and (f.attr in CONTROLLER_CALLS | GATE_CALLS) or _is_limits_apply(node):
             found.append((node.lineno, f"{name}:{node.lineno}: {ast.unparse(f)}(...)"))
+    return [f for _, f in sorted(found)]
+
+
+def absolute_moves(source: str, name: str = "<source>") -> list[str]:
+    """Absolute moves encoded in ``source`` outside the allowed sink functions: ``"name:line: call"``."""
+    tree = ast.parse(source, name)
+    allowed = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and (name, node.name) in ABSOLUTE_ALLOWED:
+            allowed.update(id(n) for n in ast.walk(node))
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and id(node) not in allowed:
+            f = node.func
+            callee = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+            if callee in ABSOLUTE_CALLS:
+                found.append((node.lineno, f"{name}:{node.lineno}: {ast.unparse(f)}(...)"))
     return [f for _, f in sorted(found)]
 
 
@@ -111,3 +136,22 @@ class Wrapper:
     found = step_bypasses(planted, "planted.py")
     assert [f.split(": ")[1] for f in found] == ["tracker.process(...)", "gate.decide(...)",
                                                  "gate.limits.apply(...)"], found
+
+
+def test_absolute_goals_leave_only_through_the_step_and_the_gate():
+    """The daemon's homing writes its set-pan / set-tilt through FrameStep.own_goal: nothing else in
+    foveatrack, sim or scripts encodes an absolute move, and the homing asks the step for it."""
+    found = []
+    for rel, p in _modules():
+        found += absolute_moves(p.read_text(encoding="utf-8"), rel)
+    assert not found, ("these encode an absolute move themselves; write it through "
+                       "foveatrack.frame_step.FrameStep.own_goal (the gate decides it):\n  " + "\n  ".join(found))
+    assert "self.step.own_goal(" in (ROOT / "foveatrack/daemon/head_pose.py").read_text(encoding="utf-8")
+    planted = """
+from gimbal.pelco import encode_set_tilt
+def home(head):
+    head.send_raw(encode_set_tilt(1, 80.0, "pelco-d", "zenith"), "homing")
+    gate.decide_goal("tilt", 80.0)
+"""
+    assert absolute_moves(planted, "planted.py") == ["planted.py:4: encode_set_tilt(...)"]
+    assert step_bypasses(planted, "planted.py") == ["planted.py:5: gate.decide_goal(...)"]

@@ -44,11 +44,15 @@ def test_the_last_trusted_bearing_is_searched_first():
         assert plan.goal == "home" and (plan.pan_deg, plan.tilt_deg) == (0.0, 0.0), plan
 
 
-def test_a_bearing_beyond_the_stops_is_kept_inside_them():
+def test_a_bearing_beyond_the_stops_is_left_to_the_gate():
+    """The plan asks for the bearing (pan wrapped); the gate keeps the tilt inside the stops at the
+    write (tests/daemon/test_homing_gate.py), the one tilt rule.  The wait is for the clamped goal: the
+    head cannot pass its stop."""
     b = Bearings()
     b.saw(1.0, _at(190.0, 80.0))
     p = plan_homing(HEAD, b, 2.0)
-    assert p.pan_deg == pytest.approx(-170.0) and p.tilt_deg == pytest.approx(60.0 - HEAD.tilt_margin_deg)
+    assert p.pan_deg == pytest.approx(-170.0) and p.tilt_deg == pytest.approx(80.0)
+    assert p.worst_case_s == pytest.approx(worst_case_s(HEAD, 60.0)) == pytest.approx(58.0)
 
 
 def test_the_worst_case_is_the_move_to_this_goal_from_anywhere():

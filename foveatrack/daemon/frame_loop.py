@@ -44,6 +44,21 @@ class _HeadSink:
         d.counters["commands_written" if ok else "commands_failed"] += 1
         return ok
 
+    def send_goal(self, axis: str, goal_deg: float, source: str) -> bool:
+        """An absolute move (Pelco set-pan 0x4B / set-tilt 0x4D) the gate let through (the homing's)."""
+        from gimbal.pelco import encode_set_pan, encode_set_tilt
+
+        d = self.daemon
+        h = d.cfg.head
+        if axis == "pan":
+            raw = encode_set_pan(h.address, goal_deg, h.protocol)
+        else:
+            raw = encode_set_tilt(h.address, goal_deg, h.protocol, getattr(d.head.client, "tilt_zero", "zenith"))
+        self.raw = raw
+        ok = d.head.send_raw(raw, source)
+        self.t_written = time.monotonic()
+        return ok
+
 
 class FrameLoop:
     """The frames' part of the daemon (a mixin of ``Daemon``; ``pending``: the frames complete and

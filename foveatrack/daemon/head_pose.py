@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 from foveatrack.daemon.homing_plan import HomingConfirm, HomingSteps, plan_homing
 from foveatrack.daemon.record_queue import _job_event
@@ -89,8 +89,6 @@ class HeadPose:
         self._home_steps = HomingSteps()
         self._homing_t0 = now
         if h.on_reconnect == "home":
-            from gimbal.pelco import encode_set_pan, encode_set_tilt
-
             # the target's last trusted bearing first, else home; the worst-case wait to that goal
             # (foveatrack.daemon.homing_plan); with a pose check, detections after the last check that
             # vouched for the pose are not trusted
@@ -101,14 +99,12 @@ class HeadPose:
                                               setup_s=2 * quiet, wait_ends_early=confirmable)
             self._homing_confirm = HomingConfirm() if confirmable else None
             self.log.event("head_homing_plan", **plan.as_event())
-            pan, tilt = plan.pan_deg, plan.tilt_deg
-            tz = getattr(self.head.client, "tilt_zero", "zenith")
             # an absolute set is obeyed only after a quiet line: nothing else is written meanwhile, and
             # each step's gap counts from the previous write as it happened, not as it was planned (a
-            # late 10 Hz tick once left the tilt set 0.205 s after the pan set; the head ignored it)
-            self._home_steps = HomingSteps([(quiet, "pan", encode_set_pan(h.address, pan, h.protocol)),
-                                            (quiet, "tilt", encode_set_tilt(h.address, tilt, h.protocol, tz)),
-                                            (plan.wait_s, "done", None)], time.monotonic())  # after the STOP
+            # late 10 Hz tick once left the tilt set 0.205 s after the pan set; the head ignored it);
+            # the goals go through the one step, whose gate keeps the tilt inside the stops (_pose_tick)
+            self._home_steps = HomingSteps([(quiet, "pan", plan.pan_deg), (quiet, "tilt", plan.tilt_deg),
+                                            (plan.wait_s, "done", None)], now)     # after the STOP
 
     def _pose_tick(self, now: float) -> None:
         h = self.cfg.head
@@ -123,16 +119,21 @@ class HeadPose:
             return
         confirmed = self.pose_state == "homing" and self._homing_confirm is not None and self._homing_confirm.confirmed
         while (due := self._home_steps.pop_due(now, confirmed)) is not None:
-            step, raw = due
+            step, goal_deg = due
             plan = self._homing
             if step in ("pan", "tilt"):
-                if not self.head.send_raw(raw, "homing"):
-                    self.log.event("head_homing_failed", step=step)
+                rec = self.step.own_goal(step, goal_deg, "homing")
+                if not rec.reached_head:
+                    self.log.event("head_homing_failed", step=step, limited=list(rec.limited))
                     return self._pose_unknown(now, "homing_write_failed")   # again once the link is back
-                self._home_steps.written(time.monotonic())
+                self._home_steps.written(now)    # (the tick's time: the write follows it within the tick)
+                # the goal the gate let through is where the head goes: the wait's checks and the
+                # tracker rebased at the end use it
+                plan = self._homing = replace(plan, **{f"{step}_deg": rec.goal_deg})
                 self.pose_state = "homing"
+                extra = {"asked_deg": rec.asked_deg, "limited": list(rec.limited)} if rec.limited else {}
                 self.log.event("head_homing", axis=step, home_deg=[plan.pan_deg, plan.tilt_deg], goal=plan.goal,
-                               worst_case_s=round(plan.worst_case_s, 3))
+                               worst_case_s=round(plan.worst_case_s, 3), **extra)
             else:
                 t_s = self.sensor_now_s(now)
                 pan, tilt = plan.pan_deg, plan.tilt_deg

@@ -18,7 +18,10 @@ the home view by then (issue 26: 0 of 160 frames detected afterwards).  Now:
   rim of the view, and the paper's controller, which stops on every empty frame, took over 7 s to
   catch it); else home.  Home too when the homing must
   prove the head behind a reappeared link is ours (the pose check must see the lidar move: a goal
-  where it already points proves nothing).  The tilt is kept ``tilt_margin_deg`` inside the stops.
+  where it already points proves nothing).  The goal is not clamped here: the daemon writes it through
+  the one frame step (:meth:`foveatrack.frame_step.FrameStep.own_goal`), whose gate keeps the tilt
+  ``tilt_margin_deg`` inside the stops (:meth:`foveatrack.gate.Limits.clamp_tilt_goal`, the same rule as
+  for speed commands) and says why it moved it; pan is wrapped to [-180, 180) here.
 * **how long** (worst case): the head's pose is unknown (the PTS-303H reports none, and
   /work/shared/facts/gimbal-pelco.md states no power-on pose; a link cut while the head kept its
   power leaves it wherever its latched motion took it), so the wait is what the move to *this* goal
@@ -129,7 +132,8 @@ def worst_case_s(head, tilt_goal_deg: float) -> float:
     """The time the absolute move to tilt ``tilt_goal_deg`` (any pan) may take from anywhere [s]: 180 deg
     of pan, and the tilt from the farther stop (module docstring)."""
     lo, hi = head.tilt_limits_deg
-    tilt_travel = max(tilt_goal_deg - lo, hi - tilt_goal_deg, 0.0)
+    goal = min(max(tilt_goal_deg, lo), hi)    # the head cannot go past a stop (the gate keeps it inside)
+    tilt_travel = max(goal - lo, hi - goal)
     return 180.0 / head.pan_speed_max_deg_s + tilt_travel / head.tilt_speed_max_deg_s + RAMP_S
 
 
@@ -153,15 +157,13 @@ def plan_homing(head, bearings: Bearings | None, now_s: float | None,
     through it too)."""
     home_pan, home_tilt = head.home_deg
     b = None if bearings is None or now_s is None or prove_identity else bearings.last(trusted_until_s)
-    lo, hi = head.tilt_limits_deg
-    m = head.tilt_margin_deg
     if b is not None and now_s - b.t_s <= BEARING_MAX_AGE_S:
         age = max(now_s - b.t_s, 0.0)
         rp, rt = bearings.rate_deg_s(b)
 
         def carried(lead_s):
             dp, dt = (min(max(r * lead_s, -MAX_EXTRAPOLATION_DEG), MAX_EXTRAPOLATION_DEG) for r in (rp, rt))
-            return (b.pan_deg + dp + 180.0) % 360.0 - 180.0, min(max(b.tilt_deg + dt, lo + m), hi - m)
+            return (b.pan_deg + dp + 180.0) % 360.0 - 180.0, b.tilt_deg + dt   # the tilt: the gate's
 
         lead = age + max(setup_s, 0.0)
         pan, tilt = carried(lead)
@@ -184,7 +186,7 @@ class HomingConfirm:
     feed it each pose check at the goal pose (:class:`foveatrack.pose_check.PoseCheckResult` or None)."""
 
     def __init__(self):
-        self._ok: list[tuple[float, float]] = []
+        self._ok: deque = deque(maxlen=CONFIRM_CHECKS)   # the last checks (a list grew while at rest there)
         self.confirmed = False
 
     def feed(self, res) -> bool:
@@ -195,7 +197,7 @@ class HomingConfirm:
             self._ok.clear()
             return self.confirmed
         self._ok.append((res.dpan_deg, res.dtilt_deg))
-        recent = self._ok[-CONFIRM_CHECKS:]
+        recent = self._ok
         if len(recent) == CONFIRM_CHECKS and all(
                 max(v[k] for v in recent) - min(v[k] for v in recent) <= CONFIRM_REST_DEG for k in (0, 1)):
             self.confirmed = True
@@ -206,7 +208,7 @@ class HomingSteps:
     """The homing's writes in order, each due ``gap_s`` after the previous write as it was really made
     (not as planned: a 10 Hz tick that fired the pan set 0.09 s late left the tilt set 0.205 s after
     it, under the PTS family's 0.2 s quiet line plus the frame's time on the wire, and the head
-    ignored it).  ``steps``: ``(gap_s, name, frame)``, the first gap counted from ``t0``; the last,
+    ignored it).  ``steps``: ``(gap_s, name, goal)``, the first gap counted from ``t0``; the last,
     ``"done"``, may come early once the wait is confirmed (:class:`HomingConfirm`)."""
 
     def __init__(self, steps=(), t0: float = 0.0):
@@ -217,7 +219,7 @@ class HomingSteps:
         return bool(self._steps)
 
     def pop_due(self, now: float, confirmed: bool = False):
-        """The next ``(name, frame)`` if it is due at host time ``now``, else None."""
+        """The next ``(name, goal)`` if it is due at host time ``now``, else None."""
         if self._steps and (now >= self.due or (confirmed and self._steps[0][1] == "done")):
             _, name, frame = self._steps.pop(0)
             self.due = math.inf        # until written() says when the previous write was made
@@ -227,7 +229,7 @@ class HomingSteps:
         return None
 
     def written(self, t: float) -> None:
-        """The popped frame went out at host time ``t``: the next step is due its gap after it."""
+        """The popped step was written at host time ``t``: the next is due its gap after it."""
         if self._steps:
             self.due = t + self._steps[0][0]
 

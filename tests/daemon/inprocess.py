@@ -34,11 +34,13 @@ def target_frame(k, period=0.1, az_deg=10.0, n=40):
     return Frame(t0, t1, xyz, t_ns, np.full(n, 30, np.uint8))
 
 
-def inprocess_daemon(tmp_path, head):
+def inprocess_daemon(tmp_path, head, head_extra: str = ""):
     """A daemon recording to ``tmp_path / "rec.mcap"``, writing to ``head`` (``send_frame(raw) ->
-    bool``), with a fake receiver whose ``offset_s`` (host - sensor clock) the test sets."""
+    bool``), with a fake receiver whose ``offset_s`` (host - sensor clock) the test sets;
+    ``head_extra``: more ``[head]`` keys (TOML lines)."""
     cfg_path = tmp_path / "d.toml"
-    cfg_path.write_text(CONFIG)
+    cfg_path.write_text(CONFIG.replace('port = "/tmp/not-opened-in-this-test"\n',
+                                       'port = "/tmp/not-opened-in-this-test"\n' + head_extra + "\n"))
     d = Daemon(load_config(cfg_path), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
     rec = tmp_path / "rec.mcap"
     d.recorder = RecordingThread(RecordingWriter(rec, d._meta()), 50)
