@@ -84,15 +84,6 @@ class HeadConfig:
                 self.tilt0_deg if self.home_tilt_deg is None else self.home_tilt_deg)
 
     @property
-    def home_wait_worst_s(self) -> float:
-        """The time the head's absolute move to home may take from anywhere: 180 deg of pan and the whole
-        tilt range at the table's top speeds, plus 1 s for the ramps and the dead time [s]."""
-        if self.home_wait_s is not None:
-            return self.home_wait_s
-        lo, hi = self.tilt_limits_deg
-        return 180.0 / self.pan_speed_max_deg_s + (hi - lo) / self.tilt_speed_max_deg_s + 1.0
-
-    @property
     def facts(self) -> HeadFacts:
         """The head's facts (stops, start pose, protocol, baud, limits) the tracker and the gate read;
         the daemon measures each send, so no fixed send delay."""

@@ -57,7 +57,6 @@ def test_a_bearing_beyond_the_stops_is_left_to_the_gate():
 
 def test_the_worst_case_is_the_move_to_this_goal_from_anywhere():
     # before: 180/15 + 90/2 + 1 = 58 s for any goal; to tilt 0 the farther stop is 60 deg away: 43 s
-    assert HEAD.home_wait_worst_s == pytest.approx(58.0)
     assert worst_case_s(HEAD, 0.0) == pytest.approx(12.0 + 30.0 + 1.0)
     assert worst_case_s(HEAD, 15.0) == pytest.approx(12.0 + 22.5 + 1.0)     # the middle of the range: least
     assert worst_case_s(HEAD, -30.0) == pytest.approx(58.0)                 # at a stop: the whole range
