@@ -17,28 +17,20 @@ M_MMAP_THRESHOLD = -3          # glibc's malloc.h
 MMAP_THRESHOLD_BYTES = 128 * 1024
 
 
-def _glibc(name: str, *argtypes):
-    """The C library's function ``name`` with its argument types, or None where there is none (not
-    glibc)."""
-    import ctypes
-    import ctypes.util
-
-    try:
-        fn = getattr(ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6"), name)
-    except (OSError, AttributeError):
-        return None
-    fn.argtypes = list(argtypes)
-    fn.restype = ctypes.c_int
-    return fn
-
-
 def return_freed_memory(threshold_bytes: int = MMAP_THRESHOLD_BYTES) -> bool:
     """Fix glibc's mmap threshold at ``threshold_bytes`` for this process; whether it was set (False
     where the C library is not glibc: nothing changes there)."""
     import ctypes
+    import ctypes.util
 
-    mallopt = _glibc("mallopt", ctypes.c_int, ctypes.c_int)
-    return mallopt is not None and mallopt(M_MMAP_THRESHOLD, int(threshold_bytes)) == 1
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+    mallopt.restype = ctypes.c_int
+    return mallopt(M_MMAP_THRESHOLD, int(threshold_bytes)) == 1
 
 
 def trim_freed_memory() -> bool:
@@ -49,7 +41,13 @@ def trim_freed_memory() -> bool:
     (issue 26's soak: RSS settled by ~1 MB over minutes 5-20 without it).  Where the C library is not
     glibc, nothing (False)."""
     import ctypes
+    import ctypes.util
 
-    malloc_trim = _glibc("malloc_trim", ctypes.c_size_t)
-    return malloc_trim is not None and malloc_trim(0) == 1
+    try:
+        fn = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return False
+    fn.argtypes = [ctypes.c_size_t]
+    fn.restype = ctypes.c_int
+    return fn(0) == 1
 
