@@ -31,23 +31,3 @@ def return_freed_memory(threshold_bytes: int = MMAP_THRESHOLD_BYTES) -> bool:
     mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
     mallopt.restype = ctypes.c_int
     return mallopt(M_MMAP_THRESHOLD, int(threshold_bytes)) == 1
-
-
-def trim_freed_memory() -> bool:
-    """Hand the free pages inside glibc's heaps back to the system (``malloc_trim(0)``: the top of each
-    heap and whole free pages inside it, by ``madvise``); whether anything was released.  The frame
-    loop's mid-sized blocks (below the mmap threshold: packets, per-packet arrays, records) leave free
-    pages scattered between live blocks that the heap keeps resident; the daemon trims once a minute
-    (issue 26's soak: RSS settled by ~1 MB over minutes 5-20 without it).  Where the C library is not
-    glibc, nothing (False)."""
-    import ctypes
-    import ctypes.util
-
-    try:
-        fn = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
-    except (OSError, AttributeError):
-        return False
-    fn.argtypes = [ctypes.c_size_t]
-    fn.restype = ctypes.c_int
-    return fn(0) == 1
-

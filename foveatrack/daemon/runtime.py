@@ -61,8 +61,6 @@ from foveatrack.gyro_attitude import ImuFeed
 from foveatrack.tracker import Tracker
 from foveatrack.turn_witness import MoveWitness
 
-HEAP_TRIM_PERIOD_S = 60.0   # free pages inside the heap handed back this often (foveatrack.daemon.heap)
-
 
 class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, StatusDisplay, RunStats):
     """One run of the daemon (see module docstring).  ``run()`` returns the exit status (0).
@@ -145,7 +143,6 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
                 t_start = time.monotonic()
                 next_tick = t_start + period
                 self._next_status, self._next_progress = t_start, t_start + PROGRESS_PERIOD_S
-                self._next_trim = t_start + HEAP_TRIM_PERIOD_S
                 while not self.stop_ev.is_set():
                     if self.duration_s is not None and time.monotonic() - t_start >= self.duration_s:
                         break
@@ -175,10 +172,4 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
         if now >= self._next_status:
             self._next_status = now + self.cfg.loop.status_period_s
             self._show_status(self.frame_times, self.watchdog.tripped)
-        if self.heap_returns_freed and now >= self._next_trim:
-            # freed pages scattered inside the heap go back too (foveatrack.daemon.heap)
-            from foveatrack.daemon.heap import trim_freed_memory
-
-            self._next_trim = now + HEAP_TRIM_PERIOD_S
-            self.counters["heap_trims"] += bool(trim_freed_memory())
         return next_tick
