@@ -77,16 +77,22 @@ class FakeHead:
         return True
 
 
+def _homing_at_100_s(tmp_path, head, extra: str):
+    """An in-process daemon homing to pan 5 deg (``extra``: more [head] keys), its link lost and back
+    at host time 100 s."""
+    d, _ = inprocess_daemon(tmp_path, head, f'on_reconnect = "home"\nhome_pan_deg = 5.0\nhome_wait_s = 1.0\n{extra}')
+    d._pose_unknown(0.0, "link_lost")
+    d._reconnected(100.0)
+    return d
+
+
 def test_the_daemons_homing_to_a_goal_beyond_the_stop_writes_the_gates_goal(tmp_path):
     """A home tilt between the margin's line and the stop (59.5 deg; stops -30/60, margin 2: a config
     may set it, the stops are checked, not the margin): the daemon writes the set-tilt to 58 deg, logs
     why, and rebases the tracker there (before, the homing wrote 59.5: its own clamp held bearings only)."""
     head = FakeHead()
-    d, _ = inprocess_daemon(tmp_path, head, 'on_reconnect = "home"\nhome_pan_deg = 5.0\nhome_tilt_deg = 59.5\n'
-                                            'tilt_limits_deg = [-30.0, 60.0]\ntilt_margin_deg = 2.0\nhome_wait_s = 1.0')
+    d = _homing_at_100_s(tmp_path, head, 'home_tilt_deg = 59.5\ntilt_limits_deg = [-30.0, 60.0]\ntilt_margin_deg = 2.0')
     try:
-        d._pose_unknown(0.0, "link_lost")
-        d._reconnected(100.0)
         assert d._homing.tilt_deg == 59.5          # the plan asks; the gate decides at the write
         d._pose_tick(100.35)                       # the pan set
         d._pose_tick(100.65)                       # the tilt set
@@ -116,11 +122,8 @@ def test_the_daemons_tilt_set_waits_its_quiet_line_after_a_late_pan_set(tmp_path
     left the tilt set 0.205 s after it, and the head (0.2 s quiet line + the frame on the wire) ignored
     it.  Each set is now due 0.3 s after the previous write."""
     head = FakeHead()
-    d, _ = inprocess_daemon(tmp_path, head, 'on_reconnect = "home"\nhome_pan_deg = 5.0\nhome_tilt_deg = 10.0\n'
-                                            'home_wait_s = 1.0')
+    d = _homing_at_100_s(tmp_path, head, 'home_tilt_deg = 10.0')
     try:
-        d._pose_unknown(0.0, "link_lost")
-        d._reconnected(100.0)
         n0 = len(head.raw)                         # the STOP
         d._pose_tick(100.29)
         assert len(head.raw) == n0                 # the quiet line after the STOP
