@@ -122,7 +122,7 @@ class Attention:
             else:
                 if self.revisit in in_fovea:
                     self._revisit_dwell_s += dt_s
-                if self._revisit_dwell_s >= cfg.dwell_s or t_s - self._revisit_start_s >= cfg.saccade_timeout_s:
+                if self._fixation_over(t_s, self._revisit_start_s, self._revisit_dwell_s):
                     self.served_s[self.revisit] = t_s     # served, or given up on: its clock restarts
                     self.revisit = None
         if self.revisit is None and self.priority is not None:
@@ -142,6 +142,11 @@ class Attention:
             self.verifying = None
         return self.target
 
+    def _fixation_over(self, t_s: float, start_s: float, dwell_s: float) -> bool:
+        """A fixation (a revisit, or a look at a candidate) ends once its track has been ``dwell_s`` in
+        the fovea, or ``saccade_timeout_s`` after it started."""
+        return dwell_s >= self.cfg.dwell_s or t_s - start_s >= self.cfg.saccade_timeout_s
+
     def _verify(self, t_s: float, views, in_fovea: set[int], dt_s: float) -> int | None:
         """Nothing confirmed: look at the likeliest candidate (the most hits off the scenery, then the
         lower id), so that the fovea resolves what the sparse rim of the field only hints at.  Held
@@ -154,7 +159,7 @@ class Attention:
             if self.verifying in cands:
                 if self.verifying in in_fovea:
                     self._verify_dwell_s += dt_s
-                if self._verify_dwell_s < cfg.dwell_s and t_s - self._verify_start_s < cfg.saccade_timeout_s:
+                if not self._fixation_over(t_s, self._verify_start_s, self._verify_dwell_s):
                     return self.verifying
             self.verifying = None
         order = sorted((-v.clear_hits, tid) for tid, v in cands.items())
