@@ -30,6 +30,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRUTH, TRUTH_OBJECTS
 
 
@@ -43,8 +45,18 @@ def _finite_or_none(v):
     return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
 
 
+def floats(v) -> tuple:
+    """A vector (an array or a sequence of numbers) as a tuple of Python floats, the same values
+    ``float()`` of each gives.  A float array's ``tolist`` does it at C speed: records are built on
+    the loop's thread every frame, where a generator of ``float()`` calls cost microseconds
+    (docs/recordings.md)."""
+    if isinstance(v, np.ndarray) and v.dtype.kind == "f":
+        return tuple(v.tolist())
+    return tuple(map(float, v))
+
+
 def _xyz(v):
-    return None if v is None else [float(x) for x in v]
+    return None if v is None else list(map(float, v))
 
 
 def _nan(v) -> float:
@@ -138,10 +150,12 @@ class DetectionRecord:
     def from_output(cls, t_ns: int, frame_id: int, out) -> "DetectionRecord":
         """From a :class:`foveatrack.tracker.TrackOutput`."""
         d = out.detection
-        return cls(int(t_ns), int(frame_id), d is not None, None if d is None else tuple(float(v) for v in d.xyz),
-                   0 if d is None else int(d.n_points), None if d is None else float(d.t_s),
-                   None if d is None else float(d.az_deg), None if d is None else float(d.el_deg),
-                   str(getattr(out.state, "value", out.state)), _finite_or_none(out.error_pan_deg), _finite_or_none(out.error_tilt_deg))
+        state = str(getattr(out.state, "value", out.state))
+        errors = _finite_or_none(out.error_pan_deg), _finite_or_none(out.error_tilt_deg)
+        if d is None:
+            return cls(int(t_ns), int(frame_id), False, None, 0, None, None, None, state, *errors)
+        return cls(int(t_ns), int(frame_id), True, floats(d.xyz), int(d.n_points), float(d.t_s),
+                   float(d.az_deg), float(d.el_deg), state, *errors)
 
     def to_json(self) -> dict:
         return {"frame_index": self.frame_id, "detected": self.detected, "xyz_m": _xyz(self.xyz_m),
@@ -174,7 +188,7 @@ class HeadEstimateRecord:
     def from_output(cls, t_ns: int, frame_id: int, out) -> "HeadEstimateRecord":
         return cls(int(t_ns), int(frame_id), float(out.head_pan_deg), float(out.head_tilt_deg),
                    out.head_sigma_pan_deg, out.head_sigma_tilt_deg,
-                   None if out.world_xyz is None else tuple(float(v) for v in out.world_xyz),
+                   None if out.world_xyz is None else floats(out.world_xyz),
                    _finite_or_none(out.world_sigma_m))
 
     def to_json(self) -> dict:
