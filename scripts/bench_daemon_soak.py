@@ -318,7 +318,8 @@ watchdog_s = 2.0
                                   f"{fit[0]:+.2f} MB/hour ({fit[0] / 60.0:+.4f} MB/min, {fit[1]} samples)"))
     print(f"load average over the run: mean {np.mean(loads):.2f}, max {np.max(loads):.2f} (1-min, sampled every 5 s)")
     keys = ("frames", "frames_skipped", "frames_stale", "queue_dropped_points", "recording_dropped",
-            "lidar_lost_slots", "lidar_duplicate_points", "lidar_clock_jumps", "lidar_imu_packets_unused")
+            "lidar_lost_slots", "lidar_duplicate_points", "lidar_clock_jumps", "lidar_imu_packets_unused",
+            "heap_trims", "heap_trim_ms")
     print("daemon counters: " + ", ".join(f"{k} {stats.get(k, 0)}" for k in keys))
     return 0
 

@@ -10,6 +10,7 @@ with the writer first: ``_job_frame`` writes a processed frame as every driver d
 from __future__ import annotations
 
 import sys
+import time
 
 from foveatrack.daemon.support import RecordingThread
 from foveatrack.recording.format import DAEMON_EVENTS
@@ -93,7 +94,8 @@ class DaemonRecording:
             self.head.close()
             raise
         # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
-        self.recorder = RecordingThread(writer, r.queue_frames, self._segment_path, r.overwrite)
+        self.recorder = RecordingThread(writer, r.queue_frames, self._segment_path, r.overwrite,
+                                        self._trim_heap if self.heap_returns_freed else None)
         self.recording_path = path
         self.head.journal = journal
         self._segment_t0 = None         # the segment clock starts at the first frame (not while no lidar is seen)
@@ -103,6 +105,18 @@ class DaemonRecording:
         from foveatrack.recording.segments import segment_path
 
         return segment_path(self.recording_path, k)
+
+    def _trim_heap(self) -> None:
+        """On the recording's thread, once a segment's file is complete: the heap's free pages go
+        back to the system (:func:`foveatrack.daemon.heap.trim_freed_memory`), counted in
+        ``heap_trims`` with the time they took in ``heap_trim_ms``."""
+        from foveatrack.daemon.heap import trim_freed_memory
+
+        t = time.perf_counter()
+        released = trim_freed_memory()
+        self.counters["heap_trims"] += 1
+        self.counters["heap_trim_ms"] += round((time.perf_counter() - t) * 1e3, 3)
+        self.counters["heap_trims_released"] += bool(released)
 
     def _next_segment_if_due(self, now: float) -> None:
         """At a frame boundary, on the loop's thread: after ``[recording] segment_minutes``, the

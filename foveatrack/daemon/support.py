@@ -100,13 +100,15 @@ class RecordingThread:
     Segments (``segment_path``: k -> the file of segment k): the loop sets :attr:`segment`, and every
     job carries the segment it was submitted in; the first job of a new segment moves the writer to
     its file first (:meth:`~foveatrack.recording.RecordingWriter.next_segment`), so a dropped job never
-    leaves the records of one segment in another's file.
+    leaves the records of one segment in another's file.  ``segment_closed()``, where given, is called
+    on the writer's thread after each move (the daemon hands the closed segment's freed heap back).
     """
 
-    def __init__(self, writer, max_jobs: int, segment_path=None, overwrite: bool = False):
+    def __init__(self, writer, max_jobs: int, segment_path=None, overwrite: bool = False, segment_closed=None):
         self.writer = writer
         self.segment = 0
         self._segment_path = segment_path
+        self._segment_closed = segment_closed   # called on this thread once a segment's file is complete
         self.overwrite = overwrite
         self.q: queue.Queue = queue.Queue(maxsize=max_jobs)
         self.dropped = 0
@@ -139,6 +141,8 @@ class RecordingThread:
             try:
                 if segment != getattr(self.writer, "segment_index", 0):
                     self.writer.next_segment(self._segment_path(segment), overwrite=self.overwrite, index=segment)
+                    if self._segment_closed is not None:
+                        self._segment_closed()
                 fn(self.writer, *args)
                 self.written += 1
             except BaseException as exc:  # noqa: BLE001 - reported by the daemon, recording stops

@@ -65,6 +65,8 @@ def test_a_daemon_run_in_segments_is_whole_and_replays_to_the_bit(tmp_path):
     # no frame lost or doubled at a boundary (the daemon's count at its stop)
     stop = next(e for e in log_events(log) if e["event"] == "stop")
     assert frames == list(range(len(frames))) and len(frames) == stop["stats"]["frames"], (len(frames), stop["stats"])
+    # the heap trimmed once per segment closed, on the writer's thread (foveatrack.daemon.heap), where glibc's is
+    assert stop["stats"].get("heap_trims", 0) == (len(parts) if start["heap_returns_freed"] else 0), stop["stats"]
     # replay reads the run whole from its first segment, and reproduces it
     run = open_run(rec)
     assert len(run.parts) == len(parts) + 1 and not run.notes
