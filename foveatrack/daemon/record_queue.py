@@ -94,6 +94,10 @@ class DaemonRecording:
             self.head.close()
             raise
         # a frame is ~6 jobs-worth of records in one job; commands/events are single jobs
+        if self.heap_returns_freed:
+            # the trim's counters exist before the writer's thread can add to them (a key added
+            # there while the loop's thread walks the counters would change their size under it)
+            self.counters.update({"heap_trims": 0, "heap_trim_ms": 0.0, "heap_trims_released": 0})
         self.recorder = RecordingThread(writer, r.queue_frames, self._segment_path, r.overwrite,
                                         self._trim_heap if self.heap_returns_freed else None)
         self.recording_path = path
