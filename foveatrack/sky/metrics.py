@@ -17,6 +17,8 @@ Per drone, with tracks matched to drones at each frame by the same assignment (c
 ``match_m``; only confirmed tracks, any class):
 
 ``time_to_confirm_s``   first frame a track is matched minus the first frame the drone is visible
+``time_to_drone_label_s``  ... a track labelled drone is matched (None: never; the label waits,
+                        foveatrack.sky.classify rule 5)
 ``continuity``          share of the frames from that first match on with a matched track
 ``id_switches``         times the matched track's id changes (gaps without a match do not count)
 ``fovea_share``         share of its visible frames the drone spends in the fovea
@@ -73,6 +75,7 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
     ids = sorted(drones)
     T = t.size
     matched = {d: [None] * T for d in ids}
+    as_drone = {d: [False] * T for d in ids}     # the matched track is labelled drone
     false_ids: set[int] = set()
     for k in range(T):
         tr = tracks_per_frame[k]
@@ -82,6 +85,7 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
         hit = set()
         for i, j in g["assignment"]:
             matched[live[j]][k] = tr[i][0]
+            as_drone[live[j]][k] = tr[i][1] == "drone"
             hit.add(i)
         for i, (tid, label, _) in enumerate(tr):
             if label == "drone" and i not in hit:
@@ -93,7 +97,10 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
         m = matched[d]
         first_vis = int(np.argmax(vis)) if vis.any() else None
         first = next((k for k in range(T) if m[k] is not None), None)
+        labelled = next((k for k in range(T) if as_drone[d][k]), None)
         r = {"time_to_confirm_s": None if first is None or first_vis is None else float(t[first] - t[first_vis]),
+             "time_to_drone_label_s": None if labelled is None or first_vis is None else
+             float(t[labelled] - t[first_vis]),
              "continuity": 0.0, "id_switches": 0, "track_ids": sorted({x for x in m if x is not None})}
         if first is not None:
             seen = [x for x in m[first:] if x is not None]

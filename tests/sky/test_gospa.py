@@ -68,7 +68,7 @@ def test_drone_metrics_count_switches_gaps_and_false_tracks():
     for k in range(T):
         tr = []
         if 8 <= k < 20:
-            tr.append((1, "drone", xyz[k]))
+            tr.append((1, "drone" if k >= 11 else "unknown", xyz[k]))   # labelled drone 3 frames after it
         elif 22 <= k:
             tr.append((2, "drone", xyz[k]))          # a new id after a gap: one switch
         if k == 30:
@@ -79,6 +79,7 @@ def test_drone_metrics_count_switches_gaps_and_false_tracks():
     m = drone_metrics(t, {"a": {"xyz_m": xyz, "visible": vis, "in_fovea": fov}}, tracks)
     a = m["drones"]["a"]
     assert a["time_to_confirm_s"] == pytest.approx(0.3)
+    assert a["time_to_drone_label_s"] == pytest.approx(0.6)
     assert a["id_switches"] == 1 and a["track_ids"] == [1, 2]
     assert a["continuity"] == pytest.approx(40 / 42)
     assert a["longest_revisit_gap_s"] == pytest.approx(0.4)
