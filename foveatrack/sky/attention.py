@@ -5,7 +5,11 @@ Threat score of a confirmed track (0 for tentative ones), with ``d`` its distanc
 point ``protected_xyz_m`` and ``s`` its closing speed on it (``-v . (p - c) / |p - c|``, > 0 when
 it comes nearer; negative values count as 0)::
 
-    score = class_weight[label] * (1 + s / closing_ref_m_s) * distance_ref_m / (distance_ref_m + d)
+    score = class_weight[looks_like] * (1 + s / closing_ref_m_s) * distance_ref_m / (distance_ref_m + d)
+
+``looks_like`` is what the classifier's rules say of the track now, before its label waits
+(:mod:`foveatrack.sky.classify` rule 5): the fovea looks at a possible drone, and its resolution
+helps decide what it is.
 
 ``class_weight``: drone 1.0, unknown 0.5 (not classified yet: a drone until shown otherwise, but
 after the drones), bird 0.05, clutter 0.  So a drone closing at 10 m/s counts twice one hovering at
@@ -16,7 +20,7 @@ Schedule (evaluated after each frame, for the next):
 
 * the *priority track* is the highest score (an operator's pin, :meth:`Attention.pin`, overrides it
   while the pinned track lives);
-* a *revisit* is due for every other confirmed drone whose clock -- its last frame in the fovea, the
+* a *revisit* is due for every other confirmed track that looks like a drone whose clock -- its last frame in the fovea, the
   end of its last revisit, or its confirmation -- is older than ``revisit_s``; the most overdue one is
   served first;
 * with no confirmed track, the fovea goes to the tentative track with the most hits off the scenery
@@ -77,7 +81,7 @@ def threat_score(view, cfg: AttentionConfig) -> float:
     dx, dy, dz = px - c[0], py - c[1], pz - c[2]
     d = math.sqrt(dx * dx + dy * dy + dz * dz)
     closing = max(0.0, -(vx * dx + vy * dy + vz * dz) / d) if d > 0 else 0.0
-    return (CLASS_WEIGHT.get(view.label, 0.0) * (1.0 + closing / cfg.closing_ref_m_s)
+    return (CLASS_WEIGHT.get(view.looks_like, 0.0) * (1.0 + closing / cfg.closing_ref_m_s)
             * cfg.distance_ref_m / (cfg.distance_ref_m + d))
 
 
@@ -128,7 +132,7 @@ class Attention:
         if self.revisit is None and self.priority is not None:
             first = {}
             for tid, v in live.items():
-                if tid != self.priority and v.label == "drone":
+                if tid != self.priority and v.looks_like == "drone":
                     first[tid] = self.served_s[tid]
             due = sorted((t, tid) for tid, t in first.items() if t_s - t > cfg.revisit_s)
             if due:

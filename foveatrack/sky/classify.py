@@ -31,7 +31,11 @@ Rules, in order (thresholds in :class:`ClassifierConfig`; documented in docs/sky
 3. ``manoeuvre_m_s2 >= bird_manoeuvre_m_s2`` or ``speed_m_s >= bird_speed_m_s``, or -- only where
    the fovea resolves the object (``median_points >= flap_min_points``) -- ``flap_cv >= bird_flap_cv``
    or a ``flap_period_s`` found: ``bird``;
-4. otherwise ``drone``.
+4. otherwise ``drone``;
+5. held (:func:`held_label`): a track is labelled ``drone`` only once rules 1-4 have said so in
+   ``drone_after_frames`` frames in a row; until then it keeps the label it had.  A crown part that
+   swings one way for a moment looks like a slow straight drone to rules 2-4; a drone keeps looking
+   like one.
 
 The thresholds were chosen on seeds +8 and +9 of the four sky scenes (two-drones-crossing,
 drone-tree-line, swarm-of-five, drone-and-flock: the confirmed tracks' features, each labelled by the
@@ -67,15 +71,17 @@ class ClassifierConfig:
     bird_speed_m_s: float = 4.5
     min_flap_period_s: float = 0.2
     flap_autocorr: float = 0.5
+    drone_after_frames: int = 10
 
     @classmethod
     def from_mapping(cls, data: Mapping, where: str) -> "ClassifierConfig":
         check_keys(data, [f.name for f in fields(cls)], where)
         kw = {}
         for k, v in data.items():
-            if k == "min_hits":
-                if isinstance(v, bool) or not isinstance(v, int) or v < 2:
-                    raise UserError(f"{where}: min_hits must be an integer >= 2, got {v!r}")
+            if k in ("min_hits", "drone_after_frames"):
+                least = 2 if k == "min_hits" else 1
+                if isinstance(v, bool) or not isinstance(v, int) or v < least:
+                    raise UserError(f"{where}: {k} must be an integer >= {least}, got {v!r}")
                 kw[k] = v
             else:
                 kw[k] = as_float(v, k, where, lo=0)
@@ -162,3 +168,13 @@ def classify(track, cfg: ClassifierConfig) -> tuple[str, dict]:
             or (resolved and (f["flap_cv"] >= cfg.bird_flap_cv or f["flap_period_s"] is not None))):
         return "bird", f
     return "drone", f
+
+
+def held_label(rules_label: str, previous: str, drone_frames: int, cfg: ClassifierConfig) -> tuple[str, int]:
+    """Rule 5: ``(label, drone_frames)`` of a track after this frame, given what rules 1-4 say now
+    (``rules_label``), the label it showed (``previous``) and in how many frames in a row before this
+    one they had said ``drone`` (``drone_frames``)."""
+    drone_frames = drone_frames + 1 if rules_label == "drone" else 0
+    if rules_label != "drone" or drone_frames >= cfg.drone_after_frames:
+        return rules_label, drone_frames
+    return previous, drone_frames

@@ -58,7 +58,7 @@ from foveatrack.fixed_order import mat3T_vec, norm3
 from foveatrack.frames import Frame
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
-from foveatrack.sky.classify import ClassifierConfig, classify
+from foveatrack.sky.classify import ClassifierConfig, classify, held_label
 from foveatrack.sky.motion import ConstantVelocityFilter
 from foveatrack.sky.range_background import RangeBackground
 from foveatrack.sky.world_points import lidar_to_world_per_point
@@ -181,6 +181,8 @@ class SkyTrack:
     clear_hits: int = 0
     confirmed_t_s: float | None = None
     label: str = "unknown"
+    seen_as: str = "unknown"        # what the classifier's rules 1-4 say this frame (label: after rule 5)
+    drone_frames: int = 0           # frames in a row the classifier's rules have said "drone"
     features: dict = field(default_factory=dict)
     history: list = field(default_factory=list)
     in_view: bool = True
@@ -217,6 +219,13 @@ class TrackView:
     in_view: bool
     features: dict
     clear_hits: int = 0
+    seen_as: str | None = None      # the classifier's rules 1-4 this frame, before rule 5's wait (None: the label)
+
+    @property
+    def looks_like(self) -> str:
+        """What the fovea's schedule goes by: what the track looks like now, before the label waits
+        (foveatrack.sky.classify rule 5: the fovea helps decide, so it looks at a possible drone)."""
+        return self.label if self.seen_as is None else self.seen_as
 
 
 @dataclass(frozen=True)
@@ -360,9 +369,11 @@ class SkyTracker:
         self.background.learn(cells[keep], ranges[keep])
         deleted = self._prune(t_mid)
         for tr in self.tracks:
-            tr.label, tr.features = classify(tr, cfg.classifier)
+            tr.seen_as, tr.features = classify(tr, cfg.classifier)
+            tr.label, tr.drone_frames = held_label(tr.seen_as, tr.label, tr.drone_frames, cfg.classifier)
         views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, tr.kf.predicted(t_mid)[0], tr.kf.v.copy(),
-                                tr.hit_now, tr.in_view, dict(tr.features), tr.clear_hits) for tr in self.tracks)
+                                tr.hit_now, tr.in_view, dict(tr.features), tr.clear_hits, tr.seen_as)
+                      for tr in self.tracks)
         return SkyFrameOutput(t1, views, fovea_det, frame.n_points, int(fg_idx.size), len(objs),
                               tuple(confirmed_now), tuple(deleted))
 

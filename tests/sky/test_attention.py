@@ -106,3 +106,16 @@ def test_a_candidate_being_verified_holds_the_fovea_until_dwell_or_timeout():
     att.update(0.1, [_cand(0, 5), _cand(1, 3)], set(), 0.1)
     assert att.update(0.2, [_cand(1, 3)], set(), 0.1) == 1
     assert att.update(0.3, [_cand(1, 3), view(2, [20, 0, 0])], set(), 0.1) == 2 and att.verifying is None
+
+
+def test_the_schedule_goes_by_what_a_track_looks_like_not_its_waiting_label():
+    # a track the classifier's rules call a drone while its label still waits (rule 5) is revisited and
+    # scored as a drone; one labelled drone that now looks like a bird is not
+    cfg = AttentionConfig(revisit_s=1.0, dwell_s=0.3, saccade_timeout_s=0.5)
+    pending = TrackView(1, True, "unknown", np.array([60.0, 10, 0]), np.zeros(3), True, True, {}, 0, "drone")
+    turned = TrackView(2, True, "drone", np.array([70.0, -10, 0]), np.zeros(3), True, True, {}, 0, "bird")
+    assert threat_score(pending, cfg) == threat_score(view(1, [60, 10, 0]), cfg)
+    served = _run(Attention(cfg), lambda t: [view(0, [20, 0, 0]), pending, turned],
+                  lambda target: set() if target is None else {target}, 6.0)
+    ids = {s for _, s in served}
+    assert 1 in ids and 2 not in ids

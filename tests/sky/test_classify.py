@@ -6,7 +6,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from foveatrack.sky.classify import ClassifierConfig, classify
+import pytest
+
+from foveatrack.errors import UserError
+from foveatrack.sky.classify import ClassifierConfig, classify, held_label
 
 
 def _track(path, n_points=4, noise_m=0.05, seconds=3.0, seed=0):
@@ -51,3 +54,15 @@ def test_flapping_counts_only_where_the_object_is_resolved():
     assert classify(tr, ClassifierConfig())[0] == "drone"
     tr.history = [(t, p, s, 40) for t, p, s, _ in tr.history]
     assert classify(tr, ClassifierConfig())[0] == "bird"
+
+
+def test_a_drone_label_waits_until_the_rules_have_said_drone_so_many_frames_in_a_row():
+    cfg = ClassifierConfig(drone_after_frames=3)
+    label, run, shown = "clutter", 0, []
+    for said in ["drone", "drone", "clutter", "drone", "drone", "drone", "drone", "bird", "drone"]:
+        label, run = held_label(said, label, run, cfg)
+        shown.append(label)
+    assert shown == ["clutter", "clutter", "clutter", "clutter", "clutter", "drone", "drone", "bird", "bird"]
+    assert held_label("drone", "unknown", 0, ClassifierConfig(drone_after_frames=1)) == ("drone", 1)   # at once
+    with pytest.raises(UserError, match="drone_after_frames must be an integer >= 1"):
+        ClassifierConfig.from_mapping({"drone_after_frames": 0}, "[tracker.sky.classifier]")
