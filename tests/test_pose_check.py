@@ -61,9 +61,13 @@ class Lidar:
         self.scan = scene_scan_model(self.scene)
         self.t = 0.0
 
-    def frame(self, pan_deg, tilt_deg, dur_s=0.1):
+    def frame(self, pan_deg, tilt_deg, dur_s=0.1, t_s=None):
+        """The next frame, or the one starting at ``t_s`` (a test that must not depend on which
+        tests took frames before it in the module's shared scene)."""
         from sim.world import kernels as wk
 
+        if t_s is not None:
+            self.t = t_s
         chunk = self.scan.scan_time(self.t, self.t + dur_s)
         d = np.ascontiguousarray(chunk.direction)
         out = np.empty_like(d)
@@ -103,12 +107,14 @@ def test_kernel_agrees_with_its_numpy_twin(yard):
 
 @pytest.mark.parametrize("true_pan, true_tilt", [(2.0, -1.0), (-2.6, 0.8), (0.4, 0.0)])
 def test_a_drift_within_the_bound_is_measured_on_both_axes(yard, true_pan, true_tilt):
-    # the dead reckoning says 0/0; the head is at the true pose: the offset found is the drift
+    # the dead reckoning says 0/0; the head is at the true pose: the offset found is the drift.  The
+    # frame a second after the map's (it was the module's next frame, so its scan -- and an error of
+    # 0.1-0.3 deg in pan, the search's steps -- depended on the test order: CI failed at 0.3 + 3e-16)
     lidar, pc = yard
-    res = check_pose(pts(lidar.frame(true_pan, true_tilt)), 0.0, 0.0, pc.map, pc.cfg)
+    res = check_pose(pts(lidar.frame(true_pan, true_tilt, t_s=2.0)), 0.0, 0.0, pc.map, pc.cfg)
     assert res.kind == "ok", res
     assert res.pan_observable and res.tilt_observable, res
-    assert abs(res.dpan_deg - true_pan) <= 0.3 and abs(res.dtilt_deg - true_tilt) <= 0.1, res
+    assert abs(res.dpan_deg - true_pan) <= 0.3 + 1e-9 and abs(res.dtilt_deg - true_tilt) <= 0.1 + 1e-9, res
     assert res.match > 0.8
 
 
