@@ -25,8 +25,9 @@ import numpy as np
 _F64 = np.dtype(np.float64)
 
 
-def _floats3(v) -> list[float]:
-    """The three components of ``v`` as Python floats (an array's ``tolist`` is the quick way)."""
+def floats3(v) -> list[float]:
+    """The three components of ``v`` as Python floats (an array's ``tolist`` is the quick way: the
+    recording's records are built with it on the loop's thread every frame)."""
     if type(v) is np.ndarray and v.dtype is _F64 and v.ndim == 1:   # a wrong length fails to unpack
         return v.tolist()
     return np.asarray(v, dtype=np.float64).reshape(3).tolist()
@@ -34,21 +35,21 @@ def _floats3(v) -> list[float]:
 
 def dot3(a, b) -> float:
     """``a . b`` of two 3-vectors (sequences or arrays of 3 floats)."""
-    a0, a1, a2 = _floats3(a)
-    b0, b1, b2 = _floats3(b)
+    a0, a1, a2 = floats3(a)
+    b0, b1, b2 = floats3(b)
     return a0 * b0 + a1 * b1 + a2 * b2
 
 
 def norm3(v) -> float:
     """``|v|`` of a 3-vector: ``sqrt(v . v)``, as ``np.linalg.norm`` defines it (without its BLAS)."""
-    x, y, z = _floats3(v)
+    x, y, z = floats3(v)
     return math.sqrt(x * x + y * y + z * z)
 
 
 def mat3_vec(R, v) -> np.ndarray:
     """``R @ v`` (3,) of a 3 x 3 matrix (an array, or its rows as floats) and a 3-vector."""
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist() if type(R) is np.ndarray else R
-    x, y, z = _floats3(v)
+    x, y, z = floats3(v)
     return np.array([r00 * x + r01 * y + r02 * z,
                      r10 * x + r11 * y + r12 * z,
                      r20 * x + r21 * y + r22 * z])
@@ -57,7 +58,7 @@ def mat3_vec(R, v) -> np.ndarray:
 def mat3T_vec(R: np.ndarray, v) -> np.ndarray:
     """``R.T @ v`` (3,): a vector turned back by the rotation ``R`` (world -> body for body -> world)."""
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
-    x, y, z = _floats3(v)
+    x, y, z = floats3(v)
     return np.array([r00 * x + r10 * y + r20 * z,
                      r01 * x + r11 * y + r21 * z,
                      r02 * x + r12 * y + r22 * z])
@@ -86,5 +87,5 @@ def mats3_times_mat3(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 def mats3_times_vec3(A: np.ndarray, v) -> np.ndarray:
     """``A @ v`` (..., 3) for a stack of 3 x 3 matrices ``A`` (..., 3, 3) and one 3-vector ``v``."""
     A = np.asarray(A, dtype=np.float64)
-    x, y, z = _floats3(v)
+    x, y, z = floats3(v)
     return A[..., 0] * x + A[..., 1] * y + A[..., 2] * z

@@ -17,9 +17,10 @@ The per-frame records are :mod:`foveatrack.recording.records`' (the daemon write
 
 from __future__ import annotations
 
+from foveatrack.fixed_order import floats3
 from foveatrack.recording import RecordingWriter
 from foveatrack.recording.run_meta import RecordingMeta, SimulatorOrigin
-from foveatrack.recording.records import (CommandRecord, ObjectTruthRecord, TruthRecord, floats, ns, write_record,
+from foveatrack.recording.records import (CommandRecord, ObjectTruthRecord, TruthRecord, ns, write_record,
                                           write_tracker_frame)
 
 
@@ -59,7 +60,7 @@ class SimRecorder:
                                           tracker_command=(t.pan_dir, t.pan_byte, t.tilt_dir, t.tilt_byte)))
         L = loop.log
         write_record(w, TruthRecord(t_end, fid, L.head_pan_deg[-1], L.head_tilt_deg[-1],
-                                    floats(L.target_xyz[-1]), L.true_error_deg[-1],
+                                    tuple(floats3(L.target_xyz[-1])), L.true_error_deg[-1],
                                     L.points_on_target[-1]))
         for o in loop.last_objects or ():
             write_record(w, ObjectTruthRecord(t_end, fid, o.id, o.cls, o.xyz_m, o.velocity_m_s, o.size_m, o.rays_hit))

@@ -30,8 +30,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numpy as np
-
+from foveatrack.fixed_order import floats3
 from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRUTH, TRUTH_OBJECTS
 
 
@@ -43,16 +42,6 @@ def ns(t_s: float) -> int:
 def _finite_or_none(v):
     """JSON has no NaN: a missing or non-finite float is recorded as null."""
     return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
-
-
-def floats(v) -> tuple:
-    """A vector (an array or a sequence of numbers) as a tuple of Python floats, the same values
-    ``float()`` of each gives.  A float array's ``tolist`` does it at C speed: records are built on
-    the loop's thread every frame, where a generator of ``float()`` calls cost microseconds
-    (docs/recordings.md)."""
-    if isinstance(v, np.ndarray) and v.dtype.kind == "f":
-        return tuple(v.tolist())
-    return tuple(map(float, v))
 
 
 def _xyz(v):
@@ -154,7 +143,7 @@ class DetectionRecord:
         errors = _finite_or_none(out.error_pan_deg), _finite_or_none(out.error_tilt_deg)
         if d is None:
             return cls(int(t_ns), int(frame_id), False, None, 0, None, None, None, state, *errors)
-        return cls(int(t_ns), int(frame_id), True, floats(d.xyz), int(d.n_points), float(d.t_s),
+        return cls(int(t_ns), int(frame_id), True, tuple(floats3(d.xyz)), int(d.n_points), float(d.t_s),
                    float(d.az_deg), float(d.el_deg), state, *errors)
 
     def to_json(self) -> dict:
@@ -188,7 +177,7 @@ class HeadEstimateRecord:
     def from_output(cls, t_ns: int, frame_id: int, out) -> "HeadEstimateRecord":
         return cls(int(t_ns), int(frame_id), float(out.head_pan_deg), float(out.head_tilt_deg),
                    out.head_sigma_pan_deg, out.head_sigma_tilt_deg,
-                   None if out.world_xyz is None else floats(out.world_xyz),
+                   None if out.world_xyz is None else tuple(floats3(out.world_xyz)),
                    _finite_or_none(out.world_sigma_m))
 
     def to_json(self) -> dict:
