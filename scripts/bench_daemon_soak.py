@@ -104,11 +104,13 @@ def slope_mb_h(samples: list[tuple[float, float]], after_s: float) -> tuple[floa
     return float(np.polyfit(tt / 3600.0, rr, 1)[0]), len(pts)
 
 
-def cpu_s(pid: int) -> float | None:
-    """User + system CPU time the process used so far [s]."""
+def cpu_s(pid: int) -> tuple[float, float, int] | None:
+    """(user + system CPU time [s], system CPU time [s], minor page faults) of the process so far: a
+    page re-faulted after memory went back to the system costs system time, not user time."""
     try:
         f = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
-        return (int(f[11]) + int(f[12])) / os.sysconf("SC_CLK_TCK")
+        tick = os.sysconf("SC_CLK_TCK")
+        return (int(f[11]) + int(f[12])) / tick, int(f[12]) / tick, int(f[7])
     except (OSError, IndexError, ValueError):
         return None
 
@@ -203,7 +205,7 @@ watchdog_s = 2.0
     rss: list[tuple[float, float]] = []
     writer_rss: list[tuple[float, float]] = []   # the sum over the daemon's children (the writer)
     load_at: list[tuple[float, float]] = []
-    cpu: list[tuple[float, float]] = []     # (run time, the daemon's CPU time so far) [s]
+    cpu: list[tuple[float, tuple | None]] = []     # (run time, cpu_s(daemon)): CPU time, system time, faults
     steal: list[tuple[float, tuple[int, int] | None]] = []     # (run time, cpu_jiffies())
     loads: list[float] = []
     t0 = None
@@ -275,8 +277,9 @@ watchdog_s = 2.0
         t_s = t_s - t_s.min()
     minutes = int(np.ceil(args.minutes))
     print("\n| minute | frames processed (of 600) | latency p50 [ms] | p99 [ms] | p99 vs minute 1 | max [ms] "
-          "| daemon RSS [MB] | writer RSS [MB] | daemon CPU [% of a core] | load (1-min avg) | host steal [%] |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| daemon RSS [MB] | writer RSS [MB] | daemon CPU [% of a core] | of which system [%] "
+          "| daemon minor faults [k/min] | load (1-min avg) | host steal [%] |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     p99_first = None
     over = []
     for k in range(minutes):
@@ -299,7 +302,13 @@ watchdog_s = 2.0
             return [(t, x) for t, x in series if k * 60.0 - 5.0 < t <= (k + 1) * 60.0 + 1e-6 and x is not None]
 
         c = over_minute(cpu)
-        row.append(f"{100.0 * (c[-1][1] - c[0][1]) / (c[-1][0] - c[0][0]):.0f}" if len(c) >= 2 else "-")
+        if len(c) >= 2:
+            span = c[-1][0] - c[0][0]
+            row += [f"{100.0 * (c[-1][1][0] - c[0][1][0]) / span:.0f}",
+                    f"{100.0 * (c[-1][1][1] - c[0][1][1]) / span:.0f}",
+                    f"{60.0 * (c[-1][1][2] - c[0][1][2]) / span / 1e3:.1f}"]
+        else:
+            row += ["-", "-", "-"]
         ld = [x for t, x in load_at if k * 60.0 < t <= (k + 1) * 60.0 + 1e-6]
         row.append(f"{np.mean(ld):.2f}" if ld else "-")
         st = [x for _, x in over_minute(steal)]
