@@ -164,6 +164,19 @@ def test_the_map_grows_only_from_frames_at_rest_that_agree_with_it():
     assert pc.on_frame(xyz, t_ns(xyz), 0.4, 0.5, lambda t: (12.0 + 20 * (t - 0.4), 0.0, 0.0, 0.0)) is None
 
 
+def test_after_a_rebase_no_frame_begun_before_it_is_checked():
+    # a homing ended at sensor time 5.03 s (the tracker rebased there); a frame of 5.0-5.1 s still
+    # queued is not checked (its first 30 ms belong to the homing), the next one is, at once
+    lidar, pc = mapped(YARD, PoseCheckConfig(enabled=True, period_s=10.0))
+    at = lambda _t: (0.0, 0.0, 0.0, 0.0)                 # noqa: E731
+    xyz = lidar.frame(0.0, 0.0)
+    zeros = np.zeros(len(xyz), np.int64)
+    assert pc.on_frame(xyz, zeros, 4.0, 4.1, at) is not None     # checked; the next after 14.1 s
+    pc.rebased(5.03)
+    assert pc.on_frame(xyz, zeros, 5.0, 5.1, at) is None
+    assert pc.on_frame(xyz, zeros, 5.1, 5.2, at) is not None
+
+
 def test_a_moving_head_is_checked_at_each_points_own_pose():
     # the head pans at 10 deg/s through the frame, and the estimate with it, 1.5 deg behind
     from sim.world import kernels as wk

@@ -155,4 +155,4 @@ class HeadPose:
         if self.imu_feed is not None:
             self.imu_feed.restart(t0_s)
         self._last_send_t = -math.inf
-        self.pose_guard.rebased()
+        self.pose_guard.rebased(t0_s)

@@ -28,10 +28,12 @@ as ours before it is driven:
 * its Pelco address: a position query answered from our address (a head with feedback) is logged as
   ``head_identity`` with ``by = "address"`` and the pose it reports; the paper's head never answers;
 * the pose check: our lidar sits on our head, so once the homing has moved the head behind the link, the
-  background must say the lidar is at home.  The first conclusive check after the homing decides:
-  ``ok`` -> ``head_identity`` (``by = "pose_check"``, verified); ``mismatch`` -> ``head_identity_refused``
+  background must say the lidar is at home.  The first conclusive check of a frame begun after the
+  homing decides: ``ok`` on both axes (pan and tilt observable) -> ``head_identity``
+  (``by = "pose_check"``, verified); ``mismatch`` -> ``head_identity_refused``
   (another head moved, ours did not): the daemon writes nothing more to the link (no STOP, no homing)
-  until it is restarted with the right head on the link.
+  until it is restarted with the right head on the link.  Until a check decides, no frame is tracked
+  (``frames_identity_pending``): nothing is written to a head whose identity is open.
 
 Without ``[pose_check]`` and without an answer, ``head_identity`` says ``verified = false`` and why.
 """
@@ -79,7 +81,15 @@ class PoseGuard:
                 # (not on the first tracked frame: replay hands on an event after the frame before it)
                 self.check.next_check_s = frame.t_end_s + self.check.cfg.period_s
             return True
-        return self._check(d, frame, now)
+        if self._check(d, frame, now):
+            return True
+        if self.identity_pending:
+            # a link that reappeared is used only once the background has said whose head it is: until
+            # a check decides, frames are not tracked (a frame begun before the homing's end is not
+            # checked, and tracking it had already turned the other head by 28 deg before the refusal)
+            d.counters["frames_identity_pending"] += 1
+            return True
+        return False
 
     def link_back(self, d) -> None:
         """The head's link reappeared: ask the head behind it for its position (answers prove our Pelco
@@ -98,9 +108,9 @@ class PoseGuard:
                         why="no answer to a position query (the paper's head never answers) and no [pose_check] "
                             "to see the head move the lidar: the head behind the link is driven unverified")
 
-    def rebased(self) -> None:
+    def rebased(self, t0_s: float) -> None:
         if self.check is not None:
-            self.check.rebased()
+            self.check.rebased(t0_s)
 
     def _check(self, d, frame, now: float) -> bool:
         """Check a frame; correct the drift, or take the pose as unknown (module docstring)."""
@@ -110,7 +120,9 @@ class PoseGuard:
         if res is None:
             return False
         d.counters[f"pose_checks_{res.kind}"] += 1
-        if self.identity_pending and res.kind != "inconclusive":
+        # an "ok" that could not see pan (or tilt) says nothing of that axis: it does not verify a head
+        if self.identity_pending and (res.kind == "mismatch" or (
+                res.kind == "ok" and res.pan_observable and res.tilt_observable)):
             self.identity_pending = False
             if res.kind == "mismatch":
                 return self._refuse(d, frame, res, now)
