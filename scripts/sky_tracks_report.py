@@ -96,6 +96,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenes", nargs="+")
     ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--first-seed", type=int, default=0,
+                    help="seeds from the scene's own plus this (default 0): tune on others than you report")
     ap.add_argument("--duration", type=float, default=None, help="override the scenes' duration [s]")
     ap.add_argument("--markdown", default=None)
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
@@ -117,7 +119,7 @@ def main(argv=None) -> int:
         table = {**base.tracker_table, "sky": sky}
         fovea = float(sky.get("attention", {}).get("fovea_half_angle_deg", 3.0))
         rows = []
-        for s in range(a.seeds):
+        for s in range(a.first_seed, a.first_seed + a.seeds):
             scene = dataclasses.replace(base, seed=base.seed + s, tracker_table=table,
                                         **({"duration_s": a.duration} if a.duration else {}))
             m, g, conf, wall, T = run_one(scene, fovea)
