@@ -20,9 +20,15 @@ Schedule (evaluated after each frame, for the next):
 
 * the *priority track* is the highest score (an operator's pin, :meth:`Attention.pin`, overrides it
   while the pinned track lives);
-* a *revisit* is due for every other confirmed track that looks like a drone whose clock -- its last frame in the fovea, the
-  end of its last revisit, or its confirmation -- is older than ``revisit_s``; the most overdue one is
-  served first;
+* a *revisit* is due for every other confirmed track that looks like a drone once its clock -- its
+  last frame in the fovea, the end of its last revisit, or its confirmation -- is older than
+  ``revisit_s``; for a track *labelled* drone, once it will be older by the time the head can have
+  brought it into the fovea (its *saccade time*, below), unless its last revisit timed out before
+  the fovea got there (then the saccade time is not taken off: a track the tilt cannot reach in time,
+  at 2 deg/s, was due again the moment it was given up on).  The most overdue one is served first,
+  and one revisit follows another without a return to the priority track while the next is due.  No
+  revisit starts while the head is still turning to the priority track (until it has been in the
+  fovea, or ``saccade_timeout_s`` after the turn began);
 * with no confirmed track, the fovea goes to the tentative track with the most hits off the scenery
   (at least ``verify_min_hits``): a saccade to verify what the field's sparse rim only hints at;
 * a revisit fixation lasts until the track has been in the fovea for ``dwell_s``, or
@@ -31,6 +37,16 @@ Schedule (evaluated after each frame, for the next):
 
 A track is *in the fovea* when its predicted bearing lies within ``fovea_half_angle_deg`` of the
 lidar's axis at the frame's mid pose (the rosette's dense centre, paper Fig. 6).
+
+Saccade time (:func:`saccade_time_s`): the head turns each axis under Algorithm 2, ``v = min(k |e|,
+v_max)``, so an axis ``e`` away takes ``(e - max(v_max/k, h)) / v_max`` at full speed and then
+``ln(min(e, v_max/k) / h) / k`` on the proportional tail (if that is above ``h``) to come within
+``h`` (the fovea's half angle) of it; both axes turn at once (the longer counts), plus
+``saccade_latency_s`` (the next command's frame, the head's dead time and acceleration).  Without it
+a revisit started when the clock had run out and the head's turn came on top: two drones 25-36 deg
+apart were out of the fovea up to 6.4 s with a 3 s revisit time, 4.1 s with it
+(docs/sky-tracks-figures.md, which also gives what it costs).  Only tracks labelled drone get it: a
+crown part that looks like a drone for a moment is revisited no sooner than before.
 """
 
 from __future__ import annotations
@@ -58,6 +74,7 @@ class AttentionConfig:
     saccade_timeout_s: float = 2.0
     fovea_half_angle_deg: float = 3.0
     verify_min_hits: float = 1.0
+    saccade_latency_s: float = 0.3
 
     @classmethod
     def from_mapping(cls, data: Mapping, where: str) -> "AttentionConfig":
@@ -66,9 +83,31 @@ class AttentionConfig:
         for k, v in data.items():
             if k == "protected_xyz_m":
                 kw[k] = as_vec(v, k, where, 3)
+            elif k == "saccade_latency_s":
+                kw[k] = as_float(v, k, where, lo=0)
             else:
                 kw[k] = as_float(v, k, where, lo=0, lo_open=True)
         return cls(**kw)
+
+
+def axis_turn_s(error_deg: float, within_deg: float, gain_1_s: float, vmax_deg_s: float) -> float:
+    """Time [s] for an axis under Algorithm 2 (``v = min(gain |e|, vmax)``, no dead band) to bring
+    an error of ``error_deg`` within ``within_deg`` (module docstring, "Saccade time")."""
+    e = abs(error_deg)
+    if e <= within_deg:
+        return 0.0
+    knee = vmax_deg_s / gain_1_s          # below this error the speed is proportional
+    full = (e - max(knee, within_deg)) / vmax_deg_s if e > knee else 0.0
+    return full + (math.log(min(e, knee) / within_deg) / gain_1_s if min(e, knee) > within_deg else 0.0)
+
+
+def saccade_time_s(e_pan_deg: float, e_tilt_deg: float, cfg: "AttentionConfig", head) -> float:
+    """Time [s] for the head to bring a bearing ``e_pan_deg`` / ``e_tilt_deg`` off its axis into the
+    fovea: both axes at once, plus ``cfg.saccade_latency_s``.  ``head``: (pan gain [1/s], pan top
+    speed [deg/s], tilt gain, tilt top speed)."""
+    kp, vp, kt, vt = head
+    h = cfg.fovea_half_angle_deg
+    return cfg.saccade_latency_s + max(axis_turn_s(e_pan_deg, h, kp, vp), axis_turn_s(e_tilt_deg, h, kt, vt))
 
 
 def threat_score(view, cfg: AttentionConfig) -> float:
@@ -97,6 +136,9 @@ class Attention:
     served_s: dict = field(default_factory=dict)
     _revisit_start_s: float = 0.0
     _revisit_dwell_s: float = 0.0
+    unreached: set = field(default_factory=set)   # tracks whose last revisit timed out before the fovea got there
+    _target_since_s: float = 0.0         # when the fovea was last given to another track
+    _target_reached: bool = False        # ... and whether that track has been in the fovea since
     verifying: int | None = None         # the candidate the fovea is turned to while nothing is confirmed
     _verify_start_s: float = 0.0
     _verify_dwell_s: float = 0.0
@@ -105,15 +147,23 @@ class Attention:
         """An operator's choice: this track is the priority while it lives (None: unpin)."""
         self.pinned = track_id
 
-    def update(self, t_s: float, views, in_fovea: set[int], dt_s: float) -> int | None:
+    def update(self, t_s: float, views, in_fovea: set[int], dt_s: float,
+               turn_s: Mapping[int, float] | None = None) -> int | None:
+        """``turn_s``: each confirmed track's saccade time from the head's pose now (module
+        docstring; missing: 0, a revisit then starts only when its clock has run out)."""
         cfg = self.cfg
+        turn_s = turn_s or {}
+        if self.target in in_fovea:
+            self._target_reached = True
         live = {v.track_id: v for v in views if v.confirmed}
         for tid in live:            # a new track's clock starts when it is confirmed
             self.served_s.setdefault(tid, t_s)
         for tid in in_fovea:
             if tid in live:
                 self.served_s[tid] = t_s
+                self.unreached.discard(tid)
         self.served_s = {k: t for k, t in self.served_s.items() if k in live}
+        self.unreached &= set(live)
         if self.pinned is not None and self.pinned not in live:
             self.pinned = None
         scores = sorted(((-threat_score(v, cfg), tid) for tid, v in live.items()))
@@ -128,22 +178,36 @@ class Attention:
                     self._revisit_dwell_s += dt_s
                 if self._fixation_over(t_s, self._revisit_start_s, self._revisit_dwell_s):
                     self.served_s[self.revisit] = t_s     # served, or given up on: its clock restarts
+                    if self._revisit_dwell_s < cfg.dwell_s:
+                        self.unreached.add(self.revisit)
                     self.revisit = None
-        if self.revisit is None and self.priority is not None:
+        # the head on its way back to the priority track is not sent elsewhere before it gets there
+        # (or gives up, as a revisit does): the tilt turns at 2 deg/s, and a revisit that cut in sent
+        # the fovea to a crown part while the drone it was turning to waited another 5 s
+        in_transit = (self.target is not None and self.target == self.priority and not self._target_reached
+                      and t_s - self._target_since_s < cfg.saccade_timeout_s)
+        if self.revisit is None and self.priority is not None and not in_transit:
             first = {}
             for tid, v in live.items():
                 if tid != self.priority and v.looks_like == "drone":
                     first[tid] = self.served_s[tid]
-            due = sorted((t, tid) for tid, t in first.items() if t_s - t > cfg.revisit_s)
+            # due once the clock will have run out by the time the head gets there (a track the head
+            # did not reach last time: once it has run out, or it would be due again at once)
+            lead = {tid: turn_s.get(tid, 0.0) if live[tid].label == "drone" and tid not in self.unreached else 0.0
+                    for tid in first}
+            due = sorted((t - lead[tid], tid) for tid, t in first.items() if t_s + lead[tid] - t > cfg.revisit_s)
             if due:
                 self.revisit = due[0][1]
                 self._revisit_start_s = t_s
                 self._revisit_dwell_s = 0.0
-        self.target = self.revisit if self.revisit is not None else self.priority
-        if self.target is None:
-            self.target = self._verify(t_s, views, in_fovea, dt_s)
+        target = self.revisit if self.revisit is not None else self.priority
+        if target is None:
+            target = self._verify(t_s, views, in_fovea, dt_s)
         else:
             self.verifying = None
+        if target != self.target:
+            self._target_since_s, self._target_reached = t_s, False
+        self.target = target
         return self.target
 
     def _fixation_over(self, t_s: float, start_s: float, dwell_s: float) -> bool:

@@ -32,7 +32,8 @@ from foveatrack.errors import UserError
 from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_rows
-from foveatrack.sky.attention import Attention, AttentionConfig, bearing_off_axis_deg, threat_score
+from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, saccade_time_s,
+                                      threat_score)
 from foveatrack.space_of_interest import Box
 from foveatrack.sky.tracks import SkyFrameOutput, SkyTracker, SkyTrackerConfig
 from foveatrack.tracker import Tracker, TrackOutput
@@ -114,6 +115,13 @@ class SkyController:
         region = space if isinstance(space, Box) and getattr(space, "frame", "lidar") == "world" else None
         self.sky = SkyTracker(sky_cfg, region)
         self.attention = Attention(attention_cfg or AttentionConfig())
+        # how fast Algorithm 2 turns each axis: its gain and top speed (the table's, or the configured
+        # cap), for the attention's saccade times
+        c = tracker.config
+        vp = tracker.table.pan.max_speed_deg_s(c.allow_turbo)
+        vt = tracker.table.tilt.max_speed_deg_s(False)
+        self._head_speeds = (c.gain_pan_1_s, vp if c.max_pan_speed_deg_s is None else min(vp, c.max_pan_speed_deg_s),
+                             c.gain_tilt_1_s, vt if c.max_tilt_speed_deg_s is None else min(vt, c.max_tilt_speed_deg_s))
 
     @property
     def recon(self):
@@ -134,7 +142,10 @@ class SkyController:
         half = self.attention.cfg.fovea_half_angle_deg
         in_fovea = {v.track_id for v in sky.tracks
                     if v.confirmed and bearing_off_axis_deg(v.xyz_m, rows, recon.lidar_offset_m) <= half}
-        nxt = self.attention.update(frame.t_end_s, sky.tracks, in_fovea, frame.t_end_s - frame.t_start_s)
+        turn = {v.track_id: saccade_time_s(*self._bearing(v.xyz_m, frame.t_end_s), self.attention.cfg,
+                                           self._head_speeds)
+                for v in sky.tracks if v.confirmed}
+        nxt = self.attention.update(frame.t_end_s, sky.tracks, in_fovea, frame.t_end_s - frame.t_start_s, turn)
         scores = {v.track_id: threat_score(v, self.attention.cfg) for v in sky.tracks if v.confirmed}
         return SkyControlOutput(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores)
 
@@ -144,14 +155,22 @@ class SkyController:
     def on_imu(self, t_s, gyro_rad_s) -> None:
         self.tracker.on_imu(t_s, gyro_rad_s)
 
-    def _aim(self, p_world: np.ndarray, t_s: float) -> Detection:
-        """The track's position as the lidar would see it at ``t_s`` (an aim point, ``n_points = 0``)."""
+    def _in_lidar(self, p_world: np.ndarray, t_s: float) -> np.ndarray:
+        """A world point in the lidar frame at the dead-reckoned pose of ``t_s``."""
         recon = self.tracker.recon
         pan, tilt, _, _ = recon.angles_at(t_s)
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_rows(pan, tilt)
         x, y, z = np.asarray(p_world, np.float64).tolist()
         ox, oy, oz = np.asarray(recon.lidar_offset_m, np.float64).reshape(3).tolist()
-        q = np.array([r00 * x + r10 * y + r20 * z - ox, r01 * x + r11 * y + r21 * z - oy,
-                      r02 * x + r12 * y + r22 * z - oz])
+        return np.array([r00 * x + r10 * y + r20 * z - ox, r01 * x + r11 * y + r21 * z - oy,
+                         r02 * x + r12 * y + r22 * z - oz])
+
+    def _bearing(self, p_world: np.ndarray, t_s: float) -> tuple[float, float]:
+        """Azimuth and elevation [deg] of a world point off the lidar's axis at ``t_s``."""
+        return bearing_deg(*self._in_lidar(p_world, t_s).tolist())
+
+    def _aim(self, p_world: np.ndarray, t_s: float) -> Detection:
+        """The track's position as the lidar would see it at ``t_s`` (an aim point, ``n_points = 0``)."""
+        q = self._in_lidar(p_world, t_s)
         az, el = bearing_deg(*q.tolist())
         return Detection(t_s, q, 0, az, el, norm3(q))

@@ -1,9 +1,11 @@
 """The fovea's schedule: priority by threat score, revisits of the other drones, return, pin."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from foveatrack.sky.attention import Attention, AttentionConfig, threat_score
+from foveatrack.sky.attention import Attention, AttentionConfig, axis_turn_s, saccade_time_s, threat_score
 from foveatrack.sky.tracks import TrackView
 
 
@@ -119,3 +121,73 @@ def test_the_schedule_goes_by_what_a_track_looks_like_not_its_waiting_label():
                   lambda target: set() if target is None else {target}, 6.0)
     ids = {s for _, s in served}
     assert 1 in ids and 2 not in ids
+
+
+@pytest.mark.parametrize("error_deg,gain,vmax", [(25.0, 2.0, 15.0), (5.0, 2.0, 15.0), (14.0, 2.0, 2.0),
+                                                 (40.0, 4.0, 20.0), (2.9, 2.0, 15.0)])
+def test_the_saccade_time_is_the_proportional_law_integrated(error_deg, gain, vmax):
+    # axis_turn_s in closed form against the law v = min(k e, vmax) stepped at 0.1 ms
+    e, t, dt = error_deg, 0.0, 1e-4
+    while e > 3.0:
+        e -= min(gain * e, vmax) * dt
+        t += dt
+    assert axis_turn_s(error_deg, 3.0, gain, vmax) == pytest.approx(t, abs=2e-3)
+    # both axes at once, the longer counts, plus the latency
+    cfg = AttentionConfig(saccade_latency_s=0.25)
+    head = (gain, vmax, 2.0, 2.0)
+    assert saccade_time_s(error_deg, 6.0, cfg, head) == pytest.approx(
+        0.25 + max(axis_turn_s(error_deg, 3.0, gain, vmax), axis_turn_s(6.0, 3.0, 2.0, 2.0)))
+
+
+def _revisit_starts(turn_s, fovea_fn=None, duration_s=8.0, label=None):
+    """When revisits of track 1 start (the priority is track 0), with the head's saccade time to it;
+    ``label``: track 1's label while it looks like a drone (default: labelled drone)."""
+    cfg = AttentionConfig(revisit_s=3.0, dwell_s=0.3, saccade_timeout_s=1.0)
+    att = Attention(cfg)
+    one = view(1, [60, 10, 0])
+    if label is not None:
+        one = dataclasses.replace(one, label=label, seen_as="drone")
+    views = [view(0, [20, 0, 0]), one]
+    starts, prev, dt = [], None, 0.1
+    fovea_fn = fovea_fn or (lambda target: set() if target is None else {target})
+    for k in range(int(round(duration_s / dt))):
+        t = (k + 1) * dt
+        att.update(t, views, fovea_fn(att.target), dt, {0: 0.0, 1: turn_s})
+        if att.target == 1 and prev != 1:
+            starts.append(round(t, 6))
+        prev = att.target
+    return starts
+
+
+def test_a_revisit_starts_its_saccade_time_early():
+    # with no turn to make, track 1 (confirmed at 0.1 s) is due once its clock is past 3 s; a head that
+    # needs 1.2 s to get there starts 1.2 s sooner, so the track is in the fovea when the clock runs out
+    plain, early = _revisit_starts(0.0), _revisit_starts(1.2)
+    assert plain[0] == pytest.approx(3.2) and early[0] == pytest.approx(2.0)
+    assert len(early) >= len(plain)
+    # a track that only looks like a drone (its label waits) is revisited, but not early
+    assert _revisit_starts(1.2, label="unknown")[0] == pytest.approx(3.2)
+
+
+def test_a_track_the_head_did_not_reach_waits_the_whole_revisit_time():
+    # the head never gets track 1 into the fovea (the tilt is too slow): each revisit times out after
+    # 1 s.  With its 4 s saccade time taken off, it was due again at once, and the priority lost the
+    # fovea for good; now it waits the whole revisit time after each timeout
+    starts = _revisit_starts(4.0, fovea_fn=lambda target: {0} if target == 0 else set(), duration_s=12.0)
+    assert starts[0] == pytest.approx(0.1)       # at once: its saccade time is over the revisit time
+    assert np.diff(starts).min() >= 1.0 + 3.0 - 1e-9, starts
+
+
+def test_no_revisit_cuts_into_the_head_s_turn_to_the_priority():
+    # the head takes 2 s to bring the priority (track 0) into the fovea; track 1 falls due meanwhile
+    cfg = AttentionConfig(revisit_s=0.5, dwell_s=0.3, saccade_timeout_s=3.0)
+    att = Attention(cfg)
+    views = [view(0, [20, 0, 0]), view(1, [60, 10, 0])]
+    served = []
+    for k in range(40):
+        t = (k + 1) * 0.1
+        reached = {0} if att.target == 0 and t >= 2.0 else ({1} if att.target == 1 else set())
+        att.update(t, views, reached, 0.1)
+        served.append((round(t, 6), att.target))
+    first_revisit = next(t for t, s in served if s == 1)
+    assert first_revisit >= 2.0, served
