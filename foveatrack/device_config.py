@@ -18,7 +18,8 @@ Tables::
     [recording]  path ("{time}" becomes the UTC start time; its directory must exist unless
                  make_dirs = true), flush_every_frames, compression, points_dtype, queue_frames, overwrite,
                  segment_minutes (default 60: a new file every hour, each complete, so memory stays bounded
-                 on long runs; 0: one file)
+                 on long runs; 0: one file), writeback_mb (default 32: the file's pages sent to the disk
+                 and dropped from the page cache every 32 MB; 0: left to the kernel)
     [daemon]     watchdog_s, max_frame_backlog, stale_frame_s, batch_queue, status_period_s, log
     [pose_check] the head's pose checked against the background (foveatrack.pose_check.PoseCheckConfig:
                  enabled, bound_deg, ...; off unless enabled = true)
@@ -112,6 +113,7 @@ class RecordingConfig:
     overwrite: bool = False
     make_dirs: bool = False     # create a missing directory (else it must exist: a typo made a new tree)
     segment_minutes: float | None = 60.0   # a new file every this many minutes, None: one (foveatrack.recording.segments)
+    writeback_mb: float = 32.0  # the file's pages to the disk and out of the cache every this many MB, 0: the kernel's (foveatrack.recording.writeback)
 
 
 @dataclass(frozen=True)
@@ -321,6 +323,8 @@ def _recording(t: Mapping, w: str) -> RecordingConfig:
         if 0 < m < 0.01:
             raise UserError(f"{w}: segment_minutes {m} is under 0.01 (0.6 s); 0 keeps one file for the run")
         kw["segment_minutes"] = m or None
+    if "writeback_mb" in t:
+        kw["writeback_mb"] = as_float(t["writeback_mb"], "writeback_mb", w, lo=0, hi=65_536)
     return RecordingConfig(**kw)
 
 

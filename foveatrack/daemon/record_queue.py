@@ -66,7 +66,8 @@ class DaemonRecording:
             path.parent.mkdir(parents=True, exist_ok=True)
             writer = RecordingWriter(path, self._meta(), flush_every_frames=r.flush_every_frames,
                                      compression=r.compression, points_dtype=r.points_dtype, overwrite=r.overwrite,
-                                     log_time="host")   # log times: the host's UTC; messages: the Livox clock
+                                     log_time="host",   # log times: the host's UTC; messages: the Livox clock
+                                     writeback_step_bytes=int(r.writeback_mb * 1024 * 1024))
         except (OSError, UserError) as exc:
             self.client.close()
             self.head.close()

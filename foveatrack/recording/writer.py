@@ -18,6 +18,7 @@ from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTION
                                          imu_columns, meta_crc32)
 from foveatrack.recording.foxglove_view import FoxgloveChannels
 from foveatrack.recording.pack_kernels import pack_points
+from foveatrack.recording.writeback import WritebackPacer
 
 
 def _sdk_version() -> str:
@@ -120,6 +121,9 @@ def check_options(path, meta, flush_every_frames, compression, compression_level
 
 
 COMPRESSIONS = ("lz4", "zstd", "none")
+# a recording's pages go to the disk and out of the cache every 32 MB (foveatrack.recording.writeback;
+# 0: left to the kernel)
+WRITEBACK_STEP_BYTES = 32 * 1024 * 1024
 # json.dumps(rec, default=_to_jsonable) to the byte, without building an encoder per record (~5 us each)
 _RECORD_JSON = json.JSONEncoder(default=_to_jsonable)
 
@@ -170,6 +174,7 @@ class RecordingWriter(RecordCalls):
         file_mode: int = 0o600,
         log_time=0,
         segment_index: int = 0,
+        writeback_step_bytes: int = WRITEBACK_STEP_BYTES,
     ):
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
@@ -190,6 +195,8 @@ class RecordingWriter(RecordCalls):
             self._opts = MCAPWriteOptions(compression=comp, profile="foveatrack", chunk_size=None,
                                           compression_threads=0, compression_level=level)
             self._file_mode = file_mode
+            self._writeback_step = int(writeback_step_bytes)
+            self._pacer = None
             self._open_file(self.path, overwrite)
             md = {
                 "format": FORMAT,
@@ -226,6 +233,9 @@ class RecordingWriter(RecordCalls):
                                          writer_options=self._opts)
         except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types for I/O
             raise UserError(f"cannot create recording {path}: {exc}") from None
+        if self._pacer is not None:
+            self._pacer.close()
+        self._pacer = WritebackPacer(path, self._writeback_step) if self._writeback_step > 0 else None
 
     def _write_meta(self, md: dict) -> None:
         md = dict(md)
@@ -351,6 +361,8 @@ class RecordingWriter(RecordCalls):
         self._channel_table()
         if self.fsync:
             _fsync(self.path)
+        if self._pacer is not None:
+            self._pacer.after_flush()
 
     def close(self) -> None:
         """Write the last chunk and the summary; the file is then complete."""
@@ -364,6 +376,8 @@ class RecordingWriter(RecordCalls):
                     _fsync(self.path)
         finally:
             self._closed = True
+            if getattr(self, "_pacer", None) is not None:
+                self._pacer.close()
 
     def __enter__(self) -> "RecordingWriter":
         return self
