@@ -42,7 +42,7 @@ class WritebackPacer:
 
     def sync(self) -> None:
         t = time.perf_counter()
-        os.fdatasync(self._fd)
+        getattr(os, "fdatasync", os.fsync)(self._fd)     # (macOS has no fdatasync)
         if hasattr(os, "posix_fadvise"):
             os.posix_fadvise(self._fd, 0, 0, os.POSIX_FADV_DONTNEED)
         self._synced = os.fstat(self._fd).st_size
