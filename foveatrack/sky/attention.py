@@ -38,16 +38,16 @@ Schedule (evaluated after each frame, for the next):
 A track is *in the fovea* when its predicted bearing lies within ``fovea_half_angle_deg`` of the
 lidar's axis at the frame's mid pose (the rosette's dense centre, paper Fig. 6).
 
-Saccade time (:func:`saccade_time_s`): the head turns each axis under Algorithm 2, ``v = min(k |e|,
-v_max)``, so an axis ``e`` away takes ``(e - max(v_max/k, h)) / v_max`` at full speed and then
-``ln(min(e, v_max/k) / h) / k`` on the proportional tail (if that is above ``h``) to come within
-``h`` (the fovea's half angle) of it; both axes turn at once (the longer counts), plus
-``saccade_latency_s`` (the next command's frame, the head's dead time and acceleration).  Without it
-a revisit started when the clock had run out and the head's turn came on top: two drones 25-36 deg
+Saccade time (:func:`saccade_time_s`): the head turns each axis under the paper's Algorithm 2 (App.
+D.3), ``v = min(k |e|, v_max)``, so an axis ``e`` away takes ``(e - max(v_max/k, h)) / v_max`` at
+full speed and then ``ln(min(e, v_max/k) / h) / k`` on the proportional tail (if that is above
+``h``) to come within ``h`` (the fovea's half angle) of it; both axes turn at once (the longer
+counts), plus ``saccade_latency_s`` (the next command's frame, the head's dead time and
+acceleration).  Without it a revisit started when the clock had run out and the head's turn came on top: two drones 25-36 deg
 apart were out of the fovea up to 6.4 s with a 3 s revisit time, 4.1 s with it, in the 32 runs it was
 chosen on (over an hour of runs: median 4.0 -> 3.6 s; docs/sky-tracks-figures.md, which also gives
-what it costs).  Only tracks labelled drone get it: a
-crown part that looks like a drone for a moment is revisited no sooner than before.
+what it costs).  Only tracks labelled drone get it: a crown part that looks like a drone for a moment
+is revisited no sooner than before.
 """
 
 from __future__ import annotations
