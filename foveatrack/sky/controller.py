@@ -137,13 +137,13 @@ class SkyController:
             det = self._aim(view.xyz_m, frame.t_end_s)
         out = self.tracker.steer(frame, det, send_t_s)
         t_mid = 0.5 * (frame.t_start_s + frame.t_end_s)
-        pan, tilt, _, _ = recon.angles_at(t_mid)
-        rows = rotation_rows(pan, tilt)
+        mid_pose = self._pose_rows(t_mid)
         half = self.attention.cfg.fovea_half_angle_deg
         in_fovea = {v.track_id for v in sky.tracks
-                    if v.confirmed and bearing_off_axis_deg(v.xyz_m, rows, recon.lidar_offset_m) <= half}
-        turn = {v.track_id: saccade_time_s(*self._bearing(v.xyz_m, frame.t_end_s), self.attention.cfg,
-                                           self._head_speeds)
+                    if v.confirmed and bearing_off_axis_deg(v.xyz_m, *mid_pose) <= half}
+        end_pose = self._pose_rows(frame.t_end_s)      # one pose for every track's saccade time
+        turn = {v.track_id: saccade_time_s(*bearing_deg(*self._in_lidar(v.xyz_m, *end_pose).tolist()),
+                                           self.attention.cfg, self._head_speeds)
                 for v in sky.tracks if v.confirmed}
         nxt = self.attention.update(frame.t_end_s, sky.tracks, in_fovea, frame.t_end_s - frame.t_start_s, turn)
         scores = {v.track_id: threat_score(v, self.attention.cfg) for v in sky.tracks if v.confirmed}
@@ -155,22 +155,23 @@ class SkyController:
     def on_imu(self, t_s, gyro_rad_s) -> None:
         self.tracker.on_imu(t_s, gyro_rad_s)
 
-    def _in_lidar(self, p_world: np.ndarray, t_s: float) -> np.ndarray:
-        """A world point in the lidar frame at the dead-reckoned pose of ``t_s``."""
+    def _pose_rows(self, t_s: float):
+        """The lidar's dead-reckoned pose at ``t_s``: its rotation rows and offset."""
         recon = self.tracker.recon
         pan, tilt, _, _ = recon.angles_at(t_s)
-        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_rows(pan, tilt)
+        return rotation_rows(pan, tilt), recon.lidar_offset_m
+
+    @staticmethod
+    def _in_lidar(p_world: np.ndarray, rows, offset) -> np.ndarray:
+        """A world point in the lidar frame of the pose ``rows``, ``offset`` (:meth:`_pose_rows`)."""
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
         x, y, z = np.asarray(p_world, np.float64).tolist()
-        ox, oy, oz = np.asarray(recon.lidar_offset_m, np.float64).reshape(3).tolist()
+        ox, oy, oz = np.asarray(offset, np.float64).reshape(3).tolist()
         return np.array([r00 * x + r10 * y + r20 * z - ox, r01 * x + r11 * y + r21 * z - oy,
                          r02 * x + r12 * y + r22 * z - oz])
 
-    def _bearing(self, p_world: np.ndarray, t_s: float) -> tuple[float, float]:
-        """Azimuth and elevation [deg] of a world point off the lidar's axis at ``t_s``."""
-        return bearing_deg(*self._in_lidar(p_world, t_s).tolist())
-
     def _aim(self, p_world: np.ndarray, t_s: float) -> Detection:
         """The track's position as the lidar would see it at ``t_s`` (an aim point, ``n_points = 0``)."""
-        q = self._in_lidar(p_world, t_s)
+        q = self._in_lidar(p_world, *self._pose_rows(t_s))
         az, el = bearing_deg(*q.tolist())
         return Detection(t_s, q, 0, az, el, norm3(q))
