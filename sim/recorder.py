@@ -13,6 +13,7 @@ The per-frame records are :mod:`foveatrack.recording.records`' (the daemon write
 * imu (scenes with ``[imu]``): the head gyro's samples fed to the tracker before the frame
 * truth_objects (multi-object scenes, ``Scene.multi_object``): every object's id, class, position,
   velocity, size and the rays that hit it, one record per object and frame (sim.objects_truth)
+* tracks (scenes with ``[tracker.sky]``): every track and the fovea's schedule, one record per frame
 """
 
 from __future__ import annotations
@@ -37,7 +38,8 @@ def recording_meta(scene, loop) -> dict:
     return RecordingMeta(loop.tracker.config, loop.head_facts.tracker_values(), loop.tracker.table,
                          loop.gate.limits, origin, point_rate_hz=scene.optics.point_rate_hz,
                          # replay's "in the FoV", as the simulator's summary has it
-                         half_fov_deg=half_fov_deg(scene)).to_dict()
+                         half_fov_deg=half_fov_deg(scene),
+                         sky=None if loop.sky is None else loop.sky.sky_table()).to_dict()
 
 
 class SimRecorder:

@@ -42,6 +42,9 @@ TRUTH = "truth"
 # simulation truth of every object of a multi-object scene (drones, birds, trees, stray returns), one
 # record per object and frame; written only by scenes with more than one object (sim.recorder)
 TRUTH_OBJECTS = "truth_objects"
+# every track of the multi-object tracker (issue 28: a [tracker.sky] run), one record per frame; written
+# only by such runs, by the simulator and the daemon alike (records.write_tracker_frame)
+TRACKS = "tracks"
 METRICS = "metrics"
 DAEMON_EVENTS = "daemon"     # the daemon's events (tracker_rebased, head_pose_unknown, ...), JSON
 IMU = "imu"                  # the IMU samples fed to the tracker before each frame (protobuf ImuSamples)
@@ -106,6 +109,22 @@ OPTIONAL_RECORD_SCHEMAS = {
         "class": {"type": "string", "description": "drone, bird, tree or clutter"}, "xyz_m": _XYZ,
         "velocity_m_s": _XYZ, "size_m": {"type": "number"},
         "rays_hit": {"type": "integer", "description": "rays of the frame that hit it, before the effects"}})),
+    TRACKS: ("foveatrack.Tracks", _obj("foveatrack.Tracks", "every track of the multi-object tracker after "
+                                       "one frame [m, world]", {
+        "frame_id": {"type": "integer"},
+        "fixated": {"type": "integer", "description": "the track the fovea served this frame" + _NULLABLE},
+        "next_target": {"type": "integer", "description": "the track the fovea serves next" + _NULLABLE},
+        "pinned": {"type": "integer", "description": "the operator's pinned track" + _NULLABLE},
+        "in_fovea": {"type": "array", "items": {"type": "integer"}},
+        "n_points": {"type": "integer"}, "n_foreground": {"type": "integer"}, "n_objects": {"type": "integer"},
+        "confirmed_now": {"type": "array", "items": {"type": "integer"}},
+        "deleted_now": {"type": "array", "items": {"type": "integer"}},
+        "tracks": {"type": "array", "items": {"type": "object", "properties": {
+            "id": {"type": "integer"}, "confirmed": {"type": "boolean"},
+            "label": {"type": "string", "description": "drone, bird, clutter or unknown"},
+            "looks_like": {"type": "string", "description": "the classifier's rules this frame, before the label waits"},
+            "xyz_m": _XYZ, "velocity_m_s": _XYZ, "hit": {"type": "boolean"}, "in_view": {"type": "boolean"},
+            "score": {"type": "number", "description": "threat score (confirmed tracks)" + _NULLABLE}}}}})),
 }
 
 

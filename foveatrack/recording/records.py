@@ -14,6 +14,7 @@ CommandRecord          /commands       a command as written to the head (Pelco b
                                        the gate changed it
 TruthRecord            /truth          simulation only: the true head pose and target
 ObjectTruthRecord      /truth_objects  simulation only, multi-object scenes: every object's truth
+TracksRecord           /tracks         the multi-object tracker (``[tracker.sky]``): every track
 =====================  ==============  =====================================================
 
 The IMU samples fed to the tracker (``/imu``) are arrays, not a JSON record:
@@ -31,7 +32,7 @@ import math
 from dataclasses import dataclass, field
 
 from foveatrack.fixed_order import floats3
-from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRUTH, TRUTH_OBJECTS
+from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, TRACKS, TRUTH, TRUTH_OBJECTS
 
 
 def ns(t_s: float) -> int:
@@ -324,14 +325,111 @@ class ObjectTruthRecord:
                    _nan(r.get("size_m")), int(r.get("rays_hit", 0)))
 
 
+def _ints_f(r: dict, key: str) -> tuple:
+    v = _field(r, key, [])
+    if not isinstance(v, (list, tuple)) or not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
+        raise RecordError(f"field {key!r}: {v!r} is not a list of whole numbers")
+    return tuple(v)
+
+
+@dataclass(frozen=True)
+class TrackEntry:
+    """One track as a frame of the multi-object tracker left it (:class:`foveatrack.sky.tracks.TrackView`):
+    id, confirmed, label (after the classifier's wait) and what it looks like this frame, position [m]
+    and velocity [m/s] in the world, hit this frame, in the lidar's field, threat score (confirmed
+    tracks; None otherwise)."""
+    id: int
+    confirmed: bool
+    label: str
+    looks_like: str
+    xyz_m: tuple
+    velocity_m_s: tuple
+    hit: bool
+    in_view: bool
+    score: float | None = None
+
+    def to_json(self) -> dict:
+        return {"id": self.id, "confirmed": self.confirmed, "label": self.label, "looks_like": self.looks_like,
+                "xyz_m": _xyz(self.xyz_m), "velocity_m_s": _xyz(self.velocity_m_s), "hit": self.hit,
+                "in_view": self.in_view, "score": self.score}
+
+    @classmethod
+    def from_json(cls, r: dict) -> "TrackEntry":
+        xyz, vel = _vec_f(r, "xyz_m", default=_MISSING), _vec_f(r, "velocity_m_s", default=_MISSING)
+        return cls(_int_f(r, "id"), bool(_bool_f(r, "confirmed", False)), _str_f(r, "label") or "unknown",
+                   _str_f(r, "looks_like") or "unknown", xyz, vel, bool(_bool_f(r, "hit", False)),
+                   bool(_bool_f(r, "in_view", True)), _num_f(r, "score"))
+
+
+@dataclass(frozen=True)
+class TracksRecord:
+    """Every track of the multi-object tracker after frame ``frame_id`` (``t_ns`` = frame end), and the
+    fovea's schedule: the track it served this frame, the one it serves next, the operator's pin, the
+    confirmed tracks inside it; the frame's points, foreground points and objects; the ids confirmed
+    and deleted this frame (issue 28, :class:`foveatrack.sky.controller.SkyControlOutput`)."""
+
+    CHANNEL = TRACKS
+    t_ns: int
+    frame_id: int
+    tracks: tuple
+    fixated: int | None = None
+    next_target: int | None = None
+    pinned: int | None = None
+    in_fovea: tuple = ()
+    n_points: int = 0
+    n_foreground: int = 0
+    n_objects: int = 0
+    confirmed_now: tuple = ()
+    deleted_now: tuple = ()
+
+    @classmethod
+    def from_output(cls, t_ns: int, frame_id: int, out) -> "TracksRecord":
+        """From a :class:`foveatrack.sky.controller.SkyControlOutput`."""
+        sky = out.sky
+        opt = lambda v: None if v is None else int(v)      # noqa: E731
+        tracks = tuple(TrackEntry(int(v.track_id), bool(v.confirmed), str(v.label), str(v.looks_like),
+                                  tuple(floats3(v.xyz_m)), tuple(floats3(v.velocity_m_s)), bool(v.hit),
+                                  bool(v.in_view), None if v.track_id not in out.scores
+                                  else float(out.scores[v.track_id]))
+                       for v in sky.tracks)
+        return cls(int(t_ns), int(frame_id), tracks, opt(out.fixated), opt(out.next_target), opt(out.pinned),
+                   tuple(int(i) for i in out.in_fovea), int(sky.n_points), int(sky.n_foreground),
+                   int(sky.n_objects), tuple(int(i) for i in sky.confirmed_now),
+                   tuple(int(i) for i in sky.deleted_now))
+
+    def to_json(self) -> dict:
+        return {"frame_id": self.frame_id, "fixated": self.fixated, "next_target": self.next_target,
+                "pinned": self.pinned, "in_fovea": list(self.in_fovea), "n_points": self.n_points,
+                "n_foreground": self.n_foreground, "n_objects": self.n_objects,
+                "confirmed_now": list(self.confirmed_now), "deleted_now": list(self.deleted_now),
+                "tracks": [t.to_json() for t in self.tracks]}
+
+    @classmethod
+    def from_json(cls, r: dict) -> "TracksRecord":
+        tracks = _field(r, "tracks", [])
+        if not isinstance(tracks, list):
+            raise RecordError(f"field 'tracks': {tracks!r} is not a list")
+        entries = []
+        for k, t in enumerate(tracks):
+            try:
+                entries.append(TrackEntry.from_json(t))
+            except RecordError as exc:
+                raise RecordError(f"tracks[{k}]: {exc}") from None
+        return cls(_int_f(r, "t_ns"), _int_f(r, "frame_id", -1), tuple(entries),
+                   _int_f(r, "fixated", None, nullable=True), _int_f(r, "next_target", None, nullable=True),
+                   _int_f(r, "pinned", None, nullable=True), _ints_f(r, "in_fovea"), _int_f(r, "n_points", 0),
+                   _int_f(r, "n_foreground", 0), _int_f(r, "n_objects", 0), _ints_f(r, "confirmed_now"),
+                   _ints_f(r, "deleted_now"))
+
+
 def write_record(writer, rec) -> None:
     """Write a typed record on its channel."""
     writer.write(rec.CHANNEL, rec.t_ns, rec.to_json())
 
 
 def write_tracker_frame(writer, frame_id: int, frame, out, imu=None) -> int:
-    """Record one frame and the tracker's output for it (points, detection, head estimate), as every
-    driver does; returns the frame-end time [ns].  Commands and truth each driver writes itself.
+    """Record one frame and the tracker's output for it (points, detection, head estimate, and every
+    track where the multi-object tracker ran), as every driver does; returns the frame-end time [ns].  Commands and truth each driver writes itself.
 
     ``imu``: the samples the driver gave ``Tracker.on_imu`` before the frame, ``(t_s, gyro_rad_s)`` or
     ``(t_s, gyro_rad_s, accel_g)``, or None where it feeds none (nothing is written then); recorded
@@ -342,12 +440,14 @@ def write_tracker_frame(writer, frame_id: int, frame, out, imu=None) -> int:
         writer.write_imu(t_end, frame_id, *imu)
     write_record(writer, DetectionRecord.from_output(t_end, frame_id, out))
     write_record(writer, HeadEstimateRecord.from_output(t_end, frame_id, out))
+    if getattr(out, "sky", None) is not None:      # the multi-object tracker: every track
+        write_record(writer, TracksRecord.from_output(t_end, frame_id, out))
     return t_end
 
 
 PARSERS = {DETECTIONS: DetectionRecord.from_json, HEAD: HeadEstimateRecord.from_json,
            COMMANDS: CommandRecord.from_json, TRUTH: TruthRecord.from_json,
-           TRUTH_OBJECTS: ObjectTruthRecord.from_json}
+           TRUTH_OBJECTS: ObjectTruthRecord.from_json, TRACKS: TracksRecord.from_json}
 
 
 def parse(channel: str, record: dict):

@@ -14,7 +14,9 @@ Keys of ``to_dict`` (flat, JSON-plain):
 * both: ``source`` ("simulator" | "daemon"), ``tracker`` (the effective tracker table), ``head_values``
   (the tracker keys the head's facts set, :meth:`gimbal.head_facts.HeadFacts.tracker_values`: kept by a
   replay with another ``[tracker]`` table), ``speed_table``, ``limits`` (the gate's; absent: commands
-  passed unchanged), ``tracker_t0_s``, ``point_rate_hz``, ``half_fov_deg`` (the simulator's)
+  passed unchanged), ``tracker_t0_s``, ``point_rate_hz``, ``half_fov_deg`` (the simulator's), ``sky``
+  (only where the multi-object tracker ran: its effective ``[tracker.sky]`` table,
+  :meth:`foveatrack.sky.controller.SkyController.table`, which replay rebuilds it from)
 * simulator (:class:`SimulatorOrigin`): ``scene_name``, ``scene_path``, ``scene_text``, ``seed``,
   ``effects``, ``gimbal`` (the scene's ``[gimbal]`` settings)
 * daemon (:class:`DaemonOrigin`): ``config_path``, ``config_text``, ``head``, ``lidar`` (its
@@ -119,6 +121,8 @@ class RecordingMeta:
     tracker_t0_s: float = 0.0
     point_rate_hz: float | None = None
     half_fov_deg: float | None = None
+    #: the multi-object tracker's effective ``[tracker.sky]`` table where it ran (None: the paper's tracker)
+    sky: Mapping[str, Any] | None = None
     #: a recording of the earlier form (:func:`from_legacy_dict`), and its ``tracker_effective`` where it
     #: has one (what replay checks its rebuilt configuration against)
     legacy: bool = False
@@ -141,6 +145,8 @@ class RecordingMeta:
             d["half_fov_deg"] = self.half_fov_deg
         if self.limits is not None:
             d["limits"] = _lists(asdict(self.limits))
+        if self.sky is not None:
+            d["sky"] = json.loads(json.dumps(self.sky))
         return d
 
     @classmethod
@@ -159,7 +165,7 @@ class RecordingMeta:
             return cls(TrackerConfig.from_mapping(meta["tracker"], where=f"{where}: recorded [tracker]"),
                        _tuples(meta["head_values"]), _speed_table(meta, where), recorded_limits(meta),
                        _origin(meta), float(meta.get("tracker_t0_s", 0.0)), meta.get("point_rate_hz"),
-                       meta.get("half_fov_deg"))
+                       meta.get("half_fov_deg"), _sky(meta, where))
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             # a metadata dict no foveatrack run wrote (a hand-made or damaged one)
             raise UserError(f"{where}: the recording's metadata does not hold a run's configuration "
@@ -190,6 +196,13 @@ def _speed_table(meta: Mapping, where: str) -> SpeedTable:
     if "speed_table" not in meta:
         raise UserError(f"{where}: the recording's metadata has no 'speed_table'")
     return SpeedTable.from_dict(meta["speed_table"], where=f"{where}: recorded speed table")
+
+
+def _sky(meta: Mapping, where: str) -> dict | None:
+    sky = meta.get("sky")
+    if sky is not None and not isinstance(sky, Mapping):
+        raise UserError(f"{where}: the recording's 'sky' (the multi-object tracker's table) is not a table: {sky!r}")
+    return None if sky is None else dict(sky)
 
 
 def _origin(meta: Mapping) -> SimulatorOrigin | DaemonOrigin:

@@ -59,7 +59,8 @@ from foveatrack.recording.run_meta import RecordingMeta
 from foveatrack.replay.config import load_tracker_table, tracker_config
 from foveatrack.replay.metrics import recorded_metrics, compare, replay_metrics
 from foveatrack.replay.recorded import (RECORDED_DTYPES, TRUTH_DTYPES, FrameArrays, LvxTimeline, TimeOrder,
-                                        PoseCorrected, TrackerRebased, recorded_arrays, recorded_frames)
+                                        PoseCorrected, TrackerRebased, TrackPinned, recorded_arrays, recorded_frames)
+from foveatrack.recording.records import TracksRecord, ns
 from foveatrack.replay.result import ReplayResult
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import Tracker, TrackerConfig
@@ -87,6 +88,41 @@ class _RecordedOutcome:
         return self.record is None or self.record.reached_head
 
 
+class _TracksComparison:
+    """The multi-object tracker's tracks, replayed against recorded, frame by frame: every field of
+    every track (:class:`foveatrack.recording.records.TracksRecord`, as JSON: what the file holds)."""
+
+    def __init__(self):
+        self.replayed: list[TracksRecord] = []
+        self.recorded = 0
+        self.compared = 0
+        self.identical = 0
+        self.first_difference: int | None = None
+
+    def add(self, frame_id: int, frame: Frame, out, recorded: TracksRecord | None) -> None:
+        mine = TracksRecord.from_output(ns(frame.t_end_s), frame_id, out) if getattr(out, "sky", None) is not None else None
+        if mine is not None:
+            self.replayed.append(mine)
+        if recorded is None:
+            return
+        self.recorded += 1
+        if mine is None:
+            return
+        self.compared += 1
+        if mine.to_json() == recorded.to_json():
+            self.identical += 1
+        elif self.first_difference is None:
+            self.first_difference = frame_id
+
+    def summary(self) -> dict:
+        """``recorded`` frames with tracks, ``replayed``, ``compared`` (both), ``identical``,
+        ``first_difference`` (frame id or None), ``identical_all`` (every recorded frame's tracks
+        replayed equal, and none replayed beyond them)."""
+        return {"recorded": self.recorded, "replayed": len(self.replayed), "compared": self.compared,
+                "identical": self.identical, "first_difference": self.first_difference,
+                "identical_all": self.recorded > 0 and self.identical == self.recorded == len(self.replayed)}
+
+
 def _after_frame(step: FrameStep, sink: _RecordedOutcome, order: TimeOrder, after: list) -> None:
     """The watchdog / shutdown STOPs and the daemon's rebases after a frame, in the order they happened
     (a fresh tracker where the daemon rebased)."""
@@ -97,6 +133,11 @@ def _after_frame(step: FrameStep, sink: _RecordedOutcome, order: TimeOrder, afte
             continue
         if isinstance(c, PoseCorrected):
             step.controller.correct_pose(c.t_s, c.dpan_deg, c.dtilt_deg)
+            continue
+        if isinstance(c, TrackPinned):
+            pin = getattr(step.controller, "pin", None)
+            if pin is not None:          # a pin means nothing to the paper's tracker (another configuration)
+                pin(c.track_id)
             continue
         if order.command_out_of_order(step.controller, c.send_time_s):
             continue
@@ -119,7 +160,15 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
         require_space(cfg, where)
     rec_cfg = meta.tracker
     sink = _RecordedOutcome()
-    step = FrameStep(Tracker(cfg, meta.speed_table, t0_s=meta.tracker_t0_s), CommandGate(meta.limits), sink)
+    controller = Tracker(cfg, meta.speed_table, t0_s=meta.tracker_t0_s)
+    # the multi-object tracker where the run had it (its recorded table), or where the table given has one
+    sky_table = meta.sky if tracker_table is None else tracker_table.get("sky")
+    if sky_table is not None:
+        from foveatrack.sky.controller import SkyController, sky_configs_from_mapping
+
+        controller = SkyController(controller, *sky_configs_from_mapping(sky_table, where + ".sky", meta.half_fov_deg))
+    tracks_cmp = _TracksComparison()
+    step = FrameStep(controller, CommandGate(meta.limits), sink)
     period = rec_cfg.period_s
     period_ns = int(round(1e9 / rec_cfg.rate_hz))
     send_delay_sim = rec_cfg.send_delay_s
@@ -156,6 +205,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
         rec = step(frame, send_t, imu=[(b.t_s, b.gyro_rad_s) for b in rf.imu], stale=rf.stale)
         out = rec.output
         F.add(k, frame, out, rec.command)
+        tracks_cmp.add(k, frame, out, rf.tracks)
         d = rf.detection
         R["detected"].append(d is not None and d.detected)
         R["det_xyz"].append(np.full(3, np.nan) if d is None or d.xyz_m is None else np.asarray(d.xyz_m, float))
@@ -192,6 +242,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     res = ReplayResult(source, str(path), config_name or "recorded", frames, recorded, truth,
                        final_pose_deg=final_pose, tracker_cfg=cfg)
     res.comparison = compare(frames, recorded)
+    res.tracks = tracks_cmp.replayed
+    if tracks_cmp.replayed or tracks_cmp.recorded:
+        res.comparison["tracks"] = tracks_cmp.summary()
     if cfg.attitude == "gyro":
         # Without IMU samples (a recording made before /imu existed, or of a run without an IMU) the
         # replayed tracker's head angles come from its commands alone, so they, the world estimates

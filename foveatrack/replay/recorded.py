@@ -9,7 +9,7 @@ import numpy as np
 
 from foveatrack.gate import STALE_FRAME
 from foveatrack.recording.format import COMMANDS, DAEMON_EVENTS, IMU, METRICS, POINTS
-from foveatrack.recording.records import (CommandRecord, DetectionRecord, HeadEstimateRecord, RecordError, TruthRecord,
+from foveatrack.recording.records import (CommandRecord, DetectionRecord, HeadEstimateRecord, RecordError, TracksRecord, TruthRecord,
                                           parse)
 
 
@@ -220,6 +220,13 @@ class PoseCorrected:
     dtilt_deg: float
 
 
+@dataclass(frozen=True)
+class TrackPinned:
+    """The daemon's operator pinned a track of the multi-object tracker (None: unpinned; its
+    ``track_pinned`` event, written between the frames it fell between); replay does the same there."""
+    track_id: int | None
+
+
 @dataclass
 class RecordedFrame:
     """One frame of a recording with the typed records that belong to it (None where absent) and the
@@ -229,8 +236,9 @@ class RecordedFrame:
     head: HeadEstimateRecord | None = None
     command: CommandRecord | None = None       # the tracker's command for this frame, as sent
     truth: TruthRecord | None = None
+    tracks: TracksRecord | None = None         # the multi-object tracker's tracks after it ([tracker.sky])
     metrics: dict = field(default_factory=dict)
-    after: list = field(default_factory=list)   # [CommandRecord | TrackerRebased | PoseCorrected] in order
+    after: list = field(default_factory=list)   # [CommandRecord | TrackerRebased | PoseCorrected | TrackPinned]
     imu: list = field(default_factory=list)     # [ImuSamples] fed to the tracker before this frame
 
     @property
@@ -288,6 +296,11 @@ def _take(cur, m):
         if e.get("event") == "tracker_rebased":
             cur.after.append(TrackerRebased(_event_float(e, "t0_s"), _event_float(e, "pan_deg"),
                                             _event_float(e, "tilt_deg"), str(e.get("reason", "?"))))
+        elif e.get("event") == "track_pinned":
+            v = e.get("track_id")
+            if v is not None and (not isinstance(v, int) or isinstance(v, bool)):
+                raise RecordError(f"field 'track_id': {v!r} is not a whole number")
+            cur.after.append(TrackPinned(v))
         elif e.get("event") == "pose_corrected":
             cur.after.append(PoseCorrected(_event_float(e, "t_s"), _event_float(e, "dpan_deg"),
                                            _event_float(e, "dtilt_deg")))
@@ -306,6 +319,8 @@ def _take(cur, m):
         cur.head = rec
     elif isinstance(rec, TruthRecord) and cur.truth is None:
         cur.truth = rec
+    elif isinstance(rec, TracksRecord) and cur.tracks is None:
+        cur.tracks = rec
     elif m.channel == METRICS:
         if not isinstance(rec, dict) or not isinstance(rec.get("name"), str) or not (
                 rec.get("value") is None or isinstance(rec.get("value"), (int, float))):

@@ -70,6 +70,18 @@ def format_report(res: ReplayResult) -> str:
                      f"{c['first_frames_detection_differs']}), {c['frames_command_differs']} of "
                      f"{c['commands_compared']} commands (first {c['first_frames_command_differs']}); "
                      f"open loop: same points, the head moved as recorded")
+    tr = c.get("tracks")
+    if tr:
+        ids = sorted({t.id for r in res.tracks for t in r.tracks if t.confirmed})
+        kept = f"{len(ids)} confirmed track{'s' if len(ids) != 1 else ''} (ids {', '.join(map(str, ids)) or '-'})"
+        if tr["identical_all"]:
+            L.append(f"  tracks (multi-object tracker): {kept}; all {tr['recorded']} frames' tracks identical to the recorded")
+        elif not tr["recorded"]:
+            L.append(f"  tracks (multi-object tracker): {kept}; the recording has none to compare (another configuration's run)")
+        else:
+            L.append(f"  tracks (multi-object tracker): {kept}; {tr['identical']} of {tr['recorded']} recorded frames' "
+                     f"tracks identical ({tr['compared']} compared, {tr['replayed']} replayed; first difference: "
+                     f"frame {tr['first_difference']})")
     cmds = c.get("commands_in_recording") or {}
     if cmds.get("from_journal"):
         L.append(f"  commands: {cmds['recorded']} in the recording, {cmds['from_journal']} of them put back from the "

@@ -28,6 +28,8 @@ class ReplayResult:
     final_pose_deg: tuple[float, float] | None = None
     # The tracker configuration the replay ran with (its dead band and tilt stops go on the plots).
     tracker_cfg: TrackerConfig | None = None
+    # The multi-object tracker's tracks per frame ([tracker.sky] runs; TracksRecord), as replayed.
+    tracks: list = field(default_factory=list)
 
     def summary(self) -> dict:
         return {"source": self.source, "path": self.path, "config": self.config, "frames": len(self.frames["t_end_s"]),

@@ -42,7 +42,8 @@ from foveatrack.tracker import Tracker, TrackOutput
 @dataclass(frozen=True)
 class SkyControlOutput:
     """One frame: the paper tracker's output for the head (``track``), every track (``sky``), the
-    track the fovea served and the one it serves next, the tracks in the fovea, the threat scores.
+    track the fovea served and the one it serves next, the tracks in the fovea, the threat scores,
+    the operator's pinned track (None: none, or it was deleted).
     ``detection`` is Algorithm 1's in the fixated track's D (None during a saccade)."""
     track: TrackOutput
     sky: SkyFrameOutput
@@ -50,6 +51,7 @@ class SkyControlOutput:
     next_target: int | None
     in_fovea: tuple[int, ...]
     scores: dict
+    pinned: int | None = None
 
     # what the drivers read of a controller's output (sim.loop, the command gate)
     @property
@@ -103,6 +105,15 @@ def sky_configs_from_mapping(data: Mapping, where: str, field_half_angle_deg: fl
     return cfg, AttentionConfig.from_mapping(att, where + ".attention")
 
 
+def sky_table(cfg: SkyTrackerConfig, attention_cfg: AttentionConfig) -> dict:
+    """The ``[tracker.sky]`` table of these configurations, every setting (:meth:`SkyController.table`)."""
+    from dataclasses import asdict
+
+    att = asdict(attention_cfg)
+    att["protected_xyz_m"] = [float(v) for v in att["protected_xyz_m"]]
+    return {**asdict(cfg), "attention": att}
+
+
 class SkyController:
     """Frames in, head commands out, every object tracked (module docstring)."""
 
@@ -127,6 +138,22 @@ class SkyController:
     def recon(self):
         return self.tracker.recon
 
+    @property
+    def config(self):
+        """The paper tracker's configuration (what the drivers read of a controller: rate, D, offset)."""
+        return self.tracker.config
+
+    def rebased(self, t0_s: float, pan_deg: float, tilt_deg: float) -> "SkyController":
+        """A fresh controller (:meth:`foveatrack.tracker.Tracker.rebased`: the lidar's clock restarted or
+        the head was homed): the paper tracker rebased, the tracks, the learned background and the
+        fovea's schedule started afresh (their times are of the old clock), the operator's pin dropped
+        (its track is gone); what the daemon does and replay repeats from its event."""
+        return SkyController(self.tracker.rebased(t0_s, pan_deg, tilt_deg), self.sky.cfg, self.attention.cfg)
+
+    def correct_pose(self, t_s: float, dpan_deg: float, dtilt_deg: float) -> bool:
+        """The pose check's drift correction of the dead reckoning (:meth:`foveatrack.tracker.Tracker.correct_pose`)."""
+        return self.tracker.correct_pose(t_s, dpan_deg, dtilt_deg)
+
     def process(self, frame: Frame, send_t_s: float | None = None) -> SkyControlOutput:
         recon = self.tracker.recon
         fix = self.attention.target
@@ -147,7 +174,18 @@ class SkyController:
                 for v in sky.tracks if v.confirmed}
         nxt = self.attention.update(frame.t_end_s, sky.tracks, in_fovea, frame.t_end_s - frame.t_start_s, turn)
         scores = {v.track_id: threat_score(v, self.attention.cfg) for v in sky.tracks if v.confirmed}
-        return SkyControlOutput(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores)
+        return SkyControlOutput(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores, self.attention.pinned)
+
+    def pin(self, track_id: int | None) -> None:
+        """The operator's choice (:meth:`foveatrack.sky.attention.Attention.pin`): this track is the
+        priority from the next frame on, while it lives; None unpins."""
+        self.attention.pin(None if track_id is None else int(track_id))
+
+    def sky_table(self) -> dict:
+        """The effective ``[tracker.sky]`` table (every setting, JSON-plain), which
+        :func:`sky_configs_from_mapping` reads back to the same configurations: what a recording
+        keeps, so that replay rebuilds this controller."""
+        return sky_table(self.sky.cfg, self.attention.cfg)
 
     def command_sent(self, t_s: float, cmd) -> None:
         self.tracker.command_sent(t_s, cmd)
