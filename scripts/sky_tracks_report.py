@@ -6,8 +6,8 @@ tracks.  ``--markdown PATH`` also writes them as a docs page.
 
     .venv/bin/python scripts/sky_tracks_report.py scenes/two-drones-crossing.toml --seeds 8
 
-Truth: the scene's ``ClosedLoop.objects_log`` (every object with id and class) where the simulator
-keeps it, else the scene's ``[[target]]`` tables (all drones).
+The figures of one run are :func:`sim.sky_summary.sky_run_figures`' (what ``foveatrack simulate``
+prints for such a run).
 """
 
 from __future__ import annotations
@@ -17,95 +17,21 @@ import dataclasses
 import math
 import sys
 import time
-from collections import Counter, defaultdict
+from collections import Counter
 
 import numpy as np
 
-from foveatrack.reconstruction import rotation_matrix
-from foveatrack.sky.attention import bearing_off_axis_deg
-from foveatrack.sky.metrics import drone_metrics, gospa
 from sim.loop import ClosedLoop
 from sim.scene import load_scene
+from sim.sky_summary import LABELS, TRUTH_CLASSES, sky_run_figures
 
-TRUTH_CLASSES = ("drone", "bird", "clutter")
-LABELS = ("drone", "bird", "clutter", "unknown")
-
-
-def _truth_frames(loop, log):
-    """Per frame: {id: (class, xyz (3,), visible)} of every object."""
-    T = len(log["t_end_s"])
-    objs = getattr(loop, "objects_log", None)
-    out = []
-    if objs:
-        for k in range(T):
-            out.append({o.id: ("drone" if o.cls == "drone" else "bird" if o.cls == "bird" else "clutter",
-                               np.array(o.xyz_m, float), o.rays_hit > 0)
-                        for o in objs[k] if not o.id.startswith("stray-")})
-        return out
-    for k in range(T):
-        t_mid = log["t_end_s"][k] - 0.05
-        out.append({f"target-{i}": ("drone", s.trajectory.position(np.array([t_mid]))[0], True)
-                    for i, s in enumerate(loop.scene.targets)})
-    return out
-
-
-def run_one(scene, fovea_half_deg: float):
+def run_one(scene):
     loop = ClosedLoop(scene)
     t0 = time.perf_counter()
     log = loop.run()
     wall = time.perf_counter() - t0
-    truth = _truth_frames(loop, log)
-    T = len(truth)
-    times = np.asarray(log["t_end_s"])
-    drone_ids = sorted({i for fr in truth for i, (c, _, _) in fr.items() if c == "drone"})
-    drones = {}
-    for d in drone_ids:
-        xyz = np.full((T, 3), np.nan)
-        vis = np.zeros(T, bool)
-        fov = np.zeros(T, bool)
-        for k, fr in enumerate(truth):
-            if d in fr:
-                xyz[k] = fr[d][1]
-                vis[k] = fr[d][2]
-                rows = rotation_matrix(log["head_pan_deg"][k], log["head_tilt_deg"][k]).tolist()
-                fov[k] = bearing_off_axis_deg(xyz[k], rows, np.zeros(3)) <= fovea_half_deg
-        drones[d] = {"xyz_m": xyz, "visible": vis, "in_fovea": fov}
-    tracks = [[(v.track_id, v.label, v.xyz_m) for v in o.sky.tracks if v.confirmed] for o in loop.sky_log]
-    m = drone_metrics(times, drones, tracks)
-    g = [gospa([x for _, _, x in tr], [drones[d]["xyz_m"][k] for d in drone_ids
-                                       if np.all(np.isfinite(drones[d]["xyz_m"][k]))], 5.0)["distance"]
-         for k, tr in enumerate(tracks)]
-    # confusion: each confirmed track's majority truth class (matched within 2 m) vs its last label
-    votes: dict[int, Counter] = defaultdict(Counter)
-    last_label: dict[int, str] = {}
-    for k, tr in enumerate(tracks):
-        ids = list(truth[k])
-        a = gospa([x for _, _, x in tr], [truth[k][i][1] for i in ids], 2.0)["assignment"] if tr and ids else []
-        for i, j in a:
-            votes[tr[i][0]][truth[k][ids[j]][0]] += 1
-        for tid, label, _ in tr:
-            last_label[tid] = label
-    confusion = Counter()
-    for tid, label in last_label.items():
-        cls = votes[tid].most_common(1)[0][0] if votes[tid] else "clutter"
-        confusion[(cls, label)] += 1
-    m["false_causes"] = false_track_causes(m["false_drone_tracks"], tracks, truth)
-    m["hours"] = T * float(np.median(np.diff(times))) / 3600.0 if T > 1 else 0.0
-    return m, float(np.mean(g)), confusion, wall, T
-
-
-def false_track_causes(false_ids, tracks, truth) -> Counter:
-    """What each false drone track was: the class of the truth object nearest to it over the frames
-    it was labelled drone (majority; "drone": a second or displaced track on a drone, which is not a
-    bird or a tree)."""
-    near: dict[int, Counter] = defaultdict(Counter)
-    wanted = set(false_ids)
-    for k, tr in enumerate(tracks):
-        objs = [(c, x) for c, x, _ in truth[k].values() if np.all(np.isfinite(x))]
-        for tid, label, x in tr:
-            if tid in wanted and label == "drone" and objs:
-                near[tid][min(objs, key=lambda o: float(np.sum((o[1] - x) ** 2)))[0]] += 1
-    return Counter(near[t].most_common(1)[0][0] if near[t] else "clutter" for t in false_ids)
+    m, g, confusion = sky_run_figures(loop, log)
+    return m, g, confusion, wall, len(log["t_end_s"])
 
 
 def summary_row(name, rows) -> str:
@@ -158,12 +84,11 @@ def main(argv=None) -> int:
                 t[name] = t = dict(t.get(name, {}))
             t[k] = int(v) if v.lstrip("-").isdigit() else float(v)
         table = {**base.tracker_table, "sky": sky}
-        fovea = float(sky.get("attention", {}).get("fovea_half_angle_deg", 3.0))
         rows = []
         for s in range(a.first_seed, a.first_seed + a.seeds):
             scene = dataclasses.replace(base, seed=base.seed + s, tracker_table=table,
                                         **({"duration_s": a.duration} if a.duration else {}))
-            m, g, conf, wall, T = run_one(scene, fovea)
+            m, g, conf, wall, T = run_one(scene)
             total_conf.update(conf)
             rows.append((scene.seed, m, g, wall, T))
             print(f"{base.name} seed {scene.seed}: {T} frames in {wall:.1f} s; GOSPA mean {g:.2f} m; "

@@ -25,6 +25,8 @@ def summarize(scene, log: dict, wall_s: float, loop=None, finish_s: float = 0.0)
     ``finish_s``: wall seconds after the loop that the run still needed (the recording's completion:
     a writer process finishing the frames it was handed), counted in ``realtime_factor_after_first_frame``
     and reported as ``finish_s``.
+
+    A run of the multi-object tracker (``[tracker.sky]``) adds ``sky``: :func:`sim.sky_summary.sky_summary`.
     """
     half_fov = half_fov_deg(scene)
     err = log["true_error_deg"].astype(float)
@@ -49,6 +51,12 @@ def summarize(scene, log: dict, wall_s: float, loop=None, finish_s: float = 0.0)
                                                   if n > 0 and rest_s > 0 else None)
         m["time_per_frame_ms"] = ({k: round(v / n * 1e3, 4) for k, v in loop.stage_s.items()} if n > 0 else None)
         m["worked_ahead"] = loop.worked_ahead     # the scan and draws on a second thread (the times depend on it)
+    if loop is not None and getattr(loop, "sky", None) is not None:
+        # the multi-object tracker: per drone, false tracks, GOSPA (the single-target figures above are
+        # of the scene's first target only, which the fovea serves only part of the time)
+        from sim.sky_summary import sky_summary
+
+        m["sky"] = sky_summary(loop, log)
     m["scene"] = scene.name
     m["seed"] = scene.seed
     m["effects"] = sorted(scene.effects)

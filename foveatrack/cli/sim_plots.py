@@ -32,6 +32,8 @@ POINTS_PNG = "points_on_target.png"     # paper Fig. 14a
 ERROR_PNG = "error.png"                 # paper Fig. 14b / 12
 TRAJECTORY_PNG = "trajectory.png"       # paper Fig. 14c
 HEAD_PNG = "head.png"
+TRACKS_PNG = "tracks.png"               # the multi-object tracker's runs ([tracker.sky])
+LABEL_C = {"drone": "tab:red", "bird": "tab:blue", "clutter": "tab:green", "unknown": "tab:purple"}
 
 _AXIS_LABEL = ("x [m] (forward)", "y [m] (+ = left)", "z [m] (+ = up)")
 
@@ -285,3 +287,65 @@ def plot_head(t_s, pan_deg, tilt_deg, title, path, *, est_pan_deg=None, est_tilt
     h2, l2 = axs.get_legend_handles_labels()
     ax.legend(h1 + h2, l1 + l2, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", borderaxespad=0.0)
     return _save(fig, path)
+
+
+def plot_sky_tracks(data: dict, title: str, path) -> Path:
+    """Every object and every confirmed track of a multi-object run (``sim.sky_summary.sky_plot_data``):
+    the top view (truth paths: drones dark, birds and crowns pale; confirmed tracks coloured by their
+    last label, each ending in its id), and per drone the time line of the fovea (dark where the drone
+    was within the fovea's half-angle of the lidar axis) and of a confirmed track near it (within 2 m).
+    """
+    plt = _plt()
+    t = data["t_s"]
+    drones = sorted(i for i, (c, _) in data["truth"].items() if c == "drone")
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(12.5, 4.8), constrained_layout=True, width_ratios=[1.3, 1])
+    a1.plot([0], [0], marker=(3, 0, -90), ms=9, color="k", ls="none", label="lidar (head centre)")
+    shown = set()
+    for i, (c, xyz) in sorted(data["truth"].items()):
+        key = "truth: drone" if c == "drone" else "truth: bird or scenery"
+        a1.plot(xyz[:, 0], xyz[:, 1], "-", color=TRUTH_C if c == "drone" else "0.8", lw=2.0 if c == "drone" else 0.6,
+                label=None if key in shown else key, zorder=1)
+        shown.add(key)
+    for tid, (label, xyz) in sorted(data["tracks"].items()):
+        key = f"track labelled {label}"
+        a1.plot(xyz[:, 0], xyz[:, 1], ".", ms=2.5, color=LABEL_C.get(label, "k"),
+                label=None if key in shown else key, zorder=2)
+        shown.add(key)
+        ok = np.all(np.isfinite(xyz), axis=1)
+        if ok.any():
+            last = xyz[ok][-1]
+            a1.annotate(str(tid), (last[0], last[1]), fontsize="x-small", xytext=(3, 3), textcoords="offset points")
+    a1.set_xlabel(_AXIS_LABEL[0])
+    a1.set_ylabel(_AXIS_LABEL[1])
+    a1.set_aspect("equal", adjustable="datalim")
+    a1.set_title("top view", fontsize="medium")
+    a1.grid(alpha=0.3)
+    _legend_outside(a1)
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.1
+    for row, d in enumerate(drones):
+        xyz = data["truth"][d][1]
+        near = np.zeros(len(t), bool)
+        for tid, (_, txyz) in data["tracks"].items():
+            dd = np.linalg.norm(txyz - xyz, axis=1)
+            near |= np.isfinite(dd) & (dd < 2.0)
+        fov = data["in_fovea"].get(d, np.zeros(len(t), bool))
+        for mask, y0, colour in ((near, row - 0.35, "tab:orange"), (fov, row + 0.02, "0.15")):
+            runs = _runs(mask)
+            a2.broken_barh([(t[a] - dt, (b - a) * dt) for a, b in runs], (y0, 0.33), color=colour)
+    a2.set_yticks(range(len(drones)), drones)
+    a2.set_ylim(-0.6, len(drones) - 0.4)
+    a2.invert_yaxis()
+    a2.set_xlabel("time [s]")
+    if len(t):
+        a2.set_xlim(0, t[-1])
+    a2.set_title("per drone: a confirmed track within 2 m (orange), in the fovea (dark)", fontsize="medium")
+    a2.grid(alpha=0.3, axis="x")
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def _runs(mask) -> list[tuple[int, int]]:
+    """The [start, end) index ranges where ``mask`` is True."""
+    m = np.concatenate([[False], np.asarray(mask, bool), [False]])
+    d = np.flatnonzero(np.diff(m.astype(np.int8)))
+    return list(zip(d[::2].tolist(), d[1::2].tolist()))

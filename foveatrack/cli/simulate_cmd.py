@@ -15,7 +15,7 @@ def register(sub) -> None:
     p.add_argument("scene", metavar="SCENE.toml", help="a scene file (see scenes/)")
     p.add_argument("--out", metavar="DIR", help="write the recording (run.mcap), summary.json and plots here")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
-    p.add_argument("--plot", action="store_true", help="write the Fig. 14 a/b/c plots into --out")
+    p.add_argument("--plot", action="store_true", help="write the Fig. 14 a/b/c plots into --out (a [tracker.sky] run: tracks.png)")
     p.add_argument("--seed", type=int, help="override the scene's seed")
     p.add_argument("--duration", type=float, metavar="S", help="override the scene's duration")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
@@ -261,17 +261,26 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
     if out_dir is not None:
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     if plot:
-        _plot_run(scene, log, summary, out_dir)
+        _plot_run(scene, log, summary, out_dir, loop)
     if want_json:
         json.dump(summary, sys.stdout, indent=2)
         sys.stdout.write("\n")
     elif not quiet:
         e = summary["tracking_error_deg"]
         fmt = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
-        print(f"{scene.name}: {summary['frames']} frames, {summary['frames_with_detection']} with a detection, "
-              f"{summary['points_on_target_per_frame']:.1f} points on target per frame")
+        if "sky" in summary:
+            print(f"{scene.name}: {summary['frames']} frames, {summary['frames_with_detection']} with the fixated "
+                  f"track measured in the fovea (Algorithm 1 in its D)")
+        else:
+            print(f"{scene.name}: {summary['frames']} frames, {summary['frames_with_detection']} with a detection, "
+                  f"{summary['points_on_target_per_frame']:.1f} points on target per frame")
         db = max(scene.tracker.deadband_pan_deg, scene.tracker.deadband_tilt_deg)
-        if scene.gimbal.frozen:
+        if "sky" in summary:
+            from sim.sky_summary import sky_lines
+
+            for line in sky_lines(summary["sky"]):
+                print(line)
+        elif scene.gimbal.frozen:
             err = log["true_error_deg"]
             i = int(np.nanargmin(err)) if np.isfinite(err).any() else None
             print("  head frozen (paper Fig. 13/14a): no tracking"
@@ -283,7 +292,7 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
         else:
             print(f"  tracking error after acquisition [deg]: rms {fmt(e['rms'])}  p95 {fmt(e['p95'])}  "
                   f"max {fmt(e['max'])}; acquisition {fmt(summary['acquisition_s'])} s")
-        if "reconstruction_error_m" in summary:
+        if "reconstruction_error_m" in summary and "sky" not in summary:
             r = summary["reconstruction_error_m"]
             print(f"  reconstructed target position error [m]: rms {fmt(r['rms'])}  p95 {fmt(r['p95'])}  "
                   f"max {fmt(r['max'])}")
@@ -297,11 +306,21 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
     return summary
 
 
-def _plot_run(scene, log, summary, out_dir) -> list[Path]:
-    """The run's plots (paper Fig. 14 a/b/c and the head angles) into ``out_dir``."""
+def _plot_run(scene, log, summary, out_dir, loop=None) -> list[Path]:
+    """The run's plots (paper Fig. 14 a/b/c and the head angles) into ``out_dir``; for a run of the
+    multi-object tracker its tracks and the head angles (Fig. 14's figures are of one target)."""
     from foveatrack.cli import sim_plots
 
     name, cfg = scene.name, scene.tracker
+    if "sky" in summary and loop is not None:
+        from sim.sky_summary import sky_plot_data
+
+        return [sim_plots.plot_sky_tracks(sky_plot_data(loop, log), f"{name}: every track (multi-object tracker)",
+                                          out_dir / sim_plots.TRACKS_PNG),
+                sim_plots.plot_head(log["t_end_s"], log["head_pan_deg"], log["head_tilt_deg"], f"{name}: head angles",
+                                    out_dir / sim_plots.HEAD_PNG, est_pan_deg=log["est_pan_deg"],
+                                    est_tilt_deg=log["est_tilt_deg"], state=log["state"],
+                                    tilt_limits_deg=cfg.tilt_limits_deg, tilt_margin_deg=cfg.tilt_margin_deg)]
     t = log["t_end_s"]
     db = max(cfg.deadband_pan_deg, cfg.deadband_tilt_deg)
     frozen = " (head frozen)" if scene.gimbal.frozen else ""

@@ -23,7 +23,7 @@ def crossing_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("crossing") / "run"
     # 6 s: both drones confirmed (the 1 s warm-up, then the rim's sparse hits), the fovea turned between them
     assert main(["simulate", str(SCENES / "two-drones-crossing.toml"), "--duration", "6", "--out", str(out),
-                 "--no-progress", "--one-thread"]) == 0
+                 "--no-progress", "--one-thread", "--plot"]) == 0
     return out / "run.mcap"
 
 
@@ -79,3 +79,14 @@ def test_a_damaged_tracks_record_names_its_field():
     bad["in_fovea"] = [1.5]
     with pytest.raises(RecordError, match="in_fovea"):
         TracksRecord.from_json(bad)
+
+
+def test_simulate_reports_the_multi_object_figures_and_plots_the_tracks(crossing_run):
+    summary = json.loads((crossing_run.parent / "summary.json").read_text())
+    sky = summary["sky"]
+    assert sorted(sky["drones"]) == ["drone-a", "drone-b"]
+    for r in sky["drones"].values():
+        assert r["time_to_confirm_s"] is not None and r["id_switches"] == 0
+    assert sky["confirmed_tracks"] >= 2 and sky["gospa_mean_m"] > 0
+    assert (crossing_run.parent / "tracks.png").stat().st_size > 10_000
+    assert not (crossing_run.parent / "error.png").exists(), "Fig. 14's plots are of one target"

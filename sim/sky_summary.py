@@ -1,0 +1,164 @@
+"""The issue-28 figures of one closed-loop run of the multi-object tracker (``[tracker.sky]``), from
+the run's log and the simulator's truth of every object: what ``foveatrack simulate`` prints for such
+a run and what ``scripts/sky_tracks_report.py`` sums over seeds.
+
+Per drone (:func:`foveatrack.sky.metrics.drone_metrics`): time from entering the lidar's field to a
+confirmed track and to the drone label, continuity, id switches, share of time in the fovea, longest
+revisit gap; the false confirmed drone tracks (and what each was near: a bird, a tree or clutter, a
+drone); the mean GOSPA over the frames; and the confusion of each confirmed track's truth class
+(majority of the frames it was matched within 2 m) against its last label.
+
+Truth: the run's ``ClosedLoop.objects_log`` (every object with id and class) where the simulator
+keeps it, else the scene's ``[[target]]`` tables (all drones).
+"""
+
+from __future__ import annotations
+
+from collections import Counter, defaultdict
+
+import numpy as np
+
+from foveatrack.reconstruction import rotation_matrix
+from foveatrack.sky.attention import bearing_off_axis_deg
+from foveatrack.sky.metrics import drone_metrics, gospa
+
+TRUTH_CLASSES = ("drone", "bird", "clutter")
+LABELS = ("drone", "bird", "clutter", "unknown")
+GOSPA_CUTOFF_M = 5.0
+
+
+def truth_frames(loop, log) -> list[dict]:
+    """Per frame: {id: (class, xyz (3,), visible)} of every object (stray near returns left out)."""
+    T = len(log["t_end_s"])
+    objs = getattr(loop, "objects_log", None)
+    out = []
+    if objs:
+        for k in range(T):
+            out.append({o.id: ("drone" if o.cls == "drone" else "bird" if o.cls == "bird" else "clutter",
+                               np.array(o.xyz_m, float), o.rays_hit > 0)
+                        for o in objs[k] if not o.id.startswith("stray-")})
+        return out
+    for k in range(T):
+        t_mid = log["t_end_s"][k] - 0.05
+        out.append({f"target-{i}": ("drone", s.trajectory.position(np.array([t_mid]))[0], True)
+                    for i, s in enumerate(loop.scene.targets)})
+    return out
+
+
+def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
+    """``(metrics, mean GOSPA [m], confusion)`` of a finished run of the multi-object tracker
+    (module docstring); ``metrics`` is :func:`~foveatrack.sky.metrics.drone_metrics`' with
+    ``false_causes`` (a Counter by what each false drone track was near) and ``hours`` of run."""
+    fovea_half_deg = loop.sky.attention.cfg.fovea_half_angle_deg
+    truth = truth_frames(loop, log)
+    T = len(truth)
+    times = np.asarray(log["t_end_s"])
+    drone_ids = sorted({i for fr in truth for i, (c, _, _) in fr.items() if c == "drone"})
+    drones = {}
+    for d in drone_ids:
+        xyz = np.full((T, 3), np.nan)
+        vis = np.zeros(T, bool)
+        fov = np.zeros(T, bool)
+        for k, fr in enumerate(truth):
+            if d in fr:
+                xyz[k] = fr[d][1]
+                vis[k] = fr[d][2]
+                rows = rotation_matrix(log["head_pan_deg"][k], log["head_tilt_deg"][k]).tolist()
+                fov[k] = bearing_off_axis_deg(xyz[k], rows, np.zeros(3)) <= fovea_half_deg
+        drones[d] = {"xyz_m": xyz, "visible": vis, "in_fovea": fov}
+    tracks = [[(v.track_id, v.label, v.xyz_m) for v in o.sky.tracks if v.confirmed] for o in loop.sky_log]
+    m = drone_metrics(times, drones, tracks)
+    g = [gospa([x for _, _, x in tr], [drones[d]["xyz_m"][k] for d in drone_ids
+                                       if np.all(np.isfinite(drones[d]["xyz_m"][k]))], GOSPA_CUTOFF_M)["distance"]
+         for k, tr in enumerate(tracks)]
+    # confusion: each confirmed track's majority truth class (matched within 2 m) vs its last label
+    votes: dict[int, Counter] = defaultdict(Counter)
+    last_label: dict[int, str] = {}
+    for k, tr in enumerate(tracks):
+        ids = list(truth[k])
+        a = gospa([x for _, _, x in tr], [truth[k][i][1] for i in ids], 2.0)["assignment"] if tr and ids else []
+        for i, j in a:
+            votes[tr[i][0]][truth[k][ids[j]][0]] += 1
+        for tid, label, _ in tr:
+            last_label[tid] = label
+    confusion = Counter()
+    for tid, label in last_label.items():
+        cls = votes[tid].most_common(1)[0][0] if votes[tid] else "clutter"
+        confusion[(cls, label)] += 1
+    m["false_causes"] = false_track_causes(m["false_drone_tracks"], tracks, truth)
+    m["hours"] = T * float(np.median(np.diff(times))) / 3600.0 if T > 1 else 0.0
+    m["confirmed_tracks"] = len(last_label)
+    return m, float(np.mean(g)) if g else float("nan"), confusion
+
+
+def false_track_causes(false_ids, tracks, truth) -> Counter:
+    """What each false drone track was: the class of the truth object nearest to it over the frames
+    it was labelled drone (majority; "drone": a second or displaced track on a drone, which is not a
+    bird or a tree)."""
+    near: dict[int, Counter] = defaultdict(Counter)
+    wanted = set(false_ids)
+    for k, tr in enumerate(tracks):
+        objs = [(c, x) for c, x, _ in truth[k].values() if np.all(np.isfinite(x))]
+        for tid, label, x in tr:
+            if tid in wanted and label == "drone" and objs:
+                near[tid][min(objs, key=lambda o: float(np.sum((o[1] - x) ** 2)))[0]] += 1
+    return Counter(near[t].most_common(1)[0][0] if near[t] else "clutter" for t in false_ids)
+
+
+def sky_summary(loop, log) -> dict:
+    """The figures of :func:`sky_run_figures` as JSON-plain values (``foveatrack simulate --json``)."""
+    m, g, confusion = sky_run_figures(loop, log)
+    return {"drones": m["drones"], "false_drone_tracks": list(m["false_drone_tracks"]),
+            "false_drone_tracks_near": dict(m["false_causes"]), "confirmed_tracks": m["confirmed_tracks"],
+            "gospa_mean_m": g, "gospa_cutoff_m": GOSPA_CUTOFF_M,
+            "confusion": [{"truth": c, "label": lab, "tracks": n} for (c, lab), n in sorted(confusion.items())]}
+
+
+def sky_lines(s: dict) -> list[str]:
+    """The printed lines of :func:`sky_summary`."""
+    fmt = lambda v: "never" if v is None else f"{v:.1f} s"      # noqa: E731
+    out = [f"  multi-object tracker: {len(s['drones'])} drones, {s['confirmed_tracks']} confirmed tracks, "
+           f"{len(s['false_drone_tracks'])} false drone tracks"
+           + (" (near " + ", ".join(f"{k} {v}" for k, v in sorted(s["false_drone_tracks_near"].items())) + ")"
+              if s["false_drone_tracks"] else "")
+           + f"; mean GOSPA {s['gospa_mean_m']:.2f} m (c = {s['gospa_cutoff_m']:g} m)"]
+    for d, r in s["drones"].items():
+        out.append(f"  {d}: confirmed {fmt(r['time_to_confirm_s'])} after entering the field, labelled drone "
+                   f"{fmt(r['time_to_drone_label_s'])}; track ids {r['track_ids'] or '-'}, {r['id_switches']} id "
+                   f"switches, continuity {r['continuity']:.2f}; in the fovea {100 * r.get('fovea_share', 0):.0f} % "
+                   f"of its time in the field, longest gap {r.get('longest_revisit_gap_s', float('nan')):.1f} s")
+    return out
+
+
+def sky_plot_data(loop, log) -> dict:
+    """What ``tracks.png`` draws (:func:`foveatrack.cli.sim_plots.plot_sky_tracks`): ``t_s`` (T,);
+    ``truth``: id -> (class, (T, 3) positions, NaN where absent); ``tracks``: id -> (last label,
+    (T, 3) positions while confirmed, NaN elsewhere); ``in_fovea``: drone id -> (T,) bool."""
+    truth = truth_frames(loop, log)
+    T = len(truth)
+    half = loop.sky.attention.cfg.fovea_half_angle_deg
+    objs: dict[str, tuple[str, np.ndarray]] = {}
+    for k, fr in enumerate(truth):
+        for i, (c, x, _) in fr.items():
+            if i not in objs:
+                objs[i] = (c, np.full((T, 3), np.nan))
+            objs[i][1][k] = x
+    tracks: dict[int, list] = {}
+    for k, o in enumerate(loop.sky_log):
+        for v in o.sky.tracks:
+            if v.confirmed:
+                if v.track_id not in tracks:
+                    tracks[v.track_id] = [v.label, np.full((T, 3), np.nan)]
+                tracks[v.track_id][0] = v.label
+                tracks[v.track_id][1][k] = v.xyz_m
+    fovea = {}
+    for i, (c, xyz) in objs.items():
+        if c == "drone":
+            f = np.zeros(T, bool)
+            for k in range(T):
+                if np.all(np.isfinite(xyz[k])):
+                    rows = rotation_matrix(log["head_pan_deg"][k], log["head_tilt_deg"][k]).tolist()
+                    f[k] = bearing_off_axis_deg(xyz[k], rows, np.zeros(3)) <= half
+            fovea[i] = f
+    return {"t_s": np.asarray(log["t_end_s"], float), "truth": objs,
+            "tracks": {i: (lab, xyz) for i, (lab, xyz) in tracks.items()}, "in_fovea": fovea}
