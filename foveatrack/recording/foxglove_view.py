@@ -27,19 +27,22 @@ import json
 import math
 
 import numpy as np
-from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms, LinePrimitive,
-                               LinePrimitiveLineType, Log, LogLevel, Point3, Pose, Quaternion, SceneEntity, SceneUpdate,
-                               SpherePrimitive, Timestamp, Vector3)
+from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms, KeyValuePair,
+                               LinePrimitive, LinePrimitiveLineType, Log, LogLevel, Point3, Pose, Quaternion,
+                               SceneEntity, SceneEntityDeletion, SceneEntityDeletionType, SceneUpdate, SpherePrimitive,
+                               TextPrimitive, Timestamp, Vector3)
 
 from foveatrack.recording.format import (COMMANDS, DETECTIONS, HEAD, IMU, IMU_DESCRIPTOR, IMU_SCHEMA_NAME, LOG,
-                                         METRICS, POINTS, RECORD_SCHEMAS, SCENE, SCENE_KEYFRAME, TF, TRUTH,
+                                         METRICS, POINTS, RECORD_SCHEMAS, SCENE, SCENE_KEYFRAME, TF, TRACKS, TRUTH,
                                          TRUTH_OBJECTS, encode_imu_pb, encode_points_pb, json_schema_of)
 from foveatrack.recording.run_meta import recorded_tracker
 from foveatrack.space_of_interest import Box, Cylinder
 
 KEYFRAME_FRAMES = 10       # /scene_keyframe: D and the histories every 10th head estimate (once a second)
 _CLASS_COLOURS = {"drone": (0.1, 0.9, 0.2), "bird": (0.9, 0.7, 0.1), "tree": (0.2, 0.5, 0.2),
-                  "clutter": (0.7, 0.7, 0.7)}     # the truth of each object (/truth_objects), by class
+                  "clutter": (0.7, 0.7, 0.7),     # the truth of each object (/truth_objects), by class
+                  "unknown": (0.4, 0.7, 1.0)}     # and each track (/tracks), by label: not yet classified
+TRACK_MARKER_M = (0.8, 0.5)    # a track's sphere [m]: confirmed, tentative (paler, see _track_look)
 HISTORY_POINTS = 256       # a history longer than this is thinned to every 2nd point (deterministic)
 SEGMENT_FRAMES = 10        # a drawn trajectory is one line entity per 10 frames: each frame re-sends
                            # its segment, so short segments keep the bytes and the CPU per frame small
@@ -124,6 +127,8 @@ class FoxgloveChannels:
         self._seen_points: dict[str, int] = {}
         self._path_colors: dict[str, tuple] = {}
         self._head_count = 0
+        self._keyframed: set[str] = set()                  # the histories the last keyframe drew
+        self._tracks_drawn: dict[int, str] = {}            # track id -> its label, while drawn (/tracks)
         self._pending_tf: tuple[int, list] | None = None   # the head estimate's transforms, awaiting the truth
         self._truth_expected: bool | None = None            # None: not known yet (the first frame)
 
@@ -219,6 +224,8 @@ class FoxgloveChannels:
             colour = _CLASS_COLOURS.get(rec.get("class"), (0.6, 0.6, 0.6))
             size = max(float(rec.get("size_m") or 0.3), 0.3)
             self._scene_update(t_ns, [self._sphere(f"true_{rec['id']}", t_ns, "world", rec["xyz_m"], size, colour)])
+        elif name == TRACKS:
+            self._draw_tracks(t_ns, rec)
         elif name not in (METRICS, TRUTH, HEAD, DETECTIONS, COMMANDS):
             ev = rec.get("event")
             self._log_line(t_ns, 2, json.dumps(rec, default=str) if ev is None else
@@ -277,15 +284,100 @@ class FoxgloveChannels:
             size=Vector3(x=size_m, y=size_m, z=size_m), color=self._color(rgb, 0.8))]
         return SceneEntity(timestamp=_ts(t_ns), frame_id=frame, id=ident, spheres=spheres)
 
-    def _scene_keyframe(self, t_ns) -> None:
+    def _scene_keyframe(self, t_ns, deleted=()) -> None:
         """D and each trajectory's history so far as one line (entity ``name/history``), on their own
-        topic: the newest of these is what a seek restores and what a viewer who joins late gets."""
+        topic: the newest of these is what a seek restores and what a viewer who joins late gets.
+        ``deleted``: the entity ids of histories an earlier keyframe drew and that are gone (a deleted
+        track's), removed from the viewer by this one."""
         ents = self._space_entities(t_ns)
         for name, (_stride, pts) in self._history.items():
             rgb = self._path_colors[name]
             ents.append(self._line(f"{name}/history", t_ns, pts, rgb))
+        self._keyframed = set(self._history)
         self._note(SCENE_KEYFRAME)
-        self._keyframe.log(SceneUpdate(entities=ents), log_time=self._lt(t_ns))
+        self._keyframe.log(SceneUpdate(deletions=[self._deletion(t_ns, i) for i in deleted], entities=ents)
+                           if deleted else SceneUpdate(entities=ents), log_time=self._lt(t_ns))
+
+    @staticmethod
+    def _deletion(t_ns, ident):
+        return SceneEntityDeletion(timestamp=_ts(t_ns), type=SceneEntityDeletionType.MatchingId, id=ident)
+
+    # ------------------------------------------------------------------ the multi-object tracker's tracks
+
+    def _draw_tracks(self, t_ns, rec) -> None:
+        """Every live track of a /tracks record in one /scene message: entity ``track_<id>/marker`` (a
+        sphere at its world position coloured by its label, paler and smaller while tentative, and a
+        text facing the camera: ``7 drone``, ``7 drone (fovea, pinned)``, ``9 unknown (tentative, next)``), and its
+        history ``track_<id>/path/N`` (10-frame segments; ``track_<id>/path/history`` on the
+        keyframes).  A track no longer in the record (deleted) has its entities deleted in the same
+        message and its history forgotten: no later keyframe draws it; if the last keyframe drew it, a
+        keyframe without it (and deleting it) is sent now, so a seek after the deletion and the live
+        view lose it at once."""
+        from foveatrack.recording.records import TracksRecord
+
+        r = TracksRecord.from_json(rec)     # a record it cannot read (RecordError) changes nothing drawn
+        marks: dict[int, list[str]] = {}
+        for tid, word in ((r.fixated, "fovea"), (r.next_target if r.next_target != r.fixated else None, "next"),
+                          (r.pinned, "pinned")):
+            if tid is not None:
+                marks.setdefault(tid, []).append(word)
+        ident = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+        ents, live = [], {}
+        for tr in r.tracks:
+            tid = tr.id
+            live[tid] = tr.label
+            if tr.xyz_m is None or not all(v is not None and math.isfinite(v) for v in tr.xyz_m):
+                continue        # no position this frame: what was drawn stays
+            rgb, alpha, size = self._track_look(tr.label, tr.confirmed)
+            words = ([] if tr.confirmed else ["tentative"]) + marks.get(tid, [])
+            text = f"{tid} {tr.label}" + (f" ({', '.join(words)})" if words else "")
+            p = [float(v) for v in tr.xyz_m]
+            meta = [KeyValuePair(key="label", value=tr.label), KeyValuePair(key="looks_like", value=tr.looks_like),
+                    KeyValuePair(key="confirmed", value=str(tr.confirmed).lower()),
+                    KeyValuePair(key="score", value="" if tr.score is None else f"{tr.score:.3g}")]
+            ents.append(SceneEntity(
+                timestamp=_ts(t_ns), frame_id="world", id=f"track_{tid}/marker", metadata=meta,
+                spheres=[SpherePrimitive(pose=Pose(position=Vector3(x=p[0], y=p[1], z=p[2]), orientation=ident),
+                                         size=Vector3(x=size, y=size, z=size), color=self._color(rgb, alpha))],
+                texts=[TextPrimitive(pose=Pose(position=Vector3(x=p[0], y=p[1], z=p[2] + size), orientation=ident),
+                                     billboard=True, font_size=14.0, scale_invariant=True,
+                                     color=self._color(rgb, 1.0), text=text)]))
+            ents.append(self._path_point(f"track_{tid}/path", t_ns, p, rgb))
+        deletions, forgotten = [], []
+        for tid in sorted(set(self._tracks_drawn) - set(live)):
+            name = f"track_{tid}/path"
+            seg, _pts = self._paths.pop(name, (-1, []))
+            deletions += [self._deletion(t_ns, f"track_{tid}/marker")] + [
+                self._deletion(t_ns, f"{name}/{k}") for k in range(seg + 1)]
+            for d in (self._history, self._seen_points, self._path_colors):
+                d.pop(name, None)
+            if name in self._keyframed:
+                forgotten.append(f"{name}/history")
+        if ents or deletions:
+            self._note(SCENE)
+            self._scene.log(SceneUpdate(deletions=deletions, entities=ents), log_time=self._lt(t_ns))
+        if forgotten:
+            self._scene_keyframe(t_ns, forgotten)
+        # the track events on /log (before: the whole record, every frame)
+        for tid in r.confirmed_now:
+            self._log_line(t_ns, 2, f"track {tid} confirmed ({live.get(tid, 'unknown')}, frame {r.frame_id})",
+                           "tracks")
+        for tid, label in live.items():
+            was = self._tracks_drawn.get(tid)
+            if was is not None and was != label:
+                self._log_line(t_ns, 2, f"track {tid} is now {label} (was {was}, frame {r.frame_id})", "tracks")
+        for tid in r.deleted_now:
+            self._log_line(t_ns, 2, f"track {tid} deleted (frame {r.frame_id})", "tracks")
+        self._tracks_drawn = live
+
+    @staticmethod
+    def _track_look(label, confirmed):
+        """(rgb, alpha, sphere size [m]) of a track: its label's colour; a tentative track's halfway
+        to white, more transparent and smaller."""
+        rgb = _CLASS_COLOURS.get(label, _CLASS_COLOURS["unknown"])
+        if confirmed:
+            return rgb, 0.6, TRACK_MARKER_M[0]
+        return tuple(0.5 + 0.5 * c for c in rgb), 0.3, TRACK_MARKER_M[1]
 
     def _remember(self, name, p3, rgb) -> None:
         stride, pts = self._history.get(name, (1, []))
