@@ -146,9 +146,13 @@ class SkyController:
     def rebased(self, t0_s: float, pan_deg: float, tilt_deg: float) -> "SkyController":
         """A fresh controller (:meth:`foveatrack.tracker.Tracker.rebased`: the lidar's clock restarted or
         the head was homed): the paper tracker rebased, the tracks, the learned background and the
-        fovea's schedule started afresh (their times are of the old clock), the operator's pin dropped
-        (its track is gone); what the daemon does and replay repeats from its event."""
-        return SkyController(self.tracker.rebased(t0_s, pan_deg, tilt_deg), self.sky.cfg, self.attention.cfg)
+        fovea's schedule started afresh (their times are of the old clock, and a homing means the pose
+        the background was learned at was wrong), the operator's pin dropped (its track is gone); new
+        tracks' ids go on from the old ones' (an id names one track for the whole run).  What the daemon
+        does and replay repeats from its event."""
+        new = SkyController(self.tracker.rebased(t0_s, pan_deg, tilt_deg), self.sky.cfg, self.attention.cfg)
+        new.sky.continue_ids_from(self.sky)
+        return new
 
     def correct_pose(self, t_s: float, dpan_deg: float, dtilt_deg: float) -> bool:
         """The pose check's drift correction of the dead reckoning (:meth:`foveatrack.tracker.Tracker.correct_pose`)."""

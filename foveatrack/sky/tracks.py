@@ -260,6 +260,10 @@ class SkyTracker:
         self._next_id = 0
         self._cos_field = None if c.field_half_angle_deg is None else math.cos(math.radians(c.field_half_angle_deg))
 
+    def continue_ids_from(self, other: "SkyTracker") -> None:
+        """New tracks' ids go on from ``other``'s (a fresh tracker that replaces it in the same run)."""
+        self._next_id = max(self._next_id, other._next_id)
+
     # ------------------------------------------------------------------------------------------
     def process(self, frame: Frame, pose, fovea_track_id: int | None = None) -> SkyFrameOutput:
         """One frame.  ``pose``: the head's pose estimate (``angles_at(t_s)``, ``lidar_offset_m``: a

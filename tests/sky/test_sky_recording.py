@@ -90,3 +90,20 @@ def test_simulate_reports_the_multi_object_figures_and_plots_the_tracks(crossing
     assert sky["confirmed_tracks"] >= 2 and sky["gospa_mean_m"] > 0
     assert (crossing_run.parent / "tracks.png").stat().st_size > 10_000
     assert not (crossing_run.parent / "error.png").exists(), "Fig. 14's plots are of one target"
+
+
+def test_a_rebased_controller_starts_afresh_but_never_reuses_an_id():
+    from foveatrack.sky.controller import SkyController
+    from foveatrack.speed_table import SpeedTable
+    from foveatrack.tracker import Tracker
+    from sim.scene import load_scene
+
+    scene = load_scene(SCENES / "two-drones-crossing.toml")
+    cfg, att = sky_configs_from_mapping(scene.tracker_table["sky"], "scene", 19.2)
+    c = SkyController(Tracker(scene.tracker, SpeedTable.nominal()), cfg, att)
+    c.sky._next_id = 7                        # seven tracks were made before the rebase
+    c.pin(3)
+    new = c.rebased(12.5, 10.0, 2.0)
+    assert new.sky.tracks == [] and new.sky.background.frame_no == 0 and new.attention.pinned is None
+    assert new.sky._next_id == 7 and new.tracker.recon.angles_at(12.5)[:2] == (10.0, 2.0)
+    assert new.sky_table() == c.sky_table()
