@@ -6,6 +6,8 @@ Threads and queues::
     control loop:     batch queue -> FrameSlicer -> Tracker.process -> CommandGate -> HeadClient
                       (the main thread; a monotonic 10 Hz tick runs the watchdog and the status)
     recording thread: bounded job queue -> RecordingWriter (drops counted; never blocks the loop)
+    operator socket:  read by the control loop between frames, without waiting ([tracker.sky] only:
+                      ``foveatrack daemon pin ID``, :mod:`foveatrack.daemon.operator`)
 
 Each frame is processed as soon as it is complete (the first point at or after its end has
 arrived), so the loop is paced by the lidar's clock; the monotonic tick keeps the watchdog and the
@@ -49,6 +51,7 @@ from foveatrack.daemon.frame_loop import FrameLoop, _HeadSink
 from foveatrack.daemon.head_pose import ABS_SET_QUIET_S, HeadPose  # noqa: F401  (ABS_SET_QUIET_S: its old home)
 from foveatrack.daemon.homing_plan import Bearings, HomingConfirm, HomingPlan, HomingSteps
 from foveatrack.daemon.lifecycle import Lifecycle
+from foveatrack.daemon.operator import Operator
 from foveatrack.daemon.pose_guard import PoseGuard
 from foveatrack.daemon.record_queue import DaemonRecording, _job_event, _job_frame  # noqa: F401
 from foveatrack.daemon.run_stats import RunStats, rate_known  # noqa: F401
@@ -111,7 +114,7 @@ def compile_sky(config: DaemonConfig, table) -> None:
         step(Frame(t0, t0 + period, xyz, t_ns, np.full(len(xyz), 30, np.uint8)), t0 + period)
 
 
-class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, StatusDisplay, RunStats):
+class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Operator, StatusDisplay, RunStats):
     """One run of the daemon (see module docstring).  ``run()`` returns the exit status (0).
 
     config : DaemonConfig; log_path : JSON-lines log (overrides ``[daemon] log``);
@@ -121,6 +124,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
     shutdown), :mod:`~foveatrack.daemon.frame_loop` (batches -> frames -> the step -> the head),
     :mod:`~foveatrack.daemon.head_pose` (link, pose, homing), :mod:`~foveatrack.daemon.watchdog`,
     :mod:`~foveatrack.daemon.record_queue` (metadata, writer queue, live view),
+    :mod:`~foveatrack.daemon.operator` (the operator's pin, with ``[tracker.sky]``),
     :mod:`~foveatrack.daemon.status_display` and :mod:`~foveatrack.daemon.run_stats`.
     """
 
@@ -132,6 +136,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
         self.live_origins = tuple(live_origins)    # origins of web pages also let read it (--live-origin)
         self.heap_returns_freed: bool | None = None  # set by `foveatrack daemon` (foveatrack.daemon.heap)
         self.live = None
+        self.control = None             # the operator's socket (foveatrack.daemon.operator), [tracker.sky] only
         self.log = JsonLog(log_path or config.loop.log)
         self.status = StatusLine(enabled=status)
         self.duration_s = duration_s
@@ -201,6 +206,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
                         raise self.rx.error
                     self._take_batches(max(0.0, next_tick - time.monotonic()))
                     self._process_pending()
+                    self._serve_operator()      # between frames: a pin applies from the next one on
                     now = time.monotonic()
                     if now >= next_tick:
                         next_tick = self._tick(now, next_tick + period, period)
