@@ -20,7 +20,8 @@ Tables::
                  segment_minutes (default 60: a new file every hour, each complete, so memory stays bounded
                  on long runs; 0: one file), writeback_mb (default 32: the file's pages sent to the disk
                  and dropped from the page cache every 32 MB; 0: left to the kernel)
-    [daemon]     watchdog_s, max_frame_backlog, stale_frame_s, batch_queue, status_period_s, log
+    [daemon]     watchdog_s, max_frame_backlog, stale_frame_s, batch_queue, status_period_s, log,
+                 control_socket (the operator's socket of a [tracker.sky] daemon: foveatrack daemon pin)
     [pose_check] the head's pose checked against the background (foveatrack.pose_check.PoseCheckConfig:
                  enabled, bound_deg, ...; off unless enabled = true)
 """
@@ -124,6 +125,7 @@ class LoopConfig:
     batch_queue: int = 2000
     status_period_s: float = 0.5
     log: str | None = None
+    control_socket: str | None = None   # the operator's socket ([tracker.sky]; DaemonConfig.control_socket_path)
 
 
 @dataclass(frozen=True)
@@ -171,6 +173,24 @@ class DaemonConfig:
             return None
         now = now or _dt.datetime.now(_dt.timezone.utc)
         p = Path(self.recording.path.replace("{time}", now.strftime("%Y%m%dT%H%M%SZ")))
+        return (p if p.is_absolute() else Path(self.path).parent / p).resolve()
+
+    @property
+    def sky(self) -> bool:
+        """The config asks for the multi-object tracker (a ``[tracker.sky]`` table)."""
+        return "sky" in self.tracker_table
+
+    def control_socket_path(self) -> Path:
+        """The operator's socket (``foveatrack daemon pin``), absolute: ``[daemon] control_socket``
+        (relative to this file), by default ``STEM.control.sock`` (this file's stem) in the
+        recording's directory, or beside this file when there is no recording or its directory
+        changes with the start time (``{time}``)."""
+        if self.loop.control_socket is not None:
+            p = Path(self.loop.control_socket)
+        else:
+            name = Path(self.path).stem + ".control.sock"
+            rec = self.recording.path
+            p = Path(rec).parent / name if rec is not None and "{time}" not in str(Path(rec).parent) else Path(name)
         return (p if p.is_absolute() else Path(self.path).parent / p).resolve()
 
     def check_recording_dir(self) -> None:
@@ -343,6 +363,9 @@ def _loop(t: Mapping, w: str) -> LoopConfig:
         kw["status_period_s"] = as_float(t["status_period_s"], "status_period_s", w, lo=0.05, hi=60)
     if "log" in t:
         kw["log"] = as_path_text(t["log"], "log", w, "a file name for JSON lines")
+    if "control_socket" in t:
+        kw["control_socket"] = as_path_text(t["control_socket"], "control_socket", w,
+                                            "a file name for the operator's Unix socket")
     return LoopConfig(**kw)
 
 

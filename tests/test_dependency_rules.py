@@ -38,7 +38,8 @@ MAY_IMPORT: dict[str, set[str]] = {
     "foveatrack.live_devices": {_CORE, "foveatrack.livox", "gimbal"},
     "foveatrack.calibration": {_CORE, "foveatrack.live_devices"},
     "foveatrack.imu_calib": {_CORE, "foveatrack.live_devices"},
-    "foveatrack.replay": {_CORE, "foveatrack.recording", "foveatrack.livox", "gimbal"},
+    # replay and the daemon run the multi-object tracker where a recording or a config asks for it
+    "foveatrack.replay": {_CORE, "foveatrack.recording", "foveatrack.livox", "foveatrack.sky", "gimbal"},
     # frames from other programs' recordings (ROS bags, PCD, numpy folders), and the fixed sensor's
     # open-loop tracker that consumes them and writes our recording
     "foveatrack.sources": {_CORE},
@@ -46,7 +47,8 @@ MAY_IMPORT: dict[str, set[str]] = {
     # many objects seen from the moving head: the open-loop tracker's background and clustering,
     # used on world coordinates
     "foveatrack.sky": {_CORE, "foveatrack.openloop"},
-    "foveatrack.daemon": {_CORE, "foveatrack.recording", "foveatrack.livox", "foveatrack.live_devices", "gimbal"},
+    "foveatrack.daemon": {_CORE, "foveatrack.recording", "foveatrack.livox", "foveatrack.live_devices", "foveatrack.sky",
+                          "gimbal"},
     "sim": {_CORE, "foveatrack.sky", "foveatrack.recording", "foveatrack.livox", "foveatrack.live_devices", "foveatrack.calibration",
             "foveatrack.imu_calib", "foveatrack.replay", "foveatrack.daemon", "gimbal"},
     # the composition root: everything, sim lazily inside its commands

@@ -37,13 +37,18 @@ class Lifecycle:
         # the bound ports (config 0 = any), kept: the client's sockets are closed at shutdown
         self.host_ports = {"cmd": self.client.cmd_port, "data": self.client.data_port,
                            "broadcast": self.client.broadcast_port}
-        self._open_recording()
-        if self.live_port is not None:
-            try:
-                self._open_live()
-            except Exception:
-                self._forget_unused_recording()
-                raise
+        self._open_control()      # the operator's socket ([tracker.sky]): a path in use fails the start here
+        try:
+            self._open_recording()
+            if self.live_port is not None:
+                try:
+                    self._open_live()
+                except Exception:
+                    self._forget_unused_recording()
+                    raise
+        except BaseException:
+            self._close_control()
+            raise
         self.q: queue.Queue = queue.Queue(maxsize=c.loop.batch_queue)
         self.rx = LidarReceiver(self.client, self.q, self.stop_ev)
         self.rx.want_imu = self.imu_feed is not None
@@ -99,6 +104,7 @@ class Lifecycle:
             self.rx.join(2.0)
         self.client.close()
         self.head.close()
+        self._close_control()
         stats = self.stats()
         if self.recorder is not None:
             self._record(_job_event, ns(t_s or 0.0), {"event": "stop", "stats": stats})

@@ -39,11 +39,14 @@ class DaemonRecording:
     def _meta(self) -> dict:
         from foveatrack.recording.run_meta import DaemonOrigin, RecordingMeta
 
-        # what runs (the tracker's configuration with the head's facts, its table, the gate), typed
+        # what runs (the tracker's configuration with the head's facts, its table, the gate, and the
+        # multi-object tracker's effective [tracker.sky] table where it runs: replay rebuilds it), typed
         c = self.cfg
+        sky_table = getattr(self.tracker, "sky_table", None)
         return RecordingMeta(self.tracker.config, c.head.facts.tracker_values(), self.table, self.limits,
                              DaemonOrigin(c.path, c.text, c.head, c.lidar), tracker_t0_s=0.0,
-                             point_rate_hz=c.lidar.point_rate_hz).to_dict()
+                             point_rate_hz=c.lidar.point_rate_hz,
+                             sky=None if sky_table is None else sky_table()).to_dict()
 
     def _open_recording(self) -> None:
         """The recording file, its writer thread and the head's command journal, when the config asks

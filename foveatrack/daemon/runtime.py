@@ -6,6 +6,8 @@ Threads and queues::
     control loop:     batch queue -> FrameSlicer -> Tracker.process -> CommandGate -> HeadClient
                       (the main thread; a monotonic 10 Hz tick runs the watchdog and the status)
     recording thread: bounded job queue -> RecordingWriter (drops counted; never blocks the loop)
+    operator socket:  read by the control loop between frames, without waiting ([tracker.sky] only:
+                      ``foveatrack daemon pin ID``, :mod:`foveatrack.daemon.operator`)
 
 Each frame is processed as soon as it is complete (the first point at or after its end has
 arrived), so the loop is paced by the lidar's clock; the monotonic tick keeps the watchdog and the
@@ -41,11 +43,15 @@ import math
 import threading
 import time
 from collections import Counter, deque
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from foveatrack.daemon.frame_loop import FrameLoop, _HeadSink
 from foveatrack.daemon.head_pose import ABS_SET_QUIET_S, HeadPose  # noqa: F401  (ABS_SET_QUIET_S: its old home)
 from foveatrack.daemon.homing_plan import Bearings, HomingConfirm, HomingPlan, HomingSteps
 from foveatrack.daemon.lifecycle import Lifecycle
+from foveatrack.daemon.operator import Operator
 from foveatrack.daemon.pose_guard import PoseGuard
 from foveatrack.daemon.record_queue import DaemonRecording, _job_event, _job_frame  # noqa: F401
 from foveatrack.daemon.run_stats import RunStats, rate_known  # noqa: F401
@@ -61,8 +67,54 @@ from foveatrack.gyro_attitude import ImuFeed
 from foveatrack.tracker import Tracker
 from foveatrack.turn_witness import MoveWitness
 
+if TYPE_CHECKING:       # imported where a config asks for it (the sky tracker's modules are not small)
+    from foveatrack.sky.controller import SkyController
 
-class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, StatusDisplay, RunStats):
+
+def daemon_controller(config: DaemonConfig, table) -> Tracker | SkyController:
+    """The daemon's controller: the paper's tracker (Algorithms 1 and 2), or -- where the config's
+    ``[tracker]`` has a ``[tracker.sky]`` table -- the multi-object tracker steering the head through
+    it (:mod:`foveatrack.sky.controller`, as the simulator builds it for a scene with that table).
+
+    The lidar's field (``field_half_angle_deg``, which tells a track out of view from one unseen in
+    it): the table's; the daemon does not know the lidar's model when it starts (the handshake comes
+    later, and its field is what the recording's metadata must hold from the start), so without the
+    key every track counts as in view."""
+    tracker = Tracker(config.tracker, table)
+    sky = config.tracker_table.get("sky")
+    if sky is None:
+        return tracker
+    from foveatrack.sky.controller import SkyController, sky_configs_from_mapping
+
+    return SkyController(tracker, *sky_configs_from_mapping(sky, f"{config.path} [tracker.sky]", None))
+
+
+def compile_sky(config: DaemonConfig, table) -> None:
+    """Compile (or load from numba's cache) the multi-object tracker's kernels before data flows, as
+    :func:`foveatrack.detection.compile_all` does the paper tracker's: a throwaway copy of the
+    daemon's controller steps through frames past its warm-up with a small object moving through a
+    scattered background (clustering, the range background, association), nothing written anywhere.
+    Without it a fresh install's first frames waited seconds for the compiler."""
+    from foveatrack.frame_step import NoHead
+    from foveatrack.frames import Frame
+
+    c = daemon_controller(config, table)
+    if not hasattr(c, "sky_table"):
+        return
+    step = FrameStep(c, CommandGate(None), NoHead())
+    rng = np.random.default_rng(0)
+    period = 1.0 / config.tracker.rate_hz
+    n_frames = int(math.ceil(c.sky.cfg.warmup_s / period)) + 8
+    for k in range(n_frames):
+        t0 = k * period
+        bg = np.column_stack([np.full(200, 40.0), rng.uniform(-10, 10, 200), rng.uniform(0, 10, 200)])
+        obj = np.array([20.0, -2.0 + 0.05 * k, 3.0]) + rng.normal(0, 0.05, (12, 3))
+        xyz = np.vstack([bg, obj])
+        t_ns = np.sort(rng.integers(int(t0 * 1e9), int((t0 + period) * 1e9), len(xyz))).astype(np.int64)
+        step(Frame(t0, t0 + period, xyz, t_ns, np.full(len(xyz), 30, np.uint8)), t0 + period)
+
+
+class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Operator, StatusDisplay, RunStats):
     """One run of the daemon (see module docstring).  ``run()`` returns the exit status (0).
 
     config : DaemonConfig; log_path : JSON-lines log (overrides ``[daemon] log``);
@@ -72,6 +124,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
     shutdown), :mod:`~foveatrack.daemon.frame_loop` (batches -> frames -> the step -> the head),
     :mod:`~foveatrack.daemon.head_pose` (link, pose, homing), :mod:`~foveatrack.daemon.watchdog`,
     :mod:`~foveatrack.daemon.record_queue` (metadata, writer queue, live view),
+    :mod:`~foveatrack.daemon.operator` (the operator's pin, with ``[tracker.sky]``),
     :mod:`~foveatrack.daemon.status_display` and :mod:`~foveatrack.daemon.run_stats`.
     """
 
@@ -83,6 +136,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
         self.live_origins = tuple(live_origins)    # origins of web pages also let read it (--live-origin)
         self.heap_returns_freed: bool | None = None  # set by `foveatrack daemon` (foveatrack.daemon.heap)
         self.live = None
+        self.control = None             # the operator's socket (foveatrack.daemon.operator), [tracker.sky] only
         self.log = JsonLog(log_path or config.loop.log)
         self.status = StatusLine(enabled=status)
         self.duration_s = duration_s
@@ -95,8 +149,8 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
         self.sink = _HeadSink(self)
         # The one frame step: tracker -> gate -> serial port; a failed write leaves the head on its
         # last command and the gate tells the dead reckoning (seen without it: ~9 deg of pan while a
-        # head was unplugged).
-        self.step = FrameStep(Tracker(config.tracker, self.table), self.gate, self.sink)
+        # head was unplugged).  The tracker: the paper's, or with [tracker.sky] the multi-object one.
+        self.step = FrameStep(daemon_controller(config, self.table), self.gate, self.sink)
         # attitude = "gyro": the lidar's IMU samples, held until the frame they precede
         self.imu_feed = ImuFeed() if config.tracker.attitude == "gyro" else None
         # ... and the same gyro witnesses every move of the head against its command (a slipping gear,
@@ -126,7 +180,8 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
         self._homing_t0: float | None = None
 
     @property
-    def tracker(self) -> Tracker:
+    def tracker(self) -> Tracker | SkyController:
+        """The controller the step drives now (a fresh one after each rebase)."""
         return self.step.controller
 
     # -------------------------------------------------------------------------------- the loop
@@ -134,6 +189,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
         from foveatrack.detection import compile_all
 
         compile_all()   # before data flows: a first-call compile would stall the first frame
+        compile_sky(self.cfg, self.table)     # and the multi-object tracker's, where it runs
         self.pose_guard.compile()
         self._open()
         with self._stop_signals():      # the handlers found come back on every way out
@@ -150,6 +206,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Status
                         raise self.rx.error
                     self._take_batches(max(0.0, next_tick - time.monotonic()))
                     self._process_pending()
+                    self._serve_operator()      # between frames: a pin applies from the next one on
                     now = time.monotonic()
                     if now >= next_tick:
                         next_tick = self._tick(now, next_tick + period, period)

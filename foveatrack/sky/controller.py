@@ -133,10 +133,17 @@ class SkyController:
         vt = tracker.table.tilt.max_speed_deg_s(False)
         self._head_speeds = (c.gain_pan_1_s, vp if c.max_pan_speed_deg_s is None else min(vp, c.max_pan_speed_deg_s),
                              c.gain_tilt_1_s, vt if c.max_tilt_speed_deg_s is None else min(vt, c.max_tilt_speed_deg_s))
+        #: the last frame's output (None before the first): the tracks an operator may pin
+        self.last_output: SkyControlOutput | None = None
 
     @property
     def recon(self):
         return self.tracker.recon
+
+    @property
+    def last_command(self):
+        """The last command the head was told it runs (:attr:`foveatrack.tracker.Tracker.last_command`)."""
+        return self.tracker.last_command
 
     @property
     def config(self):
@@ -178,12 +185,24 @@ class SkyController:
                 for v in sky.tracks if v.confirmed}
         nxt = self.attention.update(frame.t_end_s, sky.tracks, in_fovea, frame.t_end_s - frame.t_start_s, turn)
         scores = {v.track_id: threat_score(v, self.attention.cfg) for v in sky.tracks if v.confirmed}
-        return SkyControlOutput(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores, self.attention.pinned)
+        self.last_output = SkyControlOutput(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores, self.attention.pinned)
+        return self.last_output
 
     def pin(self, track_id: int | None) -> None:
         """The operator's choice (:meth:`foveatrack.sky.attention.Attention.pin`): this track is the
         priority from the next frame on, while it lives; None unpins."""
         self.attention.pin(None if track_id is None else int(track_id))
+
+    def confirmed_tracks(self) -> tuple:
+        """The confirmed tracks of the last frame (:class:`~foveatrack.sky.tracks.TrackView`; empty
+        before the first frame and after a rebase): those :meth:`pin` can make the priority."""
+        out = self.last_output
+        return () if out is None else tuple(v for v in out.sky.tracks if v.confirmed)
+
+    @property
+    def pinned(self) -> int | None:
+        """The operator's pinned track (None: none, or it was deleted)."""
+        return self.attention.pinned
 
     def sky_table(self) -> dict:
         """The effective ``[tracker.sky]`` table (every setting, JSON-plain), which

@@ -127,10 +127,11 @@ def terminate(p: subprocess.Popen, timeout_s: float = 10.0) -> int:
 
 def write_config(path: Path, head_link: Path, recording: Path, broadcast_port: int, cmd_port: int = 0,
                  data_port: int = 0, watchdog_s: float = 2.0, speed_table: str = "nominal",
-                 head_extra: str = "", recording_extra: str = "") -> Path:
+                 head_extra: str = "", recording_extra: str = "", tracker_extra: str = "") -> Path:
     """A daemon config for the virtual devices.  ``watchdog_s`` is 2 s, not the shipped 0.5 s: on a busy
     2-core machine the virtual lidar (a Python process ray-casting its batches) can pause for more than
-    0.5 s, and a test about something else must not see a watchdog trip for it."""
+    0.5 s, and a test about something else must not see a watchdog trip for it.  ``tracker_extra``: tables
+    after ``[tracker.space]`` (``[tracker.sky]``)."""
     path.write_text(f"""
 [lidar]
 sensor_ip = "127.0.0.1"
@@ -153,7 +154,7 @@ kind = "box"
 frame = "world"
 min_xyz = [1.0, -60.0, -0.7]
 max_xyz = [60.0, 60.0, 40.0]
-
+{tracker_extra}
 [recording]
 path = "{recording}"
 {recording_extra}
