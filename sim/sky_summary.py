@@ -50,6 +50,7 @@ def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
     (module docstring); ``metrics`` is :func:`~foveatrack.sky.metrics.drone_metrics`' with
     ``false_causes`` (a Counter by what each false drone track was near) and ``hours`` of run."""
     fovea_half_deg = loop.sky.attention.cfg.fovea_half_angle_deg
+    field_half_deg = loop.sky.sky.cfg.field_half_angle_deg
     truth = truth_frames(loop, log)
     T = len(truth)
     times = np.asarray(log["t_end_s"])
@@ -59,13 +60,16 @@ def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
         xyz = np.full((T, 3), np.nan)
         vis = np.zeros(T, bool)
         fov = np.zeros(T, bool)
+        field = np.zeros(T, bool)
         for k, fr in enumerate(truth):
             if d in fr:
                 xyz[k] = fr[d][1]
                 vis[k] = fr[d][2]
                 rows = rotation_matrix(log["head_pan_deg"][k], log["head_tilt_deg"][k]).tolist()
-                fov[k] = bearing_off_axis_deg(xyz[k], rows, np.zeros(3)) <= fovea_half_deg
-        drones[d] = {"xyz_m": xyz, "visible": vis, "in_fovea": fov}
+                off = bearing_off_axis_deg(xyz[k], rows, np.zeros(3))
+                fov[k] = off <= fovea_half_deg
+                field[k] = field_half_deg is None or off <= field_half_deg
+        drones[d] = {"xyz_m": xyz, "visible": vis, "in_fovea": fov, "in_field": field}
     tracks = [[(v.track_id, v.label, v.xyz_m) for v in o.sky.tracks if v.confirmed] for o in loop.sky_log]
     m = drone_metrics(times, drones, tracks)
     g = [gospa([x for _, _, x in tr], [drones[d]["xyz_m"][k] for d in drone_ids

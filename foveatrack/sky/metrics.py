@@ -22,7 +22,9 @@ Per drone, with tracks matched to drones at each frame by the same assignment (c
 ``continuity``          share of the frames from that first match on with a matched track
 ``id_switches``         times the matched track's id changes (gaps without a match do not count)
 ``fovea_share``         share of its visible frames the drone spends in the fovea
-``longest_revisit_gap_s``  the longest stretch (after its first confirmation) out of the fovea
+``longest_revisit_gap_s``  the longest stretch (after its first confirmation) out of the fovea, up
+                        to its last frame in the lidar's field (``in_field`` where given: a drone
+                        that has left the field for good is not waiting for a revisit)
 
 and ``false_drone_tracks``: confirmed tracks labelled drone at some frame without being matched to a
 drone at that frame, counted once per id (birds, trees, clutter called drones), and per hour of run.
@@ -68,7 +70,8 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
     """The per-drone figures and the false drone tracks (module docstring).
 
     times_s : (T,) frame times [s]
-    drones : id -> {"xyz_m": (T, 3), "visible": (T,) bool, "in_fovea": (T,) bool or None}
+    drones : id -> {"xyz_m": (T, 3), "visible": (T,) bool, "in_fovea": (T,) bool or None,
+                    "in_field": (T,) bool (optional)}
     tracks_per_frame : T lists of (track_id, label, xyz_m) of the confirmed tracks
     """
     t = np.asarray(times_s, np.float64)
@@ -111,7 +114,9 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
             fov = np.asarray(fov, bool)
             r["fovea_share"] = float(fov[vis].mean()) if vis.any() else 0.0
             gap, longest = 0, 0
-            for k in range(first if first is not None else T, T):
+            field = drones[d].get("in_field")
+            end = T if field is None or not np.any(field) else int(np.flatnonzero(field)[-1]) + 1
+            for k in range(first if first is not None else T, end):
                 gap = 0 if fov[k] else gap + 1
                 longest = max(longest, gap)
             r["longest_revisit_gap_s"] = longest * dt

@@ -85,3 +85,21 @@ def test_drone_metrics_count_switches_gaps_and_false_tracks():
     assert a["longest_revisit_gap_s"] == pytest.approx(0.4)
     assert m["false_drone_tracks"] == [9]
     assert m["false_drone_tracks_per_hour"] == pytest.approx(3600 / 5.0)
+
+
+def test_a_revisit_gap_ends_with_the_drones_last_frame_in_the_field():
+    T = 100
+    t = 0.1 * np.arange(T)
+    xyz = np.stack([np.full(T, 30.0), np.linspace(-5, 5, T), np.full(T, 3.0)], 1)
+    vis = np.ones(T, bool)
+    fov = np.arange(T) < 20                       # in the fovea for 2 s, then never again
+    tracks = [[(1, "drone", xyz[k])] for k in range(T)]
+    field = np.arange(T) < 50                     # ... and out of the lidar's field from 5 s on
+    d = {"xyz_m": xyz, "visible": vis, "in_fovea": fov}
+    always = drone_metrics(t, {"a": d}, tracks)["drones"]["a"]["longest_revisit_gap_s"]
+    left = drone_metrics(t, {"a": {**d, "in_field": field}}, tracks)["drones"]["a"]["longest_revisit_gap_s"]
+    assert always == pytest.approx(8.0) and left == pytest.approx(3.0)
+    # out of the field for a while and back: the time away counts (the head chose to look elsewhere)
+    back = np.where((np.arange(T) >= 50) & (np.arange(T) < 70), False, True)
+    assert drone_metrics(t, {"a": {**d, "in_field": back}}, tracks)["drones"]["a"]["longest_revisit_gap_s"] \
+        == pytest.approx(8.0)
