@@ -1,0 +1,55 @@
+"""The per-point turn into the world (foveatrack/sky/world_points.py): the numba kernel against its
+numpy twin, bit for bit, and against the exact rotation at each point's time."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from foveatrack.reconstruction import rotation_matrix
+from foveatrack.sky.world_points import lidar_to_world_per_point, lidar_to_world_per_point_numpy
+
+
+class _TurningHead:
+    """Pan and tilt turning at constant rates: ``angles_at`` as a Reconstructor has it."""
+
+    lidar_offset_m = (0.05, -0.02, 0.11)
+
+    def __init__(self, pan_rate, tilt_rate):
+        self.rates = pan_rate, tilt_rate
+
+    def angles_at(self, t):
+        return 3.0 + self.rates[0] * t, -2.0 + self.rates[1] * t, 0.0, 0.0
+
+
+@pytest.mark.parametrize("rates", [(0.0, 0.0), (60.0, -20.0), (-100.0, 2.0)])
+def test_the_kernel_equals_its_numpy_twin_bit_for_bit(rates):
+    rng = np.random.default_rng(5)
+    n = 20_000
+    xyz = rng.uniform(-80, 80, (n, 3))
+    t0, t1 = 12.3, 12.4
+    # times inside the frame, and a few just outside it (clipped to the end nodes)
+    t_ns = np.sort(rng.integers(int(t0 * 1e9) - 2_000_000, int(t1 * 1e9) + 2_000_000, n)).astype(np.int64)
+    pose = _TurningHead(*rates)
+    a = lidar_to_world_per_point(xyz, t_ns, pose, t0, t1, 11)
+    b = lidar_to_world_per_point_numpy(xyz, t_ns, pose, t0, t1, 11)
+    assert a.tobytes() == b.tobytes()
+
+
+def test_each_point_turns_at_its_own_time():
+    pose = _TurningHead(100.0, -30.0)
+    t0, t1 = 0.0, 0.1
+    t_ns = np.array([0, 25_000_000, 50_000_000, 99_000_000], np.int64)
+    xyz = np.tile([[100.0, 0.0, 0.0]], (4, 1))
+    got = lidar_to_world_per_point(xyz, t_ns, pose, t0, t1, 11)
+    for k, t in enumerate(t_ns * 1e-9):
+        p, tl, _, _ = pose.angles_at(t)
+        want = rotation_matrix(p, tl) @ (xyz[k] + np.array(pose.lidar_offset_m))
+        # the blend of two nodes 10 ms apart: within (w dt)^2 / 8 of the rotation (module docstring),
+        # w the head's whole turn rate (here sqrt(100^2 + 30^2) deg/s), times the point's range
+        w_dt = np.radians(np.hypot(100.0, 30.0)) * 0.01
+        assert np.linalg.norm(got[k] - want) <= w_dt ** 2 / 8 * np.linalg.norm(want) * 1.01
+
+
+def test_no_points_give_no_points():
+    assert lidar_to_world_per_point(np.empty((0, 3)), np.empty(0, np.int64), _TurningHead(0, 0), 0.0, 0.1).shape == (0, 3)
