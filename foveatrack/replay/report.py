@@ -19,6 +19,10 @@ def format_report(res: ReplayResult) -> str:
     # motion): its errors are what that configuration would have seen there, said beside the numbers
     open_loop = ("detections_equal" in c and not (c["detections_equal"] and c["commands_equal"]))
     caveat = " (open loop: on the recorded head motion, not where this config would have steered)" if open_loop else ""
+    if res.tracks:
+        # the multi-object tracker's fovea serves every drone in turn: the figures against the scene's
+        # first target say how often it was that one, not how well the tracker did
+        caveat += " (the scene's first target only; the multi-object tracker's fovea serves every track in turn)"
     if tr is not None:
         te = tr["tracking_error_deg"]
         fmt = lambda v: "n/a" if v is None else f"{v:.3f}"  # noqa: E731
