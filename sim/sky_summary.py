@@ -51,6 +51,7 @@ def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
     ``false_causes`` (a Counter by what each false drone track was near) and ``hours`` of run."""
     fovea_half_deg = loop.sky.attention.cfg.fovea_half_angle_deg
     field_half_deg = loop.sky.sky.cfg.field_half_angle_deg
+    region = loop.sky.sky.region
     truth = truth_frames(loop, log)
     T = len(truth)
     times = np.asarray(log["t_end_s"])
@@ -68,7 +69,10 @@ def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
                 rows = rotation_matrix(log["head_pan_deg"][k], log["head_tilt_deg"][k]).tolist()
                 off = bearing_off_axis_deg(xyz[k], rows, np.zeros(3))
                 fov[k] = off <= fovea_half_deg
-                field[k] = field_half_deg is None or off <= field_half_deg
+                # in the lidar's field and inside the scene's space of interest (a drone that has
+                # flown out of D is no longer the tracker's to revisit)
+                field[k] = (field_half_deg is None or off <= field_half_deg) and (
+                    region is None or bool(region.contains(xyz[k][None, :])[0]))
         drones[d] = {"xyz_m": xyz, "visible": vis, "in_fovea": fov, "in_field": field}
     tracks = [[(v.track_id, v.label, v.xyz_m) for v in o.sky.tracks if v.confirmed] for o in loop.sky_log]
     m = drone_metrics(times, drones, tracks)

@@ -24,7 +24,8 @@ Per drone, with tracks matched to drones at each frame by the same assignment (c
 ``fovea_share``         share of its visible frames the drone spends in the fovea
 ``longest_revisit_gap_s``  the longest stretch (after its first confirmation) out of the fovea, up
                         to its last frame in the lidar's field (``in_field`` where given: a drone
-                        that has left the field for good is not waiting for a revisit)
+                        that has left the field, or the space of interest, for good is not waiting
+                        for a revisit)
 
 and ``false_drone_tracks``: confirmed tracks labelled drone at some frame without being matched to a
 drone at that frame, counted once per id (birds, trees, clutter called drones), and per hour of run.
