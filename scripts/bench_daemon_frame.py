@@ -13,7 +13,7 @@ metrics) behind its bounded queue on the same core.  Printed: per-frame time p50
 control path (decode shown separately, amortised per frame), and the recording thread's busy time
 per frame.  Target: <= 10 ms p99 per 100 ms frame.
 
-``--sky``: the same streams with five quadrotors at 12-20 m in the field instead of one, through the
+``--sky``: the same streams with five quadrotors circling at 12-20 m in the field instead of one, through the
 multi-object tracker (``[tracker.sky]``: the range background, clustering, association, the
 classifier, the attention; issue 28's "the daemon's per-frame p99 at most 10 ms at 480 k points a
 second with five objects in the field").  Its first second is the background's warm-up (no
@@ -62,10 +62,12 @@ SCENE = {
 }
 TRACKER = {"deadband_deg": 2.0, "gain_1_s": 2.0,
            "space": {"kind": "box", "frame": "world", "min_xyz": [1.0, -60.0, -0.7], "max_xyz": [30.0, 60.0, 40.0]}}
-# --sky: five drones crossing the Horizon's field at 12-20 m, each its own way
+# --sky: five drones in the Horizon's field at 12-20 m for the whole run, each circling its own place
+# (2 m radius at 1 m/s: a drone that stays within 1.5 m of where it was first seen is taken for scenery)
 SKY_TARGETS = [{"id": f"drone-{i + 1}", "geometry": "quadrotor", "span_m": 0.35,
-                "trajectory": {"type": "straight", "start_m": [12.0 + 2.0 * i, 6.0 - 3.0 * i, 0.5 + 0.6 * i],
-                               "velocity_m_s": [0.0, 1.0 * (-1) ** i, 0.1 * i]}} for i in range(5)]
+                "trajectory": {"type": "circle", "centre_m": [12.0 + 2.0 * i, 6.0 - 3.0 * i, 0.5 + 0.6 * i],
+                               "radius_m": 2.0, "speed_m_s": 1.0 * (-1) ** i, "start_deg": 70.0 * i}}
+               for i in range(5)]
 
 
 def packets(seconds: float, dual: bool, sky: bool = False) -> list[list[bytes]]:
