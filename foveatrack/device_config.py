@@ -155,6 +155,12 @@ class DaemonConfig:
                        "the daemon believed pan -58 to -78 deg while the head was at -31 to -44 deg after 20 s); "
                        "measure the table first: foveatrack calibrate --config THIS.toml --corner X Y Z --out "
                        "table.json, then speed_table = \"table.json\"")
+        if self.sky and isinstance(self.tracker_table["sky"], dict) and \
+                "field_half_angle_deg" not in self.tracker_table["sky"]:
+            out.append(f"{self.path} [tracker.sky] has no field_half_angle_deg: every track counts as in the lidar's "
+                       "view, so one the head has turned away from is deleted after lost_after_s (2 s) unseen instead "
+                       "of lost_out_of_view_s (5 s), before a revisit can reach it; set it to your lidar's field "
+                       "(a Mid-40's: 19.2)")
         return out
 
     def speed_table(self) -> SpeedTable:

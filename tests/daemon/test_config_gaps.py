@@ -113,3 +113,14 @@ def test_the_discovery_port_is_exclusive_and_a_second_holder_is_told(tmp_path):
         s.close()
     finally:
         first.close()
+
+
+@pytest.mark.parametrize("sky, warned", [("[tracker.sky]\n", True), ("[tracker.sky]\nfield_half_angle_deg = 19.2\n", False),
+                                         ("", False)])
+def test_a_sky_table_without_the_lidars_field_is_a_warning(tmp_path, sky, warned):
+    p = _write(tmp_path)
+    p.write_text(p.read_text() + sky)
+    w = [x for x in load_config(p).warnings() if "field_half_angle_deg" in x]
+    assert bool(w) == warned
+    if warned:
+        assert "[tracker.sky]" in w[0] and "19.2" in w[0]
