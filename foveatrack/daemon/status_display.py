@@ -38,9 +38,18 @@ class StatusDisplay:
                                        ", ".join(self.status_notes())))
 
     def status_notes(self) -> list[str]:
-        """What the status line says besides the figures: the lidar unit's problems, an uncalibrated
-        head, a head device refused, lost lidar packets."""
-        notes = [self.rx.unit_note] if getattr(self, "rx", None) is not None and self.rx.unit_note else []
+        """What the status line says besides the figures: the multi-object tracker's tracks (confirmed,
+        of them labelled drone, the one the fovea serves, the pinned one), the lidar unit's problems, an
+        uncalibrated head, a head device refused, lost lidar packets."""
+        notes = []
+        sky = getattr(self.tracker, "last_output", None)
+        if sky is not None:
+            conf = [v for v in sky.sky.tracks if v.confirmed]
+            notes.append(f"tracks {len(conf)} ({sum(v.label == 'drone' for v in conf)} drone)"
+                         + (f", fovea on {sky.next_target}" if sky.next_target is not None else "")
+                         + (f", pinned {sky.pinned}" if sky.pinned is not None else ""))
+        if getattr(self, "rx", None) is not None and self.rx.unit_note:
+            notes.append(self.rx.unit_note)
         if self.cfg.head.speed_table == "nominal":
             notes.append("head UNCALIBRATED (nominal speed table)")
         if self.pose_guard.warnings:

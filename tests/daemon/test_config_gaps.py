@@ -124,3 +124,27 @@ def test_a_sky_table_without_the_lidars_field_is_a_warning(tmp_path, sky, warned
     assert bool(w) == warned
     if warned:
         assert "[tracker.sky]" in w[0] and "19.2" in w[0]
+
+
+def test_the_status_line_counts_the_sky_trackers_tracks(tmp_path):
+    # one drone seen for a second through the daemon's own controller: the status names its tracks
+    import numpy as np
+
+    from foveatrack.frames import Frame
+
+    p = _write(tmp_path)
+    p.write_text(p.read_text() + "[tracker.sky]\nwarmup_s = 0.0\nfield_half_angle_deg = 19.2\n")
+    d = Daemon(load_config(p), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
+    assert not any(n.startswith("tracks") for n in d.status_notes())
+    rng = np.random.default_rng(1)
+    for k in range(10):
+        t0 = k * 0.1
+        c = np.array([20.0, 2.0 - 0.1 * k, 1.0])
+        xyz = c + rng.normal(0, 0.05, (20, 3))
+        t_ns = np.sort(rng.integers(int(t0 * 1e9), int((t0 + 0.1) * 1e9), 20)).astype(np.int64)
+        d.tracker.process(Frame(t0, t0 + 0.1, xyz, t_ns), t0 + 0.1)
+    note = next(n for n in d.status_notes() if n.startswith("tracks"))
+    assert note.startswith("tracks 1 (") and "fovea on" in note, note
+    d.tracker.pin(next(v.track_id for v in d.tracker.last_output.sky.tracks if v.confirmed))
+    d.tracker.process(Frame(1.0, 1.1, xyz, t_ns + 100_000_000), 1.1)
+    assert "pinned" in next(n for n in d.status_notes() if n.startswith("tracks"))
