@@ -6,8 +6,9 @@ built with the Foxglove SDK's layout types (``foxglove.layouts``).
 Left: the 3D view in the world frame (the cloud on /points with its per-point reflectivity, the
 scene entities on /scene, the frames head_est, head_true and lidar from /tf).  Right, top to bottom:
 the tracking error per axis (what the controller saw, with the dead band's meaning: each axis on
-its own), the head angles (the tracker's dead-reckoned estimate and, in simulation, the truth), and
-the log (tracker state changes, the gate's interventions, daemon events).
+its own), the head angles (the tracker's dead-reckoned estimate and, in simulation, the truth), the
+multi-object tracker's tracks of the frame as a table (``/tracks``: recordings of a ``[tracker.sky]``
+run; empty otherwise), and the log (tracker state changes, the gate's interventions, daemon events).
 """
 
 from __future__ import annotations
@@ -40,9 +41,11 @@ def layout() -> fl.Layout:
             fl.PlotSeries(value="/truth.pan_deg", label="pan, true (simulation)", line_style="dashed"),
             fl.PlotSeries(value="/truth.tilt_deg", label="tilt, true (simulation)", line_style="dashed")]))
     log = fl.LogPanel(title="events", config=fl.LogConfig(topic_to_render="/log", show_name=True))
+    # the multi-object tracker's tracks of the frame, one row each (recordings of a [tracker.sky] run)
+    tracks = fl.TablePanel(title="tracks ([tracker.sky] runs)", config=fl.TableConfig(topic_path="/tracks.tracks"))
     right = fl.SplitContainer(direction="column", items=[
         fl.SplitItem(proportion=1, content=error), fl.SplitItem(proportion=1, content=head),
-        fl.SplitItem(proportion=0.6, content=log)])
+        fl.SplitItem(proportion=0.6, content=tracks), fl.SplitItem(proportion=0.6, content=log)])
     return fl.Layout(content=fl.SplitContainer(direction="row", items=[
         fl.SplitItem(proportion=1.4, content=three_d), fl.SplitItem(proportion=1, content=right)]))
 

@@ -233,7 +233,7 @@ def test_the_shipped_layout_names_channels_and_fields_a_recording_has(sim_rec):
     summary, _ = decoded(path)
     topics = {c.topic: json.loads(summary.schemas[c.schema_id].data) if c.message_encoding == "json" else None
               for c in summary.channels.values()}
-    values, shown = [], []
+    values, shown, table_paths = [], [], []
 
     def walk(x):
         if isinstance(x, dict):
@@ -242,6 +242,8 @@ def test_the_shipped_layout_names_channels_and_fields_a_recording_has(sim_rec):
                     values.append(v)
                 elif k == "topicToRender":
                     shown.append(v)
+                elif k == "topicPath" and isinstance(v, str):
+                    table_paths.append(v)
                 elif k == "topics" and isinstance(v, dict):
                     shown.extend(v)
                 walk(v)
@@ -254,6 +256,13 @@ def test_the_shipped_layout_names_channels_and_fields_a_recording_has(sim_rec):
     for v in values:
         topic, field = v.split(".", 1)
         assert topic in topics and field in topics[topic]["properties"], v
+    # a table of a channel only some recordings have (/tracks: a [tracker.sky] run): its documented schema
+    from foveatrack.recording.format import OPTIONAL_RECORD_SCHEMAS
+
+    assert table_paths == ["/tracks.tracks"]
+    for v in table_paths:
+        topic, field = v.split(".", 1)
+        assert field in OPTIONAL_RECORD_SCHEMAS[topic.lstrip("/")][1]["properties"], v
 
 
 def test_a_seek_or_a_late_viewer_gets_d_and_the_whole_history_within_a_second(tmp_path):
