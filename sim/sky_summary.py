@@ -45,16 +45,15 @@ def truth_frames(loop, log) -> list[dict]:
     return out
 
 
-def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
-    """``(metrics, mean GOSPA [m], confusion)`` of a finished run of the multi-object tracker
-    (module docstring); ``metrics`` is :func:`~foveatrack.sky.metrics.drone_metrics`' with
-    ``false_causes`` (a Counter by what each false drone track was near) and ``hours`` of run."""
+def drone_truth(loop, log, truth) -> dict:
+    """Per drone of ``truth`` (:func:`truth_frames`), by frame: ``xyz_m`` (T, 3) (NaN where absent),
+    ``visible`` (hit by a ray), ``in_fovea`` (within the fovea's half-angle of the lidar's true axis)
+    and ``in_field`` (within the lidar's field and the scene's D): what
+    :func:`~foveatrack.sky.metrics.drone_metrics` takes."""
     fovea_half_deg = loop.sky.attention.cfg.fovea_half_angle_deg
     field_half_deg = loop.sky.sky.cfg.field_half_angle_deg
     region = loop.sky.sky.region
-    truth = truth_frames(loop, log)
     T = len(truth)
-    times = np.asarray(log["t_end_s"])
     drone_ids = sorted({i for fr in truth for i, (c, _, _) in fr.items() if c == "drone"})
     drones = {}
     for d in drone_ids:
@@ -74,6 +73,18 @@ def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
                 field[k] = (field_half_deg is None or off <= field_half_deg) and (
                     region is None or bool(region.contains(xyz[k][None, :])[0]))
         drones[d] = {"xyz_m": xyz, "visible": vis, "in_fovea": fov, "in_field": field}
+    return drones
+
+
+def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
+    """``(metrics, mean GOSPA [m], confusion)`` of a finished run of the multi-object tracker
+    (module docstring); ``metrics`` is :func:`~foveatrack.sky.metrics.drone_metrics`' with
+    ``false_causes`` (a Counter by what each false drone track was near) and ``hours`` of run."""
+    truth = truth_frames(loop, log)
+    T = len(truth)
+    times = np.asarray(log["t_end_s"])
+    drones = drone_truth(loop, log, truth)
+    drone_ids = sorted(drones)
     tracks = [[(v.track_id, v.label, v.xyz_m) for v in o.sky.tracks if v.confirmed] for o in loop.sky_log]
     m = drone_metrics(times, drones, tracks)
     g = [gospa([x for _, _, x in tr], [drones[d]["xyz_m"][k] for d in drone_ids
@@ -144,7 +155,6 @@ def sky_plot_data(loop, log) -> dict:
     (T, 3) positions while confirmed, NaN elsewhere); ``in_fovea``: drone id -> (T,) bool."""
     truth = truth_frames(loop, log)
     T = len(truth)
-    half = loop.sky.attention.cfg.fovea_half_angle_deg
     objs: dict[str, tuple[str, np.ndarray]] = {}
     for k, fr in enumerate(truth):
         for i, (c, x, _) in fr.items():
@@ -159,14 +169,6 @@ def sky_plot_data(loop, log) -> dict:
                     tracks[v.track_id] = [v.label, np.full((T, 3), np.nan)]
                 tracks[v.track_id][0] = v.label
                 tracks[v.track_id][1][k] = v.xyz_m
-    fovea = {}
-    for i, (c, xyz) in objs.items():
-        if c == "drone":
-            f = np.zeros(T, bool)
-            for k in range(T):
-                if np.all(np.isfinite(xyz[k])):
-                    rows = rotation_matrix(log["head_pan_deg"][k], log["head_tilt_deg"][k]).tolist()
-                    f[k] = bearing_off_axis_deg(xyz[k], rows, np.zeros(3)) <= half
-            fovea[i] = f
+    fovea = {d: a["in_fovea"] for d, a in drone_truth(loop, log, truth).items()}
     return {"t_s": np.asarray(log["t_end_s"], float), "truth": objs,
             "tracks": {i: (lab, xyz) for i, (lab, xyz) in tracks.items()}, "in_fovea": fovea}
