@@ -213,10 +213,10 @@ class ClosedLoop:
         self.sky = None
         self.sky_log: list = []
         if controller is None and "sky" in scene.tracker_table:
-            from foveatrack.sky.controller import SkyController, sky_configs_from_mapping
+            from foveatrack.sky.controller import SkyController
             from sim.summary import half_fov_deg
-            self.sky = SkyController(self.tracker, *sky_configs_from_mapping(
-                scene.tracker_table["sky"], f"{scene.path} [tracker.sky]", half_fov_deg(scene)))
+            self.sky = SkyController.from_table(self.tracker, scene.tracker_table["sky"],
+                                                f"{scene.path} [tracker.sky]", half_fov_deg(scene))
         # The lidar's gyro on the head, only when the scene has [imu] (its own random stream).
         if self.tracker.config.attitude == "gyro" and scene.imu is None:
             raise UserError(f"{scene.path} [tracker]: attitude = \"gyro\" needs an [imu] table "

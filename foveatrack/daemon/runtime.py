@@ -84,9 +84,9 @@ def daemon_controller(config: DaemonConfig, table) -> Tracker | SkyController:
     sky = config.tracker_table.get("sky")
     if sky is None:
         return tracker
-    from foveatrack.sky.controller import SkyController, sky_configs_from_mapping
+    from foveatrack.sky.controller import SkyController
 
-    return SkyController(tracker, *sky_configs_from_mapping(sky, f"{config.path} [tracker.sky]", None))
+    return SkyController.from_table(tracker, sky, f"{config.path} [tracker.sky]")
 
 
 def compile_sky(config: DaemonConfig, table) -> None:

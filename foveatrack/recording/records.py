@@ -429,7 +429,8 @@ def write_record(writer, rec) -> None:
 
 def write_tracker_frame(writer, frame_id: int, frame, out, imu=None) -> int:
     """Record one frame and the tracker's output for it (points, detection, head estimate, and every
-    track where the multi-object tracker ran), as every driver does; returns the frame-end time [ns].  Commands and truth each driver writes itself.
+    track where the multi-object tracker ran), as every driver does; returns the frame-end time [ns].
+    Commands and truth each driver writes itself.
 
     ``imu``: the samples the driver gave ``Tracker.on_imu`` before the frame, ``(t_s, gyro_rad_s)`` or
     ``(t_s, gyro_rad_s, accel_g)``, or None where it feeds none (nothing is written then); recorded

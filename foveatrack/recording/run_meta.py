@@ -16,7 +16,7 @@ Keys of ``to_dict`` (flat, JSON-plain):
   replay with another ``[tracker]`` table), ``speed_table``, ``limits`` (the gate's; absent: commands
   passed unchanged), ``tracker_t0_s``, ``point_rate_hz``, ``half_fov_deg`` (the simulator's), ``sky``
   (only where the multi-object tracker ran: its effective ``[tracker.sky]`` table,
-  :meth:`foveatrack.sky.controller.SkyController.table`, which replay rebuilds it from)
+  :meth:`foveatrack.sky.controller.SkyController.sky_table`, which replay rebuilds it from)
 * simulator (:class:`SimulatorOrigin`): ``scene_name``, ``scene_path``, ``scene_text``, ``seed``,
   ``effects``, ``gimbal`` (the scene's ``[gimbal]`` settings)
 * daemon (:class:`DaemonOrigin`): ``config_path``, ``config_text``, ``head``, ``lidar`` (its

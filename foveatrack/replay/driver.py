@@ -164,9 +164,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     # the multi-object tracker where the run had it (its recorded table), or where the table given has one
     sky_table = meta.sky if tracker_table is None else tracker_table.get("sky")
     if sky_table is not None:
-        from foveatrack.sky.controller import SkyController, sky_configs_from_mapping
+        from foveatrack.sky.controller import SkyController
 
-        controller = SkyController(controller, *sky_configs_from_mapping(sky_table, where + ".sky", meta.half_fov_deg))
+        controller = SkyController.from_table(controller, sky_table, where + ".sky", meta.half_fov_deg)
     tracks_cmp = _TracksComparison()
     step = FrameStep(controller, CommandGate(meta.limits), sink)
     period = rec_cfg.period_s

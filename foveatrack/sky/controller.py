@@ -106,7 +106,7 @@ def sky_configs_from_mapping(data: Mapping, where: str, field_half_angle_deg: fl
 
 
 def sky_table(cfg: SkyTrackerConfig, attention_cfg: AttentionConfig) -> dict:
-    """The ``[tracker.sky]`` table of these configurations, every setting (:meth:`SkyController.table`)."""
+    """The ``[tracker.sky]`` table of these configurations, every setting (:meth:`SkyController.sky_table`)."""
     from dataclasses import asdict
 
     att = asdict(attention_cfg)
@@ -135,6 +135,14 @@ class SkyController:
                              c.gain_tilt_1_s, vt if c.max_tilt_speed_deg_s is None else min(vt, c.max_tilt_speed_deg_s))
         #: the last frame's output (None before the first): the tracks an operator may pin
         self.last_output: SkyControlOutput | None = None
+
+    @classmethod
+    def from_table(cls, tracker: Tracker, table: Mapping, where: str,
+                   field_half_angle_deg: float | None = None) -> "SkyController":
+        """The controller a ``[tracker.sky]`` table asks for around ``tracker``, as every driver builds
+        it (the simulator for a scene, the daemon for its config, replay from a recording's table);
+        ``field_half_angle_deg``: the lidar's, used unless the table sets it."""
+        return cls(tracker, *sky_configs_from_mapping(table, where, field_half_angle_deg))
 
     @property
     def recon(self):
