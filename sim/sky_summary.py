@@ -28,26 +28,27 @@ GOSPA_CUTOFF_M = 5.0
 
 
 def truth_frames(loop, log) -> list[dict]:
-    """Per frame: {id: (class, xyz (3,), visible)} of every object (stray near returns left out)."""
+    """Per frame: {id: (class, xyz (3,), visible)} of every object (stray near returns left out);
+    ``visible``: the rays of the frame that hit it (0: none; 1 where the simulator kept no count)."""
     T = len(log["t_end_s"])
     objs = getattr(loop, "objects_log", None)
     out = []
     if objs:
         for k in range(T):
             out.append({o.id: ("drone" if o.cls == "drone" else "bird" if o.cls == "bird" else "clutter",
-                               np.array(o.xyz_m, float), o.rays_hit > 0)
+                               np.array(o.xyz_m, float), int(o.rays_hit))
                         for o in objs[k] if not o.id.startswith("stray-")})
         return out
     for k in range(T):
         t_mid = log["t_end_s"][k] - 0.05
-        out.append({f"target-{i}": ("drone", s.trajectory.position(np.array([t_mid]))[0], True)
+        out.append({f"target-{i}": ("drone", s.trajectory.position(np.array([t_mid]))[0], 1)
                     for i, s in enumerate(loop.scene.targets)})
     return out
 
 
 def drone_truth(loop, log, truth) -> dict:
     """Per drone of ``truth`` (:func:`truth_frames`), by frame: ``xyz_m`` (T, 3) (NaN where absent),
-    ``visible`` (hit by a ray), ``in_fovea`` (within the fovea's half-angle of the lidar's true axis)
+    ``visible`` (hit by a ray), ``rays`` (how many), ``in_fovea`` (within the fovea's half-angle of the lidar's true axis)
     and ``in_field`` (within the lidar's field and the scene's D): what
     :func:`~foveatrack.sky.metrics.drone_metrics` takes."""
     fovea_half_deg = loop.sky.attention.cfg.fovea_half_angle_deg
@@ -58,13 +59,13 @@ def drone_truth(loop, log, truth) -> dict:
     drones = {}
     for d in drone_ids:
         xyz = np.full((T, 3), np.nan)
-        vis = np.zeros(T, bool)
+        rays = np.zeros(T, np.int64)
         fov = np.zeros(T, bool)
         field = np.zeros(T, bool)
         for k, fr in enumerate(truth):
             if d in fr:
                 xyz[k] = fr[d][1]
-                vis[k] = fr[d][2]
+                rays[k] = fr[d][2]
                 rows = rotation_matrix(log["head_pan_deg"][k], log["head_tilt_deg"][k]).tolist()
                 off = bearing_off_axis_deg(xyz[k], rows, np.zeros(3))
                 fov[k] = off <= fovea_half_deg
@@ -72,8 +73,51 @@ def drone_truth(loop, log, truth) -> dict:
                 # flown out of D is no longer the tracker's to revisit)
                 field[k] = (field_half_deg is None or off <= field_half_deg) and (
                     region is None or bool(region.contains(xyz[k][None, :])[0]))
-        drones[d] = {"xyz_m": xyz, "visible": vis, "in_fovea": fov, "in_field": field}
+        drones[d] = {"xyz_m": xyz, "visible": rays > 0, "rays": rays, "in_fovea": fov, "in_field": field}
     return drones
+
+
+def scan_allows_confirm_s(times_s, tracked, rays, min_points: int, confirm_hits: int,
+                          confirm_window: int) -> float | None:
+    """The earliest a track built from one drone's own returns could be confirmed, from the rays the
+    scan put on it (:mod:`foveatrack.sky.tracks`' rule: ``confirm_hits`` frames, each with an object of
+    ``min_points`` returns or more, within ``confirm_window`` frames of the first), counted from its
+    first frame hit by a ray; None: never in the run.
+
+    A bound no tracker with that rule can beat, whatever its background or association: the rays
+    are counted before the effects (a ray may return nothing) and every one is taken as the drone's
+    object, off the scenery.  ``tracked`` (T,) bool: the frames the tracker tracks (after its warm-up;
+    all of them for the bound without it).  What part of a slow confirmation is the scan's (the
+    rosette's sparse rim, paper Fig. 6) and what part the tracker's."""
+    t = np.asarray(times_s, np.float64)
+    n = np.asarray(rays, np.int64)
+    seen = np.flatnonzero(n > 0)
+    if seen.size == 0:
+        return None
+    first = int(seen[0])
+    hit = (n >= min_points) & np.asarray(tracked, bool)
+    for k in range(first, t.size):
+        if hit[k] and int(hit[max(first, k - confirm_window + 1):k + 1].sum()) >= confirm_hits:
+            return float(t[k] - t[first])
+    return None
+
+
+def _scan_bounds(loop, log, drones: dict, m: dict) -> None:
+    """Each drone's :func:`scan_allows_confirm_s`, with the tracker's warm-up (``scan_allows_confirm_s``)
+    and without it (``..._no_warmup_s``), into ``m["drones"]``."""
+    cfg = loop.sky.sky.cfg
+    t = np.asarray(log["t_end_s"], np.float64)
+    if t.size == 0:
+        return
+    start = t[0] - loop.tracker.config.period_s     # the first frame's start, as the tracker counts
+    after_warmup = t - start > cfg.warmup_s
+    for d, a in drones.items():
+        r = m["drones"][d]
+        r["scan_allows_confirm_s"] = scan_allows_confirm_s(t, after_warmup, a["rays"], cfg.min_points,
+                                                           cfg.confirm_hits, cfg.confirm_window)
+        r["scan_allows_confirm_no_warmup_s"] = scan_allows_confirm_s(t, np.ones(t.size, bool), a["rays"],
+                                                                     cfg.min_points, cfg.confirm_hits,
+                                                                     cfg.confirm_window)
 
 
 def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
@@ -87,6 +131,7 @@ def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
     drone_ids = sorted(drones)
     tracks = [[(v.track_id, v.label, v.xyz_m) for v in o.sky.tracks if v.confirmed] for o in loop.sky_log]
     m = drone_metrics(times, drones, tracks)
+    _scan_bounds(loop, log, drones, m)
     g = [gospa([x for _, _, x in tr], [drones[d]["xyz_m"][k] for d in drone_ids
                                        if np.all(np.isfinite(drones[d]["xyz_m"][k]))], GOSPA_CUTOFF_M)["distance"]
          for k, tr in enumerate(tracks)]
@@ -142,7 +187,11 @@ def sky_lines(s: dict) -> list[str]:
               if s["false_drone_tracks"] else "")
            + f"; mean GOSPA {s['gospa_mean_m']:.2f} m (c = {s['gospa_cutoff_m']:g} m)"]
     for d, r in s["drones"].items():
-        out.append(f"  {d}: confirmed {fmt(r['time_to_confirm_s'])} after entering the field, labelled drone "
+        bound = ""
+        if "scan_allows_confirm_s" in r:
+            bound = (f" (the scan's rays on it allowed {fmt(r['scan_allows_confirm_s'])}, "
+                     f"{fmt(r['scan_allows_confirm_no_warmup_s'])} without the warm-up)")
+        out.append(f"  {d}: confirmed {fmt(r['time_to_confirm_s'])} after entering the field{bound}, labelled drone "
                    f"{fmt(r['time_to_drone_label_s'])}; track ids {r['track_ids'] or '-'}, {r['id_switches']} id "
                    f"switches, continuity {r['continuity']:.2f}; in the fovea {100 * r.get('fovea_share', 0):.0f} % "
                    f"of its time in the field, longest gap {r.get('longest_revisit_gap_s', float('nan')):.1f} s")
