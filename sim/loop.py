@@ -235,6 +235,7 @@ class ClosedLoop:
         # kept apart from the log, whose arrays the regression and determinism digests cover.
         self.objects_log: list[list] = []
         self.last_objects: list | None = None
+        self._objects_truth = None
         self._strays_seen = 0
         self.bytes_sent = 0
         self.echo_bytes = 0
@@ -355,10 +356,13 @@ class ClosedLoop:
                           refl_byte)
             lidar_clock.observe(t1, lidar_clock.sensor_s(t1))
         if scene.multi_object:
-            from sim.objects_truth import objects_truth
+            if self._objects_truth is None:
+                from sim.objects_truth import ObjectsTruth
 
+                self._objects_truth = ObjectsTruth(scene)
             strays = self.sensor.last_strays_m if scene.has("stray_returns") else np.zeros((0, 3))
-            self.last_objects = objects_truth(scene, t_mid, self.sensor.last_object_rays, strays, self._strays_seen)
+            self.last_objects = self._objects_truth.at(t_mid, self.sensor.last_object_rays, strays, self._strays_seen,
+                                                       self.sensor.last_mid_xyz_m)
             self._strays_seen += len(strays)
             self.objects_log.append(self.last_objects)
         c4 = clock()

@@ -29,22 +29,43 @@ def target_size_m(spec) -> float:
     return 2.0 * float(spec.body.bounding_radius_m)
 
 
+class ObjectsTruth:
+    """The truth of a scene's objects frame by frame; what does not change over a run (ids, classes,
+    trajectories, sizes: a quadrotor's bounding radius walks its primitives) is gathered once."""
+
+    def __init__(self, scene):
+        from sim.world.sky import FlockPoses
+
+        self.objects = [(s.id, s.cls, s.trajectory, target_size_m(s)) for s in scene.targets]
+        self.objects += [(o.id, o.cls, o.trajectory, float(o.size_m)) for o in scene.others]
+        # a flock's velocities in one evaluation (the same values as each bird's own)
+        n_t = len(scene.targets)
+        self._flocks = [(n_t + a, n_t + b, FlockPoses(scene.others[a:b])) for a, b in FlockPoses.groups(scene.others)]
+
+    def at(self, t_mid_s: float, object_rays, strays_m: np.ndarray, stray_count: int,
+           mid_xyz_m=None) -> list[ObjectTruth]:
+        """The truth of each object at ``t_mid_s``; ``object_rays``: rays that hit each object this
+        frame (drones then others, :attr:`sim.sensor.SceneSensor.last_object_rays`), ``strays_m`` the
+        frame's stray returns (world), numbered from ``stray_count``; ``mid_xyz_m``: each object's
+        position at ``t_mid_s`` if already computed (the sensor's cull has it: the same call, the
+        same bits)."""
+        t = np.array([t_mid_s])
+        out = []
+        n_obj = len(self.objects)
+        rays = (np.zeros(n_obj, dtype=np.int64) if object_rays is None else object_rays).tolist()
+        vel: list = [None] * n_obj
+        for a, b, flock in self._flocks:
+            vel[a:b] = flock.velocities(np.arange(b - a), np.full(b - a, t_mid_s)).tolist()
+        for k, ((oid, cls, traj, size), n) in enumerate(zip(self.objects, rays)):
+            p = traj.position(t)[0] if mid_xyz_m is None else mid_xyz_m[k]
+            v = traj.velocity(t)[0].tolist() if vel[k] is None else vel[k]
+            out.append(ObjectTruth(oid, cls, tuple(p.tolist()), tuple(v), size, int(n)))
+        for k, p in enumerate(strays_m):
+            out.append(ObjectTruth(f"stray-{stray_count + k}", "clutter", tuple(float(x) for x in p), (0.0, 0.0, 0.0),
+                                   0.0, 1))
+        return out
+
+
 def objects_truth(scene, t_mid_s: float, object_rays, strays_m: np.ndarray, stray_count: int) -> list[ObjectTruth]:
-    """The truth of each object at ``t_mid_s``; ``object_rays``: rays that hit each object this frame
-    (drones then others, :attr:`sim.sensor.SceneSensor.last_object_rays`), ``strays_m`` the frame's
-    stray returns (world), numbered from ``stray_count``."""
-    t = np.array([t_mid_s])
-    out = []
-    rays = np.zeros(len(scene.targets) + len(scene.others), dtype=np.int64) if object_rays is None else object_rays
-    objs = [(s.id, s.cls, s.trajectory, target_size_m(s)) for s in scene.targets]
-    objs += [(o.id, o.cls, o.trajectory, o.size_m) for o in scene.others]
-    for (oid, cls, traj, size), n in zip(objs, rays):
-        p = traj.position(t)[0]
-        v = traj.velocity(t)[0]
-        out.append(ObjectTruth(oid, cls, tuple(float(x) for x in p), tuple(float(x) for x in v), float(size), int(n)))
-    for k, p in enumerate(strays_m):
-        out.append(ObjectTruth(f"stray-{stray_count + k}", "clutter", tuple(float(x) for x in p), (0.0, 0.0, 0.0),
-                               0.0, 1))
-    return out
-
-
+    """:meth:`ObjectsTruth.at` of a scene, once (a run keeps an :class:`ObjectsTruth`)."""
+    return ObjectsTruth(scene).at(t_mid_s, object_rays, strays_m, stray_count)

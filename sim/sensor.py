@@ -22,6 +22,7 @@ from sim.scan.kernels import RAY_OK
 from sim.scan.model import ScanModel
 from sim.scan.optics import SpeedNoise
 from sim.world import kernels as wk
+from sim.world.sky import FlockPoses
 from sim.world.trajectories import body_yaw_rad
 
 _NONE = np.zeros(0)          # an effect that is off: no draws
@@ -111,11 +112,17 @@ class SceneSensor:
         # Per target, what sizes its per-frame cull (computed once: both walk Python objects).
         self._cull = [(spec.body.bounding_radius_m, spec.trajectory.max_speed_m_s) for spec in scene.targets]
         self._cull_others = [(obj.bounding_radius_m, obj.trajectory.max_speed_m_s) for obj in scene.others]
+        # A flock's birds are cast together (sim.world.sky.FlockPoses: the same values, a twentieth of
+        # the Python calls); with a beam footprint each body's sub-rays are cast on their own.
+        self._flocks = {} if self._has["beam_footprint"] else {
+            a: (b, FlockPoses(scene.others[a:b])) for a, b in FlockPoses.groups(scene.others)}
         # Multi-object scenes: the first primitive of each object (drones, then birds and crowns), for
         # the rays that hit each (``last_object_rays``) and the stray returns placed (``last_strays_m``).
         self._object_prim_start = np.cumsum([0] + [spec.body.prims.shape[0] for spec in scene.targets]
                                             + [obj.body.prims.shape[0] for obj in scene.others])
         self.last_object_rays: np.ndarray | None = None
+        # each object's position at the last chunk's mid time (what its cull centred on; the truth's too)
+        self.last_mid_xyz_m: list[np.ndarray] | None = None
         self.last_strays_m = np.zeros((0, 3))
         # Work counters (timing-free evidence that a scene costs only what it holds).
         self.rays_total = 0
@@ -142,12 +149,24 @@ class SceneSensor:
         if has["mixed_pixels"]:
             self._share = np.ones(n)
         offset = 0
+        mids = []
         for spec, cull in zip(scene.targets, self._cull):
-            self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
+            mids.append(self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset))
             offset += spec.body.prims.shape[0]
-        for obj, cull in zip(scene.others, self._cull_others):
-            self._cast_target(obj, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
+        k = 0
+        while k < len(scene.others):
+            if k in self._flocks:
+                stop, flock = self._flocks[k]
+                mids += self._cast_flock(flock, self._cull_others[k:stop], t0, t1, chunk, d_world, rng_m, prim, offset)
+                offset += sum(o.body.prims.shape[0] for o in flock.objects)
+                k = stop
+                continue
+            obj = scene.others[k]
+            mids.append(self._cast_target(obj, self._cull_others[k], t0, t1, chunk.t_ns, d_world, chunk.status,
+                                          rng_m, prim, offset))
             offset += obj.body.prims.shape[0]
+            k += 1
+        self.last_mid_xyz_m = mids
         self.rays_total += n
         if self._bg.shape[0]:
             self.rays_cast_background += n
@@ -279,10 +298,55 @@ class SceneSensor:
             self._share[rays] = 1.0
         self.last_strays_m = d_world[rays] * r[:, None]      # world frame, for the truth
 
-    def _cast_target(self, spec, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset):
+    def _cast_target(self, spec, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset) -> np.ndarray:
+        """Cast the rays near one moving body on it; returns its position at the chunk's mid time."""
+        c = spec.trajectory.position(np.array([0.5 * (t0 + t1)]))[0]
+        self._cast_body(spec, c, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset)
+        return c
+
+    def _cast_flock(self, flock, culls, t0, t1, chunk, d_world, rng_m, prim, offset) -> list[np.ndarray]:
+        """:meth:`_cast_target` for each bird of a flock in turn, the birds' poses evaluated together
+        (:class:`sim.world.sky.FlockPoses`), the rays culled first against a cone holding every
+        bird's; returns their positions at the chunk's mid time."""
+        t_mid = 0.5 * (t0 + t1)
+        n = len(flock.objects)
+        centres = flock.positions(np.arange(n), np.full(n, t_mid))
+        reach = np.array([r + v * 0.5 * (t1 - t0) * 1.01 + 1e-3 for r, v in culls])
+        # the flock's cone: a ray within reach[k] of bird k passes within |c_k - g| + reach[k] of g
+        g = centres.mean(axis=0)
+        d = centres - g
+        outer = float(np.max(np.sqrt((d * d).sum(axis=1)) + reach)) * (1.0 + 1e-9) + 1e-6
+        sub = np.empty(chunk.t_ns.size, dtype=np.int64)
+        sub = sub[:wk.cone_candidates_kernel(d_world, chunk.status, g[0], g[1], g[2], outer, sub)]
+        mids = [centres[k].copy() for k in range(n)]
+        if sub.size == 0:
+            return mids
+        local = np.empty((n, sub.size), dtype=np.int64)
+        count = np.empty(n, dtype=np.int64)
+        wk.cones_candidates_kernel(np.ascontiguousarray(d_world[sub]), np.ascontiguousarray(chunk.status[sub]),
+                                   centres, reach, local, count)
+        total = int(count.sum())
+        self.rays_cast_targets += total
+        if total == 0:
+            return mids
+        idx_all = np.concatenate([sub[local[k, :count[k]]] for k in range(n)])
+        m = np.repeat(np.arange(n), count)
+        t_pose = chunk.t_ns[idx_all] * 1e-9 if self.target_motion == "per_point" else np.full(total, t_mid)
+        pos, yaw = flock.poses(m, t_pose)
+        flap_rad = flock.wing_angles(m, t_pose)
+        hi = 0
+        for k in range(n):
+            obj = flock.objects[k]
+            lo, hi = hi, hi + int(count[k])
+            if hi > lo:
+                wk.cast_flapping_kernel(idx_all[lo:hi], d_world, pos[lo:hi], yaw[lo:hi], flap_rad[lo:hi],
+                                        obj.body.prims, obj.hinge, offset, rng_m, prim)
+            offset += obj.body.prims.shape[0]
+        return mids
+
+    def _cast_body(self, spec, c, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset) -> None:
         traj = spec.trajectory
         t_mid = 0.5 * (t0 + t1)
-        c = traj.position(np.array([t_mid]))[0]
         radius_m, v_max = cull
         reach = radius_m + v_max * 0.5 * (t1 - t0) * 1.01 + 1e-3
         # Beam divergence can catch a body just outside the central ray's path.

@@ -142,3 +142,22 @@ def cos_incidence_twin(prim, p, d):
     else:
         n = np.tile(prim[7:10], (len(p), 1))
     return np.abs(np.einsum("ij,ij->i", n, d))
+
+
+def cone_candidates_twin(d, status, c, radius, ok_status=0):
+    """Indices of the rays with ``status == ok_status`` passing within ``radius`` of ``c`` (and in
+    front of the origin), in order: the distance of c from the ray's line by Pythagoras."""
+    b = d[:, 0] * c[0] + d[:, 1] * c[1] + d[:, 2] * c[2]
+    c2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
+    return np.flatnonzero((c2 - b * b <= radius * radius) & (b > -radius) & (status == ok_status))
+
+
+def bout_index_twin(t, member, starts_per_member):
+    """Per time, the bout index (into the members' concatenated starts) numpy's searchsorted finds."""
+    out = np.empty(t.size, np.int64)
+    lo = 0
+    for k, starts in enumerate(starts_per_member):
+        rows = member == k
+        out[rows] = lo + np.clip(np.searchsorted(starts, t[rows], side="right") - 1, 0, starts.size - 1)
+        lo += starts.size
+    return out

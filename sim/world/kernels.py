@@ -449,6 +449,49 @@ def cone_candidates_kernel(d_world, status, cx, cy, cz, radius, out_idx):
     return n
 
 
+@njit(cache=True, nogil=True)
+def cones_candidates_kernel(d_world, status, centres, radii, out_idx, out_n):
+    """:func:`cone_candidates_kernel` for K cones in one pass over the rays (a flock's birds): the rays
+    of cone k go in order to ``out_idx[k, :out_n[k]]`` (``out_idx`` (K, N), ``out_n`` (K,)).  The
+    same arithmetic per ray and cone, so the same rays (numpy twin: K calls of the one-cone kernel,
+    ``tests/world/test_world_kernels.py``)."""
+    n_cones = centres.shape[0]
+    for k in range(n_cones):
+        out_n[k] = 0
+    for j in range(d_world.shape[0]):
+        if status[j] != RAY_OK:
+            continue
+        for k in range(n_cones):
+            cx = centres[k, 0]
+            cy = centres[k, 1]
+            cz = centres[k, 2]
+            radius = radii[k]
+            b = d_world[j, 0] * cx + d_world[j, 1] * cy + d_world[j, 2] * cz
+            if (cx * cx + cy * cy + cz * cz) - b * b <= radius * radius and b > -radius:
+                out_idx[k, out_n[k]] = j
+                out_n[k] += 1
+
+
+@njit(cache=True, nogil=True)
+def bout_index_kernel(t_s, member, seg_lo, seg_hi, starts, out):
+    """Per ray, the flapping bout its time falls in: ``numpy.searchsorted(starts[lo:hi], t, "right")
+    - 1 + lo`` for its member's segment ``[lo, hi)`` of the members' concatenated, each sorted, bout
+    starts, and ``lo`` before the first (``FlapSchedule.angle_rad``'s clip).  Comparisons only: the
+    same index as numpy's (its twin, ``tests/world/test_sky.py``)."""
+    for i in range(t_s.shape[0]):
+        lo = seg_lo[member[i]]
+        a = lo
+        b = seg_hi[member[i]]
+        t = t_s[i]
+        while a < b:
+            mid = (a + b) // 2
+            if starts[mid] <= t:
+                a = mid + 1
+            else:
+                b = mid
+        out[i] = a - 1 if a - 1 >= lo else lo
+
+
 @njit(cache=True)
 def rotate_pan_tilt_grid_kernel(d_lidar, t_s, t0_s, dt_s, pan_rad, tilt_rad, out):
     """:func:`rotate_pan_tilt_kernel` with the head pose linearly interpolated from a time grid.

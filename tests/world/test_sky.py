@@ -17,7 +17,7 @@ from sim.loop import ClosedLoop
 from sim.scene import load_scene, scene_from_mapping
 from sim.world import kernels as K
 from sim.world import sky
-from world_twins import cast_flapping_twin
+from world_twins import bout_index_twin, cast_flapping_twin, cone_candidates_twin
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 NEW_SCENES = ("two-drones-crossing", "drone-and-flock", "drone-tree-line", "swarm-of-five")
@@ -165,6 +165,80 @@ def test_flock_birds_keep_apart_and_fly_at_bird_speeds():
     gaps[np.arange(20), np.arange(20)] = np.inf
     assert gaps.min() > 0.6, "two birds of the flock stay a wingspan apart"
     assert 0.6 * 0.9 - 1e-9 <= min(o.size_m for o in birds) and max(o.size_m for o in birds) <= 0.6 * 1.1 + 1e-9
+
+
+def test_a_flock_s_poses_together_are_each_bird_s_own_to_the_bit():
+    scene = load_scene(SCENES / "drone-and-flock.toml")
+    runs = sky.FlockPoses.groups(scene.others)
+    assert len(runs) == 1 and runs[0][1] - runs[0][0] == 20
+    birds = scene.others[runs[0][0]:runs[0][1]]
+    flock = sky.FlockPoses(birds)
+    rng = np.random.default_rng(3)
+    m = np.sort(rng.integers(0, 20, 3000))
+    t = rng.uniform(-0.5, scene.duration_s + 0.5, m.size)
+    # bout starts hit exactly, and times before a bird's first bout
+    t[:20] = [b.flap.bout_start_s[min(1, b.flap.bout_start_s.size - 1)] for b in birds]
+    m[:20] = np.arange(20)
+    t[20:40] = -5.0
+    order = np.argsort(m, kind="stable")
+    m, t = m[order], t[order]
+    pos, yaw = flock.poses(m, t)
+    wings = flock.wing_angles(m, t)
+    for k, b in enumerate(birds):
+        rows = m == k
+        assert np.array_equal(pos[rows], b.trajectory.position(t[rows]))
+        assert np.array_equal(flock.velocities(m[rows], t[rows]), b.trajectory.velocity(t[rows]))
+        assert np.array_equal(yaw[rows], sky.body_yaw_rad(b.trajectory, t[rows]))
+        assert np.array_equal(wings[rows], b.flap.angle_rad(t[rows]))
+
+
+def test_flock_groups_are_runs_of_one_flock_s_flapping_birds():
+    a = list(load_scene(SCENES / "drone-and-flock.toml").others)
+    crowns = [o for o in load_scene(SCENES / "drone-tree-line.toml").others if o.cls == "tree"]
+    assert sky.FlockPoses.groups(crowns) == []
+    assert sky.FlockPoses.groups(a[:5] + crowns[:1] + a[5:7] + a[7:8]) == [(0, 5), (6, 9)]
+    assert sky.FlockPoses.groups(a[:1]) == [], "a lone bird is cast on its own"
+
+
+def test_bout_and_cone_kernels_match_their_numpy_twins():
+    rng = np.random.default_rng(11)
+    starts = [np.sort(rng.uniform(-1.0, 10.0, k)) for k in (1, 2, 7, 30)]
+    member = rng.integers(0, 4, 5000)
+    t = rng.uniform(-2.0, 11.0, member.size)
+    t[:4] = [s[-1] for s in starts]
+    member[:4] = np.arange(4)
+    sizes = np.array([s.size for s in starts])
+    out = np.empty(t.size, np.int64)
+    K.bout_index_kernel(t, member, np.cumsum(sizes) - sizes, np.cumsum(sizes), np.concatenate(starts), out)
+    assert np.array_equal(out, bout_index_twin(t, member, starts))
+    d = rng.normal(size=(20_000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    status = (rng.random(d.shape[0]) < 0.05).astype(np.uint8)
+    centres = rng.normal(size=(6, 3)) * 20.0
+    radii = rng.uniform(0.5, 8.0, 6)
+    idx = np.empty((6, d.shape[0]), np.int64)
+    n = np.empty(6, np.int64)
+    K.cones_candidates_kernel(d, status, centres, radii, idx, n)
+    for k in range(6):
+        one = np.empty(d.shape[0], np.int64)
+        one = one[:K.cone_candidates_kernel(d, status, *centres[k], radii[k], one)]
+        twin = cone_candidates_twin(d, status, centres[k], radii[k])
+        assert n[k] > 0 and np.array_equal(idx[k, :n[k]], one) and np.array_equal(one, twin)
+
+
+def test_a_flock_cast_together_gives_the_run_it_gives_bird_by_bird():
+    scene = replace(load_scene(SCENES / "drone-and-flock.toml"), duration_s=2.5)
+    together = ClosedLoop(scene)
+    apart = ClosedLoop(scene)
+    apart.sensor._flocks = {}
+    assert together.sensor._flocks
+    a, b = together.run(), apart.run()
+    for k in a:
+        x, y = np.asarray(a[k]), np.asarray(b[k])
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
+    assert together.objects_log == apart.objects_log
+    assert together.sensor.rays_cast_targets == apart.sensor.rays_cast_targets
+    assert sum(o.rays_hit for fr in together.objects_log for o in fr if o.cls == "bird") > 50
 
 
 # ---------------------------------------------------------------------------------------- trees
