@@ -57,7 +57,7 @@ from scipy.optimize import linear_sum_assignment
 from foveatrack.config_util import dataclass_from_mapping
 from foveatrack.detection import Detection, box_bounds, box_detection
 from foveatrack.errors import UserError
-from foveatrack.fixed_order import mat3T_vec, norm3
+from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
@@ -198,6 +198,7 @@ class SkyTrack:
     excursion_m: float = 0.0
     last_xyz_m: np.ndarray | None = None
     last_seen_in_view: bool = True
+    classified_on: tuple | None = None    # what the classifier last read (SkyTracker._classify)
 
     @property
     def confirmed(self) -> bool:
@@ -386,7 +387,7 @@ class SkyTracker:
         self.background.learn(cells[keep], ranges[keep])
         deleted = self._prune(t_mid)
         for tr in self.tracks:
-            tr.seen_as, tr.features = classify(tr, cfg.classifier)
+            self._classify(tr)
             tr.label, tr.drone_frames = held_label(tr.seen_as, tr.label, tr.drone_frames, cfg.classifier)
         views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, tr.kf.predicted(t_mid)[0], tr.kf.v.copy(),
                                 tr.hit_now, tr.in_view, dict(tr.features), tr.clear_hits, tr.seen_as)
@@ -407,8 +408,13 @@ class SkyTracker:
         """Is the world point inside the lidar's field at the frame's mid pose?"""
         if self._cos_field is None:
             return True
-        q = mat3T_vec(np.array(rows), p_world) - offset
-        x, y, z = q.tolist()
+        # R.T p - offset in floats (mat3T_vec's products and sums, in its order; asked ~30 times a frame)
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
+        px, py, pz = p_world.tolist()
+        ox, oy, oz = offset.tolist()
+        x = (r00 * px + r10 * py + r20 * pz) - ox
+        y = (r01 * px + r11 * py + r21 * pz) - oy
+        z = (r02 * px + r12 * py + r22 * pz) - oz
         r = math.sqrt(x * x + y * y + z * z)
         return r > 0 and x >= self._cos_field * r
 
@@ -452,6 +458,18 @@ class SkyTracker:
         c = np.where(allowed, cost, _BIG)
         rows, cols = linear_sum_assignment(c)
         return [(int(i), int(j)) for i, j in zip(rows, cols) if allowed[i, j]], allowed
+
+    def _classify(self, tr: SkyTrack) -> None:
+        """Rules 1-4 of the classifier on the track, unless nothing they read has changed since the
+        last frame (most tracks get no hit in a frame): its history (hits are appended, old ones
+        dropped from the front: its length and end times tell), its filter's velocity, its
+        excursion and its last hit's time."""
+        h = tr.history
+        on = (len(h), h[0][0] if h else None, h[-1][0] if h else None, tr.kf.v.tobytes(), tr.excursion_m,
+              tr.last_hit_t_s)
+        if on != tr.classified_on:
+            tr.seen_as, tr.features = classify(tr, self.cfg.classifier)
+            tr.classified_on = on
 
     def _hit(self, tr: SkyTrack, t_s: float, z: np.ndarray, ob: SkyObject) -> None:
         tr.kf.update(t_s, z)
