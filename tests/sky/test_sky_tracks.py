@@ -174,3 +174,32 @@ def test_a_drone_split_into_two_clusters_keeps_one_track(spawn_clear_m, tracks):
                                     pose))
     assert max(o.n_objects for o in outs) == 2
     assert len({i for o in outs[20:] for i in _confirmed(o)}) == tracks
+
+
+def test_a_track_is_classified_as_if_every_frame_were_classified_afresh(monkeypatch):
+    # SkyTracker._classify skips a track whose classifier inputs did not change; a run that
+    # classifies every track every frame must show the same features and labels, frame by frame
+    from dataclasses import replace
+    from pathlib import Path
+
+    from foveatrack.sky import tracks as tracks_module
+    from sim.loop import ClosedLoop
+    from sim.scene import load_scene
+
+    scene = replace(load_scene(Path(__file__).resolve().parents[2] / "scenes" / "drone-and-flock.toml"),
+                    duration_s=6.0)
+
+    def views(loop):
+        loop.run()
+        return [[(v.track_id, v.label, v.seen_as, sorted(v.features.items())) for v in o.sky.tracks]
+                for o in loop.sky_log]
+
+    cached = views(ClosedLoop(scene))
+
+    def afresh(self, tr):
+        tr.seen_as, tr.features = tracks_module.classify(tr, self.cfg.classifier)
+
+    monkeypatch.setattr(tracks_module.SkyTracker, "_classify", afresh)
+    fresh = views(ClosedLoop(scene))
+    assert sum(len(f) for f in fresh) > 200 and any(v[1] == "bird" for f in fresh for v in f)
+    assert cached == fresh
