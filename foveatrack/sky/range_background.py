@@ -299,4 +299,7 @@ class RangeBackground:
         self.first_frame[fresh] = self.frame_no
         self.last_frame[fresh] = self.frame_no
         self.frames[u] = np.maximum(self.frames[u], self.min_frames)
-        self.first_frame[u] = np.minimum(self.first_frame[u], self.last_frame[u] - self.persist_frames)
+        # seen long enough ago to be scenery (near_frames) and spread over persist_frames: background
+        # now (with persist_frames alone, a box marked after the warm-up waited out near_frames first)
+        self.first_frame[u] = np.minimum(self.first_frame[u],
+                                         self.last_frame[u] - max(self.persist_frames, self.near_frames))

@@ -106,6 +106,17 @@ def test_mark_box_makes_the_box_background_from_its_near_side():
     assert out.tolist() == [True, True, False, False]
 
 
+def test_a_box_marked_long_after_the_warm_up_is_background_at_once():
+    # a static track found a minute into a run: its box must not wait near_frames to be scenery
+    bg = RangeBackground(warmup_frames=10)
+    for _ in range(600):
+        bg.learn(np.empty(0, np.int64), np.empty(0))
+    bg.mark_box(np.array([35.0, -1.0, 4.0]), np.array([37.0, 1.0, 6.0]))
+    cells, r = bg.cells(np.array([[36.0, 0.0, 5.0], [38.0, 0.0, 5.2], [30.0, 0.0, 4.2]]))
+    out, near = bg.is_background(cells, r)
+    assert out.tolist() == [True, True, False] and near.tolist() == [True, True, False]
+
+
 @pytest.mark.parametrize("lo, hi", [([14.0, -1.0, 0.0], [16.0, 1.0, 2.0]), ([35.0, -1.0, 4.0], [37.0, 1.0, 6.0]),
                                     ([40.0, -30.0, 2.0], [42.0, -28.0, 4.0]), ([5.0, -1.0, 0.0], [7.0, 1.0, 2.0])])
 def test_mark_box_from_the_faces_marks_what_the_whole_volume_would(lo, hi):
