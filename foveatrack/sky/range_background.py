@@ -24,12 +24,23 @@ one range and keeps the least margin.  Anything at or behind a learned surface i
 cell that never returned anything (the sky), stays foreground.
 
 A point is *on scenery in the making* (``near``) when such a cell has returned at least once, first
-``near_frames`` ago or earlier or during the warm-up (the first ``warmup_frames`` frames): the edge
-of a crown that swings into cells it reached once before is not background yet (too few returns)
-but is not a new object either.  ``near_frames`` (2 s) is long enough that a drone is far from the
-cells it crossed that long ago, even those learned while it was not tracked yet.  The tracker confirms no
-track on such points alone (:mod:`foveatrack.sky.tracks`); a stray near return or a bird that
-passed once does not blind the cells behind it (it is not background).
+``near_frames`` ago or earlier, or is *warm scenery* (below): the edge of a crown that swings into
+cells it reached once before is not background yet (too few returns) but is not a new object
+either.  ``near_frames`` (2 s) is long enough that a drone is far from the cells it crossed that
+long ago, even those learned while it was not tracked yet.  The tracker confirms no track on such
+points alone (:mod:`foveatrack.sky.tracks`); a stray near return or a bird that passed once does
+not blind the cells behind it (it is not background).
+
+Warm scenery (:meth:`RangeBackground.end_warmup`): what the warm-up (the first ``warmup_frames``
+frames, before any track) saw is scenery in the making at once -- the crowns must not start tracks
+the moment tracking starts -- but only where it *stayed*: a cell the warm-up saw counts if a cell
+within ``dilate`` steps returned at two times at least ``persist`` frames apart during the warm-up.
+A crown's patch returns again and again where it is; a drone that flew through the field during
+the warm-up left a trail of cells each seen for a frame or two (0.3 deg cells, a drone at 40 m and
+1 m/s stays in one for ~0.2 s), so its next hits, a few cells on, are not on scenery and confirm it
+as soon as the scan allows.  With ``persist`` 0 every cell the warm-up saw counts (the rule before:
+on the tuning seeds it cost 38 of 216 drones their confirmation within 2 s,
+docs/sky-tracks-figures.md).  A drone that hovers through the warm-up stays scenery until it moves.
 
 The persistence (``persist_frames``) keeps a flying object out of the background before its track
 protects it: a drone of 0.35 m at 0.8 m/s crosses a 0.3 deg cell at 33 m in 0.65 s, a scenery
@@ -97,7 +108,7 @@ def cell_kernel(xyz, du, n, cells, r):
 
 @njit(cache=True)
 def background_kernel(cells, r, n, frames, first_frame, last_frame, r_min, r_max, min_frames, persist_frames,
-                      dilate, margin_min, spread_gain, margin_max, frame_no, near_frames, warmup_frames, out, near):
+                      dilate, margin_min, spread_gain, margin_max, frame_no, near_frames, warm_near, out, near):
     """``out[k]`` = point k is background, ``near[k]`` = it lies on scenery in the making (module
     docstring)."""
     nn = n * n
@@ -119,7 +130,7 @@ def background_kernel(cells, r, n, frames, first_frame, last_frame, r_min, r_max
                 if v < 0 or v >= n:
                     continue
                 q = (face * n + u) * n + v
-                if frames[q] >= 1 and (first_frame[q] <= frame_no - near_frames or first_frame[q] < warmup_frames):
+                if frames[q] >= 1 and (first_frame[q] <= frame_no - near_frames or warm_near[q]):
                     margin = margin_min + spread_gain * (r_max[q] - r_min[q])
                     if margin > margin_max:
                         margin = margin_max
@@ -177,7 +188,7 @@ def cells_numpy(xyz: np.ndarray, du: float, n: int) -> tuple[np.ndarray, np.ndar
 
 def background_numpy(cells, r, n, frames, first_frame, last_frame, r_min, r_max, min_frames, persist_frames,
                      dilate, margin_min, spread_gain, margin_max, frame_no, near_frames,
-                     warmup_frames) -> tuple[np.ndarray, np.ndarray]:
+                     warm_near) -> tuple[np.ndarray, np.ndarray]:
     """Twin of :func:`background_kernel`: ``(out, near)``."""
     nn = n * n
     out = np.zeros(cells.size, bool)
@@ -193,7 +204,7 @@ def background_numpy(cells, r, n, frames, first_frame, last_frame, r_min, r_max,
             q = np.where(inside, (face * n + np.clip(u, 0, n - 1)) * n + np.clip(v, 0, n - 1), 0)
             margin = np.minimum(margin_min + spread_gain * (r_max[q] - r_min[q]), margin_max)
             with np.errstate(invalid="ignore"):
-                old = (first_frame[q] <= frame_no - near_frames) | (first_frame[q] < warmup_frames)
+                old = (first_frame[q] <= frame_no - near_frames) | warm_near[q]
                 ok_q = inside & (frames[q] >= 1) & old & (r >= r_min[q] - margin)
             near |= ok_q
             out |= ok_q & (frames[q] >= min_frames) & (last_frame[q] - first_frame[q] >= persist_frames)
@@ -222,7 +233,7 @@ class RangeBackground:
     cell_deg : > 0 [deg]          cell side at a face's centre (smaller off it, down to about half)
     min_frames : int >= 1         frames a cell must have returned in to be background
     persist_frames : int >= 0     ... spread over at least this many frames (first to latest)
-    near_frames : int >= 0        a cell first seen this long ago (or in the warm-up) makes ``near``
+    near_frames : int >= 0        a cell first seen this long ago (or warm scenery) makes ``near``
     dilate : int 0..3             a point is background if a cell this many steps away is
     margin_min_m, spread_gain, margin_max_m     the margin (module docstring)
     """
@@ -247,6 +258,7 @@ class RangeBackground:
         self.r_min = np.full(size, np.inf)
         self.r_max = np.full(size, -np.inf)
         self.frame_no = 0
+        self.warm_near = np.zeros(size, np.bool_)     # warm scenery (end_warmup)
 
     def cells(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Direction cell and range [m] of each world point."""
@@ -262,8 +274,21 @@ class RangeBackground:
         near = np.empty(cells.size, np.bool_)
         background_kernel(cells, r, self.n, self.frames, self.first_frame, self.last_frame, self.r_min, self.r_max,
                           self.min_frames, self.persist_frames, self.dilate, self.margin_min_m, self.spread_gain,
-                          self.margin_max_m, self.frame_no, self.near_frames, self.warmup_frames, out, near)
+                          self.margin_max_m, self.frame_no, self.near_frames, self.warm_near, out, near)
         return out, near
+
+    def end_warmup(self, persist_frames: int) -> None:
+        """The warm-up (its first ``warmup_frames`` frames) is over: mark its warm scenery (module
+        docstring), the cells it saw within ``dilate`` steps of one that returned at two times at
+        least ``persist_frames`` apart in it (0: every cell it saw)."""
+        from scipy import ndimage
+
+        warm = (self.frames >= 1) & (self.first_frame >= 0) & (self.first_frame < self.warmup_frames)
+        if persist_frames > 0:
+            stayed = (warm & (self.last_frame - self.first_frame >= persist_frames)).reshape(6, self.n, self.n)
+            square = np.ones((2 * self.dilate + 1, 2 * self.dilate + 1), bool)    # the kernel's neighbourhood
+            warm &= np.stack([ndimage.binary_dilation(face, structure=square) for face in stayed]).reshape(-1)
+        self.warm_near = warm
 
     def learn(self, cells: np.ndarray, r: np.ndarray) -> None:
         """This frame's points to learn (call once a frame, with none if nothing is to be learned)."""

@@ -7,7 +7,8 @@ Per frame:
    (:class:`~foveatrack.sky.range_background.RangeBackground`: each cell's range interval, with a
    margin grown from its spread, so a swaying crown folds into one interval).  The rosette's
    incommensurable pattern covers the field over time (paper Fig. 6).  The first ``warmup_s`` the
-   background learns alone.  Points of an object are kept out of the learning while its track may be
+   background learns alone; what it saw there is scenery in the making at once where it stayed
+   (``warmup_stay_frames``), so a drone that flew through the warm-up is not.  Points of an object are kept out of the learning while its track may be
    something flying (a tentative track off the scenery, a confirmed one that went ``protect_excursion_m``
    or more) and the object is where the track's motion predicted it (within ``protect_m``).  Objects
    mostly on *scenery in the making* (next to cells seen long ago, not yet background) give hits that
@@ -78,6 +79,9 @@ class SkyTrackerConfig:
     background_margin_m, background_spread_gain, background_margin_max_m
                                  the background's direction cells (:mod:`foveatrack.sky.range_background`)
     warmup_s : >= 0 [s]          the background learns alone this long before tracks start
+    warmup_stay_frames : int >= 0   what the warm-up saw is scenery at once only where it stayed: a cell
+                                 within ``background_dilate`` steps returned at two times this many frames
+                                 apart or more (0: all of it; :mod:`foveatrack.sky.range_background`)
     cluster_tol_m, cluster_tol_rad                    cluster gap ``max(tol_m, tol_rad * range)``
     min_points : int >= 1        returns an object needs
     max_extent_m : > 0 [m]       largest side of an object (bigger: scenery, not tracked)
@@ -108,6 +112,7 @@ class SkyTrackerConfig:
     background_spread_gain: float = 0.5
     background_margin_max_m: float = 1.5
     warmup_s: float = 1.0
+    warmup_stay_frames: int = 3
     cluster_tol_m: float = 0.5
     cluster_tol_rad: float = 0.01
     min_points: int = 2
@@ -142,7 +147,8 @@ class SkyTrackerConfig:
             raise UserError(f"field_half_angle_deg must be in (0, 180], got {self.field_half_angle_deg!r}")
         if not 0 <= self.background_dilate <= 3:
             raise UserError(f"background_dilate must be 0, 1, 2 or 3, got {self.background_dilate!r}")
-        for k in ("warmup_s", "background_spread_gain", "background_persist_frames", "spawn_clear_m"):
+        for k in ("warmup_s", "background_spread_gain", "background_persist_frames", "spawn_clear_m",
+                  "warmup_stay_frames"):
             if not getattr(self, k) >= 0:
                 raise UserError(f"{k} must be >= 0, got {getattr(self, k)!r}")
         for k in ("background_frames", "min_points", "confirm_hits"):
@@ -262,6 +268,7 @@ class SkyTracker:
                                           c.background_dilate, c.background_margin_m, c.background_spread_gain,
                                           c.background_margin_max_m)
         self._t0_s: float | None = None
+        self._warmup_over = False
         self.tracks: list[SkyTrack] = []
         self.confirmed_ever: list[int] = []
         self._next_id = 0
@@ -296,6 +303,9 @@ class SkyTracker:
             self.background.learn(cells, ranges)
             self.background.warmup_frames = self.background.frame_no
             return SkyFrameOutput(t1, (), None, frame.n_points, 0, 0, (), ())
+        if not self._warmup_over:
+            self.background.end_warmup(cfg.warmup_stay_frames)
+            self._warmup_over = True
         is_bg, near = self.background.is_background(cells, ranges)
         fg_idx = np.flatnonzero(~is_bg)
         objs, point_obj = self._objects(world[fg_idx], t_ns[fg_idx], near[fg_idx])

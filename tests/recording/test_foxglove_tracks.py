@@ -32,7 +32,7 @@ MATCHING_ID = SceneEntityDeletion.MATCHING_ID
 @pytest.fixture(scope="module")
 def crossing(tmp_path_factory):
     """6 s of two-drones-crossing as ``simulate --out`` records it (the writer process draws the view):
-    a tentative track deleted at 2.6 s, both drones confirmed, the fovea turned between them."""
+    tentative tracks deleted at 2.6 and 4.7 s, both drones confirmed, the fovea turned between them."""
     from foveatrack.cli import main
 
     out = tmp_path_factory.mktemp("crossing") / "run"
@@ -147,7 +147,7 @@ def test_each_tracks_history_grows_and_is_the_positions_it_was_recorded_at(cross
 
 def test_a_deleted_tracks_entities_are_deleted_and_no_later_keyframe_draws_it(crossing):
     deleted = [(t_log, tid) for t_log, rec in crossing["tracks"] for tid in rec["deleted_now"]]
-    assert deleted, "the crossing's tentative track 0 is deleted at 2.6 s"
+    assert deleted, "the crossing's tentative tracks 1 and 2 are deleted at 2.6 and 4.7 s"
     scene = dict(crossing["scene"])
     for t_del, tid in deleted:
         prefix = f"track_{tid}/"
@@ -168,7 +168,8 @@ def test_a_deleted_tracks_entities_are_deleted_and_no_later_keyframe_draws_it(cr
             assert [(d.id, d.type) for d in now.deletions] == [(f"{prefix}path/history", MATCHING_ID)]
             prev = [u for t, u in crossing["keys"] if t < t_del][-1]
             assert {e.id for e in prev.entities} - {f"{prefix}path/history"} <= {e.id for e in now.entities}
-    assert any("track 0 deleted" in s for s in crossing["logs"])
+    for _t, tid in deleted:
+        assert sum(f"track {tid} deleted" in s for s in crossing["logs"]) == 1, tid
 
 
 def test_the_log_has_the_track_events_not_every_record(crossing):
@@ -176,7 +177,8 @@ def test_the_log_has_the_track_events_not_every_record(crossing):
     confirmed = [tid for _t, rec in crossing["tracks"] for tid in rec["confirmed_now"]]
     for tid in confirmed:
         assert sum(s.startswith(f"track {tid} confirmed") for s in logs) == 1
-    assert any(s.startswith("track 1 is now drone") for s in logs)
+    drones = {t["id"] for _t, rec in crossing["tracks"] for t in rec["tracks"] if t["label"] == "drone"}
+    assert drones and all(any(s.startswith(f"track {tid} is now drone") for s in logs) for tid in drones), drones
     assert not [s for s in logs if '"tracks"' in s], "before: the whole /tracks record, every frame"
     assert len(logs) < len(crossing["tracks"])
 

@@ -67,12 +67,12 @@ def test_no_drone_is_confirmed_before_the_scan_s_rays_allow_it(crossing):
 
 
 @pytest.mark.parametrize("bound_s", [
-    pytest.param(4.0, marks=pytest.mark.xfail(strict=True, reason="not met: drone-a is confirmed 4.2 s after entering "
-                 "the field (the warm-up's footprint, then the rim's 2.8 s without a ray: below)")),
-    pytest.param(2.0, marks=pytest.mark.xfail(strict=True, reason="issue 28's bound, not met: drone-a enters the "
-                 "field in the warm-up's last frame (one ray, learned as scenery in the making), so its next two "
-                 "hits are not clear; then the rim gives it no ray for 2.8 s and its tentative track is dropped: "
-                 "confirmed 4.2 s after entering where its rays allowed 0.8 s; docs/sky-tracks-figures.md")),
+    pytest.param(4.0, marks=pytest.mark.xfail(strict=True, reason="not met: drone-b is confirmed 4.7 s after entering "
+                 "the field (the rim's rays: below)")),
+    pytest.param(2.0, marks=pytest.mark.xfail(strict=True, reason="issue 28's bound, not met: drone-a is confirmed "
+                 "0.5 s after entering the field and the head turns to it, which leaves drone-b at the rosette's "
+                 "sparse rim: its rays allowed a confirmation 4.6 s after it entered, the tracker took 4.7 s; "
+                 "docs/sky-tracks-figures.md")),
 ])
 def test_both_drones_confirmed_within_the_bound_of_entering_the_field(crossing, bound_s):
     loop, log = crossing
@@ -89,16 +89,29 @@ def test_the_head_fixates_both_drones(crossing):
 
 
 @pytest.mark.parametrize("seed_offset", range(8))
-def test_every_fixated_track_is_brought_into_the_fovea(seed_offset):
+def test_a_fixation_is_held_until_its_track_is_reached_or_gone(seed_offset):
     # seed 28 (the scene's own): the fovea went to one rim candidate, then the other, and both were
-    # deleted before either reached it (foveatrack/sky/attention.py: a candidate is now held)
+    # deleted before either reached it (foveatrack/sky/attention.py: a candidate is now held).  A
+    # fixation may end before its track is reached only when the track is gone (a candidate whose
+    # confirmation window closed before the head got there) or the fovea goes to a confirmed track
+    # (the priority changed); a revisit begun just before the run ends is no fault
     base = load_scene(ROOT / "scenes" / "two-drones-crossing.toml")
     table = {**base.tracker_table, "sky": {"attention": {"revisit_s": 3.0}}}
     loop = ClosedLoop(dataclasses.replace(base, seed=base.seed + seed_offset, tracker_table=table, duration_s=8.0))
-    loop.run()
-    ids = {o.fixated for o in loop.sky_log if o.fixated is not None}
-    in_fovea = {i for o in loop.sky_log for i in o.in_fovea}
-    assert ids and ids <= in_fovea, (ids, in_fovea)
+    log = loop.run()
+    timeout_s = loop.sky.attention.cfg.saccade_timeout_s
+    t = log["t_end_s"]
+    cur, start, reached, switches = None, 0.0, False, 0
+    for k, o in enumerate(loop.sky_log):
+        live = {v.track_id: v.confirmed for v in o.sky.tracks}
+        if o.fixated != cur:
+            if cur is not None and cur in live and not reached and t[k] - start < timeout_s - 1e-9:
+                assert live.get(o.fixated), (seed_offset, t[k], cur, o.fixated)
+            cur, start, reached = o.fixated, t[k], False
+            switches += 1
+        reached = reached or cur in o.in_fovea
+    served = {i for o in loop.sky_log for i in o.in_fovea}
+    assert switches >= 1 and served, (switches, served)
 
 
 def test_same_scene_same_bits(crossing):
