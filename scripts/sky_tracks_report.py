@@ -23,7 +23,7 @@ from collections import Counter
 import numpy as np
 
 from sim.loop import ClosedLoop
-from sim.scene import load_scene
+from sim.scene import load_scene, with_run_overrides
 from sim.sky_summary import LABELS, TRUTH_CLASSES, sky_run_figures
 
 def run_one(scene):
@@ -89,8 +89,10 @@ def main(argv=None) -> int:
         table = {**base.tracker_table, "sky": sky}
         rows = []
         for s in range(a.first_seed, a.first_seed + a.seeds):
-            scene = dataclasses.replace(base, seed=base.seed + s, tracker_table=table,
-                                        **({"duration_s": a.duration} if a.duration else {}))
+            # rebuilt from the scene's text with the seed and duration, so that what is drawn when
+            # the scene is loaded follows them: the flocks, the crowns' sway (drawn over the run: a
+            # crown held still past the scene's own 20 s in an hour's run), a manual flight's path
+            scene = dataclasses.replace(with_run_overrides(base, a.duration, base.seed + s), tracker_table=table)
             m, g, conf, wall, T = run_one(scene)
             total_conf.update(conf)
             rows.append((scene.seed, m, g, wall, T))
