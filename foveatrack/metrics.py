@@ -29,7 +29,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-HIGHER_IS_BETTER = frozenset({"frames_with_detection", "points_on_target_per_frame", "realtime_factor"})
+HIGHER_IS_BETTER = frozenset({"frames_with_detection", "points_on_target_per_frame", "realtime_factor",
+                              # the sky scenes' totals (sim.sky_summary.sky_totals)
+                              "confirmed_within_2s", "scan_allows_within_2s", "continuity", "fovea_share"})
 
 
 def angle_between_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:

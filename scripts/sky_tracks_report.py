@@ -24,7 +24,7 @@ import numpy as np
 
 from sim.loop import ClosedLoop
 from sim.scene import load_scene, with_run_overrides
-from sim.sky_summary import LABELS, TRUTH_CLASSES, sky_run_figures
+from sim.sky_summary import LABELS, TRUTH_CLASSES, sky_run_figures, within_bound
 
 def run_one(scene):
     loop = ClosedLoop(scene)
@@ -40,9 +40,8 @@ def summary_row(name, rows) -> str:
     of run by what they were near."""
     hours = sum(m["hours"] for _, m, *_ in rows)
     drones = [r for _, m, *_ in rows for r in m["drones"].values()]
-    within, scan, scan_cold = (sum(1 for r in drones if r.get(k) is not None and r[k] <= 2.0)
-                               for k in ("time_to_confirm_s", "scan_allows_confirm_s",
-                                         "scan_allows_confirm_no_warmup_s"))
+    within, scan, scan_cold = (within_bound(drones, k) for k in ("time_to_confirm_s", "scan_allows_confirm_s",
+                                                                 "scan_allows_confirm_no_warmup_s"))
     gaps = [r.get("longest_revisit_gap_s", math.nan) for r in drones]
     causes = Counter()
     for _, m, *_ in rows:

@@ -11,6 +11,9 @@ effect in a pinned scene), and commit the new file with a message saying why the
     python scripts/update_regression_baseline.py --monte-carlo [--seeds N] [--scheduler tcp://HOST:8786]
                                                             # tests/regression/baseline_mc.json: each
                                                             # scene over N seeds (default 8), mean and spread
+    python scripts/update_regression_baseline.py --sky [--seeds N]
+                                                            # tests/regression/baseline_sky_mc.json: the sky
+                                                            # scenes' totals over N seeds (default 8)
 
 The pinned scenes, their durations and the tolerances live in tests/regression/cases.py.
 """
@@ -24,7 +27,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "regression"))
 
-from cases import BASELINE, BASELINE_MC, CASES, MC_SEEDS, TOLERANCES, monte_carlo, run_case  # noqa: E402
+from cases import (BASELINE, BASELINE_MC, BASELINE_SKY_MC, CASES, MC_SEEDS, SKY_CASES, SKY_TOLERANCES,  # noqa: E402
+                   TOLERANCES, monte_carlo, run_case, sky_monte_carlo)
 
 from foveatrack.metrics import compare_spread_to_baseline, compare_to_baseline  # noqa: E402
 
@@ -59,10 +63,36 @@ def update_monte_carlo(args) -> int:
     return 0
 
 
+def update_sky(args) -> int:
+    from sim.monte_carlo import seeds_for
+    from sim.sweep import make_executor
+
+    seeds = seeds_for(args.seeds)
+    old = json.loads(BASELINE_SKY_MC.read_text()) if BASELINE_SKY_MC.exists() else None
+    with make_executor(args.scheduler, args.workers) as ex:
+        spreads = sky_monte_carlo(sorted(SKY_CASES), seeds, ex, progress=True)
+    for name, spread in spreads.items():
+        if old is not None and name in old["scenes"]:
+            table, failures = compare_spread_to_baseline(spread, old["scenes"][name], SKY_TOLERANCES)
+            print(f"== {name} over {len(seeds)} seeds (baseline: {len(old['seeds'])})"
+                  f"{'  (WORSE: ' + '; '.join(failures) + ')' if failures else ''}\n{table}\n")
+    if args.check:
+        return 0
+    BASELINE_SKY_MC.write_text(json.dumps({
+        "format": "foveatrack-regression-sky-monte-carlo", "version": 1,
+        "note": "per sky scene and total of sim.sky_summary.sky_totals: mean, sample sd, runs with a value "
+                "and runs without, over the seeds below; regenerate with python "
+                "scripts/update_regression_baseline.py --sky (tolerances: tests/regression/cases.py)",
+        "seeds": seeds, "scenes": spreads}, indent=1, sort_keys=True) + "\n")
+    print(f"wrote {BASELINE_SKY_MC}")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--check", action="store_true", help="compare with the current baseline; write nothing")
     ap.add_argument("--monte-carlo", action="store_true", help="the Monte Carlo baseline (each scene over --seeds)")
+    ap.add_argument("--sky", action="store_true", help="the sky scenes' Monte Carlo baseline (their totals over --seeds)")
     ap.add_argument("--seeds", type=int, default=MC_SEEDS, help=f"seeds per scene (default {MC_SEEDS})")
     ap.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
     ap.add_argument("--scheduler", default=None, help="a Dask scheduler, tcp://HOST:8786, instead of local processes")
@@ -71,6 +101,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.monte_carlo:
         return update_monte_carlo(args)
+    if args.sky:
+        return update_sky(args)
     old = json.loads(BASELINE.read_text())["scenes"] if BASELINE.exists() else {}
     scenes = {name: old[name] for name in CASES if args.scene and name not in args.scene and name in old}
     for name in CASES:

@@ -16,18 +16,20 @@ from pathlib import Path
 
 # Machine properties, not tracking quality: left out of the metrics.
 MACHINE_KEYS = ("wall_s", "realtime_factor", "realtime_factor_after_first_frame", "first_frame_s", "finish_s",
-                "time_per_frame_ms", "scene", "seed", "effects")
+                "time_per_frame_ms", "worked_ahead", "scene", "seed", "effects")
 
 
 @dataclass(frozen=True)
 class SeedRun:
     """One run: ``scene_path`` over ``duration_s`` (None: the scene's own) with ``seed``, and optional
     ``tracker`` overrides as ``(field, value)`` pairs of :class:`foveatrack.tracker.TrackerConfig`
-    (a tuple, so that a run is hashable and keys its result)."""
+    and ``sky`` overrides as ``(key, value)`` pairs of the scene's ``[tracker.sky]`` table (tuples,
+    so that a run is hashable and keys its result)."""
     scene_path: str
     seed: int
     duration_s: float | None = None
     tracker: tuple = ()
+    sky: tuple = ()
 
 
 def run_one(task: SeedRun) -> dict:
@@ -40,8 +42,14 @@ def run_one(task: SeedRun) -> dict:
     scene = with_run_overrides(load_scene(Path(task.scene_path)), task.duration_s, task.seed)
     if task.tracker:
         scene = replace(scene, tracker=replace(scene.tracker, **dict(task.tracker)))
+    if task.sky:
+        table = dict(scene.tracker_table)
+        table["sky"] = {**table.get("sky", {}), **dict(task.sky)}
+        scene = replace(scene, tracker_table=table)
     t = time.perf_counter()
-    m = summarize(scene, ClosedLoop(scene).run(), time.perf_counter() - t)
+    loop = ClosedLoop(scene)
+    log = loop.run()
+    m = summarize(scene, log, time.perf_counter() - t, loop)     # with the loop: a sky run's figures too
     for k in MACHINE_KEYS:
         m.pop(k, None)
     return m

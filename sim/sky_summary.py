@@ -169,10 +169,39 @@ def false_track_causes(false_ids, tracks, truth) -> Counter:
     return Counter(near[t].most_common(1)[0][0] if near[t] else "clutter" for t in false_ids)
 
 
+CONFIRM_BOUND_S = 2.0      # issue 28: every drone confirmed within 2 s of entering the field
+
+
+def within_bound(drones, key: str = "time_to_confirm_s") -> int:
+    """How many of the drones' figure rows have ``key`` (a time after entering the field) within
+    :data:`CONFIRM_BOUND_S`."""
+    return sum(1 for r in drones if r.get(key) is not None and r[key] <= CONFIRM_BOUND_S)
+
+
+def sky_totals(drones: dict, false_drone_tracks, gospa_mean_m: float) -> dict:
+    """One run's figures over all its drones, as plain numbers (the Monte Carlo regression's,
+    ``tests/regression/test_sky_monte_carlo.py``): drones; confirmed within 2 s; the same the scan's
+    rays allowed; never confirmed; the median time to confirm of those confirmed; id switches; false
+    drone tracks; mean continuity and fovea share; the longest revisit gap; mean GOSPA."""
+    rs = list(drones.values())
+    ttc = [r["time_to_confirm_s"] for r in rs if r["time_to_confirm_s"] is not None]
+    gaps = [r["longest_revisit_gap_s"] for r in rs if r.get("longest_revisit_gap_s") is not None]
+    return {"drones": len(rs), "confirmed_within_2s": within_bound(rs),
+            "scan_allows_within_2s": within_bound(rs, "scan_allows_confirm_s"),
+            "never_confirmed": sum(1 for r in rs if r["time_to_confirm_s"] is None),
+            "time_to_confirm_s": float(np.median(ttc)) if ttc else None,
+            "id_switches": sum(r["id_switches"] for r in rs), "false_drone_tracks": len(false_drone_tracks),
+            "continuity": float(np.mean([r["continuity"] for r in rs])) if rs else None,
+            "fovea_share": float(np.mean([r.get("fovea_share", 0.0) for r in rs])) if rs else None,
+            "longest_revisit_gap_s": max(gaps) if gaps else None, "gospa_mean_m": gospa_mean_m}
+
+
 def sky_summary(loop, log) -> dict:
-    """The figures of :func:`sky_run_figures` as JSON-plain values (``foveatrack simulate --json``)."""
+    """The figures of :func:`sky_run_figures` as JSON-plain values (``foveatrack simulate --json``),
+    with their :func:`sky_totals`."""
     m, g, confusion = sky_run_figures(loop, log)
-    return {"drones": m["drones"], "false_drone_tracks": list(m["false_drone_tracks"]),
+    return {"drones": m["drones"], "totals": sky_totals(m["drones"], m["false_drone_tracks"], g),
+            "false_drone_tracks": list(m["false_drone_tracks"]),
             "false_drone_tracks_near": dict(m["false_causes"]), "confirmed_tracks": m["confirmed_tracks"],
             "gospa_mean_m": g, "gospa_cutoff_m": GOSPA_CUTOFF_M,
             "confusion": [{"truth": c, "label": lab, "tracks": n} for (c, lab), n in sorted(confusion.items())]}

@@ -88,3 +88,50 @@ def monte_carlo(names, seeds, executor=None, tracker: dict | None = None, progre
              for n in names for s in seeds]
     results = run_seeds(tasks, executor, progress)
     return {n: spread_over_runs([results[t] for t in tasks if Path(t.scene_path).stem == n]) for n in names}
+
+
+# ---- the sky scenes (issue 28's multi-object tracker) over seeds: their totals per run -----------
+# sim.sky_summary.sky_totals of each run (drones confirmed within 2 s, never confirmed, id switches,
+# false drone tracks, continuity, fovea share, the longest revisit gap, GOSPA), mean and spread over
+# the baseline's seeds (baseline_sky_mc.json; regenerate with
+#     python scripts/update_regression_baseline.py --sky [--seeds N]
+# after a change meant to move them).  A run's counts move by whole drones, so the tolerances are a
+# quarter of a drone per run on average (two drones in eight runs) plus a share.
+SKY_CASES: dict[str, float | None] = {
+    "two-drones-crossing": None,
+    "drone-tree-line": None,
+    "swarm-of-five": None,
+    "drone-and-flock": None,
+}
+BASELINE_SKY_MC = Path(__file__).with_name("baseline_sky_mc.json")
+SKY_PREFIX = "sky.totals."
+SKY_TOLERANCES = {
+    "*": {"abs": 0.0, "rel": 0.05},
+    "drones": {"abs": 0.0, "rel": 0.0},
+    "confirmed_within_2s": {"abs": 0.25, "rel": 0.1},
+    "scan_allows_within_2s": {"abs": 0.25, "rel": 0.1},
+    "never_confirmed": {"abs": 0.25, "rel": 0.1},
+    "time_to_confirm_s": {"abs": 0.2, "rel": 0.1},
+    "id_switches": {"abs": 0.5, "rel": 0.15},
+    "false_drone_tracks": {"abs": 0.25, "rel": 0.15},
+    "continuity": {"abs": 0.03, "rel": 0.05},
+    "fovea_share": {"abs": 0.03, "rel": 0.05},
+    "longest_revisit_gap_s": {"abs": 0.5, "rel": 0.1},
+    "gospa_mean_m": {"abs": 0.2, "rel": 0.05},
+}
+
+
+def sky_monte_carlo(names, seeds, executor=None, sky: dict | None = None, progress: bool = False) -> dict:
+    """``{scene name: spread of its sky totals}`` (keys without ``sky.totals.``) over ``seeds``;
+    ``sky``: ``[tracker.sky]`` keys to set for the runs."""
+    from foveatrack.metrics import spread_over_runs
+    from sim.monte_carlo import SeedRun, run_seeds
+
+    tasks = [SeedRun(str(ROOT / "scenes" / f"{n}.toml"), s, SKY_CASES[n], (), tuple(sorted((sky or {}).items())))
+             for n in names for s in seeds]
+    results = run_seeds(tasks, executor, progress)
+    out = {}
+    for n in names:
+        spread = spread_over_runs([results[t] for t in tasks if Path(t.scene_path).stem == n])
+        out[n] = {k[len(SKY_PREFIX):]: v for k, v in spread.items() if k.startswith(SKY_PREFIX)}
+    return out
