@@ -33,58 +33,43 @@ from cases import (BASELINE, BASELINE_MC, BASELINE_SKY_MC, CASES, MC_SEEDS, SKY_
 from foveatrack.metrics import compare_spread_to_baseline, compare_to_baseline  # noqa: E402
 
 
-def update_monte_carlo(args) -> int:
+# the two Monte Carlo baselines: (file, scenes, runner, tolerances, format, what a scene's entry holds, flag)
+MC_KINDS = {
+    "pinned": (BASELINE_MC, CASES, monte_carlo, TOLERANCES, "foveatrack-regression-monte-carlo",
+               "per pinned scene and flattened metric of sim.summary.summarize", "--monte-carlo"),
+    "sky": (BASELINE_SKY_MC, SKY_CASES, sky_monte_carlo, SKY_TOLERANCES, "foveatrack-regression-sky-monte-carlo",
+            "per sky scene and total of sim.sky_summary.sky_totals", "--sky"),
+}
+
+
+def update_monte_carlo(args, kind: str) -> int:
     from sim.monte_carlo import seeds_for
     from sim.sweep import make_executor
 
+    path, cases, runner, tolerances, fmt, holds, flag = MC_KINDS[kind]
     seeds = seeds_for(args.seeds)
-    old = json.loads(BASELINE_MC.read_text()) if BASELINE_MC.exists() else None
-    names = sorted(args.scene or CASES)
+    old = json.loads(path.read_text()) if path.exists() else None
+    names = sorted(args.scene or cases)
     if args.scene and (old is None or old["seeds"] != seeds):
-        raise SystemExit("--scene with --monte-carlo needs a baseline over the same seeds to keep the other scenes")
+        raise SystemExit(f"--scene with {flag} needs a baseline over the same seeds to keep the other scenes")
     with make_executor(args.scheduler, args.workers) as ex:
-        spreads = monte_carlo(names, seeds, ex, progress=True)
+        spreads = runner(names, seeds, ex, progress=True)
     for name, spread in spreads.items():
         if old is not None and name in old["scenes"]:
-            table, failures = compare_spread_to_baseline(spread, old["scenes"][name], TOLERANCES)
+            table, failures = compare_spread_to_baseline(spread, old["scenes"][name], tolerances)
             print(f"== {name} over {len(seeds)} seeds (baseline: {len(old['seeds'])})"
                   f"{'  (WORSE: ' + '; '.join(failures) + ')' if failures else ''}\n{table}\n")
     if args.check:
         return 0
     if args.scene:   # the other scenes keep their stored spreads
         spreads = {**old["scenes"], **spreads}
-    BASELINE_MC.write_text(json.dumps({
-        "format": "foveatrack-regression-monte-carlo", "version": 1,
-        "note": "per pinned scene and flattened metric of sim.summary.summarize: mean, sample sd, runs "
-                "with a value and runs without, over the seeds below; regenerate with python "
-                "scripts/update_regression_baseline.py --monte-carlo (tolerances: tests/regression/cases.py)",
+    path.write_text(json.dumps({
+        "format": fmt, "version": 1,
+        "note": f"{holds}: mean, sample sd, runs with a value and runs without, over the seeds below; "
+                f"regenerate with python scripts/update_regression_baseline.py {flag} (tolerances: "
+                "tests/regression/cases.py)",
         "seeds": seeds, "scenes": spreads}, indent=1, sort_keys=True) + "\n")
-    print(f"wrote {BASELINE_MC}")
-    return 0
-
-
-def update_sky(args) -> int:
-    from sim.monte_carlo import seeds_for
-    from sim.sweep import make_executor
-
-    seeds = seeds_for(args.seeds)
-    old = json.loads(BASELINE_SKY_MC.read_text()) if BASELINE_SKY_MC.exists() else None
-    with make_executor(args.scheduler, args.workers) as ex:
-        spreads = sky_monte_carlo(sorted(SKY_CASES), seeds, ex, progress=True)
-    for name, spread in spreads.items():
-        if old is not None and name in old["scenes"]:
-            table, failures = compare_spread_to_baseline(spread, old["scenes"][name], SKY_TOLERANCES)
-            print(f"== {name} over {len(seeds)} seeds (baseline: {len(old['seeds'])})"
-                  f"{'  (WORSE: ' + '; '.join(failures) + ')' if failures else ''}\n{table}\n")
-    if args.check:
-        return 0
-    BASELINE_SKY_MC.write_text(json.dumps({
-        "format": "foveatrack-regression-sky-monte-carlo", "version": 1,
-        "note": "per sky scene and total of sim.sky_summary.sky_totals: mean, sample sd, runs with a value "
-                "and runs without, over the seeds below; regenerate with python "
-                "scripts/update_regression_baseline.py --sky (tolerances: tests/regression/cases.py)",
-        "seeds": seeds, "scenes": spreads}, indent=1, sort_keys=True) + "\n")
-    print(f"wrote {BASELINE_SKY_MC}")
+    print(f"wrote {path}")
     return 0
 
 
@@ -96,13 +81,17 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=MC_SEEDS, help=f"seeds per scene (default {MC_SEEDS})")
     ap.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
     ap.add_argument("--scheduler", default=None, help="a Dask scheduler, tcp://HOST:8786, instead of local processes")
-    ap.add_argument("--scene", action="append", choices=sorted(CASES), default=None,
-                    help="regenerate only this pinned scene (repeatable); the others keep their stored values")
+    ap.add_argument("--scene", action="append", choices=sorted({**CASES, **SKY_CASES}), default=None,
+                    help="regenerate only this scene (repeatable); the others keep their stored values")
     args = ap.parse_args(argv)
-    if args.monte_carlo:
-        return update_monte_carlo(args)
-    if args.sky:
-        return update_sky(args)
+    if args.monte_carlo or args.sky:
+        kind = "sky" if args.sky else "pinned"
+        if args.scene and not set(args.scene) <= set(MC_KINDS[kind][1]):
+            raise SystemExit(f"--scene: {', '.join(sorted(set(args.scene) - set(MC_KINDS[kind][1])))} is not "
+                             f"a scene of {MC_KINDS[kind][6]}")
+        return update_monte_carlo(args, kind)
+    if args.scene and not set(args.scene) <= set(CASES):
+        raise SystemExit(f"--scene: {', '.join(sorted(set(args.scene) - set(CASES)))} is not a pinned scene")
     old = json.loads(BASELINE.read_text())["scenes"] if BASELINE.exists() else {}
     scenes = {name: old[name] for name in CASES if args.scene and name not in args.scene and name in old}
     for name in CASES:

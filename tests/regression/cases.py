@@ -135,3 +135,12 @@ def sky_monte_carlo(names, seeds, executor=None, sky: dict | None = None, progre
         spread = spread_over_runs([results[t] for t in tasks if Path(t.scene_path).stem == n])
         out[n] = {k[len(SKY_PREFIX):]: v for k, v in spread.items() if k.startswith(SKY_PREFIX)}
     return out
+
+
+def assert_spread_no_worse(name: str, spread: dict, baseline: dict, tolerances: dict) -> None:
+    """The Monte Carlo check of one scene (both baselines): print the table, fail on any worse metric."""
+    from foveatrack.metrics import compare_spread_to_baseline
+
+    table, failures = compare_spread_to_baseline(spread, baseline["scenes"][name], tolerances)
+    print(f"\n{name} over seeds {baseline['seeds']}\n{table}")
+    assert not failures, f"{name} got worse than its Monte Carlo baseline:\n" + "\n".join(failures)

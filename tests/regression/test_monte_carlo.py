@@ -10,7 +10,7 @@ import json
 
 import pytest
 
-from cases import BASELINE_MC, CASES, TOLERANCES, monte_carlo
+from cases import BASELINE_MC, CASES, TOLERANCES, assert_spread_no_worse, monte_carlo
 from foveatrack.metrics import compare_spread_to_baseline
 from sim.sweep import make_executor
 
@@ -29,9 +29,7 @@ def test_baseline_pins_every_case_over_eight_seeds_or_more():
 
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_mean_and_spread_are_no_worse_than_the_baseline(spreads, name):
-    table, failures = compare_spread_to_baseline(spreads[name], _BASE["scenes"][name], TOLERANCES)
-    print(f"\n{name} over seeds {_BASE['seeds']}\n{table}")
-    assert not failures, f"{name} got worse than its Monte Carlo baseline:\n" + "\n".join(failures)
+    assert_spread_no_worse(name, spreads[name], _BASE, TOLERANCES)
 
 
 def test_a_worse_controller_fails_it():

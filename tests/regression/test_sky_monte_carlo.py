@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from cases import BASELINE_SKY_MC, SKY_CASES, SKY_TOLERANCES, sky_monte_carlo
+from cases import BASELINE_SKY_MC, SKY_CASES, SKY_TOLERANCES, assert_spread_no_worse, sky_monte_carlo
 from foveatrack.metrics import compare_spread_to_baseline
 from sim.sweep import make_executor
 
@@ -28,9 +28,7 @@ def test_baseline_pins_every_sky_scene_over_eight_seeds_or_more():
 
 @pytest.mark.parametrize("name", sorted(SKY_CASES))
 def test_sky_totals_are_no_worse_than_the_baseline(spreads, name):
-    table, failures = compare_spread_to_baseline(spreads[name], _BASE["scenes"][name], SKY_TOLERANCES)
-    print(f"\n{name} over seeds {_BASE['seeds']}\n{table}")
-    assert not failures, f"{name} got worse than its Monte Carlo baseline:\n" + "\n".join(failures)
+    assert_spread_no_worse(name, spreads[name], _BASE, SKY_TOLERANCES)
 
 
 def test_the_warm_up_rule_before_fails_it():
@@ -40,3 +38,18 @@ def test_the_warm_up_rule_before_fails_it():
         worse = sky_monte_carlo(["swarm-of-five"], _BASE["seeds"], ex, sky={"warmup_stay_frames": 0})
     _, failures = compare_spread_to_baseline(worse["swarm-of-five"], _BASE["scenes"]["swarm-of-five"], SKY_TOLERANCES)
     assert any(f.startswith("confirmed_within_2s: mean") for f in failures), failures
+
+
+def test_the_update_script_names_a_scene_that_is_not_of_the_baseline_asked_for():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "update_regression_baseline.py"
+    spec = importlib.util.spec_from_file_location("update_regression_baseline", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    for argv, says in ((["--sky", "--scene", "fig12-tracking"], "fig12-tracking is not a scene of --sky"),
+                       (["--monte-carlo", "--scene", "swarm-of-five"], "swarm-of-five is not a scene of --monte-carlo"),
+                       (["--scene", "drone-and-flock"], "drone-and-flock is not a pinned scene")):
+        with pytest.raises(SystemExit, match=says):
+            script.main(argv)
