@@ -13,11 +13,13 @@ from foveatrack.fixed_order import norm3
 @dataclass(frozen=True)
 class FrameObject:
     """One cluster: ``xyz_m`` the per-axis median of its points (Algorithm 1's estimator), its
-    point count, the largest side of its bounding box and its range."""
+    point count, the largest side of its bounding box and its range; ``t_median_ns`` the median of
+    its points' times where they were given."""
     xyz_m: np.ndarray
     n_points: int
     extent_m: float
     range_m: float
+    t_median_ns: float | None = None
 
 
 def cluster_labels(xyz: np.ndarray, tol_m: float, tol_rad: float) -> tuple[np.ndarray, int]:
@@ -31,19 +33,27 @@ def cluster_labels(xyz: np.ndarray, tol_m: float, tol_rad: float) -> tuple[np.nd
 
 
 def objects_from_labels(xyz: np.ndarray, labels: np.ndarray, n: int, min_points: int = 1,
-                        max_extent_m: float = np.inf) -> tuple[list[FrameObject], list[int]]:
+                        max_extent_m: float = np.inf, t_ns: np.ndarray | None = None
+                        ) -> tuple[list[FrameObject], list[int]]:
     """The clusters of at least ``min_points`` points and at most ``max_extent_m`` across (the
     drone-like ones; a scene's scattered returns make thousands of small clusters not worth a
-    summary), and their labels."""
+    summary), and their labels; with ``t_ns`` (N,) each one's median time too.  The medians and
+    extents come from :func:`foveatrack.openloop.kernels.cluster_summary_kernel`."""
+    from foveatrack.openloop.kernels import cluster_summary_kernel
+
+    xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
+    med = np.empty((n, 3))
+    ext = np.empty(n)
+    count = np.empty(n, np.int64)
+    t_med = np.empty(n)
+    times = np.zeros(labels.size, np.int64) if t_ns is None else np.ascontiguousarray(t_ns, np.int64)
+    cluster_summary_kernel(xyz, times, np.ascontiguousarray(labels, np.int64), int(n), int(min_points), med, ext,
+                           count, t_med)
     out, kept = [], []
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(n + 1))
-    sizes = np.diff(bounds)
-    for c in np.flatnonzero(sizes >= min_points).tolist():
-        pts = xyz[order[bounds[c]:bounds[c + 1]]]
-        med = np.median(pts, axis=0)
-        ext = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
-        if ext <= max_extent_m:
-            out.append(FrameObject(med, int(pts.shape[0]), ext, norm3(med)))
+    for c in np.flatnonzero(count >= min_points).tolist():
+        e = float(ext[c])
+        if e <= max_extent_m:
+            m = med[c].copy()
+            out.append(FrameObject(m, int(count[c]), e, norm3(m), None if t_ns is None else float(t_med[c])))
             kept.append(c)
     return out, kept

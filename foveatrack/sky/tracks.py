@@ -435,13 +435,13 @@ class SkyTracker:
         if world.shape[0] == 0:
             return [], point_obj
         labels, n = cluster_labels(world, cfg.cluster_tol_m, cfg.cluster_tol_rad)
-        found, kept = objects_from_labels(world, labels, n, cfg.min_points, cfg.max_extent_m)
+        found, kept = objects_from_labels(world, labels, n, cfg.min_points, cfg.max_extent_m, t_ns)
         objs = []
         for j, (fo, lab) in enumerate(zip(found, kept)):
             m = labels == lab
             pts = world[m]
             point_obj[m] = j
-            t_s = float(np.median(t_ns[m])) * 1e-9
+            t_s = fo.t_median_ns * 1e-9
             on_scenery = 2 * int(np.count_nonzero(near[m])) >= fo.n_points
             objs.append(SkyObject(fo.xyz_m, t_s, fo.n_points, pts.max(axis=0) - pts.min(axis=0), on_scenery))
         return objs, point_obj

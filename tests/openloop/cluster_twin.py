@@ -27,3 +27,21 @@ def cluster_labels_numpy(xyz, tol_m, tol_rad):
     rank = np.empty(k, np.int64)
     rank[np.argsort(first)] = np.arange(k)
     return rank[comp], int(k)
+
+
+def objects_from_labels_numpy(xyz, labels, n, min_points=1, max_extent_m=np.inf, t_ns=None):
+    """Twin of :func:`foveatrack.openloop.objects.objects_from_labels` (numpy's median per cluster):
+    ``(xyz_m, n_points, extent_m, t_median_ns)`` per kept cluster, and the kept labels."""
+    out, kept = [], []
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(n + 1))
+    sizes = np.diff(bounds)
+    for c in np.flatnonzero(sizes >= min_points).tolist():
+        rows = order[bounds[c]:bounds[c + 1]]
+        pts = xyz[rows]
+        med = np.median(pts, axis=0)
+        ext = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+        if ext <= max_extent_m:
+            out.append((med, int(pts.shape[0]), ext, None if t_ns is None else float(np.median(t_ns[rows]))))
+            kept.append(c)
+    return out, kept

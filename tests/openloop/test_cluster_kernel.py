@@ -60,3 +60,27 @@ def test_points_on_cube_boundaries_link_across_them(seed):
     want, kw = cluster_labels_numpy(pts, 0.5, 0.0)
     assert k == kw
     np.testing.assert_array_equal(got, want)
+
+
+def test_cluster_summaries_equal_numpy_medians_bit_for_bit():
+    from cluster_twin import objects_from_labels_numpy
+    from foveatrack.openloop.objects import objects_from_labels
+
+    rng = np.random.default_rng(4)
+    sizes = set()
+    for trial in range(20):
+        pts = np.concatenate([rng.normal(size=(int(k), 3)) * rng.uniform(0.05, 2.0) + rng.uniform(-40, 40, 3)
+                              for k in rng.integers(1, 30, rng.integers(1, 12))])
+        if trial % 4 == 0:
+            pts = np.round(pts, 1)                          # ties: equal values in a cluster
+        t_ns = rng.integers(0, 10**8, pts.shape[0]) + 10**12
+        labels, k = cluster_labels(pts, 0.8, 0.0)
+        for min_points, max_ext in ((1, np.inf), (2, 3.0), (5, np.inf)):
+            got, kept = objects_from_labels(pts, labels, k, min_points, max_ext, t_ns)
+            want, kept_w = objects_from_labels_numpy(pts, labels, k, min_points, max_ext, t_ns)
+            assert kept == kept_w
+            for g, (m, n, e, t) in zip(got, want):
+                assert g.xyz_m.tobytes() == m.tobytes() and g.n_points == n and g.extent_m == e
+                assert g.t_median_ns == t
+                sizes.add(n)
+    assert {n % 2 for n in sizes} == {0, 1} and max(sizes) > 20, "odd and even counts, small and large"
