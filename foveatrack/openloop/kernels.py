@@ -134,10 +134,11 @@ def _median_sorted(s, k):
 
 
 @njit(cache=True)
-def cluster_summary_kernel(xyz, t_ns, labels, n, min_points, med, ext, count, t_med):
+def cluster_summary_kernel(xyz, t_ns, labels, n, min_points, med, sides, count, t_med):
     """Per cluster ``c < n`` of ``labels``: its point count ``count[c]`` and, if at least
     ``min_points``, the per-axis median of its points ``med[c]`` (numpy's ``np.median(pts, axis=0)``),
-    the largest side of their bounding box ``ext[c]`` and the median of their times ``t_med[c]`` [ns,
+    the sides of their bounding box ``sides[c]`` (``pts.max(axis=0) - pts.min(axis=0)``) and, where
+    ``t_ns`` gives every point's time (else it is empty), the median of their times ``t_med[c]`` [ns,
     as numpy's median of the int64 times gives it, a float].  A frame's clusters one after another
     where ``np.median`` took ~15 us a call (numpy twin: ``tests/openloop/cluster_twin.py``)."""
     sizes = np.zeros(n, np.int64)
@@ -161,14 +162,13 @@ def cluster_summary_kernel(xyz, t_ns, labels, n, min_points, med, ext, count, t_
         count[c] = k
         if k < min_points or k == 0:
             continue
-        side = -np.inf
         for a in range(3):
             for j in range(k):
                 buf[j] = xyz[idx[start[c] + j], a]
             s = np.sort(buf[:k])
             med[c, a] = _median_sorted(s, k)
-            side = max(side, s[k - 1] - s[0])
-        ext[c] = side
-        for j in range(k):
-            tbuf[j] = float(t_ns[idx[start[c] + j]])
-        t_med[c] = _median_sorted(np.sort(tbuf[:k]), k)
+            sides[c, a] = s[k - 1] - s[0]
+        if t_ns.size == labels.size:
+            for j in range(k):
+                tbuf[j] = float(t_ns[idx[start[c] + j]])
+            t_med[c] = _median_sorted(np.sort(tbuf[:k]), k)

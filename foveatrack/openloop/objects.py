@@ -13,12 +13,13 @@ from foveatrack.fixed_order import norm3
 @dataclass(frozen=True)
 class FrameObject:
     """One cluster: ``xyz_m`` the per-axis median of its points (Algorithm 1's estimator), its
-    point count, the largest side of its bounding box and its range; ``t_median_ns`` the median of
-    its points' times where they were given."""
+    point count, the largest side of its bounding box and its range; ``sides_m`` the box's sides;
+    ``t_median_ns`` the median of its points' times where they were given."""
     xyz_m: np.ndarray
     n_points: int
     extent_m: float
     range_m: float
+    sides_m: np.ndarray | None = None
     t_median_ns: float | None = None
 
 
@@ -43,17 +44,18 @@ def objects_from_labels(xyz: np.ndarray, labels: np.ndarray, n: int, min_points:
 
     xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
     med = np.empty((n, 3))
-    ext = np.empty(n)
+    sides = np.empty((n, 3))
     count = np.empty(n, np.int64)
     t_med = np.empty(n)
-    times = np.zeros(labels.size, np.int64) if t_ns is None else np.ascontiguousarray(t_ns, np.int64)
-    cluster_summary_kernel(xyz, times, np.ascontiguousarray(labels, np.int64), int(n), int(min_points), med, ext,
+    times = np.empty(0, np.int64) if t_ns is None else np.ascontiguousarray(t_ns, np.int64)
+    cluster_summary_kernel(xyz, times, np.ascontiguousarray(labels, np.int64), int(n), int(min_points), med, sides,
                            count, t_med)
     out, kept = [], []
     for c in np.flatnonzero(count >= min_points).tolist():
-        e = float(ext[c])
+        e = float(np.max(sides[c]))
         if e <= max_extent_m:
             m = med[c].copy()
-            out.append(FrameObject(m, int(count[c]), e, norm3(m), None if t_ns is None else float(t_med[c])))
+            out.append(FrameObject(m, int(count[c]), e, norm3(m), sides[c].copy(),
+                                   None if t_ns is None else float(t_med[c])))
             kept.append(c)
     return out, kept

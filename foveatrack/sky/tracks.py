@@ -440,11 +440,9 @@ class SkyTracker:
         objs = []
         for j, (fo, lab) in enumerate(zip(found, kept)):
             m = labels == lab
-            pts = world[m]
             point_obj[m] = j
-            t_s = fo.t_median_ns * 1e-9
             on_scenery = 2 * int(np.count_nonzero(near[m])) >= fo.n_points
-            objs.append(SkyObject(fo.xyz_m, t_s, fo.n_points, pts.max(axis=0) - pts.min(axis=0), on_scenery))
+            objs.append(SkyObject(fo.xyz_m, fo.t_median_ns * 1e-9, fo.n_points, fo.sides_m, on_scenery))
         return objs, point_obj
 
     def _associate(self, objs: list[SkyObject], t_s: float) -> tuple[list[tuple[int, int]], np.ndarray]:

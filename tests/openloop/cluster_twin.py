@@ -31,7 +31,7 @@ def cluster_labels_numpy(xyz, tol_m, tol_rad):
 
 def objects_from_labels_numpy(xyz, labels, n, min_points=1, max_extent_m=np.inf, t_ns=None):
     """Twin of :func:`foveatrack.openloop.objects.objects_from_labels` (numpy's median per cluster):
-    ``(xyz_m, n_points, extent_m, t_median_ns)`` per kept cluster, and the kept labels."""
+    ``(xyz_m, n_points, extent_m, sides_m, t_median_ns)`` per kept cluster, and the kept labels."""
     out, kept = [], []
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(n + 1))
@@ -40,8 +40,9 @@ def objects_from_labels_numpy(xyz, labels, n, min_points=1, max_extent_m=np.inf,
         rows = order[bounds[c]:bounds[c + 1]]
         pts = xyz[rows]
         med = np.median(pts, axis=0)
-        ext = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+        sides = pts.max(axis=0) - pts.min(axis=0)
+        ext = float(np.max(sides))
         if ext <= max_extent_m:
-            out.append((med, int(pts.shape[0]), ext, None if t_ns is None else float(np.median(t_ns[rows]))))
+            out.append((med, int(pts.shape[0]), ext, sides, None if t_ns is None else float(np.median(t_ns[rows]))))
             kept.append(c)
     return out, kept

@@ -79,8 +79,11 @@ def test_cluster_summaries_equal_numpy_medians_bit_for_bit():
             got, kept = objects_from_labels(pts, labels, k, min_points, max_ext, t_ns)
             want, kept_w = objects_from_labels_numpy(pts, labels, k, min_points, max_ext, t_ns)
             assert kept == kept_w
-            for g, (m, n, e, t) in zip(got, want):
+            for g, (m, n, e, sides, t) in zip(got, want):
                 assert g.xyz_m.tobytes() == m.tobytes() and g.n_points == n and g.extent_m == e
+                assert g.sides_m.tobytes() == sides.tobytes()
                 assert g.t_median_ns == t
                 sizes.add(n)
+            untimed, _ = objects_from_labels(pts, labels, k, min_points, max_ext)     # the open-loop tracker's call
+            assert [(o.xyz_m.tobytes(), o.t_median_ns) for o in untimed] == [(o.xyz_m.tobytes(), None) for o in got]
     assert {n % 2 for n in sizes} == {0, 1} and max(sizes) > 20, "odd and even counts, small and large"
