@@ -186,13 +186,11 @@ def cells_numpy(xyz: np.ndarray, du: float, n: int) -> tuple[np.ndarray, np.ndar
     return cells, r
 
 
-def background_numpy(cells, r, n, frames, first_frame, last_frame, r_min, r_max, min_frames, persist_frames,
-                     dilate, margin_min, spread_gain, margin_max, frame_no, near_frames,
-                     warm_near) -> tuple[np.ndarray, np.ndarray]:
-    """Twin of :func:`background_kernel`: ``(out, near)``."""
+def face_neighbours(cells: np.ndarray, n: int, dilate: int):
+    """For each offset of the square neighbourhood the kernels walk (``dilate`` steps either way on
+    the cell's own face), ``(inside, q)``: whether each cell's neighbour there exists (a cell of -1 has
+    none) and its index (0 where it does not)."""
     nn = n * n
-    out = np.zeros(cells.size, bool)
-    near = np.zeros(cells.size, bool)
     ok = cells >= 0
     c = np.where(ok, cells, 0)
     face, rest = c // nn, c % nn
@@ -201,13 +199,22 @@ def background_numpy(cells, r, n, frames, first_frame, last_frame, r_min, r_max,
         for dv in range(-dilate, dilate + 1):
             u, v = iu + du, iv + dv
             inside = ok & (u >= 0) & (u < n) & (v >= 0) & (v < n)
-            q = np.where(inside, (face * n + np.clip(u, 0, n - 1)) * n + np.clip(v, 0, n - 1), 0)
-            margin = np.minimum(margin_min + spread_gain * (r_max[q] - r_min[q]), margin_max)
-            with np.errstate(invalid="ignore"):
-                old = (first_frame[q] <= frame_no - near_frames) | warm_near[q]
-                ok_q = inside & (frames[q] >= 1) & old & (r >= r_min[q] - margin)
-            near |= ok_q
-            out |= ok_q & (frames[q] >= min_frames) & (last_frame[q] - first_frame[q] >= persist_frames)
+            yield inside, np.where(inside, (face * n + np.clip(u, 0, n - 1)) * n + np.clip(v, 0, n - 1), 0)
+
+
+def background_numpy(cells, r, n, frames, first_frame, last_frame, r_min, r_max, min_frames, persist_frames,
+                     dilate, margin_min, spread_gain, margin_max, frame_no, near_frames,
+                     warm_near) -> tuple[np.ndarray, np.ndarray]:
+    """Twin of :func:`background_kernel`: ``(out, near)``."""
+    out = np.zeros(cells.size, bool)
+    near = np.zeros(cells.size, bool)
+    for inside, q in face_neighbours(cells, n, dilate):
+        margin = np.minimum(margin_min + spread_gain * (r_max[q] - r_min[q]), margin_max)
+        with np.errstate(invalid="ignore"):
+            old = (first_frame[q] <= frame_no - near_frames) | warm_near[q]
+            ok_q = inside & (frames[q] >= 1) & old & (r >= r_min[q] - margin)
+        near |= ok_q
+        out |= ok_q & (frames[q] >= min_frames) & (last_frame[q] - first_frame[q] >= persist_frames)
     return out, near
 
 
@@ -283,19 +290,12 @@ class RangeBackground:
         least ``persist_frames`` apart in it (0: every cell it saw)."""
         warm = (self.frames >= 1) & (self.first_frame >= 0) & (self.first_frame < self.warmup_frames)
         if persist_frames > 0:
-            # the kernel's neighbourhood (a square of side 2 dilate + 1 on the face) of every stayed
-            # cell: a few thousand cells of the 0.9 M, marked by index (a whole-sphere image dilation
-            # took 37 ms, a stall at the warm-up's end of a live run)
-            n, nn = self.n, self.n * self.n
+            # the kernel's neighbourhood of every stayed cell: a few thousand cells of the 0.9 M, marked
+            # by index (a whole-sphere image dilation took 37 ms, a stall at the warm-up's end of a live run)
             stayed = np.flatnonzero(warm & (self.last_frame - self.first_frame >= persist_frames))
-            face, rest = stayed // nn, stayed % nn
-            iu, iv = rest // n, rest % n
             near = np.zeros(warm.size, np.bool_)
-            for du in range(-self.dilate, self.dilate + 1):
-                for dv in range(-self.dilate, self.dilate + 1):
-                    u, v = iu + du, iv + dv
-                    ok = (u >= 0) & (u < n) & (v >= 0) & (v < n)
-                    near[(face[ok] * n + u[ok]) * n + v[ok]] = True
+            for inside, q in face_neighbours(stayed, self.n, self.dilate):
+                near[q[inside]] = True
             warm &= near
         self.warm_near = warm
 
