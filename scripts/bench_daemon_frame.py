@@ -123,7 +123,7 @@ def run(batches, rate_hz: float, record: bool, sky: bool = False) -> dict:
     if sky:        # the daemon's controller for a config with [tracker.sky] (foveatrack.daemon.runtime)
         from foveatrack.sky.controller import SkyController
 
-        tracker = SkyController(tracker)
+        tracker = SkyController.from_table(tracker, {}, "bench_daemon_frame [tracker.sky]")
     warm_frames = 3 if not sky else int(round(tracker.sky.cfg.warmup_s * 10)) + 3
     sink = _EncodeSink(reached=not sky)
     step = FrameStep(tracker, CommandGate(Limits()), sink)   # the daemon's step: its gate, the bytes encoded

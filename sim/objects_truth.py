@@ -65,7 +65,3 @@ class ObjectsTruth:
                                    0.0, 1))
         return out
 
-
-def objects_truth(scene, t_mid_s: float, object_rays, strays_m: np.ndarray, stray_count: int) -> list[ObjectTruth]:
-    """:meth:`ObjectsTruth.at` of a scene, once (a run keeps an :class:`ObjectsTruth`)."""
-    return ObjectsTruth(scene).at(t_mid_s, object_rays, strays_m, stray_count)

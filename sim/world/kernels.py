@@ -453,8 +453,8 @@ def cone_candidates_kernel(d_world, status, cx, cy, cz, radius, out_idx):
 def cones_candidates_kernel(d_world, status, centres, radii, out_idx, out_n):
     """:func:`cone_candidates_kernel` for K cones in one pass over the rays (a flock's birds): the rays
     of cone k go in order to ``out_idx[k, :out_n[k]]`` (``out_idx`` (K, N), ``out_n`` (K,)).  The
-    same arithmetic per ray and cone, so the same rays (numpy twin: K calls of the one-cone kernel,
-    ``tests/world/test_world_kernels.py``)."""
+    same arithmetic per ray and cone, so the same rays (numpy twin: ``cone_candidates_twin`` in
+    ``tests/world_twins.py``, compared in ``tests/world/test_sky.py``)."""
     n_cones = centres.shape[0]
     for k in range(n_cones):
         out_n[k] = 0

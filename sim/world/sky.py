@@ -397,9 +397,9 @@ class FlockPoses:
     def _wander_arg(self, m, t):
         return t[:, None, None] * self.omega[m] + self.phase[m]
 
-    def positions(self, m: np.ndarray, t: np.ndarray) -> np.ndarray:
+    def positions(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None) -> np.ndarray:
         """(N, 3): member ``m[i]``'s position at ``t[i]``."""
-        arg = self._wander_arg(m, t)
+        arg = self._wander_arg(m, t) if arg is None else arg
         return self.path.position(t) + self.slot[m] + (self.amp[m] * np.sin(arg)).sum(axis=1)
 
     def velocities(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None) -> np.ndarray:
@@ -409,8 +409,7 @@ class FlockPoses:
     def poses(self, m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(positions (N, 3), yaws (N,))`` of members ``m`` at ``t`` (:meth:`positions`, :meth:`yaws`)."""
         arg = self._wander_arg(m, t)
-        pos = self.path.position(t) + self.slot[m] + (self.amp[m] * np.sin(arg)).sum(axis=1)
-        return pos, self.yaws(m, t, arg)
+        return self.positions(m, t, arg), self.yaws(m, t, arg)
 
     def yaws(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None) -> np.ndarray:
         """Body yaw (:func:`~sim.world.trajectories.body_yaw_rad`): along the velocity; a member
