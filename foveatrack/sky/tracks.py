@@ -101,6 +101,9 @@ class SkyTrackerConfig:
     spawn_clear_m : >= 0 [m]     an unmatched object this close to a confirmed track's hit of the
                                  frame starts no track (0: every unmatched object starts one)
     history_s : > 0 [s]          how long a track keeps its measurements (the classifier's window)
+    merge_m, merge_v_m_s, merge_frames   two confirmed tracks this close in position and velocity
+                                 this many frames in a row are one object: the one with fewer hits
+                                 in its history goes (merge_frames 0: never)
     pose_nodes : int >= 2        head poses asked per frame for the per-point turn
     """
 
@@ -134,6 +137,9 @@ class SkyTrackerConfig:
     d_half_m: float = 1.0
     protect_m: float = 1.0
     history_s: float = 3.0
+    merge_m: float = 0.6
+    merge_v_m_s: float = 1.0
+    merge_frames: int = 5
     pose_nodes: int = 11
     classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
 
@@ -148,7 +154,7 @@ class SkyTrackerConfig:
         if not 0 <= self.background_dilate <= 3:
             raise UserError(f"background_dilate must be 0, 1, 2 or 3, got {self.background_dilate!r}")
         for k in ("warmup_s", "background_spread_gain", "background_persist_frames", "spawn_clear_m",
-                  "warmup_stay_frames"):
+                  "warmup_stay_frames", "merge_m", "merge_v_m_s", "merge_frames"):
             if not getattr(self, k) >= 0:
                 raise UserError(f"{k} must be >= 0, got {getattr(self, k)!r}")
         for k in ("background_frames", "min_points", "confirm_hits"):
@@ -272,6 +278,7 @@ class SkyTracker:
         self.tracks: list[SkyTrack] = []
         self.confirmed_ever: list[int] = []
         self._next_id = 0
+        self._together: dict[tuple[int, int], int] = {}     # frames in a row two tracks were one (merge_*)
         self._cos_field = None if c.field_half_angle_deg is None else math.cos(math.radians(c.field_half_angle_deg))
 
     def continue_ids_from(self, other: "SkyTracker") -> None:
@@ -472,10 +479,10 @@ class SkyTracker:
         """Rules 1-4 of the classifier on the track, unless nothing they read has changed since the
         last frame (most tracks get no hit in a frame): its history (hits are appended, old ones
         dropped from the front: its length and end times tell), its filter's velocity, its
-        excursion and its last hit's time."""
+        excursion, its last hit's time and whether it is labelled drone (rule 4 keeps the label)."""
         h = tr.history
         on = (len(h), h[0][0] if h else None, h[-1][0] if h else None, tr.kf.v.tobytes(), tr.excursion_m,
-              tr.last_hit_t_s)
+              tr.last_hit_t_s, tr.label == "drone")
         if on != tr.classified_on:
             tr.seen_as, tr.features = classify(tr, self.cfg.classifier)
             tr.classified_on = on
@@ -508,8 +515,36 @@ class SkyTracker:
                 gone.append(tr.track_id)
             else:
                 keep.append(tr)
-        self.tracks = keep
+        self.tracks = [tr for tr in keep if tr.track_id not in self._merged_away(keep, t_s, gone)]
         return gone
+
+    def _merged_away(self, tracks: list[SkyTrack], t_s: float, gone: list[int]) -> set[int]:
+        """Ids of confirmed tracks that have been one object with another for ``merge_frames``
+        frames in a row (within ``merge_m`` and ``merge_v_m_s``): of each such pair the one with
+        fewer hits in its history goes (a tie: the younger), and is added to ``gone``.  A crown part
+        or a split cluster can start a second track on a drone; the two then take its hits in turn
+        and every turn is an id switch."""
+        cfg = self.cfg
+        if cfg.merge_frames <= 0:
+            return set()
+        conf = [tr for tr in tracks if tr.confirmed]
+        together, away = {}, set()
+        for a in range(len(conf)):
+            pa, va = conf[a].kf.predicted(t_s)[0], conf[a].kf.v
+            for b in range(a + 1, len(conf)):
+                ta, tb = conf[a], conf[b]
+                if ta.track_id in away or tb.track_id in away:
+                    continue
+                if norm3(pa - tb.kf.predicted(t_s)[0]) > cfg.merge_m or norm3(va - tb.kf.v) > cfg.merge_v_m_s:
+                    continue
+                key = (ta.track_id, tb.track_id)
+                n = together[key] = self._together.get(key, 0) + 1
+                if n >= cfg.merge_frames:
+                    weaker = tb if (len(tb.history), -tb.track_id) <= (len(ta.history), -ta.track_id) else ta
+                    away.add(weaker.track_id)
+                    gone.append(weaker.track_id)
+        self._together = {k: n for k, n in together.items() if k[0] not in away and k[1] not in away}
+        return away
 
     def _static(self, tr: SkyTrack, t_s: float) -> bool:
         """Scenery: in ``static_window_s`` of life it never got ``static_radius_m`` from where it

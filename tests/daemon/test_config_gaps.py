@@ -127,7 +127,7 @@ def test_a_sky_table_without_the_lidars_field_is_a_warning(tmp_path, sky, warned
 
 
 def test_the_status_line_counts_the_sky_trackers_tracks(tmp_path):
-    # one drone seen for a second through the daemon's own controller: the status names its tracks
+    # one drone (0.2 m) seen for a second through the daemon's own controller: the status names its tracks
     import numpy as np
 
     from foveatrack.frames import Frame
@@ -140,7 +140,7 @@ def test_the_status_line_counts_the_sky_trackers_tracks(tmp_path):
     for k in range(10):
         t0 = k * 0.1
         c = np.array([20.0, 2.0 - 0.1 * k, 1.0])
-        xyz = c + rng.normal(0, 0.05, (20, 3))
+        xyz = c + rng.normal(0, 0.03, (20, 3))
         t_ns = np.sort(rng.integers(int(t0 * 1e9), int((t0 + 0.1) * 1e9), 20)).astype(np.int64)
         d.tracker.process(Frame(t0, t0 + 0.1, xyz, t_ns), t0 + 0.1)
     note = next(n for n in d.status_notes() if n.startswith("tracks"))

@@ -66,3 +66,24 @@ def test_a_drone_label_waits_until_the_rules_have_said_drone_so_many_frames_in_a
     assert held_label("drone", "unknown", 0, ClassifierConfig(drone_after_frames=1)) == ("drone", 1)   # at once
     with pytest.raises(UserError, match="drone_after_frames must be an integer >= 1"):
         ClassifierConfig.from_mapping({"drone_after_frames": 0}, "[tracker.sky.classifier]")
+
+
+def _swinging_patch(side_m, path):
+    tr = _track(path, noise_m=0.1, seconds=2.0)
+    tr.history = [(t, p, np.array([0.6 * side_m, side_m, 0.5 * side_m]), 8) for t, p, _, _ in tr.history]
+    return tr
+
+
+def test_an_extended_patch_that_swings_back_is_clutter_a_small_object_or_a_straight_one_is_not():
+    # a crown's part at the quarter of its swing: net speed 1.3 m/s (rule 2 lets it by), its
+    # velocity turning over at 0.75 m/s^2 (below the bird rule)
+    def swing(t):
+        return (35.0, 1.2 * math.sin(2 * math.pi * 0.3 * t + math.pi / 2), 5.0)
+    cfg = ClassifierConfig()
+    label, f = classify(_swinging_patch(0.55, swing), cfg)
+    assert label == "clutter", f
+    assert f["net_speed_m_s"] > cfg.clutter_net_speed_m_s and f["manoeuvre_m_s2"] < cfg.bird_manoeuvre_m_s2
+    assert classify(_swinging_patch(0.55, swing), ClassifierConfig(clutter_turn_1_s=0.0))[0] == "drone"
+    # a drone-sized object doing the same, and the patch's size flying straight on: drones
+    assert classify(_swinging_patch(0.2, swing), cfg)[0] == "drone"
+    assert classify(_swinging_patch(0.55, lambda t: (33.0, 5.0 - 0.9 * t, 8.0)), cfg)[0] == "drone"

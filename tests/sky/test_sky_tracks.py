@@ -203,3 +203,40 @@ def test_a_track_is_classified_as_if_every_frame_were_classified_afresh(monkeypa
     fresh = views(ClosedLoop(scene))
     assert sum(len(f) for f in fresh) > 200 and any(v[1] == "bird" for f in fresh for v in f)
     assert cached == fresh
+
+
+
+def _confirmed_track(tracker, tid, xyz, v, hits, t_s):
+    from foveatrack.sky.motion import ConstantVelocityFilter
+    from foveatrack.sky.tracks import SkyTrack
+    cfg = tracker.cfg
+    kf = ConstantVelocityFilter(t_s, xyz, cfg.q_m2_s3, cfg.r_m2, cfg.v0_sigma_m_s)
+    kf.v = np.array(v, float)
+    tr = SkyTrack(tid, kf, t_s, t_s, confirmed_t_s=t_s)
+    tr.history = [(t_s, np.array(xyz, float), np.array([0.3, 0.3, 0.1]), 3)] * hits
+    tr.origin_xyz_m = tr.last_xyz_m = np.array(xyz, float)
+    return tr
+
+
+@pytest.mark.parametrize("merge_frames", [5, 0])
+def test_two_tracks_on_one_object_become_one(merge_frames):
+    # Two confirmed tracks 0.3 m apart with one velocity (a crown's part or a split cluster started a
+    # second track on a drone; the two would take its hits in turn, an id switch each time), and a
+    # pair as close that flies apart (two drones crossing).  After merge_frames frames together the
+    # first pair's track with fewer hits goes; without the rule (0) both stay.
+    from foveatrack.frames import Frame
+
+    tracker = SkyTracker(SkyTrackerConfig(warmup_s=0.0, merge_frames=merge_frames))
+    empty = lambda k: Frame(k * 0.1, (k + 1) * 0.1, np.empty((0, 3)), np.empty(0, np.int64))
+    pose = Pose()
+    tracker.process(empty(0), pose)
+    tracker.tracks = [_confirmed_track(tracker, 3, [30, 0, 3.0], [0, -1, 0], 12, 0.1),
+                      _confirmed_track(tracker, 7, [30, 0, 3.3], [0, -1, 0.2], 20, 0.1),
+                      _confirmed_track(tracker, 8, [30, 9, 3.0], [0, -2, 0], 10, 0.1),
+                      _confirmed_track(tracker, 9, [30, 9, 3.3], [0, 2, 0], 30, 0.1)]
+    deleted = [i for k in range(1, 8) for i in tracker.process(empty(k), pose).deleted_now]
+    left = {tr.track_id for tr in tracker.tracks}
+    if merge_frames:
+        assert deleted == [3] and left == {7, 8, 9}          # 3 had fewer hits than 7
+    else:
+        assert deleted == [] and left == {3, 7, 8, 9}
