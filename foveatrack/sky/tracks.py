@@ -40,7 +40,11 @@ Per frame:
    lies in its gate while none is left for it: two clusters became one) for longer.  A confirmed
    track that in ``static_window_s`` of life never got ``static_radius_m`` from where it was first
    seen is scenery (a part of a tree the background has not learned yet): dropped, and its D made
-   background (as in the open-loop tracker).
+   background (as in the open-loop tracker).  Two confirmed tracks within ``merge_m`` and
+   ``merge_v_m_s`` of each other ``merge_frames`` frames in a row are one object: the one with fewer
+   hits in its history is dropped (a crown's track that came onto a drone took its hits in turn with
+   the drone's own track: 28 id switches in a 20 s tree-line run; over seeds +200..+229 of the four
+   scenes id switches 167 -> 130).
 
 Ids are integers from 0 in the order tracks are created, never reused.  Everything is a function of
 the frames and the pose: no random numbers, sums in a fixed order, a stable assignment.
