@@ -161,7 +161,7 @@ def read_small_text(path, what: str) -> str:
 def dataclass_from_mapping(cls, data: Mapping, where: str, parsers: Mapping | None = None,
                            none_ok: Sequence[str] = ()):
     """A frozen dataclass of settings from its TOML table: unknown keys refused; a field whose default
-    is an int must be an integer; ``parsers[name](value, where.name)`` reads a field of its own kind
+    is a bool must be true or false, one that is an int an integer; ``parsers[name](value, where.name)`` reads a field of its own kind
     (a sub-table); every other value is a float (None allowed for the fields in ``none_ok``).  The
     class's own checks (``__post_init__``) name ``where`` too."""
     from dataclasses import fields
@@ -174,7 +174,11 @@ def dataclass_from_mapping(cls, data: Mapping, where: str, parsers: Mapping | No
         v = data[f.name]
         if parsers and f.name in parsers:
             kw[f.name] = parsers[f.name](v, f"{where}.{f.name}")
-        elif isinstance(f.default, int) and not isinstance(f.default, bool):
+        elif isinstance(f.default, bool):
+            if not isinstance(v, bool):
+                raise UserError(f"{where}: {f.name} must be true or false, got {v!r}")
+            kw[f.name] = v
+        elif isinstance(f.default, int):
             if isinstance(v, bool) or not isinstance(v, int):
                 raise UserError(f"{where}: {f.name} must be an integer, got {v!r}")
             kw[f.name] = v

@@ -69,8 +69,8 @@ def main(argv=None) -> int:
                     help="only the one-line summary per scene (for long runs: --seeds 180 is a scene-hour "
                          "of a 20 s scene)")
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
-                    help="[tracker.sky] keys to set for the run (numbers), e.g. warmup_s=0.8 or "
-                         "classifier.drone_after_frames=10")
+                    help="[tracker.sky] keys to set for the run (numbers, true or false), e.g. warmup_s=0.8, "
+                         "warmup_replay=false or classifier.drone_after_frames=10")
     a = ap.parse_args(argv)
     lines = []
     summary = []
@@ -84,7 +84,7 @@ def main(argv=None) -> int:
             t = sky
             for name in tables:
                 t[name] = t = dict(t.get(name, {}))
-            t[k] = int(v) if v.lstrip("-").isdigit() else float(v)
+            t[k] = (v == "true") if v in ("true", "false") else int(v) if v.lstrip("-").isdigit() else float(v)
         table = {**base.tracker_table, "sky": sky}
         rows = []
         for s in range(a.first_seed, a.first_seed + a.seeds):

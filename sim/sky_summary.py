@@ -78,7 +78,7 @@ def drone_truth(loop, log, truth) -> dict:
 
 
 def scan_allows_confirm_s(times_s, tracked, rays, min_points: int, confirm_hits: int,
-                          confirm_window: int) -> float | None:
+                          confirm_window: int, reported_from: int = 0) -> float | None:
     """The earliest a track built from one drone's own returns could be confirmed, from the rays the
     scan put on it (:mod:`foveatrack.sky.tracks`' rule: ``confirm_hits`` frames, each with an object of
     ``min_points`` returns or more, within ``confirm_window`` frames of the first), counted from its
@@ -87,7 +87,9 @@ def scan_allows_confirm_s(times_s, tracked, rays, min_points: int, confirm_hits:
     A bound no tracker with that rule can beat, whatever its background or association: the rays
     are counted before the effects (a ray may return nothing) and every one is taken as the drone's
     object, off the scenery.  ``tracked`` (T,) bool: the frames the tracker tracks (after its warm-up;
-    all of them for the bound without it).  What part of a slow confirmation is the scan's (the
+    all of them for the bound without it).  ``reported_from``: the first frame a confirmation can be
+    reported at (a tracker that tracks its warm-up's frames at the warm-up's end counts their hits,
+    and says so at the first frame after it).  What part of a slow confirmation is the scan's (the
     rosette's sparse rim, paper Fig. 6) and what part the tracker's."""
     t = np.asarray(times_s, np.float64)
     n = np.asarray(rays, np.int64)
@@ -98,23 +100,27 @@ def scan_allows_confirm_s(times_s, tracked, rays, min_points: int, confirm_hits:
     hit = (n >= min_points) & np.asarray(tracked, bool)
     for k in range(first, t.size):
         if hit[k] and int(hit[max(first, k - confirm_window + 1):k + 1].sum()) >= confirm_hits:
-            return float(t[k] - t[first])
+            return float(t[max(k, reported_from)] - t[first])
     return None
 
 
 def _scan_bounds(loop, log, drones: dict, m: dict) -> None:
-    """Each drone's :func:`scan_allows_confirm_s`, with the tracker's warm-up (``scan_allows_confirm_s``)
-    and without it (``..._no_warmup_s``), into ``m["drones"]``."""
+    """Each drone's :func:`scan_allows_confirm_s`, with the tracker's warm-up (``scan_allows_confirm_s``;
+    with ``warmup_replay`` the warm-up's hits count, reported at its end) and without it
+    (``..._no_warmup_s``), into ``m["drones"]``."""
     cfg = loop.sky.sky.cfg
     t = np.asarray(log["t_end_s"], np.float64)
     if t.size == 0:
         return
     start = t[0] - loop.tracker.config.period_s     # the first frame's start, as the tracker counts
     after_warmup = t - start > cfg.warmup_s
+    # with warmup_replay the warm-up's frames are tracked at its end: their hits count, reported then
+    tracked = np.ones(t.size, bool) if cfg.warmup_replay else after_warmup
+    reported_from = int(np.argmax(after_warmup)) if cfg.warmup_replay and after_warmup.any() else 0
     for d, a in drones.items():
         r = m["drones"][d]
-        r["scan_allows_confirm_s"] = scan_allows_confirm_s(t, after_warmup, a["rays"], cfg.min_points,
-                                                           cfg.confirm_hits, cfg.confirm_window)
+        r["scan_allows_confirm_s"] = scan_allows_confirm_s(t, tracked, a["rays"], cfg.min_points,
+                                                           cfg.confirm_hits, cfg.confirm_window, reported_from)
         r["scan_allows_confirm_no_warmup_s"] = scan_allows_confirm_s(t, np.ones(t.size, bool), a["rays"],
                                                                      cfg.min_points, cfg.confirm_hits,
                                                                      cfg.confirm_window)

@@ -32,11 +32,23 @@ MATCHING_ID = SceneEntityDeletion.MATCHING_ID
 @pytest.fixture(scope="module")
 def crossing(tmp_path_factory):
     """6 s of two-drones-crossing as ``simulate --out`` records it (the writer process draws the view):
-    tentative tracks deleted at 2.6 and 4.7 s, both drones confirmed, the fovea turned between them."""
+    both drones confirmed, the fovea turned between them."""
     from foveatrack.cli import main
 
     out = tmp_path_factory.mktemp("crossing") / "run"
     assert main(["simulate", str(ROOT / "scenes" / "two-drones-crossing.toml"), "--duration", "6",
+                 "--out", str(out), "--no-progress"]) == 0
+    return read_view(out / "run.mcap")
+
+
+@pytest.fixture(scope="module")
+def swarm(tmp_path_factory):
+    """6 s of swarm-of-five as ``simulate --out`` records it: tracks deleted at 3.3, 3.6, 4.4 and 5.5 s
+    (the crossing, whose warm-up is now tracked at its end, deletes none in its first 6 s)."""
+    from foveatrack.cli import main
+
+    out = tmp_path_factory.mktemp("swarm") / "run"
+    assert main(["simulate", str(ROOT / "scenes" / "swarm-of-five.toml"), "--duration", "6",
                  "--out", str(out), "--no-progress"]) == 0
     return read_view(out / "run.mcap")
 
@@ -145,31 +157,31 @@ def test_each_tracks_history_grows_and_is_the_positions_it_was_recorded_at(cross
         assert hist[tid] == sorted(hist[tid]) and hist[tid][-1] > hist[tid][0] >= 0
 
 
-def test_a_deleted_tracks_entities_are_deleted_and_no_later_keyframe_draws_it(crossing):
-    deleted = [(t_log, tid) for t_log, rec in crossing["tracks"] for tid in rec["deleted_now"]]
-    assert deleted, "the crossing's tentative tracks 1 and 2 are deleted at 2.6 and 4.7 s"
-    scene = dict(crossing["scene"])
+def test_a_deleted_tracks_entities_are_deleted_and_no_later_keyframe_draws_it(swarm):
+    deleted = [(t_log, tid) for t_log, rec in swarm["tracks"] for tid in rec["deleted_now"]]
+    assert deleted, "the swarm's tracks 1, 4, 0 and 7 are deleted at 3.3, 3.6, 4.4 and 5.5 s"
+    scene = dict(swarm["scene"])
     for t_del, tid in deleted:
         prefix = f"track_{tid}/"
-        sent = {e.id for t, u in crossing["scene"] if t < t_del for e in u.entities if e.id.startswith(prefix)}
+        sent = {e.id for t, u in swarm["scene"] if t < t_del for e in u.entities if e.id.startswith(prefix)}
         assert f"{prefix}marker" in sent and any("/path/" in i for i in sent)
         dels = [d for d in scene[t_del].deletions if d.id.startswith(prefix)]
         assert {d.id for d in dels} == sent and all(d.type == MATCHING_ID for d in dels)
         # never drawn again on /scene, nor on /scene_keyframe
-        assert not [e.id for t, u in crossing["scene"] if t >= t_del for e in u.entities if e.id.startswith(prefix)]
-        later = [u for t, u in crossing["keys"] if t >= t_del]
+        assert not [e.id for t, u in swarm["scene"] if t >= t_del for e in u.entities if e.id.startswith(prefix)]
+        later = [u for t, u in swarm["keys"] if t >= t_del]
         assert later and all(not e.id.startswith(prefix) for u in later for e in u.entities)
-        drawn_by_a_keyframe = any(e.id == f"{prefix}path/history" for t, u in crossing["keys"] if t < t_del
+        drawn_by_a_keyframe = any(e.id == f"{prefix}path/history" for t, u in swarm["keys"] if t < t_del
                                   for e in u.entities)
         if drawn_by_a_keyframe:
             # a whole keyframe at the deletion removes it (a seek restores only the newest keyframe: D
             # and the other histories are in it too)
-            (now,) = [u for t, u in crossing["keys"] if t == t_del and u.deletions]
+            (now,) = [u for t, u in swarm["keys"] if t == t_del and u.deletions]
             assert [(d.id, d.type) for d in now.deletions] == [(f"{prefix}path/history", MATCHING_ID)]
-            prev = [u for t, u in crossing["keys"] if t < t_del][-1]
+            prev = [u for t, u in swarm["keys"] if t < t_del][-1]
             assert {e.id for e in prev.entities} - {f"{prefix}path/history"} <= {e.id for e in now.entities}
     for _t, tid in deleted:
-        assert sum(f"track {tid} deleted" in s for s in crossing["logs"]) == 1, tid
+        assert sum(f"track {tid} deleted" in s for s in swarm["logs"]) == 1, tid
 
 
 def test_the_log_has_the_track_events_not_every_record(crossing):

@@ -38,5 +38,16 @@ def test_the_warm_up_frames_count_for_entering_but_not_as_hits():
     assert _bound(rays, tracked) == pytest.approx(1.5 - 0.1)
 
 
+def test_a_tracked_warm_up_counts_its_hits_and_reports_at_its_end():
+    # warmup_replay: the warm-up's frames are tracked when it ends (frame index 10, t 1.1), so hits
+    # in it count, but no confirmation is reported before then
+    rays = [2, 2, 2] + [0] * 9 + [2, 2, 2]
+    assert scan_allows_confirm_s(T, np.ones(T.size, bool), np.asarray(rays + [0] * (T.size - len(rays))), 2, 3, 15,
+                                 reported_from=10) == pytest.approx(1.1 - 0.1)
+    late = [0] * 11 + [2, 2, 2]                       # first seen after the warm-up: as before
+    assert scan_allows_confirm_s(T, np.ones(T.size, bool), np.asarray(late + [0] * (T.size - len(late))), 2, 3, 15,
+                                 reported_from=10) == pytest.approx(1.4 - 1.2)
+
+
 def test_never_hit_is_none():
     assert _bound([]) is None

@@ -66,18 +66,13 @@ def test_no_drone_is_confirmed_before_the_scan_s_rays_allow_it(crossing):
         assert r["time_to_confirm_s"] >= r["scan_allows_confirm_s"] - 1e-9, (d, r)
 
 
-@pytest.mark.parametrize("bound_s", [
-    pytest.param(4.0, marks=pytest.mark.xfail(strict=True, reason="not met: drone-b is confirmed 4.7 s after entering "
-                 "the field (the rim's rays: below)")),
-    pytest.param(2.0, marks=pytest.mark.xfail(strict=True, reason="issue 28's bound, not met: drone-a is confirmed "
-                 "0.5 s after entering the field and the head turns to it, which leaves drone-b at the rosette's "
-                 "sparse rim: its rays allowed a confirmation 4.6 s after it entered, the tracker took 4.7 s; "
-                 "docs/sky-tracks-figures.md")),
-])
-def test_both_drones_confirmed_within_the_bound_of_entering_the_field(crossing, bound_s):
+def test_both_drones_confirmed_within_2s_of_entering_the_field(crossing):
+    # issue 28's bound on the scene's own seed.  Before the warm-up's frames were tracked at its end
+    # (warmup_replay) drone-b took 4.7 s: drone-a was confirmed first, the head turned to it and left
+    # drone-b at the rosette's sparse rim; its hits in the warm-up now count
     loop, log = crossing
     for d, r in _drone_metrics(loop, log)["drones"].items():
-        assert r["time_to_confirm_s"] is not None and r["time_to_confirm_s"] <= bound_s, (d, r)
+        assert r["time_to_confirm_s"] is not None and r["time_to_confirm_s"] <= 2.0, (d, r)
 
 
 def test_the_head_fixates_both_drones(crossing):

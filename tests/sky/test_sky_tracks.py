@@ -223,7 +223,8 @@ def test_two_tracks_on_one_object_become_one(merge_frames):
     # Two confirmed tracks 0.3 m apart with one velocity (a crown's part or a split cluster started a
     # second track on a drone; the two would take its hits in turn, an id switch each time), and a
     # pair as close that flies apart (two drones crossing).  After merge_frames frames together the
-    # first pair's track with fewer hits goes; without the rule (0) both stay.
+    # first pair's track with fewer hits goes; without the rule (0, and the close rule's 15 frames
+    # not reached) both stay.
     from foveatrack.frames import Frame
 
     tracker = SkyTracker(SkyTrackerConfig(warmup_s=0.0, merge_frames=merge_frames))
@@ -240,3 +241,52 @@ def test_two_tracks_on_one_object_become_one(merge_frames):
         assert deleted == [3] and left == {7, 8, 9}          # 3 had fewer hits than 7
     else:
         assert deleted == [] and left == {3, 7, 8, 9}
+
+
+@pytest.mark.parametrize("replay", [True, False])
+def test_a_drone_seen_in_the_warm_up_is_confirmed_when_it_ends(replay):
+    # A drone crosses the field from the first frame, in front of the scenery's wall.  The warm-up's
+    # frames are tracked at its end (warmup_replay), when the background knows what stayed: the drone
+    # is confirmed in the first frame after the warm-up.  Without it the tracker starts from that
+    # frame and needs three more.
+    a = straight([30, 6, 3.0], [0, -4.0, 0])
+    outs = run(SkyTracker(SkyTrackerConfig(warmup_replay=replay)), [a], 2.5)
+    first = next(k for k, o in enumerate(outs) if o.confirmed_now)
+    if replay:
+        assert outs[first].t_s == pytest.approx(1.1)
+    else:
+        assert outs[first].t_s >= 1.3 - 1e-9
+    (tid,) = outs[first].confirmed_now
+    assert np.linalg.norm(_confirmed(outs[first])[tid].xyz_m - _truth_at(a, outs[first].t_s)) < 0.5
+    # only what a frame showed is ever reported deleted
+    shown = set()
+    for o in outs:
+        assert set(o.deleted_now) <= shown
+        shown |= {v.track_id for v in o.tracks}
+
+
+@pytest.mark.parametrize("close_frames, gone", [(4, [3]), (0, [])])
+def test_two_tracks_close_for_long_become_one_whatever_their_velocities(close_frames, gone):
+    # two tracks taking one object's hits in turn drag each other's velocity about: close in
+    # position alone for merge_close_frames frames in a row is enough
+    from foveatrack.frames import Frame
+
+    tracker = SkyTracker(SkyTrackerConfig(warmup_s=0.0, merge_frames=0, merge_close_frames=close_frames))
+    empty = lambda k: Frame(k * 0.1, (k + 1) * 0.1, np.empty((0, 3)), np.empty(0, np.int64))
+    pose = Pose()
+    tracker.process(empty(0), pose)
+    tracker.tracks = [_confirmed_track(tracker, 3, [30, 0, 3.0], [0, -1, 0], 12, 0.1),
+                      _confirmed_track(tracker, 7, [30, 0, 3.0], [0, -1, 1.2], 20, 0.1)]
+    deleted = [i for k in range(1, 4) for i in tracker.process(empty(k), pose).deleted_now]
+    assert deleted == []                                  # 3 frames: not yet
+    assert list(tracker.process(empty(4), pose).deleted_now) == gone
+
+
+@pytest.mark.parametrize("value, ok", [(True, True), (False, True), (1, False), ("yes", False)])
+def test_warmup_replay_is_true_or_false_in_a_table(value, ok):
+    from foveatrack.errors import UserError
+    if ok:
+        assert SkyTrackerConfig.from_mapping({"warmup_replay": value}, "[tracker.sky]").warmup_replay is value
+    else:
+        with pytest.raises(UserError, match=r"\[tracker.sky\]: warmup_replay must be true or false"):
+            SkyTrackerConfig.from_mapping({"warmup_replay": value}, "[tracker.sky]")
