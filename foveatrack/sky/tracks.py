@@ -447,7 +447,7 @@ class SkyTracker:
             keep = np.ones(cells.size, bool)
             keep[fg_idx[~learn_pts]] = False
             self.background.learn(cells[keep], ranges[keep])
-        deleted = self._prune(t_mid)
+        deleted = self._prune(t_mid, fovea_track_id)
         for tr in self.tracks:
             self._classify(tr)
             tr.label, tr.drone_frames = held_label(tr.seen_as, tr.label, tr.drone_frames, cfg.classifier)
@@ -543,18 +543,24 @@ class SkyTracker:
         tr.last_xyz_m = z
         tr.excursion_m = max(tr.excursion_m, norm3(z - tr.origin_xyz_m))
 
-    def _prune(self, t_s: float) -> list[int]:
+    def _prune(self, t_s: float, fovea_track_id: int | None = None) -> list[int]:
         """Drop failed candidates, tracks lost too long and static scenery; returns their ids."""
         cfg = self.cfg
         keep, gone = [], []
         for tr in self.tracks:
             tr.history = [h for h in tr.history if h[0] >= t_s - cfg.history_s]
             unseen = t_s - max(tr.last_hit_t_s, tr.merged_t_s)
-            lost = unseen > (cfg.lost_after_s if tr.last_seen_in_view else cfg.lost_out_of_view_s)
+            # the track the fovea is turning to is not given up while the head gets there: the
+            # attention gives the turn saccade_timeout_s, and a revisit comes when a track at the
+            # sparse rim may have gone unseen for lost_after_s
+            in_view = tr.last_seen_in_view and tr.track_id != fovea_track_id
+            lost = unseen > (cfg.lost_after_s if in_view else cfg.lost_out_of_view_s)
             failed = not tr.confirmed and tr.frames_seen >= cfg.confirm_window and tr.clear_hits < cfg.confirm_hits
             if lost or failed:
                 gone.append(tr.track_id)
-            elif tr.confirmed and self._static(tr, t_s):
+            elif tr.confirmed and tr.history and self._static(tr, t_s):
+                # (a track without a hit in its history window is not seen standing anywhere: the
+                # lost rule decides; its D would be the median of nothing)
                 c = np.median(np.array([h[1] for h in tr.history]), axis=0)
                 self.background.mark_box(c - cfg.d_half_m, c + cfg.d_half_m)
                 gone.append(tr.track_id)
