@@ -130,7 +130,7 @@ class SkyTrackerConfig:
     background_spread_gain: float = 0.5
     background_margin_max_m: float = 1.5
     warmup_s: float = 1.0
-    warmup_stay_frames: int = 3
+    warmup_stay_frames: int = 5
     warmup_replay: bool = True
     cluster_tol_m: float = 0.5
     cluster_tol_rad: float = 0.01
