@@ -12,7 +12,7 @@ Per frame:
    and tracked when it ends (``warmup_replay``), against the background that now knows what stayed:
    a drone in the field at power-on has its hits from the first frame, and can be confirmed in the
    first frame after the warm-up (seeds +200..+229 of the four sky scenes: confirmed within 2 s of
-   entering the field 108 -> 143 of 270 drones).  What the replay starts and ends within the
+   entering the field 115 -> 158 of 270 drones).  What the replay starts and ends within the
    warm-up's frames is never shown, and not reported deleted.  Points of an object are kept out of the learning while its track may be
    something flying (a tentative track off the scenery, a confirmed one that went ``protect_excursion_m``
    or more) and the object is where the track's motion predicted it (within ``protect_m``).  Objects
@@ -51,7 +51,7 @@ Per frame:
    the drone's own track: 28 id switches in a 20 s tree-line run).  Or within ``merge_m`` alone
    ``merge_close_frames`` frames in a row: two tracks that take one object's hits in turn drag each
    other's velocity about (two drones whose clusters merge as they cross part within a second).
-   Over seeds +200..+229 of the four scenes, id switches 263 without the rule, 132 with it.
+   Over seeds +200..+229 of the four scenes, id switches 201 without the rule, 127 with it.
 
 Ids are integers from 0 in the order tracks are created, never reused.  Everything is a function of
 the frames and the pose: no random numbers, sums in a fixed order, a stable assignment.
