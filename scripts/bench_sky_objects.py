@@ -15,34 +15,20 @@ Usage: python scripts/bench_sky_objects.py [--duration S] [--repeat N]
 from __future__ import annotations
 
 import argparse
-import copy
 import os
 import time
-import tomllib
-from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
 from sim.loop import ClosedLoop  # noqa: E402
-from sim.scene import scene_from_mapping  # noqa: E402
-
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
+from sim.study.sky_objects import sky_scene  # noqa: E402
 
 
 def _scene(name: str, duration_s: float, birds: int | None = None, flock_of: str | None = None):
-    m = tomllib.loads((SCENES / f"{name}.toml").read_text())
-    m = copy.deepcopy(m)
-    m["scene"]["duration_s"] = duration_s
-    if flock_of is not None:      # another scene's birds added (the swarm with the flock)
-        m["bird"] = tomllib.loads((SCENES / f"{flock_of}.toml").read_text())["bird"]
-    if birds is not None:
-        if birds == 0:
-            m.pop("bird", None)
-        else:
-            m["bird"][0]["count"] = birds
-    return scene_from_mapping(m, str(SCENES / f"{name}.toml"))
+    # the study's builder (section 8 of docs/accuracy-vs-time.md runs the same cases over seeds)
+    return sky_scene(name, duration_s, None, birds, flock_of)
 
 
 def _frame_ms(scene, repeat: int) -> tuple[float, float, float]:

@@ -33,9 +33,10 @@ def register(sub) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (tcp://host:port)")
     p.add_argument("--from-json", metavar="FILE", help="rewrite the report and plots from saved results (no runs)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
-    p.add_argument("--axis", choices=("all", "effects"), default="all",
-                   help="'effects': run only the effects axis (each effect a scene can list, on fig12) and "
-                        "update its section of DIR's existing report and JSON")
+    p.add_argument("--axis", choices=("all", "effects", "objects"), default="all",
+                   help="'effects': run only the effects axis (each effect a scene can list, on fig12), "
+                        "'objects': only the sky axis (the multi-object tracker's frame against objects and "
+                        "points), and update its section of DIR's existing report and JSON")
     p.add_argument("--effects", metavar="NAME[,NAME...]",
                    help="with --axis effects: only these effects (default: every one the axis measures)")
     p.set_defaults(func=cmd_accuracy_vs_time)
@@ -60,10 +61,10 @@ def cmd_accuracy_vs_time(args) -> int:
     out = output_dir(args.out, "--out")
     if args.effects and args.axis != "effects":
         raise UserError("--effects: give it with --axis effects")
-    if args.axis == "effects":
+    if args.axis != "all":
         if args.from_json:
-            raise UserError("--from-json rewrites the whole report; give it without --axis effects")
-        return _effects_axis(args, out)
+            raise UserError(f"--from-json rewrites the whole report; give it without --axis {args.axis}")
+        return _one_axis(args, out)
     if args.from_json:
         try:
             saved = json.loads(Path(args.from_json).read_text())
@@ -101,23 +102,24 @@ def _write(results: dict, meta: dict, out: Path) -> int:
     return 0
 
 
-def _effects_axis(args, out: Path) -> int:
-    """Run the effects axis alone and write it into ``out``'s existing results and report (the rest
-    of the report is rewritten from the saved results, unchanged)."""
+def _one_axis(args, out: Path) -> int:
+    """Run one axis alone (``--axis effects`` or ``objects``) and write it into ``out``'s existing
+    results and report (the rest of the report is rewritten from the saved results, unchanged)."""
     from sim.study.effect_costs import measured_effects, merge
-    from sim.study.runner import cpu_name, json_ready, run_effects_axis
+    from sim.study.runner import cpu_name, json_ready, run_effects_axis, run_objects_axis
     from sim.sweep import make_executor
 
+    flag = f"--axis {args.axis}"
     path = out / RESULTS
     try:
         saved = json.loads(path.read_text())
     except FileNotFoundError:
-        raise UserError(f"--axis effects: {path} does not exist; run the whole study into {out} first "
+        raise UserError(f"{flag}: {path} does not exist; run the whole study into {out} first "
                         "(foveatrack study accuracy-vs-time --out DIR)") from None
     except (OSError, ValueError) as exc:
-        raise UserError(f"--axis effects: {path} is not a study result ({exc})") from None
+        raise UserError(f"{flag}: {path} is not a study result ({exc})") from None
     if not isinstance(saved, dict) or "results" not in saved or "meta" not in saved:
-        raise UserError(f"--axis effects: {path} is not a study result (no 'results'/'meta')")
+        raise UserError(f"{flag}: {path} is not a study result (no 'results'/'meta')")
     effects = None
     if args.effects:
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]
@@ -126,17 +128,23 @@ def _effects_axis(args, out: Path) -> int:
         if bad or not effects:
             raise UserError(f"--effects {args.effects}: {', '.join(bad) or 'no name'} not measured by the axis; "
                             f"allowed: {', '.join(allowed)}")
+    size = "quick" if args.quick else "full"
     load_start = _load()
     t0 = time.perf_counter()
     with make_executor(args.scheduler, args.workers) as ex:
-        axis, cpu_s = run_effects_axis("quick" if args.quick else "full", ex, effects, progress=not args.no_progress)
-    argv = (["foveatrack study accuracy-vs-time --axis effects"] + (["--effects", args.effects] if args.effects else [])
+        if args.axis == "effects":
+            axis, cpu_s = run_effects_axis(size, ex, effects, progress=not args.no_progress)
+        else:
+            axis, cpu_s = run_objects_axis(size, ex, progress=not args.no_progress)
+    argv = ([f"foveatrack study accuracy-vs-time {flag}"] + (["--effects", args.effects] if args.effects else [])
             + (["--quick"] if args.quick else []) + ["--out", str(args.out)]
             + (["--workers", str(args.workers)] if args.workers else []))
     results, meta = saved["results"], saved["meta"]
     results.setdefault("axes", {})
-    results["axes"]["effects"] = json_ready(merge(results["axes"].get("effects"), axis))
-    results["axes"]["effects"]["run"] = {
+    if args.axis == "effects":     # a run of some effects updates their rows and keeps the others'
+        axis = merge(results["axes"].get("effects"), axis)
+    results["axes"][args.axis] = json_ready(axis)
+    results["axes"][args.axis]["run"] = {
         "command": " ".join(argv), "wall_s": time.perf_counter() - t0, "cpu_s": cpu_s,
         "workers": args.workers or (f"Dask at {args.scheduler}" if args.scheduler else os.cpu_count()),
         "cpu": cpu_name(), "load_1min_start": load_start, "load_1min_end": _load()}

@@ -108,6 +108,14 @@ def headlines(res: dict) -> list[str]:
             d, dm = r["delta"]["error_rms_acq_deg"], r["delta"]["recon_rms_m"]
             out.append(f"- Lever, {r['lever']} ({lv['scene']}): tracking error after acquisition {_delta(d)} deg, "
                        f"world position {_delta(dm)} m, CPU x{_ci(r['cost_ratio'])} of the paper's loop.")
+    ob = {r["case"]: r for r in (ax.get("objects") or {}).get("rows", [])}
+    lo, hi, sw = ob.get("drone-and-flock, 0 birds"), ob.get("drone-and-flock, 80 birds"), \
+        ob.get("swarm-of-five + the 20-bird flock")
+    if lo and hi and sw:
+        out.append(f"- Sky (multi-object tracker): 0 -> 80 birds take a frame {_ci(lo['ci']['ms_per_frame'])} -> "
+                   f"{_ci(hi['ci']['ms_per_frame'])} ms of CPU; the swarm with the 20-bird flock "
+                   f"{_ci(sw['ci']['ms_per_frame'])} ms ({_f(sw.get('x_real_time'), '{:.0f}')}x real time), of it the "
+                   f"tracker {_ci(sw['ci']['tracker_ms_per_frame'])} ms.")
     return out + [""]
 
 
@@ -293,6 +301,9 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
     # 7 ----------------------------------------------------------------------------------------
     L += effects_section(ax.get("effects"))
 
+    # 8 ----------------------------------------------------------------------------------------
+    L += objects_section(ax.get("objects"))
+
     # Pareto --------------------------------------------------------------------------------------
     L += ["## Pareto front: for a target accuracy, the cheapest settings", "",
           "Per axis and scene/target, the measured settings that no other beats *beyond the noise* (better on one "
@@ -329,14 +340,26 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
                            else f"{_f(c['error'])} ({_f(c.get('error_hi'))})" if c["error"] is not None else "-"),
                           ", ".join(c.get("cost_ties") or []) or "-"]
                          for c in g["cheapest"]])
-    L += ["## Regenerate", "", "```", COMMAND, EFFECTS_COMMAND, "```", "",
+    L += ["## Regenerate", "", "```", COMMAND, EFFECTS_COMMAND, OBJECTS_COMMAND, "```", "",
           "Add `--scheduler tcp://HOST:8786` to run the same tasks on a Dask cluster, `--quick` for the small "
           "version; `--from-json FILE` rewrites the report and plots from saved results without rerunning.  The "
-          "second command runs section 7 alone and writes it into the existing results and page.", ""]
+          "second and third commands run section 7 or 8 alone and write it into the existing results and page.", ""]
     return "\n".join(L)
 
 
 EFFECTS_COMMAND = "foveatrack study accuracy-vs-time --axis effects --out docs --workers 2"
+
+
+OBJECTS_COMMAND = "foveatrack study accuracy-vs-time --axis objects --out docs --workers 2"
+
+
+def _how_run(axis: dict) -> str:
+    """How a section run alone was measured (its ``run`` record), or that the whole study measured it."""
+    run = axis.get("run")
+    return (f"Measured by `{run['command']}` ({_f(run.get('wall_s'), '{:.0f}')} s wall on {run.get('workers', '?')} "
+            f"workers, {_f(run.get('cpu_s'), '{:.0f}')} s of measured CPU; CPU: {run.get('cpu', 'not recorded')}, load "
+            f"{_f(run.get('load_1min_start'), '{:.1f}')} at the start and {_f(run.get('load_1min_end'), '{:.1f}')} at the "
+            "end)" if run else "Measured in the whole study's run (above)")
 
 
 def effects_section(ef: dict | None) -> list[str]:
@@ -344,11 +367,7 @@ def effects_section(ef: dict | None) -> list[str]:
     (:mod:`sim.study.effect_costs`); regenerated alone by :data:`EFFECTS_COMMAND`."""
     if not ef or not ef.get("rows"):
         return []
-    run = ef.get("run")
-    how = (f"Measured by `{run['command']}` ({_f(run.get('wall_s'), '{:.0f}')} s wall on {run.get('workers', '?')} "
-           f"workers, {_f(run.get('cpu_s'), '{:.0f}')} s of measured CPU; CPU: {run.get('cpu', 'not recorded')}, load "
-           f"{_f(run.get('load_1min_start'), '{:.1f}')} at the start and {_f(run.get('load_1min_end'), '{:.1f}')} at the "
-           "end)" if run else "Measured in the whole study's run (above)")
+    how = _how_run(ef)
     L = ["## 7. The effects: what each costs per frame and does to fig12's tracking", "",
          f"Each effect a scene can list, added alone to {ef['scene']} at its documented default parameters "
          f"(docs/scenes.md), {_f(ef['duration_s'], '{:g}')} s, seeds {', '.join(map(str, ef['seeds']))}, paired with "
@@ -369,7 +388,31 @@ def effects_section(ef: dict | None) -> list[str]:
     return L
 
 
-__all__ = ["write_report", "headlines", "effects_section", "COMMAND", "EFFECTS_COMMAND", "TARGETS"]
+def objects_section(ob: dict | None) -> list[str]:
+    """Section 8 of the report: the multi-object tracker's frame against the objects and points in the
+    field, and what it tracks (:mod:`sim.study.sky_objects`); regenerated alone by :data:`OBJECTS_COMMAND`."""
+    if not ob or not ob.get("rows"):
+        return []
+    seeds = ob["rows"][0]["seeds"]
+    L = ["## 8. The sky: the multi-object tracker's frame against objects and points", "",
+         f"The sky scenes (issue 28; docs/sky-tracks.md) with the flock cut or added, and the swarm scanned by a "
+         f"Horizon instead of its Mid-40, {_f(ob['duration_s'], '{:g}')} s, {len(seeds)} seeds each (each seed its own "
+         f"world).  CPU is the worker's per frame of the whole closed loop without recording; of it the ray casting "
+         f"with the effects and the tracker (the loop's stage clocks).  What it tracks: the share of drones confirmed "
+         f"within 2 s of entering the field, id switches and false drone tracks per run, the mean GOSPA "
+         f"(c = 5 m).  {_how_run(ob)}.  Regenerate this section alone with `{OBJECTS_COMMAND}`.", ""]
+    L += _table(["case", "objects", "points a frame", "CPU per frame [ms]", "x real time", "ray casting [ms]",
+                 "tracker [ms]", "confirmed within 2 s", "id switches", "false drone tracks", "GOSPA [m]"],
+                [[r["case"], _f(r["ci"]["objects"]["mean"], "{:.0f}"), _f(r["ci"]["points_per_frame"]["mean"], "{:.0f}"),
+                  _ci(r["ci"]["ms_per_frame"]), _f(r.get("x_real_time"), "{:.0f}"), _ci(r["ci"]["cast_ms_per_frame"]),
+                  _ci(r["ci"]["tracker_ms_per_frame"]), _ci(r["ci"]["confirmed_within_2s_share"]),
+                  _ci(r["ci"]["id_switches"]), _ci(r["ci"]["false_drone_tracks"]), _ci(r["ci"]["gospa_mean_m"])]
+                 for r in ob["rows"]])
+    return L
+
+
+__all__ = ["write_report", "headlines", "effects_section", "objects_section", "COMMAND", "EFFECTS_COMMAND",
+           "OBJECTS_COMMAND", "TARGETS"]
 
 
 def _orbit_m(target: str) -> float:

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import math
 
-from sim.study import calibration_time, effect_costs, levers, pareto, point_rate, scan_fidelity, sensing, sim_fidelity
+from sim.study import (calibration_time, effect_costs, levers, pareto, point_rate, scan_fidelity, sensing,
+                       sim_fidelity, sky_objects)
 from sim.study.common import SIZES, StudySize, warm_up
 from sim.sweep import run_tasks
 
-AXES = ("scan", "fidelity", "sensing", "calibration", "rate", "levers", "effects")
+AXES = ("scan", "fidelity", "sensing", "calibration", "rate", "levers", "effects", "objects")
 
 # Target accuracies of the closing Pareto table, per axis (in that axis's error unit).
 TARGETS = {
@@ -35,14 +36,16 @@ def execute(task) -> dict:
 
 def build_tasks(size: StudySize) -> list:
     tasks = (scan_fidelity.tasks(size) + sim_fidelity.tasks(size) + sensing.tasks(size)
-             + calibration_time.tasks(size) + point_rate.tasks(size) + levers.tasks(size) + effect_costs.tasks(size))
+             + calibration_time.tasks(size) + point_rate.tasks(size) + levers.tasks(size) + effect_costs.tasks(size)
+             + sky_objects.tasks(size))
     return sorted(tasks, key=lambda t: -t.cost_hint)
 
 
 def assemble(size: StudySize, results: list[tuple[object, dict]]) -> dict:
     """The study's results (JSON-ready apart from non-finite floats) from ``(task, result)`` pairs."""
     by = {a: [(t, r) for t, r in results if t.axis == a] for a in ("scan", "fidelity", "sensing", "coverage",
-                                                                 "calibration", "rate", "levers", "effects")}
+                                                                 "calibration", "rate", "levers", "effects",
+                                                                 "objects")}
     axes = {
         "scan": scan_fidelity.collect(by["scan"]),
         "fidelity": sim_fidelity.collect(by["fidelity"]),
@@ -51,6 +54,7 @@ def assemble(size: StudySize, results: list[tuple[object, dict]]) -> dict:
         "rate": point_rate.collect(by["rate"]),
         "levers": levers.collect(by["levers"]),
         "effects": effect_costs.collect(by["effects"]),
+        "objects": sky_objects.collect(by["objects"]),
     }
     points = {
         "scan": scan_fidelity.pareto_points(axes["scan"]),
@@ -110,6 +114,14 @@ def run_effects_axis(size: str | StudySize, executor, effects: list[str] | None 
     size = SIZES[size] if isinstance(size, str) else size
     results = run_tasks(execute, effect_costs.tasks(size, effects), executor, desc="effects", progress=progress)
     return effect_costs.collect(results), sum(r.get("cpu_s", 0.0) for _, r in results)
+
+
+def run_objects_axis(size: str | StudySize, executor, progress: bool = True) -> tuple[dict, float]:
+    """The sky axis alone (:mod:`sim.study.sky_objects`): its collected result and the CPU its runs
+    measured."""
+    size = SIZES[size] if isinstance(size, str) else size
+    results = run_tasks(execute, sky_objects.tasks(size), executor, desc="objects", progress=progress)
+    return sky_objects.collect(results), sum(r.get("cpu_s", 0.0) for _, r in results)
 
 
 def run_study(size: str | StudySize, executor, progress: bool = True) -> dict:
