@@ -2,7 +2,6 @@
 per frame and its change of the tracking error against fig12 as shipped, paired by seed; and the
 route that regenerates only that section of the report."""
 
-import json
 import shutil
 from pathlib import Path
 
@@ -10,6 +9,7 @@ import pytest
 
 from foveatrack.cli import main
 from sim.study import effect_costs as ec
+from one_axis import run_one_axis
 from sim.study.common import QUICK
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
@@ -52,23 +52,10 @@ def test_collect_pairs_by_seed():
 
 
 def test_effects_only_route_updates_its_section_and_nothing_else(tmp_path):
-    shutil.copy(DOCS / "accuracy-vs-time.json", tmp_path / "accuracy-vs-time.json")
-    before = json.loads((tmp_path / "accuracy-vs-time.json").read_text())
-    assert main(["study", "accuracy-vs-time", "--axis", "effects", "--effects", "weather", "--quick",
-                 "--out", str(tmp_path), "--workers", "1", "--no-progress"]) == 0
-    after = json.loads((tmp_path / "accuracy-vs-time.json").read_text())
-    ef = after["results"]["axes"].pop("effects")
-    before["results"]["axes"].pop("effects", None)
-    assert after == before                      # every other axis and the meta: as they were
+    ef, text = run_one_axis(tmp_path, "effects", "--effects", "weather", "--quick", "--workers", "1")
     assert [r["effect"] for r in ef["rows"]] == [ec.REFERENCE, "weather"] and ef["seeds"] == [12, 1012]
     assert ef["run"]["command"].startswith("foveatrack study accuracy-vs-time --axis effects --effects weather")
-    text = (tmp_path / "accuracy-vs-time.md").read_text()
     assert "## 7. The effects" in text and "| weather |" in text
-    # the page is the one --from-json writes from the same results
-    other = tmp_path / "again"
-    assert main(["study", "accuracy-vs-time", "--from-json", str(tmp_path / "accuracy-vs-time.json"),
-                 "--out", str(other)]) == 0
-    assert (other / "accuracy-vs-time.md").read_text() == text
 
 
 def test_effects_route_user_errors(tmp_path, capsys):

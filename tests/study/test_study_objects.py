@@ -3,18 +3,14 @@ frame against the objects and the points in the field, with what it tracks; and 
 regenerates only that section.  Times are not asserted (benchmarks print them); the cases, the
 pairing and the route are."""
 
-import json
 import math
-import shutil
-from pathlib import Path
 
 import pytest
 
 from foveatrack.cli import main
+from one_axis import run_one_axis
 from sim.study import sky_objects as so
 from sim.study.common import QUICK
-
-DOCS = Path(__file__).resolve().parents[2] / "docs"
 
 
 def test_the_cases_change_what_they_say_and_nothing_else():
@@ -50,14 +46,7 @@ def test_collect_gives_each_case_its_intervals_and_real_time_factor():
 
 
 def test_objects_only_route_updates_its_section_and_nothing_else(tmp_path):
-    shutil.copy(DOCS / "accuracy-vs-time.json", tmp_path / "accuracy-vs-time.json")
-    before = json.loads((tmp_path / "accuracy-vs-time.json").read_text())
-    assert main(["study", "accuracy-vs-time", "--axis", "objects", "--quick", "--out", str(tmp_path),
-                 "--workers", "2", "--no-progress"]) == 0
-    after = json.loads((tmp_path / "accuracy-vs-time.json").read_text())
-    ob = after["results"]["axes"].pop("objects")
-    before["results"]["axes"].pop("objects", None)
-    assert after == before                      # every other axis and the meta: as they were
+    ob, text = run_one_axis(tmp_path, "objects", "--quick", "--workers", "2")
     rows = {r["case"]: r for r in ob["rows"]}
     assert list(rows) == [c[0] for c in so.CASES]
     assert [rows[f"drone-and-flock, {n} birds"]["ci"]["objects"]["mean"] for n in (0, 5, 20, 80)] == [1, 6, 21, 81]
@@ -68,12 +57,7 @@ def test_objects_only_route_updates_its_section_and_nothing_else(tmp_path):
         assert all(math.isfinite(r["ci"][k]["mean"]) for k in so.METRICS), r["case"]
         assert 0.0 <= r["ci"]["confirmed_within_2s_share"]["mean"] <= 1.0
     assert ob["run"]["command"].startswith("foveatrack study accuracy-vs-time --axis objects --quick")
-    text = (tmp_path / "accuracy-vs-time.md").read_text()
     assert "## 8. The sky" in text and "| swarm-of-five + the 20-bird flock |" in text
-    other = tmp_path / "again"
-    assert main(["study", "accuracy-vs-time", "--from-json", str(tmp_path / "accuracy-vs-time.json"),
-                 "--out", str(other)]) == 0
-    assert (other / "accuracy-vs-time.md").read_text() == text
 
 
 def test_objects_route_user_errors(tmp_path, capsys):
