@@ -84,14 +84,12 @@ def main(argv=None) -> int:
     ap.add_argument("--scene", action="append", choices=sorted({**CASES, **SKY_CASES}), default=None,
                     help="regenerate only this scene (repeatable); the others keep their stored values")
     args = ap.parse_args(argv)
-    if args.monte_carlo or args.sky:
-        kind = "sky" if args.sky else "pinned"
-        if args.scene and not set(args.scene) <= set(MC_KINDS[kind][1]):
-            raise SystemExit(f"--scene: {', '.join(sorted(set(args.scene) - set(MC_KINDS[kind][1])))} is not "
-                             f"a scene of {MC_KINDS[kind][6]}")
+    kind = "sky" if args.sky else "pinned" if args.monte_carlo else None
+    allowed, what = (MC_KINDS[kind][1], f"a scene of {MC_KINDS[kind][6]}") if kind else (CASES, "a pinned scene")
+    if args.scene and not set(args.scene) <= set(allowed):
+        raise SystemExit(f"--scene: {', '.join(sorted(set(args.scene) - set(allowed)))} is not {what}")
+    if kind:
         return update_monte_carlo(args, kind)
-    if args.scene and not set(args.scene) <= set(CASES):
-        raise SystemExit(f"--scene: {', '.join(sorted(set(args.scene) - set(CASES)))} is not a pinned scene")
     old = json.loads(BASELINE.read_text())["scenes"] if BASELINE.exists() else {}
     scenes = {name: old[name] for name in CASES if args.scene and name not in args.scene and name in old}
     for name in CASES:

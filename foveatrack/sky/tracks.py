@@ -566,21 +566,22 @@ class SkyTracker:
                 gone.append(tr.track_id)
             else:
                 keep.append(tr)
-        away = self._merged_away(keep, t_s, gone)
+        away = self._merged_away(keep, t_s)
+        gone += away
         self.tracks = [tr for tr in keep if tr.track_id not in away]
         return gone
 
-    def _merged_away(self, tracks: list[SkyTrack], t_s: float, gone: list[int]) -> set[int]:
+    def _merged_away(self, tracks: list[SkyTrack], t_s: float) -> list[int]:
         """Ids of confirmed tracks that have been one object with another for ``merge_frames``
         frames in a row (within ``merge_m`` and ``merge_v_m_s``), or ``merge_close_frames`` (within
         ``merge_m``): of each such pair the one with fewer hits in its history goes (a tie: the
-        younger), and is added to ``gone``.  A crown part or a split cluster can start a second track
+        younger), in the order found.  A crown part or a split cluster can start a second track
         on a drone; the two then take its hits in turn and every turn is an id switch."""
         cfg = self.cfg
         if cfg.merge_frames <= 0 and cfg.merge_close_frames <= 0:
-            return set()
+            return []
         conf = [tr for tr in tracks if tr.confirmed]
-        together, away = {}, set()
+        together, away = {}, []
         if len(conf) < 2:
             self._together = {}
             return away
@@ -599,8 +600,7 @@ class SkyTracker:
             together[key] = (close + 1, same)
             if 0 < cfg.merge_frames <= same or 0 < cfg.merge_close_frames <= close + 1:
                 weaker = tb if (len(tb.history), -tb.track_id) <= (len(ta.history), -ta.track_id) else ta
-                away.add(weaker.track_id)
-                gone.append(weaker.track_id)
+                away.append(weaker.track_id)
         self._together = {k: n for k, n in together.items() if k[0] not in away and k[1] not in away}
         return away
 

@@ -79,15 +79,24 @@ BASELINE_MC = Path(__file__).with_name("baseline_mc.json")
 MC_SEEDS = 8
 
 
-def monte_carlo(names, seeds, executor=None, tracker: dict | None = None, progress: bool = False) -> dict:
-    """``{scene name: spread_over_runs(...)}`` of the pinned scenes over ``seeds``."""
+def _spreads(names, seeds, durations: dict, executor, progress: bool, tracker: dict | None = None,
+             sky: dict | None = None) -> dict:
+    """``{scene name: spread_over_runs(...)}`` of each scene over ``seeds`` at its duration in
+    ``durations`` (None: its own), with ``tracker`` and ``[tracker.sky]`` overrides: what both Monte
+    Carlo baselines run."""
     from foveatrack.metrics import spread_over_runs
     from sim.monte_carlo import SeedRun, run_seeds
 
-    tasks = [SeedRun(str(ROOT / "scenes" / f"{n}.toml"), s, CASES[n], tuple(sorted((tracker or {}).items())))
+    tasks = [SeedRun(str(ROOT / "scenes" / f"{n}.toml"), s, durations[n], tuple(sorted((tracker or {}).items())),
+                     tuple(sorted((sky or {}).items())))
              for n in names for s in seeds]
     results = run_seeds(tasks, executor, progress)
     return {n: spread_over_runs([results[t] for t in tasks if Path(t.scene_path).stem == n]) for n in names}
+
+
+def monte_carlo(names, seeds, executor=None, tracker: dict | None = None, progress: bool = False) -> dict:
+    """``{scene name: spread_over_runs(...)}`` of the pinned scenes over ``seeds``."""
+    return _spreads(names, seeds, CASES, executor, progress, tracker=tracker)
 
 
 # ---- the sky scenes (issue 28's multi-object tracker) over seeds: their totals per run -----------
@@ -124,17 +133,9 @@ SKY_TOLERANCES = {
 def sky_monte_carlo(names, seeds, executor=None, sky: dict | None = None, progress: bool = False) -> dict:
     """``{scene name: spread of its sky totals}`` (keys without ``sky.totals.``) over ``seeds``;
     ``sky``: ``[tracker.sky]`` keys to set for the runs."""
-    from foveatrack.metrics import spread_over_runs
-    from sim.monte_carlo import SeedRun, run_seeds
-
-    tasks = [SeedRun(str(ROOT / "scenes" / f"{n}.toml"), s, SKY_CASES[n], (), tuple(sorted((sky or {}).items())))
-             for n in names for s in seeds]
-    results = run_seeds(tasks, executor, progress)
-    out = {}
-    for n in names:
-        spread = spread_over_runs([results[t] for t in tasks if Path(t.scene_path).stem == n])
-        out[n] = {k[len(SKY_PREFIX):]: v for k, v in spread.items() if k.startswith(SKY_PREFIX)}
-    return out
+    spreads = _spreads(names, seeds, SKY_CASES, executor, progress, sky=sky)
+    return {n: {k[len(SKY_PREFIX):]: v for k, v in spread.items() if k.startswith(SKY_PREFIX)}
+            for n, spread in spreads.items()}
 
 
 def assert_spread_no_worse(name: str, spread: dict, baseline: dict, tolerances: dict) -> None:
