@@ -43,12 +43,18 @@ METRICS = ("ms_per_frame", "cast_ms_per_frame", "tracker_ms_per_frame", "points_
 def sky_scene(name: str, duration_s: float, seed: int | None = None, birds: int | None = None,
               flock_of: str | None = None, preset: str | None = None):
     """A shipped sky scene, changed: its flock cut to ``birds`` (0: none), another scene's birds added
-    (``flock_of``), another lidar (``preset``); at ``duration_s`` and ``seed`` (None: its own), rebuilt
-    from its text so that what it draws follows them."""
-    from sim.scene import scene_from_mapping, with_run_overrides
+    (``flock_of``), another lidar (``preset``); at ``duration_s`` and ``seed`` (None: its own), both set
+    in its table before it is built, so that what it draws when built (the flock's slots and wander,
+    the crowns' sway over the run) follows them.  (:func:`sim.scene.with_run_overrides` cannot do it
+    here: a scene built from a changed table has no text to rebuild from, and only its plain fields
+    would change.)"""
+    from sim.scene import scene_from_mapping
 
     path = SCENES_DIR / f"{name}.toml"
     m = copy.deepcopy(tomllib.loads(path.read_text()))
+    m["scene"]["duration_s"] = duration_s
+    if seed is not None:
+        m["scene"]["seed"] = seed
     if flock_of is not None:
         m["bird"] = tomllib.loads((SCENES_DIR / f"{flock_of}.toml").read_text())["bird"]
     if birds is not None:
@@ -58,8 +64,7 @@ def sky_scene(name: str, duration_s: float, seed: int | None = None, birds: int 
             m["bird"][0]["count"] = birds
     if preset is not None:
         m["lidar"] = {"preset": preset}
-    scene = scene_from_mapping(m, str(path))
-    return with_run_overrides(scene, duration_s, scene.seed if seed is None else seed)
+    return scene_from_mapping(m, str(path))
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,7 @@ pairing and the route are."""
 
 import math
 
+import numpy as np
 import pytest
 
 from foveatrack.cli import main
@@ -25,6 +26,14 @@ def test_the_cases_change_what_they_say_and_nothing_else():
     assert len(both.targets) == len(swarm.targets) == 5
     assert len([o for o in both.others if o.cls == "bird"]) == 20 + len([o for o in swarm.others if o.cls == "bird"])
     assert so.sky_scene("swarm-of-five", 2.0, 7, preset="horizon").optics.name == "horizon"
+    # each seed its own world: the flock is drawn from the seed (a scene built from a changed table
+    # has no text, and sim.scene.with_run_overrides changed only its seed field: one flock for all)
+    t = np.array([1.0])
+    first_bird = [o for o in so.sky_scene("drone-and-flock", 2.0, 8).others if o.cls == "bird"][0]
+    assert not np.allclose(birds[0].trajectory.position(t), first_bird.trajectory.position(t))
+    assert np.array_equal(birds[0].trajectory.position(t),
+                          [o for o in so.sky_scene("drone-and-flock", 2.0, 7).others if o.cls == "bird"][0]
+                          .trajectory.position(t))
     assert swarm.optics.name == "mid40"
     # every case on the same paired seeds of its scene
     ts = so.tasks(QUICK)
