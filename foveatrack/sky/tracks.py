@@ -37,11 +37,13 @@ Per frame:
    track's hit of this frame: the sparse scan splits a drone into two clusters now and then, and a
    second track on it would take its hits in turn with the first (swarm-of-five, 24 runs: id
    switches 102 -> 74, second tracks labelled drone 16 -> 9).  A tentative track is confirmed after ``confirm_hits``
-   hits off the scenery in its first ``confirm_window`` frames, and dropped if it is not.  A track not
-   seen for ``lost_after_s`` while where it was last seen lies in the lidar's field
-   (``field_half_angle_deg`` around the optical axis at the frame's pose), or for
-   ``lost_out_of_view_s`` while it does not (the head looks elsewhere),
-   is deleted; so is one merged with another track's object (an object matched to another track
+   hits off the scenery in its first ``confirm_window`` frames, and dropped if it is not.  A track is
+   deleted once it has gone unseen for ``lost_after_s`` of the time where it was last seen lay in the
+   lidar's field (``field_half_angle_deg`` around the optical axis at the frame's pose), or for
+   ``lost_out_of_view_s`` in all: the time the head looked elsewhere does not count toward the first
+   (the crossing, seed 33: the head turned back to a drone it had left 1.7 s before, and its track
+   was deleted 0.3 s after the drone was back at the sparse rim; over the cold hours of the four
+   scenes, id switches 847 -> 833); so is one merged with another track's object (an object matched to another track
    lies in its gate while none is left for it: two clusters became one) for longer.  A confirmed
    track that in ``static_window_s`` of life never got ``static_radius_m`` from where it was first
    seen is scenery (a part of a tree the background has not learned yet): dropped, and its D made
@@ -103,7 +105,7 @@ class SkyTrackerConfig:
     gate_chi2 : > 0              largest squared Mahalanobis distance of an allowed pair
     gate_max_m : > 0 [m]         largest distance of an allowed pair from the prediction
     confirm_hits, confirm_window : ints    M hits of the first N frames
-    lost_after_s : > 0 [s]       unseen this long while in the field: deleted
+    lost_after_s : > 0 [s]       unseen this long in the field (summed): deleted
     lost_out_of_view_s : > 0 [s] unseen this long while out of the field: deleted
     field_half_angle_deg : > 0 or None     the lidar's field around its axis (None: every track in view)
     static_window_s, static_radius_m       a confirmed track that stayed put this long is scenery
@@ -227,6 +229,7 @@ class SkyTrack:
     excursion_m: float = 0.0
     last_xyz_m: np.ndarray | None = None
     last_seen_in_view: bool = True
+    unseen_in_view_s: float = 0.0   # time since its last hit during which where it was last seen lay in the field
     classified_on: tuple | None = None    # what the classifier last read (SkyTracker._classify)
 
     @property
@@ -447,7 +450,7 @@ class SkyTracker:
             keep = np.ones(cells.size, bool)
             keep[fg_idx[~learn_pts]] = False
             self.background.learn(cells[keep], ranges[keep])
-        deleted = self._prune(t_mid, fovea_track_id)
+        deleted = self._prune(t_mid, fovea_track_id, t1 - t0)
         for tr in self.tracks:
             self._classify(tr)
             tr.label, tr.drone_frames = held_label(tr.seen_as, tr.label, tr.drone_frames, cfg.classifier)
@@ -543,18 +546,23 @@ class SkyTracker:
         tr.last_xyz_m = z
         tr.excursion_m = max(tr.excursion_m, norm3(z - tr.origin_xyz_m))
 
-    def _prune(self, t_s: float, fovea_track_id: int | None = None) -> list[int]:
-        """Drop failed candidates, tracks lost too long and static scenery; returns their ids."""
+    def _prune(self, t_s: float, fovea_track_id: int | None, frame_s: float) -> list[int]:
+        """Drop failed candidates, tracks lost too long and static scenery; returns their ids.  ``frame_s``:
+        the frame's length, added to the unseen time in the field of each track not seen in it."""
         cfg = self.cfg
         keep, gone = [], []
         for tr in self.tracks:
             tr.history = [h for h in tr.history if h[0] >= t_s - cfg.history_s]
             unseen = t_s - max(tr.last_hit_t_s, tr.merged_t_s)
+            if tr.hit_now or tr.merged_t_s == t_s:
+                tr.unseen_in_view_s = 0.0
+            elif tr.last_seen_in_view:
+                tr.unseen_in_view_s += frame_s
             # the track the fovea is turning to is not given up while the head gets there: the
             # attention gives the turn saccade_timeout_s, and a revisit comes when a track at the
             # sparse rim may have gone unseen for lost_after_s
             in_view = tr.last_seen_in_view and tr.track_id != fovea_track_id
-            lost = unseen > (cfg.lost_after_s if in_view else cfg.lost_out_of_view_s)
+            lost = (in_view and tr.unseen_in_view_s > cfg.lost_after_s) or unseen > cfg.lost_out_of_view_s
             failed = not tr.confirmed and tr.frames_seen >= cfg.confirm_window and tr.clear_hits < cfg.confirm_hits
             if lost or failed:
                 gone.append(tr.track_id)

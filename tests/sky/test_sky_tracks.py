@@ -310,3 +310,25 @@ def test_the_track_the_fovea_turns_to_is_not_given_up_while_the_head_gets_there(
         for i in tracker.process(empty(k), pose, fovea_track_id=3).deleted_now:
             gone_at[i] = (k + 1) * 0.1
     assert 2.0 < gone_at[8] <= 2.3 and 5.0 < gone_at[3] <= 5.3, gone_at
+
+
+def test_only_the_time_in_the_field_counts_toward_losing_a_track():
+    # A confirmed track unseen from 0.1 s on; the head looks 40 deg away until 1.5 s, then back.  The
+    # scan could not have seen it while it was out of the field, so it is lost after lost_after_s
+    # (2 s) in the field: at 3.5 s, not at 2 s.  On the crossing (seed 33) the head turned back to a
+    # drone it had left 1.7 s before, and its track was deleted 0.3 s after the drone was back in
+    # the field, at the rosette's sparse rim, with no ray on it yet: the drone came back under a new id.
+    # One that stays out of the field goes after lost_out_of_view_s (5 s), as before.
+    from foveatrack.frames import Frame
+
+    tracker = SkyTracker(SkyTrackerConfig(warmup_s=0.0, field_half_angle_deg=19.2))
+    empty = lambda k: Frame(k * 0.1, (k + 1) * 0.1, np.empty((0, 3)), np.empty(0, np.int64))
+    pose = Pose(lambda t: (40.0 if t < 1.5 else 0.0, 0.0))
+    tracker.process(empty(0), pose)
+    tracker.tracks = [_confirmed_track(tracker, 3, [30, 5, 3.0], [0, 0, 0], 12, 0.1),
+                      _confirmed_track(tracker, 8, [-30, 5, 3.0], [0, 0, 0], 12, 0.1)]   # behind: never in the field
+    gone_at = {}
+    for k in range(1, 60):
+        for i in tracker.process(empty(k), pose).deleted_now:
+            gone_at[i] = (k + 1) * 0.1
+    assert 3.5 <= gone_at[3] <= 3.7 and 5.0 < gone_at[8] <= 5.3, gone_at
