@@ -103,3 +103,40 @@ def test_a_revisit_gap_ends_with_the_drones_last_frame_in_the_field():
     back = np.where((np.arange(T) >= 50) & (np.arange(T) < 70), False, True)
     assert drone_metrics(t, {"a": {**d, "in_field": back}}, tracks)["drones"]["a"]["longest_revisit_gap_s"] \
         == pytest.approx(8.0)
+
+
+def test_a_track_passing_by_a_drone_does_not_take_its_match():
+    # The drone's own track follows it 0.3 m off; a crown's track (labelled clutter) passes through
+    # the drone's position.  CLEAR MOT keeps the drone's match while its track stays within match_m:
+    # no id switch (by the assignment alone the passing track took the drone for a few frames: two).
+    T = 40
+    t = 0.1 * np.arange(T)
+    xyz = np.stack([np.full(T, 30.0), np.linspace(-2, 2, T), np.full(T, 3.0)], 1)
+    crossing = np.stack([np.full(T, 30.0), np.full(T, 0.0), np.linspace(5.0, 1.0, T)], 1)
+    tracks = [[(1, "drone", xyz[k] + [0.0, 0.0, 0.3]), (7, "clutter", crossing[k])] for k in range(T)]
+    d = {"xyz_m": xyz, "visible": np.ones(T, bool), "in_fovea": None}
+    a = drone_metrics(t, {"a": d}, tracks)["drones"]["a"]
+    assert a["id_switches"] == 0 and a["track_ids"] == [1]
+    # ... but a track that leaves the drone hands it on: from frame 21 track 1 drifts off at 5 m/s, and
+    # track 7, on the drone from frame 20, takes it once track 1 is 2 m away (frame 25): one switch
+    gone = [[(1, "drone", xyz[k] + [0.0, 0.0, 0.3 + 0.5 * max(0, k - 20)])] + ([(7, "drone", xyz[k])] if k >= 20 else [])
+            for k in range(T)]
+    b = drone_metrics(t, {"a": d}, gone)["drones"]["a"]
+    assert b["id_switches"] == 1 and b["track_ids"] == [1, 7]
+
+
+def test_a_drone_keeps_its_track_when_another_drones_track_comes_nearer():
+    # Two drones 1.2 m apart, each with its own track between them: 0.55 m from its drone and 0.65 m
+    # from the other, then from frame 10 0.7 m from its drone and 0.5 m from the other.  By the
+    # assignment alone the drones swap tracks at frame 10 (two switches); CLEAR MOT keeps each one's.
+    T = 20
+    t = 0.1 * np.arange(T)
+    a_xyz = np.tile([30.0, 0.0, 3.0], (T, 1))
+    b_xyz = np.tile([30.0, 1.2, 3.0], (T, 1))
+    tracks = [[(1, "drone", np.array([30.0, 0.55 if k < 10 else 0.7, 3.0])),
+               (2, "drone", np.array([30.0, 0.65 if k < 10 else 0.5, 3.0]))] for k in range(T)]
+    d = {"a": {"xyz_m": a_xyz, "visible": np.ones(T, bool), "in_fovea": None},
+         "b": {"xyz_m": b_xyz, "visible": np.ones(T, bool), "in_fovea": None}}
+    m = drone_metrics(t, d, tracks)["drones"]
+    assert m["a"]["track_ids"] == [1] and m["b"]["track_ids"] == [2]
+    assert m["a"]["id_switches"] == 0 and m["b"]["id_switches"] == 0
