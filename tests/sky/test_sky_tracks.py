@@ -332,3 +332,24 @@ def test_only_the_time_in_the_field_counts_toward_losing_a_track():
         for i in tracker.process(empty(k), pose).deleted_now:
             gone_at[i] = (k + 1) * 0.1
     assert 3.5 <= gone_at[3] <= 3.7 and 5.0 < gone_at[8] <= 5.3, gone_at
+
+
+@pytest.mark.parametrize("clear_hits, confirmed, takes", [(2, False, False), (0, False, True), (2, True, True)])
+def test_a_candidate_seen_off_the_scenery_takes_no_object_on_it(clear_hits, confirmed, takes):
+    # A tentative track with two hits 0.1 s apart off the scenery gates metres wide: on the tree line
+    # such a candidate on the drone took a crown's part 3 m below it and the drone started over.  An
+    # object on the scenery in its gate is not its; off the scenery it is.  A candidate never seen off
+    # the scenery, and a confirmed track (a drone in front of a crown), take it as before.
+    from foveatrack.sky.tracks import SkyObject
+
+    tracker = SkyTracker(NO_WARMUP)
+    tr = _confirmed_track(tracker, 1, [30.0, 0.0, 8.0], [0.0, 0.0, 0.0], 2, 0.0)
+    tr.kf.c = np.full(3, 8.0)              # the velocity of two hits 0.1 s apart: 2.8 m/s a side
+    tr.clear_hits = clear_hits
+    tr.confirmed_t_s = 0.0 if confirmed else None
+    tracker.tracks = [tr]
+    below = np.array([30.0, 0.5, 5.5])      # 2.5 m below, 0.4 s on: within the chi-square gate
+    for on_scenery, expect in ((True, takes), (False, True)):
+        ob = SkyObject(below, 0.4, 6, np.array([0.5, 0.5, 0.5]), on_scenery)
+        match, allowed = tracker._associate([ob], 0.4)
+        assert (match == [(0, 0)]) is expect, (on_scenery, match, allowed)
