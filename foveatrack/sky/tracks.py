@@ -15,7 +15,9 @@ Per frame:
    entering the field 115 -> 158 of 270 drones).  What the replay starts and ends within the
    warm-up's frames is never shown, and not reported deleted.  Points of an object are kept out of the learning while its track may be
    something flying (a tentative track off the scenery, a confirmed one that went ``protect_excursion_m``
-   or more) and the object is where the track's motion predicted it (within ``protect_m``).  Objects
+   or more) and the object is where the track's motion predicted it (within ``protect_m``); so are
+   the points in the fixated track's D, if it is such a confirmed track (a hovering drone with one
+   return a frame makes no object; flock seed +240: it became scenery and its track took a bird).  Objects
    mostly on *scenery in the making* (next to cells seen long ago, not yet background) give hits that
    do not count toward confirmation.
 3. The remaining points are clustered into objects (:func:`foveatrack.openloop.objects.cluster_labels`,
@@ -401,6 +403,11 @@ class SkyTracker:
                                       head_trig(pan, tilt), off, lo, hi)
         confirmed_now = []
         learn_pts = np.ones(fg_idx.size, bool)
+        if fov is not None and self.tracks[fov].confirmed and self.tracks[fov].excursion_m >= cfg.protect_excursion_m:
+            # the fixated track's D is the target's (Algorithm 1): a frame with a single return on a
+            # hovering drone makes no object to protect, and a few such frames made it scenery
+            wf = world[fg_idx]
+            learn_pts &= ~(keep & np.all((wf >= c - cfg.d_half_m) & (wf <= c + cfg.d_half_m), axis=1))
         for i, j in match:
             tr, ob = self.tracks[i], objs[j]
             z, tz = ob.xyz_m, ob.t_s
