@@ -27,8 +27,9 @@ and what is allowed.  Tables::
 
 from __future__ import annotations
 
+import copy
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -159,6 +160,8 @@ class Scene:
     start_utc_ns: int = 1_767_225_600_000_000_000
     # birds and tree crowns (sim.world.sky.SkyObject), only if the scene lists [[bird]] / [[tree]]
     others: tuple = ()
+    # the table the scene was built from (a copy): what with_run_overrides rebuilds it from
+    table: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def multi_object(self) -> bool:
@@ -184,15 +187,15 @@ class Scene:
 
 
 def with_run_overrides(scene: Scene, duration_s: float | None = None, seed: int | None = None) -> Scene:
-    """The scene with another duration and/or seed, rebuilt from its text so that everything
-    derived from them (a manual flight's path is drawn from the seed over the duration) follows."""
-    import tomllib
-
+    """The scene with another duration and/or seed, rebuilt from the table it was built from (a
+    file's or a mapping's alike) so that everything derived from them follows: a manual flight's
+    path, a flock and a tree's sway are drawn from the seed over the duration.  (Scenes built from
+    a mapping without text used to get only the two fields changed, their world drawn as before:
+    every seed of a study flew the same flock.)  A change made to the built scene with
+    ``dataclasses.replace`` is not in its table: make it after this call."""
     if duration_s is None and seed is None:
         return scene
-    data = tomllib.loads(scene.text) if scene.text else None
-    if data is None:  # built from a mapping without text: only plain fields can change
-        return replace(scene, **{k: v for k, v in (("duration_s", duration_s), ("seed", seed)) if v is not None})
+    data = copy.deepcopy(dict(scene.table))
     sc = dict(data.get("scene", {}))
     if duration_s is not None:
         sc["duration_s"] = duration_s
@@ -311,7 +314,7 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         background_prims=np.array(prims).reshape(-1, 13), background_reflectivity=np.array(refl, dtype=float),
         tracker=tracker, tracker_table=tracker_table, imu=imu, imu_poses=imu_poses,
         gate=_gate(data["gate"], f"{where} [gate]") if "gate" in data else None, range_envelope_m=envelope,
-        start_utc_ns=start_utc_ns, others=others,
+        start_utc_ns=start_utc_ns, others=others, table=copy.deepcopy(dict(data)),
     )
 
 

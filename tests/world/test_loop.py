@@ -220,6 +220,29 @@ def test_run_overrides_rebuild_a_manual_flight(tmp_path, capsys):
     assert main(["simulate", str(path), "--no-progress", "--out", str(tmp_path / "file")]) == 2
 
 
+def test_run_overrides_rebuild_a_scene_built_from_a_mapping():
+    # A scene built from a table (no text: a study's or a script's changed copy of a shipped one) is
+    # rebuilt from that table: another seed draws another flock, the same seed the same one.  It used
+    # to get only its seed field changed, and every seed of a study flew one flock.
+    import tomllib
+
+    from sim.scene import scene_from_mapping, with_run_overrides
+
+    data = tomllib.loads((SCENES / "drone-and-flock.toml").read_text())
+    base = scene_from_mapping(data, "a table")
+    assert base.text == ""
+    t = np.array([1.0])
+
+    def first_bird(scene):
+        return next(o for o in scene.others if o.cls == "bird").trajectory.position(t)
+    other, same = with_run_overrides(base, seed=base.seed + 1), with_run_overrides(base, seed=base.seed)
+    assert other.seed == base.seed + 1 and not np.allclose(first_bird(other), first_bird(base))
+    assert np.array_equal(first_bird(same), first_bird(base))
+    assert with_run_overrides(base, duration_s=3.0).duration_s == 3.0
+    data["scene"]["seed"] = -5          # the table is the scene's own copy: changing the caller's changes nothing
+    assert with_run_overrides(base, seed=4).seed == 4
+
+
 def test_exact_head_pose_from_pieces_matches_asking_the_head_at_every_point():
     # The default route (pose from the head's motion pieces, trigonometry per ms) and the reference
     # (the head model asked about every point) are the same model: same points, same tracking.
