@@ -193,10 +193,13 @@ class FrameSlicer:
         xyz = np.concatenate(self._buf_xyz) if self._buf_xyz else np.empty((0, 3))
         t = np.concatenate(self._buf_t) if self._buf_t else np.empty(0, np.int64)
         refl = np.concatenate(self._buf_r) if (self._has_refl and self._buf_r) else None
-        order = np.argsort(t, kind="stable")
-        xyz, t = xyz[order], t[order]
-        if refl is not None:
-            refl = refl[order]
+        # packets come in time order nearly always: the gathers of a reorder cost 1-2 ms a frame at
+        # 480 k points/s (bench_daemon_frame), the test 0.02 ms
+        if t.size > 1 and not bool(np.all(t[1:] >= t[:-1])):
+            order = np.argsort(t, kind="stable")
+            xyz, t = xyz[order], t[order]
+            if refl is not None:
+                refl = refl[order]
         start = self._next_start_ns
         edges = start + period * np.arange(n_frames + 1, dtype=np.int64)
         idx = np.searchsorted(t, edges, side="left")
@@ -220,7 +223,8 @@ def strip_no_return(frame: Frame) -> Frame:
     them here before detection and recording."""
     if not frame.n_points:
         return frame
-    ret = np.any(frame.xyz != 0.0, axis=1)
+    x = frame.xyz
+    ret = (x[:, 0] != 0.0) | (x[:, 1] != 0.0) | (x[:, 2] != 0.0)    # column by column: any(axis=1) is 4x slower
     if ret.all():
         return frame
     return Frame(frame.t_start_s, frame.t_end_s, frame.xyz[ret], frame.t_ns[ret],

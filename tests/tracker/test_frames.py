@@ -33,6 +33,33 @@ def test_every_point_in_exactly_one_frame(batch):
         assert a.t_end_s == b.t_start_s
 
 
+def test_points_out_of_order_within_a_frame_come_out_in_time_order():
+    # Two packets of one frame arriving swapped, overlapping in time, with a tie (a pair of returns
+    # is stamped alike): the frame's points come out sorted by time, ties in arrival order, with
+    # their xyz and reflectivity; a stream already in order comes out as it went in.
+    rng = np.random.default_rng(3)
+    late = np.sort(rng.integers(30_000_000, 90_000_000, 50))
+    early = np.sort(np.append(rng.integers(5_000_000, 60_000_000, 49), late[10]))
+    nxt = np.sort(rng.integers(100_000_000, 250_000_000, 80))
+    batches = [late, early, nxt]
+    xyz = [rng.normal(size=(b.size, 3)) for b in batches]
+    refl = [rng.integers(0, 255, b.size).astype(np.uint8) for b in batches]
+    s = FrameSlicer(10.0)
+    frames = []
+    for b, x, r in zip(batches, xyz, refl):
+        frames += s.push(x, b.astype(np.int64), r)
+    frames += s.flush()
+    t_all = np.concatenate(batches)
+    order = np.argsort(t_all, kind="stable")
+    assert np.array_equal(np.concatenate([f.t_ns for f in frames]), t_all[order])
+    assert np.array_equal(np.concatenate([f.xyz for f in frames]), np.concatenate(xyz)[order])
+    assert np.array_equal(np.concatenate([f.reflectivity for f in frames]), np.concatenate(refl)[order])
+    s = FrameSlicer(10.0)
+    frames = s.push(np.concatenate(xyz)[order], t_all[order], np.concatenate(refl)[order]) + s.flush()
+    assert np.array_equal(np.concatenate([f.xyz for f in frames]), np.concatenate(xyz)[order])
+    assert s.late_points == 0
+
+
 def test_boundary_point_goes_to_later_frame_and_gaps_make_empty_frames():
     s = FrameSlicer(10.0)
     out = s.push(np.zeros((3, 3)) + 1, np.array([50_000_000, 100_000_000, 350_000_000]))
