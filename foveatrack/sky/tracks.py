@@ -49,7 +49,7 @@ Per frame:
    lidar's field (``field_half_angle_deg`` around the optical axis at the frame's pose), or for
    ``lost_out_of_view_s`` in all: the time the head looked elsewhere does not count toward the first
    (the crossing, seed 33: the head turned back to a drone it had left 1.7 s before, and its track
-   was deleted 0.3 s after the drone was back at the sparse rim; over the cold hours of the four
+   was deleted 0.5 s after the drone was back at the sparse rim; over the cold hours of the four
    scenes, id switches 847 -> 833); so is one merged with another track's object (an object matched to another track
    lies in its gate while none is left for it: two clusters became one) for longer.  A confirmed
    track that in ``static_window_s`` of life never got ``static_radius_m`` from where it was first

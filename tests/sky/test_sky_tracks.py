@@ -316,7 +316,7 @@ def test_only_the_time_in_the_field_counts_toward_losing_a_track():
     # A confirmed track unseen from 0.1 s on; the head looks 40 deg away until 1.5 s, then back.  The
     # scan could not have seen it while it was out of the field, so it is lost after lost_after_s
     # (2 s) in the field: at 3.5 s, not at 2 s.  On the crossing (seed 33) the head turned back to a
-    # drone it had left 1.7 s before, and its track was deleted 0.3 s after the drone was back in
+    # drone it had left 1.7 s before, and its track was deleted 0.5 s after the drone was back in
     # the field, at the rosette's sparse rim, with no ray on it yet: the drone came back under a new id.
     # One that stays out of the field goes after lost_out_of_view_s (5 s), as before.
     from foveatrack.frames import Frame
