@@ -106,7 +106,7 @@ def _one_axis(args, out: Path) -> int:
     """Run one axis alone (``--axis effects`` or ``objects``) and write it into ``out``'s existing
     results and report (the rest of the report is rewritten from the saved results, unchanged)."""
     from sim.study.effect_costs import measured_effects, merge
-    from sim.study.runner import cpu_name, json_ready, run_effects_axis, run_objects_axis
+    from sim.study.runner import cpu_name, json_ready, run_one_axis
     from sim.sweep import make_executor
 
     flag = f"--axis {args.axis}"
@@ -132,10 +132,7 @@ def _one_axis(args, out: Path) -> int:
     load_start = _load()
     t0 = time.perf_counter()
     with make_executor(args.scheduler, args.workers) as ex:
-        if args.axis == "effects":
-            axis, cpu_s = run_effects_axis(size, ex, effects, progress=not args.no_progress)
-        else:
-            axis, cpu_s = run_objects_axis(size, ex, progress=not args.no_progress)
+        axis, cpu_s = run_one_axis(args.axis, size, ex, effects, progress=not args.no_progress)
     argv = ([f"foveatrack study accuracy-vs-time {flag}"] + (["--effects", args.effects] if args.effects else [])
             + (["--quick"] if args.quick else []) + ["--out", str(args.out)]
             + (["--workers", str(args.workers)] if args.workers else []))

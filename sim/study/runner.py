@@ -43,9 +43,8 @@ def build_tasks(size: StudySize) -> list:
 
 def assemble(size: StudySize, results: list[tuple[object, dict]]) -> dict:
     """The study's results (JSON-ready apart from non-finite floats) from ``(task, result)`` pairs."""
-    by = {a: [(t, r) for t, r in results if t.axis == a] for a in ("scan", "fidelity", "sensing", "coverage",
-                                                                 "calibration", "rate", "levers", "effects",
-                                                                 "objects")}
+    # every axis's tasks, and the sensing axis's coverage tasks (collected with it)
+    by = {a: [(t, r) for t, r in results if t.axis == a] for a in AXES + ("coverage",)}
     axes = {
         "scan": scan_fidelity.collect(by["scan"]),
         "fidelity": sim_fidelity.collect(by["fidelity"]),
@@ -107,21 +106,20 @@ def cpu_name() -> str:
     return platform.processor() or platform.machine() or "unknown"
 
 
-def run_effects_axis(size: str | StudySize, executor, effects: list[str] | None = None,
-                     progress: bool = True) -> tuple[dict, float]:
-    """The effects axis alone (:mod:`sim.study.effect_costs`): its collected result and the CPU its
-    runs measured.  ``effects``: a subset of the measured effects (default: all of them)."""
+def run_one_axis(axis: str, size: str | StudySize, executor, effects: list[str] | None = None,
+                 progress: bool = True) -> tuple[dict, float]:
+    """One axis alone, ``"effects"`` (:mod:`sim.study.effect_costs`; ``effects``: a subset of the
+    measured effects, default all) or ``"objects"`` (:mod:`sim.study.sky_objects`): its collected
+    result and the CPU its runs measured."""
     size = SIZES[size] if isinstance(size, str) else size
-    results = run_tasks(execute, effect_costs.tasks(size, effects), executor, desc="effects", progress=progress)
-    return effect_costs.collect(results), sum(r.get("cpu_s", 0.0) for _, r in results)
-
-
-def run_objects_axis(size: str | StudySize, executor, progress: bool = True) -> tuple[dict, float]:
-    """The sky axis alone (:mod:`sim.study.sky_objects`): its collected result and the CPU its runs
-    measured."""
-    size = SIZES[size] if isinstance(size, str) else size
-    results = run_tasks(execute, sky_objects.tasks(size), executor, desc="objects", progress=progress)
-    return sky_objects.collect(results), sum(r.get("cpu_s", 0.0) for _, r in results)
+    if axis == "effects":
+        module, tasks = effect_costs, effect_costs.tasks(size, effects)
+    elif axis == "objects":
+        module, tasks = sky_objects, sky_objects.tasks(size)
+    else:
+        raise ValueError(f"no single-axis run for {axis!r}; axes run alone: effects, objects")
+    results = run_tasks(execute, tasks, executor, desc=axis, progress=progress)
+    return module.collect(results), sum(r.get("cpu_s", 0.0) for _, r in results)
 
 
 def run_study(size: str | StudySize, executor, progress: bool = True) -> dict:

@@ -45,9 +45,7 @@ def sky_scene(name: str, duration_s: float, seed: int | None = None, birds: int 
     """A shipped sky scene, changed: its flock cut to ``birds`` (0: none), another scene's birds added
     (``flock_of``), another lidar (``preset``); at ``duration_s`` and ``seed`` (None: its own), both set
     in its table before it is built, so that what it draws when built (the flock's slots and wander,
-    the crowns' sway over the run) follows them.  (:func:`sim.scene.with_run_overrides` cannot do it
-    here: a scene built from a changed table has no text to rebuild from, and only its plain fields
-    would change.)"""
+    the crowns' sway over the run) follows them; the scene is built once."""
     from sim.scene import scene_from_mapping
 
     path = SCENES_DIR / f"{name}.toml"

@@ -26,8 +26,8 @@ def test_the_cases_change_what_they_say_and_nothing_else():
     assert len(both.targets) == len(swarm.targets) == 5
     assert len([o for o in both.others if o.cls == "bird"]) == 20 + len([o for o in swarm.others if o.cls == "bird"])
     assert so.sky_scene("swarm-of-five", 2.0, 7, preset="horizon").optics.name == "horizon"
-    # each seed its own world: the flock is drawn from the seed (a scene built from a changed table
-    # has no text, and sim.scene.with_run_overrides changed only its seed field: one flock for all)
+    # each seed its own world: the flock is drawn from the seed (the builder once set only the built
+    # scene's seed field, and every seed flew one flock)
     t = np.array([1.0])
     first_bird = [o for o in so.sky_scene("drone-and-flock", 2.0, 8).others if o.cls == "bird"][0]
     assert not np.allclose(birds[0].trajectory.position(t), first_bird.trajectory.position(t))
