@@ -398,7 +398,8 @@ class SkyTracker:
                     keep &= point_obj != j
             sel = fg_idx[keep]
             c = tr.kf.predicted(t_mid)[0]
-            lo, hi = box_bounds(Box(tuple((c - cfg.d_half_m).tolist()), tuple((c + cfg.d_half_m).tolist())))
+            d_box = Box(tuple((c - cfg.d_half_m).tolist()), tuple((c + cfg.d_half_m).tolist()))
+            lo, hi = box_bounds(d_box)
             fovea_det = box_detection(np.ascontiguousarray(xyz[sel]), np.ascontiguousarray(t_ns[sel]),
                                       head_trig(pan, tilt), off, lo, hi)
         confirmed_now = []
@@ -406,8 +407,7 @@ class SkyTracker:
         if fov is not None and self.tracks[fov].confirmed and self.tracks[fov].excursion_m >= cfg.protect_excursion_m:
             # the fixated track's D is the target's (Algorithm 1): a frame with a single return on a
             # hovering drone makes no object to protect, and a few such frames made it scenery
-            wf = world[fg_idx]
-            learn_pts &= ~(keep & np.all((wf >= c - cfg.d_half_m) & (wf <= c + cfg.d_half_m), axis=1))
+            learn_pts &= ~(keep & d_box.contains(world[fg_idx]))
         for i, j in match:
             tr, ob = self.tracks[i], objs[j]
             z, tz = ob.xyz_m, ob.t_s
