@@ -44,15 +44,13 @@ import math
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from foveatrack.fixed_order import norm3
+
 
 def _pair_distances(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     d = X[:, None, :] - Y[None, :, :]
     d2 = d * d
     return np.sqrt(d2[..., 0] + d2[..., 1] + d2[..., 2])
-
-
-def _distance(a, b) -> float:
-    return float(_pair_distances(np.reshape(a, (1, 3)), np.reshape(b, (1, 3)))[0, 0])
 
 
 def gospa(estimates, truths, c: float, p: float = 2.0) -> dict:
@@ -100,7 +98,7 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
             where = {tid: i for i, (tid, _, _) in enumerate(tr)}
             for d in live:
                 i = where.get(matched[d][k - 1])
-                if i is not None and i not in hit and _distance(tr[i][2], drones[d]["xyz_m"][k]) < match_m:
+                if i is not None and i not in hit and norm3(np.asarray(tr[i][2], np.float64) - drones[d]["xyz_m"][k]) < match_m:
                     hit[i] = d
         kept = set(hit.values())
         rest_d = [d for d in live if d not in kept]
