@@ -35,11 +35,15 @@ class ConstantVelocityFilter:
         self.q = float(q_m2_s3)
         self.r = float(r_m2)
 
+    def position_at(self, t_s: float) -> np.ndarray:
+        """Position (3,) at ``t_s``, the filter unchanged (:meth:`predicted` without the variance)."""
+        return self.p + self.v * (t_s - self.t_s)
+
     def predicted(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Position (3,) and its per-axis variance (3,) at ``t_s``, the filter unchanged."""
         dt = t_s - self.t_s
         q = self.q
-        return self.p + self.v * dt, self.a + 2.0 * dt * self.b + dt * dt * self.c + q * dt * dt * dt / 3.0
+        return self.position_at(t_s), self.a + 2.0 * dt * self.b + dt * dt * self.c + q * dt * dt * dt / 3.0
 
     def predict(self, t_s: float) -> None:
         dt = t_s - self.t_s

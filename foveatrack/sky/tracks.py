@@ -609,9 +609,9 @@ class SkyTracker:
         if len(conf) < 2:
             self._together = {}
             return away
-        # every pair's distance at once (the filters' predictions, p + v dt, and |d| as norm3 sums
-        # it): a flock's twenty confirmed tracks are 190 pairs a frame; few are close
-        P = np.array([tr.kf.p + tr.kf.v * (t_s - tr.kf.t_s) for tr in conf])
+        # every pair's distance at once (|d| as norm3 sums it): a flock's twenty confirmed tracks are
+        # 190 pairs a frame; few are close
+        P = np.array([tr.kf.position_at(t_s) for tr in conf])
         d = P[:, None, :] - P[None, :, :]
         dist = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
         for a, b in np.argwhere(np.triu(dist <= cfg.merge_m, 1)).tolist():     # row-major: (a, b) in order
