@@ -104,6 +104,126 @@ def scan_allows_confirm_s(times_s, tracked, rays, min_points: int, confirm_hits:
     return None
 
 
+REVISIT_S = 3.0          # issue 28: each drone in the fovea at least once per revisit time
+
+
+def pointing_deg(xyz_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The head's pan and tilt [deg] that put world points ``xyz_m`` (..., 3) on the lidar's axis:
+    :func:`foveatrack.reconstruction.rotation_matrix` turns the axis to ``(cos t cos p, cos t sin p,
+    sin t)`` (the lidar's offset from the head's centre left out, as :func:`drone_truth` does)."""
+    x, y, z = xyz_m[..., 0], xyz_m[..., 1], xyz_m[..., 2]
+    return np.degrees(np.arctan2(y, x)), np.degrees(np.arctan2(z, np.hypot(x, y)))
+
+
+def _pan_half_deg(tilt_deg: np.ndarray, half_deg: float) -> np.ndarray:
+    """The widest pan [deg] a cone of half-angle ``half_deg`` spans at a point of tilt ``tilt_deg``
+    on its rim or inside it: ``asin(sin h / cos e)`` with the axis's elevation ``e`` taken as far from
+    the horizon as the cone lets it (``|tilt| + h``), so that it bounds every such cone."""
+    e = np.radians(np.minimum(np.abs(tilt_deg) + half_deg, 89.9))
+    return np.degrees(np.arcsin(np.minimum(1.0, np.sin(np.radians(half_deg)) / np.cos(e))))
+
+
+def _pair_bound_s(tau_s: np.ndarray, dt: float) -> float:
+    """The pair's bound over one run of frames both drones are in (:func:`head_allows_revisit_s`):
+    if neither gap exceeded ``G = n dt``, every window of ``2 n + 2`` frames holds a trip there and
+    back, so twice its smallest ``tau`` is at most ``G`` (one frame given for the frames' sampling).
+    The bound is ``(n + 1) dt`` for the largest ``n`` some window breaks that for."""
+    best = 0.0
+    for n in range(1, (tau_s.size - 2) // 2 + 1):
+        w = np.lib.stride_tricks.sliding_window_view(tau_s, 2 * n + 2).min(axis=1)
+        if 2.0 * float(w.max()) - dt > n * dt + 1e-9:
+            best = (n + 1) * dt
+    return best
+
+
+def _leg_s(d_deg: np.ndarray, v: float, a: float) -> np.ndarray:
+    """The least time [s] an axis of top speed ``v`` and acceleration ``a`` takes to turn ``d_deg``
+    starting or ending at rest: ``d / v + v / (2 a)``, or ``sqrt(2 d / a)`` if it never reaches ``v``."""
+    d = np.maximum(d_deg, 0.0)
+    return np.where(d >= v * v / (2.0 * a), d / v + v / (2.0 * a), np.sqrt(2.0 * d / a))
+
+
+def head_allows_revisit_s(times_s, head_pan_deg, head_tilt_deg, drones: dict, head_limits,
+                          fovea_half_deg: float) -> dict:
+    """Lower bounds, from the head's top speeds alone, on the longest revisit gaps
+    (:func:`foveatrack.sky.metrics.drone_metrics`' ``longest_revisit_gap_s``) of a run: what no
+    schedule of the fovea could have beaten with this head, as :func:`scan_allows_confirm_s` is for
+    the confirmation.
+
+    ``drones``: id -> ``xyz_m`` (T, 3) (NaN where absent), ``in_field`` (T,) bool and ``first_s`` (the
+    time its first confirmed track was matched, None: never; its gaps are counted from then on, up to
+    its last frame in the field).  ``head_pan_deg``, ``head_tilt_deg``: the head's true pose per frame.
+    ``head_limits``: top speeds [deg/s] and accelerations [deg/s^2], ``(pan v, tilt v, pan a, tilt a)``.
+    The fovea is the cone of ``fovea_half_deg`` about the axis.
+
+    * ``acquire_s`` (per drone): from the head's pose at ``first_s``, the first frame at which both
+      axes, turning at top speed from then on (whatever they were doing then, so no acceleration
+      counted), could have put the drone in the fovea (tilt within
+      ``h``, pan within :func:`_pan_half_deg`); its first gap lasts at least that long (the whole
+      window if never);
+    * ``pairs`` (per two drones, both past ``first_s`` and in the field over a run of ``W`` s): the
+      fovea holds both at once only if their axes differ by under ``2 h``; else going from one to the
+      other and back turns an axis by its excess over ``2 h`` each way, with a stop between, so each
+      way takes at least ``tau`` (:func:`_leg_s`, the longer axis).  If neither
+      drone's gap exceeded ``G < W / 2``, the first ``G`` s of the run hold a visit to each, say to A
+      before B; the ``G`` s after that visit to B hold another to A, and A's gap around B's visit is
+      at least ``2 tau``, ``tau``'s least over those ``2 G`` s: the longer of their longest gaps is
+      over ``G`` wherever some ``2 G`` s of the run have ``2 tau > G`` (:func:`_pair_bound_s`);
+    * ``bound_s``: the largest of all of these: this run's longest gap could not have been shorter.
+
+    The head's dead time and the frame's latency are left out (and the acceleration where said): each
+    only adds."""
+    t = np.asarray(times_s, np.float64)
+    T = t.size
+    dt = float(np.median(np.diff(t))) if T > 1 else 0.0
+    vp, vt, ap, at = (float(v) for v in head_limits)
+    h = float(fovea_half_deg)
+    pan0 = np.asarray(head_pan_deg, np.float64)
+    tilt0 = np.asarray(head_tilt_deg, np.float64)
+    win, aim = {}, {}
+    for d, a in drones.items():
+        field = np.asarray(a["in_field"], bool)
+        if a.get("first_s") is None or not field.any():
+            continue
+        k0 = int(np.searchsorted(t, a["first_s"] - 1e-9))
+        end = int(np.flatnonzero(field)[-1]) + 1
+        if k0 >= end:
+            continue
+        win[d] = (k0, end)
+        aim[d] = pointing_deg(np.asarray(a["xyz_m"], np.float64))
+    acquire = {}
+    for d, (k0, end) in win.items():
+        p, q = aim[d]
+        ks = np.arange(k0, end)
+        dpan = np.abs((p[ks] - pan0[k0] + 180.0) % 360.0 - 180.0) - _pan_half_deg(q[ks], h)
+        dtilt = np.abs(q[ks] - tilt0[k0]) - h
+        reach = t[ks] - t[k0]
+        with np.errstate(invalid="ignore"):     # NaN where the drone is absent: not reachable there
+            ok = (dpan <= vp * reach + 1e-9) & (dtilt <= vt * reach + 1e-9)
+        acquire[d] = float(t[ks[np.argmax(ok)]] - t[k0]) if ok.any() else (end - k0) * dt
+    pairs = {}
+    ids = sorted(win)
+    for i, a in enumerate(ids):
+        for b in ids[i + 1:]:
+            both = np.zeros(T, bool)
+            lo, hi = max(win[a][0], win[b][0]), min(win[a][1], win[b][1])
+            if hi <= lo:
+                continue
+            both[lo:hi] = (np.asarray(drones[a]["in_field"], bool)[lo:hi]
+                           & np.asarray(drones[b]["in_field"], bool)[lo:hi])
+            (pa, qa), (pb, qb) = aim[a], aim[b]
+            dpan = np.abs((pa - pb + 180.0) % 360.0 - 180.0) - 2.0 * _pan_half_deg(
+                np.maximum(np.abs(qa), np.abs(qb)), h)
+            with np.errstate(invalid="ignore"):
+                tau = np.maximum(_leg_s(dpan, vp, ap), _leg_s(np.abs(qa - qb) - 2.0 * h, vt, at))
+            best = 0.0
+            for run in np.split(np.flatnonzero(both), np.flatnonzero(np.diff(np.flatnonzero(both)) > 1) + 1):
+                best = max(best, _pair_bound_s(tau[run], dt))
+            pairs[(a, b)] = best
+    bound = max(list(acquire.values()) + list(pairs.values()), default=None)
+    return {"acquire_s": acquire, "pairs": pairs, "bound_s": bound}
+
+
 def _scan_bounds(loop, log, drones: dict, m: dict) -> None:
     """Each drone's :func:`scan_allows_confirm_s`, with the tracker's warm-up (``scan_allows_confirm_s``;
     with ``warmup_replay`` the warm-up's hits count, reported at its end) and without it
@@ -126,6 +246,29 @@ def _scan_bounds(loop, log, drones: dict, m: dict) -> None:
                                                                      cfg.confirm_window)
 
 
+def head_limits(loop) -> tuple[float, float, float, float]:
+    """The simulated head's true top speeds [deg/s] over the bytes its tracker may send (pan's turbo
+    byte only where the tracker may use it) and its accelerations [deg/s^2]: pan v, tilt v, pan a,
+    tilt a."""
+    from sim.loop import truth_speed_table      # sim.loop is the heavier module; only a summary needs it
+
+    table = truth_speed_table(loop.head)
+    p = loop.head.params
+    return (table.pan.max_speed_deg_s(loop.tracker.config.allow_turbo), table.tilt.max_speed_deg_s(False),
+            p.pan_accel_deg_s2, p.tilt_accel_deg_s2)
+
+
+def _head_bounds(loop, log, drones: dict, m: dict) -> None:
+    """:func:`head_allows_revisit_s` of the run: each drone's ``head_allows_acquire_s`` into
+    ``m["drones"]``, the run's bound into ``m["head_allows_revisit_s"]``."""
+    given = {d: {**a, "first_s": m["drones"][d]["first_matched_s"]} for d, a in drones.items()}
+    b = head_allows_revisit_s(log["t_end_s"], log["head_pan_deg"], log["head_tilt_deg"], given,
+                              head_limits(loop), loop.sky.attention.cfg.fovea_half_angle_deg)
+    for d, r in m["drones"].items():
+        r["head_allows_acquire_s"] = b["acquire_s"].get(d)
+    m["head_allows_revisit_s"] = b["bound_s"]
+
+
 def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
     """``(metrics, mean GOSPA [m], confusion)`` of a finished run of the multi-object tracker
     (module docstring); ``metrics`` is :func:`~foveatrack.sky.metrics.drone_metrics`' with
@@ -138,6 +281,7 @@ def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
     tracks = [[(v.track_id, v.label, v.xyz_m) for v in o.sky.tracks if v.confirmed] for o in loop.sky_log]
     m = drone_metrics(times, drones, tracks)
     _scan_bounds(loop, log, drones, m)
+    _head_bounds(loop, log, drones, m)
     g = [gospa([x for _, _, x in tr], [drones[d]["xyz_m"][k] for d in drone_ids
                                        if np.all(np.isfinite(drones[d]["xyz_m"][k]))], GOSPA_CUTOFF_M)["distance"]
          for k, tr in enumerate(tracks)]
@@ -184,11 +328,12 @@ def within_bound(drones, key: str = "time_to_confirm_s") -> int:
     return sum(1 for r in drones if r.get(key) is not None and r[key] <= CONFIRM_BOUND_S)
 
 
-def sky_totals(drones: dict, false_drone_tracks, gospa_mean_m: float) -> dict:
+def sky_totals(drones: dict, false_drone_tracks, gospa_mean_m: float, head_allows_revisit_s: float | None = None) -> dict:
     """One run's figures over all its drones, as plain numbers (the Monte Carlo regression's,
     ``tests/regression/test_sky_monte_carlo.py``): drones; confirmed within 2 s; the same the scan's
     rays allowed; never confirmed; the median time to confirm of those confirmed; id switches; false
-    drone tracks; mean continuity and fovea share; the longest revisit gap; mean GOSPA."""
+    drone tracks; mean continuity and fovea share; the longest revisit gap and the shortest the head's
+    speed allowed (:func:`head_allows_revisit_s`); mean GOSPA."""
     rs = list(drones.values())
     ttc = [r["time_to_confirm_s"] for r in rs if r["time_to_confirm_s"] is not None]
     gaps = [r["longest_revisit_gap_s"] for r in rs if r.get("longest_revisit_gap_s") is not None]
@@ -199,14 +344,16 @@ def sky_totals(drones: dict, false_drone_tracks, gospa_mean_m: float) -> dict:
             "id_switches": sum(r["id_switches"] for r in rs), "false_drone_tracks": len(false_drone_tracks),
             "continuity": float(np.mean([r["continuity"] for r in rs])) if rs else None,
             "fovea_share": float(np.mean([r.get("fovea_share", 0.0) for r in rs])) if rs else None,
-            "longest_revisit_gap_s": max(gaps) if gaps else None, "gospa_mean_m": gospa_mean_m}
+            "longest_revisit_gap_s": max(gaps) if gaps else None, "head_allows_revisit_s": head_allows_revisit_s,
+            "gospa_mean_m": gospa_mean_m}
 
 
 def sky_summary(loop, log) -> dict:
     """The figures of :func:`sky_run_figures` as JSON-plain values (``foveatrack simulate --json``),
     with their :func:`sky_totals`."""
     m, g, confusion = sky_run_figures(loop, log)
-    return {"drones": m["drones"], "totals": sky_totals(m["drones"], m["false_drone_tracks"], g),
+    return {"drones": m["drones"], "totals": sky_totals(m["drones"], m["false_drone_tracks"], g,
+                                                        m["head_allows_revisit_s"]),
             "false_drone_tracks": list(m["false_drone_tracks"]),
             "false_drone_tracks_near": dict(m["false_causes"]), "confirmed_tracks": m["confirmed_tracks"],
             "gospa_mean_m": g, "gospa_cutoff_m": GOSPA_CUTOFF_M,
@@ -229,7 +376,14 @@ def sky_lines(s: dict) -> list[str]:
         out.append(f"  {d}: confirmed {fmt(r['time_to_confirm_s'])} after entering the field{bound}, labelled drone "
                    f"{fmt(r['time_to_drone_label_s'])}; track ids {r['track_ids'] or '-'}, {r['id_switches']} id "
                    f"switches, continuity {r['continuity']:.2f}; in the fovea {100 * r.get('fovea_share', 0):.0f} % "
-                   f"of its time in the field, longest gap {r.get('longest_revisit_gap_s', float('nan')):.1f} s")
+                   f"of its time in the field, longest gap {r.get('longest_revisit_gap_s', float('nan')):.1f} s"
+                   + (f" (the head's speed allowed its first {fmt(r['head_allows_acquire_s'])})"
+                      if r.get("head_allows_acquire_s") is not None else ""))
+    bound = s["totals"].get("head_allows_revisit_s")
+    if bound is not None:
+        gap = s["totals"]["longest_revisit_gap_s"]
+        out.append(f"  revisits: longest gap {fmt(gap)}; the head's top speeds allowed no less than {fmt(bound)} "
+                   f"(revisit time {REVISIT_S:g} s)")
     return out
 
 

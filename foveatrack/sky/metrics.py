@@ -23,6 +23,7 @@ drone's match for a frame, two id switches though the drone's own track never le
 in a swarm was credited with another drone's track.)
 
 ``time_to_confirm_s``   first frame a track is matched minus the first frame the drone is visible
+``first_matched_s``     the time of that first match (None: never), where the revisit gaps start
 ``time_to_drone_label_s``  ... a track labelled drone is matched (None: never; the label waits,
                         foveatrack.sky.classify rule 5)
 ``continuity``          share of the frames from that first match on with a matched track
@@ -124,6 +125,7 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
         r = {"time_to_confirm_s": None if first is None or first_vis is None else float(t[first] - t[first_vis]),
              "time_to_drone_label_s": None if labelled is None or first_vis is None else
              float(t[labelled] - t[first_vis]),
+             "first_matched_s": None if first is None else float(t[first]),
              "continuity": 0.0, "id_switches": 0, "track_ids": sorted({x for x in m if x is not None})}
         if first is not None:
             seen = [x for x in m[first:] if x is not None]

@@ -66,6 +66,19 @@ def test_no_drone_is_confirmed_before_the_scan_s_rays_allow_it(crossing):
         assert r["time_to_confirm_s"] >= r["scan_allows_confirm_s"] - 1e-9, (d, r)
 
 
+def test_no_revisit_gap_is_shorter_than_the_head_s_speed_allows(crossing):
+    # the head's bound (sim.sky_summary.head_allows_revisit_s) is a bound: a gap under it means the
+    # bound took the head for slower than it is, or counted frames the metric does not
+    from sim.sky_summary import sky_run_figures
+
+    loop, log = crossing
+    m, _, _ = sky_run_figures(loop, log)
+    gaps = {d: r["longest_revisit_gap_s"] for d, r in m["drones"].items()}
+    for d, r in m["drones"].items():
+        assert r["head_allows_acquire_s"] is not None and gaps[d] >= r["head_allows_acquire_s"] - 1e-9, (d, r)
+    assert max(gaps.values()) >= m["head_allows_revisit_s"] - 1e-9 and m["head_allows_revisit_s"] > 0, (gaps, m)
+
+
 def test_both_drones_confirmed_within_2s_of_entering_the_field(crossing):
     # issue 28's bound on the scene's own seed.  Before the warm-up's frames were tracked at its end
     # (warmup_replay) drone-b took 4.7 s: drone-a was confirmed first, the head turned to it and left
