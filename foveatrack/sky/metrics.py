@@ -22,9 +22,14 @@ the assignment alone, a crown's track that passed within a few centimetres of a 
 drone's match for a frame, two id switches though the drone's own track never left it; and a drone
 in a swarm was credited with another drone's track.)
 
-``time_to_confirm_s``   first frame a track is matched minus the first frame the drone is visible
-``first_matched_s``     the time of that first match (None: never), where the revisit gaps start
-``time_to_drone_label_s``  ... a track labelled drone is matched (None: never; the label waits,
+``time_to_confirm_s``   first frame a track *of its own* is within ``match_m`` of it, minus the first
+                        frame the drone is visible: a track is a drone's own if it was nearest that
+                        drone (within ``match_m``) when it was first output (a track that followed
+                        one drone and drifted onto another is the second drone's id switch, not its
+                        confirmation; matched or not: CLEAR MOT keeps the drifted track matched)
+``first_matched_s``     the time of the first match of any track (None: never), where the revisit
+                        gaps and the continuity start
+``time_to_drone_label_s``  ... a track of its own labelled drone is (None: never; the label waits,
                         foveatrack.sky.classify rule 5)
 ``continuity``          share of the frames from that first match on with a matched track
 ``id_switches``         times the matched track's id changes (gaps without a match do not count)
@@ -88,7 +93,6 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
     ids = sorted(drones)
     T = t.size
     matched = {d: [None] * T for d in ids}
-    as_drone = {d: [False] * T for d in ids}     # the matched track is labelled drone
     false_ids: set[int] = set()
     for k in range(T):
         tr = tracks_per_frame[k]
@@ -110,10 +114,26 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
                 hit[rest_i[i]] = rest_d[j]
         for i, d in hit.items():
             matched[d][k] = tr[i][0]
-            as_drone[d][k] = tr[i][1] == "drone"
         for i, (tid, label, _) in enumerate(tr):
             if label == "drone" and i not in hit:
                 false_ids.add(tid)
+    # each track's own drone: the nearest within match_m when it was first output (None: none)
+    owner: dict[int, str | None] = {}
+    own_at = {d: None for d in ids}         # first frame a track of its own is within match_m
+    own_label_at = {d: None for d in ids}   # ... and labelled drone
+    for k in range(T):
+        live = [d for d in ids if np.all(np.isfinite(drones[d]["xyz_m"][k]))]
+        for tid, label, x in tracks_per_frame[k]:
+            dist = {d: norm3(np.asarray(x, np.float64) - drones[d]["xyz_m"][k]) for d in live}
+            if tid not in owner:
+                near = min(live, key=lambda d: (dist[d], d), default=None)
+                owner[tid] = near if near is not None and dist[near] < match_m else None
+            d = owner[tid]
+            if d is not None and d in dist and dist[d] < match_m:
+                if own_at[d] is None:
+                    own_at[d] = k
+                if own_label_at[d] is None and label == "drone":
+                    own_label_at[d] = k
     dt = float(np.median(np.diff(t))) if T > 1 else 0.0
     out = {}
     for d in ids:
@@ -121,8 +141,8 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
         m = matched[d]
         first_vis = int(np.argmax(vis)) if vis.any() else None
         first = next((k for k in range(T) if m[k] is not None), None)
-        labelled = next((k for k in range(T) if as_drone[d][k]), None)
-        r = {"time_to_confirm_s": None if first is None or first_vis is None else float(t[first] - t[first_vis]),
+        own, labelled = own_at[d], own_label_at[d]
+        r = {"time_to_confirm_s": None if own is None or first_vis is None else float(t[own] - t[first_vis]),
              "time_to_drone_label_s": None if labelled is None or first_vis is None else
              float(t[labelled] - t[first_vis]),
              "first_matched_s": None if first is None else float(t[first]),

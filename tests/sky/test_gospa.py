@@ -140,3 +140,34 @@ def test_a_drone_keeps_its_track_when_another_drones_track_comes_nearer():
     m = drone_metrics(t, d, tracks)["drones"]
     assert m["a"]["track_ids"] == [1] and m["b"]["track_ids"] == [2]
     assert m["a"]["id_switches"] == 0 and m["b"]["id_switches"] == 0
+
+
+def test_a_drone_is_not_confirmed_by_another_drone_s_track_that_drifts_onto_it():
+    # Drone a's track 1 is on it from frame 2; from frame 10 a is gone and track 1 is on drone b;
+    # b's own track 5 comes at frame 25.  Before, b counted as confirmed at frame 10, by a's track
+    # (swarm-of-five: drone-5 "confirmed 1.8 s in", its rays allowed 7.7 s).  It is a's track that
+    # went over to b: b's confirmation is its own track's, and its labelling too.
+    T = 40
+    t = 0.1 * np.arange(T)
+    a_xyz = np.tile([30.0, 0.0, 3.0], (T, 1))
+    a_xyz[10:] = np.nan
+    b_xyz = np.tile([30.0, 5.0, 3.0], (T, 1))
+    tracks = []
+    for k in range(T):
+        tr = []
+        if 2 <= k < 10:
+            tr.append((1, "drone", a_xyz[k]))
+        elif 10 <= k:
+            tr.append((1, "drone", b_xyz[k] + [0.0, 0.3, 0.0]))
+        if k >= 25:
+            tr.append((5, "unknown" if k < 30 else "drone", b_xyz[k]))
+        tracks.append(tr)
+    d = {"a": {"xyz_m": a_xyz, "visible": np.arange(T) < 10, "in_fovea": None},
+         "b": {"xyz_m": b_xyz, "visible": np.ones(T, bool), "in_fovea": None}}
+    m = drone_metrics(t, d, tracks)["drones"]
+    assert m["a"]["time_to_confirm_s"] == pytest.approx(0.2)
+    assert m["b"]["time_to_confirm_s"] == pytest.approx(2.5)
+    assert m["b"]["time_to_drone_label_s"] == pytest.approx(3.0)
+    # track 1 is the one b stays matched to (CLEAR MOT keeps it: track 5 is a second track on b);
+    # continuity and the revisit gaps start at its first match
+    assert m["b"]["first_matched_s"] == pytest.approx(1.0) and m["b"]["track_ids"] == [1]
