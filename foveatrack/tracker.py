@@ -379,10 +379,12 @@ class Tracker:
     def process(self, frame: Frame, send_t_s: float | None = None) -> TrackOutput:
         return self.steer(frame, self._detect(frame), send_t_s)
 
-    def steer(self, frame: Frame, det: Detection | None, send_t_s: float | None = None) -> TrackOutput:
+    def steer(self, frame: Frame, det: Detection | None, send_t_s: float | None = None,
+              gains_1_s: tuple[float, float] | None = None) -> TrackOutput:
         """Algorithm 2 (and the lost-target states) on a detection of ``frame`` made by the caller:
         :meth:`process`'s Algorithm 1, or the sky tracker's in the fixated track's D
-        (:mod:`foveatrack.sky.controller`)."""
+        (:mod:`foveatrack.sky.controller`).  ``gains_1_s``: (pan, tilt) gains for this frame in
+        place of the configured ones (the sky tracker's saccades; the paper controller only)."""
         cfg = self.config
         t_now = frame.t_end_s
         send_t = t_now + cfg.send_delay_s if send_t_s is None else send_t_s
@@ -399,7 +401,7 @@ class Tracker:
             self.last_pan_error_deg = err_pan
             self.lost_since_s = None
             self.state = TrackState.TRACKING
-            v_pan, v_tilt = self._control(det, err_pan, err_tilt, hp, ht, send_t)
+            v_pan, v_tilt = self._control(det, err_pan, err_tilt, hp, ht, send_t, gains_1_s)
         else:
             hp, ht, sp, st = self.recon.angles_at(t_now)
             v_pan, v_tilt = self._lost(t_now, send_t, ht)
@@ -443,11 +445,12 @@ class Tracker:
             return None
         return det
 
-    def _control(self, det, err_pan, err_tilt, hp, ht, send_t) -> tuple[float, float]:
+    def _control(self, det, err_pan, err_tilt, hp, ht, send_t, gains_1_s=None) -> tuple[float, float]:
         cfg = self.config
         if cfg.controller == "paper":
-            return (deadband_p(err_pan, cfg.deadband_pan_deg, cfg.gain_pan_1_s),
-                    deadband_p(err_tilt, cfg.deadband_tilt_deg, cfg.gain_tilt_1_s))
+            kp, kt = (cfg.gain_pan_1_s, cfg.gain_tilt_1_s) if gains_1_s is None else gains_1_s
+            return (deadband_p(err_pan, cfg.deadband_pan_deg, kp),
+                    deadband_p(err_tilt, cfg.deadband_tilt_deg, kt))
         # predictive: filter the world bearing, feed its rate forward
         self.pan_filter.update(det.t_s, hp + err_pan)
         self.tilt_filter.update(det.t_s, ht + err_tilt)

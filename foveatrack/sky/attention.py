@@ -38,8 +38,16 @@ Schedule (evaluated after each frame, for the next):
 A track is *in the fovea* when its predicted bearing lies within ``fovea_half_angle_deg`` of the
 lidar's axis at the frame's mid pose (the rosette's dense centre, paper Fig. 6).
 
+Saccade gain (``saccade_gain_1_s``, default None: Algorithm 2's own gain): while the fixated track is
+off the fovea the head turns to it at this gain instead, ``v = min(k_s |e|, v_max)`` (the paper's
+Algorithm 2 still tracks inside the fovea).  A measured trade-off, not the default: at 4 /s (with
+``saccade_latency_s = 0.6``, what such saccades take) an hour of cold starts of each sky scene met the
+3 s revisit in 102, 5 and 81 runs of 180 (tree line, crossing, flock; 94, 0 and 71 without), and made
+43 false drone tracks near crowns and 27 near birds where Algorithm 2's gain made 33 and 17
+(docs/sky-tracks-figures.md).
+
 Saccade time (:func:`saccade_time_s`): the head turns each axis under the paper's Algorithm 2 (App.
-D.3), ``v = min(k |e|, v_max)``, so an axis ``e`` away takes ``(e - max(v_max/k, h)) / v_max`` at
+D.3) at the saccade gain, ``v = min(k |e|, v_max)``, so an axis ``e`` away takes ``(e - max(v_max/k, h)) / v_max`` at
 full speed and then ``ln(min(e, v_max/k) / h) / k`` on the proportional tail (if that is above
 ``h``) to come within ``h`` (the fovea's half angle) of it; both axes turn at once (the longer
 counts), plus ``saccade_latency_s`` (the next command's frame, the head's dead time and
@@ -76,6 +84,7 @@ class AttentionConfig:
     fovea_half_angle_deg: float = 3.0
     verify_min_hits: float = 1.0
     saccade_latency_s: float = 0.3
+    saccade_gain_1_s: float | None = None
 
     @classmethod
     def from_mapping(cls, data: Mapping, where: str) -> "AttentionConfig":
@@ -86,6 +95,8 @@ class AttentionConfig:
                 kw[k] = as_vec(v, k, where, 3)
             elif k == "saccade_latency_s":
                 kw[k] = as_float(v, k, where, lo=0)
+            elif k == "saccade_gain_1_s" and v is None:     # a recording's table: Algorithm 2's own gain
+                kw[k] = None
             else:
                 kw[k] = as_float(v, k, where, lo=0, lo_open=True)
         return cls(**kw)

@@ -131,8 +131,11 @@ class SkyController:
         c = tracker.config
         vp = tracker.table.pan.max_speed_deg_s(c.allow_turbo)
         vt = tracker.table.tilt.max_speed_deg_s(False)
-        self._head_speeds = (c.gain_pan_1_s, vp if c.max_pan_speed_deg_s is None else min(vp, c.max_pan_speed_deg_s),
-                             c.gain_tilt_1_s, vt if c.max_tilt_speed_deg_s is None else min(vt, c.max_tilt_speed_deg_s))
+        ks = self.attention.cfg.saccade_gain_1_s
+        self._head_speeds = (c.gain_pan_1_s if ks is None else ks,
+                             vp if c.max_pan_speed_deg_s is None else min(vp, c.max_pan_speed_deg_s),
+                             c.gain_tilt_1_s if ks is None else ks,
+                             vt if c.max_tilt_speed_deg_s is None else min(vt, c.max_tilt_speed_deg_s))
         #: the last frame's output (None before the first): the tracks an operator may pin
         self.last_output: SkyControlOutput | None = None
 
@@ -181,7 +184,12 @@ class SkyController:
         view = next((v for v in sky.tracks if v.track_id == fix), None)
         if det is None and view is not None:
             det = self._aim(view.xyz_m, frame.t_end_s)
-        out = self.tracker.steer(frame, det, send_t_s)
+        gains = None
+        ks = self.attention.cfg.saccade_gain_1_s
+        if ks is not None and view is not None and bearing_off_axis_deg(
+                view.xyz_m, *self._pose_rows(frame.t_end_s)) > self.attention.cfg.fovea_half_angle_deg:
+            gains = (ks, ks)        # a saccade: the fixated track is off the fovea
+        out = self.tracker.steer(frame, det, send_t_s, gains)
         t_mid = 0.5 * (frame.t_start_s + frame.t_end_s)
         mid_pose = self._pose_rows(t_mid)
         half = self.attention.cfg.fovea_half_angle_deg

@@ -191,3 +191,15 @@ def test_no_revisit_cuts_into_the_head_s_turn_to_the_priority():
         served.append((round(t, 6), att.target))
     first_revisit = next(t for t, s in served if s == 1)
     assert first_revisit >= 2.0, served
+
+
+def test_the_saccade_gain_is_algorithm_2_s_unless_set_and_a_bad_one_is_named():
+    from foveatrack.errors import UserError
+
+    assert AttentionConfig().saccade_gain_1_s is None
+    assert AttentionConfig.from_mapping({"saccade_gain_1_s": 4}, "t").saccade_gain_1_s == 4.0
+    # a recording's table writes the default as null; it reads back as the default
+    assert AttentionConfig.from_mapping({"saccade_gain_1_s": None}, "t").saccade_gain_1_s is None
+    for bad in (0, -1.0, "fast"):
+        with pytest.raises(UserError, match="saccade_gain_1_s"):
+            AttentionConfig.from_mapping({"saccade_gain_1_s": bad}, "[tracker.sky.attention]")
