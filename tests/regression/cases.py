@@ -126,6 +126,8 @@ SKY_TOLERANCES = {
     "continuity": {"abs": 0.03, "rel": 0.05},
     "fovea_share": {"abs": 0.03, "rel": 0.05},
     "longest_revisit_gap_s": {"abs": 0.5, "rel": 0.1},
+    # the least gap the head's path allowed: what the gaps are read against, not a figure of merit
+    "head_allows_revisit_s": None,
     "gospa_mean_m": {"abs": 0.2, "rel": 0.05},
 }
 
