@@ -23,10 +23,12 @@ drone's match for a frame, two id switches though the drone's own track never le
 in a swarm was credited with another drone's track.)
 
 ``time_to_confirm_s``   first frame a track *of its own* is within ``match_m`` of it, minus the first
-                        frame the drone is visible: a track is a drone's own if it was nearest that
-                        drone (within ``match_m``) when it was first output (a track that followed
-                        one drone and drifted onto another is the second drone's id switch, not its
-                        confirmation; matched or not: CLEAR MOT keeps the drifted track matched)
+                        frame the drone is visible: a track is the own of the drone it was first
+                        matched to, or, never matched, of the drone nearest it (within ``match_m``)
+                        when it was first output (a track that followed one drone and drifted onto
+                        another is the second drone's id switch, not its confirmation; matched or
+                        not: CLEAR MOT keeps the drifted track matched, and the second drone's own
+                        track is then a second track on it)
 ``first_matched_s``     the time of the first match of any track (None: never), where the revisit
                         gaps and the continuity start
 ``time_to_drone_label_s``  ... a track of its own labelled drone is (None: never; the label waits,
@@ -117,8 +119,13 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
         for i, (tid, label, _) in enumerate(tr):
             if label == "drone" and i not in hit:
                 false_ids.add(tid)
-    # each track's own drone: the nearest within match_m when it was first output (None: none)
+    # each track's own drone: the first it was matched to; a track never matched, the nearest within
+    # match_m when it was first output (None: none)
     owner: dict[int, str | None] = {}
+    for k in range(T):
+        for d in ids:
+            if matched[d][k] is not None:
+                owner.setdefault(matched[d][k], d)
     own_at = {d: None for d in ids}         # first frame a track of its own is within match_m
     own_label_at = {d: None for d in ids}   # ... and labelled drone
     for k in range(T):
