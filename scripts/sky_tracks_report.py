@@ -25,7 +25,7 @@ import numpy as np
 
 from sim.loop import ClosedLoop
 from sim.scene import load_scene, with_run_overrides
-from sim.sky_summary import LABELS, REVISIT_S, TRUTH_CLASSES, sky_run_figures, within_bound
+from sim.sky_summary import GAP_REASONS, LABELS, REVISIT_S, TRUTH_CLASSES, sky_run_figures, within_bound
 
 
 def run_one(scene):
@@ -65,6 +65,21 @@ def summary_row(name, rows) -> str:
             f"{sum(met)} ({sum(allowed)}; {sum(a and b for a, b in zip(met, allowed))}) | {per_h} |")
 
 
+def gap_row(name, rows) -> str:
+    """One scene over all its runs: the frames of its drones' longest revisit gaps, by what the fovea
+    did (:func:`sim.sky_summary.gap_reasons`)."""
+    c = Counter()
+    for _, m, *_ in rows:
+        for r in m["gap_reasons"].values():
+            c.update(r)
+    n = sum(c.values())
+    return f"| {name} | {n} | " + " | ".join(f"{c[k]} ({100 * c[k] / n if n else 0:.0f} %)" for k in GAP_REASONS) + " |"
+
+
+GAP_HEAD = ("| scene | frames of the longest gaps | " + " | ".join(GAP_REASONS) + " |\n"
+            + "|---" * (len(GAP_REASONS) + 2) + "|")
+
+
 SUMMARY_HEAD = ("| scene | runs | scene-hours | drones | confirmed within 2 s (the scan's rays allowed it; without "
                 "the warm-up; both confirmed and allowed) | id switches | longest revisit gap, median / max [s] (the run's least the "
                 "head's speed allowed) | runs with every gap within 3 s (runs the head allowed it; both) | "
@@ -89,6 +104,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     lines = []
     summary = []
+    gap_rows = []
     total_conf = Counter()
     for path in a.scenes:
         base = load_scene(path)
@@ -113,6 +129,7 @@ def main(argv=None) -> int:
             print(f"{base.name} seed {scene.seed}: {T} frames in {wall:.1f} s; GOSPA mean {g:.2f} m; "
                   f"false drone tracks {len(m['false_drone_tracks'])}", file=sys.stderr)
         summary.append(summary_row(base.name, rows))
+        gap_rows.append(gap_row(base.name, rows))
         if a.summary_only:
             continue
         lines.append(f"## {base.name} ({a.seeds} seeds)\n")
@@ -141,7 +158,9 @@ def main(argv=None) -> int:
             lines.append(f"| {seed} | {len(m['false_drone_tracks'])} | {m['false_drone_tracks_per_hour']:.0f} | "
                          f"{g:.2f} | {gap:.1f} ({'-' if b is None else f'{b:.1f}'}) | {wall:.1f} |")
         lines.append("")
-    lines[:0] = ["## Summary\n", SUMMARY_HEAD, *summary, ""]
+    lines[:0] = ["## Summary\n", SUMMARY_HEAD, *summary, "",
+                 "Where each drone's longest revisit gap went, frame by frame (what the fovea did then):\n",
+                 GAP_HEAD, *gap_rows, ""]
     lines.append("## Confusion matrix of the confirmed tracks (rows: truth, columns: the track's last label)\n")
     lines.append("| truth \\ label | " + " | ".join(LABELS) + " |")
     lines.append("|---|" + "---|" * len(LABELS))

@@ -18,6 +18,7 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
+from foveatrack.fixed_order import norm3
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.sky.attention import bearing_off_axis_deg
 from foveatrack.sky.metrics import drone_metrics, gospa
@@ -271,6 +272,59 @@ def _head_bounds(loop, log, drones: dict, m: dict) -> None:
     m["head_allows_revisit_s"] = b["bound_s"]
 
 
+GAP_REASONS = ("turning to it", "serving another drone", "serving a track not on a drone",
+               "its track looks no drone", "no confirmed track on it")     # the report's columns
+
+
+def gap_reasons(loop, log, drones: dict, m: dict) -> dict:
+    """Per drone, what the fovea did in the frames of its longest revisit gap (the frames
+    :func:`~foveatrack.sky.metrics.drone_metrics` counts), each frame one of :data:`GAP_REASONS`, by
+    the confirmed track nearest the drone within 2 m (its track) and the track the fovea served:
+    its track (the head is turning to it); a track within 2 m of another drone; another track, or
+    none; before those two, its track looks like no drone (the schedule revisits only what looks
+    like one); or it had no confirmed track.  What a long gap is made of: the head's
+    turn, the other drones, the classifier or the tracker."""
+    out = {}
+    t = np.asarray(log["t_end_s"], np.float64)
+    for d, a in drones.items():
+        first = m["drones"][d].get("first_matched_s")
+        field = np.asarray(a["in_field"], bool)
+        fov = np.asarray(a["in_fovea"], bool)
+        if first is None or not field.any():
+            continue
+        k0 = int(np.searchsorted(t, first - 1e-9))
+        end = int(np.flatnonzero(field)[-1]) + 1
+        best, cur = (0, 0), None
+        for k in range(k0, end + 1):
+            if k < end and not fov[k]:
+                cur = k if cur is None else cur
+            elif cur is not None:
+                best = max(best, (k - cur, -cur))
+                cur = None
+        n, start = best[0], -best[1]
+        reasons = Counter()
+        for k in range(start, start + n):
+            o = loop.sky_log[k]
+            x = a["xyz_m"][k]
+            views = {v.track_id: v for v in o.sky.tracks if v.confirmed}
+            near = min(((norm3(v.xyz_m - x), tid) for tid, v in views.items()), default=(np.inf, None))
+            own = near[1] if near[0] < 2.0 else None
+            fix = views.get(o.fixated)
+            others = [e for e in drones if e != d and np.all(np.isfinite(drones[e]["xyz_m"][k]))]
+            if own is None:
+                reasons["no confirmed track on it"] += 1
+            elif o.fixated == own:
+                reasons["turning to it"] += 1
+            elif views[own].looks_like != "drone":
+                reasons["its track looks no drone"] += 1
+            elif fix is not None and any(norm3(fix.xyz_m - drones[e]["xyz_m"][k]) < 2.0 for e in others):
+                reasons["serving another drone"] += 1
+            else:
+                reasons["serving a track not on a drone"] += 1
+        out[d] = reasons
+    return out
+
+
 def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
     """``(metrics, mean GOSPA [m], confusion)`` of a finished run of the multi-object tracker
     (module docstring); ``metrics`` is :func:`~foveatrack.sky.metrics.drone_metrics`' with
@@ -304,6 +358,7 @@ def sky_run_figures(loop, log) -> tuple[dict, float, Counter]:
     m["false_causes"] = false_track_causes(m["false_drone_tracks"], tracks, truth)
     m["hours"] = T * float(np.median(np.diff(times))) / 3600.0 if T > 1 else 0.0
     m["confirmed_tracks"] = len(last_label)
+    m["gap_reasons"] = gap_reasons(loop, log, drones, m)
     return m, float(np.mean(g)) if g else float("nan"), confusion
 
 

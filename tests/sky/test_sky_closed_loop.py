@@ -111,6 +111,21 @@ def test_saccades_turn_at_the_saccade_gain_and_fixations_at_algorithm_2_s(saccad
     np.testing.assert_allclose(fix, gain, rtol=0.1)
 
 
+def test_the_gap_reasons_account_for_every_frame_of_the_longest_gap(crossing):
+    # sim.sky_summary.gap_reasons walks the frames the metric counts: as many as the longest gap
+    from sim.sky_summary import GAP_REASONS, sky_run_figures
+
+    loop, log = crossing
+    m, _, _ = sky_run_figures(loop, log)
+    dt = 0.1
+    for d, r in m["drones"].items():
+        reasons = m["gap_reasons"][d]
+        assert set(reasons) <= set(GAP_REASONS), reasons
+        assert sum(reasons.values()) == round(r["longest_revisit_gap_s"] / dt), (d, reasons, r)
+    # two drones share the fovea: one's longest gap has the head serving the other in it
+    assert any(m["gap_reasons"][d]["serving another drone"] > 0 for d in m["drones"]), m["gap_reasons"]
+
+
 def test_both_drones_confirmed_within_2s_of_entering_the_field(crossing):
     # issue 28's bound on the scene's own seed.  Before the warm-up's frames were tracked at its end
     # (warmup_replay) drone-b took 4.7 s: drone-a was confirmed first, the head turned to it and left
