@@ -4,8 +4,8 @@ Runs ``drone-and-flock`` (a Mid-40 at 100 k points/s, a quadrotor, the ground) o
 the flock cut to 0, 5, 20 and 80 birds, the swarm, tree-line and crossing scenes as shipped, and the
 swarm with drone-and-flock's 20 birds added (issue 28's speed target: 150x real time), each after a
 warm-up frame, and prints per run: the objects, the wall time per frame after the first (best of the
-repetitions), the real-time factor, the ray-casting stage's share of it (where the objects cost), the
-median CPU time of this process per frame (less moved by other processes on a loaded machine than the
+repetitions), the real-time factor, the ray-casting stage's and the tracker's shares of it (where the
+objects cost) and the other stages' (the head, the scan, the beams, the link, the log), the median CPU time of this process per frame (less moved by other processes on a loaded machine than the
 wall time), and the machine's load average (a shared machine's timings move with it).  No recording
 is written.
 
@@ -31,8 +31,14 @@ def _scene(name: str, duration_s: float, birds: int | None = None, flock_of: str
     return sky_scene(name, duration_s, None, birds, flock_of)
 
 
-def _frame_ms(scene, repeat: int) -> tuple[float, float, float]:
-    best, cast, cpu = float("inf"), 0.0, float("inf")
+# the stages whose cost does not depend on the objects in the sky (sim.loop.STAGES): what is left of
+# 150x's 0.67 ms a frame for the ray casting and the tracker
+FIXED_STAGES = ("head model: commands arrive", "scan", "beams into the world (head pose)",
+                "link (Pelco-D, UART)", "log and recording")
+
+
+def _frame_ms(scene, repeat: int) -> tuple[float, float, float, float, float]:
+    best, cast, track, fixed, cpu = float("inf"), 0.0, 0.0, 0.0, float("inf")
     for _ in range(repeat):
         marks = []
         loop = ClosedLoop(scene, frame_hook=lambda *_: marks.append(time.process_time()))
@@ -40,9 +46,10 @@ def _frame_ms(scene, repeat: int) -> tuple[float, float, float]:
         n = max(loop.steps_timed, 1)
         total = sum(loop.stage_s.values()) / n
         if total < best:
-            best, cast = total, loop.stage_s["ray casting + effects"] / n
+            best, cast, track = total, loop.stage_s["ray casting + effects"] / n, loop.stage_s["tracker"] / n
+            fixed = sum(loop.stage_s[k] for k in FIXED_STAGES) / n
         cpu = min(cpu, float(np.median(np.diff(marks))))       # from the second frame on
-    return best * 1e3, cast * 1e3, cpu * 1e3
+    return best * 1e3, cast * 1e3, track * 1e3, fixed * 1e3, cpu * 1e3
 
 
 def main() -> None:
@@ -56,12 +63,13 @@ def main() -> None:
     runs += [("swarm-of-five + the 20-bird flock", _scene("swarm-of-five", a.duration, flock_of="drone-and-flock"))]
     ClosedLoop(_scene("drone-and-flock", 0.2, 5)).run()      # numba's cache / compilation, once
     print(f"{'scene':34s} {'objects':>7s} {'ms/frame':>9s} {'x real time':>11s} {'cast+effects ms':>15s} "
-          f"{'CPU ms/frame':>12s}")
+          f"{'tracker ms':>10s} {'other stages ms':>15s} {'CPU ms/frame':>12s}")
     for label, scene in runs:
-        ms, cast, cpu = _frame_ms(scene, a.repeat)
+        ms, cast, track, fixed, cpu = _frame_ms(scene, a.repeat)
         n_obj = len(scene.targets) + len(scene.others)
         period_ms = scene.tracker.period_s * 1e3
-        print(f"{label:34s} {n_obj:7d} {ms:9.2f} {period_ms / ms:11.1f} {cast:15.2f} {cpu:12.2f}")
+        print(f"{label:34s} {n_obj:7d} {ms:9.2f} {period_ms / ms:11.1f} {cast:15.2f} {track:10.2f} {fixed:15.2f} "
+              f"{cpu:12.2f}")
     print("load average (1, 5, 15 min): " + ", ".join(f"{x:.2f}" for x in os.getloadavg()))
 
 
