@@ -302,7 +302,8 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
             # on a first run the kernels compile inside the first frame: say so, and the speed without it
             speed += (f" ({summary['first_frame_s']:.1f} s of it the first frame, which loads or compiles the "
                       f"numba kernels; {after:.0f}x after it)")
-        print(speed + (f"; recording and plots in {out_dir}/" if out_dir else ""))
+        wrote = "recording and plots" if plot else "recording"     # plots only with --plot
+        print(speed + (f"; {wrote} in {out_dir}/" if out_dir else ""))
     return summary
 
 
