@@ -107,3 +107,22 @@ def test_a_rebased_controller_starts_afresh_but_never_reuses_an_id():
     assert new.sky.tracks == [] and new.sky.background.frame_no == 0 and new.attention.pinned is None
     assert new.sky._next_id == 7 and new.tracker.recon.angles_at(12.5)[:2] == (10.0, 2.0)
     assert new.sky_table() == c.sky_table()
+
+
+def test_a_run_with_the_saccade_gain_records_it_and_replays_to_the_bit(tmp_path):
+    # the option travels in the recorded table (the default is written as null and reads back as it);
+    # replay rebuilds the controller with it: the same commands and tracks
+    from foveatrack.cli import main
+
+    scene = tmp_path / "crossing-fast-saccades.toml"
+    scene.write_text((SCENES / "two-drones-crossing.toml").read_text()
+                     + "\n[tracker.sky.attention]\nsaccade_gain_1_s = 4.0\nsaccade_latency_s = 0.6\n")
+    out = tmp_path / "run"
+    assert main(["simulate", str(scene), "--duration", "6", "--out", str(out), "--no-progress", "--one-thread"]) == 0
+    meta = RecordingReader(out / "run.mcap").meta
+    assert meta["sky"]["attention"]["saccade_gain_1_s"] == 4.0
+    _, att = sky_configs_from_mapping(meta["sky"], "recorded")
+    assert att.saccade_gain_1_s == 4.0
+    res = replay_recording(out / "run.mcap")
+    c = res.comparison
+    assert c["detections_equal"] and c["commands_equal"] and c["tracks"]["identical_all"], c
