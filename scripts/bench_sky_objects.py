@@ -5,8 +5,9 @@ the flock cut to 0, 5, 20 and 80 birds, the swarm, tree-line and crossing scenes
 swarm with drone-and-flock's 20 birds added (issue 28's speed target: 150x real time), each after a
 warm-up frame, and prints per run: the objects, the wall time per frame after the first (best of the
 repetitions), the real-time factor, the ray-casting stage's and the tracker's shares of it (where the
-objects cost) and the other stages' (the head, the scan, the beams, the link, the log), the median CPU time of this process per frame (less moved by other processes on a loaded machine than the
-wall time), and the machine's load average (a shared machine's timings move with it).  No recording
+objects cost) and the other stages' (the head, the scan, the beams, the link, the log), the median
+CPU time of this process per frame (less moved by other processes on a loaded machine than the wall
+time), and the machine's load average (a shared machine's timings move with it).  No recording
 is written.
 
 Usage: python scripts/bench_sky_objects.py [--duration S] [--repeat N]

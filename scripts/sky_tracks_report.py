@@ -2,7 +2,7 @@
 seeds and print the issue-28 figures: per drone the time to a confirmed track after entering the
 lidar's field (and the earliest the scan's rays on it allowed: :func:`sim.sky_summary.
 scan_allows_confirm_s`), id switches, continuity, share of time in the fovea and the longest revisit
-gap (and the shortest the head's speed allowed: :func:`sim.sky_summary.head_allows_revisit_s`); false
+gap (and the shortest the head's speed allowed: :func:`sim.sky_bounds.head_allows_revisit_s`); false
 confirmed drone tracks per hour; GOSPA; and the drone/bird/clutter confusion matrix of the confirmed
 tracks.  ``--markdown PATH`` also writes them as a docs page.
 

@@ -47,8 +47,8 @@ Algorithm 2 still tracks inside the fovea).  A measured trade-off, not the defau
 (docs/sky-tracks-figures.md).
 
 Saccade time (:func:`saccade_time_s`): the head turns each axis under the paper's Algorithm 2 (App.
-D.3) at the saccade gain, ``v = min(k |e|, v_max)``, so an axis ``e`` away takes ``(e - max(v_max/k, h)) / v_max`` at
-full speed and then ``ln(min(e, v_max/k) / h) / k`` on the proportional tail (if that is above
+D.3) at the saccade gain, ``v = min(k |e|, v_max)``, so an axis ``e`` away takes
+``(e - max(v_max/k, h)) / v_max`` at full speed and then ``ln(min(e, v_max/k) / h) / k`` on the proportional tail (if that is above
 ``h``) to come within ``h`` (the fovea's half angle) of it; both axes turn at once (the longer
 counts), plus ``saccade_latency_s`` (the next command's frame, the head's dead time and
 acceleration).  Without it a revisit started when the clock had run out and the head's turn came on top: two drones 25-36 deg

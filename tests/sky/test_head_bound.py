@@ -1,10 +1,10 @@
-"""The shortest revisit gaps the head's speed allows (sim.sky_summary.head_allows_revisit_s): what
+"""The shortest revisit gaps the head's speed allows (sim.sky_bounds.head_allows_revisit_s): what
 part of a long gap is the PTS-303H's (tilt at 2 deg/s) and what part the fovea's schedule (issue 28)."""
 
 import numpy as np
 import pytest
 
-from sim.sky_summary import head_allows_revisit_s
+from sim.sky_bounds import head_allows_revisit_s
 
 T = np.round(0.1 * np.arange(1, 121), 10)      # frame end times of a 12 s run
 LIMITS = (15.0, 2.0, 40.0, 10.0)               # pan, tilt top speeds [deg/s]; accelerations [deg/s^2]

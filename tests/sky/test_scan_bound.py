@@ -1,10 +1,10 @@
-"""The earliest confirmation the scan's rays allow (sim.sky_summary.scan_allows_confirm_s): what part
+"""The earliest confirmation the scan's rays allow (sim.sky_bounds.scan_allows_confirm_s): what part
 of a slow confirmation is the rosette's and what part the tracker's (issue 28)."""
 
 import numpy as np
 import pytest
 
-from sim.sky_summary import scan_allows_confirm_s
+from sim.sky_bounds import scan_allows_confirm_s
 
 T = np.round(0.1 * np.arange(1, 41), 10)      # frame end times of a 4 s run
 

@@ -67,7 +67,7 @@ def test_no_drone_is_confirmed_before_the_scan_s_rays_allow_it(crossing):
 
 
 def test_no_revisit_gap_is_shorter_than_the_head_s_speed_allows(crossing):
-    # the head's bound (sim.sky_summary.head_allows_revisit_s) is a bound: a gap under it means the
+    # the head's bound (sim.sky_bounds.head_allows_revisit_s) is a bound: a gap under it means the
     # bound took the head for slower than it is, or counted frames the metric does not
     from sim.sky_summary import sky_run_figures
 
