@@ -128,22 +128,14 @@ def gap_reasons(loop, log, drones: dict, m: dict) -> dict:
     turn, the other drones, the classifier or the tracker."""
     out = {}
     t = np.asarray(log["t_end_s"], np.float64)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
     for d, a in drones.items():
-        first = m["drones"][d].get("first_matched_s")
-        field = np.asarray(a["in_field"], bool)
-        fov = np.asarray(a["in_fovea"], bool)
-        if first is None or not field.any():
+        r = m["drones"][d]
+        if r.get("first_matched_s") is None or r.get("longest_revisit_gap_s") is None:
             continue
-        k0 = int(np.searchsorted(t, first - 1e-9))
-        end = int(np.flatnonzero(field)[-1]) + 1
-        best, cur = (0, 0), None
-        for k in range(k0, end + 1):
-            if k < end and not fov[k]:
-                cur = k if cur is None else cur
-            elif cur is not None:
-                best = max(best, (k - cur, -cur))
-                cur = None
-        n, start = best[0], -best[1]
+        since = r.get("longest_revisit_gap_from_s")
+        start = 0 if since is None else int(np.searchsorted(t, since - 1e-9))
+        n = int(round(r["longest_revisit_gap_s"] / dt)) if dt > 0 else 0
         reasons = Counter()
         for k in range(start, start + n):
             o = loop.sky_log[k]

@@ -39,7 +39,8 @@ in a swarm was credited with another drone's track.)
 ``longest_revisit_gap_s``  the longest stretch (after its first confirmation) out of the fovea, up
                         to its last frame in the lidar's field (``in_field`` where given: a drone
                         that has left the field, or the space of interest, for good is not waiting
-                        for a revisit)
+                        for a revisit); ``longest_revisit_gap_from_s`` the time of its first frame
+                        (None: no gap; the first of equally long ones)
 
 and ``false_drone_tracks``: confirmed tracks labelled drone at some frame without being matched to a
 drone at that frame, counted once per id (birds, trees, clutter called drones), and per hour of run.
@@ -131,12 +132,14 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
     for k in range(T):
         live = [d for d in ids if np.all(np.isfinite(drones[d]["xyz_m"][k]))]
         for tid, label, x in tracks_per_frame[k]:
-            dist = {d: norm3(np.asarray(x, np.float64) - drones[d]["xyz_m"][k]) for d in live}
+            x = np.asarray(x, np.float64)
             if tid not in owner:
-                near = min(live, key=lambda d: (dist[d], d), default=None)
-                owner[tid] = near if near is not None and dist[near] < match_m else None
+                near = min(((norm3(x - drones[d]["xyz_m"][k]), d) for d in live), default=(math.inf, None))
+                owner[tid] = near[1] if near[0] < match_m else None
             d = owner[tid]
-            if d is not None and d in dist and dist[d] < match_m:
+            if d is None or (own_at[d] is not None and (own_label_at[d] is not None or label != "drone")):
+                continue            # nothing left for this track to tell its drone
+            if d in live and norm3(x - drones[d]["xyz_m"][k]) < match_m:
                 if own_at[d] is None:
                     own_at[d] = k
                 if own_label_at[d] is None and label == "drone":
@@ -162,13 +165,15 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
         if fov is not None:
             fov = np.asarray(fov, bool)
             r["fovea_share"] = float(fov[vis].mean()) if vis.any() else 0.0
-            gap, longest = 0, 0
+            gap, longest, since = 0, 0, None
             field = drones[d].get("in_field")
             end = T if field is None or not np.any(field) else int(np.flatnonzero(field)[-1]) + 1
             for k in range(first if first is not None else T, end):
                 gap = 0 if fov[k] else gap + 1
-                longest = max(longest, gap)
+                if gap > longest:
+                    longest, since = gap, k - gap + 1
             r["longest_revisit_gap_s"] = longest * dt
+            r["longest_revisit_gap_from_s"] = None if since is None else float(t[since])
         out[d] = r
     hours = (t[-1] - t[0] + dt) / 3600.0 if T else math.nan
     return {"drones": out, "false_drone_tracks": sorted(false_ids),
