@@ -83,7 +83,7 @@ from foveatrack.frames import Frame
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
-from foveatrack.sky.motion import ConstantVelocityFilter
+from foveatrack.sky.motion import ConstantVelocityFilter, predicted_many
 from foveatrack.sky.range_background import RangeBackground
 from foveatrack.sky.world_points import lidar_to_world_per_point
 from foveatrack.space_of_interest import Box
@@ -376,7 +376,7 @@ class SkyTracker:
         for tr in self.tracks:
             tr.frames_seen += 1
             tr.hit_now = False
-            tr.in_view = self._in_view(tr.kf.predicted(t_mid)[0], rows, off)
+            tr.in_view = self._in_view(tr.kf.position_at(t_mid), rows, off)
             # lost while in view: where it was last seen is in the field now (a track that coasts out
             # of the field on its own velocity is not "out of view": the head did not look away)
             tr.last_seen_in_view = self._in_view(tr.last_xyz_m, rows, off)
@@ -397,7 +397,7 @@ class SkyTracker:
                 if i != fov:
                     keep &= point_obj != j
             sel = fg_idx[keep]
-            c = tr.kf.predicted(t_mid)[0]
+            c = tr.kf.position_at(t_mid)
             d_box = Box(tuple((c - cfg.d_half_m).tolist()), tuple((c + cfg.d_half_m).tolist()))
             lo, hi = box_bounds(d_box)
             fovea_det = box_detection(np.ascontiguousarray(xyz[sel]), np.ascontiguousarray(t_ns[sel]),
@@ -414,7 +414,7 @@ class SkyTracker:
             if i == fov and fovea_det is not None:
                 z = np.array(self._to_world(fovea_det.xyz, fovea_det.t_s, pose))
                 tz = fovea_det.t_s
-            pred = tr.kf.predicted(ob.t_s)[0]
+            pred = tr.kf.position_at(ob.t_s)
             # what a track sees is kept out of the background while it is where the track predicted it,
             # as long as the track may be something flying: a tentative track off the scenery, or a
             # confirmed one that has gone somewhere.  A confirmed track that stays put (a crown's part
@@ -468,7 +468,7 @@ class SkyTracker:
             tr.label, tr.drone_frames = held_label(tr.seen_as, tr.label, tr.drone_frames, cfg.classifier)
         if not learn:
             return (), None, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
-        views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, tr.kf.predicted(t_mid)[0], tr.kf.v.copy(),
+        views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, tr.kf.position_at(t_mid), tr.kf.v.copy(),
                                 tr.hit_now, tr.in_view, dict(tr.features), tr.clear_hits, tr.seen_as)
                       for tr in self.tracks)
         return views, fovea_det, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
@@ -518,10 +518,7 @@ class SkyTracker:
         cfg = self.cfg
         if not self.tracks or not objs:
             return [], np.zeros((len(self.tracks), len(objs)), bool)
-        P = np.empty((len(self.tracks), 3))
-        V = np.empty((len(self.tracks), 3))
-        for i, tr in enumerate(self.tracks):
-            P[i], V[i] = tr.kf.predicted(t_s)
+        P, V = predicted_many([tr.kf for tr in self.tracks], t_s)
         O = np.array([ob.xyz_m for ob in objs])
         d = O[None, :, :] - P[:, None, :]
         d2 = d * d

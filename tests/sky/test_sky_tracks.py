@@ -206,6 +206,28 @@ def test_a_track_is_classified_as_if_every_frame_were_classified_afresh(monkeypa
 
 
 
+def test_predicted_many_is_each_filters_prediction_bit_for_bit():
+    # the association predicts every track at once (motion.predicted_many): row i must be the same
+    # bits as filter i's own prediction, whatever each filter's time, state and noise
+    from foveatrack.sky.motion import ConstantVelocityFilter, predicted_many
+
+    rng = np.random.default_rng(7)
+    filters = []
+    for i in range(40):
+        kf = ConstantVelocityFilter(rng.uniform(0, 5), rng.normal(size=3) * 30, 0.5 + 0.37 * i, 0.04, 3.0)
+        for _ in range(int(rng.integers(0, 6))):
+            kf.update(kf.t_s + rng.uniform(0.05, 0.3), kf.p + rng.normal(size=3))
+        filters.append(kf)
+    for t_s in (5.0, 7.3, 11.123456789):
+        P, V = predicted_many(filters, t_s)
+        assert P.shape == V.shape == (40, 3)
+        for i, kf in enumerate(filters):
+            p, v = kf.predicted(t_s)
+            assert P[i].tobytes() == p.tobytes() and V[i].tobytes() == v.tobytes()
+    P, V = predicted_many([], 1.0)
+    assert P.shape == V.shape == (0, 3)
+
+
 def _confirmed_track(tracker, tid, xyz, v, hits, t_s):
     from foveatrack.sky.motion import ConstantVelocityFilter
     from foveatrack.sky.tracks import SkyTrack
