@@ -9,13 +9,14 @@ crown (:mod:`sim.world.sky`), and each stray near return of the frame (class "cl
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 
-@dataclass(frozen=True)
-class ObjectTruth:
+class ObjectTruth(NamedTuple):
+    """One object at a frame's mid time (a named tuple: made ~25 times a frame, four times quicker than
+    a frozen dataclass)."""
     id: str
     cls: str
     xyz_m: tuple

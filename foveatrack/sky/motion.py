@@ -82,6 +82,16 @@ class ConstantVelocityFilter:
         return float(np.sqrt(x * x + y * y + z * z))
 
 
+
+def positions_many(filters, t_s: float) -> np.ndarray:
+    """:meth:`ConstantVelocityFilter.position_at` of many filters at ``t_s``: (N, 3), row ``i`` the
+    same bits as ``filters[i].position_at(t_s)``."""
+    if not filters:
+        return np.empty((0, 3))
+    dt = t_s - np.array([f.t_s for f in filters])
+    return np.array([f.p for f in filters]) + np.array([f.v for f in filters]) * dt[:, None]
+
+
 def predicted_many(filters, t_s: float) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`ConstantVelocityFilter.predicted` of many filters at ``t_s``: positions (N, 3) and
     variances (N, 3), row ``i`` the same bits as ``filters[i].predicted(t_s)`` (the same elementwise
@@ -91,10 +101,8 @@ def predicted_many(filters, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         return np.empty((0, 3)), np.empty((0, 3))
     dt = t_s - np.array([f.t_s for f in filters])
     q = np.array([f.q for f in filters])
-    p = np.array([f.p for f in filters])
-    v = np.array([f.v for f in filters])
     a = np.array([f.a for f in filters])
     b = np.array([f.b for f in filters])
     c = np.array([f.c for f in filters])
-    col = dt[:, None]
-    return p + v * col, a + (2.0 * dt)[:, None] * b + (dt * dt)[:, None] * c + (q * dt * dt * dt / 3.0)[:, None]
+    var = a + (2.0 * dt)[:, None] * b + (dt * dt)[:, None] * c + (q * dt * dt * dt / 3.0)[:, None]
+    return positions_many(filters, t_s), var

@@ -83,7 +83,7 @@ from foveatrack.frames import Frame
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
-from foveatrack.sky.motion import ConstantVelocityFilter, predicted_many
+from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, predicted_many
 from foveatrack.sky.range_background import RangeBackground
 from foveatrack.sky.world_points import lidar_to_world_per_point
 from foveatrack.space_of_interest import Box
@@ -608,7 +608,7 @@ class SkyTracker:
             return away
         # every pair's distance at once (|d| as norm3 sums it): a flock's twenty confirmed tracks are
         # 190 pairs a frame; few are close
-        P = np.array([tr.kf.position_at(t_s) for tr in conf])
+        P = positions_many([tr.kf for tr in conf], t_s)
         d = P[:, None, :] - P[None, :, :]
         dist = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
         for a, b in np.argwhere(np.triu(dist <= cfg.merge_m, 1)).tolist():     # row-major: (a, b) in order

@@ -207,9 +207,10 @@ def test_a_track_is_classified_as_if_every_frame_were_classified_afresh(monkeypa
 
 
 def test_predicted_many_is_each_filters_prediction_bit_for_bit():
-    # the association predicts every track at once (motion.predicted_many): row i must be the same
-    # bits as filter i's own prediction, whatever each filter's time, state and noise
-    from foveatrack.sky.motion import ConstantVelocityFilter, predicted_many
+    # the association predicts every track at once (motion.predicted_many), the merge rule their
+    # positions (positions_many): row i must be the same bits as filter i's own, whatever each
+    # filter's time, state and noise
+    from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, predicted_many
 
     rng = np.random.default_rng(7)
     filters = []
@@ -224,8 +225,10 @@ def test_predicted_many_is_each_filters_prediction_bit_for_bit():
         for i, kf in enumerate(filters):
             p, v = kf.predicted(t_s)
             assert P[i].tobytes() == p.tobytes() and V[i].tobytes() == v.tobytes()
+        assert positions_many(filters, t_s).tobytes() == P.tobytes()
+        assert kf.position_at(t_s).tobytes() == p.tobytes()
     P, V = predicted_many([], 1.0)
-    assert P.shape == V.shape == (0, 3)
+    assert P.shape == V.shape == positions_many([], 1.0).shape == (0, 3)
 
 
 def _confirmed_track(tracker, tid, xyz, v, hits, t_s):
