@@ -362,7 +362,7 @@ class ClosedLoop:
                 self._objects_truth = ObjectsTruth(scene)
             strays = self.sensor.last_strays_m if scene.has("stray_returns") else np.zeros((0, 3))
             self.last_objects = self._objects_truth.at(t_mid, self.sensor.last_object_rays, strays, self._strays_seen,
-                                                       self.sensor.last_mid_xyz_m)
+                                                       self.sensor.last_mid_xyz_m, self.sensor.last_mid_velocity)
             self._strays_seen += len(strays)
             self.objects_log.append(self.last_objects)
         c4 = clock()

@@ -44,19 +44,20 @@ class ObjectsTruth:
         self._flocks = [(n_t + a, n_t + b, FlockPoses(scene.others[a:b])) for a, b in FlockPoses.groups(scene.others)]
 
     def at(self, t_mid_s: float, object_rays, strays_m: np.ndarray, stray_count: int,
-           mid_xyz_m=None) -> list[ObjectTruth]:
+           mid_xyz_m=None, mid_velocity=None) -> list[ObjectTruth]:
         """The truth of each object at ``t_mid_s``; ``object_rays``: rays that hit each object this
         frame (drones then others, :attr:`sim.sensor.SceneSensor.last_object_rays`), ``strays_m`` the
-        frame's stray returns (world), numbered from ``stray_count``; ``mid_xyz_m``: each object's
-        position at ``t_mid_s`` if already computed (the sensor's cull has it: the same call, the
-        same bits)."""
+        frame's stray returns (world), numbered from ``stray_count``; ``mid_xyz_m``, ``mid_velocity``:
+        each object's position and velocity at ``t_mid_s`` where already computed (the sensor's cull
+        has them, None for a velocity it did not ask: the same calls, the same bits)."""
         t = np.array([t_mid_s])
         out = []
         n_obj = len(self.objects)
         rays = (np.zeros(n_obj, dtype=np.int64) if object_rays is None else object_rays).tolist()
-        vel: list = [None] * n_obj
+        vel: list = [None] * n_obj if mid_velocity is None else [None if v is None else v.tolist() for v in mid_velocity]
         for a, b, flock in self._flocks:
-            vel[a:b] = flock.velocities(np.arange(b - a), np.full(b - a, t_mid_s)).tolist()
+            if any(v is None for v in vel[a:b]):
+                vel[a:b] = flock.velocities(np.arange(b - a), np.full(b - a, t_mid_s)).tolist()
         for k, ((oid, cls, traj, size), n) in enumerate(zip(self.objects, rays)):
             p = traj.position(t)[0] if mid_xyz_m is None else mid_xyz_m[k]
             v = traj.velocity(t)[0].tolist() if vel[k] is None else vel[k]

@@ -26,6 +26,7 @@ from sim.world.sky import FlockPoses
 from sim.world.trajectories import body_yaw_rad
 
 _NONE = np.zeros(0)          # an effect that is off: no draws
+_ZERO3 = np.zeros(3)         # the velocity a cull without an acceleration bound does not read
 EFFECT_STREAMS = ("range_noise", "angular_noise", "return_probability", "sunlight", "dropouts", "stray_returns",
                   "weather")
 CLUTTER_REFLECTIVITY_BYTE = 1   # a droplet's return: the weakest diffuse byte (sim.effects, weather)
@@ -110,8 +111,12 @@ class SceneSensor:
                       "stray_returns", "incidence", "weather", "mixed_pixels")}
         self._target_prim_end = sum(spec.body.prims.shape[0] for spec in scene.targets)
         # Per target, what sizes its per-frame cull (computed once: both walk Python objects).
-        self._cull = [(spec.body.bounding_radius_m, spec.trajectory.max_speed_m_s) for spec in scene.targets]
-        self._cull_others = [(obj.bounding_radius_m, obj.trajectory.max_speed_m_s) for obj in scene.others]
+        # (bounding radius, top speed, acceleration bound or None): the cone over the frame, then the
+        # ray's own instant (wk.moving_cull_kernel)
+        self._cull = [(spec.body.bounding_radius_m, spec.trajectory.max_speed_m_s,
+                       getattr(spec.trajectory, "max_accel_m_s2", None)) for spec in scene.targets]
+        self._cull_others = [(obj.bounding_radius_m, obj.trajectory.max_speed_m_s,
+                              getattr(obj.trajectory, "max_accel_m_s2", None)) for obj in scene.others]
         # A flock's birds are cast together (sim.world.sky.FlockPoses: the same values, a twentieth of
         # the Python calls); with a beam footprint each body's sub-rays are cast on their own.
         self._flocks = {} if self._has["beam_footprint"] else {
@@ -123,6 +128,8 @@ class SceneSensor:
         self.last_object_rays: np.ndarray | None = None
         # each object's position at the last chunk's mid time (what its cull centred on; the truth's too)
         self.last_mid_xyz_m: list[np.ndarray] | None = None
+        # ... and its velocity there where the cull asked for it (None where it did not): the truth's too
+        self.last_mid_velocity: list | None = None
         self.last_strays_m = np.zeros((0, 3))
         # Work counters (timing-free evidence that a scene costs only what it holds).
         self.rays_total = 0
@@ -149,24 +156,33 @@ class SceneSensor:
         if has["mixed_pixels"]:
             self._share = np.ones(n)
         offset = 0
-        mids = []
+        mids, vels = [], []
+        # each ray's instant, as the poses take it (the per-ray cull's)
+        self._t_ray = chunk.t_ns * 1e-9 if self.target_motion == "per_point" else np.full(n, 0.5 * (t0 + t1))
         for spec, cull in zip(scene.targets, self._cull):
-            mids.append(self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset))
+            c, v = self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
+            mids.append(c)
+            vels.append(v)
             offset += spec.body.prims.shape[0]
         k = 0
         while k < len(scene.others):
             if k in self._flocks:
                 stop, flock = self._flocks[k]
-                mids += self._cast_flock(flock, self._cull_others[k:stop], t0, t1, chunk, d_world, rng_m, prim, offset)
+                c, v = self._cast_flock(flock, self._cull_others[k:stop], t0, t1, chunk, d_world, rng_m, prim, offset)
+                mids += c
+                vels += v
                 offset += sum(o.body.prims.shape[0] for o in flock.objects)
                 k = stop
                 continue
             obj = scene.others[k]
-            mids.append(self._cast_target(obj, self._cull_others[k], t0, t1, chunk.t_ns, d_world, chunk.status,
-                                          rng_m, prim, offset))
+            c, v = self._cast_target(obj, self._cull_others[k], t0, t1, chunk.t_ns, d_world, chunk.status,
+                                     rng_m, prim, offset)
+            mids.append(c)
+            vels.append(v)
             offset += obj.body.prims.shape[0]
             k += 1
         self.last_mid_xyz_m = mids
+        self.last_mid_velocity = vels
         self.rays_total += n
         if self._bg.shape[0]:
             self.rays_cast_background += n
@@ -298,11 +314,14 @@ class SceneSensor:
             self._share[rays] = 1.0
         self.last_strays_m = d_world[rays] * r[:, None]      # world frame, for the truth
 
-    def _cast_target(self, spec, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset) -> np.ndarray:
-        """Cast the rays near one moving body on it; returns its position at the chunk's mid time."""
-        c = spec.trajectory.position(np.array([0.5 * (t0 + t1)]))[0]
-        self._cast_body(spec, c, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset)
-        return c
+    def _cast_target(self, spec, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset):
+        """Cast the rays near one moving body on it; returns its position and velocity at the chunk's
+        mid time (the velocity None where the cull did not need it)."""
+        t = np.array([0.5 * (t0 + t1)])
+        c = spec.trajectory.position(t)[0]
+        v = None if cull[2] is None or self._has["beam_footprint"] else spec.trajectory.velocity(t)[0]
+        self._cast_body(spec, c, v, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset)
+        return c, v
 
     def _cast_flock(self, flock, culls, t0, t1, chunk, d_world, rng_m, prim, offset) -> list[np.ndarray]:
         """:meth:`_cast_target` for each bird of a flock in turn, the birds' poses evaluated together
@@ -311,7 +330,9 @@ class SceneSensor:
         t_mid = 0.5 * (t0 + t1)
         n = len(flock.objects)
         centres = flock.positions(np.arange(n), np.full(n, t_mid))
-        reach = np.array([r + v * 0.5 * (t1 - t0) * 1.01 + 1e-3 for r, v in culls])
+        vel = flock.velocities(np.arange(n), np.full(n, t_mid))
+        vels = [vel[k].copy() for k in range(n)]
+        reach = np.array([r + v * 0.5 * (t1 - t0) * 1.01 + 1e-3 for r, v, _ in culls])
         # the flock's cone: a ray within reach[k] of bird k passes within |c_k - g| + reach[k] of g
         g = centres.mean(axis=0)
         d = centres - g
@@ -320,16 +341,28 @@ class SceneSensor:
         sub = sub[:wk.cone_candidates_kernel(d_world, chunk.status, g[0], g[1], g[2], outer, sub)]
         mids = [centres[k].copy() for k in range(n)]
         if sub.size == 0:
-            return mids
+            return mids, vels
         local = np.empty((n, sub.size), dtype=np.int64)
         count = np.empty(n, dtype=np.int64)
         wk.cones_candidates_kernel(np.ascontiguousarray(d_world[sub]), np.ascontiguousarray(chunk.status[sub]),
                                    centres, reach, local, count)
+        if int(count.sum()) == 0:
+            return mids, vels
+        # each bird's cone candidates that can meet it at their own instant (wk.moving_cull_kernel)
+        kept = np.empty(sub.size, dtype=np.int64)
+        parts = []
+        for k in range(n):
+            if count[k]:
+                r, v_max, accel = culls[k]
+                m_k = wk.moving_cull_kernel(sub[local[k, :count[k]]], d_world, self._t_ray, t_mid, centres[k], vel[k],
+                                            r, -1.0 if accel is None else accel, v_max, kept)
+                count[k] = m_k
+                parts.append(kept[:m_k].copy())
         total = int(count.sum())
         self.rays_cast_targets += total
         if total == 0:
-            return mids
-        idx_all = np.concatenate([sub[local[k, :count[k]]] for k in range(n)])
+            return mids, vels
+        idx_all = np.concatenate(parts)
         m = np.repeat(np.arange(n), count)
         t_pose = chunk.t_ns[idx_all] * 1e-9 if self.target_motion == "per_point" else np.full(total, t_mid)
         pos, yaw = flock.poses(m, t_pose)
@@ -342,18 +375,23 @@ class SceneSensor:
                 wk.cast_flapping_kernel(idx_all[lo:hi], d_world, pos[lo:hi], yaw[lo:hi], flap_rad[lo:hi],
                                         obj.body.prims, obj.hinge, offset, rng_m, prim)
             offset += obj.body.prims.shape[0]
-        return mids
+        return mids, vels
 
-    def _cast_body(self, spec, c, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset) -> None:
+    def _cast_body(self, spec, c, v, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset) -> None:
         traj = spec.trajectory
         t_mid = 0.5 * (t0 + t1)
-        radius_m, v_max = cull
+        radius_m, v_max, accel = cull
         reach = radius_m + v_max * 0.5 * (t1 - t0) * 1.01 + 1e-3
         # Beam divergence can catch a body just outside the central ray's path.
         if self._has["beam_footprint"]:
             reach += norm3(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
         idx = np.empty(t_ns.size, dtype=np.int64)
         idx = idx[:wk.cone_candidates_kernel(d_world, status, c[0], c[1], c[2], reach, idx)]
+        if idx.size and not self._has["beam_footprint"]:
+            # ... of those, the rays that can meet it at their own instant (wk.moving_cull_kernel)
+            kept = np.empty(idx.size, dtype=np.int64)
+            idx = kept[:wk.moving_cull_kernel(idx, d_world, self._t_ray, t_mid, c, _ZERO3 if v is None else v,
+                                              radius_m, -1.0 if accel is None else accel, v_max, kept)]
         self.rays_cast_targets += idx.size
         if idx.size == 0:
             return

@@ -152,6 +152,21 @@ def cone_candidates_twin(d, status, c, radius, ok_status=0):
     return np.flatnonzero((c2 - b * b <= radius * radius) & (b > -radius) & (status == ok_status))
 
 
+
+def moving_cull_twin(idx, d, t_ray, t_mid, c, v, radius, accel, v_max):
+    """The rays of ``idx`` within reach of the body at their own times (kernel's docstring), in order."""
+    dt = t_ray[idx] - t_mid
+    if accel >= 0.0:
+        q = c[None, :] + v[None, :] * dt[:, None]
+        reach = (radius + 0.5 * accel * dt * dt) * 1.01 + 1e-3
+    else:
+        q = np.repeat(np.asarray(c, float)[None, :], idx.size, axis=0)
+        reach = (radius + v_max * np.abs(dt)) * 1.01 + 1e-3
+    dd = d[idx]
+    b = dd[:, 0] * q[:, 0] + dd[:, 1] * q[:, 1] + dd[:, 2] * q[:, 2]
+    q2 = q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1] + q[:, 2] * q[:, 2]
+    return idx[(q2 - b * b <= reach * reach) & (b > -reach)]
+
 def bout_index_twin(t, member, starts_per_member):
     """Per time, the bout index (into the members' concatenated starts) numpy's searchsorted finds."""
     out = np.empty(t.size, np.int64)

@@ -450,6 +450,41 @@ def cone_candidates_kernel(d_world, status, cx, cy, cz, radius, out_idx):
 
 
 @njit(cache=True, nogil=True)
+def moving_cull_kernel(idx, d_world, t_ray, t_mid, c, v, radius, accel, v_max, out_idx):
+    """Of the rays ``idx`` (a body's cone candidates, :func:`cone_candidates_kernel`), those that can
+    meet the body at the ray's own time ``t_ray[j]`` (``dt = t_ray[j] - t_mid``), kept in order in
+    ``out_idx``; returns how many.  The body lies within ``radius`` of its position p(t), and
+
+    * with an acceleration bound (``accel >= 0``): ``|p(t) - (c + v dt)| <= accel dt^2 / 2`` (``c``,
+      ``v`` its position and velocity at ``t_mid``) -- the test is against that predicted point;
+    * without (``accel < 0``): ``|p(t) - c| <= v_max |dt|``.
+
+    The cone test covers the whole frame (``v_max`` times half its length); this one the ray's
+    instant, so a bird at 8 m/s keeps a fifth of the rays (a flock of 20: 600 -> ~130 a frame) and the
+    poses are evaluated for those only.  Conservative by construction (1 % and 1 mm added, as the cone's
+    reach): a ray it drops cannot meet the body, so the cast is the same bits."""
+    n = 0
+    for i in range(idx.shape[0]):
+        j = idx[i]
+        dt = t_ray[j] - t_mid
+        if accel >= 0.0:
+            qx = c[0] + v[0] * dt
+            qy = c[1] + v[1] * dt
+            qz = c[2] + v[2] * dt
+            reach = (radius + 0.5 * accel * dt * dt) * 1.01 + 1e-3
+        else:
+            qx = c[0]
+            qy = c[1]
+            qz = c[2]
+            reach = (radius + v_max * abs(dt)) * 1.01 + 1e-3
+        b = d_world[j, 0] * qx + d_world[j, 1] * qy + d_world[j, 2] * qz
+        if (qx * qx + qy * qy + qz * qz) - b * b <= reach * reach and b > -reach:
+            out_idx[n] = j
+            n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
 def cones_candidates_kernel(d_world, status, centres, radii, out_idx, out_n):
     """:func:`cone_candidates_kernel` for K cones in one pass over the rays (a flock's birds): the rays
     of cone k go in order to ``out_idx[k, :out_n[k]]`` (``out_idx`` (K, N), ``out_n`` (K,)).  The

@@ -177,6 +177,7 @@ class SharedPath:
     def __init__(self, trajectory):
         self.trajectory = trajectory
         self.max_speed_m_s = trajectory.max_speed_m_s
+        self.max_accel_m_s2 = getattr(trajectory, "max_accel_m_s2", None)
         self._memo: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
     def _ask(self, what: str, t_s):
@@ -222,6 +223,16 @@ class FlockMember:
     def max_speed_m_s(self) -> float:
         wander = np.abs(self.amp_m * self.omega_rad_s).sum(axis=0)
         return self.centre.max_speed_m_s + math.sqrt(float((wander * wander).sum()))
+
+    @property
+    def max_accel_m_s2(self) -> float | None:
+        """A bound on |acceleration|: the centre's (None if its trajectory gives none) plus the
+        wander's, whose sines accelerate each axis by at most the sum of ``amp omega^2``."""
+        centre = getattr(self.centre, "max_accel_m_s2", None)
+        if centre is None:
+            return None
+        wander = np.abs(self.amp_m * self.omega_rad_s * self.omega_rad_s).sum(axis=0)
+        return centre + math.sqrt(float((wander * wander).sum()))
 
 
 def flock_offsets(rng: np.random.Generator, count: int, radius_m: float, centre, wingspan_m: float,

@@ -59,6 +59,11 @@ class Straight:
     def max_speed_m_s(self) -> float:
         return norm3(self.velocity_m_s)
 
+    @property
+    def max_accel_m_s2(self) -> float:
+        """A bound on |acceleration| (the sensor's per-ray cull, :func:`sim.world.kernels.moving_cull_kernel`)."""
+        return 0.0
+
 
 @dataclass(frozen=True)
 class Circle:
@@ -83,6 +88,11 @@ class Circle:
     @property
     def max_speed_m_s(self) -> float:
         return abs(self.speed_m_s)
+
+    @property
+    def max_accel_m_s2(self) -> float:
+        """A bound on |acceleration|: the centripetal ``v^2 / r`` of the orbit."""
+        return self.speed_m_s * self.speed_m_s / abs(self.radius_m)
 
 
 @dataclass(frozen=True)
