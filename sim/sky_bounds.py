@@ -81,7 +81,7 @@ def _pair_bound_s(tau_s: np.ndarray, dt: float) -> float:
             lo = mid
         else:
             hi = mid - 1
-    return (lo + 1) * dt if lo >= 1 else 0.0
+    return (lo + 1) * dt if lo >= 1 or (tau_s.size >= 2 and broken(0)) else 0.0
 
 
 def _leg_s(d_deg: np.ndarray, v: float, a: float) -> np.ndarray:

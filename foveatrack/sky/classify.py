@@ -88,6 +88,14 @@ class ClassifierConfig:
     flap_autocorr: float = 0.5
     drone_after_frames: int = 10
 
+    def __post_init__(self) -> None:
+        # rules 2-4 read a net speed and a velocity, which take two hits (a table's types are checked
+        # by from_mapping; this holds for a configuration built in code too)
+        if not self.min_hits >= 2:
+            raise UserError(f"min_hits must be an integer >= 2, got {self.min_hits!r}")
+        if not self.drone_after_frames >= 1:
+            raise UserError(f"drone_after_frames must be an integer >= 1, got {self.drone_after_frames!r}")
+
     @classmethod
     def from_mapping(cls, data: Mapping, where: str) -> "ClassifierConfig":
         check_keys(data, [f.name for f in fields(cls)], where)

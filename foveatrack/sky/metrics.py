@@ -167,7 +167,8 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
             r["fovea_share"] = float(fov[vis].mean()) if vis.any() else 0.0
             gap, longest, since = 0, 0, None
             field = drones[d].get("in_field")
-            end = T if field is None or not np.any(field) else int(np.flatnonzero(field)[-1]) + 1
+            # up to its last frame in the field (a drone never in it: no gap to count)
+            end = T if field is None else (int(np.flatnonzero(field)[-1]) + 1 if np.any(field) else 0)
             for k in range(first if first is not None else T, end):
                 gap = 0 if fov[k] else gap + 1
                 if gap > longest:

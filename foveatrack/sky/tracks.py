@@ -113,7 +113,8 @@ class SkyTrackerConfig:
     gate_max_m : > 0 [m]         largest distance of an allowed pair from the prediction
     confirm_hits, confirm_window : ints    M hits of the first N frames
     lost_after_s : > 0 [s]       unseen this long in the field (summed): deleted
-    lost_out_of_view_s : > 0 [s] unseen this long while out of the field: deleted
+    lost_out_of_view_s : > 0 [s] unseen this long in all, in the field or out: deleted (below
+                                 lost_after_s it decides alone)
     field_half_angle_deg : > 0 or None     the lidar's field around its axis (None: every track in view)
     static_window_s, static_radius_m       a confirmed track that stayed put this long is scenery
     d_half_m : > 0 [m]           half-size of the fixated track's D (Algorithm 1)

@@ -68,8 +68,10 @@ def lidar_to_world_per_point(xyz: np.ndarray, t_ns: np.ndarray, pose, t0_s: floa
     ts, R = node_rotations(pose, t0_s, t1_s, nodes)
     off = np.ascontiguousarray(np.asarray(pose.lidar_offset_m, np.float64).reshape(3))
     out = np.empty((n, 3))
-    world_points_kernel(xyz, np.ascontiguousarray(t_ns, np.int64), R, float(t0_s),
-                        (t1_s - t0_s) / (ts.size - 1), off, out)
+    step = (t1_s - t0_s) / (ts.size - 1)
+    if not step > 0.0:      # a frame of no length (or reversed): every point at the one pose of t0
+        R, step = R[:1].repeat(2, axis=0), 1.0
+    world_points_kernel(xyz, np.ascontiguousarray(t_ns, np.int64), R, float(t0_s), step, off, out)
     return out
 
 
@@ -85,6 +87,8 @@ def lidar_to_world_per_point_numpy(xyz: np.ndarray, t_ns: np.ndarray, pose, t0_s
     qx, qy, qz = xyz[:, 0] + off[0], xyz[:, 1] + off[1], xyz[:, 2] + off[2]
     t = np.asarray(t_ns, np.int64) * 1e-9
     step = (t1_s - t0_s) / (ts.size - 1)
+    if not step > 0.0:
+        R, ts, step = R[:1].repeat(2, axis=0), ts[:2], 1.0
     u = np.clip((t - t0_s) / step, 0.0, ts.size - 1.0)
     i = np.minimum(np.floor(u).astype(np.int64), ts.size - 2)
     w = u - i

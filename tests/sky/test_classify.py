@@ -87,3 +87,11 @@ def test_an_extended_patch_that_swings_back_is_clutter_a_small_object_or_a_strai
     # a drone-sized object doing the same, and the patch's size flying straight on: drones
     assert classify(_swinging_patch(0.2, swing), cfg)[0] == "drone"
     assert classify(_swinging_patch(0.55, lambda t: (33.0, 5.0 - 0.9 * t, 8.0)), cfg)[0] == "drone"
+
+
+def test_a_classifier_built_in_code_is_checked_as_a_table_is():
+    # rules 2-4 need two hits (a net speed, a velocity): min_hits 1 crashed on a one-hit track
+    with pytest.raises(UserError, match="min_hits"):
+        ClassifierConfig(min_hits=1)
+    with pytest.raises(UserError, match="drone_after_frames"):
+        ClassifierConfig(drone_after_frames=0)

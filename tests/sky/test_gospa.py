@@ -171,3 +171,17 @@ def test_a_drone_is_not_confirmed_by_another_drone_s_track_that_drifts_onto_it()
     # track 1 is the one b stays matched to (CLEAR MOT keeps it: track 5 is a second track on b);
     # continuity and the revisit gaps start at its first match
     assert m["b"]["first_matched_s"] == pytest.approx(1.0) and m["b"]["track_ids"] == [1]
+
+
+def test_a_drone_never_in_the_field_has_no_revisit_gap():
+    # matched all along (a track on it from the rim's returns) but never inside the field and D: the
+    # fovea owes it nothing, as one in the field for a single frame is owed one frame
+    T = 50
+    t = 0.1 * np.arange(T)
+    xyz = np.tile([30.0, 0.0, 3.0], (T, 1))
+    d = {"xyz_m": xyz, "visible": np.ones(T, bool), "in_fovea": np.zeros(T, bool)}
+    tracks = [[(1, "drone", xyz[k])] for k in range(T)]
+    never = drone_metrics(t, {"a": {**d, "in_field": np.zeros(T, bool)}}, tracks)["drones"]["a"]
+    once = drone_metrics(t, {"a": {**d, "in_field": np.arange(T) == 0}}, tracks)["drones"]["a"]
+    assert never["longest_revisit_gap_s"] == 0.0 and never["longest_revisit_gap_from_s"] is None
+    assert once["longest_revisit_gap_s"] == pytest.approx(0.1)

@@ -77,3 +77,14 @@ def test_the_slow_tilt_binds_where_the_pan_would_not():
 def test_a_drone_never_confirmed_has_no_gap_to_bound():
     b = _bound({"a": _drone(0.0, 10.0, first_s=None), "b": _drone(0.0, 0.0)})
     assert "a" not in b["acquire_s"] and b["pairs"] == {}
+
+
+def test_the_pair_bound_counts_its_smallest_window():
+    # a trip there and back of 5 s in every window: even the smallest window (two frames) breaks
+    # "twice the trip within G", so the bound is one frame, not none
+    from sim.sky_bounds import _pair_bound_s
+
+    for n in (2, 3, 4, 40):
+        assert _pair_bound_s(np.full(n, 5.0), 0.1) >= 0.1 - 1e-12
+    assert _pair_bound_s(np.full(1, 5.0), 0.1) == 0.0        # one frame: no window at all
+    assert _pair_bound_s(np.zeros(10), 0.1) == 0.0           # no trip needed: no bound

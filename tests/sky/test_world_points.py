@@ -53,3 +53,16 @@ def test_each_point_turns_at_its_own_time():
 
 def test_no_points_give_no_points():
     assert lidar_to_world_per_point(np.empty((0, 3)), np.empty(0, np.int64), _TurningHead(0, 0), 0.0, 0.1).shape == (0, 3)
+
+
+def test_a_frame_of_no_length_turns_every_point_at_its_one_pose():
+    # t1 == t0 (a frame of a single instant): no node spacing to divide by; every point takes the
+    # pose at t0, in the kernel and in its twin
+    pose = _TurningHead(60.0, -20.0)
+    xyz = np.array([[50.0, 1.0, 2.0], [10.0, -3.0, 0.5]])
+    t_ns = np.array([1_600_000_000, 1_600_000_000], np.int64)
+    a = lidar_to_world_per_point(xyz, t_ns, pose, 1.6, 1.6, 11)
+    b = lidar_to_world_per_point_numpy(xyz, t_ns, pose, 1.6, 1.6, 11)
+    p, tl, _, _ = pose.angles_at(1.6)
+    want = (rotation_matrix(p, tl) @ (xyz + np.array(pose.lidar_offset_m)).T).T
+    assert a.tobytes() == b.tobytes() and np.allclose(a, want, rtol=0, atol=1e-9)
