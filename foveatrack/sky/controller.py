@@ -195,11 +195,16 @@ class SkyController:
         half = self.attention.cfg.fovea_half_angle_deg
         in_fovea = {v.track_id for v in sky.tracks
                     if v.confirmed and bearing_off_axis_deg(v.xyz_m, *mid_pose) <= half}
+        # the candidate being verified counts too for the attention, which ends that look once the
+        # candidate has been dwell_s in the fovea (without it every look ran saccade_timeout_s)
+        cand = next((v for v in sky.tracks if v.track_id == self.attention.verifying and not v.confirmed), None)
+        looked = in_fovea | ({cand.track_id} if cand is not None
+                             and bearing_off_axis_deg(cand.xyz_m, *mid_pose) <= half else set())
         end_pose = self._pose_rows(frame.t_end_s)      # one pose for every track's saccade time
         turn = {v.track_id: saccade_time_s(*bearing_deg(*self._in_lidar(v.xyz_m, *end_pose).tolist()),
                                            self.attention.cfg, self._head_speeds)
                 for v in sky.tracks if v.confirmed}
-        nxt = self.attention.update(frame.t_end_s, sky.tracks, in_fovea, frame.t_end_s - frame.t_start_s, turn)
+        nxt = self.attention.update(frame.t_end_s, sky.tracks, looked, frame.t_end_s - frame.t_start_s, turn)
         scores = {v.track_id: threat_score(v, self.attention.cfg) for v in sky.tracks if v.confirmed}
         self.last_output = SkyControlOutput(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores, self.attention.pinned)
         return self.last_output

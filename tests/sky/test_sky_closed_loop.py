@@ -176,3 +176,26 @@ def test_same_scene_same_bits(crossing):
     a = [(v.track_id, v.xyz_m.tobytes()) for o in loop.sky_log for v in o.sky.tracks]
     b = [(v.track_id, v.xyz_m.tobytes()) for o in loop2.sky_log for v in o.sky.tracks]
     assert a == b
+
+
+def test_a_look_at_a_candidate_ends_once_it_has_been_in_the_fovea_dwell_s():
+    # Nothing confirmed (confirmation asks more hits than the scan gives the crossing's drones in a
+    # few seconds): the head turns to the likeliest candidate and looks at it until it has been in
+    # the fovea dwell_s, or saccade_timeout_s has passed.  The controller told the attention only of
+    # the confirmed tracks in the fovea, so a candidate's dwell never counted and every look ran the
+    # whole timeout.
+    base = load_scene(ROOT / "scenes" / "two-drones-crossing.toml")
+    sky = {"confirm_hits": 15, "confirm_window": 15, "attention": {"dwell_s": 0.3, "saccade_timeout_s": 2.0}}
+    scene = dataclasses.replace(base, tracker_table={**base.tracker_table, "sky": sky}, duration_s=6.0)
+    seen = []
+
+    def hook(frame, out, loop):
+        att = loop.sky.attention
+        seen.append((att.verifying, att._verify_start_s, att._verify_dwell_s, out.sky.confirmed_now))
+
+    ClosedLoop(scene, frame_hook=hook).run()
+    assert not any(c for *_, c in seen)                     # nothing was confirmed
+    assert any(v is not None for v, *_ in seen)             # candidates were looked at
+    starts = sorted({s for v, s, *_ in seen if v is not None})
+    assert max(d for *_, d, _ in seen) > 0.0                # a candidate's time in the fovea counted
+    assert min(b - a for a, b in zip(starts, starts[1:])) < 2.0 - 1e-9    # a look ended before its timeout
