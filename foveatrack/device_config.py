@@ -199,6 +199,36 @@ class DaemonConfig:
             p = Path(rec).parent / name if rec is not None and "{time}" not in str(Path(rec).parent) else Path(name)
         return (p if p.is_absolute() else Path(self.path).parent / p).resolve()
 
+    def control_socket_dir_made(self) -> bool:
+        """Whether the daemon creates the control socket's missing directory: it is the recording's,
+        which ``[recording] make_dirs`` lets it create."""
+        rec = self.recording_path()
+        return (self.recording.make_dirs and rec is not None
+                and self.control_socket_path().parent == rec.parent.resolve())
+
+    def check_control_socket(self) -> None:
+        """A UserError naming ``[daemon] control_socket`` when the multi-object tracker's control socket
+        could not be made at its path: an existing file that is not a socket, or a missing directory
+        the daemon does not create (:meth:`control_socket_dir_made`).  ``daemon --check`` asks it,
+        as the start does (``--check`` passed both, and the run then failed)."""
+        import os
+        import stat
+
+        if not self.sky:
+            return
+        path = self.control_socket_path()
+        key = f"{self.path} [daemon] control_socket"
+        if (path.exists() or path.is_symlink()) and not stat.S_ISSOCK(os.lstat(path).st_mode):
+            raise UserError(f"{key}: {path} exists and is not a socket; remove it or set control_socket to "
+                            "another path")
+        if not path.parent.is_dir():
+            if self.control_socket_dir_made():
+                return
+            raise UserError(f"{key}: the directory {path.parent} does not exist; create it or set "
+                            "control_socket to a path in an existing directory")
+        if not os.access(path.parent, os.W_OK | os.X_OK):
+            raise UserError(f"{key}: {path.parent} is not a directory this user can write in")
+
     def check_recording_dir(self) -> None:
         """A UserError naming ``[recording] path`` when the recording could not be written there: its
         directory missing (and ``make_dirs`` off) or not writable.  The daemon's start and

@@ -111,6 +111,7 @@ def cmd_daemon(args) -> int:
         # the devices as the daemon opens them: a port that does not exist or a socket another process
         # holds fails here, naming the key (before: --check passed a head port that did not exist)
         cfg.check_recording_dir()
+        cfg.check_control_socket()
         print(f"foveatrack daemon --check: {check_devices(cfg)}", file=sys.stderr)
         return 0
     if args.duration_s is not None and not args.duration_s > 0:

@@ -121,6 +121,9 @@ def ask_daemon(path: Path, request: dict, timeout_s: float = 5.0) -> dict:
     if not path.exists():
         raise UserError(f"no daemon is running there: no control socket at {path} (a daemon whose config has "
                         "[tracker.sky] creates it while it runs)")
+    if not stat.S_ISSOCK(os.stat(path).st_mode):
+        raise UserError(f"{path} is not a control socket (not a socket at all): check [daemon] control_socket; "
+                        "a daemon will not start with that path either")
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     try:
         sock.bind("")              # an abstract name of our own (Linux autobind): the answer's address
@@ -171,6 +174,13 @@ class Operator:
             return
         path = self.cfg.control_socket_path()
         try:
+            self.cfg.check_control_socket()
+            if not path.parent.is_dir():      # the recording's directory, which make_dirs lets us create
+                try:
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    raise UserError(f"{self.cfg.path} [daemon] control_socket: cannot create {path.parent}: "
+                                    f"{exc.strerror or exc}") from None
             self.control = ControlSocket(path, f"{self.cfg.path} [daemon]")
         except UserError:
             self.client.close()

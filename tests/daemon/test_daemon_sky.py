@@ -193,3 +193,45 @@ def test_a_daemon_answers_over_its_socket_between_frames(tmp_path):
     finally:
         server.close()
     assert not path.exists()
+
+
+def test_the_control_socket_path_is_checked_as_the_start_uses_it(tmp_path):
+    """``daemon --check`` and the start ask the same of the control socket's path: a recording
+    directory the daemon will make (``make_dirs``) holds it; another missing directory, or a file that
+    is not a socket, is refused naming the key (``--check`` passed both, and the run then failed)."""
+    from types import SimpleNamespace
+
+    from foveatrack.daemon.operator import Operator
+    from foveatrack.device_config import load_config
+
+    # the recording's directory, not there yet, with make_dirs: accepted, and the start makes it
+    made = write_config(tmp_path / "m.toml", tmp_path / "head", tmp_path / "runs" / "rec.mcap", free_udp_port(),
+                        tracker_extra=SKY, recording_extra="make_dirs = true")
+    cfg = load_config(made)
+    cfg.check_control_socket()
+    closed = []
+    op = Operator()
+    op.cfg, op.tracker, op.counters = cfg, SimpleNamespace(pin=None), {}
+    op.client = op.head = SimpleNamespace(close=lambda: closed.append(1))
+    op.log = SimpleNamespace(event=lambda *a, **k: None)
+    op._open_control()
+    try:
+        assert (tmp_path / "runs" / "m.control.sock").exists() and not closed
+    finally:
+        op.control.close()
+    # the same without make_dirs: the recording check names its key first; the socket's own check too
+    missing = write_config(tmp_path / "n.toml", tmp_path / "head", tmp_path / "gone" / "rec.mcap", free_udp_port(),
+                           tracker_extra=SKY)
+    with pytest.raises(UserError, match=r"\[daemon\] control_socket: the directory .*gone does not exist"):
+        load_config(missing).check_control_socket()
+    # a file that is not a socket: --check refuses it, and pin says it is no control socket
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep me")
+    plain = write_config(tmp_path / "f.toml", tmp_path / "head", tmp_path / "rec.mcap", free_udp_port(),
+                         tracker_extra=SKY)
+    plain.write_text(plain.read_text().replace("[daemon]\n", f'[daemon]\ncontrol_socket = "{precious}"\n'))
+    r = _cli("daemon", "--check", "--config", str(plain))
+    assert r.returncode == 2 and "control_socket" in r.stderr and "is not a socket" in r.stderr, r.stderr
+    r = _cli("daemon", "tracks", "--config", str(plain))
+    assert r.returncode == 2 and "is not a control socket" in r.stderr, r.stderr
+    assert precious.read_text() == "keep me"
