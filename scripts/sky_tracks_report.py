@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 import sys
 import time
 from collections import Counter
@@ -87,13 +88,36 @@ SUMMARY_HEAD = ("| scene | runs | scene-hours | drones | confirmed within 2 s (t
                 "|---|---|---|---|---|---|---|---|---|")
 
 
+def _at_least_one(text: str) -> int:
+    """--seeds: an integer >= 1 (none would leave the figures nothing to divide by)."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {n}")
+    return n
+
+
+def _positive_seconds(text: str) -> float:
+    """--duration: a finite number of seconds > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be > 0 s, got {text}")
+    return v
+
+
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    # the prog named as the script, also when main() is called from elsewhere (the tests)
+    ap = argparse.ArgumentParser(prog=os.path.basename(__file__), description=__doc__.split("\n\n")[0])
     ap.add_argument("scenes", nargs="+")
-    ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--seeds", type=_at_least_one, default=8)
     ap.add_argument("--first-seed", type=int, default=0,
                     help="seeds from the scene's own plus this (default 0): tune on others than you report")
-    ap.add_argument("--duration", type=float, default=None, help="override the scenes' duration [s]")
+    ap.add_argument("--duration", type=_positive_seconds, default=None, help="override the scenes' duration [s]")
     ap.add_argument("--markdown", default=None)
     ap.add_argument("--summary-only", action="store_true",
                     help="only the one-line summary per scene (for long runs: --seeds 180 is a scene-hour "

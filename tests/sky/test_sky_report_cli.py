@@ -1,0 +1,46 @@
+"""scripts/sky_tracks_report.py refuses what it cannot run before any run starts, with one line that
+names the bad argument (exit status 2), and runs a tiny report."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENE = "scenes/two-drones-crossing.toml"
+
+
+@pytest.fixture(scope="module")
+def report():
+    spec = importlib.util.spec_from_file_location("sky_tracks_report", ROOT / "scripts" / "sky_tracks_report.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def refused(report, capsys, *argv) -> str:
+    """main(argv)'s exit status must be 2; its stderr, for the message, without a traceback."""
+    try:
+        status = report.main([str(a) for a in argv])
+    except SystemExit as exc:      # argparse's refusals
+        status = exc.code
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert "Traceback" not in err
+    assert "sky_tracks_report.py: error:" in err
+    return err
+
+
+@pytest.mark.parametrize("argv, names", [
+    (["--seeds", "0"], "--seeds"),
+    (["--seeds", "-1"], "--seeds"),
+    (["--seeds", "two"], "--seeds"),
+    (["--duration", "0"], "--duration"),
+    (["--duration", "-3"], "--duration"),
+    (["--duration", "nan"], "--duration"),
+])
+def test_a_count_or_time_out_of_range_is_refused_up_front(report, capsys, argv, names):
+    err = refused(report, capsys, SCENE, *argv)
+    assert names in err
