@@ -110,6 +110,27 @@ def _positive_seconds(text: str) -> float:
     return v
 
 
+def _set_item(text: str) -> tuple[tuple[str, ...], bool | int | float]:
+    """--set KEY=VALUE: the key's path (classifier.min_hits=6: a key of a sub-table) and the value, true
+    or false, an integer or a finite number (the [tracker.sky] keys are all numbers or booleans)."""
+    key, eq, value = text.partition("=")
+    path = tuple(key.split("."))
+    if not eq or not all(path):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected KEY=VALUE, e.g. warmup_s=0.8 or "
+                                         "attention.revisit_s=2.8")
+    if value in ("true", "false"):
+        return path, value == "true"
+    if value.lstrip("-").isdigit():
+        return path, int(value)
+    try:
+        v = float(value)
+    except ValueError:
+        v = math.nan
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"{text!r}: {value!r} is not true, false or a finite number")
+    return path, v
+
+
 def main(argv=None) -> int:
     # the prog named as the script, also when main() is called from elsewhere (the tests)
     ap = argparse.ArgumentParser(prog=os.path.basename(__file__), description=__doc__.split("\n\n")[0])
@@ -122,7 +143,7 @@ def main(argv=None) -> int:
     ap.add_argument("--summary-only", action="store_true",
                     help="only the one-line summary per scene (for long runs: --seeds 180 is a scene-hour "
                          "of a 20 s scene)")
-    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+    ap.add_argument("--set", nargs="*", default=[], type=_set_item, metavar="KEY=VALUE",
                     help="[tracker.sky] keys to set for the run (numbers, true or false), e.g. warmup_s=0.8, "
                          "warmup_replay=false or classifier.drone_after_frames=10")
     a = ap.parse_args(argv)
@@ -133,13 +154,11 @@ def main(argv=None) -> int:
     for path in a.scenes:
         base = load_scene(path)
         sky = dict(base.tracker_table.get("sky", {}))
-        for kv in a.set:
-            k, _, v = kv.partition("=")
-            *tables, k = k.split(".")          # classifier.min_hits=6: a key of a sub-table
+        for (*tables, k), v in a.set:          # classifier.min_hits=6: a key of a sub-table
             t = sky
             for name in tables:
                 t[name] = t = dict(t.get(name, {}))
-            t[k] = (v == "true") if v in ("true", "false") else int(v) if v.lstrip("-").isdigit() else float(v)
+            t[k] = v
         table = {**base.tracker_table, "sky": sky}
         rows = []
         for s in range(a.first_seed, a.first_seed + a.seeds):

@@ -44,3 +44,17 @@ def refused(report, capsys, *argv) -> str:
 def test_a_count_or_time_out_of_range_is_refused_up_front(report, capsys, argv, names):
     err = refused(report, capsys, SCENE, *argv)
     assert names in err
+
+
+@pytest.mark.parametrize("item", ["min_points", "attention.revisit_s=abc", "=3", "attention..revisit_s=2",
+                                  "warmup_s=", "warmup_s=nan", "warmup_replay=yes"])
+def test_a_set_item_not_key_equals_number_or_boolean_is_refused_naming_it(report, capsys, item):
+    err = refused(report, capsys, SCENE, "--set", item)
+    assert "--set" in err and repr(item) in err
+
+
+def test_set_values_are_booleans_integers_or_numbers(report):
+    assert [report._set_item(t) for t in ("warmup_replay=false", "confirm_hits=3", "attention.revisit_s=2.8",
+                                          "v0_sigma_m_s=-1e-1")] == [
+        (("warmup_replay",), False), (("confirm_hits",), 3), (("attention", "revisit_s"), 2.8),
+        (("v0_sigma_m_s",), -0.1)]
