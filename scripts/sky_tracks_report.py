@@ -21,9 +21,12 @@ import os
 import sys
 import time
 from collections import Counter
+from collections.abc import Mapping
 
 import numpy as np
 
+from foveatrack.errors import UserError
+from foveatrack.sky.controller import sky_configs_from_mapping
 from sim.loop import ClosedLoop
 from sim.scene import load_scene, with_run_overrides
 from sim.sky_summary import GAP_REASONS, LABELS, REVISIT_S, TRUTH_CLASSES, sky_run_figures, within_bound
@@ -147,19 +150,38 @@ def main(argv=None) -> int:
                     help="[tracker.sky] keys to set for the run (numbers, true or false), e.g. warmup_s=0.8, "
                          "warmup_replay=false or classifier.drone_after_frames=10")
     a = ap.parse_args(argv)
+    try:
+        return report(a)
+    except UserError as exc:     # as the foveatrack command reports one: a line, no traceback
+        print(f"{ap.prog}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+def scene_and_table(path: str, a: argparse.Namespace):
+    """The scene at ``path`` and its [tracker] table with [tracker.sky] and the --set keys, checked (the
+    seeds it will run, the sky table's keys and values) so that a mistake stops the report before a run."""
+    base = load_scene(path)
+    if base.seed + a.first_seed < 0:
+        raise UserError(f"--first-seed {a.first_seed}: {path}'s seed {base.seed} plus it is below 0")
+    sky = dict(base.tracker_table.get("sky", {}))
+    for (*tables, k), v in a.set:          # classifier.min_hits=6: a key of a sub-table
+        t = sky
+        for name in tables:
+            if not isinstance(t.get(name, {}), Mapping):
+                raise UserError(f"--set {'.'.join((*tables, k))}={v}: {name} is a key, not a table")
+            t[name] = t = dict(t.get(name, {}))
+        t[k] = v
+    sky_configs_from_mapping(sky, f"{path} [tracker.sky]")     # what ClosedLoop builds from it
+    return base, {**base.tracker_table, "sky": sky}
+
+
+def report(a: argparse.Namespace) -> int:
+    scenes = [scene_and_table(path, a) for path in a.scenes]    # every scene before any run
     lines = []
     summary = []
     gap_rows = []
     total_conf = Counter()
-    for path in a.scenes:
-        base = load_scene(path)
-        sky = dict(base.tracker_table.get("sky", {}))
-        for (*tables, k), v in a.set:          # classifier.min_hits=6: a key of a sub-table
-            t = sky
-            for name in tables:
-                t[name] = t = dict(t.get(name, {}))
-            t[k] = v
-        table = {**base.tracker_table, "sky": sky}
+    for base, table in scenes:
         rows = []
         for s in range(a.first_seed, a.first_seed + a.seeds):
             # rebuilt from the scene's text with the seed and duration, so that what is drawn when

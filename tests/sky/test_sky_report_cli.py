@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-SCENE = "scenes/two-drones-crossing.toml"
+SCENE = str(ROOT / "scenes" / "two-drones-crossing.toml")   # the tests may run from any directory
 
 
 @pytest.fixture(scope="module")
@@ -58,3 +58,19 @@ def test_set_values_are_booleans_integers_or_numbers(report):
                                           "v0_sigma_m_s=-1e-1")] == [
         (("warmup_replay",), False), (("confirm_hits",), 3), (("attention", "revisit_s"), 2.8),
         (("v0_sigma_m_s",), -0.1)]
+
+
+@pytest.mark.parametrize("argv, names", [
+    ([SCENE, str(ROOT / "scenes" / "nope.toml")], "nope.toml"),
+    ([SCENE, "--set", "min_pionts=3"], "min_pionts"),
+    ([SCENE, "--set", "attention.revisit_s=-1"], "revisit_s"),
+    ([SCENE, "--set", "min_points=2", "classifier.bogus=1"], "bogus"),
+    ([SCENE, "--first-seed", "-1000"], "--first-seed"),
+])
+def test_a_user_error_is_one_line_before_any_run(report, capsys, argv, names):
+    """A missing scene or a bad --set key is the scene's or the table's UserError, printed as the
+    foveatrack command prints one (a line, exit status 2) before the first scene has run."""
+    err = refused(report, capsys, *argv)
+    assert names in err
+    assert len(err.strip().splitlines()) == 1
+    assert "frames in" not in err       # no run had started
