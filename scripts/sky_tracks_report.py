@@ -163,6 +163,11 @@ def scene_and_table(path: str, a: argparse.Namespace):
     base = load_scene(path)
     if base.seed + a.first_seed < 0:
         raise UserError(f"--first-seed {a.first_seed}: {path}'s seed {base.seed} plus it is below 0")
+    duration = base.duration_s if a.duration is None else a.duration
+    if round(duration * base.tracker.rate_hz) < 1:      # no frame: nothing to divide the figures by
+        given = "" if a.duration is None else "--duration: "
+        raise UserError(f"{given}{path}: duration {duration:g} s is shorter than one tracker frame "
+                        f"({1 / base.tracker.rate_hz:g} s)")
     sky = dict(base.tracker_table.get("sky", {}))
     for (*tables, k), v in a.set:          # classifier.min_hits=6: a key of a sub-table
         t = sky

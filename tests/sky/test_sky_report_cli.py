@@ -74,3 +74,8 @@ def test_a_user_error_is_one_line_before_any_run(report, capsys, argv, names):
     assert names in err
     assert len(err.strip().splitlines()) == 1
     assert "frames in" not in err       # no run had started
+
+
+def test_a_duration_shorter_than_a_frame_is_refused(report, capsys):
+    """0.01 s is > 0 but no tracker frame: the figures of no frame divided by zero."""
+    assert "--duration" in refused(report, capsys, SCENE, "--duration", "0.01")
