@@ -180,7 +180,26 @@ def scene_and_table(path: str, a: argparse.Namespace):
     return base, {**base.tracker_table, "sky": sky}
 
 
+def check_markdown(path: str) -> None:
+    """--markdown PATH is written after every run: that it can be is checked before the first."""
+    where = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise UserError(f"--markdown {path}: is a directory; name the file to write")
+    if not os.path.isdir(where):
+        raise UserError(f"--markdown {path}: no directory {where} to write it in")
+    existed = os.path.exists(path)
+    try:            # opened as it will be (a permission, a read-only or special file system), left as it was
+        with open(path, "a"):
+            pass
+    except OSError as exc:
+        raise UserError(f"--markdown {path}: cannot write it ({exc.strerror or exc})") from None
+    if not existed:
+        os.remove(path)
+
+
 def report(a: argparse.Namespace) -> int:
+    if a.markdown:
+        check_markdown(a.markdown)
     scenes = [scene_and_table(path, a) for path in a.scenes]    # every scene before any run
     lines = []
     summary = []
@@ -239,8 +258,11 @@ def report(a: argparse.Namespace) -> int:
     text = "\n".join(lines) + "\n"
     print(text)
     if a.markdown:
-        with open(a.markdown, "w") as f:
-            f.write(text)
+        try:
+            with open(a.markdown, "w") as f:
+                f.write(text)
+        except OSError as exc:     # a full disk, say: the report is on stdout above
+            raise UserError(f"--markdown {a.markdown}: {exc.strerror or exc} (the report is printed above)") from None
     return 0
 
 

@@ -79,3 +79,11 @@ def test_a_user_error_is_one_line_before_any_run(report, capsys, argv, names):
 def test_a_duration_shorter_than_a_frame_is_refused(report, capsys):
     """0.01 s is > 0 but no tracker frame: the figures of no frame divided by zero."""
     assert "--duration" in refused(report, capsys, SCENE, "--duration", "0.01")
+
+
+def test_a_markdown_path_that_cannot_be_written_is_refused_before_any_run(report, capsys, tmp_path):
+    """The page is written after every run: a missing directory used to be found minutes later."""
+    unwritable = [Path("/proc/sky-report.md")] if Path("/proc/self").is_dir() else []   # even for root
+    for path in (tmp_path / "no" / "such" / "x.md", tmp_path, *unwritable):
+        err = refused(report, capsys, SCENE, "--markdown", path)
+        assert "--markdown" in err and "frames in" not in err
