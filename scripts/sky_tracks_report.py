@@ -144,8 +144,9 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=_positive_seconds, default=None, help="override the scenes' duration [s]")
     ap.add_argument("--markdown", default=None)
     ap.add_argument("--summary-only", action="store_true",
-                    help="only the one-line summary per scene (for long runs: --seeds 180 is a scene-hour "
-                         "of a 20 s scene)")
+                    help="leave out the per-seed tables: print the summary and where the longest revisit gaps "
+                         "went (a line per scene each) and the confusion matrix of all the scenes (for long "
+                         "runs: --seeds 180 is a scene-hour of a 20 s scene)")
     ap.add_argument("--set", nargs="*", default=[], type=_set_item, metavar="KEY=VALUE",
                     help="[tracker.sky] keys to set for the run (numbers, true or false), e.g. warmup_s=0.8, "
                          "warmup_replay=false or classifier.drone_after_frames=10")

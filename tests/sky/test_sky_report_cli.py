@@ -87,3 +87,13 @@ def test_a_markdown_path_that_cannot_be_written_is_refused_before_any_run(report
     for path in (tmp_path / "no" / "such" / "x.md", tmp_path, *unwritable):
         err = refused(report, capsys, SCENE, "--markdown", path)
         assert "--markdown" in err and "frames in" not in err
+
+
+def test_a_tiny_summary_only_run(report, capsys):
+    """--summary-only prints what its help says (and docs/sky-tracks-figures.md's hour tables use): the
+    summary, where the longest gaps went, the confusion matrix; no per-seed table."""
+    assert report.main([SCENE, "--seeds", "1", "--duration", "1.5", "--summary-only"]) == 0
+    out = capsys.readouterr().out
+    assert "\n| two-drones-crossing | 1 | 0.00 | 2 | " in out
+    assert report.GAP_HEAD in out and "## Confusion matrix" in out
+    assert "## two-drones-crossing" not in out and "| seed |" not in out
