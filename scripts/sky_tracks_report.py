@@ -1,10 +1,11 @@
 """Run scenes with the multi-object tracker ([tracker.sky], added here if the scene lacks it) over
 seeds and print the issue-28 figures: per drone the time to a confirmed track after entering the
-lidar's field (and the earliest the scan's rays on it allowed: :func:`sim.sky_summary.
-scan_allows_confirm_s`), id switches, continuity, share of time in the fovea and the longest revisit
-gap (and the shortest the head's speed allowed: :func:`sim.sky_bounds.head_allows_revisit_s`); false
-confirmed drone tracks per hour; GOSPA; and the drone/bird/clutter confusion matrix of the confirmed
-tracks.  ``--markdown PATH`` also writes them as a docs page.
+lidar's field (and the earliest the scan's rays on it allowed:
+:func:`sim.sky_summary.scan_allows_confirm_s`), id switches, continuity, share of time in the fovea
+and the longest revisit gap (and the shortest the head's speed allowed:
+:func:`sim.sky_bounds.head_allows_revisit_s`); false confirmed drone tracks per hour; GOSPA; and the
+drone/bird/clutter confusion matrix of the confirmed tracks.  ``--markdown PATH`` also writes them as
+a docs page.
 
     .venv/bin/python scripts/sky_tracks_report.py scenes/two-drones-crossing.toml --seeds 8
 
@@ -18,6 +19,7 @@ import argparse
 import dataclasses
 import math
 import os
+import re
 import sys
 import time
 from collections import Counter
@@ -134,15 +136,20 @@ def _set_item(text: str) -> tuple[tuple[str, ...], bool | int | float]:
     return path, v
 
 
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     # the prog named as the script, also when main() is called from elsewhere (the tests)
-    ap = argparse.ArgumentParser(prog=os.path.basename(__file__), description=__doc__.split("\n\n")[0])
-    ap.add_argument("scenes", nargs="+")
-    ap.add_argument("--seeds", type=_at_least_one, default=8)
+    # the docstring's first paragraph, its reST markup (:func:`x`, ``x``) read as plain text in a terminal
+    description = re.sub(r":\w+:`([^`]*)`", r"\1", __doc__.split("\n\n")[0]).replace("``", "")
+    ap = argparse.ArgumentParser(prog=os.path.basename(__file__), description=description)
+    ap.add_argument("scenes", nargs="+", metavar="SCENE",
+                    help="scene files, e.g. scenes/two-drones-crossing.toml, run one after another")
+    ap.add_argument("--seeds", type=_at_least_one, default=8,
+                    help="runs of each scene, each seed its own world (default 8, at least 1)")
     ap.add_argument("--first-seed", type=int, default=0,
                     help="seeds from the scene's own plus this (default 0): tune on others than you report")
     ap.add_argument("--duration", type=_positive_seconds, default=None, help="override the scenes' duration [s]")
-    ap.add_argument("--markdown", default=None)
+    ap.add_argument("--markdown", default=None, metavar="PATH",
+                    help="also write what is printed to this file, a Markdown page (its directory must exist)")
     ap.add_argument("--summary-only", action="store_true",
                     help="leave out the per-seed tables: print the summary and where the longest revisit gaps "
                          "went (a line per scene each) and the confusion matrix of all the scenes (for long "
@@ -150,6 +157,11 @@ def main(argv=None) -> int:
     ap.add_argument("--set", nargs="*", default=[], type=_set_item, metavar="KEY=VALUE",
                     help="[tracker.sky] keys to set for the run (numbers, true or false), e.g. warmup_s=0.8, "
                          "warmup_replay=false or classifier.drone_after_frames=10")
+    return ap
+
+
+def main(argv=None) -> int:
+    ap = build_parser()
     a = ap.parse_args(argv)
     try:
         return report(a)

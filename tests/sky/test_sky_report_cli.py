@@ -97,3 +97,11 @@ def test_a_tiny_summary_only_run(report, capsys):
     assert "\n| two-drones-crossing | 1 | 0.00 | 2 | " in out
     assert report.GAP_HEAD in out and "## Confusion matrix" in out
     assert "## two-drones-crossing" not in out and "| seed |" not in out
+
+
+def test_the_help_describes_every_argument_in_plain_text(report):
+    parser = report.build_parser()
+    assert all(a.help for a in parser._actions), [a.dest for a in parser._actions if not a.help]
+    description = " ".join(parser.format_help().split("positional arguments:")[0].split())
+    assert "sim.sky_summary.scan_allows_confirm_s" in description      # whole, not split by the wrap
+    assert ":func:" not in description and "``" not in description
