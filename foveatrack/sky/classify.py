@@ -95,6 +95,8 @@ class ClassifierConfig:
             raise UserError(f"min_hits must be an integer >= 2, got {self.min_hits!r}")
         if not self.drone_after_frames >= 1:
             raise UserError(f"drone_after_frames must be an integer >= 1, got {self.drone_after_frames!r}")
+        if not 0.0 < self.flap_autocorr <= 1.0:     # a normalised autocorrelation never exceeds 1
+            raise UserError(f"flap_autocorr must be in (0, 1], got {self.flap_autocorr!r}")
 
     @classmethod
     def from_mapping(cls, data: Mapping, where: str) -> "ClassifierConfig":

@@ -23,10 +23,11 @@ configuration asks for it.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
+from foveatrack.config_util import check_keys
 from foveatrack.detection import Detection, bearing_deg
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import norm3
@@ -98,6 +99,9 @@ def sky_configs_from_mapping(data: Mapping, where: str, field_half_angle_deg: fl
     if not isinstance(data, Mapping):
         raise UserError(f"{where}: expected a table, got {data!r}")
     data = dict(data)
+    # every key the table may hold, its sub-tables too (a misspelt [tracker.sky.atention] was told
+    # the allowed keys without "attention")
+    check_keys(data, [f.name for f in fields(SkyTrackerConfig)] + ["attention"], where)
     att = data.pop("attention", {})
     cfg = SkyTrackerConfig.from_mapping(data, where)
     if "field_half_angle_deg" not in data and field_half_angle_deg is not None:

@@ -91,6 +91,10 @@ from foveatrack.space_of_interest import Box
 _BIG = 1e12
 
 
+#: the background's direction cells [deg]: finer takes hundreds of MB, coarser is metres across
+CELL_DEG_RANGE = (0.1, 5.0)
+
+
 @dataclass(frozen=True)
 class SkyTrackerConfig:
     """Parameters of :class:`SkyTracker` (a scene's ``[sky]`` table; units in the names).
@@ -176,6 +180,13 @@ class SkyTrackerConfig:
                   "d_half_m", "protect_m", "history_s"):
             if not getattr(self, k) > 0:
                 raise UserError(f"{k} must be > 0, got {getattr(self, k)!r}")
+        if not CELL_DEG_RANGE[0] <= self.cell_deg <= CELL_DEG_RANGE[1]:
+            # the direction map holds 6 n^2 cells, n = 2 / tan(cell_deg), ~37 bytes each: 0.3 deg is
+            # 0.9 M cells (32 MB), 0.1 deg 7.9 M (290 MB), 0.01 deg 29 GB; a cell of several degrees is
+            # metres across at the scenes' ranges and would take a drone for the tree behind it
+            n = math.ceil(2.0 / math.tan(math.radians(min(self.cell_deg, 89.0)))) if self.cell_deg > 0 else math.inf
+            raise UserError(f"cell_deg must be in [{CELL_DEG_RANGE[0]}, {CELL_DEG_RANGE[1]}] deg, got "
+                            f"{self.cell_deg!r} (its direction map would hold {6 * n * n:.3g} cells)")
         if self.field_half_angle_deg is not None and not 0 < self.field_half_angle_deg <= 180:
             raise UserError(f"field_half_angle_deg must be in (0, 180], got {self.field_half_angle_deg!r}")
         if not 0 <= self.background_dilate <= 3:

@@ -406,3 +406,19 @@ def test_the_fixated_drones_d_is_not_learned_into_the_background():
     tid = next(iter(_confirmed(late[0])))
     assert all(tid in _confirmed(o) for o in late)
     assert sum(v.hit for o in late for v in o.tracks if v.track_id == tid) >= 12    # its returns are hits again
+
+
+def test_what_a_user_can_get_wrong_in_the_sky_table_is_named():
+    # a misspelt sub-table is told the keys it may be (attention among them); a cell too fine for
+    # memory or too coarse to mean anything, a correlation threshold no correlation reaches, are refused
+    from foveatrack.errors import UserError
+    from foveatrack.sky.controller import sky_configs_from_mapping
+
+    with pytest.raises(UserError, match=r"unknown key\(s\) 'atention'; allowed keys: .*attention"):
+        sky_configs_from_mapping({"atention": {"revisit_s": 2.0}}, "s.toml [tracker.sky]")
+    for cell in (0.000001, 0.05, 6.0, 90.0):
+        with pytest.raises(UserError, match=r"cell_deg must be in \[0.1, 5.0\]"):
+            sky_configs_from_mapping({"cell_deg": cell}, "s.toml [tracker.sky]")
+    assert sky_configs_from_mapping({"cell_deg": 0.1}, "w")[0].cell_deg == 0.1
+    with pytest.raises(UserError, match="flap_autocorr"):
+        sky_configs_from_mapping({"classifier": {"flap_autocorr": 5.0}}, "s.toml [tracker.sky]")
