@@ -43,6 +43,19 @@ def run_one(scene):
     return m, g, confusion, wall, len(log["t_end_s"])
 
 
+def _median_max(values) -> str:
+    """``median / max`` of the numbers that are (NaN: none measured), ``- / -`` if none are."""
+    v = [x for x in values if x is not None and not math.isnan(x)]
+    return f"{np.median(v):.1f} / {max(v):.1f}" if v else "- / -"
+
+
+def run_longest_gap(m) -> float | None:
+    """A run's longest revisit gap over its drones; None where a drone in the field was never tracked
+    (never revisited: the run does not meet the revisit time whatever the others did)."""
+    gaps = [r.get("longest_revisit_gap_s", 0.0) for r in m["drones"].values()]
+    return None if any(g is None for g in gaps) else max(gaps, default=0.0)
+
+
 def summary_row(name, rows) -> str:
     """One scene over all its runs: the issue-28 figures that decide, with false drone tracks per hour
     of run by what they were near."""
@@ -53,10 +66,11 @@ def summary_row(name, rows) -> str:
     # drone by drone: a count of each can agree while the drones differ (a track of objects that
     # held other returns too can be confirmed before the drone's own rays allow it)
     both = within_bound([r for r in drones if within_bound([r], "scan_allows_confirm_s")])
-    gaps = [r.get("longest_revisit_gap_s", math.nan) for r in drones]
-    # per run: every drone's longest gap within the revisit time, and whether the head's speed allowed it
-    run_gap = [max((r["longest_revisit_gap_s"] for r in m["drones"].values()
-                    if r.get("longest_revisit_gap_s") is not None), default=None) for _, m, *_ in rows]
+    gaps = [math.nan if r.get("longest_revisit_gap_s", math.nan) is None else r.get("longest_revisit_gap_s", math.nan)
+            for r in drones]
+    # per run: every drone's longest gap within the revisit time (a drone no track followed is not),
+    # and whether the head's speed allowed it
+    run_gap = [run_longest_gap(m) for _, m, *_ in rows]
     run_bound = [m.get("head_allows_revisit_s") for _, m, *_ in rows]
     met = [g is not None and g <= REVISIT_S + 1e-9 for g in run_gap]
     allowed = [b is None or b <= REVISIT_S + 1e-9 for b in run_bound]
@@ -66,8 +80,7 @@ def summary_row(name, rows) -> str:
         causes.update(m["false_causes"])
     per_h = " / ".join(f"{causes[c]} ({causes[c] / hours:.0f})" for c in ("bird", "clutter", "drone"))
     return (f"| {name} | {len(rows)} | {hours:.2f} | {len(drones)} | {within} ({scan}; {scan_cold}; {both}) | "
-            f"{sum(r['id_switches'] for r in drones)} | {np.nanmedian(gaps):.1f} / {np.nanmax(gaps):.1f} "
-            f"({np.median(bounds) if bounds else math.nan:.1f} / {max(bounds, default=math.nan):.1f}) | "
+            f"{sum(r['id_switches'] for r in drones)} | {_median_max(gaps)} ({_median_max(bounds)}) | "
             f"{sum(met)} ({sum(allowed)}; {sum(a and b for a, b in zip(met, allowed))}) | {per_h} |")
 
 
@@ -246,7 +259,9 @@ def report(a: argparse.Namespace) -> int:
                     "scan_allows_confirm_no_warmup_s"))
                 lines.append(f"| {seed} | {d} | {ttc} | {sb} ({sb0}) | {ttl} | {r['id_switches']} | "
                              f"{r['continuity']:.2f} | "
-                             f"{r.get('fovea_share', math.nan):.2f} | {r.get('longest_revisit_gap_s', math.nan):.1f} | "
+                             f"{r.get('fovea_share', math.nan):.2f} | "
+                             + ("never tracked" if r.get("longest_revisit_gap_s", 0.0) is None
+                                else f"{r.get('longest_revisit_gap_s', math.nan):.1f}") + " | "
                              + ("-" if r.get("head_allows_acquire_s") is None else f"{r['head_allows_acquire_s']:.1f}")
                              + " |")
         lines.append("")
@@ -254,11 +269,11 @@ def report(a: argparse.Namespace) -> int:
                      "longest revisit gap (the head's speed allowed) [s] | wall [s] |")
         lines.append("|---|---|---|---|---|---|")
         for seed, m, g, wall, T in rows:
-            gap = max((r["longest_revisit_gap_s"] for r in m["drones"].values()
-                       if r.get("longest_revisit_gap_s") is not None), default=math.nan)
+            gap = run_longest_gap(m)
             b = m.get("head_allows_revisit_s")
             lines.append(f"| {seed} | {len(m['false_drone_tracks'])} | {m['false_drone_tracks_per_hour']:.0f} | "
-                         f"{g:.2f} | {gap:.1f} ({'-' if b is None else f'{b:.1f}'}) | {wall:.1f} |")
+                         f"{g:.2f} | {'a drone never tracked' if gap is None else f'{gap:.1f}'} "
+                         f"({'-' if b is None else f'{b:.1f}'}) | {wall:.1f} |")
         lines.append("")
     lines[:0] = ["## Summary\n", SUMMARY_HEAD, *summary, "",
                  "Where each drone's longest revisit gap went, frame by frame (what the fovea did then):\n",

@@ -268,7 +268,9 @@ def sky_lines(s: dict) -> list[str]:
         out.append(f"  {d}: confirmed {fmt(r['time_to_confirm_s'])} after entering the field{bound}, labelled drone "
                    f"{fmt(r['time_to_drone_label_s'])}; track ids {r['track_ids'] or '-'}, {r['id_switches']} id "
                    f"switches, continuity {r['continuity']:.2f}; in the fovea {100 * r.get('fovea_share', 0):.0f} % "
-                   f"of its time in the field, longest gap {r.get('longest_revisit_gap_s', float('nan')):.1f} s"
+                   f"of its time in the field, longest gap "
+                   + ("never tracked" if r.get("longest_revisit_gap_s", 0.0) is None
+                      else f"{r.get('longest_revisit_gap_s', float('nan')):.1f} s")
                    + (f" (the head's speed allowed its first {fmt(r['head_allows_acquire_s'])})"
                       if r.get("head_allows_acquire_s") is not None else ""))
     bound = s["totals"].get("head_allows_revisit_s")

@@ -39,8 +39,9 @@ in a swarm was credited with another drone's track.)
 ``longest_revisit_gap_s``  the longest stretch (after its first confirmation) out of the fovea, up
                         to its last frame in the lidar's field (``in_field`` where given: a drone
                         that has left the field, or the space of interest, for good is not waiting
-                        for a revisit); ``longest_revisit_gap_from_s`` the time of its first frame
-                        (None: no gap; the first of equally long ones)
+                        for a revisit); None for a drone in the field no track ever followed (it
+                        was never revisited); ``longest_revisit_gap_from_s`` the time of its first
+                        frame (None: no gap; the first of equally long ones)
 
 and ``false_drone_tracks``: confirmed tracks labelled drone at some frame without being matched to a
 drone at that frame, counted once per id (birds, trees, clutter called drones), and per hour of run.
@@ -173,7 +174,10 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
                 gap = 0 if fov[k] else gap + 1
                 if gap > longest:
                     longest, since = gap, k - gap + 1
-            r["longest_revisit_gap_s"] = longest * dt
+            # a drone in the field that no track ever followed was never revisited: no gap is measured
+            # (None), and it does not count as one within the revisit time
+            never = first is None and (field is None or bool(np.any(field)))
+            r["longest_revisit_gap_s"] = None if never else longest * dt
             r["longest_revisit_gap_from_s"] = None if since is None else float(t[since])
         out[d] = r
     hours = (t[-1] - t[0] + dt) / 3600.0 if T else math.nan

@@ -185,3 +185,23 @@ def test_a_drone_never_in_the_field_has_no_revisit_gap():
     once = drone_metrics(t, {"a": {**d, "in_field": np.arange(T) == 0}}, tracks)["drones"]["a"]
     assert never["longest_revisit_gap_s"] == 0.0 and never["longest_revisit_gap_from_s"] is None
     assert once["longest_revisit_gap_s"] == pytest.approx(0.1)
+
+
+def test_a_drone_in_the_field_no_track_followed_was_never_revisited():
+    # no track near it at any frame: no gap is measured (None), where 0.0 read as "revisited within
+    # any revisit time"; and the report's run does not count as one whose every gap was within 3 s
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
+    from sky_tracks_report import run_longest_gap
+
+    T = 30
+    t = 0.1 * np.arange(T)
+    xyz = np.tile([30.0, 0.0, 3.0], (T, 1))
+    d = {"xyz_m": xyz, "visible": np.ones(T, bool), "in_fovea": np.zeros(T, bool), "in_field": np.ones(T, bool)}
+    m = drone_metrics(t, {"a": d, "b": {**d, "in_fovea": np.ones(T, bool)}},
+                      [[(1, "drone", xyz[k] + [0.0, 0.0, 0.0])] if k > 100 else [] for k in range(T)])
+    assert m["drones"]["a"]["longest_revisit_gap_s"] is None and m["drones"]["a"]["first_matched_s"] is None
+    assert run_longest_gap(m) is None
+    assert run_longest_gap({"drones": {"a": {"longest_revisit_gap_s": 2.5}, "b": {"longest_revisit_gap_s": 0.3}}}) == 2.5
