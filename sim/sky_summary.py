@@ -252,11 +252,16 @@ def sky_summary(loop, log) -> dict:
             "confusion": [{"truth": c, "label": lab, "tracks": n} for (c, lab), n in sorted(confusion.items())]}
 
 
+def _count(n: int, one: str, many: str | None = None) -> str:
+    """``1 drone``, ``2 drones``."""
+    return f"{n} {one if n == 1 else (many or one + 's')}"
+
+
 def sky_lines(s: dict) -> list[str]:
     """The printed lines of :func:`sky_summary`."""
     fmt = lambda v: "never" if v is None else f"{v:.1f} s"      # noqa: E731
-    out = [f"  multi-object tracker: {len(s['drones'])} drones, {s['confirmed_tracks']} confirmed tracks, "
-           f"{len(s['false_drone_tracks'])} false drone tracks"
+    out = [f"  multi-object tracker: {_count(len(s['drones']), 'drone')}, "
+           f"{_count(s['confirmed_tracks'], 'confirmed track')}, {_count(len(s['false_drone_tracks']), 'false drone track')}"
            + (" (near " + ", ".join(f"{k} {v}" for k, v in sorted(s["false_drone_tracks_near"].items())) + ")"
               if s["false_drone_tracks"] else "")
            + f"; mean GOSPA {s['gospa_mean_m']:.2f} m (c = {s['gospa_cutoff_m']:g} m)"]
@@ -266,8 +271,8 @@ def sky_lines(s: dict) -> list[str]:
             bound = (f" (the scan's rays on it allowed {fmt(r['scan_allows_confirm_s'])}, "
                      f"{fmt(r['scan_allows_confirm_no_warmup_s'])} without the warm-up)")
         out.append(f"  {d}: confirmed {fmt(r['time_to_confirm_s'])} after entering the field{bound}, labelled drone "
-                   f"{fmt(r['time_to_drone_label_s'])}; track ids {r['track_ids'] or '-'}, {r['id_switches']} id "
-                   f"switches, continuity {r['continuity']:.2f}; in the fovea {100 * r.get('fovea_share', 0):.0f} % "
+                   f"{fmt(r['time_to_drone_label_s'])}; track ids {r['track_ids'] or '-'}, "
+                   f"{_count(r['id_switches'], 'id switch', 'id switches')}, continuity {r['continuity']:.2f}; in the fovea {100 * r.get('fovea_share', 0):.0f} % "
                    f"of its time in the field, longest gap "
                    + ("never tracked" if r.get("longest_revisit_gap_s", 0.0) is None
                       else f"{r.get('longest_revisit_gap_s', float('nan')):.1f} s")

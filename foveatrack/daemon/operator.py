@@ -224,9 +224,10 @@ class Operator:
             return self._reply(True, f"live confirmed tracks: {names}{pinned}")
         if cmd == "unpin":
             was = ctl.pinned
+            if was is None:       # nothing to change: no event, nothing recorded
+                return self._reply(True, "no track was pinned; none is")
             self._pin(None)
-            return self._reply(True, f"unpinned track {was}: the fovea's priority is the highest threat again"
-                               if was is not None else "no track was pinned; none is")
+            return self._reply(True, f"unpinned track {was}: the fovea's priority is the highest threat again")
         tid = req.get("track_id")
         if isinstance(tid, bool) or not isinstance(tid, int) or tid < 0:
             return self._reply(False, f"track id must be a whole number >= 0, got {tid!r}")

@@ -82,6 +82,10 @@ def format_report(res: ReplayResult) -> str:
             L.append(f"  tracks (multi-object tracker): {kept}; all {tr['recorded']} frames' tracks identical to the recorded")
         elif not tr["recorded"]:
             L.append(f"  tracks (multi-object tracker): {kept}; the recording has none to compare (another configuration's run)")
+        elif not tr["replayed"]:
+            L.append(f"  tracks: the recording holds the multi-object tracker's tracks ({tr['recorded']} frames); this "
+                     "replay ran the paper's single-target tracker (its configuration has no [tracker.sky]), so there "
+                     "are none to compare")
         else:
             L.append(f"  tracks (multi-object tracker): {kept}; {tr['identical']} of {tr['recorded']} recorded frames' "
                      f"tracks identical ({tr['compared']} compared, {tr['replayed']} replayed; first difference: "

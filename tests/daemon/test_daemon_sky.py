@@ -235,3 +235,21 @@ def test_the_control_socket_path_is_checked_as_the_start_uses_it(tmp_path):
     r = _cli("daemon", "tracks", "--config", str(plain))
     assert r.returncode == 2 and "is not a control socket" in r.stderr, r.stderr
     assert precious.read_text() == "keep me"
+
+
+def test_an_unpin_with_nothing_pinned_changes_nothing_and_records_nothing():
+    from types import SimpleNamespace
+
+    from foveatrack.daemon.operator import Operator
+
+    events, recorded = [], []
+    op = Operator()
+    op.tracker = SimpleNamespace(pinned=None, confirmed_tracks=lambda: (), pin=lambda tid: events.append(("pin", tid)),
+                                 last_output=None, attention=SimpleNamespace(priority=None))
+    op.log = SimpleNamespace(event=lambda *a, **k: events.append(a))
+    op._record = lambda *a: recorded.append(a)
+    op.counters = {"operator_pins": 0, "frames": 7}
+    op.last_frame_end_s = 1.0
+    reply = op._operator_request({"command": "unpin"})
+    assert reply["ok"] and "no track was pinned" in reply["message"]
+    assert events == [] and recorded == [] and op.counters["operator_pins"] == 0

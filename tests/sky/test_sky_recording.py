@@ -64,6 +64,12 @@ def test_replay_with_a_paper_tracker_table_runs_the_paper_tracker(crossing_run):
     table = {k: v for k, v in meta["tracker"].items()}
     res = replay_recording(crossing_run, tracker_table=table, config_name="paper")
     assert res.tracks == [] and res.comparison["tracks"]["compared"] == 0
+    # and the report says so, where it printed "0 of 60 recorded frames' tracks identical"
+    from foveatrack.replay.report import format_report
+
+    text = format_report(res)
+    assert "ran the paper's single-target tracker" in text and "none to compare" in text, text
+    assert "recorded frames' tracks identical" not in text
 
 
 def test_a_damaged_tracks_record_names_its_field():
