@@ -288,6 +288,14 @@ class ClosedLoop:
         """
         period = self.tracker.config.period_s
         n_frames = int(round(self.scene.duration_s / period))
+        if self.sky is not None:
+            # its kernels run first when its warm-up ends, ~10 frames in: compiled (or loaded) now, on
+            # a throwaway controller, once per process (a fresh install's frame 11 waited ~8 s)
+            from foveatrack.sky.controller import SkyController
+            from foveatrack.sky.warm import compile_sky_kernels
+
+            throwaway = SkyController(self.tracker.rebased(0.0, 0.0, 0.0), self.sky.sky.cfg, self.sky.attention.cfg)
+            compile_sky_kernels(throwaway, self.tracker.config.rate_hz)
         worker = None
         try:
             if ahead:       # inside the try: a Ctrl-C during the set-up still ends the worker

@@ -45,8 +45,6 @@ import time
 from collections import Counter, deque
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from foveatrack.daemon.frame_loop import FrameLoop, _HeadSink
 from foveatrack.daemon.head_pose import ABS_SET_QUIET_S, HeadPose  # noqa: F401  (ABS_SET_QUIET_S: its old home)
 from foveatrack.daemon.homing_plan import Bearings, HomingConfirm, HomingPlan, HomingSteps
@@ -91,27 +89,15 @@ def daemon_controller(config: DaemonConfig, table) -> Tracker | SkyController:
 
 def compile_sky(config: DaemonConfig, table) -> None:
     """Compile (or load from numba's cache) the multi-object tracker's kernels before data flows, as
-    :func:`foveatrack.detection.compile_all` does the paper tracker's: a throwaway copy of the
-    daemon's controller steps through frames past its warm-up with a small object moving through a
-    scattered background (clustering, the range background, association), nothing written anywhere.
-    Without it a fresh install's first frames waited seconds for the compiler."""
-    from foveatrack.frame_step import NoHead
-    from foveatrack.frames import Frame
-
+    :func:`foveatrack.detection.compile_all` does the paper tracker's, on a throwaway copy of the
+    daemon's controller (:func:`foveatrack.sky.warm.compile_sky_kernels`).  Without it a fresh
+    install's first frames past the tracker's warm-up waited seconds for the compiler."""
     c = daemon_controller(config, table)
     if not hasattr(c, "sky_table"):
         return
-    step = FrameStep(c, CommandGate(None), NoHead())
-    rng = np.random.default_rng(0)
-    period = 1.0 / config.tracker.rate_hz
-    n_frames = int(math.ceil(c.sky.cfg.warmup_s / period)) + 8
-    for k in range(n_frames):
-        t0 = k * period
-        bg = np.column_stack([np.full(200, 40.0), rng.uniform(-10, 10, 200), rng.uniform(0, 10, 200)])
-        obj = np.array([20.0, -2.0 + 0.05 * k, 3.0]) + rng.normal(0, 0.05, (12, 3))
-        xyz = np.vstack([bg, obj])
-        t_ns = np.sort(rng.integers(int(t0 * 1e9), int((t0 + period) * 1e9), len(xyz))).astype(np.int64)
-        step(Frame(t0, t0 + period, xyz, t_ns, np.full(len(xyz), 30, np.uint8)), t0 + period)
+    from foveatrack.sky.warm import compile_sky_kernels
+
+    compile_sky_kernels(c, config.tracker.rate_hz)
 
 
 class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Operator, StatusDisplay, RunStats):

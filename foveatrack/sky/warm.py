@@ -1,0 +1,41 @@
+"""The multi-object tracker's numba kernels compiled (or loaded from numba's cache) before data flows.
+
+Its kernels (the direction cells and range background, the per-point turn into the world, the
+clustering, Algorithm 1 in a D) run first when the tracker's warm-up ends, ~10 frames into a run: on
+a fresh install that frame waited ~8 s for the compiler, in the daemon's live loop as in a simulated
+run.  :func:`compile_sky_kernels` steps a throwaway controller through frames past its warm-up with
+a small object moving through a scattered background, once per process, nothing written anywhere.
+The daemon (:func:`foveatrack.daemon.runtime.compile_sky`) and the simulator's closed loop
+(:meth:`sim.loop.ClosedLoop.run`) both call it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+_done = False
+
+
+def compile_sky_kernels(controller, rate_hz: float) -> None:
+    """Step ``controller`` (a throwaway :class:`~foveatrack.sky.controller.SkyController`: its state is
+    spent) through synthetic frames past its warm-up; a second call in the process does nothing."""
+    global _done
+    if _done:
+        return
+    from foveatrack.frame_step import FrameStep, NoHead
+    from foveatrack.frames import Frame
+    from foveatrack.gate import CommandGate
+
+    step = FrameStep(controller, CommandGate(None), NoHead())
+    rng = np.random.default_rng(0)
+    period = 1.0 / rate_hz
+    for k in range(int(math.ceil(controller.sky.cfg.warmup_s / period)) + 8):
+        t0 = k * period
+        bg = np.column_stack([np.full(200, 40.0), rng.uniform(-10, 10, 200), rng.uniform(0, 10, 200)])
+        obj = np.array([20.0, -2.0 + 0.05 * k, 3.0]) + rng.normal(0, 0.05, (12, 3))
+        xyz = np.vstack([bg, obj])
+        t_ns = np.sort(rng.integers(int(t0 * 1e9), int((t0 + period) * 1e9), len(xyz))).astype(np.int64)
+        step(Frame(t0, t0 + period, xyz, t_ns, np.full(len(xyz), 30, np.uint8)), t0 + period)
+    _done = True
