@@ -252,6 +252,13 @@ def sky_summary(loop, log) -> dict:
             "confusion": [{"truth": c, "label": lab, "tracks": n} for (c, lab), n in sorted(confusion.items())]}
 
 
+def _sooner(r: dict) -> bool:
+    """Whether a drone's track was confirmed before the scan's rays on the drone itself allowed (a
+    neighbour's returns in its objects: sim.sky_bounds.scan_allows_confirm_s bounds its own rays)."""
+    ttc, allowed = r.get("time_to_confirm_s"), r.get("scan_allows_confirm_s")
+    return ttc is not None and allowed is not None and ttc < allowed - 1e-9
+
+
 def _count(n: int, one: str, many: str | None = None) -> str:
     """``1 drone``, ``2 drones``."""
     return f"{n} {one if n == 1 else (many or one + 's')}"
@@ -269,7 +276,9 @@ def sky_lines(s: dict) -> list[str]:
         bound = ""
         if "scan_allows_confirm_s" in r:
             bound = (f" (the scan's rays on it allowed {fmt(r['scan_allows_confirm_s'])}, "
-                     f"{fmt(r['scan_allows_confirm_no_warmup_s'])} without the warm-up)")
+                     f"{fmt(r['scan_allows_confirm_no_warmup_s'])} without the warm-up"
+                     + ("; sooner than its own rays allowed: the objects its track was confirmed on held "
+                        "other returns too" if _sooner(r) else "") + ")")
         out.append(f"  {d}: confirmed {fmt(r['time_to_confirm_s'])} after entering the field{bound}, labelled drone "
                    f"{fmt(r['time_to_drone_label_s'])}; track ids {r['track_ids'] or '-'}, "
                    f"{_count(r['id_switches'], 'id switch', 'id switches')}, continuity {r['continuity']:.2f}; in the fovea {100 * r.get('fovea_share', 0):.0f} % "
