@@ -13,6 +13,8 @@ simulated run and its replay look alike.
 * head.png -- the head (true; in a daemon recording the daemon's own estimate, the head
   reports no pose) and the replay's dead reckoning, their difference per axis, the tilt stops when
   the tilt comes near one, and the tracker's state frame by frame (not for a ``.lvx`` file)
+* tracks.png -- a multi-object run's ([tracker.sky]) replayed tracks, with every object's truth and
+  each drone's time in the fovea where the recording is a simulator's (:func:`sky_plot_data`)
 
 Time is the recording's own for a simulator recording (virtual time, as ``simulate`` plots it) and
 seconds since the first frame otherwise.
@@ -85,4 +87,47 @@ def plot_all(res, out_dir: Path) -> list[Path]:
             est_pan_deg=f["head_pan_deg"], est_tilt_deg=f["head_tilt_deg"], state=f["state"], source=source,
             tilt_limits_deg=None if cfg is None else cfg.tilt_limits_deg,
             tilt_margin_deg=None if cfg is None else cfg.tilt_margin_deg))
+    if res.tracks:
+        files.append(sim_plots.plot_sky_tracks(sky_plot_data(res, t), f"{name}: tracks (replay)",
+                                               out_dir / sim_plots.TRACKS_PNG))
     return files
+
+
+def sky_plot_data(res, t: np.ndarray) -> dict:
+    """What ``tracks.png`` draws (:func:`foveatrack.cli.sim_plots.plot_sky_tracks`, as ``simulate``
+    draws it from :func:`sim.sky_summary.sky_plot_data`) from a replay of a multi-object run: the
+    replayed confirmed tracks, and -- in a simulator's recording -- every object's truth
+    (``/truth_objects``) and, per drone, the frames it was within the fovea's half-angle of the true
+    axis (the half-angle of the recorded ``[tracker.sky]`` table).  A daemon's recording has no
+    truth: the tracks alone."""
+    from foveatrack.recording import RecordingReader
+    from foveatrack.recording.records import ObjectTruthRecord
+    from foveatrack.reconstruction import rotation_matrix
+    from foveatrack.sky.attention import bearing_off_axis_deg
+
+    T = len(t)
+    tracks: dict[int, list] = {}
+    for k, rec in enumerate(res.tracks[:T]):
+        for v in rec.tracks:
+            if v.confirmed:
+                entry = tracks.setdefault(v.id, [v.label, np.full((T, 3), np.nan)])
+                entry[0] = v.label
+                entry[1][k] = v.xyz_m
+    truth: dict[str, tuple[str, np.ndarray]] = {}
+    in_fovea: dict[str, np.ndarray] = {}
+    reader = RecordingReader(res.path) if res.source == "simulator" else None
+    if reader is not None and res.truth is not None:
+        for r in map(ObjectTruthRecord.from_json, reader.records("truth_objects")):
+            k = r.frame_id
+            if r.id.startswith("stray-") or not 0 <= k < T:
+                continue
+            cls = r.cls if r.cls in ("drone", "bird") else "clutter"
+            truth.setdefault(r.id, (cls, np.full((T, 3), np.nan)))[1][k] = r.true_world_m
+        half = float(((reader.meta.get("sky") or {}).get("attention") or {}).get("fovea_half_angle_deg", 3.0))
+        pan, tilt = res.truth["pan_deg"], res.truth["tilt_deg"]
+        for i, (c, xyz) in truth.items():
+            if c == "drone":
+                in_fovea[i] = np.array([bool(np.all(np.isfinite(xyz[k]))) and bearing_off_axis_deg(
+                    xyz[k], rotation_matrix(pan[k], tilt[k]).tolist(), np.zeros(3)) <= half for k in range(T)])
+    return {"t_s": t, "truth": truth, "tracks": {i: (lab, xyz) for i, (lab, xyz) in tracks.items()},
+            "in_fovea": in_fovea}

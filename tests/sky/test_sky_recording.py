@@ -132,3 +132,38 @@ def test_a_run_with_the_saccade_gain_records_it_and_replays_to_the_bit(tmp_path)
     res = replay_recording(out / "run.mcap")
     c = res.comparison
     assert c["detections_equal"] and c["commands_equal"] and c["tracks"]["identical_all"], c
+
+
+def test_replay_plots_the_tracks_as_simulate_does(crossing_run, tmp_path):
+    # replay --plot of a multi-object run draws tracks.png too (it drew the single-target figures
+    # only): the replayed tracks, the recorded truth of every object and each drone's time in the
+    # fovea -- the masks simulate drew from its own run; a daemon's recording (no truth): tracks alone
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from foveatrack.cli.replay_plots import plot_all, sky_plot_data
+    from foveatrack.cli.sim_plots import plot_sky_tracks
+
+    res = replay_recording(crossing_run)
+    files = plot_all(res, tmp_path)
+    assert (tmp_path / "tracks.png") in files and (tmp_path / "tracks.png").stat().st_size > 10_000
+    t = np.asarray(res.frames["t_end_s"], float)
+    data = sky_plot_data(res, t)
+    assert sorted(i for i, (c, _) in data["truth"].items() if c == "drone") == ["drone-a", "drone-b"]
+    assert len(data["tracks"]) >= 2 and all(m.any() for m in data["in_fovea"].values())
+    # the fovea masks are the ones the run's own figures count (sim.sky_summary.drone_truth)
+    from sim.loop import ClosedLoop
+    from sim.scene import load_scene
+    from sim.sky_summary import drone_truth, truth_frames
+    import dataclasses
+
+    loop = ClosedLoop(dataclasses.replace(load_scene(SCENES / "two-drones-crossing.toml"), duration_s=6.0))
+    log = loop.run()
+    want = drone_truth(loop, log, truth_frames(loop, log))
+    for d, m in data["in_fovea"].items():
+        assert np.array_equal(m, want[d]["in_fovea"]), d
+    daemon = SimpleNamespace(source="daemon", path=str(crossing_run), truth=None, tracks=res.tracks)
+    bare = sky_plot_data(daemon, t)
+    assert bare["truth"] == {} and bare["in_fovea"] == {} and len(bare["tracks"]) == len(data["tracks"])
+    assert plot_sky_tracks(bare, "daemon", tmp_path / "bare.png").stat().st_size > 5_000
