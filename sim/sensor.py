@@ -323,10 +323,10 @@ class SceneSensor:
         self._cast_body(spec, c, v, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset)
         return c, v
 
-    def _cast_flock(self, flock, culls, t0, t1, chunk, d_world, rng_m, prim, offset) -> list[np.ndarray]:
+    def _cast_flock(self, flock, culls, t0, t1, chunk, d_world, rng_m, prim, offset):
         """:meth:`_cast_target` for each bird of a flock in turn, the birds' poses evaluated together
         (:class:`sim.world.sky.FlockPoses`), the rays culled first against a cone holding every
-        bird's; returns their positions at the chunk's mid time."""
+        bird's; returns their positions and velocities at the chunk's mid time (two lists)."""
         t_mid = 0.5 * (t0 + t1)
         n = len(flock.objects)
         centres = flock.positions(np.arange(n), np.full(n, t_mid))
