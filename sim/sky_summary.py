@@ -43,8 +43,9 @@ def truth_frames(loop, log) -> list[dict]:
                                np.array(o.xyz_m, float), int(o.rays_hit))
                         for o in objs[k] if not o.id.startswith("stray-")})
         return out
+    half = 0.5 * loop.tracker.config.period_s      # frame mid, as the truth is taken (not 10 Hz only)
     for k in range(T):
-        t_mid = log["t_end_s"][k] - 0.05
+        t_mid = log["t_end_s"][k] - half
         out.append({f"target-{i}": ("drone", s.trajectory.position(np.array([t_mid]))[0], 1)
                     for i, s in enumerate(loop.scene.targets)})
     return out
