@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from foveatrack.errors import UserError
+from foveatrack.recording.file_lock import recording_in_use
 from foveatrack.recording import mcap_walk as mw
 from foveatrack.recording.format import (CHANNELS_META_NAME, DETECTIONS, FORMAT, IMU, MCAP_MAGIC, META_CRC_KEY,
                                          META_NAME, POINTS, READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message,
@@ -220,6 +221,11 @@ class RecordingReader:
         problem = self.problem
         if problem is None:
             return None
+        if self.complete is not True and self.in_use:
+            # a writer holds it (foveatrack.recording.writer.recording_in_use): its end is the writer's
+            # next bytes, not damage
+            return (f"note: {self.path} is still being written by a running process: read what it held up to "
+                    f"byte {self.size} (its end is the writer's next data, not damage)")
         if self.damage or self.unattributed:
             return f"WARNING: damaged recording {self.path}, {problem}"
         if self.capped is not None:
@@ -234,6 +240,7 @@ class RecordingReader:
         self.damage = []
         self.unattributed = {}
         self.capped = None
+        self.in_use = recording_in_use(self.path)
         size = self.size
         with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
             data_end = self._data_end_pos(mm)

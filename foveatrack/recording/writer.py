@@ -16,6 +16,7 @@ from foveatrack.mm_grid import quantise_to_mm_grid
 from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD, IMU,
                                          MAX_GRID_MM, META_CRC_KEY, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable,
                                          imu_columns, meta_crc32)
+from foveatrack.recording.file_lock import hold as _hold
 from foveatrack.recording.foxglove_view import FoxgloveChannels
 from foveatrack.recording.pack_kernels import pack_points
 from foveatrack.recording.writeback import WritebackPacer
@@ -228,10 +229,13 @@ class RecordingWriter(RecordCalls):
         import foxglove
 
         _create_private(path, overwrite, self._file_mode)
+        self._release()
+        self._lock_fd = _hold(path)
         try:
             self._w = foxglove.open_mcap(path, allow_overwrite=True, context=self.context,
                                          writer_options=self._opts)
         except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types for I/O
+            self._release()
             raise UserError(f"cannot create recording {path}: {exc}") from None
         if self._pacer is not None:
             self._pacer.close()
@@ -376,8 +380,15 @@ class RecordingWriter(RecordCalls):
                     _fsync(self.path)
         finally:
             self._closed = True
+            self._release()
             if getattr(self, "_pacer", None) is not None:
                 self._pacer.close()
+
+    def _release(self) -> None:
+        """Let go of the file's lock (:func:`_hold`): the file is complete, or the next segment's is taken."""
+        fd, self._lock_fd = getattr(self, "_lock_fd", None), None
+        if fd is not None:
+            os.close(fd)
 
     def __enter__(self) -> "RecordingWriter":
         return self

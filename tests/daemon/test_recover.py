@@ -130,6 +130,37 @@ def test_a_journal_held_by_a_running_daemon_is_not_touched(tmp_path):
     assert cut.read_bytes() == data
 
 
+
+def test_a_recording_still_being_written_is_not_touched_and_is_read_as_such(tmp_path):
+    # A user ran 'recover' on a simulator's recording while it was still writing: it was rewritten
+    # from the 45 frames then on disk and the writer's next 55 were lost.  The writer holds its
+    # file's lock (foveatrack.recording.file_lock): recover refuses and changes nothing; replay and
+    # export read what it holds and say it is being written, not damaged; once closed, all is normal.
+    from foveatrack.errors import UserError
+    from foveatrack.recording.file_lock import recording_in_use
+
+    live = tmp_path / "live.mcap"
+    w = RecordingWriter(live, {"source": "daemon", "config_text": "x"}, log_time="host")
+    for i in range(3):
+        t_end = (i + 1) * 100_000_000
+        w.write_points(t_end, i, np.full((5, 3), 2.0), np.full(5, t_end, np.int64))
+    w.flush()
+    try:
+        assert recording_in_use(live)
+        data = live.read_bytes()
+        with pytest.raises(UserError, match="still being written by a running process"):
+            recover(live)
+        assert live.read_bytes() == data
+        r = RecordingReader(live)
+        assert len(list(r.points())) == 3
+        assert "still being written" in r.warning() and "damaged" not in r.warning(), r.warning()
+    finally:
+        w.close()
+    assert not recording_in_use(live)
+    r = RecordingReader(live)
+    assert len(list(r.points())) == 3 and r.warning() is None
+
+
 def test_not_a_recording_is_one_line(tmp_path, capsys):
     p = tmp_path / "x.mcap"
     p.write_bytes(b"hello")
