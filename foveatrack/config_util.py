@@ -41,6 +41,42 @@ def check_output_file(path, flag: str) -> None:
         raise UserError(f"{flag} {path}: the directory {parent} is not writable")
 
 
+def check_outputs(outputs, inputs=(), overwrite: bool = False) -> None:
+    """A command's output files ``outputs`` ((flag, path) pairs; a None path is not asked for), each
+    checked by :func:`check_output_file`, and never a file it reads (``inputs``: files, or directories
+    whose files it reads), never one another's, and -- unless ``overwrite`` -- never a file that exists:
+    what a user already has is not replaced unasked (a track's --csv named one of its own scans
+    replaced that scan; two exports to one name kept the second)."""
+    from pathlib import Path
+
+    def key(p):
+        return Path(p).resolve()
+
+    read = set()
+    for p in inputs:
+        if p is None:
+            continue
+        p = Path(p)
+        read.add(key(p))
+        if p.is_dir():
+            read.update(key(c) for c in p.iterdir())
+    seen: dict = {}
+    for flag, path in outputs:
+        if not path:
+            continue
+        check_output_file(path, flag)
+        k = key(path)
+        if k in read:
+            raise UserError(f"{flag} {path}: that is a file this command reads (or one in the folder it reads); "
+                            "give another name")
+        if k in seen:
+            raise UserError(f"{flag} {path}: {seen[k]} writes the same file; give each output its own name")
+        seen[k] = flag
+        if not overwrite and Path(path).exists():
+            raise UserError(f"{flag} {path}: the file exists; give another name, move it away, or add "
+                            "--overwrite to replace it")
+
+
 def output_dir(path, flag: str):
     """The output directory ``path`` (given with ``flag``), created if missing; a UserError naming the
     flag when it cannot be.  Returns it as a Path."""

@@ -28,7 +28,8 @@ def cmd_demo(args) -> int:
 
     out = Path(args.out)
     scene_path = args.scene or shipped_scene(DEFAULT_SCENE)
-    run_and_report(scene_path, out, plot=True, progress=not args.no_progress)
+    # the demo's directory is its own: a second demo replaces the first's files (the quick start is run again)
+    run_and_report(scene_path, out, plot=True, progress=not args.no_progress, overwrite=True)
 
     optics = load_scene(scene_path).optics
     scan_dir = out / "scan"

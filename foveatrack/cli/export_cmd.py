@@ -30,6 +30,7 @@ def register(sub) -> None:
                    help="read at most N frames (default: one per 8 bytes of the file, at least 10000; a file "
                         "claiming more is crafted or damaged, and export warns where it stopped)")
     p.add_argument("--frame-ms", type=int, default=50, metavar="MS", help="LVX frame length (default 50, as Livox Viewer)")
+    p.add_argument("--overwrite", action="store_true", help="replace output files that exist (else refused)")
     p.set_defaults(func=cmd_export)
 
 
@@ -37,7 +38,7 @@ def cmd_export(args) -> int:
     import sys
     from pathlib import Path
 
-    from foveatrack.config_util import check_output_file
+    from foveatrack.config_util import check_outputs
     from foveatrack.errors import UserError
     from foveatrack.recording.format import MCAP_MAGIC
 
@@ -66,10 +67,9 @@ def cmd_export(args) -> int:
 
         LvxReader(rec).close()
     for flag, path, suffixes in outs:
-        if path:
-            if Path(path).suffix.lower() not in suffixes:
-                raise UserError(f"{flag} {path}: the file name must end in {' or '.join(suffixes)}")
-            check_output_file(path, flag)
+        if path and Path(path).suffix.lower() not in suffixes:
+            raise UserError(f"{flag} {path}: the file name must end in {' or '.join(suffixes)}")
+    check_outputs([(flag, path) for flag, path, _ in outs], inputs=[rec], overwrite=args.overwrite)
     if args.max_frames is not None and args.max_frames < 1:
         raise UserError(f"--max-frames {args.max_frames}: give a whole number of frames >= 1")
     cap = args.max_frames

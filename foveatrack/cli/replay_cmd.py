@@ -23,6 +23,7 @@ def register(sub) -> None:
     p.add_argument("--export-points", metavar="F.csv|F.npz", help="export every recorded point")
     p.add_argument("--export-trajectory", metavar="F.csv|F.npz",
                    help="export the replay's per-frame detections, commands, head and world estimates (and truth)")
+    p.add_argument("--overwrite", action="store_true", help="replace export files that exist (else refused)")
     p.add_argument("--max-frames", type=int, default=None, metavar="N",
                    help="read at most N frames of a .mcap recording (default: one per 8 bytes of the file, "
                         "at least 10000; a file claiming more is crafted or damaged, and replay says where it stopped)")
@@ -47,18 +48,19 @@ def cmd_replay(args) -> int:
     import json
     from pathlib import Path
 
-    from foveatrack.config_util import check_output_file
+    from foveatrack.config_util import check_outputs
     from foveatrack.errors import UserError
     from foveatrack.replay import export_replay_trajectory, format_report, replay
 
     _check_recording_arg(args.recording)
     if args.tracker_config:
         _check_tracker_config(args.tracker_config)
-    for flag, path in (("--export-points", args.export_points), ("--export-trajectory", args.export_trajectory)):
-        if path:  # before the replay, which takes a while on a long recording
-            if Path(path).suffix.lower() not in (".csv", ".npz"):
-                raise UserError(f"{flag} {path}: the file name must end in .csv or .npz")
-            check_output_file(path, flag)
+    exports = (("--export-points", args.export_points), ("--export-trajectory", args.export_trajectory))
+    for flag, path in exports:
+        if path and Path(path).suffix.lower() not in (".csv", ".npz"):
+            raise UserError(f"{flag} {path}: the file name must end in .csv or .npz")
+    # before the replay, which takes a while on a long recording
+    check_outputs(exports, inputs=[args.recording], overwrite=args.overwrite)
     if args.live is not None and not args.recording.lower().endswith(".lvx"):
         from foveatrack.recording.live import check_port, stream_recording
 

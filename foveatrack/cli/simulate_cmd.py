@@ -14,6 +14,8 @@ def register(sub) -> None:
     p = sub.add_parser("simulate", help="run a scene's closed loop (lidar, UAV, head over UART, tracker)")
     p.add_argument("scene", metavar="SCENE.toml", help="a scene file (see scenes/)")
     p.add_argument("--out", metavar="DIR", help="write the recording (run.mcap), summary.json and plots here")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a recording (run.mcap) that --out already holds (else refused)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--plot", action="store_true", help="write the Fig. 14 a/b/c plots into --out (a [tracker.sky] run: tracks.png)")
     p.add_argument("--seed", type=int, help="override the scene's seed")
@@ -123,8 +125,9 @@ def _others_running() -> int:
 
 def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None, duration=None, progress=True,
                    quiet=False, live_port=None, speed=1.0, ahead=None, recording_process=None,
-                   linger_s=0.0, live_origins=()) -> dict:
-    """Run a scene and report it (the ``simulate`` command).  ``ahead``: trace the scan ahead on a second
+                   linger_s=0.0, live_origins=(), overwrite=False) -> dict:
+    """Run a scene and report it (the ``simulate`` command).  ``overwrite``: replace the recording
+    ``out`` holds from an earlier run (else a UserError before the run).  ``ahead``: trace the scan ahead on a second
     thread; ``recording_process``: write the recording from a child process.  None: both where a core is
     free (:func:`core_free`); the results and the file are the same either way."""
     from foveatrack.recording import writer_process
@@ -138,7 +141,7 @@ def run_and_report(scene_path, out=None, want_json=False, plot=False, seed=None,
     child = writer_process.RecordingProcess() if recording_process and out and live_port is None else None
     try:
         return _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed,
-                               spare if ahead is None else ahead, child, linger_s, live_origins)
+                               spare if ahead is None else ahead, child, linger_s, live_origins, overwrite)
     finally:
         if child is not None:
             child.close()       # a no-op after the run closed it; ends the child if the run failed early
@@ -161,7 +164,7 @@ def _compile_kernels_first(scene_path, progress: bool) -> None:
 
 
 def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, quiet, live_port, speed, ahead,
-                    child, linger_s=0.0, live_origins=()) -> dict:
+                    child, linger_s=0.0, live_origins=(), overwrite=False) -> dict:
     import time
 
     import numpy as np
@@ -186,6 +189,10 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
     if plot and out is None:
         raise UserError("--plot needs --out DIR")
     out_dir = Path(out) if out else None
+    if out_dir is not None and not overwrite and (out_dir / "run.mcap").exists():
+        # an earlier run's recording is not replaced unasked (before the run, not after it)
+        raise UserError(f"--out {out_dir}: it holds a recording (run.mcap) of an earlier run; give another --out, "
+                        "move it away, or add --overwrite to replace it")
     if out_dir is not None:
         try:
             out_dir.mkdir(parents=True, exist_ok=True)
@@ -362,5 +369,5 @@ def cmd_simulate(args) -> int:
                         "(without --live the run goes as fast as the machine allows)")
     run_and_report(args.scene, args.out, args.json, args.plot, args.seed, args.duration, not args.no_progress,
                    live_port=args.live, speed=args.speed, ahead=_cores_flag(args), recording_process=_cores_flag(args),
-                   linger_s=max(args.linger_s, 0.0), live_origins=args.live_origin)
+                   linger_s=max(args.linger_s, 0.0), live_origins=args.live_origin, overwrite=args.overwrite)
     return 0

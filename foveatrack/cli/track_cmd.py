@@ -31,22 +31,27 @@ def register(sub) -> None:
     p.add_argument("--record", metavar="F.mcap",
                    help="write a Foxglove recording: the cloud, the track and the D of every frame")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--overwrite", action="store_true", help="replace a --csv or --record file that exists (else refused)")
     p.set_defaults(func=cmd_track)
 
 
 def cmd_track(args) -> int:
     import json
 
-    from foveatrack.config_util import check_output_file, read_toml
+    from pathlib import Path
+
+    from foveatrack.config_util import check_outputs, read_toml
     from foveatrack.errors import UserError
     from foveatrack.openloop import OpenLoopConfig, track_source
     from foveatrack.openloop.reference import load_reference
     from foveatrack.sources import open_source
 
-    if args.csv:
-        check_output_file(args.csv, "--csv")
-    if args.record:
-        check_output_file(args.record, "--record")
+    if args.csv and Path(args.csv).suffix.lower() != ".csv":
+        raise UserError(f"--csv {args.csv}: the file name must end in .csv")
+    if args.record and Path(args.record).suffix.lower() != ".mcap":
+        raise UserError(f"--record {args.record}: the file name must end in .mcap")
+    # never one of the scans it reads (a --csv named after a scan replaced it), nor a file that exists
+    check_outputs([("--csv", args.csv), ("--record", args.record)], inputs=[args.source], overwrite=args.overwrite)
     cfg = OpenLoopConfig()
     if args.config:
         data, _ = read_toml(args.config, "open-loop config (--config)")
@@ -74,7 +79,8 @@ def cmd_track(args) -> int:
         if args.record:
             from foveatrack.openloop.recording import TrackRecorder
 
-            recorder = TrackRecorder(args.record, {"input": str(args.source), "topic": args.topic})
+            recorder = TrackRecorder(args.record, {"input": str(args.source), "topic": args.topic},
+                                     overwrite=args.overwrite)
         res = track_source(source, cfg, reference, progress=lambda k: bar.update(1), observer=recorder)
     finally:
         bar.close()

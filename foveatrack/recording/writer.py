@@ -40,7 +40,8 @@ class RecordingExistsError(UserError):
         what = "an empty file" if path.is_file() and path.stat().st_size == 0 else \
             "a directory" if path.is_dir() else "a file"
         super().__init__(f"recording {path} already exists ({what}); it is never overwritten unless asked: "
-                         f"choose another path, move it away, or pass overwrite=True")
+                         f"choose another path, move it away, or ask for it to be replaced (--overwrite; "
+                         f"a daemon's [recording] overwrite = true)")
 
 
 class RecordCalls(abc.ABC):
