@@ -125,3 +125,31 @@ def test_a_bad_box_and_a_bad_config(tmp_path, capsys):
     _fails([FIXTURE, "--config", cfg], capsys, "c.toml", "min_points")
     cfg.write_text("[openloop]\nconfirm_hitz = 3\n")
     _fails([FIXTURE, "--config", cfg], capsys, "c.toml", "confirm_hitz")
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "binary"])
+def test_a_pcd_cut_short_gives_its_whole_points_and_says_so(tmp_path, encoding):
+    # A scan whose writer was killed: read silently (ascii, its last number cut in half) or refused
+    # whole with numpy's "buffer size must be a multiple of element size" (binary).  Now its whole
+    # points are read, to the bit, and one line says how many of the header's are missing.
+    from pypcd4 import Encoding, PointCloud
+
+    from foveatrack.sources.pcd_folder import PcdFolderSource
+
+    xyz = np.random.default_rng(3).uniform(1, 50, (820, 3))
+    f = tmp_path / "1706255621.000000.pcd"
+    PointCloud.from_points(xyz, ("x", "y", "z"), (np.float64,) * 3).save(f, encoding=Encoding(encoding))
+    data = f.read_bytes()
+    f.write_bytes(data[: len(data) // 2 + 5])
+    said = []
+    frames = list(PcdFolderSource(tmp_path, warn=said.append))
+    got = frames[0].frame.xyz
+    assert 300 < len(got) < 820 and len(said) == 1
+    assert f"holds {len(got)} of the 820 points" in said[0] and "cut short" in said[0]
+    want = xyz[:len(got)] if encoding == "binary" else np.array([[float(f"{v:.10g}") for v in p] for p in xyz[:len(got)]])
+    # the source may order points by time: compared as sorted rows
+    assert np.allclose(np.sort(got.view([("", float)] * 3), axis=0).view(float).reshape(-1, 3),
+                       np.sort(want.view([("", float)] * 3), axis=0).view(float).reshape(-1, 3), rtol=0, atol=1e-6)
+    f.write_bytes(data)
+    said.clear()
+    assert len(list(PcdFolderSource(tmp_path, warn=said.append))[0].frame.xyz) == 820 and not said
