@@ -55,6 +55,8 @@ def cmd_export(args) -> int:
     if not any(path for _, path, _ in outs):
         raise UserError("export: give at least one of --lvx, --csv, --npz, --trajectory, --imu")
     rec = Path(args.recording)
+    if rec.is_dir():
+        raise UserError(f"{rec} is a directory; give the recording inside it (e.g. {rec / 'run.mcap'})")
     if not rec.is_file():
         raise UserError(f"{rec}: no such recording")
     with open(rec, "rb") as fh:

@@ -85,7 +85,7 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
 
     if data_type is not None and data_type not in P.POINT_DATA_TYPES:
         raise UserError(f"LVX data type {data_type}: must be one of {list(P.POINT_DATA_TYPES)} "
-                        "(6 is IMU, which recordings do not hold)")
+                        "(6 is the Livox IMU packet: --lvx writes points; a recording's IMU samples go out with --imu)")
     if not 1 <= frame_duration_ms <= 1000:
         raise UserError(f"frame duration {frame_duration_ms} ms: must be 1..1000")
     reader = open_run(recording, max_frames, segment_alone=True)

@@ -106,14 +106,14 @@ class BagSource:
             with self._reader() as r:
                 return {name: (info.msgtype, info.msgcount) for name, info in r.topics.items()}
         except Exception as exc:   # rosbags raises its own errors, KeyError/struct errors on damage
-            raise UserError(f"{self.path}: not a readable bag ({_one_line(exc)})") from None
+            raise UserError(f"{self.path}: not a readable bag ({_bag_problem(exc)})") from None
 
     def __iter__(self):
         try:
             reader = self._reader()
             reader.open()
         except Exception as exc:
-            raise UserError(f"{self.path}: not a readable bag ({_one_line(exc)})") from None
+            raise UserError(f"{self.path}: not a readable bag ({_bag_problem(exc)})") from None
         try:
             tf = self._read_tf(reader) if self.fixed_frame is not None else None
             conns = [c for c in reader.connections if c.topic == self.topic]
@@ -173,6 +173,16 @@ def describe_topics(topics: dict[str, tuple[str, int]]) -> str:
     parts = [f"{name} ({t}, {n} messages{'' if t in CLOUD_TYPES else ', not a cloud'})"
              for name, (t, n) in sorted(topics.items())]
     return "; ".join(parts)
+
+
+def _bag_problem(exc: Exception) -> str:
+    """The reader's reason in a line, and for a bag whose end or index is missing (its recorder was
+    stopped short: the usual state of a killed recording) what mends it."""
+    why = _one_line(exc)
+    if any(k in why for k in ("index", "Header could not be read", "end magic", "magic is invalid")):
+        why += ("; a bag whose recorder was stopped short has no index or end: 'rosbag reindex BAG' (ROS 1) or "
+                "'ros2 bag reindex DIR' (ROS 2) writes them, then read it again")
+    return why
 
 
 def _one_line(exc: BaseException) -> str:

@@ -212,10 +212,11 @@ def test_export_command_and_its_errors(tmp_path, capsys):
         (["export", str(rec)], "at least one of"),
         (["export", str(rec), "--lvx", str(tmp_path / "a.txt")], "must end in .lvx"),
         (["export", str(rec), "--lvx", str(tmp_path / "no" / "a.lvx")], "does not exist"),
-        (["export", str(rec), "--lvx", str(tmp_path / "b.lvx"), "--data-type", "6"], "6 is IMU"),
+        (["export", str(rec), "--lvx", str(tmp_path / "b.lvx"), "--data-type", "6"], "6 is the Livox IMU packet"),
         (["export", str(rec), "--lvx", str(tmp_path / "b.lvx"), "--device", "hdl64"], "device 'hdl64'"),
         (["export", str(tmp_path / "a.lvx"), "--csv", str(tmp_path / "b.csv")], "already a Livox .lvx"),
         (["export", str(tmp_path / "missing.mcap"), "--csv", str(tmp_path / "b.csv")], "no such recording"),
+        (["export", str(tmp_path), "--csv", str(tmp_path / "b.csv")], "is a directory"),
     ]:
         assert main(argv) == 2
         assert msg in capsys.readouterr().err

@@ -153,3 +153,13 @@ def test_a_pcd_cut_short_gives_its_whole_points_and_says_so(tmp_path, encoding):
     f.write_bytes(data)
     said.clear()
     assert len(list(PcdFolderSource(tmp_path, warn=said.append))[0].frame.xyz) == 820 and not said
+
+
+def test_a_bag_cut_short_says_how_to_mend_it(tmp_path, frames, capsys):
+    # the usual state of a bag whose recorder was killed: no index (ROS 1) or no end (ROS 2 MCAP)
+    bag = bw.write_bag(tmp_path / "b.bag", frames, "pointcloud2", ros1=True)
+    data = bag.read_bytes()
+    bag.write_bytes(data[: int(len(data) * 0.9)])
+    assert main(["track", str(bag), "--topic", "/livox/lidar"]) == 2
+    err = capsys.readouterr().err
+    assert "not a readable bag" in err and "rosbag reindex" in err and "Traceback" not in err, err
