@@ -68,8 +68,10 @@ def plot_all(res, out_dir: Path) -> list[Path]:
         bearing_error_deg=bearing, deadband_deg=db, **phases,
         deadband_axes_deg=None if db is None else (cfg.deadband_pan_deg, cfg.deadband_tilt_deg)))
 
+    # an .lvx holds no head motion: its points are turned by a head held still, whatever the head did
+    lvx_note = "; head frozen: an .lvx holds no head motion" if res.source == "lvx" else ""
     files.append(sim_plots.plot_trajectory(
-        t, f["world_xyz"], f"{name}: reconstructed trajectory (replay; paper Fig. 14c)",
+        t, f["world_xyz"], f"{name}: reconstructed trajectory (replay; paper Fig. 14c{lvx_note})",
         out_dir / sim_plots.TRAJECTORY_PNG, true_xyz=None if truth is None else truth["target_xyz_m"]))
 
     if res.source != "lvx":
