@@ -239,6 +239,13 @@ class DaemonConfig:
         path = self.recording_path()
         if path is None:
             return
+        # what the writer refuses at the start, refused here too (--check passed both)
+        if path.is_dir():
+            raise UserError(f"{self.path} [recording] path: {path} is a directory; name the recording's file "
+                            "(e.g. .../daemon-{time}.mcap)")
+        if path.exists() and not self.recording.overwrite:
+            raise UserError(f"{self.path} [recording] path: {path} already exists and is never overwritten unless "
+                            "asked: put {time} in the path, move it away, or set overwrite = true in [recording]")
         parent = path.parent
         if not parent.is_dir() and not self.recording.make_dirs:
             raise UserError(f"{self.path} [recording] path: the directory {parent} does not exist; create it "

@@ -12,6 +12,7 @@ from __future__ import annotations
 import queue
 import signal
 import threading
+import time
 from contextlib import contextmanager
 from dataclasses import asdict
 
@@ -65,15 +66,24 @@ class Lifecycle:
         try:
             if self.install_signals and threading.current_thread() is threading.main_thread():
                 for sig in STOP_SIGNALS:
-                    old[sig] = signal.signal(sig, lambda *_: self.stop_ev.set())
+                    old[sig] = signal.signal(sig, lambda *_: self._stop_by_signal())
             yield
         finally:
             for sig, h in old.items():
                 # None: a handler not set from Python, which cannot be put back; the default is
                 signal.signal(sig, signal.SIG_DFL if h is None else h)
 
+    def _stop_by_signal(self) -> None:
+        """SIGINT/SIGTERM: stop, and remember how long after the start (a stop before the lidar had
+        time to announce itself is no lidar fault: :attr:`RunStats.stopped_before_data`)."""
+        if getattr(self, "signal_after_s", None) is None:
+            started = getattr(self, "started_mono", None)
+            self.signal_after_s = None if started is None else time.monotonic() - started
+        self.stop_ev.set()
+
     def _start(self) -> None:
         """The start in the log, the head stopped, the receiver running; the loop's state fresh."""
+        self.started_mono = time.monotonic()
         c = self.cfg
         self.log.event("start", config=c.path, recording=str(self.recording_path) if self.recording_path else None,
                        lidar=asdict(c.lidar), head_port=c.head.port, head_open=self.head.connected,

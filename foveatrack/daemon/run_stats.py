@@ -11,6 +11,11 @@ def rate_known(d) -> bool:
     return getattr(d, "client", None) is not None and d.client.decoder.point_rate_hz > 0
 
 
+#: how long a Livox may take to be heard after the daemon starts (it broadcasts once a second, and the
+#: handshake follows): a stop within it, with nothing heard, is not a lidar fault
+ANNOUNCE_WAIT_S = 3.0
+
+
 class RunStats:
     """The figures' part of the daemon (a mixin of ``Daemon``)."""
 
@@ -50,7 +55,10 @@ class RunStats:
         ``lidar_foreign_source``)."""
         out = []
         rx = getattr(self, "rx", None)
-        if rx is not None and rx.last_packet_mono is None:
+        if self.stopped_before_data:
+            out.append(f"stopped by a signal {self.signal_after_s:.1f} s after its start, before any lidar data "
+                       f"arrived (a Livox announces itself once a second): no lidar fault to report")
+        elif rx is not None and rx.last_packet_mono is None:
             L = self.cfg.lidar
             hp = self.host_ports
             ports = f"data port {hp['data']}, command port {hp['cmd']}" + (
@@ -73,9 +81,18 @@ class RunStats:
 
     @property
     def no_lidar_data(self) -> bool:
-        """True when the run never received a lidar packet (the CLI exits non-zero)."""
+        """True when the run never received a lidar packet (the CLI exits non-zero), unless it was
+        stopped before the lidar had time to announce itself (:attr:`stopped_before_data`)."""
         rx = getattr(self, "rx", None)
-        return rx is not None and rx.last_packet_mono is None
+        return rx is not None and rx.last_packet_mono is None and not self.stopped_before_data
+
+    @property
+    def stopped_before_data(self) -> bool:
+        """Stopped by SIGINT/SIGTERM within :data:`ANNOUNCE_WAIT_S` of the start with no lidar packet yet:
+        a user's Ctrl-C 0.8 s in was told the lidar was off the network (exit 3)."""
+        rx = getattr(self, "rx", None)
+        after = getattr(self, "signal_after_s", None)
+        return rx is not None and rx.last_packet_mono is None and after is not None and after < ANNOUNCE_WAIT_S
 
     def drops(self) -> int:
         rx = self.rx

@@ -51,7 +51,8 @@ _RECV_BUF = 2048
 _MAX_DATAGRAMS_PER_POLL = 20_000
 
 
-def _udp_socket(ip: str, port: int, rcvbuf: int | None = None, reuse: bool = False) -> socket.socket:
+def _udp_socket(ip: str, port: int, rcvbuf: int | None = None, reuse: bool = False, key: str = "") -> socket.socket:
+    """A bound UDP socket; a UserError naming ``key`` (the config's key for the port) if it cannot be."""
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     if reuse:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -64,7 +65,8 @@ def _udp_socket(ip: str, port: int, rcvbuf: int | None = None, reuse: bool = Fal
         s.bind((ip, port))
     except OSError as exc:
         s.close()
-        raise UserError(f"cannot bind UDP {ip or '*'}:{port} for the Livox link: {exc.strerror}") from None
+        raise UserError(f"cannot bind UDP {ip or '*'}:{port} for the Livox link{f' ({key})' if key else ''}: "
+                        f"{exc.strerror}") from None
     s.setblocking(False)
     return s
 
@@ -131,15 +133,19 @@ class LivoxClient:
         self._counters: Counter = Counter()
 
         self._sel = selectors.DefaultSelector()
-        self._data = _udp_socket(self.host_ip, data_port, rcvbuf=8 << 20)
-        self._cmd = _udp_socket(self.host_ip, cmd_port)
+        self._data = _udp_socket(self.host_ip, data_port, rcvbuf=8 << 20, key="[lidar] data_port")
+        try:
+            self._cmd = _udp_socket(self.host_ip, cmd_port, key="[lidar] cmd_port")
+        except UserError:
+            self._data.close()
+            raise
         self._bcast = None
         if broadcast_port is not None:
             try:
                 # '' so that real broadcasts (255.255.255.255) reach us as well as unicast ones.
                 # Exclusive (no SO_REUSEADDR): with a shared port a second process silently took 15 of
                 # 17 broadcasts; now the second one is told at start.
-                self._bcast = _udp_socket("", broadcast_port)
+                self._bcast = _udp_socket("", broadcast_port, key="[lidar] broadcast_port")
             except UserError as exc:
                 self._data.close()
                 self._cmd.close()

@@ -80,6 +80,7 @@ def test_check_opens_the_head_port_and_binds_the_lidar_sockets(tmp_path):
         p = _write(tmp_path, lidar=FULL["lidar"].replace("data_port = 0", f"data_port = {busy}"))
         r = _cli("daemon", "--config", str(p), "--check")
     assert r.returncode == 2 and "Address already in use" in r.stderr and str(busy) in r.stderr, r.stderr
+    assert "[lidar] data_port" in r.stderr, r.stderr      # the key to change (a user's clash did not say)
     r = _cli("daemon", "--config", str(_write(tmp_path)), "--check")
     assert r.returncode == 0 and "head port 'loop://' opened" in r.stderr and "lidar sockets bound" in r.stderr
 
@@ -148,3 +149,40 @@ def test_the_status_line_counts_the_sky_trackers_tracks(tmp_path):
     d.tracker.pin(next(v.track_id for v in d.tracker.last_output.sky.tracks if v.confirmed))
     d.tracker.process(Frame(1.0, 1.1, xyz, t_ns + 100_000_000), 1.1)
     assert "pinned" in next(n for n in d.status_notes() if n.startswith("tracks"))
+
+
+@pytest.mark.slow
+def test_a_ctrl_c_before_the_lidar_could_announce_itself_is_no_lidar_fault(tmp_path):
+    # A user's SIGTERM 0.8 s after the start got "no lidar data arrived ... is the lidar on and on this
+    # network" and exit 3: a Livox announces itself once a second, so nothing had had time to arrive.
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    p = _write(tmp_path)
+    log = tmp_path / "d.jsonl"
+    proc = subprocess.Popen([sys.executable, "-m", "foveatrack", "daemon", "--config", str(p), "--no-status",
+                             "--log", str(log)],
+                            cwd=ROOT, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.1)
+        if log.exists() and '"start"' in log.read_text():
+            break
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert "stopped by a signal" in err and "no lidar fault" in err and "is the lidar on" not in err, err
+
+
+def test_check_refuses_a_recording_path_the_start_would_refuse(tmp_path):
+    # --check passed an existing recording (the start then refused to overwrite it) and a directory
+    keep = tmp_path / "keep.mcap"
+    keep.write_bytes(b"the user's recording")
+    r = _cli("daemon", "--config", str(_write(tmp_path, recording=f'path = "{keep}"')), "--check")
+    assert r.returncode == 2 and "[recording] path" in r.stderr and "already exists" in r.stderr, r.stderr
+    r = _cli("daemon", "--config", str(_write(tmp_path, recording=f'path = "{tmp_path}"\noverwrite = true')), "--check")
+    assert r.returncode == 2 and "is a directory" in r.stderr, r.stderr
+    assert keep.read_bytes() == b"the user's recording"
