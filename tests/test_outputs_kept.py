@@ -104,3 +104,15 @@ def test_points_an_lvx_export_leaves_out_are_a_warning_of_their_own(tmp_path, ca
     assert main(["export", str(rec), "--lvx", str(tmp_path / "t.lvx")]) == 0
     err = capsys.readouterr().err
     assert "WARNING" in err and "were left out" in err and "share a scan slot" in err, err
+
+
+@pytest.mark.parametrize("argv", [["calibrate", "--scene", str(ROOT / "scenes" / "calibration-room.toml")],
+                                  ["calibrate-imu", str(ROOT / "scenes" / "imu-calibration-yard.toml")]])
+def test_a_calibration_keeps_a_table_that_exists(argv, tmp_path, capsys):
+    # a user's live-measured speed table (the one the daemon config names) was replaced by a simulated
+    # calibration's, without a word; refused before the calibration runs
+    table = tmp_path / "precious.json"
+    table.write_text('{"the user": "measured on the live head"}')
+    code, err = _run([*argv, "--out", str(table)], capsys)
+    assert code == 2 and "--out" in err and "exists" in err and "--overwrite" in err, err
+    assert table.read_text() == '{"the user": "measured on the live head"}'

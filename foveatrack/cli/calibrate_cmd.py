@@ -29,7 +29,7 @@ import math
 import sys
 
 from foveatrack.calibration import FeatureSpec
-from foveatrack.config_util import check_output_file, seed_arg
+from foveatrack.config_util import check_output_file, check_outputs, seed_arg
 from foveatrack.errors import UserError
 from foveatrack.speed_table import TURBO
 
@@ -43,6 +43,7 @@ def register(sub) -> None:
     p.add_argument("--unit-seed", type=seed_arg, metavar="N", help="simulate another unit of the head family")
     p.add_argument("--out", metavar="TABLE.json", default="speed-table.json",
                    help="where to write the speed table (default: %(default)s)")
+    p.add_argument("--overwrite", action="store_true", help="replace a --out table that exists (else refused)")
     p.add_argument("--plot", metavar="F.png", help="plot measured speeds (and the truth, when simulated)")
     p.add_argument("--json", action="store_true", help="print a JSON summary instead of text")
     p.add_argument("--pan-bytes", metavar="B,B,...", help="pan bytes to measure (0-63, 'turbo'); "
@@ -197,7 +198,9 @@ def measured_rows(table) -> list[dict]:
 
 
 def _check_outputs(args) -> None:
-    check_output_file(args.out, "--out")   # before minutes of calibration, not after
+    # before minutes of calibration, not after; a table that exists (perhaps the one a daemon config
+    # names, measured on the live head) is not replaced unasked
+    check_outputs([("--out", args.out)], overwrite=args.overwrite)
     if args.plot:
         check_output_file(args.plot, "--plot")
 

@@ -35,7 +35,7 @@ import time
 
 import numpy as np
 
-from foveatrack.config_util import check_output_file
+from foveatrack.config_util import check_output_file, check_outputs
 from foveatrack.errors import UserError
 
 
@@ -74,6 +74,7 @@ def register(sub) -> None:
     p.add_argument("--lidar", metavar="NAME,...", help="lidars to compare (Risley presets mid40, horizon, "
                    "prototype; spinning vlp16); default: the scene's [lidar] preset")
     p.add_argument("--out", metavar="X.json", help="write the extrinsic (first lidar, longest accumulation)")
+    p.add_argument("--overwrite", action="store_true", help="replace an --out file that exists (else refused)")
     p.add_argument("--plot", metavar="F.png", help="plot error vs accumulation time beside coverage")
     p.add_argument("--json", action="store_true", help="print a JSON summary instead of text")
     p.add_argument("--bootstrap", type=int, default=200, metavar="N", help="bootstrap resamples for the "
@@ -158,9 +159,9 @@ def cmd_calibrate_imu(args) -> int:
     from sim.scene import load_scene
 
     acc = sorted(set(_floats(args.accumulate, "--accumulate")))
-    for path in (args.out, args.plot):
-        if path:
-            check_output_file(path, "--out" if path == args.out else "--plot")
+    if args.plot:
+        check_output_file(args.plot, "--plot")
+    check_outputs([("--out", args.out)], overwrite=args.overwrite)     # an extrinsic that exists is kept
     scene = load_scene(args.scene)
     lidars = [s.strip() for s in args.lidar.split(",") if s.strip()] if args.lidar else [scene.optics.name]
     for name in lidars:
@@ -246,7 +247,7 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
     if args.max_s is not None and not args.max_s > 0:
         raise UserError(f"--max-s must be > 0, got {args.max_s}")
     out = args.out or "imu-extrinsic.json"
-    check_output_file(out, "--out")
+    check_outputs([("--out", out)], overwrite=args.overwrite)
     given = {k: getattr(args, k) for k in ("poses", "step_deg", "tilt_step_deg", "dwell_s", "settle_s", "speed_deg_s")
              if getattr(args, k) is not None}
     plan = RigPlan(**given)
