@@ -88,7 +88,7 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
     plan, dropped = plan_within_limits(plan, config)
     plan = replace(plan, start_tilt_deg=h.tilt0_deg, latency_s=h.frame_time_s + processing_s)
     cal = PriorAxisCalibrator(plan, feature, seed=seed, date=date, start_tilt_sigma_deg=start_tilt_sigma_deg,
-                              head=f"{h.protocol} head, address {h.address} on {h.port}")
+                              head=f"Pelco-{h.protocol} head, address {h.address} on {h.port}")
     legs_total = len(plan.pan_bytes) * 2 + len(plan.tilt_bytes) * 2
     head, client = open_devices(config)     # as the daemon opens them, with the same messages
     stream = LidarStream(client)            # last packet (watchdog) and host - sensor clock offset

@@ -366,7 +366,9 @@ class Calibrator:
                 return self._start_next_leg(now)
             if elapsed >= 5 * p.reference_s + 1.0:
                 self.failure = (f"the corner was not found near {tuple(self.feature.approx_xyz)} "
-                                f"(within {self.feature.radius_m} m) in {self.frames} frames")
+                                f"(within {self.feature.radius_m} m) in {self.frames} frames: check --corner, and "
+                                f"that the head is at the start pose the config gives ([head] pan0_deg, tilt0_deg; "
+                                f"a calibration cut short leaves it elsewhere: home it first)")
                 self._phase = "done"
                 return STOP
             return None
