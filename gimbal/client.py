@@ -168,6 +168,10 @@ class HeadClient:
                 self.stats.open_locked += 1
                 self.last_open_error = (f"{self.url} is in use by another process, which holds its exclusive "
                                         f"lock ({self.last_open_error})")
+            elif "Inappropriate ioctl" in self.last_open_error:
+                # ENOTTY: an ordinary file (or any non-terminal) where a serial device was meant
+                self.last_open_error = (f"{self.url} is not a serial device (a regular file or another "
+                                        f"non-terminal: {self.last_open_error})")
             self._ser = None
             return False
         self.stats.opens += 1

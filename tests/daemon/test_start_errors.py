@@ -43,6 +43,8 @@ def test_a_head_port_that_cannot_be_opened_fails_the_start(tmp_path, port):
         d._open()
     msg = str(exc.value)
     assert "[head]" in msg and repr(port) in msg and "cannot be opened" in msg and "/dev/ttyUSB0" in msg
+    if port in (str(tmp_path / "not-a-tty.txt"), "/dev/null"):     # pyserial's ENOTTY, said in words
+        assert "is not a serial device" in msg, msg
     assert not (tmp_path / "runs").exists()   # no empty recording left behind
 
 
