@@ -214,5 +214,5 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Operat
             self._log_progress()
         if now >= self._next_status:
             self._next_status = now + self.cfg.loop.status_period_s
-            self._show_status(self.frame_times, self.watchdog.tripped)
+            self._show_status(self.frame_times, self.watchdog.tripped, now)
         return next_tick
