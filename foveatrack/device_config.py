@@ -229,6 +229,14 @@ class DaemonConfig:
         if not os.access(path.parent, os.W_OK | os.X_OK):
             raise UserError(f"{key}: {path.parent} is not a directory this user can write in")
 
+    def recording_exists_message(self, path) -> str:
+        """What to say of a recording ``path`` that exists (the start and ``--check`` say the same)."""
+        why = ("two starts within the same second gave the same '{time}' name; start again a second later"
+               if "{time}" in str(self.recording.path) else
+               "put '{time}' in it for a new file per start (e.g. path = \"runs/{time}.mcap\")")
+        return (f"{self.path} [recording] path: {path} already exists and is never overwritten unless asked; "
+                f"{why}, or set overwrite = true in [recording] to replace it")
+
     def check_recording_dir(self) -> None:
         """A UserError naming ``[recording] path`` when the recording could not be written there: its
         directory missing (and ``make_dirs`` off) or not writable.  The daemon's start and
@@ -244,8 +252,7 @@ class DaemonConfig:
             raise UserError(f"{self.path} [recording] path: {path} is a directory; name the recording's file "
                             "(e.g. .../daemon-{time}.mcap)")
         if path.exists() and not self.recording.overwrite:
-            raise UserError(f"{self.path} [recording] path: {path} already exists and is never overwritten unless "
-                            "asked: put {time} in the path, move it away, or set overwrite = true in [recording]")
+            raise UserError(self.recording_exists_message(path))
         parent = path.parent
         if not parent.is_dir() and not self.recording.make_dirs:
             raise UserError(f"{self.path} [recording] path: the directory {parent} does not exist; create it "

@@ -75,12 +75,7 @@ class DaemonRecording:
             self.client.close()
             self.head.close()
             if isinstance(exc, RecordingExistsError):
-                why = ("two starts within the same second gave the same '{time}' name; start again a "
-                       "second later" if "{time}" in r.path else
-                       "put '{time}' in it for a new file per start (e.g. path = \"runs/{time}.mcap\")")
-                raise UserError(f"{c.path} [recording] path: {path} already exists and is never overwritten "
-                                f"unless asked; {why}, or set overwrite = true in [recording] to replace it"
-                                ) from None
+                raise UserError(c.recording_exists_message(path)) from None
             if isinstance(exc, UserError):
                 raise
             raise UserError(f"{c.path} [recording] path: cannot create {path} ({exc.strerror or exc})") from None

@@ -263,7 +263,9 @@ def test_fault5_a_nominal_speed_table_is_a_warning_at_start_in_the_log_and_the_s
     try:
         d = start(["daemon", "--config", str(cfg), "--log", str(log)], tmp_path / "d.out", tmp_path / "d.err")
         wait_for(lambda: event(log, "start"), 60, "the daemon to start", [d])
-        assert terminate(d) == 3            # no lidar in this test: "no lidar data arrived"
+        # no lidar in this test: "no lidar data arrived" (3), or 0 where the stop came within the 3 s a
+        # Livox may take to announce itself (RunStats.stopped_before_data)
+        assert terminate(d) in (0, 3)
     finally:
         stop_all({"head": head})
     err = (tmp_path / "d.err").read_text()

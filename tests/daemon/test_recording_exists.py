@@ -42,7 +42,7 @@ def test_the_writer_names_the_file_and_the_way_out(tmp_path):
     with pytest.raises(RecordingExistsError) as exc:
         RecordingWriter(p, {})
     assert isinstance(exc.value, UserError) and exc.value.path == p
-    assert str(p) in str(exc.value) and "overwrite=True" in str(exc.value)
+    assert str(p) in str(exc.value) and "--overwrite" in str(exc.value) and "overwrite = true" in str(exc.value)
     assert p.read_text() == "precious"
 
 
