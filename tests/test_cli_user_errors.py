@@ -193,3 +193,9 @@ def test_a_damaged_lvx_is_named_by_its_lvx_header_not_the_mcap_magic(tmp_path, c
         assert "is not a readable Livox .lvx v1.1 file" in err
     assert wrong in err and "MCAP" not in err, err
     assert not (tmp_path / "p.csv").exists()
+
+
+def test_a_turbo_tilt_byte_is_named_as_the_user_gave_it(capsys):
+    # "--tilt-bytes turbo" was answered "tilt bytes [255] not allowed": the user wrote no 255
+    code, err = _run(["calibrate", "--scene", ROOM, "--tilt-bytes", "turbo"], capsys)
+    assert code == 2 and "tilt bytes turbo not allowed" in err and "the tilt has no turbo" in err, err

@@ -65,8 +65,9 @@ class CalibrationPlan:
         for axis, bs in (("pan", self.pan_bytes), ("tilt", self.tilt_bytes)):
             bad = [b for b in bs if b not in axis_bytes(axis)]
             if bad:
-                raise UserError(f"calibration plan: {axis} bytes {bad} not allowed (0..63"
-                                f"{', 255 = turbo' if axis == 'pan' else ''})")
+                said = ", ".join("turbo" if b == 255 else str(b) for b in bad)
+                raise UserError(f"calibration plan: {axis} bytes {said} not allowed (0..63"
+                                + (", turbo" if axis == "pan" else "; the tilt has no turbo") + ")")
         if not (self.dwell_s > self.settle_s >= 0 and self.max_excursion_deg > 0):
             raise UserError("calibration plan: need dwell_s > settle_s >= 0 and max_excursion_deg > 0")
 

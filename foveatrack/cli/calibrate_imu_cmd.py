@@ -196,7 +196,10 @@ def cmd_calibrate_imu(args) -> int:
         from foveatrack.cli.imu_calib_plots import plot_error_vs_accumulation
 
         plot_error_vs_accumulation(rows, coverage, args.plot, scene.name,
-                                   f"foveatrack calibrate-imu {args.scene} --lidar {','.join(lidars)} --accumulate {args.accumulate} --plot {args.plot}")
+                                   " ".join(["foveatrack calibrate-imu", str(args.scene)]       # the command as given
+                                            + ([f"--lidar {args.lidar}"] if args.lidar else [])
+                                            + [f"--accumulate {args.accumulate}", f"--plot {args.plot}"]
+                                            + ([f"--out {args.out}"] if args.out else [])))
     summary = {"scene": scene.name, "poses": len(data.lidar_poses), "wall_s": round(wall_s, 1),
                "extrinsic": extrinsic, "rows": rows}
     if args.json:
