@@ -294,8 +294,8 @@ class ClosedLoop:
             from foveatrack.sky.controller import SkyController
             from foveatrack.sky.warm import compile_sky_kernels
 
-            throwaway = SkyController(self.tracker.rebased(0.0, 0.0, 0.0), self.sky.sky.cfg, self.sky.attention.cfg)
-            compile_sky_kernels(throwaway, self.tracker.config.rate_hz)
+            compile_sky_kernels(lambda: SkyController(self.tracker.rebased(0.0, 0.0, 0.0), self.sky.sky.cfg,
+                                                      self.sky.attention.cfg), self.tracker.config.rate_hz)
         worker = None
         try:
             if ahead:       # inside the try: a Ctrl-C during the set-up still ends the worker

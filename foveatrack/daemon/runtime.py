@@ -92,12 +92,11 @@ def compile_sky(config: DaemonConfig, table) -> None:
     :func:`foveatrack.detection.compile_all` does the paper tracker's, on a throwaway copy of the
     daemon's controller (:func:`foveatrack.sky.warm.compile_sky_kernels`).  Without it a fresh
     install's first frames past the tracker's warm-up waited seconds for the compiler."""
-    c = daemon_controller(config, table)
-    if not hasattr(c, "sky_table"):
+    if not config.sky:
         return
     from foveatrack.sky.warm import compile_sky_kernels
 
-    compile_sky_kernels(c, config.tracker.rate_hz)
+    compile_sky_kernels(lambda: daemon_controller(config, table), config.tracker.rate_hz)
 
 
 class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Operator, StatusDisplay, RunStats):

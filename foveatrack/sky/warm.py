@@ -18,12 +18,14 @@ import numpy as np
 _done = False
 
 
-def compile_sky_kernels(controller, rate_hz: float) -> None:
-    """Step ``controller`` (a throwaway :class:`~foveatrack.sky.controller.SkyController`: its state is
-    spent) through synthetic frames past its warm-up; a second call in the process does nothing."""
+def compile_sky_kernels(make_controller, rate_hz: float) -> None:
+    """Step a throwaway :class:`~foveatrack.sky.controller.SkyController` (``make_controller()``: built
+    only when the kernels are not ready yet -- its background map is 32 MB, and every run of a study
+    asks) through synthetic frames past its warm-up; a second call in the process does nothing."""
     global _done
     if _done:
         return
+    controller = make_controller()
     from foveatrack.frame_step import FrameStep, NoHead
     from foveatrack.frames import Frame
     from foveatrack.gate import CommandGate
