@@ -27,15 +27,21 @@ from numba import njit
 from foveatrack.reconstruction import rotation_rows
 
 
-def node_rotations(pose, t0_s: float, t1_s: float, nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """Node times (K,) [s] and rotations (K, 3, 3) of the head between ``t0_s`` and ``t1_s``."""
+def node_rotations(pose, t0_s: float, t1_s: float, nodes: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Node times (K,) [s], rotations (K, 3, 3) of the head between ``t0_s`` and ``t1_s``, and the
+    nodes' spacing [s].  A frame of no length (or reversed) has one pose, at ``t0_s``, given as two
+    equal nodes 1 s apart: every point takes it (there is no spacing to divide by)."""
     k = max(int(nodes), 2)
+    step = (t1_s - t0_s) / (k - 1)
+    if not step > 0.0:
+        p, tl, _, _ = pose.angles_at(t0_s)
+        return np.array([t0_s, t0_s + 1.0]), np.array([rotation_rows(p, tl)] * 2, np.float64), 1.0
     ts = [t0_s + (t1_s - t0_s) * i / (k - 1) for i in range(k)]
     R = np.empty((k, 3, 3))
     for i, t in enumerate(ts):
         p, tl, _, _ = pose.angles_at(t)
         R[i] = rotation_rows(p, tl)
-    return np.array(ts), R
+    return np.array(ts), R, step
 
 
 @njit(cache=True)
@@ -65,12 +71,9 @@ def lidar_to_world_per_point(xyz: np.ndarray, t_ns: np.ndarray, pose, t0_s: floa
     n = xyz.shape[0]
     if n == 0:
         return np.empty((0, 3))
-    ts, R = node_rotations(pose, t0_s, t1_s, nodes)
+    _, R, step = node_rotations(pose, t0_s, t1_s, nodes)
     off = np.ascontiguousarray(np.asarray(pose.lidar_offset_m, np.float64).reshape(3))
     out = np.empty((n, 3))
-    step = (t1_s - t0_s) / (ts.size - 1)
-    if not step > 0.0:      # a frame of no length (or reversed): every point at the one pose of t0
-        R, step = R[:1].repeat(2, axis=0), 1.0
     world_points_kernel(xyz, np.ascontiguousarray(t_ns, np.int64), R, float(t0_s), step, off, out)
     return out
 
@@ -82,13 +85,10 @@ def lidar_to_world_per_point_numpy(xyz: np.ndarray, t_ns: np.ndarray, pose, t0_s
     n = xyz.shape[0]
     if n == 0:
         return np.empty((0, 3))
-    ts, R = node_rotations(pose, t0_s, t1_s, nodes)
+    ts, R, step = node_rotations(pose, t0_s, t1_s, nodes)
     off = np.asarray(pose.lidar_offset_m, np.float64).reshape(3).tolist()
     qx, qy, qz = xyz[:, 0] + off[0], xyz[:, 1] + off[1], xyz[:, 2] + off[2]
     t = np.asarray(t_ns, np.int64) * 1e-9
-    step = (t1_s - t0_s) / (ts.size - 1)
-    if not step > 0.0:
-        R, ts, step = R[:1].repeat(2, axis=0), ts[:2], 1.0
     u = np.clip((t - t0_s) / step, 0.0, ts.size - 1.0)
     i = np.minimum(np.floor(u).astype(np.int64), ts.size - 2)
     w = u - i
