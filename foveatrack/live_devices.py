@@ -139,19 +139,11 @@ class CommandJournal:
 
 
 def journal_in_use(path) -> bool:
-    """Whether a running driver holds the journal at ``path`` (its :class:`CommandJournal` lock)."""
-    import fcntl
+    """Whether a running driver holds the journal at ``path`` (its :class:`CommandJournal` lock): the
+    probe a recording's lock is asked with (:func:`foveatrack.file_lock.recording_in_use`)."""
+    from foveatrack.file_lock import recording_in_use
 
-    try:
-        with open(path, "rb") as f:
-            try:
-                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                return True
-            fcntl.flock(f, fcntl.LOCK_UN)
-    except FileNotFoundError:
-        return False
-    return False
+    return recording_in_use(path)
 
 
 @dataclass(frozen=True)

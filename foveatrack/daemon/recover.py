@@ -134,12 +134,12 @@ def recover(path, journal=None, progress=None) -> Recovery:
     file that is not a recording or a journal a running driver holds."""
     from foveatrack.live_devices import journal_in_use, journal_path, read_journal
     from foveatrack.recording import RecordingReader, RecordingWriter
-    from foveatrack.recording.file_lock import recording_in_use
+    from foveatrack.file_lock import recording_in_use
     from foveatrack.recording.records import CommandRecord, ns
 
     path = Path(path)
     if recording_in_use(path):
-        # its writer's lock (foveatrack.recording.file_lock): rewriting it now would lose what comes next
+        # its writer's lock (foveatrack.file_lock): rewriting it now would lose what comes next
         raise UserError(f"{path} is still being written by a running process; stop it first (a stopped writer "
                         "completes its file itself), nothing was changed")
     jpath = journal_path(path) if journal is None else Path(journal)

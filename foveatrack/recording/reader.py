@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from foveatrack.errors import UserError
-from foveatrack.recording.file_lock import recording_in_use
+from foveatrack.file_lock import recording_in_use
 from foveatrack.recording import mcap_walk as mw
 from foveatrack.recording.format import (CHANNELS_META_NAME, DETECTIONS, FORMAT, IMU, MCAP_MAGIC, META_CRC_KEY,
                                          META_NAME, POINTS, READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message,
@@ -222,7 +222,7 @@ class RecordingReader:
         if problem is None:
             return None
         if self.complete is not True and self.in_use:
-            # a writer holds it (foveatrack.recording.writer.recording_in_use): its end is the writer's
+            # a writer holds it (foveatrack.file_lock.recording_in_use): its end is the writer's
             # next bytes, not damage
             return (f"note: {self.path} is still being written by a running process: read what it held up to "
                     f"byte {self.size} (its end is the writer's next data, not damage)")

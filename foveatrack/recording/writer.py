@@ -16,7 +16,7 @@ from foveatrack.mm_grid import quantise_to_mm_grid
 from foveatrack.recording.format import (CHANNELS_META_NAME, COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD, IMU,
                                          MAX_GRID_MM, META_CRC_KEY, META_NAME, METRICS, POINTS, TRUTH, _to_jsonable,
                                          imu_columns, meta_crc32)
-from foveatrack.recording.file_lock import hold as _hold
+from foveatrack.file_lock import hold as _hold
 from foveatrack.recording.foxglove_view import FoxgloveChannels
 from foveatrack.recording.pack_kernels import pack_points
 from foveatrack.recording.writeback import WritebackPacer

@@ -134,10 +134,10 @@ def test_a_journal_held_by_a_running_daemon_is_not_touched(tmp_path):
 def test_a_recording_still_being_written_is_not_touched_and_is_read_as_such(tmp_path):
     # A user ran 'recover' on a simulator's recording while it was still writing: it was rewritten
     # from the 45 frames then on disk and the writer's next 55 were lost.  The writer holds its
-    # file's lock (foveatrack.recording.file_lock): recover refuses and changes nothing; replay and
+    # file's lock (foveatrack.file_lock): recover refuses and changes nothing; replay and
     # export read what it holds and say it is being written, not damaged; once closed, all is normal.
     from foveatrack.errors import UserError
-    from foveatrack.recording.file_lock import recording_in_use
+    from foveatrack.file_lock import recording_in_use
 
     live = tmp_path / "live.mcap"
     w = RecordingWriter(live, {"source": "daemon", "config_text": "x"}, log_time="host")

@@ -3,7 +3,9 @@
 can tell a file still being written from one cut short: ``recover`` refuses it, ``replay`` and
 ``export`` read what it holds so far and say so instead of calling its end damage.  The kernel
 drops the lock when the writer's process dies (a killed driver's file is then recoverable), as it
-does a command journal's (:class:`foveatrack.live_devices.CommandJournal`)."""
+does a command journal's (:class:`foveatrack.live_devices.CommandJournal`), whose lock is asked with
+the same probe (:func:`recording_in_use`).  A core module: the recording layer and the live devices'
+layer both use it."""
 
 from __future__ import annotations
 
@@ -28,7 +30,8 @@ def hold(path) -> int | None:
 
 
 def recording_in_use(path) -> bool:
-    """Whether a running writer holds the recording at ``path`` (:func:`hold`)."""
+    """Whether a running writer holds the file at ``path`` under its exclusive ``flock`` (a recording's,
+    :func:`hold`; a command journal's too, :func:`foveatrack.live_devices.journal_in_use`)."""
     try:
         import fcntl
 
