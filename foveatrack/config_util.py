@@ -11,6 +11,20 @@ from collections.abc import Mapping, Sequence
 from foveatrack.errors import UserError
 
 
+def positive_arg(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    import argparse
+    import math
+
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number")
+    return v
+
+
 def seed_arg(text: str) -> int:
     """argparse ``type=`` for seeds and unit seeds: an integer >= 0 (numpy's SeedSequence rejects
     negative ones with a traceback deep inside the run)."""
@@ -42,8 +56,9 @@ def check_output_file(path, flag: str) -> None:
 
 
 def check_outputs(outputs, inputs=(), overwrite: bool = False) -> None:
-    """A command's output files ``outputs`` ((flag, path) pairs; a None path is not asked for), each
-    checked by :func:`check_output_file`, and never a file it reads (``inputs``: files, or directories
+    """A command's output files ``outputs`` ((flag, path) pairs, or (flag, path, suffixes): the name must
+    end in one of them; a None path is not asked for), each checked by :func:`check_output_file`, and
+    never a file it reads (``inputs``: files, or directories
     whose files it reads), never one another's, and -- unless ``overwrite`` -- never a file that exists:
     what a user already has is not replaced unasked (a track's --csv named one of its own scans
     replaced that scan; two exports to one name kept the second)."""
@@ -61,9 +76,11 @@ def check_outputs(outputs, inputs=(), overwrite: bool = False) -> None:
         if p.is_dir():
             read.update(key(c) for c in p.iterdir())
     seen: dict = {}
-    for flag, path in outputs:
+    for flag, path, *suffixes in outputs:
         if not path:
             continue
+        if suffixes and Path(path).suffix.lower() not in suffixes[0]:
+            raise UserError(f"{flag} {path}: the file name must end in {' or '.join(suffixes[0])}")
         check_output_file(path, flag)
         k = key(path)
         if k in read:

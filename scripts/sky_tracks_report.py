@@ -27,6 +27,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from foveatrack.config_util import check_output_file, positive_arg
 from foveatrack.errors import UserError
 from foveatrack.sky.controller import sky_configs_from_mapping
 from sim.loop import ClosedLoop
@@ -66,8 +67,7 @@ def summary_row(name, rows) -> str:
     # drone by drone: a count of each can agree while the drones differ (a track of objects that
     # held other returns too can be confirmed before the drone's own rays allow it)
     both = within_bound([r for r in drones if within_bound([r], "scan_allows_confirm_s")])
-    gaps = [math.nan if r.get("longest_revisit_gap_s", math.nan) is None else r.get("longest_revisit_gap_s", math.nan)
-            for r in drones]
+    gaps = [r.get("longest_revisit_gap_s") for r in drones]      # _median_max leaves out the unmeasured
     # per run: every drone's longest gap within the revisit time (a drone no track followed is not),
     # and whether the head's speed allowed it
     run_gap = [run_longest_gap(m) for _, m, *_ in rows]
@@ -117,17 +117,6 @@ def _at_least_one(text: str) -> int:
     return n
 
 
-def _positive_seconds(text: str) -> float:
-    """--duration: a finite number of seconds > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"must be > 0 s, got {text}")
-    return v
-
-
 def _set_item(text: str) -> tuple[tuple[str, ...], bool | int | float]:
     """--set KEY=VALUE: the key's path (classifier.min_hits=6: a key of a sub-table) and the value, true
     or false, an integer or a finite number (the [tracker.sky] keys are all numbers or booleans)."""
@@ -160,7 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="runs of each scene, each seed its own world (default 8, at least 1)")
     ap.add_argument("--first-seed", type=int, default=0,
                     help="seeds from the scene's own plus this (default 0): tune on others than you report")
-    ap.add_argument("--duration", type=_positive_seconds, default=None, help="override the scenes' duration [s]")
+    ap.add_argument("--duration", type=positive_arg, default=None, help="override the scenes' duration [s]")
     ap.add_argument("--markdown", default=None, metavar="PATH",
                     help="also write what is printed to this file, a Markdown page (its directory must exist)")
     ap.add_argument("--summary-only", action="store_true",
@@ -208,11 +197,7 @@ def scene_and_table(path: str, a: argparse.Namespace):
 
 def check_markdown(path: str) -> None:
     """--markdown PATH is written after every run: that it can be is checked before the first."""
-    where = os.path.dirname(os.path.abspath(path))
-    if os.path.isdir(path):
-        raise UserError(f"--markdown {path}: is a directory; name the file to write")
-    if not os.path.isdir(where):
-        raise UserError(f"--markdown {path}: no directory {where} to write it in")
+    check_output_file(path, "--markdown")        # a directory, a missing or unwritable directory
     existed = os.path.exists(path)
     try:            # opened as it will be (a permission, a read-only or special file system), left as it was
         with open(path, "a"):

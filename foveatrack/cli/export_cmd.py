@@ -68,10 +68,7 @@ def cmd_export(args) -> int:
         from foveatrack.livox.lvx import LvxReader
 
         LvxReader(rec).close()
-    for flag, path, suffixes in outs:
-        if path and Path(path).suffix.lower() not in suffixes:
-            raise UserError(f"{flag} {path}: the file name must end in {' or '.join(suffixes)}")
-    check_outputs([(flag, path) for flag, path, _ in outs], inputs=[rec], overwrite=args.overwrite)
+    check_outputs(outs, inputs=[rec], overwrite=args.overwrite)
     if args.max_frames is not None and args.max_frames < 1:
         raise UserError(f"--max-frames {args.max_frames}: give a whole number of frames >= 1")
     cap = args.max_frames

@@ -8,14 +8,13 @@ table (or top level) describes custom optics: ``point_rate_hz``, ``channel_offse
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
 import time
 from pathlib import Path
 
-from foveatrack.config_util import seed_arg
+from foveatrack.config_util import positive_arg, seed_arg
 from foveatrack.errors import UserError
 
 
@@ -29,7 +28,7 @@ def register(sub) -> None:
         p.add_argument("--model", choices=("exact", "paraxial"), default="exact",
                        help="exact refraction (default) or the paraxial vector sum")
         if duration is not None:
-            p.add_argument("--duration", type=_positive, default=duration, metavar="S",
+            p.add_argument("--duration", type=positive_arg, default=duration, metavar="S",
                            help=f"accumulation time in seconds (default {duration:g})")
             p.add_argument("--noise", type=float, default=None, metavar="FRAC",
                            help="motor speed noise, 1-sigma relative (paper: 0.01); default none")
@@ -69,7 +68,7 @@ def register(sub) -> None:
     p.add_argument("--rpm2", default="-12000:-1000", metavar="LO:HI",
                    help="prism 2 speed range [rpm]; negative ranges need '=': --rpm2=-12000:-1000")
     p.add_argument("--grid", type=int, default=30, metavar="N", help="N x N speeds (default 30)")
-    p.add_argument("--cap", type=_positive, default=5.0, metavar="S", help="time cap in seconds (paper: 5)")
+    p.add_argument("--cap", type=positive_arg, default=5.0, metavar="S", help="time cap in seconds (paper: 5)")
     p.add_argument("--seed", type=seed_arg, default=0, help="seed of the motor speed noise (default 0)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (tcp://host:port)")
@@ -81,16 +80,6 @@ def register(sub) -> None:
     from foveatrack.cli.lidar_serve import add_serve_parser  # the virtual lidar (issue 6)
 
     add_serve_parser(lsub)
-
-
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number")
-    return v
 
 
 def _load(args):

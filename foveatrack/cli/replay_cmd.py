@@ -55,12 +55,10 @@ def cmd_replay(args) -> int:
     _check_recording_arg(args.recording)
     if args.tracker_config:
         _check_tracker_config(args.tracker_config)
-    exports = (("--export-points", args.export_points), ("--export-trajectory", args.export_trajectory))
-    for flag, path in exports:
-        if path and Path(path).suffix.lower() not in (".csv", ".npz"):
-            raise UserError(f"{flag} {path}: the file name must end in .csv or .npz")
     # before the replay, which takes a while on a long recording
-    check_outputs(exports, inputs=[args.recording], overwrite=args.overwrite)
+    check_outputs([("--export-points", args.export_points, (".csv", ".npz")),
+                   ("--export-trajectory", args.export_trajectory, (".csv", ".npz"))],
+                  inputs=[args.recording], overwrite=args.overwrite)
     if args.live is not None and not args.recording.lower().endswith(".lvx"):
         from foveatrack.recording.live import check_port, stream_recording
 

@@ -38,20 +38,15 @@ def register(sub) -> None:
 def cmd_track(args) -> int:
     import json
 
-    from pathlib import Path
-
     from foveatrack.config_util import check_outputs, read_toml
     from foveatrack.errors import UserError
     from foveatrack.openloop import OpenLoopConfig, track_source
     from foveatrack.openloop.reference import load_reference
     from foveatrack.sources import open_source
 
-    if args.csv and Path(args.csv).suffix.lower() != ".csv":
-        raise UserError(f"--csv {args.csv}: the file name must end in .csv")
-    if args.record and Path(args.record).suffix.lower() != ".mcap":
-        raise UserError(f"--record {args.record}: the file name must end in .mcap")
     # never one of the scans it reads (a --csv named after a scan replaced it), nor a file that exists
-    check_outputs([("--csv", args.csv), ("--record", args.record)], inputs=[args.source], overwrite=args.overwrite)
+    check_outputs([("--csv", args.csv, (".csv",)), ("--record", args.record, (".mcap",))], inputs=[args.source],
+                  overwrite=args.overwrite)
     cfg = OpenLoopConfig()
     if args.config:
         data, _ = read_toml(args.config, "open-loop config (--config)")
