@@ -21,8 +21,7 @@ from collections import Counter, defaultdict
 import numpy as np
 
 from foveatrack.fixed_order import norm3
-from foveatrack.reconstruction import rotation_matrix
-from foveatrack.sky.attention import bearing_off_axis_deg
+from foveatrack.sky.attention import true_off_axis_deg
 from foveatrack.sky.metrics import drone_metrics, gospa
 from sim.sky_bounds import head_allows_revisit_s, head_limits, scan_allows_confirm_s
 
@@ -71,13 +70,13 @@ def drone_truth(loop, log, truth) -> dict:
             if d in fr:
                 xyz[k] = fr[d][1]
                 rays[k] = fr[d][2]
-                rows = rotation_matrix(log["head_pan_deg"][k], log["head_tilt_deg"][k]).tolist()
-                off = bearing_off_axis_deg(xyz[k], rows, np.zeros(3))
-                fov[k] = off <= fovea_half_deg
-                # in the lidar's field and inside the scene's space of interest (a drone that has
-                # flown out of D is no longer the tracker's to revisit)
-                field[k] = (field_half_deg is None or off <= field_half_deg) and (
-                    region is None or bool(region.contains(xyz[k][None, :])[0]))
+        off = true_off_axis_deg(xyz, log["head_pan_deg"], log["head_tilt_deg"])
+        for k in np.flatnonzero(np.isfinite(off)):
+            fov[k] = off[k] <= fovea_half_deg
+            # in the lidar's field and inside the scene's space of interest (a drone that has
+            # flown out of D is no longer the tracker's to revisit)
+            field[k] = (field_half_deg is None or off[k] <= field_half_deg) and (
+                region is None or bool(region.contains(xyz[k][None, :])[0]))
         drones[d] = {"xyz_m": xyz, "visible": rays > 0, "rays": rays, "in_fovea": fov, "in_field": field}
     return drones
 

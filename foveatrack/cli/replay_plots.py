@@ -104,8 +104,7 @@ def sky_plot_data(res, t: np.ndarray) -> dict:
     truth: the tracks alone."""
     from foveatrack.recording import RecordingReader
     from foveatrack.recording.records import ObjectTruthRecord
-    from foveatrack.reconstruction import rotation_matrix
-    from foveatrack.sky.attention import bearing_off_axis_deg
+    from foveatrack.sky.attention import true_off_axis_deg
 
     T = len(t)
     tracks: dict[int, list] = {}
@@ -129,7 +128,6 @@ def sky_plot_data(res, t: np.ndarray) -> dict:
         pan, tilt = res.truth["pan_deg"], res.truth["tilt_deg"]
         for i, (c, xyz) in truth.items():
             if c == "drone":
-                in_fovea[i] = np.array([bool(np.all(np.isfinite(xyz[k]))) and bearing_off_axis_deg(
-                    xyz[k], rotation_matrix(pan[k], tilt[k]).tolist(), np.zeros(3)) <= half for k in range(T)])
+                in_fovea[i] = true_off_axis_deg(xyz, pan, tilt) <= half     # NaN (absent): False
     return {"t_s": t, "truth": truth, "tracks": {i: (lab, xyz) for i, (lab, xyz) in tracks.items()},
             "in_fovea": in_fovea}

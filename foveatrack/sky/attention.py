@@ -68,7 +68,9 @@ import numpy as np
 
 from foveatrack.config_util import as_float, as_vec, check_keys
 from foveatrack.errors import UserError
+from foveatrack.reconstruction import rotation_matrix
 
+_NO_OFFSET = np.zeros(3)
 CLASS_WEIGHT = {"drone": 1.0, "unknown": 0.5, "bird": 0.05, "clutter": 0.0}
 
 
@@ -259,3 +261,17 @@ def bearing_off_axis_deg(p_world, rows, offset) -> float:
     qy = r01 * x + r11 * y + r21 * z - oy
     qz = r02 * x + r12 * y + r22 * z - oz
     return math.degrees(math.atan2(math.hypot(qy, qz), qx))
+
+
+def true_off_axis_deg(xyz_m, pan_deg, tilt_deg) -> np.ndarray:
+    """Per frame, the angle [deg] between world points ``xyz_m`` (T, 3) and the lidar's true axis at
+    the head's true pose ``pan_deg``, ``tilt_deg`` (T,), the lidar's offset from the head's centre
+    left out; NaN where a point is absent (NaN).  What the simulator's and a replay's truth call "in
+    the fovea" and "in the field"."""
+    xyz = np.asarray(xyz_m, np.float64).reshape(-1, 3)
+    out = np.full(len(xyz), np.nan)
+    for k in range(len(xyz)):
+        if np.all(np.isfinite(xyz[k])):
+            out[k] = bearing_off_axis_deg(xyz[k], rotation_matrix(pan_deg[k], tilt_deg[k]).tolist(), _NO_OFFSET)
+    return out
+

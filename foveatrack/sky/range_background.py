@@ -238,6 +238,13 @@ def learn_numpy(cells, r, frame_no, frames, first_frame, last_frame, r_min, r_ma
 
 # ------------------------------------------------------------------------------------------ the model
 
+def face_side_cells(cell_deg: float) -> int:
+    """Cells along a cube face's side for a cell of ``cell_deg`` at the face's centre: the face spans
+    ``[-1, 1]`` in the two coordinates divided by the largest, cut every ``tan(cell_deg)``; the map
+    holds ``6 n^2`` cells (module docstring)."""
+    return int(math.ceil(2.0 / math.tan(math.radians(cell_deg))))
+
+
 class RangeBackground:
     """Per-direction range intervals (module docstring); :meth:`cells`, :meth:`is_background`,
     :meth:`learn` (once a frame), :meth:`mark_box`.
@@ -254,7 +261,7 @@ class RangeBackground:
                  margin_min_m: float = 0.5, spread_gain: float = 0.5, margin_max_m: float = 1.5, near_frames: int = 20,
                  warmup_frames: int = 0):
         self.du = math.tan(math.radians(cell_deg))
-        self.n = int(math.ceil(2.0 / self.du))
+        self.n = face_side_cells(cell_deg)
         size = 6 * self.n * self.n
         self.min_frames = int(min_frames)
         self.persist_frames = int(persist_frames)

@@ -84,7 +84,7 @@ from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
 from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, predicted_many
-from foveatrack.sky.range_background import RangeBackground
+from foveatrack.sky.range_background import RangeBackground, face_side_cells
 from foveatrack.sky.world_points import lidar_to_world_per_point
 from foveatrack.space_of_interest import Box
 
@@ -181,10 +181,10 @@ class SkyTrackerConfig:
             if not getattr(self, k) > 0:
                 raise UserError(f"{k} must be > 0, got {getattr(self, k)!r}")
         if not CELL_DEG_RANGE[0] <= self.cell_deg <= CELL_DEG_RANGE[1]:
-            # the direction map holds 6 n^2 cells, n = 2 / tan(cell_deg), ~37 bytes each: 0.3 deg is
+            # the direction map holds 6 n^2 cells (face_side_cells), ~37 bytes each: 0.3 deg is
             # 0.9 M cells (32 MB), 0.1 deg 7.9 M (290 MB), 0.01 deg 29 GB; a cell of several degrees is
             # metres across at the scenes' ranges and would take a drone for the tree behind it
-            n = math.ceil(2.0 / math.tan(math.radians(min(self.cell_deg, 89.0)))) if self.cell_deg > 0 else math.inf
+            n = face_side_cells(min(self.cell_deg, 89.0)) if self.cell_deg > 0 else math.inf
             raise UserError(f"cell_deg must be in [{CELL_DEG_RANGE[0]}, {CELL_DEG_RANGE[1]}] deg, got "
                             f"{self.cell_deg!r} (its direction map would hold {6 * n * n:.3g} cells)")
         if self.field_half_angle_deg is not None and not 0 < self.field_half_angle_deg <= 180:

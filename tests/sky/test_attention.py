@@ -5,7 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from foveatrack.sky.attention import Attention, AttentionConfig, axis_turn_s, saccade_time_s, threat_score
+from foveatrack.sky.attention import (Attention, AttentionConfig, axis_turn_s, saccade_time_s, threat_score,
+                                      true_off_axis_deg)
 from foveatrack.sky.tracks import TrackView
 
 
@@ -203,3 +204,21 @@ def test_the_saccade_gain_is_algorithm_2_s_unless_set_and_a_bad_one_is_named():
     for bad in (0, -1.0, "fast"):
         with pytest.raises(UserError, match="saccade_gain_1_s"):
             AttentionConfig.from_mapping({"saccade_gain_1_s": bad}, "[tracker.sky.attention]")
+
+
+def test_true_off_axis_deg_per_frame():
+    """The truth's "in the fovea" angle: 0 on the axis the head's pose points, the pan and tilt
+    offsets where one axis alone is off, the angle between the directions where both are, NaN where
+    the object is absent."""
+    xyz = np.array([[30.0, 0.0, 0.0],                                  # on the axis at pan 0, tilt 0
+                    [20.0 * np.cos(np.radians(10)), 20.0 * np.sin(np.radians(10)), 0.0],   # 10 deg left
+                    [np.nan, np.nan, np.nan],                          # absent
+                    [10.0, 0.0, 10.0]])                                # 45 deg up
+    pan = np.array([0.0, 0.0, 0.0, 30.0])
+    tilt = np.array([0.0, 0.0, 0.0, 45.0])
+    off = true_off_axis_deg(xyz, pan, tilt)
+    assert off[0] == pytest.approx(0.0, abs=1e-12)
+    assert off[1] == pytest.approx(10.0, abs=1e-9)
+    assert np.isnan(off[2])
+    # axis (cos45 cos30, cos45 sin30, sin45) against (1, 0, 1)/sqrt2: cos = (cos30 + 1) / 2
+    assert off[3] == pytest.approx(np.degrees(np.arccos((np.cos(np.radians(30)) + 1) / 2)), abs=1e-9)
