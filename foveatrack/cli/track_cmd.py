@@ -50,6 +50,7 @@ def cmd_track(args) -> int:
     cfg = OpenLoopConfig()
     if args.config:
         data, _ = read_toml(args.config, "open-loop config (--config)")
+        _refuse_other_tables(args.config, data)
         table = data.get("openloop", data)
         cfg = OpenLoopConfig.from_mapping(table, f"{args.config} [openloop]")
     if args.box:
@@ -127,3 +128,28 @@ def format_summary(res) -> str:
         else:
             lines.append(f"  no tracked frame has a reference sample ({ref['frames_with_reference']} frames have one)")
     return "\n".join(lines)
+
+
+def _refuse_other_tables(path: str, data: dict) -> None:
+    """``--config`` holds the open-loop tracker's keys, in an ``[openloop]`` table or bare; a file with
+    other tables (a scene, a daemon config, a ``[tracker.sky]`` table) would have them ignored, or be
+    told of an ``[openloop]`` table it does not have."""
+    from dataclasses import fields
+
+    from foveatrack.errors import UserError
+    from foveatrack.openloop import OpenLoopConfig
+
+    known = {f.name for f in fields(OpenLoopConfig)}
+    def is_table(v) -> bool:
+        return isinstance(v, dict) or (isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v))
+
+    others = sorted(k for k, v in data.items() if k != "openloop" and is_table(v)
+                    and ("openloop" in data or k not in known))
+    if not others:
+        return
+    sky = isinstance(data.get("tracker"), dict) and "sky" in data["tracker"]
+    why = (": the multi-object tracker ([tracker.sky]) runs in simulate, replay and the daemon; `track` "
+           "follows one drone with the open-loop tracker" if sky else "")
+    raise UserError(f"{path}: `track --config` reads an [openloop] table (docs/real-recordings.md), and "
+                    f"this file has {', '.join(f'[{k}]' for k in others)}{why}")
+

@@ -127,6 +127,21 @@ def test_a_bad_box_and_a_bad_config(tmp_path, capsys):
     _fails([FIXTURE, "--config", cfg], capsys, "c.toml", "confirm_hitz")
 
 
+def test_a_config_with_tables_track_does_not_read(tmp_path, capsys):
+    # before: [tracker.sky] beside [openloop] was ignored without a word, and alone it was refused as
+    # "[openloop]: unknown key(s) 'tracker'" in a file with no [openloop] table
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[openloop]\nmin_points = 3\n[tracker.sky]\nmin_points = 2\n")
+    _fails([FIXTURE, "--config", cfg], capsys, "c.toml", "[tracker]: the multi-object tracker")
+    cfg.write_text("[tracker.sky]\nmin_points = 2\n")
+    _fails([FIXTURE, "--config", cfg], capsys, "c.toml", "reads an [openloop] table")
+    cfg.write_text("[scene]\nname = 'x'\n[[target]]\nid = 'a'\n")
+    _fails([FIXTURE, "--config", cfg], capsys, "c.toml", "[scene], [target]")
+    # the open-loop keys bare, with their own [space] table, are still read (this one's box is bad)
+    cfg.write_text("min_points = 3\n[space]\nkind = 'box'\n")
+    _fails([FIXTURE, "--config", cfg], capsys, "c.toml", "space: box needs min_xyz")
+
+
 @pytest.mark.parametrize("encoding", ["ascii", "binary"])
 def test_a_pcd_cut_short_gives_its_whole_points_and_says_so(tmp_path, encoding):
     # A scan whose writer was killed: read silently (ascii, its last number cut in half) or refused
