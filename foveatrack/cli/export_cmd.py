@@ -4,7 +4,10 @@
 Viewer, the vendor SDK's tools and ``livox-lvx`` read; ``--csv`` / ``--npz`` write every point
 (:func:`foveatrack.recording.export_points`); ``--trajectory F.csv|F.npz`` the recorded detections,
 head, truth and commands (:func:`foveatrack.recording.export_trajectory`); ``--imu F.csv|F.npz`` the IMU
-samples fed to the tracker (:func:`foveatrack.recording.export_imu`).  Several at once are fine.
+samples fed to the tracker (:func:`foveatrack.recording.export_imu`); ``--tracks F.csv|F.npz`` every track
+of the multi-object tracker per frame, and ``--truth-objects F.csv|F.npz`` the simulator's truth of every
+object, per frame (:func:`foveatrack.recording.export_tracks`, :func:`~foveatrack.recording.
+export_truth_objects`: what a multi-object evaluation takes).  Several at once are fine.
 
 A damaged recording is exported from everything the reader recovered, and ``export`` prints on stderr
 the warning ``replay`` prints: the bytes skipped and the frames and records lost with them.
@@ -21,6 +24,10 @@ def register(sub) -> None:
     p.add_argument("--npz", metavar="OUT.npz", help="every point as NPZ")
     p.add_argument("--trajectory", metavar="F.csv|F.npz", help="detections, head, truth and commands over time")
     p.add_argument("--imu", metavar="F.csv|F.npz", help="the IMU samples fed to the tracker (gyro, accel)")
+    p.add_argument("--tracks", metavar="F.csv|F.npz",
+                   help="every track of the multi-object tracker ([tracker.sky]), a row per track and frame")
+    p.add_argument("--truth-objects", metavar="F.csv|F.npz",
+                   help="the simulator's truth of every object of a multi-object scene, a row per object and frame")
     p.add_argument("--data-type", type=int, metavar="N",
                    help="LVX point data type: 0 Cartesian, 1 spherical, 2/3 extended, 4/5 dual, 7/8 triple "
                         "(default: what the device sends, Mid-40 0, others 2)")
@@ -51,9 +58,10 @@ def cmd_export(args) -> int:
             print(line, file=sys.stderr, flush=True)
 
     outs = [("--lvx", args.lvx, (".lvx",)), ("--csv", args.csv, (".csv",)), ("--npz", args.npz, (".npz",)),
-            ("--trajectory", args.trajectory, (".csv", ".npz")), ("--imu", args.imu, (".csv", ".npz"))]
+            ("--trajectory", args.trajectory, (".csv", ".npz")), ("--imu", args.imu, (".csv", ".npz")),
+            ("--tracks", args.tracks, (".csv", ".npz")), ("--truth-objects", args.truth_objects, (".csv", ".npz"))]
     if not any(path for _, path, _ in outs):
-        raise UserError("export: give at least one of --lvx, --csv, --npz, --trajectory, --imu")
+        raise UserError("export: give at least one of " + ", ".join(flag for flag, _, _ in outs))
     rec = Path(args.recording)
     if rec.is_dir():
         raise UserError(f"{rec} is a directory; give the recording inside it (e.g. {rec / 'run.mcap'})")
@@ -75,11 +83,14 @@ def cmd_export(args) -> int:
     if args.data_type is not None or args.device:
         if not args.lvx:
             raise UserError("--data-type and --device are for --lvx")
-    from foveatrack.recording import export_imu, export_points, export_trajectory
+    from foveatrack.recording import export_imu, export_points, export_tracks, export_trajectory, export_truth_objects
 
     # the IMU samples first: a recording without them is an error, and it must come before any other
     # output is written (it came last, after the points had been written)
     n_imu = export_imu(rec, args.imu, warn=warn, max_frames=cap) if args.imu else None
+    # ... and so do the tracks and the objects' truth, which a single-target run has none of
+    n_tracks = export_tracks(rec, args.tracks, warn=warn, max_frames=cap) if args.tracks else None
+    n_truth = export_truth_objects(rec, args.truth_objects, warn=warn, max_frames=cap) if args.truth_objects else None
     if args.lvx:
         from foveatrack.livox.lvx_export import export_lvx
 
@@ -105,4 +116,8 @@ def cmd_export(args) -> int:
         print(f"{export_trajectory(rec, args.trajectory, warn=warn, max_frames=cap)} records -> {args.trajectory}")
     if n_imu is not None:
         print(f"{n_imu} IMU samples -> {args.imu}")
+    if n_tracks is not None:
+        print(f"{n_tracks} track rows -> {args.tracks}")
+    if n_truth is not None:
+        print(f"{n_truth} object truth rows -> {args.truth_objects}")
     return 0

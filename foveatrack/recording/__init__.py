@@ -55,7 +55,8 @@ Not thread-safe: one writer per thread (a daemon writes from one thread or behin
 file from a child process (``simulate --out`` where a core is free).
 """
 
-from foveatrack.recording.export import export_imu, export_points, export_trajectory
+from foveatrack.recording.export import (export_imu, export_points, export_tracks, export_trajectory,
+                                         export_truth_objects)
 from foveatrack.recording.format import (COMMANDS, DETECTIONS, FORMAT, FORMAT_VERSION, HEAD, IMU, META_NAME, METRICS,
                                          POINTS, STANDARD_CHANNELS, TRUTH, ImuSamples, Message, PointsFrame,
                                          packed_point_dtype)
@@ -64,4 +65,5 @@ from foveatrack.recording.writer import RecordingExistsError, RecordingWriter
 
 __all__ = ["COMMANDS", "DETECTIONS", "FORMAT", "FORMAT_VERSION", "HEAD", "IMU", "META_NAME", "METRICS", "POINTS",
            "STANDARD_CHANNELS", "TRUTH", "Damage", "ImuSamples", "Message", "PointsFrame", "RecordingExistsError",
-           "RecordingReader", "RecordingWriter", "export_imu", "export_points", "export_trajectory", "packed_point_dtype"]
+           "RecordingReader", "RecordingWriter", "export_imu", "export_points", "export_tracks", "export_trajectory",
+           "export_truth_objects", "packed_point_dtype"]

@@ -12,7 +12,7 @@ import numpy as np
 
 from foveatrack.errors import UserError
 from foveatrack.metrics import flatten
-from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, IMU, POINTS, TRUTH
+from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, IMU, POINTS, TRACKS, TRUTH, TRUTH_OBJECTS
 from foveatrack.recording.reader import RecordingReader
 from foveatrack.recording.segments import open_run
 
@@ -180,3 +180,74 @@ def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike, warn: 
         cols.update((f"accel_{a}_g", accel[:, i]) for i, a in enumerate("xyz"))
     write_columns(out_path, cols, nan_as_empty=True)
     return int(cols["t_s"].shape[0])
+
+
+def export_tracks(recording: str | os.PathLike, out_path: str | os.PathLike, warn: Warn | None = None,
+                  max_frames: int | None = None) -> int:
+    """Write every track of the multi-object tracker, frame by frame (the ``tracks`` channel), to CSV
+    or NPZ (by suffix): one row per track and frame, what a multi-object evaluation (CLEAR MOT, GOSPA,
+    HOTA) takes beside :func:`export_truth_objects`.  Columns: ``t_ns`` (the frame's end),
+    ``frame_id``, ``id``, ``confirmed``, ``label`` (after the classifier's wait), ``looks_like`` (this
+    frame), ``x_m, y_m, z_m`` and ``vx_m_s, vy_m_s, vz_m_s`` (world frame), ``hit`` (this frame),
+    ``in_view``, ``score`` (the threat score of a confirmed track; empty otherwise), ``fixated`` (the
+    fovea served it this frame), ``pinned``.  Returns the row count; a recording of the single-target
+    tracker has no tracks and is an error that says so."""
+    from foveatrack.recording.records import TracksRecord
+
+    out_path = Path(out_path)
+    out_kind(out_path)
+    reader = open_run(recording, max_frames, segment_alone=True)
+    frames = [TracksRecord.from_json(r) for r in reader.records(TRACKS)]
+    _warn_damage(reader, warn)
+    if not frames:
+        raise UserError(f"{recording} holds no tracks: a run of the single-target tracker (its detections are "
+                        f"in --trajectory); the multi-object tracker runs with a [tracker.sky] table")
+    rows = [(f, e) for f in frames for e in f.tracks]
+    vec = lambda get, i: np.array([get(e)[i] for _, e in rows], dtype=float)    # noqa: E731
+    cols = {"t_ns": np.array([f.t_ns for f, _ in rows], dtype=np.int64),
+            "frame_id": np.array([f.frame_id for f, _ in rows], dtype=np.int64),
+            "id": np.array([e.id for _, e in rows], dtype=np.int64),
+            "confirmed": np.array([e.confirmed for _, e in rows], dtype=bool),
+            "label": np.array([e.label for _, e in rows]),
+            "looks_like": np.array([e.looks_like for _, e in rows])}
+    cols.update((f"{a}_m", vec(lambda e: e.xyz_m, i)) for i, a in enumerate("xyz"))
+    cols.update((f"v{a}_m_s", vec(lambda e: e.velocity_m_s, i)) for i, a in enumerate("xyz"))
+    cols.update(hit=np.array([e.hit for _, e in rows], dtype=bool),
+                in_view=np.array([e.in_view for _, e in rows], dtype=bool),
+                score=np.array([math.nan if e.score is None else e.score for _, e in rows], dtype=float),
+                fixated=np.array([e.id == f.fixated for f, e in rows], dtype=bool),
+                pinned=np.array([e.id == f.pinned for f, e in rows], dtype=bool))
+    write_columns(out_path, cols, nan_as_empty=True)
+    return len(rows)
+
+
+def export_truth_objects(recording: str | os.PathLike, out_path: str | os.PathLike, warn: Warn | None = None,
+                         max_frames: int | None = None) -> int:
+    """Write the simulator's truth of every object of a multi-object scene, frame by frame (the
+    ``truth_objects`` channel), to CSV or NPZ (by suffix): ``t_ns`` (the frame's end), ``frame_id``,
+    ``id``, ``class`` (drone, bird, tree, clutter: a stray near return), ``x_m, y_m, z_m`` and ``vx_m_s,
+    vy_m_s, vz_m_s`` (world frame, at the frame's mid time), ``size_m``, ``rays_hit`` (the frame's rays
+    on it, before the effects).  Returns the row count; a recording without the channel (a daemon's,
+    a single-target scene's: its one target's truth is in --trajectory) is an error that says so."""
+    from foveatrack.recording.records import ObjectTruthRecord
+
+    out_path = Path(out_path)
+    out_kind(out_path)
+    reader = open_run(recording, max_frames, segment_alone=True)
+    recs = [ObjectTruthRecord.from_json(r) for r in reader.records(TRUTH_OBJECTS)]
+    _warn_damage(reader, warn)
+    if not recs:
+        raise UserError(f"{recording} holds no object truth: only the simulator's runs of multi-object scenes "
+                        f"record it (a single target's truth is in --trajectory; a daemon knows no truth)")
+    cols = {"t_ns": np.array([r.t_ns for r in recs], dtype=np.int64),
+            "frame_id": np.array([r.frame_id for r in recs], dtype=np.int64),
+            "id": np.array([r.id for r in recs]),
+            "class": np.array([r.cls for r in recs])}
+    cols.update((f"{a}_m", np.array([r.true_world_m[i] for r in recs], dtype=float)) for i, a in enumerate("xyz"))
+    cols.update((f"v{a}_m_s", np.array([r.true_velocity_m_s[i] for r in recs], dtype=float))
+                for i, a in enumerate("xyz"))
+    cols.update(size_m=np.array([r.size_m for r in recs], dtype=float),
+                rays_hit=np.array([r.rays_hit for r in recs], dtype=np.int64))
+    write_columns(out_path, cols, nan_as_empty=True)
+    return len(recs)
+

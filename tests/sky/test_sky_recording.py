@@ -167,3 +167,50 @@ def test_replay_plots_the_tracks_as_simulate_does(crossing_run, tmp_path):
     bare = sky_plot_data(daemon, t)
     assert bare["truth"] == {} and bare["in_fovea"] == {} and len(bare["tracks"]) == len(data["tracks"])
     assert plot_sky_tracks(bare, "daemon", tmp_path / "bare.png").stat().st_size > 5_000
+
+
+def test_export_writes_every_track_and_every_objects_truth_as_the_recording_holds_them(crossing_run, tmp_path):
+    """``export --tracks`` / ``--truth-objects``: a row per track (object) and frame, what a
+    multi-object evaluation takes; the CSV and the NPZ hold the recorded values (the NPZ to the bit)."""
+    import csv
+
+    import numpy as np
+
+    from foveatrack.cli import main
+    from foveatrack.recording.records import ObjectTruthRecord
+
+    out = {k: tmp_path / f"{k}.{ext}" for k, ext in (("tc", "csv"), ("tn", "npz"), ("oc", "csv"), ("on", "npz"))}
+    assert main(["export", str(crossing_run), "--tracks", str(out["tc"]), "--truth-objects", str(out["oc"])]) == 0
+    assert main(["export", str(crossing_run), "--tracks", str(out["tn"]), "--truth-objects", str(out["on"])]) == 0
+    r = RecordingReader(crossing_run)
+    want = [(f, e) for f in map(TracksRecord.from_json, r.records("tracks")) for e in f.tracks]
+    z = np.load(out["tn"])
+    assert len(z["id"]) == len(want) > 0
+    assert z["frame_id"].tolist() == [f.frame_id for f, _ in want]
+    assert z["id"].tolist() == [e.id for _, e in want]
+    assert z["label"].tolist() == [e.label for _, e in want]
+    assert np.array_equal(np.column_stack([z["x_m"], z["y_m"], z["z_m"]]), np.array([e.xyz_m for _, e in want]))
+    assert z["fixated"].tolist() == [e.id == f.fixated for f, e in want]
+    assert int(z["fixated"].sum()) > 0 and int(z["confirmed"].sum()) > 0
+    rows = list(csv.DictReader(out["tc"].open()))
+    assert [int(x["id"]) for x in rows] == z["id"].tolist()
+    assert [float(x["y_m"]) for x in rows] == z["y_m"].tolist()       # repr round-trips the float
+    truth = [ObjectTruthRecord.from_json(x) for x in r.records("truth_objects")]
+    o = np.load(out["on"])
+    assert sorted(set(o["id"].tolist())) == ["drone-a", "drone-b"] and len(o["id"]) == len(truth)
+    assert np.array_equal(np.column_stack([o["x_m"], o["y_m"], o["z_m"]]), np.array([t.true_world_m for t in truth]))
+    assert [x["class"] for x in csv.DictReader(out["oc"].open())] == o["class"].tolist()
+
+
+def test_export_of_tracks_from_a_single_target_run_says_it_has_none(tmp_path, capsys):
+    from foveatrack.cli import main
+
+    run = tmp_path / "run"
+    assert main(["simulate", str(SCENES / "fig12-tracking.toml"), "--duration", "0.5", "--out", str(run),
+                 "--no-progress", "--one-thread"]) == 0
+    capsys.readouterr()
+    assert main(["export", str(run / "run.mcap"), "--tracks", str(tmp_path / "t.csv")]) == 2
+    assert "holds no tracks: a run of the single-target tracker" in capsys.readouterr().err
+    assert main(["export", str(run / "run.mcap"), "--truth-objects", str(tmp_path / "o.csv")]) == 2
+    assert "holds no object truth" in capsys.readouterr().err
+    assert not (tmp_path / "t.csv").exists() and not (tmp_path / "o.csv").exists()
