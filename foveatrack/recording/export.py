@@ -194,30 +194,23 @@ def export_tracks(recording: str | os.PathLike, out_path: str | os.PathLike, war
     tracker has no tracks and is an error that says so."""
     from foveatrack.recording.records import TracksRecord
 
-    out_path = Path(out_path)
-    out_kind(out_path)
-    reader = open_run(recording, max_frames, segment_alone=True)
-    frames = [TracksRecord.from_json(r) for r in reader.records(TRACKS)]
-    _warn_damage(reader, warn)
-    if not frames:
-        raise UserError(f"{recording} holds no tracks: a run of the single-target tracker (its detections are "
-                        f"in --trajectory); the multi-object tracker runs with a [tracker.sky] table")
+    frames = _channel_records(recording, out_path, TRACKS, TracksRecord.from_json, warn, max_frames,
+                              "holds no tracks: a run of the single-target tracker (its detections are in "
+                              "--trajectory); the multi-object tracker runs with a [tracker.sky] table")
     rows = [(f, e) for f in frames for e in f.tracks]
-    vec = lambda get, i: np.array([get(e)[i] for _, e in rows], dtype=float)    # noqa: E731
     cols = {"t_ns": np.array([f.t_ns for f, _ in rows], dtype=np.int64),
             "frame_id": np.array([f.frame_id for f, _ in rows], dtype=np.int64),
             "id": np.array([e.id for _, e in rows], dtype=np.int64),
             "confirmed": np.array([e.confirmed for _, e in rows], dtype=bool),
             "label": np.array([e.label for _, e in rows]),
             "looks_like": np.array([e.looks_like for _, e in rows])}
-    cols.update((f"{a}_m", vec(lambda e: e.xyz_m, i)) for i, a in enumerate("xyz"))
-    cols.update((f"v{a}_m_s", vec(lambda e: e.velocity_m_s, i)) for i, a in enumerate("xyz"))
+    cols.update(_world_columns([e.xyz_m for _, e in rows], [e.velocity_m_s for _, e in rows]))
     cols.update(hit=np.array([e.hit for _, e in rows], dtype=bool),
                 in_view=np.array([e.in_view for _, e in rows], dtype=bool),
                 score=np.array([math.nan if e.score is None else e.score for _, e in rows], dtype=float),
                 fixated=np.array([e.id == f.fixated for f, e in rows], dtype=bool),
                 pinned=np.array([e.id == f.pinned for f, e in rows], dtype=bool))
-    write_columns(out_path, cols, nan_as_empty=True)
+    write_columns(Path(out_path), cols, nan_as_empty=True)
     return len(rows)
 
 
@@ -231,23 +224,38 @@ def export_truth_objects(recording: str | os.PathLike, out_path: str | os.PathLi
     a single-target scene's: its one target's truth is in --trajectory) is an error that says so."""
     from foveatrack.recording.records import ObjectTruthRecord
 
-    out_path = Path(out_path)
-    out_kind(out_path)
-    reader = open_run(recording, max_frames, segment_alone=True)
-    recs = [ObjectTruthRecord.from_json(r) for r in reader.records(TRUTH_OBJECTS)]
-    _warn_damage(reader, warn)
-    if not recs:
-        raise UserError(f"{recording} holds no object truth: only the simulator's runs of multi-object scenes "
-                        f"record it (a single target's truth is in --trajectory; a daemon knows no truth)")
+    recs = _channel_records(recording, out_path, TRUTH_OBJECTS, ObjectTruthRecord.from_json, warn, max_frames,
+                            "holds no object truth: only the simulator's runs of multi-object scenes record it "
+                            "(a single target's truth is in --trajectory; a daemon knows no truth)")
     cols = {"t_ns": np.array([r.t_ns for r in recs], dtype=np.int64),
             "frame_id": np.array([r.frame_id for r in recs], dtype=np.int64),
             "id": np.array([r.id for r in recs]),
             "class": np.array([r.cls for r in recs])}
-    cols.update((f"{a}_m", np.array([r.true_world_m[i] for r in recs], dtype=float)) for i, a in enumerate("xyz"))
-    cols.update((f"v{a}_m_s", np.array([r.true_velocity_m_s[i] for r in recs], dtype=float))
-                for i, a in enumerate("xyz"))
+    cols.update(_world_columns([r.true_world_m for r in recs], [r.true_velocity_m_s for r in recs]))
     cols.update(size_m=np.array([r.size_m for r in recs], dtype=float),
                 rays_hit=np.array([r.rays_hit for r in recs], dtype=np.int64))
-    write_columns(out_path, cols, nan_as_empty=True)
+    write_columns(Path(out_path), cols, nan_as_empty=True)
     return len(recs)
+
+
+def _channel_records(recording, out_path, channel: str, parse, warn: Warn | None, max_frames: int | None,
+                     none_held: str) -> list:
+    """The parsed records of one channel for an export to ``out_path`` (its suffix checked first); none
+    is an error that says ``none_held`` of the recording."""
+    out_kind(Path(out_path))
+    reader = open_run(recording, max_frames, segment_alone=True)
+    recs = [parse(r) for r in reader.records(channel)]
+    _warn_damage(reader, warn)
+    if not recs:
+        raise UserError(f"{recording} {none_held}")
+    return recs
+
+
+def _world_columns(xyz: list, velocity: list) -> dict:
+    """``x_m, y_m, z_m, vx_m_s, vy_m_s, vz_m_s`` from per-row world positions and velocities."""
+    p = np.array(xyz, dtype=float).reshape(-1, 3)
+    v = np.array(velocity, dtype=float).reshape(-1, 3)
+    cols = {f"{a}_m": p[:, i].copy() for i, a in enumerate("xyz")}
+    cols.update((f"v{a}_m_s", v[:, i].copy()) for i, a in enumerate("xyz"))
+    return cols
 
