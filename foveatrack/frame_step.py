@@ -38,7 +38,12 @@ class FrameSource(Protocol):
 
 
 class CommandSink(Protocol):
-    """Where a command goes: the virtual UART, a serial port, or nowhere (replay, a frozen head)."""
+    """Where a command goes: the virtual UART, a serial port, or nowhere (replay, a frozen head).
+
+    A sink may also define ``head_ran(cmd) -> HeadCommand | None``, asked after each write: the
+    command the head ran instead of ``cmd`` (None: the write's outcome says it all).  A replay under
+    another configuration has it: the recorded points were seen while the head ran the recorded
+    commands, and the dead reckoning must follow those, not the replayed tracker's."""
 
     def send(self, cmd: HeadCommand, send_t_s: float, source: str) -> bool:
         """Write ``cmd`` at ``send_t_s`` (the controller's clock); True when the head got it, False when
@@ -140,7 +145,7 @@ class FrameStep:
             cmd = STOP
             c.command_sent(send_t_s, cmd)
         ok = self.sink.send(cmd, send_t_s, self.source)
-        head = self.gate.wrote(c, send_t_s, cmd, ok)
+        head = self.gate.wrote(c, send_t_s, cmd, ok, self._ran_instead(cmd))
         return StepRecord(send_t_s, out, out.command, cmd, tuple(why), bool(ok), head)
 
     def own_command(self, send_t_s: float, cmd: HeadCommand, source: str) -> StepRecord:
@@ -148,8 +153,13 @@ class FrameStep:
         written and accounted for as the controller's are."""
         self.controller.command_sent(send_t_s, cmd)
         ok = self.sink.send(cmd, send_t_s, source)
-        head = self.gate.wrote(self.controller, send_t_s, cmd, ok)
+        head = self.gate.wrote(self.controller, send_t_s, cmd, ok, self._ran_instead(cmd))
         return StepRecord(send_t_s, None, cmd, cmd, (), bool(ok), head)
+
+    def _ran_instead(self, cmd: HeadCommand) -> HeadCommand | None:
+        """The sink's word on a command the head ran instead of ``cmd`` (:class:`CommandSink`)."""
+        head_ran = getattr(self.sink, "head_ran", None)
+        return None if head_ran is None else head_ran(cmd)
 
     def own_goal(self, axis: str, goal_deg: float, source: str) -> GoalRecord:
         """An absolute goal of the driver's own (the daemon's homing): decided by the gate, written by

@@ -169,12 +169,19 @@ class CommandGate:
         if ok:
             self.head_cmd = STOP
 
-    def wrote(self, tracker, send_t_s: float, cmd: HeadCommand, ok: bool) -> HeadCommand:
+    def wrote(self, tracker, send_t_s: float, cmd: HeadCommand, ok: bool,
+              ran_instead: HeadCommand | None = None) -> HeadCommand:
         """After the sink wrote ``cmd`` (registered with the tracker at ``send_t_s``): ``ok`` False means
         the head never got the bytes and keeps running its last command, which the dead reckoning is
         told at the same instant (a Pelco head latches motion: a link outage would otherwise read as
-        the head following the tracker).  Returns what the head now runs."""
-        if ok:
+        the head following the tracker).  ``ran_instead``: the sink knows the head ran this command
+        instead (a replay under another configuration follows the recorded head); the dead reckoning
+        is told so at the same instant.  Returns what the head now runs."""
+        if ran_instead is not None:
+            self.head_cmd = ran_instead
+            if tracker is not None:
+                tracker.command_sent(send_t_s, ran_instead)
+        elif ok:
             self.head_cmd = cmd
         elif tracker is not None:
             tracker.command_sent(send_t_s, self.head_cmd)

@@ -31,7 +31,9 @@ before the channel existed has none, and its replay dead-reckons the commands (t
 
 Replay is open loop: the points are what the lidar saw while the head moved as it did, so a
 different configuration shows which detections and commands would have differed on the same data,
-not where the head would have gone.
+not where the head would have gone.  Its dead reckoning follows the head as it moved: where the
+replayed tracker's command differs from the recorded one, the head is taken to have run the recorded
+one (:class:`_RecordedOutcome`), so the points are placed in the world where they were seen.
 
 A damaged recording (:class:`foveatrack.recording.Damage`) is replayed from everything the reader
 recovered; the report's first line after the title is a WARNING naming what was skipped.  Frames
@@ -79,13 +81,27 @@ def require_space(cfg: TrackerConfig, where: str) -> None:
 class _RecordedOutcome:
     """Replay's command sink: nothing is written; whether the head got a command is what the recording
     says (the daemon's ``written: false`` for a failed write; a command without a record reached it).
-    The driver names the record before each step (:attr:`record`)."""
+    The driver names the record before each step (:attr:`record`).
 
-    def __init__(self):
+    ``follow_recorded`` (a replay under another configuration): where the replayed command differs
+    from the recorded one, the head ran the recorded one (:meth:`head_ran`): the points were seen
+    from the head's recorded motion, and the dead reckoning that places them in the world follows it
+    (before, it followed the replayed tracker's own commands: a what-if replay of a sky run with a
+    1 s revisit time put the head 25 deg off by frame 400 and made 181 confirmed tracks of 5)."""
+
+    def __init__(self, follow_recorded: bool = False):
         self.record: CommandRecord | None = None
+        self.follow_recorded = follow_recorded
 
     def send(self, cmd: HeadCommand, send_t_s: float, source: str) -> bool:
         return self.record is None or self.record.reached_head
+
+    def head_ran(self, cmd: HeadCommand) -> HeadCommand | None:
+        r = self.record
+        if not self.follow_recorded or r is None or not r.reached_head or None in r.speeds:
+            return None
+        recorded = r.command
+        return None if recorded == cmd else recorded
 
 
 class _TracksComparison:
@@ -159,7 +175,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     if tracker_table is not None:     # the recorded configuration replays as it ran, space or none
         require_space(cfg, where)
     rec_cfg = meta.tracker
-    sink = _RecordedOutcome()
+    sink = _RecordedOutcome(follow_recorded=tracker_table is not None)
     controller = Tracker(cfg, meta.speed_table, t0_s=meta.tracker_t0_s)
     # the multi-object tracker where the run had it (its recorded table), or where the table given has one
     sky_table = meta.sky if tracker_table is None else tracker_table.get("sky")

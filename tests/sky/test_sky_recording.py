@@ -214,3 +214,18 @@ def test_export_of_tracks_from_a_single_target_run_says_it_has_none(tmp_path, ca
     assert main(["export", str(run / "run.mcap"), "--truth-objects", str(tmp_path / "o.csv")]) == 2
     assert "holds no object truth" in capsys.readouterr().err
     assert not (tmp_path / "t.csv").exists() and not (tmp_path / "o.csv").exists()
+
+
+def test_a_replay_under_another_table_places_the_points_from_the_head_as_it_moved(crossing_run):
+    """Open loop: the points were seen while the head ran the recorded commands, so the replayed
+    tracker's dead reckoning follows those, whatever it would have sent itself.  Before, it followed
+    its own commands: under another schedule the head estimate drifted from the recorded one and the
+    recorded points were put in the world at the wrong pose."""
+    meta = RecordingReader(crossing_run).meta
+    table = {k: v for k, v in meta["tracker"].items() if k != "sky"}
+    table["sky"] = {"attention": {"saccade_gain_1_s": 4.0, "revisit_s": 1.0}}
+    res = replay_recording(crossing_run, tracker_table=table, config_name="faster saccades")
+    assert not res.comparison["commands_equal"], "another schedule: other commands"
+    # where its dead reckoning has the head in the end: where the recorded commands took it, as the
+    # replay under the recorded table has it (before: 12.6 deg of pan apart)
+    assert res.final_pose_deg == replay_recording(crossing_run).final_pose_deg
