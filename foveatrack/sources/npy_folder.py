@@ -2,7 +2,8 @@
 
 ``<unix time>.npy`` per scan, e.g. ``1706255621.614239.npy``: an (N, 3) float array of x, y, z [m]
 in the sensor frame; rows of zeros are padding (MMAUD pads every frame to 24000 rows).  Frames are
-read in time order (the time in the name, read exactly: :func:`~foveatrack.sources.stamps.ns_from_file_stem`).
+read in time order (the time in the name, read exactly: :func:`~foveatrack.sources.stamps.time_from_file_stem`;
+µs or ns since 1970 as digits only, e.g. ``1717243800005000.npy``, are read too).
 An (N, 4) array's fourth column is taken as intensity and dropped.
 """
 
@@ -13,20 +14,28 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.errors import UserError
-from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, ns_from_file_stem
+from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, time_from_file_stem
 
 
 def timed_files(folder: Path, suffix: str) -> list[tuple[int, Path]]:
     """``(stamp_ns, path)`` of the files ``<unix time><suffix>`` in ``folder``, oldest first; a
-    UserError naming the folder when there are none or one is not named by a time."""
+    UserError naming the folder when there are none, or the file when one is not named by a time
+    or is named in another unit than the rest (:func:`~foveatrack.sources.stamps.time_from_file_stem`)."""
     files = [f for f in folder.iterdir() if f.is_file() and f.suffix.lower() == suffix]
     if not files:
         raise UserError(f"{folder}: no {suffix} files (an empty folder for frames)")
-    out = []
-    for f in files:
-        ns = ns_from_file_stem(f.name[: -len(suffix)])
-        if ns is None:
-            raise UserError(f"{f}: the file name is not a time (<unix seconds>[.fraction]{suffix} expected)")
+    out, units = [], {}
+    for f in sorted(files):
+        got = time_from_file_stem(f.name[: -len(suffix)])
+        if got is None:
+            raise UserError(f"{f}: the file name is not a time since 1970 before 2262 (<unix seconds>"
+                            f"[.fraction]{suffix}, or digits only: 10 seconds, 13 ms, 16 µs, 19 ns expected)")
+        ns, unit = got
+        units.setdefault(unit, f)
+        if len(units) > 1:
+            (u0, f0), = ((u, g) for u, g in units.items() if u != unit)
+            raise UserError(f"{f}: the name reads as {unit} since 1970 but {f0.name}'s as {u0} (a name's unit "
+                            f"is given by its digits); give a folder of names in one unit")
         out.append((ns, f))
     out.sort()
     for (a, fa), (b, fb) in zip(out, out[1:]):

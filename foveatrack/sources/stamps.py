@@ -6,6 +6,12 @@ frame ``[stamp, stamp + 1/rate_hz)``: a Livox driver stamps a frame at its first
 without a time of their own are given the stamp, so Algorithm 1's detection time (the median
 point time, :mod:`foveatrack.detection`) is the stamp.  Each reader yields ``(arrival_s, frame)``:
 a bag's log time, for files the frame's end (when the sensor had finished the scan).
+
+A file named by its time: ``<seconds>.<fraction>`` (up to 9 digits after the point) is seconds since
+1970; a name of digits only is read in the unit its length gives, the one a time since 1970 has in
+it: up to 10 digits seconds, 11-13 milliseconds, 14-16 microseconds, 17-19
+nanoseconds (``1717243800005000`` is µs).  One folder's names must all be in one unit, and lie
+before 2262 (what int64 ns hold).
 """
 
 from __future__ import annotations
@@ -19,6 +25,9 @@ from foveatrack.errors import UserError
 from foveatrack.frames import Frame
 
 _STEM = re.compile(r"^(\d+)(?:\.(\d{1,9}))?$")
+_INT64_MAX = 2**63 - 1
+# a name of digits only: (most digits, unit, ns per unit)
+_INTEGER_UNITS = ((10, "s", 1_000_000_000), (13, "ms", 1_000_000), (16, "µs", 1_000), (19, "ns", 1))
 
 
 class StampedFrame(NamedTuple):
@@ -28,12 +37,28 @@ class StampedFrame(NamedTuple):
 
 def ns_from_file_stem(stem: str) -> int | None:
     """``"1706255621.614239"`` -> 1706255621614239000: decimal seconds to integer ns exactly
-    (through a float the last digits would round); None if the name is not a time."""
+    (through a float the last digits would round); ``"1717243800005000"`` (digits only, 16 of
+    them: µs) -> 1717243800005000000; None if the name is not a time."""
+    got = time_from_file_stem(stem)
+    return None if got is None else got[0]
+
+
+def time_from_file_stem(stem: str) -> tuple[int, str] | None:
+    """``(ns, unit)`` of a file name's time, ``unit`` the one it was read in ("s", "ms", "µs",
+    "ns"; a fraction is always seconds); None if the name is not a time or lies past 2262
+    (what int64 ns hold)."""
     m = _STEM.match(stem)
     if m is None:
         return None
-    frac = (m.group(2) or "").ljust(9, "0")
-    return int(m.group(1)) * 1_000_000_000 + int(frac)
+    digits, frac = m.group(1), m.group(2)
+    if frac is not None:
+        ns, unit = int(digits) * 1_000_000_000 + int(frac.ljust(9, "0")), "s"
+    else:
+        scale = next(((u, k) for most, u, k in _INTEGER_UNITS if len(digits) <= most), None)
+        if scale is None:
+            return None
+        unit, ns = scale[0], int(digits) * scale[1]
+    return (ns, unit) if ns <= _INT64_MAX else None
 
 
 def period_ns(rate_hz: float) -> int:

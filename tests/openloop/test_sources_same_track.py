@@ -90,3 +90,33 @@ def test_pointcloud2_point_times_are_read(tmp_path, frames):
     (_, fr), = list(open_source(path, TOPIC))
     valid = np.any(xyz != 0, axis=1)
     np.testing.assert_array_equal(fr.t_ns, ns + (np.arange(len(xyz)) * 1000)[valid])
+
+
+@pytest.mark.parametrize("unit", ["ms", "us", "ns"])
+def test_npy_folder_named_in_ms_us_or_ns_gives_the_same_track(tmp_path, frames, reference_run, unit):
+    # Files named by an integer time in ms, µs or ns since 1970 (1706255621614239.npy): once an
+    # OverflowError from the int64 stamp; the unit is the one the name's digit count gives.
+    digits = {"ms": 3, "us": 6, "ns": 9}[unit]
+    for f in FIXTURE.glob("*.npy"):
+        sec, frac = f.name[:-4].split(".")
+        shutil.copy(f, tmp_path / f"{sec}{frac.ljust(9, '0')[:digits]}.npy")
+    if unit == "ms":   # the fixture's names are µs: cut to ms, the frames start up to 1 ms earlier
+        run = list(open_source(tmp_path))
+        assert [a.t_start_s for _, a in run] == [ns // 10**6 * 10**6 * 1e-9 for ns, _ in frames]
+        return
+    _same(list(open_source(tmp_path)), track_source(open_source(tmp_path)), reference_run)
+
+
+def test_npy_folder_names_in_two_units_or_past_int64_are_refused(tmp_path):
+    from foveatrack.errors import UserError
+
+    f = next(FIXTURE.glob("*.npy"))
+    shutil.copy(f, tmp_path / "1706255621.614239.npy")
+    shutil.copy(f, tmp_path / "1706255621714191.npy")
+    with pytest.raises(UserError, match=r"1706255621714191\.npy: the name reads as µs .* 1706255621\.614239\.npy's as s"):
+        open_source(tmp_path)
+    for g in tmp_path.iterdir():
+        g.unlink()
+    shutil.copy(f, tmp_path / "9999999999.npy")      # 2286: past what int64 ns hold
+    with pytest.raises(UserError, match=r"9999999999\.npy: the file name is not a time"):
+        open_source(tmp_path)
