@@ -4,7 +4,8 @@
 in the sensor frame; rows of zeros are padding (MMAUD pads every frame to 24000 rows).  Frames are
 read in time order (the time in the name, read exactly: :func:`~foveatrack.sources.stamps.time_from_file_stem`;
 µs or ns since 1970 as digits only, e.g. ``1717243800005000.npy``, are read too).
-An (N, 4) array's fourth column is taken as intensity and dropped.
+An (N, 4) array's fourth column is taken as intensity and dropped.  A file cut short (its writer
+killed, a copy interrupted) is read to its last whole point, with one warning, as a PCD file is.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.errors import UserError
-from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, time_from_file_stem
+from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, time_from_file_stem, warn_stderr
 
 
 def timed_files(folder: Path, suffix: str) -> list[tuple[int, Path]]:
@@ -49,23 +50,59 @@ class NpyFolderSource:
 
     kind = "npy folder"
 
-    def __init__(self, folder, rate_hz: float = 10.0):
+    def __init__(self, folder, rate_hz: float = 10.0, warn=None):
         self.path = Path(folder)
         self.rate_hz = check_rate(rate_hz)
         self.files = timed_files(self.path, ".npy")
+        #: where a file cut short is said (one line each; default: stderr)
+        self.warn = warn or warn_stderr
 
     def __len__(self) -> int:
         return len(self.files)
 
     def __iter__(self):
         for ns, f in self.files:
-            try:
-                a = np.load(f, allow_pickle=False)
-            except (ValueError, OSError, EOFError) as exc:
-                why = "it holds pickled objects" if "pickle" in str(exc) else " ".join(str(exc).split())[:160]
-                raise UserError(f"{f}: not a readable .npy array of numbers ({why})") from None
+            a = _read_npy(f, self.warn)
             if a.ndim != 2 or a.shape[1] not in (3, 4) or a.dtype.kind not in "fiu":
                 raise UserError(f"{f}: expected an (N, 3) array of x, y, z numbers, "
                                 f"got shape {a.shape} of {a.dtype}")
             fr = frame_from_cloud(ns, a[:, :3], self.rate_hz)
             yield StampedFrame(fr.t_end_s, fr)
+
+
+def _read_npy(f: Path, warn) -> np.ndarray:
+    """The array of a ``.npy`` file; one cut short (its header whole, its body not) is read to its
+    last whole row, and ``warn`` says how many of the header's rows are missing."""
+    try:
+        return np.load(f, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        cut = _npy_cut_short(f)
+        if cut is None:
+            why = "it holds pickled objects" if "pickle" in str(exc) else " ".join(str(exc).split())[:160]
+            raise UserError(f"{f}: not a readable .npy array of numbers ({why})") from None
+    a, said = cut
+    warn(f"{f}: holds {a.shape[0]} of the {said} points its header gives (the file is cut short); "
+         f"the rest of that scan is missing")
+    return a
+
+
+def _npy_cut_short(f: Path) -> tuple[np.ndarray, int] | None:
+    """``(its whole rows, the rows its header gives)`` of a 2-D numeric ``.npy`` whose body is
+    shorter than its header says; None for any other damage (numpy's own error is then the one said)."""
+    fmt = np.lib.format
+    try:
+        with open(f, "rb") as fh:
+            read_header = {(1, 0): fmt.read_array_header_1_0, (2, 0): fmt.read_array_header_2_0}[fmt.read_magic(fh)]
+            shape, fortran, dtype = read_header(fh)
+            body = fh.read()
+    except Exception:
+        return None
+    if dtype.hasobject or len(shape) != 2 or dtype.itemsize == 0:
+        return None
+    row = shape[1] * dtype.itemsize
+    if len(body) >= shape[0] * row:
+        return None
+    if fortran or row == 0:       # column after column: no whole point is left
+        return np.empty((0, shape[1]), dtype), shape[0]
+    n = len(body) // row
+    return np.frombuffer(body[: n * row], dtype=dtype).reshape(n, shape[1]), shape[0]

@@ -7,14 +7,13 @@ from __future__ import annotations
 
 import io
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from foveatrack.errors import UserError
 from foveatrack.sources.npy_folder import timed_files
-from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud
+from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, warn_stderr
 
 
 class PcdFolderSource:
@@ -25,7 +24,7 @@ class PcdFolderSource:
         self.rate_hz = check_rate(rate_hz)
         self.files = timed_files(self.path, ".pcd")
         #: where a scan cut short is said (one line each; default: stderr)
-        self.warn = warn or (lambda line: print(f"WARNING: {line}", file=sys.stderr, flush=True))
+        self.warn = warn or warn_stderr
 
     def __len__(self) -> int:
         return len(self.files)

@@ -17,6 +17,7 @@ before 2262 (what int64 ns hold).
 from __future__ import annotations
 
 import re
+import sys
 from typing import NamedTuple
 
 import numpy as np
@@ -59,6 +60,11 @@ def time_from_file_stem(stem: str) -> tuple[int, str] | None:
             return None
         unit, ns = scale[0], int(digits) * scale[1]
     return (ns, unit) if ns <= _INT64_MAX else None
+
+
+def warn_stderr(line: str) -> None:
+    """Where a reader says what it read with a loss (its ``warn`` unless given): a line on stderr."""
+    print(f"WARNING: {line}", file=sys.stderr, flush=True)
 
 
 def period_ns(rate_hz: float) -> int:

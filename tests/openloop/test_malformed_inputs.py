@@ -178,3 +178,27 @@ def test_a_bag_cut_short_says_how_to_mend_it(tmp_path, frames, capsys):
     assert main(["track", str(bag), "--topic", "/livox/lidar"]) == 2
     err = capsys.readouterr().err
     assert "not a readable bag" in err and "rosbag reindex" in err and "Traceback" not in err, err
+
+
+def test_an_npy_cut_short_gives_its_whole_points_and_says_so(tmp_path, capsys):
+    # One frame of a folder cut short aborted the whole run ("Failed to read all data for array"),
+    # where a PCD cut short is read to its last whole point: now the same, one line naming the file.
+    from foveatrack.sources.npy_folder import NpyFolderSource
+
+    xyz = np.random.default_rng(4).uniform(1, 50, (500, 3))
+    for k in range(3):
+        np.save(tmp_path / f"1706255621.{k}00000.npy", xyz + k)
+    cut = tmp_path / "1706255621.100000.npy"
+    data = cut.read_bytes()
+    cut.write_bytes(data[: len(data) - 4001])             # 7999 bytes of points left: 333 and a third
+    said = []
+    frames = [fr for _, fr in NpyFolderSource(tmp_path, warn=said.append)]
+    assert [fr.n_points for fr in frames] == [500, 333, 500]
+    np.testing.assert_array_equal(frames[1].xyz, xyz[:333] + 1)
+    assert len(said) == 1 and "1706255621.100000.npy: holds 333 of the 500 points" in said[0], said
+    assert main(["track", str(tmp_path), "--csv", str(tmp_path / "t.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "WARNING:" in err and "1706255621.100000.npy" in err and "Traceback" not in err, err
+    assert len((tmp_path / "t.csv").read_text().splitlines()) == 4
+    cut.write_bytes(data[:60])                              # the header cut: not an array at all
+    _fails([tmp_path], capsys, "1706255621.100000.npy", "not a readable .npy")
