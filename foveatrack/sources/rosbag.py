@@ -7,11 +7,19 @@ definitions, as ROS 1 bags and MCAP do, is read with those).
 
 PointCloud2: any field layout with ``x``, ``y``, ``z`` (any numeric type, either byte order);
 ``intensity`` (or ``reflectivity``) is kept as reflectivity; a per-point time is read from the first
-of ``timestamp``, ``time``, ``t``, ``offset_time``.  Its unit is not in the message, so it is taken
-from its size (the drivers' conventions): values above 1e15 are absolute ns (livox_ros_driver2),
-above 1e8 absolute seconds (Hesai); smaller ones are offsets from ``header.stamp``, in ns when the
-field is an integer (Ouster ``t``, Livox ``offset_time``) and in seconds when it is a float
-(Velodyne ``time``).  CustomMsg: point time = ``timebase + offset_time`` [ns].
+of ``timestamp``, ``time``, ``t``, ``offset_time``.  Its unit is not in the message; it is taken from
+the field's datatype and name, as the drivers publish them (:func:`point_times_ns`):
+
+* an integer field is ns after ``header.stamp`` (Livox ``offset_time`` and Ouster ``t``: uint32);
+* a float64 field named ``timestamp`` is an absolute time, in ns (livox_ros_driver2) or seconds
+  (Hesai, RoboSense): the two are nine orders of magnitude apart, told by whether its values reach 1e15;
+* any other float field is seconds after ``header.stamp`` (Velodyne ``time``: float32).
+
+A scan's times are then checked against its ``header.stamp``: spread over more than a second (or a
+frame period, if longer), they cannot be a scan's, and its points are put at the stamp; lying more
+than that from the stamp (a driver stamping points on another clock: GPS time is 18 s ahead of UTC),
+they are read from the scan's first point on, placed at the stamp.  Either is said once per topic.
+CustomMsg: point time = ``timebase + offset_time`` [ns], checked the same way.
 
 The frame of a message starts at its ``header.stamp`` (:mod:`foveatrack.sources.stamps`); its
 arrival is the bag's log time.
@@ -24,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.errors import UserError
-from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud
+from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, period_ns, warn_stderr
 from foveatrack.sources.tf import TF_TYPES, TfBuffer, apply
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
@@ -53,6 +61,8 @@ uint8[3] rsvd
 # PointField.datatype -> numpy type (sensor_msgs/msg/PointField)
 _POINTFIELD = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
 _TIME_FIELDS = ("timestamp", "time", "t", "offset_time")
+#: how far a scan's point times may spread, and lie from its header.stamp, at the least [ns]
+_SCAN_SPAN_NS = 1_000_000_000
 
 
 def livox_typestore(base=None):
@@ -73,10 +83,13 @@ class BagSource:
 
     kind = "ros bag"
 
-    def __init__(self, path, topic: str | None, rate_hz: float = 10.0, fixed_frame: str | None = None):
+    def __init__(self, path, topic: str | None, rate_hz: float = 10.0, fixed_frame: str | None = None,
+                 warn=None):
         self.path = Path(path)
         self.rate_hz = check_rate(rate_hz)
         self.fixed_frame = fixed_frame
+        #: where what is read with a loss or a guess is said (default: stderr)
+        self.warn = warn or warn_stderr
         topics = self._topics()
         if topic is None:
             raise UserError(f"{self.path}: give the cloud topic with --topic; the bag has "
@@ -118,6 +131,7 @@ class BagSource:
             tf = self._read_tf(reader) if self.fixed_frame is not None else None
             conns = [c for c in reader.connections if c.topic == self.topic]
             msgs = reader.messages(connections=conns)
+            note = _once(self.warn)
             k = 0
             while True:
                 try:
@@ -135,9 +149,9 @@ class BagSource:
                                     f"{conn.msgtype} ({_one_line(exc)})") from None
                 where = f"{self.path}: topic {self.topic} ({conn.msgtype}) message {k}"
                 if conn.msgtype == POINTCLOUD2:
-                    fr = frame_from_pointcloud2(msg, self.rate_hz, where)
+                    fr = frame_from_pointcloud2(msg, self.rate_hz, where, note)
                 else:
-                    fr = frame_from_livox_custom(msg, self.rate_hz, where)
+                    fr = frame_from_livox_custom(msg, self.rate_hz, where, note)
                 if tf is not None and fr.n_points:
                     R, t = tf.lookup(self.fixed_frame, msg.header.frame_id, _stamp_ns(msg), where)
                     fr = type(fr)(fr.t_start_s, fr.t_end_s, apply(R, t, fr.xyz), fr.t_ns, fr.reflectivity)
@@ -185,6 +199,17 @@ def _bag_problem(exc: Exception) -> str:
     return why
 
 
+def _once(warn):
+    """``note(key, line)``: ``warn(line)`` the first time ``key`` is noted, then nothing."""
+    seen = set()
+
+    def note(key: str, line: str) -> None:
+        if key not in seen:
+            seen.add(key)
+            warn(line)
+    return note
+
+
 def _one_line(exc: BaseException) -> str:
     s = " ".join(str(exc).split())
     return s[:200] if s else type(exc).__name__
@@ -197,8 +222,8 @@ def _stamp_ns(msg) -> int:
 
 
 def pointcloud2_xyz(msg, where: str):
-    """``(xyz (N,3) float64, t (N,) float64 or None, time field name or None, intensity or None)``
-    of a PointCloud2, by its field layout."""
+    """``(xyz (N,3) float64, t (N,) as the field holds it or None, time field name or None, intensity
+    or None)`` of a PointCloud2, by its field layout."""
     fields = {f.name: f for f in msg.fields}
     missing = [k for k in ("x", "y", "z") if k not in fields]
     if missing:
@@ -230,28 +255,78 @@ def pointcloud2_xyz(msg, where: str):
     t = column(tname) if tname else None
     iname = next((k for k in ("intensity", "reflectivity") if k in fields), None)
     inten = column(iname) if iname else None
-    return xyz, t, inten
+    return xyz, t, tname, inten
 
 
-def frame_from_pointcloud2(msg, rate_hz: float, where: str):
+def frame_from_pointcloud2(msg, rate_hz: float, where: str, note=None):
+    """The frame of a PointCloud2; ``note(key, line)`` hears what is read with a guess (default: a
+    warning each time)."""
+    note = note or (lambda key, line: warn_stderr(line))
     stamp = _stamp_ns(msg)
-    xyz, t, inten = pointcloud2_xyz(msg, where)
+    xyz, t, tname, inten = pointcloud2_xyz(msg, where)
     t_ns = None
     if t is not None and t.size:
-        tmax = float(np.max(np.abs(t)))
-        if tmax > 1e15:
-            t_ns = t.astype(np.int64)
-        elif tmax > 1e8:
-            t_ns = np.round(t.astype(np.float64) * 1e9).astype(np.int64)
-        elif t.dtype.kind in "iu":
-            t_ns = stamp + t.astype(np.int64)
-        else:
-            t_ns = stamp + np.round(t.astype(np.float64) * 1e9).astype(np.int64)
+        t_ns = point_times_ns(t, tname, stamp, period_ns(rate_hz), where, note)
     refl = None if inten is None else np.clip(inten, 0, 255).astype(np.uint8)
     return frame_from_cloud(stamp, xyz, rate_hz, t_ns, refl)
 
 
-def frame_from_livox_custom(msg, rate_hz: float, where: str):
+def point_times_ns(t: np.ndarray, name: str, stamp_ns: int, period: int, where: str, note) -> np.ndarray | None:
+    """Per-point times [ns] of a PointCloud2 time field ``t`` (its values as the field holds them),
+    the unit taken from its datatype and name (the module's rules); None when they cannot be a
+    scan's (the points are then at the stamp)."""
+    dt = t.dtype
+    with np.errstate(all="ignore"):
+        if dt.kind in "iu":
+            how = f"{name} ({dt.name}): ns after header.stamp"
+            off = t.astype(np.float64)
+            exact = lambda: stamp_ns + t.astype(np.int64)                   # noqa: E731
+        elif name == "timestamp" and dt.itemsize == 8:
+            finite = t[np.isfinite(t)]
+            in_ns = finite.size > 0 and float(np.median(np.abs(finite))) >= 1e15
+            how = f"{name} (float64): absolute {'ns' if in_ns else 'seconds'}"
+            off = t - float(stamp_ns) if in_ns else t * 1e9 - float(stamp_ns)
+            exact = (lambda: np.round(t).astype(np.int64)) if in_ns else (lambda: np.round(t * 1e9).astype(np.int64))
+        else:
+            how = f"{name} ({dt.name}): seconds after header.stamp"
+            off = t.astype(np.float64) * 1e9
+            exact = lambda: stamp_ns + np.round(t.astype(np.float64) * 1e9).astype(np.int64)  # noqa: E731
+        return _near_stamp(off, exact, stamp_ns, period, where, how, note)
+
+
+def _near_stamp(off: np.ndarray, exact, stamp_ns: int, period: int, where: str, how: str, note):
+    """A scan's point times from their offsets ``off`` [ns, float64] from its stamp: ``exact()``
+    (int64 ns) when they lie near the stamp, counted from the first point when they lie on another
+    clock, None when they spread over more than a scan can."""
+    good = np.isfinite(off)
+    if not good.any():
+        return None
+    lo, hi = float(off[good].min()), float(off[good].max())
+    span = max(_SCAN_SPAN_NS, period)
+    if hi - lo > span:
+        note("time-span", f"{where}: the points' time field {how} spreads one scan over {(hi - lo) * 1e-9:.4g} s, "
+                          f"which no scan lasts: not a unit this reads; the points are put at header.stamp "
+                          f"(said for the first such message only)")
+        return None
+    if lo >= -span and hi <= span:
+        t_ns = exact()
+    else:
+        note("time-clock", f"{where}: the points' time field {how} puts the scan's first point "
+                           f"{lo * 1e-9:+.3f} s from header.stamp: the points are stamped on another clock than "
+                           f"the header (GPS time, for one, is 18 s ahead of UTC); each scan's first point is put "
+                           f"at its header.stamp, the others kept after it (said for the first such message only)")
+        if max(-lo, hi) < 2.0**62:      # in int64: the times as exact as the field holds them
+            t_ns = exact()
+            t_ns = stamp_ns + (t_ns - t_ns[good].min())
+        else:
+            t_ns = stamp_ns + np.round(np.where(good, off - lo, 0.0)).astype(np.int64)
+    if not good.all():
+        t_ns = np.where(good, t_ns, stamp_ns)
+    return t_ns
+
+
+def frame_from_livox_custom(msg, rate_hz: float, where: str, note=None):
+    note = note or (lambda key, line: warn_stderr(line))
     pts = msg.points
     n = len(pts)
     xyz = np.empty((n, 3), dtype=np.float64)
@@ -261,5 +336,10 @@ def frame_from_livox_custom(msg, rate_hz: float, where: str):
         xyz[i, 0], xyz[i, 1], xyz[i, 2] = p.x, p.y, p.z
         off[i] = p.offset_time
         refl[i] = p.reflectivity
-    t_ns = int(msg.timebase) + off
-    return frame_from_cloud(_stamp_ns(msg), xyz, rate_hz, t_ns, refl)
+    stamp = _stamp_ns(msg)
+    t_ns = None
+    if n:
+        base = int(msg.timebase) - stamp
+        t_ns = _near_stamp(base + off.astype(np.float64), lambda: int(msg.timebase) + off, stamp,
+                           period_ns(rate_hz), where, "timebase + offset_time: ns", note)
+    return frame_from_cloud(stamp, xyz, rate_hz, t_ns, refl)

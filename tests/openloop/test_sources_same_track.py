@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import bag_writers as bw
+from foveatrack.cli import main
 from foveatrack.openloop import track_source
 from foveatrack.sources import open_source
 
@@ -120,3 +121,90 @@ def test_npy_folder_names_in_two_units_or_past_int64_are_refused(tmp_path):
     shutil.copy(f, tmp_path / "9999999999.npy")      # 2286: past what int64 ns hold
     with pytest.raises(UserError, match=r"9999999999\.npy: the file name is not a time"):
         open_source(tmp_path)
+
+
+def _timed_bag(path, frames, name, code, datatype, times):
+    """A ROS 2 bag of PointCloud2 x, y, z (float32) and a time field ``name`` (numpy ``code``,
+    PointField ``datatype``) holding ``times(stamp_ns, n)``."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    store = bw._stores(False)
+    PointField = store.types["sensor_msgs/msg/PointField"]
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        c = w.add_connection(TOPIC, "sensor_msgs/msg/PointCloud2", typestore=store)
+        for ns, xyz in frames:
+            msg = bw.pointcloud2(store, ns, xyz, False, float64=False, extra_intensity=False)
+            rec = np.zeros(len(xyz), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), (name, "<" + code)])
+            for i, k in enumerate("xyz"):
+                rec[k] = xyz[:, i]
+            rec[name] = times(ns, len(xyz))
+            msg.fields = msg.fields + [PointField(name=name, offset=12, datatype=datatype, count=1)]
+            msg.point_step, msg.data = rec.dtype.itemsize, np.frombuffer(rec.tobytes(), np.uint8)
+            w.write(c, ns + bw.PERIOD_NS, store.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2"))
+    return path
+
+
+def _read(path, rate_hz=10.0):
+    from foveatrack.sources.rosbag import BagSource
+
+    said = []
+    return [fr for _, fr in BagSource(path, TOPIC, rate_hz, warn=said.append)], said
+
+
+def _spread(n, span_ns):
+    return np.linspace(0, span_ns, n)
+
+
+@pytest.mark.parametrize("name, code, datatype", [("offset_time", "u4", 6), ("t", "u4", 6)],
+                         ids=["livox-offset_time", "ouster-t"])
+def test_integer_offsets_of_a_200ms_scan_are_ns_after_the_stamp(tmp_path, frames, name, code, datatype):
+    # 5 Hz scans: offsets up to 2e8 ns were read as absolute seconds (det_t_s 100360000.0) and
+    # --record failed with "point times must lie within ±2.1 s"
+    path = _timed_bag(tmp_path / "b", frames[:4], name, code, datatype, lambda ns, n: _spread(n, 199_000_000))
+    got, said = _read(path, 5.0)
+    for (ns, xyz), fr in zip(frames, got):
+        valid = np.any(xyz != 0, axis=1)
+        np.testing.assert_array_equal(fr.t_ns, ns + _spread(len(xyz), 199_000_000).astype(np.uint32).astype(np.int64)[valid])
+    assert said == []
+    rec = tmp_path / "r.mcap"
+    assert main(["track", str(path), "--topic", TOPIC, "--rate-hz", "5", "--record", str(rec)]) == 0
+
+
+def test_float_offsets_are_seconds_and_float64_timestamps_absolute(tmp_path, frames):
+    ns0, xyz0 = frames[0]
+    valid = np.any(xyz0 != 0, axis=1)
+    off = _spread(len(xyz0), 99_000_000)
+    cases = {   # Velodyne time (float32 s after the stamp), Hesai timestamp (float64 s), livox_ros_driver2 (float64 ns)
+        "velodyne": ("time", "f4", 7, lambda ns, n: (off * 1e-9).astype(np.float32),
+                     ns0 + np.round((off * 1e-9).astype(np.float32).astype(np.float64) * 1e9).astype(np.int64)),
+        "hesai": ("timestamp", "f8", 8, lambda ns, n: (ns + off) * 1e-9, np.round((ns0 + off) * 1e-9 * 1e9).astype(np.int64)),
+        "livox2": ("timestamp", "f8", 8, lambda ns, n: ns + off, (ns0 + off).astype(np.int64)),
+    }
+    for case, (name, code, dt, times, want) in cases.items():
+        got, said = _read(_timed_bag(tmp_path / case, frames[:1], name, code, dt, times))
+        np.testing.assert_array_equal(got[0].t_ns, want[valid], err_msg=case)
+        assert said == [], (case, said)
+
+
+def test_point_times_on_another_clock_are_said_once_and_kept_after_the_stamp(tmp_path, frames):
+    # livox_ros_driver2-style absolute ns, 18 s ahead of header.stamp (GPS time against UTC): once
+    # passed silently, the detections 18 s off the frames
+    off = lambda n: _spread(n, 99_000_000) + 1_000_000          # noqa: E731
+    path = _timed_bag(tmp_path / "b", frames[:3], "timestamp", "f8", 8, lambda ns, n: ns + 18_000_000_000 + off(n))
+    got, said = _read(path)
+    assert len(said) == 1 and TOPIC in said[0] and "message 0" in said[0] and "+18.001 s from header.stamp" in said[0], said
+    for (ns, xyz), fr in zip(frames, got):
+        valid = np.any(xyz != 0, axis=1)
+        held = (ns + 18_000_000_000 + off(len(xyz)))[valid].astype(np.int64)   # float64 ns: to 256 ns
+        np.testing.assert_array_equal(fr.t_ns, ns + (held - held.min()))
+    rec = tmp_path / "r.mcap"
+    assert main(["track", str(path), "--topic", TOPIC, "--record", str(rec)]) == 0
+
+
+def test_point_times_no_scan_can_span_put_the_points_at_the_stamp_and_say_so(tmp_path, frames):
+    # a float32 field of ns (read as seconds by its type): a scan 99e6 s long
+    path = _timed_bag(tmp_path / "b", frames[:2], "time", "f4", 7, lambda ns, n: _spread(n, 99_000_000))
+    got, said = _read(path)
+    assert len(said) == 1 and "time (float32): seconds after header.stamp" in said[0] and "which no scan lasts" in said[0]
+    for (ns, _), fr in zip(frames, got):
+        assert (fr.t_ns == ns).all()
