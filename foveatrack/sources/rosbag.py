@@ -5,7 +5,9 @@
 The Livox definitions are registered with rosbags' typestore here (a bag that embeds its own
 definitions, as ROS 1 bags and MCAP do, is read with those).
 
-PointCloud2: any field layout with ``x``, ``y``, ``z`` (any numeric type, either byte order);
+PointCloud2: any field layout with ``x``, ``y``, ``z`` (any numeric type, either byte order: the
+``is_bigendian`` flag's, unless the float coordinates read so are mostly nonsense and read the other
+way sane, when the flag is said to be wrong and overruled);
 ``intensity`` (or ``reflectivity``) is kept as reflectivity; a per-point time is read from the first
 of ``timestamp``, ``time``, ``t``, ``offset_time``.  Its unit is not in the message; it is taken from
 the field's datatype and name, as the drivers publish them (:func:`point_times_ns`):
@@ -221,9 +223,11 @@ def _stamp_ns(msg) -> int:
     return int(st.sec) * 1_000_000_000 + int(st.nanosec)
 
 
-def pointcloud2_xyz(msg, where: str):
+def pointcloud2_xyz(msg, where: str, note=None):
     """``(xyz (N,3) float64, t (N,) as the field holds it or None, time field name or None, intensity
-    or None)`` of a PointCloud2, by its field layout."""
+    or None)`` of a PointCloud2, by its field layout and byte order (a wrong ``is_bigendian`` flag
+    is overruled, :func:`_byte_order`; ``note(key, line)`` hears it)."""
+    note = note or (lambda key, line: warn_stderr(line))
     fields = {f.name: f for f in msg.fields}
     missing = [k for k in ("x", "y", "z") if k not in fields]
     if missing:
@@ -235,9 +239,9 @@ def pointcloud2_xyz(msg, where: str):
     if n and (step <= 0 or data.size < n * step):
         raise UserError(f"{where}: PointCloud2 data holds {data.size} bytes, fewer than width*height*point_step "
                         f"= {n}*{step}")
-    order = ">" if msg.is_bigendian else "<"
+    flagged = ">" if msg.is_bigendian else "<"
 
-    def column(name):
+    def column(name, order):
         f = fields[name]
         code = _POINTFIELD.get(int(f.datatype))
         if code is None:
@@ -248,14 +252,50 @@ def pointcloud2_xyz(msg, where: str):
         rec = np.dtype({"names": [name], "formats": [dt], "offsets": [int(f.offset)], "itemsize": step})
         return np.frombuffer(data[: n * step].tobytes(), dtype=rec, count=n)[name]
 
-    xyz = np.empty((n, 3), dtype=np.float64)
-    for i, k in enumerate("xyz"):
-        xyz[:, i] = column(k)
-    tname = next((k for k in _TIME_FIELDS if k in fields), None)
-    t = column(tname) if tname else None
-    iname = next((k for k in ("intensity", "reflectivity") if k in fields), None)
-    inten = column(iname) if iname else None
+    def points(order):
+        xyz = np.empty((n, 3), dtype=np.float64)
+        for i, k in enumerate("xyz"):
+            xyz[:, i] = column(k, order)
+        return xyz
+
+    with np.errstate(all="ignore"):       # bytes that are no number (a wrong flag, damage) are judged below
+        xyz, order = points(flagged), flagged
+        if n and all(int(fields[k].datatype) in (7, 8) for k in "xyz"):
+            order = _byte_order(xyz, flagged, points, where, note)
+            if order != flagged:
+                xyz = points(order)
+        tname = next((k for k in _TIME_FIELDS if k in fields), None)
+        t = column(tname, order) if tname else None
+        iname = next((k for k in ("intensity", "reflectivity") if k in fields), None)
+        inten = column(iname, order) if iname else None
     return xyz, t, tname, inten
+
+
+def _implausible(xyz: np.ndarray) -> float:
+    """The share of a cloud's coordinates that no lidar gives: of those that are neither 0 nor NaN
+    (padding, no return), the ones infinite or off 0.1 mm .. 10 km.  A float read in the wrong byte
+    order is mostly that (denormal or huge); 0 for a cloud with none to judge."""
+    v = np.abs(xyz[~np.isnan(xyz) & (xyz != 0)])
+    return float(np.count_nonzero(~((v >= 1e-4) & (v <= 1e4)))) / v.size if v.size else 0.0
+
+
+def _byte_order(xyz: np.ndarray, flagged: str, points, where: str, note) -> str:
+    """The byte order to read a cloud's floats in: its ``is_bigendian`` flag's, unless most of its
+    coordinates are implausible read so while read the other way at most a quarter as many are (a
+    driver setting the flag wrong), said once."""
+    bad = _implausible(xyz)
+    if bad <= 0.5:
+        return flagged
+    other = "<" if flagged == ">" else ">"
+    bad_other = _implausible(points(other))
+    if bad_other * 4 >= bad:
+        return flagged
+    name = {">": "big-endian", "<": "little-endian"}
+    note("byte-order", f"{where}: is_bigendian is {flagged == '>'}, but read {name[flagged]} {bad:.0%} of its "
+                       f"coordinates (leaving out 0 and NaN) are denormal, infinite, or beyond 10 km, where read "
+                       f"{name[other]} {bad_other:.0%} are: the is_bigendian flag is taken to be wrong and the data "
+                       f"read {name[other]} (said for the first such message only)")
+    return other
 
 
 def frame_from_pointcloud2(msg, rate_hz: float, where: str, note=None):
@@ -263,11 +303,11 @@ def frame_from_pointcloud2(msg, rate_hz: float, where: str, note=None):
     warning each time)."""
     note = note or (lambda key, line: warn_stderr(line))
     stamp = _stamp_ns(msg)
-    xyz, t, tname, inten = pointcloud2_xyz(msg, where)
+    xyz, t, tname, inten = pointcloud2_xyz(msg, where, note)
     t_ns = None
     if t is not None and t.size:
         t_ns = point_times_ns(t, tname, stamp, period_ns(rate_hz), where, note)
-    refl = None if inten is None else np.clip(inten, 0, 255).astype(np.uint8)
+    refl = None if inten is None else np.clip(np.nan_to_num(inten), 0, 255).astype(np.uint8)
     return frame_from_cloud(stamp, xyz, rate_hz, t_ns, refl)
 
 

@@ -208,3 +208,40 @@ def test_point_times_no_scan_can_span_put_the_points_at_the_stamp_and_say_so(tmp
     assert len(said) == 1 and "time (float32): seconds after header.stamp" in said[0] and "which no scan lasts" in said[0]
     for (ns, _), fr in zip(frames, got):
         assert (fr.t_ns == ns).all()
+
+
+@pytest.mark.parametrize("data_order", ["<", ">"], ids=["little-endian-data", "big-endian-data"])
+def test_a_wrong_is_bigendian_flag_is_said_and_overruled(tmp_path, frames, reference_run, data_order):
+    # little-endian floats flagged is_bigendian (a driver's bug) were read as denormals: a "drone"
+    # tracked at 1e-38 m and numpy's RuntimeWarning on stderr.  Big-endian data flagged right read
+    # as before, unsaid; flagged wrong, each is read in the order its values make sense in.
+    import warnings
+
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from foveatrack.sources.rosbag import BagSource
+
+    store = bw._stores(False)
+    path = tmp_path / "b"
+    for flag in (data_order == "<", data_order == ">"):      # the wrong flag, then the right one
+        if path.exists():
+            shutil.rmtree(path)
+        with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+            c = w.add_connection(TOPIC, "sensor_msgs/msg/PointCloud2", typestore=store)
+            for ns, xyz in frames:
+                msg = bw.pointcloud2(store, ns, xyz, False, float64=False)
+                rec = np.frombuffer(msg.data.tobytes(), np.dtype({"names": ["x", "y", "z", "intensity"],
+                                    "formats": ["<f4"] * 4, "offsets": [0, 4, 8, 12], "itemsize": msg.point_step}))
+                if data_order == ">":
+                    rec = rec.astype(rec.dtype.newbyteorder(">"))
+                msg.data, msg.is_bigendian = np.frombuffer(rec.tobytes(), np.uint8), flag
+                w.write(c, ns + bw.PERIOD_NS, store.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2"))
+        said = []
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            run = list(BagSource(path, TOPIC, warn=said.append))
+        _same(run, track_source(open_source(path, TOPIC)), reference_run)
+        wrong = flag != (data_order == ">")
+        assert len(said) == wrong, said
+        if wrong:
+            assert f"is_bigendian is {flag}" in said[0] and "taken to be wrong" in said[0] and TOPIC in said[0]
