@@ -24,7 +24,9 @@ they are read from the scan's first point on, placed at the stamp.  Either is sa
 CustomMsg: point time = ``timebase + offset_time`` [ns], checked the same way.
 
 The frame of a message starts at its ``header.stamp`` (:mod:`foveatrack.sources.stamps`); its
-arrival is the bag's log time.
+arrival is the bag's log time.  Messages are read in the bag's order: stamps that go back or repeat
+are counted and said once at the end; a topic whose first messages all share one stamp (0: never
+set) is refused.
 """
 
 from __future__ import annotations
@@ -134,6 +136,7 @@ class BagSource:
             conns = [c for c in reader.connections if c.topic == self.topic]
             msgs = reader.messages(connections=conns)
             note = _once(self.warn)
+            stamps = _StampOrder(self.path, self.topic, self.n_messages)
             k = 0
             while True:
                 try:
@@ -149,6 +152,7 @@ class BagSource:
                 except Exception as exc:
                     raise UserError(f"{self.path}: topic {self.topic}: message {k} is not a readable "
                                     f"{conn.msgtype} ({_one_line(exc)})") from None
+                stamps.see(k, _stamp_ns(msg))
                 where = f"{self.path}: topic {self.topic} ({conn.msgtype}) message {k}"
                 if conn.msgtype == POINTCLOUD2:
                     fr = frame_from_pointcloud2(msg, self.rate_hz, where, note)
@@ -159,6 +163,7 @@ class BagSource:
                     fr = type(fr)(fr.t_start_s, fr.t_end_s, apply(R, t, fr.xyz), fr.t_ns, fr.reflectivity)
                 k += 1
                 yield StampedFrame(log_ns * 1e-9, fr)
+            stamps.end(k, self.warn)
         finally:
             reader.close()
 
@@ -181,6 +186,48 @@ class BagSource:
             raise UserError(f"{self.path}: the tf topics ({', '.join(self._tf_topics)}) are not readable "
                             f"({_one_line(exc)})") from None
         return buf
+
+
+class _StampOrder:
+    """A topic's header stamps, which are its frames' times: the first ``SAME_LIMIT`` messages (or all,
+    if fewer) at one stamp are refused (a publisher that does not stamp its clouds: every frame at
+    one time), a stamp not after the message before's is counted and said once at the end (the
+    messages are read in the bag's order)."""
+
+    SAME_LIMIT = 10
+
+    def __init__(self, path: Path, topic: str, n_messages: int):
+        self.path, self.topic, self.n_messages = path, topic, n_messages
+        self.first = self.prev = None
+        self.all_same = True
+        self.n_back, self.first_back = 0, None
+
+    def see(self, k: int, stamp: int) -> None:
+        if k == 0:
+            self.first = stamp
+        else:
+            self.all_same = self.all_same and stamp == self.first
+            if stamp <= self.prev:
+                self.n_back += 1
+                self.first_back = self.first_back or (k, stamp, self.prev)
+        self.prev = stamp
+        if k >= 1 and self.all_same and k + 1 == min(self.n_messages, self.SAME_LIMIT):
+            self._refuse(k + 1)
+
+    def end(self, n: int, warn) -> None:
+        if n >= 2 and self.all_same:
+            self._refuse(n)
+        if self.n_back:
+            k, stamp, prev = self.first_back
+            warn(f"{self.path}: topic {self.topic}: {self.n_back} of its {n} messages have a header.stamp not "
+                 f"after the message before's (the first: message {k} at {stamp * 1e-9:.6f} s, after "
+                 f"{prev * 1e-9:.6f} s); they were read in the bag's order")
+
+    def _refuse(self, n: int):
+        unset = " (0: never set)" if self.first == 0 else ""
+        raise UserError(f"{self.path}: topic {self.topic}: the first {n} messages all have header.stamp "
+                        f"{self.first * 1e-9:.6f} s{unset}; a frame's time is its header.stamp, so these frames "
+                        f"cannot be told apart in time (the publisher does not stamp its clouds)")
 
 
 def describe_topics(topics: dict[str, tuple[str, int]]) -> str:

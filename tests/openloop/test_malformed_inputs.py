@@ -202,3 +202,38 @@ def test_an_npy_cut_short_gives_its_whole_points_and_says_so(tmp_path, capsys):
     assert len((tmp_path / "t.csv").read_text().splitlines()) == 4
     cut.write_bytes(data[:60])                              # the header cut: not an array at all
     _fails([tmp_path], capsys, "1706255621.100000.npy", "not a readable .npy")
+
+
+@pytest.mark.parametrize("n, stamp", [(12, 0), (3, 1706255621_614239000)], ids=["12-unset", "3-all-one"])
+def test_a_bag_whose_clouds_all_share_one_stamp_is_refused(tmp_path, n, stamp, capsys):
+    # every header.stamp 0 (a converter that never set it): "tracked 118/120", every frame at t=0
+    xyz = bw.npy_frames(FIXTURE)[0][1]
+    bag = bw.write_bag(tmp_path / "b.bag", [(stamp, xyz)] * n, "pointcloud2", ros1=True)
+    err = _fails([bag, "--topic", TOPIC, "--csv", tmp_path / "t.csv"], capsys, "b.bag", TOPIC,
+                 f"the first {min(n, 10)} messages all have header.stamp {stamp * 1e-9:.6f} s")
+    assert ("never set" in err) == (stamp == 0)
+    assert not (tmp_path / "t.csv").exists()
+
+
+def test_header_stamps_that_go_back_or_repeat_are_counted_and_said(tmp_path, frames):
+    # a swapped pair and a repeated stamp were read in the bag's order without a word
+    from foveatrack.sources.rosbag import BagSource
+
+    from rosbags.rosbag1 import Writer
+
+    ns = [s for s, _ in frames]
+    stamps = [ns[0], ns[2], ns[1], ns[3], ns[3]]
+    store, bag = bw._stores(True), tmp_path / "b.bag"
+    with Writer(bag) as w:                    # logged in order, the stamps as they are
+        c = w.add_connection(TOPIC, "sensor_msgs/msg/PointCloud2", typestore=store)
+        for i, s in enumerate(stamps):
+            msg = bw.pointcloud2(store, s, frames[0][1], True)
+            w.write(c, ns[0] + (i + 1) * bw.PERIOD_NS, store.serialize_ros1(msg, "sensor_msgs/msg/PointCloud2"))
+    said = []
+    got = [fr.t_start_s for _, fr in BagSource(bag, TOPIC, warn=said.append)]
+    assert got == [s * 1e-9 for s in stamps]
+    assert len(said) == 1 and "2 of its 5 messages have a header.stamp not after the message before's" in said[0]
+    assert f"message 2 at {ns[1] * 1e-9:.6f} s, after {ns[2] * 1e-9:.6f} s" in said[0] and TOPIC in said[0], said
+    said.clear()
+    list(BagSource(bw.write_bag(tmp_path / "ok.bag", frames, "pointcloud2", ros1=True), TOPIC, warn=said.append))
+    assert said == []
