@@ -194,6 +194,25 @@ them (Avia) or on the scene's objects (Mid-360: posts, foliage in the wind; conf
   estimate is the team's, not truth).  Frames without an estimate (12 of 88) are not counted.
 - The tests run on 18 frames cut from sequence 1 (`tests/openloop/mmaud_seq1/`, source and licence in
   its README), so the suite needs no network.
+
+## How a recording's times are read
+
+- A folder's file names are times since 1970: `<seconds>.<fraction>` (`1706255621.614239.npy`), or
+  digits only, in the unit their number of digits gives (a time since 1970 has 10 digits in
+  seconds, 13 in ms, 16 in µs, 19 in ns: up to 10 digits are seconds, 11-13 ms, 14-16 µs,
+  17-19 ns; `1717243800005000.npy` is µs).  A folder whose names are in two units is refused,
+  naming a file of each.
+- A PointCloud2's per-point time (the first of the fields `timestamp`, `time`, `t`, `offset_time`) is
+  read in the unit its datatype and name give, as the drivers publish them: an integer field is ns
+  after `header.stamp` (Livox `offset_time`, Ouster `t`), a float64 `timestamp` an absolute time in
+  ns (livox_ros_driver2) or seconds (Hesai; told apart by whether its values reach 1e15), any other
+  float field seconds after `header.stamp` (Velodyne `time`).  A scan whose times spread over more
+  than a second (or a frame period) is put at its stamp; one whose times lie further than that
+  from its stamp (points on another clock: GPS time is 18 s ahead of UTC) keeps its points' times
+  after its first point, put at the stamp.  Either is said once, naming the topic and message.
+- A bag's frames are at their `header.stamp`s, read in the bag's order: stamps that go back or
+  repeat are counted and said once at the end (with the first such message); a topic whose first
+  10 messages (or all, if fewer) share one stamp, as when a publisher never sets it (0), is refused.
 """
 
 
