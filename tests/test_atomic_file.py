@@ -1,0 +1,65 @@
+"""foveatrack.atomic_file: an output appears under its name only when whole, and nothing is left of one
+cut short (a Ctrl-C during an export left a partial CSV and a corrupt NPZ under their final names)."""
+
+import os
+import stat
+
+import pytest
+
+from foveatrack.atomic_file import written_whole
+
+
+def _listing(d):
+    return sorted(p.name for p in d.iterdir())
+
+
+def test_the_file_appears_only_when_the_block_ends(tmp_path):
+    out = tmp_path / "a.csv"
+    with written_whole(out) as tmp:
+        assert tmp.parent == tmp_path and tmp.name.startswith(".a.csv.") and tmp.name.endswith(".tmp")
+        tmp.write_text("x,y\n")
+        assert not out.exists()
+    assert out.read_text() == "x,y\n" and _listing(tmp_path) == ["a.csv"]
+
+
+@pytest.mark.parametrize("exc", [KeyboardInterrupt, OSError, ValueError])
+def test_an_interrupted_write_leaves_neither_the_file_nor_a_temporary(tmp_path, exc):
+    out = tmp_path / "a.csv"
+    with pytest.raises(exc):
+        with written_whole(out) as tmp:
+            tmp.write_text("x,y\n1,2\n")
+            raise exc()
+    assert _listing(tmp_path) == []
+
+
+def test_a_file_it_replaces_is_whole_until_then_and_keeps_its_mode(tmp_path):
+    out = tmp_path / "a.csv"
+    out.write_text("old\n")
+    os.chmod(out, 0o640)
+    with pytest.raises(KeyboardInterrupt):
+        with written_whole(out) as tmp:
+            tmp.write_text("half")
+            raise KeyboardInterrupt
+    assert out.read_text() == "old\n" and _listing(tmp_path) == ["a.csv"]
+    with written_whole(out) as tmp:
+        tmp.write_text("new\n")
+    assert out.read_text() == "new\n" and stat.S_IMODE(out.stat().st_mode) == 0o640
+
+
+def test_a_new_file_gets_the_mode_open_gives_it(tmp_path):
+    (tmp_path / "plain").write_text("")
+    with written_whole(tmp_path / "a.csv") as tmp:
+        tmp.write_text("")
+    assert (tmp_path / "a.csv").stat().st_mode == (tmp_path / "plain").stat().st_mode
+
+
+def test_a_symlink_is_written_through(tmp_path):
+    (tmp_path / "real").mkdir()
+    target = tmp_path / "real" / "a.csv"
+    target.write_text("old\n")
+    link = tmp_path / "a.csv"
+    link.symlink_to(target)
+    with written_whole(link) as tmp:
+        assert tmp.parent == tmp_path / "real"
+        tmp.write_text("new\n")
+    assert link.is_symlink() and target.read_text() == "new\n"
