@@ -10,6 +10,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from foveatrack.atomic_file import written_whole
 from foveatrack.errors import UserError
 from foveatrack.metrics import flatten
 from foveatrack.recording.format import COMMANDS, DETECTIONS, HEAD, IMU, POINTS, TRACKS, TRUTH, TRUTH_OBJECTS
@@ -27,12 +28,13 @@ def out_kind(out_path: Path) -> str:
 
 def write_columns(out_path: Path, cols: dict, nan_as_empty: bool = False) -> None:
     """Equal-length columns as NPZ (one array each) or CSV (a header row, then a row per index), by
-    the file name; ``nan_as_empty``: a NaN is an empty CSV cell."""
+    the file name; ``nan_as_empty``: a NaN is an empty CSV cell.  The file appears under its name
+    only when it is whole (:func:`~foveatrack.atomic_file.written_whole`)."""
     if out_kind(out_path) == "npz":
-        np.savez_compressed(out_path, **cols)
+        _write_npz(out_path, cols)
         return
     arrays = [np.asarray(c) for c in cols.values()]
-    with open(out_path, "w", newline="") as fh:
+    with written_whole(out_path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(cols.keys())
         if len(arrays) > 1 and all(a.ndim == 1 and a.dtype.kind in "biuf" for a in arrays):
@@ -40,6 +42,13 @@ def write_columns(out_path: Path, cols: dict, nan_as_empty: bool = False) -> Non
             return
         for row in zip(*(a.tolist() for a in arrays)):
             w.writerow(["" if nan_as_empty and isinstance(v, float) and math.isnan(v) else v for v in row])
+
+
+def _write_npz(out_path: Path, arrays: dict) -> None:
+    """``arrays`` as a compressed NPZ, under ``out_path`` only when whole (given a file, not a name:
+    numpy would add ".npz" to the temporary's)."""
+    with written_whole(out_path) as tmp, open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
 
 
 _CSV_BLOCK_ROWS = 65536
@@ -130,7 +139,7 @@ def export_trajectory(
         # a list field is its columns k[0], k[1], ...; where it was null it also came as k, a column
         # that was blank in every row (xyz_m, world_xyz_m)
         keys = ["t_ns"] + [k for k in keys if k != "t_ns" and f"{k}[0]" not in keys]
-        with open(out_path, "w", newline="") as fh:
+        with written_whole(out_path) as tmp, open(tmp, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["channel", *keys])
             for ch, r in rows:
@@ -150,7 +159,7 @@ def export_trajectory(
                     arrays[f"{ch}.{k}"] = np.array([np.nan if v is None else v for v in vals], dtype=float)
                 else:
                     arrays[f"{ch}.{k}"] = np.array(["" if v is None else str(v) for v in vals])
-        np.savez_compressed(out_path, **arrays)
+        _write_npz(out_path, arrays)
     return len(rows)
 
 
