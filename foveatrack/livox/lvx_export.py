@@ -7,6 +7,7 @@ data packets of the chosen data type (empty slots as "no return", as a real unit
 the packets go into LVX frames of ``frame_duration_ms`` by packet time.  Reading the file back gives
 the recorded points to the wire resolution (1 mm; 0.01 deg and 1 mm for the spherical types) at the
 recorded times (to 1 ns: the packet timestamp and the in-packet offset are rounded separately).
+The file appears under its name only when it is whole (:mod:`foveatrack.atomic_file`).
 
 The multi-return types (4, 5 dual; 7, 8 triple) carry each recorded point as the first return of its
 slot and leave the other returns empty: recordings hold one return per slot.  Two recorded points in
@@ -23,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from foveatrack.atomic_file import written_whole
 from foveatrack.errors import UserError
 from foveatrack.livox import protocol as P
 from foveatrack.livox.lvx import LvxDevice, write_lvx
@@ -117,7 +119,8 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
     devices = [LvxDevice(f"VLIVOX{name.upper()[:6]}{h:03d}"[:15], "", h, dev_type, n_heads > 1, 0.0, 0.0, yaw, 0.0, 0.0, 0.0)
                for h, yaw in enumerate(yaws)]
     if not len(t):
-        write_lvx(out_path, [], devices, frame_duration_ms)
+        with written_whole(out_path) as tmp:
+            write_lvx(tmp, [], devices, frame_duration_ms)
         return LvxExport(Path(out_path), dev_type, dt, n_heads, 0, 0, 0, 0, problem=problem)
     t_origin = int(t.min())
     slot = np.round((t - t_origin) * (rate / 1e9)).astype(np.int64)
@@ -171,6 +174,7 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
         prev = k
         fr = sorted(packets[k], key=lambda x: (x[0], x[1]))
         lvx_frames.append([(h, pk) for _, h, pk in fr])
-    write_lvx(out_path, lvx_frames, devices, frame_duration_ms)
+    with written_whole(out_path) as tmp:          # under its name only when whole (an export cut by Ctrl-C)
+        write_lvx(tmp, lvx_frames, devices, frame_duration_ms)
     return LvxExport(Path(out_path), dev_type, dt, n_heads, int(len(slot)), n_packets, len(lvx_frames), collisions,
                      problem=problem, time_gaps=gaps)

@@ -236,3 +236,61 @@ def test_mid100_exports_three_devices(tmp_path):
     assert np.abs(b.t_ns[order] - t).max() <= 1
     slot = np.round((t - t.min()) * 300_000 / 1e9).astype(int)
     np.testing.assert_array_equal(dev[order], slot % 3)   # point k from head k mod 3
+
+
+@pytest.mark.parametrize("points", [True, False], ids=["points", "no-points"])
+def test_an_lvx_cut_short_leaves_nothing_under_its_name_and_is_written_as_before(tmp_path, monkeypatch, points):
+    """A Ctrl-C halfway through the packets leaves neither the .lvx nor a temporary (a user's partial
+    export then looked finished: the next one asked for --overwrite); a whole one has the bytes
+    write_lvx writes straight to the name."""
+    import contextlib
+
+    from cut_short import cut_short_open
+
+    from foveatrack.livox import lvx as lvx_module
+    from foveatrack.livox import lvx_export
+
+    rec = tmp_path / "run.mcap"
+    if points:
+        make_recording(rec, preset="mid40", rate=100_000, n_frames=3)
+    else:
+        with RecordingWriter(rec, {"point_rate_hz": 100_000}) as w:
+            w.write_detection(1, 0, False)
+    whole = tmp_path / "whole.lvx"
+    export_lvx(rec, whole)
+    with monkeypatch.context() as m:
+        m.setattr(lvx_export, "written_whole", contextlib.contextmanager(lambda p: (yield p)))
+        export_lvx(rec, tmp_path / "straight.lvx")
+    assert whole.read_bytes() == (tmp_path / "straight.lvx").read_bytes()
+    (tmp_path / "straight.lvx").unlink()
+    with monkeypatch.context() as m:
+        m.setattr(lvx_module, "open", cut_short_open(whole.stat().st_size // 2), raising=False)
+        with pytest.raises(KeyboardInterrupt):
+            export_lvx(rec, tmp_path / "cut.lvx")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.mcap", "whole.lvx"]
+
+
+def test_an_export_command_cut_short_can_be_run_again(tmp_path, monkeypatch, capsys):
+    """The user's case: ``export REC --lvx a.lvx --csv a.csv`` interrupted, then run again -- not refused
+    for files that exist, as a partial one was; what it writes is the uninterrupted export's."""
+    from cut_short import cut_short_open
+
+    from foveatrack.livox import lvx as lvx_module
+    from foveatrack.recording import export
+
+    rec = tmp_path / "run.mcap"
+    make_recording(rec, preset="mid40", rate=100_000, n_frames=3)
+    ref = tmp_path / "ref"
+    ref.mkdir()
+    assert main(["export", str(rec), "--lvx", str(ref / "a.lvx"), "--csv", str(ref / "a.csv")]) == 0
+    argv = ["export", str(rec), "--lvx", str(tmp_path / "a.lvx"), "--csv", str(tmp_path / "a.csv")]
+    # cut in the LVX: nothing is written; cut in the CSV, after the whole LVX: the LVX is kept
+    for module, name, left in ((lvx_module, "a.lvx", []), (export, "a.csv", ["a.lvx"])):
+        with monkeypatch.context() as m:
+            m.setattr(module, "open", cut_short_open((ref / name).stat().st_size // 2), raising=False)
+            assert main(argv) == 130
+        assert "interrupted" in capsys.readouterr().err
+        assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["ref", "run.mcap", *left])
+    assert main(["export", str(rec), "--csv", str(tmp_path / "a.csv")]) == 0
+    for name in ("a.lvx", "a.csv"):
+        assert (tmp_path / name).read_bytes() == (ref / name).read_bytes()
