@@ -5,7 +5,7 @@ imported it from the daemon package).  Example: ``examples/daemon-virtual.toml``
 
 Tables::
 
-    [lidar]      sensor_ip, host_ip (both required), cmd_port, data_port, broadcast_port (0 = any; false = no
+    [lidar]      sensor_ip, host_ip (both required), cmd_port, data_port, broadcast_port (each its own; 0 = any; false = no
                  discovery, then sensor_cmd_port), sensor_cmd_port, point_rate_hz, broadcast_code
     [head]       port (device path or pyserial URL), baud (a standard rate, gimbal.client.STANDARD_BAUDS,
                  as a scene's [gimbal] baud), address, protocol ("D" | "P"),
@@ -311,7 +311,23 @@ def _lidar(t: Mapping, w: str) -> LidarConfig:
     cfg = LidarConfig(**kw)
     if cfg.broadcast_port is None and cfg.sensor_cmd_port is None:
         raise UserError(f"{w}: broadcast_port = false (no discovery) needs sensor_cmd_port (65000 on a Livox)")
+    _distinct_ports(cfg, t, w)
     return cfg
+
+
+def _distinct_ports(cfg: LidarConfig, t: Mapping, w: str) -> None:
+    """The host's own ports are bound one socket each: a repeated one failed at start as 'Address
+    already in use' blamed on another process.  0 (any free port) may repeat; false is no port."""
+    seen: dict[int, str] = {}
+    for k in ("cmd_port", "data_port", "broadcast_port"):
+        v = getattr(cfg, k)
+        if not v:
+            continue
+        if v in seen:
+            keys = " and ".join(f"{key}{'' if key in t else ' (its default)'}" for key in (seen[v], k))
+            raise UserError(f"{w}: {keys} are both {v}; each of cmd_port, data_port and broadcast_port "
+                            "needs a port of its own (0 = any free port)")
+        seen[v] = k
 
 
 def _head(t: Mapping, w: str) -> HeadConfig:

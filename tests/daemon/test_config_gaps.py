@@ -85,6 +85,28 @@ def test_check_opens_the_head_port_and_binds_the_lidar_sockets(tmp_path):
     assert r.returncode == 0 and "head port 'loop://' opened" in r.stderr and "lidar sockets bound" in r.stderr
 
 
+@pytest.mark.parametrize("ports, keys, value", [
+    ("cmd_port = 56101\ndata_port = 56101\nbroadcast_port = false", "cmd_port and data_port", 56101),
+    ("cmd_port = 0\ndata_port = 56100\nbroadcast_port = 56100", "data_port and broadcast_port", 56100),
+    ("cmd_port = 55000\ndata_port = 0\nbroadcast_port = 55000", "cmd_port and broadcast_port", 55000),
+    ("data_port = 56001\nbroadcast_port = false", "cmd_port (its default) and data_port", 56001),
+])
+def test_a_lidar_port_repeated_in_the_table_is_refused_at_load_naming_both_keys(tmp_path, ports, keys, value):
+    """A user's data_port equal to its cmd_port failed at bind as 'Address already in use' on
+    cmd_port, and one equal to broadcast_port blamed 'another process' (a second daemon?)."""
+    p = _write(tmp_path, lidar='sensor_ip = "127.0.0.1"\nhost_ip = "127.0.0.1"\nsensor_cmd_port = 65000\n' + ports)
+    with pytest.raises(UserError) as exc:
+        load_config(p)
+    msg = str(exc.value)
+    assert str(p) in msg and f"[lidar]: {keys} are both {value}" in msg and "a port of its own" in msg, msg
+
+
+def test_lidar_ports_of_0_may_repeat_each_is_any_free_port(tmp_path):
+    p = _write(tmp_path, lidar='sensor_ip = "127.0.0.1"\nhost_ip = "127.0.0.1"\ncmd_port = 0\ndata_port = 0\n'
+                               'broadcast_port = 0')
+    assert (load_config(p).lidar.cmd_port, load_config(p).lidar.data_port) == (0, 0)
+
+
 @pytest.mark.slow
 def test_a_run_without_lidar_data_exits_non_zero_and_says_so(tmp_path):
     p = _write(tmp_path)
