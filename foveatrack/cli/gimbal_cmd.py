@@ -3,7 +3,8 @@
 * ``foveatrack gimbal serve``: serve a virtual head on a pseudo-terminal.  The first line on stdout
   is the device path; open it with any Pelco-D/P controller (pyserial:
   ``serial.serial_for_url(path, 9600)``).  ``--truth FILE`` receives the true state as JSON lines.
-  Stops cleanly on SIGINT / SIGTERM (exit status 0).
+  Stops cleanly on SIGINT / SIGTERM (exit status 0).  ``--link PATH`` is held by ``PATH.lock``
+  while served: a second server on PATH is refused, a link left by a killed one is replaced.
 * ``foveatrack gimbal curves --plot F.png``: speed vs speed byte for two (or more) unit seeds, the
   reason the tracker must calibrate (paper, Appendix D, "Gimbal angle calibration").
 """
@@ -33,7 +34,8 @@ def register(subparsers) -> None:
     s.add_argument("--family", default="pts-303", help="head family: pts-303 or heavy-worm")
     s.add_argument("--truth", metavar="FILE", help="write the true state as JSON lines here")
     s.add_argument("--truth-period-s", type=float, default=0.02, help="truth line period [s]")
-    s.add_argument("--link", metavar="PATH", help="also make a symlink PATH to the pty")
+    s.add_argument("--link", metavar="PATH", help="also make a symlink PATH to the pty (PATH.lock marks it "
+                   "while served: a second server on PATH is refused)")
     s.add_argument("--pan0-deg", type=float, default=0.0, help="the head's pan at power-on [deg] (default 0)")
     s.add_argument("--tilt0-deg", type=float, default=0.0, help="the head's tilt at power-on [deg] (default 0)")
     s.set_defaults(func=cmd_serve)
@@ -81,7 +83,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         power_cuts["n"] += 1
 
     old[signal.SIGUSR1] = signal.signal(signal.SIGUSR1, _on_power_cut)
-    truth = None
+    truth = claim = None
     try:
         if args.truth:
             try:
@@ -90,6 +92,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
                 raise UserError(f"--truth {args.truth}: cannot write ({exc.strerror})") from exc
         if args.link:
             _check_link_path(args.link)
+            claim = _claim_link(args.link)
         server = VirtualHeadServer(head, time.monotonic, baud=args.baud, truth=truth,
                                    truth_period_s=args.truth_period_s, link_path=args.link)
         try:
@@ -112,6 +115,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
         finally:
             server.close()
     finally:
+        if claim is not None:
+            _release_link(args.link, claim)
         if truth is not None:
             truth.close()
         for sig, handler in old.items():
@@ -165,9 +170,6 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
-
 
 def _check_link_path(link: str) -> None:
     """--link names a symlink we create (or replace, if it is one): say plainly what is wrong with it.
@@ -183,3 +185,55 @@ def _check_link_path(link: str) -> None:
     if os.path.lexists(link) and not os.path.islink(link):
         raise UserError(f"--link {link}: a file that is not a symlink is there already; "
                         "name another path (the link is replaced only if it is one)")
+
+
+def _claim_link(link: str) -> int:
+    """Hold ``LINK.lock`` (an exclusive flock) while this server serves --link LINK; return its fd.
+
+    A second server on the same path took over the live head's link and, on exit, removed it.  The
+    kernel drops the lock when its holder dies however it dies, so a link left by a killed server (its
+    pty gone, or its number since reused) is replaced as before; only a live server's is refused.
+    """
+    import fcntl
+    import os
+
+    lock = f"{link}.lock"
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        except OSError as exc:
+            raise UserError(f"--link {link}: cannot open its lock file {lock} ({exc.strerror})") from exc
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            pid = os.read(fd, 32).decode("ascii", "replace").strip()
+            os.close(fd)
+            who = f"process {pid}" if pid.isdigit() else "another process"
+            target = f" (-> {os.readlink(link)})" if os.path.islink(link) else ""
+            raise UserError(f"--link {link}{target} belongs to a virtual head that {who} still serves; stop "
+                            f"that server first ({'kill ' + pid if pid.isdigit() else 'Ctrl-C'}), or name "
+                            "another path") from None
+        try:
+            ours = os.path.samestat(os.fstat(fd), os.stat(lock))
+        except FileNotFoundError:
+            ours = False
+        if ours:             # not a file its last holder removed as we opened it
+            os.ftruncate(fd, 0)
+            os.write(fd, f"{os.getpid()}\n".encode())
+            return fd
+        os.close(fd)
+
+
+def _release_link(link: str, fd: int) -> None:
+    """Remove ``LINK.lock`` while still holding it (the file is ours), then let it go."""
+    import os
+
+    try:
+        os.unlink(f"{link}.lock")
+    except OSError:
+        pass
+    os.close(fd)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

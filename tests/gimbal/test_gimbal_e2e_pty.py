@@ -195,6 +195,83 @@ def test_missing_port_and_loopback_never_raise():
     assert loop.stats.query_timeouts == 1 and loop.stats.bad_replies == 0
 
 
+def _serve_link(link, *extra):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    return subprocess.Popen(_serve_cmd() + ["--link", str(link), *extra], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+
+
+def _stop(*procs):
+    for p in procs:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
+def test_a_second_server_on_a_live_link_is_refused_and_the_first_keeps_its_link(tmp_path):
+    """A user's second 'gimbal serve --link /tmp/x' moved the link to its own pty without a word, and
+    its exit removed it: the first head, still serving, had no link."""
+    link = tmp_path / "tty"
+    first = _serve_link(link)
+    second = None
+    try:
+        assert _readline(first.stdout) == str(link)
+        pty = os.readlink(link)
+        second = _serve_link(link)
+        try:
+            code = second.wait(timeout=20)
+        except subprocess.TimeoutExpired:       # it took the link: let it exit as a user would
+            second.send_signal(signal.SIGINT)
+            code = second.wait(timeout=10)
+        err = second.stderr.read()
+        assert code == 2, (code, err)
+        assert f"--link {link} (-> {pty})" in err and f"process {first.pid} still serves" in err, err
+        assert f"kill {first.pid}" in err and "another path" in err, err
+        assert os.readlink(link) == pty and first.poll() is None and second.stdout.read() == ""
+        first.send_signal(signal.SIGINT)
+        assert first.wait(timeout=10) == 0
+        assert not os.path.lexists(link) and not os.path.lexists(f"{link}.lock")
+    finally:
+        _stop(first, *([second] if second else []))
+
+
+def test_a_link_left_by_a_killed_server_is_taken_by_the_next(tmp_path):
+    link = tmp_path / "tty"
+    first = _serve_link(link)
+    second = None
+    try:
+        assert _readline(first.stdout) == str(link)
+        first.kill()                           # no clean exit: the link and the lock file stay
+        first.wait(5)
+        assert os.path.islink(link) and os.path.exists(f"{link}.lock")
+        second = _serve_link(link)
+        assert _readline(second.stdout) == str(link) and os.path.exists(os.readlink(link))
+        with open(f"{link}.lock") as f:
+            assert f.read().strip() == str(second.pid)
+        second.send_signal(signal.SIGINT)
+        assert second.wait(timeout=10) == 0
+        assert not os.path.lexists(link) and not os.path.lexists(f"{link}.lock")
+    finally:
+        _stop(first, *([second] if second else []))
+
+
+def test_a_server_removes_the_link_on_exit_only_while_it_points_to_its_own_pty(tmp_path):
+    link = tmp_path / "tty"
+    a = VirtualHeadServer(PTS303H(), time.monotonic, link_path=str(link))
+    b = VirtualHeadServer(PTS303H(), time.monotonic, link_path=str(link))
+    a.open()
+    try:
+        b.open()                               # in one process nothing refuses it: the link is b's now
+        try:
+            a.close()
+            assert os.readlink(link) == b.path
+        finally:
+            b.close()
+        assert not os.path.lexists(link)
+    finally:
+        a.close()
+
+
 def test_sigint_stops_the_server_cleanly(tmp_path):
     truth = tmp_path / "t.jsonl"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
