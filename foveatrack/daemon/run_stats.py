@@ -59,25 +59,30 @@ class RunStats:
             out.append(f"stopped by a signal {self.signal_after_s:.1f} s after its start, before any lidar data "
                        f"arrived (a Livox announces itself once a second): no lidar fault to report")
         elif rx is not None and rx.last_packet_mono is None:
-            L = self.cfg.lidar
-            hp = self.host_ports
-            ports = f"data port {hp['data']}, command port {hp['cmd']}" + (
-                f", broadcasts on port {hp['broadcast']}" if hp["broadcast"] is not None else "")
-            msg = f"no lidar data arrived from [lidar] sensor_ip {L.sensor_ip} ({ports})"
-            foreign = sorted(self.client.foreign_addresses)
-            if foreign:
-                msg += (f"; {rx.counters.get('foreign_source', 0)} datagrams from {', '.join(foreign)} were dropped: "
-                        "is sensor_ip the lidar's address?")
-            else:
-                msg += (f"; nothing arrived at all: is the lidar on and on this network, and host_ip {L.host_ip} "
-                        "this host's address on it?")
-            out.append(msg)
+            out.append(self.no_lidar_data_text())
         failed = self.counters.get("commands_failed", 0)
         if failed:
             total = failed + self.counters.get("commands_written", 0)
             out.append(f"{failed} of {total} head commands were not written to [head] port {self.cfg.head.port!r} "
                        "(see head_* counters in the log)")
         return out
+
+    def no_lidar_data_text(self, so_far: str = "") -> str:
+        """Why no lidar data arrived, in words (the end-of-run problem; while it runs, the watchdog's
+        note with ``so_far``, e.g. " in 10 s so far"): the ports listened on, and the datagrams
+        dropped from another address, or that nothing arrived at all."""
+        rx = self.rx
+        L = self.cfg.lidar
+        hp = self.host_ports
+        ports = f"data port {hp['data']}, command port {hp['cmd']}" + (
+            f", broadcasts on port {hp['broadcast']}" if hp["broadcast"] is not None else "")
+        msg = f"no lidar data arrived from [lidar] sensor_ip {L.sensor_ip}{so_far} ({ports})"
+        foreign = sorted(self.client.foreign_addresses)
+        if foreign:
+            return msg + (f"; {rx.counters.get('foreign_source', 0)} datagrams from {', '.join(foreign)} were "
+                          "dropped: is sensor_ip the lidar's address?")
+        return msg + (f"; nothing arrived at all: is the lidar on and on this network, and host_ip {L.host_ip} "
+                      "this host's address on it?")
 
     @property
     def no_lidar_data(self) -> bool:

@@ -73,6 +73,14 @@ class StatusLine:
             self.stream.flush()
             self._shown = True
 
+    def note(self, text: str) -> None:
+        """A line of its own, on a terminal or not (a daemon under systemd or with stderr in a file has
+        no status line, and heard of a silent lidar only at its exit): above the status line, which
+        the next :meth:`show` draws again."""
+        self.stream.write(("\r\x1b[K" if self.enabled and self._shown else "") + text + "\n")
+        self.stream.flush()
+        self._shown = False
+
     def done(self) -> None:
         if self.enabled and self._shown:
             self.stream.write("\n")

@@ -93,6 +93,10 @@ def test_fault1_a_restarted_lidar_is_tracked_again(tmp_path):
     finally:
         stop_all(procs)
     stats = event(log, "stop")["stats"]
+    # said on stderr as it happened (no status line here: stderr is a file)
+    err = (tmp_path / "d.err").read_text()
+    assert "WARNING: no lidar packet for" in err and "the head is stopped until the lidar comes back" in err, err
+    assert "the lidar is back after" in err, err
     jump = event(log, "lidar_clock_jump")
     assert jump is not None and jump["new_t_s"] < jump["last_t_s"], jump      # the clock went back
     assert stats["lidar_clock_jumps"] == 1 and stats["clock_epochs"] == 1

@@ -114,3 +114,44 @@ def test_the_recording_path_is_printed_resolved(tmp_path, monkeypatch, capsys):
     printed = err.split("; recording ", 1)[1].split()[0]
     assert Path(printed).is_absolute() and ".." not in Path(printed).parts, err
     assert Path(printed).parent == (tmp_path / "out" / "runs").resolve() and Path(printed).is_file()
+
+
+def test_a_silent_lidar_is_said_on_stderr_while_it_runs_not_only_at_its_end(tmp_path, capsys):
+    # before: with stderr not a terminal (systemd's journal, a file) there is no status line, and a
+    # daemon listening on the wrong broadcast port ran 10 minutes in silence; the reason came at exit
+    d = _daemon(tmp_path, "loop://", sensor_ip="127.0.0.2")
+    from foveatrack.daemon.watchdog import WatchdogState
+
+    d._open()
+    try:
+        d.started_mono, d.watchdog = 1000.0, WatchdogState()
+        for now in (1005.0, 1010.05, 1030.0, 1070.1, 1075.0):
+            d._watch_lidar(now)
+        err = capsys.readouterr().err
+    finally:
+        d.client.close()
+        d.head.close()
+        d.recorder.close()
+    notes = [ln for ln in err.splitlines() if "no lidar data arrived" in ln]
+    assert len(notes) == 2, err
+    assert notes[0].startswith("foveatrack daemon: WARNING: no lidar data arrived from [lidar] sensor_ip 127.0.0.2 "
+                               "in 10 s so far (data port ")
+    assert "in 70 s so far" in notes[1] and "nothing arrived at all" in notes[1]
+
+
+def test_a_status_line_note_stands_on_its_own_line_above_the_status():
+    import io
+
+    from foveatrack.daemon.support import StatusLine
+
+    tty = io.StringIO()
+    s = StatusLine(tty, enabled=True)
+    s.show("10.0 Hz")
+    s.note("WARNING: x")
+    s.show("0.0 Hz")
+    assert tty.getvalue() == "\r10.0 Hz\x1b[K\r\x1b[KWARNING: x\n\r0.0 Hz\x1b[K"
+    plain = io.StringIO()
+    s = StatusLine(plain, enabled=False)
+    s.show("10.0 Hz")
+    s.note("WARNING: x")
+    assert plain.getvalue() == "WARNING: x\n"
