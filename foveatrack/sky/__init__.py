@@ -10,8 +10,7 @@
   each fixation (:class:`foveatrack.tracker.Tracker`'s)
 * :mod:`~foveatrack.sky.metrics` -- GOSPA, continuity, id switches, false tracks, fovea shares
 
-* :mod:`~foveatrack.sky.range_background` -- the static scene learned per direction as a range interval
-
-The clustering is the open-loop tracker's (:mod:`foveatrack.openloop.kernels`), used here on world
-coordinates instead of the fixed sensor's.
+The clustering and the background (the static scene learned per direction as a range interval) are
+the open-loop tracker's (:mod:`foveatrack.openloop.kernels`, :mod:`foveatrack.openloop.range_background`),
+used here on world coordinates instead of the fixed sensor's.
 """

@@ -4,7 +4,7 @@ Per frame:
 
 1. The points go into the world at each point's head pose (:mod:`foveatrack.sky.world_points`).
 2. The static scene is learned per direction from the pivot and taken out
-   (:class:`~foveatrack.sky.range_background.RangeBackground`: each cell's range interval, with a
+   (:class:`~foveatrack.openloop.range_background.RangeBackground`: each cell's range interval, with a
    margin grown from its spread, so a swaying crown folds into one interval).  The rosette's
    incommensurable pattern covers the field over time (paper Fig. 6).  The first ``warmup_s`` the
    background learns alone; what it saw there is scenery in the making at once where it stayed
@@ -84,15 +84,12 @@ from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
 from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, predicted_many
-from foveatrack.sky.range_background import RangeBackground, face_side_cells
+from foveatrack.openloop.range_background import RangeBackground, check_cell_deg
 from foveatrack.sky.world_points import lidar_to_world_per_point
 from foveatrack.space_of_interest import Box
 
 _BIG = 1e12
 
-
-#: the background's direction cells [deg]: finer takes hundreds of MB, coarser is metres across
-CELL_DEG_RANGE = (0.1, 5.0)
 
 
 @dataclass(frozen=True)
@@ -101,12 +98,12 @@ class SkyTrackerConfig:
 
     cell_deg, background_frames, background_persist_frames, background_dilate,
     background_margin_m, background_spread_gain, background_margin_max_m
-                                 the background's direction cells (:mod:`foveatrack.sky.range_background`)
+                                 the background's direction cells (:mod:`foveatrack.openloop.range_background`)
     warmup_s : >= 0 [s]          the background learns alone this long before tracks start
     warmup_replay : bool          the warm-up's frames are tracked when it ends (module docstring)
     warmup_stay_frames : int >= 0   what the warm-up saw is scenery at once only where it stayed: a cell
                                  within ``background_dilate`` steps returned at two times this many frames
-                                 apart or more (0: all of it; :mod:`foveatrack.sky.range_background`)
+                                 apart or more (0: all of it; :mod:`foveatrack.openloop.range_background`)
     cluster_tol_m, cluster_tol_rad                    cluster gap ``max(tol_m, tol_rad * range)``
     min_points : int >= 1        returns an object needs
     max_extent_m : > 0 [m]       largest side of an object (bigger: scenery, not tracked)
@@ -180,13 +177,7 @@ class SkyTrackerConfig:
                   "d_half_m", "protect_m", "history_s"):
             if not getattr(self, k) > 0:
                 raise UserError(f"{k} must be > 0, got {getattr(self, k)!r}")
-        if not CELL_DEG_RANGE[0] <= self.cell_deg <= CELL_DEG_RANGE[1]:
-            # the direction map holds 6 n^2 cells (face_side_cells), ~37 bytes each: 0.3 deg is
-            # 0.9 M cells (32 MB), 0.1 deg 7.9 M (290 MB), 0.01 deg 29 GB; a cell of several degrees is
-            # metres across at the scenes' ranges and would take a drone for the tree behind it
-            n = face_side_cells(min(self.cell_deg, 89.0)) if self.cell_deg > 0 else math.inf
-            raise UserError(f"cell_deg must be in [{CELL_DEG_RANGE[0]}, {CELL_DEG_RANGE[1]}] deg, got "
-                            f"{self.cell_deg!r} (its direction map would hold {6 * n * n:.3g} cells)")
+        check_cell_deg(self.cell_deg)
         if self.field_half_angle_deg is not None and not 0 < self.field_half_angle_deg <= 180:
             raise UserError(f"field_half_angle_deg must be in (0, 180], got {self.field_half_angle_deg!r}")
         if not 0 <= self.background_dilate <= 3:

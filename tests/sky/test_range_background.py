@@ -1,4 +1,4 @@
-"""The sky tracker's background of direction cells (foveatrack/sky/range_background.py): the numba
+"""The sky tracker's background of direction cells (foveatrack/openloop/range_background.py): the numba
 kernels against their numpy twins bit for bit, and what the model must do -- learn a swaying crown
 as background while a drone in front of it, or in the open sky, stays foreground; a stray return
 does not blind the cells behind it."""
@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from foveatrack.sky import range_background as rb
-from foveatrack.sky.range_background import RangeBackground
+from foveatrack.openloop import range_background as rb
+from foveatrack.openloop.range_background import RangeBackground
 
 
 def _random_points(rng, n):

@@ -136,7 +136,7 @@ def test_scenery_is_learned_in_the_world_while_the_head_turns():
 
 
 @pytest.mark.xfail(strict=True, reason="not met: a drone in front of scenery during the background's warm-up "
-                   "sets the scenery cells' nearest range to its own (foveatrack/sky/range_background.py learns "
+                   "sets the scenery cells' nearest range to its own (foveatrack/openloop/range_background.py learns "
                    "the nearest return of a cell at once); it is background there until it leaves those cells")
 def test_a_drone_in_front_of_scenery_during_the_warm_up_is_tracked():
     pose = Pose(lambda t: (10.0 * math.sin(t), 0.0))

@@ -1,9 +1,11 @@
-"""The static scene seen from the head, learned per direction as a range interval, and taken out
-(issue 28: "the static background learned from the scan itself ... and subtracted").
+"""The static scene learned per direction as a range interval, and taken out: of the sky tracker
+(issue 28: "the static background learned from the scan itself ... and subtracted",
+:mod:`foveatrack.sky.tracks`) and of the open-loop tracker of a fixed sensor
+(:mod:`foveatrack.openloop.tracker`, beside its cubes), one model for both.
 
 The head turns about its pivot (the world origin), so a static object keeps its *direction* from
-the pivot whatever the head does; the rosette's incommensurable pattern covers every direction of
-the field over time (paper Fig. 6).  The sphere of directions is cut into cells (a cube map: the
+the pivot whatever the head does (a fixed sensor is its own pivot); the rosette's incommensurable
+pattern covers every direction of the field over time (paper Fig. 6).  The sphere of directions is cut into cells (a cube map: the
 face of the largest coordinate, then the two others divided by it, cut every ``tan(cell_deg)`` --
 divisions only, no trigonometry, so the same cell on every CPU), and each cell remembers
 
@@ -69,6 +71,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from foveatrack.errors import UserError
 
 
 # ------------------------------------------------------------------------------------------ kernels
@@ -238,6 +242,21 @@ def learn_numpy(cells, r, frame_no, frames, first_frame, last_frame, r_min, r_ma
 
 # ------------------------------------------------------------------------------------------ the model
 
+#: the background's direction cells [deg]: finer takes hundreds of MB, coarser is metres across
+CELL_DEG_RANGE = (0.1, 5.0)
+
+
+def check_cell_deg(cell_deg: float, key: str = "cell_deg") -> None:
+    """A UserError for a cell size outside :data:`CELL_DEG_RANGE`: the direction map holds 6 n^2 cells
+    (:func:`face_side_cells`), ~37 bytes each: 0.3 deg is 0.9 M cells (32 MB), 0.1 deg 7.9 M
+    (290 MB), 0.01 deg 29 GB; a cell of several degrees is metres across at the scenes' ranges and
+    would take a drone for the tree behind it."""
+    if not CELL_DEG_RANGE[0] <= cell_deg <= CELL_DEG_RANGE[1]:
+        n = face_side_cells(min(cell_deg, 89.0)) if cell_deg > 0 else math.inf
+        raise UserError(f"{key} must be in [{CELL_DEG_RANGE[0]}, {CELL_DEG_RANGE[1]}] deg, got "
+                        f"{cell_deg!r} (its direction map would hold {6 * n * n:.3g} cells)")
+
+
 def face_side_cells(cell_deg: float) -> int:
     """Cells along a cube face's side for a cell of ``cell_deg`` at the face's centre: the face spans
     ``[-1, 1]`` in the two coordinates divided by the largest, cut every ``tan(cell_deg)``; the map
@@ -310,6 +329,18 @@ class RangeBackground:
                 near[q[inside]] = True
             warm &= near
         self.warm_near = warm
+
+    def covered(self, cells: np.ndarray) -> np.ndarray:
+        """Per point: a cell within ``dilate`` steps is established (it returned in ``min_frames``
+        frames spread over ``persist_frames``), whatever the point's range: its direction is known
+        scenery, and a foreground point there is something in front of it.  The open-loop tracker
+        learns no such point (a drone's first frames before its track is confirmed brought a wall's
+        cells down to its range, and the drone was background from then on)."""
+        out = np.zeros(cells.size, np.bool_)
+        for inside, q in face_neighbours(cells, self.n, self.dilate):
+            out |= inside & (self.frames[q] >= self.min_frames) & (self.last_frame[q] - self.first_frame[q]
+                                                                    >= self.persist_frames)
+        return out
 
     def learn(self, cells: np.ndarray, r: np.ndarray) -> None:
         """This frame's points to learn (call once a frame, with none if nothing is to be learned)."""
