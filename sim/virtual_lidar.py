@@ -26,7 +26,9 @@ LivoxUnit` does (docs/livox.md has the full table):
 Data are paced in real time on the monotonic clock (``time_scale`` > 1 runs the stream faster).
 The points come from ``source(t0_ns, t1_ns) -> (xyz, reflectivity, t_ns)``: the returns a simulated
 lidar produces for the slots in ``[t0_ns, t1_ns)`` of *stream time* (``t_start_ns`` + elapsed wall time
-× time_scale).  A lidar fires at a fixed rate, one slot every ``1e9 / point_rate_hz`` ns (two or three
+× time_scale, counted from ``serve()``'s start with ``clock="start"``, or from the first start-sampling
+command a host sends with ``clock="sampling"``: until then stream time stays ``t_start_ns``, and later
+starts continue the same clock, as a unit's own time runs on between samplings).  A lidar fires at a fixed rate, one slot every ``1e9 / point_rate_hz`` ns (two or three
 returns per slot for the dual and triple types, the simulator's single return being the first);
 each returned point goes to the slot nearest its ``t_ns``, slots without a point go out as "no
 return" (0, 0, 0), points beyond a slot's capacity or outside the interval are counted and dropped.
@@ -70,6 +72,9 @@ ImuSource = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 _RETURNS_PER_SLOT = {4: 2, 5: 2, 7: 3, 8: 3}
 
 
+#: When stream time starts: at ``serve()``, or at the first start-sampling command (``VirtualLivox(clock=)``).
+CLOCKS = ("start", "sampling")
+
 #: The longest the served IMU waits behind the stream for its source (``imu_ready_ns``) [s].
 IMU_MAX_WAIT_S = 2.0
 
@@ -111,6 +116,10 @@ class VirtualLivox:
     imu_ready_ns : optional callable() -> stream time [ns] up to which ``imu_source`` can compute its
         samples from what it knows (a pose it follows from a file): samples wait for it, at most
         ``IMU_MAX_WAIT_S`` behind the stream (then they go with what the source has)
+    clock : "start" (stream time runs from ``serve()``'s start) or "sampling" (from the first time a
+        host starts sampling; ``lidar serve``'s default, so a scene begins when a host first looks)
+    on_sampling_start : optional callable(t_ns, host (ip, data port)), called at every accepted
+        start-sampling command with the stream time of the first slot it sends
     """
 
     def __init__(
@@ -137,9 +146,15 @@ class VirtualLivox:
         control_log: list | None = None,
         imu_lag_s: float = 0.0,
         imu_ready_ns=None,
+        clock: str = "start",
+        on_sampling_start: Callable[[int, tuple], None] | None = None,
     ):
         if not point_rate_hz > 0 or not time_scale > 0 or not 0 <= loss_rate < 1:
             raise ValueError("need point_rate_hz > 0, time_scale > 0 and 0 <= loss_rate < 1")
+        if clock not in CLOCKS:
+            raise ValueError(f"clock must be one of {CLOCKS}, got {clock!r}")
+        self.clock = clock
+        self.on_sampling_start = on_sampling_start
         self.unit = unit
         self.coordinate_system, self.return_mode = 0, 0
         if packet_type is None:
@@ -229,6 +244,11 @@ class VirtualLivox:
     def returns_per_slot(self) -> int:
         return _RETURNS_PER_SLOT.get(self.packet_type, 1)
 
+    @property
+    def clock_zero_mono(self) -> float | None:
+        """``time.monotonic()`` at stream time ``t_start_ns``; None until the clock starts (``clock``)."""
+        return self._mono0
+
     def stream_time_ns(self, mono: float | None = None) -> int:
         mono = time.monotonic() if mono is None else mono
         if self._mono0 is None:
@@ -287,9 +307,11 @@ class VirtualLivox:
 
     def serve(self, stop: threading.Event) -> None:
         """Serve until ``stop`` is set (blocking)."""
-        self._mono0 = time.monotonic()
+        t0 = time.monotonic()
+        if self.clock == "start":
+            self._mono0 = t0
         next_bcast = 0.0
-        next_batch = self._mono0
+        next_batch = t0
         while not stop.is_set():
             now = time.monotonic()
             if self.host is not None and now - self._last_heartbeat > self.link_timeout_s:
@@ -434,11 +456,16 @@ class VirtualLivox:
                 self.counters["sampling_refused_state"] += 1  # motor off in power-saving / standby
                 self._reply(frame, addr, fail)
                 return
-            if start and not self.sampling:
+            first = start and not self.sampling
+            if first:
+                if self._mono0 is None:  # clock "sampling": stream time starts with the first sampling
+                    self._mono0 = now
                 self._restart_stream(now)
             self.sampling = start
             self.counters["sampling_start" if start else "sampling_stop"] += 1
             self._reply(frame, addr, ok)
+            if first and self.on_sampling_start is not None:
+                self.on_sampling_start(self._slot_time_ns(self._next_slot), self.host)
         elif cid == P.CMD_ID_COORDINATE_SYSTEM:
             cs = pl[0] if len(pl) >= 1 else 255
             dt = self.unit.data_type(cs, self.return_mode) if cs in (0, 1) else None
