@@ -8,7 +8,12 @@ casts them against the targets (culled by :func:`~sim.world.kernels.cone_candida
 target at the point's own time, :func:`~sim.world.kernels.cast_moving_kernel`) and the background
 (:func:`~sim.world.kernels.cast_static_kernel`), and applies the effects the scene lists -- the
 same steps 2-5 as :meth:`sim.loop.ClosedLoop.step` (DESIGN.md "How data flows").  Stream time 0 is
-scene time 0.  The random streams are the scene's (:func:`sim.effects.effect_rng`), so two serves
+scene time 0, and by default (``clock="sampling"``) that is when a host first starts sampling, not when
+the serve starts: a daemon that connects late (a cold start's compiles, a loaded machine) still sees
+the scene from its beginning.  ``clock="start"`` starts it with the serve (as before 2026-12).  Past
+the scene's ``duration_s`` the stream goes on (the trajectories past their end: straight, circle and
+figure-eight flights keep flying, waypoint and manual ones hover where they end), and ``status`` is
+told so once.  The random streams are the scene's (:func:`sim.effects.effect_rng`), so two serves
 of one scene with the same batches give the same points; the batches follow the wall clock, so a
 served run is not bit-identical to the closed-loop simulator (which is what replay is for).
 
@@ -17,7 +22,8 @@ Head pose ("follows the virtual head's pose if the scene's gimbal is served too"
 ``foveatrack gimbal serve --truth FILE`` writes the head's true state as JSON lines every
 ``--truth-period-s`` (20 ms).  :class:`TruthTail` follows that file: it reads the complete new lines
 at every source call, maps head time to the lidar's stream time through ``time.monotonic`` (the
-head's ``t_s`` = monotonic − its clock zero, printed by ``gimbal serve``; without ``--head-clock-zero``
+head's ``t_s`` = monotonic − its clock zero, printed by ``gimbal serve``; the lidar's stream time 0 is
+the monotonic time its clock started, :attr:`sim.virtual_lidar.VirtualLivox.clock_zero_mono`; without ``--head-clock-zero``
 it is estimated as the smallest ``read time − newest t_s`` seen, which is late by at most the
 file's write-to-read delay), and interpolates pan (unwrapped) and tilt between lines.
 
@@ -229,8 +235,13 @@ class _FollowingSource:
     def __init__(self, scene, tail: TruthTail, time_scale: float):
         self.tail = tail
         self.time_scale = time_scale
-        self.mono0: float | None = None  # monotonic at stream time 0 (set by serve_scene)
+        self.lidar = None  # the VirtualLivox streaming this (set by serve_scene): its clock is stream time's
         self.inner = SceneSource(scene, pose=self._pose)
+
+    @property
+    def mono0(self) -> float | None:
+        """``time.monotonic()`` at stream time 0 (None until the lidar's clock starts)."""
+        return None if self.lidar is None else self.lidar.clock_zero_mono
 
     def known_until_ns(self, ahead_s: float) -> float:
         """Stream time [ns] up to which the pose is interpolated from truth lines, not extrapolated,
@@ -252,12 +263,40 @@ class _FollowingSource:
         return self.inner(t0_ns, t1_ns)
 
 
+class _SceneEnd:
+    """The source, saying once (``status``) when the stream first passes the scene's ``duration_s``."""
+
+    def __init__(self, source, duration_s: float, status):
+        self.source = source
+        self.duration_s = duration_s
+        self.end_ns = duration_s * 1e9
+        self.status = status
+        self.passed = False
+
+    def set_rain_fog_suppression(self, on: bool) -> None:
+        self.source.set_rain_fog_suppression(on)
+
+    def __call__(self, t0_ns, t1_ns):
+        if not self.passed and t1_ns > self.end_ns:
+            self.passed = True
+            if self.status is not None:
+                self.status(f"scene time {max(t0_ns * 1e-9, self.duration_s):.1f} s: past the scene's duration_s "
+                            f"= {self.duration_s:g} s; serving on, the targets past their trajectories' end "
+                            "(straight, circle and figure-eight flights fly on, waypoint and manual ones hover "
+                            "where they end); restart the serve to see the scene again from its start")
+        return self.source(t0_ns, t1_ns)
+
+
 def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("127.0.0.1", 55000),
                 time_scale=1.0, loss_rate=0.0, seed=0, packet_type=None, head_truth=None,
-                head_clock_zero=None, duration_s=None, ready=None, control_log=None) -> dict:
-    """Serve ``scene``'s lidar until SIGINT/SIGTERM or ``duration_s``; returns the counters.
+                head_clock_zero=None, duration_s=None, ready=None, control_log=None, clock="sampling",
+                status=None) -> dict:
+    """Serve ``scene``'s lidar until SIGINT/SIGTERM or ``duration_s`` (wall seconds); returns the counters.
 
     ``ready(lidar)`` is called once the sockets are bound (the CLI prints ``READY ip port``).
+    ``clock``: scene time 0 at the first start-sampling command ("sampling") or at the start ("start").
+    ``status(line)``, if given, gets a line at every sampling start (the scene time it starts at) and
+    one when the stream first passes the scene's ``duration_s``.
     """
     from foveatrack.errors import UserError
     from foveatrack.livox import protocol as P
@@ -277,6 +316,20 @@ def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("
         source = SceneSource(scene)
 
     warm_up_kernels(scene)
+    scene_s = float(scene.duration_s)
+    clock_started = []
+
+    def _sampling_start(t_ns: int, host) -> None:
+        first = not clock_started
+        clock_started.append(t_ns)
+        if status is None:
+            return
+        t = t_ns * 1e-9
+        where = (f"past the scene's end (duration_s = {scene_s:g} s)" if t >= scene_s
+                 else f"of the scene's {scene_s:g} s")
+        note = "; the scene's clock starts now" if first and clock == "sampling" else ""
+        status(f"host {host[0]}:{host[1]} started sampling at scene time {t:.2f} s, {where}{note}")
+
     imu_kw = {}
     if scene.imu is not None and unit.has_imu:
         # the scene's IMU on the head, moving with the pose the points are cast at
@@ -291,15 +344,15 @@ def serve_scene(scene, *, bind_ip="127.0.0.1", cmd_port=65000, broadcast_addr=("
 
     def _ready(lidar: VirtualLivox):
         if tail is not None:
-            # VirtualLivox sets its monotonic origin when serve() starts, right after this call.
-            source.mono0 = time.monotonic()
+            source.lidar = lidar  # the head's time is mapped through the lidar's clock zero
         if ready is not None:
             ready(lidar)
 
     counters = run_virtual_lidar(
-        source, duration_s=duration_s, ready=_ready, bind_ip=bind_ip, cmd_port=cmd_port,
-        broadcast_addr=broadcast_addr, point_rate_hz=float(scene.optics.point_rate_hz), packet_type=packet_type,
-        unit=unit, time_scale=time_scale, loss_rate=loss_rate, seed=seed, control_log=control_log, **imu_kw)
+        _SceneEnd(source, scene_s, status), duration_s=duration_s, ready=_ready, bind_ip=bind_ip,
+        cmd_port=cmd_port, broadcast_addr=broadcast_addr, point_rate_hz=float(scene.optics.point_rate_hz),
+        packet_type=packet_type, unit=unit, time_scale=time_scale, loss_rate=loss_rate, seed=seed,
+        control_log=control_log, clock=clock, on_sampling_start=_sampling_start, **imu_kw)
     inner = source.inner if tail is not None else source
     counters["points_on_target"] = inner.points_on_target
     if tail is not None:

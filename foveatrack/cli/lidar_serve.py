@@ -3,6 +3,8 @@
 Registered by :func:`foveatrack.cli.lidar_cmd.register` through :func:`add_serve_parser`; the
 simulator (:mod:`sim.lidar_server`) is imported only when the command runs.  The first stdout line is
 ``READY <ip> <cmd_port>``; on SIGINT/SIGTERM it prints its counters as one JSON line and exits 0.
+Status lines go to stderr: the unit, then the scene time at every sampling start (scene time 0 is the
+first one's, unless ``--clock start``), and once the stream passes the scene's ``duration_s``.
 """
 
 from __future__ import annotations
@@ -36,7 +38,12 @@ def add_serve_parser(lsub) -> None:
                    help="that head's time.monotonic() at t_s = 0 (printed by gimbal serve; default: estimated)")
     p.add_argument("--log-control", metavar="FILE",
                    help="write every control datagram received and sent as JSON lines {dir, t_s, hex}")
-    p.add_argument("--duration-s", type=float, default=None, help="stop after this many seconds")
+    p.add_argument("--clock", choices=("sampling", "start"), default="sampling",
+                   help="when scene time 0 is: when a host first starts sampling (default), or when the serve "
+                        "starts (a host that connects late then meets the scene that far in)")
+    p.add_argument("--duration-s", type=float, default=None,
+                   help="stop after this many wall seconds from the start (past the scene's own duration_s "
+                        "the serve goes on, and says so once)")
     p.set_defaults(func=cmd_serve)
 
 
@@ -69,12 +76,19 @@ def cmd_serve(args) -> int:
               f"on {lidar.address[0]}:{lidar.cmd_port}, broadcasting to {args.broadcast_ip}:{args.broadcast_port}"
               f"{'; following head truth ' + args.head_truth if args.head_truth else ''}; Ctrl-C stops",
               file=sys.stderr, flush=True)
+        when = "when a host first starts sampling" if args.clock == "sampling" else "now (--clock start)"
+        print(f"lidar serve: the scene's clock starts {when}; the scene lasts {scene.duration_s:g} s",
+              file=sys.stderr, flush=True)
+
+    def status(line: str) -> None:
+        print(f"lidar serve: {line}", file=sys.stderr, flush=True)
 
     log = _ControlLog(args.log_control) if args.log_control else None
     counters = serve_scene(
         scene, bind_ip=args.bind_ip, cmd_port=args.cmd_port, broadcast_addr=(args.broadcast_ip, args.broadcast_port),
         time_scale=args.time_scale, loss_rate=args.loss_rate, seed=args.seed, packet_type=args.packet_type,
-        head_truth=args.head_truth, head_clock_zero=args.head_clock_zero, duration_s=args.duration_s, ready=ready, control_log=log)
+        head_truth=args.head_truth, head_clock_zero=args.head_clock_zero, duration_s=args.duration_s, ready=ready,
+        control_log=log, clock=args.clock, status=status)
     if log is not None:
         log.close()
     print(json.dumps({k: int(v) for k, v in sorted(counters.items())}), flush=True)
