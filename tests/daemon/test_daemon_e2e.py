@@ -37,9 +37,9 @@ def _setup(tmp_path, cmd_port=0, data_port=0, loss_rate=0.0):
                           tmp_path / "head.out", tmp_path / "head.err")
     wait_for(lambda: first_line(tmp_path / "head.out"), 20, "the head's pty", [procs["head"]])
     procs["daemon"] = start(["daemon", "--config", str(cfg), "--log", str(log)], tmp_path / "d.out", tmp_path / "d.err")
-    # The virtual lidar's scene clock starts when it does: the daemon must be listening first, or
-    # it meets the UAV seconds into its flight (seen in CI: a first-run compile of the daemon's
-    # kernels took 3.6 s, and the first frame it saw was 3.1 s into the scene).
+    # The daemon listens first.  The served scene's clock now starts at the daemon's first sampling
+    # anyway; when it started with the serve, a daemon that came late met the UAV seconds into its
+    # flight (seen in CI: a first-run compile of the daemon's kernels took 3.6 s, the first frame 3.1 s in).
     wait_for(lambda: event(log, "start"), 30, "the daemon to start", [procs["daemon"]])
     procs["lidar"] = start(["lidar", "serve", str(SCENE), "--cmd-port", "0", "--broadcast-port", str(bport),
                             "--head-truth", str(truth), "--loss-rate", str(loss_rate), "--seed", "5"],
