@@ -13,6 +13,7 @@ Tables::
                  pan_speed_max_deg_s, tilt_speed_max_deg_s, pan_turbo_deg_s (the nominal table),
                  max_pan_byte, max_tilt_byte, allow_turbo, tilt_limits_deg, tilt_margin_deg,
                  pan0_deg, tilt0_deg (the pose at start, e.g. after homing),
+                 on_start ("assume" | "home": drive to home_pan_deg/home_tilt_deg first),
                  on_reconnect ("stop" | "home" | "keep"), home_pan_deg, home_tilt_deg, home_wait_s
     [tracker]    foveatrack.tracker.TrackerConfig keys (rate_hz is the loop rate)
     [recording]  path ("{time}" becomes the UTC start time; its directory must exist unless
@@ -75,6 +76,7 @@ class HeadConfig:
     tilt_margin_deg: float = DEFAULT_HEAD.tilt_margin_deg   # the gate's, inside the tracker's 3 deg
     pan0_deg: float = DEFAULT_HEAD.pan0_deg
     tilt0_deg: float = DEFAULT_HEAD.tilt0_deg
+    on_start: str = "assume"            # the pose at start: ON_START
     on_reconnect: str = "stop"          # what a reconnected head's unknown pose gets: ON_RECONNECT
     home_pan_deg: float | None = None   # where "home" drives the head (default pan0_deg, tilt0_deg)
     home_tilt_deg: float | None = None
@@ -270,6 +272,10 @@ class DaemonConfig:
 #           home_wait_s for it, and track on from there
 #   "keep": trust the dead reckoning (only a link that was cut while the head kept its power)
 ON_RECONNECT = ("stop", "home", "keep")
+# The head reports no pose: at start it is assumed at pan0_deg/tilt0_deg (where a previous run, or a
+# hand, may not have left it: a second run tracked from 0/0 with the head at -61 deg, 1 frame of 374
+# detected), or driven home first by absolute moves ("home", as on_reconnect = "home" does)
+ON_START = ("assume", "home")
 
 
 def _int(v, key, where, lo, hi):
@@ -370,6 +376,8 @@ def _head(t: Mapping, w: str) -> HeadConfig:
         kw["pan0_deg"] = as_float(t["pan0_deg"], "pan0_deg", w, lo=-180, hi=180)
     if "tilt0_deg" in t:
         kw["tilt0_deg"] = as_float(t["tilt0_deg"], "tilt0_deg", w, lo=-90, hi=90)
+    if "on_start" in t:
+        kw["on_start"] = as_choice(t["on_start"], "on_start", w, ON_START)
     if "on_reconnect" in t:
         kw["on_reconnect"] = as_choice(t["on_reconnect"], "on_reconnect", w, ON_RECONNECT)
     if "home_pan_deg" in t:

@@ -2,7 +2,8 @@
 known again, and the tracker rebased on the new pose (one role of :class:`foveatrack.daemon.runtime.Daemon`).
 
 ``pose_state``: None (known), "unknown" (the link was lost: a head that lost power comes back at its
-power-on pose and reports none), "homing" (absolute moves under way, ``[head] on_reconnect = "home"``),
+power-on pose and reports none; or the start, with ``[head] on_start = "home"``), "homing" (absolute
+moves under way, ``[head] on_reconnect = "home"`` or ``on_start = "home"``),
 "refused" (another head behind the link: :mod:`foveatrack.daemon.pose_guard`).  No frame is tracked
 while it is not None.
 """
@@ -70,25 +71,28 @@ class HeadPose:
         if self.pose_state is not None:
             self._pose_tick(now)
 
-    def _pose_unknown(self, now: float, why: str) -> None:
-        """The head's link was lost (or a homing write failed): from now its pose is unknown (one that
-        lost power comes back at its power-on pose; the head reports none).  No frame is tracked until
-        :meth:`_reconnected` has done what ``[head] on_reconnect`` says."""
+    def _pose_unknown(self, now: float, why: str, policy: str | None = None) -> None:
+        """The head's link was lost (or a homing write failed, or the run starts with ``[head] on_start
+        = "home"``): from now its pose is unknown (one that lost power comes back at its power-on pose;
+        the head reports none).  No frame is tracked until :meth:`_reconnected` has done what
+        ``policy`` says ("stop", "home"; default ``[head] on_reconnect``)."""
         h = self.cfg.head
+        self._home_policy = h.on_reconnect if policy is None else policy
         self.pose_state = "unknown"
         self._home_steps = HomingSteps()
         self.counters["head_pose_unknown"] += 1
-        self.log.event("head_pose_unknown", why=why, on_reconnect=h.on_reconnect, frames=self.counters["frames"])
+        self.log.event("head_pose_unknown", why=why, on_reconnect=self._home_policy, frames=self.counters["frames"])
         self._record(_job_event, ns(self.sensor_now_s(now) or 0.0),
-                     {"event": "head_pose_unknown", "why": why, "on_reconnect": h.on_reconnect})
+                     {"event": "head_pose_unknown", "why": why, "on_reconnect": self._home_policy})
 
     def _reconnected(self, now: float) -> None:
-        """The link is back (its first frame was STOP): home the head if the config says so."""
+        """The link is back (its first frame was STOP), or the run starts: home the head if the pose's
+        policy says so (:meth:`_pose_unknown`)."""
         h = self.cfg.head
         self.head.stop()
         self._home_steps = HomingSteps()
         self._homing_t0 = now
-        if h.on_reconnect == "home":
+        if self._home_policy == "home":
             # the target's last trusted bearing first, else home; the worst-case wait to that goal
             # (foveatrack.daemon.homing_plan); with a pose check, detections after the last check that
             # vouched for the pose are not trusted
@@ -110,7 +114,7 @@ class HeadPose:
         h = self.cfg.head
         if self.pose_state == "refused":    # another head behind the link: nothing is written to it
             return
-        if not self.head.connected or h.on_reconnect == "stop":
+        if not self.head.connected or self._home_policy == "stop":
             # STOP every second: while the link is down each try is the reopen, so the first frame a
             # reopened link carries is STOP; with "stop" it holds the head until the daemon restarts
             if now - getattr(self, "_last_unknown_stop", -math.inf) >= 1.0:

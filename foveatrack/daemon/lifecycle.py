@@ -92,13 +92,26 @@ class Lifecycle:
         for w in c.warnings():
             self.log.event("warning", message=w)
         self.head.stop()
+        killed = []
         if self.recording_path is not None:   # a killed run's recording here: completed from its journal
             from foveatrack.daemon.recover import recover_directory
 
-            recover_directory(self.recording_path.parent, self.log.event, exclude=[self.recording_path])
+            killed = recover_directory(self.recording_path.parent, self.log.event, exclude=[self.recording_path])
         self.rx.start()
         self.watchdog = WatchdogState()
         self.link_seen = LinkSeen(head_up=self.head.connected)   # after the first STOP, which may reopen it
+        h = c.head
+        if h.on_start == "home":
+            # the head reports no pose: drive it home by absolute moves before tracking, as a
+            # reconnected head is (foveatrack.daemon.head_pose), wherever a previous run left it
+            now = time.monotonic()
+            self._pose_unknown(now, "start", policy="home")
+            self._reconnected(now)
+        elif killed and self.head.connected:
+            self.status.note(f"foveatrack daemon: WARNING: the run before this one was killed (its recording was "
+                             f"completed above): the head is where that run left it, and this run assumes it at "
+                             f"pan {h.pan0_deg:g} / tilt {h.tilt0_deg:g} deg; [head] on_start = \"home\" drives it "
+                             f"there first")
 
     def _shutdown(self) -> None:
         self.stop_ev.set()

@@ -154,6 +154,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Operat
         self.recording_path = None
         self.epoch = 0                      # the sensor clock's epoch (foveatrack.sensor_time)
         self.pose_state: str | None = None  # None (known), "unknown", "homing" (after a head reconnect)
+        self._home_policy = config.head.on_reconnect   # what an unknown pose gets (head_pose._pose_unknown)
         self._home_steps = HomingSteps()    # the writes of the homing under way
         self.last_frame_end_s: float | None = None
         self.pending: deque = deque()             # complete frames not yet processed, (frame, host arrival)

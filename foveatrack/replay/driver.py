@@ -197,6 +197,7 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     order = TimeOrder()
     commands: dict = {}
     for rf in recorded_frames(reader, commands):
+        _after_frame(step, sink, order, rf.before)     # the daemon's start (a homing) before its first frame
         pts = rf.points
         k = int(pts.frame_index)
         if source == "simulator":

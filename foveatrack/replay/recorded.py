@@ -240,6 +240,9 @@ class RecordedFrame:
     metrics: dict = field(default_factory=dict)
     after: list = field(default_factory=list)   # [CommandRecord | TrackerRebased | PoseCorrected | TrackPinned]
     imu: list = field(default_factory=list)     # [ImuSamples] fed to the tracker before this frame
+    # the first frame only: what happened before it, as ``after`` (the daemon's homing at start,
+    # ``[head] on_start = "home"``, rebased its tracker before any frame)
+    before: list = field(default_factory=list)
 
     @property
     def stale(self) -> bool:
@@ -256,18 +259,21 @@ def recorded_frames(reader, commands: dict | None = None):
     from foveatrack.errors import UserError
 
     cur = None
+    early = RecordedFrame(None)      # what comes before the first frame (its ``before``)
     for m in reader.messages():
         if commands is not None and m.channel == COMMANDS and isinstance(m.record, dict):
             commands["recorded"] = commands.get("recorded", 0) + 1
             for k in ("from_journal", "journal_only"):
                 commands[k] = commands.get(k, 0) + (m.record.get(k) is True)
         try:
-            new = _take(cur, m)
+            new = _take(early if cur is None and m.channel == DAEMON_EVENTS else cur, m)
         except RecordError as exc:
             raise UserError(f"{reader.path}: a {m.channel} record at time {m.t_ns} ns is damaged: {exc}") from None
         if new is not None:
             if cur is not None:
                 yield cur
+            else:
+                new.before = early.after
             cur = new
     if cur is not None:
         yield cur

@@ -418,3 +418,31 @@ def test_fault6_a_killed_daemons_recording_is_completed_from_its_journal(tmp_pat
     assert RecordingReader(rec2 := tmp_path / "rec2.mcap").closed(), rec2
     assert oct(rec.stat().st_mode & 0o777) == "0o600"
     assert json.loads(json.dumps(ev))      # the event is plain JSON
+
+
+def test_fault7_on_start_home_drives_the_head_home_before_the_first_frame_is_tracked(tmp_path):
+    # the head reports no pose: a second run assumed pan0/tilt0 with the head where the first had left
+    # it (-61 deg: 1 frame of 374 detected).  With on_start = "home" the start drives it home by the
+    # absolute moves a reconnect uses (home pan -6 deg here, so that the move is a real one from 0/0)
+    procs, link, truth, rec, log, bport = _setup(
+        tmp_path, config_extra='on_start = "home"\nhome_pan_deg = -6.0\nhome_tilt_deg = 0.0\nhome_wait_s = 3.0')
+    try:
+        wait_for(lambda: event(log, "head_homed"), 60, "the head homed", list(procs.values()))
+        _wait_frames(log, rec, 40, list(procs.values()))
+        assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
+        time.sleep(0.6)
+    finally:
+        stop_all(procs)
+    unknown = event(log, "head_pose_unknown")
+    assert unknown["why"] == "start" and unknown["on_reconnect"] == "home"
+    homed = event(log, "head_homed")
+    assert homed["pan_deg"] == -6.0 and homed["tilt_deg"] == 0.0 and homed["frames"] == 0, homed
+    stats = event(log, "stop")["stats"]
+    assert stats["head_homed"] == 1
+    # the head really went there (its own truth), and the dead reckoning agrees at rest
+    rows = read_truth(str(truth))
+    pan_rest, tilt_rest = _replays_to_the_bit(rec).final_pose_deg
+    assert abs(pan_rest - rows[-1]["pan_deg"]) < 1.0 and abs(tilt_rest - rows[-1]["tilt_deg"]) < 0.5, (
+        (pan_rest, tilt_rest), rows[-1])
+    dets = [d for d in RecordingReader(rec).records("detections") if d["detected"]]
+    assert len(dets) >= 20
