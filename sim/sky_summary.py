@@ -22,6 +22,7 @@ import numpy as np
 
 from foveatrack.fixed_order import norm3
 from foveatrack.sky.attention import true_off_axis_deg
+from foveatrack.sky.track_paths import confirmed_paths
 from foveatrack.sky.metrics import drone_metrics, gospa
 from sim.sky_bounds import head_allows_revisit_s, head_limits, scan_allows_confirm_s
 
@@ -298,7 +299,8 @@ def sky_lines(s: dict) -> list[str]:
 def sky_plot_data(loop, log) -> dict:
     """What ``tracks.png`` draws (:func:`foveatrack.cli.sim_plots.plot_sky_tracks`): ``t_s`` (T,);
     ``truth``: id -> (class, (T, 3) positions, NaN where absent); ``tracks``: id -> (last label,
-    (T, 3) positions while confirmed, NaN elsewhere); ``in_fovea``: drone id -> (T,) bool."""
+    (T, 3) positions while confirmed, NaN elsewhere, (T,) measured that frame:
+    :func:`foveatrack.sky.track_paths.confirmed_paths`); ``in_fovea``: drone id -> (T,) bool."""
     truth = truth_frames(loop, log)
     T = len(truth)
     objs: dict[str, tuple[str, np.ndarray]] = {}
@@ -307,14 +309,7 @@ def sky_plot_data(loop, log) -> dict:
             if i not in objs:
                 objs[i] = (c, np.full((T, 3), np.nan))
             objs[i][1][k] = x
-    tracks: dict[int, list] = {}
-    for k, o in enumerate(loop.sky_log):
-        for v in o.sky.tracks:
-            if v.confirmed:
-                if v.track_id not in tracks:
-                    tracks[v.track_id] = [v.label, np.full((T, 3), np.nan)]
-                tracks[v.track_id][0] = v.label
-                tracks[v.track_id][1][k] = v.xyz_m
+    tracks = confirmed_paths(([(v.track_id, v.confirmed, v.label, v.xyz_m, v.hit) for v in o.sky.tracks]
+                              for o in loop.sky_log), T)
     fovea = {d: a["in_fovea"] for d, a in drone_truth(loop, log, truth).items()}
-    return {"t_s": np.asarray(log["t_end_s"], float), "truth": objs,
-            "tracks": {i: (lab, xyz) for i, (lab, xyz) in tracks.items()}, "in_fovea": fovea}
+    return {"t_s": np.asarray(log["t_end_s"], float), "truth": objs, "tracks": tracks, "in_fovea": fovea}

@@ -105,15 +105,11 @@ def sky_plot_data(res, t: np.ndarray) -> dict:
     from foveatrack.recording import RecordingReader
     from foveatrack.recording.records import ObjectTruthRecord
     from foveatrack.sky.attention import true_off_axis_deg
+    from foveatrack.sky.track_paths import confirmed_paths
 
     T = len(t)
-    tracks: dict[int, list] = {}
-    for k, rec in enumerate(res.tracks[:T]):
-        for v in rec.tracks:
-            if v.confirmed:
-                entry = tracks.setdefault(v.id, [v.label, np.full((T, 3), np.nan)])
-                entry[0] = v.label
-                entry[1][k] = v.xyz_m
+    tracks = confirmed_paths(([(v.id, v.confirmed, v.label, v.xyz_m, v.hit) for v in rec.tracks]
+                              for rec in res.tracks), T)
     truth: dict[str, tuple[str, np.ndarray]] = {}
     in_fovea: dict[str, np.ndarray] = {}
     reader = RecordingReader(res.path) if res.source == "simulator" else None
@@ -129,5 +125,4 @@ def sky_plot_data(res, t: np.ndarray) -> dict:
         for i, (c, xyz) in truth.items():
             if c == "drone":
                 in_fovea[i] = true_off_axis_deg(xyz, pan, tilt) <= half     # NaN (absent): False
-    return {"t_s": t, "truth": truth, "tracks": {i: (lab, xyz) for i, (lab, xyz) in tracks.items()},
-            "in_fovea": in_fovea}
+    return {"t_s": t, "truth": truth, "tracks": tracks, "in_fovea": in_fovea}

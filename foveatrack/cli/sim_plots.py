@@ -289,11 +289,17 @@ def plot_head(t_s, pan_deg, tilt_deg, title, path, *, est_pan_deg=None, est_tilt
     return _save(fig, path)
 
 
+#: the most confirmed tracks the time lines of a run without truth draw (the longest-lived)
+MAX_TRACK_LINES = 20
+
+
 def plot_sky_tracks(data: dict, title: str, path) -> Path:
     """Every object and every confirmed track of a multi-object run (``sim.sky_summary.sky_plot_data``):
     the top view (truth paths: drones dark, birds and crowns pale; confirmed tracks coloured by their
-    last label, each ending in its id), and per drone the time line of the fovea (dark where the drone
-    was within the fovea's half-angle of the lidar axis) and of a confirmed track near it (within 2 m).
+    last label, dots where a frame measured them, a faint line through the frames the filter coasted,
+    each ending in its id), and per drone the time line of the fovea (dark where the drone was within
+    the fovea's half-angle of the lidar axis) and of a confirmed track near it (within 2 m).  Without
+    truth (a daemon's recording) the time lines are the confirmed tracks' own: confirmed, and measured.
     """
     plt = _plt()
     t = data["t_s"]
@@ -306,9 +312,11 @@ def plot_sky_tracks(data: dict, title: str, path) -> Path:
         a1.plot(xyz[:, 0], xyz[:, 1], "-", color=TRUTH_C if c == "drone" else "0.8", lw=2.0 if c == "drone" else 0.6,
                 label=None if key in shown else key, zorder=1)
         shown.add(key)
-    for tid, (label, xyz) in sorted(data["tracks"].items()):
-        key = f"track labelled {label}"
-        a1.plot(xyz[:, 0], xyz[:, 1], ".", ms=2.5, color=LABEL_C.get(label, "k"),
+    for tid, (label, xyz, hit) in sorted(data["tracks"].items()):
+        key = f"track labelled {label} (dots: measured)"
+        colour = LABEL_C.get(label, "k")
+        a1.plot(xyz[:, 0], xyz[:, 1], "-", lw=0.6, alpha=0.35, color=colour, zorder=2)    # coasting too
+        a1.plot(np.where(hit, xyz[:, 0], np.nan), np.where(hit, xyz[:, 1], np.nan), ".", ms=2.5, color=colour,
                 label=None if key in shown else key, zorder=2)
         shown.add(key)
         ok = np.all(np.isfinite(xyz), axis=1)
@@ -322,23 +330,38 @@ def plot_sky_tracks(data: dict, title: str, path) -> Path:
     a1.grid(alpha=0.3)
     _legend_outside(a1)
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.1
-    for row, d in enumerate(drones):
-        xyz = data["truth"][d][1]
-        near = np.zeros(len(t), bool)
-        for tid, (_, txyz) in data["tracks"].items():
-            dd = np.linalg.norm(txyz - xyz, axis=1)
-            near |= np.isfinite(dd) & (dd < 2.0)
-        fov = data["in_fovea"].get(d, np.zeros(len(t), bool))
-        for mask, y0, colour in ((near, row - 0.35, "tab:orange"), (fov, row + 0.02, "0.15")):
-            runs = _runs(mask)
-            a2.broken_barh([(t[a] - dt, (b - a) * dt) for a, b in runs], (y0, 0.33), color=colour)
-    a2.set_yticks(range(len(drones)), drones)
-    a2.set_ylim(-0.6, len(drones) - 0.4)
+
+    def bars(row, mask, y0, colour):
+        a2.broken_barh([(t[a] - dt, (b - a) * dt) for a, b in _runs(mask)], (row + y0, 0.33), color=colour)
+
+    if drones:
+        rows = drones
+        for row, d in enumerate(drones):
+            xyz = data["truth"][d][1]
+            near = np.zeros(len(t), bool)
+            for tid, (_, txyz, _) in data["tracks"].items():
+                dd = np.linalg.norm(txyz - xyz, axis=1)
+                near |= np.isfinite(dd) & (dd < 2.0)
+            bars(row, near, -0.35, "tab:orange")
+            bars(row, data["in_fovea"].get(d, np.zeros(len(t), bool)), 0.02, "0.15")
+        a2.set_title("per drone: a confirmed track within 2 m (orange), in the fovea (dark)", fontsize="medium")
+    else:
+        # no truth (a daemon's recording): what each confirmed track did, not what it followed
+        life = sorted(data["tracks"].items(), key=lambda kv: -int(np.isfinite(kv[1][1][:, 0]).sum()))
+        shown_tracks = sorted(life[:MAX_TRACK_LINES])
+        rows = [f"{tid} ({label})" for tid, (label, _, _) in shown_tracks]
+        for row, (tid, (label, xyz, hit)) in enumerate(shown_tracks):
+            bars(row, np.isfinite(xyz[:, 0]), -0.35, "0.75")
+            bars(row, hit, 0.02, LABEL_C.get(label, "k"))
+        more = f"; {len(life) - MAX_TRACK_LINES} shorter ones left out" if len(life) > MAX_TRACK_LINES else ""
+        a2.set_title(f"no truth in this recording: per confirmed track, confirmed (grey), measured (its label's "
+                     f"colour){more}", fontsize="medium", wrap=True)
+    a2.set_yticks(range(len(rows)), rows)
+    a2.set_ylim(-0.6, max(len(rows), 1) - 0.4)
     a2.invert_yaxis()
     a2.set_xlabel("time [s]")
     if len(t):
         a2.set_xlim(0, t[-1])
-    a2.set_title("per drone: a confirmed track within 2 m (orange), in the fovea (dark)", fontsize="medium")
     a2.grid(alpha=0.3, axis="x")
     fig.suptitle(title)
     return _save(fig, path)

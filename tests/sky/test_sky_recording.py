@@ -152,6 +152,10 @@ def test_replay_plots_the_tracks_as_simulate_does(crossing_run, tmp_path):
     data = sky_plot_data(res, t)
     assert sorted(i for i, (c, _) in data["truth"].items() if c == "drone") == ["drone-a", "drone-b"]
     assert len(data["tracks"]) >= 2 and all(m.any() for m in data["in_fovea"].values())
+    # measured frames are confirmed frames, and some frames coasted (drawn apart: a user took a track's
+    # coasted straight line for measured positions)
+    assert all(np.isfinite(x[h, 0]).all() for _, x, h in data["tracks"].values())
+    assert any((np.isfinite(x[:, 0]) & ~h).any() for _, x, h in data["tracks"].values())
     # the fovea masks are the ones the run's own figures count (sim.sky_summary.drone_truth)
     from sim.loop import ClosedLoop
     from sim.scene import load_scene
