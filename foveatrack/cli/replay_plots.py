@@ -14,7 +14,9 @@ simulated run and its replay look alike.
   reports no pose) and the replay's dead reckoning, their difference per axis, the tilt stops when
   the tilt comes near one, and the tracker's state frame by frame (not for a ``.lvx`` file)
 * tracks.png -- a multi-object run's ([tracker.sky]) replayed tracks, with every object's truth and
-  each drone's time in the fovea where the recording is a simulator's (:func:`sky_plot_data`)
+  each drone's time in the fovea where the recording is a simulator's (:func:`sky_plot_data`); such a
+  run gets it and head.png only, as ``simulate`` draws it: the one-target figures drew the fixated
+  track's detections as one target's, jumping from drone to drone with the fovea
 
 Time is the recording's own for a simulator recording (virtual time, as ``simulate`` plots it) and
 seconds since the first frame otherwise.
@@ -28,30 +30,43 @@ import numpy as np
 
 
 def plot_all(res, out_dir: Path) -> list[Path]:
-    from foveatrack.cli import sim_plots
-
-    f, truth, cfg = res.frames, res.truth, res.tracker_cfg
+    f = res.frames
     out_dir = Path(out_dir)
     rp = Path(res.path)   # "overhead-tilt-stop/run.mcap": simulate names every recording run.mcap
     name = f"{rp.parent.name}/{rp.name}" if rp.parent.name else rp.name
     t_abs = np.asarray(f["t_end_s"], float)
     t0 = 0.0 if res.source == "simulator" or not len(t_abs) else float(t_abs[0])
     t = t_abs - t0
+    sky = bool(res.tracks)      # a multi-object run: tracks.png and head.png, as simulate draws it
+    files = [] if sky else _one_target_figures(res, out_dir, name, t, t0)
+    if res.source != "lvx":
+        files.append(_head_figure(res, out_dir, name, t))
+    if sky:
+        from foveatrack.cli import sim_plots
+
+        files.append(sim_plots.plot_sky_tracks(sky_plot_data(res, t), f"{name}: tracks (replay)",
+                                               out_dir / sim_plots.TRACKS_PNG))
+    return files
+
+
+def _one_target_figures(res, out_dir: Path, name: str, t, t0: float) -> list[Path]:
+    """Fig. 14a, 14b and 14c of the replay (points on the target, error against time, the
+    reconstructed trajectory)."""
+    from foveatrack.cli import sim_plots
+
+    f, truth, cfg = res.frames, res.truth, res.tracker_cfg
     det = np.asarray(f["detected"], bool)
     bearing = np.where(det, np.hypot(f["error_pan_deg"], f["error_tilt_deg"]), np.nan)
     det_points = np.where(det, f["det_n_points"], np.nan)
-    files = []
-
     if truth is not None:
-        files.append(sim_plots.plot_points_vs_position(
+        files = [sim_plots.plot_points_vs_position(
             truth["target_xyz_m"], truth["true_error_deg"], truth["points_on_target"],
             f"{name}: points on the UAV per frame (replay)", out_dir / sim_plots.POINTS_PNG,
-            det_points=det_points))
+            det_points=det_points)]
     else:
-        files.append(sim_plots.plot_points_vs_position(
+        files = [sim_plots.plot_points_vs_position(
             f["world_xyz"], bearing, None, f"{name}: points in the detection per frame (replay)",
-            out_dir / sim_plots.POINTS_PNG, det_points=det_points, source="tracker's"))
-
+            out_dir / sim_plots.POINTS_PNG, det_points=det_points, source="tracker's")]
     tr = res.metrics.get("tracking") or {}
     phases = {}
     if tr.get("in_fov_t_s") is not None:
@@ -74,25 +89,28 @@ def plot_all(res, out_dir: Path) -> list[Path]:
         t, f["world_xyz"], f"{name}: reconstructed trajectory (replay; paper Fig. 14c{lvx_note})",
         out_dir / sim_plots.TRAJECTORY_PNG, true_xyz=None if truth is None else truth["target_xyz_m"]))
 
-    if res.source != "lvx":
-        if truth is not None:
-            pan, tilt, source = truth["pan_deg"], truth["tilt_deg"], "true"
-            head_title = f"{name}: head angles (replay)"
-        else:
-            # a daemon recording holds the daemon's own dead reckoning, not the head's pose (the head
-            # reports none): the residual says how far the replay is from it, not from the head
-            pan, tilt, source = res.recorded["head_pan_deg"], res.recorded["head_tilt_deg"], "daemon's estimate"
-            head_title = f"{name}: head angles (replay; the head's true pose is not measured)"
-        files.append(sim_plots.plot_head(
-            t, pan, tilt, head_title, out_dir / sim_plots.HEAD_PNG, est_label="replay's dead reckoning",
-            residual_label="replay - " + ("true" if truth is not None else "daemon") + " [deg]",
-            est_pan_deg=f["head_pan_deg"], est_tilt_deg=f["head_tilt_deg"], state=f["state"], source=source,
-            tilt_limits_deg=None if cfg is None else cfg.tilt_limits_deg,
-            tilt_margin_deg=None if cfg is None else cfg.tilt_margin_deg))
-    if res.tracks:
-        files.append(sim_plots.plot_sky_tracks(sky_plot_data(res, t), f"{name}: tracks (replay)",
-                                               out_dir / sim_plots.TRACKS_PNG))
     return files
+
+
+def _head_figure(res, out_dir: Path, name: str, t) -> Path:
+    """head.png of the replay."""
+    from foveatrack.cli import sim_plots
+
+    f, truth, cfg = res.frames, res.truth, res.tracker_cfg
+    if truth is not None:
+        pan, tilt, source = truth["pan_deg"], truth["tilt_deg"], "true"
+        head_title = f"{name}: head angles (replay)"
+    else:
+        # a daemon recording holds the daemon's own dead reckoning, not the head's pose (the head
+        # reports none): the residual says how far the replay is from it, not from the head
+        pan, tilt, source = res.recorded["head_pan_deg"], res.recorded["head_tilt_deg"], "daemon's estimate"
+        head_title = f"{name}: head angles (replay; the head's true pose is not measured)"
+    return sim_plots.plot_head(
+        t, pan, tilt, head_title, out_dir / sim_plots.HEAD_PNG, est_label="replay's dead reckoning",
+        residual_label="replay - " + ("true" if truth is not None else "daemon") + " [deg]",
+        est_pan_deg=f["head_pan_deg"], est_tilt_deg=f["head_tilt_deg"], state=f["state"], source=source,
+        tilt_limits_deg=None if cfg is None else cfg.tilt_limits_deg,
+        tilt_margin_deg=None if cfg is None else cfg.tilt_margin_deg)
 
 
 def sky_plot_data(res, t: np.ndarray) -> dict:

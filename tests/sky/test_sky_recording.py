@@ -148,6 +148,8 @@ def test_replay_plots_the_tracks_as_simulate_does(crossing_run, tmp_path):
     res = replay_recording(crossing_run)
     files = plot_all(res, tmp_path)
     assert (tmp_path / "tracks.png") in files and (tmp_path / "tracks.png").stat().st_size > 10_000
+    # as simulate draws a multi-object run: the one-target figures mixed the fixated tracks' detections
+    assert sorted(p.name for p in files) == ["head.png", "tracks.png"]
     t = np.asarray(res.frames["t_end_s"], float)
     data = sky_plot_data(res, t)
     assert sorted(i for i, (c, _) in data["truth"].items() if c == "drone") == ["drone-a", "drone-b"]
