@@ -187,6 +187,7 @@ class Operator:
             self.head.close()
             raise
         self.counters["operator_pins"] = 0     # before the threads that read the counters start
+        self.counters["operator_unpins"] = 0
         self.log.event("control_socket", path=str(path))
 
     def _close_control(self) -> None:
@@ -246,6 +247,6 @@ class Operator:
         """Apply the pin and record it before the next frame (replay applies it at the same place)."""
         self.tracker.pin(track_id)
         t_s = self.last_frame_end_s if self.last_frame_end_s is not None else 0.0
-        self.counters["operator_pins"] += 1
+        self.counters["operator_pins" if track_id is not None else "operator_unpins"] += 1
         self.log.event("track_pinned", track_id=track_id, frames=self.counters["frames"])
         self._record(_job_event, ns(t_s), {"event": "track_pinned", "track_id": track_id})
