@@ -120,9 +120,11 @@ def _check_recording_arg(recording) -> None:
         return
     mcaps = [f for f in p.glob("*.mcap") if f.is_file()]
     if mcaps:
-        newest = max(mcaps, key=lambda f: f.stat().st_mtime)
-        raise UserError(f"{p}: is a directory, not a recording; give a file, e.g. the newest "
-                        f"recording in it, {newest} ({len(mcaps)} .mcap file(s) in it)")
+        # the newest few with their sizes: the newest alone was once a run stopped before any frame
+        newest = sorted(mcaps, key=lambda f: f.stat().st_mtime, reverse=True)[:3]
+        listed = ", ".join(f"{f} ({f.stat().st_size / 1e6:.1f} MB)" for f in newest)
+        raise UserError(f"{p}: is a directory, not a recording; give a file, e.g. one of the newest "
+                        f"recordings in it: {listed} ({len(mcaps)} .mcap file(s) in it)")
     raise UserError(f"{p}: is a directory, not a recording (no .mcap files in it); "
                     "give a .mcap recording or a .lvx file")
 

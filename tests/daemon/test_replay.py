@@ -162,15 +162,16 @@ def test_cli_directory_is_named_as_a_directory(tmp_path, capsys):
     the newest .mcap in it (the file the user most likely meant)."""
     import os
 
-    old, new = tmp_path / "run-old.mcap", tmp_path / "run-new.mcap"
-    for f, t in ((old, 1_000_000), (new, 2_000_000)):
-        f.write_bytes(b"")
-        os.utime(f, (t, t))
+    # the newest three, with their sizes: the newest alone was once a run stopped before any frame
+    files = [tmp_path / f"run-{k}.mcap" for k in range(4)]
+    for k, f in enumerate(files):
+        f.write_bytes(b"x" * (k * 300_000))
+        os.utime(f, (1_000_000 + k, 1_000_000 + k))
     (tmp_path / "later.txt").write_text("not a recording")   # newer, but not an .mcap
     assert main(["replay", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "is a directory" in err and "no such recording" not in err
-    assert str(new) in err and str(old) not in err
+    assert f"{files[3]} (0.9 MB), {files[2]} (0.6 MB), {files[1]} (0.3 MB)" in err and str(files[0]) not in err
     empty = tmp_path / "empty"
     empty.mkdir()
     assert main(["replay", str(empty)]) == 2
