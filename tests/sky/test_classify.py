@@ -95,3 +95,17 @@ def test_a_classifier_built_in_code_is_checked_as_a_table_is():
         ClassifierConfig(min_hits=1)
     with pytest.raises(UserError, match="drone_after_frames"):
         ClassifierConfig(drone_after_frames=0)
+
+
+def test_a_drone_label_can_be_held_for_a_few_frames_of_other_rule_output():
+    # drone_leave_frames 1 (the default) leaves the label at once, as the test above; at 3 a track
+    # labelled drone keeps it through two frames of other output (the status line's flicker), and
+    # the wait for the label starts again after it left
+    cfg = ClassifierConfig(drone_after_frames=2, drone_leave_frames=3)
+    label, run, shown = "unknown", 0, []
+    for said in ["drone", "drone", "unknown", "unknown", "drone", "unknown", "unknown", "unknown", "drone", "drone"]:
+        label, run = held_label(said, label, run, cfg)
+        shown.append(label)
+    assert shown == ["unknown", "drone", "drone", "drone", "drone", "drone", "drone", "unknown", "unknown", "drone"]
+    with pytest.raises(UserError, match="drone_leave_frames must be an integer >= 1"):
+        ClassifierConfig.from_mapping({"drone_leave_frames": 0}, "[tracker.sky.classifier]")
