@@ -53,6 +53,10 @@ def open_source(path: str | os.PathLike, topic: str | None = None, rate_hz: floa
         return BagSource(p, topic, rate_hz, fixed_frame)
     if suffix == ".pcd":
         raise UserError(f"{p}: give the folder of PCD files (one per scan, named by time), not one file")
+    if suffix == ".lvx":
+        raise UserError(f"{p}: a Livox Viewer file, which `track` does not read (a .bag, a ROS 2 bag folder or "
+                        f".mcap/.db3, a folder of <unix time>.npy or .pcd files); `foveatrack replay {p} "
+                        "--tracker-config FILE` reads Livox Viewer files")
     raise UserError(f"{p}: not a recording this reads (a .bag, a ROS 2 bag folder or .mcap/.db3, "
                     "a folder of <unix time>.npy or .pcd files)")
 

@@ -237,3 +237,10 @@ def test_header_stamps_that_go_back_or_repeat_are_counted_and_said(tmp_path, fra
     said.clear()
     list(BagSource(bw.write_bag(tmp_path / "ok.bag", frames, "pointcloud2", ros1=True), TOPIC, warn=said.append))
     assert said == []
+
+
+def test_a_livox_viewer_file_points_to_replay(tmp_path, capsys):
+    # before: "not a recording this reads", though `replay` reads it
+    lvx = tmp_path / "run.lvx"
+    lvx.write_bytes(b"livox_tech\x00\x00\x00\x00\x00\x00")
+    _fails([lvx], capsys, "run.lvx", "Livox Viewer", f"foveatrack replay {lvx} --tracker-config FILE")
