@@ -45,6 +45,7 @@ def open_source(path: str | os.PathLike, topic: str | None = None, rate_hz: floa
         if ".pcd" in kinds:
             from foveatrack.sources.pcd_folder import PcdFolderSource
             return PcdFolderSource(p, rate_hz)
+        _refuse_folder_of_bags(p)
         raise UserError(f"{p}: an empty folder for frames (no <unix time>.npy or .pcd files, "
                         "no ROS 2 bag metadata.yaml)")
     suffix = p.suffix.lower()
@@ -59,6 +60,23 @@ def open_source(path: str | os.PathLike, topic: str | None = None, rate_hz: floa
                         "--tracker-config FILE` reads Livox Viewer files")
     raise UserError(f"{p}: not a recording this reads (a .bag, a ROS 2 bag folder or .mcap/.db3, "
                     "a folder of <unix time>.npy or .pcd files)")
+
+
+def _refuse_folder_of_bags(p: Path) -> None:
+    """A folder with bag files and no frames (a recording split into ``rec_0.bag``, ``rec_1.bag``, ...;
+    a ROS 2 bag's ``.mcap`` without its ``metadata.yaml``): ``track`` reads one bag, given itself."""
+    files = sorted(f for f in p.iterdir() if f.is_file())
+    for ext in (".bag", ".mcap", ".db3"):
+        bags = [f for f in files if f.suffix.lower() == ext]
+        if not bags:
+            continue
+        n = len(bags)
+        names = ", ".join(f.name for f in bags[:3]) + (", ..." if n > 3 else "")
+        how = (f"give one bag, e.g. {bags[0]} (`track` reads one at a time), or a ROS 2 bag folder with metadata.yaml"
+               if ext == ".bag" else
+               f"give the {ext} file itself, e.g. {bags[0]} (a ROS 2 bag folder has a metadata.yaml)")
+        raise UserError(f"{p}: holds {n} {ext} file{'s' if n > 1 else ''} ({names}) and no <unix time>.npy or "
+                        f".pcd frames: {how}")
 
 
 def _is_bag(p: Path) -> bool:

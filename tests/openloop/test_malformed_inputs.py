@@ -244,3 +244,17 @@ def test_a_livox_viewer_file_points_to_replay(tmp_path, capsys):
     lvx = tmp_path / "run.lvx"
     lvx.write_bytes(b"livox_tech\x00\x00\x00\x00\x00\x00")
     _fails([lvx], capsys, "run.lvx", "Livox Viewer", f"foveatrack replay {lvx} --tracker-config FILE")
+
+
+def test_a_folder_of_split_bags_says_to_give_one(tmp_path, frames, capsys):
+    # before: "an empty folder for frames" for a folder holding rec_0.bag, rec_1.bag
+    d = tmp_path / "split"
+    d.mkdir()
+    bw.write_bag(d / "rec_0.bag", frames[:2], "pointcloud2", ros1=True)
+    bw.write_bag(d / "rec_1.bag", frames[2:], "pointcloud2", ros1=True)
+    err = _fails([d], capsys, str(d), "holds 2 .bag files", "give one bag", "metadata.yaml", d / "rec_0.bag")
+    assert "empty folder" not in err
+    # a ROS 2 bag's .mcap without its metadata.yaml: give the file
+    bag = bw.write_bag(tmp_path / "r2", frames, "pointcloud2", ros1=False)
+    (bag / "metadata.yaml").unlink()
+    _fails([bag], capsys, "holds 1 .mcap file", "give the .mcap file itself")
