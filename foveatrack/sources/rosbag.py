@@ -123,14 +123,14 @@ class BagSource:
             with self._reader() as r:
                 return {name: (info.msgtype, info.msgcount) for name, info in r.topics.items()}
         except Exception as exc:   # rosbags raises its own errors, KeyError/struct errors on damage
-            raise UserError(f"{self.path}: not a readable bag ({_bag_problem(exc)})") from None
+            raise _unreadable(self.path, exc) from None
 
     def __iter__(self):
         try:
             reader = self._reader()
             reader.open()
         except Exception as exc:
-            raise UserError(f"{self.path}: not a readable bag ({_bag_problem(exc)})") from None
+            raise _unreadable(self.path, exc) from None
         try:
             tf = self._read_tf(reader) if self.fixed_frame is not None else None
             conns = [c for c in reader.connections if c.topic == self.topic]
@@ -238,14 +238,92 @@ def describe_topics(topics: dict[str, tuple[str, int]]) -> str:
     return "; ".join(parts)
 
 
-def _bag_problem(exc: Exception) -> str:
-    """The reader's reason in a line, and for a bag whose end or index is missing (its recorder was
-    stopped short: the usual state of a killed recording) what mends it."""
+ROS1_MAGIC = b"#ROSBAG V2.0\n"
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+SQLITE_MAGIC = b"SQLite format 3\x00"
+# what a file that is no bag may be instead, by its first bytes
+_NOT_BAGS = ((b"\x1f\x8b", "gzip-compressed data (gunzip it first)"), (b"BZh", "bzip2-compressed data (unpack it first)"),
+             (b"\xfd7zXZ\x00", "xz-compressed data (unpack it first)"),
+             (b"\x28\xb5\x2f\xfd", "zstd-compressed data (unpack it first)"), (b"PK\x03\x04", "a zip archive"),
+             (b"#ROSBAG V1.", "a ROS 1 bag of the old format V1.x (rosbags reads V2.0)"),
+             (b"livox_tech", "a Livox Viewer .lvx file"), (b"\x93NUMPY", "a numpy .npy file"),
+             (b"# .PCD", "a PCD file"))
+
+
+def _unreadable(path: Path, exc: Exception) -> UserError:
+    """The error for a bag rosbags cannot open: what the file is by its first bytes (another kind of
+    file, a ROS 1 magic with no bag after it), else the reader's reason,
+    and for a bag cut short -- a ROS 1 bag whose header record holds together, a ROS 2 bag -- what
+    mends it."""
     why = _one_line(exc)
+    if path.is_dir():
+        return UserError(f"{path}: not a readable bag ({_mend(why)})")
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(64)
+        size = path.stat().st_size
+    except OSError as e:
+        return UserError(f"{path}: cannot read it ({e.strerror or e})")
+    kinds = {ROS1_MAGIC: ("a ROS 1 bag", ".bag"), MCAP_MAGIC: ("an MCAP file (a ROS 2 bag's storage)", ".mcap"),
+             SQLITE_MAGIC: ("an SQLite file (a ROS 2 bag's storage)", ".db3")}
+    magic = next((m for m in kinds if head.startswith(m)), None)
+    if magic is None:
+        return UserError(f"{path}: not a ROS bag: it does not start with the ROS 1 bag header '#ROSBAG V2.0' "
+                         f"(nor with the MCAP or SQLite header of a ROS 2 bag); its first bytes are "
+                         f"{_first_bytes(head, size)}")
+    what, ext = kinds[magic]
+    if path.suffix.lower() != ext:
+        return UserError(f"{path}: {what}, named {path.suffix or 'without a suffix'}: name it {ext} "
+                         f"(the suffix says how to read it)")
+    if magic == ROS1_MAGIC:
+        wrong = _ros1_header_problem(path, size)
+        if wrong is not None:
+            return UserError(f"{path}: not a ROS bag: it starts with the ROS 1 bag magic '#ROSBAG V2.0', but no "
+                             f"bag header record follows it ({wrong}); a bag cut short keeps its header, so this "
+                             f"is no bag 'rosbag reindex' can mend")
+    return UserError(f"{path}: not a readable bag ({_mend(why)})")
+
+
+def _mend(why: str) -> str:
+    """The reader's reason, and for a bag whose end or index is missing (its recorder was stopped
+    short: the usual state of a killed recording) what mends it."""
     if any(k in why for k in ("index", "Header could not be read", "end magic", "magic is invalid")):
         why += ("; a bag whose recorder was stopped short has no index or end: 'rosbag reindex BAG' (ROS 1) or "
                 "'ros2 bag reindex DIR' (ROS 2) writes them, then read it again")
     return why
+
+
+def _ros1_header_problem(path: Path, size: int) -> str | None:
+    """None if the ROS 1 magic is followed by a bag header record (op 0x03) within the file, as every
+    bag has from its first write on; else what follows it instead."""
+    with open(path, "rb") as fh:
+        fh.seek(len(ROS1_MAGIC))
+        raw = fh.read(4)
+        if len(raw) < 4:
+            return f"the file ends {size - len(ROS1_MAGIC)} bytes after it"
+        n = int.from_bytes(raw, "little")
+        if len(ROS1_MAGIC) + 4 + n > size:
+            return f"its first record's header length, {n} bytes, runs past the file's {size} bytes"
+        hdr = fh.read(n)
+    fields, i = {}, 0
+    while i + 4 <= n:
+        k = int.from_bytes(hdr[i:i + 4], "little")
+        name, eq, value = hdr[i + 4:i + 4 + k].partition(b"=")
+        if i + 4 + k > n or not eq:
+            return "its first record's header fields do not hold together"
+        fields[name] = value
+        i += 4 + k
+    if fields.get(b"op") != b"\x03":
+        return "its first record is not a bag header (op 0x03)"
+    return None
+
+
+def _first_bytes(head: bytes, size: int) -> str:
+    if size == 0:
+        return "none: the file is empty"
+    like = next((w for m, w in _NOT_BAGS if head.startswith(m)), None)
+    shown = repr(head[:16]) + (" ..." if size > 16 else "")
+    return f"{shown}, {like}" if like else shown
 
 
 def _once(warn):

@@ -258,3 +258,32 @@ def test_a_folder_of_split_bags_says_to_give_one(tmp_path, frames, capsys):
     bag = bw.write_bag(tmp_path / "r2", frames, "pointcloud2", ros1=False)
     (bag / "metadata.yaml").unlink()
     _fails([bag], capsys, "holds 1 .mcap file", "give the .mcap file itself")
+
+
+@pytest.mark.parametrize("head", [b"", b"#ROSBAG V2.0\n", b"\x1f\x8b\x08\x00"], ids=["bytes", "ros1-magic", "gzip"])
+def test_a_file_named_bag_that_is_no_bag_is_not_told_to_reindex(tmp_path, frames, capsys, head):
+    # before: any file named .bag rosbags could not open got "'rosbag reindex BAG' ... then read it
+    # again", which cannot mend a file that never was a bag
+    bag = tmp_path / "garbage.bag"
+    bag.write_bytes(head + bytes(range(256)) * 10)
+    err = _fails([bag, "--topic", TOPIC], capsys, "garbage.bag", "not a ROS bag")
+    assert "rosbag reindex BAG" not in err and "read it again" not in err, err
+    if head.startswith(b"#ROSBAG"):
+        assert "no bag header record follows it" in err and "50462976 bytes" in err, err
+    else:
+        assert "does not start with the ROS 1 bag header '#ROSBAG V2.0'" in err
+        assert repr(head + bytes(range(16 - len(head)))) in err, err
+        assert ("gzip" in err) == head.startswith(b"\x1f\x8b"), err
+    # a bag cut short keeps its magic and header record: told to reindex (test_a_bag_cut_short_says_how_to_mend_it)
+    good = bw.write_bag(tmp_path / "b.bag", frames, "pointcloud2", ros1=True)
+    data = good.read_bytes()
+    good.write_bytes(data[: int(len(data) * 0.9)])
+    _fails([good, "--topic", TOPIC], capsys, "rosbag reindex BAG")
+
+
+def test_a_bag_of_one_kind_named_as_the_other(tmp_path, frames, capsys):
+    ros2 = next(bw.write_bag(tmp_path / "r2", frames, "pointcloud2", ros1=False).glob("*.mcap"))
+    ros1 = bw.write_bag(tmp_path / "r1.bag", frames, "pointcloud2", ros1=True)
+    _fails([ros2.rename(tmp_path / "x.bag"), "--topic", TOPIC], capsys, "x.bag", "an MCAP file", "name it .mcap")
+    _fails([ros1.rename(tmp_path / "x.mcap"), "--topic", TOPIC], capsys, "x.mcap", "a ROS 1 bag", "name it .bag")
+
