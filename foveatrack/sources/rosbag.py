@@ -241,6 +241,9 @@ def describe_topics(topics: dict[str, tuple[str, int]]) -> str:
 ROS1_MAGIC = b"#ROSBAG V2.0\n"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"
+#: the MCAP metadata record of foveatrack's own recordings (foveatrack.recording.format.META_NAME, which
+#: this unit may not import)
+FOVEATRACK_META = "foveatrack"
 # what a file that is no bag may be instead, by its first bytes
 _NOT_BAGS = ((b"\x1f\x8b", "gzip-compressed data (gunzip it first)"), (b"BZh", "bzip2-compressed data (unpack it first)"),
              (b"\xfd7zXZ\x00", "xz-compressed data (unpack it first)"),
@@ -251,8 +254,8 @@ _NOT_BAGS = ((b"\x1f\x8b", "gzip-compressed data (gunzip it first)"), (b"BZh", "
 
 
 def _unreadable(path: Path, exc: Exception) -> UserError:
-    """The error for a bag rosbags cannot open: what the file is by its first bytes (another kind of
-    file, a ROS 1 magic with no bag after it), else the reader's reason,
+    """The error for a bag rosbags cannot open: what the file is by its first bytes (foveatrack's own
+    recording, another kind of file, a ROS 1 magic with no bag after it), else the reader's reason,
     and for a bag cut short -- a ROS 1 bag whose header record holds together, a ROS 2 bag -- what
     mends it."""
     why = _one_line(exc)
@@ -264,6 +267,10 @@ def _unreadable(path: Path, exc: Exception) -> UserError:
         size = path.stat().st_size
     except OSError as e:
         return UserError(f"{path}: cannot read it ({e.strerror or e})")
+    if head.startswith(MCAP_MAGIC) and _is_foveatrack_recording(path):
+        return UserError(f"{path}: a foveatrack recording (its MCAP metadata names it; `simulate --out` and the "
+                         f"daemon write these), not a ROS bag: `foveatrack replay {path}` re-runs the tracker over "
+                         f"it, `foveatrack export {path}` writes its points as .lvx, CSV or NPZ")
     kinds = {ROS1_MAGIC: ("a ROS 1 bag", ".bag"), MCAP_MAGIC: ("an MCAP file (a ROS 2 bag's storage)", ".mcap"),
              SQLITE_MAGIC: ("an SQLite file (a ROS 2 bag's storage)", ".db3")}
     magic = next((m for m in kinds if head.startswith(m)), None)
@@ -324,6 +331,26 @@ def _first_bytes(head: bytes, size: int) -> str:
     like = next((w for m, w in _NOT_BAGS if head.startswith(m)), None)
     shown = repr(head[:16]) + (" ..." if size > 16 else "")
     return f"{shown}, {like}" if like else shown
+
+
+def _is_foveatrack_recording(path: Path) -> bool:
+    """An MCAP file foveatrack's recording writer wrote: its Header's profile or a metadata record,
+    which the writer puts before any message, names foveatrack."""
+    from mcap.records import Chunk, Header, Message, Metadata
+    from mcap.stream_reader import StreamReader
+
+    try:
+        with open(path, "rb") as fh:
+            for k, rec in enumerate(StreamReader(fh, skip_magic=False).records):
+                if isinstance(rec, Header) and rec.profile == FOVEATRACK_META:
+                    return True
+                if isinstance(rec, Metadata) and rec.name == FOVEATRACK_META:
+                    return True
+                if isinstance(rec, (Chunk, Message)) or k > 100:
+                    return False
+    except Exception:      # damage: it says no more than its records before it
+        return False
+    return False
 
 
 def _once(warn):

@@ -287,3 +287,13 @@ def test_a_bag_of_one_kind_named_as_the_other(tmp_path, frames, capsys):
     _fails([ros2.rename(tmp_path / "x.bag"), "--topic", TOPIC], capsys, "x.bag", "an MCAP file", "name it .mcap")
     _fails([ros1.rename(tmp_path / "x.mcap"), "--topic", TOPIC], capsys, "x.mcap", "a ROS 1 bag", "name it .bag")
 
+
+def test_a_foveatrack_recording_points_to_replay_and_export(tmp_path, capsys):
+    # before: "not a readable bag (Profile is not ros2.)" for foveatrack's own recording
+    rec = tmp_path / "run.mcap"
+    assert main(["track", str(FIXTURE), "--record", str(rec), "--json"]) == 0
+    capsys.readouterr()
+    for argv in ([rec], [rec, "--topic", TOPIC]):
+        err = _fails(argv, capsys, "run.mcap", "a foveatrack recording", f"foveatrack replay {rec}",
+                     f"foveatrack export {rec}")
+        assert "Profile" not in err
