@@ -105,6 +105,9 @@ class BagSource:
             raise UserError(f"{self.path}: topic {topic} carries {msgtype}, which is not a point cloud "
                             f"this reads ({', '.join(CLOUD_TYPES)})")
         self.topic, self.msgtype, self.n_messages = topic, msgtype, n
+        if n == 0 and not self._has_a_message():
+            raise UserError(f"{self.path}: topic {topic} has no messages, so there is nothing to track; the bag "
+                            "has " + describe_topics(topics))
         self._tf_topics = [name for name, (t, _) in topics.items() if t in TF_TYPES]
         if fixed_frame is not None and not self._tf_topics:
             raise UserError(f"{self.path}: --fixed-frame {fixed_frame} needs a /tf topic (tf2_msgs/msg/TFMessage); "
@@ -112,6 +115,16 @@ class BagSource:
 
     def __len__(self) -> int:
         return self.n_messages
+
+    def _has_a_message(self) -> bool:
+        """Whether the topic has a message, read, where its count says none (a ROS 2 bag's count is its
+        metadata.yaml's); a read that fails is left to the iteration to say."""
+        try:
+            with self._reader() as r:
+                conns = [c for c in r.connections if c.topic == self.topic]
+                return next(iter(r.messages(connections=conns)), None) is not None
+        except Exception:
+            return True
 
     def _reader(self):
         from rosbags.highlevel import AnyReader

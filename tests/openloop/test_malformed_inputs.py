@@ -297,3 +297,25 @@ def test_a_foveatrack_recording_points_to_replay_and_export(tmp_path, capsys):
         err = _fails(argv, capsys, "run.mcap", "a foveatrack recording", f"foveatrack replay {rec}",
                      f"foveatrack export {rec}")
         assert "Profile" not in err
+
+
+@pytest.mark.parametrize("ros1", [True, False], ids=["ros1-bag", "ros2-mcap"])
+def test_a_topic_without_messages_is_refused_before_any_output(tmp_path, frames, ros1, capsys):
+    # before: exit 0, "frames 0", a CSV of its header only and empty plots, and no word of why
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
+
+    store, bag = bw._stores(ros1), tmp_path / ("b.bag" if ros1 else "b")
+    pc2 = "sensor_msgs/msg/PointCloud2"
+    w = Writer1(bag) if ros1 else Writer2(bag, version=9, storage_plugin=StoragePlugin.MCAP)
+    ser = store.serialize_ros1 if ros1 else store.serialize_cdr
+    with w:
+        w.add_connection(TOPIC, pc2, typestore=store)
+        other = w.add_connection("/points", pc2, typestore=store)
+        for ns, xyz in frames:
+            w.write(other, ns, ser(bw.pointcloud2(store, ns, xyz, ros1), pc2))
+    out = [tmp_path / "t.csv", tmp_path / "plots", tmp_path / "t.mcap"]
+    _fails([bag, "--topic", TOPIC, "--csv", out[0], "--plot", out[1], "--record", out[2]], capsys,
+           f"topic {TOPIC} has no messages", f"{TOPIC} (sensor_msgs/msg/PointCloud2, 0 messages)",
+           "/points (sensor_msgs/msg/PointCloud2, 4 messages)")
+    assert not any(p.exists() for p in out)
