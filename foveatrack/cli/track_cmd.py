@@ -127,6 +127,8 @@ def format_summary(res) -> str:
                          f"({ref['frames_with_reference']} frames have a reference sample)")
         else:
             lines.append(f"  no tracked frame has a reference sample ({ref['frames_with_reference']} frames have one)")
+        if ref.get("matched_at"):
+            lines.append(f"  the reference was sampled at {ref['matched_at']}")
     return "\n".join(lines)
 
 

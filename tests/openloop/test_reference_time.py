@@ -3,6 +3,7 @@ carry times (the median time of its points), the frame's stamp when they do not 
 says which."""
 
 import numpy as np
+import pytest
 
 from foveatrack.frames import Frame
 from foveatrack.openloop import OpenLoopConfig, track_source
@@ -55,3 +56,21 @@ def test_without_point_times_the_frame_stamp_is_all_there_is():
     np.testing.assert_array_equal(res.frames["ref_t_s"], res.frames["t_s"])
     e = res.frames["error_m"]
     assert np.all((e > 0.45) & (e < 0.7))     # the drone's 60-80 ms at 8 m/s: the frame's, not the code's, error
+
+
+def _summary_lines(point_times: bool, reference, keep=None) -> list[str]:
+    from foveatrack.cli.track_cmd import format_summary
+
+    cfg = OpenLoopConfig(space=Box((15.0, -10.0, 0.0), (25.0, 10.0, 4.0)))
+    frames = [fr for k, fr in enumerate(_frames(point_times)) if keep is None or k in keep]
+    return format_summary(track_source(frames, cfg, reference=reference)).splitlines()
+
+
+@pytest.mark.parametrize("point_times", [True, False], ids=["detection-time", "stamp"])
+def test_the_text_summary_says_which_time_the_reference_was_sampled_at(point_times):
+    # the JSON summary said it (reference.matched_at); the text printed the distance alone
+    lines = _summary_lines(point_times, _reference())
+    k = next(i for i, line in enumerate(lines) if "distance to the reference" in line)
+    want = "each detection's time (the median time of its points)" if point_times else "each frame's stamp"
+    assert lines[k + 1].startswith(f"  the reference was sampled at {want}"), lines
+
