@@ -126,10 +126,46 @@ def format_summary(res) -> str:
                          f"p95 {e['p95_m']:.3f} m, max {e['max_m']:.3f} m "
                          f"({ref['frames_with_reference']} frames have a reference sample)")
         else:
-            lines.append(f"  no tracked frame has a reference sample ({ref['frames_with_reference']} frames have one)")
+            lines.append(f"  no tracked frame has a reference sample ({ref['frames_with_reference']} frames have one)"
+                         + _why_no_reference(ref))
         if ref.get("matched_at"):
             lines.append(f"  the reference was sampled at {ref['matched_at']}")
     return "\n".join(lines)
+
+
+def _why_no_reference(ref: dict) -> str:
+    """Why no tracked frame met a reference sample: the reference's time span and the tracked frames'
+    (the frames', if none was tracked), and whether they overlap at all -- a reference in seconds from
+    its start against frames in unix seconds, or in ns against seconds, never does."""
+    import math
+
+    r, f, who = ref.get("t_range_s"), ref.get("tracked_t_range_s"), "tracked frames"
+    if f is None:
+        f, who = ref.get("frames_t_range_s"), "frames"
+    if r is None or f is None:
+        return ""
+
+    def t(v):
+        return f"{v:.3f}" if abs(v) < 1e11 else f"{v:.6g}"
+
+    text = f": the reference spans {t(r[0])} .. {t(r[1])} s, the {who} {t(f[0])} .. {t(f[1])} s"
+    if r[0] <= f[1] and f[0] <= r[1]:
+        if ref["frames_with_reference"]:       # the frames that have one were not tracked
+            return text
+        return text + (f"; no reference sample lies within {ref['max_dt_s'] * 1e3:.0f} ms (half a frame) of a "
+                       f"{who[:-1]}'s time")
+    text += "; they do not overlap"
+    unix = 1e8                       # 1973 in unix seconds: a time below it is counted from a recording's start
+    if r[1] < unix <= f[0]:
+        return text + (" (the reference's times look like seconds from its start, the frames' like unix seconds: "
+                       "give the reference in unix seconds)")
+    if f[1] < unix <= r[0]:
+        return text + " (the frames' times look like seconds from their start, the reference's like unix seconds)"
+    if unix <= f[0] and r[0] > 0:
+        unit = {3: "ms", 6: "µs", 9: "ns"}.get(3 * round(math.log10(r[0] / f[0]) / 3))
+        if unit:
+            return text + f" (the reference's times look like {unit} since 1970; --reference takes seconds)"
+    return text
 
 
 def _refuse_other_tables(path: str, data: dict) -> None:

@@ -104,8 +104,18 @@ def summarize(frames: dict, confirmed: list, cfg: OpenLoopConfig, reference, per
                                          else "each frame's stamp (the points carry no time of their own)"),
                           "frames_with_reference": int(ok.sum()),
                           "frames_with_reference_tracked": int((ok & det).sum()),
-                          "error": error_summary(err)}
+                          "error": error_summary(err),
+                          # what says why none matched: the two clocks' spans (relative vs unix seconds)
+                          "t_range_s": _span(ref_t), "frames_t_range_s": _span(at), "tracked_t_range_s": _span(at[det]),
+                          "max_dt_s": 0.5 * period_s}
     return s
+
+
+def _span(t) -> list | None:
+    """``[first, last]`` of the finite times [s], None if there are none."""
+    t = np.asarray(t, float)
+    t = t[np.isfinite(t)]
+    return [float(t.min()), float(t.max())] if t.size else None
 
 
 def write_track_csv(res: OpenLoopResult, path) -> int:

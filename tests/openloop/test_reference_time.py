@@ -74,3 +74,26 @@ def test_the_text_summary_says_which_time_the_reference_was_sampled_at(point_tim
     want = "each detection's time (the median time of its points)" if point_times else "each frame's stamp"
     assert lines[k + 1].startswith(f"  the reference was sampled at {want}"), lines
 
+
+@pytest.mark.parametrize("shift, hint", [(-T0, "look like seconds from its start"), (None, "look like ns since 1970")],
+                         ids=["relative-seconds", "ns"])
+def test_no_reference_sample_says_both_time_spans(shift, hint):
+    # a reference in seconds from its start against unix-time frames: "no tracked frame has a reference
+    # sample (0 frames have one)" and nothing of why
+    t, xyz = _reference()
+    t = t + shift if shift is not None else t * 1e9
+    lines = _summary_lines(False, (t, xyz))
+    line = next(line for line in lines if "no tracked frame has a reference sample" in line)
+    span = "0.000 .. 1.190 s" if shift is not None else "1.71724e+18 .. 1.71724e+18 s"
+    assert f"the reference spans {span}, the tracked frames {T0}.000 .. {T0}.900 s" in line, line
+    assert "they do not overlap" in line and hint in line, line
+
+
+def test_overlapping_spans_with_no_sample_near_a_tracked_frame_say_so():
+    # frames at 0.0-0.2 s and 0.8-0.9 s, the reference at 0.4-0.6 s only: within the frames' span, near none
+    t, xyz = _reference()
+    near = (t >= T0 + 0.4) & (t <= T0 + 0.6)
+    lines = _summary_lines(False, (t[near], xyz[near]), keep=[0, 1, 2, 8, 9])
+    line = next(x for x in lines if "no tracked frame has a reference sample" in x)
+    assert f"the reference spans {T0 + 0.4:.3f} .. {T0 + 0.6:.3f} s, the tracked frames {T0}.000 .. {T0}.900 s" in line
+    assert "do not overlap" not in line and "no reference sample lies within 50 ms (half a frame)" in line, line
