@@ -47,6 +47,10 @@ def cmd_track(args) -> int:
     # never one of the scans it reads (a --csv named after a scan replaced it), nor a file that exists
     check_outputs([("--csv", args.csv, (".csv",)), ("--record", args.record, (".mcap",))], inputs=[args.source],
                   overwrite=args.overwrite)
+    if args.record:
+        from foveatrack.openloop.recording import check_frame_length
+
+        check_frame_length(args.rate_hz, args.record)
     cfg = OpenLoopConfig()
     if args.config:
         data, _ = read_toml(args.config, "open-loop config (--config)")

@@ -12,6 +12,29 @@ from __future__ import annotations
 import numpy as np
 
 D_TOPIC = "/openloop_d"
+#: the furthest a point's time may lie from its frame's time [ns] in a recording: the writer stores it
+#: as an int32 ``age_ns`` (:meth:`foveatrack.recording.RecordingWriter.write_points`), so a frame,
+#: recorded at its end, holds 2.147 s of points at most
+MAX_POINT_AGE_NS = 2**31 - 1
+# the frame's end is a float in seconds (a unix time: its last digit is ~0.2 us) rounded back to ns
+_ROUNDING_NS = 1_000
+
+
+def check_frame_length(rate_hz: float, path) -> None:
+    """Refuse ``--record`` before anything is read when a frame at ``rate_hz`` lasts longer than a
+    recording's frame holds (below ~0.466 Hz): a frame's points reach back its whole length from
+    its end.  A rate that is no positive number is left to the sources to refuse."""
+    from foveatrack.errors import UserError
+
+    if not (rate_hz > 0 and np.isfinite(rate_hz)):
+        return
+    length_ns = 1e9 / rate_hz
+    if length_ns + _ROUNDING_NS > MAX_POINT_AGE_NS:
+        least = 1e9 / (MAX_POINT_AGE_NS - _ROUNDING_NS)
+        raise UserError(f"--record {path}: a frame at --rate-hz {rate_hz:g} lasts {length_ns * 1e-9:.3g} s, longer "
+                        f"than the {MAX_POINT_AGE_NS * 1e-9:.3f} s of points a recording's frame holds (each point's "
+                        f"time is stored as int32 ns before its frame's end): give --rate-hz {least:.3f} or more, "
+                        f"or track without --record")
 
 
 class TrackRecorder:
@@ -41,6 +64,14 @@ class TrackRecorder:
 
         w = self.writer
         t_ns = int(round(frame.t_end_s * 1e9))
+        if frame.n_points and max(t_ns - int(frame.t_ns.min()), int(frame.t_ns.max()) - t_ns) > MAX_POINT_AGE_NS:
+            from foveatrack.errors import UserError
+
+            raise UserError(f"--record {w.path}: frame {k} (at {frame.t_start_s:.6f} s) has points from "
+                            f"{(int(frame.t_ns.min()) - t_ns) * 1e-9:+.3f} s to {(int(frame.t_ns.max()) - t_ns) * 1e-9:+.3f} s "
+                            f"of its end, beyond the ±{MAX_POINT_AGE_NS * 1e-9:.3f} s a recording's frame holds (each "
+                            f"point's time is stored as int32 ns from its frame's end); the frames before it are "
+                            f"recorded; track without --record to read it all")
         w.write_points(t_ns, k, frame.xyz, frame.t_ns, frame.reflectivity)
         det = out.detection
         xyz = None if det is None else np.asarray(det.xyz, float)
