@@ -67,8 +67,9 @@ class TrackRecorder:
         if frame.n_points and max(t_ns - int(frame.t_ns.min()), int(frame.t_ns.max()) - t_ns) > MAX_POINT_AGE_NS:
             from foveatrack.errors import UserError
 
+            lo, hi = (int(frame.t_ns.min()) - t_ns) * 1e-9, (int(frame.t_ns.max()) - t_ns) * 1e-9
             raise UserError(f"--record {w.path}: frame {k} (at {frame.t_start_s:.6f} s) has points from "
-                            f"{(int(frame.t_ns.min()) - t_ns) * 1e-9:+.3f} s to {(int(frame.t_ns.max()) - t_ns) * 1e-9:+.3f} s "
+                            f"{lo:+.3f} s to {hi:+.3f} s "
                             f"of its end, beyond the ±{MAX_POINT_AGE_NS * 1e-9:.3f} s a recording's frame holds (each "
                             f"point's time is stored as int32 ns from its frame's end); the frames before it are "
                             f"recorded; track without --record to read it all")

@@ -258,7 +258,8 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 #: this unit may not import)
 FOVEATRACK_META = "foveatrack"
 # what a file that is no bag may be instead, by its first bytes
-_NOT_BAGS = ((b"\x1f\x8b", "gzip-compressed data (gunzip it first)"), (b"BZh", "bzip2-compressed data (unpack it first)"),
+_NOT_BAGS = ((b"\x1f\x8b", "gzip-compressed data (gunzip it first)"),
+             (b"BZh", "bzip2-compressed data (unpack it first)"),
              (b"\xfd7zXZ\x00", "xz-compressed data (unpack it first)"),
              (b"\x28\xb5\x2f\xfd", "zstd-compressed data (unpack it first)"), (b"PK\x03\x04", "a zip archive"),
              (b"#ROSBAG V1.", "a ROS 1 bag of the old format V1.x (rosbags reads V2.0)"),
