@@ -5,6 +5,8 @@ the user renaming files by hand before every start.)"""
 
 import pytest
 
+from daemon_procs import free_udp_port
+
 from foveatrack.daemon import Daemon, load_config
 from foveatrack.device_config import DaemonConfig
 from foveatrack.errors import UserError
@@ -20,7 +22,7 @@ host_ip = "127.0.0.1"
 cmd_port = 0
 data_port = 0
 broadcast_port = false
-sensor_cmd_port = 65000
+sensor_cmd_port = {free_udp_port()}
 [head]
 port = "loop://"
 [recording]

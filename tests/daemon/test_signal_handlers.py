@@ -7,6 +7,8 @@ import signal
 
 import pytest
 
+from daemon_procs import free_udp_port
+
 from foveatrack.daemon import Daemon, load_config
 
 
@@ -19,7 +21,7 @@ host_ip = "127.0.0.1"
 cmd_port = 0
 data_port = 0
 broadcast_port = false
-sensor_cmd_port = 65000
+sensor_cmd_port = {free_udp_port()}
 [head]
 port = "loop://"
 [recording]

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from daemon_procs import free_udp_port
+
 from foveatrack.daemon import Daemon, load_config
 from foveatrack.errors import UserError
 
@@ -24,7 +26,7 @@ host_ip = "127.0.0.1"
 cmd_port = 0
 data_port = {data_port}
 broadcast_port = false
-sensor_cmd_port = 65000
+sensor_cmd_port = {free_udp_port()}
 [head]
 port = "{port}"
 [recording]
