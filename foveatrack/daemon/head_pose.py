@@ -60,7 +60,9 @@ class HeadPose:
             head_up = seen.head_up = self.head.connected
             self.counters["head_link_up" if head_up else "head_link_down"] += 1
             self.log.event("head_connected" if head_up else "head_disconnected", stats=asdict(self.head.stats))
-            if c.head.on_reconnect != "keep" and self.pose_state != "refused":
+            # "keep" trusts the dead reckoning over a lost link, but a pose already unknown (a homing
+            # under way, at start or after a failed write) is homed again once the link is back
+            if (c.head.on_reconnect != "keep" or self.pose_state is not None) and self.pose_state != "refused":
                 if not head_up and self.pose_state is None:
                     self._pose_unknown(now, "link_lost")
                 elif head_up:
@@ -129,7 +131,9 @@ class HeadPose:
                 rec = self.step.own_goal(step, goal_deg, "homing")
                 if not rec.reached_head:
                     self.log.event("head_homing_failed", step=step, limited=list(rec.limited))
-                    return self._pose_unknown(now, "homing_write_failed")   # again once the link is back
+                    # again once the link is back, as the pose's policy says (a start's homing under
+                    # on_reconnect = "keep" stayed unknown for good when it took that policy)
+                    return self._pose_unknown(now, "homing_write_failed", policy=self._home_policy)
                 self._home_steps.written(now)    # (the tick's time: the write follows it within the tick)
                 # the goal the gate let through is where the head goes: the wait's checks and the
                 # tracker rebased at the end use it
@@ -144,12 +148,15 @@ class HeadPose:
                 if confirmed:
                     self.log.event("head_homing_confirmed", by="pose_check",
                                    waited_s=round(now - (self._homing_t0 or now), 3), wait_s=plan.wait_s)
-                self._rebase_tracker(t_s if t_s is not None else 0.0, pan, tilt)
+                # before the lidar's first packet (a homing at start) the sensor clock is unknown: the
+                # tracker starts at 0, and the record says so (replay rebases at the same instant)
+                t0 = t_s if t_s is not None else 0.0
+                self._rebase_tracker(t0, pan, tilt)
                 self.pose_state = None
                 self.counters["head_homed"] += 1
-                self.log.event("head_homed", pan_deg=pan, tilt_deg=tilt, t0_s=t_s, frames=self.counters["frames"])
-                self._record(_job_event, ns(t_s or 0.0), {"event": "tracker_rebased", "reason": "head_homed",
-                                                          "t0_s": t_s, "pan_deg": pan, "tilt_deg": tilt})
+                self.log.event("head_homed", pan_deg=pan, tilt_deg=tilt, t0_s=t0, frames=self.counters["frames"])
+                self._record(_job_event, ns(t0), {"event": "tracker_rebased", "reason": "head_homed",
+                                                  "t0_s": t0, "pan_deg": pan, "tilt_deg": tilt})
 
     def _rebase_tracker(self, t0_s: float, pan_deg: float, tilt_deg: float) -> None:
         """A fresh tracker whose dead reckoning starts at ``(pan_deg, tilt_deg)`` at sensor time ``t0_s``."""

@@ -102,8 +102,9 @@ class Lifecycle:
         self.link_seen = LinkSeen(head_up=self.head.connected)   # after the first STOP, which may reopen it
         h = c.head
         if h.on_start == "home":
-            # the head reports no pose: drive it home by absolute moves before tracking, as a
-            # reconnected head is (foveatrack.daemon.head_pose), wherever a previous run left it
+            # the head reports no pose: drive it home (home_pan_deg / home_tilt_deg, by default pan0_deg /
+            # tilt0_deg) by absolute moves before tracking, as a reconnected head is
+            # (foveatrack.daemon.head_pose), wherever a previous run left it
             now = time.monotonic()
             self._pose_unknown(now, "start", policy="home")
             self._reconnected(now)
@@ -111,7 +112,7 @@ class Lifecycle:
             self.status.note(f"foveatrack daemon: WARNING: the run before this one was killed (its recording was "
                              f"completed above): the head is where that run left it, and this run assumes it at "
                              f"pan {h.pan0_deg:g} / tilt {h.tilt0_deg:g} deg; [head] on_start = \"home\" drives it "
-                             f"there first")
+                             f"home first (home_pan_deg / home_tilt_deg, by default there)")
 
     def _shutdown(self) -> None:
         self.stop_ev.set()

@@ -446,3 +446,28 @@ def test_fault7_on_start_home_drives_the_head_home_before_the_first_frame_is_tra
         (pan_rest, tilt_rest), rows[-1])
     dets = [d for d in RecordingReader(rec).records("detections") if d["detected"]]
     assert len(dets) >= 20
+
+
+def test_fault7b_a_start_homed_before_the_lidar_speaks_replays(tmp_path):
+    # a lidar up after the daemon had homed the head (boot order): the rebase is at sensor time 0,
+    # recorded as such; it was recorded as null and the replay refused the file as damaged
+    link, truth, rec, log = tmp_path / "head", tmp_path / "truth.jsonl", tmp_path / "rec.mcap", tmp_path / "d.jsonl"
+    bport = free_udp_port()
+    table = tmp_path / "unit3.json"
+    truth_speed_table(PTS303H(unit_seed=3)).save(table)
+    cfg = write_config(tmp_path / "d.toml", link, rec, bport, speed_table=str(table))
+    cfg.write_text(cfg.read_text().replace(
+        "[tracker]\n", 'on_start = "home"\nhome_pan_deg = -6.0\nhome_tilt_deg = 0.0\nhome_wait_s = 2.0\n\n[tracker]\n', 1))
+    procs = {"head": _head(tmp_path, link, truth)}
+    try:
+        procs["daemon"] = start(["daemon", "--config", str(cfg), "--log", str(log)], tmp_path / "d.out", tmp_path / "d.err")
+        wait_for(lambda: event(log, "head_homed"), 60, "the head homed", list(procs.values()))
+        assert event(log, "lidar_data") is None
+        procs["lidar"] = _lidar(tmp_path, bport, truth)
+        wait_for(lambda: event(log, "lidar_data"), 60, "lidar data at the daemon", list(procs.values()))
+        _wait_frames(log, rec, 30, list(procs.values()))
+        assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
+    finally:
+        stop_all(procs)
+    assert event(log, "head_homed")["t0_s"] == 0.0
+    _replays_to_the_bit(rec)
