@@ -83,14 +83,16 @@ def cmd_export(args) -> int:
     if args.data_type is not None or args.device:
         if not args.lvx:
             raise UserError("--data-type and --device are for --lvx")
-    from foveatrack.recording import export_imu, export_points, export_tracks, export_trajectory, export_truth_objects
+    from foveatrack.recording import export_points, export_trajectory
+    from foveatrack.recording.export import imu_columns, tracks_columns, truth_objects_columns, write_columns
 
-    # the IMU samples first: a recording without them is an error, and it must come before any other
-    # output is written (it came last, after the points had been written)
-    n_imu = export_imu(rec, args.imu, warn=warn, max_frames=cap) if args.imu else None
-    # ... and so do the tracks and the objects' truth, which a single-target run has none of
-    n_tracks = export_tracks(rec, args.tracks, warn=warn, max_frames=cap) if args.tracks else None
-    n_truth = export_truth_objects(rec, args.truth_objects, warn=warn, max_frames=cap) if args.truth_objects else None
+    # the tables a recording may lack (IMU samples, the multi-object tracker's tracks, the objects'
+    # truth) are read and checked first: a recording without one is an error, and it must come
+    # before any output is written (the IMU came last once, after the points had been written; then
+    # the IMU table was written before the tracks were found missing)
+    tables = [(path, read(rec, warn, cap), what) for path, read, what in (
+        (args.imu, imu_columns, "IMU samples"), (args.tracks, tracks_columns, "track rows"),
+        (args.truth_objects, truth_objects_columns, "object truth rows")) if path]
     if args.lvx:
         from foveatrack.livox.lvx_export import export_lvx
 
@@ -114,10 +116,7 @@ def cmd_export(args) -> int:
             print(f"{export_points(rec, path, warn=warn, max_frames=cap)} points -> {path}")
     if args.trajectory:
         print(f"{export_trajectory(rec, args.trajectory, warn=warn, max_frames=cap)} records -> {args.trajectory}")
-    if n_imu is not None:
-        print(f"{n_imu} IMU samples -> {args.imu}")
-    if n_tracks is not None:
-        print(f"{n_tracks} track rows -> {args.tracks}")
-    if n_truth is not None:
-        print(f"{n_truth} object truth rows -> {args.truth_objects}")
+    for path, cols, what in tables:
+        write_columns(Path(path), cols, nan_as_empty=True)
+        print(f"{len(next(iter(cols.values())))} {what} -> {path}")
     return 0

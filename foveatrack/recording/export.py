@@ -172,6 +172,13 @@ def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike, warn: 
     that says so (recordings of runs without an IMU, or made before the channel existed)."""
     out_path = Path(out_path)
     out_kind(out_path)
+    cols = imu_columns(recording, warn, max_frames)
+    write_columns(out_path, cols, nan_as_empty=True)
+    return int(cols["t_s"].shape[0])
+
+
+def imu_columns(recording: str | os.PathLike, warn: Warn | None = None, max_frames: int | None = None) -> dict:
+    """The columns :func:`export_imu` writes, read and checked before anything is written."""
     reader = open_run(recording, max_frames, segment_alone=True)
     batches = list(reader.imu())
     _warn_damage(reader, warn)
@@ -187,8 +194,7 @@ def export_imu(recording: str | os.PathLike, out_path: str | os.PathLike, warn: 
     cols.update((f"gyro_{a}_rad_s", gyro[:, i]) for i, a in enumerate("xyz"))
     if not np.isnan(accel).all():
         cols.update((f"accel_{a}_g", accel[:, i]) for i, a in enumerate("xyz"))
-    write_columns(out_path, cols, nan_as_empty=True)
-    return int(cols["t_s"].shape[0])
+    return cols
 
 
 def export_tracks(recording: str | os.PathLike, out_path: str | os.PathLike, warn: Warn | None = None,
@@ -201,9 +207,17 @@ def export_tracks(recording: str | os.PathLike, out_path: str | os.PathLike, war
     ``in_view``, ``score`` (the threat score of a confirmed track; empty otherwise), ``fixated`` (the
     fovea served it this frame), ``pinned``.  Returns the row count; a recording of the single-target
     tracker has no tracks and is an error that says so."""
+    out_kind(Path(out_path))
+    cols = tracks_columns(recording, warn, max_frames)
+    write_columns(Path(out_path), cols, nan_as_empty=True)
+    return int(cols["id"].shape[0])
+
+
+def tracks_columns(recording: str | os.PathLike, warn: Warn | None = None, max_frames: int | None = None) -> dict:
+    """The columns :func:`export_tracks` writes, read and checked before anything is written."""
     from foveatrack.recording.records import TracksRecord
 
-    frames = _channel_records(recording, out_path, TRACKS, TracksRecord.from_json, warn, max_frames,
+    frames = _channel_records(recording, TRACKS, TracksRecord.from_json, warn, max_frames,
                               "holds no tracks: a run of the single-target tracker (its detections are in "
                               "--trajectory); the multi-object tracker runs with a [tracker.sky] table")
     rows = [(f, e) for f in frames for e in f.tracks]
@@ -219,8 +233,7 @@ def export_tracks(recording: str | os.PathLike, out_path: str | os.PathLike, war
                 score=np.array([math.nan if e.score is None else e.score for _, e in rows], dtype=float),
                 fixated=np.array([e.id == f.fixated for f, e in rows], dtype=bool),
                 pinned=np.array([e.id == f.pinned for f, e in rows], dtype=bool))
-    write_columns(Path(out_path), cols, nan_as_empty=True)
-    return len(rows)
+    return cols
 
 
 def export_truth_objects(recording: str | os.PathLike, out_path: str | os.PathLike, warn: Warn | None = None,
@@ -231,9 +244,18 @@ def export_truth_objects(recording: str | os.PathLike, out_path: str | os.PathLi
     vy_m_s, vz_m_s`` (world frame, at the frame's mid time), ``size_m``, ``rays_hit`` (the frame's rays
     on it, before the effects).  Returns the row count; a recording without the channel (a daemon's,
     a single-target scene's: its one target's truth is in --trajectory) is an error that says so."""
+    out_kind(Path(out_path))
+    cols = truth_objects_columns(recording, warn, max_frames)
+    write_columns(Path(out_path), cols, nan_as_empty=True)
+    return int(cols["id"].shape[0])
+
+
+def truth_objects_columns(recording: str | os.PathLike, warn: Warn | None = None,
+                          max_frames: int | None = None) -> dict:
+    """The columns :func:`export_truth_objects` writes, read and checked before anything is written."""
     from foveatrack.recording.records import ObjectTruthRecord
 
-    recs = _channel_records(recording, out_path, TRUTH_OBJECTS, ObjectTruthRecord.from_json, warn, max_frames,
+    recs = _channel_records(recording, TRUTH_OBJECTS, ObjectTruthRecord.from_json, warn, max_frames,
                             "holds no object truth: only the simulator's runs of multi-object scenes record it "
                             "(a single target's truth is in --trajectory; a daemon knows no truth)")
     cols = {"t_ns": np.array([r.t_ns for r in recs], dtype=np.int64),
@@ -243,17 +265,23 @@ def export_truth_objects(recording: str | os.PathLike, out_path: str | os.PathLi
     cols.update(_world_columns([r.true_world_m for r in recs], [r.true_velocity_m_s for r in recs]))
     cols.update(size_m=np.array([r.size_m for r in recs], dtype=float),
                 rays_hit=np.array([r.rays_hit for r in recs], dtype=np.int64))
-    write_columns(Path(out_path), cols, nan_as_empty=True)
-    return len(recs)
+    return cols
 
 
-def _channel_records(recording, out_path, channel: str, parse, warn: Warn | None, max_frames: int | None,
+def _channel_records(recording, channel: str, parse, warn: Warn | None, max_frames: int | None,
                      none_held: str) -> list:
-    """The parsed records of one channel for an export to ``out_path`` (its suffix checked first); none
-    is an error that says ``none_held`` of the recording."""
-    out_kind(Path(out_path))
+    """The parsed records of one channel; a record whose fields are not of their type is an error
+    naming the file, the channel and its time (as replay names it), none an error that says
+    ``none_held`` of the recording."""
+    from foveatrack.recording.records import RecordError
+
     reader = open_run(recording, max_frames, segment_alone=True)
-    recs = [parse(r) for r in reader.records(channel)]
+    recs = []
+    for m in reader.messages(channel):
+        try:
+            recs.append(parse(m.record))
+        except (RecordError, ValueError, TypeError, KeyError) as exc:
+            raise UserError(f"{recording}: a {channel} record at time {m.t_ns} ns is damaged: {exc}") from None
     _warn_damage(reader, warn)
     if not recs:
         raise UserError(f"{recording} {none_held}")

@@ -320,9 +320,11 @@ class ObjectTruthRecord:
 
     @classmethod
     def from_json(cls, r: dict) -> "ObjectTruthRecord":
-        return cls(int(r["t_ns"]), int(r.get("frame_id", -1)), str(r.get("id", "")), str(r.get("class", "")),
-                   tuple(r.get("xyz_m") or (math.nan,) * 3), tuple(r.get("velocity_m_s") or (math.nan,) * 3),
-                   _nan(r.get("size_m")), int(r.get("rays_hit", 0)))
+        nan3 = (math.nan,) * 3
+        xyz, vel = _vec_f(r, "xyz_m", 3, nan3) or nan3, _vec_f(r, "velocity_m_s", 3, nan3) or nan3
+        return cls(_int_f(r, "t_ns"), _int_f(r, "frame_id", -1), str(r.get("id", "")), str(r.get("class", "")),
+                   tuple(math.nan if x is None else x for x in xyz), tuple(math.nan if x is None else x for x in vel),
+                   _nan(r.get("size_m")), _int_f(r, "rays_hit", 0))
 
 
 def _ints_f(r: dict, key: str) -> tuple:

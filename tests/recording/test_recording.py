@@ -402,3 +402,36 @@ def test_an_export_writes_what_it_wrote_straight_to_its_name(every_table, tmp_pa
     else:
         assert _npz_members(got) == _npz_members(want)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([got.name, want.name])
+
+
+def test_export_of_tables_a_damaged_record_is_named_and_nothing_is_left_when_one_is_missing(tmp_path, capsys):
+    # a review found: a tracks or object-truth record of the wrong type came out as a traceback, and
+    # `--imu F --tracks G` of a single-target run wrote F before finding it had no tracks
+    from foveatrack.cli import main
+    from foveatrack.recording.format import TRACKS, TRUTH_OBJECTS
+
+    rng = np.random.default_rng(1)
+    bad = tmp_path / "bad.mcap"
+    with RecordingWriter(bad, META) as w:
+        t, xyz, tp, refl = frame(rng, 0, 100)
+        w.write_points(t, 0, xyz, tp, refl)
+        w.write(TRACKS, t, {"frame_id": 0, "tracks": [{"id": "seven", "confirmed": True}]})
+        w.write(TRUTH_OBJECTS, t, {"frame_id": 0, "id": "a", "class": "drone", "xyz_m": "here"})
+    for flag, channel in (("--tracks", "tracks"), ("--truth-objects", "truth_objects")):
+        assert main(["export", str(bad), flag, str(tmp_path / "o.csv")]) == 2
+        err = capsys.readouterr().err
+        assert f"bad.mcap: a {channel} record at time {t} ns is damaged" in err and "Traceback" not in err, err
+    single = tmp_path / "single.mcap"
+    with RecordingWriter(single, META) as w:
+        for k in range(3):
+            t, xyz, tp, refl = frame(rng, k, 100)
+            w.write_points(t, k, xyz, tp, refl)
+            w.write_imu(t, k, t / 1e9 + np.arange(20) * 1e-3, rng.normal(size=(20, 3)), None)
+    out = tmp_path / "out"
+    out.mkdir()
+    assert main(["export", str(single), "--imu", str(out / "imu.csv"), "--tracks", str(out / "tracks.csv"),
+                 "--csv", str(out / "points.csv")]) == 2
+    assert "holds no tracks" in capsys.readouterr().err
+    assert list(out.iterdir()) == []
+    assert main(["export", str(single), "--imu", str(out / "imu.csv")]) == 0
+    assert (out / "imu.csv").read_text().count("\n") == 61
