@@ -223,8 +223,14 @@ def background_numpy(cells, r, n, frames, first_frame, last_frame, r_min, r_max,
             old = (first_frame[q] <= frame_no - near_frames) | warm_near[q]
             ok_q = inside & (frames[q] >= 1) & old & (r >= r_min[q] - margin)
         near |= ok_q
-        out |= ok_q & (frames[q] >= min_frames) & (last_frame[q] - first_frame[q] >= persist_frames)
+        out |= ok_q & established_numpy(q, frames, first_frame, last_frame, min_frames, persist_frames)
     return out, near
+
+
+def established_numpy(q, frames, first_frame, last_frame, min_frames, persist_frames) -> np.ndarray:
+    """Per cell of ``q``: established scenery, returned in ``min_frames`` frames spread over at least
+    ``persist_frames`` (the test :func:`background_kernel` makes inline)."""
+    return (frames[q] >= min_frames) & (last_frame[q] - first_frame[q] >= persist_frames)
 
 
 def learn_numpy(cells, r, frame_no, frames, first_frame, last_frame, r_min, r_max) -> None:
@@ -338,8 +344,8 @@ class RangeBackground:
         cells down to its range, and the drone was background from then on)."""
         out = np.zeros(cells.size, np.bool_)
         for inside, q in face_neighbours(cells, self.n, self.dilate):
-            out |= inside & (self.frames[q] >= self.min_frames) & (self.last_frame[q] - self.first_frame[q]
-                                                                    >= self.persist_frames)
+            out |= inside & established_numpy(q, self.frames, self.first_frame, self.last_frame, self.min_frames,
+                                              self.persist_frames)
         return out
 
     def learn(self, cells: np.ndarray, r: np.ndarray) -> None:

@@ -59,6 +59,7 @@ import numpy as np
 from foveatrack.config_util import dataclass_from_mapping
 from foveatrack.detection import Detection, box_bounds, box_detection, detect, LEVEL
 from foveatrack.errors import UserError
+from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
 from foveatrack.openloop.background import BackgroundModel, voxel_keys
 from foveatrack.openloop.range_background import RangeBackground, check_cell_deg
@@ -208,11 +209,6 @@ class OpenLoopOutput:
     confirmed_now: tuple[int, ...]
 
 
-def _dist(a, b) -> float:
-    d = np.asarray(a, float) - np.asarray(b, float)
-    return float(np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))
-
-
 def _elevation(tr: Track) -> float:
     x, y, z = tr.xyz_m.tolist()
     return math.atan2(z, math.hypot(x, y))
@@ -266,7 +262,7 @@ class OpenLoopTracker:
             det = box_detection(np.ascontiguousarray(xyz[fg]), np.ascontiguousarray(t_ns[fg]), LEVEL, _ZERO3, lo, hi)
             learn &= ~in_d
             fg &= ~in_d
-            if det is None or _dist(det.xyz, c) <= cfg.protect_m:
+            if det is None or norm3(np.asarray(det.xyz, float) - c) <= cfg.protect_m:
                 learn_dir &= ~in_d
             if det is not None:
                 tr.hits += 1

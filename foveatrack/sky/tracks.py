@@ -229,7 +229,7 @@ class SkyTrack:
     confirmed_t_s: float | None = None
     label: str = "unknown"
     seen_as: str = "unknown"        # what the classifier's rules 1-4 say this frame (label: after rule 5)
-    drone_frames: int = 0           # frames in a row the classifier's rules have said "drone"
+    drone_frames: int = 0           # frames in a row the rules said "drone" (> 0), or, labelled drone, otherwise (< 0)
     features: dict = field(default_factory=dict)
     history: list = field(default_factory=list)
     in_view: bool = True
