@@ -54,10 +54,18 @@ def truth_frames(loop, log) -> list[dict]:
 def drone_truth(loop, log, truth) -> dict:
     """Per drone of ``truth`` (:func:`truth_frames`), by frame: ``xyz_m`` (T, 3) (NaN where absent),
     ``visible`` (hit by a ray), ``rays`` (how many), ``in_fovea`` (within the fovea's half-angle of the lidar's true axis)
-    and ``in_field`` (within the lidar's field and the scene's D): what
-    :func:`~foveatrack.sky.metrics.drone_metrics` takes."""
+    and ``in_field`` (in the scene's D and within the lidar's field at some pose the head can take:
+    its elevation within the tilt limits widened by the field's half-angle; pan turns all round):
+    what :func:`~foveatrack.sky.metrics.drone_metrics` takes.
+
+    The field is the head's reach, not the lidar's field at the head's present pose: a drone the
+    head has turned away from still waits for its revisit.  Counted at the present pose (before),
+    a drone the schedule left outside the lidar's field stopped counting: the crossing's second drone,
+    35 deg from the first at the end, had its last gap cut short where the head turned away for good,
+    and the head's bound on the pair saw only the frames both drones were in one field."""
     fovea_half_deg = loop.sky.attention.cfg.fovea_half_angle_deg
     field_half_deg = loop.sky.sky.cfg.field_half_angle_deg
+    tilt_lo, tilt_hi = loop.tracker.config.tilt_limits_deg
     region = loop.sky.sky.region
     T = len(truth)
     drone_ids = sorted({i for fr in truth for i, (c, _, _) in fr.items() if c == "drone"})
@@ -72,11 +80,13 @@ def drone_truth(loop, log, truth) -> dict:
                 xyz[k] = fr[d][1]
                 rays[k] = fr[d][2]
         off = true_off_axis_deg(xyz, log["head_pan_deg"], log["head_tilt_deg"])
+        el = np.degrees(np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1])))
+        half = 90.0 if field_half_deg is None else field_half_deg
         for k in np.flatnonzero(np.isfinite(off)):
             fov[k] = off[k] <= fovea_half_deg
-            # in the lidar's field and inside the scene's space of interest (a drone that has
+            # within the head's reach and inside the scene's space of interest (a drone that has
             # flown out of D is no longer the tracker's to revisit)
-            field[k] = (field_half_deg is None or off[k] <= field_half_deg) and (
+            field[k] = tilt_lo - half <= el[k] <= tilt_hi + half and (
                 region is None or bool(region.contains(xyz[k][None, :])[0]))
         drones[d] = {"xyz_m": xyz, "visible": rays > 0, "rays": rays, "in_fovea": fov, "in_field": field}
     return drones

@@ -37,9 +37,10 @@ in a swarm was credited with another drone's track.)
 ``id_switches``         times the matched track's id changes (gaps without a match do not count)
 ``fovea_share``         share of its visible frames the drone spends in the fovea
 ``longest_revisit_gap_s``  the longest stretch (after its first confirmation) out of the fovea, up
-                        to its last frame in the lidar's field (``in_field`` where given: a drone
-                        that has left the field, or the space of interest, for good is not waiting
-                        for a revisit); None for a drone in the field no track ever followed (it
+                        to its last frame in the field (``in_field`` where given: the simulator's is
+                        the head's reach, :func:`sim.sky_summary.drone_truth`; a drone that has
+                        left it, or the space of interest, for good is not waiting for a revisit;
+                        one the head merely turned away from is); None for a drone in the field no track ever followed (it
                         was never revisited); ``longest_revisit_gap_from_s`` the time of its first
                         frame (None: no gap; the first of equally long ones)
 

@@ -199,3 +199,19 @@ def test_a_look_at_a_candidate_ends_once_it_has_been_in_the_fovea_dwell_s():
     starts = sorted({s for v, s, *_ in seen if v is not None})
     assert max(d for *_, d, _ in seen) > 0.0                # a candidate's time in the fovea counted
     assert min(b - a for a, b in zip(starts, starts[1:])) < 2.0 - 1e-9    # a look ended before its timeout
+
+
+def test_a_drone_the_head_turned_away_from_still_waits_for_its_revisit():
+    # "in the field" is the head's reach (in D, its elevation within the tilt limits widened by the
+    # lidar's half-field), not the lidar's field at the head's present pose: at the end of the 12 s
+    # crossing the drones are 35 deg apart, and the one the fovea is not on lies outside the lidar's
+    # field; counted at the present pose, its gap stopped counting there
+    from foveatrack.sky.attention import true_off_axis_deg
+    from sim.sky_summary import drone_truth, truth_frames
+
+    loop, log = _run(duration_s=12.0)
+    drones = drone_truth(loop, log, truth_frames(loop, log))
+    half = loop.sky.sky.cfg.field_half_angle_deg
+    off = {d: true_off_axis_deg(a["xyz_m"], log["head_pan_deg"], log["head_tilt_deg"]) for d, a in drones.items()}
+    assert max(o[-1] for o in off.values()) > half           # one of them outside the present field
+    assert all(a["in_field"].all() for a in drones.values())
