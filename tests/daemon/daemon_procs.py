@@ -24,6 +24,14 @@ def free_udp_port(ip: str = "127.0.0.1") -> int:
     return port
 
 
+def silent_lidar_table(sensor_ip: str = "127.0.0.1", data_port: int = 0) -> str:
+    """A daemon config's ``[lidar]`` table for a test with no lidar: no broadcast, and the handshake
+    sent to a free port nothing listens on (with 65000 named, a virtual or real unit serving there
+    on this machine answered it and streamed into tests that expected silence)."""
+    return (f'[lidar]\nsensor_ip = "{sensor_ip}"\nhost_ip = "127.0.0.1"\ncmd_port = 0\ndata_port = {data_port}\n'
+            f"broadcast_port = false\nsensor_cmd_port = {free_udp_port()}\n")
+
+
 def env() -> dict:
     e = dict(os.environ)
     e["PYTHONPATH"] = str(ROOT) + os.pathsep + e.get("PYTHONPATH", "")

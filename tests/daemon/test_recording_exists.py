@@ -5,7 +5,7 @@ the user renaming files by hand before every start.)"""
 
 import pytest
 
-from daemon_procs import free_udp_port
+from daemon_procs import silent_lidar_table
 
 from foveatrack.daemon import Daemon, load_config
 from foveatrack.device_config import DaemonConfig
@@ -16,14 +16,7 @@ from foveatrack.recording import RecordingExistsError, RecordingReader, Recordin
 def _daemon(tmp_path, rec_path, extra=""):
     cfg = tmp_path / "d.toml"
     cfg.write_text(f"""
-[lidar]
-sensor_ip = "127.0.0.1"
-host_ip = "127.0.0.1"
-cmd_port = 0
-data_port = 0
-broadcast_port = false
-sensor_cmd_port = {free_udp_port()}
-[head]
+{silent_lidar_table()}[head]
 port = "loop://"
 [recording]
 path = "{rec_path}"

@@ -7,7 +7,7 @@ import signal
 
 import pytest
 
-from daemon_procs import free_udp_port
+from daemon_procs import silent_lidar_table
 
 from foveatrack.daemon import Daemon, load_config
 
@@ -15,14 +15,7 @@ from foveatrack.daemon import Daemon, load_config
 def _daemon(tmp_path):
     cfg = tmp_path / "d.toml"
     cfg.write_text(f"""
-[lidar]
-sensor_ip = "127.0.0.1"
-host_ip = "127.0.0.1"
-cmd_port = 0
-data_port = 0
-broadcast_port = false
-sensor_cmd_port = {free_udp_port()}
-[head]
+{silent_lidar_table()}[head]
 port = "loop://"
 [recording]
 path = "{tmp_path}/runs/run-{{time}}.mcap"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from daemon_procs import free_udp_port
+from daemon_procs import silent_lidar_table
 
 from foveatrack.daemon import Daemon, load_config
 from foveatrack.errors import UserError
@@ -20,14 +20,7 @@ def _daemon(tmp_path, port, sensor_ip="127.0.0.1", data_port=0, rec_dir=None):
     rec_dir = rec_dir or tmp_path / "runs"
     cfg = tmp_path / "d.toml"
     cfg.write_text(f"""
-[lidar]
-sensor_ip = "{sensor_ip}"
-host_ip = "127.0.0.1"
-cmd_port = 0
-data_port = {data_port}
-broadcast_port = false
-sensor_cmd_port = {free_udp_port()}
-[head]
+{silent_lidar_table(sensor_ip, data_port)}[head]
 port = "{port}"
 [recording]
 path = "{rec_dir}/run-{{time}}.mcap"
