@@ -84,7 +84,10 @@ def cmd_replay(args) -> int:
     if args.export_trajectory:
         n = export_replay_trajectory(res, args.export_trajectory)
         notes.append(f"{n} frames -> {args.export_trajectory}")
-    if args.plot:
+    if args.plot and not len(res.frames["t_end_s"]):
+        # blank axes would read as a run drawn (a user found four empty figures and exit 0)
+        notes.append("--plot: no plots, the recording holds no lidar frames")
+    elif args.plot:
         from foveatrack.cli.replay_plots import plot_all
         from foveatrack.config_util import output_dir
 

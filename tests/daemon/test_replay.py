@@ -223,3 +223,11 @@ def test_the_open_loop_caveat_sits_beside_the_numbers(sim_run, tmp_path):
     same = format_report(replay_recording(path)).splitlines()
     assert not any("open loop" in x for x in same)
     assert any(x.lstrip().startswith("reconstructed target position error [m]") for x in same)
+
+
+def test_replay_plot_of_a_recording_without_frames_draws_nothing_and_says_so(tmp_path, capsys):
+    # four blank figures and exit 0 read as a run drawn
+    empty = Path(__file__).resolve().parents[1] / "corpus" / "no-frames.mcap"
+    assert main(["replay", str(empty), "--plot", str(tmp_path / "plots")]) == 0
+    assert "--plot: no plots, the recording holds no lidar frames" in capsys.readouterr().out
+    assert not (tmp_path / "plots").exists()
