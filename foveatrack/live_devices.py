@@ -30,6 +30,13 @@ from foveatrack.control import HeadCommand
 from foveatrack.errors import UserError
 
 
+def counters_text(counters: dict) -> str:
+    """A lidar client's or stream's counters in words for an error message (``cmd_sent 20,
+    cmd_timeouts 19, ...``): what tells a lidar that never answered from one whose packets were
+    dropped (the calibrations printed the raw dict)."""
+    return ", ".join(f"{k} {v}" for k, v in counters.items()) or "none"
+
+
 def open_head(config):
     """The head's :class:`gimbal.client.HeadClient`, open now, or a UserError naming ``[head] port``.
 

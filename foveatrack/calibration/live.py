@@ -35,7 +35,7 @@ from foveatrack.device_config import DaemonConfig
 from foveatrack.errors import UserError
 from foveatrack.frames import FrameSlicer, strip_no_return
 from foveatrack.gate import CommandGate
-from foveatrack.live_devices import LidarStream, open_devices
+from foveatrack.live_devices import LidarStream, counters_text, open_devices
 from foveatrack.speed_table import TURBO, SpeedTable
 
 
@@ -113,19 +113,19 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
             if silent_s is None and now - t_start > first_data_s:
                 raise UserError(f"no data from the lidar {L.sensor_ip} within {first_data_s:g} s (is it on, "
                                 f"and is [lidar] host_ip {L.host_ip} this machine's address on its network?); "
-                                f"the head was stopped and no table was written (lidar counters: {client.counters})")
+                                f"the head was stopped and no table was written (lidar counters: {counters_text(client.counters)})")
             if silent_s is not None and silent_s > config.loop.watchdog_s:
                 raise UserError(f"the lidar fell silent for {silent_s:.1f} s ([daemon] watchdog_s "
                                 f"{config.loop.watchdog_s:g}) after {run['frames']} frames; the head was stopped "
                                 f"and no table was written (link {client.state}, unit {client.unit_status()}, "
-                                f"lidar counters: {client.counters})")
+                                f"lidar counters: {counters_text(client.counters)})")
             _, batches = stream.poll(0.02)
             for b in batches:
                 if b.epoch != 0:
                     # the procedure times legs on the sensor clock: a restarted or jumped clock mid-run
                     # would mis-time the leg under way (the daemon re-anchors; a table must not)
                     raise UserError(f"the lidar's clock restarted or jumped after {run['frames']} frames "
-                                    f"({_legs(cal)} legs done; lidar counters: {stream.counters}); the head "
+                                    f"({_legs(cal)} legs done; lidar counters: {counters_text(stream.counters)}); the head "
                                     "was stopped and no table was written: start the calibration again")
                 if len(b):
                     for frame in slicer.push(b.xyz, b.t_ns, b.reflectivity):

@@ -59,6 +59,7 @@ from foveatrack.gate import CommandGate, Proposal
 from foveatrack.imu_calib import handeye, procedure, registration
 from foveatrack.imu_calib.imu_integration import GRAVITY_M_S2, ImuSamples
 from foveatrack.imu_calib.se3 import so3_log
+from foveatrack.live_devices import counters_text
 from foveatrack.turn_witness import TurnMismatch, TurnWitness
 
 #: A window is static when no 0.25 s block of its gyro readings has a mean farther than this from the
@@ -232,16 +233,16 @@ class _Rig:
         if silent is None and now - self.t_start > self.first_data_s:
             self._fail(f"no data from the lidar {L.sensor_ip} within {self.first_data_s:g} s (is it on, and is "
                        f"[lidar] host_ip {L.host_ip} this machine's address on its network?) (lidar counters: "
-                       f"{self.client.counters})")
+                       f"{counters_text(self.client.counters)})")
         if silent is not None and silent > self.config.loop.watchdog_s:
             self._fail(f"the lidar fell silent for {silent:.1f} s ([daemon] watchdog_s {self.config.loop.watchdog_s:g}) "
-                       f"at pose {self.pose + 1} (link {self.client.state}, lidar counters: {self.client.counters})")
+                       f"at pose {self.pose + 1} (link {self.client.state}, lidar counters: {counters_text(self.client.counters)})")
         _, batches = s.poll(timeout_s)
         for b in batches:
             if b.epoch != 0:
                 # windows and IMU moves are timed on the sensor clock: a restarted clock breaks both
                 self._fail(f"the lidar's clock restarted or jumped at pose {self.pose + 1} (lidar counters: "
-                           f"{s.counters}): start the calibration again")
+                           f"{counters_text(s.counters)}): start the calibration again")
             if not len(b):
                 continue
             t_s = b.t_ns * 1e-9
@@ -522,7 +523,7 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
         worst = float(gaps.max()) if len(gaps) else float("nan")
         raise UserError(f"the IMU samples have a gap of {worst * 1e3:.0f} ms between the first and last pose (more "
                         f"than {IMU_MAX_GAP_S * 1e3:.0f} ms: lost packets); a move cannot be integrated across it, so "
-                        "no extrinsic was written: run again (lidar counters: " + str(counters["lidar"]) + ")")
+                        "no extrinsic was written: run again (lidar counters: " + counters_text(counters["lidar"]) + ")")
     spreads = [static_spread_deg_s(t_imu, gyro, a, b) for a, b in win]
     for i, sp in enumerate(spreads):
         if not sp <= STATIC_TOL_DEG_S:

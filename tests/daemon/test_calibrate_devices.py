@@ -198,9 +198,11 @@ def test_no_lidar_is_an_error_that_names_it_and_stops_the_head(tmp_path, capsys)
         from foveatrack.calibration.live import calibrate_live
         from foveatrack.errors import UserError
 
-        with pytest.raises(UserError, match=r"no data from the lidar 127\.0\.0\.1 within 1 s.*head was stopped"):
+        with pytest.raises(UserError, match=r"no data from the lidar 127\.0\.0\.1 within 1 s.*head was stopped") as e:
             calibrate_live(cfg, CalibrationPlan(pan_bytes=(40,), tilt_bytes=(63,)), FeatureSpec((5.9, 0.8, 0.84)),
                            first_data_s=1.0)
+        # the counters in words, not a raw dict
+        assert "(lidar counters: " in str(e.value) and "{" not in str(e.value), str(e.value)
     finally:
         terminate(head)
 
