@@ -165,9 +165,13 @@ class Scene:
 
     @property
     def multi_object(self) -> bool:
-        """The scene's world holds more than one drone, or birds, trees or stray returns: its
-        recording then carries the truth of every object (sim.recorder)."""
-        return len(self.targets) > 1 or bool(self.others) or self.has("stray_returns")
+        """The scene's world holds more than one drone, or birds, trees or stray returns, or its
+        tracker is the multi-object one (``[tracker.sky]``): its recording then carries the truth of
+        every object (sim.recorder) and each object's rays are counted (the sky figures' bounds read
+        them: a single target under ``[tracker.sky]`` was said to have allowed its confirmation
+        "never", its rays taken as 1 a frame)."""
+        return (len(self.targets) > 1 or bool(self.others) or self.has("stray_returns")
+                or isinstance((self.tracker_table or {}).get("sky"), dict))
 
     @property
     def lidar_range_m(self) -> tuple[float, float]:

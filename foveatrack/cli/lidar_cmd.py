@@ -212,7 +212,8 @@ def cmd_info(args) -> int:
         f"  {other} model of the same optics: {fov_other[0]:.2f} x {fov_other[1]:.2f} deg "
         f"(the paraxial model is off by {err[0]:+.2f} / {err[1]:+.2f} deg)",
         f"  {info['point_rate_hz']} points/s, {info['channels']} channel(s), {len(optics.prisms)} prisms, "
-        f"pattern repeats every {info['repeat_period_s']} s (noise-free)",
+        + ("the pattern repeats only after more than 1e9 s (noise-free)" if info["repeat_period_s"] is None
+           else f"pattern repeats every {info['repeat_period_s']} s (noise-free)"),
     ])
     if args.plot:
         _pattern_plot(optics, args.model, 0.1, args.plot)

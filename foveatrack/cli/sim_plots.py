@@ -313,7 +313,7 @@ def plot_sky_tracks(data: dict, title: str, path) -> Path:
                 label=None if key in shown else key, zorder=1)
         shown.add(key)
     for tid, (label, xyz, hit) in sorted(data["tracks"].items()):
-        key = f"track labelled {label} (dots: measured)"
+        key = f"track last labelled {label} (dots: measured)"
         colour = LABEL_C.get(label, "k")
         a1.plot(xyz[:, 0], xyz[:, 1], "-", lw=0.6, alpha=0.35, color=colour, zorder=2)    # coasting too
         a1.plot(np.where(hit, xyz[:, 0], np.nan), np.where(hit, xyz[:, 1], np.nan), ".", ms=2.5, color=colour,

@@ -156,3 +156,12 @@ def test_livox_presets_in_lidar_info_and_density(capsys, preset, fov, message):
     if message:   # eq. (4) is one beam's radial law: several lasers or heads are refused, named
         assert main(["lidar", "density", preset, "--duration", "0.05", "--no-progress"]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_lidar_info_says_a_pattern_that_repeats_after_1e9_s_in_words(capsys):
+    # "pattern repeats every None s" (repeat_period_s is None past 1e9 s)
+    from foveatrack.cli import main
+
+    assert main(["lidar", "info", "horizon"]) == 0
+    out = capsys.readouterr().out
+    assert "None" not in out and "repeats only after more than 1e9 s" in out

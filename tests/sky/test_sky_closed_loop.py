@@ -215,3 +215,22 @@ def test_a_drone_the_head_turned_away_from_still_waits_for_its_revisit():
     off = {d: true_off_axis_deg(a["xyz_m"], log["head_pan_deg"], log["head_tilt_deg"]) for d, a in drones.items()}
     assert max(o[-1] for o in off.values()) > half           # one of them outside the present field
     assert all(a["in_field"].all() for a in drones.values())
+
+
+def test_a_single_target_under_the_sky_tracker_has_its_rays_counted():
+    # a single target's world was not "multi-object", so its truth said 1 ray a frame and the scan
+    # "never" allowed a confirmation the tracker made 0.9 s in; its id was "target-0", not its own
+    import tomllib
+
+    from sim.scene import scene_from_mapping
+    from sim.sky_summary import sky_run_figures
+
+    m = tomllib.loads((ROOT / "scenes" / "fig12-tracking.toml").read_text())
+    m["scene"]["duration_s"] = 4.0
+    m["tracker"]["sky"] = {}
+    loop = ClosedLoop(scene_from_mapping(m, "fig12 with [tracker.sky]"))
+    figs, _, _ = sky_run_figures(loop, loop.run())
+    (d, r), = figs["drones"].items()
+    assert d == loop.scene.targets[0].id
+    assert r["time_to_confirm_s"] is not None and r["scan_allows_confirm_s"] is not None
+    assert r["scan_allows_confirm_s"] <= r["time_to_confirm_s"] + 1e-9
