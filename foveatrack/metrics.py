@@ -84,6 +84,10 @@ def tracking_metrics(t_s, error_deg, *, detected=None, in_fov=None, acquired_deg
     e = np.asarray(error_deg, float)
     F = len(t)
     ok = np.isfinite(e) & (e < acquired_deg)
+    if detected is not None and not np.any(detected):
+        # nothing was ever detected: a target that flew out along the axis was within the threshold
+        # and read as "acquired at 0.00 s, rms 0.84 deg" with the head never moved
+        ok[:] = False
     acq_idx = None
     run = 0
     for i in range(F):

@@ -293,6 +293,9 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
             print("  head frozen (paper Fig. 13/14a): no tracking"
                   + (f"; the target passed {err[i]:.2f} deg off the lidar axis at {log['t_end_s'][i]:.1f} s"
                      if i is not None else ""))
+        elif summary["acquisition_s"] is None and not summary.get("frames_with_detection"):
+            print("  never acquired: no frame had a detection (the target never in the space of interest D "
+                  "and the lidar's range and field together?): no tracking error to report")
         elif summary["acquisition_s"] is None:
             print(f"  never acquired (error never under {db + 1:g} deg = dead band + 1 for 5 frames in a row): "
                   "no tracking error to report")

@@ -64,3 +64,17 @@ def test_spread_over_runs_and_its_comparison_catch_a_wider_spread_and_lost_runs(
     assert base["acq"]["missing"] == 0 and better["acq"]["missing"] == 1
     failures = compare_spread_to_baseline(better, base, tol)[1]
     assert failures == ["acq: missing in 1 runs, baseline 0"]
+
+
+def test_a_run_with_no_detection_is_never_acquired_whatever_the_true_error():
+    # a target that flew out of D along the lidar's axis was within the threshold from the start and
+    # read "acquired at 0.00 s, rms 0.84 deg" with the head never moved and nothing detected
+    import numpy as np
+
+    from foveatrack.metrics import tracking_metrics
+
+    t = np.arange(30) * 0.1
+    e = np.full(30, 0.8)
+    m = tracking_metrics(t, e, detected=np.zeros(30, bool))
+    assert m["acquisition_s"] is None and m["tracking_error_deg"]["rms"] is None
+    assert tracking_metrics(t, e, detected=np.ones(30, bool))["acquisition_s"] == 0.0
