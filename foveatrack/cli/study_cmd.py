@@ -139,7 +139,15 @@ def _one_axis(args, out: Path) -> int:
     results, meta = saved["results"], saved["meta"]
     results.setdefault("axes", {})
     if args.axis == "effects":     # a run of some effects updates their rows and keeps the others'
-        axis = merge(results["axes"].get("effects"), axis)
+        before = results["axes"].get("effects")
+        axis = merge(before, axis, cpu_name())
+        kept = {r["effect"] for r in axis["rows"]}
+        dropped = [r["effect"] for r in (before or {}).get("rows", []) if r["effect"] not in kept]
+        if dropped:
+            print(f"study: the effects' rows of the earlier run ({len(dropped)}: {', '.join(dropped[:4])}"
+                  f"{', ...' if len(dropped) > 4 else ''}) were left out: measured on another CPU "
+                  f"({(before.get('run') or {}).get('cpu')}) or with other seeds or another duration; run "
+                  f"the whole axis here to have every row", file=sys.stderr)
     results["axes"][args.axis] = json_ready(axis)
     results["axes"][args.axis]["run"] = {
         "command": " ".join(argv), "wall_s": time.perf_counter() - t0, "cpu_s": cpu_s,

@@ -139,10 +139,14 @@ def collect(results) -> dict:
             "excluded": excluded(), "rows": rows}
 
 
-def merge(old: dict | None, new: dict) -> dict:
+def merge(old: dict | None, new: dict, cpu: str | None = None) -> dict:
     """``new``'s rows over ``old``'s (the same reference and seeds): a run of some effects updates
-    their rows and keeps the others'.  Rows of runs with other seeds or durations are dropped."""
-    if not old or old.get("seeds") != new["seeds"] or old.get("duration_s") != new["duration_s"]:
+    their rows and keeps the others'.  Rows of runs with other seeds or durations, or measured on
+    another CPU than ``cpu`` (the old run's ``run["cpu"]``; None: not compared), are dropped: their
+    milliseconds beside this run's reference mixed two machines in one table, under this run's
+    header."""
+    other_cpu = cpu is not None and (old or {}).get("run", {}).get("cpu") not in (None, cpu)
+    if not old or other_cpu or old.get("seeds") != new["seeds"] or old.get("duration_s") != new["duration_s"]:
         return new
     rows = {r["effect"]: r for r in old["rows"]}
     rows.update({r["effect"]: r for r in new["rows"]})

@@ -373,7 +373,8 @@ def effects_section(ef: dict | None) -> list[str]:
          f"(docs/scenes.md), {_f(ef['duration_s'], '{:g}')} s, seeds {', '.join(map(str, ef['seeds']))}, paired with "
          f"fig12 as shipped (the **reference**).  CPU is the whole closed loop's per frame, as the paired ratio to "
          f"the reference's on the same seed and in ms; Δ is the paired change (bold: outside the noise).  {how}.  "
-         f"Regenerate this section alone with `{EFFECTS_COMMAND}` (add `--effects NAME,...` for some of them; "
+         f"Regenerate this section alone with `{EFFECTS_COMMAND}` (add `--effects NAME,...` for some of them: "
+         "the other effects' rows are kept only if measured on the same CPU with the same seeds and duration; "
          "the rest of the page is rewritten unchanged from the JSON).", ""]
     excl = ef.get("excluded") or {}
     if excl:

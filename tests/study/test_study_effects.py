@@ -49,6 +49,10 @@ def test_collect_pairs_by_seed():
     other = ec.collect([(ec.EffectTask(e, s, 2.0), r) for (t, r) in res for e, s in [(t.effect and "incidence", t.seed)]])
     merged = ec.merge(out, other)
     assert [r["effect"] for r in merged["rows"]] == [ec.REFERENCE, "weather", "incidence"]
+    # ... measured on the same CPU; another's milliseconds are not mixed into this run's table
+    out["run"] = {"cpu": "AMD EPYC"}
+    assert [r["effect"] for r in ec.merge(out, other, "AMD EPYC")["rows"]] == [ec.REFERENCE, "weather", "incidence"]
+    assert [r["effect"] for r in ec.merge(out, other, "Intel Xeon")["rows"]] == [ec.REFERENCE, "incidence"]
 
 
 def test_effects_only_route_updates_its_section_and_nothing_else(tmp_path):
