@@ -27,7 +27,8 @@ File (JSON)::
      "axes": {"pan":  {"entries": [{"byte": 0, "speed": 0.0, "sigma": 0.01, "measured": true}, ...]},
               "tilt": {"entries": [...]}}}
 
-``unit`` may be ``"deg/s"`` or ``"rad/s"`` (converted to deg/s on load).  ``byte`` may be an
+``unit`` may be ``"deg/s"`` or ``"rad/s"`` (the speeds converted to deg/s on load; the ``accel_deg_s2``
+keys are in deg/s^2 whatever the unit, as their name says).  ``byte`` may be an
 integer or a string such as ``"0x3F"``/``"turbo"``.
 """
 
@@ -330,7 +331,9 @@ class SpeedTable:
                 raise UserError(f"{where}: axes.{a} must be {{\"entries\": [...], \"accel_deg_s2\": optional}}")
             ax_acc = ax.get("accel_deg_s2")
             if ax_acc is not None:
-                ax_acc = _num_or_nan(ax_acc, f"{where}: axes.{a}.accel_deg_s2") * k
+                # named in deg/s^2 whatever ``unit`` says (the speeds'): not scaled (a rad/s table's
+                # 40.5 deg/s^2 once loaded as 2322)
+                ax_acc = _num_or_nan(ax_acc, f"{where}: axes.{a}.accel_deg_s2")
                 if not (math.isfinite(ax_acc) and ax_acc > 0):
                     raise UserError(f"{where}: axes.{a}.accel_deg_s2 must be a number > 0 or absent")
             entries = []
@@ -366,7 +369,7 @@ class SpeedTable:
             raise UserError(f"{where}: dead_time_s must be a number >= 0")
         acc = data.get("accel_deg_s2")
         if acc is not None:
-            acc = _num_or_nan(acc, where + ": accel_deg_s2") * k
+            acc = _num_or_nan(acc, where + ": accel_deg_s2")     # deg/s^2 by its name, as above
             if not (math.isfinite(acc) and acc > 0):
                 raise UserError(f"{where}: accel_deg_s2 must be a number > 0 or null")
         return cls(tables["pan"], tables["tilt"], unit="deg/s", date=str(data.get("date", "")),

@@ -108,6 +108,12 @@ def test_table_roundtrip_and_errors(tmp_path):
     d["unit"] = "rad/s"
     p.write_text(json.dumps(d))
     assert SpeedTable.load(p).pan.speed_deg_s(63) == pytest.approx(15.0 * 180 / math.pi)
+    # the accelerations are named in deg/s^2 and stay so whatever the speeds' unit (they loaded x57)
+    d["accel_deg_s2"] = 40.0
+    d["axes"]["tilt"]["accel_deg_s2"] = 9.3
+    p.write_text(json.dumps(d))
+    u = SpeedTable.load(p)
+    assert u.accel_deg_s2 == 40.0 and u.tilt.accel_deg_s2 == 9.3
     cases = [
         ("{", "not valid JSON"),
         (json.dumps({**t.to_dict(), "unit": "rpm"}), "unit must be one of"),
