@@ -658,10 +658,15 @@ class Calibrator:
         for axis in ("pan", "tilt"):
             entries = []
             plan_bytes = self.plan.pan_bytes if axis == "pan" else self.plan.tilt_bytes
+            plain = [b for b in plan_bytes if b != TURBO]
             for byte in axis_bytes(axis):
                 fits = [f for f in per[axis].get(byte, []) if f is not None]
                 if byte not in plan_bytes:
-                    unmeasured[axis][byte] = "not in the plan (interpolated)"
+                    # between two measured bytes a speed is interpolated; outside them it is unknown and
+                    # the tracker never sends the byte (they were all said to be interpolated)
+                    inside = byte != TURBO and plain and min(plain) < byte < max(plain)
+                    unmeasured[axis][byte] = ("not in the plan (interpolated)" if inside else
+                                              "not in the plan, outside the measured bytes (no speed: never sent)")
                     continue
                 if not fits:
                     unmeasured[axis][byte] = self._unmeasured_reason(axis, byte)

@@ -82,7 +82,10 @@ def test_calibrate_cli_writes_the_table_and_reports(tmp_path, capsys):
     assert rc == 0
     s = json.loads(capsys.readouterr().out)
     assert s["measured"] == 3 and s["within_tolerance"] == 3
-    assert 0 in s["unmeasured"]["pan"]["not in the plan (interpolated)"]
+    # byte 0 lies below the lowest byte measured (24): no speed, not interpolated (it said
+    # interpolated while the table held NaN there); 30 lies between 24 and 40
+    assert 0 in s["unmeasured"]["pan"]["not in the plan, outside the measured bytes (no speed: never sent)"]
+    assert 30 in s["unmeasured"]["pan"]["not in the plan (interpolated)"]
     t = json.loads(out.read_text())
     assert t["format"] == "foveatrack-speed-table" and "4343" in t["head"]
     assert png.stat().st_size > 10_000
