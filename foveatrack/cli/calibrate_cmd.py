@@ -29,7 +29,7 @@ import math
 import sys
 
 from foveatrack.calibration import FeatureSpec
-from foveatrack.config_util import check_output_file, check_outputs, seed_arg
+from foveatrack.config_util import check_outputs, seed_arg
 from foveatrack.errors import UserError
 from foveatrack.speed_table import TURBO
 
@@ -200,9 +200,8 @@ def measured_rows(table) -> list[dict]:
 def _check_outputs(args) -> None:
     # before minutes of calibration, not after; a table that exists (perhaps the one a daemon config
     # names, measured on the live head) is not replaced unasked
-    check_outputs([("--out", args.out)], overwrite=args.overwrite)
-    if args.plot:
-        check_output_file(args.plot, "--plot")
+    # ... nor a plot (--plot replaced an existing file where --out refused one)
+    check_outputs([("--out", args.out), ("--plot", args.plot)], overwrite=args.overwrite)
 
 
 def calibrate_devices(args) -> int:

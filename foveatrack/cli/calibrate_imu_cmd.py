@@ -35,7 +35,7 @@ import time
 
 import numpy as np
 
-from foveatrack.config_util import check_output_file, check_outputs
+from foveatrack.config_util import check_outputs
 from foveatrack.errors import UserError
 
 
@@ -159,9 +159,8 @@ def cmd_calibrate_imu(args) -> int:
     from sim.scene import load_scene
 
     acc = sorted(set(_floats(args.accumulate, "--accumulate")))
-    if args.plot:
-        check_output_file(args.plot, "--plot")
-    check_outputs([("--out", args.out)], overwrite=args.overwrite)     # an extrinsic that exists is kept
+    # an extrinsic that exists is kept, and so is a plot
+    check_outputs([("--out", args.out), ("--plot", args.plot)], overwrite=args.overwrite)
     scene = load_scene(args.scene)
     lidars = [s.strip() for s in args.lidar.split(",") if s.strip()] if args.lidar else [scene.optics.name]
     for name in lidars:

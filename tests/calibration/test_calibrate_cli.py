@@ -89,3 +89,14 @@ def test_calibrate_cli_writes_the_table_and_reports(tmp_path, capsys):
     t = json.loads(out.read_text())
     assert t["format"] == "foveatrack-speed-table" and "4343" in t["head"]
     assert png.stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("cmd", [["calibrate", "--scene", SCENE], ["calibrate-imu", str(ROOT / "scenes" / "imu-calibration-yard.toml")]])
+def test_a_plot_that_exists_is_not_replaced_unasked(tmp_path, capsys, cmd):
+    # --out refused an existing file, --plot replaced one in silence
+    png = tmp_path / "mine.png"
+    png.write_bytes(b"a plot the user keeps")
+    assert main(cmd + ["--plot", str(png), "--out", str(tmp_path / "out.json")]) == 2   # (--out: never the cwd's)
+    err = capsys.readouterr().err
+    assert "--plot" in err and "exists" in err and "Traceback" not in err, err
+    assert png.read_bytes() == b"a plot the user keeps"
