@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from foveatrack.recording.writer import MAX_POINT_AGE_NS, point_ages_fit
+
 D_TOPIC = "/openloop_d"
-#: the furthest a point's time may lie from its frame's time [ns] in a recording: the writer stores it
-#: as an int32 ``age_ns`` (:meth:`foveatrack.recording.RecordingWriter.write_points`), so a frame,
-#: recorded at its end, holds 2.147 s of points at most
-MAX_POINT_AGE_NS = 2**31 - 1
+# a frame, recorded at its end, holds MAX_POINT_AGE_NS (2.147 s) of points at most: the writer stores
+# a point's time as an int32 age (foveatrack.recording.writer.point_ages_fit)
 # the frame's end is a float in seconds (a unix time: its last digit is ~0.2 us) rounded back to ns
 _ROUNDING_NS = 1_000
 
@@ -64,7 +64,7 @@ class TrackRecorder:
 
         w = self.writer
         t_ns = int(round(frame.t_end_s * 1e9))
-        if frame.n_points and max(t_ns - int(frame.t_ns.min()), int(frame.t_ns.max()) - t_ns) > MAX_POINT_AGE_NS:
+        if not point_ages_fit(t_ns, frame.t_ns):
             from foveatrack.errors import UserError
 
             lo, hi = (int(frame.t_ns.min()) - t_ns) * 1e-9, (int(frame.t_ns.max()) - t_ns) * 1e-9

@@ -123,6 +123,17 @@ def check_options(path, meta, flush_every_frames, compression, compression_level
 
 
 COMPRESSIONS = ("lz4", "zstd", "none")
+#: a point's time is stored as int32 ns before its frame's ``t_ns`` (its ``age_ns``): the most a point
+#: may lie before the frame's time [ns] (and one ns more after it)
+MAX_POINT_AGE_NS = 2**31 - 1
+
+
+def point_ages_fit(t_ns: int, t_ns_points) -> bool:
+    """Whether every point time lies within what a frame recorded at ``t_ns`` holds (the rule
+    :meth:`RecordingWriter.write_points` refuses by; ``track --record`` asks it first, to say so in
+    words)."""
+    tp = np.asarray(t_ns_points, dtype=np.int64).reshape(-1)
+    return not tp.size or (t_ns - int(tp.min()) <= MAX_POINT_AGE_NS and t_ns - int(tp.max()) >= -MAX_POINT_AGE_NS - 1)
 # a recording's pages go to the disk and out of the cache every 32 MB (foveatrack.recording.writeback;
 # 0: left to the kernel)
 WRITEBACK_STEP_BYTES = 32 * 1024 * 1024
@@ -333,7 +344,7 @@ class RecordingWriter(RecordCalls):
         if self._frames_since_flush >= self.flush_every_frames:
             self.flush()
         t_ns = int(t_ns)
-        if n and (t_ns - int(tp.min()) >= 2**31 or t_ns - int(tp.max()) < -(2**31)):
+        if not point_ages_fit(t_ns, tp):
             raise ValueError("point times must lie within ±2.1 s of the frame t_ns")
         # x, y, z: on the mm grid (a Livox's Cartesian output, the simulator's) compact and exact,
         # otherwise float64 (exact); "float32" forces the grid, rounding to the nearest mm
