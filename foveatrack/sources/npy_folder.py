@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.errors import UserError
-from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, time_from_file_stem, warn_stderr
+from foveatrack.sources.stamps import (StampedFrame, check_rate, cut_short, frame_from_cloud, time_from_file_stem,
+                                       warn_stderr)
 
 
 def timed_files(folder: Path, suffix: str) -> list[tuple[int, Path]]:
@@ -81,8 +82,7 @@ def _read_npy(f: Path, warn) -> np.ndarray:
             why = "it holds pickled objects" if "pickle" in str(exc) else " ".join(str(exc).split())[:160]
             raise UserError(f"{f}: not a readable .npy array of numbers ({why})") from None
     a, said = cut
-    warn(f"{f}: holds {a.shape[0]} of the {said} points its header gives (the file is cut short); "
-         f"the rest of that scan is missing")
+    warn(cut_short(f, a.shape[0], said))
     return a
 
 

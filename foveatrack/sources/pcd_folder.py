@@ -13,7 +13,7 @@ import numpy as np
 
 from foveatrack.errors import UserError
 from foveatrack.sources.npy_folder import timed_files
-from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, warn_stderr
+from foveatrack.sources.stamps import StampedFrame, check_rate, cut_short, frame_from_cloud, warn_stderr
 
 
 class PcdFolderSource:
@@ -35,8 +35,7 @@ class PcdFolderSource:
             fields = pc.fields
             if held < said:
                 # a scan cut short (its writer killed, a copy interrupted): its whole points, said once
-                self.warn(f"{f}: holds {held} of the {said} points its header gives (the file is cut short); "
-                          f"the rest of that scan is missing")
+                self.warn(cut_short(f, held, said))
             missing = [k for k in ("x", "y", "z") if k not in fields]
             if missing:
                 raise UserError(f"{f}: the PCD has no field {', '.join(missing)} (fields: {', '.join(fields)})")

@@ -67,6 +67,13 @@ def warn_stderr(line: str) -> None:
     print(f"WARNING: {line}", file=sys.stderr, flush=True)
 
 
+def cut_short(path, held: int, said: int) -> str:
+    """What a reader says of a scan file cut short (its writer killed, a copy interrupted), whose whole
+    points it read: the PCD and the .npy folders alike."""
+    return (f"{path}: holds {held} of the {said} points its header gives (the file is cut short); "
+            f"the rest of that scan is missing")
+
+
 def period_ns(rate_hz: float) -> int:
     return int(round(1e9 / rate_hz))
 
