@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from foveatrack.mcap_names import MCAP_MAGIC, META_NAME  # noqa: F401  (re-exported: the recording's names)
+
 FORMAT = "foveatrack-recording"
 FORMAT_VERSION = "4"
 # 1: JSON + base64 points (python mcap writer); 2: Foxglove SDK, protobuf, float64 points;
@@ -32,7 +34,6 @@ def meta_crc32(md: dict) -> str:
 
     body = json.dumps({k: v for k, v in md.items() if k != META_CRC_KEY}, sort_keys=True, ensure_ascii=True)
     return f"{zlib.crc32(body.encode()):08x}"
-META_NAME = "foveatrack"
 CHANNELS_META_NAME = "foveatrack_channels"   # channel id -> name tables written as channels appear
 POINTS = "points"
 DETECTIONS = "detections"
@@ -57,7 +58,6 @@ SCENE = "scene"
 SCENE_KEYFRAME = "scene_keyframe"
 LOG = "log"
 VIEW_CHANNELS = (TF, SCENE, SCENE_KEYFRAME, LOG)
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 # foxglove NumericType (docs.foxglove.dev, "NumericType")
 _FOX_TYPES = {"u1": 1, "i1": 2, "u2": 3, "i2": 4, "u4": 5, "i4": 6, "f4": 7, "f8": 8}

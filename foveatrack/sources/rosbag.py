@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.errors import UserError
+from foveatrack.mcap_names import MCAP_MAGIC, META_NAME
 from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, period_ns, warn_stderr
 from foveatrack.sources.tf import TF_TYPES, TfBuffer, apply
 
@@ -252,11 +253,7 @@ def describe_topics(topics: dict[str, tuple[str, int]]) -> str:
 
 
 ROS1_MAGIC = b"#ROSBAG V2.0\n"
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"
-#: the MCAP metadata record of foveatrack's own recordings (foveatrack.recording.format.META_NAME, which
-#: this unit may not import)
-FOVEATRACK_META = "foveatrack"
 # what a file that is no bag may be instead, by its first bytes
 _NOT_BAGS = ((b"\x1f\x8b", "gzip-compressed data (gunzip it first)"),
              (b"BZh", "bzip2-compressed data (unpack it first)"),
@@ -356,9 +353,9 @@ def _is_foveatrack_recording(path: Path) -> bool:
     try:
         with open(path, "rb") as fh:
             for k, rec in enumerate(StreamReader(fh, skip_magic=False).records):
-                if isinstance(rec, Header) and rec.profile == FOVEATRACK_META:
+                if isinstance(rec, Header) and rec.profile == META_NAME:
                     return True
-                if isinstance(rec, Metadata) and rec.name == FOVEATRACK_META:
+                if isinstance(rec, Metadata) and rec.name == META_NAME:
                     return True
                 if isinstance(rec, (Chunk, Message)) or k > 100:
                     return False
