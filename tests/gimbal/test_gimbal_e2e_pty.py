@@ -228,11 +228,16 @@ def test_a_second_server_on_a_live_link_is_refused_and_the_first_keeps_its_link(
         assert f"--link {link} (-> {pty})" in err and f"process {first.pid} still serves" in err, err
         assert f"kill {first.pid}" in err and "another path" in err, err
         assert os.readlink(link) == pty and first.poll() is None and second.stdout.read() == ""
-        first.send_signal(signal.SIGINT)
-        assert first.wait(timeout=10) == 0
-        assert not os.path.lexists(link) and not os.path.lexists(f"{link}.lock")
+        _stops_and_leaves_nothing(first, link)
     finally:
         _stop(first, *([second] if second else []))
+
+
+def _stops_and_leaves_nothing(server, link):
+    """SIGINT stops a link's server with exit 0, and it removes its link and the link's lock file."""
+    server.send_signal(signal.SIGINT)
+    assert server.wait(timeout=10) == 0
+    assert not os.path.lexists(link) and not os.path.lexists(f"{link}.lock")
 
 
 def test_a_link_left_by_a_killed_server_is_taken_by_the_next(tmp_path):
@@ -248,9 +253,7 @@ def test_a_link_left_by_a_killed_server_is_taken_by_the_next(tmp_path):
         assert _readline(second.stdout) == str(link) and os.path.exists(os.readlink(link))
         with open(f"{link}.lock") as f:
             assert f.read().strip() == str(second.pid)
-        second.send_signal(signal.SIGINT)
-        assert second.wait(timeout=10) == 0
-        assert not os.path.lexists(link) and not os.path.lexists(f"{link}.lock")
+        _stops_and_leaves_nothing(second, link)
     finally:
         _stop(first, *([second] if second else []))
 
