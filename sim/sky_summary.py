@@ -73,21 +73,19 @@ def drone_truth(loop, log, truth) -> dict:
     for d in drone_ids:
         xyz = np.full((T, 3), np.nan)
         rays = np.zeros(T, np.int64)
-        fov = np.zeros(T, bool)
-        field = np.zeros(T, bool)
         for k, fr in enumerate(truth):
             if d in fr:
                 xyz[k] = fr[d][1]
                 rays[k] = fr[d][2]
-        off = true_off_axis_deg(xyz, log["head_pan_deg"], log["head_tilt_deg"])
+        present = np.all(np.isfinite(xyz), axis=1)
+        fov = present & (true_off_axis_deg(xyz, log["head_pan_deg"], log["head_tilt_deg"]) <= fovea_half_deg)
+        # within the head's reach and inside the scene's space of interest (a drone that has flown out
+        # of D is no longer the tracker's to revisit)
         el = np.degrees(np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1])))
         half = 90.0 if field_half_deg is None else field_half_deg
-        for k in np.flatnonzero(np.isfinite(off)):
-            fov[k] = off[k] <= fovea_half_deg
-            # within the head's reach and inside the scene's space of interest (a drone that has
-            # flown out of D is no longer the tracker's to revisit)
-            field[k] = tilt_lo - half <= el[k] <= tilt_hi + half and (
-                region is None or bool(region.contains(xyz[k][None, :])[0]))
+        field = present & (el >= tilt_lo - half) & (el <= tilt_hi + half)
+        if region is not None and present.any():
+            field[present] &= np.asarray(region.contains(xyz[present]), bool)
         drones[d] = {"xyz_m": xyz, "visible": rays > 0, "rays": rays, "in_fovea": fov, "in_field": field}
     return drones
 
