@@ -19,7 +19,7 @@ from typing import Iterator
 
 @contextmanager
 def written_whole(path: str | os.PathLike) -> Iterator[Path]:
-    """The path of an empty temporary file in ``path``'s directory (a hidden name, ``.NAME.XXXX.tmp``),
+    """The path of an empty temporary file in ``path``'s directory (a hidden name, ``.NAME.<8 hex digits>.tmp``),
     for the caller to write (open it with "w"/"wb"; it keeps the mode a new file gets under the umask,
     or the mode of the file it replaces); moved onto ``path`` when the block ends, removed if it raises.
     A symlink at ``path`` is written through: its target is replaced."""
