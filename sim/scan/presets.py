@@ -72,7 +72,7 @@ PROTOTYPE = RisleyOptics(
 # Mid-40 speeds: the paper's pair (ratio, hence pattern shape, kept) scaled by 1.09 so that the swath
 # coverage follows Livox's published Mid-40 curve (within 0.014 at every 0.05 s to 1.4 s; the paper's
 # own speeds are 0.044 low at 0.7 s): scripts/fit_livox_presets.py, docs/livox-files.md.  Livox does not
-# publish the Mid-40's speeds; both stay under the 12000 rpm the paper's motors reach (Section II).
+# publish the Mid-40's speeds; both stay under the 12000 rpm the paper's motors reach (Section III.A).
 MID40_RPM = (7950.5, -5083.8)
 MID40 = PROTOTYPE.with_(name="mid40", beam_divergence_deg=(0.28, 0.03)).with_prism(0, rpm=MID40_RPM[0]) \
     .with_prism(1, rpm=MID40_RPM[1])
