@@ -31,7 +31,7 @@ def scan_allows_confirm_s(times_s, tracked, rays, min_points: int, confirm_hits:
     bound without it).  ``reported_from``: the first frame a confirmation can be
     reported at (a tracker that tracks its warm-up's frames at the warm-up's end counts their hits,
     and says so at the first frame after it).  What part of a slow confirmation is the scan's (the
-    rosette's sparse rim, paper Fig. 6) and what part the tracker's."""
+    rosette's sparse periphery, paper Fig. 5) and what part the tracker's."""
     t = np.asarray(times_s, np.float64)
     n = np.asarray(rays, np.int64)
     seen = np.flatnonzero(n > 0)

@@ -36,7 +36,7 @@ Schedule (evaluated after each frame, for the next):
   reach does not hold the fovea); then the fovea returns to the priority track.
 
 A track is *in the fovea* when its predicted bearing lies within ``fovea_half_angle_deg`` of the
-lidar's axis at the frame's mid pose (the rosette's dense centre, paper Fig. 6).
+lidar's axis at the frame's mid pose (the rosette's dense centre, paper Fig. 5).
 
 Saccade gain (``saccade_gain_1_s``, default None: Algorithm 2's own gain): while the fixated track is
 off the fovea the head turns to it at this gain instead, ``v = min(k_s |e|, v_max)`` (the paper's
