@@ -30,15 +30,11 @@ def format_report(res: ReplayResult) -> str:
                  f"max {fmt(te['max'])}; acquisition {fmt(tr['acquisition_s'])} s; "
                  f"frames with detection {tr['frames_with_detection']}/{tr['frames']}{caveat}")
         if "reconstruction_error_m" in tr and tr["reconstruction_error_m"]["rms"] is not None:
+            # under another config the dead reckoning follows the recorded head too (driver's
+            # _RecordedOutcome): a figure on the recorded motion, with the tracking error's caveat
             re_ = tr["reconstruction_error_m"]
-            if open_loop:
-                # the points were taken at the recorded head's pose, the world estimate turns them by the
-                # replay's dead reckoning of this config's own commands: a mix of two heads, not a figure
-                L.append("  reconstructed target position: not comparable (open loop: the points come from the "
-                         "recorded head's motion, the replay's dead reckoning from this config's commands)")
-            else:
-                L.append(f"  reconstructed target position error [m]: rms {re_['rms']:.3f}, p95 {re_['p95']:.3f}, "
-                         f"max {re_['max']:.3f}{caveat}")
+            L.append(f"  reconstructed target position error [m]: rms {re_['rms']:.3f}, p95 {re_['p95']:.3f}, "
+                     f"max {re_['max']:.3f}{caveat}")
     d = m["detection"]
     be = d["bearing_error_deg"]
     L.append(f"  detections: {d['frames_with_detection']}/{d['frames']} frames"
