@@ -4,13 +4,18 @@
 output's name (``os.replace``, atomic on one file system) only when the writing ended without an
 exception; an exception -- KeyboardInterrupt too -- removes it.  A Ctrl-C during an export left a
 CSV with 917 505 of its 1 251 727 lines, and an NPZ that would not decompress, under the names a
-finished export has: ``--overwrite`` was then asked for as if it were one.  A core module: the
-recording layer and the Livox layer both write through it.
+finished export has: ``--overwrite`` was then asked for as if it were one.  With ``fsync`` the file
+and then its directory are synced to the disk, so a power loss leaves the old file or the new one
+(``recover`` rewrites a recording in place this way).  A process killed inside the block cannot
+remove its temporary: :func:`leftovers` names those for a later run to clear.  A core module: the
+recording layer, the Livox layer and the daemon's ``recover`` all write through it.
 """
 
 from __future__ import annotations
 
+import glob
 import os
+import re
 import secrets
 from contextlib import contextmanager
 from pathlib import Path
@@ -18,11 +23,13 @@ from typing import Iterator
 
 
 @contextmanager
-def written_whole(path: str | os.PathLike) -> Iterator[Path]:
+def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path]:
     """The path of an empty temporary file in ``path``'s directory (a hidden name, ``.NAME.<8 hex digits>.tmp``),
-    for the caller to write (open it with "w"/"wb"; it keeps the mode a new file gets under the umask,
-    or the mode of the file it replaces); moved onto ``path`` when the block ends, removed if it raises.
-    A symlink at ``path`` is written through: its target is replaced."""
+    for the caller to write (open it with "w"/"wb", or let a writer that creates its file itself
+    replace it); it gets the mode of the file it replaces (else the one a new file gets under the
+    umask), moved onto ``path`` when the block ends, removed if it raises.  ``fsync``: the file is
+    synced before the rename and the directory after it.  A symlink at ``path`` is written through:
+    its target is replaced."""
     final = Path(os.path.realpath(path))
     tmp = None
     try:
@@ -34,12 +41,37 @@ def written_whole(path: str | os.PathLike) -> Iterator[Path]:
                 continue
             tmp = name
         try:
-            os.chmod(tmp, final.stat().st_mode & 0o7777)     # --overwrite: the replaced file's mode
+            mode = final.stat().st_mode & 0o7777     # --overwrite: the replaced file's mode
         except FileNotFoundError:
-            pass
+            mode = None
+        if mode is not None:
+            os.chmod(tmp, mode)         # before the writing: a private file's contents stay private
         yield tmp
+        if mode is not None:
+            os.chmod(tmp, mode)         # again: a writer may have made the file anew under the umask
+        if fsync:
+            _fsync(tmp, os.O_RDONLY)
         os.replace(tmp, final)
+        if fsync:
+            _fsync(final.parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))   # the rename itself
     except BaseException:
         if tmp is not None:
             tmp.unlink(missing_ok=True)
         raise
+
+
+def leftovers(path: str | os.PathLike) -> list[Path]:
+    """The temporaries :func:`written_whole` made for ``path`` that are still there: a process killed
+    inside the block (``kill -9``, a power loss) never removed its own.  Whether one is still being
+    written by a running process is for the caller to tell."""
+    final = Path(os.path.realpath(path))
+    own = re.compile(re.escape(f".{final.name}.") + r"[0-9a-f]{8}\.tmp")
+    return sorted(p for p in final.parent.glob(glob.escape(f".{final.name}.") + "*.tmp") if own.fullmatch(p.name))
+
+
+def _fsync(path, flags: int) -> None:
+    fd = os.open(path, flags)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

@@ -63,3 +63,46 @@ def test_a_symlink_is_written_through(tmp_path):
         assert tmp.parent == tmp_path / "real"
         tmp.write_text("new\n")
     assert link.is_symlink() and target.read_text() == "new\n"
+
+
+def test_fsync_syncs_the_file_before_its_rename_and_the_directory_after(tmp_path, monkeypatch):
+    # recover rewrites a recording in place: after a power loss the old file or the whole new one
+    out = tmp_path / "a.mcap"
+    synced = []
+    real = os.fsync
+
+    def spy(fd):
+        synced.append((os.readlink(f"/proc/self/fd/{fd}"), out.exists()))
+        real(fd)
+
+    monkeypatch.setattr(os, "fsync", spy)
+    with written_whole(out) as tmp:
+        tmp.write_text("x")
+    assert synced == []          # an export's default: no sync
+    out.unlink()
+    with written_whole(out, fsync=True) as tmp:
+        tmp.write_text("x")
+    d = os.path.realpath(tmp_path)
+    assert synced == [(os.path.join(d, tmp.name), False), (d, True)]
+
+
+def test_a_writer_that_makes_the_file_anew_still_gets_the_replaced_files_mode(tmp_path):
+    # recover's RecordingWriter creates its file itself (exclusively, under the umask)
+    out = tmp_path / "rec.mcap"
+    out.write_text("old\n")
+    os.chmod(out, 0o600)
+    with written_whole(out) as tmp:
+        tmp.unlink()
+        os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+    assert stat.S_IMODE(out.stat().st_mode) == 0o600
+
+
+def test_leftovers_are_the_temporaries_of_that_name_only(tmp_path):
+    from foveatrack.atomic_file import leftovers
+
+    out = tmp_path / "rec.mcap"
+    left = tmp_path / ".rec.mcap.0123abcd.tmp"      # what a process killed inside the block leaves
+    for p in (left, out, tmp_path / ".rec.mcap.zzzzzzzz.tmp", tmp_path / ".rec.mcap.0123abcd.tmp.x",
+              tmp_path / ".rec.mcap2.0123abcd.tmp", tmp_path / ".rec.mcap.recovering"):
+        p.write_text("")
+    assert leftovers(out) == [left]
