@@ -22,20 +22,21 @@ end (no summary, no footer: readable only by a tolerant reader such as ours) tha
    saw it);
 3. a ``/daemon`` event ``recovered`` saying what was done.
 
-The new file is written beside the old one (``.<name>.recovering``), synced to the disk, given the
-old file's permissions (the recorder's 0600) and renamed over it: the original stays whole until the
-new one is complete.  A recording that was closed properly is left as it is (a no-op, said so), and
-so is one whose journal a running daemon holds (its lock).  A journal line that cannot be read is
-reported and skipped.
+The new file is written beside the old one and renamed over it
+(:func:`foveatrack.atomic_file.written_whole`, synced to the disk with its directory), with the old
+file's permissions (the recorder's 0600): the original stays whole until the new one is complete.
+A recovery killed before its rename leaves its temporary, which the next one removes.  A recording
+that was closed properly is left as it is (a no-op, said so), and so is one whose journal a running
+daemon holds (its lock).  A journal line that cannot be read is reported and skipped.
 """
 
 from __future__ import annotations
 
-import os
 import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from foveatrack.atomic_file import leftovers, written_whole
 from foveatrack.errors import UserError
 from foveatrack.recording.format import COMMANDS, DAEMON_EVENTS, IMU, POINTS, PointsFrame, ImuSamples
 
@@ -120,14 +121,6 @@ def _match(recorded: list[dict], journal: list) -> tuple[list[bool], int]:
     return used, after
 
 
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def recover(path, journal=None, progress=None) -> Recovery:
     """Complete the recording at ``path`` from its command journal (module docstring); returns what
     was done.  ``progress(frames)`` is called every 100 frames copied.  UserError (one line) for a
@@ -154,17 +147,20 @@ def recover(path, journal=None, progress=None) -> Recovery:
         return res
     if not reader.meta.get("source"):
         raise UserError(f"{path}: not a recording of a driver with a command journal (no 'source' in its metadata)")
-    tmp = path.with_name(f".{path.name}.recovering")
-    tmp.unlink(missing_ok=True)          # a recovery that died before its rename: ours, never the original
+    for tmp in leftovers(path):
+        if not recording_in_use(tmp):    # a killed recovery's; a running one holds its writer's lock
+            tmp.unlink(missing_ok=True)
     mode = path.stat().st_mode & 0o777
     meta = dict(reader.meta)
     meta["recovered_from_journal"] = {"journal": jpath.name, "created_utc": reader.info.get("created_utc")}
     clock = _LogTimes(reader.info.get("log_time", "host_utc"))
     recorded_cmds: list[dict] = []
     last_t_ns, last_log = 0, 0
-    writer = RecordingWriter(tmp, meta, fsync=True, overwrite=True, created_utc=reader.info.get("created_utc"),
-                             log_time=clock, file_mode=mode, segment_index=_segment_index(reader.info))
-    try:
+    # overwrite: the writer makes its file itself (exclusively), in place of written_whole's empty one;
+    # written_whole syncs it once, before the rename (a temporary cut short is thrown away anyway)
+    with written_whole(path, fsync=True) as tmp, RecordingWriter(
+            tmp, meta, overwrite=True, created_utc=reader.info.get("created_utc"), log_time=clock,
+            file_mode=mode, segment_index=_segment_index(reader.info)) as writer:
         for log_time, m in reader.logged_messages():
             clock.current = last_log = max(log_time, 0)
             r = m.record
@@ -220,14 +216,6 @@ def recover(path, journal=None, progress=None) -> Recovery:
             "event": "recovered", "commands_added": res.commands_added, "journal_only_added": res.journal_only_added,
             "journal": jpath.name, "journal_lines": len(lines), "bad_journal_lines": len(bad),
             "frames": res.frames, "reader_problem": res.reader_problem})
-        writer.close()
-    except BaseException:
-        writer.close()
-        tmp.unlink(missing_ok=True)
-        raise
-    os.chmod(tmp, mode)
-    os.replace(tmp, path)            # atomic: the original is whole until the new file is
-    _fsync_dir(path.parent)
     res.recovered = True
     return res
 

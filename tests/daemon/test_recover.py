@@ -166,3 +166,48 @@ def test_not_a_recording_is_one_line(tmp_path, capsys):
     p.write_bytes(b"hello")
     assert main(["recover", str(p)]) == 2
     assert "not a foveatrack recording" in capsys.readouterr().err
+
+
+def test_a_killed_recover_leaves_the_original_whole_and_the_next_one_clears_its_temporary(tmp_path):
+    # kill -9 (or a power loss) mid-rewrite: nothing half-written under the recording's name; the
+    # temporary left beside it is removed by the next recover, which completes the file
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from foveatrack.atomic_file import leftovers
+
+    cut, n_journal = _cut_short(tmp_path, frames=150)
+    data = cut.read_bytes()
+    before = sorted(p.name for p in tmp_path.iterdir())
+    root = Path(__file__).resolve().parents[2]
+    kill_at_100 = ("import os, signal, sys; from foveatrack.daemon.recover import recover; "
+                   "recover(sys.argv[1], progress=lambda n: os.kill(os.getpid(), signal.SIGKILL))")
+    out = subprocess.run([sys.executable, "-c", kill_at_100, str(cut)], cwd=root, capture_output=True,
+                         env={**os.environ, "PYTHONPATH": str(root)}, timeout=120)
+    assert out.returncode == -signal.SIGKILL, out.stderr
+    assert cut.read_bytes() == data
+    left = leftovers(cut)
+    assert len(left) == 1 and left[0].stat().st_size > 0        # killed with 100 frames written
+    res = recover(cut)
+    assert res.recovered and res.frames == 150
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    assert len(_official_commands(cut)) == n_journal
+
+
+def test_recover_leaves_a_temporary_another_running_recover_still_writes(tmp_path):
+    from foveatrack.atomic_file import leftovers
+    from foveatrack.file_lock import hold
+
+    cut, _ = _cut_short(tmp_path)
+    running = tmp_path / ".rec.mcap.0123abcd.tmp"
+    running.write_bytes(b"being written")
+    dead = tmp_path / ".rec.mcap.89abcdef.tmp"
+    dead.write_bytes(b"cut short")
+    fd = hold(running)          # the flock a running RecordingWriter holds on its file
+    try:
+        assert recover(cut).recovered
+    finally:
+        os.close(fd)
+    assert leftovers(cut) == [running] and running.read_bytes() == b"being written"
