@@ -141,6 +141,19 @@ class DaemonConfig:
     recording: RecordingConfig
     loop: LoopConfig
     pose_check: PoseCheckConfig = PoseCheckConfig()
+    head_port_option: str | None = None     # the command-line option that replaced [head] port ("--serial")
+
+    def with_head_port(self, port: str, option: str) -> "DaemonConfig":
+        """This config with the head's port given by ``option`` on the command line (``--serial``)."""
+        return replace(self, head=replace(self.head, port=port), head_port_option=option)
+
+    def named_head_port(self) -> str:
+        """The head's port and where it was given, for the errors about it: ``--serial '/dev/ttyUSB1'``
+        or ``daemon.toml [head]: port '/dev/ttyUSB0'`` (a port given on the command line and blamed on
+        the file sent a user to fix a config that was right)."""
+        if self.head_port_option is not None:
+            return f"{self.head_port_option} {self.head.port!r}"
+        return f"{self.path} [head]: port {self.head.port!r}"
 
     @property
     def tracker_overrides(self) -> dict:

@@ -38,7 +38,8 @@ def counters_text(counters: dict) -> str:
 
 
 def open_head(config):
-    """The head's :class:`gimbal.client.HeadClient`, open now, or a UserError naming ``[head] port``.
+    """The head's :class:`gimbal.client.HeadClient`, open now, or a UserError naming ``[head] port``
+    (or the option that replaced it, :meth:`~foveatrack.device_config.DaemonConfig.named_head_port`).
 
     The device is identified once (:mod:`foveatrack.serial_identity`; a ``/dev/serial/by-id/`` name of
     it is opened instead of ``/dev/ttyUSB0`` where there is one) and every reopen after a disconnect
@@ -58,14 +59,14 @@ def open_head(config):
     except GimbalError as exc:
         raise UserError(f"{config.path} [head]: {exc}") from None
     if not head.connected and head.stats.open_locked:
-        raise UserError(f"{config.path} [head]: port {h.port!r} is in use by another process (it holds the port's "
+        raise UserError(f"{config.named_head_port()} is in use by another process (it holds the port's "
                         "exclusive lock): another daemon or program drives this head; stop it first, or give "
                         "this one its own head")
     if not head.connected:
         # A port that is wrong at start (a typo, an adapter not plugged in, a regular file, a server not
         # started) would otherwise leave the driver commanding no head, silently: the link reconnects by
         # itself only once it has been up.
-        raise UserError(f"{config.path} [head]: port {h.port!r} cannot be opened ({head.last_open_error}); "
+        raise UserError(f"{config.named_head_port()} cannot be opened ({head.last_open_error}); "
                         "give the head's serial device (/dev/ttyUSB0) or a pyserial URL (socket://host:port, "
                         "rfc2217://host:port) that exists now, e.g. start 'foveatrack gimbal serve --link PATH' first")
     head.identity, head.open_path = ident, open_path

@@ -141,7 +141,7 @@ def calibrate_live(config: DaemonConfig, plan: CalibrationPlan, feature: Feature
             # A keep-alive that did not get through changes nothing; a change of command that did
             # not, leaves the head doing the last one while the procedure times a new leg: its
             # measurements would be wrong.
-            raise UserError(f"the head's serial link [head] port {h.port!r} failed when the calibration "
+            raise UserError(f"the head's serial link ({config.named_head_port()}) failed when the calibration "
                             f"changed its command ({_legs(cal)} legs done); the head was stopped if it "
                             "could be reached and no table was written")
         run["written"] = cmd

@@ -228,7 +228,7 @@ def calibrate_devices(args) -> int:
     if args.lidar:
         cfg = replace(cfg, lidar=replace(cfg.lidar, sensor_ip=args.lidar))
     if args.serial:
-        cfg = replace(cfg, head=replace(cfg.head, port=args.serial))
+        cfg = cfg.with_head_port(args.serial, "--serial")
     plan = CalibrationPlan(**_plan_overrides(args))
     bar = None
     progress = None

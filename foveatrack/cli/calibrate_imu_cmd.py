@@ -258,7 +258,7 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
     if args.lidar_ip:
         cfg = replace(cfg, lidar=replace(cfg.lidar, sensor_ip=args.lidar_ip))
     if args.serial:
-        cfg = replace(cfg, head=replace(cfg.head, port=args.serial))
+        cfg = cfg.with_head_port(args.serial, "--serial")
     bar = None
     progress = None
     if not args.no_progress and not args.json and not args.by_hand:

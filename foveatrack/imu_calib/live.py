@@ -372,7 +372,7 @@ class _HeadDrive:
             self.rig._fail(f"the [head] limits of {self.config.path} stopped a planned move ({', '.join(rec.limited)}) at "
                            f"dead-reckoned tilt {self.tilt_deg:.1f} +- {math.sqrt(self.tilt_var):.1f} deg")
         if not rec.reached_head and cmd != last:
-            self.rig._fail(f"the head's serial link [head] port {self.config.head.port!r} failed when a move changed "
+            self.rig._fail(f"the head's serial link ({self.config.named_head_port()}) failed when a move changed "
                            f"its command (pose {self.rig.pose + 1})")
 
     def _witness(self, pan: AxisMove, tilt: AxisMove, el_s: float) -> None:

@@ -223,7 +223,10 @@ def test_the_plan_is_cut_to_the_configs_limits(tmp_path):
     (["--config", "{cfg}"], "needs --corner X Y Z"),
     (["--config", "{cfg}", "--corner", "1", "2", "3", "--unit-seed", "4"], "simulated unit"),
     (["--config", "{cfg}", "--corner", "1", "2", "3", "--max-s", "0"], "--max-s must be > 0"),
-    (["--config", "{cfg}", "--corner", "1", "2", "3", "--serial", "/nonexistent/tty-x"], r"\[head\].*tty-x"),
+    # the port is blamed where it was given: --serial (the file's [head] port was right), or the file
+    (["--config", "{cfg}", "--corner", "1", "2", "3", "--serial", "/nonexistent/tty-x"],
+     r"(?s)\A(?!.*\[head\]).*error: --serial '/nonexistent/tty-x' cannot be opened"),
+    (["--config", "{cfg}", "--corner", "1", "2", "3"], r"d\.toml \[head\]: port '\S*/x' cannot be opened"),
 ])
 def test_command_line_mistakes_are_named(tmp_path, capsys, argv, message):
     cfg = _config(tmp_path, tmp_path / "x", free_udp_port())

@@ -217,7 +217,10 @@ def test_ctrl_c_stops_the_head_and_writes_nothing(rig):
     (["--by-hand"], "need --config"),
     (["scenes/imu-calibration-room.toml", "--config", "{cfg}"], "not both"),
     (["scenes/imu-calibration-room.toml", "--poses", "5"], r"--poses: real-rig options.*\[imu_poses\]"),
-    (["--config", "{cfg}", "--serial", "/nonexistent/tty-x"], r"\[head\].*tty-x"),
+    # the port is blamed where it was given: --serial (the file's [head] port was right), or the file
+    (["--config", "{cfg}", "--serial", "/nonexistent/tty-x"],
+     r"(?s)\A(?!.*\[head\]).*error: --serial '/nonexistent/tty-x' cannot be opened"),
+    (["--config", "{cfg}"], r"d\.toml \[head\]: port '\S*/x' cannot be opened"),
 ])
 def test_command_line_mistakes_are_named(tmp_path, capsys, argv, message):
     cfg = _config(tmp_path, tmp_path / "x", free_udp_port())
