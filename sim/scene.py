@@ -2,7 +2,8 @@
 
 A scene lists everything a closed-loop run simulates, and nothing else: an effect that is not in
 ``[scene] effects`` draws no random numbers and costs no time.  Every error names the file, the key
-and what is allowed.  Tables::
+and what is allowed; a drone or bird under the ground or at the head is named too
+(:mod:`sim.scene_placement`, :meth:`Scene.warnings`).  Tables::
 
     [scene]      name, duration_s, seed, effects = [...], start_utc (the recording's log times, UTC)
     [effects]    parameters of the listed effects (optional; documented defaults)
@@ -183,6 +184,15 @@ class Scene:
 
         return DEFAULT_RANGE_ENVELOPE_M
 
+    def warnings(self) -> list[str]:
+        """What in the scene runs but cannot be seen, in words: a drone or a bird below the ground or
+        in the lidar's blind zone at some instant (:mod:`sim.scene_placement`; the CLIs that fly a
+        scene print them at load).  Derived, so a scene changed by ``dataclasses.replace`` is judged
+        as it is."""
+        from sim.scene_placement import placement_problems
+
+        return placement_problems(self)[1]
+
     def has(self, effect: str) -> bool:
         return effect in self.effects
 
@@ -311,7 +321,7 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
     tracker_table = dict(tracker_raw)
     tracker = TrackerConfig.from_mapping(tracker_table, where=f"{where} [tracker]")
     imu, imu_poses = _imu(data, where)
-    return Scene(
+    scene = Scene(
         name=str(sc.get("name", Path(where).stem)), path=where, text=text, duration_s=duration, seed=seed,
         effects=frozenset(effects), effect_params=params, optics=optics, scan_model=scan_model, gimbal=gimbal,
         targets=target_specs,
@@ -320,6 +330,12 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         gate=_gate(data["gate"], f"{where} [gate]") if "gate" in data else None, range_envelope_m=envelope,
         start_utc_ns=start_utc_ns, others=others, table=copy.deepcopy(dict(data)),
     )
+    from sim.scene_placement import placement_problems
+
+    errors, _ = placement_problems(scene)
+    if errors:      # a drone the head can never see: the run would measure nothing
+        raise UserError("; ".join(errors))
+    return scene
 
 
 START_UTC = "2026-01-01T00:00:00Z"     # a scene's start_utc unless it gives one (docs/recordings.md)

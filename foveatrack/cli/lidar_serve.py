@@ -52,6 +52,8 @@ def cmd_serve(args) -> int:
     from sim.scene import load_scene
 
     scene = load_scene(args.scene)
+    for w in scene.warnings():      # a drone under the ground or at the head is served, and never seen
+        print(f"lidar serve: WARNING: {w}", file=sys.stderr, flush=True)
     if not args.time_scale > 0:
         raise UserError(f"--time-scale must be > 0, got {args.time_scale}")
     if args.duration_s is not None and not args.duration_s > 0:

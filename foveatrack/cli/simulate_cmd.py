@@ -182,6 +182,8 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
     if duration is not None and not (0 < duration <= 2 * 86400):
         raise UserError(f"--duration {duration}: must be > 0 and at most 172800 s (2 days of virtual time)")
     scene = with_run_overrides(load_scene(scene_path), duration, seed)
+    for w in scene.warnings():      # a drone under the ground or at the head runs, and is never seen
+        print(f"foveatrack simulate: WARNING: {w}", file=sys.stderr, flush=True)
     frames = int(round(scene.duration_s * scene.tracker.rate_hz))
     if frames < 1:
         raise UserError(f"{scene.path}: duration {scene.duration_s} s is shorter than one tracker frame "
