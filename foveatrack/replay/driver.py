@@ -271,7 +271,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     if tracker_table is None and as_recorded is not None:
         # the configuration replay rebuilt is the one the recording says ran
         res.comparison["tracker_config_as_recorded"] = as_recorded
-    res.metrics = replay_metrics(frames, truth, cfg, meta.half_fov_deg)
+    # the truth's error is the recorded head's (under another config too: open loop), so it counts as
+    # acquired by the recorded run's dead band, not by this config's
+    res.metrics = replay_metrics(frames, truth, rec_cfg, meta.half_fov_deg)
     res.recorded_metrics = recorded_metrics(recorded, truth, rec_cfg, frames)
     if reader.problem:
         res.comparison["recording_problem"] = reader.problem

@@ -38,7 +38,8 @@ def replay_metrics(frames: dict, truth: dict | None, cfg: TrackerConfig, half_fo
     """Detection metrics, and with the simulator's truth the tracking metrics as ``simulate`` gives
     them: the acquisition clock starts when the true error is inside ``half_fov_deg`` (recorded by
     the simulator; recordings made before it was, start it at the first frame with points on the
-    target) and stops once it is held within :func:`foveatrack.metrics.acquired_within_deg`."""
+    target) and stops once it is held within :func:`foveatrack.metrics.acquired_within_deg` of ``cfg``:
+    the configuration that moved the head the truth's error is of (the recorded one, in a replay)."""
     out = {"detection": bearing_metrics(frames)}
     if truth is not None:
         err = np.asarray(truth["true_error_deg"], float)

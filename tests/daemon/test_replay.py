@@ -227,6 +227,11 @@ def test_the_open_loop_caveat_sits_beside_the_numbers(sim_run, tmp_path):
     # same points (the detections do not depend on the deadband), placed from the same head motion:
     # the same figure as the recorded configuration's replay
     assert rec_line.split(" (open loop")[0] == same_rec
+    # the tracking error too is the recorded head's: acquired by the recorded run's dead band (this
+    # config's 0.5 deg + 1 never held on a head that ran a 2 deg dead band: "acquisition n/a")
+    same_err = next(x for x in same if x.lstrip().startswith("tracking error"))
+    assert err_line.split(" (open loop")[0] == same_err.split(" (open loop")[0]
+    assert "acquisition n/a" not in err_line
 
 
 def test_replay_plot_of_a_recording_without_frames_draws_nothing_and_says_so(tmp_path, capsys):
