@@ -88,6 +88,13 @@ class LegRecord:
 
 @dataclass
 class CalibrationReport:
+    """What a calibration measured beside its table, and what its user must hear.
+
+    ``warnings``: sentences about a table that was written but may be wrong, or about the set-up
+    that made it (each says what was seen and what to do); every place that shows the report
+    prints them (``foveatrack calibrate``, text and ``--json``).
+    """
+
     unmeasured: dict            # axis -> {byte: reason}
     axis_lidar: dict            # axis -> unit vector (rotation axis in lidar coords)
     implied_start_tilt_deg: float | None
@@ -96,3 +103,4 @@ class CalibrationReport:
     accel_deg_s2: float | None
     frames: int
     frames_with_feature: int
+    warnings: tuple[str, ...] = ()

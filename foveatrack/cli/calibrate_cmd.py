@@ -8,7 +8,9 @@ Simulated::
 runs :class:`foveatrack.calibration.Calibrator` against the simulated PTS-303H over the virtual UART
 (``sim.calibration_run``), writes the speed table (JSON: unit, date, per-entry uncertainty; see
 :mod:`foveatrack.speed_table`), prints the entries it could not measure and, since the unit's truth is
-known in simulation, each measured entry's error.
+known in simulation, each measured entry's error.  The report's warnings (a table written that may
+be wrong, and why) go to stderr last, in text and ``--json`` alike, and into the JSON summary's
+``warnings``.
 
 Real hardware (a Livox and a head on a serial port)::
 
@@ -130,6 +132,7 @@ def cmd_calibrate(args) -> int:
         "entries": run.comparison,
         "within_tolerance": sum(r["ok"] for r in run.comparison),
         "measured": len(run.comparison),
+        "warnings": list(run.report.warnings),
     }
     if args.plot:
         _plot(run.table, run.comparison, args.plot, truth=run.truth)
@@ -149,13 +152,21 @@ def cmd_calibrate(args) -> int:
           f"{run.head_end_deg[0]:.2f}, tilt {run.head_end_deg[1]:.2f} deg (started {run.head_start_deg[0]:.2f}, "
           f"{run.head_start_deg[1]:.2f})")
     print(f"  table written to {args.out}")
+    _print_warnings(summary["warnings"])
     return 0
 
 
 def _print_json(summary) -> int:
     json.dump(summary, sys.stdout, indent=2, default=_jsonable)
     sys.stdout.write("\n")
+    _print_warnings(summary["warnings"])
     return 0
+
+
+def _print_warnings(warnings) -> None:
+    """The report's warnings on stderr, last (text and ``--json`` alike: stdout stays the summary)."""
+    for w in warnings:
+        print(f"calibrate: warning: {w}", file=sys.stderr)
 
 
 def _print_unmeasured(unmeasured: dict) -> None:
@@ -261,6 +272,7 @@ def calibrate_devices(args) -> int:
         "command_delay_ms": None if delays is None else {"median": delays[0], "p95": delays[1]},
         "latency_assumed_ms": run.plan.latency_s * 1e3,
         "unmeasured": unmeasured_summary(run.report), "entries": rows, "counters": run.counters,
+        "warnings": list(run.report.warnings),
     }
     if args.plot:
         _plot(table, rows, args.plot)
@@ -280,6 +292,7 @@ def calibrate_devices(args) -> int:
         print(f"  commands left {delays[0]:.1f} ms (median; p95 {delays[1]:.1f}) after their frame's last point; "
               f"the plan assumed {run.plan.latency_s * 1e3:.1f} ms to the head")
     print(f"  table written to {args.out}")
+    _print_warnings(summary["warnings"])
     return 0
 
 

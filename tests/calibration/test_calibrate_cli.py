@@ -100,3 +100,63 @@ def test_a_plot_that_exists_is_not_replaced_unasked(tmp_path, capsys, cmd):
     err = capsys.readouterr().err
     assert "--plot" in err and "exists" in err and "Traceback" not in err, err
     assert png.read_bytes() == b"a plot the user keeps"
+
+
+# ---- the report's warnings reach the user, whichever way the report is shown --------------------
+
+WARNING = "the plan's start tilt disagrees with the corner's motion (a test's sentence)"
+
+
+def _report(warnings):
+    from foveatrack.calibration import CalibrationReport
+
+    return CalibrationReport({"pan": {}, "tilt": {}}, {"pan": (0.0, 0.0, 1.0), "tilt": (0.0, 1.0, 0.0)}, 0.0,
+                             {"pan": {}, "tilt": {}}, 0.04, None, 10, 10, warnings=warnings)
+
+
+def _scene_run(warnings):
+    from sim.calibration_run import CalibrationRun
+    from foveatrack.speed_table import SpeedTable
+
+    t = SpeedTable.nominal()
+    return CalibrationRun(t, _report(warnings), t, [], 10, 1.0, 0.1, (23.0, 6.5), (23.0, 6.5))
+
+
+def _device_run(warnings):
+    from foveatrack.calibration import CalibrationPlan
+    from foveatrack.calibration.live import LiveCalibration
+    from foveatrack.speed_table import SpeedTable
+
+    return LiveCalibration(SpeedTable.nominal(), _report(warnings), CalibrationPlan(), {}, 10, 1.0)
+
+
+def _device_config(tmp_path):
+    cfg = tmp_path / "d.toml"
+    cfg.write_text('[lidar]\nsensor_ip = "127.0.0.1"\nhost_ip = "127.0.0.1"\n[head]\nport = "loop://"\ntilt0_deg = 35.0\n')
+    return str(cfg)
+
+
+@pytest.mark.parametrize("mode", ["scene", "config"])
+@pytest.mark.parametrize("json_out", [False, True])
+def test_the_reports_warnings_are_shown_in_text_and_json(tmp_path, capsys, monkeypatch, mode, json_out):
+    # Both routes of `calibrate` (simulated head, real devices) with the calibration itself replaced
+    # by a finished run whose report carries a warning: the printing is what is tested here (what
+    # raises the warning: test_start_tilt_prior.py).
+    import foveatrack.calibration.live as live
+    import foveatrack.cli.calibrate_cmd as cc
+
+    if mode == "scene":
+        module, name, run = cc, "calibrate_scene", _scene_run
+        argv = ["calibrate", "--scene", SCENE]
+    else:
+        module, name, run = live, "calibrate_live", _device_run
+        argv = ["calibrate", "--config", _device_config(tmp_path), "--corner", "5.9", "0.8", "0.84", "--no-progress"]
+    argv += ["--json"] if json_out else []
+    for k, warnings in enumerate([(WARNING,), ()]):
+        monkeypatch.setattr(module, name, lambda *a, w=warnings, **kw: run(w))
+        assert main(argv + ["--out", str(tmp_path / f"t{k}.json")]) == 0
+        out, err = capsys.readouterr()
+        said = [line for line in err.splitlines() if "warning" in line.lower()]
+        assert said == [f"calibrate: warning: {w}" for w in warnings], err
+        if json_out:
+            assert json.loads(out)["warnings"] == list(warnings)
