@@ -34,8 +34,9 @@ angle (de-rotation, excursion and return checks) are medians over the last sampl
 Estimate (batch, in :meth:`result`): the rotation axis of each head axis *in the lidar frame* is the
 direction in which the corner positions do not move (smallest eigenvector of the pooled, per-leg
 centred scatter of corner positions; falls back to the prior -- lidar Y for tilt, ``R_y(t0) z`` for pan
--- if the legs are too short to tell).  This makes pan calibration independent of the unknown start
-tilt (an error of cos(tilt) otherwise).  The angle of the corner about that axis is fitted against the
+-- if the legs are too short to tell; :class:`PriorAxisCalibrator` combines the two, and warns and
+uses the data alone when they contradict the prior).  This makes pan calibration independent of the
+unknown start tilt (an error of cos(tilt) otherwise).  The angle of the corner about that axis is fitted against the
 corner's time by least squares over the steady part of each leg (after ``settle_s``, and never
 before the leg's ramp has ended, :func:`fit_ramp`; the corners off the leg's smooth track left out,
 here and in the axis scatter):
@@ -56,6 +57,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -73,6 +75,14 @@ from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable, axi
 #: missed frames once settled; before, up to ``settle_s`` of its ramp may pass unseen).
 TILT_CORNER_SIGMA_DEG = 0.1
 TILT_UNSEEN_MAX_S = 1.0
+
+#: Above this chi-square (2 degrees of freedom) a head axis's prior and the corner data disagree
+#: (:meth:`PriorAxisCalibrator._axis_fit`): were both right, it is exceeded with probability
+#: ``exp(-13.8 / 2) = 0.001``.  In simulation the statistic runs far below its nominal law (the
+#: first-order data sigma is conservative): 0.01-0.94 for the pan axis over 11 runs with the right
+#: start tilt, while a start tilt 10 deg off gave 16, 13.5 deg off 22-28 and 28.5 deg off 21-39 (a
+#: wrong prior also spoils the procedure's online de-rotation, which widens the data's sigma).
+PRIOR_CONFLICT_CHI2 = 13.8
 
 
 def on_smooth_track(t_s: np.ndarray, q_m: np.ndarray, n_sigma: float = 5.0, floor_m: float = 1e-3,
@@ -195,6 +205,47 @@ def _leg_samples(leg: LegRecord) -> tuple[list[int], np.ndarray, np.ndarray]:
     idx = [i for i, (t, _) in enumerate(leg.samples) if leg.t_cmd_s < t <= stop]
     return (idx, np.array([leg.samples[i][0] for i in idx], dtype=float),
             np.array([leg.samples[i][1] for i in idx], dtype=float).reshape(-1, 3))
+
+
+@dataclass(frozen=True)
+class AxisFit:
+    """One head axis in the lidar frame, as :meth:`PriorAxisCalibrator._axis_fit` found it.
+
+    name : ``"pan"`` or ``"tilt"``
+    axis : (3,) unit   the estimate the table is measured about
+    prior : (3,) unit  the assumed axis (pan: ``R_y(start_tilt) z``; tilt: lidar Y)
+    data_axis : (3,) unit or None   the corner data's own axis (sign toward the prior); None: too few
+        samples to tell
+    data_cov : (3, 3) or None [rad^2]  its covariance, first order (in the plane normal to it)
+    chi2 : float >= 0 or None   the prior against the data (see :class:`PriorAxisCalibrator`)
+    degenerate : bool  the data do not determine the axis (``w0 / w1 > 0.25``, or too few samples)
+    """
+
+    name: str
+    axis: np.ndarray
+    prior: np.ndarray
+    data_axis: np.ndarray | None
+    data_cov: np.ndarray | None
+    chi2: float | None
+    degenerate: bool
+
+    @property
+    def conflict(self) -> bool:
+        """The prior and the data cannot both be right (``chi2 > PRIOR_CONFLICT_CHI2``)."""
+        return self.chi2 is not None and self.chi2 > PRIOR_CONFLICT_CHI2
+
+    def implied_start_tilt_deg(self) -> tuple[float, float, float, float]:
+        """The pan axis of the data as a start tilt: ``(tilt, sigma, lean, sigma)`` [deg], where the
+        axis is ``(cos(lean) sin(tilt), sin(lean), cos(lean) cos(tilt))`` (the lean toward lidar Y is
+        what no start tilt explains) and the sigmas are the covariance's along those two angles."""
+        a = self.data_axis
+        t = math.atan2(a[0], a[2])
+        lean = math.asin(max(-1.0, min(1.0, float(a[1]))))
+        e_t = np.array([math.cos(t), 0.0, -math.sin(t)])
+        e_l = np.cross(e_t, a)
+        e_l /= max(np.linalg.norm(e_l), 1e-12)
+        sig = [math.degrees(math.sqrt(max(float(e @ self.data_cov @ e), 0.0))) for e in (e_t, e_l)]
+        return math.degrees(t), sig[0], math.degrees(lean), sig[1]
 
 
 class Calibrator:
@@ -751,6 +802,22 @@ class PriorAxisCalibrator(Calibrator):
     corner's anisotropic noise and no information (with all 18 tilt bytes pooled the tilt axis came
     out 50 deg off and every tilt speed +2.7 %).  Degenerate scatter (``w0 / w1 > 0.25``) -> prior.
 
+    The prior is tested against the data first: were both right, each ``theta_{p,j}`` would be a
+    normal deviate of variance ``sigma_{d,j}^2 + sigma_p^2`` (the assumption the combination above
+    rests on), so
+
+    .. math:: \\chi^2 = \\sum_{j=1,2} \\frac{\\theta_{p,j}^2}{\\sigma_{d,j}^2 + \\sigma_p^2}
+
+    follows a chi-square law with 2 degrees of freedom.  Above ``PRIOR_CONFLICT_CHI2`` (13.8,
+    p = 0.001) they cannot both be right, and the data's axis ``v0`` is used alone: a prior the data
+    contradict is wrong (a ``tilt0_deg`` left from another mounting, a head not homed), and combining
+    it with them by inverse variance gives an axis consistent with neither, near the prior since its
+    0.5 deg outweighs the data's 2-5 deg (a start tilt of 35 deg for a true 6.5 made every pan speed
+    25-33 % high; the data's axis alone: 0.4-4.2 % over 7 runs).  The report then says so
+    (:meth:`_prior_warning`), naming the start tilt the data imply and the one given; degenerate
+    scatter keeps the prior but is tested and said alike.  The test misses what the data cannot
+    resolve: a start tilt 6.5 deg off (chi-square 12.6, one-byte plan) biased pan by 2 % unsaid.
+
     start_tilt_sigma_deg : float > 0 [deg]  how well the start tilt (``plan.start_tilt_deg``) is
         known: exact in simulation; a levelled head with a known zero about 0.5 deg; give 90 if unknown
         (it is also the tilt estimate's floor for the command gate: behind a gate with tilt stops, 90
@@ -769,26 +836,65 @@ class PriorAxisCalibrator(Calibrator):
         self.min_arc_rms_m = float(min_arc_rms_m)
 
     def _axis_estimate(self, axis: str) -> np.ndarray:
+        return self._axis_fit(axis).axis
+
+    def _axis_fit(self, axis: str) -> AxisFit:
+        """The axis estimate (class docstring), with the data's own axis and the test of the prior
+        against it."""
         prior = self._prior_axis(axis)
         C, n = self._leg_scatter(axis, self.min_arc_rms_m)
         if n < 10:
-            return prior
+            return AxisFit(axis, prior, prior, None, None, None, True)
         w, v = np.linalg.eigh(C)
         a = v[:, 0] if v[:, 0] @ prior > 0 else -v[:, 0]
-        if w[1] <= 0 or w[0] / w[1] > 0.25:
-            return prior                      # degenerate: the arcs do not tell the axis
         s2 = max(w[0], 0.0) / max(n - 3, 1)
-        wp = 1.0 / math.radians(self.prior_sigma_deg[axis]) ** 2
+        var_p = math.radians(self.prior_sigma_deg[axis]) ** 2
+        var_d = [s2 * w[j] / (w[j] - w[0]) ** 2 if w[j] > w[0] else math.inf for j in (1, 2)]
+        theta_p = [float(prior @ v[:, j]) for j in (1, 2)]
+        chi2 = sum(th * th / (vd + var_p) for th, vd in zip(theta_p, var_d))
+        cov = sum((vd if math.isfinite(vd) else 1e6) * np.outer(v[:, j], v[:, j]) for vd, j in zip(var_d, (1, 2)))
+        if w[1] <= 0 or w[0] / w[1] > 0.25:
+            # degenerate: the arcs do not tell the axis (the test above may still tell the prior wrong)
+            return AxisFit(axis, prior, prior, a, cov, chi2, True)
+        if chi2 > PRIOR_CONFLICT_CHI2:
+            return AxisFit(axis, a, prior, a, cov, chi2, False)     # a prior the data contradict is wrong
+        wp = 1.0 / var_p
         out = a.copy()
-        for j in (1, 2):
-            var_d = s2 * w[j] / (w[j] - w[0]) ** 2
-            wd = 1.0 / var_d if var_d > 0 else math.inf
-            theta_p = float(prior @ v[:, j])
-            out += (wp * theta_p / (wd + wp) if math.isfinite(wd) else 0.0) * v[:, j]
+        for j, vd, th in zip((1, 2), var_d, theta_p):
+            wd = 1.0 / vd if vd > 0 else math.inf
+            out += (wp * th / (wd + wp) if math.isfinite(wd) else 0.0) * v[:, j]
         out /= np.linalg.norm(out)
         if out @ prior < math.cos(math.radians(30)):
-            return prior
-        return out
+            out = prior
+        return AxisFit(axis, out, prior, a, cov, chi2, False)
+
+    def _prior_warning(self, fit: AxisFit) -> str | None:
+        """The report's sentence on a prior the data contradict (``fit.conflict``), else None."""
+        if not fit.conflict:
+            return None
+        sp = self.prior_sigma_deg[fit.name]
+        test = (f"chi-square {fit.chi2:.0f} for 2 degrees of freedom, above {PRIOR_CONFLICT_CHI2:g}: "
+                f"p < 0.001 were both right")
+        if fit.degenerate:
+            used = (f"The legs are too short for the data's axis to replace the assumed one, so the table used "
+                    f"the assumed one: every {fit.name} speed in it may be off alike.")
+        else:
+            used = (f"The table's {fit.name} speeds were measured about the data's axis, not the assumed one "
+                    f"(which would bias them all alike).")
+        if fit.name == "pan":
+            tilt, tilt_sigma, lean, lean_sigma = fit.implied_start_tilt_deg()
+            t0 = self.plan.start_tilt_deg
+            return (f"the start tilt disagrees with the corner's motion: the head's pan axis as the corner turned "
+                    f"about it implies a start tilt of {tilt:.1f} +- {tilt_sigma:.1f} deg (and a lean of "
+                    f"{lean:+.1f} +- {lean_sigma:.1f} deg toward lidar Y, which no start tilt gives), but the "
+                    f"calibration was told {t0:g} +- {sp:g} deg (tilt0_deg: [head] in a daemon config, "
+                    f"[gimbal] in a scene; {test}).  {used}  If the head did not start at {t0:g} deg, measure "
+                    f"its start tilt, set tilt0_deg to it and calibrate again: the daemon takes tilt0_deg as "
+                    f"the head's start pose, and the calibration's tilt stops count from it.")
+        off = math.degrees(math.acos(min(1.0, abs(float(fit.data_axis @ fit.prior)))))
+        return (f"the tilt axis disagrees with the lidar's mounting: the corner turned about an axis "
+                f"{off:.1f} deg from lidar Y, where the calibration assumes the tilt axis within {sp:g} deg "
+                f"({test}).  {used}  Check that the lidar sits on the head with its Y axis along the tilt axis.")
 
 
     def _estimate(self):
@@ -816,6 +922,8 @@ class PriorAxisCalibrator(Calibrator):
         from scipy.optimize import least_squares
 
         table, report = super()._estimate()
+        said = [self._prior_warning(self._axis_fit(ax)) for ax in ("pan", "tilt")]
+        report = _replace(report, warnings=report.warnings + tuple(w for w in said if w))
         axes = {ax: np.asarray(report.axis_lidar[ax], float) for ax in ("pan", "tilt")}
         data = []
         for leg in self.legs:
