@@ -56,6 +56,20 @@ def axis_bytes(axis: str) -> tuple[int, ...]:
     return tuple(range(64)) + ((TURBO,) if axis == "pan" else ())
 
 
+def byte_ranges(bs) -> str:
+    """Speed bytes in words: [0, 1, 2, 5, 7, 8] -> '0-2, 5, 7-8' (turbo as 'turbo')."""
+    bs = sorted(bs)
+    parts, i = [], 0
+    while i < len(bs):
+        j = i
+        while j + 1 < len(bs) and bs[j + 1] == bs[j] + 1 and bs[j + 1] != TURBO:
+            j += 1
+        name = lambda b: "turbo" if b == TURBO else str(b)  # noqa: E731
+        parts.append(name(bs[i]) if i == j else f"{name(bs[i])}-{name(bs[j])}")
+        i = j + 1
+    return ", ".join(parts)
+
+
 @dataclass(frozen=True)
 class SpeedEntry:
     """One table entry.  ``speed_deg_s`` NaN = unknown; ``measured`` False = not measured

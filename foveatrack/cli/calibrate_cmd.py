@@ -34,6 +34,7 @@ from foveatrack.calibration import FeatureSpec
 from foveatrack.config_util import check_outputs, seed_arg
 from foveatrack.errors import UserError
 from foveatrack.speed_table import TURBO
+from foveatrack.speed_table import byte_ranges as ranges  # the name its callers and tests use
 
 
 def register(sub) -> None:
@@ -83,18 +84,6 @@ def _bytes(text: str | None, what: str) -> tuple[int, ...] | None:
     return tuple(out)
 
 
-def ranges(bs) -> str:
-    """[0, 1, 2, 5, 7, 8] -> '0-2, 5, 7-8' (turbo as 'turbo')."""
-    bs = sorted(bs)
-    parts, i = [], 0
-    while i < len(bs):
-        j = i
-        while j + 1 < len(bs) and bs[j + 1] == bs[j] + 1 and bs[j + 1] != TURBO:
-            j += 1
-        name = lambda b: "turbo" if b == TURBO else str(b)  # noqa: E731
-        parts.append(name(bs[i]) if i == j else f"{name(bs[i])}-{name(bs[j])}")
-        i = j + 1
-    return ", ".join(parts)
 
 
 def unmeasured_summary(report) -> dict:
