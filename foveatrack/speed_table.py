@@ -47,6 +47,11 @@ from gimbal.head_facts import TURBO as HEAD_TURBO
 
 TURBO = HEAD_TURBO   # 0xFF, declared once with the head's facts
 AXES = ("pan", "tilt")
+#: The most bytes in a row a table is trusted to interpolate between two known speeds: the default
+#: calibration plan's widest (40, 48, 56 leave 7 between).  With known speeds only at 4, 8, 16, 32, 63
+#: the bytes the tracker uses were several percent off and a 60 s reconstruction drifted 3.6 % of
+#: range (docs/tracker.md).
+MAX_INTERPOLATED_RUN = 7
 UNITS = {"deg/s": 1.0, "rad/s": 180.0 / math.pi}
 FORMAT = "foveatrack-speed-table"
 
@@ -232,6 +237,64 @@ class AxisTable:
         """(speed, sigma) over bytes 0..63 and turbo at index 64 [deg/s]; NaN = unknown."""
         return self._speed.copy(), self._sigma.copy()
 
+    def problems(self) -> list[str]:
+        """What in this axis's speeds the tracker runs with but steers wrong by, each in words naming
+        the bytes at fault (empty: none).  Such a table is not refused (the inverse works on any
+        table with a speed > 0); it is said.
+
+        * Speeds that fall as the byte rises: a known speed below that of a lower byte by more than
+          3 sigma of the two (a measured table's slow bytes scatter about 0 within their sigmas;
+          an entry without a sigma counts 0), and a turbo slower than the fastest byte (turbo is the
+          device's fastest).  The tracker picks the byte of the nearest speed and interpolates
+          between known ones, so around such bytes it turns at speeds the head does not have.
+        * Bytes above the highest known speed: they have none and are never sent, so the tracker's
+          fastest turn is less than the head's.  Below the lowest, only more than
+          ``MAX_INTERPOLATED_RUN`` of them (the slowest turn is then far from a stop; the bytes under a
+          table starting at 4 barely move a PTS-303H).
+        * More than ``MAX_INTERPOLATED_RUN`` bytes in a row between two known speeds: interpolated.
+        """
+        out = []
+        knots = sorted((e for e in self.entries if math.isfinite(e.speed_deg_s) and e.byte != TURBO),
+                       key=lambda e: e.byte)
+        sig = lambda e: e.sigma_deg_s if math.isfinite(e.sigma_deg_s) else 0.0  # noqa: E731
+        falls, top = [], None
+        for e in knots:
+            if top is not None and e.speed_deg_s < top.speed_deg_s - 3.0 * math.hypot(sig(e), sig(top)) - 1e-9:
+                falls.append(f"byte {e.byte} ({e.speed_deg_s:.4g} deg/s) is slower than byte {top.byte} "
+                             f"({top.speed_deg_s:.4g})")
+            if top is None or e.speed_deg_s > top.speed_deg_s:
+                top = e
+        turbo = self.entry(TURBO)
+        if (turbo is not None and math.isfinite(turbo.speed_deg_s) and top is not None
+                and turbo.speed_deg_s < top.speed_deg_s - 3.0 * math.hypot(sig(turbo), sig(top)) - 1e-9):
+            falls.append(f"turbo ({turbo.speed_deg_s:.4g} deg/s) is slower than byte {top.byte} ({top.speed_deg_s:.4g})")
+        if falls:
+            shown = "; ".join(falls[:6]) + (f"; and {len(falls) - 6} more" if len(falls) > 6 else "")
+            out.append(f"{self.axis} speeds fall as the speed byte rises: {shown}.  The tracker picks the byte "
+                       "of the nearest speed and interpolates between bytes, so near these it turns at speeds "
+                       "the head does not have: check these entries, or measure the table again "
+                       "(foveatrack calibrate)")
+        if not knots:
+            out.append(f"{self.axis} bytes 0-63 have no speed: none is ever sent"
+                       + (" (turbo only)" if self.axis == "pan" else ""))
+            return out
+        lo, hi = knots[0].byte, knots[-1].byte
+        if lo > MAX_INTERPOLATED_RUN:
+            out.append(f"{self.axis} bytes {byte_ranges(range(lo))} have no speed (the lowest listed is {lo}): "
+                       f"they are never sent, and the slowest {self.axis} turn is byte {lo}'s "
+                       f"{knots[0].speed_deg_s:.4g} deg/s")
+        if hi < 63:
+            out.append(f"{self.axis} bytes {byte_ranges(range(hi + 1, 64))} have no speed (the highest listed is "
+                       f"{hi}): they are never sent, and the fastest {self.axis} turn is "
+                       f"{self.max_speed_deg_s(False):.4g} deg/s" + (" without turbo" if self.axis == "pan" else ""))
+        gaps = [(a.byte, b.byte) for a, b in zip(knots, knots[1:]) if b.byte - a.byte - 1 > MAX_INTERPOLATED_RUN]
+        if gaps:
+            said = ", ".join(f"{byte_ranges(range(a + 1, b))} (between {a} and {b})" for a, b in gaps)
+            out.append(f"{self.axis} speeds are interpolated over more than {MAX_INTERPOLATED_RUN} bytes in a row: "
+                       f"{said}: the speeds there are guesses (known only at 4, 8, 16, 32 and 63, the tracker's "
+                       "were several percent off); measure at least every 4th byte")
+        return out
+
 
 @dataclass(frozen=True)
 class SpeedTable:
@@ -260,6 +323,10 @@ class SpeedTable:
     @property
     def unmeasured(self) -> dict[str, tuple[int, ...]]:
         return {a: self.axis(a).unmeasured_bytes for a in AXES}
+
+    def problems(self) -> list[str]:
+        """Both axes' :meth:`AxisTable.problems`: what a user who supplies this table must hear."""
+        return self.pan.problems() + self.tilt.problems()
 
     # ---- defaults ------------------------------------------------------------------------------
     @classmethod

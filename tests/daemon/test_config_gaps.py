@@ -208,3 +208,27 @@ def test_check_refuses_a_recording_path_the_start_would_refuse(tmp_path):
     r = _cli("daemon", "--config", str(_write(tmp_path, recording=f'path = "{tmp_path}"\noverwrite = true')), "--check")
     assert r.returncode == 2 and "is a directory" in r.stderr, r.stderr
     assert keep.read_bytes() == b"the user's recording"
+
+
+def test_check_names_the_bytes_a_supplied_speed_table_steers_wrong(tmp_path):
+    # a user's table with two rows swapped and no tilt speed above byte 24: it runs (not refused), and
+    # `daemon --check` (as the start) says so, naming the file's key and the bytes
+    import json
+
+    d = json.loads((ROOT / "examples" / "pts303h-unit3-speed-table.json").read_text())
+    pan = d["axes"]["pan"]["entries"]
+    i16, i20 = [k for k, e in enumerate(pan) if e["byte"] in (16, 20)]
+    pan[i16]["speed"], pan[i20]["speed"] = pan[i20]["speed"], pan[i16]["speed"]
+    d["axes"]["tilt"]["entries"] = [e for e in d["axes"]["tilt"]["entries"] if e["byte"] <= 24]
+    (tmp_path / "table.json").write_text(json.dumps(d))
+    p = _write(tmp_path, head=FULL["head"] + '\nspeed_table = "table.json"')
+    r = _cli("daemon", "--config", str(p), "--check")
+    assert r.returncode == 0, r.stderr
+    said = [line for line in r.stderr.splitlines() if "WARNING" in line and "speed_table 'table.json'" in line]
+    assert len(said) == 2, r.stderr
+    assert "byte 20 (2.126 deg/s) is slower than byte 16 (2.799)" in said[0]
+    assert "tilt bytes 25-63 have no speed" in said[1]
+    # the example as shipped: nothing to say
+    p = _write(tmp_path, head=FULL["head"] + f'\nspeed_table = "{ROOT / "examples" / "pts303h-unit3-speed-table.json"}"')
+    r = _cli("daemon", "--config", str(p), "--check")
+    assert r.returncode == 0 and "WARNING" not in r.stderr, r.stderr
