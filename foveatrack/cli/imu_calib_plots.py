@@ -2,21 +2,52 @@
 (calibration error against accumulation time), the registration error behind it, the extrinsic's error
 against the truth, and Fig. 6e (coverage against time) beside them.
 
-Degrees and centimetres each get their own panel (never one log axis for both); eq. (8) is drawn on a
-linear axis from zero, so a change of a percent looks like one.  Rows may carry ``KEY_lo`` / ``KEY_hi``
-beside a metric ``KEY`` (a spread over seeds): drawn as a band.  The lidars' legend is one, below the
-panels, so it covers no curve.
+Degrees and centimetres each get their own panel (never one log axis for both).  Every error panel
+(eq. (8), registration, extrinsic) is drawn on a linear axis from zero, so a change of a percent
+looks like one (the yard's registration error, 0.01131 -> 0.01124 deg, filled a log panel top to
+bottom), unless one lidar's errors are more than ten times another's (a 16-line lidar beside the
+Risley ones): then on a log axis, which its label says.  The accumulation axis is logarithmic, as the times run are (0.1 s to
+10 s), with a tick at each time run, in plain numbers.  The coverage panel draws the Risley lidars
+only (a spinning lidar's scan repeats every turn) and its title names any lidar of the run it leaves
+out.  Rows may carry ``KEY_lo`` / ``KEY_hi`` beside a metric ``KEY`` (a spread over seeds): drawn as a
+band.  The lidars' legend is one, below the panels, so it covers no curve.
 """
 
 from __future__ import annotations
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.ticker import FuncFormatter, NullFormatter  # noqa: E402
 
 COLOURS = {"mid40": "tab:blue", "horizon": "tab:orange", "prototype": "tab:green", "vlp16": "tab:red"}
+PLAIN = FuncFormatter(lambda x, _: f"{x:g}")    # 0.2, 1, 10: not 2 x 10^-1
+
+
+def _error_axis(ax, per_lidar: dict, extra, label: str) -> None:
+    """Linear from zero; log where one lidar's errors are more than ten times another's (their medians),
+    said in the label, so that both can be read.  ``per_lidar``: {lidar: [values]}; ``extra``: values
+    the axis must also show (bands, a floor line)."""
+    med = [float(np.median(v)) for v in ([x for x in vs if x > 0] for vs in per_lidar.values()) if v]
+    if med and max(med) > 10.0 * min(med):
+        ax.set(yscale="log", ylabel=f"{label} (log scale)")
+        ax.yaxis.set_major_formatter(PLAIN)
+        ax.yaxis.set_minor_formatter(NullFormatter())
+    else:
+        top = max((x for vs in per_lidar.values() for x in vs if x == x), default=1.0)
+        ax.set(ylim=(0, 1.2 * max([top] + [x for x in extra if x == x])), ylabel=label)
+
+
+def _time_axis(ax, label: str, ticks=None) -> None:
+    """Logarithmic accumulation time, ticks in plain numbers (at ``ticks``: the times run)."""
+    ax.set(xscale="log", xlabel=label)
+    if ticks is not None:
+        ax.set_xticks(sorted(set(ticks)))
+    ax.xaxis.set_major_formatter(PLAIN)
+    ax.xaxis.set_minor_formatter(NullFormatter())
 
 
 def _curve(ax, rr, key: str, colour, scale: float = 1.0) -> None:
@@ -40,29 +71,36 @@ def plot_error_vs_accumulation(rows: list[dict], coverage: dict | None, path: st
         _curve(ax_reg_t, rr, "registration_translation_m", c, 100.0)
         _curve(ax_x_r, rr, "rotation_error_deg", c)
         _curve(ax_x_t, rr, "translation_error_m", c, 100.0)
-    floors = []
+    floors = {}
     for key, ax, scale in (("imu_floor_rotation_deg", ax_x_r, 1.0), ("imu_floor_translation_m", ax_x_t, 100.0)):
         vals = [r[key] for r in rows if key in r]
         if vals:
-            ax.axhline(sum(vals) / len(vals) * scale, color="grey", lw=1.0, ls=":")
-            floors.append(ax)
+            floors[ax] = sum(vals) / len(vals) * scale
+            ax.axhline(floors[ax], color="grey", lw=1.0, ls=":")
     xl = "accumulation time per pose [s]"
-    top = max((r.get("eq8_mean_hi", r["eq8_mean"]) for r in rows), default=1.0)
-    ax_eq8.set(xscale="log", xlabel=xl, ylabel="eq. (8) error (mean over pose pairs)", ylim=(0, 1.2 * top),
-               title="calibration error, eq. (8) (paper Fig. 11b)")
-    ax_reg_r.set(xscale="log", yscale="log", xlabel=xl, ylabel="rotation [deg]",
-                 title="lidar registration error per pose pair (mean)")
-    ax_reg_t.set(xscale="log", yscale="log", xlabel=xl, ylabel="translation [cm]",
-                 title="lidar registration error per pose pair (mean)")
-    ax_x_r.set(xscale="log", yscale="log", xlabel=xl, ylabel="rotation [deg]", title="extrinsic error: rotation")
-    ax_x_t.set(xscale="log", yscale="log", xlabel=xl, ylabel="translation [cm]", title="extrinsic error: translation")
-    for ax in (ax_eq8, ax_reg_r, ax_reg_t, ax_x_r, ax_x_t):
+    times = [r["accumulate_s"] for r in rows]
+    for ax, key, scale, label, title in (
+            (ax_eq8, "eq8_mean", 1.0, "eq. (8) error (mean over pose pairs)", "calibration error, eq. (8) (paper Fig. 11b)"),
+            (ax_reg_r, "registration_rotation_deg", 1.0, "rotation [deg]", "lidar registration error per pose pair: rotation"),
+            (ax_reg_t, "registration_translation_m", 100.0, "translation [cm]",
+             "lidar registration error per pose pair: translation"),
+            (ax_x_r, "rotation_error_deg", 1.0, "rotation [deg]", "extrinsic error: rotation"),
+            (ax_x_t, "translation_error_m", 100.0, "translation [cm]", "extrinsic error: translation")):
+        per_lidar = {n: [r[key] * scale for r in rows if r["lidar"] == n] for n in lidars}
+        band = [r[k] * scale for r in rows for k in (f"{key}_lo", f"{key}_hi") if k in r]
+        _error_axis(ax, per_lidar, band + ([floors[ax]] if ax in floors else []), label)
+        _time_axis(ax, xl, times)
+        ax.set_title(title, fontsize=11)
         ax.grid(True, which="both", alpha=0.3)
     if coverage:
         for name, (t, cov) in coverage.items():
             ax_cov.plot(t, cov * 100, color=COLOURS.get(name))
-        ax_cov.set(xscale="log", xlabel="accumulation time [s]", ylabel="coverage [%]",
-                   title="coverage of the FoV (paper Fig. 6e)\nspinning lidars: fixed after one turn", ylim=(0, 100))
+        left_out = [n for n in lidars if n not in coverage]
+        _time_axis(ax_cov, "accumulation time [s]")
+        ax_cov.set(ylabel="coverage [%]", ylim=(0, 100))
+        ax_cov.set_title("coverage of the FoV (paper Fig. 6e), App. C voxels\nthe Risley scan at one pose"
+                         + (f"; {', '.join(left_out)} not drawn\n(a spinning scan repeats every turn)" if left_out else ""),
+                         fontsize=11)
         ax_cov.grid(True, which="both", alpha=0.3)
     else:
         ax_cov.axis("off")
