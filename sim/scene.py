@@ -186,12 +186,22 @@ class Scene:
 
     def warnings(self) -> list[str]:
         """What in the scene runs but cannot be seen, in words: a drone or a bird below the ground or
-        in the lidar's blind zone at some instant (:mod:`sim.scene_placement`; the CLIs that fly a
-        scene print them at load).  Derived, so a scene changed by ``dataclasses.replace`` is judged
-        as it is."""
+        in the lidar's blind zone at some instant (:mod:`sim.scene_placement`), and what its
+        ``[gimbal] speed_table`` file steers wrong by (:meth:`foveatrack.speed_table.SpeedTable.problems`,
+        as a daemon config's table is judged); the CLIs that fly a scene print them at load.  Derived,
+        so a scene changed by ``dataclasses.replace`` is judged as it is."""
+        from foveatrack.speed_table import SpeedTable
         from sim.scene_placement import placement_problems
 
-        return placement_problems(self)[1]
+        out = placement_problems(self)[1]
+        table = self.gimbal.speed_table
+        if table not in ("truth", "nominal"):      # the simulated unit's own curves need no check
+            try:
+                problems = SpeedTable.load(table).problems()
+            except UserError:
+                problems = []      # the run's own load names an unreadable table
+            out += [f"{self.path} [gimbal] speed_table {table!r}: {p}" for p in problems]
+        return out
 
     def has(self, effect: str) -> bool:
         return effect in self.effects

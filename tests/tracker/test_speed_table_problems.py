@@ -85,3 +85,27 @@ def test_a_table_with_problems_still_loads_and_inverts(tmp_path):
     back = SpeedTable.load(p)
     assert back.pan.byte_for_speed(5.0) == 10
     assert len(back.problems()) == 3      # pan falls, pan and tilt interpolated over long runs
+
+
+def test_a_scenes_speed_table_file_is_judged_as_a_daemon_configs_is(tmp_path, capsys):
+    # a scene flying a user's table got none of the daemon's checks: simulate ran it silently
+    from foveatrack.cli import main
+    from sim.scene import load_scene
+
+    d = json.loads(EXAMPLE.read_text())
+    pan = d["axes"]["pan"]["entries"]
+    i16, i20 = [k for k, e in enumerate(pan) if e["byte"] in (16, 20)]
+    pan[i16]["speed"], pan[i20]["speed"] = pan[i20]["speed"], pan[i16]["speed"]
+    (tmp_path / "swapped.json").write_text(json.dumps(d))
+    scene = tmp_path / "s.toml"
+    scene.write_text('[scene]\nduration_s = 0.3\n[gimbal]\nspeed_table = "swapped.json"\n'
+                     '[[target]]\n[target.trajectory]\ntype = "straight"\nstart_m = [12.0, 0.0, 1.0]\n'
+                     'velocity_m_s = [0.0, 0.5, 0.0]\n')
+    said = [w for w in load_scene(scene).warnings() if "speed_table" in w]
+    assert len(said) == 1 and "'" + str(tmp_path / "swapped.json") + "'" in said[0], said
+    assert "byte 20 (2.126 deg/s) is slower than byte 16 (2.799)" in said[0]
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "run")]) == 0
+    assert "byte 20 (2.126 deg/s) is slower than byte 16" in capsys.readouterr().err
+    # the simulated unit's own tables are not files: nothing to say
+    scene.write_text(scene.read_text().replace('"swapped.json"', '"nominal"'))
+    assert not [w for w in load_scene(scene).warnings() if "speed_table" in w]
