@@ -20,6 +20,7 @@ clock error (0.1 ms per 100 s at 1 ppm).
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import time
@@ -62,6 +63,10 @@ def open_head(config):
         raise UserError(f"{config.named_head_port()} is in use by another process (it holds the port's "
                         "exclusive lock): another daemon or program drives this head; stop it first, or give "
                         "this one its own head")
+    if not head.connected and head.last_open_errno in (errno.EACCES, errno.EPERM):
+        # the port is there, but not this user's: "start a server first" would send them the wrong way
+        raise UserError(f"{config.path} [head]: port {h.port!r} exists but this user may not open it "
+                        f"({head.last_open_error}); {_port_access_advice(open_path)}")
     if not head.connected:
         # A port that is wrong at start (a typo, an adapter not plugged in, a regular file, a server not
         # started) would otherwise leave the driver commanding no head, silently: the link reconnects by
@@ -71,6 +76,40 @@ def open_head(config):
                         "rfc2217://host:port) that exists now, e.g. start 'foveatrack gimbal serve --link PATH' first")
     head.identity, head.open_path = ident, open_path
     return head
+
+
+def _port_access_advice(path: str) -> str:
+    """What to do about a serial device this user may not open: join the group that may (a USB
+    adapter's /dev/ttyUSB0 is ``root:dialout``, mode 660), or give the device a udev rule."""
+    import getpass
+    import grp
+    import os
+    import pwd
+    import stat
+
+    user = getpass.getuser()
+    try:
+        st = os.stat(path)
+    except OSError:
+        return (f"add {user} to the serial devices' group (sudo usermod -aG dialout {user}, then log in again) "
+                "or give the device a udev rule (GROUP=\"dialout\", MODE=\"0660\")")
+
+    def name(lookup, ident):
+        try:
+            return lookup(ident)[0]
+        except KeyError:
+            return str(ident)
+
+    owner, group = name(pwd.getpwuid, st.st_uid), name(grp.getgrgid, st.st_gid)
+    node = (f"{os.path.realpath(path)} is owner {owner}, group {group}, "
+            f"mode {stat.S_IMODE(st.st_mode):03o}")
+    if st.st_gid != 0 and st.st_mode & stat.S_IRGRP and st.st_mode & stat.S_IWGRP:
+        return (f"{node}: add {user} to group {group} (sudo usermod -aG {group} {user}, then log in again), "
+                "or give the device a udev rule")
+    return (f"{node}, which only {owner} may open: give the device a udev rule that hands it to a group "
+            f"{user} is in (e.g. /etc/udev/rules.d/99-pelco-head.rules: SUBSYSTEM==\"tty\", "
+            f"ATTRS{{idVendor}}==\"VVVV\", ATTRS{{idProduct}}==\"PPPP\", GROUP=\"dialout\", MODE=\"0660\"; then "
+            f"sudo usermod -aG dialout {user} and log in again)")
 
 
 def open_lidar(config):

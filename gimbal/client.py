@@ -128,6 +128,7 @@ class HeadClient:
         self.stats = ClientStats()
         self._ser = None
         self.last_open_error: str | None = None  # why the last attempt to open the port failed
+        self.last_open_errno: int | None = None  # its errno, where the OS gave one (EACCES: not this user's)
         self._last_open_attempt = -float("inf")
         self._parser = PelcoParser(protocol)
         self.open_guard = open_guard
@@ -164,6 +165,7 @@ class HeadClient:
         except (serial.SerialException, OSError, ValueError) as exc:
             self.stats.open_failures += 1
             self.last_open_error = str(exc) or type(exc).__name__
+            self.last_open_errno = getattr(exc, "errno", None)
             if lock and "exclusively lock" in self.last_open_error:
                 self.stats.open_locked += 1
                 self.last_open_error = (f"{self.url} is in use by another process, which holds its exclusive "
@@ -175,7 +177,7 @@ class HeadClient:
             self._ser = None
             return False
         self.stats.opens += 1
-        self.last_open_error = None
+        self.last_open_error = self.last_open_errno = None
         self._parser.reset()
         return True
 

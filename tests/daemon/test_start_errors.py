@@ -150,3 +150,44 @@ def test_a_status_line_note_stands_on_its_own_line_above_the_status():
     s.show("10.0 Hz")
     s.note("WARNING: x")
     assert plain.getvalue() == "WARNING: x\n"
+
+
+def _denied(url, **kwargs):
+    """pyserial's open of a device this user may not open (root's opens are never refused, so the
+    permission error is raised here, as pyserial raises it for a user outside the device's group)."""
+    import errno
+
+    import serial
+
+    raise serial.SerialException(errno.EACCES, f"could not open port {url}: [Errno 13] Permission denied: {url!r}")
+
+
+@pytest.mark.parametrize("group", ["root", "dialout"])
+def test_a_head_port_this_user_may_not_open_says_so_and_what_to_do(tmp_path, monkeypatch, group):
+    """A non-root user's /dev/ttyUSB0 without the dialout group was told to give a device "that exists
+    now" or to start 'foveatrack gimbal serve': the port exists, the user may not open it."""
+    import grp
+    import os
+
+    import serial
+
+    try:
+        gid = grp.getgrnam(group).gr_gid
+    except KeyError:
+        pytest.skip(f"no group {group} on this machine")
+    port = tmp_path / "ttyUSB0"
+    port.write_text("")
+    os.chown(port, 0, gid)
+    port.chmod(0o660 if group != "root" else 0o600)
+    monkeypatch.setattr(serial, "serial_for_url", _denied)
+    d = _daemon(tmp_path, port)
+    with pytest.raises(UserError) as exc:
+        d._open()
+    msg = str(exc.value)
+    assert "[head]" in msg and repr(str(port)) in msg and "this user may not open it" in msg, msg
+    assert "Permission denied" in msg and "gimbal serve" not in msg, msg
+    if group == "dialout":
+        assert "group dialout" in msg and "usermod -aG dialout" in msg, msg
+    else:
+        assert "mode 600" in msg and "udev rule" in msg and 'GROUP="dialout"' in msg, msg
+    assert not (tmp_path / "runs").exists()
