@@ -61,9 +61,9 @@ from foveatrack.recording.format import (COMMANDS, DETECTIONS, FORMAT, FORMAT_VE
                                          POINTS, STANDARD_CHANNELS, TRUTH, ImuSamples, Message, PointsFrame,
                                          packed_point_dtype)
 from foveatrack.recording.reader import Damage, RecordingReader
-from foveatrack.recording.writer import RecordingExistsError, RecordingWriter
+from foveatrack.recording.writer import RecordingExistsError, RecordingWriter, RecordingWriteError
 
 __all__ = ["COMMANDS", "DETECTIONS", "FORMAT", "FORMAT_VERSION", "HEAD", "IMU", "META_NAME", "METRICS", "POINTS",
            "STANDARD_CHANNELS", "TRUTH", "Damage", "ImuSamples", "Message", "PointsFrame", "RecordingExistsError",
-           "RecordingReader", "RecordingWriter", "export_imu", "export_points", "export_tracks", "export_trajectory",
+           "RecordingReader", "RecordingWriteError", "RecordingWriter", "export_imu", "export_points", "export_tracks", "export_trajectory",
            "export_truth_objects", "packed_point_dtype"]

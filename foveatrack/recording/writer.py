@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import abc
 import datetime as _dt
+import errno
 import json
 import os
 import platform
@@ -81,6 +82,53 @@ class RecordCalls(abc.ABC):
     def write_metric(self, t_ns: int, name: str, value: float, **extra) -> None:
         """A scalar figure (processing time, latency, drop counts, ...)."""
         self.write(METRICS, t_ns, {"name": str(name), "value": value, **extra})
+
+
+def _drop_quietly(writer) -> None:
+    """Drop a writer's failed SDK writer without the SDK's log line about it ("Failed to close MCAP
+    writer: ... attempted another write after a write method failed"): the RecordingWriteError
+    raised says what happened, in words."""
+    import logging
+
+    log = logging.getLogger("foxglove_py.mcap")
+    was, log.disabled = log.disabled, True
+    try:
+        writer._w = None
+    finally:
+        log.disabled = was
+
+
+class RecordingWriteError(UserError):
+    """Writing the recording failed part-way (its disk full, an I/O error): the file holds the
+    frames written before, readable as it is (the reader takes every complete chunk); nothing more
+    is written to it."""
+
+    def __init__(self, path: Path, frames_kept: int, cause: BaseException):
+        self.path, self.frames_kept = path, frames_kept
+        super().__init__(f"cannot write recording {path}: {_why_write_failed(path, cause)}; the "
+                         f"{frames_kept} frame(s) written before are kept and readable as they are "
+                         f"(foveatrack replay or export {path}); nothing more is recorded")
+
+
+#: free space under which a failed write is said to be a full disk [bytes] (a chunk is one frame: up
+#: to ~1 MB at 480 k points/s, so a chunk that did not fit can leave that much free)
+FULL_DISK_BYTES = 16 * 1024 * 1024
+
+
+def _why_write_failed(path: Path, exc: BaseException) -> str:
+    """In words.  The SDK says only "I/O error from writing" (the OS's errno stays inside it), so a
+    full disk is told by the free space of the file system the file is on."""
+    err = getattr(exc, "errno", None)
+    try:
+        st = os.statvfs(path.parent)
+        free = st.f_bavail * st.f_frsize
+    except OSError:
+        free = None
+    if err == errno.ENOSPC or (free is not None and free < FULL_DISK_BYTES):
+        return ("no space left on its disk" + (f" ({free:,} bytes free on the file system of "
+                                               f"{path.parent})" if free is not None else "")
+                + ": free some, or record elsewhere")
+    return (exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc) or type(exc).__name__)
 
 
 def _create_private(path: Path, overwrite: bool, mode: int) -> None:
@@ -228,14 +276,21 @@ class RecordingWriter(RecordCalls):
             if segment_index:
                 md["segment_index"] = str(int(segment_index))
             self._md = md
-            self._write_meta(md)
+        self.write_error: RecordingWriteError | None = None    # the write that failed, if one did
+        self.frames_kept = 0      # frames in complete chunks handed to the OS (what a reader gets)
         self.segment_index = int(segment_index)
         self._tabled = 0
         self._frames_since_flush = 0
         self.frames_written = 0
         self.messages_written = 0
         self._closed = False
-        self.flush()
+        try:
+            if self._w is not None:
+                self._write_meta(self._md)
+            self.flush()
+        except BaseException:
+            self._abandon()         # no writer half made: its file's lock and the SDK's writer go now
+            raise
 
     def _open_file(self, path: Path, overwrite: bool) -> None:
         import foxglove
@@ -256,7 +311,33 @@ class RecordingWriter(RecordCalls):
     def _write_meta(self, md: dict) -> None:
         md = dict(md)
         md[META_CRC_KEY] = meta_crc32(md)
-        self._w.write_metadata(META_NAME, md)
+        self._sdk(self._w.write_metadata, META_NAME, md)
+
+    def _sdk(self, call, *args):
+        """One call that writes to the file (the SDK's, an fsync): a failure -- a full disk, an I/O
+        error -- is a :class:`RecordingWriteError` naming the file and what it keeps; the file is
+        then written no more (a later call raises the same)."""
+        if self.write_error is not None:
+            raise self.write_error
+        try:
+            return call(*args)
+        except (RuntimeError, OSError) as exc:   # the SDK's FoxgloveError is a RuntimeError
+            self.write_error = RecordingWriteError(self.path, self.frames_kept, exc)
+        # the failed SDK writer goes now, while the interpreter runs: kept (by this frame's ``call``
+        # in the error's traceback, or the writer itself) to the interpreter's exit, its drop panicked
+        call = args = None
+        _drop_quietly(self)
+        raise self.write_error
+
+    def _abandon(self) -> None:
+        """Let go of the file without writing more: the SDK's writer is dropped here, while the
+        interpreter runs (one that failed, dropped at the interpreter's exit, panicked there), and
+        the lock released."""
+        self._closed = True
+        self._w = None
+        self._release()
+        if getattr(self, "_pacer", None) is not None:
+            self._pacer.close()
 
     def next_segment(self, path: str | os.PathLike, overwrite: bool = False, index: int | None = None) -> None:
         """Complete the current file (its last chunk, summary and footer) and go on in a new one at
@@ -271,10 +352,10 @@ class RecordingWriter(RecordCalls):
             raise ValueError("recording is closed" if self._closed else "a writer without a file has no segments")
         path = Path(path)
         self.view.end_frame()          # what of the last frame still waits goes in the old file
-        self._w.close()
+        self._sdk(self._w.close)
         self._w = None
         if self.fsync:
-            _fsync(self.path)
+            self._sdk(_fsync, self.path)
         self._open_file(path, overwrite)
         self.path = path
         self.segment_index = self.segment_index + 1 if index is None else int(index)
@@ -290,6 +371,8 @@ class RecordingWriter(RecordCalls):
     def _add(self, name: str, t_ns: int) -> int:
         if self._closed:
             raise ValueError("recording is closed")
+        if self.write_error is not None:
+            raise self.write_error
         t_ns = int(t_ns)
         if t_ns < 0:
             raise ValueError(f"t_ns must be >= 0 (MCAP log time), got {t_ns}")
@@ -305,7 +388,7 @@ class RecordingWriter(RecordCalls):
         if self._w is None or len(order) == self._tabled:
             return
         self._tabled = len(order)
-        self._w.write_metadata(CHANNELS_META_NAME, {"channels_json": json.dumps(
+        self._sdk(self._w.write_metadata, CHANNELS_META_NAME, {"channels_json": json.dumps(
             {str(i + 1): name for i, name in enumerate(order)})})
 
     # ------------------------------------------------------------------ writing
@@ -370,15 +453,18 @@ class RecordingWriter(RecordCalls):
         """Complete the current chunk and hand it to the OS (and the disk if ``fsync``)."""
         if self._closed:
             return
+        if self.write_error is not None:
+            raise self.write_error
         self._frames_since_flush = 0
         if self._w is None:
             return
-        self._w.flush()
+        self._sdk(self._w.flush)
         self._channel_table()
         if self.fsync:
-            _fsync(self.path)
+            self._sdk(_fsync, self.path)
+        self.frames_kept = self.frames_written
         if self._pacer is not None:
-            self._pacer.after_flush()
+            self._sdk(self._pacer.after_flush)
 
     def close(self) -> None:
         """Write the last chunk and the summary; the file is then complete."""
@@ -386,15 +472,13 @@ class RecordingWriter(RecordCalls):
             return
         try:
             self.view.finish()      # the last head estimate's transforms, if they still wait
+            # after a failed write the file is left as it is (its SDK writer is gone)
             if self._w is not None:
-                self._w.close()
+                self._sdk(self._w.close)
                 if self.fsync:
-                    _fsync(self.path)
+                    self._sdk(_fsync, self.path)
         finally:
-            self._closed = True
-            self._release()
-            if getattr(self, "_pacer", None) is not None:
-                self._pacer.close()
+            self._abandon()
 
     def _release(self) -> None:
         """Let go of the file's lock (:func:`_hold`): the file is complete, or the next segment's is taken."""

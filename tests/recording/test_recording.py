@@ -435,3 +435,87 @@ def test_export_of_tables_a_damaged_record_is_named_and_nothing_is_left_when_one
     assert list(out.iterdir()) == []
     assert main(["export", str(single), "--imu", str(out / "imu.csv")]) == 0
     assert (out / "imu.csv").read_text().count("\n") == 61
+
+
+DISK_FULL_SCRIPT = textwrap.dedent(
+    """
+    import resource, signal, sys
+    import numpy as np
+    from foveatrack.recording import RecordingWriter
+    from foveatrack.recording.pack_kernels import pack_points
+
+    pack_points(np.zeros((1, 3)), 0, np.zeros(1, np.int64), np.zeros(1, np.uint8))   # kernels loaded first
+    # the file may not grow past 300 kB: a write past it fails (EFBIG) as on a full disk, for root too
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))
+    rng = np.random.default_rng(0)
+    w = RecordingWriter(sys.argv[1], {"seed": 1}, compression="none")
+    try:
+        for k in range(100):
+            t = 1_000_000_000 + k * 100_000_000
+            w.write_points(t, k, rng.normal(0, 50, (2000, 3)), np.full(2000, t - 50_000_000))
+            w.write_detection(t, k, False)
+    except Exception as exc:
+        print("KEPT", getattr(exc, "frames_kept", None))
+        print(type(exc).__name__, exc)
+    try:
+        w.close()        # after the failure: lets the file go as it is, raises nothing more
+    except Exception as exc:
+        print("CLOSE RAISED", exc)
+    print("CLOSED", flush=True)
+    """
+)
+
+
+def test_a_write_that_fails_part_way_says_what_is_kept_and_keeps_it(tmp_path):
+    """A recording whose disk fills (here: a file-size limit, a real failed write, root or not) used
+    to end in the SDK's "RuntimeError: FoxgloveError: MCAP error: I/O error from writing", a second
+    traceback from close(), and a Rust panic at the interpreter's exit (the failed SDK writer
+    dropped then).  Now: one UserError naming the file and what it keeps, which a reader gets."""
+    p = tmp_path / "full.mcap"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r = subprocess.run([sys.executable, "-c", DISK_FULL_SCRIPT, str(p)], capture_output=True, text=True,
+                       env=env, timeout=120)
+    assert r.returncode == 0 and "CLOSED" in r.stdout, r.stdout + r.stderr
+    assert "panicked" not in r.stderr and "Failed to close" not in r.stderr, r.stderr
+    assert "RecordingWriteError" in r.stdout and "CLOSE RAISED" not in r.stdout, r.stdout
+    kept = int(r.stdout.split("KEPT ")[1].split()[0])
+    assert 0 < kept < 100
+    assert f"cannot write recording {p}" in r.stdout and f"the {kept} frame(s) written before are kept" in r.stdout
+    frames = list(RecordingReader(p).points())
+    assert [f.frame_index for f in frames] == list(range(kept))
+
+
+def test_a_full_disk_is_said_in_words(tmp_path, monkeypatch):
+    """The SDK's error does not carry the OS's errno: a full disk is told by the file system's free
+    space (os.statvfs simulated full here)."""
+    from types import SimpleNamespace
+
+    import foveatrack.recording.writer as writer_mod
+
+    p = tmp_path / "r.mcap"
+    rng = np.random.default_rng(0)
+    w = RecordingWriter(p, META)
+    for k in range(3):
+        t, xyz, tp, refl = frame(rng, k, 100)
+        w.write_points(t, k, xyz, tp, refl)
+
+    class Failing:
+        def __init__(self, sdk):
+            self.sdk = sdk
+
+        def flush(self):
+            raise RuntimeError("FoxgloveError: MCAP error: I/O error from writing, or reading a compression stream")
+
+        def __getattr__(self, name):
+            return getattr(self.sdk, name)
+
+    w._w = Failing(w._w)
+    monkeypatch.setattr(writer_mod.os, "statvfs", lambda _p: SimpleNamespace(f_bavail=3, f_frsize=4096))
+    with pytest.raises(UserError, match=r"no space left on its disk \(12,288 bytes free"):
+        t, xyz, tp, refl = frame(rng, 3, 100)
+        w.write_points(t, 3, xyz, tp, refl)
+    with pytest.raises(UserError, match="cannot write recording"):     # and the same for any call after it
+        w.write_detection(t, 3, False)
+    w.close()
+    assert w.write_error.frames_kept == 2        # the third frame waited in the chunk that failed
