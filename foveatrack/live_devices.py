@@ -171,18 +171,34 @@ class CommandJournal:
             why = "it is a symbolic link" if exc.errno == errno.ELOOP else exc.strerror
             raise UserError(f"command journal {self.path}: cannot write ({why})") from None
         self._f = os.fdopen(fd, "a", buffering=1)
+        self.error: OSError | None = None   # the write that failed (a full disk): journaling stopped there
+        self.lost = 0                       # lines not journaled since
         try:
             fcntl.flock(self._f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             pass      # another holder (never expected: one journal per new recording); journaling goes on
 
     def write(self, raw: bytes, source: str = "", send_t_s: float | None = None) -> None:
+        """Journal one frame.  Never raises: a journal that cannot be written (its disk full) must not
+        keep the frame -- a STOP among them -- from the head; the first failure is kept in
+        :attr:`error` (the driver says it) and nothing more is journaled (the file stays open: its
+        lock still tells ``recover`` that a driver runs)."""
+        if self.error is not None:
+            self.lost += 1
+            return
         t = "" if send_t_s is None or not math.isfinite(send_t_s) else f', "send_t_s": {send_t_s!r}'
-        self._f.write(f'{{"t_mono_s": {time.monotonic():.6f}, "t_unix_s": {time.time():.6f}, '
-                      f'"raw_hex": "{raw.hex()}", "source": "{source}"{t}}}\n')
+        try:
+            self._f.write(f'{{"t_mono_s": {time.monotonic():.6f}, "t_unix_s": {time.time():.6f}, '
+                          f'"raw_hex": "{raw.hex()}", "source": "{source}"{t}}}\n')
+        except OSError as exc:
+            self.error = exc
+            self.lost += 1
 
     def close(self) -> None:
-        self._f.close()
+        try:
+            self._f.close()
+        except OSError:
+            pass      # the line that failed is still buffered and fails again: said already (error)
 
 
 def journal_in_use(path) -> bool:

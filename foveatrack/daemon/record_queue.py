@@ -32,6 +32,10 @@ def _job_event(w, t_ns, rec: dict):
     w.write(DAEMON_EVENTS, t_ns, rec)
 
 
+def _why(exc: OSError) -> str:
+    return exc.strerror or str(exc) or type(exc).__name__
+
+
 class DaemonRecording:
     """The recording's part of the daemon (a mixin of ``Daemon``; its state lives on the daemon:
     ``recorder``, ``recording_path``, ``live``)."""
@@ -181,6 +185,41 @@ class DaemonRecording:
         # on stderr too, as simulate and replay say it: the JSON log is for machines
         print(f"live view on {self.live.url} (Foxglove: Open connection -> Foxglove WebSocket)",
               file=sys.stderr, flush=True)
+
+    def output_faults(self) -> list[tuple[str, str]]:
+        """What the run could not write, as ``(output, sentence)``: the recording (its writer's thread
+        stopped at the error; its frames before are kept), the command journal, the log.  A full disk
+        stops none of them from tracking: each is said once when it happens (:meth:`_watch_outputs`)
+        and again among the run's last lines."""
+        from foveatrack.errors import UserError
+
+        out = []
+        err = None if self.recorder is None else self.recorder.error
+        if err is not None:
+            what = str(err) if isinstance(err, UserError) else (
+                f"the recording {self.recording_path} stopped: {type(err).__name__}: {err}")
+            out.append(("recording", f"{what}; tracking goes on"))
+        journal = getattr(self.head, "journal", None) if getattr(self, "head", None) is not None else None
+        if journal is not None and journal.error is not None:
+            out.append(("journal", f"command journal {journal.path}: cannot write ({_why(journal.error)}): the head "
+                                   f"still gets every command, but from here on none is journaled ({journal.lost} so "
+                                   "far), so 'foveatrack recover' cannot put back what a killed daemon's recording "
+                                   "lacks"))
+        if self.log.error is not None:
+            out.append(("log", f"--log {self.log.path}: cannot write ({_why(self.log.error)}); "
+                               f"from here on no event is logged ({self.log.lost} so far), the run goes on"))
+        return out
+
+    def _watch_outputs(self) -> None:
+        """On the tick: a recording, journal or log that just failed is said at once on stderr (and
+        in the log, while it can be written): a full disk otherwise stopped the recording in silence,
+        seen only as a growing drop count."""
+        said = self.__dict__.setdefault("_faults_said", set())
+        for output, text in self.output_faults():
+            if output not in said:
+                said.add(output)
+                self.status.note(f"foveatrack daemon: WARNING: {text}")
+                self.log.event("output_failed", output=output, error=text)
 
     def _record(self, fn, *args):
         if self.recorder is not None:

@@ -65,6 +65,7 @@ class RunStats:
             total = failed + self.counters.get("commands_written", 0)
             out.append(f"{failed} of {total} head commands were not written to [head] port {self.cfg.head.port!r} "
                        "(see head_* counters in the log)")
+        out.extend(text for _, text in self.output_faults())     # a recording, journal or log not written
         return out
 
     def no_lidar_data_text(self, so_far: str = "") -> str:

@@ -208,6 +208,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Operat
             next_tick = now + period
         self._watch_lidar(now)
         self._watch_head_link(now)
+        self._watch_outputs()
         if now >= self._next_progress:
             # how far the run got, in the log every second: a killed daemon's log still says so
             self._next_progress = now + PROGRESS_PERIOD_S

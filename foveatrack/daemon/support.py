@@ -22,6 +22,9 @@ class JsonLog:
 
     def __init__(self, path: str | None):
         self._fh = None
+        self.path = path
+        self.error: OSError | None = None   # the write that failed (a full disk): the log was written no more
+        self.lost = 0                       # events not written since
         if path:
             from foveatrack.errors import UserError
 
@@ -43,11 +46,23 @@ class JsonLog:
         rec = {"t_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds"),
                "t_mono_s": round(time.monotonic(), 6), "event": event, **fields}
         with self._lock:
-            self._fh.write(json.dumps(rec, default=_plain) + "\n")
+            if self.error is not None:
+                self.lost += 1
+                return
+            try:
+                self._fh.write(json.dumps(rec, default=_plain) + "\n")
+            except OSError as exc:
+                # a log on a full disk must not stop the loop (or the STOP of its shutdown): kept, said
+                # by the daemon once (foveatrack.daemon.record_queue), and nothing more is written
+                self.error = exc
+                self.lost += 1
 
     def close(self) -> None:
         if self._fh is not None:
-            self._fh.close()
+            try:
+                self._fh.close()
+            except OSError:
+                pass      # the line that failed is still buffered and fails again: said already (error)
             self._fh = None
 
 

@@ -1,0 +1,98 @@
+"""A full disk under a running daemon: the head still gets every command (a STOP among them), the
+run goes on, and what could not be written -- the recording, the command journal, the log -- is said
+once when it happens and again at the end.  (Found as a non-root user on a 2 MB tmpfs: the recording
+stopped in silence, seen only as a growing drop count; then the journal's ENOSPC was raised out of
+the loop, the shutdown's STOP died on the same write, and the run ended on "foveatrack: error: No
+space left on device" naming no file.)
+
+The full disk is /dev/full (every write fails with ENOSPC, for root too) for the journal and the log,
+and a recording whose SDK writer fails its flush as on a full disk."""
+
+import errno
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+from daemon_procs import silent_lidar_table
+
+from foveatrack.control import STOP
+from foveatrack.daemon import Daemon, load_config
+from foveatrack.daemon.support import JsonLog
+from foveatrack.live_devices import CommandJournal
+
+FULL = "/dev/full"
+pytestmark = pytest.mark.skipif(not os.path.exists(FULL), reason="no /dev/full on this system")
+
+
+def _daemon(tmp_path) -> Daemon:
+    cfg = tmp_path / "d.toml"
+    cfg.write_text(f"""
+{silent_lidar_table()}[head]
+port = "loop://"
+[recording]
+path = "{tmp_path}/runs/run-{{time}}.mcap"
+make_dirs = true
+""")
+    return Daemon(load_config(cfg), status=False, install_signals=False)
+
+
+def test_a_journal_on_a_full_disk_never_keeps_a_command_from_the_head():
+    j = CommandJournal(FULL)
+    j.write(b"\xff\x01\x00\x00\x00\x00\x01", "tracker", 1.0)     # raised ENOSPC into the loop before
+    j.write(b"\xff\x01\x00\x00\x00\x00\x01", "shutdown", 1.1)
+    assert j.error is not None and j.error.errno == errno.ENOSPC and j.lost == 2
+    j.close()
+
+
+def test_a_log_on_a_full_disk_does_not_stop_the_run():
+    log = JsonLog(FULL)
+    log.event("progress", frames=1)
+    log.event("stop")
+    assert log.error is not None and log.error.errno == errno.ENOSPC and log.lost == 2
+    log.close()
+
+
+def test_the_daemon_says_once_what_a_full_disk_stopped_and_tracks_on(tmp_path, capsys):
+    d = _daemon(tmp_path)
+    d._open()
+    try:
+        d.head.journal.close()
+        d.head.journal = CommandJournal(FULL)
+        d.log = JsonLog(FULL)
+        w = d.recorder.writer
+
+        class FullDisk:          # the SDK writer's flush on a full disk, as the SDK says it
+            def __init__(self, sdk):
+                self.sdk = sdk
+
+            def flush(self):
+                raise RuntimeError("FoxgloveError: MCAP error: I/O error from writing, or reading a compression "
+                                   "stream")
+
+            def __getattr__(self, name):
+                return getattr(self.sdk, name)
+
+        w._w = FullDisk(w._w)
+        d.recorder.submit(lambda writer: writer.flush())
+        deadline = time.monotonic() + 10
+        while d.recorder.error is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        raw, written = d.head.send(STOP, "watchdog", 0.5)
+        assert written                           # the head got it though nothing could journal it
+        d.log.event("progress")
+        d._watch_outputs()
+        d._watch_outputs()                       # each said once, not at every tick
+        err = capsys.readouterr().err
+        rec = Path(d.recording_path)
+        assert err.count("WARNING") == 3, err
+        assert f"WARNING: cannot write recording {rec}" in err and "tracking goes on" in err
+        assert f"WARNING: command journal {FULL}: cannot write (No space left on device)" in err
+        assert f"WARNING: --log {FULL}: cannot write (No space left on device)" in err
+        problems = d.problems()
+        assert any(p.startswith(f"cannot write recording {rec}") for p in problems), problems
+        assert any(p.startswith(f"command journal {FULL}") for p in problems), problems
+    finally:
+        d._shutdown()        # sends its STOP through the failed journal: must not raise
+    assert d.final_stats is not None
