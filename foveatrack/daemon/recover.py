@@ -32,6 +32,7 @@ daemon holds (its lock).  A journal line that cannot be read is reported and ski
 
 from __future__ import annotations
 
+import os
 import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -126,7 +127,7 @@ def recover(path, journal=None, progress=None) -> Recovery:
     was done.  ``progress(frames)`` is called every 100 frames copied.  UserError (one line) for a
     file that is not a recording or a journal a running driver holds."""
     from foveatrack.live_devices import journal_in_use, journal_path, read_journal
-    from foveatrack.recording import RecordingReader, RecordingWriter
+    from foveatrack.recording import RecordingReader, RecordingWriter, RecordingWriteError
     from foveatrack.file_lock import recording_in_use
     from foveatrack.recording.records import CommandRecord, ns
 
@@ -150,6 +151,7 @@ def recover(path, journal=None, progress=None) -> Recovery:
     for tmp in leftovers(path):
         if not recording_in_use(tmp):    # a killed recovery's; a running one holds its writer's lock
             tmp.unlink(missing_ok=True)
+    _check_can_replace(path)
     mode = path.stat().st_mode & 0o777
     meta = dict(reader.meta)
     meta["recovered_from_journal"] = {"journal": jpath.name, "created_utc": reader.info.get("created_utc")}
@@ -157,67 +159,118 @@ def recover(path, journal=None, progress=None) -> Recovery:
     recorded_cmds: list[dict] = []
     last_t_ns, last_log = 0, 0
     # overwrite: the writer makes its file itself (exclusively), in place of written_whole's empty one;
-    # written_whole syncs it once, before the rename (a temporary cut short is thrown away anyway)
-    with written_whole(path, fsync=True) as tmp, RecordingWriter(
-            tmp, meta, overwrite=True, created_utc=reader.info.get("created_utc"), log_time=clock,
-            file_mode=mode, segment_index=_segment_index(reader.info)) as writer:
-        for log_time, m in reader.logged_messages():
-            clock.current = last_log = max(log_time, 0)
-            r = m.record
-            if isinstance(r, PointsFrame):
-                writer.write_points(r.t_ns, r.frame_index, r.xyz, r.t_ns_points, r.reflectivity)
-                res.frames += 1
-                if progress is not None and res.frames % 100 == 0:
-                    progress(res.frames)
-            elif isinstance(r, ImuSamples):
-                writer.write_imu(r.t_ns, r.frame_id, r.t_s, r.gyro_rad_s, r.accel_g)
-            elif isinstance(r, dict):
-                rec = dict(r)
-                rec.pop("t_ns", None)
-                writer.write(m.channel, m.t_ns, rec)
-                if m.channel == COMMANDS:
-                    recorded_cmds.append(r)
-            else:      # a later version's binary channel: this version cannot write it back
-                raise UserError(f"{path}: a {m.channel} message this foveatrack cannot write back (a later "
-                                "version's channel): recover it with the version that recorded it; nothing was changed")
-            res.records_copied += 1
-            last_t_ns = max(last_t_ns, m.t_ns)
-        if reader.capped is not None:      # the rewrite would lose what the cap left unread
-            raise UserError(f"{path}: {reader.capped_text()}; nothing was changed")
-        res.reader_problem = reader.problem
-        res.commands_recorded = len(recorded_cmds)
-        used, after = _match(recorded_cmds, lines)
-        # host monotonic -> sensor time, for a line without its own send time (the daemon's STOPs)
-        offsets = [j.t_mono_s - j.send_t_s for j in lines if j.send_t_s is not None]
-        offsets += [r["host_written_s"] - r["send_t_s"] for r in recorded_cmds
-                    if isinstance(r.get("host_written_s"), (int, float)) and isinstance(r.get("send_t_s"), (int, float))]
-        offset = statistics.median(offsets) if offsets else None
-        for i, j in enumerate(lines):
-            if used[i]:
-                continue
-            pd, pb, td, tb = _command_fields(j.raw)
-            replayed = (i >= after and j.source not in UNRECORDED_SOURCES and j.send_t_s is not None
-                        and pd is not None)
-            send_t = j.send_t_s if j.send_t_s is not None else (
-                j.t_mono_s - offset if offset is not None else None)
-            t_ns = ns(send_t) if send_t is not None and send_t >= 0 else last_t_ns
-            clock.current = int(j.t_unix_s * 1e9) if j.t_unix_s is not None else last_log
-            rec = CommandRecord(t_ns, j.raw, pd, pb, td, tb, frame_id=None, source=j.source or "unrecorded",
-                                send_t_s=send_t, host_written_s=j.t_mono_s).to_json()
-            rec["from_journal"] = True
-            rec["journal_line"] = j.line_no
-            if not replayed:
-                rec["journal_only"] = True
-            writer.write(COMMANDS, t_ns, rec)
-            res.commands_added += replayed
-            res.journal_only_added += not replayed
-        clock.current = last_log
-        writer.write(DAEMON_EVENTS, last_t_ns, {
-            "event": "recovered", "commands_added": res.commands_added, "journal_only_added": res.journal_only_added,
-            "journal": jpath.name, "journal_lines": len(lines), "bad_journal_lines": len(bad),
-            "frames": res.frames, "reader_problem": res.reader_problem})
+    # written_whole syncs it once, before the rename (a temporary cut short is thrown away anyway), and
+    # removes it on any exception: nothing of the rewrite is left beside the recording
+    try:
+        with written_whole(path, fsync=True) as tmp, RecordingWriter(
+                tmp, meta, overwrite=True, created_utc=reader.info.get("created_utc"), log_time=clock,
+                file_mode=mode, segment_index=_segment_index(reader.info)) as writer:
+            for log_time, m in reader.logged_messages():
+                clock.current = last_log = max(log_time, 0)
+                r = m.record
+                if isinstance(r, PointsFrame):
+                    writer.write_points(r.t_ns, r.frame_index, r.xyz, r.t_ns_points, r.reflectivity)
+                    res.frames += 1
+                    if progress is not None and res.frames % 100 == 0:
+                        progress(res.frames)
+                elif isinstance(r, ImuSamples):
+                    writer.write_imu(r.t_ns, r.frame_id, r.t_s, r.gyro_rad_s, r.accel_g)
+                elif isinstance(r, dict):
+                    rec = dict(r)
+                    rec.pop("t_ns", None)
+                    writer.write(m.channel, m.t_ns, rec)
+                    if m.channel == COMMANDS:
+                        recorded_cmds.append(r)
+                else:      # a later version's binary channel: this version cannot write it back
+                    raise UserError(f"{path}: a {m.channel} message this foveatrack cannot write back (a later "
+                                    "version's channel): recover it with the version that recorded it; nothing was changed")
+                res.records_copied += 1
+                last_t_ns = max(last_t_ns, m.t_ns)
+            if reader.capped is not None:      # the rewrite would lose what the cap left unread
+                raise UserError(f"{path}: {reader.capped_text()}; nothing was changed")
+            res.reader_problem = reader.problem
+            res.commands_recorded = len(recorded_cmds)
+            used, after = _match(recorded_cmds, lines)
+            # host monotonic -> sensor time, for a line without its own send time (the daemon's STOPs)
+            offsets = [j.t_mono_s - j.send_t_s for j in lines if j.send_t_s is not None]
+            offsets += [r["host_written_s"] - r["send_t_s"] for r in recorded_cmds
+                        if isinstance(r.get("host_written_s"), (int, float)) and isinstance(r.get("send_t_s"), (int, float))]
+            offset = statistics.median(offsets) if offsets else None
+            for i, j in enumerate(lines):
+                if used[i]:
+                    continue
+                pd, pb, td, tb = _command_fields(j.raw)
+                replayed = (i >= after and j.source not in UNRECORDED_SOURCES and j.send_t_s is not None
+                            and pd is not None)
+                send_t = j.send_t_s if j.send_t_s is not None else (
+                    j.t_mono_s - offset if offset is not None else None)
+                t_ns = ns(send_t) if send_t is not None and send_t >= 0 else last_t_ns
+                clock.current = int(j.t_unix_s * 1e9) if j.t_unix_s is not None else last_log
+                rec = CommandRecord(t_ns, j.raw, pd, pb, td, tb, frame_id=None, source=j.source or "unrecorded",
+                                    send_t_s=send_t, host_written_s=j.t_mono_s).to_json()
+                rec["from_journal"] = True
+                rec["journal_line"] = j.line_no
+                if not replayed:
+                    rec["journal_only"] = True
+                writer.write(COMMANDS, t_ns, rec)
+                res.commands_added += replayed
+                res.journal_only_added += not replayed
+            clock.current = last_log
+            writer.write(DAEMON_EVENTS, last_t_ns, {
+                "event": "recovered", "commands_added": res.commands_added, "journal_only_added": res.journal_only_added,
+                "journal": jpath.name, "journal_lines": len(lines), "bad_journal_lines": len(bad),
+                "frames": res.frames, "reader_problem": res.reader_problem})
+    except RecordingWriteError as exc:
+        # the completed copy, not the recording, could not be written: say it of the recording
+        raise UserError(f"{path}: not recovered: its completed copy could not be written beside it "
+                        f"({exc.why}); it needs about {path.stat().st_size:,} bytes free in "
+                        f"{path.parent}; nothing was changed") from None
+    except PermissionError as exc:
+        # the probe above showed the directory takes a new file: what is refused is the rename over it
+        raise UserError(f"{path}: not recovered: the completed copy could not replace it "
+                        f"({exc.strerror or exc}{_replace_hint(path)}); nothing was changed") from None
     res.recovered = True
     return res
+
+
+def _check_can_replace(path: Path) -> None:
+    """Before any work: the completed copy is written beside the recording and renamed over it, so
+    its directory must take a new file (a directory this user may not write failed only at the copy,
+    naming the hidden temporary).  The probe is named as written_whole names its temporaries, so one
+    left by a kill between its two lines is cleared as theirs are."""
+    import secrets
+
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+    try:
+        os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o600))
+    except OSError as exc:
+        raise UserError(f"{path}: not recovered: recover writes the completed file beside it and renames it "
+                        f"over it, and {path.parent} does not take a new file ({exc.strerror or exc}); nothing "
+                        f"was changed: copy the recording and its {path.name}.commands.jsonl to a directory "
+                        "you can write, and recover the copy") from None
+    tmp.unlink(missing_ok=True)
+
+
+def _replace_hint(path: Path) -> str:
+    """Why a rename over ``path`` is refused where its directory is writable: a sticky directory
+    (/tmp) lets only a file's owner replace it."""
+    import stat
+
+    try:
+        d, f = path.parent.stat(), path.stat()
+    except OSError:
+        return ""
+    me = os.geteuid()
+    if d.st_mode & stat.S_ISVTX and me not in (f.st_uid, d.st_uid):
+        import pwd
+
+        try:
+            owner = pwd.getpwuid(f.st_uid).pw_name
+        except KeyError:
+            owner = str(f.st_uid)
+        return (f": {path.name} belongs to {owner}, and in a directory with the sticky bit (as /tmp) only its "
+                f"owner may replace it: let {owner} recover it, or recover a copy of it and its journal")
+    return ""
 
 
 def unfinished_recordings(directory) -> list[Path]:

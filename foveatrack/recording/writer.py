@@ -105,7 +105,8 @@ class RecordingWriteError(UserError):
 
     def __init__(self, path: Path, frames_kept: int, cause: BaseException):
         self.path, self.frames_kept = path, frames_kept
-        super().__init__(f"cannot write recording {path}: {_why_write_failed(path, cause)}; the "
+        self.why = _why_write_failed(path, cause)     # what failed, in words ("no space left on its disk ...")
+        super().__init__(f"cannot write recording {path}: {self.why}; the "
                          f"{frames_kept} frame(s) written before are kept and readable as they are "
                          f"(foveatrack replay or export {path}); nothing more is recorded")
 
@@ -125,9 +126,8 @@ def _why_write_failed(path: Path, exc: BaseException) -> str:
     except OSError:
         free = None
     if err == errno.ENOSPC or (free is not None and free < FULL_DISK_BYTES):
-        return ("no space left on its disk" + (f" ({free:,} bytes free on the file system of "
-                                               f"{path.parent})" if free is not None else "")
-                + ": free some, or record elsewhere")
+        return "no space left on its disk" + (f" ({free:,} bytes free on the file system of {path.parent})"
+                                              if free is not None else "")
     return (exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc) or type(exc).__name__)
 
 

@@ -13,6 +13,7 @@ import pytest
 from foveatrack.cli import main
 from foveatrack.recording import RecordingReader, RecordingWriter
 from foveatrack.daemon.recover import recover
+from foveatrack.errors import UserError
 from gimbal.pelco import encode_pan_tilt, encode_set_pan, encode_stop
 
 STOP = encode_stop(1)
@@ -211,3 +212,81 @@ def test_recover_leaves_a_temporary_another_running_recover_still_writes(tmp_pat
     finally:
         os.close(fd)
     assert leftovers(cut) == [running] and running.read_bytes() == b"being written"
+
+
+# Recovering where the user may not write, or on a full disk (found as a non-root user; root's writes
+# are never refused, so each refusal is raised here where the OS raises it for such a user).
+
+
+def _unchanged(cut, before: bytes):
+    from foveatrack.atomic_file import leftovers
+
+    assert cut.read_bytes() == before
+    assert leftovers(cut) == []      # nothing of the rewrite left beside it
+
+
+def test_a_directory_that_takes_no_new_file_is_said_before_any_work(tmp_path, monkeypatch):
+    """It failed only at the copy, naming the hidden temporary: 'cannot create recording
+    .rec.mcap.recovering: Permission denied'."""
+    import errno
+
+    cut, _ = _cut_short(tmp_path)
+    before = cut.read_bytes()
+    real_open = os.open
+
+    def denied(path, *args, **kwargs):
+        if str(path).endswith(".tmp"):
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_open(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", denied)
+    with pytest.raises(UserError) as exc:
+        recover(cut)
+    msg = str(exc.value)
+    assert msg.startswith(f"{cut}: not recovered:") and "does not take a new file (Permission denied)" in msg, msg
+    assert "nothing was changed" in msg and "recover the copy" in msg
+    monkeypatch.undo()
+    _unchanged(cut, before)
+
+
+def test_a_rename_refused_leaves_nothing_beside_the_recording(tmp_path, monkeypatch):
+    """Another user's recording in a sticky directory (/tmp): the rename over it is refused (EPERM)
+    after the whole rewrite; the rewrite was left beside it and the error named only the temporary."""
+    import errno
+
+    cut, _ = _cut_short(tmp_path)
+    before = cut.read_bytes()
+
+    def refused(src, dst):
+        raise PermissionError(errno.EPERM, "Operation not permitted", str(src))
+
+    monkeypatch.setattr(os, "replace", refused)
+    with pytest.raises(UserError) as exc:
+        recover(cut)
+    msg = str(exc.value)
+    assert msg.startswith(f"{cut}: not recovered: the completed copy could not replace it (Operation not "
+                          "permitted") and msg.endswith("nothing was changed"), msg
+    _unchanged(cut, before)
+
+
+def test_a_full_disk_under_the_rewrite_is_said_of_the_recording(tmp_path, monkeypatch):
+    """The copy's first write failing (ENOSPC) left its empty temporary and said 'cannot write
+    recording .rec.mcap.recovering ...; the 0 frame(s) written before are kept'."""
+    import errno
+
+    cut, _ = _cut_short(tmp_path)
+    before = cut.read_bytes()
+
+    def full(self, md):
+        def write():
+            raise OSError(errno.ENOSPC, "No space left on device")
+        self._sdk(write)
+
+    monkeypatch.setattr(RecordingWriter, "_write_meta", full)
+    with pytest.raises(UserError) as exc:
+        recover(cut)
+    msg = str(exc.value)
+    assert msg.startswith(f"{cut}: not recovered: its completed copy could not be written beside it (no space "
+                          "left on its disk") and "nothing was changed" in msg, msg
+    assert ".tmp" not in msg
+    _unchanged(cut, before)
