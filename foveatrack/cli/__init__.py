@@ -57,6 +57,12 @@ def _main(argv: list[str] | None) -> int:
     try:
         # inside the try: a Ctrl-C while the command modules import (a second or so) is an interruption too
         args = build_parser().parse_args(argv)
+        from foveatrack.cli.kernel_cache import choose
+
+        # before any command defines a kernel: a read-only install with no writable home crashed here
+        note = choose()
+        if note:
+            print(note, file=sys.stderr, flush=True)
         return int(args.func(args) or 0)
     except UserError as exc:
         print(f"foveatrack: error: {exc}", file=sys.stderr)

@@ -163,7 +163,9 @@ def compile_split(scene_path, stream=None) -> float:
             _end(proc)                  # interrupted: do not leave a compile running
             err.close()
     wall = time.perf_counter() - t0
-    say(f"kernels compiled in {wall:.0f} s (cached next to the sources; later runs load them)")
+    from foveatrack.cli.kernel_cache import place
+
+    say(f"kernels compiled in {wall:.0f} s (cached {place()}; later runs load them)")
     return wall
 
 

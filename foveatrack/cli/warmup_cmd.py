@@ -58,5 +58,7 @@ def warm_up(progress: bool = True, split: bool = True) -> float:
 
 def cmd_warmup(args) -> int:
     wall = warm_up(progress=not args.no_progress)
-    print(f"numba kernels ready in {wall:.1f} s (cached next to the sources; later runs load them)")
+    from foveatrack.cli.kernel_cache import place
+
+    print(f"numba kernels ready in {wall:.1f} s (cached {place()}; later runs load them)")
     return 0
