@@ -40,6 +40,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 import time
 
 import numpy as np
@@ -83,6 +84,7 @@ class TruthTail:
         self.rows = np.zeros((0, 5))  # t_s, pan_deg (unwrapped), tilt_deg, pan_speed, tilt_speed
         self.restarts = 0
         self.lines = 0
+        self._denied_said = False
 
     def _reset(self) -> None:
         self.rows = np.zeros((0, 5))
@@ -104,8 +106,14 @@ class TruthTail:
                 self.fallback = (float(pan[0]), float(tilt[0]))  # a dead head holds its last pose
             try:
                 self._fh = open(self.path, "rb")
-            except OSError:
+            except OSError as exc:
                 self._fh = None
+                if isinstance(exc, PermissionError) and not self._denied_said:
+                    # a truth file another user wrote (its umask 077): said, not served past in silence
+                    self._denied_said = True
+                    print(f"lidar serve: WARNING: --head-truth {self.path}: cannot read it ({exc.strerror}); the "
+                          "head stays at the scene's pan0/tilt0 until this user may read it", file=sys.stderr,
+                          flush=True)
                 return
             self._ino = st.st_ino
             self._reset()

@@ -134,6 +134,42 @@ def test_lidar_serve_says_it_waits_for_a_head_truth_file_not_yet_written(tmp_pat
     assert len(waiting) == 1 and f"--head-truth {truth}" in waiting[0] and "waiting for it" in waiting[0]
 
 
+def test_lidar_serve_head_truth_this_user_may_not_read_is_refused(tmp_path, capsys, monkeypatch):
+    """Before: served with the head frozen at the scene's start pose, saying it followed the file
+    (head_truth_lines 0 at the end).  Root reads any file: os.access says "not readable" here, as it
+    does for a user and another's 0600 truth file."""
+    import os
+
+    truth = tmp_path / "t.jsonl"
+    truth.write_text('{"t_s": 0.0, "pan_deg": 0.0, "tilt_deg": 0.0}\n')
+    truth.chmod(0o600)
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, m, *a, **k: False if str(p) == str(truth) and m & os.R_OK
+                        else real_access(p, m, *a, **k))
+    code, err = _run(["lidar", "serve", SCENE, "--head-truth", str(truth), "--duration-s", "0.2"], capsys)
+    assert code == 2 and f"--head-truth {truth}: this user may not read it (Permission denied" in err, err
+    assert "mode 600" in err
+
+
+def test_a_head_truth_that_appears_unreadable_is_said_once(tmp_path, capsys, monkeypatch):
+    """A truth file written later by another user (umask 077): said once, not followed in silence."""
+    import sim.lidar_server as ls
+
+    truth = tmp_path / "t.jsonl"
+    truth.write_text('{"t_s": 0.0, "pan_deg": 0.0, "tilt_deg": 0.0}\n')
+
+    def denied(path, *a, **k):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(ls, "open", denied, raising=False)
+    tail = ls.TruthTail(str(truth), fallback=(1.0, 2.0))
+    for _ in range(3):
+        tail.poll(0.0)
+    err = capsys.readouterr().err
+    assert err.count("WARNING") == 1 and f"--head-truth {truth}: cannot read it (Permission denied)" in err
+    assert tail.lines == 0
+
+
 def test_version_names_the_package_and_what_it_runs_on(capsys):
     import foveatrack
 
