@@ -54,9 +54,14 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
         os.replace(tmp, final)
         if fsync:
             _fsync(final.parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))   # the rename itself
-    except BaseException:
+    except BaseException as exc:
         if tmp is not None:
             tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError) and exc.errno is not None and (
+                exc.filename is None or str(exc.filename) == str(tmp)):
+            # a write that failed (a full disk) names no file, or the hidden temporary: the output's own
+            # name is the one the user gave (an export on a full disk said only "No space left on device")
+            raise type(exc)(exc.errno, exc.strerror, str(path)) from None
         raise
 
 

@@ -106,3 +106,20 @@ def test_leftovers_are_the_temporaries_of_that_name_only(tmp_path):
               tmp_path / ".rec.mcap2.0123abcd.tmp", tmp_path / ".rec.mcap.recovering"):
         p.write_text("")
     assert leftovers(out) == [left]
+
+
+def test_a_failed_write_names_the_output(tmp_path):
+    """A write on a full disk raises an OSError that names no file (or the hidden temporary): an
+    export there ended on 'foveatrack: error: No space left on device'.  Simulated: the OS's error
+    raised inside the block, where a write to the temporary raises it."""
+    import errno
+
+    out = tmp_path / "a.csv"
+    with pytest.raises(OSError) as exc:
+        with written_whole(out) as tmp:
+            raise OSError(errno.ENOSPC, "No space left on device")
+    assert exc.value.errno == errno.ENOSPC and exc.value.filename == str(out)
+    with pytest.raises(PermissionError) as exc:
+        with written_whole(out) as tmp:
+            raise PermissionError(errno.EACCES, "Permission denied", str(tmp))
+    assert exc.value.filename == str(out) and _listing(tmp_path) == []
