@@ -82,10 +82,10 @@ def _port_access_advice(path: str) -> str:
     """What to do about a serial device this user may not open: join the group that may (a USB
     adapter's /dev/ttyUSB0 is ``root:dialout``, mode 660), or give the device a udev rule."""
     import getpass
-    import grp
     import os
-    import pwd
     import stat
+
+    from foveatrack.errors import owner_names
 
     user = getpass.getuser()
     try:
@@ -94,13 +94,7 @@ def _port_access_advice(path: str) -> str:
         return (f"add {user} to the serial devices' group (sudo usermod -aG dialout {user}, then log in again) "
                 "or give the device a udev rule (GROUP=\"dialout\", MODE=\"0660\")")
 
-    def name(lookup, ident):
-        try:
-            return lookup(ident)[0]
-        except KeyError:
-            return str(ident)
-
-    owner, group = name(pwd.getpwuid, st.st_uid), name(grp.getgrgid, st.st_gid)
+    owner, group = owner_names(st)
     node = (f"{os.path.realpath(path)} is owner {owner}, group {group}, "
             f"mode {stat.S_IMODE(st.st_mode):03o}")
     if st.st_gid != 0 and st.st_mode & stat.S_IRGRP and st.st_mode & stat.S_IWGRP:

@@ -14,7 +14,7 @@ import os
 import sys
 
 from foveatrack.config_util import seed_arg
-from foveatrack.errors import UserError
+from foveatrack.errors import UserError, access_text
 
 
 def add_serve_parser(lsub) -> None:
@@ -120,18 +120,6 @@ class _ControlLog:
         self._fh.close()
 
 
-def _owner_and_mode(p) -> str:
-    import pwd
-    import stat
-
-    st = p.stat()
-    try:
-        owner = pwd.getpwuid(st.st_uid).pw_name
-    except KeyError:
-        owner = str(st.st_uid)
-    return f"{owner}'s, mode {stat.S_IMODE(st.st_mode):03o}"
-
-
 def _check_head_truth(path: str) -> None:
     """``--head-truth FILE`` in a directory that does not exist can never appear: an error (before, the
     lidar served with the head frozen at the scene's start pose and said nothing).  A file that does not
@@ -150,6 +138,6 @@ def _check_head_truth(path: str) -> None:
               "scene's pan0/tilt0 until 'foveatrack gimbal serve --truth' writes it)", file=sys.stderr, flush=True)
     elif not os.access(p, os.R_OK):
         # served on with the head frozen at its start pose, saying it followed the file (head_truth_lines 0)
-        raise UserError(f"--head-truth {path}: this user may not read it (Permission denied; it is "
-                        f"{_owner_and_mode(p)}), so the head could never be followed; run 'foveatrack gimbal "
+        raise UserError(f"--head-truth {path}: this user may not read it (Permission denied; "
+                        f"{access_text(p)}), so the head could never be followed; run 'foveatrack gimbal "
                         "serve --truth' as this user, or let this user read the file")

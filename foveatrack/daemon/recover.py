@@ -262,12 +262,9 @@ def _replace_hint(path: Path) -> str:
         return ""
     me = os.geteuid()
     if d.st_mode & stat.S_ISVTX and me not in (f.st_uid, d.st_uid):
-        import pwd
+        from foveatrack.errors import owner_names
 
-        try:
-            owner = pwd.getpwuid(f.st_uid).pw_name
-        except KeyError:
-            owner = str(f.st_uid)
+        owner = owner_names(f)[0]
         return (f": {path.name} belongs to {owner}, and in a directory with the sticky bit (as /tmp) only its "
                 f"owner may replace it: let {owner} recover it, or recover a copy of it and its journal")
     return ""
