@@ -170,6 +170,30 @@ def test_a_head_truth_that_appears_unreadable_is_said_once(tmp_path, capsys, mon
     assert tail.lines == 0
 
 
+@pytest.mark.parametrize("argv", [["replay"], ["export", "--csv", "{tmp}/out.csv"], ["recover"]])
+def test_a_recording_this_user_may_not_read_says_whose_it_is(tmp_path, capsys, monkeypatch, argv):
+    """A recording is its owner's alone (0600): a user replaying a service's recording met only
+    'rec.mcap: Permission denied'.  Root reads any file: the open raises what it raises for another
+    user."""
+    import foveatrack.recording.reader as reader_mod
+    from foveatrack.recording import RecordingWriter
+
+    rec = tmp_path / "rec.mcap"
+    RecordingWriter(rec, {"source": "daemon"}).close()
+    real_open = open
+
+    def denied(path, *a, **k):
+        if str(path) == str(rec):
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_open(path, *a, **k)
+
+    monkeypatch.setattr(reader_mod, "open", denied, raising=False)
+    argv = [a.format(tmp=tmp_path) for a in argv]
+    code, err = _run(argv[:1] + [str(rec)] + argv[1:], capsys)
+    assert code == 2 and f"{rec}: this user may not read it (owner " in err and "mode 600" in err, err
+    assert "readable by its owner only" in err and not list(tmp_path.glob("out.csv"))
+
+
 def test_version_names_the_package_and_what_it_runs_on(capsys):
     import foveatrack
 

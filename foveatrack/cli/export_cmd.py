@@ -67,8 +67,9 @@ def cmd_export(args) -> int:
         raise UserError(f"{rec} is a directory; give the recording inside it (e.g. {rec / 'run.mcap'})")
     if not rec.is_file():
         raise UserError(f"{rec}: no such recording")
-    with open(rec, "rb") as fh:
-        head = fh.read(10)
+    from foveatrack.recording.reader import read_head
+
+    head = read_head(rec, 10)
     if head == b"livox_tech":
         raise UserError(f"{rec} is already a Livox .lvx file; export reads foveatrack .mcap recordings")
     if rec.suffix.lower() == ".lvx" and not head.startswith(MCAP_MAGIC):

@@ -101,6 +101,21 @@ def frame_cap(size_bytes: int) -> int:
     return max(FRAME_CAP_FLOOR, int(size_bytes) // MIN_BYTES_PER_FRAME)
 
 
+def read_head(path, n: int) -> bytes:
+    """The first ``n`` bytes of a recording (or an ``.lvx``), to tell what it is; a UserError naming who
+    may read it where this user may not: the writer makes a recording its owner's alone (0600), so a
+    user replaying a service's recording met a bare "Permission denied"."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(n)
+    except PermissionError:
+        from foveatrack.errors import access_text
+
+        raise UserError(f"{path}: this user may not read it ({access_text(path)}); read it as its owner, or have "
+                        "them share it (a copy, or chmod g+r and a group this user is in): foveatrack makes a "
+                        "recording readable by its owner only (it holds the configuration)") from None
+
+
 class RecordingReader:
     """Read a recording, also one cut short or damaged: nothing that was recorded and is intact is lost.
 
@@ -132,8 +147,7 @@ class RecordingReader:
         self.max_frames = frame_cap(self.size) if max_frames is None else max_frames
         #: (byte offset where reading stopped, frames read) when the frame cap stopped it, else None
         self.capped: tuple[int, int] | None = None
-        with open(self.path, "rb") as fh:
-            head = fh.read(len(MCAP_MAGIC))
+        head = read_head(self.path, len(MCAP_MAGIC))
         if head != MCAP_MAGIC:
             what = "is empty" if self.size == 0 else "does not start with the MCAP magic"
             if 0 < self.size < len(MCAP_MAGIC) and MCAP_MAGIC.startswith(head):

@@ -380,8 +380,9 @@ def replay(path: str | os.PathLike, tracker_config_path: str | None = None,
     if not p.is_file():
         raise UserError(f"{p}: no such recording")
     table = load_tracker_table(tracker_config_path) if tracker_config_path else None
-    with open(p, "rb") as fh:
-        head = fh.read(16)
+    from foveatrack.recording.reader import read_head
+
+    head = read_head(p, 16)
     if head.startswith(b"livox_tech") or (p.suffix.lower() == ".lvx" and not head.startswith(MCAP_MAGIC)):
         from foveatrack.livox.lvx import LvxReader
 
