@@ -103,9 +103,12 @@ class RecordingWriteError(UserError):
     frames written before, readable as it is (the reader takes every complete chunk); nothing more
     is written to it."""
 
-    def __init__(self, path: Path, frames_kept: int, cause: BaseException):
-        self.path, self.frames_kept = path, frames_kept
+    def __init__(self, path: Path, frames_kept: int, cause: BaseException, begun: bool = True):
+        self.path, self.frames_kept, self.cause = path, frames_kept, cause
         self.why = _why_write_failed(path, cause)     # what failed, in words ("no space left on its disk ...")
+        if not begun:       # its metadata did not fit: the file was removed, nothing was recorded
+            super().__init__(f"cannot create recording {path}: {self.why}; nothing was left under its name")
+            return
         super().__init__(f"cannot write recording {path}: {self.why}; the "
                          f"{frames_kept} frame(s) written before are kept and readable as they are "
                          f"(foveatrack replay or export {path}); nothing more is recorded")
@@ -288,8 +291,13 @@ class RecordingWriter(RecordCalls):
             if self._w is not None:
                 self._write_meta(self._md)
             self.flush()
-        except BaseException:
+        except BaseException as exc:
             self._abandon()         # no writer half made: its file's lock and the SDK's writer go now
+            if isinstance(exc, RecordingWriteError) and self.path is not None:
+                # the file made above (exclusively, ours) holds nothing a reader could take: an empty
+                # file left on a full disk was then called a recording whose "0 frame(s)" were kept
+                self.path.unlink(missing_ok=True)
+                raise RecordingWriteError(self.path, 0, exc.cause, begun=False) from None
             raise
 
     def _open_file(self, path: Path, overwrite: bool) -> None:

@@ -519,3 +519,22 @@ def test_a_full_disk_is_said_in_words(tmp_path, monkeypatch):
         w.write_detection(t, 3, False)
     w.close()
     assert w.write_error.frames_kept == 2        # the third frame waited in the chunk that failed
+
+
+def test_a_recording_whose_metadata_does_not_fit_leaves_no_empty_file(tmp_path, monkeypatch):
+    """On a full disk the new file's first write fails: an empty file was left and called a recording
+    whose "0 frame(s) written before are kept and readable" (replay then said it was empty).
+    Simulated: the OS's ENOSPC raised where the SDK writes the metadata."""
+    import errno
+
+    def full(self, md):
+        def write():
+            raise OSError(errno.ENOSPC, "No space left on device")
+        self._sdk(write)
+
+    monkeypatch.setattr(RecordingWriter, "_write_meta", full)
+    p = tmp_path / "r.mcap"
+    with pytest.raises(UserError) as exc:
+        RecordingWriter(p, META)
+    assert str(exc.value).startswith(f"cannot create recording {p}: no space left on its disk")
+    assert "nothing was left under its name" in str(exc.value) and not p.exists()
