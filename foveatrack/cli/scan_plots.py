@@ -17,10 +17,18 @@ def _plt():
 
 
 def _save(fig, path: str | Path) -> Path:
+    """Write ``fig`` to ``path`` (its format from the suffix), under its name only when whole: a plot
+    cut by a full disk leaves nothing, and the error names the plot (it said only "No space left on
+    device", after the run's recording and summary were written)."""
+    from foveatrack.atomic_file import written_whole
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130, bbox_inches="tight")
-    _plt().close(fig)
+    try:
+        with written_whole(path) as tmp:
+            fig.savefig(tmp, dpi=130, bbox_inches="tight", format=path.suffix[1:].lower() or "png")
+    finally:
+        _plt().close(fig)
     return path
 
 
