@@ -5,8 +5,8 @@ against the truth, and Fig. 6e (coverage against time) beside them.
 Degrees and centimetres each get their own panel (never one log axis for both).  Every error panel
 (eq. (8), registration, extrinsic) is drawn on a linear axis from zero, so a change of a percent
 looks like one (the yard's registration error, 0.01131 -> 0.01124 deg, filled a log panel top to
-bottom), unless one lidar's errors are more than ten times another's (a 16-line lidar beside the
-Risley ones): then on a log axis, which its label says.  The accumulation axis is logarithmic, as the times run are (0.1 s to
+bottom), unless the values it draws span more than a decade (a 16-line lidar beside the Risley
+ones, or a registration that failed at one time): then on a log axis, which its label says.  The accumulation axis is logarithmic, as the times run are (0.1 s to
 10 s), with a tick at each time run, in plain numbers.  The coverage panel draws the Risley lidars
 only (a spinning lidar's scan repeats every turn) and its title names any lidar of the run it leaves
 out.  Rows may carry ``KEY_lo`` / ``KEY_hi`` beside a metric ``KEY`` (a spread over seeds): drawn as a
@@ -28,11 +28,12 @@ PLAIN = FuncFormatter(lambda x, _: f"{x:g}")    # 0.2, 1, 10: not 2 x 10^-1
 
 
 def _error_axis(ax, per_lidar: dict, extra, label: str) -> None:
-    """Linear from zero; log where one lidar's errors are more than ten times another's (their medians),
-    said in the label, so that both can be read.  ``per_lidar``: {lidar: [values]}; ``extra``: values
-    the axis must also show (bands, a floor line)."""
-    med = [float(np.median(v)) for v in ([x for x in vs if x > 0] for vs in per_lidar.values()) if v]
-    if med and max(med) > 10.0 * min(med):
+    """Linear from zero; log where the values drawn span more than a decade (a 16-line lidar beside
+    the Risley ones, or one registration that failed: a linear axis then flattens every other curve
+    to its floor), said in the label.  ``per_lidar``: {lidar: [values]}; ``extra``: values the axis
+    must also show (bands, a floor line)."""
+    pos = [x for vs in per_lidar.values() for x in vs if x > 0] + [x for x in extra if x > 0]
+    if pos and max(pos) > 10.0 * min(pos):
         ax.set(yscale="log", ylabel=f"{label} (log scale)")
         ax.yaxis.set_major_formatter(PLAIN)
         ax.yaxis.set_minor_formatter(NullFormatter())

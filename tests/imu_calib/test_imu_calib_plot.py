@@ -62,6 +62,17 @@ def test_lidars_a_decade_apart_keep_a_log_axis_and_say_so(monkeypatch, tmp_path)
         assert ax.get_yscale() == "log" and "log scale" in ax.get_ylabel(), (ax.get_title(), ax.get_ylabel())
 
 
+def test_one_failed_registration_keeps_a_log_axis(monkeypatch, tmp_path):
+    # the room figure redrawn: the 16-line lidar 3 x the Risley ones but one of its times 45 x (a
+    # registration that slid): by the medians a linear axis, which drew the Mid-40 and the Horizon
+    # flat on the floor under the spike
+    rows = ([_row("mid40", t) for t in (0.1, 1.0, 10.0)]
+            + [_row("vlp16", t, scale=s) for t, s in ((0.1, 3.0), (1.0, 3.0), (5.0, 45.0), (10.0, 3.0))])
+    fig = _figure(monkeypatch, tmp_path, rows, None)
+    for ax in _error_panels(fig):
+        assert ax.get_yscale() == "log" and "log scale" in ax.get_ylabel(), (ax.get_title(), ax.get_ylabel())
+
+
 def test_accumulation_ticks_are_the_times_run_in_plain_numbers(monkeypatch, tmp_path):
     # on a log axis spanning less than two decades matplotlib labelled the minor ticks too:
     # "2 x 10^-1 3 x 10^-1 4 x 10^-1 6 x 10^-1" ran into one another under the panels
