@@ -4,6 +4,7 @@
 Recovery is judged in sensor time and by counts (frames, detections), never by wall-clock luck: the
 machine these run on is shared and busy."""
 
+import math
 import os
 import socket
 import threading
@@ -12,7 +13,8 @@ import time
 import numpy as np
 import pytest
 
-from daemon_procs import SCENE, event, first_line, free_udp_port, log_events, start, stop_all, terminate, wait_for, write_config
+from daemon_procs import (SCENE, event, first_line, free_udp_port, head_clock_zero, log_events, start, stop_all,
+                          terminate, wait_for, write_config)
 from foveatrack.livox.protocol import encode_data_packets
 from foveatrack.recording import RecordingReader
 from foveatrack.replay import replay_recording
@@ -78,6 +80,46 @@ def _replays_to_the_bit(rec):
     return res
 
 
+#: fig12's acquisition in this scene, from its own start (the head at the scene's pan0/tilt0, the UAV
+#: 11.3 deg left and 4.2 deg up, crossing right at 2.3 deg/s): the closed-loop simulator (sim.loop.ClosedLoop
+#: on SCENE, seeds 12-43) detects it in every frame from 1.7 s on at the latest (from 0.2-1.0 s in most
+#: seeds; the paper scene's acquisition is 1.4 s, docs/tracker.md), and in >= 93 % of the 30 frames after
+#: the bound below from any start pan -9..7 deg (16 seeds each).
+FIG12_HELD_S = 1.7
+
+
+def _held_bound(pan_deg: float) -> tuple[float, float, float]:
+    """When the restarted scene's UAV is held at the latest, for a head at pan ``pan_deg`` at the
+    new clock's start: ``(held_s, off_deg, rate_deg_s)``.
+
+    The paper's controller moves the head only on a frame with a detection and stops it on every empty
+    one (``HOLDING``), so at the rim of the Mid-40's rosette, where a 0.35 m UAV at 12 m is in 27-50 %
+    of the frames (within 4 deg of the axis: 99 %; the simulator, the head held still), the head's
+    speed is not what limits the acquisition: the detections are (from 16-19 deg off the simulator
+    holds it from 0.7-4.1 s, from fig12's start by 1.7 s).  What is sure is the UAV's own crossing: it
+    flies toward a stopped head's axis at ``rate_deg_s`` (at least), and the head only ever turns
+    toward it, so it is no farther off than fig12's start (``off_fig12``) after
+    ``(off - off_fig12) / rate``, and still closing: from there fig12's acquisition (``FIG12_HELD_S``)
+    bounds the rest."""
+    from sim.scene import load_scene
+
+    scene = load_scene(SCENE)
+    traj = scene.targets[0].trajectory
+    t = np.arange(0.0, 10.05, 0.05)                      # the bound (<= 6 s) and 3 s after it
+    xyz = traj.position(t)
+    az = np.degrees(np.arctan2(xyz[:, 1], xyz[:, 0]))      # pan of the UAV's bearing (left +)
+    rate = np.diff(az) / np.diff(t)
+    off, off_fig12 = az[0] - pan_deg, az[0] - scene.gimbal.pan0_deg
+    slowest = float(np.min(np.abs(rate)))
+    if abs(off) <= abs(off_fig12):
+        return FIG12_HELD_S, float(off), slowest
+    # farther off than fig12's start: the extra time counts on the UAV flying toward the head's axis.
+    # It does: the old run's last commands turned the head right, after the UAV, and the restarted
+    # UAV, back at 11.3 deg left, is left of it and flies right
+    assert np.all(np.sign(rate) == -np.sign(off)), (pan_deg, off)
+    return FIG12_HELD_S + float(abs(off) - abs(off_fig12)) / slowest, float(off), slowest
+
+
 def test_fault1_a_restarted_lidar_is_tracked_again(tmp_path):
     procs, link, truth, rec, log, bport = _setup(tmp_path)
     try:
@@ -86,9 +128,11 @@ def test_fault1_a_restarted_lidar_is_tracked_again(tmp_path):
         procs["lidar"].wait(5)
         time.sleep(1.0)
         procs["lidar"] = _lidar(tmp_path, bport, truth, "l2")
-        wait_for(lambda: event(log, "tracker_rebased"), 60, "the daemon to re-anchor the new clock",
-                 [procs["daemon"], procs["lidar"]])
-        _wait_frames(log, rec, 60, [procs["daemon"], procs["lidar"]])
+        rebased = wait_for(lambda: event(log, "tracker_rebased"), 60, "the daemon to re-anchor the new clock",
+                           [procs["daemon"], procs["lidar"]])
+        held_s, off, rate = _held_bound(rebased["pan_deg"])
+        # 3 s of frames from the bound on to judge the hold by
+        _wait_frames(log, rec, max(60, math.ceil(held_s * 10) + 31), [procs["daemon"], procs["lidar"]])
         assert terminate(procs["daemon"]) == 0, (tmp_path / "d.err").read_text()
     finally:
         stop_all(procs)
@@ -100,16 +144,32 @@ def test_fault1_a_restarted_lidar_is_tracked_again(tmp_path):
     jump = event(log, "lidar_clock_jump")
     assert jump is not None and jump["new_t_s"] < jump["last_t_s"], jump      # the clock went back
     assert stats["lidar_clock_jumps"] == 1 and stats["clock_epochs"] == 1
+    # The head runs its last command until the watchdog stops it (2 s here): a pan command's 5-6 deg/s
+    # carries it 11-13 deg on while the lidar is silent (seen: from 4-6 deg to -4.8 .. -8.6 deg).
+    # The new tracker starts where the head really is, that run-on included (seen: within 0.12 deg):
+    # the head is at rest when the daemon re-anchors (stopped by the watchdog >= 0.4 s before).
+    zero = float(head_clock_zero(tmp_path / "head.err"))
+    at_rest = [r for r in read_truth(str(truth)) if r["t_s"] + zero <= rebased["t_mono_s"]][-1]
+    assert at_rest["pan_speed_deg_s"] == 0.0 and at_rest["tilt_speed_deg_s"] == 0.0, at_rest
+    assert abs(rebased["pan_deg"] - at_rest["pan_deg"]) < 0.5, (rebased, at_rest)
+    assert abs(rebased["tilt_deg"] - at_rest["tilt_deg"]) < 0.5, (rebased, at_rest)
     dets = _detections(rec)
     t = np.array([d["t_ns"] for d in dets]) * 1e-9
     back = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1          # the first frame of the new clock
     after = dets[back:]
-    assert len(after) >= 50
-    # tracked again within 2 s of its return (sensor time, i.e. frames of the new clock)
-    first = next(i for i, d in enumerate(after) if d["detected"])
-    assert (after[first]["t_ns"] - after[0]["t_ns"]) * 1e-9 <= 2.0, first
-    # then held (after the acquisition's first 15 frames: the restarted scene's UAV enters off-axis again)
-    assert len(after) >= first + 30 and np.mean([d["detected"] for d in after[first + 15:]]) >= 0.8
+    detected = np.array([d["detected"] for d in after])
+    t_new = t[back:]                                           # sensor time = the restarted scene's time
+    # tracked again within 2 s of its return (sensor time, i.e. frames of the new clock; seen: by its
+    # 9th frame, also from the rim)
+    first = int(np.argmax(detected))
+    assert detected[first] and t_new[first] - t_new[0] <= 2.0, first
+    # and held from the bound on (_held_bound: where the restarted UAV is off the head, how fast it
+    # crosses, fig12's own acquisition).  Between the first detection and the bound the UAV may be
+    # lost for seconds at the rim (seen: 2.4 s, from 16 deg off): that is the paper's controller there.
+    window = detected[t_new >= held_s + 0.1 - 1e-6][:30]       # frames that start at or after held_s
+    assert len(window) == 30 and window.mean() >= 0.9, (
+        f"UAV {off:.1f} deg off the head at the restart, closing at {rate:.2f} deg/s: held from "
+        f"{held_s:.2f} s", "".join(str(int(d)) for d in detected))
     # and nothing of the new clock was thrown away as late
     assert stats["slicer_late_points"] < 1000, stats["slicer_late_points"]
     _replays_to_the_bit(rec)
