@@ -28,7 +28,7 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
     for the caller to write (open it with "w"/"wb", or let a writer that creates its file itself
     replace it); it gets the mode of the file it replaces (else the one a new file gets under the
     umask), moved onto ``path`` when the block ends, removed if it raises.  ``fsync``: the file is
-    synced before the rename and the directory after it.  A symlink at ``path`` is written through:
+    synced before the rename and the directory after it (best-effort: the file is replaced by then).  A symlink at ``path`` is written through:
     its target is replaced."""
     final = Path(os.path.realpath(path))
     tmp = None
@@ -52,8 +52,6 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
         if fsync:
             _fsync(tmp, os.O_RDONLY)
         os.replace(tmp, final)
-        if fsync:
-            _fsync(final.parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))   # the rename itself
     except BaseException as exc:
         if tmp is not None:
             tmp.unlink(missing_ok=True)
@@ -63,6 +61,14 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
             # name is the one the user gave (an export on a full disk said only "No space left on device")
             raise type(exc)(exc.errno, exc.strerror, str(path)) from None
         raise
+    if fsync:
+        # the rename itself, best-effort: the file is replaced by now, whole, and an error here is not a
+        # failure to write it (a directory this user may write but not read, 0333, cannot be opened to
+        # sync; recover then said "nothing was changed" of a recording it had replaced)
+        try:
+            _fsync(final.parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+        except OSError:
+            pass
 
 
 def leftovers(path: str | os.PathLike) -> list[Path]:

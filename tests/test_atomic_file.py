@@ -123,3 +123,25 @@ def test_a_failed_write_names_the_output(tmp_path):
         with written_whole(out) as tmp:
             raise PermissionError(errno.EACCES, "Permission denied", str(tmp))
     assert exc.value.filename == str(out) and _listing(tmp_path) == []
+
+
+def test_a_directory_that_cannot_be_opened_to_sync_is_no_failure_to_write(tmp_path, monkeypatch):
+    """A directory this user may write and search but not read (0333): the rename succeeds, the
+    directory's open to sync it is refused.  That was raised as a failure to write the file (recover
+    said 'nothing was changed' of a recording it had replaced); the file is whole under its name."""
+    import errno
+
+    out = tmp_path / "a.mcap"
+    out.write_text("old\n")
+    real_open = os.open
+
+    def no_read(path, flags, *args, **kwargs):
+        if flags & getattr(os, "O_DIRECTORY", 0):
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", no_read)
+    with written_whole(out, fsync=True) as tmp:
+        tmp.write_text("new\n")
+    monkeypatch.undo()
+    assert out.read_text() == "new\n" and _listing(tmp_path) == ["a.mcap"]

@@ -290,3 +290,25 @@ def test_a_full_disk_under_the_rewrite_is_said_of_the_recording(tmp_path, monkey
                           "left on its disk") and "nothing was changed" in msg, msg
     assert ".tmp" not in msg
     _unchanged(cut, before)
+
+
+def test_a_directory_that_cannot_be_read_to_sync_it_is_recovered_and_said_so(tmp_path, monkeypatch):
+    """A write+search-only directory (0333): the rename over the recording succeeds, the directory's
+    open to sync it is refused; recover said 'the completed copy could not replace it ...; nothing was
+    changed' of a recording it had replaced."""
+    import errno
+
+    cut, _ = _cut_short(tmp_path)
+    real_open = os.open
+
+    def no_read(path, flags, *args, **kwargs):
+        if os.path.isdir(path) and flags & getattr(os, "O_DIRECTORY", 0):
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", no_read)
+    res = recover(cut)
+    monkeypatch.undo()
+    from foveatrack.atomic_file import leftovers
+
+    assert res.recovered and RecordingReader(cut).closed() and leftovers(cut) == []
