@@ -22,6 +22,17 @@ from pathlib import Path
 from typing import Iterator
 
 
+class RenameRefused(PermissionError):
+    """The rename of the whole temporary onto the output was refused (a sticky directory: another user's
+    file), and only that: a PermissionError raised while the block read or wrote is not one."""
+
+
+def temporary_name(final: Path) -> Path:
+    """A fresh name for a temporary of ``final`` (already resolved), beside it: ``.NAME.<8 hex digits>.tmp``,
+    what :func:`leftovers` finds.  The one place that pattern is made (``recover``'s probe takes it too)."""
+    return final.with_name(f".{final.name}.{secrets.token_hex(4)}.tmp")
+
+
 @contextmanager
 def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path]:
     """The path of an empty temporary file in ``path``'s directory (a hidden name, ``.NAME.<8 hex digits>.tmp``),
@@ -34,7 +45,7 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
     tmp = None
     try:
         while tmp is None:
-            name = final.with_name(f".{final.name}.{secrets.token_hex(4)}.tmp")
+            name = temporary_name(final)
             try:
                 os.close(os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
             except FileExistsError:
@@ -51,7 +62,10 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
             os.chmod(tmp, mode)         # again: a writer may have made the file anew under the umask
         if fsync:
             _fsync(tmp, os.O_RDONLY)
-        os.replace(tmp, final)
+        try:
+            os.replace(tmp, final)
+        except PermissionError as exc:
+            raise RenameRefused(exc.errno, exc.strerror, str(path)) from None
     except BaseException as exc:
         if tmp is not None:
             tmp.unlink(missing_ok=True)

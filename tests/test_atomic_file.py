@@ -145,3 +145,30 @@ def test_a_directory_that_cannot_be_opened_to_sync_is_no_failure_to_write(tmp_pa
         tmp.write_text("new\n")
     monkeypatch.undo()
     assert out.read_text() == "new\n" and _listing(tmp_path) == ["a.mcap"]
+
+
+def test_only_a_refused_rename_is_a_rename_refused(tmp_path, monkeypatch):
+    """recover said 'the completed copy could not replace it' of any PermissionError inside the block
+    (one reading the recording too): the rename's refusal has its own class."""
+    import errno
+
+    from foveatrack.atomic_file import RenameRefused, leftovers, temporary_name
+
+    out = tmp_path / "a.csv"
+    with pytest.raises(PermissionError) as exc:
+        with written_whole(out):
+            raise PermissionError(errno.EACCES, "Permission denied", str(tmp_path / "input"))
+    assert not isinstance(exc.value, RenameRefused)
+
+    def refused(src, dst):
+        raise PermissionError(errno.EPERM, "Operation not permitted", str(src))
+
+    monkeypatch.setattr(os, "replace", refused)
+    with pytest.raises(RenameRefused) as exc:
+        with written_whole(out) as tmp:
+            tmp.write_text("x")
+    assert exc.value.filename == str(out) and _listing(tmp_path) == []
+    # the temporaries' one name: what leftovers finds
+    t = temporary_name(out)
+    t.write_text("")
+    assert t.parent == tmp_path and leftovers(out) == [t]

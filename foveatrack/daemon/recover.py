@@ -37,7 +37,7 @@ import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from foveatrack.atomic_file import leftovers, written_whole
+from foveatrack.atomic_file import RenameRefused, leftovers, temporary_name, written_whole
 from foveatrack.errors import UserError
 from foveatrack.recording.format import COMMANDS, DAEMON_EVENTS, IMU, POINTS, PointsFrame, ImuSamples
 
@@ -148,10 +148,13 @@ def recover(path, journal=None, progress=None) -> Recovery:
         return res
     if not reader.meta.get("source"):
         raise UserError(f"{path}: not a recording of a driver with a command journal (no 'source' in its metadata)")
-    for tmp in leftovers(path):
+    # a symlink's target is what is rewritten (written_whole writes through it): its directory is the one
+    # that must take the copy, and the one the leftovers are in
+    real = Path(os.path.realpath(path))
+    for tmp in leftovers(real):
         if not recording_in_use(tmp):    # a killed recovery's; a running one holds its writer's lock
             tmp.unlink(missing_ok=True)
-    _check_can_replace(path)
+    _check_can_replace(path, real)
     mode = path.stat().st_mode & 0o777
     meta = dict(reader.meta)
     meta["recovered_from_journal"] = {"journal": jpath.name, "created_utc": reader.info.get("created_utc")}
@@ -225,27 +228,26 @@ def recover(path, journal=None, progress=None) -> Recovery:
         raise UserError(f"{path}: not recovered: its completed copy could not be written beside it "
                         f"({exc.why}); it needs about {path.stat().st_size:,} bytes free in "
                         f"{path.parent}; nothing was changed") from None
-    except PermissionError as exc:
+    except RenameRefused as exc:
         # the probe above showed the directory takes a new file: what is refused is the rename over it
         raise UserError(f"{path}: not recovered: the completed copy could not replace it "
-                        f"({exc.strerror or exc}{_replace_hint(path)}); nothing was changed") from None
+                        f"({exc.strerror or exc}{_replace_hint(real)}); nothing was changed") from None
     res.recovered = True
     return res
 
 
-def _check_can_replace(path: Path) -> None:
-    """Before any work: the completed copy is written beside the recording and renamed over it, so
-    its directory must take a new file (a directory this user may not write failed only at the copy,
-    naming the hidden temporary).  The probe is named as written_whole names its temporaries, so one
-    left by a kill between its two lines is cleared as theirs are."""
-    import secrets
-
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+def _check_can_replace(path: Path, real: Path) -> None:
+    """Before any work: the completed copy is written beside the recording (``real``: ``path`` resolved,
+    a symlink's target) and renamed over it, so that directory must take a new file (a directory this
+    user may not write failed only at the copy, naming the hidden temporary).  The probe is named as
+    written_whole names its temporaries (:func:`temporary_name`), so one left by a kill between its two
+    lines is cleared as theirs are."""
+    tmp = temporary_name(real)
     try:
         os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o600))
     except OSError as exc:
         raise UserError(f"{path}: not recovered: recover writes the completed file beside it and renames it "
-                        f"over it, and {path.parent} does not take a new file ({exc.strerror or exc}); nothing "
+                        f"over it, and {real.parent} does not take a new file ({exc.strerror or exc}); nothing "
                         f"was changed: copy the recording and its {path.name}.commands.jsonl to a directory "
                         "you can write, and recover the copy") from None
     tmp.unlink(missing_ok=True)

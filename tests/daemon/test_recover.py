@@ -312,3 +312,68 @@ def test_a_directory_that_cannot_be_read_to_sync_it_is_recovered_and_said_so(tmp
     from foveatrack.atomic_file import leftovers
 
     assert res.recovered and RecordingReader(cut).closed() and leftovers(cut) == []
+
+
+def _linked(tmp_path):
+    """A cut-short recording in ``ro/`` reached through symlinks (it and its journal) in ``mine/``."""
+    (tmp_path / "ro").mkdir()
+    (tmp_path / "mine").mkdir()
+    cut, _ = _cut_short(tmp_path / "ro")
+    link = tmp_path / "mine" / "rec.mcap"
+    link.symlink_to(cut)
+    (tmp_path / "mine" / "rec.mcap.commands.jsonl").symlink_to(tmp_path / "ro" / "rec.mcap.commands.jsonl")
+    return cut, link
+
+
+def test_through_a_symlink_the_targets_directory_is_the_one_probed(tmp_path, monkeypatch):
+    """The probe was made beside the link while the copy is written beside its target: a target's
+    directory that takes no new file failed at the copy and was said as a refused rename."""
+    import errno
+
+    cut, link = _linked(tmp_path)
+    before = cut.read_bytes()
+    real_open = os.open
+
+    def read_only_share(path, flags, *args, **kwargs):
+        if flags & os.O_CREAT and os.path.dirname(os.path.abspath(path)) == str(tmp_path / "ro"):
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", read_only_share)
+    with pytest.raises(UserError) as exc:
+        recover(link)
+    monkeypatch.undo()
+    msg = str(exc.value)
+    assert msg.startswith(f"{link}: not recovered:") and f"{tmp_path / 'ro'} does not take a new file" in msg, msg
+    _unchanged(cut, before)
+    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["rec.mcap", "rec.mcap.commands.jsonl"]
+
+
+def test_through_a_symlink_the_sticky_hint_is_of_the_targets_directory(tmp_path, monkeypatch):
+    import errno
+
+    cut, link = _linked(tmp_path)
+    os.chmod(tmp_path / "ro", 0o1777)           # a sticky directory (as /tmp) holding another user's file
+
+    def refused(src, dst):
+        raise PermissionError(errno.EPERM, "Operation not permitted", str(src))
+
+    monkeypatch.setattr(os, "replace", refused)
+    monkeypatch.setattr(os, "geteuid", lambda: 4242)
+    with pytest.raises(UserError) as exc:
+        recover(link)
+    assert "only its owner may replace it" in str(exc.value), str(exc.value)
+
+
+def test_a_permission_error_reading_the_recording_is_not_a_refused_rename(tmp_path, monkeypatch):
+    import errno
+
+    cut, _ = _cut_short(tmp_path)
+
+    def unreadable(self, *a, **k):
+        raise PermissionError(errno.EACCES, "Permission denied", str(cut))
+
+    monkeypatch.setattr(RecordingReader, "logged_messages", unreadable)
+    with pytest.raises(PermissionError) as exc:
+        recover(cut)
+    assert exc.value.filename == str(cut)
