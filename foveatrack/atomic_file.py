@@ -43,6 +43,7 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
     its target is replaced."""
     final = Path(os.path.realpath(path))
     tmp = None
+    renaming = False
     try:
         while tmp is None:
             name = temporary_name(final)
@@ -62,6 +63,7 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
             os.chmod(tmp, mode)         # again: a writer may have made the file anew under the umask
         if fsync:
             _fsync(tmp, os.O_RDONLY)
+        renaming = True
         try:
             os.replace(tmp, final)
         except PermissionError as exc:
@@ -69,6 +71,10 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
     except BaseException as exc:
         if tmp is not None:
             tmp.unlink(missing_ok=True)
+        if renaming:
+            # the rename's own error names both files: a temporary gone (ENOENT) or another file system
+            # (EXDEV) is not the output's to be named by
+            raise
         if isinstance(exc, OSError) and exc.errno is not None and (
                 exc.filename is None or str(exc.filename) == str(tmp)):
             # a write that failed (a full disk) names no file, or the hidden temporary: the output's own

@@ -172,3 +172,23 @@ def test_only_a_refused_rename_is_a_rename_refused(tmp_path, monkeypatch):
     t = temporary_name(out)
     t.write_text("")
     assert t.parent == tmp_path and leftovers(out) == [t]
+
+
+def test_a_rename_that_fails_otherwise_keeps_its_own_names(tmp_path, monkeypatch):
+    """A temporary removed under it (ENOENT) was said as the output itself missing."""
+    import errno
+
+    out = tmp_path / "a.csv"
+    with pytest.raises(FileNotFoundError) as exc:
+        with written_whole(out) as tmp:
+            tmp.unlink()
+    assert exc.value.filename == str(tmp) and exc.value.filename2 == str(out)
+
+    def cross(src, dst):
+        raise OSError(errno.EXDEV, "Invalid cross-device link", str(src), None, str(dst))
+
+    monkeypatch.setattr(os, "replace", cross)
+    with pytest.raises(OSError) as exc:
+        with written_whole(out) as tmp:
+            tmp.write_text("x")
+    assert exc.value.errno == errno.EXDEV and exc.value.filename == str(tmp) and _listing(tmp_path) == []

@@ -27,7 +27,8 @@ The new file is written beside the old one and renamed over it
 file's permissions (the recorder's 0600): the original stays whole until the new one is complete.
 A recovery killed before its rename leaves its temporary, which the next one removes.  A recording
 that was closed properly is left as it is (a no-op, said so), and so is one whose journal a running
-daemon holds (its lock).  A journal line that cannot be read is reported and skipped.
+daemon holds (its lock); the recording itself is held under its lock for the whole rewrite, so a second
+recover of it at once is refused.  A journal line that cannot be read is reported and skipped.
 """
 
 from __future__ import annotations
@@ -126,16 +127,36 @@ def recover(path, journal=None, progress=None) -> Recovery:
     """Complete the recording at ``path`` from its command journal (module docstring); returns what
     was done.  ``progress(frames)`` is called every 100 frames copied.  UserError (one line) for a
     file that is not a recording or a journal a running driver holds."""
-    from foveatrack.live_devices import journal_in_use, journal_path, read_journal
-    from foveatrack.recording import RecordingReader, RecordingWriter, RecordingWriteError
-    from foveatrack.file_lock import recording_in_use
-    from foveatrack.recording.records import CommandRecord, ns
+    from foveatrack.file_lock import hold, recording_in_use
 
     path = Path(path)
-    if recording_in_use(path):
+    # a symlink's target is what is rewritten (written_whole writes through it): its directory is the one
+    # that must take the copy, and the one the leftovers are in
+    real = Path(os.path.realpath(path))
+    # the recording's own lock, held to the end (after the rename): a second recover of it (the daemon's
+    # start and a user's, at once) cleared this one's copy between its writer's close and its rename
+    lock = hold(real)
+    if lock is None and recording_in_use(real):
+        if leftovers(real):
+            # a copy beside it: a running recover's (a writer never writes beside its recording)
+            raise UserError(f"{path} is being recovered by another process; let it finish, nothing was changed")
         # its writer's lock (foveatrack.file_lock): rewriting it now would lose what comes next
         raise UserError(f"{path} is still being written by a running process; stop it first (a stopped writer "
                         "completes its file itself), nothing was changed")
+    try:
+        return _recover(path, real, journal, progress)
+    finally:
+        if lock is not None:
+            os.close(lock)
+
+
+def _recover(path: Path, real: Path, journal, progress) -> Recovery:
+    """:func:`recover` under the recording's lock."""
+    from foveatrack.file_lock import recording_in_use
+    from foveatrack.live_devices import journal_in_use, journal_path, read_journal
+    from foveatrack.recording import RecordingReader, RecordingWriter, RecordingWriteError
+    from foveatrack.recording.records import CommandRecord, ns
+
     jpath = journal_path(path) if journal is None else Path(journal)
     reader = RecordingReader(path)
     if jpath.exists() and journal_in_use(jpath):
@@ -148,9 +169,6 @@ def recover(path, journal=None, progress=None) -> Recovery:
         return res
     if not reader.meta.get("source"):
         raise UserError(f"{path}: not a recording of a driver with a command journal (no 'source' in its metadata)")
-    # a symlink's target is what is rewritten (written_whole writes through it): its directory is the one
-    # that must take the copy, and the one the leftovers are in
-    real = Path(os.path.realpath(path))
     for tmp in leftovers(real):
         if not recording_in_use(tmp):    # a killed recovery's; a running one holds its writer's lock
             tmp.unlink(missing_ok=True)

@@ -377,3 +377,33 @@ def test_a_permission_error_reading_the_recording_is_not_a_refused_rename(tmp_pa
     with pytest.raises(PermissionError) as exc:
         recover(cut)
     assert exc.value.filename == str(cut)
+
+
+def test_a_second_recover_of_the_same_file_is_refused_while_the_first_runs(tmp_path, monkeypatch):
+    """The daemon's start and a user's 'foveatrack recover' at once: the second one's leftovers cleanup
+    removed the first one's copy between its writer's close (its lock gone) and its rename, and the
+    first failed with FileNotFoundError naming the recording."""
+    import foveatrack.atomic_file as af
+
+    cut, n_journal = _cut_short(tmp_path)
+    before = cut.read_bytes()
+    real = af._fsync
+    second = []
+
+    def fsync_spy(path, flags):
+        # the first recover has closed its copy and syncs it before the rename: the second starts now
+        if not second and str(path).endswith(".tmp"):
+            try:
+                second.append(recover(cut))
+            except UserError as exc:
+                second.append(exc)
+            assert cut.read_bytes() == before
+        return real(path, flags)
+
+    monkeypatch.setattr(af, "_fsync", fsync_spy)
+    res = recover(cut)
+    assert res.recovered and len(_official_commands(cut)) == n_journal
+    assert isinstance(second[0], UserError), second
+    msg = str(second[0])
+    assert msg == f"{cut} is being recovered by another process; let it finish, nothing was changed", msg
+    assert recover(cut).already_complete           # the lock is let go after the rename
