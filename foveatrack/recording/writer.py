@@ -280,7 +280,8 @@ class RecordingWriter(RecordCalls):
                 md["segment_index"] = str(int(segment_index))
             self._md = md
         self.write_error: RecordingWriteError | None = None    # the write that failed, if one did
-        self.frames_kept = 0      # frames in complete chunks handed to the OS (what a reader gets)
+        self.frames_kept = 0      # frames in complete chunks handed to the OS (what a reader gets), over the run
+        self._frames_before_file = 0     # of those, the ones in the earlier segments' files (next_segment)
         self.segment_index = int(segment_index)
         self._tabled = 0
         self._frames_since_flush = 0
@@ -330,7 +331,8 @@ class RecordingWriter(RecordCalls):
         try:
             return call(*args)
         except (RuntimeError, OSError) as exc:   # the SDK's FoxgloveError is a RuntimeError
-            self.write_error = RecordingWriteError(self.path, self.frames_kept, exc)
+            # the frames the current file keeps: the error names that file (a segment's, not the run's)
+            self.write_error = RecordingWriteError(self.path, self.frames_kept - self._frames_before_file, exc)
         # the failed SDK writer goes now, while the interpreter runs: kept (by this frame's ``call``
         # in the error's traceback, or the writer itself) to the interpreter's exit, its drop panicked
         call = args = None
@@ -366,13 +368,25 @@ class RecordingWriter(RecordCalls):
             self._sdk(_fsync, self.path)
         self._open_file(path, overwrite)
         self.path = path
+        # the old file, closed whole, keeps every frame written so far: the new one's count starts here
+        self.frames_kept = self._frames_before_file = self.frames_written
         self.segment_index = self.segment_index + 1 if index is None else int(index)
         self._md["segment_index"] = str(self.segment_index)
-        self._write_meta(self._md)
-        self._tabled = 0
-        self.view.new_file()
-        self._frames_since_flush = 0
-        self.flush()
+        try:
+            self._write_meta(self._md)
+            self._tabled = 0
+            self.view.new_file()
+            self._frames_since_flush = 0
+            self.flush()
+        except RecordingWriteError as exc:
+            # as __init__ does for the first file: the new one (exclusively ours) holds nothing a reader
+            # could take; left, it was described as a recording whose frames were kept
+            self._w = None             # (the failed SDK writer is gone already: _sdk)
+            self._release()
+            path.unlink(missing_ok=True)
+            # every later call raises this, as after any failed write; close() lets the writer go
+            self.write_error = RecordingWriteError(path, 0, exc.cause, begun=False)
+            raise self.write_error from None
 
     # ------------------------------------------------------------------ channels
 

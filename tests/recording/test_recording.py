@@ -538,3 +538,69 @@ def test_a_recording_whose_metadata_does_not_fit_leaves_no_empty_file(tmp_path, 
         RecordingWriter(p, META)
     assert str(exc.value).startswith(f"cannot create recording {p}: no space left on its disk")
     assert "nothing was left under its name" in str(exc.value) and not p.exists()
+
+
+class _FailingFlush:
+    """An SDK writer whose flush fails as on a full disk ("I/O error from writing")."""
+
+    def __init__(self, sdk):
+        self.sdk = sdk
+
+    def flush(self):
+        raise RuntimeError("FoxgloveError: MCAP error: I/O error from writing")
+
+    def __getattr__(self, name):
+        return getattr(self.sdk, name)
+
+
+def test_a_failed_write_in_a_later_segment_counts_that_files_frames(tmp_path):
+    """'the N frame(s) written before are kept' named the segment's file but counted the run's frames:
+    11 said of a file holding 1."""
+    rng = np.random.default_rng(0)
+    w = RecordingWriter(tmp_path / "a.mcap", META)
+    for k in range(10):
+        t, xyz, tp, refl = frame(rng, k, 50)
+        w.write_points(t, k, xyz, tp, refl)
+    w.next_segment(tmp_path / "b.mcap")
+    for k in range(10, 12):
+        t, xyz, tp, refl = frame(rng, k, 50)
+        w.write_points(t, k, xyz, tp, refl)
+    w._w = _FailingFlush(w._w)
+    with pytest.raises(UserError) as exc:
+        t, xyz, tp, refl = frame(rng, 12, 50)
+        w.write_points(t, 12, xyz, tp, refl)
+    w.close()
+    kept = len(list(RecordingReader(tmp_path / "b.mcap").points()))
+    assert kept == 1 and w.write_error.frames_kept == kept
+    assert str(exc.value).startswith(f"cannot write recording {tmp_path / 'b.mcap'}:")
+    assert "the 1 frame(s) written before are kept" in str(exc.value), str(exc.value)
+    assert len(list(RecordingReader(tmp_path / "a.mcap").points())) == 10
+
+
+def test_a_segment_whose_metadata_does_not_fit_leaves_no_empty_file(tmp_path, monkeypatch):
+    """As for the first file: the new segment's empty file was left on the full disk and said to keep
+    the frames written before."""
+    import errno
+
+    rng = np.random.default_rng(0)
+    w = RecordingWriter(tmp_path / "c.mcap", META)
+    for k in range(5):
+        t, xyz, tp, refl = frame(rng, k, 50)
+        w.write_points(t, k, xyz, tp, refl)
+
+    def full(self, md):
+        def write():
+            raise OSError(errno.ENOSPC, "No space left on device")
+        self._sdk(write)
+
+    monkeypatch.setattr(RecordingWriter, "_write_meta", full)
+    e = tmp_path / "e.mcap"
+    with pytest.raises(UserError) as exc:
+        w.next_segment(e)
+    monkeypatch.undo()
+    assert str(exc.value).startswith(f"cannot create recording {e}: no space left on its disk")
+    assert "nothing was left under its name" in str(exc.value) and not e.exists()
+    with pytest.raises(UserError, match="cannot create recording"):      # and the same for any call after it
+        w.write_detection(0, 0, False)
+    w.close()
+    assert len(list(RecordingReader(tmp_path / "c.mcap").points())) == 5
