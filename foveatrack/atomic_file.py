@@ -42,7 +42,7 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
     synced before the rename and the directory after it (best-effort: the file is replaced by then).  A symlink at ``path`` is written through:
     its target is replaced."""
     final = Path(os.path.realpath(path))
-    tmp = None
+    tmp = name = None      # name: the temporary being made (a refused creation names it, tmp still None)
     renaming = False
     try:
         while tmp is None:
@@ -76,9 +76,11 @@ def written_whole(path: str | os.PathLike, fsync: bool = False) -> Iterator[Path
             # (EXDEV) is not the output's to be named by
             raise
         if isinstance(exc, OSError) and exc.errno is not None and (
-                exc.filename is None or str(exc.filename) == str(tmp)):
-            # a write that failed (a full disk) names no file, or the hidden temporary: the output's own
-            # name is the one the user gave (an export on a full disk said only "No space left on device")
+                exc.filename is None or str(exc.filename) in (str(tmp), str(name))):
+            # a write that failed (a full disk) names no file, or the hidden temporary (its creation refused
+            # too: 'export --csv /sys/out.csv' said '/sys/.out.csv.1a2b3c4d.tmp: Permission denied'): the
+            # output's own name is the one the user gave (an export on a full disk said only "No space left
+            # on device")
             raise type(exc)(exc.errno, exc.strerror, str(path)) from None
         raise
     if fsync:

@@ -192,3 +192,22 @@ def test_a_rename_that_fails_otherwise_keeps_its_own_names(tmp_path, monkeypatch
         with written_whole(out) as tmp:
             tmp.write_text("x")
     assert exc.value.errno == errno.EXDEV and exc.value.filename == str(tmp) and _listing(tmp_path) == []
+
+
+def test_a_temporary_that_cannot_be_made_is_said_of_the_output(tmp_path, monkeypatch):
+    """'export --csv /sys/out.csv' said '/sys/.out.csv.1a2b3c4d.tmp: Permission denied'."""
+    import errno
+
+    out = tmp_path / "out.csv"
+    real_open = os.open
+
+    def denied(path, flags, *args, **kwargs):
+        if flags & os.O_CREAT:
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", denied)
+    with pytest.raises(PermissionError) as exc:
+        with written_whole(out):
+            pass
+    assert exc.value.filename == str(out) and ".tmp" not in str(exc.value)
