@@ -243,9 +243,10 @@ def _recover(path: Path, real: Path, journal, progress) -> Recovery:
                 "frames": res.frames, "reader_problem": res.reader_problem})
     except RecordingWriteError as exc:
         # the completed copy, not the recording, could not be written: say it of the recording
+        # the space it needs is said for a full disk only (not an I/O error, a quota, a file-size limit)
+        need = (f"; it needs about {real.stat().st_size:,} bytes free in {real.parent}" if exc.disk_full else "")
         raise UserError(f"{path}: not recovered: its completed copy could not be written beside it "
-                        f"({exc.why}); it needs about {path.stat().st_size:,} bytes free in "
-                        f"{path.parent}; nothing was changed") from None
+                        f"({exc.why}){need}; nothing was changed") from None
     except RenameRefused as exc:
         # the probe above showed the directory takes a new file: what is refused is the rename over it
         raise UserError(f"{path}: not recovered: the completed copy could not replace it "
@@ -265,9 +266,9 @@ def _check_can_replace(path: Path, real: Path) -> None:
         os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o600))
     except OSError as exc:
         raise UserError(f"{path}: not recovered: recover writes the completed file beside it and renames it "
-                        f"over it, and {real.parent} does not take a new file ({exc.strerror or exc}); nothing "
-                        f"was changed: copy the recording and its {path.name}.commands.jsonl to a directory "
-                        "you can write, and recover the copy") from None
+                        f"over it, and {real.parent} does not take a new file ({exc.strerror or exc}): copy the "
+                        f"recording and its {path.name}.commands.jsonl to a directory you can write, and "
+                        "recover the copy; nothing was changed") from None
     tmp.unlink(missing_ok=True)
 
 

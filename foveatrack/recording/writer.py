@@ -106,6 +106,7 @@ class RecordingWriteError(UserError):
     def __init__(self, path: Path, frames_kept: int, cause: BaseException, begun: bool = True):
         self.path, self.frames_kept, self.cause = path, frames_kept, cause
         self.why = _why_write_failed(path, cause)     # what failed, in words ("no space left on its disk ...")
+        self.disk_full = _disk_full(path, cause) is not None   # told as _why_write_failed tells it
         if not begun:       # its metadata did not fit: the file was removed, nothing was recorded
             super().__init__(f"cannot create recording {path}: {self.why}; nothing was left under its name")
             return
@@ -119,9 +120,10 @@ class RecordingWriteError(UserError):
 FULL_DISK_BYTES = 16 * 1024 * 1024
 
 
-def _why_write_failed(path: Path, exc: BaseException) -> str:
-    """In words.  The SDK says only "I/O error from writing" (the OS's errno stays inside it), so a
-    full disk is told by the free space of the file system the file is on."""
+def _disk_full(path: Path, exc: BaseException) -> tuple[int | None] | None:
+    """Whether a failed write was a full disk: ``(free bytes or None,)`` if so, else None.  The SDK says
+    only "I/O error from writing" (the OS's errno stays inside it), so a full disk is told by ENOSPC or
+    by the free space of the file system the file is on."""
     err = getattr(exc, "errno", None)
     try:
         st = os.statvfs(path.parent)
@@ -129,6 +131,15 @@ def _why_write_failed(path: Path, exc: BaseException) -> str:
     except OSError:
         free = None
     if err == errno.ENOSPC or (free is not None and free < FULL_DISK_BYTES):
+        return (free,)
+    return None
+
+
+def _why_write_failed(path: Path, exc: BaseException) -> str:
+    """In words (a full disk: :func:`_disk_full`)."""
+    full = _disk_full(path, exc)
+    if full is not None:
+        free = full[0]
         return "no space left on its disk" + (f" ({free:,} bytes free on the file system of {path.parent})"
                                               if free is not None else "")
     return (exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc) or type(exc).__name__)

@@ -409,3 +409,41 @@ def test_a_second_recover_of_the_same_file_is_refused_while_the_first_runs(tmp_p
     msg = str(second[0])
     assert msg == f"{cut} is being recovered by another process; let it finish, nothing was changed", msg
     assert recover(cut).already_complete           # the lock is let go after the rename
+
+
+def test_only_a_full_disk_is_said_to_need_space_and_every_error_ends_nothing_was_changed(tmp_path, monkeypatch):
+    """'it needs about N bytes free' was said for any failed write of the copy (an I/O error too); the
+    probe's refusal ended '...recover the copy', not 'nothing was changed' as every other one does."""
+    import errno
+    from types import SimpleNamespace
+
+    import foveatrack.recording.writer as writer_mod
+
+    cut, _ = _cut_short(tmp_path)
+    before = cut.read_bytes()
+
+    def eio(self, md):
+        def write():
+            raise OSError(errno.EIO, "Input/output error")
+        self._sdk(write)
+
+    monkeypatch.setattr(RecordingWriter, "_write_meta", eio)
+    monkeypatch.setattr(writer_mod.os, "statvfs", lambda _p: SimpleNamespace(f_bavail=10**9, f_frsize=4096))
+    with pytest.raises(UserError) as exc:
+        recover(cut)
+    msg = str(exc.value)
+    assert "(Input/output error); nothing was changed" in msg and "bytes free" not in msg, msg
+    monkeypatch.undo()
+    _unchanged(cut, before)
+
+    real_open = os.open
+
+    def denied(path, *args, **kwargs):
+        if str(path).endswith(".tmp"):
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_open(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", denied)
+    with pytest.raises(UserError) as exc:
+        recover(cut)
+    assert str(exc.value).endswith("nothing was changed"), str(exc.value)
