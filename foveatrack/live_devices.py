@@ -65,8 +65,7 @@ def open_head(config):
                         "this one its own head")
     if not head.connected and head.last_open_errno in (errno.EACCES, errno.EPERM):
         # the port is there, but not this user's: "start a server first" would send them the wrong way
-        raise UserError(f"{config.path} [head]: port {h.port!r} exists but this user may not open it "
-                        f"({head.last_open_error}); {_port_access_advice(open_path)}")
+        raise UserError(_access_denied_text(config, open_path, head.last_open_errno, head.last_open_error))
     if not head.connected:
         # A port that is wrong at start (a typo, an adapter not plugged in, a regular file, a server not
         # started) would otherwise leave the driver commanding no head, silently: the link reconnects by
@@ -78,25 +77,45 @@ def open_head(config):
     return head
 
 
+def _access_denied_text(config, open_path: str, err: int, error: str) -> str:
+    """The message for a head port the system refused this user (EACCES, EPERM), blamed on where the
+    port was given (:meth:`~foveatrack.device_config.DaemonConfig.named_head_port`: a ``--serial`` port
+    is not the config file's).  A device path gets who may open it and how to become one of them
+    (:func:`_port_access_advice`); a pyserial URL (``socket://``, ``rfc2217://``) is no device node, so
+    the group and udev advice would be wrong for it: its own error is all there is to say."""
+    import os
+
+    reason = os.strerror(err)
+    if "://" in open_path:
+        return f"{config.named_head_port()} was refused ({error}); check that this user may connect to it"
+    # pyserial's text repeats the errno and the path ("[Errno 13] could not open port P: [Errno 13]
+    # Permission denied: 'P'"): the reason in words is enough beside the port's name
+    return (f"{config.named_head_port()} exists but this user may not open it ({reason}); "
+            f"{_port_access_advice(open_path)}")
+
+
 def _port_access_advice(path: str) -> str:
     """What to do about a serial device this user may not open: join the group that may (a USB
-    adapter's /dev/ttyUSB0 is ``root:dialout``, mode 660), or give the device a udev rule."""
+    adapter's /dev/ttyUSB0 is ``root:dialout``, mode 660), or give the device a udev rule.  Who may
+    open it is said by :func:`foveatrack.errors.access_text`, as for every file this user may not use."""
     import getpass
     import os
     import stat
 
-    from foveatrack.errors import owner_names
+    from foveatrack.errors import access_text, owner_names
 
     user = getpass.getuser()
     try:
         st = os.stat(path)
     except OSError:
+        st = None
+    who = access_text(path)
+    if st is None or not who:
         return (f"add {user} to the serial devices' group (sudo usermod -aG dialout {user}, then log in again) "
                 "or give the device a udev rule (GROUP=\"dialout\", MODE=\"0660\")")
 
     owner, group = owner_names(st)
-    node = (f"{os.path.realpath(path)} is owner {owner}, group {group}, "
-            f"mode {stat.S_IMODE(st.st_mode):03o}")
+    node = f"{os.path.realpath(path)} is {who}"
     if st.st_gid != 0 and st.st_mode & stat.S_IRGRP and st.st_mode & stat.S_IWGRP:
         return (f"{node}: add {user} to group {group} (sudo usermod -aG {group} {user}, then log in again), "
                 "or give the device a udev rule")

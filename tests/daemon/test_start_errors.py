@@ -191,3 +191,44 @@ def test_a_head_port_this_user_may_not_open_says_so_and_what_to_do(tmp_path, mon
     else:
         assert "mode 600" in msg and "udev rule" in msg and 'GROUP="dialout"' in msg, msg
     assert not (tmp_path / "runs").exists()
+
+
+def test_a_serial_option_port_this_user_may_not_open_is_not_blamed_on_the_config(tmp_path, monkeypatch):
+    """A head port given by --serial that the user may not open was blamed on the config file
+    ("d.toml [head]: port ..."), whose port was right; the message said "[Errno 13]" twice and
+    formatted owner, group and mode by hand (review).  It names --serial, says the reason once and
+    who may open the device in the words of every other permission message (errors.access_text)."""
+    import serial
+
+    from foveatrack.errors import access_text
+    from foveatrack.live_devices import open_head
+
+    port = tmp_path / "ttyUSB1"
+    port.write_text("")
+    port.chmod(0o600)
+    monkeypatch.setattr(serial, "serial_for_url", _denied)
+    config = _daemon(tmp_path, "/dev/ttyUSB0").cfg.with_head_port(str(port), "--serial")
+    with pytest.raises(UserError) as exc:
+        open_head(config)
+    msg = str(exc.value)
+    assert msg.startswith(f"--serial {str(port)!r} exists but this user may not open it"), msg
+    assert str(config.path) not in msg and "[head]" not in msg and "/dev/ttyUSB0" not in msg, msg
+    assert "Permission denied" in msg and "Errno" not in msg, msg
+    assert f"is {access_text(port)}" in msg and "udev rule" in msg, msg
+
+
+def test_a_refused_pyserial_url_gets_no_device_advice(tmp_path, monkeypatch):
+    """A socket:// or rfc2217:// head port refused with EACCES is no device node: no group to join, no
+    udev rule to write (the review found the dialout/udev advice given for any port)."""
+    import serial
+
+    from foveatrack.live_devices import open_head
+
+    monkeypatch.setattr(serial, "serial_for_url", _denied)
+    config = _daemon(tmp_path, "socket://127.0.0.1:4001").cfg
+    with pytest.raises(UserError) as exc:
+        open_head(config)
+    msg = str(exc.value)
+    assert msg.startswith(f"{config.path} [head]: port 'socket://127.0.0.1:4001' was refused"), msg
+    assert "Permission denied" in msg, msg
+    assert "dialout" not in msg and "udev" not in msg and "usermod" not in msg and "gimbal serve" not in msg, msg
