@@ -171,8 +171,11 @@ class DaemonConfig:
                        "measure the table first: foveatrack calibrate --config THIS.toml --corner X Y Z --out "
                        "table.json, then speed_table = \"table.json\"")
         else:
-            # a table a user supplies: speeds that fall as the byte rises, bytes it has no speed for
-            out += [f"{self.path} [head] speed_table {self.head.speed_table!r}: {p}" for p in self.speed_table().problems()]
+            # a table a user supplies: speeds that fall as the byte rises, bytes it has no speed for (up
+            # to the bytes this config may send: calibrate --config measures none above them)
+            limits = {"pan": self.head.max_pan_byte, "tilt": self.head.max_tilt_byte}
+            out += [f"{self.path} [head] speed_table {self.head.speed_table!r}: {p}"
+                    for p in self.speed_table().problems(max_byte=limits)]
         if self.sky and isinstance(self.tracker_table["sky"], dict) and \
                 "field_half_angle_deg" not in self.tracker_table["sky"]:
             out.append(f"{self.path} [tracker.sky] has no field_half_angle_deg: every track counts as in the lidar's "

@@ -237,22 +237,30 @@ class AxisTable:
         """(speed, sigma) over bytes 0..63 and turbo at index 64 [deg/s]; NaN = unknown."""
         return self._speed.copy(), self._sigma.copy()
 
-    def problems(self) -> list[str]:
+    def problems(self, max_byte: int = 63) -> list[str]:
         """What in this axis's speeds the tracker runs with but steers wrong by, each in words naming
         the bytes at fault (empty: none).  Such a table is not refused (the inverse works on any
         table with a speed > 0); it is said.
+
+        ``max_byte``: the highest byte the head may be sent (a config's ``[head] max_pan_byte`` /
+        ``max_tilt_byte``; 63 where there is no limit).  Bytes above it are never sent whatever the
+        table says, so their missing speeds are nobody's problem: ``calibrate --config`` measures none
+        of them (its plan drops them), and the table it writes was said to lack them at every start.
 
         * Speeds that fall as the byte rises: a known speed below that of a lower byte by more than
           3 sigma of the two (a measured table's slow bytes scatter about 0 within their sigmas;
           an entry without a sigma counts 0), and a turbo slower than the fastest byte (turbo is the
           device's fastest).  The tracker picks the byte of the nearest speed and interpolates
           between known ones, so around such bytes it turns at speeds the head does not have.
-        * Bytes above the highest known speed: they have none and are never sent, so the tracker's
-          fastest turn is less than the head's.  Below the lowest, only more than
+        * Bytes above the highest known speed, up to ``max_byte``: they have none and are never sent,
+          so the tracker's fastest turn is less than the head's.  Below the lowest, only more than
           ``MAX_INTERPOLATED_RUN`` of them (the slowest turn is then far from a stop; the bytes under a
           table starting at 4 barely move a PTS-303H).
-        * More than ``MAX_INTERPOLATED_RUN`` bytes in a row between two known speeds: interpolated.
+        * More than ``MAX_INTERPOLATED_RUN`` bytes in a row (up to ``max_byte``) between two known
+          speeds: interpolated.
         """
+        if not 0 <= max_byte <= 63:
+            raise ValueError(f"max_byte must be 0..63, got {max_byte}")
         out = []
         knots = sorted((e for e in self.entries if math.isfinite(e.speed_deg_s) and e.byte != TURBO),
                        key=lambda e: e.byte)
@@ -283,11 +291,14 @@ class AxisTable:
             out.append(f"{self.axis} bytes {byte_ranges(range(lo))} have no speed (the lowest listed is {lo}): "
                        f"they are never sent, and the slowest {self.axis} turn is byte {lo}'s "
                        f"{knots[0].speed_deg_s:.4g} deg/s")
-        if hi < 63:
-            out.append(f"{self.axis} bytes {byte_ranges(range(hi + 1, 64))} have no speed (the highest listed is "
-                       f"{hi}): they are never sent, and the fastest {self.axis} turn is "
+        if hi < max_byte:
+            limit = "" if max_byte == 63 else f", the highest the head may be sent {max_byte}"
+            out.append(f"{self.axis} bytes {byte_ranges(range(hi + 1, max_byte + 1))} have no speed (the highest "
+                       f"listed is {hi}{limit}): they are never sent, and the fastest {self.axis} turn is "
                        f"{self.max_speed_deg_s(False):.4g} deg/s" + (" without turbo" if self.axis == "pan" else ""))
-        gaps = [(a.byte, b.byte) for a, b in zip(knots, knots[1:]) if b.byte - a.byte - 1 > MAX_INTERPOLATED_RUN]
+        # a run of interpolated bytes counts only as far as the bytes that may be sent
+        gaps = [(a.byte, b.byte) for a, b in zip(knots, knots[1:])
+                if min(b.byte, max_byte + 1) - a.byte - 1 > MAX_INTERPOLATED_RUN]
         if gaps:
             said = ", ".join(f"{byte_ranges(range(a + 1, b))} (between {a} and {b})" for a, b in gaps)
             out.append(f"{self.axis} speeds are interpolated over more than {MAX_INTERPOLATED_RUN} bytes in a row: "
@@ -324,9 +335,13 @@ class SpeedTable:
     def unmeasured(self) -> dict[str, tuple[int, ...]]:
         return {a: self.axis(a).unmeasured_bytes for a in AXES}
 
-    def problems(self) -> list[str]:
-        """Both axes' :meth:`AxisTable.problems`: what a user who supplies this table must hear."""
-        return self.pan.problems() + self.tilt.problems()
+    def problems(self, max_byte: dict[str, int] | None = None) -> list[str]:
+        """Both axes' :meth:`AxisTable.problems`: what a user who supplies this table must hear.
+
+        ``max_byte``: ``{"pan": .., "tilt": ..}``, the highest byte each axis may be sent (a daemon
+        config's ``[head]`` limits); missing (a scene's table): 63, every byte."""
+        lim = max_byte or {}
+        return self.pan.problems(lim.get("pan", 63)) + self.tilt.problems(lim.get("tilt", 63))
 
     # ---- defaults ------------------------------------------------------------------------------
     @classmethod

@@ -232,3 +232,23 @@ def test_check_names_the_bytes_a_supplied_speed_table_steers_wrong(tmp_path):
     p = _write(tmp_path, head=FULL["head"] + f'\nspeed_table = "{ROOT / "examples" / "pts303h-unit3-speed-table.json"}"')
     r = _cli("daemon", "--config", str(p), "--check")
     assert r.returncode == 0 and "WARNING" not in r.stderr, r.stderr
+
+
+def test_a_table_measured_under_the_configs_byte_limits_is_not_said_to_lack_the_bytes_above_them(tmp_path):
+    # `calibrate --config` under [head] max_pan_byte = 40 measures no pan byte above 40 (its plan drops
+    # them): every start and --check then warned that "pan bytes 41-63 have no speed ... never sent",
+    # bytes this config forbids anyway (review).  Missing bytes are said only up to the limit.
+    import json
+
+    d = json.loads((ROOT / "examples" / "pts303h-unit3-speed-table.json").read_text())
+    d["axes"]["pan"]["entries"] = [e for e in d["axes"]["pan"]["entries"] if e["byte"] != "turbo" and e["byte"] <= 40]
+    (tmp_path / "table.json").write_text(json.dumps(d))
+    warnings = load_config(_write(tmp_path, head=FULL["head"] + '\nspeed_table = "table.json"\nmax_pan_byte = 40'
+                                  '\nallow_turbo = false')).warnings()
+    assert not [w for w in warnings if "speed_table" in w], warnings
+    # a limit above the table's highest byte: the bytes between are said, and only those
+    warnings = load_config(_write(tmp_path, head=FULL["head"] + '\nspeed_table = "table.json"\nmax_pan_byte = 50'
+                                  '\nallow_turbo = false')).warnings()
+    said = [w for w in warnings if "speed_table" in w]
+    assert len(said) == 1 and "pan bytes 41-50 have no speed (the highest listed is 40, the highest the head may " \
+                              "be sent 50)" in said[0], said

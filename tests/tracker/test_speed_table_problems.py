@@ -109,3 +109,17 @@ def test_a_scenes_speed_table_file_is_judged_as_a_daemon_configs_is(tmp_path, ca
     # the simulated unit's own tables are not files: nothing to say
     scene.write_text(scene.read_text().replace('"swapped.json"', '"nominal"'))
     assert not [w for w in load_scene(scene).warnings() if "speed_table" in w]
+
+
+def test_bytes_above_the_highest_that_may_be_sent_are_not_missing():
+    # a table measured under [head] max_tilt_byte = 40 (calibrate --config drops the bytes above it)
+    table = _axis("tilt", _linear(list(range(0, 41, 4))))
+    assert table.problems(max_byte=40) == []
+    assert [p for p in table.problems() if "41-63 have no speed" in p]          # no limit: every byte counts
+    said = table.problems(max_byte=45)
+    assert len(said) == 1 and "tilt bytes 41-45 have no speed" in said[0], said
+    # an interpolated run counts only up to the limit: 24 -> 63 leaves 25-40 unknown below a limit of 40
+    assert len(_axis("pan", _linear([0, 4, 8, 12, 16, 20, 24, 63])).problems(max_byte=31)) == 0
+    assert "25-62 (between 24 and 63)" in _axis("pan", _linear([0, 4, 8, 12, 16, 20, 24, 63])).problems(max_byte=40)[0]
+    both = SpeedTable(_axis("pan", _linear(range(0, 41, 4))), table)
+    assert both.problems({"pan": 40, "tilt": 40}) == [] and len(both.problems()) == 2
