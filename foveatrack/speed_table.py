@@ -302,8 +302,9 @@ class AxisTable:
         if gaps:
             said = ", ".join(f"{byte_ranges(range(a + 1, b))} (between {a} and {b})" for a, b in gaps)
             out.append(f"{self.axis} speeds are interpolated over more than {MAX_INTERPOLATED_RUN} bytes in a row: "
-                       f"{said}: the speeds there are guesses (known only at 4, 8, 16, 32 and 63, the tracker's "
-                       "were several percent off); measure at least every 4th byte")
+                       f"{said}: the speeds there are interpolated guesses; measure at least every "
+                       f"{MAX_INTERPOLATED_RUN + 1}th byte (a table known only at 4, 8, 16, 32 and 63 once steered "
+                       "the tracker several percent off)")
         return out
 
 
