@@ -97,8 +97,13 @@ def cmd_daemon(args) -> int:
     if args.config is None:
         raise UserError("daemon: --config FILE.toml is required (examples/daemon-virtual.toml)")
     cfg = load_config(args.config)
+    from foveatrack.daemon.support import StatusLine
+
+    # stderr in a file on a full disk: what cannot be said is not said, and the daemon runs (and exits
+    # with its own code) all the same; a print raised ENOSPC and ended the command with 1
+    say = StatusLine(sys.stderr, enabled=False).note
     for w in cfg.warnings():
-        print(f"foveatrack daemon: WARNING: {w}", file=sys.stderr)
+        say(f"foveatrack daemon: WARNING: {w}")
     if args.check:
         from foveatrack.daemon.runtime import daemon_controller
 
@@ -134,10 +139,12 @@ def cmd_daemon(args) -> int:
     s = d.final_stats
     timing = (f"processing p99 {s['processing_ms_p99']} ms, latency p99 {s.get('latency_ms_p99', float('nan'))} ms"
               if "processing_ms_p99" in s else "no frame processed")
-    print(f"foveatrack daemon: {s.get('frames', 0)} frames, {s.get('frames_detected', 0)} with a detection; {timing}"
-          f"{'; recording ' + str(d.recording_path) if d.recording_path else ''}", file=sys.stderr)
+    # through the daemon's status line: a stderr that failed during the run (ENOSPC) is not written
+    # again, and a failure here does not replace the run's exit code
+    d.status.note(f"foveatrack daemon: {s.get('frames', 0)} frames, {s.get('frames_detected', 0)} with a "
+                  f"detection; {timing}{'; recording ' + str(d.recording_path) if d.recording_path else ''}")
     for problem in d.problems():
-        print(f"foveatrack daemon: {problem}", file=sys.stderr)
+        d.status.note(f"foveatrack daemon: {problem}")
     if code == 0 and d.no_lidar_data:
         return NO_LIDAR_DATA_EXIT     # a run that never heard the lidar did not do its job
     return code

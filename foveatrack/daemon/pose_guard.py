@@ -179,5 +179,5 @@ class PoseGuard:
         d.log.event("head_identity_refused", port=h.port, why=why, frames_sent=d.head.stats.frames_sent,
                     **res.as_event())
         d._record(_job_event, ns(frame.t_end_s), {"event": "head_identity_refused", "why": why})
-        print(f"foveatrack daemon: {why}", file=__import__("sys").stderr, flush=True)
+        d.status.note(f"foveatrack daemon: {why}")     # on the tick: a failed stderr must not end it
         return True

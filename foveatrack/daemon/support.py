@@ -75,31 +75,44 @@ def _plain(x):
 
 
 class StatusLine:
-    """One live line on a terminal (``\\r`` + clear to end of line); silent when not a TTY."""
+    """One live line on a terminal (``\\r`` + clear to end of line); silent when not a TTY.
+
+    A write that fails (stderr redirected to a file on a full disk: ENOSPC; a closed pipe) ends the
+    writing to that stream, kept in :attr:`error`, and is never raised: the daemon says its warnings
+    from the control loop's tick, and a warning about the full disk must not end the tracking."""
 
     def __init__(self, stream=None, enabled: bool | None = None):
         self.stream = stream or sys.stderr
         self.enabled = self.stream.isatty() if enabled is None else enabled
         self._shown = False
+        self.error: OSError | None = None    # the write that failed; nothing is written after it
+
+    def _write(self, text: str) -> bool:
+        if self.error is not None:
+            return False
+        try:
+            self.stream.write(text)
+            self.stream.flush()
+        except OSError as exc:
+            self.error = exc
+            return False
+        return True
 
     def show(self, text: str) -> None:
-        if self.enabled:
-            self.stream.write("\r" + text + "\x1b[K")
-            self.stream.flush()
+        if self.enabled and self._write("\r" + text + "\x1b[K"):
             self._shown = True
 
     def note(self, text: str) -> None:
         """A line of its own, on a terminal or not (a daemon under systemd or with stderr in a file has
         no status line, and heard of a silent lidar only at its exit): above the status line, which
         the next :meth:`show` draws again."""
-        self.stream.write(("\r\x1b[K" if self.enabled and self._shown else "") + text + "\n")
-        self.stream.flush()
+        self._write(("\r\x1b[K" if self.enabled and self._shown else "") + text + "\n")
         self._shown = False
 
     def done(self) -> None:
         if self.enabled and self._shown:
-            self.stream.write("\n")
-            self.stream.flush()
+            self._write("\n")
+        self._shown = False
 
 
 def format_status(rate_hz, pts, state, err_pan, err_tilt, latency_ms, drops, head_ok, lidar_note="") -> str:

@@ -96,3 +96,49 @@ def test_the_daemon_says_once_what_a_full_disk_stopped_and_tracks_on(tmp_path, c
     finally:
         d._shutdown()        # sends its STOP through the failed journal: must not raise
     assert d.final_stats is not None
+
+
+def test_a_stderr_on_a_full_disk_does_not_end_the_tick(tmp_path):
+    # stderr redirected to a file on the same full disk (2>>daemon.err): the tick's warning about the
+    # full disk raised ENOSPC out of _watch_outputs and ended the tracking (review)
+    from foveatrack.daemon.support import StatusLine
+
+    d = _daemon(tmp_path)
+    d._open()
+    full = open(FULL, "w")
+    try:
+        d.log = JsonLog(FULL)
+        d.log.event("progress")
+        d.status = StatusLine(stream=full, enabled=True)
+        d.status.show("10.0 Hz")                  # the status line itself: not raised either
+        d._watch_outputs()                        # says the log's failure: the write fails, the tick goes on
+        assert d.status.error is not None and d.status.error.errno == errno.ENOSPC
+        d.status.note("and nothing more is tried")
+        d.status.done()
+    finally:
+        d.status = StatusLine(enabled=False)
+        d._shutdown()
+        try:
+            full.close()                         # its buffer still holds what could not be written
+        except OSError:
+            pass
+    assert d.final_stats is not None
+
+
+@pytest.mark.parametrize("table", ["nominal", "example"])
+def test_a_daemon_with_stderr_on_a_full_disk_runs_and_exits_with_its_own_code(tmp_path, table):
+    # the start's warnings (the nominal table has one) and the last lines (frames, problems: the
+    # example table has no start warning) were print()s: ENOSPC ended the command with 1, before the
+    # run or after it; now it runs and exits 3 (no lidar data, as with a writable stderr)
+    import subprocess
+    import sys
+
+    from daemon_procs import ROOT, env
+
+    speed_table = "nominal" if table == "nominal" else str(ROOT / "examples" / "pts303h-unit3-speed-table.json")
+    cfg = tmp_path / "d.toml"
+    cfg.write_text(f'{silent_lidar_table()}[head]\nport = "loop://"\nspeed_table = "{speed_table}"\n')
+    with open(FULL, "w") as full:
+        r = subprocess.run([sys.executable, "-m", "foveatrack", "daemon", "--config", str(cfg), "--duration-s", "1",
+                            "--no-status"], cwd=ROOT, env=env(), stdout=subprocess.PIPE, stderr=full, timeout=120)
+    assert r.returncode == 3, r.returncode
