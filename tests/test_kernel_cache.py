@@ -21,15 +21,20 @@ from foveatrack.cli import kernel_cache
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture
-def unwritable(tmp_path, monkeypatch):
+def _make_unwritable(tmp_path, monkeypatch):
     """The sources' and the user's cache directories not writable for this user; a temporary
-    directory of the test's own."""
+    directory of the test's own.  What choose() sets -- the environment's ``NUMBA_CACHE_DIR`` and the
+    imported numba's ``config.CACHE_DIR`` -- is undone with ``monkeypatch``: left set, every kernel
+    defined later in the pytest session cached into this test's temporary directory (and, with the
+    tests in random order, recompiled there)."""
+    import numba
+
     home_cache = tmp_path / "home" / ".cache"
     (tmp_path / "home").mkdir()
     monkeypatch.setenv("XDG_CACHE_HOME", str(home_cache))
-    monkeypatch.setenv("NUMBA_CACHE_DIR", "")     # what choose() sets is undone after the test
+    monkeypatch.setenv("NUMBA_CACHE_DIR", "")
     monkeypatch.delenv("NUMBA_CACHE_DIR")
+    monkeypatch.setattr(numba.config, "CACHE_DIR", numba.config.CACHE_DIR)
     monkeypatch.setattr(kernel_cache.tempfile, "tempdir", str(tmp_path / "tmp"))
     (tmp_path / "tmp").mkdir()
     real_access = os.access
@@ -42,6 +47,25 @@ def unwritable(tmp_path, monkeypatch):
 
     monkeypatch.setattr(os, "access", access)
     return tmp_path
+
+
+@pytest.fixture
+def unwritable(tmp_path, monkeypatch):
+    return _make_unwritable(tmp_path, monkeypatch)
+
+
+def test_what_choose_sets_is_undone_after_the_test(tmp_path):
+    import numba
+
+    before = (os.environ.get("NUMBA_CACHE_DIR"), numba.config.CACHE_DIR)
+    mp = pytest.MonkeyPatch()
+    try:
+        _make_unwritable(tmp_path, mp)
+        kernel_cache.choose()
+        assert numba.config.CACHE_DIR.startswith(str(tmp_path))      # choose() set it...
+    finally:
+        mp.undo()
+    assert (os.environ.get("NUMBA_CACHE_DIR"), numba.config.CACHE_DIR) == before    # ...and it is undone
 
 
 def test_no_writable_cache_gets_a_private_one_and_a_note(unwritable, monkeypatch):
