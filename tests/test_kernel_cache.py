@@ -89,6 +89,28 @@ def test_a_cache_dir_others_may_write_is_never_used(unwritable):
     assert got != planted and got.parent == unwritable / "tmp" and stat.S_IMODE(got.stat().st_mode) == 0o700
 
 
+def test_a_cache_of_this_runs_own_is_not_said_to_be_loaded_by_later_runs(unwritable):
+    """mkdtemp makes a new directory at every run: "later runs load them" (warmup, the compile) was
+    false; the note and the messages say the cache is this run's own and how to keep the kernels."""
+    planted = unwritable / "tmp" / f"foveatrack-numba-cache-{os.geteuid()}"
+    planted.mkdir()
+    planted.chmod(0o777)
+    note = kernel_cache.choose()
+    got = os.environ["NUMBA_CACHE_DIR"]
+    assert f"{planted} is not this user's alone" in note and f"cached in {got}, this run's own" in note, note
+    assert "compiled again at every run" in note and "NUMBA_CACHE_DIR to a directory" in note, note
+    assert "first run" not in note, note
+    said = kernel_cache.cached_text()
+    assert "later runs load them" not in said and f"in {got}, this run's own" in said, said
+    assert "every run compiles them again" in said and "set NUMBA_CACHE_DIR" in said, said
+
+
+def test_a_kept_cache_is_said_to_be_loaded_by_later_runs(unwritable):
+    kernel_cache.choose()
+    cache = unwritable / "tmp" / f"foveatrack-numba-cache-{os.geteuid()}"
+    assert kernel_cache.cached_text() == f"cached in {cache}; later runs load them"
+
+
 def test_numba_s_own_choice_stands_where_it_can_write(tmp_path, monkeypatch):
     monkeypatch.setenv("NUMBA_CACHE_DIR", "")
     monkeypatch.delenv("NUMBA_CACHE_DIR")

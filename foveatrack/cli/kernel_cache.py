@@ -11,8 +11,11 @@ kernel ended in that traceback.
 :func:`choose` is called by the CLI before any command runs: in that case it points numba at a
 directory of this user's own under the system's temporary directory (``NUMBA_CACHE_DIR``, which the
 compile processes inherit) and says so on stderr; the run compiles there (about a minute the first
-time) and later runs load it, as long as the temporary directory keeps it.  A ``NUMBA_CACHE_DIR``
-the user set is left as it is.
+time) and later runs load it, as long as the temporary directory keeps it.  Where that directory's
+fixed name is taken by one this user may not trust (another user's, a link, one anybody may write),
+the run gets a new directory of its own (``mkdtemp``): that cache is this run's alone, every run
+compiles the kernels again, and the messages say so and how to keep them (set ``NUMBA_CACHE_DIR`` to
+a directory of this user's).  A ``NUMBA_CACHE_DIR`` the user set is left as it is.
 """
 
 from __future__ import annotations
@@ -27,6 +30,10 @@ from foveatrack.errors import UserError
 
 #: the directory whose ``__pycache__`` numba caches the package's kernels in (foveatrack/)
 SOURCES = Path(__file__).resolve().parents[1]
+#: the name prefix of a cache directory made for one run alone (the fixed name was not this user's):
+#: what tells the messages, in this process and the compile processes (``NUMBA_CACHE_DIR``), that no
+#: later run will load it
+RUN_OWN_PREFIX = "foveatrack-numba-cache-run-"
 
 
 def _writable(directory: Path) -> bool:
@@ -70,7 +77,7 @@ def choose() -> str | None:
     cache = Path(tempfile.gettempdir()) / f"foveatrack-numba-cache-{os.geteuid()}"
     if not _own_private_dir(cache):
         try:        # another user's (or a link) at that name: a directory for this run alone
-            cache = Path(tempfile.mkdtemp(prefix="foveatrack-numba-cache-"))
+            cache = Path(tempfile.mkdtemp(prefix=RUN_OWN_PREFIX))
         except OSError as exc:
             raise UserError(f"the numba kernels cannot be cached: neither {in_tree} nor {user_wide} nor the "
                             f"temporary directory can be written ({exc.strerror or exc}); set NUMBA_CACHE_DIR "
@@ -78,9 +85,18 @@ def choose() -> str | None:
     os.environ["NUMBA_CACHE_DIR"] = str(cache)
     if "numba" in sys.modules:      # numba read its configuration at its import
         sys.modules["numba"].config.CACHE_DIR = str(cache)
+    where = (f"they are cached in {cache} instead, compiled there on the first run (about a minute); set "
+             "NUMBA_CACHE_DIR to keep them elsewhere") if not _run_own(cache) else (
+             f"and {cache.parent / f'foveatrack-numba-cache-{os.geteuid()}'} is not this user's alone: they are "
+             f"cached in {cache}, this run's own, and compiled again at every run (about a minute); set "
+             "NUMBA_CACHE_DIR to a directory this user may write to keep them")
     return (f"foveatrack: note: the numba kernels cannot be cached next to the sources ({in_tree}) nor in "
-            f"{user_wide} (neither can be written by this user): they are cached in {cache} instead, compiled "
-            "there on the first run (about a minute); set NUMBA_CACHE_DIR to keep them elsewhere")
+            f"{user_wide} (neither can be written by this user): {where}")
+
+
+def _run_own(cache) -> bool:
+    """Whether ``cache`` is a directory :func:`choose` made for one run alone."""
+    return Path(cache).name.startswith(RUN_OWN_PREFIX)
 
 
 def place() -> str:
@@ -90,3 +106,14 @@ def place() -> str:
     if _writable(SOURCES / "__pycache__"):
         return "next to the sources"
     return f"in {user_cache_dir()}"
+
+
+def cached_text() -> str:
+    """Where the kernels were cached and whether later runs load them, for the messages after a
+    compile: "cached next to the sources; later runs load them", or for a cache of this run's own
+    (:func:`choose`'s ``mkdtemp``) that no later run will find, and what to do about it."""
+    own = os.environ.get("NUMBA_CACHE_DIR")
+    if own and _run_own(own):
+        return (f"cached in {own}, this run's own: every run compiles them again; set NUMBA_CACHE_DIR to a "
+                "directory this user may write to keep them")
+    return f"cached {place()}; later runs load them"

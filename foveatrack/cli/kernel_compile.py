@@ -163,9 +163,9 @@ def compile_split(scene_path, stream=None) -> float:
             _end(proc)                  # interrupted: do not leave a compile running
             err.close()
     wall = time.perf_counter() - t0
-    from foveatrack.cli.kernel_cache import place
+    from foveatrack.cli.kernel_cache import cached_text
 
-    say(f"kernels compiled in {wall:.0f} s (cached {place()}; later runs load them)")
+    say(f"kernels compiled in {wall:.0f} s ({cached_text()})")
     return wall
 
 

@@ -81,7 +81,9 @@ class CompileNotice:
             self._timer.cancel()
             self._timer = None
             if self._said:
-                print(f"kernels ready after {time.perf_counter() - self._t0:.0f} s (cached for later runs)",
+                from foveatrack.cli.kernel_cache import cached_text
+
+                print(f"kernels ready after {time.perf_counter() - self._t0:.0f} s ({cached_text()})",
                       file=self._stream, flush=True)
 
 

@@ -58,7 +58,7 @@ def warm_up(progress: bool = True, split: bool = True) -> float:
 
 def cmd_warmup(args) -> int:
     wall = warm_up(progress=not args.no_progress)
-    from foveatrack.cli.kernel_cache import place
+    from foveatrack.cli.kernel_cache import cached_text
 
-    print(f"numba kernels ready in {wall:.1f} s (cached {place()}; later runs load them)")
+    print(f"numba kernels ready in {wall:.1f} s ({cached_text()})")
     return 0
