@@ -152,6 +152,8 @@ class DaemonRecording:
         old, self.head.journal = self.head.journal, journal
         if old is not None:
             old.close()
+            if old.error is not None:    # its loss stays said among the run's last lines (output_faults)
+                self.__dict__.setdefault("_failed_journals", []).append(old)
         self.recorder.segment = k
         self.log.event("recording_segment", index=k, path=str(path))
 
@@ -188,7 +190,9 @@ class DaemonRecording:
 
     def output_faults(self) -> list[tuple[str, str]]:
         """What the run could not write, as ``(output, sentence)``: the recording (its writer's thread
-        stopped at the error; its frames before are kept), the command journal, the log.  A full disk
+        stopped at the error; its frames before are kept), each command journal (``"journal PATH"``:
+        a recording in segments has one per segment, and one closed at a rollover stays said), the
+        log.  A full disk
         stops none of them from tracking: each is said once when it happens (:meth:`_watch_outputs`)
         and again among the run's last lines."""
         from foveatrack.errors import UserError
@@ -199,12 +203,15 @@ class DaemonRecording:
             what = str(err) if isinstance(err, UserError) else (
                 f"the recording {self.recording_path} stopped: {type(err).__name__}: {err}")
             out.append(("recording", f"{what}; tracking goes on"))
+        # the journals of earlier segments that failed (closed at a rollover), then the current one:
+        # each said by its path (a segment's new journal failing later is another fault)
         journal = getattr(self.head, "journal", None) if getattr(self, "head", None) is not None else None
-        if journal is not None and journal.error is not None:
-            out.append(("journal", f"command journal {journal.path}: cannot write ({_why(journal.error)}): the head "
-                                   f"still gets every command, but from here on none is journaled ({journal.lost} so "
-                                   "far), so 'foveatrack recover' cannot put back what a killed daemon's recording "
-                                   "lacks"))
+        for j in [*self.__dict__.get("_failed_journals", ()), journal]:
+            if j is not None and j.error is not None:
+                out.append((f"journal {j.path}",
+                            f"command journal {j.path}: cannot write ({_why(j.error)}): the head still gets every "
+                            f"command, but from here on none is journaled ({j.lost} so far), so 'foveatrack "
+                            "recover' cannot put back what a killed daemon's recording lacks"))
         if self.log.error is not None:
             out.append(("log", f"--log {self.log.path}: cannot write ({_why(self.log.error)}); "
                                f"from here on no event is logged ({self.log.lost} so far), the run goes on"))
@@ -215,11 +222,12 @@ class DaemonRecording:
         in the log, while it can be written): a full disk otherwise stopped the recording in silence,
         seen only as a growing drop count."""
         said = self.__dict__.setdefault("_faults_said", set())
-        for output, text in self.output_faults():
-            if output not in said:
-                said.add(output)
+        for key, text in self.output_faults():
+            if key not in said:     # "recording", "log", "journal PATH": each segment's journal its own
+                said.add(key)
                 self.status.note(f"foveatrack daemon: WARNING: {text}")
-                self.log.event("output_failed", output=output, error=text)
+                output, _, path = key.partition(" ")
+                self.log.event("output_failed", output=output, error=text, **({"path": path} if path else {}))
 
     def _record(self, fn, *args):
         if self.recorder is not None:

@@ -142,3 +142,50 @@ def test_a_daemon_with_stderr_on_a_full_disk_runs_and_exits_with_its_own_code(tm
         r = subprocess.run([sys.executable, "-m", "foveatrack", "daemon", "--config", str(cfg), "--duration-s", "1",
                             "--no-status"], cwd=ROOT, env=env(), stdout=subprocess.PIPE, stderr=full, timeout=120)
     assert r.returncode == 3, r.returncode
+
+
+def test_each_segments_journal_that_fails_is_said_and_stays_said(tmp_path, capsys):
+    # a recording in segments: the first segment's journal failed, then the rollover closed it -- its
+    # loss vanished from the run's last lines -- and the new segment's journal failing later was never
+    # said, "journal" being said already (review).  Each journal is its own fault, by its path.
+    from foveatrack.live_devices import journal_path
+
+    cfg = tmp_path / "d.toml"
+    cfg.write_text(f"""
+{silent_lidar_table()}[head]
+port = "loop://"
+[recording]
+path = "{tmp_path}/runs/run-{{time}}.mcap"
+make_dirs = true
+segment_minutes = 1
+""")
+    d = Daemon(load_config(cfg), status=False, install_signals=False)
+    d._open()
+    try:
+        first = d.head.journal.path
+        d.head.journal._f.close()
+        d.head.journal._f = open(FULL, "a", buffering=1)         # the first segment's disk fills
+        d.head.send(STOP, "watchdog", 0.5)
+        d._watch_outputs()
+        d._next_segment_if_due(100.0)
+        d._next_segment_if_due(161.0)                             # the rollover: a new journal
+        second = d.head.journal.path
+        assert second != first and second == str(journal_path(d._segment_path(1)))
+        assert any(f"command journal {first}" in p for p in d.problems()), d.problems()   # still said at the end
+        d.head.send(STOP, "watchdog", 1.0)                        # the new journal works
+        d._watch_outputs()
+        d.head.journal._f.close()
+        d.head.journal._f = open(FULL, "a", buffering=1)          # ... until its disk fills too
+        d.head.send(STOP, "watchdog", 1.5)
+        d._watch_outputs()
+        d._watch_outputs()
+        err = capsys.readouterr().err
+        assert err.count(f"WARNING: command journal {first}: cannot write") == 1, err
+        assert err.count(f"WARNING: command journal {second}: cannot write") == 1, err
+        problems = d.problems()
+        assert [p for p in problems if p.startswith("command journal")] == [
+            p for p in problems if p.startswith(f"command journal {first}") or p.startswith(f"command journal {second}")]
+        assert sum(p.startswith("command journal") for p in problems) == 2, problems
+    finally:
+        d._shutdown()
+    assert d.final_stats is not None
