@@ -32,6 +32,27 @@ def silent_lidar_table(sensor_ip: str = "127.0.0.1", data_port: int = 0) -> str:
             f"broadcast_port = false\nsensor_cmd_port = {free_udp_port()}\n")
 
 
+def loop_head_daemon(tmp_path: Path, rec_path=None, extra: str = "", **daemon_kw):
+    """An in-process daemon for a test with no devices: no lidar (:func:`silent_lidar_table`), the
+    head on pyserial's ``loop://``, recording to ``rec_path`` (default: a new file per start under
+    ``tmp_path/runs``); ``extra``: more ``[recording]`` keys."""
+    from foveatrack.daemon import Daemon, load_config
+
+    rec = rec_path if rec_path is not None else f"{tmp_path}/runs/run-{{time}}.mcap"
+    cfg = tmp_path / "d.toml"
+    cfg.write_text(f'''
+{silent_lidar_table()}[head]
+port = "loop://"
+[recording]
+path = "{rec}"
+make_dirs = true
+{extra}
+''')
+    daemon_kw.setdefault("status", False)
+    daemon_kw.setdefault("install_signals", False)
+    return Daemon(load_config(cfg), **daemon_kw)
+
+
 def env() -> dict:
     e = dict(os.environ)
     e["PYTHONPATH"] = str(ROOT) + os.pathsep + e.get("PYTHONPATH", "")

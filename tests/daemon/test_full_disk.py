@@ -15,10 +15,10 @@ from pathlib import Path
 
 import pytest
 
-from daemon_procs import silent_lidar_table
+from daemon_procs import loop_head_daemon, silent_lidar_table
 
 from foveatrack.control import STOP
-from foveatrack.daemon import Daemon, load_config
+from foveatrack.daemon import Daemon
 from foveatrack.daemon.support import JsonLog
 from foveatrack.live_devices import CommandJournal
 
@@ -26,16 +26,8 @@ FULL = "/dev/full"
 pytestmark = pytest.mark.skipif(not os.path.exists(FULL), reason="no /dev/full on this system")
 
 
-def _daemon(tmp_path) -> Daemon:
-    cfg = tmp_path / "d.toml"
-    cfg.write_text(f"""
-{silent_lidar_table()}[head]
-port = "loop://"
-[recording]
-path = "{tmp_path}/runs/run-{{time}}.mcap"
-make_dirs = true
-""")
-    return Daemon(load_config(cfg), status=False, install_signals=False)
+def _daemon(tmp_path, extra: str = "") -> Daemon:
+    return loop_head_daemon(tmp_path, extra=extra)
 
 
 def test_a_journal_on_a_full_disk_never_keeps_a_command_from_the_head():
@@ -150,16 +142,7 @@ def test_each_segments_journal_that_fails_is_said_and_stays_said(tmp_path, capsy
     # said, "journal" being said already (review).  Each journal is its own fault, by its path.
     from foveatrack.live_devices import journal_path
 
-    cfg = tmp_path / "d.toml"
-    cfg.write_text(f"""
-{silent_lidar_table()}[head]
-port = "loop://"
-[recording]
-path = "{tmp_path}/runs/run-{{time}}.mcap"
-make_dirs = true
-segment_minutes = 1
-""")
-    d = Daemon(load_config(cfg), status=False, install_signals=False)
+    d = _daemon(tmp_path, "segment_minutes = 1")
     d._open()
     try:
         first = d.head.journal.path

@@ -5,24 +5,15 @@ the user renaming files by hand before every start.)"""
 
 import pytest
 
-from daemon_procs import silent_lidar_table
+from daemon_procs import loop_head_daemon
 
-from foveatrack.daemon import Daemon, load_config
 from foveatrack.device_config import DaemonConfig
 from foveatrack.errors import UserError
 from foveatrack.recording import RecordingExistsError, RecordingReader, RecordingWriter
 
 
 def _daemon(tmp_path, rec_path, extra=""):
-    cfg = tmp_path / "d.toml"
-    cfg.write_text(f"""
-{silent_lidar_table()}[head]
-port = "loop://"
-[recording]
-path = "{rec_path}"
-{extra}
-""")
-    return Daemon(load_config(cfg), log_path=str(tmp_path / "d.jsonl"), status=False, install_signals=False)
+    return loop_head_daemon(tmp_path, rec_path, extra, log_path=str(tmp_path / "d.jsonl"))
 
 
 def _close(d):

@@ -227,13 +227,11 @@ def _unchanged(cut, before: bytes):
     assert leftovers(cut) == []      # nothing of the rewrite left beside it
 
 
-def test_a_directory_that_takes_no_new_file_is_said_before_any_work(tmp_path, monkeypatch):
-    """It failed only at the copy, naming the hidden temporary: 'cannot create recording
-    .rec.mcap.recovering: Permission denied'."""
+def _no_new_file_beside(monkeypatch):
+    """A directory this user may not write (root may, so the OS's refusal is raised here): the
+    temporary beside the recording cannot be made."""
     import errno
 
-    cut, _ = _cut_short(tmp_path)
-    before = cut.read_bytes()
     real_open = os.open
 
     def denied(path, *args, **kwargs):
@@ -242,6 +240,16 @@ def test_a_directory_that_takes_no_new_file_is_said_before_any_work(tmp_path, mo
         return real_open(path, *args, **kwargs)
 
     monkeypatch.setattr(os, "open", denied)
+
+
+def test_a_directory_that_takes_no_new_file_is_said_before_any_work(tmp_path, monkeypatch):
+    """It failed only at the copy, naming the hidden temporary: 'cannot create recording
+    .rec.mcap.recovering: Permission denied'."""
+    import errno
+
+    cut, _ = _cut_short(tmp_path)
+    before = cut.read_bytes()
+    _no_new_file_beside(monkeypatch)
     with pytest.raises(UserError) as exc:
         recover(cut)
     msg = str(exc.value)
@@ -436,14 +444,7 @@ def test_only_a_full_disk_is_said_to_need_space_and_every_error_ends_nothing_was
     monkeypatch.undo()
     _unchanged(cut, before)
 
-    real_open = os.open
-
-    def denied(path, *args, **kwargs):
-        if str(path).endswith(".tmp"):
-            raise PermissionError(errno.EACCES, "Permission denied", str(path))
-        return real_open(path, *args, **kwargs)
-
-    monkeypatch.setattr(os, "open", denied)
+    _no_new_file_beside(monkeypatch)
     with pytest.raises(UserError) as exc:
         recover(cut)
     assert str(exc.value).endswith("nothing was changed"), str(exc.value)

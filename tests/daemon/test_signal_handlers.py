@@ -7,22 +7,12 @@ import signal
 
 import pytest
 
-from daemon_procs import silent_lidar_table
-
-from foveatrack.daemon import Daemon, load_config
+from daemon_procs import loop_head_daemon
 
 
 def _daemon(tmp_path):
-    cfg = tmp_path / "d.toml"
-    cfg.write_text(f"""
-{silent_lidar_table()}[head]
-port = "loop://"
-[recording]
-path = "{tmp_path}/runs/run-{{time}}.mcap"
-make_dirs = true
-""")
     # no lidar answers: the run ends after duration_s
-    return Daemon(load_config(cfg), log_path=str(tmp_path / "d.jsonl"), status=False, duration_s=0.3)
+    return loop_head_daemon(tmp_path, log_path=str(tmp_path / "d.jsonl"), duration_s=0.3, install_signals=True)
 
 
 def _callers_int(signum, frame):    # the handlers the caller had: distinct from Python's own
