@@ -31,6 +31,7 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -184,6 +185,15 @@ class Scene:
 
         return DEFAULT_RANGE_ENVELOPE_M
 
+    @cached_property
+    def placement(self) -> tuple[list[str], list[str]]:
+        """``(errors, warnings)`` of :func:`sim.scene_placement.placement_problems`, computed once per
+        scene (a long scene's flock samples every bird's path: seconds; the load and ``warnings``
+        both ask)."""
+        from sim.scene_placement import placement_problems
+
+        return placement_problems(self)
+
     def warnings(self) -> list[str]:
         """What in the scene runs but cannot be seen, in words: a drone or a bird below the ground or
         in the lidar's blind zone at some instant (:mod:`sim.scene_placement`), and what its
@@ -191,9 +201,8 @@ class Scene:
         as a daemon config's table is judged); the CLIs that fly a scene print them at load.  Derived,
         so a scene changed by ``dataclasses.replace`` is judged as it is."""
         from foveatrack.speed_table import SpeedTable
-        from sim.scene_placement import placement_problems
 
-        out = placement_problems(self)[1]
+        out = list(self.placement[1])
         table = self.gimbal.speed_table
         if table not in ("truth", "nominal"):      # the simulated unit's own curves need no check
             try:
@@ -340,9 +349,7 @@ def scene_from_mapping(data: Mapping[str, Any], where: str = "scene", text: str 
         gate=_gate(data["gate"], f"{where} [gate]") if "gate" in data else None, range_envelope_m=envelope,
         start_utc_ns=start_utc_ns, others=others, table=copy.deepcopy(dict(data)),
     )
-    from sim.scene_placement import placement_problems
-
-    errors, _ = placement_problems(scene)
+    errors, _ = scene.placement
     if errors:      # a drone the head can never see: the run would measure nothing
         raise UserError("; ".join(errors))
     return scene
