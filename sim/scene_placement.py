@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from sim.world.kernels import PLANE, PRIM_COLUMNS
+from sim.world.trajectories import numpy_paths
 
 SAMPLE_S = 0.1              # the tracker's frame at 10 Hz: a drone at 20 m/s moves 2 m in it
 MAX_SAMPLES = 100_001       # a two-day scene is sampled every ~1.7 s (its check stays a few ms)
@@ -33,7 +34,14 @@ def ground_z_m(background_prims: np.ndarray) -> float | None:
 
 
 def placement_problems(scene) -> tuple[list[str], list[str]]:
-    """``(errors, warnings)`` of a :class:`sim.scene.Scene`'s drones and birds (module docstring)."""
+    """``(errors, warnings)`` of a :class:`sim.scene.Scene`'s drones and birds (module docstring).
+    The paths are sampled in numpy (:func:`sim.world.trajectories.numpy_paths`): a load compiles no
+    numba kernel."""
+    with numpy_paths():
+        return _placement_problems(scene)
+
+
+def _placement_problems(scene) -> tuple[list[str], list[str]]:
     n = min(MAX_SAMPLES, max(2, int(math.ceil(scene.duration_s / SAMPLE_S)) + 1))
     t = np.linspace(0.0, scene.duration_s, n)
     ground = ground_z_m(scene.background_prims)

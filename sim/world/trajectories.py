@@ -8,6 +8,8 @@ rotation centre is the origin), and ``max_speed_m_s`` (used to bound the per-fra
 from __future__ import annotations
 
 import math
+import threading
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,6 +20,22 @@ from foveatrack.fixed_order import norm3
 
 _straight_position_kernel = None
 _hover_heading_kernel = None
+_plain = threading.local()     # numpy_paths(): paths in numpy on this thread, no kernel
+
+
+@contextmanager
+def numpy_paths():
+    """Within the block, this thread's paths are evaluated in numpy, never by a numba kernel (the same
+    bits: :func:`sim.world.kernels.straight_position_kernel` is numpy's expression element for
+    element).  For what is asked once at a scene's load (:mod:`sim.scene_placement`): the load must
+    compile no kernel, since a first run compiles them in two other processes before its first frame
+    (``tests/test_kernel_compile.py``); the kernel is for the closed loop's per-ray poses."""
+    before = getattr(_plain, "on", False)
+    _plain.on = True
+    try:
+        yield
+    finally:
+        _plain.on = before
 
 
 def _col(t_s) -> np.ndarray:
@@ -42,6 +60,8 @@ class Straight:
 
     def position(self, t_s):
         global _straight_position_kernel
+        if getattr(_plain, "on", False):
+            return self._start + np.ascontiguousarray(t_s, dtype=np.float64).reshape(-1, 1) * self._velocity
         if _straight_position_kernel is None:   # numba loads on first use, not on import
             from sim.world.kernels import straight_position_kernel as _straight_position_kernel
         t = np.ascontiguousarray(t_s, dtype=np.float64).reshape(-1)
