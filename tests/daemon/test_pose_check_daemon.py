@@ -244,7 +244,13 @@ def test_after_a_power_cut_the_head_is_homed_to_the_targets_bearing_and_tracks_a
     assert event(log, "head_homing_confirmed") is not None
     # blind for the move and three checks at rest (seen: 24 frames), not the worst case (41 s to there)
     assert stats["frames_pose_unknown"] <= 80, stats["frames_pose_unknown"]
-    assert detected >= 40, detected
+    # and tracking again once the pose is confirmed: most of the frames after the blind ones have a
+    # detection.  (A bar of 40 of the 100 held only while the blind part stayed under ~55 frames,
+    # tighter than the bound above: beside two busy loops a check at rest is now and then repeated,
+    # blind 6.4-7.6 s in 4 of 17 runs, one of them on 5595742's code; after it 22 of 24, 24 of 26,
+    # 25 of 32 and 27 of 35 frames were detected.)
+    after = 100 - stats["frames_pose_unknown"]
+    assert detected >= 0.7 * after, (detected, after)
     # the estimate agrees with the head after all that (at rest, as above), and replay repeats the run
     rows = read_truth(str(truth))
     res = replay_recording(rec)
