@@ -10,6 +10,8 @@ import stat
 import numpy as np
 import pytest
 
+from failing_writes import metadata_write_fails
+
 from foveatrack.cli import main
 from foveatrack.recording import RecordingReader, RecordingWriter
 from foveatrack.daemon.recover import recover
@@ -287,12 +289,7 @@ def test_a_full_disk_under_the_rewrite_is_said_of_the_recording(tmp_path, monkey
     cut, _ = _cut_short(tmp_path)
     before = cut.read_bytes()
 
-    def full(self, md):
-        def write():
-            raise OSError(errno.ENOSPC, "No space left on device")
-        self._sdk(write)
-
-    monkeypatch.setattr(RecordingWriter, "_write_meta", full)
+    metadata_write_fails(monkeypatch, errno.ENOSPC)
     with pytest.raises(UserError) as exc:
         recover(cut)
     msg = str(exc.value)
@@ -430,12 +427,7 @@ def test_only_a_full_disk_is_said_to_need_space_and_every_error_ends_nothing_was
     cut, _ = _cut_short(tmp_path)
     before = cut.read_bytes()
 
-    def eio(self, md):
-        def write():
-            raise OSError(errno.EIO, "Input/output error")
-        self._sdk(write)
-
-    monkeypatch.setattr(RecordingWriter, "_write_meta", eio)
+    metadata_write_fails(monkeypatch, errno.EIO)
     monkeypatch.setattr(writer_mod.os, "statvfs", lambda _p: SimpleNamespace(f_bavail=10**9, f_frsize=4096))
     with pytest.raises(UserError) as exc:
         recover(cut)

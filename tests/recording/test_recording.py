@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from failing_writes import FailingFlush, metadata_write_fails
+
 from foveatrack.errors import UserError
 from foveatrack.recording import (
     RecordingReader,
@@ -486,6 +488,8 @@ def test_a_write_that_fails_part_way_says_what_is_kept_and_keeps_it(tmp_path):
     assert [f.frame_index for f in frames] == list(range(kept))
 
 
+
+
 def test_a_full_disk_is_said_in_words(tmp_path, monkeypatch):
     """The SDK's error does not carry the OS's errno: a full disk is told by the file system's free
     space (os.statvfs simulated full here)."""
@@ -500,17 +504,7 @@ def test_a_full_disk_is_said_in_words(tmp_path, monkeypatch):
         t, xyz, tp, refl = frame(rng, k, 100)
         w.write_points(t, k, xyz, tp, refl)
 
-    class Failing:
-        def __init__(self, sdk):
-            self.sdk = sdk
-
-        def flush(self):
-            raise RuntimeError("FoxgloveError: MCAP error: I/O error from writing, or reading a compression stream")
-
-        def __getattr__(self, name):
-            return getattr(self.sdk, name)
-
-    w._w = Failing(w._w)
+    w._w = FailingFlush(w._w)
     monkeypatch.setattr(writer_mod.os, "statvfs", lambda _p: SimpleNamespace(f_bavail=3, f_frsize=4096))
     with pytest.raises(UserError, match=r"no space left on its disk \(12,288 bytes free"):
         t, xyz, tp, refl = frame(rng, 3, 100)
@@ -527,30 +521,12 @@ def test_a_recording_whose_metadata_does_not_fit_leaves_no_empty_file(tmp_path, 
     Simulated: the OS's ENOSPC raised where the SDK writes the metadata."""
     import errno
 
-    def full(self, md):
-        def write():
-            raise OSError(errno.ENOSPC, "No space left on device")
-        self._sdk(write)
-
-    monkeypatch.setattr(RecordingWriter, "_write_meta", full)
+    metadata_write_fails(monkeypatch, errno.ENOSPC)
     p = tmp_path / "r.mcap"
     with pytest.raises(UserError) as exc:
         RecordingWriter(p, META)
     assert str(exc.value).startswith(f"cannot create recording {p}: no space left on its disk")
     assert "nothing was left under its name" in str(exc.value) and not p.exists()
-
-
-class _FailingFlush:
-    """An SDK writer whose flush fails as on a full disk ("I/O error from writing")."""
-
-    def __init__(self, sdk):
-        self.sdk = sdk
-
-    def flush(self):
-        raise RuntimeError("FoxgloveError: MCAP error: I/O error from writing")
-
-    def __getattr__(self, name):
-        return getattr(self.sdk, name)
 
 
 def test_a_failed_write_in_a_later_segment_counts_that_files_frames(tmp_path):
@@ -565,7 +541,7 @@ def test_a_failed_write_in_a_later_segment_counts_that_files_frames(tmp_path):
     for k in range(10, 12):
         t, xyz, tp, refl = frame(rng, k, 50)
         w.write_points(t, k, xyz, tp, refl)
-    w._w = _FailingFlush(w._w)
+    w._w = FailingFlush(w._w)
     with pytest.raises(UserError) as exc:
         t, xyz, tp, refl = frame(rng, 12, 50)
         w.write_points(t, 12, xyz, tp, refl)
@@ -588,12 +564,7 @@ def test_a_segment_whose_metadata_does_not_fit_leaves_no_empty_file(tmp_path, mo
         t, xyz, tp, refl = frame(rng, k, 50)
         w.write_points(t, k, xyz, tp, refl)
 
-    def full(self, md):
-        def write():
-            raise OSError(errno.ENOSPC, "No space left on device")
-        self._sdk(write)
-
-    monkeypatch.setattr(RecordingWriter, "_write_meta", full)
+    metadata_write_fails(monkeypatch, errno.ENOSPC)
     e = tmp_path / "e.mcap"
     with pytest.raises(UserError) as exc:
         w.next_segment(e)
