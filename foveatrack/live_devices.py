@@ -29,6 +29,7 @@ from pathlib import Path
 
 from foveatrack.control import HeadCommand
 from foveatrack.errors import UserError
+from foveatrack.first_failure import StopsAtFirstFailure, close_quietly
 
 
 def counters_text(counters: dict) -> str:
@@ -156,7 +157,7 @@ def journal_path(recording) -> Path:
     return recording.with_name(recording.name + JOURNAL_SUFFIX)
 
 
-class CommandJournal:
+class CommandJournal(StopsAtFirstFailure):
     """Every frame meant for the head, appended (one JSON line, flushed to the kernel) *before* it is
     written to the port: whatever a driver killed with SIGKILL got to the head is in it (the
     recording, written behind a queue, lost the frame in flight); ``foveatrack recover`` puts what
@@ -184,8 +185,6 @@ class CommandJournal:
             why = "it is a symbolic link" if exc.errno == errno.ELOOP else exc.strerror
             raise UserError(f"command journal {self.path}: cannot write ({why})") from None
         self._f = os.fdopen(fd, "a", buffering=1)
-        self.error: OSError | None = None   # the write that failed (a full disk): journaling stopped there
-        self.lost = 0                       # lines not journaled since
         try:
             fcntl.flock(self._f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -196,22 +195,12 @@ class CommandJournal:
         keep the frame -- a STOP among them -- from the head; the first failure is kept in
         :attr:`error` (the driver says it) and nothing more is journaled (the file stays open: its
         lock still tells ``recover`` that a driver runs)."""
-        if self.error is not None:
-            self.lost += 1
-            return
         t = "" if send_t_s is None or not math.isfinite(send_t_s) else f', "send_t_s": {send_t_s!r}'
-        try:
-            self._f.write(f'{{"t_mono_s": {time.monotonic():.6f}, "t_unix_s": {time.time():.6f}, '
-                          f'"raw_hex": "{raw.hex()}", "source": "{source}"{t}}}\n')
-        except OSError as exc:
-            self.error = exc
-            self.lost += 1
+        self._guarded(self._f.write, f'{{"t_mono_s": {time.monotonic():.6f}, "t_unix_s": {time.time():.6f}, '
+                                     f'"raw_hex": "{raw.hex()}", "source": "{source}"{t}}}\n')
 
     def close(self) -> None:
-        try:
-            self._f.close()
-        except OSError:
-            pass      # the line that failed is still buffered and fails again: said already (error)
+        close_quietly(self._f)
 
 
 def journal_in_use(path) -> bool:

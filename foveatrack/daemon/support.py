@@ -14,17 +14,16 @@ import time
 
 import numpy as np
 
+from foveatrack.first_failure import StopsAtFirstFailure, close_quietly
 
 
 # ----------------------------------------------------------------------------------------- logs
-class JsonLog:
+class JsonLog(StopsAtFirstFailure):
     """Structured log: one JSON object per line (``t_utc``, ``t_mono_s``, ``event``, fields)."""
 
     def __init__(self, path: str | None):
         self._fh = None
         self.path = path
-        self.error: OSError | None = None   # the write that failed (a full disk): the log was written no more
-        self.lost = 0                       # events not written since
         if path:
             from foveatrack.errors import UserError
 
@@ -46,23 +45,12 @@ class JsonLog:
         rec = {"t_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds"),
                "t_mono_s": round(time.monotonic(), 6), "event": event, **fields}
         with self._lock:
-            if self.error is not None:
-                self.lost += 1
-                return
-            try:
-                self._fh.write(json.dumps(rec, default=_plain) + "\n")
-            except OSError as exc:
-                # a log on a full disk must not stop the loop (or the STOP of its shutdown): kept, said
-                # by the daemon once (foveatrack.daemon.record_queue), and nothing more is written
-                self.error = exc
-                self.lost += 1
+            # a log on a full disk must not stop the loop (or the STOP of its shutdown)
+            self._guarded(self._fh.write, json.dumps(rec, default=_plain) + "\n")
 
     def close(self) -> None:
         if self._fh is not None:
-            try:
-                self._fh.close()
-            except OSError:
-                pass      # the line that failed is still buffered and fails again: said already (error)
+            close_quietly(self._fh)
             self._fh = None
 
 
@@ -74,7 +62,7 @@ def _plain(x):
     return str(x)
 
 
-class StatusLine:
+class StatusLine(StopsAtFirstFailure):
     """One live line on a terminal (``\\r`` + clear to end of line); silent when not a TTY.
 
     A write that fails (stderr redirected to a file on a full disk: ENOSPC; a closed pipe) ends the
@@ -85,18 +73,13 @@ class StatusLine:
         self.stream = stream or sys.stderr
         self.enabled = self.stream.isatty() if enabled is None else enabled
         self._shown = False
-        self.error: OSError | None = None    # the write that failed; nothing is written after it
 
     def _write(self, text: str) -> bool:
-        if self.error is not None:
-            return False
-        try:
-            self.stream.write(text)
-            self.stream.flush()
-        except OSError as exc:
-            self.error = exc
-            return False
-        return True
+        return self._guarded(self._emit, text)
+
+    def _emit(self, text: str) -> None:
+        self.stream.write(text)
+        self.stream.flush()
 
     def show(self, text: str) -> None:
         if self.enabled and self._write("\r" + text + "\x1b[K"):
