@@ -105,8 +105,9 @@ class RecordingWriteError(UserError):
 
     def __init__(self, path: Path, frames_kept: int, cause: BaseException, begun: bool = True):
         self.path, self.frames_kept, self.cause = path, frames_kept, cause
-        self.why = _why_write_failed(path, cause)     # what failed, in words ("no space left on its disk ...")
-        self.disk_full = _disk_full(path, cause) is not None   # told as _why_write_failed tells it
+        full = _disk_full(path, cause)
+        self.disk_full = full is not None
+        self.why = _why_write_failed(cause, full, path)     # in words ("no space left on its disk ...")
         if not begun:       # its metadata did not fit: the file was removed, nothing was recorded
             super().__init__(f"cannot create recording {path}: {self.why}; nothing was left under its name")
             return
@@ -135,9 +136,8 @@ def _disk_full(path: Path, exc: BaseException) -> tuple[int | None] | None:
     return None
 
 
-def _why_write_failed(path: Path, exc: BaseException) -> str:
-    """In words (a full disk: :func:`_disk_full`)."""
-    full = _disk_full(path, exc)
+def _why_write_failed(exc: BaseException, full: tuple[int | None] | None, path: Path) -> str:
+    """In words; ``full``: :func:`_disk_full`'s answer for it."""
     if full is not None:
         free = full[0]
         return "no space left on its disk" + (f" ({free:,} bytes free on the file system of {path.parent})"
