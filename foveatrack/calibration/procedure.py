@@ -834,9 +834,12 @@ class PriorAxisCalibrator(Calibrator):
         self.prior_sigma_deg = {"pan": float(start_tilt_sigma_deg), "tilt": float(mount_sigma_deg)}
         self.start_tilt_sigma_deg = float(start_tilt_sigma_deg)
         self.min_arc_rms_m = float(min_arc_rms_m)
+        self._fits: dict[str, AxisFit] = {}      # the last fit of each axis (_axis_estimate)
 
     def _axis_estimate(self, axis: str) -> np.ndarray:
-        return self._axis_fit(axis).axis
+        # kept: the estimate's warnings (_estimate) are of this fit, not of a second one
+        self._fits[axis] = fit = self._axis_fit(axis)
+        return fit.axis
 
     def _axis_fit(self, axis: str) -> AxisFit:
         """The axis estimate (class docstring), with the data's own axis and the test of the prior
@@ -922,7 +925,7 @@ class PriorAxisCalibrator(Calibrator):
         from scipy.optimize import least_squares
 
         table, report = super()._estimate()
-        said = [self._prior_warning(self._axis_fit(ax)) for ax in ("pan", "tilt")]
+        said = [self._prior_warning(self._fits[ax]) for ax in ("pan", "tilt")]     # the fits just used
         report = _replace(report, warnings=report.warnings + tuple(w for w in said if w))
         axes = {ax: np.asarray(report.axis_lidar[ax], float) for ax in ("pan", "tilt")}
         data = []
