@@ -84,8 +84,6 @@ def _bytes(text: str | None, what: str) -> tuple[int, ...] | None:
     return tuple(out)
 
 
-
-
 def unmeasured_summary(report) -> dict:
     """{axis: {reason: [bytes]}} from a CalibrationReport."""
     out = {}
