@@ -83,6 +83,10 @@ TILT_UNSEEN_MAX_S = 1.0
 #: start tilt, while a start tilt 10 deg off gave 16, 13.5 deg off 22-28 and 28.5 deg off 21-39 (a
 #: wrong prior also spoils the procedure's online de-rotation, which widens the data's sigma).
 PRIOR_CONFLICT_CHI2 = 13.8
+#: The same p = 0.001 for one angle alone (chi-square, 1 degree of freedom): which of the pan prior's
+#: two angles, the start tilt and the lean toward lidar Y, the data contradict
+#: (:meth:`AxisFit.start_tilt_and_lean_chi2`).
+PRIOR_CONFLICT_CHI2_1DOF = 10.8
 
 
 def on_smooth_track(t_s: np.ndarray, q_m: np.ndarray, n_sigma: float = 5.0, floor_m: float = 1e-3,
@@ -246,6 +250,28 @@ class AxisFit:
         e_l /= max(np.linalg.norm(e_l), 1e-12)
         sig = [math.degrees(math.sqrt(max(float(e @ self.data_cov @ e), 0.0))) for e in (e_t, e_l)]
         return math.degrees(t), sig[0], math.degrees(lean), sig[1]
+
+    def start_tilt_and_lean_chi2(self, start_tilt_deg: float, prior_sigma_deg: float) -> tuple[float, float]:
+        """The pan prior's two angles tested one at a time: ``(start tilt, lean)``, the chi-square (1
+        degree of freedom) of the configured ``start_tilt_deg`` with whatever lean fits best, and of no
+        lean toward lidar Y with whatever start tilt fits best.  The 2-degree test (``chi2``) says the
+        prior is wrong; these say which part of it: a start tilt off turns the pan axis in the lidar's
+        XZ plane, a lidar rolled on the head leans it toward lidar Y, which no start tilt explains.
+
+        Both are the 2-degree statistic ``p^T W p`` (``W``: the inverse of the data's covariance plus
+        the prior's ``prior_sigma_deg`` [deg], in the plane normal to the data's axis) minimised over
+        the free angle: with ``p = cos(f) e1 + sin(f) e2`` that is the smaller eigenvalue of the
+        2 x 2 form ``[e1 e2]^T W [e1 e2]``, exact for any size of angle (the implied tilt and lean
+        are first-order: with degenerate scatter they came out 40-90 deg off and their one-angle
+        tests contradicted the 2-degree one, 33 and 194 against 13.7)."""
+        a = self.data_axis
+        S = self.data_cov + math.radians(prior_sigma_deg) ** 2 * (np.eye(3) - np.outer(a, a))
+        lam, vec = np.linalg.eigh(S)        # the smallest: the data's axis, no variance
+        W = sum(np.outer(vec[:, k], vec[:, k]) / lam[k] for k in (1, 2))
+        t = math.radians(start_tilt_deg)
+        at_start_tilt = np.column_stack([[math.sin(t), 0.0, math.cos(t)], [0.0, 1.0, 0.0]])   # any lean
+        no_lean = np.column_stack([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])                          # any tilt
+        return tuple(float(np.linalg.eigvalsh(B.T @ W @ B)[0]) for B in (at_start_tilt, no_lean))
 
 
 class Calibrator:
@@ -814,7 +840,8 @@ class PriorAxisCalibrator(Calibrator):
     it with them by inverse variance gives an axis consistent with neither, near the prior since its
     0.5 deg outweighs the data's 2-5 deg (a start tilt of 35 deg for a true 6.5 made every pan speed
     25-33 % high; the data's axis alone: 0.4-4.2 % over 7 runs).  The report then says so
-    (:meth:`_prior_warning`), naming the start tilt the data imply and the one given; degenerate
+    (:meth:`_prior_warning`), naming what the data contradict, each angle tested alone: the start
+    tilt (the one the data imply and the one given), the lean toward lidar Y, or both; degenerate
     scatter keeps the prior but is tested and said alike.  The test misses what the data cannot
     resolve: a start tilt 6.5 deg off (chi-square 12.6, one-byte plan) biased pan by 2 % unsaid.
 
@@ -885,20 +912,43 @@ class PriorAxisCalibrator(Calibrator):
             used = (f"The table's {fit.name} speeds were measured about the data's axis, not the assumed one "
                     f"(which would bias them all alike).")
         if fit.name == "pan":
-            tilt, tilt_sigma, lean, lean_sigma = fit.implied_start_tilt_deg()
-            t0 = self.plan.start_tilt_deg
-            return (f"the start tilt disagrees with the corner's motion: the head's pan axis as the corner turned "
-                    f"about it implies a start tilt of {tilt:.1f} +- {tilt_sigma:.1f} deg (and a lean of "
-                    f"{lean:+.1f} +- {lean_sigma:.1f} deg toward lidar Y, which no start tilt gives), but the "
-                    f"calibration was told {t0:g} +- {sp:g} deg (tilt0_deg: [head] in a daemon config, "
-                    f"[gimbal] in a scene; {test}).  {used}  If the head did not start at {t0:g} deg, measure "
-                    f"its start tilt, set tilt0_deg to it and calibrate again: the daemon takes tilt0_deg as "
-                    f"the head's start pose, and the calibration's tilt stops count from it.")
+            return self._pan_prior_warning(fit, sp, test, used)
         off = math.degrees(math.acos(min(1.0, abs(float(fit.data_axis @ fit.prior)))))
         return (f"the tilt axis disagrees with the lidar's mounting: the corner turned about an axis "
                 f"{off:.1f} deg from lidar Y, where the calibration assumes the tilt axis within {sp:g} deg "
                 f"({test}).  {used}  Check that the lidar sits on the head with its Y axis along the tilt axis.")
 
+    def _pan_prior_warning(self, fit: AxisFit, sp: float, test: str, used: str) -> str:
+        """The warning on a pan prior the data contradict, naming the part of it they contradict: the
+        start tilt (``tilt0_deg``), the lean toward lidar Y (the lidar's mounting), or both.  Neither
+        alone but the two together: both are named, either may be off."""
+        tilt, tilt_sigma, lean, lean_sigma = fit.implied_start_tilt_deg()
+        t0 = self.plan.start_tilt_deg
+        tilt_chi2, lean_chi2 = fit.start_tilt_and_lean_chi2(t0, sp)
+        tilt_off, lean_off = tilt_chi2 > PRIOR_CONFLICT_CHI2_1DOF, lean_chi2 > PRIOR_CONFLICT_CHI2_1DOF
+        if not (tilt_off or lean_off):
+            tilt_off = lean_off = True
+        said_tilt = (f"implies a start tilt of {tilt:.1f} +- {tilt_sigma:.1f} deg, but the calibration was told "
+                     f"{t0:g} +- {sp:g} deg (tilt0_deg: [head] in a daemon config, [gimbal] in a scene)")
+        said_lean = (f"leans {lean:+.1f} +- {lean_sigma:.1f} deg toward lidar Y, which no start tilt gives, where "
+                     f"the calibration assumes 0 +- {sp:g} deg")
+        fix_tilt = (f"If the head did not start at {t0:g} deg, measure its start tilt, set tilt0_deg to it and "
+                    f"calibrate again: the daemon takes tilt0_deg as the head's start pose, and the "
+                    f"calibration's tilt stops count from it.")
+        fix_lean = ("Check that the lidar sits on the head with its Y axis along the tilt axis (a lidar rolled "
+                    "about its X axis leans the pan axis so)")
+        axis = "the head's pan axis as the corner turned about it"
+        if not lean_off:
+            return (f"the start tilt disagrees with the corner's motion: {axis} {said_tilt}; its lean toward "
+                    f"lidar Y, {lean:+.1f} +- {lean_sigma:.1f} deg, agrees with the mounting ({test}).  {used}  "
+                    f"{fix_tilt}")
+        if not tilt_off:
+            return (f"the pan axis leans toward lidar Y against the lidar's mounting: {axis} {said_lean}; its "
+                    f"start tilt, {tilt:.1f} +- {tilt_sigma:.1f} deg, agrees with the {t0:g} deg given "
+                    f"(tilt0_deg is not what is wrong; {test}).  {used}  {fix_lean}.")
+        return (f"the start tilt and the lean toward lidar Y disagree with the corner's motion: {axis} "
+                f"{said_tilt}, and {said_lean} ({test}).  {used}  {fix_lean}; and {fix_tilt[0].lower()}"
+                f"{fix_tilt[1:]}")
 
     def _estimate(self):
         """The base estimate, then the head timing refitted from the legs' whole angle histories.
