@@ -61,7 +61,9 @@ class CalibrationDriver:
     def process(self, frame: Frame, send_t_s: float) -> "CalibrationOutput":
         """The :class:`foveatrack.controller.Controller` step: this frame's command to send, with the
         head's tilt as the procedure sees it (the start tilt plus the corner's turn about the tilt
-        axis; :meth:`Calibrator.tilt_since_start_deg`), which the command gate keeps from the stops."""
+        axis; :meth:`Calibrator.tilt_since_start_deg`), which the command gate keeps from the stops.
+        The start tilt is the plan's, or the one the corner data imply once they contradict the plan's
+        (:meth:`Calibrator.start_tilt_deg`)."""
         cmd = self(frame, send_t_s)
         cal = self.calibrator
         if not hasattr(cal, "tilt_since_start_deg"):
@@ -69,8 +71,9 @@ class CalibrationDriver:
         off_deg, off_sigma_deg, t_seen = cal.tilt_since_start_deg(frame.t_end_s)
         if t_seen is not None and self._tilt_driven_s(t_seen, frame.t_end_s) > TILT_UNSEEN_MAX_S:
             off_deg = off_sigma_deg = math.nan     # tilted too long unseen: the gate refuses more tilt
-        return CalibrationOutput(cmd, head_tilt_deg=cal.plan.start_tilt_deg + off_deg,
-                                 head_sigma_tilt_deg=math.hypot(cal.start_tilt_sigma_deg, off_sigma_deg))
+        start_deg, start_sigma_deg, _ = cal.start_tilt_deg()
+        return CalibrationOutput(cmd, head_tilt_deg=start_deg + off_deg,
+                                 head_sigma_tilt_deg=math.hypot(start_sigma_deg, off_sigma_deg))
 
     def _tilt_driven_s(self, since_s: float, now_s: float) -> float:
         """How long the procedure's commands drove the tilt between ``since_s`` and ``now_s`` [s]."""
@@ -91,9 +94,19 @@ class CalibrationDriver:
         tilt stop, an unknown tilt or a stale frame."""
         if why:
             done = sum(1 for leg in self.calibrator.legs if leg.t_stop_s is not None)
-            where = (f"with the tilt unknown (the corner out of sight over {TILT_UNSEEN_MAX_S:g} s of tilt motion)"
-                     if not math.isfinite(out.head_tilt_deg) else
-                     f"at estimated tilt {out.head_tilt_deg:.1f} +- {out.head_sigma_tilt_deg:.1f} deg")
+            # the user's tilt0_deg may not be what the stops were counted from: say so
+            start_deg, _, from_data = self.calibrator.start_tilt_deg()
+            t0 = self.calibrator.plan.start_tilt_deg
+            if from_data and not math.isfinite(start_deg):
+                where = (f"with the tilt unknown (the pan legs' corner data contradict tilt0_deg {t0:g} but do not "
+                         "tell the start tilt: measure it and set tilt0_deg)")
+            elif not math.isfinite(out.head_tilt_deg):
+                where = f"with the tilt unknown (the corner out of sight over {TILT_UNSEEN_MAX_S:g} s of tilt motion)"
+            else:
+                where = f"at estimated tilt {out.head_tilt_deg:.1f} +- {out.head_sigma_tilt_deg:.1f} deg"
+                if from_data:
+                    where += (f" (counted from the start tilt the pan legs' corner data imply, {start_deg:.1f} deg: "
+                              f"they contradict tilt0_deg {t0:g})")
             raise UserError(f"the command gate refused the calibration's command ({', '.join(why)}) {where} after "
                             f"{done} legs: the plan would take the head past its limits, or out of the lidar's "
                             "sight of it; start it farther from its tilt stop (or with a smaller max_excursion_deg); "

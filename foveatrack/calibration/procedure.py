@@ -391,6 +391,12 @@ class Calibrator:
         corner, _ = found
         return t_mid, corner
 
+    def start_tilt_deg(self) -> tuple[float, float, bool]:
+        """The head's tilt at the start [deg], its 1 sigma [deg], and whether the corner data gave it
+        (False: the plan's ``start_tilt_deg``): what the command gate's tilt estimate counts from
+        (:class:`foveatrack.calibration.drive.CalibrationDriver`).  Here always the plan's."""
+        return self.plan.start_tilt_deg, self.start_tilt_sigma_deg, False
+
     def tilt_since_start_deg(self, t_s: float) -> tuple[float, float, float | None]:
         """The head's tilt at ``t_s`` relative to the start reference as the corner shows it, its 1-sigma
         uncertainty [deg] (for the command gate's tilt stops), and when the corner was seen [s] (None:
@@ -862,11 +868,35 @@ class PriorAxisCalibrator(Calibrator):
         self.start_tilt_sigma_deg = float(start_tilt_sigma_deg)
         self.min_arc_rms_m = float(min_arc_rms_m)
         self._fits: dict[str, AxisFit] = {}      # the last fit of each axis (_axis_estimate)
+        self._start_tilt: tuple[float, float, bool] | None = None    # start_tilt_deg, once the pan legs are over
 
     def _axis_estimate(self, axis: str) -> np.ndarray:
         # kept: the estimate's warnings (_estimate) are of this fit, not of a second one
         self._fits[axis] = fit = self._axis_fit(axis)
         return fit.axis
+
+    def start_tilt_deg(self) -> tuple[float, float, bool]:
+        """The plan's start tilt until the pan legs are over; then, if their corner data contradict it
+        (the start tilt's part of the pan prior's test: :meth:`_pan_prior_parts`), the start tilt
+        they imply and its sigma (:meth:`AxisFit.implied_start_tilt_deg`), or NaN where the scatter
+        is degenerate (the table keeps the prior's axis then, and the implied tilt is no estimate:
+        137 +- 15 deg for a head at 48).  The pan legs come before the tilt legs, so the gate keeps
+        the stops with the start tilt the data show, and refuses tilt where they cannot show it:
+        counted from a wrong ``tilt0_deg`` the stops moved by its error (the simulated head at 6.5
+        deg, told 54, was refused its tilt leg "at estimated tilt 57"; one at 48, told 20, was driven
+        into its stop at 60 while the gate believed 32)."""
+        if self._start_tilt is not None:
+            return self._start_tilt
+        pan_legs = [g for g in self.legs if g.axis == "pan"]
+        if (not pan_legs or any(g.t_stop_s is None for g in pan_legs)
+                or any(q[0] == "pan" for q in self._queue)):
+            return super().start_tilt_deg()       # the pan legs have not shown it yet
+        self._start_tilt = super().start_tilt_deg()
+        fit = self._axis_fit("pan")
+        if fit.conflict and self._pan_prior_parts(fit)[0]:
+            tilt, tilt_sigma, _, _ = fit.implied_start_tilt_deg()
+            self._start_tilt = (math.nan, math.nan, True) if fit.degenerate else (tilt, tilt_sigma, True)
+        return self._start_tilt
 
     def _axis_fit(self, axis: str) -> AxisFit:
         """The axis estimate (class docstring), with the data's own axis and the test of the prior
@@ -918,23 +948,27 @@ class PriorAxisCalibrator(Calibrator):
                 f"{off:.1f} deg from lidar Y, where the calibration assumes the tilt axis within {sp:g} deg "
                 f"({test}).  {used}  Check that the lidar sits on the head with its Y axis along the tilt axis.")
 
+    def _pan_prior_parts(self, fit: AxisFit) -> tuple[bool, bool]:
+        """Which parts of a pan prior the data contradict (``fit.conflict``): ``(start tilt, lean)``,
+        each angle tested alone; neither alone but the two together: both (either may be off)."""
+        tilt_chi2, lean_chi2 = fit.start_tilt_and_lean_chi2(self.plan.start_tilt_deg, self.prior_sigma_deg["pan"])
+        tilt_off, lean_off = tilt_chi2 > PRIOR_CONFLICT_CHI2_1DOF, lean_chi2 > PRIOR_CONFLICT_CHI2_1DOF
+        return (True, True) if not (tilt_off or lean_off) else (tilt_off, lean_off)
+
     def _pan_prior_warning(self, fit: AxisFit, sp: float, test: str, used: str) -> str:
         """The warning on a pan prior the data contradict, naming the part of it they contradict: the
-        start tilt (``tilt0_deg``), the lean toward lidar Y (the lidar's mounting), or both.  Neither
-        alone but the two together: both are named, either may be off."""
+        start tilt (``tilt0_deg``), the lean toward lidar Y (the lidar's mounting), or both."""
         tilt, tilt_sigma, lean, lean_sigma = fit.implied_start_tilt_deg()
         t0 = self.plan.start_tilt_deg
-        tilt_chi2, lean_chi2 = fit.start_tilt_and_lean_chi2(t0, sp)
-        tilt_off, lean_off = tilt_chi2 > PRIOR_CONFLICT_CHI2_1DOF, lean_chi2 > PRIOR_CONFLICT_CHI2_1DOF
-        if not (tilt_off or lean_off):
-            tilt_off = lean_off = True
+        tilt_off, lean_off = self._pan_prior_parts(fit)
         said_tilt = (f"implies a start tilt of {tilt:.1f} +- {tilt_sigma:.1f} deg, but the calibration was told "
                      f"{t0:g} +- {sp:g} deg (tilt0_deg: [head] in a daemon config, [gimbal] in a scene)")
         said_lean = (f"leans {lean:+.1f} +- {lean_sigma:.1f} deg toward lidar Y, which no start tilt gives, where "
                      f"the calibration assumes 0 +- {sp:g} deg")
         fix_tilt = (f"If the head did not start at {t0:g} deg, measure its start tilt, set tilt0_deg to it and "
-                    f"calibrate again: the daemon takes tilt0_deg as the head's start pose, and the "
-                    f"calibration's tilt stops count from it.")
+                    f"calibrate again: the daemon takes tilt0_deg as the head's start pose (a calibration's "
+                    f"tilt stops count from it until the pan legs contradict it, then from the start tilt "
+                    f"they imply).")
         fix_lean = ("Check that the lidar sits on the head with its Y axis along the tilt axis (a lidar rolled "
                     "about its X axis leans the pan axis so)")
         axis = "the head's pan axis as the corner turned about it"

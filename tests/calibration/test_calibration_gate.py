@@ -115,7 +115,7 @@ def test_the_tilt_estimate_outlives_the_corner_unless_the_tilt_moves_unseen():
     from foveatrack.control import HeadCommand
 
     commands = iter([HeadCommand(1, 20, 0, 0)] * 30 + [HeadCommand(0, 0, 1, 63)] * 30)
-    cal = SimpleNamespace(plan=SimpleNamespace(start_tilt_deg=10.0), start_tilt_sigma_deg=0.5, done=False,
+    cal = SimpleNamespace(start_tilt_deg=lambda: (10.0, 0.5, False), done=False,
                           step=lambda frame: next(commands), tilt_since_start_deg=lambda t: (1.0, 0.1, 0.0))
     driver = CalibrationDriver(cal)
     tilts = []
