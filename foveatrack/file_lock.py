@@ -4,8 +4,10 @@ can tell a file still being written from one cut short: ``recover`` refuses it, 
 ``export`` read what it holds so far and say so instead of calling its end damage.  The kernel
 drops the lock when the writer's process dies (a killed driver's file is then recoverable), as it
 does a command journal's (:class:`foveatrack.live_devices.CommandJournal`), whose lock is asked with
-the same probe (:func:`recording_in_use`).  A core module: the recording layer and the live devices'
-layer both use it."""
+the same probe (:func:`recording_in_use`).  ``recover`` holds the same lock while it rewrites a cut-short
+recording (its completed copy beside it, renamed over it at the end): :func:`lock_holder` tells the two
+apart, so a reader is told which one to wait for.  A core module: the recording layer and the live
+devices' layer both use it."""
 
 from __future__ import annotations
 
@@ -47,3 +49,14 @@ def recording_in_use(path) -> bool:
     finally:
         os.close(fd)          # closing drops the probe's own lock if it got one
     return False
+
+
+def lock_holder(path) -> str | None:
+    """Who holds the recording at ``path`` under its lock: ``"recover"`` when a temporary copy of it lies
+    beside it (``foveatrack recover`` writing the completed file, :func:`foveatrack.atomic_file.written_whole`;
+    a writer never writes beside its recording), ``"writer"`` otherwise, None when nothing holds it."""
+    from foveatrack.atomic_file import leftovers
+
+    if not recording_in_use(path):
+        return None
+    return "recover" if leftovers(path) else "writer"

@@ -127,7 +127,7 @@ def recover(path, journal=None, progress=None) -> Recovery:
     """Complete the recording at ``path`` from its command journal (module docstring); returns what
     was done.  ``progress(frames)`` is called every 100 frames copied.  UserError (one line) for a
     file that is not a recording or a journal a running driver holds."""
-    from foveatrack.file_lock import hold, recording_in_use
+    from foveatrack.file_lock import hold, lock_holder
 
     path = Path(path)
     # a symlink's target is what is rewritten (written_whole writes through it): its directory is the one
@@ -136,10 +136,10 @@ def recover(path, journal=None, progress=None) -> Recovery:
     # the recording's own lock, held to the end (after the rename): a second recover of it (the daemon's
     # start and a user's, at once) cleared this one's copy between its writer's close and its rename
     lock = hold(real)
-    if lock is None and recording_in_use(real):
-        if leftovers(real):
-            # a copy beside it: a running recover's (a writer never writes beside its recording)
-            raise UserError(f"{path} is being recovered by another process; let it finish, nothing was changed")
+    holder = None if lock is not None else lock_holder(real)
+    if holder == "recover":
+        raise UserError(f"{path} is being recovered by another process; let it finish, nothing was changed")
+    if holder == "writer":
         # its writer's lock (foveatrack.file_lock): rewriting it now would lose what comes next
         raise UserError(f"{path} is still being written by a running process; stop it first (a stopped writer "
                         "completes its file itself), nothing was changed")

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from foveatrack.errors import UserError
-from foveatrack.file_lock import recording_in_use
+from foveatrack.file_lock import lock_holder
 from foveatrack.recording import mcap_walk as mw
 from foveatrack.recording.format import (CHANNELS_META_NAME, DETECTIONS, FORMAT, IMU, MCAP_MAGIC, META_CRC_KEY,
                                          META_NAME, POINTS, READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message,
@@ -235,9 +235,13 @@ class RecordingReader:
         problem = self.problem
         if problem is None:
             return None
-        if self.complete is not True and self.in_use:
-            # a writer holds it (foveatrack.file_lock.recording_in_use): its end is the writer's
-            # next bytes, not damage
+        if self.complete is not True and self.held_by == "recover":
+            # recover holds the file's lock while it writes the completed file beside it: not a writer
+            return (f"note: {self.path} is being recovered by a running 'foveatrack recover': read what the cut-short "
+                    f"file held up to byte {self.size}; run this again once the recover has finished (it replaces "
+                    f"the file with the completed one)")
+        if self.complete is not True and self.held_by == "writer":
+            # a writer holds it (foveatrack.file_lock): its end is the writer's next bytes, not damage
             return (f"note: {self.path} is still being written by a running process: read what it held up to "
                     f"byte {self.size} (its end is the writer's next data, not damage)")
         if self.damage or self.unattributed:
@@ -254,7 +258,8 @@ class RecordingReader:
         self.damage = []
         self.unattributed = {}
         self.capped = None
-        self.in_use = recording_in_use(self.path)
+        self.held_by = lock_holder(self.path)     # "writer", "recover" or None (foveatrack.file_lock)
+        self.in_use = self.held_by is not None
         size = self.size
         with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
             data_end = self._data_end_pos(mm)

@@ -416,6 +416,41 @@ def test_a_second_recover_of_the_same_file_is_refused_while_the_first_runs(tmp_p
     assert recover(cut).already_complete           # the lock is let go after the rename
 
 
+def test_a_recording_being_recovered_is_read_as_such_not_as_still_being_written(tmp_path, monkeypatch, capsys):
+    """'export' of a recording while 'foveatrack recover' rewrote it said "still being written by a
+    running process": recover holds the writer's lock (it must, or a second recover or a reader would
+    take its half-written state for the file's), but no writer is adding to the file; the user had
+    nothing to stop, and should wait for the recover and read the completed file."""
+    import foveatrack.atomic_file as af
+    from foveatrack.file_lock import recording_in_use
+
+    cut, _ = _cut_short(tmp_path)
+    real = af._fsync
+    during = []
+
+    def fsync_spy(path, flags):
+        # the recover has written its copy and syncs it before the rename: read the recording now
+        if not during and str(path).endswith(".tmp"):
+            assert recording_in_use(cut)        # the lock as strong as before
+            capsys.readouterr()
+            rc = main(["export", str(cut), "--csv", str(tmp_path / "points.csv")])
+            during.append((rc, capsys.readouterr().err, _warning_after_reading(cut)))
+        return real(path, flags)
+
+    monkeypatch.setattr(af, "_fsync", fsync_spy)
+    assert recover(cut).recovered
+    (rc, err, warning), = during
+    assert rc == 0 and "being recovered by a running 'foveatrack recover'" in err, err
+    assert "once the recover has finished" in err and "still being written" not in err, err
+    assert warning.startswith(f"note: {cut} is being recovered"), warning
+    assert not recording_in_use(cut) and _warning_after_reading(cut) is None
+
+
+def _warning_after_reading(path):
+    r = RecordingReader(path)
+    list(r.points())
+    return r.warning()
+
 def test_only_a_full_disk_is_said_to_need_space_and_every_error_ends_nothing_was_changed(tmp_path, monkeypatch):
     """'it needs about N bytes free' was said for any failed write of the copy (an I/O error too); the
     probe's refusal ended '...recover the copy', not 'nothing was changed' as every other one does."""
