@@ -228,6 +228,22 @@ class RecordingReader:
         return (f"reading stopped at byte {pos} of {self.size} after {n} frames, the cap on frames per file "
                 f"({why}): the rest of the file was not read")
 
+    def held_text(self) -> str | None:
+        """The sentence for an unfinished file a running process holds under its lock (after a full
+        iteration; ``replay`` and ``export`` alike), None otherwise: its end is then not damage."""
+        if self.complete is True:
+            return None
+        if self.held_by == "recover":
+            # recover holds the file's lock while it writes the completed file beside it: not a writer
+            return (f"{self.path} is being recovered by a running 'foveatrack recover': read what the cut-short "
+                    f"file held up to byte {self.size}; run this again once the recover has finished (it replaces "
+                    f"the file with the completed one)")
+        if self.held_by == "writer":
+            # a writer holds it (foveatrack.file_lock): its end is the writer's next bytes, not damage
+            return (f"{self.path} is still being written by a running process: read what it held up to "
+                    f"byte {self.size} (its end is the writer's next data, not damage)")
+        return None
+
     def warning(self) -> str | None:
         """The line a command prints after reading the whole recording (``replay`` and ``export`` alike):
         ``WARNING: damaged recording, ...`` naming every skipped stretch and what it held, a ``note``
@@ -235,15 +251,9 @@ class RecordingReader:
         problem = self.problem
         if problem is None:
             return None
-        if self.complete is not True and self.held_by == "recover":
-            # recover holds the file's lock while it writes the completed file beside it: not a writer
-            return (f"note: {self.path} is being recovered by a running 'foveatrack recover': read what the cut-short "
-                    f"file held up to byte {self.size}; run this again once the recover has finished (it replaces "
-                    f"the file with the completed one)")
-        if self.complete is not True and self.held_by == "writer":
-            # a writer holds it (foveatrack.file_lock): its end is the writer's next bytes, not damage
-            return (f"note: {self.path} is still being written by a running process: read what it held up to "
-                    f"byte {self.size} (its end is the writer's next data, not damage)")
+        held = self.held_text()
+        if held is not None:
+            return f"note: {held}"
         if self.damage or self.unattributed:
             return f"WARNING: damaged recording {self.path}, {problem}"
         if self.capped is not None:

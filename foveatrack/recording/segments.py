@@ -92,6 +92,10 @@ class RunReader:
         parts = [f"{r.path.name}: {r.problem}" for r in self.parts if r.problem]
         return "; ".join(parts) if parts else None
 
+    def held_text(self) -> str | None:
+        held = [h for h in (r.held_text() for r in self.parts) if h]
+        return "; ".join(held) if held else None
+
     def warning(self) -> str | None:
         lines = [w for w in (r.warning() for r in self.parts) if w] + [f"note: {n}" for n in self.notes]
         return "\n".join(lines) if lines else None

@@ -43,7 +43,9 @@ def format_report(res: ReplayResult) -> str:
              + f"; states {d['states']}")
     if not d["frames"]:
         L.append("  the recording holds no lidar frames (e.g. the lidar never sent data): nothing to replay")
-    if c.get("recording_damage"):
+    if c.get("recording_held"):      # its end is a writer's next data, or a recover's to complete: not damage
+        L.insert(1, f"  note: {c['recording_held']}")
+    elif c.get("recording_damage"):
         L.insert(1, "  WARNING: damaged recording, " + "; ".join(c["recording_damage"]))
     if c.get("recording_capped"):
         L.insert(1, f"  WARNING: {res.path} read in part: {c['recording_capped']}")
@@ -99,7 +101,8 @@ def format_report(res: ReplayResult) -> str:
                  f"dead reckoning: STOPs at start or while its pose was unknown, homing; not replayed)")
     for k, v in res.recorded_metrics.items():
         L.append(f"  recorded {k}: p50 {v['p50']:.2f}, p99 {v['p99']:.2f}, max {v['max']:.2f}")
-    if c.get("recording_problem") and not c.get("recording_damage") and not c.get("recording_capped"):
+    if (c.get("recording_problem") and not c.get("recording_damage") and not c.get("recording_capped")
+            and not c.get("recording_held")):
         L.append(f"  note: {c['recording_problem']}")
     return "\n".join(L)
 

@@ -2,6 +2,7 @@
 recordings, the CLI (JSON, plots, exports), and .lvx files (lidar only, head frozen)."""
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -73,6 +74,46 @@ def test_cut_recording_replays_its_complete_frames(sim_run, tmp_path):
     assert res.comparison["detections_equal"] and not res.comparison["recording_complete"]
     assert np.array_equal(res.frames["detected"], log["detected"][:n])
 
+
+def test_replay_of_a_recording_a_writer_or_a_recover_holds_says_so_not_damaged(sim_run, tmp_path, monkeypatch, capsys):
+    """replay called the end of a file still being written, or being rewritten by 'foveatrack recover',
+    a damaged recording ("file cut short"), where export said it was being written: the reader knows
+    who holds the file's lock, and replay says it as export does (what to wait for, not damage)."""
+    import foveatrack.atomic_file as af
+    from foveatrack.daemon.recover import recover
+    from foveatrack.file_lock import hold
+
+    path, _, _ = sim_run
+    cut = tmp_path / "cut.mcap"
+    data = Path(path).read_bytes()
+    cut.write_bytes(data[: int(len(data) * 0.6)])
+
+    def replay_says(*args):
+        capsys.readouterr()
+        assert main(["replay", str(cut), *args]) == 0
+        out = capsys.readouterr()
+        return out.err if "--json" in args else out.out
+
+    fd = hold(cut)                  # its writer's lock, as a running simulator or daemon holds it
+    try:
+        for said in (replay_says(), replay_says("--json")):
+            assert "still being written by a running process" in said and "damaged" not in said, said
+    finally:
+        os.close(fd)
+    assert "WARNING: damaged recording" in replay_says()      # let go: its end is damage again
+
+    real, during = af._fsync, []
+
+    def fsync_spy(p, flags):         # the recover's copy is written, not yet renamed over the recording
+        if not during and str(p).endswith(".tmp"):
+            during.extend([replay_says(), replay_says("--json")])
+        return real(p, flags)
+
+    monkeypatch.setattr(af, "_fsync", fsync_spy)
+    assert recover(cut).recovered
+    for said in during:
+        assert "being recovered by a running 'foveatrack recover'" in said and "damaged" not in said, said
+        assert "still being written" not in said, said
 
 def test_cli_json_plots_exports(sim_run, tmp_path, capsys):
     path, log, _ = sim_run
