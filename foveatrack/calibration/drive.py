@@ -98,8 +98,12 @@ class CalibrationDriver:
             start_deg, _, from_data = self.calibrator.start_tilt_deg()
             t0 = self.calibrator.plan.start_tilt_deg
             if from_data and not math.isfinite(start_deg):
-                where = (f"with the tilt unknown (the pan legs' corner data contradict tilt0_deg {t0:g} but do not "
-                         "tell the start tilt: measure it and set tilt0_deg)")
+                # the short legs' test is weak (a right tilt0_deg failed it in 1 of 7 simulated tall-room
+                # runs): the second way out is for that user
+                where = (f"with the tilt unknown (the pan legs' corner data contradict tilt0_deg {t0:g} but are too "
+                         "short to tell the start tilt: measure it and set tilt0_deg, or, if it is right, give the "
+                         "pan legs more room (max_excursion_deg, the corner farther from the pan axis) so that "
+                         "their arcs show the axis)")
             elif not math.isfinite(out.head_tilt_deg):
                 where = f"with the tilt unknown (the corner out of sight over {TILT_UNSEEN_MAX_S:g} s of tilt motion)"
             else:
