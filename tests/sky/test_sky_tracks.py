@@ -373,7 +373,7 @@ def test_a_candidate_seen_off_the_scenery_takes_no_object_on_it(clear_hits, conf
     tr.clear_hits = clear_hits
     tr.confirmed_t_s = 0.0 if confirmed else None
     tracker.tracks = [tr]
-    below = np.array([30.0, 0.5, 5.5])      # 2.5 m below, 0.4 s on: within the chi-square gate
+    below = np.array([30.0, 0.5, 6.0])      # 2 m below, 0.4 s on: within the chi-square gate and gate_max_m
     for on_scenery, expect in ((True, takes), (False, True)):
         ob = SkyObject(below, 0.4, 6, np.array([0.5, 0.5, 0.5]), on_scenery)
         match, allowed = tracker._associate([ob], 0.4)
