@@ -176,3 +176,26 @@ def bout_index_twin(t, member, starts_per_member):
         out[rows] = lo + np.clip(np.searchsorted(starts, t[rows], side="right") - 1, 0, starts.size - 1)
         lo += starts.size
     return out
+
+
+def _wander_arg_twin(flock, m, t):
+    return t[:, None, None] * flock.omega[m] + flock.phase[m]
+
+
+def flock_positions_twin(flock, m, t):
+    """``FlockPoses.positions`` by numpy (``wander_arg_kernel``, ``wander_sum_kernel``): the centre's
+    path, the bird's slot and the sum of its wander's sines."""
+    return flock.path.position(t) + flock.slot[m] + (flock.amp[m] * np.sin(_wander_arg_twin(flock, m, t))).sum(axis=1)
+
+
+def flock_velocities_twin(flock, m, t):
+    """``FlockPoses.velocities`` by numpy: the centre's velocity and the wander's derivative."""
+    return flock.path.velocity(t) + (flock.amp_omega[m] * np.cos(_wander_arg_twin(flock, m, t))).sum(axis=1)
+
+
+def flock_wing_angles_twin(flock, m, t):
+    """``FlockPoses.wing_angles`` by numpy (``wing_phase_kernel``, ``wing_angle_kernel``)."""
+    k = bout_index_twin(t, m, [flock.bout_start[lo:hi] for lo, hi in zip(flock.seg_lo, flock.seg_hi)])
+    phase = flock.two_pi_f[m] * (t - flock.bout_start[k])
+    phi0 = flock.phi0[m]
+    return np.where(flock.bout_flaps[k], phi0 + flock.flap_amp[m] * np.sin(phase), phi0)

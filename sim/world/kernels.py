@@ -508,15 +508,49 @@ def cones_candidates_kernel(d_world, status, centres, radii, out_idx, out_n):
 
 
 @njit(cache=True, nogil=True)
-def bout_index_kernel(t_s, member, seg_lo, seg_hi, starts, out):
-    """Per ray, the flapping bout its time falls in: ``numpy.searchsorted(starts[lo:hi], t, "right")
-    - 1 + lo`` for its member's segment ``[lo, hi)`` of the members' concatenated, each sorted, bout
-    starts, and ``lo`` before the first (``FlapSchedule.angle_rad``'s clip).  Comparisons only: the
-    same index as numpy's (its twin, ``tests/world/test_sky.py``)."""
+def wander_arg_kernel(t_s, member, omega, phase, out):
+    """``out[i] = t_s[i] * omega[member[i]] + phase[member[i]]`` (N, K, 3): the arguments of a flock's
+    wander sines (:class:`sim.world.sky.FlockPoses`), numpy's ``t[:, None, None] * omega[m] +
+    phase[m]`` element for element."""
     for i in range(t_s.shape[0]):
-        lo = seg_lo[member[i]]
+        m = member[i]
+        t = t_s[i]
+        for k in range(omega.shape[1]):
+            for a in range(3):
+                out[i, k, a] = t * omega[m, k, a] + phase[m, k, a]
+
+
+@njit(cache=True, nogil=True)
+def wander_sum_kernel(base, slot, member, amp, trig, out):
+    """``out[i] = base[i] + slot[member[i]] + sum_k amp[member[i], k] * trig[i, k]`` (N, 3): a flock's
+    positions (the centre's path, the bird's slot, its wander's sines) or, with ``slot`` empty (0, 3),
+    velocities; numpy's ``base + slot[m] + (amp[m] * trig).sum(axis=1)``, its sum from 0.0 in order
+    of k (numpy twins: ``flock_positions_twin``, ``flock_velocities_twin`` in ``tests/world_twins.py``)."""
+    with_slot = slot.shape[0] > 0
+    for i in range(base.shape[0]):
+        m = member[i]
+        for a in range(3):
+            s = 0.0
+            for k in range(amp.shape[1]):
+                s += amp[m, k, a] * trig[i, k, a]
+            x = base[i, a] + slot[m, a] if with_slot else base[i, a]
+            out[i, a] = x + s
+
+
+@njit(cache=True, nogil=True)
+def wing_phase_kernel(t_s, member, seg_lo, seg_hi, starts, two_pi_f, out_bout, out_phase):
+    """Per ray, the flapping bout its time falls in and the wingbeat's phase in it.
+
+    The bout: ``numpy.searchsorted(starts[lo:hi], t, "right") - 1 + lo`` for its member's segment
+    ``[lo, hi)`` of the members' concatenated, each sorted, bout starts, and ``lo`` before the first
+    (``FlapSchedule.angle_rad``'s clip), by comparisons only; the phase: ``two_pi_f[member] * (t -
+    starts[bout])`` (numpy twins: ``bout_index_twin``, ``flock_wing_angles_twin`` in
+    ``tests/world_twins.py``)."""
+    for i in range(t_s.shape[0]):
+        m = member[i]
+        lo = seg_lo[m]
         a = lo
-        b = seg_hi[member[i]]
+        b = seg_hi[m]
         t = t_s[i]
         while a < b:
             mid = (a + b) // 2
@@ -524,7 +558,19 @@ def bout_index_kernel(t_s, member, seg_lo, seg_hi, starts, out):
                 a = mid + 1
             else:
                 b = mid
-        out[i] = a - 1 if a - 1 >= lo else lo
+        k = a - 1 if a - 1 >= lo else lo
+        out_bout[i] = k
+        out_phase[i] = two_pi_f[m] * (t - starts[k])
+
+
+@njit(cache=True, nogil=True)
+def wing_angle_kernel(bout, member, flaps, phi0, amp, sin_phase, out):
+    """Per ray, the wing angle: ``phi0 + amp * sin(phase)`` of its member in a flapping bout, ``phi0``
+    in a glide (``FlapSchedule.angle_rad``; ``sin_phase`` numpy's sine of
+    :func:`wing_phase_kernel`'s phase)."""
+    for i in range(bout.shape[0]):
+        m = member[i]
+        out[i] = phi0[m] + amp[m] * sin_phase[i] if flaps[bout[i]] else phi0[m]
 
 
 @njit(cache=True)

@@ -354,6 +354,9 @@ class SkyObject:
     fixed_yaw: float | None = None
 
 
+_NO_SLOT = np.zeros((0, 3))      # FlockPoses.velocities: no slot added (wander_sum_kernel)
+
+
 class FlockPoses:
     """The poses of a flock's birds (consecutive :class:`SkyObject` s whose :class:`FlockMember`
     trajectories share one centre), evaluated for all of them at once: a frame asks for twenty
@@ -361,7 +364,9 @@ class FlockPoses:
     cost more in Python than the arithmetic.  Every value is what the member's own
     ``position``/``velocity``/:func:`~sim.world.trajectories.body_yaw_rad`/``flap.angle_rad``
     gives, by the same element-wise operations in the same order (``tests/world/test_sky.py``
-    compares them bit for bit)."""
+    compares them bit for bit): the sines and cosines and the centre's path by numpy as there, the
+    rest by kernels (:func:`sim.world.kernels.wander_sum_kernel` and its neighbours), where numpy's
+    gathers and small sums over (N, 3, 3) arrays took several times the time of the sines."""
 
     def __init__(self, objects: list[SkyObject]):
         trajs = [o.trajectory for o in objects]
@@ -406,16 +411,29 @@ class FlockPoses:
         return out
 
     def _wander_arg(self, m, t):
-        return t[:, None, None] * self.omega[m] + self.phase[m]
+        from sim.world import kernels as wk
+
+        arg = np.empty((t.size,) + self.omega.shape[1:])
+        wk.wander_arg_kernel(t, m, self.omega, self.phase, arg)
+        return arg
 
     def positions(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None) -> np.ndarray:
         """(N, 3): member ``m[i]``'s position at ``t[i]``."""
+        from sim.world import kernels as wk
+
         arg = self._wander_arg(m, t) if arg is None else arg
-        return self.path.position(t) + self.slot[m] + (self.amp[m] * np.sin(arg)).sum(axis=1)
+        out = np.empty((t.size, 3))
+        wk.wander_sum_kernel(np.ascontiguousarray(self.path.position(t)), self.slot, m, self.amp, np.sin(arg), out)
+        return out
 
     def velocities(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None) -> np.ndarray:
+        from sim.world import kernels as wk
+
         arg = self._wander_arg(m, t) if arg is None else arg
-        return self.path.velocity(t) + (self.amp_omega[m] * np.cos(arg)).sum(axis=1)
+        out = np.empty((t.size, 3))
+        wk.wander_sum_kernel(np.ascontiguousarray(self.path.velocity(t)), _NO_SLOT, m, self.amp_omega, np.cos(arg),
+                             out)
+        return out
 
     def poses(self, m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(positions (N, 3), yaws (N,))`` of members ``m`` at ``t`` (:meth:`positions`, :meth:`yaws`)."""
@@ -435,10 +453,11 @@ class FlockPoses:
 
     def wing_angles(self, m: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Each ray's wing angle (``FlapSchedule.angle_rad`` of member ``m[i]`` at ``t[i]``)."""
-        from sim.world.kernels import bout_index_kernel
+        from sim.world import kernels as wk
 
-        k = np.empty(t.size, np.int64)
-        bout_index_kernel(t, m, self.seg_lo, self.seg_hi, self.bout_start, k)
-        phase = self.two_pi_f[m] * (t - self.bout_start[k])
-        phi0 = self.phi0[m]
-        return np.where(self.bout_flaps[k], phi0 + self.flap_amp[m] * np.sin(phase), phi0)
+        bout = np.empty(t.size, np.int64)
+        phase = np.empty(t.size)
+        wk.wing_phase_kernel(t, m, self.seg_lo, self.seg_hi, self.bout_start, self.two_pi_f, bout, phase)
+        out = np.empty(t.size)
+        wk.wing_angle_kernel(bout, m, self.bout_flaps, self.phi0, self.flap_amp, np.sin(phase), out)
+        return out

@@ -17,7 +17,8 @@ from sim.loop import ClosedLoop
 from sim.scene import load_scene, scene_from_mapping
 from sim.world import kernels as K
 from sim.world import sky
-from world_twins import bout_index_twin, cast_flapping_twin, cone_candidates_twin, moving_cull_twin
+from world_twins import (bout_index_twin, cast_flapping_twin, cone_candidates_twin, flock_positions_twin,
+                         flock_velocities_twin, flock_wing_angles_twin, moving_cull_twin)
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 NEW_SCENES = ("two-drones-crossing", "drone-and-flock", "drone-tree-line", "swarm-of-five")
@@ -200,7 +201,7 @@ def test_flock_groups_are_runs_of_one_flock_s_flapping_birds():
     assert sky.FlockPoses.groups(a[:1]) == [], "a lone bird is cast on its own"
 
 
-def test_bout_and_cone_kernels_match_their_numpy_twins():
+def test_wing_phase_kernel_finds_numpy_s_bouts():
     rng = np.random.default_rng(11)
     starts = [np.sort(rng.uniform(-1.0, 10.0, k)) for k in (1, 2, 7, 30)]
     member = rng.integers(0, 4, 5000)
@@ -208,9 +209,39 @@ def test_bout_and_cone_kernels_match_their_numpy_twins():
     t[:4] = [s[-1] for s in starts]
     member[:4] = np.arange(4)
     sizes = np.array([s.size for s in starts])
-    out = np.empty(t.size, np.int64)
-    K.bout_index_kernel(t, member, np.cumsum(sizes) - sizes, np.cumsum(sizes), np.concatenate(starts), out)
-    assert np.array_equal(out, bout_index_twin(t, member, starts))
+    bout, phase = np.empty(t.size, np.int64), np.empty(t.size)
+    two_pi_f = rng.uniform(20.0, 80.0, 4)
+    cat = np.concatenate(starts)
+    K.wing_phase_kernel(t, member, np.cumsum(sizes) - sizes, np.cumsum(sizes), cat, two_pi_f, bout, phase)
+    assert np.array_equal(bout, bout_index_twin(t, member, starts))
+    assert np.array_equal(phase, two_pi_f[member] * (t - cat[bout]))
+
+
+def _flocks():
+    """drone-and-flock's 20 birds on a circle, and flocks on a straight line and a manual (spline) path."""
+    flocks = [sky.FlockPoses(load_scene(SCENES / "drone-and-flock.toml").others)]
+    m = _mapping("drone-and-flock")
+    for trajectory in ({"type": "straight", "start_m": [40.0, 10.0, 8.0], "velocity_m_s": [0.0, -7.0, 0.0]},
+                       {"type": "manual", "centre_m": [50.0, 0.0, 10.0], "radius_m": 10.0, "max_speed_m_s": 12.0,
+                        "max_accel_m_s2": 3.0}):
+        m["bird"] = [{"id": "b", "count": 7, "wingspan_m": 1.0, "glide_fraction": 0.5, "trajectory": trajectory}]
+        flocks.append(sky.FlockPoses(scene_from_mapping(copy.deepcopy(m)).others))
+    return flocks
+
+
+@pytest.mark.parametrize("n", [1, 2, 415, 3000])
+def test_flock_pose_kernels_match_their_numpy_twins_to_the_bit(n):
+    rng = np.random.default_rng(n)
+    for flock in _flocks():
+        m = np.sort(rng.integers(0, len(flock.objects), n))
+        t = rng.uniform(-0.5, 20.5, n)
+        assert np.array_equal(flock.positions(m, t), flock_positions_twin(flock, m, t))
+        assert np.array_equal(flock.velocities(m, t), flock_velocities_twin(flock, m, t))
+        assert np.array_equal(flock.wing_angles(m, t), flock_wing_angles_twin(flock, m, t))
+
+
+def test_cones_kernel_matches_its_numpy_twin():
+    rng = np.random.default_rng(11)
     d = rng.normal(size=(20_000, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     status = (rng.random(d.shape[0]) < 0.05).astype(np.uint8)
