@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -36,6 +37,35 @@ STRAY_REFLECTIVITY = 0.1      # an insect's or a dust grain's return: weak
 ONE_KIND_STREAMS = {"range_noise": "normal", "angular_noise": "normal", "return_probability": "uniform",
                     "dropouts": "uniform"}
 _NORMALS_BLOCK = 16_384     # normals per block on one thread: ~60 us of draws, a few frames' worth
+
+
+class _FlockCast(NamedTuple):
+    """What casting a flock's birds together needs (:meth:`SceneSensor._cast_flock`), gathered once."""
+
+    stop: int                 # the index in the scene's ``others`` after its last bird
+    poses: FlockPoses
+    members: np.ndarray       # 0 .. K-1
+    radius_m: np.ndarray      # each bird's cull: bounding radius, top speed, acceleration bound (-1: none)
+    max_speed_m_s: np.ndarray
+    max_accel_m_s2: np.ndarray
+    prims: np.ndarray         # the birds' primitive tables one after another: bird k's are the rows
+    hinge: np.ndarray         # prim_start[k]:prim_start[k + 1] (sim.world.kernels.cast_flock_kernel)
+    prim_start: np.ndarray
+
+    @classmethod
+    def of(cls, objects, culls, stop: int) -> _FlockCast:
+        """The flock ``objects`` (``scene.others[start:stop]``), ``culls`` their (radius, speed, accel)."""
+        radius, speed, accel = zip(*culls)
+        return cls(stop, FlockPoses(objects), np.arange(len(objects)), np.array(radius, dtype=np.float64),
+                   np.array(speed, dtype=np.float64), np.array([-1.0 if a is None else a for a in accel]),
+                   np.concatenate([o.body.prims for o in objects]), np.concatenate([o.hinge for o in objects]),
+                   np.cumsum([0] + [o.body.prims.shape[0] for o in objects]))
+
+
+def _reach(radius_m, max_speed_m_s, t0: float, t1: float):
+    """How near a ray must pass a body's position at the chunk's mid-time to be cast on it: its bounding
+    radius plus how far it can fly in half the chunk (1 % and 1 mm to spare); floats or arrays."""
+    return radius_m + max_speed_m_s * 0.5 * (t1 - t0) * 1.01 + 1e-3
 
 
 def scene_scan_model(scene) -> ScanModel:
@@ -120,7 +150,7 @@ class SceneSensor:
         # A flock's birds are cast together (sim.world.sky.FlockPoses: the same values, a twentieth of
         # the Python calls); with a beam footprint each body's sub-rays are cast on their own.
         self._flocks = {} if self._has["beam_footprint"] else {
-            a: (b, FlockPoses(scene.others[a:b])) for a, b in FlockPoses.groups(scene.others)}
+            a: _FlockCast.of(scene.others[a:b], self._cull_others[a:b], b) for a, b in FlockPoses.groups(scene.others)}
         # Multi-object scenes: the first primitive of each object (drones, then birds and crowns), for
         # the rays that hit each (``last_object_rays``) and the stray returns placed (``last_strays_m``).
         self._object_prim_start = np.cumsum([0] + [spec.body.prims.shape[0] for spec in scene.targets]
@@ -167,12 +197,12 @@ class SceneSensor:
         k = 0
         while k < len(scene.others):
             if k in self._flocks:
-                stop, flock = self._flocks[k]
-                c, v = self._cast_flock(flock, self._cull_others[k:stop], t0, t1, chunk, d_world, rng_m, prim, offset)
+                flock = self._flocks[k]
+                c, v = self._cast_flock(flock, t0, t1, chunk, d_world, rng_m, prim, offset)
                 mids += c
                 vels += v
-                offset += sum(o.body.prims.shape[0] for o in flock.objects)
-                k = stop
+                offset += int(flock.prim_start[-1])
+                k = flock.stop
                 continue
             obj = scene.others[k]
             c, v = self._cast_target(obj, self._cull_others[k], t0, t1, chunk.t_ns, d_world, chunk.status,
@@ -323,65 +353,31 @@ class SceneSensor:
         self._cast_body(spec, c, v, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset)
         return c, v
 
-    def _cast_flock(self, flock, culls, t0, t1, chunk, d_world, rng_m, prim, offset):
-        """:meth:`_cast_target` for each bird of a flock in turn, the birds' poses evaluated together
-        (:class:`sim.world.sky.FlockPoses`), the rays culled first against a cone holding every
-        bird's; returns their positions and velocities at the chunk's mid time (two lists)."""
+    def _cast_flock(self, flock: _FlockCast, t0, t1, chunk, d_world, rng_m, prim, offset):
+        """:meth:`_cast_target` for each bird of a flock in turn, in a few calls: the birds' poses
+        evaluated together (:class:`sim.world.sky.FlockPoses`), the rays culled for every bird in one
+        pass (:func:`sim.world.kernels.flock_candidates_kernel`: bird by bird, the rays in order) and
+        cast on them in one (:func:`sim.world.kernels.cast_flock_kernel`); returns their positions and
+        velocities at the chunk's mid time (two lists)."""
         t_mid = 0.5 * (t0 + t1)
-        n = len(flock.objects)
-        centres = flock.positions(np.arange(n), np.full(n, t_mid))
-        vel = flock.velocities(np.arange(n), np.full(n, t_mid))
-        vels = [vel[k].copy() for k in range(n)]
-        reach = np.array([r + v * 0.5 * (t1 - t0) * 1.01 + 1e-3 for r, v, _ in culls])
-        # the flock's cone: a ray within reach[k] of bird k passes within |c_k - g| + reach[k] of g
-        g = centres.mean(axis=0)
-        d = centres - g
-        outer = float(np.max(np.sqrt((d * d).sum(axis=1)) + reach)) * (1.0 + 1e-9) + 1e-6
-        sub = np.empty(chunk.t_ns.size, dtype=np.int64)
-        sub = sub[:wk.cone_candidates_kernel(d_world, chunk.status, g[0], g[1], g[2], outer, sub)]
-        mids = [centres[k].copy() for k in range(n)]
-        if sub.size == 0:
-            return mids, vels
-        local = np.empty((n, sub.size), dtype=np.int64)
-        count = np.empty(n, dtype=np.int64)
-        wk.cones_candidates_kernel(np.ascontiguousarray(d_world[sub]), np.ascontiguousarray(chunk.status[sub]),
-                                   centres, reach, local, count)
-        if int(count.sum()) == 0:
-            return mids, vels
-        # each bird's cone candidates that can meet it at their own instant (wk.moving_cull_kernel)
-        kept = np.empty(sub.size, dtype=np.int64)
-        parts = []
-        for k in range(n):
-            if count[k]:
-                r, v_max, accel = culls[k]
-                m_k = wk.moving_cull_kernel(sub[local[k, :count[k]]], d_world, self._t_ray, t_mid, centres[k], vel[k],
-                                            r, -1.0 if accel is None else accel, v_max, kept)
-                count[k] = m_k
-                parts.append(kept[:m_k].copy())
-        total = int(count.sum())
-        self.rays_cast_targets += total
-        if total == 0:
-            return mids, vels
-        idx_all = np.concatenate(parts)
-        m = np.repeat(np.arange(n), count)
-        t_pose = chunk.t_ns[idx_all] * 1e-9 if self.target_motion == "per_point" else np.full(total, t_mid)
-        pos, yaw = flock.poses(m, t_pose)
-        flap_rad = flock.wing_angles(m, t_pose)
-        hi = 0
-        for k in range(n):
-            obj = flock.objects[k]
-            lo, hi = hi, hi + int(count[k])
-            if hi > lo:
-                wk.cast_flapping_kernel(idx_all[lo:hi], d_world, pos[lo:hi], yaw[lo:hi], flap_rad[lo:hi],
-                                        obj.body.prims, obj.hinge, offset, rng_m, prim)
-            offset += obj.body.prims.shape[0]
-        return mids, vels
+        poses = flock.poses
+        centres, vel = poses.positions_velocities(flock.members, np.full(flock.members.size, t_mid))
+        idx, m = wk.flock_candidates_kernel(d_world, chunk.status, self._t_ray, t_mid, centres, vel,
+                                            _reach(flock.radius_m, flock.max_speed_m_s, t0, t1), flock.radius_m,
+                                            flock.max_accel_m_s2, flock.max_speed_m_s)
+        self.rays_cast_targets += idx.size
+        if idx.size:
+            t_pose = self._t_ray[idx]      # each ray's own instant (per_point), or the mid time (per_frame)
+            pos, yaw = poses.poses(m, t_pose)
+            wk.cast_flock_kernel(idx, m, d_world, pos, yaw, poses.wing_angles(m, t_pose), flock.prims, flock.hinge,
+                                 flock.prim_start, offset, rng_m, prim)
+        return list(centres), list(vel)
 
     def _cast_body(self, spec, c, v, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset) -> None:
         traj = spec.trajectory
         t_mid = 0.5 * (t0 + t1)
         radius_m, v_max, accel = cull
-        reach = radius_m + v_max * 0.5 * (t1 - t0) * 1.01 + 1e-3
+        reach = _reach(radius_m, v_max, t0, t1)
         # Beam divergence can catch a body just outside the central ray's path.
         if self._has["beam_footprint"]:
             reach += norm3(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2

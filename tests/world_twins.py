@@ -178,6 +178,32 @@ def bout_index_twin(t, member, starts_per_member):
     return out
 
 
+def flock_candidates_twin(d, status, t_ray, t_mid, centres, velocities, reach, radius, accel, v_max):
+    """``flock_candidates_kernel`` as the sensor culled a flock before it: the rays in the flock's
+    cone (numpy's mean, norms and max), then each bird's cone among them and of those the rays that
+    can meet it at their own instant, concatenated bird by bird."""
+    g = centres.mean(axis=0)
+    off = centres - g
+    outer = float(np.max(np.sqrt((off * off).sum(axis=1)) + reach)) * (1.0 + 1e-9) + 1e-6
+    sub = cone_candidates_twin(d, status, g, outer)
+    per = [moving_cull_twin(sub[cone_candidates_twin(d[sub], status[sub], c, r)], d, t_ray, t_mid, c, v, rad, acc, vm)
+           for c, v, r, rad, acc, vm in zip(centres, velocities, reach, radius, accel, v_max)]
+    return np.concatenate(per), np.repeat(np.arange(len(per)), [p.size for p in per])
+
+
+def cast_flock_twin(d, idx, member, pos, yaw, flap, prims, hinge, prim_start, prim_offset, out_range, out_prim):
+    """``cast_flock_kernel``: :func:`cast_flapping_twin` bird by bird, each ray's nearest hit kept."""
+    out_range, out_prim = out_range.copy(), out_prim.copy()
+    for k in range(prim_start.size - 1):
+        rows = np.flatnonzero(member == k)
+        lo, hi = prim_start[k], prim_start[k + 1]
+        r, p = cast_flapping_twin(d[idx[rows]], pos[rows], yaw[rows], flap[rows], prims[lo:hi], hinge[lo:hi])
+        for j, rr, pp in zip(idx[rows], r, p):
+            if rr < out_range[j]:
+                out_range[j], out_prim[j] = rr, prim_offset + lo + pp
+    return out_range, out_prim
+
+
 def _wander_arg_twin(flock, m, t):
     return t[:, None, None] * flock.omega[m] + flock.phase[m]
 

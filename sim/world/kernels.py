@@ -466,45 +466,133 @@ def moving_cull_kernel(idx, d_world, t_ray, t_mid, c, v, radius, accel, v_max, o
     n = 0
     for i in range(idx.shape[0]):
         j = idx[i]
-        dt = t_ray[j] - t_mid
-        if accel >= 0.0:
-            qx = c[0] + v[0] * dt
-            qy = c[1] + v[1] * dt
-            qz = c[2] + v[2] * dt
-            reach = (radius + 0.5 * accel * dt * dt) * 1.01 + 1e-3
-        else:
-            qx = c[0]
-            qy = c[1]
-            qz = c[2]
-            reach = (radius + v_max * abs(dt)) * 1.01 + 1e-3
-        b = d_world[j, 0] * qx + d_world[j, 1] * qy + d_world[j, 2] * qz
-        if (qx * qx + qy * qy + qz * qz) - b * b <= reach * reach and b > -reach:
+        if _meets_at_instant(d_world, j, t_ray[j] - t_mid, c[0], c[1], c[2], v[0], v[1], v[2], radius, accel, v_max):
             out_idx[n] = j
             n += 1
     return n
 
 
+@njit(cache=True, inline="always")
+def _meets_at_instant(d_world, j, dt, cx, cy, cz, vx, vy, vz, radius, accel, v_max):
+    """Whether ray ``j`` can meet, ``dt`` after the mid time, a body at ``c`` moving at ``v`` then
+    (:func:`moving_cull_kernel`'s test)."""
+    if accel >= 0.0:
+        qx = cx + vx * dt
+        qy = cy + vy * dt
+        qz = cz + vz * dt
+        reach = (radius + 0.5 * accel * dt * dt) * 1.01 + 1e-3
+    else:
+        qx = cx
+        qy = cy
+        qz = cz
+        reach = (radius + v_max * abs(dt)) * 1.01 + 1e-3
+    b = d_world[j, 0] * qx + d_world[j, 1] * qy + d_world[j, 2] * qz
+    return (qx * qx + qy * qy + qz * qz) - b * b <= reach * reach and b > -reach
+
+
 @njit(cache=True, nogil=True)
-def cones_candidates_kernel(d_world, status, centres, radii, out_idx, out_n):
-    """:func:`cone_candidates_kernel` for K cones in one pass over the rays (a flock's birds): the rays
-    of cone k go in order to ``out_idx[k, :out_n[k]]`` (``out_idx`` (K, N), ``out_n`` (K,)).  The
-    same arithmetic per ray and cone, so the same rays (numpy twin: ``cone_candidates_twin`` in
-    ``tests/world_twins.py``, compared in ``tests/world/test_sky.py``)."""
-    n_cones = centres.shape[0]
-    for k in range(n_cones):
-        out_n[k] = 0
+def flock_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities, reach, radius, accel, v_max):
+    """:func:`cone_candidates_kernel` then :func:`moving_cull_kernel` for the K birds of a flock in one
+    pass over the rays: returns ``(idx, member)``, the rays of bird 0 in order, then bird 1's, ...;
+    ``member[i]`` the bird of ray ``idx[i]``.
+
+    Bird k is at ``centres[k]`` and moves at ``velocities[k]`` at ``t_mid``; its cone's radius over
+    the frame is ``reach[k]``; ``radius[k]``, ``accel[k]`` (< 0: no bound), ``v_max[k]`` size the test
+    at a ray's own instant ``t_ray[j]``.  A ray is tested against the birds only if it passes within
+    the flock's cone: about the birds' mean ``g`` (numpy's ``centres.mean(axis=0)``), of radius
+    ``max_k(|c_k - g| + reach[k])`` widened by 1e-9 and 1 um (a ray within ``reach[k]`` of bird k
+    passes within ``|c_k - g| + reach[k]`` of ``g``, so the rounding's margin drops none).  Each test
+    with the arithmetic of the kernels it stands for, so the same rays; the mean's sum from 0.0 in
+    order of k, as numpy's (numpy twin: ``flock_candidates_twin`` in ``tests/world_twins.py``)."""
+    n = centres.shape[0]
+    gx = 0.0
+    gy = 0.0
+    gz = 0.0
+    for k in range(n):
+        gx += centres[k, 0]
+        gy += centres[k, 1]
+        gz += centres[k, 2]
+    gx /= n
+    gy /= n
+    gz /= n
+    far = -math.inf
+    for k in range(n):
+        dx = centres[k, 0] - gx
+        dy = centres[k, 1] - gy
+        dz = centres[k, 2] - gz
+        v = math.sqrt(dx * dx + dy * dy + dz * dz) + reach[k]
+        if not v <= far and far == far:      # larger, or NaN: numpy's max keeps a NaN
+            far = v
+    outer = far * (1.0 + 1e-9) + 1e-6
+    # the birds' columns as arrays of their own: one ray's test against every bird vectorises
+    cx = np.ascontiguousarray(centres[:, 0])
+    cy = np.ascontiguousarray(centres[:, 1])
+    cz = np.ascontiguousarray(centres[:, 2])
+    c2 = np.empty(n)
+    r2 = np.empty(n)
+    for k in range(n):
+        c2[k] = cx[k] * cx[k] + cy[k] * cy[k] + cz[k] * cz[k]
+        r2[k] = reach[k] * reach[k]
+    # (ray, bird) pairs in ray order, then sorted by bird (stably: each bird's rays stay in order);
+    # room for them guessed, and made once more if short (the pass's arrays are not reassigned
+    # inside its loop: growing them there made numba count references on every ray, ~40x slower)
+    count = np.zeros(n + 1, dtype=np.int64)
+    room = max(64, d_world.shape[0] // 8)
+    while True:
+        pair_ray = np.empty(room, dtype=np.int64)
+        pair_bird = np.empty(room, dtype=np.int64)
+        count[:] = 0
+        n_pairs = _flock_pairs(d_world, status, gx, gy, gz, outer, cx, cy, cz, c2, r2, reach, t_ray, t_mid, velocities,
+                               radius, accel, v_max, pair_ray, pair_bird, count)
+        if n_pairs <= room:
+            break
+        room = n_pairs
+    for k in range(n):
+        count[k + 1] += count[k]       # now bird k's first place
+    idx = np.empty(n_pairs, dtype=np.int64)
+    member = np.empty(n_pairs, dtype=np.int64)
+    for p in range(n_pairs):
+        k = pair_bird[p]
+        idx[count[k]] = pair_ray[p]
+        member[count[k]] = k
+        count[k] += 1
+    return idx, member
+
+
+@njit(cache=True, nogil=True)
+def _flock_pairs(d_world, status, gx, gy, gz, outer, cx, cy, cz, c2, r2, reach, t_ray, t_mid, velocities, radius, accel,
+                 v_max, pair_ray, pair_bird, count):
+    """The (ray, bird) pairs of :func:`flock_candidates_kernel` in ray order, as many as fit in
+    ``pair_ray``/``pair_bird``; ``count[k + 1]``: bird k's.  Returns how many there are."""
+    outer2 = outer * outer
+    g2 = gx * gx + gy * gy + gz * gz
+    n = cx.shape[0]
+    hit = np.empty(n, dtype=np.uint8)
+    n_pairs = 0
     for j in range(d_world.shape[0]):
-        if status[j] != RAY_OK:
+        dx = d_world[j, 0]
+        dy = d_world[j, 1]
+        dz = d_world[j, 2]
+        b = dx * gx + dy * gy + dz * gz
+        if not ((g2 - b * b <= outer2) and (b > -outer) and status[j] == RAY_OK):
             continue
-        for k in range(n_cones):
-            cx = centres[k, 0]
-            cy = centres[k, 1]
-            cz = centres[k, 2]
-            radius = radii[k]
-            b = d_world[j, 0] * cx + d_world[j, 1] * cy + d_world[j, 2] * cz
-            if (cx * cx + cy * cy + cz * cz) - b * b <= radius * radius and b > -radius:
-                out_idx[k, out_n[k]] = j
-                out_n[k] += 1
+        any_hit = 0
+        for k in range(n):      # no branch here: the loop vectorises
+            bk = dx * cx[k] + dy * cy[k] + dz * cz[k]
+            h = (c2[k] - bk * bk <= r2[k]) & (bk > -reach[k])
+            hit[k] = h
+            any_hit |= h
+        if any_hit:
+            dt = t_ray[j] - t_mid
+            for k in range(n):
+                if hit[k] and _meets_at_instant(d_world, j, dt, cx[k], cy[k], cz[k], velocities[k, 0],
+                                                velocities[k, 1], velocities[k, 2], radius[k], accel[k], v_max[k]):
+                    if n_pairs < pair_ray.shape[0]:
+                        pair_ray[n_pairs] = j
+                        pair_bird[n_pairs] = k
+                    n_pairs += 1
+                    count[k + 1] += 1
+    return n_pairs
 
 
 @njit(cache=True, nogil=True)
@@ -855,26 +943,48 @@ def cast_flapping_kernel(idx, d_world, pos, yaw, flap_rad, prims, hinge, prim_of
     (a rigid motion: the range along the unit ray is unchanged).  Numpy twin:
     ``tests/world_twins.py`` ``cast_flapping_twin``."""
     for i in range(idx.shape[0]):
-        j = idx[i]
-        ox, oy, oz, dx, dy, dz = _ray_in_body(d_world, j, pos, yaw, i)
-        cf = math.cos(flap_rad[i])
-        sf = math.sin(flap_rad[i])
-        for m in range(prims.shape[0]):
-            sign = hinge[m, 0]
-            if sign == 0.0:
-                t = _hit_prim(prims, m, ox, oy, oz, dx, dy, dz)
-            else:
-                # R_x(a) with a = -sign * phi: cos a = cf, sin a = -sign * sf
-                sa = -sign * sf
-                hy = hinge[m, 1]
-                hz = hinge[m, 2]
-                ry = oy - hy
-                rz = oz - hz
-                oy2 = ry * cf - rz * sa + hy
-                oz2 = ry * sa + rz * cf + hz
-                dy2 = dy * cf - dz * sa
-                dz2 = dy * sa + dz * cf
-                t = _hit_prim(prims, m, ox, oy2, oz2, dx, dy2, dz2)
-            if t < out_range[j]:
-                out_range[j] = t
-                out_prim[j] = prim_offset + m
+        _cast_flapping_ray(idx[i], d_world, pos, yaw, flap_rad, i, prims, hinge, 0, prims.shape[0], prim_offset,
+                           out_range, out_prim)
+
+
+@njit(cache=True, nogil=True)
+def cast_flock_kernel(idx, member, d_world, pos, yaw, flap_rad, prims, hinge, prim_start, prim_offset, out_range,
+                      out_prim):
+    """:func:`cast_flapping_kernel` for the birds of a flock in one call: ray ``idx[i]`` against bird
+    ``member[i]``, whose primitives are the rows ``prim_start[k]:prim_start[k + 1]`` of ``prims`` and
+    ``hinge`` (the birds' tables one after another) and record ``prim_offset`` plus their row.  The
+    rays in the order of the calls it replaces (one per bird, bird after bird), so every range and
+    id is the same (``tests/world/test_sky.py``; numpy twin ``cast_flock_twin`` in
+    ``tests/world_twins.py``)."""
+    for i in range(idx.shape[0]):
+        k = member[i]
+        _cast_flapping_ray(idx[i], d_world, pos, yaw, flap_rad, i, prims, hinge, prim_start[k], prim_start[k + 1],
+                           prim_offset, out_range, out_prim)
+
+
+@njit(cache=True, inline="always")
+def _cast_flapping_ray(j, d_world, pos, yaw, flap_rad, i, prims, hinge, m_lo, m_hi, prim_offset, out_range, out_prim):
+    """Ray ``j`` against the primitives ``m_lo:m_hi`` of a flapping body posed by ``pos[i]``, ``yaw[i]``,
+    ``flap_rad[i]`` (:func:`cast_flapping_kernel`)."""
+    ox, oy, oz, dx, dy, dz = _ray_in_body(d_world, j, pos, yaw, i)
+    cf = math.cos(flap_rad[i])
+    sf = math.sin(flap_rad[i])
+    for m in range(m_lo, m_hi):
+        sign = hinge[m, 0]
+        if sign == 0.0:
+            t = _hit_prim(prims, m, ox, oy, oz, dx, dy, dz)
+        else:
+            # R_x(a) with a = -sign * phi: cos a = cf, sin a = -sign * sf
+            sa = -sign * sf
+            hy = hinge[m, 1]
+            hz = hinge[m, 2]
+            ry = oy - hy
+            rz = oz - hz
+            oy2 = ry * cf - rz * sa + hy
+            oz2 = ry * sa + rz * cf + hz
+            dy2 = dy * cf - dz * sa
+            dz2 = dy * sa + dz * cf
+            t = _hit_prim(prims, m, ox, oy2, oz2, dx, dy2, dz2)
+        if t < out_range[j]:
+            out_range[j] = t
+            out_prim[j] = prim_offset + m

@@ -435,6 +435,11 @@ class FlockPoses:
                              out)
         return out
 
+    def positions_velocities(self, m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`positions` and :meth:`velocities`, the wander's arguments made once for both."""
+        arg = self._wander_arg(m, t)
+        return self.positions(m, t, arg), self.velocities(m, t, arg)
+
     def poses(self, m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(positions (N, 3), yaws (N,))`` of members ``m`` at ``t`` (:meth:`positions`, :meth:`yaws`)."""
         arg = self._wander_arg(m, t)

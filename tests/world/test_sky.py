@@ -17,8 +17,9 @@ from sim.loop import ClosedLoop
 from sim.scene import load_scene, scene_from_mapping
 from sim.world import kernels as K
 from sim.world import sky
-from world_twins import (bout_index_twin, cast_flapping_twin, cone_candidates_twin, flock_positions_twin,
-                         flock_velocities_twin, flock_wing_angles_twin, moving_cull_twin)
+from world_twins import (bout_index_twin, cast_flapping_twin, cast_flock_twin, cone_candidates_twin,
+                         flock_candidates_twin, flock_positions_twin, flock_velocities_twin,
+                         flock_wing_angles_twin, moving_cull_twin)
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 NEW_SCENES = ("two-drones-crossing", "drone-and-flock", "drone-tree-line", "swarm-of-five")
@@ -240,22 +241,65 @@ def test_flock_pose_kernels_match_their_numpy_twins_to_the_bit(n):
         assert np.array_equal(flock.wing_angles(m, t), flock_wing_angles_twin(flock, m, t))
 
 
-def test_cones_kernel_matches_its_numpy_twin():
-    rng = np.random.default_rng(11)
-    d = rng.normal(size=(20_000, 3))
+def test_flock_candidates_kernel_matches_its_twin_and_the_kernels_it_stands_for():
+    rng = np.random.default_rng(12)
+    d = rng.normal(size=(4000, 3)) + np.array([3.0, 0.0, 0.0])
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     status = (rng.random(d.shape[0]) < 0.05).astype(np.uint8)
-    centres = rng.normal(size=(6, 3)) * 20.0
-    radii = rng.uniform(0.5, 8.0, 6)
-    idx = np.empty((6, d.shape[0]), np.int64)
-    n = np.empty(6, np.int64)
-    K.cones_candidates_kernel(d, status, centres, radii, idx, n)
-    for k in range(6):
-        one = np.empty(d.shape[0], np.int64)
-        one = one[:K.cone_candidates_kernel(d, status, *centres[k], radii[k], one)]
-        twin = cone_candidates_twin(d, status, centres[k], radii[k])
-        assert n[k] > 0 and np.array_equal(idx[k, :n[k]], one) and np.array_equal(one, twin)
+    t_ray = np.sort(rng.uniform(2.0, 2.1, d.shape[0]))
+    # wide cones overlap: more (ray, bird) pairs than the kernel's first guess (d.shape[0] // 8 = 500), which grows
+    for n_birds, spread, reach, pairs in ((20, 8.0, 0.4, 20), (6, 3.0, 6.0, 500), (2, 1.0, 1.0, 10)):
+        centres = np.array([30.0, 0.0, 0.0]) + rng.normal(size=(n_birds, 3)) * spread
+        vel = rng.normal(size=(n_birds, 3)) * 8.0
+        cone = rng.uniform(0.5, 1.5, n_birds) * reach
+        radius = cone * rng.uniform(0.3, 0.9, n_birds)
+        accel = np.where(rng.random(n_birds) < 0.3, -1.0, rng.uniform(0.0, 20.0, n_birds))
+        v_max = np.linalg.norm(vel, axis=1) + 1.0
+        args = (d, status, t_ray, 2.05, centres, vel, cone, radius, accel, v_max)
+        idx, member = K.flock_candidates_kernel(*args)
+        twin_idx, twin_member = flock_candidates_twin(*args)
+        assert idx.size > pairs and np.array_equal(idx, twin_idx) and np.array_equal(member, twin_member)
+        for k in range(n_birds):
+            one = np.empty(d.shape[0], np.int64)
+            one = one[:K.cone_candidates_kernel(d, status, *centres[k], cone[k], one)]
+            kept = np.empty(one.size, np.int64)
+            kept = kept[:K.moving_cull_kernel(one, d, t_ray, 2.05, centres[k], vel[k], radius[k], accel[k], v_max[k],
+                                              kept)]
+            assert np.array_equal(idx[member == k], kept)
+    assert K.flock_candidates_kernel(d, status, t_ray, 2.05, centres + 1e3, vel, cone, radius, accel, v_max)[0].size == 0
 
+
+def test_a_flock_cast_in_one_call_is_its_birds_cast_one_by_one():
+    rng = np.random.default_rng(13)
+    birds = [sky.bird_body(b) for b in (0.5, 0.6, 0.9)]
+    prims = np.concatenate([b.body.prims for b in birds])
+    hinge = np.concatenate([b.hinge for b in birds])
+    prim_start = np.cumsum([0] + [b.body.prims.shape[0] for b in birds])
+    centres = np.array([[9.0, 0.0, 0.0], [9.2, 0.3, 0.0], [8.0, -0.2, 0.1]])
+    n = 6000
+    d = centres[rng.integers(0, 3, n)] + rng.normal(0, 0.3, (n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    member = np.repeat(np.arange(3), [2500, 2000, 3000])        # overlapping: a ray may meet two birds
+    idx = np.concatenate([rng.choice(n, 2500, replace=False), rng.choice(n, 2000, replace=False),
+                          rng.choice(n, 3000, replace=False)])
+    pos = centres[member] + rng.normal(0, 0.05, (member.size, 3))
+    yaw = rng.uniform(-np.pi, np.pi, member.size)
+    flap = rng.uniform(-0.6, 1.2, member.size)
+    r, p = np.full(n, np.inf), np.full(n, -1, dtype=np.int64)
+    r[::7] = 8.6                                             # something nearer on some rays already
+    p[::7] = 99
+    r1, p1, r2, p2 = r.copy(), p.copy(), r.copy(), p.copy()
+    K.cast_flock_kernel(idx, member, d, pos, yaw, flap, prims, hinge, prim_start, 5, r1, p1)
+    for k, b in enumerate(birds):
+        rows = member == k
+        K.cast_flapping_kernel(idx[rows], d, pos[rows], yaw[rows], flap[rows], b.body.prims, b.hinge,
+                               5 + prim_start[k], r2, p2)
+    assert np.array_equal(r1, r2) and np.array_equal(p1, p2)
+    assert set(p1[p1 != 99]) >= set(range(5, 5 + prims.shape[0])) | {-1}
+    rt, pt = cast_flock_twin(d, idx, member, pos, yaw, flap, prims, hinge, prim_start, 5, r, p)
+    assert np.array_equal(p1, pt)
+    f = np.isfinite(r1)
+    np.testing.assert_allclose(r1[f], rt[f], rtol=1e-12)
 
 
 def test_the_per_ray_cull_keeps_what_its_twin_keeps():
@@ -284,12 +328,20 @@ def test_the_per_ray_cull_drops_only_rays_that_miss(monkeypatch):
     # the truth (rays that hit each object) and the log are the same, and the cull cast far fewer
     # rays where things fly fast (the flock's birds at 8 m/s: a cone over the frame reaches ~0.8 m
     # from a bird's centre, its instant ~0.4 m; the crossing's drones at 1.2-1.4 m/s gain less).
+    flock_candidates = K.flock_candidates_kernel
+
     def run(scene, keep_all):
         if keep_all:
             def everything(idx, d, t_ray, t_mid, c, v, radius, accel, v_max, out):
                 out[:idx.size] = idx
                 return idx.size
+
+            def cones_only(d, status, t_ray, t_mid, centres, vel, reach, radius, accel, v_max):
+                # an infinite body radius: every ray can meet its bird at its instant
+                return flock_candidates(d, status, t_ray, t_mid, centres, vel, reach, np.full_like(radius, np.inf),
+                                        accel, v_max)
             monkeypatch.setattr(K, "moving_cull_kernel", everything)
+            monkeypatch.setattr(K, "flock_candidates_kernel", cones_only)
         points = []
         loop = ClosedLoop(scene, frame_hook=lambda frame, out, lp: points.append(frame.xyz.tobytes()))
         log = loop.run()
