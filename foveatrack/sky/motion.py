@@ -96,13 +96,16 @@ def predicted_many(filters, t_s: float) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`ConstantVelocityFilter.predicted` of many filters at ``t_s``: positions (N, 3) and
     variances (N, 3), row ``i`` the same bits as ``filters[i].predicted(t_s)`` (the same elementwise
     operations in the same order, on arrays: one call for a frame's tracks, not one per track)."""
-    n = len(filters)
-    if n == 0:
-        return np.empty((0, 3)), np.empty((0, 3))
+    return positions_many(filters, t_s), variances_many(filters, t_s)
+
+
+def variances_many(filters, t_s: float) -> np.ndarray:
+    """The variances (N, 3) of :func:`predicted_many` alone (for a caller that has the positions)."""
+    if not filters:
+        return np.empty((0, 3))
     dt = t_s - np.array([f.t_s for f in filters])
     q = np.array([f.q for f in filters])
     a = np.array([f.a for f in filters])
     b = np.array([f.b for f in filters])
     c = np.array([f.c for f in filters])
-    var = a + (2.0 * dt)[:, None] * b + (dt * dt)[:, None] * c + (q * dt * dt * dt / 3.0)[:, None]
-    return positions_many(filters, t_s), var
+    return a + (2.0 * dt)[:, None] * b + (dt * dt)[:, None] * c + (q * dt * dt * dt / 3.0)[:, None]

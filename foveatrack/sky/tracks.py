@@ -92,7 +92,7 @@ from foveatrack.frames import Frame
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
-from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, predicted_many
+from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, variances_many
 from foveatrack.openloop.range_background import RangeBackground, check_cell_deg
 from foveatrack.sky.world_points import lidar_to_world_per_point
 from foveatrack.space_of_interest import Box
@@ -385,14 +385,20 @@ class SkyTracker:
         pan, tilt, _, _ = pose.angles_at(t_mid)
         rows = rotation_rows(pan, tilt)
         off = np.asarray(pose.lidar_offset_m, np.float64).reshape(3)
-        for tr in self.tracks:
+        # every track's prediction at mid-frame, once: the field test, the association and the
+        # fixated track's D all read it
+        pred_mid = positions_many([tr.kf for tr in self.tracks], t_mid)
+        n = len(self.tracks)
+        last = np.array([tr.last_xyz_m for tr in self.tracks]).reshape(n, 3)
+        seen = self._in_view_many(np.concatenate((pred_mid, last)), rows, off)
+        for tr, in_view, last_in_view in zip(self.tracks, seen[:n], seen[n:]):
             tr.frames_seen += 1
             tr.hit_now = False
-            tr.in_view = self._in_view(tr.kf.position_at(t_mid), rows, off)
+            tr.in_view = in_view
             # lost while in view: where it was last seen is in the field now (a track that coasts out
             # of the field on its own velocity is not "out of view": the head did not look away)
-            tr.last_seen_in_view = self._in_view(tr.last_xyz_m, rows, off)
-        match, allowed = self._associate(objs, t_mid)
+            tr.last_seen_in_view = last_in_view
+        match, allowed = self._associate(objs, t_mid, pred_mid)
         obj_track = {j: i for i, j in match}
         # A confirmed track left without an object while an object matched to another track lies in
         # its gate has merged with it (two clusters became one): it coasts and is not lost meanwhile.
@@ -409,7 +415,7 @@ class SkyTracker:
                 if i != fov:
                     keep &= point_obj != j
             sel = fg_idx[keep]
-            c = tr.kf.position_at(t_mid)
+            c = pred_mid[fov]
             d_box = Box(tuple((c - cfg.d_half_m).tolist()), tuple((c + cfg.d_half_m).tolist()))
             lo, hi = box_bounds(d_box)
             fovea_det = box_detection(np.ascontiguousarray(xyz[sel]), np.ascontiguousarray(t_ns[sel]),
@@ -474,15 +480,15 @@ class SkyTracker:
             keep = np.ones(cells.size, bool)
             keep[fg_idx[~learn_pts]] = False
             self.background.learn(cells[keep], ranges[keep])
-        deleted = self._prune(t_mid, fovea_track_id, t1 - t0)
+        deleted, positions = self._prune(t_mid, fovea_track_id, t1 - t0)
         for tr in self.tracks:
             self._classify(tr)
             tr.label, tr.drone_frames = held_label(tr.seen_as, tr.label, tr.drone_frames, cfg.classifier)
         if not learn:
             return (), None, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
-        views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, tr.kf.position_at(t_mid), tr.kf.v.copy(),
+        views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, p, tr.kf.v.copy(),
                                 tr.hit_now, tr.in_view, dict(tr.features), tr.clear_hits, tr.seen_as)
-                      for tr in self.tracks)
+                      for tr, p in zip(self.tracks, positions))
         return views, fovea_det, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
 
     # ------------------------------------------------------------------------------------------
@@ -494,19 +500,20 @@ class SkyTracker:
         x, y, z = q.tolist()
         return np.array([r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z])
 
-    def _in_view(self, p_world: np.ndarray, rows, offset: np.ndarray) -> bool:
-        """Is the world point inside the lidar's field at the frame's mid pose?"""
+    def _in_view_many(self, p_world: np.ndarray, rows, offset: np.ndarray) -> list[bool]:
+        """Per world point of ``p_world`` (N, 3): is it inside the lidar's field at the frame's mid pose?"""
         if self._cos_field is None:
-            return True
-        # R.T p - offset in floats (mat3T_vec's products and sums, in its order; asked ~30 times a frame)
+            return [True] * p_world.shape[0]
+        # R.T p - offset column by column (mat3T_vec's products and sums, in its order: the bits of
+        # the scalar form, one call for every track's two points of a frame)
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
-        px, py, pz = p_world.tolist()
+        px, py, pz = p_world[:, 0], p_world[:, 1], p_world[:, 2]
         ox, oy, oz = offset.tolist()
         x = (r00 * px + r10 * py + r20 * pz) - ox
         y = (r01 * px + r11 * py + r21 * pz) - oy
         z = (r02 * px + r12 * py + r22 * pz) - oz
-        r = math.sqrt(x * x + y * y + z * z)
-        return r > 0 and x >= self._cos_field * r
+        r = np.sqrt(x * x + y * y + z * z)
+        return ((r > 0) & (x >= self._cos_field * r)).tolist()
 
     def _objects(self, world: np.ndarray, t_ns: np.ndarray, near: np.ndarray) -> tuple[list[SkyObject], np.ndarray]:
         """The frame's objects and, per foreground point, the index of its object (-1: none)."""
@@ -524,13 +531,17 @@ class SkyTracker:
             objs.append(SkyObject(fo.xyz_m, fo.t_median_ns * 1e-9, fo.n_points, fo.sides_m, on_scenery))
         return objs, point_obj
 
-    def _associate(self, objs: list[SkyObject], t_s: float) -> tuple[list[tuple[int, int]], np.ndarray]:
+    def _associate(self, objs: list[SkyObject], t_s: float, positions: np.ndarray | None = None
+                   ) -> tuple[list[tuple[int, int]], np.ndarray]:
         """Gated global nearest neighbour (module docstring): ``(track index, object index)`` pairs, and
-        the allowed pairs (tracks x objects)."""
+        the allowed pairs (tracks x objects).  ``positions``: the tracks' predicted positions at
+        ``t_s`` if the caller has them (:func:`positions_many`)."""
         cfg = self.cfg
         if not self.tracks or not objs:
             return [], np.zeros((len(self.tracks), len(objs)), bool)
-        P, V = predicted_many([tr.kf for tr in self.tracks], t_s)
+        kfs = [tr.kf for tr in self.tracks]
+        P = positions_many(kfs, t_s) if positions is None else positions
+        V = variances_many(kfs, t_s)
         O = np.array([ob.xyz_m for ob in objs])
         d = O[None, :, :] - P[:, None, :]
         d2 = d * d
@@ -571,13 +582,16 @@ class SkyTracker:
         tr.last_xyz_m = z
         tr.excursion_m = max(tr.excursion_m, norm3(z - tr.origin_xyz_m))
 
-    def _prune(self, t_s: float, fovea_track_id: int | None, frame_s: float) -> list[int]:
-        """Drop failed candidates, tracks lost too long and static scenery; returns their ids.  ``frame_s``:
-        the frame's length, added to the unseen time in the field of each track not seen in it."""
+    def _prune(self, t_s: float, fovea_track_id: int | None, frame_s: float) -> tuple[list[int], np.ndarray]:
+        """Drop failed candidates, tracks lost too long and static scenery; returns their ids, and the
+        positions (N, 3) of the tracks left at ``t_s`` (:func:`positions_many`).  ``frame_s``: the frame's
+        length, added to the unseen time in the field of each track not seen in it."""
         cfg = self.cfg
         keep, gone = [], []
+        oldest = t_s - cfg.history_s
         for tr in self.tracks:
-            tr.history = [h for h in tr.history if h[0] >= t_s - cfg.history_s]
+            if tr.history:
+                tr.history = [h for h in tr.history if h[0] >= oldest]
             unseen = t_s - max(tr.last_hit_t_s, tr.merged_t_s)
             if tr.hit_now or tr.merged_t_s == t_s:
                 tr.unseen_in_view_s = 0.0
@@ -599,31 +613,40 @@ class SkyTracker:
                 gone.append(tr.track_id)
             else:
                 keep.append(tr)
-        away = self._merged_away(keep, t_s)
+        # the positions once, for the merge rule and the frame's views
+        positions = positions_many([tr.kf for tr in keep], t_s)
+        away = self._merged_away(keep, t_s, positions)
         gone += away
-        self.tracks = [tr for tr in keep if tr.track_id not in away]
-        return gone
+        if away:
+            stay = [i for i, tr in enumerate(keep) if tr.track_id not in away]
+            keep, positions = [keep[i] for i in stay], positions[stay]
+        self.tracks = keep
+        return gone, positions
 
-    def _merged_away(self, tracks: list[SkyTrack], t_s: float) -> list[int]:
+    def _merged_away(self, tracks: list[SkyTrack], t_s: float, positions: np.ndarray) -> list[int]:
         """Ids of confirmed tracks that have been one object with another for ``merge_frames``
         frames in a row (within ``merge_m`` and ``merge_v_m_s``), or ``merge_close_frames`` (within
         ``merge_m``): of each such pair the one with fewer hits in its history goes (a tie: the
         younger), in the order found.  A crown part or a split cluster can start a second track
-        on a drone; the two then take its hits in turn and every turn is an id switch."""
+        on a drone; the two then take its hits in turn and every turn is an id switch.  ``positions``:
+        the tracks' at ``t_s`` (:func:`positions_many`)."""
         cfg = self.cfg
         if cfg.merge_frames <= 0 and cfg.merge_close_frames <= 0:
             return []
-        conf = [tr for tr in tracks if tr.confirmed]
+        idx = [i for i, tr in enumerate(tracks) if tr.confirmed]
+        conf = [tracks[i] for i in idx]
         together, away = {}, []
         if len(conf) < 2:
             self._together = {}
             return away
         # every pair's distance at once (|d| as norm3 sums it): a flock's twenty confirmed tracks are
         # 190 pairs a frame; few are close
-        P = positions_many([tr.kf for tr in conf], t_s)
+        P = positions[idx]
         d = P[:, None, :] - P[None, :, :]
         dist = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
-        for a, b in np.argwhere(np.triu(dist <= cfg.merge_m, 1)).tolist():     # row-major: (a, b) in order
+        for a, b in np.argwhere(dist <= cfg.merge_m).tolist():     # row-major: (a, b) in order
+            if a >= b:      # each pair once (what np.triu(.., 1) kept; a track's own zero distance too)
+                continue
             ta, tb = conf[a], conf[b]
             if ta.track_id in away or tb.track_id in away:
                 continue

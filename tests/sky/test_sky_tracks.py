@@ -210,7 +210,7 @@ def test_predicted_many_is_each_filters_prediction_bit_for_bit():
     # the association predicts every track at once (motion.predicted_many), the merge rule their
     # positions (positions_many): row i must be the same bits as filter i's own, whatever each
     # filter's time, state and noise
-    from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, predicted_many
+    from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, predicted_many, variances_many
 
     rng = np.random.default_rng(7)
     filters = []
@@ -226,9 +226,42 @@ def test_predicted_many_is_each_filters_prediction_bit_for_bit():
             p, v = kf.predicted(t_s)
             assert P[i].tobytes() == p.tobytes() and V[i].tobytes() == v.tobytes()
         assert positions_many(filters, t_s).tobytes() == P.tobytes()
+        assert variances_many(filters, t_s).tobytes() == V.tobytes()
         assert kf.position_at(t_s).tobytes() == p.tobytes()
     P, V = predicted_many([], 1.0)
     assert P.shape == V.shape == positions_many([], 1.0).shape == (0, 3)
+
+
+def test_the_field_test_of_many_points_is_each_points_own():
+    # every track's two points of a frame are tested at once (SkyTracker._in_view_many): each answer
+    # must be the one the scalar form gives (R.T p - offset in floats, mat3T_vec's order), at the
+    # field's rim too
+    from foveatrack.reconstruction import rotation_rows
+
+    tracker = SkyTracker(SkyTrackerConfig(field_half_angle_deg=19.2))
+    rng = np.random.default_rng(11)
+    cos_field = math.cos(math.radians(19.2))
+
+    def scalar(p, rows, off):
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
+        px, py, pz = p.tolist()
+        ox, oy, oz = off.tolist()
+        x = (r00 * px + r10 * py + r20 * pz) - ox
+        y = (r01 * px + r11 * py + r21 * pz) - oy
+        z = (r02 * px + r12 * py + r22 * pz) - oz
+        r = math.sqrt(x * x + y * y + z * z)
+        return r > 0 and x >= cos_field * r
+
+    for _ in range(20):
+        rows = rotation_rows(rng.uniform(-180, 180), rng.uniform(-30, 60))
+        off = rng.normal(size=3) * 0.05
+        axis = np.array([rows[0][0], rows[1][0], rows[2][0]])      # the lidar's axis in the world
+        P = np.concatenate([rng.normal(size=(200, 3)) * 40.0,
+                            axis * 30.0 + rng.normal(size=(200, 3)) * 10.0, np.zeros((1, 3))])
+        got = tracker._in_view_many(P, rows, off)
+        assert got == [scalar(p, rows, off) for p in P] and all(type(b) is bool for b in got)
+        assert 0 < sum(got) < len(got)
+    assert SkyTracker(SkyTrackerConfig())._in_view_many(P, rows, off) == [True] * len(P)
 
 
 def _confirmed_track(tracker, tid, xyz, v, hits, t_s):
