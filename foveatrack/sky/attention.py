@@ -162,9 +162,10 @@ class Attention:
         self.pinned = track_id
 
     def update(self, t_s: float, views, in_fovea: set[int], dt_s: float,
-               turn_s: Mapping[int, float] | None = None) -> int | None:
+               turn_s: Mapping[int, float] | None = None, scores: Mapping[int, float] | None = None) -> int | None:
         """``turn_s``: each confirmed track's saccade time from the head's pose now (module
-        docstring; missing: 0, a revisit then starts only when its clock has run out)."""
+        docstring; missing: 0, a revisit then starts only when its clock has run out).  ``scores``:
+        every confirmed track's :func:`threat_score`, if the caller has them."""
         cfg = self.cfg
         turn_s = turn_s or {}
         if self.target in in_fovea:
@@ -180,8 +181,10 @@ class Attention:
         self.unreached &= set(live)
         if self.pinned is not None and self.pinned not in live:
             self.pinned = None
-        scores = sorted(((-threat_score(v, cfg), tid) for tid, v in live.items()))
-        best = scores[0][1] if scores and scores[0][0] < 0.0 else None
+        if scores is None:
+            scores = {tid: threat_score(v, cfg) for tid, v in live.items()}
+        ranked = sorted((-scores[tid], tid) for tid in live)
+        best = ranked[0][1] if ranked and ranked[0][0] < 0.0 else None
         self.priority = self.pinned if self.pinned is not None else best
         # the revisit in progress: count its time in the fovea, end it when served or timed out
         if self.revisit is not None:
@@ -257,9 +260,12 @@ def bearing_off_axis_deg(p_world, rows, offset) -> float:
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
     x, y, z = np.asarray(p_world, np.float64).reshape(3).tolist()
     ox, oy, oz = np.asarray(offset, np.float64).reshape(3).tolist()
-    qx = r00 * x + r10 * y + r20 * z - ox
-    qy = r01 * x + r11 * y + r21 * z - oy
-    qz = r02 * x + r12 * y + r22 * z - oz
+    return off_axis_deg(r00 * x + r10 * y + r20 * z - ox, r01 * x + r11 * y + r21 * z - oy,
+                        r02 * x + r12 * y + r22 * z - oz)
+
+
+def off_axis_deg(qx: float, qy: float, qz: float) -> float:
+    """Angle [deg] between the lidar's axis and a point ``(qx, qy, qz)`` of the lidar frame."""
     return math.degrees(math.atan2(math.hypot(qy, qz), qx))
 
 

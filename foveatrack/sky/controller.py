@@ -30,11 +30,11 @@ import numpy as np
 from foveatrack.config_util import check_keys
 from foveatrack.detection import Detection, bearing_deg
 from foveatrack.errors import UserError
-from foveatrack.fixed_order import norm3
+from foveatrack.fixed_order import floats3, norm3
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_rows
-from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, saccade_time_s,
-                                      threat_score)
+from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, off_axis_deg,
+                                      saccade_time_s, threat_score)
 from foveatrack.space_of_interest import Box
 from foveatrack.sky.tracks import SkyFrameOutput, SkyTracker, SkyTrackerConfig
 from foveatrack.tracker import Tracker, TrackOutput
@@ -194,22 +194,29 @@ class SkyController:
                 view.xyz_m, *self._pose_rows(frame.t_end_s)) > self.attention.cfg.fovea_half_angle_deg:
             gains = (ks, ks)        # a saccade: the fixated track is off the fovea
         out = self.tracker.steer(frame, det, send_t_s, gains)
+        att = self.attention.cfg
         t_mid = 0.5 * (frame.t_start_s + frame.t_end_s)
         mid_pose = self._pose_rows(t_mid)
-        half = self.attention.cfg.fovea_half_angle_deg
-        in_fovea = {v.track_id for v in sky.tracks
-                    if v.confirmed and bearing_off_axis_deg(v.xyz_m, *mid_pose) <= half}
+        half = att.fovea_half_angle_deg
+        end_pose = self._pose_rows(frame.t_end_s)      # one pose for every track's saccade time
+        # per confirmed track, in one pass: in the fovea at the mid pose, its saccade time from the
+        # end pose, its threat score (the attention's too)
+        in_fovea, turn, scores = set(), {}, {}
+        for v in sky.tracks:
+            if v.confirmed:
+                p = v.xyz_m.tolist()
+                if off_axis_deg(*self._in_lidar(p, *mid_pose)) <= half:
+                    in_fovea.add(v.track_id)
+                turn[v.track_id] = saccade_time_s(*bearing_deg(*self._in_lidar(p, *end_pose)), att,
+                                                  self._head_speeds)
+                scores[v.track_id] = threat_score(v, att)
         # the candidate being verified counts too for the attention, which ends that look once the
         # candidate has been dwell_s in the fovea (without it every look ran saccade_timeout_s)
         cand = next((v for v in sky.tracks if v.track_id == self.attention.verifying and not v.confirmed), None)
         looked = in_fovea | ({cand.track_id} if cand is not None
                              and bearing_off_axis_deg(cand.xyz_m, *mid_pose) <= half else set())
-        end_pose = self._pose_rows(frame.t_end_s)      # one pose for every track's saccade time
-        turn = {v.track_id: saccade_time_s(*bearing_deg(*self._in_lidar(v.xyz_m, *end_pose).tolist()),
-                                           self.attention.cfg, self._head_speeds)
-                for v in sky.tracks if v.confirmed}
-        nxt = self.attention.update(frame.t_end_s, sky.tracks, looked, frame.t_end_s - frame.t_start_s, turn)
-        scores = {v.track_id: threat_score(v, self.attention.cfg) for v in sky.tracks if v.confirmed}
+        nxt = self.attention.update(frame.t_end_s, sky.tracks, looked, frame.t_end_s - frame.t_start_s, turn,
+                                    scores)
         self.last_output = SkyControlOutput(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores, self.attention.pinned)
         return self.last_output
 
@@ -248,16 +255,17 @@ class SkyController:
         return rotation_rows(pan, tilt), recon.lidar_offset_m
 
     @staticmethod
-    def _in_lidar(p_world: np.ndarray, rows, offset) -> np.ndarray:
-        """A world point in the lidar frame of the pose ``rows``, ``offset`` (:meth:`_pose_rows`)."""
+    def _in_lidar(p_world, rows, offset) -> tuple[float, float, float]:
+        """A world point (3 floats) in the lidar frame of the pose ``rows``, ``offset`` (:meth:`_pose_rows`)."""
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
-        x, y, z = np.asarray(p_world, np.float64).tolist()
-        ox, oy, oz = np.asarray(offset, np.float64).reshape(3).tolist()
-        return np.array([r00 * x + r10 * y + r20 * z - ox, r01 * x + r11 * y + r21 * z - oy,
-                         r02 * x + r12 * y + r22 * z - oz])
+        x, y, z = p_world
+        ox, oy, oz = floats3(offset)
+        return (r00 * x + r10 * y + r20 * z - ox, r01 * x + r11 * y + r21 * z - oy,
+                r02 * x + r12 * y + r22 * z - oz)
 
     def _aim(self, p_world: np.ndarray, t_s: float) -> Detection:
         """The track's position as the lidar would see it at ``t_s`` (an aim point, ``n_points = 0``)."""
-        q = self._in_lidar(p_world, *self._pose_rows(t_s))
-        az, el = bearing_deg(*q.tolist())
+        xyz = self._in_lidar(floats3(p_world), *self._pose_rows(t_s))
+        q = np.array(xyz)
+        az, el = bearing_deg(*xyz)
         return Detection(t_s, q, 0, az, el, norm3(q))

@@ -55,6 +55,23 @@ def test_revisits_each_other_drone_and_returns_to_the_priority():
             assert b in (0, 1, 2)
 
 
+def test_scores_handed_in_are_the_ones_it_would_compute():
+    # the controller scores every confirmed track once a frame (its output shows the scores) and hands
+    # them to the attention: the schedule must be the one the attention's own scores give
+    cfg = AttentionConfig(revisit_s=1.0, dwell_s=0.2, saccade_timeout_s=0.5)
+    own, given = Attention(cfg), Attention(cfg)
+
+    def views(t):
+        return [view(0, [20, 0, 0]), view(1, [60 - 4 * t, 10, 0], vel=(-4, 0, 0)), view(2, [70, -10, 0]),
+                view(3, [30, 5, 0], label="bird"), view(4, [25, 1, 0], confirmed=False)]
+    for k in range(100):
+        t, vs = (k + 1) * 0.1, views((k + 1) * 0.1)
+        fovea = set() if own.target is None else {own.target}
+        a = own.update(t, vs, fovea, 0.1)
+        b = given.update(t, vs, fovea, 0.1, None, {v.track_id: threat_score(v, cfg) for v in vs if v.confirmed})
+        assert a == b and own.priority == given.priority and own.revisit == given.revisit
+
+
 def test_a_revisit_that_never_reaches_the_track_times_out():
     cfg = AttentionConfig(revisit_s=1.0, dwell_s=0.3, saccade_timeout_s=0.5)
     att = Attention(cfg)
