@@ -123,16 +123,20 @@ def _mean(xs) -> float:
     return math.fsum(xs) / len(xs)
 
 
-def _slope(ts, xs) -> float:
-    tm, xm = _mean(ts), _mean(xs)
-    den = math.fsum((t - tm) * (t - tm) for t in ts)
-    return 0.0 if den == 0.0 else math.fsum((t - tm) * (x - xm) for t, x in zip(ts, xs)) / den
-
-
-def _velocity(h) -> list[float]:
-    ts = [x[0] for x in h]
-    ps = [x[1].tolist() for x in h]      # Python floats, the values float(x[1][a]) gives (a tenth the cost)
-    return [_slope(ts, [p[a] for p in ps]) for a in range(3)]
+def _velocity(ts, ps) -> list[float]:
+    """Least-squares velocity per axis of the positions ``ps`` (lists of 3 floats) at times ``ts``;
+    the times' mean and spread once for the three axes."""
+    tm = _mean(ts)
+    dts = [t - tm for t in ts]
+    den = math.fsum([d * d for d in dts])
+    if den == 0.0:
+        return [0.0, 0.0, 0.0]
+    out = []
+    for a in range(3):
+        xs = [p[a] for p in ps]
+        xm = _mean(xs)
+        out.append(math.fsum([d * (x - xm) for d, x in zip(dts, xs)]) / den)
+    return out
 
 
 def _norm(v) -> float:
@@ -148,50 +152,63 @@ def flap_period_s(ts, zs, min_period_s: float, threshold: float) -> float | None
     dt = (ts[-1] - ts[0]) / (n - 1)
     m = _mean(zs)
     d = [z - m for z in zs]
-    var = math.fsum(x * x for x in d)
+    var = math.fsum([x * x for x in d])
     if var <= 0.0 or dt <= 0.0:
         return None
-    ac = [math.fsum(d[i] * d[i + k] for i in range(n - k)) / var for k in range(n // 2 + 1)]
-    for k in range(1, len(ac) - 1):
-        if k * dt >= min_period_s and ac[k] >= threshold and ac[k] >= ac[k - 1] and ac[k] >= ac[k + 1]:
+    ac = {}
+
+    def at(k: int) -> float:
+        # each lag's autocorrelation when the search first reads it (most windows hold no peak
+        # above the threshold, and the lags below the shortest period are read by none)
+        if k not in ac:
+            ac[k] = math.fsum([d[i] * d[i + k] for i in range(n - k)]) / var
+        return ac[k]
+
+    for k in range(1, n // 2):
+        if k * dt >= min_period_s and at(k) >= threshold and at(k) >= at(k - 1) and at(k) >= at(k + 1):
             return k * dt
     return None
 
 
 def features(track) -> dict:
     """The features of a track (module docstring) from its ``history`` and filter."""
+    return _features(track)[0]
+
+
+def _features(track) -> tuple[dict, list | None, list | None]:
+    """:func:`features`, and the hits' times and vertical sides (None with fewer than two hits),
+    which :func:`classify` reads again."""
     h = track.history
     f = {"hits": len(h), "speed_m_s": track.kf.speed_m_s, "excursion_m": float(getattr(track, "excursion_m", 0.0)),
          "age_s": float(track.last_hit_t_s - track.first_t_s)}
     if len(h) < 2:
-        return f
+        return f, None, None
     f["median_points"] = float(sorted(int(x[3]) for x in h)[len(h) // 2])
     ts = [x[0] for x in h]
     span = ts[-1] - ts[0]
-    zs = [float(x[2][2]) for x in h]
-    f["size_m"] = sorted(float(max(x[2].tolist())) for x in h)[len(h) // 2]
+    sides = [x[2].tolist() for x in h]      # Python floats: the values float(x[2][a]) gives (a tenth the cost)
+    zs = [float(s[2]) for s in sides]
+    f["size_m"] = sorted(float(max(s)) for s in sides)[len(h) // 2]
     p0, p1 = h[0][1].tolist(), h[-1][1].tolist()
     f["net_speed_m_s"] = _norm([p1[a] - p0[a] for a in range(3)]) / span if span > 0 else 0.0
     zm = _mean(zs)
     f["flap_cv"] = math.sqrt(_mean([(z - zm) * (z - zm) for z in zs])) / zm if zm > 0 else 0.0
     half = len(h) // 2
     if half >= 3:
-        a, b = h[:half], h[half:]
-        va, vb = _velocity(a), _velocity(b)
-        dt = _mean([x[0] for x in b]) - _mean([x[0] for x in a])
+        ps = [x[1].tolist() for x in h]
+        va, vb = _velocity(ts[:half], ps[:half]), _velocity(ts[half:], ps[half:])
+        dt = _mean(ts[half:]) - _mean(ts[:half])
         f["manoeuvre_m_s2"] = _norm([vb[i] - va[i] for i in range(3)]) / dt if dt > 0 else 0.0
     f["flap_period_s"] = None
-    return f
+    return f, ts, zs
 
 
 def classify(track, cfg: ClassifierConfig) -> tuple[str, dict]:
     """``(label, features)`` of a track (module docstring)."""
-    f = features(track)
+    f, ts, zs = _features(track)
     if f["hits"] < cfg.min_hits:
         return "unknown", f
-    ts = [x[0] for x in track.history]
-    f["flap_period_s"] = flap_period_s(ts, [float(x[2][2]) for x in track.history], cfg.min_flap_period_s,
-                                       cfg.flap_autocorr)
+    f["flap_period_s"] = flap_period_s(ts, zs, cfg.min_flap_period_s, cfg.flap_autocorr)
     if f["net_speed_m_s"] < cfg.clutter_net_speed_m_s or (
             f["age_s"] >= cfg.clutter_age_s and f["excursion_m"] < cfg.clutter_excursion_m):
         return "clutter", f

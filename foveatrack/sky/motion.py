@@ -17,6 +17,8 @@ bits on every CPU.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -79,7 +81,7 @@ class ConstantVelocityFilter:
     @property
     def speed_m_s(self) -> float:
         x, y, z = self.v.tolist()
-        return float(np.sqrt(x * x + y * y + z * z))
+        return math.sqrt(x * x + y * y + z * z)     # IEEE's correctly rounded root: np.sqrt's bits
 
 
 

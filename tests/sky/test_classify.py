@@ -109,3 +109,39 @@ def test_a_drone_label_can_be_held_for_a_few_frames_of_other_rule_output():
     assert shown == ["unknown", "drone", "drone", "drone", "drone", "drone", "drone", "unknown", "unknown", "drone"]
     with pytest.raises(UserError, match="drone_leave_frames must be an integer >= 1"):
         ClassifierConfig.from_mapping({"drone_leave_frames": 0}, "[tracker.sky.classifier]")
+
+
+def test_the_flap_period_is_the_first_peak_of_the_whole_autocorrelation():
+    # flap_period_s reads each lag's autocorrelation only when its search gets there: the answer must
+    # be the first peak of the whole series of lags, as written out here
+    from foveatrack.sky.classify import flap_period_s
+
+    def whole(ts, zs, min_period_s, threshold):
+        n = len(zs)
+        if n < 6:
+            return None
+        dt = (ts[-1] - ts[0]) / (n - 1)
+        m = math.fsum(zs) / n
+        d = [z - m for z in zs]
+        var = math.fsum(x * x for x in d)
+        if var <= 0.0 or dt <= 0.0:
+            return None
+        ac = [math.fsum(d[i] * d[i + k] for i in range(n - k)) / var for k in range(n // 2 + 1)]
+        for k in range(1, len(ac) - 1):
+            if k * dt >= min_period_s and ac[k] >= threshold and ac[k] >= ac[k - 1] and ac[k] >= ac[k + 1]:
+                return k * dt
+        return None
+
+    rng = np.random.default_rng(5)
+    found = 0
+    for _ in range(3000):
+        n = int(rng.integers(0, 35))
+        ts = np.cumsum(rng.uniform(0.08, 0.12, n)).tolist()
+        period = rng.uniform(0.15, 0.8)
+        zs = (0.2 + 0.1 * np.sin(2 * np.pi * np.array(ts) / period) * rng.uniform(0, 1)
+              + rng.normal(0, 0.02, n)).tolist()
+        args = (float(rng.choice([0.0, 0.2, 0.4])), float(rng.choice([0.2, 0.5, 0.8])))
+        got = flap_period_s(ts, zs, *args)
+        assert got == whole(ts, zs, *args)
+        found += got is not None
+    assert found > 300
