@@ -518,17 +518,18 @@ class SkyTracker:
     def _objects(self, world: np.ndarray, t_ns: np.ndarray, near: np.ndarray) -> tuple[list[SkyObject], np.ndarray]:
         """The frame's objects and, per foreground point, the index of its object (-1: none)."""
         cfg = self.cfg
-        point_obj = np.full(world.shape[0], -1, np.int64)
         if world.shape[0] == 0:
-            return [], point_obj
+            return [], np.full(0, -1, np.int64)
         labels, n = cluster_labels(world, cfg.cluster_tol_m, cfg.cluster_tol_rad)
         found, kept = objects_from_labels(world, labels, n, cfg.min_points, cfg.max_extent_m, t_ns)
-        objs = []
-        for j, (fo, lab) in enumerate(zip(found, kept)):
-            m = labels == lab
-            point_obj[m] = j
-            on_scenery = 2 * int(np.count_nonzero(near[m])) >= fo.n_points
-            objs.append(SkyObject(fo.xyz_m, fo.t_median_ns * 1e-9, fo.n_points, fo.sides_m, on_scenery))
+        # each point's object through its cluster's label (kept clusters numbered in order), and each
+        # object's points on scenery in the making, for all objects at once
+        index = np.full(n, -1, np.int64)
+        index[kept] = np.arange(len(kept))
+        point_obj = index[labels]
+        near_n = np.bincount(point_obj[near & (point_obj >= 0)], minlength=len(kept)).tolist()
+        objs = [SkyObject(fo.xyz_m, fo.t_median_ns * 1e-9, fo.n_points, fo.sides_m, 2 * k >= fo.n_points)
+                for fo, k in zip(found, near_n)]
         return objs, point_obj
 
     def _associate(self, objs: list[SkyObject], t_s: float, positions: np.ndarray | None = None
