@@ -232,6 +232,41 @@ def test_predicted_many_is_each_filters_prediction_bit_for_bit():
     assert P.shape == V.shape == positions_many([], 1.0).shape == (0, 3)
 
 
+def test_the_filters_update_on_floats_is_the_array_forms_bits():
+    # ConstantVelocityFilter.update runs predict's and the update's lines axis by axis on floats: every
+    # state must be the bits of those lines on arrays, with a zero step and a measurement variance too
+    from foveatrack.sky.motion import ConstantVelocityFilter
+
+    def update_arrays(f, t_s, z_m, r_m2=None):
+        f.predict(t_s)
+        r = f.r if r_m2 is None else float(r_m2)
+        s = f.a + r
+        y = np.asarray(z_m, np.float64).reshape(3) - f.p
+        ka, kb = f.a / s, f.b / s
+        f.p = f.p + ka * y
+        f.v = f.v + kb * y
+        f.c = f.c - f.b * kb
+        f.a = f.a * (r / s)
+        f.b = f.b * (r / s)
+
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        args = (rng.uniform(0, 5), rng.normal(size=3) * 30, rng.uniform(0.1, 40), rng.uniform(0.001, 0.5),
+                rng.uniform(0.5, 20))
+        f, g = ConstantVelocityFilter(*args), ConstantVelocityFilter(*args)
+        t = args[0]
+        for _ in range(int(rng.integers(1, 12))):
+            t += float(rng.choice([0.0, rng.uniform(0.01, 0.5)]))
+            z = f.p + rng.normal(size=3) * rng.uniform(0.01, 3)
+            r = None if rng.uniform() < 0.7 else float(rng.uniform(0.001, 1))
+            f.update(t, z, r)
+            update_arrays(g, t, z, r)
+            assert f.t_s == g.t_s and type(f.t_s) is type(g.t_s)
+            for name in ("p", "v", "a", "b", "c"):
+                a, b = getattr(f, name), getattr(g, name)
+                assert a.dtype == b.dtype and a.shape == b.shape == (3,) and a.tobytes() == b.tobytes(), name
+
+
 def test_the_field_test_of_many_points_is_each_points_own():
     # every track's two points of a frame are tested at once (SkyTracker._in_view_many): each answer
     # must be the one the scalar form gives (R.T p - offset in floats, mat3T_vec's order), at the
