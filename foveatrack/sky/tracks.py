@@ -402,9 +402,12 @@ class SkyTracker:
         obj_track = {j: i for i, j in match}
         # A confirmed track left without an object while an object matched to another track lies in
         # its gate has merged with it (two clusters became one): it coasts and is not lost meanwhile.
-        for i, tr in enumerate(self.tracks):
-            if tr.confirmed and i not in {a for a, _ in match} and any(allowed[i, j] for j in obj_track):
-                tr.merged_t_s = t_mid
+        if obj_track:
+            matched = {i for i, _ in match}
+            gated = allowed[:, list(obj_track)].any(axis=1).tolist()
+            for i, tr in enumerate(self.tracks):
+                if tr.confirmed and i not in matched and gated[i]:
+                    tr.merged_t_s = t_mid
         # Algorithm 1 for the fixated track: its D, without the points of other tracks' objects
         fovea_det = None
         fov = next((i for i, tr in enumerate(self.tracks) if tr.track_id == fovea_track_id), None)
