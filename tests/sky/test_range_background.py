@@ -132,6 +132,36 @@ def test_the_warm_up_keeps_as_scenery_what_stayed_not_what_flew_through():
         assert near[1] != ok_drone, f"warmup_stay_frames={stay}: the drone's next point"
 
 
+@pytest.mark.parametrize("dilate", [0, 1, 3])
+def test_the_warm_scenery_is_the_whole_spheres_rule(dilate):
+    # end_warmup looks only at the cells seen and marks every stayed cell's neighbourhood at once
+    # (face_neighbourhood): the same cells as the rule over the whole sphere, offset by offset
+    rng = np.random.default_rng(dilate)
+    for stay in (0, 1, 4):
+        bg = RangeBackground(cell_deg=1.0, dilate=dilate, warmup_frames=8)
+        for _ in range(8):
+            pts = _random_points(rng, 300)
+            pts[10:60] = np.array([30.0, -5.0, 4.0]) + rng.normal(size=(50, 3)) * 3.0    # seen again and again
+            pts[60:70] = [[-1.0, 1.0, 1.0]] * 10        # a face's corner
+            bg.learn(*bg.cells(pts))
+        bg.mark_box(np.array([10.0, 10.0, 1.0]), np.array([11.0, 11.0, 2.0]))    # seen by no frame
+        bg.end_warmup(stay)
+        warm = (bg.frames >= 1) & (bg.first_frame >= 0) & (bg.first_frame < bg.warmup_frames)
+        if stay > 0:
+            near = np.zeros(warm.size, np.bool_)
+            for inside, q in rb.face_neighbours(np.flatnonzero(warm & (bg.last_frame - bg.first_frame >= stay)),
+                                                bg.n, bg.dilate):
+                near[q[inside]] = True
+            warm &= near
+        assert bg.warm_near.dtype == np.bool_ and np.array_equal(bg.warm_near, warm)
+        assert 0 < warm.sum() < (bg.frames >= 1).sum() or stay == 0
+    cells = np.concatenate([rng.integers(-1, 6 * bg.n * bg.n, 300), [0, bg.n - 1, bg.n * bg.n - 1, -1]])
+    want = set()
+    for inside, q in rb.face_neighbours(cells, bg.n, dilate):
+        want |= set(q[inside].tolist())
+    assert set(rb.face_neighbourhood(cells, bg.n, dilate).tolist()) == want
+
+
 def test_a_box_marked_long_after_the_warm_up_is_background_at_once():
     # a static track found a minute into a run: its box must not wait near_frames to be scenery
     bg = RangeBackground(warmup_frames=10)
