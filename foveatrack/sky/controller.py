@@ -249,17 +249,17 @@ class SkyController:
         self.tracker.on_imu(t_s, gyro_rad_s)
 
     def _pose_rows(self, t_s: float):
-        """The lidar's dead-reckoned pose at ``t_s``: its rotation rows and offset."""
+        """The lidar's dead-reckoned pose at ``t_s``: its rotation rows and offset (3 floats)."""
         recon = self.tracker.recon
         pan, tilt, _, _ = recon.angles_at(t_s)
-        return rotation_rows(pan, tilt), recon.lidar_offset_m
+        return rotation_rows(pan, tilt), floats3(recon.lidar_offset_m)
 
     @staticmethod
     def _in_lidar(p_world, rows, offset) -> tuple[float, float, float]:
         """A world point (3 floats) in the lidar frame of the pose ``rows``, ``offset`` (:meth:`_pose_rows`)."""
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
         x, y, z = p_world
-        ox, oy, oz = floats3(offset)
+        ox, oy, oz = offset
         return (r00 * x + r10 * y + r20 * z - ox, r01 * x + r11 * y + r21 * z - oy,
                 r02 * x + r12 * y + r22 * z - oz)
 
