@@ -17,6 +17,7 @@ import math
 import numpy as np
 import pytest
 
+from calib_fixture import SyntheticHead, corner_frames
 from foveatrack.calibration import CalibrationPlan, FeatureSpec, PriorAxisCalibrator
 from foveatrack.calibration.drive import drive_calibration
 from foveatrack.errors import UserError
@@ -29,60 +30,15 @@ TILT0_DEG, TILT_STOP_DEG, MARGIN_DEG = 50.0, 60.0, 2.0
 CORNER_W = np.array([4.0, 0.5, 5.0])     # world: front wall x = 4, left wall y = 0.5, ceiling z = 5
 
 
-def _corner_points(rng, n=400):
-    """Points on the three planes within 1 m of the corner, on the room's inner side."""
-    cx, cy, cz = CORNER_W
-    u = rng.uniform(0.0, 1.0, (3, n, 2))
-    walls = [np.column_stack([np.full(n, cx), cy - u[0, :, 0], cz - u[0, :, 1]]),
-             np.column_stack([cx - u[1, :, 0], np.full(n, cy), cz - u[1, :, 1]]),
-             np.column_stack([cx - u[2, :, 0], cy - u[2, :, 1], np.full(n, cz)])]
-    return np.vstack(walls) + rng.normal(0.0, 0.003, (3 * n, 3))
-
-
-class _Head:
-    """Turns at the commanded speed from the moment a command is sent; tilt holds at its stop."""
-
-    def __init__(self):
-        self.pan, self.tilt, self.t = 0.0, TILT0_DEG, 0.0
-        self.v = (0.0, 0.0)
-        self.max_tilt = TILT0_DEG
-
-    def advance(self, t):
-        dt = t - self.t
-        self.pan += self.v[0] * dt
-        self.tilt = min(self.tilt + self.v[1] * dt, TILT_STOP_DEG)
-        self.max_tilt = max(self.max_tilt, self.tilt)
-        self.t = t
-
-    def send(self, t, cmd):
-        self.advance(t)
-        self.v = (cmd.pan_dir * cmd.pan_byte / 63 * 15.0, cmd.tilt_dir * cmd.tilt_byte / 63 * 2.0)
-
-
-def _frames(head, rng, max_s=60.0):
-    k = 0
-    while k / RATE_HZ < max_s:
-        t0, t1 = k / RATE_HZ, (k + 1) / RATE_HZ
-        pts = _corner_points(rng)
-        t = np.sort(rng.uniform(t0, t1, len(pts)))
-        xyz = np.empty_like(pts)
-        for i in range(0, len(pts), 50):      # the head's pose every 2.5 ms across the frame
-            head.advance(t[i])
-            xyz[i:i + 50] = pts[i:i + 50] @ rotation_matrix(head.pan, head.tilt)   # world -> lidar: R.T p
-        head.advance(t1)
-        yield Frame(t0, t1, xyz, (t * 1e9).astype(np.int64))
-        k += 1
-
-
 def test_the_tilt_stop_fires_in_the_speed_table_calibration():
     rng = np.random.default_rng(3)
-    head = _Head()
+    head = SyntheticHead(TILT0_DEG, TILT_STOP_DEG)
     plan = CalibrationPlan(pan_bytes=(20,), tilt_bytes=(63,), dwell_s=8.0, start_tilt_deg=TILT0_DEG)
     approx = CORNER_W @ rotation_matrix(0.0, TILT0_DEG)
     cal = PriorAxisCalibrator(plan, FeatureSpec(tuple(approx), radius_m=1.0), seed=0)
     gate = CommandGate(Limits(tilt_limits_deg=(-30.0, TILT_STOP_DEG), tilt_margin_deg=MARGIN_DEG))
     with pytest.raises(UserError) as err:
-        drive_calibration(cal, _frames(head, rng), head.send, gate=gate)
+        drive_calibration(cal, corner_frames(head, rng, CORNER_W, RATE_HZ, 60.0), head.send, gate=gate)
     msg = str(err.value)
     assert "tilt_stop_up" in msg and "no table was written" in msg, msg
     # it fired on the tilt leg, before the head reached the gate's margin, and the head was stopped
