@@ -100,10 +100,10 @@ def cmd_replay(args) -> int:
         print(json.dumps(s, indent=1, default=lambda x: x.item() if hasattr(x, "item") else str(x)))
         damage = res.comparison.get("recording_damage")
         held = res.comparison.get("recording_held")
+        if damage:   # stdout is for the machine; a person watching must still see that bytes were skipped
+            print(f"foveatrack replay: WARNING: damaged recording, {'; '.join(damage)}", file=sys.stderr)
         if held:     # a writer's or a recover's file: its end is not damage (the text report says the same)
             print(f"foveatrack replay: note: {held}", file=sys.stderr)
-        elif damage:   # stdout is for the machine; a person watching must still see that bytes were skipped
-            print(f"foveatrack replay: WARNING: damaged recording, {'; '.join(damage)}", file=sys.stderr)
         if res.comparison.get("recording_capped"):
             print(f"foveatrack replay: WARNING: {args.recording} read in part: {res.comparison['recording_capped']}",
                   file=sys.stderr)

@@ -205,17 +205,30 @@ class RecordingReader:
     @property
     def problem(self) -> str | None:
         """One line saying what was skipped (None: nothing)."""
-        parts = [d.describe() for d in self.damage]
-        if self.unattributed:
-            n = sum(self.unattributed.values())
-            parts.append(f"{n} message(s) of channel id(s) {sorted(self.unattributed)} skipped: their channel "
-                         f"was defined in a damaged chunk")
+        parts = self._skipped(self.damage)
         if self.capped is not None:
             parts.append(self.capped_text())
         if not parts and self.complete is False:
             parts.append(f"the file ends at byte {self.size} without its end-of-data record: the writer was not "
                          f"closed (cut short, e.g. kill -9 or power loss); every whole chunk before it was read")
         return "; ".join(parts) if parts else None
+
+    def _skipped(self, damage) -> list[str]:
+        """What ``damage`` (some of :attr:`damage`) and the messages of unknown channels lost, a phrase each."""
+        parts = [d.describe() for d in damage]
+        if self.unattributed:
+            n = sum(self.unattributed.values())
+            parts.append(f"{n} message(s) of channel id(s) {sorted(self.unattributed)} skipped: their channel "
+                         f"was defined in a damaged chunk")
+        return parts
+
+    def damage_not_held(self) -> list:
+        """The skipped stretches that are damage: every one, but for a file a running process holds
+        (:meth:`held_text`) its cut-short end, which is that process's next bytes (a writer's) or what
+        it completes (a recover's).  A stretch skipped before the end is damage all the same."""
+        if self.held_text() is not None and self.damage and self.damage[-1].cut_short:
+            return self.damage[:-1]
+        return list(self.damage)
 
     def capped_text(self) -> str | None:
         """One line naming what the frame cap left unread (None: it did not stop the reading)."""
@@ -253,7 +266,10 @@ class RecordingReader:
             return None
         held = self.held_text()
         if held is not None:
-            return f"note: {held}"
+            # its end is not damage; a stretch skipped before it is, and is said first
+            damaged = self._skipped(self.damage_not_held())
+            return "\n".join(([f"WARNING: damaged recording {self.path}, {'; '.join(damaged)}"] if damaged else [])
+                             + [f"note: {held}"])
         if self.damage or self.unattributed:
             return f"WARNING: damaged recording {self.path}, {problem}"
         if self.capped is not None:

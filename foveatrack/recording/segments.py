@@ -92,6 +92,10 @@ class RunReader:
         parts = [f"{r.path.name}: {r.problem}" for r in self.parts if r.problem]
         return "; ".join(parts) if parts else None
 
+    def damage_not_held(self) -> list:
+        """Every part's :meth:`~foveatrack.recording.RecordingReader.damage_not_held`, in order."""
+        return [d for r in self.parts for d in r.damage_not_held()]
+
     def held_text(self) -> str | None:
         held = [h for h in (r.held_text() for r in self.parts) if h]
         return "; ".join(held) if held else None

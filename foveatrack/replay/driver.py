@@ -287,7 +287,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
             res.comparison["recording_segment_notes"] = reader.notes
     res.comparison["commands_in_recording"] = commands
     res.comparison["metadata_checksum"] = "verified" if reader.meta_checked else "absent (an older recording)"
-    res.comparison["recording_damage"] = [d.describe() for d in reader.damage] + order.describe()
+    # a held file's cut-short end is not damage (recording_held says what it is); what was skipped
+    # before it is
+    res.comparison["recording_damage"] = [d.describe() for d in reader.damage_not_held()] + order.describe()
     if reader.capped is not None:
         res.comparison["recording_capped"] = reader.capped_text()
     res.comparison.update(_gaps(frames, recorded, reader, order.frames + order.commands))

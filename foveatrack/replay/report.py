@@ -45,7 +45,7 @@ def format_report(res: ReplayResult) -> str:
         L.append("  the recording holds no lidar frames (e.g. the lidar never sent data): nothing to replay")
     if c.get("recording_held"):      # its end is a writer's next data, or a recover's to complete: not damage
         L.insert(1, f"  note: {c['recording_held']}")
-    elif c.get("recording_damage"):
+    if c.get("recording_damage"):    # (a held file's: what was skipped before its end)
         L.insert(1, "  WARNING: damaged recording, " + "; ".join(c["recording_damage"]))
     if c.get("recording_capped"):
         L.insert(1, f"  WARNING: {res.path} read in part: {c['recording_capped']}")

@@ -115,6 +115,36 @@ def test_replay_of_a_recording_a_writer_or_a_recover_holds_says_so_not_damaged(s
         assert "being recovered by a running 'foveatrack recover'" in said and "damaged" not in said, said
         assert "still being written" not in said, said
 
+def test_a_held_recording_damaged_before_its_end_is_said_damaged_too(sim_run, tmp_path, capsys):
+    """A held file's cut-short end is not damage, but a stretch skipped before it is: replay said only
+    "still being written" of a file with a damaged chunk in its middle (export too), and the frames
+    lost there went unsaid."""
+    from foveatrack.file_lock import hold
+    from foveatrack.recording import RecordingReader
+
+    path, _, _ = sim_run
+    data = bytearray(Path(path).read_bytes()[: int(len(Path(path).read_bytes()) * 0.6)])
+    mid = len(data) // 3
+    data[mid:mid + 4096] = b"\xff" * 4096            # a damaged stretch well before the end
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(bytes(data))
+    fd = hold(cut)                                     # a running writer's lock
+    try:
+        capsys.readouterr()
+        assert main(["replay", str(cut)]) == 0
+        said = capsys.readouterr().out
+        reader = RecordingReader(cut)
+        for _ in reader.messages():
+            pass
+        warning = reader.warning()
+    finally:
+        os.close(fd)
+    for text in (said, warning):
+        assert "still being written by a running process" in text, text
+        assert "WARNING: damaged recording" in text and "skipped bytes" in text, text
+        assert "file cut short" not in text, text      # the end is the writer's next bytes
+
+
 def test_cli_json_plots_exports(sim_run, tmp_path, capsys):
     path, log, _ = sim_run
     pts, trj, plots = tmp_path / "p.npz", tmp_path / "t.csv", tmp_path / "plots"
