@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import os
 import statistics
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -135,8 +136,16 @@ def recover(path, journal=None, progress=None) -> Recovery:
     real = Path(os.path.realpath(path))
     # the recording's own lock, held to the end (after the rename): a second recover of it (the daemon's
     # start and a user's, at once) cleared this one's copy between its writer's close and its rename
-    lock = hold(real)
-    holder = None if lock is not None else lock_holder(real)
+    lock, holder = hold(real), None
+    deadline = time.monotonic() + 0.5
+    while lock is None:
+        holder = lock_holder(real)
+        if holder is not None or time.monotonic() > deadline:
+            break
+        # held by no one: a reader's probe (recording_in_use) held it for an instant; going on without
+        # the lock would let a second recover in (a file that cannot be locked at all goes on as before)
+        time.sleep(0.01)
+        lock = hold(real)
     if holder == "recover":
         raise UserError(f"{path} is being recovered by another process; let it finish, nothing was changed")
     if holder == "writer":

@@ -475,3 +475,25 @@ def test_only_a_full_disk_is_said_to_need_space_and_every_error_ends_nothing_was
     with pytest.raises(UserError) as exc:
         recover(cut)
     assert str(exc.value).endswith("nothing was changed"), str(exc.value)
+
+
+def test_recover_takes_the_lock_a_readers_probe_held_for_an_instant(tmp_path, monkeypatch):
+    """Every reader probes a recording's lock (recording_in_use) for an instant: a recover that asked
+    for the lock in that instant found no one holding it afterwards and went on without it, which
+    lets a second recover in (the race the lock is there for).  It asks again."""
+    import foveatrack.daemon.recover as rc
+    import foveatrack.file_lock as fl
+
+    real_hold, asked = fl.hold, []
+
+    def probed_hold(p):            # the first three asks meet a reader's probe
+        asked.append(p)
+        return None if len(asked) <= 3 else real_hold(p)
+
+    monkeypatch.setattr(fl, "hold", probed_hold)
+    held = []
+    monkeypatch.setattr(rc, "_recover", lambda path, real, journal, progress: held.append(fl.recording_in_use(real)))
+    f = tmp_path / "run.mcap"
+    f.write_bytes(b"not yet a recording")
+    rc.recover(f)
+    assert held == [True] and len(asked) == 4, (held, asked)
