@@ -111,6 +111,11 @@ class CalibrationDriver:
                 if from_data:
                     where += (f" (counted from the start tilt the pan legs' corner data imply, {start_deg:.1f} deg: "
                               f"they contradict tilt0_deg {t0:g})")
+            if from_data and not math.isfinite(start_deg):
+                # neither the limits nor the sight were the cause, and "a smaller max_excursion_deg" would
+                # contradict the advice above
+                raise UserError(f"the command gate refused the calibration's command ({', '.join(why)}) {where} "
+                                f"after {done} legs: no table was written")
             raise UserError(f"the command gate refused the calibration's command ({', '.join(why)}) {where} after "
                             f"{done} legs: the plan would take the head past its limits, or out of the lidar's "
                             "sight of it; start it farther from its tilt stop (or with a smaller max_excursion_deg); "

@@ -968,7 +968,7 @@ class PriorAxisCalibrator(Calibrator):
         fix_tilt = (f"If the head did not start at {t0:g} deg, measure its start tilt, set tilt0_deg to it and "
                     f"calibrate again: the daemon takes tilt0_deg as the head's start pose (a calibration's "
                     f"tilt stops count from it until the pan legs contradict it, then from the start tilt "
-                    f"they imply).")
+                    f"they imply, or, where they are too short to tell it, the gate refuses tilt).")
         fix_lean = ("Check that the lidar sits on the head with its Y axis along the tilt axis (a lidar rolled "
                     "about its X axis leans the pan axis so)")
         axis = "the head's pan axis as the corner turned about it"

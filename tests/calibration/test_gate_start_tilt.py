@@ -106,6 +106,10 @@ def test_a_head_near_its_stop_told_a_low_start_tilt_is_not_driven_into_it(tmp_pa
     print(f"\nhead's true tilt at most {rows[:, 1].max():.1f} deg; {error}")
     assert error is not None, "the tilt leg ran"
     assert "contradict tilt0_deg 20" in str(error) and "no table was written" in str(error), str(error)
+    # the refusal of a start tilt the legs cannot tell gives its own advice, not the limits' (which told
+    # the user to take a smaller max_excursion_deg right after the larger one this case needs)
+    if "too short to tell the start tilt" in str(error):
+        assert "smaller max_excursion_deg" not in str(error) and "past its limits" not in str(error), str(error)
     assert rows[:, 1].max() < 60.0 - 2.0, rows[:, 1].max()      # never past the gate's line
     assert not any(g.axis == "tilt" and g.t_stop_s is not None for g in cal.legs)
 
