@@ -96,7 +96,6 @@ class ConstantVelocityFilter:
         return math.sqrt(x * x + y * y + z * z)     # IEEE's correctly rounded root: np.sqrt's bits
 
 
-
 def positions_many(filters, t_s: float) -> np.ndarray:
     """:meth:`ConstantVelocityFilter.position_at` of many filters at ``t_s``: (N, 3), row ``i`` the
     same bits as ``filters[i].position_at(t_s)``."""
@@ -106,15 +105,10 @@ def positions_many(filters, t_s: float) -> np.ndarray:
     return np.array([f.p for f in filters]) + np.array([f.v for f in filters]) * dt[:, None]
 
 
-def predicted_many(filters, t_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`ConstantVelocityFilter.predicted` of many filters at ``t_s``: positions (N, 3) and
-    variances (N, 3), row ``i`` the same bits as ``filters[i].predicted(t_s)`` (the same elementwise
-    operations in the same order, on arrays: one call for a frame's tracks, not one per track)."""
-    return positions_many(filters, t_s), variances_many(filters, t_s)
-
-
 def variances_many(filters, t_s: float) -> np.ndarray:
-    """The variances (N, 3) of :func:`predicted_many` alone (for a caller that has the positions)."""
+    """The variances of :meth:`ConstantVelocityFilter.predicted` of many filters at ``t_s``: (N, 3),
+    row ``i`` the same bits as ``filters[i].predicted(t_s)[1]`` (the same elementwise operations in
+    the same order, on arrays: one call for a frame's tracks, not one per track)."""
     if not filters:
         return np.empty((0, 3))
     dt = t_s - np.array([f.t_s for f in filters])
