@@ -277,9 +277,10 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     res.recorded_metrics = recorded_metrics(recorded, truth, rec_cfg, frames)
     if reader.problem:
         res.comparison["recording_problem"] = reader.problem
-    if reader.held_text():
+    held = reader.held_text()
+    if held:
         # a writer or a recover holds the file: what is said of its end (the report, as export says it)
-        res.comparison["recording_held"] = reader.held_text()
+        res.comparison["recording_held"] = held
     res.comparison["recording_complete"] = bool(reader.complete)
     if getattr(reader, "parts", None):
         res.comparison["recording_segments"] = len(reader.parts)

@@ -123,7 +123,8 @@ def test_a_held_recording_damaged_before_its_end_is_said_damaged_too(sim_run, tm
     from foveatrack.recording import RecordingReader
 
     path, _, _ = sim_run
-    data = bytearray(Path(path).read_bytes()[: int(len(Path(path).read_bytes()) * 0.6)])
+    whole = Path(path).read_bytes()
+    data = bytearray(whole[: int(len(whole) * 0.6)])
     mid = len(data) // 3
     data[mid:mid + 4096] = b"\xff" * 4096            # a damaged stretch well before the end
     cut = tmp_path / "cut.mcap"
