@@ -46,9 +46,14 @@ Rules, in order (thresholds in :class:`ClassifierConfig`; documented in docs/sky
    clutter loses the fovea).  ``clutter_turn_1_s = 0`` turns the rule off (docs/sky-tracks-figures.md
    gives what it changed);
 5. held (:func:`held_label`): a track is labelled ``drone`` only once rules 1-4 have said so in
-   ``drone_after_frames`` frames in a row; until then it keeps the label it had.  A crown part that
-   swings one way for a moment looks like a slow straight drone to rules 2-4; a drone keeps looking
-   like one.  Leaving the label is at once unless ``drone_leave_frames`` > 1 (it then waits that many
+   ``drone_after_frames`` frames in a row, ``drone_after_hits`` of which brought the track a hit;
+   until then it keeps the label it had.  A crown part that swings one way for a moment looks like
+   a slow straight drone to rules 2-4; a drone keeps looking like one.  The hits count because rules
+   1-4 read only the hits: a track that got its five and then coasted unseen for the rest of the
+   frames had given one verdict, repeated.  Without them (``drone_after_hits = 0``, the rule before
+   2026-12-07) most of the false drone tracks on crowns were labelled that way in the first seconds
+   after power-on: a crown's part seen in 0.4-0.9 s of hits (the drones' were 0.9 s or more), seeds
+   +200..+259 of the tree line; docs/sky-tracks-figures.md gives what the count changed.  Leaving the label is at once unless ``drone_leave_frames`` > 1 (it then waits that many
    frames of other output in a row): a measured trade-off, not the default.  At 5 the daemon's status
    line no longer flickers between drone and unknown, but a second track on a drone keeps the drone
    label longer: seeds +200..+229 of the four scenes, false drone tracks near a drone 4 -> 19
@@ -74,6 +79,11 @@ from foveatrack.errors import UserError
 
 LABELS = ("unknown", "clutter", "bird", "drone")
 
+#: keys added to :class:`ClassifierConfig` since recordings began to keep the sky table, each with the
+#: value that behaves as before it: a recording's table without one ran that way, and replays so
+#: (:func:`foveatrack.recording.run_meta.RecordingMeta.from_dict`)
+ADDED_SINCE_RECORDED = {"drone_after_hits": 0}
+
 
 @dataclass(frozen=True)
 class ClassifierConfig:
@@ -91,6 +101,7 @@ class ClassifierConfig:
     min_flap_period_s: float = 0.2
     flap_autocorr: float = 0.5
     drone_after_frames: int = 10
+    drone_after_hits: int = 5
     drone_leave_frames: int = 1
 
     def __post_init__(self) -> None:
@@ -101,6 +112,8 @@ class ClassifierConfig:
         for k in ("drone_after_frames", "drone_leave_frames"):
             if not getattr(self, k) >= 1:
                 raise UserError(f"{k} must be an integer >= 1, got {getattr(self, k)!r}")
+        if not self.drone_after_hits >= 0:
+            raise UserError(f"drone_after_hits must be an integer >= 0, got {self.drone_after_hits!r}")
         if not 0.0 < self.flap_autocorr <= 1.0:     # a normalised autocorrelation never exceeds 1
             raise UserError(f"flap_autocorr must be in (0, 1], got {self.flap_autocorr!r}")
 
@@ -109,8 +122,8 @@ class ClassifierConfig:
         check_keys(data, [f.name for f in fields(cls)], where)
         kw = {}
         for k, v in data.items():
-            if k in ("min_hits", "drone_after_frames", "drone_leave_frames"):
-                least = 2 if k == "min_hits" else 1
+            if k in ("min_hits", "drone_after_frames", "drone_after_hits", "drone_leave_frames"):
+                least = {"min_hits": 2, "drone_after_hits": 0}.get(k, 1)
                 if isinstance(v, bool) or not isinstance(v, int) or v < least:
                     raise UserError(f"{where}: {k} must be an integer >= {least}, got {v!r}")
                 kw[k] = v
@@ -223,16 +236,20 @@ def classify(track, cfg: ClassifierConfig) -> tuple[str, dict]:
     return "drone", f
 
 
-def held_label(rules_label: str, previous: str, drone_frames: int, cfg: ClassifierConfig) -> tuple[str, int]:
-    """Rule 5: ``(label, drone_frames)`` of a track after this frame, given what rules 1-4 say now
-    (``rules_label``), the label it showed (``previous``) and ``drone_frames``: in how many frames in a
-    row before this one they had said ``drone`` (> 0), or, for a track labelled drone, in how many
-    they had said otherwise (< 0; it keeps the label until ``drone_leave_frames`` have)."""
+def held_label(rules_label: str, previous: str, drone_frames: int, drone_hits: int, hit: bool,
+               cfg: ClassifierConfig) -> tuple[str, int, int]:
+    """Rule 5: ``(label, drone_frames, drone_hits)`` of a track after this frame, given what rules 1-4
+    say now (``rules_label``), the label it showed (``previous``), ``drone_frames``: in how many frames
+    in a row before this one they had said ``drone`` (> 0), or, for a track labelled drone, in how many
+    they had said otherwise (< 0; it keeps the label until ``drone_leave_frames`` have), and
+    ``drone_hits``: how many of those drone frames brought the track a hit (``hit``: this one did)."""
     if rules_label == "drone":
         drone_frames = max(drone_frames, 0) + 1
-        return ("drone" if drone_frames >= cfg.drone_after_frames else previous), drone_frames
+        drone_hits += hit
+        ready = drone_frames >= cfg.drone_after_frames and drone_hits >= cfg.drone_after_hits
+        return ("drone" if ready else previous), drone_frames, drone_hits
     if previous == "drone":
         away = 1 - min(drone_frames, 0)
         if away < cfg.drone_leave_frames:
-            return "drone", -away
-    return rules_label, 0
+            return "drone", -away, 0
+    return rules_label, 0, 0

@@ -239,6 +239,7 @@ class SkyTrack:
     label: str = "unknown"
     seen_as: str = "unknown"        # what the classifier's rules 1-4 say this frame (label: after rule 5)
     drone_frames: int = 0           # frames in a row the rules said "drone" (> 0), or, labelled drone, otherwise (< 0)
+    drone_hits: int = 0             # of those drone frames, how many brought a hit (classify rule 5)
     features: dict = field(default_factory=dict)
     history: list = field(default_factory=list)
     in_view: bool = True
@@ -487,7 +488,8 @@ class SkyTracker:
         deleted, positions = self._prune(t_mid, fovea_track_id, t1 - t0)
         for tr in self.tracks:
             self._classify(tr)
-            tr.label, tr.drone_frames = held_label(tr.seen_as, tr.label, tr.drone_frames, cfg.classifier)
+            tr.label, tr.drone_frames, tr.drone_hits = held_label(tr.seen_as, tr.label, tr.drone_frames, tr.drone_hits,
+                                                                   tr.hit_now, cfg.classifier)
         if not learn:
             return (), None, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
         views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, p, tr.kf.v.copy(),

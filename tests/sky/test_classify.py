@@ -2,6 +2,7 @@
 by hand: the rules' order and the thresholds chosen on the sky scenes' seeds +8 and +9."""
 
 import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -57,15 +58,37 @@ def test_flapping_counts_only_where_the_object_is_resolved():
 
 
 def test_a_drone_label_waits_until_the_rules_have_said_drone_so_many_frames_in_a_row():
-    cfg = ClassifierConfig(drone_after_frames=3)
-    label, run, shown = "clutter", 0, []
+    cfg = ClassifierConfig(drone_after_frames=3, drone_after_hits=0)
+    label, run, hits, shown = "clutter", 0, 0, []
     for said in ["drone", "drone", "clutter", "drone", "drone", "drone", "drone", "bird", "drone"]:
-        label, run = held_label(said, label, run, cfg)
+        label, run, hits = held_label(said, label, run, hits, True, cfg)
         shown.append(label)
     assert shown == ["clutter", "clutter", "clutter", "clutter", "clutter", "drone", "drone", "bird", "bird"]
-    assert held_label("drone", "unknown", 0, ClassifierConfig(drone_after_frames=1)) == ("drone", 1)   # at once
+    once = ClassifierConfig(drone_after_frames=1, drone_after_hits=1)
+    assert held_label("drone", "unknown", 0, 0, True, once) == ("drone", 1, 1)   # at once
     with pytest.raises(UserError, match="drone_after_frames must be an integer >= 1"):
         ClassifierConfig.from_mapping({"drone_after_frames": 0}, "[tracker.sky.classifier]")
+
+
+def test_the_drone_label_waits_for_hits_not_for_frames_a_track_coasted_through():
+    # a crown's part seen in five frames and then coasting unseen: its rules 1-4 verdict, from the
+    # same five hits, repeats every frame; ten such frames were a drone label before drone_after_hits
+    cfg = ClassifierConfig()                   # 10 frames, 5 of them with a hit
+    frames = [True] * 4 + [False] * 8 + [True]
+    label, run, hits, shown = "unknown", 0, 0, []
+    for hit in frames:
+        label, run, hits = held_label("drone", label, run, hits, hit, cfg)
+        shown.append(label)
+    assert shown == ["unknown"] * 12 + ["drone"]          # the fifth hit, 13 frames in
+    label, run, hits = "unknown", 0, 0
+    for hit in frames[:10]:
+        label, run, hits = held_label("drone", label, run, hits, hit, replace(cfg, drone_after_hits=0))
+    assert label == "drone"                              # the rule before: ten frames, four hits
+    # the hits count only within the run of drone verdicts
+    label, run, hits = held_label("unknown", "unknown", 9, 4, True, cfg)
+    assert (label, run, hits) == ("unknown", 0, 0)
+    with pytest.raises(UserError, match="drone_after_hits must be an integer >= 0"):
+        ClassifierConfig.from_mapping({"drone_after_hits": -1}, "[tracker.sky.classifier]")
 
 
 def _swinging_patch(side_m, path):
@@ -101,10 +124,10 @@ def test_a_drone_label_can_be_held_for_a_few_frames_of_other_rule_output():
     # drone_leave_frames 1 (the default) leaves the label at once, as the test above; at 3 a track
     # labelled drone keeps it through two frames of other output (the status line's flicker), and
     # the wait for the label starts again after it left
-    cfg = ClassifierConfig(drone_after_frames=2, drone_leave_frames=3)
-    label, run, shown = "unknown", 0, []
+    cfg = ClassifierConfig(drone_after_frames=2, drone_after_hits=2, drone_leave_frames=3)
+    label, run, hits, shown = "unknown", 0, 0, []
     for said in ["drone", "drone", "unknown", "unknown", "drone", "unknown", "unknown", "unknown", "drone", "drone"]:
-        label, run = held_label(said, label, run, cfg)
+        label, run, hits = held_label(said, label, run, hits, True, cfg)
         shown.append(label)
     assert shown == ["unknown", "drone", "drone", "drone", "drone", "drone", "drone", "unknown", "unknown", "drone"]
     with pytest.raises(UserError, match="drone_leave_frames must be an integer >= 1"):

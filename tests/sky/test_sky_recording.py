@@ -235,3 +235,38 @@ def test_a_replay_under_another_table_places_the_points_from_the_head_as_it_move
     # where its dead reckoning has the head in the end: where the recorded commands took it, as the
     # replay under the recorded table has it (before: 12.6 deg of pan apart)
     assert res.final_pose_deg == replay_recording(crossing_run).final_pose_deg
+
+
+def test_a_recording_made_before_a_sky_key_existed_replays_as_it_ran(tmp_path, monkeypatch):
+    # classifier.drone_after_hits came after recordings began to keep the sky table: one made before
+    # it ran without it (0), and a table without the key must replay so, not with today's default.
+    # Tree line seed 258: a crown's part is labelled drone 3.2 s in after five hits and five frames
+    # of coasting (the count of hits keeps that label back)
+    from foveatrack.cli import main
+    from foveatrack.recording import run_meta
+
+    scene = tmp_path / "tree-line-before.toml"
+    scene.write_text((SCENES / "drone-tree-line.toml").read_text()
+                     + "\n[tracker.sky.classifier]\ndrone_after_hits = 0\n")
+    out = tmp_path / "run"
+    assert main(["simulate", str(scene), "--seed", "258", "--out", str(out),
+                 "--no-progress", "--one-thread"]) == 0
+    from_dict = run_meta.RecordingMeta.from_dict
+
+    def as_made_before(meta, where="recording"):
+        meta = json.loads(json.dumps(meta))
+        del meta["sky"]["classifier"]["drone_after_hits"]
+        return from_dict(meta, where)
+
+    monkeypatch.setattr(run_meta.RecordingMeta, "from_dict", staticmethod(as_made_before))
+    res = replay_recording(out / "run.mcap")
+    c = res.comparison
+    assert run_meta.RecordingMeta.from_dict(RecordingReader(out / "run.mcap").meta).sky["classifier"][
+        "drone_after_hits"] == 0
+    assert c["commands_equal"] and c["tracks"]["identical_all"], c["tracks"]
+    # today's default on the same frames labels differently: the test above can tell
+    table = {k: v for k, v in RecordingReader(out / "run.mcap").meta["tracker"].items() if k != "sky"}
+    sky = dict(RecordingReader(out / "run.mcap").meta["sky"])
+    sky["classifier"] = {**sky["classifier"], "drone_after_hits": 5}
+    res5 = replay_recording(out / "run.mcap", tracker_table={**table, "sky": sky}, config_name="today's default")
+    assert not res5.comparison["tracks"]["identical_all"]
