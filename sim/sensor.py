@@ -155,6 +155,9 @@ class SceneSensor:
         # the rays that hit each (``last_object_rays``) and the stray returns placed (``last_strays_m``).
         self._object_prim_start = np.cumsum([0] + [spec.body.prims.shape[0] for spec in scene.targets]
                                             + [obj.body.prims.shape[0] for obj in scene.others])
+        # ... and the object of each of their primitives (sim.sensor_kernels.object_rays_kernel)
+        self._object_of_prim = np.repeat(np.arange(self._object_prim_start.size - 1),
+                                         np.diff(self._object_prim_start))
         self.last_object_rays: np.ndarray | None = None
         # each object's position at the last chunk's mid time (what its cull centred on; the truth's too)
         self.last_mid_xyz_m: list[np.ndarray] | None = None
@@ -222,9 +225,8 @@ class SceneSensor:
         if has["stray_returns"]:
             self._strays(chunk, d_world, t0, t1, rng_m, prim)
         if scene.multi_object:
-            on = (prim >= 0) & (prim < self._object_prim_start[-1]) & (chunk.status == RAY_OK)
-            which = np.searchsorted(self._object_prim_start, prim[on], side="right") - 1
-            self.last_object_rays = np.bincount(which, minlength=self._object_prim_start.size - 1)
+            self.last_object_rays = np.zeros(self._object_prim_start.size - 1, dtype=np.int64)
+            sk.object_rays_kernel(prim, chunk.status, self._object_of_prim, self.last_object_rays)
         # 5. effects, each only if listed (draws in a fixed order, one call per effect and frame),
         # applied to the hits and gathered in scan order in one pass.
         n_hit = sk.count_hits_kernel(prim, chunk.status)

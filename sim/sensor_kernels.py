@@ -65,6 +65,21 @@ def count_hits_kernel(prim, status):
     return n
 
 
+@njit(cache=True, nogil=True)
+def object_rays_kernel(prim, status, object_of_prim, out_count):
+    """Per object of a multi-object scene, the rays that hit it and left the prisms (``status ==
+    RAY_OK``): ``out_count[object_of_prim[prim[j]]]`` counts ray j when ``prim[j]`` is one of the
+    objects' primitives (``object_of_prim``: the object of each, drones then others; the background
+    and a stray return after them count for none).  One pass instead of numpy's mask, searchsorted
+    and bincount over the whole frame (~20 us of the ~10 000 rays of a Mid-40 frame); integers, so
+    the same counts (numpy twin: ``object_rays_twin`` in ``tests/sensor_twins.py``)."""
+    n_prims = object_of_prim.shape[0]
+    for j in range(prim.shape[0]):
+        p = prim[j]
+        if p >= 0 and p < n_prims and status[j] == RAY_OK:
+            out_count[object_of_prim[p]] += 1
+
+
 @njit(cache=True, inline="always")
 def _refl_byte(refl, gain):
     """The Livox reflectivity byte of a return of effective reflectivity ``refl * gain``:

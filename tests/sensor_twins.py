@@ -118,3 +118,11 @@ def mixed_pixel_twin(sub_r, sub_prim, refl_table, resolution_m):
         out_p[k] = sub_prim[k, hit[g[np.argmax(p[g])]]]
         out_share[k] = g.size / s
     return out_r, out_p, out_share
+
+
+def object_rays_twin(prim, status, object_prim_start):
+    """Per object, the rays that hit it and left the prisms, as the sensor counted them before
+    ``object_rays_kernel``: ``object_prim_start`` the first primitive of each object and the end."""
+    on = (prim >= 0) & (prim < object_prim_start[-1]) & (status == RAY_OK)
+    which = np.searchsorted(object_prim_start, prim[on], side="right") - 1
+    return np.bincount(which, minlength=object_prim_start.size - 1)

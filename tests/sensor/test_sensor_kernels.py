@@ -152,3 +152,21 @@ def test_mm_grid_kernel_is_quantise_to_mm_grid_to_the_bit():
     got = np.empty_like(xyz)
     sk.quantise_to_mm_grid_kernel(xyz, got)
     assert np.array_equal(got.view(np.int64), quantise_to_mm_grid(xyz).view(np.int64))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_object_rays_kernel_matches_twin(seed):
+    """Rays per object, with objects of no primitives, the background and a stray row after them,
+    rays that hit nothing and rays that left no prism."""
+    from sensor_twins import object_rays_twin
+
+    rng = np.random.default_rng(seed)
+    sizes = rng.choice([0, 1, 3, 5], rng.integers(1, 8))
+    start = np.cumsum(np.concatenate([[0], sizes]))
+    n = [0, 1, 5000][seed % 3]
+    prim = rng.integers(-1, int(start[-1]) + 3, n)           # past the objects: background, strays
+    status = rng.choice([RAY_OK, RAY_OK, RAY_TIR, RAY_GRAZING], n).astype(np.uint8)
+    got = np.zeros(sizes.size, dtype=np.int64)
+    sk.object_rays_kernel(prim, status, np.repeat(np.arange(sizes.size), sizes), got)
+    want = object_rays_twin(prim, status, start)
+    assert got.dtype == want.dtype and np.array_equal(got, want)
