@@ -50,7 +50,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from sim.world import bodies
-from sim.world.trajectories import body_yaw_rad, heading_rad
+from sim.world.trajectories import body_yaw_rad, heading_rad, position_velocity
 
 G_M_S2 = 9.81
 RHO_AIR_KG_M3 = 1.225
@@ -417,38 +417,47 @@ class FlockPoses:
         wk.wander_arg_kernel(t, m, self.omega, self.phase, arg)
         return arg
 
-    def positions(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None) -> np.ndarray:
-        """(N, 3): member ``m[i]``'s position at ``t[i]``."""
+    def positions(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None,
+                  path_position: np.ndarray | None = None) -> np.ndarray:
+        """(N, 3): member ``m[i]``'s position at ``t[i]`` (``path_position``: the centre's at ``t``
+        where already known)."""
         from sim.world import kernels as wk
 
         arg = self._wander_arg(m, t) if arg is None else arg
+        base = self.path.position(t) if path_position is None else path_position
         out = np.empty((t.size, 3))
-        wk.wander_sum_kernel(np.ascontiguousarray(self.path.position(t)), self.slot, m, self.amp, np.sin(arg), out)
+        wk.wander_sum_kernel(np.ascontiguousarray(base), self.slot, m, self.amp, np.sin(arg), out)
         return out
 
-    def velocities(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None) -> np.ndarray:
+    def velocities(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None,
+                   path_velocity: np.ndarray | None = None) -> np.ndarray:
         from sim.world import kernels as wk
 
         arg = self._wander_arg(m, t) if arg is None else arg
+        base = self.path.velocity(t) if path_velocity is None else path_velocity
         out = np.empty((t.size, 3))
-        wk.wander_sum_kernel(np.ascontiguousarray(self.path.velocity(t)), _NO_SLOT, m, self.amp_omega, np.cos(arg),
-                             out)
+        wk.wander_sum_kernel(np.ascontiguousarray(base), _NO_SLOT, m, self.amp_omega, np.cos(arg), out)
         return out
 
     def positions_velocities(self, m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`positions` and :meth:`velocities`, the wander's arguments made once for both."""
+        """:meth:`positions` and :meth:`velocities`, the wander's arguments and the centre's path made
+        once for both."""
         arg = self._wander_arg(m, t)
-        return self.positions(m, t, arg), self.velocities(m, t, arg)
+        p, v = position_velocity(self.path, t)
+        return self.positions(m, t, arg, p), self.velocities(m, t, arg, v)
 
     def poses(self, m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(positions (N, 3), yaws (N,))`` of members ``m`` at ``t`` (:meth:`positions`, :meth:`yaws`)."""
+        """``(positions (N, 3), yaws (N,))`` of members ``m`` at ``t`` (:meth:`positions`, :meth:`yaws`),
+        the wander's arguments and the centre's path made once for both."""
         arg = self._wander_arg(m, t)
-        return self.positions(m, t, arg), self.yaws(m, t, arg)
+        p, v = position_velocity(self.path, t)
+        return self.positions(m, t, arg, p), self.yaws(m, t, arg, v)
 
-    def yaws(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None) -> np.ndarray:
+    def yaws(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None,
+             path_velocity: np.ndarray | None = None) -> np.ndarray:
         """Body yaw (:func:`~sim.world.trajectories.body_yaw_rad`): along the velocity; a member
         hovering at some of its times is asked on its own (its heading looked up on the grid)."""
-        yaw = heading_rad(self.velocities(m, t, arg), default=math.nan)
+        yaw = heading_rad(self.velocities(m, t, arg, path_velocity), default=math.nan)
         bad = np.isnan(yaw)
         if bad.any():
             for k in np.unique(m[bad]).tolist():

@@ -94,16 +94,39 @@ class Circle:
     speed_m_s: float
     start_deg: float = 0.0
 
-    def _phase(self, t_s):
-        return math.radians(self.start_deg) + _col(t_s) * (self.speed_m_s / self.radius_m)
+    def _trig(self, t_s):
+        """``cos`` and ``sin`` (N,) of the orbit's phase at ``t_s`` (numpy's, as both methods use them)."""
+        ph = (math.radians(self.start_deg) + _col(t_s) * (self.speed_m_s / self.radius_m)).reshape(-1)
+        return np.cos(ph), np.sin(ph)
+
+    # Column by column, each element as ``centre + radius * (cos, sin, 0)`` and ``speed * (-sin, cos, 0)``
+    # (numpy's stacked (N, 3) forms, the same bits: tests/world/test_trajectories.py): a flock's
+    # centre is asked for both at a frame's rays' times, and the stacking cost more than the sines.
+    def _position(self, cos, sin):
+        out = np.empty((cos.size, 3))
+        cx, cy, cz = self.centre_m
+        out[:, 0] = cx + self.radius_m * cos
+        out[:, 1] = cy + self.radius_m * sin
+        out[:, 2] = cz + self.radius_m * 0.0
+        return out
+
+    def _velocity(self, cos, sin):
+        out = np.empty((cos.size, 3))
+        out[:, 0] = self.speed_m_s * -sin
+        out[:, 1] = self.speed_m_s * cos
+        out[:, 2] = self.speed_m_s * 0.0
+        return out
 
     def position(self, t_s):
-        ph = self._phase(t_s)
-        return np.asarray(self.centre_m) + self.radius_m * np.hstack([np.cos(ph), np.sin(ph), np.zeros_like(ph)])
+        return self._position(*self._trig(t_s))
 
     def velocity(self, t_s):
-        ph = self._phase(t_s)
-        return self.speed_m_s * np.hstack([-np.sin(ph), np.cos(ph), np.zeros_like(ph)])
+        return self._velocity(*self._trig(t_s))
+
+    def position_velocity(self, t_s):
+        """``(position(t_s), velocity(t_s))``, the phase's sine and cosine taken once for both."""
+        trig = self._trig(t_s)
+        return self._position(*trig), self._velocity(*trig)
 
     @property
     def max_speed_m_s(self) -> float:
@@ -227,6 +250,13 @@ class Manual:
         v = self._spline(np.clip(t, 0.0, self.duration_s), 1)
         v[(t < 0) | (t > self.duration_s)] = 0.0
         return v
+
+
+def position_velocity(traj, t_s) -> tuple[np.ndarray, np.ndarray]:
+    """``(traj.position(t_s), traj.velocity(t_s))``: in one evaluation where the trajectory has one
+    (``position_velocity``: what the two share made once, the same values), else in two."""
+    both = getattr(traj, "position_velocity", None)
+    return both(t_s) if both is not None else (traj.position(t_s), traj.velocity(t_s))
 
 
 # A hovering body keeps the heading it had when it last moved, looked up on this grid of absolute

@@ -1,5 +1,7 @@
 """Trajectories: defining properties (derivatives, bounds, waypoints, determinism)."""
 
+import math
+
 import numpy as np
 
 from sim.world import trajectories as tr
@@ -84,3 +86,21 @@ def test_near_zero_and_zero_speed_give_a_steady_yaw():
     for v in ((0.0, 0.0, 0.0), (0.0, 1e-5, 0.0), (0.0, 0.0, 0.3)):    # at rest, creeping, climbing
         yaw = tr.body_yaw_rad(tr.Straight((10, 0, 2), v), np.linspace(0, 20, 400))
         assert np.all(yaw == 0.0) and np.all(np.isfinite(yaw))
+
+
+def test_circle_columns_are_the_stacked_forms_to_the_bit():
+    """Circle builds its (N, 3) arrays column by column: each element as numpy's stacked form,
+    ``centre + radius * [cos, sin, 0]`` and ``speed * [-sin, cos, 0]``, and ``position_velocity``
+    gives the two at once, the same bits."""
+    t = np.concatenate([np.random.default_rng(4).uniform(-10.0, 200.0, 1000), [0.0, -0.0, 1e9]])
+    for c in (tr.Circle((40.0, 0.0, 6.0), 12.0, 8.0), tr.Circle((0, -3, -0.0), 50, -12.5, 30.0),
+              tr.Circle((1.5, 2.5, 3.5), 0.7, 3.0, -400.0)):
+        ph = math.radians(c.start_deg) + t.reshape(-1, 1) * (c.speed_m_s / c.radius_m)
+        p = np.asarray(c.centre_m) + c.radius_m * np.hstack([np.cos(ph), np.sin(ph), np.zeros_like(ph)])
+        v = c.speed_m_s * np.hstack([-np.sin(ph), np.cos(ph), np.zeros_like(ph)])
+        both = c.position_velocity(t)
+        for got, want in ((c.position(t), p), (c.velocity(t), v), (both[0], p), (both[1], v)):
+            assert got.shape == want.shape and np.array_equal(got.view(np.int64), want.view(np.int64))
+    s = tr.Straight((10, 2, 1), (0, -3, 0.5))      # no position_velocity of its own: the two calls
+    pv = tr.position_velocity(s, t)
+    assert np.array_equal(pv[0], s.position(t)) and np.array_equal(pv[1], s.velocity(t))
