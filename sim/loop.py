@@ -438,7 +438,7 @@ class ClosedLoop:
         L.command.append((c.pan_dir, c.pan_byte, c.tilt_dir, c.tilt_byte))
         if self.scene.targets:
             traj = self.scene.targets[0].trajectory
-            p = traj.position(np.array([t_mid]))[0]
+            p = self.sensor.last_mid_xyz_m[0]   # its position at t_mid, as this frame's cull evaluated it
             R = rotation_matrix(pan, tilt)
             q = mat3T_vec(R, p)   # R.T @ p in a fixed order (BLAS's differs per CPU)
             L.true_error_deg.append(math.degrees(math.atan2(math.hypot(q[1], q[2]), q[0])))

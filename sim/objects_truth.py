@@ -48,22 +48,21 @@ class ObjectsTruth:
         """The truth of each object at ``t_mid_s``; ``object_rays``: rays that hit each object this
         frame (drones then others, :attr:`sim.sensor.SceneSensor.last_object_rays`), ``strays_m`` the
         frame's stray returns (world), numbered from ``stray_count``; ``mid_xyz_m``, ``mid_velocity``:
-        each object's position and velocity at ``t_mid_s`` where already computed (the sensor's cull
-        has them, None for a velocity it did not ask: the same calls, the same bits)."""
+        each object's position and velocity at ``t_mid_s`` as [x, y, z] lists of floats where already
+        computed (the sensor's cull has them, None for a velocity it did not ask: the same calls, the
+        same bits)."""
         t = np.array([t_mid_s])
-        out = []
         n_obj = len(self.objects)
         rays = (np.zeros(n_obj, dtype=np.int64) if object_rays is None else object_rays).tolist()
-        vel: list = [None] * n_obj if mid_velocity is None else [None if v is None else v.tolist() for v in mid_velocity]
+        xyz = ([traj.position(t)[0].tolist() for _, _, traj, _ in self.objects] if mid_xyz_m is None
+               else mid_xyz_m)
+        vel: list = [None] * n_obj if mid_velocity is None else list(mid_velocity)
         for a, b, flock in self._flocks:
-            if any(v is None for v in vel[a:b]):
+            if None in vel[a:b]:
                 vel[a:b] = flock.velocities(np.arange(b - a), np.full(b - a, t_mid_s)).tolist()
-        for k, ((oid, cls, traj, size), n) in enumerate(zip(self.objects, rays)):
-            p = traj.position(t)[0] if mid_xyz_m is None else mid_xyz_m[k]
-            v = traj.velocity(t)[0].tolist() if vel[k] is None else vel[k]
-            out.append(ObjectTruth(oid, cls, tuple(p.tolist()), tuple(v), size, int(n)))
+        out = [ObjectTruth(oid, cls, tuple(p), tuple(traj.velocity(t)[0].tolist() if v is None else v), size, n)
+               for (oid, cls, traj, size), p, v, n in zip(self.objects, xyz, vel, rays)]
         for k, p in enumerate(strays_m):
             out.append(ObjectTruth(f"stray-{stray_count + k}", "clutter", tuple(float(x) for x in p), (0.0, 0.0, 0.0),
                                    0.0, 1))
         return out
-

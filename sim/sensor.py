@@ -159,8 +159,9 @@ class SceneSensor:
         self._object_of_prim = np.repeat(np.arange(self._object_prim_start.size - 1),
                                          np.diff(self._object_prim_start))
         self.last_object_rays: np.ndarray | None = None
-        # each object's position at the last chunk's mid time (what its cull centred on; the truth's too)
-        self.last_mid_xyz_m: list[np.ndarray] | None = None
+        # each object's position at the last chunk's mid time (what its cull centred on; the truth's too),
+        # as Python floats [x, y, z] (the truth's form: a flock's in one conversion, not one a bird)
+        self.last_mid_xyz_m: list[list[float]] | None = None
         # ... and its velocity there where the cull asked for it (None where it did not): the truth's too
         self.last_mid_velocity: list | None = None
         self.last_strays_m = np.zeros((0, 3))
@@ -194,8 +195,8 @@ class SceneSensor:
         self._t_ray = chunk.t_ns * 1e-9 if self.target_motion == "per_point" else np.full(n, 0.5 * (t0 + t1))
         for spec, cull in zip(scene.targets, self._cull):
             c, v = self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
-            mids.append(c)
-            vels.append(v)
+            mids.append(c.tolist())
+            vels.append(None if v is None else v.tolist())
             offset += spec.body.prims.shape[0]
         k = 0
         while k < len(scene.others):
@@ -210,8 +211,8 @@ class SceneSensor:
             obj = scene.others[k]
             c, v = self._cast_target(obj, self._cull_others[k], t0, t1, chunk.t_ns, d_world, chunk.status,
                                      rng_m, prim, offset)
-            mids.append(c)
-            vels.append(v)
+            mids.append(c.tolist())
+            vels.append(None if v is None else v.tolist())
             offset += obj.body.prims.shape[0]
             k += 1
         self.last_mid_xyz_m = mids
@@ -360,7 +361,7 @@ class SceneSensor:
         evaluated together (:class:`sim.world.sky.FlockPoses`), the rays culled for every bird in one
         pass (:func:`sim.world.kernels.flock_candidates_kernel`: bird by bird, the rays in order) and
         cast on them in one (:func:`sim.world.kernels.cast_flock_kernel`); returns their positions and
-        velocities at the chunk's mid time (two lists)."""
+        velocities at the chunk's mid time (two lists of [x, y, z] lists)."""
         t_mid = 0.5 * (t0 + t1)
         poses = flock.poses
         centres, vel = poses.positions_velocities(flock.members, np.full(flock.members.size, t_mid))
@@ -373,7 +374,7 @@ class SceneSensor:
             pos, yaw = poses.poses(m, t_pose)
             wk.cast_flock_kernel(idx, m, d_world, pos, yaw, poses.wing_angles(m, t_pose), flock.prims, flock.hinge,
                                  flock.prim_start, offset, rng_m, prim)
-        return list(centres), list(vel)
+        return centres.tolist(), vel.tolist()
 
     def _cast_body(self, spec, c, v, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset) -> None:
         traj = spec.trajectory
