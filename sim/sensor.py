@@ -394,7 +394,7 @@ class SceneSensor:
         self.rays_cast_targets += idx.size
         if idx.size == 0:
             return
-        t_pose = t_ns[idx] * 1e-9 if self.target_motion == "per_point" else np.full(idx.size, t_mid)
+        t_pose = self._t_ray[idx]      # each ray's own instant (per_point), or the mid time (per_frame)
         pos = traj.position(t_pose)
         fixed_yaw = getattr(spec, "fixed_yaw", None)      # a tree's crown keeps its yaw
         yaw = body_yaw_rad(traj, t_pose) if fixed_yaw is None else np.full(idx.size, fixed_yaw)

@@ -38,6 +38,11 @@ def numpy_paths():
         _plain.on = before
 
 
+# Up to this many rows, one broadcast of a row of three fills an (N, 3) array quicker than three column
+# assignments (~0.9 against ~1.6 us at a few rows; at 3000 rows the columns take 4 us, the rows 10).
+_ROWS_BROADCAST_MAX = 256
+
+
 def _col(t_s) -> np.ndarray:
     return np.asarray(t_s, dtype=np.float64).reshape(-1, 1)
 
@@ -71,8 +76,11 @@ class Straight:
 
     def velocity(self, t_s):
         out = np.empty((_col(t_s).shape[0], 3))
-        for i in range(3):    # column by column: broadcasting rows of three costs more
-            out[:, i] = self._velocity[i]
+        if out.shape[0] <= _ROWS_BROADCAST_MAX:   # a frame's few rays on a drone, or its mid time
+            out[:] = self._velocity
+        else:    # column by column: broadcasting rows of three costs more for many rows
+            for i in range(3):
+                out[:, i] = self._velocity[i]
         return out
 
     @property

@@ -104,3 +104,11 @@ def test_circle_columns_are_the_stacked_forms_to_the_bit():
     s = tr.Straight((10, 2, 1), (0, -3, 0.5))      # no position_velocity of its own: the two calls
     pv = tr.position_velocity(s, t)
     assert np.array_equal(pv[0], s.position(t)) and np.array_equal(pv[1], s.velocity(t))
+
+
+def test_straight_velocity_fills_every_row_either_way():
+    """Few rows take one broadcast, many take three column fills: every row is the velocity."""
+    s = tr.Straight((10, 2, 1), (0.25, -3.0, -0.0))
+    for n in (0, 1, tr._ROWS_BROADCAST_MAX, tr._ROWS_BROADCAST_MAX + 1, 5000):
+        v = s.velocity(np.linspace(0.0, 1.0, n))
+        assert v.shape == (n, 3) and np.array_equal(v.view(np.int64), np.tile(s._velocity, (n, 1)).view(np.int64))
