@@ -53,8 +53,9 @@ Rules, in order (thresholds in :class:`ClassifierConfig`; documented in docs/sky
    frames had given one verdict, repeated.  Without them (``drone_after_hits = 0``, the rule before
    2026-12-07) most of the false drone tracks on crowns were labelled that way in the first seconds
    after power-on: a crown's part seen in 0.4-0.9 s of hits (the drones' were 0.9 s or more), seeds
-   +200..+259 of the tree line; docs/sky-tracks-figures.md gives what the count changed.  Leaving the label is at once unless ``drone_leave_frames`` > 1 (it then waits that many
-   frames of other output in a row): a measured trade-off, not the default.  At 5 the daemon's status
+   +200..+259 of the tree line; docs/sky-tracks-figures.md gives what the count changed.  Leaving
+   the label is at once unless ``drone_leave_frames`` > 1 (it then waits that many frames of other
+   output in a row): a measured trade-off, not the default.  At 5 the daemon's status
    line no longer flickers between drone and unknown, but a second track on a drone keeps the drone
    label longer: seeds +200..+229 of the four scenes, false drone tracks near a drone 4 -> 19
    (flock) and 7 -> 18 (swarm), everything else the same.

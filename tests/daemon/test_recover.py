@@ -6,6 +6,7 @@ import json
 import os
 import shutil
 import stat
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -497,3 +498,25 @@ def test_recover_takes_the_lock_a_readers_probe_held_for_an_instant(tmp_path, mo
     f.write_bytes(b"not yet a recording")
     rc.recover(f)
     assert held == [True] and len(asked) == 4, (held, asked)
+
+
+def test_a_killed_recovers_leftovers_do_not_make_a_writers_file_read_as_being_recovered(tmp_path):
+    """Readers were told "being recovered" of any held file with a recover's temporary copy beside it:
+    a recover killed mid-copy (kill -9) left one, and the next writer's file was said to be recovered,
+    not written.  A recover is known by its mark's lock, which dies with its process."""
+    from foveatrack.file_lock import _recover_mark, hold, lock_holder, mark_recovering, unmark_recovering
+
+    cut, _ = _cut_short(tmp_path)
+    leftover = cut.parent / f".{cut.name}.0123abcd.tmp"
+    leftover.write_bytes(b"a killed recover's copy")
+    Path(_recover_mark(cut)).write_bytes(b"")                 # and its mark, unlocked now
+    fd = hold(cut)                                          # a writer holds the file
+    try:
+        assert lock_holder(cut) == "writer"
+        mark = mark_recovering(cut)                         # a running recover's mark, locked
+        assert mark is not None and lock_holder(cut) == "recover"
+        unmark_recovering(cut, mark)
+        assert not Path(_recover_mark(cut)).exists() and lock_holder(cut) == "writer"
+    finally:
+        os.close(fd)
+    assert lock_holder(cut) is None
