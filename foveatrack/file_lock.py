@@ -6,8 +6,9 @@ drops the lock when the writer's process dies (a killed driver's file is then re
 does a command journal's (:class:`foveatrack.live_devices.CommandJournal`), whose lock is asked with
 the same probe (:func:`recording_in_use`).  ``recover`` holds the same lock while it rewrites a cut-short
 recording (its completed copy beside it, renamed over it at the end): :func:`lock_holder` tells the two
-apart, so a reader is told which one to wait for.  A core module: the recording layer and the live
-devices' layer both use it."""
+apart, so a reader is told which one to wait for, by a mark recover keeps locked beside the file for as
+long as it runs (:func:`mark_recovering`).  A core module: the recording layer and the live devices'
+layer both use it."""
 
 from __future__ import annotations
 
@@ -51,12 +52,48 @@ def recording_in_use(path) -> bool:
     return False
 
 
-def lock_holder(path) -> str | None:
-    """Who holds the recording at ``path`` under its lock: ``"recover"`` when a temporary copy of it lies
-    beside it (``foveatrack recover`` writing the completed file, :func:`foveatrack.atomic_file.written_whole`;
-    a writer never writes beside its recording), ``"writer"`` otherwise, None when nothing holds it."""
-    from foveatrack.atomic_file import leftovers
+def _recover_mark(path) -> str:
+    real = os.path.realpath(path)
+    return os.path.join(os.path.dirname(real), f".{os.path.basename(real)}.recovering")
 
+
+def mark_recovering(path) -> int | None:
+    """``foveatrack recover``'s mark beside the recording at ``path``, under an exclusive ``flock`` for
+    as long as the recover runs (it holds the recording's own lock too): the fd to give
+    :func:`unmark_recovering`, None where it cannot be made.  Not the temporary copy it writes: that
+    copy's writer closes it, and so lets its lock go, before the copy is synced and renamed, and a
+    killed recover's copy lies there unlocked; the mark's lock lasts the whole recover and dies with
+    its process."""
+    try:
+        import fcntl
+
+        fd = os.open(_recover_mark(path), os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o600)
+    except (ImportError, OSError):
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def unmark_recovering(path, fd: int | None) -> None:
+    """Remove :func:`mark_recovering`'s mark (before its lock goes, so no reader finds it unlocked)."""
+    if fd is None:
+        return
+    try:
+        os.unlink(_recover_mark(path))
+    except OSError:
+        pass
+    os.close(fd)
+
+
+def lock_holder(path) -> str | None:
+    """Who holds the recording at ``path`` under its lock: ``"recover"`` while ``foveatrack recover``'s
+    mark beside it is locked (:func:`mark_recovering`), ``"writer"`` otherwise, None when nothing
+    holds it.  A killed recover's leftovers (its copy, its mark) are not locked: a writer that holds the
+    file later is still its writer."""
     if not recording_in_use(path):
         return None
-    return "recover" if leftovers(path) else "writer"
+    return "recover" if recording_in_use(_recover_mark(path)) else "writer"

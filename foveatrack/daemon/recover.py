@@ -128,7 +128,7 @@ def recover(path, journal=None, progress=None) -> Recovery:
     """Complete the recording at ``path`` from its command journal (module docstring); returns what
     was done.  ``progress(frames)`` is called every 100 frames copied.  UserError (one line) for a
     file that is not a recording or a journal a running driver holds."""
-    from foveatrack.file_lock import hold, lock_holder
+    from foveatrack.file_lock import hold, lock_holder, mark_recovering, unmark_recovering
 
     path = Path(path)
     # a symlink's target is what is rewritten (written_whole writes through it): its directory is the one
@@ -152,11 +152,15 @@ def recover(path, journal=None, progress=None) -> Recovery:
         # its writer's lock (foveatrack.file_lock): rewriting it now would lose what comes next
         raise UserError(f"{path} is still being written by a running process; stop it first (a stopped writer "
                         "completes its file itself), nothing was changed")
+    # readers are told it is being recovered for as long as this mark is locked (file_lock.lock_holder)
+    mark = mark_recovering(real) if lock is not None else None
     try:
         return _recover(path, real, journal, progress)
     finally:
+        # the recording's lock first: a reader between the two finds the file free, never "written"
         if lock is not None:
             os.close(lock)
+        unmark_recovering(real, mark)
 
 
 def _recover(path: Path, real: Path, journal, progress) -> Recovery:
