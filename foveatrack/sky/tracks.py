@@ -89,6 +89,7 @@ from foveatrack.detection import Detection, box_bounds, box_detection
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
+from foveatrack.kernels import box_inside_kernel, valid_mask_kernel
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
@@ -334,15 +335,18 @@ class SkyTracker:
         serves this frame, measured by Algorithm 1 in its D."""
         cfg = self.cfg
         t0, t1 = frame.t_start_s, frame.t_end_s
-        xyz, t_ns = frame.xyz, frame.t_ns
-        x, y, z = xyz[:, 0], xyz[:, 1], xyz[:, 2]     # column by column: (N, 3) reductions over axis 1 are slow
-        valid = np.isfinite(x) & np.isfinite(y) & np.isfinite(z) & ((x != 0.0) | (y != 0.0) | (z != 0.0))
-        if not valid.all():
+        xyz, t_ns = frame.xyz, frame.t_ns      # (N, 3) float64, C-contiguous (Frame)
+        valid = np.empty(xyz.shape[0], np.bool_)
+        if valid_mask_kernel(xyz, valid) < valid.size:
             xyz, t_ns = xyz[valid], t_ns[valid]
         world = lidar_to_world_per_point(xyz, t_ns, pose, t0, t1, cfg.pose_nodes)
         if self.region is not None and world.shape[0]:
             # by index: the scenes' D keeps a tenth of the points, three arrays are cut
-            inside = np.flatnonzero(np.asarray(self.region.contains(world), bool))
+            if type(self.region) is Box:
+                inside = np.empty(world.shape[0], np.int64)
+                inside = inside[:box_inside_kernel(world, *box_bounds(self.region), inside)]
+            else:
+                inside = np.flatnonzero(np.asarray(self.region.contains(world), bool))
             xyz, t_ns, world = xyz[inside], t_ns[inside], world[inside]
         cells, ranges = self.background.cells(world)
         if self._t0_s is None:

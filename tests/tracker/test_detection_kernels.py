@@ -196,3 +196,32 @@ def test_the_median_selection_is_numpys_median(kind, n):
     with np.errstate(over="ignore"):
         got = _median_select(a.copy(), n)
     assert np.float64(got).tobytes() == want.tobytes(), (got, want)
+
+
+@pytest.mark.parametrize("n", [0, 1, 5000])
+def test_the_sky_trackers_point_tests_are_their_numpy_twins(n):
+    """The sky tracker's frame tests (foveatrack.sky.tracks): valid_mask_kernel against valid_points,
+    box_inside_kernel against Box.contains, point for point, on non-finite points, the no-return
+    marker, signed zeros and points exactly on the box's faces."""
+    from foveatrack.detection import valid_points
+    from foveatrack.kernels import box_inside_kernel, valid_mask_kernel
+
+    xyz, _ = _cloud(n + 1, n)
+    rng = np.random.default_rng(n)
+    box = Box((-5.0, -20.0, -3.0), (25.0, 10.0, 8.0), frame="world")
+    if n:
+        k = rng.integers(0, n, 60)
+        xyz[k[:10]] = -0.0
+        xyz[k[10:20], 0] = -0.0
+        xyz[k[20:30]] = np.where(rng.random((10, 3)) < 0.5, box.min_xyz, box.max_xyz)   # on the faces
+        xyz[k[30:40], 1] = np.nextafter(box.max_xyz[1], -np.inf)
+    ok = np.empty(n, np.bool_)
+    assert valid_mask_kernel(xyz, ok) == int(valid_points(xyz).sum())
+    np.testing.assert_array_equal(ok, valid_points(xyz))
+    idx = np.empty(n, np.int64)
+    lo, hi = np.array(box.min_xyz), np.array(box.max_xyz)
+    with np.errstate(invalid="ignore"):
+        want = np.flatnonzero(box.contains(xyz))
+    got = idx[:box_inside_kernel(xyz, lo, hi, idx)]
+    np.testing.assert_array_equal(got, want)
+    assert n < 100 or 0 < want.size < n
