@@ -85,7 +85,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from foveatrack.config_util import dataclass_from_mapping
-from foveatrack.detection import Detection, box_bounds, box_detection
+from foveatrack.detection import Detection, box_bounds, box_detection, frozen_maker
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
@@ -286,6 +286,9 @@ class TrackView:
         """What the fovea's schedule goes by: what the track looks like now, before the label waits
         (foveatrack.sky.classify rule 5: the fovea helps decide, so it looks at a possible drone)."""
         return self.label if self.seen_as is None else self.seen_as
+
+
+_make_view = frozen_maker(TrackView)    # TrackView(...) without the frozen init's per-field cost (every track, every frame)
 
 
 @dataclass(frozen=True)
@@ -496,8 +499,8 @@ class SkyTracker:
                                                                    tr.hit_now, cfg.classifier)
         if not learn:
             return (), None, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
-        views = tuple(TrackView(tr.track_id, tr.confirmed, tr.label, p, tr.kf.v.copy(),
-                                tr.hit_now, tr.in_view, dict(tr.features), tr.clear_hits, tr.seen_as)
+        views = tuple(_make_view(tr.track_id, tr.confirmed_t_s is not None, tr.label, p, tr.kf.v.copy(),
+                                 tr.hit_now, tr.in_view, dict(tr.features), tr.clear_hits, tr.seen_as)
                       for tr, p in zip(self.tracks, positions))
         return views, fovea_det, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
 
