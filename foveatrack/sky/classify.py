@@ -1,7 +1,7 @@
 """Drone, bird or clutter, from what the lidar measures of a track over its last ``history_s``.
 
-Features (each from the track's hits in the window; sums by ``math.fsum``: exact, so the same bits
-everywhere):
+Features (each from the track's hits in the window; sums exactly rounded, as ``math.fsum`` sums: the
+same bits everywhere):
 
 ``hits``            measurements in the window
 ``size_m``          median of the largest side of the object's bounding box
@@ -67,16 +67,18 @@ nearest truth object), between the classes' 5th and 95th percentiles: drones 0.5
 docs/sky-tracks-figures.md are measured on seeds +0 to +7, which were not used.  ``flap_cv`` of a
 sparse cluster does not tell a flapping wing (drones 0.32-0.99, birds 0.42-0.82 there): it counts
 only where the object is resolved.
+
+The features are computed in :mod:`foveatrack.sky.features`.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from collections.abc import Mapping
 
 from foveatrack.config_util import as_float, check_keys
 from foveatrack.errors import UserError
+from foveatrack.sky.features import window_features
 
 LABELS = ("unknown", "clutter", "bird", "drone")
 
@@ -133,96 +135,12 @@ class ClassifierConfig:
         return cls(**kw)
 
 
-def _mean(xs) -> float:
-    return math.fsum(xs) / len(xs)
-
-
-def _velocity(ts, ps) -> list[float]:
-    """Least-squares velocity per axis of the positions ``ps`` (lists of 3 floats) at times ``ts``;
-    the times' mean and spread once for the three axes."""
-    tm = _mean(ts)
-    dts = [t - tm for t in ts]
-    den = math.fsum([d * d for d in dts])
-    if den == 0.0:
-        return [0.0, 0.0, 0.0]
-    out = []
-    for a in range(3):
-        xs = [p[a] for p in ps]
-        xm = _mean(xs)
-        out.append(math.fsum([d * (x - xm) for d, x in zip(dts, xs)]) / den)
-    return out
-
-
-def _norm(v) -> float:
-    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-
-
-def flap_period_s(ts, zs, min_period_s: float, threshold: float) -> float | None:
-    """Apparent period of the series ``zs`` sampled at ``ts`` (about evenly): the lag of the first
-    normalised autocorrelation peak above ``threshold`` with at least two periods in the window."""
-    n = len(zs)
-    if n < 6:
-        return None
-    dt = (ts[-1] - ts[0]) / (n - 1)
-    m = _mean(zs)
-    d = [z - m for z in zs]
-    var = math.fsum([x * x for x in d])
-    if var <= 0.0 or dt <= 0.0:
-        return None
-    ac = {}
-
-    def at(k: int) -> float:
-        # each lag's autocorrelation when the search first reads it (most windows hold no peak
-        # above the threshold, and the lags below the shortest period are read by none)
-        if k not in ac:
-            ac[k] = math.fsum([d[i] * d[i + k] for i in range(n - k)]) / var
-        return ac[k]
-
-    for k in range(1, n // 2):
-        if k * dt >= min_period_s and at(k) >= threshold and at(k) >= at(k - 1) and at(k) >= at(k + 1):
-            return k * dt
-    return None
-
-
-def features(track) -> dict:
-    """The features of a track (module docstring) from its ``history`` and filter."""
-    return _features(track)[0]
-
-
-def _features(track) -> tuple[dict, list | None, list | None]:
-    """:func:`features`, and the hits' times and vertical sides (None with fewer than two hits),
-    which :func:`classify` reads again."""
-    h = track.history
-    f = {"hits": len(h), "speed_m_s": track.kf.speed_m_s, "excursion_m": float(getattr(track, "excursion_m", 0.0)),
-         "age_s": float(track.last_hit_t_s - track.first_t_s)}
-    if len(h) < 2:
-        return f, None, None
-    f["median_points"] = float(sorted(int(x[3]) for x in h)[len(h) // 2])
-    ts = [x[0] for x in h]
-    span = ts[-1] - ts[0]
-    sides = [x[2].tolist() for x in h]      # Python floats: the values float(x[2][a]) gives (a tenth the cost)
-    zs = [float(s[2]) for s in sides]
-    f["size_m"] = sorted(float(max(s)) for s in sides)[len(h) // 2]
-    p0, p1 = h[0][1].tolist(), h[-1][1].tolist()
-    f["net_speed_m_s"] = _norm([p1[a] - p0[a] for a in range(3)]) / span if span > 0 else 0.0
-    zm = _mean(zs)
-    f["flap_cv"] = math.sqrt(_mean([(z - zm) * (z - zm) for z in zs])) / zm if zm > 0 else 0.0
-    half = len(h) // 2
-    if half >= 3:
-        ps = [x[1].tolist() for x in h]
-        va, vb = _velocity(ts[:half], ps[:half]), _velocity(ts[half:], ps[half:])
-        dt = _mean(ts[half:]) - _mean(ts[:half])
-        f["manoeuvre_m_s2"] = _norm([vb[i] - va[i] for i in range(3)]) / dt if dt > 0 else 0.0
-    f["flap_period_s"] = None
-    return f, ts, zs
-
-
 def classify(track, cfg: ClassifierConfig) -> tuple[str, dict]:
     """``(label, features)`` of a track (module docstring)."""
-    f, ts, zs = _features(track)
-    if f["hits"] < cfg.min_hits:
+    enough = len(track.history) >= cfg.min_hits
+    f = window_features(track, (cfg.min_flap_period_s, cfg.flap_autocorr) if enough else None)
+    if not enough:
         return "unknown", f
-    f["flap_period_s"] = flap_period_s(ts, zs, cfg.min_flap_period_s, cfg.flap_autocorr)
     if f["net_speed_m_s"] < cfg.clutter_net_speed_m_s or (
             f["age_s"] >= cfg.clutter_age_s and f["excursion_m"] < cfg.clutter_excursion_m):
         return "clutter", f

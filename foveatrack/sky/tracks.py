@@ -288,7 +288,7 @@ class TrackView:
         return self.label if self.seen_as is None else self.seen_as
 
 
-_make_view = frozen_maker(TrackView)    # TrackView(...) without the frozen init's per-field cost (every track, every frame)
+_make_view = frozen_maker(TrackView)    # TrackView(...) without the frozen init's cost per field, per track
 
 
 @dataclass(frozen=True)

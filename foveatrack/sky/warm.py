@@ -1,10 +1,11 @@
 """The multi-object tracker's numba kernels compiled (or loaded from numba's cache) before data flows.
 
-Its kernels (the direction cells and range background, the per-point turn into the world, the
-clustering, Algorithm 1 in a D) run first when the tracker's warm-up ends, ~10 frames into a run: on
-a fresh install that frame waited ~8 s for the compiler, in the daemon's live loop as in a simulated
-run.  :func:`compile_sky_kernels` steps a throwaway controller through frames past its warm-up with
-a small object moving through a scattered background, once per process, nothing written anywhere.
+Its kernels (the frame's validity and region tests, the direction cells and range background, the
+per-point turn into the world, the clustering, Algorithm 1 in a D, the classifier's features) run
+first when the tracker's warm-up ends, ~10 frames into a run: on a fresh install that frame waited
+~8 s for the compiler, in the daemon's live loop as in a simulated run.  :func:`compile_sky_kernels`
+steps a throwaway controller through frames past its warm-up with a small object moving through a
+scattered background, once per process, nothing written anywhere.
 The daemon (:func:`foveatrack.daemon.runtime.compile_sky`) and the simulator's closed loop
 (:meth:`sim.loop.ClosedLoop.run`) both call it.
 """

@@ -1,5 +1,6 @@
-"""Drone, bird or clutter from what the lidar measures (foveatrack/sky/classify.py), on tracks made
-by hand: the rules' order and the thresholds chosen on the sky scenes' seeds +8 and +9."""
+"""Drone, bird or clutter from what the lidar measures (foveatrack/sky/classify.py, its features
+foveatrack/sky/features.py), on tracks made by hand: the rules' order and the thresholds chosen on the
+sky scenes' seeds +8 and +9; the features' kernel against its Python twin."""
 
 import math
 from dataclasses import replace
@@ -137,7 +138,7 @@ def test_a_drone_label_can_be_held_for_a_few_frames_of_other_rule_output():
 def test_the_flap_period_is_the_first_peak_of_the_whole_autocorrelation():
     # flap_period_s reads each lag's autocorrelation only when its search gets there: the answer must
     # be the first peak of the whole series of lags, as written out here
-    from foveatrack.sky.classify import flap_period_s
+    from foveatrack.sky.features import flap_period_s
 
     def whole(ts, zs, min_period_s, threshold):
         n = len(zs)
@@ -168,3 +169,93 @@ def test_the_flap_period_is_the_first_peak_of_the_whole_autocorrelation():
         assert got == whole(ts, zs, *args)
         found += got is not None
     assert found > 300
+
+
+def _bits(f: dict) -> list:
+    """A features dict as its keys in order, each value's type and bits (floats by their bytes)."""
+    return [(k, type(v).__name__, np.float64(v).tobytes() if isinstance(v, float) else v) for k, v in f.items()]
+
+
+def test_the_features_kernel_is_its_python_twin_bit_for_bit():
+    # features_kernel (what classify runs) against features_python, the same sums by math.fsum in
+    # Python lists: every key, its order and the bits of every value, on windows of 0-39 hits, with
+    # equal times (no span, no spread), a standing object, flat and flapping vertical sides, zero
+    # sides, and the flap period asked for or not
+    from foveatrack.sky.features import features_python, window_features
+
+    rng = np.random.default_rng(0)
+    periods = manoeuvres = 0
+    for _ in range(6000):
+        n = int(rng.integers(0, 40))
+        kind = int(rng.integers(0, 4))
+        ts = [np.cumsum(rng.uniform(0.08, 0.12, n)), np.full(n, 3.3),
+              np.round(np.cumsum(rng.uniform(0.05, 0.15, n)), 1), np.sort(rng.uniform(0, 3, n))][kind]
+        P = rng.normal(size=(n, 3)) * rng.choice([0.01, 1.0, 30.0]) + rng.normal(size=3) * 50
+        if n and rng.random() < 0.2:
+            P[:] = P[0]
+        S = np.abs(rng.normal(0.3, 0.1, (n, 3)))
+        u = rng.random()
+        if u < 0.2:
+            S[:, 2] = 0.25
+        elif u < 0.3:
+            S[:] = 0.0
+        elif u < 0.6:
+            S[:, 2] = 0.2 + 0.1 * np.sin(2 * np.pi * ts / rng.uniform(0.15, 0.8))
+        hist = [(float(ts[i]), P[i].copy(), S[i].copy(), int(k)) for i, k in enumerate(rng.integers(1, 60, n))]
+        tr = SimpleNamespace(history=hist, kf=SimpleNamespace(speed_m_s=1.5), excursion_m=2.0, first_t_s=0.0,
+                             last_hit_t_s=3.0)
+        period = (None if rng.random() < 0.3
+                  else (float(rng.choice([0.0, 0.2, 0.4])), float(rng.choice([0.2, 0.5, 0.8]))))
+        want = features_python(tr, period)
+        assert _bits(window_features(tr, period)) == _bits(want)
+        periods += want.get("flap_period_s") is not None
+        manoeuvres += "manoeuvre_m_s2" in want
+    assert periods > 300 and manoeuvres > 2000
+
+
+def test_the_kernels_exact_sum_is_math_fsums():
+    # fsum_kernel is CPython's math_fsum line for line: the same bits (and the same errors) on sums
+    # that cancel, mix huge and tiny values, sit exactly halfway between two doubles (the final
+    # half-even correction), hold subnormals, signed zeros, infinities and NaN
+    from foveatrack.sky.features import fsum_kernel
+
+    inf, nan = float("inf"), float("nan")
+    cases = [[], [0.0], [-0.0], [-0.0, -0.0], [1e-16, 1.0, 1e16], [1.0, 1e100, 1.0, -1e100], [1e308, 1e308, -1e308],
+             [2.0 ** 53, 1.0, 2.0 ** -60], [2.0 ** 53, 1.0, -2.0 ** -60], [1.0, 2.0 ** -53, 2.0 ** -106],
+             [1.0, -2.0 ** -54, -2.0 ** -108], [inf, 1.0], [-inf, 2.0], [nan, 1.0], [inf, -inf], [inf, nan],
+             [5e-324, 5e-324, -5e-324], [1.7976931348623157e308, -1.7976931348623157e308, 1.0], [0.1] * 10,
+             [1e16, 1.0, 1e-16, -1e16], [3.0, -2.0 ** -52, 2.0 ** -105]]
+    rng = np.random.default_rng(1)
+    for _ in range(20000):
+        n = int(rng.integers(1, 40))
+        kind = int(rng.integers(0, 6))
+        if kind == 0:
+            x = rng.normal(size=n)
+        elif kind == 1:
+            x = rng.normal(size=n) * 10.0 ** rng.integers(-300, 300, n)
+        elif kind == 2:                 # cancellation: values and most of their negatives, shuffled
+            x = rng.normal(size=n) * 10.0 ** rng.integers(-20, 20, n)
+            x = np.concatenate([x, -x[: n // 2]])
+            rng.shuffle(x)
+        elif kind == 3:                 # a unit, half its last place (or 3 halves), and a tiny tie-breaker
+            b = 2.0 ** int(rng.integers(-30, 30))
+            x = np.array([b, b * 2.0 ** -53 * rng.choice([1, -1, 3, -3]), b * 2.0 ** -106 * rng.choice([1, -1])]
+                         + list(rng.normal(size=int(rng.integers(0, 3))) * b * 2.0 ** -120))
+        elif kind == 4:
+            x = np.round(rng.normal(size=n) * 1e3) / 8.0
+        else:
+            x = rng.choice([1e308, -1e308, 1.0, -1.0, 1e-308, 2.0 ** -1074], n)
+        cases.append(x.tolist())
+
+    def outcome(f, xs):
+        try:
+            return np.float64(f(xs)).tobytes()
+        except (OverflowError, ValueError) as e:
+            return type(e).__name__, str(e)
+
+    errors = 0
+    for c in cases:
+        want = outcome(math.fsum, c)
+        assert outcome(fsum_kernel, np.array(c, np.float64)) == want, c
+        errors += isinstance(want, tuple)
+    assert errors > 100
