@@ -37,7 +37,6 @@ from typing import Any, ClassVar
 from foveatrack.device_config import HeadConfig, LidarConfig
 from foveatrack.errors import UserError
 from foveatrack.gate import Limits
-from foveatrack.sky.classify import ADDED_SINCE_RECORDED
 from foveatrack.speed_table import SpeedTable
 from foveatrack.tracker import TrackerConfig
 
@@ -203,14 +202,7 @@ def _sky(meta: Mapping, where: str) -> dict | None:
     sky = meta.get("sky")
     if sky is not None and not isinstance(sky, Mapping):
         raise UserError(f"{where}: the recording's 'sky' (the multi-object tracker's table) is not a table: {sky!r}")
-    if sky is None:
-        return None
-    # keys the sky tracker has gained since this recording was made take the value it ran with
-    sky = dict(sky)
-    classifier = sky.get("classifier", {})
-    if isinstance(classifier, Mapping):
-        sky["classifier"] = {**ADDED_SINCE_RECORDED, **classifier}
-    return sky
+    return None if sky is None else dict(sky)
 
 
 def _origin(meta: Mapping) -> SimulatorOrigin | DaemonOrigin:

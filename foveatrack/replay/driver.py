@@ -180,8 +180,10 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
     # the multi-object tracker where the run had it (its recorded table), or where the table given has one
     sky_table = meta.sky if tracker_table is None else tracker_table.get("sky")
     if sky_table is not None:
-        from foveatrack.sky.controller import SkyController
+        from foveatrack.sky.controller import SkyController, recorded_sky_table
 
+        if tracker_table is None:       # the recorded table, with what the tracker gained since at its old values
+            sky_table = recorded_sky_table(sky_table)
         controller = SkyController.from_table(controller, sky_table, where + ".sky", meta.half_fov_deg)
     tracks_cmp = _TracksComparison()
     step = FrameStep(controller, CommandGate(meta.limits), sink)

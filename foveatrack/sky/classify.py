@@ -84,7 +84,7 @@ LABELS = ("unknown", "clutter", "bird", "drone")
 
 #: keys added to :class:`ClassifierConfig` since recordings began to keep the sky table, each with the
 #: value that behaves as before it: a recording's table without one ran that way, and replays so
-#: (:func:`foveatrack.recording.run_meta.RecordingMeta.from_dict`)
+#: (:func:`foveatrack.sky.controller.recorded_sky_table`)
 ADDED_SINCE_RECORDED = {"drone_after_hits": 0}
 
 

@@ -33,6 +33,7 @@ from foveatrack.errors import UserError
 from foveatrack.fixed_order import floats3, norm3
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_rows
+from foveatrack.sky.classify import ADDED_SINCE_RECORDED
 from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, off_axis_deg,
                                       saccade_time_s, threat_score)
 from foveatrack.space_of_interest import Box
@@ -107,6 +108,17 @@ def sky_configs_from_mapping(data: Mapping, where: str, field_half_angle_deg: fl
     if "field_half_angle_deg" not in data and field_half_angle_deg is not None:
         cfg = replace(cfg, field_half_angle_deg=float(field_half_angle_deg))
     return cfg, AttentionConfig.from_mapping(att, where + ".attention")
+
+
+def recorded_sky_table(table: Mapping) -> dict:
+    """A recording's ``[tracker.sky]`` table as it ran: the keys the tracker has gained since the
+    recording was made (:data:`foveatrack.sky.classify.ADDED_SINCE_RECORDED`) at the values that
+    behave as before them (a table from :func:`sky_table` has every key, and keeps its own)."""
+    table = dict(table)
+    classifier = table.get("classifier", {})
+    if isinstance(classifier, Mapping):
+        table["classifier"] = {**ADDED_SINCE_RECORDED, **classifier}
+    return table
 
 
 def sky_table(cfg: SkyTrackerConfig, attention_cfg: AttentionConfig) -> dict:
