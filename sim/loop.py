@@ -32,6 +32,7 @@ from foveatrack.fixed_order import mat3T_vec, norm3
 from foveatrack.frame_step import FrameStep, NoHead
 from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate, Limits
+from foveatrack.heap import freeze_startup_heap
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable
 from foveatrack.tracker import Tracker
@@ -152,6 +153,7 @@ class ClosedLoop:
 
     def __init__(self, scene: Scene, frame_hook=None, head_grid_s: float | None = None, controller=None,
                  target_motion: str = "per_point"):
+        freeze_startup_heap()      # the imports out of the collector's walks, before this loop's objects
         self.scene = scene
         self.head_grid_s = head_grid_s
         self.sensor = SceneSensor(scene, target_motion)

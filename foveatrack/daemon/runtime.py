@@ -62,6 +62,7 @@ from foveatrack.frames import FrameSlicer
 from foveatrack.frame_step import FrameStep
 from foveatrack.gate import CommandGate
 from foveatrack.gyro_attitude import ImuFeed
+from foveatrack.heap import freeze_startup_heap
 from foveatrack.tracker import Tracker
 from foveatrack.turn_witness import MoveWitness
 
@@ -177,6 +178,7 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Operat
         compile_all()   # before data flows: a first-call compile would stall the first frame
         compile_sky(self.cfg, self.table)     # and the multi-object tracker's, where it runs
         self.pose_guard.compile()
+        freeze_startup_heap()       # imports and kernels out of the collector's walks (a ~19 ms stall)
         self._open()
         with self._stop_signals():      # the handlers found come back on every way out
             try:
