@@ -32,9 +32,9 @@ from foveatrack.fixed_order import mat3T_vec, norm3
 from foveatrack.frame_step import FrameStep, NoHead
 from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate, Limits
-from foveatrack.heap import freeze_startup_heap
 from foveatrack.reconstruction import rotation_matrix
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable
+from foveatrack.startup_heap import freeze_startup_heap
 from foveatrack.tracker import Tracker
 from gimbal.head_facts import HeadFacts
 from gimbal.pelco import encode_pan_tilt, wrap_pan_deg

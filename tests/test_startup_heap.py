@@ -1,11 +1,11 @@
-"""The startup heap set aside from the cyclic collector once per process (foveatrack.heap)."""
+"""The startup heap set aside from the cyclic collector once per process (foveatrack.startup_heap)."""
 
 from __future__ import annotations
 
 import gc
 from pathlib import Path
 
-from foveatrack import heap
+from foveatrack import startup_heap as heap
 
 SCENE = Path(__file__).resolve().parents[1] / "scenes" / "fig12-tracking.toml"
 

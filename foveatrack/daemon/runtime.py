@@ -62,7 +62,7 @@ from foveatrack.frames import FrameSlicer
 from foveatrack.frame_step import FrameStep
 from foveatrack.gate import CommandGate
 from foveatrack.gyro_attitude import ImuFeed
-from foveatrack.heap import freeze_startup_heap
+from foveatrack.startup_heap import freeze_startup_heap
 from foveatrack.tracker import Tracker
 from foveatrack.turn_witness import MoveWitness
 

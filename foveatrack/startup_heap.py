@@ -10,7 +10,8 @@ runs of the swarm with the flock, ``gc.callbacks`` timed), 0.057 ms with the sta
 :func:`freeze_startup_heap` collects once and then freezes (``gc.freeze``) what is alive, once per
 process, before the run builds its own objects.  Frozen objects are still freed by reference
 counting when dropped; only a reference cycle among them would stay until the process ends.  The
-numbers a run computes do not depend on when the collector runs.
+numbers a run computes do not depend on when the collector runs.  (What the allocator gives back to
+the system is :mod:`foveatrack.daemon.heap`'s.)
 """
 
 from __future__ import annotations
