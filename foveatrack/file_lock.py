@@ -18,10 +18,16 @@ import os
 def hold(path) -> int | None:
     """An exclusive ``flock`` on the recording's file (module docstring): the fd to close when the
     writer is done, None where the lock cannot be taken."""
+    return _flocked(path, os.O_RDONLY)
+
+
+def _flocked(path, flags: int) -> int | None:
+    """``path`` opened with ``flags`` (never through a symlink; made 0600 with ``O_CREAT``) under an
+    exclusive ``flock`` taken without waiting: its fd, None where either cannot be had."""
     try:
         import fcntl
 
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+        fd = os.open(path, flags | getattr(os, "O_NOFOLLOW", 0), 0o600)
     except (ImportError, OSError):
         return None
     try:
@@ -64,18 +70,7 @@ def mark_recovering(path) -> int | None:
     copy's writer closes it, and so lets its lock go, before the copy is synced and renamed, and a
     killed recover's copy lies there unlocked; the mark's lock lasts the whole recover and dies with
     its process."""
-    try:
-        import fcntl
-
-        fd = os.open(_recover_mark(path), os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o600)
-    except (ImportError, OSError):
-        return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        os.close(fd)
-        return None
-    return fd
+    return _flocked(_recover_mark(path), os.O_RDWR | os.O_CREAT)
 
 
 def unmark_recovering(path, fd: int | None) -> None:
