@@ -8,10 +8,13 @@ target is 10 ms; and in the simulator the collector took 0.13 ms of a ~1.1 ms fr
 runs of the swarm with the flock, ``gc.callbacks`` timed), 0.057 ms with the startup heap frozen.
 
 :func:`freeze_startup_heap` collects once and then freezes (``gc.freeze``) what is alive, once per
-process, before the run builds its own objects.  Frozen objects are still freed by reference
-counting when dropped; only a reference cycle among them would stay until the process ends.  The
-numbers a run computes do not depend on when the collector runs.  (What the allocator gives back to
-the system is :mod:`foveatrack.daemon.heap`'s.)
+process.  ``sim.loop.ClosedLoop`` and the daemon call it from ``__new__``, before the instance exists:
+the collector takes a frozen object for a reference from outside, so a cycle through one -- the
+loop and its link to the head hold each other -- would keep every object on it, and all they hold,
+until the process ends (a review found the first loop of a process kept so: ~34 MB and its logs).
+Frozen objects are still freed by reference counting when dropped; what was alive at the call and
+sits on a cycle stays.  The numbers a run computes do not depend on when the collector runs.  (What
+the allocator gives back to the system is :mod:`foveatrack.daemon.heap`'s.)
 """
 
 from __future__ import annotations

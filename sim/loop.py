@@ -151,9 +151,14 @@ class ClosedLoop:
 
     _TRIG_NODE_S = 0.001   # trigonometry once per ms in the exact route (1.7e-3 rad steps at 100 deg/s)
 
+    def __new__(cls, *args, **kwargs):
+        # the imports out of the collector's walks (foveatrack.startup_heap), before this loop exists:
+        # a frozen loop would hold its own cycles, and all it keeps, until the process ends
+        freeze_startup_heap()
+        return super().__new__(cls)
+
     def __init__(self, scene: Scene, frame_hook=None, head_grid_s: float | None = None, controller=None,
                  target_motion: str = "per_point"):
-        freeze_startup_heap()      # the imports out of the collector's walks, before this loop's objects
         self.scene = scene
         self.head_grid_s = head_grid_s
         self.sensor = SceneSensor(scene, target_motion)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gc
+import weakref
 from pathlib import Path
 
 from foveatrack import startup_heap as heap
@@ -10,7 +11,7 @@ from foveatrack import startup_heap as heap
 SCENE = Path(__file__).resolve().parents[1] / "scenes" / "fig12-tracking.toml"
 
 
-def test_the_startup_heap_is_frozen_once_and_a_closed_loop_does_it_first(monkeypatch):
+def test_the_startup_heap_is_frozen_once_before_the_first_loop_which_is_still_freed(monkeypatch):
     from sim.loop import ClosedLoop
     from sim.scene import load_scene
 
@@ -19,11 +20,35 @@ def test_the_startup_heap_is_frozen_once_and_a_closed_loop_does_it_first(monkeyp
     monkeypatch.setattr(heap, "_frozen", False)
     try:
         assert gc.get_freeze_count() == 0
-        ClosedLoop(scene)                        # the simulator freezes before it builds its own objects
+        loop = ClosedLoop(scene)                 # the simulator freezes the heap first
         frozen = gc.get_freeze_count()
         assert heap._frozen and frozen > 10_000, frozen      # the imports: numpy, scipy, numba, ours
-        kept = [[k] for k in range(5000)]
-        heap.freeze_startup_heap()               # a second call: nothing more is frozen
-        assert gc.get_freeze_count() == frozen and len(kept) == 5000
+        ClosedLoop(scene)                        # a second loop: nothing more is frozen
+        assert gc.get_freeze_count() == frozen
+        # the first loop was built after the freeze: its cycles (the loop and its link to the head)
+        # are collected when it is dropped (frozen, it kept ~34 MB and its logs to the process's end)
+        loop.run()
+        gone = weakref.ref(loop)
+        del loop
+        gc.collect()
+        assert gone() is None
+    finally:
+        gc.unfreeze()
+
+
+def test_the_daemon_freezes_the_heap_before_it_exists(tmp_path, monkeypatch):
+    from foveatrack.daemon import Daemon, load_config
+
+    gc.unfreeze()
+    monkeypatch.setattr(heap, "_frozen", False)
+    try:
+        d = Daemon(load_config(Path(__file__).resolve().parents[1] / "examples" / "daemon-virtual.toml"),
+                   log_path=str(tmp_path / "log.jsonl"), status=False, install_signals=False)
+        d.log.close()
+        assert heap._frozen and gc.get_freeze_count() > 10_000
+        gone = weakref.ref(d)
+        del d
+        gc.collect()
+        assert gone() is None
     finally:
         gc.unfreeze()

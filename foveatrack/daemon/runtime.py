@@ -114,6 +114,12 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Operat
     :mod:`~foveatrack.daemon.status_display` and :mod:`~foveatrack.daemon.run_stats`.
     """
 
+    def __new__(cls, *args, **kwargs):
+        # the imports out of the collector's walks (foveatrack.startup_heap: a full collection is a
+        # ~19 ms stall in a frame), before this daemon exists: a frozen daemon's cycles would never go
+        freeze_startup_heap()
+        return super().__new__(cls)
+
     def __init__(self, config: DaemonConfig, log_path: str | None = None, status: bool | None = None,
                  duration_s: float | None = None, install_signals: bool = True, live_port: int | None = None,
                  live_origins=()):
@@ -178,7 +184,6 @@ class Daemon(Lifecycle, FrameLoop, HeadPose, LidarWatch, DaemonRecording, Operat
         compile_all()   # before data flows: a first-call compile would stall the first frame
         compile_sky(self.cfg, self.table)     # and the multi-object tracker's, where it runs
         self.pose_guard.compile()
-        freeze_startup_heap()       # imports and kernels out of the collector's walks (a ~19 ms stall)
         self._open()
         with self._stop_signals():      # the handlers found come back on every way out
             try:
