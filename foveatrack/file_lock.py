@@ -22,12 +22,13 @@ def hold(path) -> int | None:
 
 
 def _flocked(path, flags: int) -> int | None:
-    """``path`` opened with ``flags`` (never through a symlink; made 0600 with ``O_CREAT``) under an
-    exclusive ``flock`` taken without waiting: its fd, None where either cannot be had."""
+    """``path`` opened with ``flags`` (never through a symlink; made 0644 with ``O_CREAT``, so that
+    another user's reader can probe it) under an exclusive ``flock`` taken without waiting: its fd,
+    None where either cannot be had."""
     try:
         import fcntl
 
-        fd = os.open(path, flags | getattr(os, "O_NOFOLLOW", 0), 0o600)
+        fd = os.open(path, flags | getattr(os, "O_NOFOLLOW", 0), 0o644)
     except (ImportError, OSError):
         return None
     try:
@@ -63,22 +64,50 @@ def _recover_mark(path) -> str:
     return os.path.join(os.path.dirname(real), f".{os.path.basename(real)}.recovering")
 
 
-def mark_recovering(path) -> int | None:
+def mark_recovering(path, wait_s: float = 0.5) -> int | None:
     """``foveatrack recover``'s mark beside the recording at ``path``, under an exclusive ``flock`` for
     as long as the recover runs (it holds the recording's own lock too): the fd to give
-    :func:`unmark_recovering`, None where it cannot be made.  Not the temporary copy it writes: that
-    copy's writer closes it, and so lets its lock go, before the copy is synced and renamed, and a
-    killed recover's copy lies there unlocked; the mark's lock lasts the whole recover and dies with
-    its process."""
-    return _flocked(_recover_mark(path), os.O_RDWR | os.O_CREAT)
+    :func:`unmark_recovering`, None where it cannot be made within ``wait_s``.  Not the temporary
+    copy it writes: that copy's writer closes it, and so lets its lock go, before the copy is synced
+    and renamed, and a killed recover's copy lies there unlocked; the mark's lock lasts the whole
+    recover and dies with its process.
+
+    A recover that has just renamed its copy over the file still holds the mark for a moment while
+    a second one may take the new file's lock: the second waits for the mark.  A mark locked after
+    its file was unlinked (the first recover removed it between our open and our lock) is no one's
+    mark: it is made again."""
+    import time
+
+    mark = _recover_mark(path)
+    deadline = time.monotonic() + wait_s
+    while True:
+        fd = _flocked(mark, os.O_RDWR | os.O_CREAT)
+        if fd is not None:
+            if _is_at(fd, mark):
+                return fd
+            os.close(fd)
+        if time.monotonic() > deadline:
+            return None
+        time.sleep(0.01)
+
+
+def _is_at(fd: int, path: str) -> bool:
+    """Whether the open file ``fd`` is still the one at ``path`` (not unlinked or replaced since)."""
+    try:
+        return os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False))
+    except OSError:
+        return False
 
 
 def unmark_recovering(path, fd: int | None) -> None:
-    """Remove :func:`mark_recovering`'s mark (before its lock goes, so no reader finds it unlocked)."""
+    """Remove :func:`mark_recovering`'s mark while its lock is held (so no reader finds it unlocked,
+    and only while the path is still this mark: not a later recover's), then let the lock go."""
     if fd is None:
         return
+    mark = _recover_mark(path)
     try:
-        os.unlink(_recover_mark(path))
+        if _is_at(fd, mark):
+            os.unlink(mark)
     except OSError:
         pass
     os.close(fd)
@@ -91,4 +120,7 @@ def lock_holder(path) -> str | None:
     file later is still its writer."""
     if not recording_in_use(path):
         return None
-    return "recover" if recording_in_use(_recover_mark(path)) else "writer"
+    if recording_in_use(_recover_mark(path)):
+        return "recover"
+    # a recover that ended between the two probes took its mark away: asked again, the file is free
+    return "writer" if recording_in_use(path) else None

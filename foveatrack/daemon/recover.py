@@ -157,7 +157,7 @@ def recover(path, journal=None, progress=None) -> Recovery:
     try:
         return _recover(path, real, journal, progress)
     finally:
-        # the recording's lock first: a reader between the two finds the file free, never "written"
+        # the recording's lock first: a reader between the two finds the file free (file_lock.lock_holder)
         if lock is not None:
             os.close(lock)
         unmark_recovering(real, mark)

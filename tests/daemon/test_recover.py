@@ -520,3 +520,32 @@ def test_a_killed_recovers_leftovers_do_not_make_a_writers_file_read_as_being_re
     finally:
         os.close(fd)
     assert lock_holder(cut) is None
+
+
+def test_the_recover_mark_is_readable_by_others_waited_for_and_never_anothers(tmp_path, monkeypatch):
+    """A review's findings: the mark was made 0600, so another user's reader could not probe it and
+    was told "still being written"; a second recover that took the renamed file's lock while the
+    first still held the mark ran without one; and a reader asked between a recover's two unlocks
+    was told "writer" of a free file."""
+    import threading
+
+    import foveatrack.file_lock as fl
+
+    cut, _ = _cut_short(tmp_path)
+    old_umask = os.umask(0o022)
+    try:
+        first = fl.mark_recovering(cut)
+    finally:
+        os.umask(old_umask)
+    mark = Path(fl._recover_mark(cut))
+    assert first is not None and mark.stat().st_mode & 0o044 == 0o044
+    # a second recover waits for the first's mark and then makes its own
+    threading.Timer(0.1, fl.unmark_recovering, (cut, first)).start()
+    second = fl.mark_recovering(cut, wait_s=2.0)
+    assert second is not None and fl._is_at(second, str(mark))
+    fl.unmark_recovering(cut, second)
+    assert not mark.exists()
+    # the recording free by the time the mark is asked about: nothing holds it
+    probes = iter([True, False, False])
+    monkeypatch.setattr(fl, "recording_in_use", lambda p: next(probes))
+    assert fl.lock_holder(cut) is None
