@@ -20,20 +20,24 @@ def test_the_startup_heap_is_frozen_once_before_the_first_loop_which_is_still_fr
     monkeypatch.setattr(heap, "_frozen", False)
     try:
         assert gc.get_freeze_count() == 0
-        loop = ClosedLoop(scene)                 # the simulator freezes the heap first
+        first = [ClosedLoop(scene)]              # the simulator freezes the heap first
         frozen = gc.get_freeze_count()
         assert heap._frozen and frozen > 10_000, frozen      # the imports: numpy, scipy, numba, ours
         ClosedLoop(scene)                        # a second loop: nothing more is frozen
         assert gc.get_freeze_count() == frozen
         # the first loop was built after the freeze: its cycles (the loop and its link to the head)
         # are collected when it is dropped (frozen, it kept ~34 MB and its logs to the process's end)
-        loop.run()
-        gone = weakref.ref(loop)
-        del loop
-        gc.collect()
-        assert gone() is None
+        first[0].run()
+        assert _freed_when_dropped(first)
     finally:
         gc.unfreeze()
+
+
+def _freed_when_dropped(holder: list) -> bool:
+    """Whether the one object in ``holder`` (its only reference) is collected once dropped."""
+    gone = weakref.ref(holder.pop())
+    gc.collect()
+    return gone() is None
 
 
 def test_the_daemon_freezes_the_heap_before_it_exists(tmp_path, monkeypatch):
@@ -42,13 +46,10 @@ def test_the_daemon_freezes_the_heap_before_it_exists(tmp_path, monkeypatch):
     gc.unfreeze()
     monkeypatch.setattr(heap, "_frozen", False)
     try:
-        d = Daemon(load_config(Path(__file__).resolve().parents[1] / "examples" / "daemon-virtual.toml"),
-                   log_path=str(tmp_path / "log.jsonl"), status=False, install_signals=False)
-        d.log.close()
+        first = [Daemon(load_config(Path(__file__).resolve().parents[1] / "examples" / "daemon-virtual.toml"),
+                        log_path=str(tmp_path / "log.jsonl"), status=False, install_signals=False)]
+        first[0].log.close()
         assert heap._frozen and gc.get_freeze_count() > 10_000
-        gone = weakref.ref(d)
-        del d
-        gc.collect()
-        assert gone() is None
+        assert _freed_when_dropped(first)
     finally:
         gc.unfreeze()
