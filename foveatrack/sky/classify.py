@@ -46,14 +46,17 @@ Rules, in order (thresholds in :class:`ClassifierConfig`; documented in docs/sky
    clutter loses the fovea).  ``clutter_turn_1_s = 0`` turns the rule off (docs/sky-tracks-figures.md
    gives what it changed);
 5. held (:func:`held_label`): a track is labelled ``drone`` only once rules 1-4 have said so in
-   ``drone_after_frames`` frames in a row, ``drone_after_hits`` of which brought the track a hit;
-   until then it keeps the label it had.  A crown part that swings one way for a moment looks like
-   a slow straight drone to rules 2-4; a drone keeps looking like one.  The hits count because rules
-   1-4 read only the hits: a track that got its five and then coasted unseen for the rest of the
-   frames had given one verdict, repeated.  Without them (``drone_after_hits = 0``, the rule before
-   2026-12-07) most of the false drone tracks on crowns were labelled that way in the first seconds
-   after power-on: a crown's part seen in 0.4-0.9 s of hits (the drones' were 0.9 s or more), seeds
-   +200..+259 of the tree line; docs/sky-tracks-figures.md gives what the count changed.  Leaving
+   ``drone_after_frames`` frames in a row and ``drone_after_hits`` of the frames of that run (not a
+   window: the run may be longer) measured the track -- an object matched to it, or Algorithm 1 in
+   its D while it was fixated; until then it keeps the label it had.  A crown part that swings one
+   way for a moment looks like a slow straight drone to rules 2-4; a drone keeps looking like one.
+   The measurements count because rules 1-4 read only what was measured: a track that got its five
+   hits and then coasted unseen for the rest of the frames had given one verdict, repeated.
+   Without them (``drone_after_hits = 0``, the rule before 2026-12-07) most of the false drone tracks
+   on crowns were labelled that way in the first seconds after power-on: on the tree line's seeds
+   +200..+259, the eleven crown parts first labelled drone had 0.37-1.79 s of hits, seven under
+   0.9 s; the 59 drones 0.9 s or more.  docs/sky-tracks-figures.md gives what the count changed.
+   Leaving
    the label is at once unless ``drone_leave_frames`` > 1 (it then waits that many frames of other
    output in a row): a measured trade-off, not the default.  At 5 the daemon's status
    line no longer flickers between drone and unknown, but a second track on a drone keeps the drone
@@ -161,7 +164,8 @@ def held_label(rules_label: str, previous: str, drone_frames: int, drone_hits: i
     say now (``rules_label``), the label it showed (``previous``), ``drone_frames``: in how many frames
     in a row before this one they had said ``drone`` (> 0), or, for a track labelled drone, in how many
     they had said otherwise (< 0; it keeps the label until ``drone_leave_frames`` have), and
-    ``drone_hits``: how many of those drone frames brought the track a hit (``hit``: this one did)."""
+    ``drone_hits``: how many of those drone frames measured the track (``hit``: this one did; an
+    object matched to it, or Algorithm 1 in its D while fixated)."""
     if rules_label == "drone":
         drone_frames = max(drone_frames, 0) + 1
         drone_hits += hit

@@ -76,7 +76,7 @@ def _base_features(track) -> dict:
 
 
 def features_python(track, period: tuple[float, float] | None = None) -> dict:
-    """:func:`features` in Python lists and ``math.fsum``: the twin of :func:`features_kernel`.
+    """:func:`window_features` in Python lists and ``math.fsum``: the twin of :func:`features_kernel`.
     ``period``: ``(min_period_s, threshold)`` to look for ``flap_period_s`` (:func:`flap_period_s`;
     None: it stays None)."""
     h = track.history
@@ -178,7 +178,9 @@ def _mean_kernel(xs):
 
 @njit(cache=True)
 def _sorted_middle(xs):
-    """``sorted(xs)[len(xs) // 2]`` (a stable insertion sort: the element Python's sort puts there)."""
+    """``sorted(xs)[len(xs) // 2]`` (a stable insertion sort: the element Python's sort puts there),
+    for values with no NaN among them (a NaN compares false both ways and the two sorts part): the
+    tracker's box sides and point counts come from finite points."""
     a = xs.copy()
     for i in range(1, a.shape[0]):
         v = a[i]
@@ -303,13 +305,9 @@ def features_kernel(ts, P, S, n_points, want_period, min_period_s, threshold, ou
             out[7] = period
 
 
-def features(track) -> dict:
-    """The features of a track (:mod:`foveatrack.sky.classify`) from its ``history`` and filter."""
-    return window_features(track, None)
-
-
 def window_features(track, period: tuple[float, float] | None) -> dict:
-    """:func:`features` by :func:`features_kernel`; ``period`` as in :func:`features_python`."""
+    """The features of a track (:mod:`foveatrack.sky.classify`) from its ``history`` and filter, by
+    :func:`features_kernel`; ``period`` as in :func:`features_python`."""
     h = track.history
     f = _base_features(track)
     n = len(h)
