@@ -62,18 +62,23 @@ def head_trig(pan_deg: float, tilt_deg: float) -> tuple[float, float, float, flo
     return math.cos(p), math.sin(p), math.cos(t), math.sin(t)
 
 
+def rotation_entries(pan_deg: float, tilt_deg: float) -> tuple[float, ...]:
+    """The nine entries of ``R_z(pan) @ R_y(-tilt)``, row by row, as floats: the one place the
+    rotation is written (:func:`rotation_rows`, :func:`rotation_matrix` and the sky tracker's node
+    rotations take them)."""
+    cp, sp, ct, st = head_trig(pan_deg, tilt_deg)
+    return (cp * ct, -sp, -cp * st, sp * ct, cp, -sp * st, st, 0.0, ct)
+
+
 def rotation_rows(pan_deg: float, tilt_deg: float) -> tuple[tuple[float, float, float], ...]:
     """:func:`rotation_matrix`'s rows as floats (cheaper than the array for one product)."""
-    cp, sp, ct, st = head_trig(pan_deg, tilt_deg)
-    return (cp * ct, -sp, -cp * st), (sp * ct, cp, -sp * st), (st, 0.0, ct)
+    e = rotation_entries(pan_deg, tilt_deg)
+    return e[0:3], e[3:6], e[6:9]
 
 
 def rotation_matrix(pan_deg: float, tilt_deg: float) -> np.ndarray:
     """``R_z(pan) @ R_y(-tilt)``: head (tilt-stage) coordinates -> world (see module docstring)."""
-    cp, sp, ct, st = head_trig(pan_deg, tilt_deg)     # rotation_rows' products (inline: quicker)
-    return np.array([cp * ct, -sp, -cp * st,
-                     sp * ct, cp, -sp * st,
-                     st, 0.0, ct]).reshape(3, 3)
+    return np.array(rotation_entries(pan_deg, tilt_deg)).reshape(3, 3)
 
 
 @dataclass(slots=True)

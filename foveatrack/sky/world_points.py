@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numba import njit
 
-from foveatrack.reconstruction import head_trig, rotation_rows
+from foveatrack.reconstruction import rotation_entries, rotation_rows
 
 
 def node_rotations(pose, t0_s: float, t1_s: float, nodes: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -37,13 +37,12 @@ def node_rotations(pose, t0_s: float, t1_s: float, nodes: int) -> tuple[np.ndarr
         p, tl, _, _ = pose.angles_at(t0_s)
         return np.array([t0_s, t0_s + 1.0]), np.array([rotation_rows(p, tl)] * 2, np.float64), 1.0
     ts = [t0_s + (t1_s - t0_s) * i / (k - 1) for i in range(k)]
-    # rotation_rows' entries (the same products), every node's into one flat list made into the array
-    # at once: assigning each node's rows into an array took twice the time of the poses' trig
+    # every node's entries into one flat list made into the array at once: assigning each node's rows
+    # into an array took twice the time of the poses' trig
     flat = []
     for t in ts:
         p, tl, _, _ = pose.angles_at(t)
-        cp, sp, ct, st = head_trig(p, tl)
-        flat += (cp * ct, -sp, -cp * st, sp * ct, cp, -sp * st, st, 0.0, ct)
+        flat += rotation_entries(p, tl)
     return np.array(ts), np.array(flat).reshape(k, 3, 3), step
 
 
