@@ -33,9 +33,9 @@ from foveatrack.errors import UserError
 from foveatrack.fixed_order import floats3, norm3
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_rows
-from foveatrack.sky.classify import ADDED_SINCE_RECORDED
 from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, off_axis_deg,
                                       saccade_time_s, threat_score)
+from foveatrack.sky.classify import ADDED_SINCE_RECORDED
 from foveatrack.space_of_interest import Box
 from foveatrack.sky.tracks import SkyFrameOutput, SkyTracker, SkyTrackerConfig
 from foveatrack.tracker import Tracker, TrackOutput

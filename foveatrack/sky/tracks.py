@@ -545,17 +545,16 @@ class SkyTracker:
                 for fo, k in zip(found, near_n)]
         return objs, point_obj
 
-    def _associate(self, objs: list[SkyObject], t_s: float, positions: np.ndarray | None = None
+    def _associate(self, objs: list[SkyObject], t_s: float, positions: np.ndarray
                    ) -> tuple[list[tuple[int, int]], np.ndarray]:
         """Gated global nearest neighbour (module docstring): ``(track index, object index)`` pairs, and
         the allowed pairs (tracks x objects).  ``positions``: the tracks' predicted positions at
-        ``t_s`` if the caller has them (:func:`positions_many`)."""
+        ``t_s`` (:func:`positions_many`, made once a frame by the caller)."""
         cfg = self.cfg
         if not self.tracks or not objs:
             return [], np.zeros((len(self.tracks), len(objs)), bool)
-        kfs = [tr.kf for tr in self.tracks]
-        P = positions_many(kfs, t_s) if positions is None else positions
-        V = variances_many(kfs, t_s)
+        P = positions
+        V = variances_many([tr.kf for tr in self.tracks], t_s)
         O = np.array([ob.xyz_m for ob in objs])
         d = O[None, :, :] - P[:, None, :]
         d2 = d * d

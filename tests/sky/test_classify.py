@@ -88,6 +88,14 @@ def test_the_drone_label_waits_for_hits_not_for_frames_a_track_coasted_through()
     # the hits count only within the run of drone verdicts
     label, run, hits = held_label("unknown", "unknown", 9, 4, True, cfg)
     assert (label, run, hits) == ("unknown", 0, 0)
+    # leaving the label waits drone_leave_frames whether or not those frames measured the track, and
+    # the next run of drone verdicts counts its hits from nothing
+    leave = replace(cfg, drone_leave_frames=3)
+    label, run, hits, shown = "drone", 12, 7, []
+    for said, hit in (("unknown", False), ("unknown", True), ("unknown", False), ("drone", True)):
+        label, run, hits = held_label(said, label, run, hits, hit, leave)
+        shown.append((label, hits))
+    assert shown == [("drone", 0), ("drone", 0), ("unknown", 0), ("unknown", 1)]
     with pytest.raises(UserError, match="drone_after_hits must be an integer >= 0"):
         ClassifierConfig.from_mapping({"drone_after_hits": -1}, "[tracker.sky.classifier]")
 

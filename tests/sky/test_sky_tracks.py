@@ -430,6 +430,7 @@ def test_a_candidate_seen_off_the_scenery_takes_no_object_on_it(clear_hits, conf
     # such a candidate on the drone took a crown's part 3 m below it and the drone started over.  An
     # object on the scenery in its gate is not its; off the scenery it is.  A candidate never seen off
     # the scenery, and a confirmed track (a drone in front of a crown), take it as before.
+    from foveatrack.sky.motion import positions_many
     from foveatrack.sky.tracks import SkyObject
 
     tracker = SkyTracker(NO_WARMUP)
@@ -441,7 +442,7 @@ def test_a_candidate_seen_off_the_scenery_takes_no_object_on_it(clear_hits, conf
     below = np.array([30.0, 0.5, 6.0])      # 2 m below, 0.4 s on: within the chi-square gate and gate_max_m
     for on_scenery, expect in ((True, takes), (False, True)):
         ob = SkyObject(below, 0.4, 6, np.array([0.5, 0.5, 0.5]), on_scenery)
-        match, allowed = tracker._associate([ob], 0.4)
+        match, allowed = tracker._associate([ob], 0.4, positions_many([tr.kf], 0.4))
         assert (match == [(0, 0)]) is expect, (on_scenery, match, allowed)
 
 
