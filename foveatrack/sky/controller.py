@@ -33,7 +33,7 @@ from foveatrack.errors import UserError
 from foveatrack.fixed_order import floats3, norm3
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_rows
-from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, off_axis_deg,
+from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, in_lidar, off_axis_deg,
                                       saccade_time_s, threat_score)
 from foveatrack.sky.classify import ADDED_SINCE_RECORDED
 from foveatrack.space_of_interest import Box
@@ -217,9 +217,9 @@ class SkyController:
         for v in sky.tracks:
             if v.confirmed:
                 p = v.xyz_m.tolist()
-                if off_axis_deg(*self._in_lidar(p, *mid_pose)) <= half:
+                if off_axis_deg(*in_lidar(p, *mid_pose)) <= half:
                     in_fovea.add(v.track_id)
-                turn[v.track_id] = saccade_time_s(*bearing_deg(*self._in_lidar(p, *end_pose)), att,
+                turn[v.track_id] = saccade_time_s(*bearing_deg(*in_lidar(p, *end_pose)), att,
                                                   self._head_speeds)
                 scores[v.track_id] = threat_score(v, att)
         # the candidate being verified counts too for the attention, which ends that look once the
@@ -266,18 +266,9 @@ class SkyController:
         pan, tilt, _, _ = recon.angles_at(t_s)
         return rotation_rows(pan, tilt), floats3(recon.lidar_offset_m)
 
-    @staticmethod
-    def _in_lidar(p_world, rows, offset) -> tuple[float, float, float]:
-        """A world point (3 floats) in the lidar frame of the pose ``rows``, ``offset`` (:meth:`_pose_rows`)."""
-        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
-        x, y, z = p_world
-        ox, oy, oz = offset
-        return (r00 * x + r10 * y + r20 * z - ox, r01 * x + r11 * y + r21 * z - oy,
-                r02 * x + r12 * y + r22 * z - oz)
-
     def _aim(self, p_world: np.ndarray, t_s: float) -> Detection:
         """The track's position as the lidar would see it at ``t_s`` (an aim point, ``n_points = 0``)."""
-        xyz = self._in_lidar(floats3(p_world), *self._pose_rows(t_s))
+        xyz = in_lidar(floats3(p_world), *self._pose_rows(t_s))
         q = np.array(xyz)
         az, el = bearing_deg(*xyz)
         return Detection(t_s, q, 0, az, el, norm3(q))
