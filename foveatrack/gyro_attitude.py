@@ -335,6 +335,9 @@ class GyroAttitude(HeadPose):
     def speeds_at(self, t_s: float) -> tuple[float, float]:
         return self.commands.speeds_at(t_s)
 
+    def accels_deg_s2(self) -> tuple[float | None, float | None]:
+        return self.commands.accels_deg_s2()
+
     # -- the gyro ---------------------------------------------------------------------------------
     def on_imu(self, t_s, gyro_rad_s) -> None:
         """Gyro samples in time order: ``t_s`` (N,) [s, sensor clock], ``gyro_rad_s`` (N, 3) in the

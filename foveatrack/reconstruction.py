@@ -281,6 +281,14 @@ class HeadPose(abc.ABC):
     def angles_at(self, t_s: float) -> tuple[float, float, float, float]:
         """``(pan_deg, tilt_deg, sigma_pan_deg, sigma_tilt_deg)`` of the head at ``t_s`` [s]."""
 
+    @abc.abstractmethod
+    def speeds_at(self, t_s: float) -> tuple[float, float]:
+        """The head's (pan, tilt) speeds [deg/s] at ``t_s`` (the sky schedule's saccade times)."""
+
+    @abc.abstractmethod
+    def accels_deg_s2(self) -> tuple[float | None, float | None]:
+        """The (pan, tilt) accelerations [deg/s^2] the head turns at (None: at once)."""
+
     def rotation_at(self, t_s: float) -> np.ndarray:
         p, t, _, _ = self.angles_at(t_s)
         return rotation_matrix(p, t)
@@ -411,4 +419,8 @@ class Reconstructor(HeadPose):
     def speeds_at(self, t_s: float) -> tuple[float, float]:
         """Estimated actual (pan, tilt) speeds [deg/s] at ``t_s``."""
         return self.pan.state(t_s)[1], self.tilt.state(t_s)[1]
+
+    def accels_deg_s2(self) -> tuple[float | None, float | None]:
+        """The (pan, tilt) accelerations [deg/s^2] the dead reckoning ramps the speed at (None: at once)."""
+        return self.pan.accel, self.tilt.accel
 

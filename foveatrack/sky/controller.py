@@ -28,14 +28,15 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from foveatrack.config_util import check_keys
-from foveatrack.detection import Detection, bearing_deg
+from foveatrack.detection import Detection, bearing_deg, wrap_deg
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import floats3, norm3
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_rows
+from foveatrack.sky.attention import ADDED_SINCE_RECORDED as ATTENTION_ADDED
 from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, in_lidar, off_axis_deg,
                                       saccade_time_s, threat_score)
-from foveatrack.sky.classify import ADDED_SINCE_RECORDED
+from foveatrack.sky.classify import ADDED_SINCE_RECORDED as CLASSIFIER_ADDED
 from foveatrack.space_of_interest import Box
 from foveatrack.sky.tracks import SkyFrameOutput, SkyTracker, SkyTrackerConfig
 from foveatrack.tracker import Tracker, TrackOutput
@@ -112,12 +113,14 @@ def sky_configs_from_mapping(data: Mapping, where: str, field_half_angle_deg: fl
 
 def recorded_sky_table(table: Mapping) -> dict:
     """A recording's ``[tracker.sky]`` table as it ran: the keys the tracker has gained since the
-    recording was made (:data:`foveatrack.sky.classify.ADDED_SINCE_RECORDED`) at the values that
+    recording was made (:data:`foveatrack.sky.classify.ADDED_SINCE_RECORDED`,
+    :data:`foveatrack.sky.attention.ADDED_SINCE_RECORDED`) at the values that
     behave as before them (a table from :func:`sky_table` has every key, and keeps its own)."""
     table = dict(table)
-    classifier = table.get("classifier", {})
-    if isinstance(classifier, Mapping):
-        table["classifier"] = {**ADDED_SINCE_RECORDED, **classifier}
+    for sub, added in (("classifier", CLASSIFIER_ADDED), ("attention", ATTENTION_ADDED)):
+        given = table.get(sub, {})
+        if isinstance(given, Mapping):
+            table[sub] = {**added, **given}
     return table
 
 
@@ -128,6 +131,10 @@ def sky_table(cfg: SkyTrackerConfig, attention_cfg: AttentionConfig) -> dict:
     att = asdict(attention_cfg)
     att["protected_xyz_m"] = [float(v) for v in att["protected_xyz_m"]]
     return {**asdict(cfg), "attention": att}
+
+
+#: the step [s] over which a track's bearing rate is taken from its velocity, for its saccade time
+_RATE_S = 0.1
 
 
 class SkyController:
@@ -211,17 +218,24 @@ class SkyController:
         mid_pose = self._pose_rows(t_mid)
         half = att.fovea_half_angle_deg
         end_pose = self._pose_rows(frame.t_end_s)      # one pose for every track's saccade time
+        speeds = recon.speeds_at(frame.t_end_s)
+        accels = recon.accels_deg_s2()
         # per confirmed track, in one pass: in the fovea at the mid pose, its saccade time from the
-        # end pose, its threat score (the attention's too)
+        # end pose (with its bearing's own rate there, and the head's speed now), its threat score
+        # (the attention's too)
         in_fovea, turn, scores = set(), {}, {}
         for v in sky.tracks:
             if v.confirmed:
                 p = v.xyz_m.tolist()
                 if off_axis_deg(*in_lidar(p, *mid_pose)) <= half:
                     in_fovea.add(v.track_id)
-                turn[v.track_id] = saccade_time_s(*bearing_deg(*in_lidar(p, *end_pose)), att,
-                                                  self._head_speeds)
-                scores[v.track_id] = threat_score(v, att)
+                az, el = bearing_deg(*in_lidar(p, *end_pose))
+                u = v.velocity_m_s.tolist()
+                az1, el1 = bearing_deg(*in_lidar([p[0] + _RATE_S * u[0], p[1] + _RATE_S * u[1],
+                                                   p[2] + _RATE_S * u[2]], *end_pose))
+                rates = (wrap_deg(az1 - az) / _RATE_S, (el1 - el) / _RATE_S)
+                turn[v.track_id] = saccade_time_s(az, el, att, self._head_speeds, rates, speeds, accels)
+                scores[v.track_id] = threat_score(v, att, self.attention.looks_like(v))
         # the candidate being verified counts too for the attention, which ends that look once the
         # candidate has been dwell_s in the fovea (without it every look ran saccade_timeout_s)
         cand = next((v for v in sky.tracks if v.track_id == self.attention.verifying and not v.confirmed), None)

@@ -150,11 +150,56 @@ def test_the_saccade_time_is_the_proportional_law_integrated(error_deg, gain, vm
         e -= min(gain * e, vmax) * dt
         t += dt
     assert axis_turn_s(error_deg, 3.0, gain, vmax) == pytest.approx(t, abs=2e-3)
-    # both axes at once, the longer counts, plus the latency
-    cfg = AttentionConfig(saccade_latency_s=0.25)
+    # both axes at once, the longer counts, plus the latency (a timeout longer than any turn here)
+    cfg = AttentionConfig(saccade_latency_s=0.25, saccade_timeout_s=10.0)
     head = (gain, vmax, 2.0, 2.0)
     assert saccade_time_s(error_deg, 6.0, cfg, head) == pytest.approx(
         0.25 + max(axis_turn_s(error_deg, 3.0, gain, vmax), axis_turn_s(6.0, 3.0, 2.0, 2.0)))
+    assert axis_turn_s(-error_deg, 3.0, gain, vmax) == axis_turn_s(error_deg, 3.0, gain, vmax)
+
+
+def _stepped_turn_s(error_deg, gain, vmax, rate, speed, accel, within=3.0, dt=1e-4):
+    """The model axis_turn_s solves, stepped: an axis turning away from the target first stops at
+    ``accel``, then follows v = sign(e) min(k |e|, vmax); the target's bearing moves at ``rate``."""
+    e, v, t = error_deg, speed, 0.0
+    while v * error_deg < 0.0:                      # turning away: stopping
+        dv = min(abs(v), accel * dt)
+        v -= np.sign(v) * dv
+        e += (rate - v) * dt
+        t += dt
+    while abs(e) > within:
+        v = np.sign(e) * min(gain * abs(e), vmax)
+        e += (rate - v) * dt
+        t += dt
+        if t > 60.0:
+            return np.inf
+    return t
+
+
+@pytest.mark.parametrize("error_deg,rate,speed,accel", [
+    (25.0, 3.0, 0.0, None), (-25.0, -3.0, 0.0, None),      # drawing away on either side
+    (25.0, -4.0, 0.0, None),                               # coming nearer
+    (25.0, 3.0, -12.0, 40.0), (-20.0, 2.0, 10.0, 40.0),   # the head turning away from it now
+    (25.0, 0.0, 8.0, 40.0),                                # ... or toward it: no stop
+    (5.0, 2.5, 0.0, None), (2.0, 3.0, -14.0, 40.0)])
+def test_the_saccade_time_counts_the_targets_own_motion_and_the_heads_speed(error_deg, rate, speed, accel):
+    got = axis_turn_s(error_deg, 3.0, 2.0, 15.0, rate, speed, accel)
+    assert got == pytest.approx(_stepped_turn_s(error_deg, 2.0, 15.0, rate, speed, accel), abs=3e-3)
+    if speed * error_deg < 0.0:
+        assert got > axis_turn_s(error_deg, 3.0, 2.0, 15.0, rate)
+    # zero rate and speed: the closed form of a still target, to the bit
+    assert axis_turn_s(error_deg, 3.0, 2.0, 15.0, 0.0, 0.0, accel) == axis_turn_s(error_deg, 3.0, 2.0, 15.0)
+
+
+def test_a_target_the_head_cannot_close_on_takes_the_saccade_timeout():
+    # drawing away faster than the top speed, or trailing Algorithm 2's tail by more than the fovea
+    assert axis_turn_s(25.0, 3.0, 2.0, 15.0, 16.0) == np.inf
+    assert axis_turn_s(25.0, 3.0, 2.0, 15.0, 6.5) == np.inf          # lag 3.25 deg > 3 deg
+    assert np.isfinite(axis_turn_s(25.0, 3.0, 2.0, 15.0, 5.5))
+    cfg = AttentionConfig(saccade_latency_s=0.3, saccade_timeout_s=2.0)
+    assert saccade_time_s(25.0, 0.0, cfg, (2.0, 15.0, 2.0, 2.0), rates=(16.0, 0.0)) == 0.3 + 2.0
+    # and a long turn (the 2 deg/s tilt) is planned for no longer than the attention waits for it
+    assert saccade_time_s(0.0, 14.0, cfg, (2.0, 15.0, 2.0, 2.0)) == 0.3 + 2.0
 
 
 def _revisit_starts(turn_s, fovea_fn=None, duration_s=8.0, label=None):
@@ -239,3 +284,45 @@ def test_true_off_axis_deg_per_frame():
     assert np.isnan(off[2])
     # axis (cos45 cos30, cos45 sin30, sin45) against (1, 0, 1)/sqrt2: cos = (cos30 + 1) / 2
     assert off[3] == pytest.approx(np.degrees(np.arccos((np.cos(np.radians(30)) + 1) / 2)), abs=1e-9)
+
+
+def test_a_drone_out_of_the_fovea_keeps_its_verdict_while_the_rules_have_too_few_hits():
+    # the rules say unknown only when a track's window holds too few hits: what a drone gets out of the
+    # fovea.  The schedule keeps what they said last (keep_verdict): the priority stays, and the other
+    # drone is still revisited; without it both went to the drone that happened to be seen
+    def views(t):
+        unseen = "unknown" if t > 1.0 else "drone"           # both drones out of the fovea after 1 s
+        near = dataclasses.replace(view(0, [20, 0, 0]), seen_as=unseen)
+        far = dataclasses.replace(view(1, [60, 10, 0]), seen_as="drone" if t < 0.5 else unseen)
+        seen = view(2, [70, -10, 0])                          # the rules still call it a drone
+        return [near, far, seen]
+
+    never = lambda target: set()                              # nothing reaches the fovea: clocks run
+    for keep, priority, revisited in ((True, 0, {1, 2}), (False, 2, set())):
+        cfg = AttentionConfig(revisit_s=2.0, dwell_s=0.3, saccade_timeout_s=1.0, keep_verdict=keep)
+        att = Attention(cfg)
+        served = _run(att, views, never, 8.0)
+        assert att.priority == priority, keep
+        assert {s for t, s in served if t > 2.0} - {priority} == revisited, keep
+
+
+def test_only_a_label_is_kept_not_a_look():
+    # a bird's track may look like a drone for a frame or two (its label waits, rule 5); that look is
+    # not kept: out of the fovea it is unknown again, and scored so
+    att = Attention(AttentionConfig())
+    glimpse = TrackView(3, True, "unknown", np.array([40.0, 0, 0]), np.zeros(3), True, True, {}, 0, "drone")
+    assert att.looks_like(glimpse) == "drone"
+    assert att.looks_like(dataclasses.replace(glimpse, seen_as="unknown")) == "unknown"
+    bird = dataclasses.replace(glimpse, label="bird", seen_as="bird")
+    assert att.looks_like(bird) == "bird"
+    assert att.looks_like(dataclasses.replace(bird, seen_as="unknown")) == "bird"
+    assert att.looks_like(dataclasses.replace(bird, seen_as="drone")) == "drone"   # a verdict now wins
+
+
+def test_the_verdicts_kept_are_those_of_live_tracks():
+    att = Attention(AttentionConfig())
+    for k in range(50):             # tracks come and go: the memory holds the live ones only
+        v = view(k, [30, 0, 0])
+        att.looks_like(v)
+        att.update(0.1 * (k + 1), [v], set(), 0.1)
+    assert set(att._verdict) == {49}

@@ -234,3 +234,25 @@ def test_a_single_target_under_the_sky_tracker_has_its_rays_counted():
     assert d == loop.scene.targets[0].id
     assert r["time_to_confirm_s"] is not None and r["scan_allows_confirm_s"] is not None
     assert r["scan_allows_confirm_s"] <= r["time_to_confirm_s"] + 1e-9
+
+
+def test_the_sky_schedule_runs_on_the_gyro_attitude_as_on_the_commands():
+    # the saccade time asks the head's attitude source for its speed and acceleration: through the
+    # interface both sources share (the gyro's answers from its command reckoning), so a crossing
+    # with attitude = "gyro" revisits its drones as one with the commands' attitude does
+    import tomllib
+
+    from sim.scene import scene_from_mapping
+    from sim.sky_summary import sky_run_figures
+
+    m = tomllib.loads((ROOT / "scenes" / "two-drones-crossing.toml").read_text())
+    m["scene"]["duration_s"] = 8.0
+    m["tracker"]["attitude"] = "gyro"
+    m["imu"] = {"rotation_deg": [0.0, 0.0, 0.0], "translation_m": [0.0, 0.0, 0.0]}
+    loop = ClosedLoop(scene_from_mapping(m, "crossing, gyro attitude"))
+    recon = loop.sky.tracker.recon
+    assert type(recon).__name__ == "GyroAttitude"
+    assert recon.accels_deg_s2() == recon.commands.accels_deg_s2() == (40.0, 10.0)
+    figs, _, _ = sky_run_figures(loop, loop.run())
+    for d, r in figs["drones"].items():       # both drones confirmed and in the fovea by turns
+        assert r["time_to_confirm_s"] is not None and r["fovea_share"] > 0.1, (d, r)

@@ -237,39 +237,51 @@ def test_a_replay_under_another_table_places_the_points_from_the_head_as_it_move
     assert res.final_pose_deg == replay_recording(crossing_run).final_pose_deg
 
 
-def test_a_recording_made_before_a_sky_key_existed_replays_as_it_ran(tmp_path, monkeypatch):
-    # classifier.drone_after_hits came after recordings began to keep the sky table: one made before
-    # it ran without it (0), and a table without the key must replay so, not with today's default.
-    # Tree line seed 258: a crown's part is labelled drone 3.2 s in after five hits and five frames
-    # of coasting (the count of hits keeps that label back)
+# Each key a sky table gained after recordings began to keep it, at the value it ran with before, and
+# the run in which today's default acts differently (so the test can tell):
+# * classifier.drone_after_hits, tree line seed 258: a crown's part is labelled drone 3.2 s in after
+#   five hits and five frames of coasting (the count of hits keeps that label back);
+# * attention.saccade_counts_motion and keep_verdict, the crossing (its own seed): the drones draw
+#   apart after 5 s, and the revisits start sooner and go to a drone that looked unknown.
+ADDED_KEYS = [("drone-tree-line", 258, "classifier", {"drone_after_hits": 0}),
+              ("two-drones-crossing", 28, "attention", {"saccade_counts_motion": False, "keep_verdict": False})]
+
+
+@pytest.mark.parametrize("name,seed,sub,before", ADDED_KEYS, ids=[k[2] for k in ADDED_KEYS])
+def test_a_recording_made_before_a_sky_key_existed_replays_as_it_ran(tmp_path, monkeypatch, name, seed, sub, before):
+    # a recording made before the keys ran without them, and a table without them must replay so,
+    # not with today's defaults
     from foveatrack.cli import main
     from foveatrack.recording import run_meta
     from foveatrack.sky.controller import recorded_sky_table
 
-    scene = tmp_path / "tree-line-before.toml"
-    scene.write_text((SCENES / "drone-tree-line.toml").read_text()
-                     + "\n[tracker.sky.classifier]\ndrone_after_hits = 0\n")
+    scene = tmp_path / f"{name}-before.toml"
+    scene.write_text((SCENES / f"{name}.toml").read_text() + f"\n[tracker.sky.{sub}]\n"
+                     + "".join(f"{k} = {json.dumps(v)}\n" for k, v in before.items()))
     out = tmp_path / "run"
-    assert main(["simulate", str(scene), "--seed", "258", "--out", str(out),
+    assert main(["simulate", str(scene), "--seed", str(seed), "--out", str(out),
                  "--no-progress", "--one-thread"]) == 0
     from_dict = run_meta.RecordingMeta.from_dict
 
     def as_made_before(meta, where="recording"):
         meta = json.loads(json.dumps(meta))
-        del meta["sky"]["classifier"]["drone_after_hits"]
+        for k in before:
+            del meta["sky"][sub][k]
         return from_dict(meta, where)
 
     monkeypatch.setattr(run_meta.RecordingMeta, "from_dict", staticmethod(as_made_before))
     res = replay_recording(out / "run.mcap")
     c = res.comparison
     recorded = run_meta.RecordingMeta.from_dict(RecordingReader(out / "run.mcap").meta).sky
-    assert "drone_after_hits" not in recorded["classifier"]
-    assert recorded_sky_table(recorded)["classifier"]["drone_after_hits"] == 0
-    assert recorded_sky_table({"classifier": {"drone_after_hits": 7}})["classifier"]["drone_after_hits"] == 7
+    assert not set(before) & set(recorded[sub])
+    assert {k: recorded_sky_table(recorded)[sub][k] for k in before} == before
+    # a table that has the keys keeps its own
+    own = {k: (not v if isinstance(v, bool) else v + 7) for k, v in before.items()}
+    assert {k: recorded_sky_table({sub: own})[sub][k] for k in before} == own
     assert c["commands_equal"] and c["tracks"]["identical_all"], c["tracks"]
-    # today's default on the same frames labels differently: the test above can tell
+    # today's defaults on the same frames act differently: the test above can tell
     table = {k: v for k, v in RecordingReader(out / "run.mcap").meta["tracker"].items() if k != "sky"}
     sky = dict(RecordingReader(out / "run.mcap").meta["sky"])
-    sky["classifier"] = {**sky["classifier"], "drone_after_hits": 5}
-    res5 = replay_recording(out / "run.mcap", tracker_table={**table, "sky": sky}, config_name="today's default")
-    assert not res5.comparison["tracks"]["identical_all"]
+    sky[sub] = {k: v for k, v in sky[sub].items() if k not in before}
+    res_now = replay_recording(out / "run.mcap", tracker_table={**table, "sky": sky}, config_name="today's default")
+    assert not (res_now.comparison["commands_equal"] and res_now.comparison["tracks"]["identical_all"])
