@@ -23,6 +23,7 @@ def load_reference(path) -> tuple[np.ndarray, np.ndarray]:
         raise UserError(f"--reference {p}: no such file or folder")
     if p.is_dir():
         from foveatrack.sources.npy_folder import timed_files
+        from foveatrack.sources.stamps import seconds
 
         ts, xs = [], []
         for ns, f in timed_files(p, ".npy"):
@@ -32,7 +33,7 @@ def load_reference(path) -> tuple[np.ndarray, np.ndarray]:
                 raise UserError(f"--reference {f}: not a readable .npy array ({exc})") from None
             if a.size != 3 or a.dtype.kind not in "fiu":
                 raise UserError(f"--reference {f}: expected x, y, z (3 numbers), got shape {a.shape}")
-            ts.append(ns * 1e-9)
+            ts.append(seconds(ns))
             xs.append(np.asarray(a, np.float64).reshape(3))
         return np.asarray(ts), np.asarray(xs).reshape(-1, 3)
     try:

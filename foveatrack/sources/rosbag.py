@@ -37,7 +37,7 @@ import numpy as np
 
 from foveatrack.errors import UserError
 from foveatrack.mcap_names import MCAP_MAGIC, META_NAME
-from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, period_ns, warn_stderr
+from foveatrack.sources.stamps import StampedFrame, check_rate, frame_from_cloud, period_ns, seconds, warn_stderr
 from foveatrack.sources.tf import TF_TYPES, TfBuffer, apply
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
@@ -176,7 +176,7 @@ class BagSource:
                     R, t = tf.lookup(self.fixed_frame, msg.header.frame_id, _stamp_ns(msg), where)
                     fr = type(fr)(fr.t_start_s, fr.t_end_s, apply(R, t, fr.xyz), fr.t_ns, fr.reflectivity)
                 k += 1
-                yield StampedFrame(log_ns * 1e-9, fr)
+                yield StampedFrame(seconds(log_ns), fr)
             stamps.end(k, self.warn)
         finally:
             reader.close()

@@ -74,6 +74,12 @@ def cut_short(path, held: int, said: int) -> str:
             f"the rest of that scan is missing")
 
 
+def seconds(ns) -> float:
+    """``ns`` nanoseconds as the float nearest to the exact seconds: an integer quotient, rounded once
+    (``ns * 1e-9`` rounds twice: a scan named ``1706255621.100000`` became 1706255621.1000001 s)."""
+    return int(ns) / 1_000_000_000
+
+
 def period_ns(rate_hz: float) -> int:
     return int(round(1e9 / rate_hz))
 
@@ -95,7 +101,7 @@ def frame_from_cloud(stamp_ns: int, xyz: np.ndarray, rate_hz: float, t_ns: np.nd
     t_end_ns = stamp_ns + period_ns(rate_hz)
     if t.size:
         t_end_ns = max(t_end_ns, int(t.max()) + 1)
-    return Frame(stamp_ns * 1e-9, t_end_ns * 1e-9, xyz, t, refl)
+    return Frame(seconds(stamp_ns), seconds(t_end_ns), xyz, t, refl)
 
 
 def check_rate(rate_hz: float) -> float:

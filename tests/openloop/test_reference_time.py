@@ -97,3 +97,21 @@ def test_overlapping_spans_with_no_sample_near_a_tracked_frame_say_so():
     line = next(x for x in lines if "no tracked frame has a reference sample" in x)
     assert f"the reference spans {T0 + 0.4:.3f} .. {T0 + 0.6:.3f} s, the tracked frames {T0}.000 .. {T0}.900 s" in line
     assert "do not overlap" not in line and "no reference sample lies within 50 ms (half a frame)" in line, line
+
+
+@pytest.mark.parametrize("name", ["1706255621.100000", "1706255621.3", "1717243800005000", "1706255621.614239"])
+def test_a_frame_named_by_its_time_starts_at_that_time_exactly(tmp_path, name):
+    # the float nearest the name's exact seconds, what a user reads back in the track CSV: ns * 1e-9
+    # rounded twice, and 1706255621.100000.npy started at 1706255621.1000001 s
+    from fractions import Fraction
+
+    from foveatrack.sources.npy_folder import NpyFolderSource
+    from foveatrack.sources.stamps import ns_from_file_stem
+
+    np.save(tmp_path / f"{name}.npy", np.array([[20.0, 0.0, 2.0]]))
+    (_, frame), = NpyFolderSource(tmp_path, rate_hz=10.0)
+    ns = ns_from_file_stem(name)
+    assert frame.t_start_s == float(Fraction(ns, 10**9))
+    assert frame.t_end_s == float(Fraction(ns + 100_000_000, 10**9))
+    if name == "1706255621.100000":
+        assert repr(frame.t_start_s) == "1706255621.1"

@@ -103,7 +103,7 @@ def test_npy_folder_named_in_ms_us_or_ns_gives_the_same_track(tmp_path, frames, 
         shutil.copy(f, tmp_path / f"{sec}{frac.ljust(9, '0')[:digits]}.npy")
     if unit == "ms":   # the fixture's names are µs: cut to ms, the frames start up to 1 ms earlier
         run = list(open_source(tmp_path))
-        assert [a.t_start_s for _, a in run] == [ns // 10**6 * 10**6 * 1e-9 for ns, _ in frames]
+        assert [a.t_start_s for _, a in run] == [ns // 10**6 * 10**6 / 10**9 for ns, _ in frames]
         return
     _same(list(open_source(tmp_path)), track_source(open_source(tmp_path)), reference_run)
 
