@@ -50,7 +50,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from sim.world import bodies
-from sim.world.trajectories import body_yaw_rad, heading_rad, position_velocity
+from sim.world.trajectories import body_yaw_rad, heading_rad, position_velocity, spline_at
 
 G_M_S2 = 9.81
 RHO_AIR_KG_M3 = 1.225
@@ -272,11 +272,11 @@ class SplinePath:
     duration_s: float
 
     def position(self, t_s):
-        return self._spline(np.clip(np.asarray(t_s, dtype=np.float64).reshape(-1), 0.0, self.duration_s))
+        return spline_at(self._spline, np.clip(np.asarray(t_s, dtype=np.float64).reshape(-1), 0.0, self.duration_s))
 
     def velocity(self, t_s):
         t = np.asarray(t_s, dtype=np.float64).reshape(-1)
-        v = self._spline(np.clip(t, 0.0, self.duration_s), 1)
+        v = spline_at(self._spline, np.clip(t, 0.0, self.duration_s), 1)
         v[(t < 0) | (t > self.duration_s)] = 0.0
         return v
 

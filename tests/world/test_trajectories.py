@@ -112,3 +112,20 @@ def test_straight_velocity_fills_every_row_either_way():
     for n in (0, 1, tr._ROWS_BROADCAST_MAX, tr._ROWS_BROADCAST_MAX + 1, 5000):
         v = s.velocity(np.linspace(0.0, 1.0, n))
         assert v.shape == (n, 3) and np.array_equal(v.view(np.int64), np.tile(s._velocity, (n, 1)).view(np.int64))
+
+
+def test_spline_paths_evaluate_as_the_spline_call_to_the_bit():
+    """spline_at (scipy's evaluation without the call's wrapping) gives the call's bits, position and
+    velocity, inside the path, at its ends, past them and on one time or many."""
+    from sim.world.sky import crown_sway
+
+    manual = tr.Manual((20, 0, 5), 10.0, 15.0, 5.0, 10.0, seed=3)
+    waypoints = tr.Waypoints(((10, 0, 2), (12, 5, 3), (15, 2, 4), (20, -3, 2)), 4.0)
+    crown = crown_sway(np.random.default_rng(4), (30.0, 5.0, 8.0), 0.3, 0.1, 0.4, 20.0, 10.0)
+    times = [np.array([4.321]), np.linspace(-1.0, 12.0, 997), np.array([0.0, 10.0, 0.02, 3.3])]
+    for spline in (manual._spline, waypoints._spline, crown._spline):
+        for t in times:
+            for nu in (0, 1):
+                got, want = tr.spline_at(spline, t, nu), spline(t, nu)
+                assert got.shape == want.shape and got.dtype == want.dtype
+                assert got.tobytes() == want.tobytes()
