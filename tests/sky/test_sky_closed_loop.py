@@ -256,3 +256,28 @@ def test_the_sky_schedule_runs_on_the_gyro_attitude_as_on_the_commands():
     figs, _, _ = sky_run_figures(loop, loop.run())
     for d, r in figs["drones"].items():       # both drones confirmed and in the fovea by turns
         assert r["time_to_confirm_s"] is not None and r["fovea_share"] > 0.1, (d, r)
+
+
+def test_objects_truth_is_what_the_named_tuple_built_field_by_field_gives():
+    """ObjectsTruth.at builds its named tuples from their fields in C (tuple.__new__): the same type and
+    values as ObjectTruth(...) on each object's own position and velocity, flocks and crowns too, with
+    the sensor's mid values given or not, strays after."""
+    from sim.objects_truth import ObjectTruth, ObjectsTruth
+    from sim.study.sky_objects import sky_scene
+
+    for scene in (sky_scene("drone-and-flock", 2.0, None, 6), sky_scene("drone-tree-line", 2.0)):
+        truth = ObjectsTruth(scene)
+        t_mid = 1.25
+        t = np.array([t_mid])
+        objs = [(s.id, s.cls, s.trajectory) for s in scene.targets] + [(o.id, o.cls, o.trajectory) for o in scene.others]
+        rays = np.arange(len(objs), dtype=np.int64)
+        strays = np.array([[10.0, 1.0, 2.0]])
+        xyz = [traj.position(t)[0].tolist() for _, _, traj in objs]
+        vel = [traj.velocity(t)[0].tolist() for _, _, traj in objs]
+        for mid_xyz, mid_vel in ((None, None), (xyz, [None] * len(objs)), (xyz, vel)):
+            got = truth.at(t_mid, rays, strays, 7, mid_xyz, mid_vel)
+            assert all(type(o) is ObjectTruth for o in got)
+            want = [ObjectTruth(i, c, tuple(p), tuple(v), size, n) for (i, c, _), p, v, size, n in
+                    zip(objs, xyz, vel, [o.size_m for o in got[:len(objs)]], rays.tolist())]
+            want.append(ObjectTruth("stray-7", "clutter", (10.0, 1.0, 2.0), (0.0, 0.0, 0.0), 0.0, 1))
+            assert got == want
