@@ -49,6 +49,27 @@ def box_inside_kernel(xyz, lo, hi, out_idx):
     return k
 
 
+
+@njit(cache=True)
+def close_pairs_kernel(P, limit, out):
+    """The pairs ``a < b`` of rows of ``P`` (N, 3) at most ``limit`` apart, in row-major order, into
+    ``out`` (N (N - 1) / 2, 2); returns how many.  The distance as numpy's elementwise form sums it,
+    ``sqrt((dx dx + dy dy) + dz dz)`` of ``P[a] - P[b]`` (twin: the distance matrix and
+    ``np.argwhere``, ``tests/sky/test_sky_tracks.py``): the sky tracker's merge rule, ~20 confirmed
+    tracks of a flock a frame, where the matrix took a dozen numpy calls."""
+    k = 0
+    n = P.shape[0]
+    for a in range(n):
+        for b in range(a + 1, n):
+            dx = P[a, 0] - P[b, 0]
+            dy = P[a, 1] - P[b, 1]
+            dz = P[a, 2] - P[b, 2]
+            if math.sqrt(dx * dx + dy * dy + dz * dz) <= limit:
+                out[k, 0] = a
+                out[k, 1] = b
+                k += 1
+    return k
+
 @njit(cache=True)
 def box_members_kernel(xyz, cos_pan, sin_pan, cos_tilt, sin_tilt, offset, lo, hi, out_idx):
     """Indices of the points inside an axis-aligned box D after the head's turn; returns how many.

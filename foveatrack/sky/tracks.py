@@ -89,7 +89,7 @@ from foveatrack.detection import Detection, box_bounds, box_detection, frozen_ma
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
-from foveatrack.kernels import box_inside_kernel, valid_mask_kernel
+from foveatrack.kernels import box_inside_kernel, close_pairs_kernel, valid_mask_kernel
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
@@ -652,14 +652,11 @@ class SkyTracker:
         if len(conf) < 2:
             self._together = {}
             return away
-        # every pair's distance at once (|d| as norm3 sums it): a flock's twenty confirmed tracks are
-        # 190 pairs a frame; few are close
-        P = positions[idx]
-        d = P[:, None, :] - P[None, :, :]
-        dist = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
-        for a, b in np.argwhere(dist <= cfg.merge_m).tolist():     # row-major: (a, b) in order
-            if a >= b:      # each pair once (what np.triu(.., 1) kept; a track's own zero distance too)
-                continue
+        # every pair's distance in one call (|d| as norm3 sums it): a flock's twenty confirmed tracks
+        # are 190 pairs a frame; few are close.  Each pair once, a < b, in row-major order
+        pairs = np.empty((len(conf) * (len(conf) - 1) // 2, 2), np.int64)
+        n_close = close_pairs_kernel(positions[idx], float(cfg.merge_m), pairs)
+        for a, b in pairs[:n_close].tolist():
             ta, tb = conf[a], conf[b]
             if ta.track_id in away or tb.track_id in away:
                 continue

@@ -488,3 +488,28 @@ def test_what_a_user_can_get_wrong_in_the_sky_table_is_named():
     assert sky_configs_from_mapping({"cell_deg": 0.1}, "w")[0].cell_deg == 0.1
     with pytest.raises(UserError, match="flap_autocorr"):
         sky_configs_from_mapping({"classifier": {"flap_autocorr": 5.0}}, "s.toml [tracker.sky]")
+
+
+def test_close_pairs_kernel_is_the_distance_matrix_and_argwhere():
+    """close_pairs_kernel (the merge rule's pairs) against its twin, the numpy form the rule used: the
+    distance matrix summed x, y, z, np.argwhere row-major and a < b; ties at the limit, a repeated
+    point, NaN rows, one row and none."""
+    from foveatrack.kernels import close_pairs_kernel
+
+    def twin(P, limit):
+        d = P[:, None, :] - P[None, :, :]
+        dist = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
+        return [(a, b) for a, b in np.argwhere(dist <= limit).tolist() if a < b]
+
+    rng = np.random.default_rng(5)
+    for n in (0, 1, 2, 7, 25, 60):
+        for limit in (0.0, 0.6, 3.0):
+            P = rng.normal(0.0, 2.0, (n, 3)) + [30.0, 0.0, 5.0]
+            if n >= 4:
+                P[3] = P[1]                                  # a distance of 0
+                P[2] = P[0] + [limit, 0.0, 0.0]              # at the limit (or a rounding off it)
+            if n >= 7:
+                P[5] = np.nan
+            out = np.empty((n * (n - 1) // 2, 2), np.int64)
+            k = close_pairs_kernel(P, limit, out)
+            assert [tuple(p) for p in out[:k].tolist()] == twin(P, limit)
