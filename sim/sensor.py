@@ -149,8 +149,8 @@ class SceneSensor:
                               getattr(obj.trajectory, "max_accel_m_s2", None)) for obj in scene.others]
         # A flock's birds are cast together (sim.world.sky.FlockPoses: the same values, a twentieth of
         # the Python calls); with a beam footprint each body's sub-rays are cast on their own.
-        self._flocks = {} if self._has["beam_footprint"] else {
-            a: _FlockCast.of(scene.others[a:b], self._cull_others[a:b], b) for a, b in FlockPoses.groups(scene.others)}
+        self._group_flocks({} if self._has["beam_footprint"] else {
+            a: _FlockCast.of(scene.others[a:b], self._cull_others[a:b], b) for a, b in FlockPoses.groups(scene.others)})
         # Multi-object scenes: the first primitive of each object (drones, then birds and crowns), for
         # the rays that hit each (``last_object_rays``) and the stray returns placed (``last_strays_m``).
         self._object_prim_start = np.cumsum([0] + [spec.body.prims.shape[0] for spec in scene.targets]
@@ -169,6 +169,20 @@ class SceneSensor:
         self.rays_total = 0
         self.rays_cast_targets = 0
         self.rays_cast_background = 0
+
+    def _group_flocks(self, flocks: dict) -> None:
+        """The flocks cast together (``flocks``: first index in the scene's ``others`` -> :class:`_FlockCast`)
+        and so the bodies cast one by one: the targets, then the others outside a flock, in cast order,
+        whose rays are culled for all of them in one pass (:meth:`_cull_lone`), their culls as arrays."""
+        scene = self.scene
+        self._flocks = flocks
+        in_flock = {k for a, f in flocks.items() for k in range(a, f.stop)}
+        self._lone = ([(spec, cull) for spec, cull in zip(scene.targets, self._cull)]
+                      + [(o, c) for k, (o, c) in enumerate(zip(scene.others, self._cull_others)) if k not in in_flock])
+        radius, speed, accel = zip(*(c for _, c in self._lone)) if self._lone else ((), (), ())
+        self._lone_radius = np.array(radius, dtype=np.float64)
+        self._lone_speed = np.array(speed, dtype=np.float64)
+        self._lone_accel = np.array([-1.0 if a is None else a for a in accel], dtype=np.float64)
 
     def returns(self, chunk, d_world: np.ndarray, t0: float, t1: float):
         """Points for one scan chunk whose beams point along ``d_world`` (world frame).
@@ -193,8 +207,10 @@ class SceneSensor:
         mids, vels = [], []
         # each ray's instant, as the poses take it (the per-ray cull's)
         self._t_ray = chunk.t_ns * 1e-9 if self.target_motion == "per_point" else np.full(n, 0.5 * (t0 + t1))
-        for spec, cull in zip(scene.targets, self._cull):
-            c, v = self._cast_target(spec, cull, t0, t1, chunk.t_ns, d_world, chunk.status, rng_m, prim, offset)
+        lone = iter(self._cull_lone(t0, t1, chunk, d_world))
+        for spec in scene.targets:
+            c, v, idx = next(lone)
+            self._cast_on(spec, idx, d_world, rng_m, prim, offset)
             mids.append(c.tolist())
             vels.append(None if v is None else v.tolist())
             offset += spec.body.prims.shape[0]
@@ -209,8 +225,8 @@ class SceneSensor:
                 k = flock.stop
                 continue
             obj = scene.others[k]
-            c, v = self._cast_target(obj, self._cull_others[k], t0, t1, chunk.t_ns, d_world, chunk.status,
-                                     rng_m, prim, offset)
+            c, v, idx = next(lone)
+            self._cast_on(obj, idx, d_world, rng_m, prim, offset)
             mids.append(c.tolist())
             vels.append(None if v is None else v.tolist())
             offset += obj.body.prims.shape[0]
@@ -347,17 +363,49 @@ class SceneSensor:
             self._share[rays] = 1.0
         self.last_strays_m = d_world[rays] * r[:, None]      # world frame, for the truth
 
-    def _cast_target(self, spec, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset):
-        """Cast the rays near one moving body on it; returns its position and velocity at the chunk's
-        mid time (the velocity None where the cull did not need it)."""
+    def _cull_lone(self, t0, t1, chunk, d_world) -> list:
+        """Per body cast one by one (``self._lone``: the targets, then the others outside a flock), its
+        position and velocity at the chunk's mid time (the velocity None where the cull does not need
+        it) and the rays that can meet it, ``(c, v, idx)``.  The rays of all of them in one pass,
+        :func:`sim.world.kernels.flock_candidates_kernel` (the tests of ``cone_candidates_kernel`` and
+        ``moving_cull_kernel``, each body's rays in order: the same rays; a swarm's five drones took
+        ten calls and five passes over the rays); with a beam footprint, body by body
+        (:meth:`_candidates`)."""
         t = np.array([0.5 * (t0 + t1)])
-        c = spec.trajectory.position(t)[0]
-        v = None if cull[2] is None or self._has["beam_footprint"] else spec.trajectory.velocity(t)[0]
-        self._cast_body(spec, c, v, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset)
-        return c, v
+        footprint = self._has["beam_footprint"]
+        cs, vs = [], []
+        for spec, cull in self._lone:
+            cs.append(spec.trajectory.position(t)[0])
+            vs.append(None if cull[2] is None or footprint else spec.trajectory.velocity(t)[0])
+        if footprint or not cs:
+            return [(c, v, self._candidates(c, v, cull, t0, t1, chunk.t_ns, d_world, chunk.status))
+                    for (_, cull), c, v in zip(self._lone, cs, vs)]
+        idx, member = wk.flock_candidates_kernel(
+            d_world, chunk.status, self._t_ray, float(t[0]), np.array(cs), np.array([_ZERO3 if v is None else v for v in vs]),
+            _reach(self._lone_radius, self._lone_speed, t0, t1), self._lone_radius, self._lone_accel, self._lone_speed)
+        bounds = np.searchsorted(member, np.arange(len(cs) + 1)).tolist()     # each body's rays, in order
+        return [(c, v, idx[bounds[k]:bounds[k + 1]]) for k, (c, v) in enumerate(zip(cs, vs))]
+
+    def _candidates(self, c, v, cull, t0, t1, t_ns, d_world, status) -> np.ndarray:
+        """The rays near one moving body at ``c`` (velocity ``v``, None: not needed) at the chunk's mid
+        time that can meet it: its cone over the chunk, then each ray's own instant (not with a beam
+        footprint, whose divergence widens the cone instead)."""
+        radius_m, v_max, accel = cull
+        reach = _reach(radius_m, v_max, t0, t1)
+        # Beam divergence can catch a body just outside the central ray's path.
+        if self._has["beam_footprint"]:
+            reach += norm3(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
+        idx = np.empty(t_ns.size, dtype=np.int64)
+        idx = idx[:wk.cone_candidates_kernel(d_world, status, c[0], c[1], c[2], reach, idx)]
+        if idx.size and not self._has["beam_footprint"]:
+            # ... of those, the rays that can meet it at their own instant (wk.moving_cull_kernel)
+            kept = np.empty(idx.size, dtype=np.int64)
+            idx = kept[:wk.moving_cull_kernel(idx, d_world, self._t_ray, 0.5 * (t0 + t1), c, _ZERO3 if v is None else v,
+                                              radius_m, -1.0 if accel is None else accel, v_max, kept)]
+        return idx
 
     def _cast_flock(self, flock: _FlockCast, t0, t1, chunk, d_world, rng_m, prim, offset):
-        """:meth:`_cast_target` for each bird of a flock in turn, in a few calls: the birds' poses
+        """:meth:`_cast_on` for each bird of a flock in turn, in a few calls: the birds' poses
         evaluated together (:class:`sim.world.sky.FlockPoses`), the rays culled for every bird in one
         pass (:func:`sim.world.kernels.flock_candidates_kernel`: bird by bird, the rays in order) and
         cast on them in one (:func:`sim.world.kernels.cast_flock_kernel`); returns their positions and
@@ -376,21 +424,10 @@ class SceneSensor:
                                  flock.prim_start, offset, rng_m, prim)
         return centres.tolist(), vel.tolist()
 
-    def _cast_body(self, spec, c, v, cull, t0, t1, t_ns, d_world, status, rng_m, prim, offset) -> None:
+    def _cast_on(self, spec, idx, d_world, rng_m, prim, offset) -> None:
+        """Cast the rays ``idx`` (the body's candidates, :meth:`_cull_lone`) on one moving body, each at
+        its own instant."""
         traj = spec.trajectory
-        t_mid = 0.5 * (t0 + t1)
-        radius_m, v_max, accel = cull
-        reach = _reach(radius_m, v_max, t0, t1)
-        # Beam divergence can catch a body just outside the central ray's path.
-        if self._has["beam_footprint"]:
-            reach += norm3(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
-        idx = np.empty(t_ns.size, dtype=np.int64)
-        idx = idx[:wk.cone_candidates_kernel(d_world, status, c[0], c[1], c[2], reach, idx)]
-        if idx.size and not self._has["beam_footprint"]:
-            # ... of those, the rays that can meet it at their own instant (wk.moving_cull_kernel)
-            kept = np.empty(idx.size, dtype=np.int64)
-            idx = kept[:wk.moving_cull_kernel(idx, d_world, self._t_ray, t_mid, c, _ZERO3 if v is None else v,
-                                              radius_m, -1.0 if accel is None else accel, v_max, kept)]
         self.rays_cast_targets += idx.size
         if idx.size == 0:
             return
