@@ -24,7 +24,7 @@ from sim.scan.model import ScanModel
 from sim.scan.optics import SpeedNoise
 from sim.world import kernels as wk
 from sim.world.sky import FlockPoses
-from sim.world.trajectories import body_yaw_rad
+from sim.world.trajectories import body_yaw_rad, position_velocity
 
 _NONE = np.zeros(0)          # an effect that is off: no draws
 _ZERO3 = np.zeros(3)         # the velocity a cull without an acceleration bound does not read
@@ -375,8 +375,13 @@ class SceneSensor:
         footprint = self._has["beam_footprint"]
         cs, vs = [], []
         for spec, cull in self._lone:
-            cs.append(spec.trajectory.position(t)[0])
-            vs.append(None if cull[2] is None or footprint else spec.trajectory.velocity(t)[0])
+            if cull[2] is None or footprint:
+                cs.append(spec.trajectory.position(t)[0])
+                vs.append(None)
+            else:
+                p, v = position_velocity(spec.trajectory, t)
+                cs.append(p[0])
+                vs.append(v[0])
         if footprint or not cs:
             return [(c, v, self._candidates(c, v, cull, t0, t1, chunk.t_ns, d_world, chunk.status))
                     for (_, cull), c, v in zip(self._lone, cs, vs)]
@@ -432,9 +437,13 @@ class SceneSensor:
         if idx.size == 0:
             return
         t_pose = self._t_ray[idx]      # each ray's own instant (per_point), or the mid time (per_frame)
-        pos = traj.position(t_pose)
         fixed_yaw = getattr(spec, "fixed_yaw", None)      # a tree's crown keeps its yaw
-        yaw = body_yaw_rad(traj, t_pose) if fixed_yaw is None else np.full(idx.size, fixed_yaw)
+        if fixed_yaw is None:     # along its velocity: position and velocity in one evaluation where the path has one
+            pos, vel = position_velocity(traj, t_pose)
+            yaw = body_yaw_rad(traj, t_pose, vel)
+        else:
+            pos = traj.position(t_pose)
+            yaw = np.full(idx.size, fixed_yaw)
         prims = spec.body.prims
         flap = getattr(spec, "flap", None)
         if flap is not None:     # a bird: its wings at each ray's own time

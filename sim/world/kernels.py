@@ -920,6 +920,23 @@ def straight_position_kernel(start_m, velocity_m_s, t_s, out):
 
 
 @njit(cache=True, nogil=True)
+def circle_rows_kernel(cos, sin, cx, cy, cz, radius, speed, out_position, out_velocity):
+    """A circle's rows from its phase's cosines and sines (N,): positions ``(cx + r cos, cy + r sin,
+    cz + r 0.0)`` into ``out_position`` and velocities ``(speed (-sin), speed cos, speed 0.0)`` into
+    ``out_velocity`` (either (0, 3): not asked), numpy's column forms element for element
+    (:class:`sim.world.trajectories.Circle`; twin: its columns under ``numpy_paths``,
+    ``tests/world/test_trajectories.py``)."""
+    for i in range(out_position.shape[0]):
+        out_position[i, 0] = cx + radius * cos[i]
+        out_position[i, 1] = cy + radius * sin[i]
+        out_position[i, 2] = cz + radius * 0.0
+    for i in range(out_velocity.shape[0]):
+        out_velocity[i, 0] = speed * -sin[i]
+        out_velocity[i, 1] = speed * cos[i]
+        out_velocity[i, 2] = speed * 0.0
+
+
+@njit(cache=True, nogil=True)
 def hover_heading_kernel(velocity, default, yaw):
     """``yaw[j] = default`` where the body hovers: ``not vx^2 + vy^2 > 1e-8`` [m^2/s^2] (NaN too),
     row ``j`` of ``velocity`` (N, 3) [m/s]; :func:`sim.world.trajectories.heading_rad`'s mask in one

@@ -19,7 +19,9 @@ from foveatrack.fixed_order import norm3
 
 
 _straight_position_kernel = None
+_circle_rows_kernel = None
 _hover_heading_kernel = None
+_NO_ROWS = np.empty((0, 3))     # circle_rows_kernel: rows not asked for
 _plain = threading.local()     # numpy_paths(): paths in numpy on this thread, no kernel
 
 
@@ -122,32 +124,39 @@ class Circle:
 
     # Column by column, each element as ``centre + radius * (cos, sin, 0)`` and ``speed * (-sin, cos, 0)``
     # (numpy's stacked (N, 3) forms, the same bits: tests/world/test_trajectories.py): a flock's
-    # centre is asked for both at a frame's rays' times, and the stacking cost more than the sines.
-    def _position(self, cos, sin):
-        out = np.empty((cos.size, 3))
+    # centre is asked for both at a frame's rays' times, and the stacking cost more than the sines;
+    # the columns by one kernel call (sim.world.kernels.circle_rows_kernel) where they took fourteen
+    # numpy calls, in numpy under numpy_paths().
+    def _rows(self, cos, sin, position: bool, velocity: bool):
+        global _circle_rows_kernel
+        p = np.empty((cos.size, 3)) if position else _NO_ROWS
+        v = np.empty((cos.size, 3)) if velocity else _NO_ROWS
         cx, cy, cz = self.centre_m
-        out[:, 0] = cx + self.radius_m * cos
-        out[:, 1] = cy + self.radius_m * sin
-        out[:, 2] = cz + self.radius_m * 0.0
-        return out
-
-    def _velocity(self, cos, sin):
-        out = np.empty((cos.size, 3))
-        out[:, 0] = self.speed_m_s * -sin
-        out[:, 1] = self.speed_m_s * cos
-        out[:, 2] = self.speed_m_s * 0.0
-        return out
+        r, s = self.radius_m, self.speed_m_s
+        if not getattr(_plain, "on", False):
+            if _circle_rows_kernel is None:   # numba loads on first use, not on import
+                from sim.world.kernels import circle_rows_kernel as _circle_rows_kernel
+            _circle_rows_kernel(cos, sin, float(cx), float(cy), float(cz), float(r), float(s), p, v)
+            return p, v
+        if position:
+            p[:, 0] = cx + r * cos
+            p[:, 1] = cy + r * sin
+            p[:, 2] = cz + r * 0.0
+        if velocity:
+            v[:, 0] = s * -sin
+            v[:, 1] = s * cos
+            v[:, 2] = s * 0.0
+        return p, v
 
     def position(self, t_s):
-        return self._position(*self._trig(t_s))
+        return self._rows(*self._trig(t_s), True, False)[0]
 
     def velocity(self, t_s):
-        return self._velocity(*self._trig(t_s))
+        return self._rows(*self._trig(t_s), False, True)[1]
 
     def position_velocity(self, t_s):
         """``(position(t_s), velocity(t_s))``, the phase's sine and cosine taken once for both."""
-        trig = self._trig(t_s)
-        return self._position(*trig), self._velocity(*trig)
+        return self._rows(*self._trig(t_s), True, True)
 
     @property
     def max_speed_m_s(self) -> float:
@@ -272,6 +281,15 @@ class Manual:
         v[(t < 0) | (t > self.duration_s)] = 0.0
         return v
 
+    def position_velocity(self, t_s):
+        """``(position(t_s), velocity(t_s))``, the times clipped once for both (the sensor asks for
+        both at the frame's mid time and at the rays' times)."""
+        t = _col(t_s)[:, 0]
+        held = np.clip(t, 0.0, self.duration_s)
+        v = spline_at(self._spline, held, 1)
+        v[(t < 0) | (t > self.duration_s)] = 0.0
+        return spline_at(self._spline, held), v
+
 
 def position_velocity(traj, t_s) -> tuple[np.ndarray, np.ndarray]:
     """``(traj.position(t_s), traj.velocity(t_s))``: in one evaluation where the trajectory has one
@@ -286,7 +304,7 @@ HOVER_LOOKUP_STEP_S = 0.05
 HOVER_LOOKUP_SPAN_S = 120.0
 
 
-def body_yaw_rad(traj, t_s) -> np.ndarray:
+def body_yaw_rad(traj, t_s, velocity: np.ndarray | None = None) -> np.ndarray:
     """Yaw of a body flying ``traj`` at each time ``t_s`` [s]: along its horizontal velocity while it
     moves (:func:`heading_rad`); while it hovers, the heading it had at the last grid time
     (``HOVER_LOOKUP_STEP_S``) it moved, within ``HOVER_LOOKUP_SPAN_S`` before; before it first
@@ -294,9 +312,10 @@ def body_yaw_rad(traj, t_s) -> np.ndarray:
 
     A function of the time alone (chunk-independent), and continuous through a stop: snapping to a
     fixed yaw below 1e-4 m/s turned a slowing quadrotor by up to 180 deg in one step.
+    ``velocity``: ``traj.velocity(t_s)`` where the caller has it.
     """
     t = _col(t_s)[:, 0]
-    yaw = heading_rad(traj.velocity(t), default=math.nan)
+    yaw = heading_rad(traj.velocity(t) if velocity is None else velocity, default=math.nan)
     hover = np.flatnonzero(np.isnan(yaw))
     if hover.size == 0:
         return yaw

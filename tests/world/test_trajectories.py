@@ -1,5 +1,6 @@
 """Trajectories: defining properties (derivatives, bounds, waypoints, determinism)."""
 
+import contextlib
 import math
 
 import numpy as np
@@ -94,13 +95,15 @@ def test_circle_columns_are_the_stacked_forms_to_the_bit():
     gives the two at once, the same bits."""
     t = np.concatenate([np.random.default_rng(4).uniform(-10.0, 200.0, 1000), [0.0, -0.0, 1e9]])
     for c in (tr.Circle((40.0, 0.0, 6.0), 12.0, 8.0), tr.Circle((0, -3, -0.0), 50, -12.5, 30.0),
-              tr.Circle((1.5, 2.5, 3.5), 0.7, 3.0, -400.0)):
+              tr.Circle((1.5, 2.5, 3.5), 0.7, 3.0, -400.0), tr.Circle((-0.0, 1.0, 2.0), -3.0, 0.0, 10.0)):
         ph = math.radians(c.start_deg) + t.reshape(-1, 1) * (c.speed_m_s / c.radius_m)
         p = np.asarray(c.centre_m) + c.radius_m * np.hstack([np.cos(ph), np.sin(ph), np.zeros_like(ph)])
         v = c.speed_m_s * np.hstack([-np.sin(ph), np.cos(ph), np.zeros_like(ph)])
-        both = c.position_velocity(t)
-        for got, want in ((c.position(t), p), (c.velocity(t), v), (both[0], p), (both[1], v)):
-            assert got.shape == want.shape and np.array_equal(got.view(np.int64), want.view(np.int64))
+        for plain in (False, True):        # circle_rows_kernel, and numpy's columns
+            with tr.numpy_paths() if plain else contextlib.nullcontext():
+                both = c.position_velocity(t)
+                for got, want in ((c.position(t), p), (c.velocity(t), v), (both[0], p), (both[1], v)):
+                    assert got.shape == want.shape and np.array_equal(got.view(np.int64), want.view(np.int64))
     s = tr.Straight((10, 2, 1), (0, -3, 0.5))      # no position_velocity of its own: the two calls
     pv = tr.position_velocity(s, t)
     assert np.array_equal(pv[0], s.position(t)) and np.array_equal(pv[1], s.velocity(t))
@@ -129,3 +132,7 @@ def test_spline_paths_evaluate_as_the_spline_call_to_the_bit():
                 got, want = tr.spline_at(spline, t, nu), spline(t, nu)
                 assert got.shape == want.shape and got.dtype == want.dtype
                 assert got.tobytes() == want.tobytes()
+    for t in times:     # a manual path's position and velocity in one evaluation: the two calls' bits
+        p, v = tr.position_velocity(manual, t)
+        assert p.tobytes() == manual.position(t).tobytes() and v.tobytes() == manual.velocity(t).tobytes()
+        assert tr.body_yaw_rad(manual, t, v).tobytes() == tr.body_yaw_rad(manual, t).tobytes()
