@@ -538,12 +538,13 @@ def flock_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities, 
     # inside its loop: growing them there made numba count references on every ray, ~40x slower)
     count = np.zeros(n + 1, dtype=np.int64)
     room = max(64, d_world.shape[0] // 8)
+    box = _cone_box(gx, gy, gz, cx, cy, cz, reach)
     while True:
         pair_ray = np.empty(room, dtype=np.int64)
         pair_bird = np.empty(room, dtype=np.int64)
         count[:] = 0
         n_pairs = _flock_pairs(d_world, status, gx, gy, gz, outer, cx, cy, cz, c2, r2, reach, t_ray, t_mid, velocities,
-                               radius, accel, v_max, pair_ray, pair_bird, count)
+                               radius, accel, v_max, pair_ray, pair_bird, count, box)
         if n_pairs <= room:
             break
         room = n_pairs
@@ -559,11 +560,70 @@ def flock_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities, 
     return idx, member
 
 
+# The direction box's margin [rad] over a bird's cone half-angle (_cone_box): a ray whose |d|^2 is
+# within 1e-6 of 1 passes a bird's cone test up to ~1.3e-3 rad outside its half-angle, rounding
+# included; the box takes three times that.
+_BOX_MARGIN_RAD = 4e-3
+
+
+@njit(cache=True, nogil=True)
+def _cone_box(gx, gy, gz, cx, cy, cz, reach):
+    """Where the directions that can pass a bird's cone test lie, across the birds' mean direction
+    ``g``: ``(ok, e1 (3,), e2 (3,), lo_u, hi_u, lo_v, hi_v)``, a box in the coordinates ``(d . e1,
+    d . e2)`` (``e1``, ``e2`` unit, across ``g`` and each other).  A bird at ``|c|`` above twice its
+    cone's radius ``reach`` takes a unit ray only within ``a = asin(reach / |c|)`` of its direction
+    (one behind it fails ``d . c > -reach``), so each coordinate within ``a`` of the bird's; the box
+    holds every bird's ``a + _BOX_MARGIN_RAD`` about it.  ``ok`` False (a bird that near, a zero or
+    non-finite mean): no box, every ray that passes the flock's cone is tested against the birds."""
+    e1 = np.zeros(3)
+    e2 = np.zeros(3)
+    gn = math.sqrt(gx * gx + gy * gy + gz * gz)
+    if not (gn > 0.0 and gn < math.inf):
+        return False, e1, e2, 0.0, 0.0, 0.0, 0.0
+    ux = gx / gn
+    uy = gy / gn
+    uz = gz / gn
+    # e1: g crossed with the axis least along it
+    if abs(ux) <= abs(uy) and abs(ux) <= abs(uz):
+        px, py, pz = 0.0, uz, -uy
+    elif abs(uy) <= abs(uz):
+        px, py, pz = -uz, 0.0, ux
+    else:
+        px, py, pz = uy, -ux, 0.0
+    pn = math.sqrt(px * px + py * py + pz * pz)
+    e1[0] = px / pn
+    e1[1] = py / pn
+    e1[2] = pz / pn
+    e2[0] = uy * e1[2] - uz * e1[1]
+    e2[1] = uz * e1[0] - ux * e1[2]
+    e2[2] = ux * e1[1] - uy * e1[0]
+    lo_u = math.inf
+    hi_u = -math.inf
+    lo_v = math.inf
+    hi_v = -math.inf
+    for k in range(cx.shape[0]):
+        cn = math.sqrt(cx[k] * cx[k] + cy[k] * cy[k] + cz[k] * cz[k])
+        if not (cn > 2.0 * reach[k] and cn < math.inf and reach[k] >= 0.0):
+            return False, e1, e2, 0.0, 0.0, 0.0, 0.0
+        u = (cx[k] * e1[0] + cy[k] * e1[1] + cz[k] * e1[2]) / cn
+        v = (cx[k] * e2[0] + cy[k] * e2[1] + cz[k] * e2[2]) / cn
+        w = math.asin(reach[k] / cn) + _BOX_MARGIN_RAD
+        lo_u = min(lo_u, u - w)
+        hi_u = max(hi_u, u + w)
+        lo_v = min(lo_v, v - w)
+        hi_v = max(hi_v, v + w)
+    return True, e1, e2, lo_u, hi_u, lo_v, hi_v
+
+
 @njit(cache=True, nogil=True)
 def _flock_pairs(d_world, status, gx, gy, gz, outer, cx, cy, cz, c2, r2, reach, t_ray, t_mid, velocities, radius, accel,
-                 v_max, pair_ray, pair_bird, count):
+                 v_max, pair_ray, pair_bird, count, box):
     """The (ray, bird) pairs of :func:`flock_candidates_kernel` in ray order, as many as fit in
-    ``pair_ray``/``pair_bird``; ``count[k + 1]``: bird k's.  Returns how many there are."""
+    ``pair_ray``/``pair_bird``; ``count[k + 1]``: bird k's.  Returns how many there are.  A ray in
+    the flock's cone but outside ``box`` (:func:`_cone_box`; a ray whose |d|^2 is within 1e-6 of 1)
+    can meet no bird: the birds are not tested (a flock flattened as the scenes make it fills a
+    third of its cone, toward which the head turns)."""
+    box_ok, e1, e2, lo_u, hi_u, lo_v, hi_v = box
     outer2 = outer * outer
     g2 = gx * gx + gy * gy + gz * gz
     n = cx.shape[0]
@@ -576,6 +636,11 @@ def _flock_pairs(d_world, status, gx, gy, gz, outer, cx, cy, cz, c2, r2, reach, 
         b = dx * gx + dy * gy + dz * gz
         if not ((g2 - b * b <= outer2) and (b > -outer) and status[j] == RAY_OK):
             continue
+        if box_ok and abs(dx * dx + dy * dy + dz * dz - 1.0) <= 1e-6:
+            pu = dx * e1[0] + dy * e1[1] + dz * e1[2]
+            pv = dx * e2[0] + dy * e2[1] + dz * e2[2]
+            if not (pu >= lo_u and pu <= hi_u and pv >= lo_v and pv <= hi_v):
+                continue
         any_hit = 0
         for k in range(n):      # no branch here: the loop vectorises
             bk = dx * cx[k] + dy * cy[k] + dz * cz[k]

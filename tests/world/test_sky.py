@@ -560,3 +560,39 @@ def test_lone_bodies_are_culled_in_one_pass_as_one_by_one():
         sensor._cull_lone = checked
         loop.run()
     assert frames > 20
+
+
+def test_flock_candidates_with_the_direction_box_are_the_twin_s_everywhere():
+    """The flock kernel skips the rays outside its direction box (kernels._cone_box): over flocks
+    flattened and round, near and far, in every direction (each axis the least along the mean: every
+    way the box's axes are made), a bird near the lidar (no box), and rays of a length off 1 (tested
+    without the box), the same rays as the twin."""
+    rng = np.random.default_rng(23)
+    n_rays = 3000
+    for trial in range(120):
+        axis = rng.normal(size=3)
+        if trial % 4 == 0:
+            axis = np.eye(3)[trial // 4 % 3] * rng.choice([-1.0, 1.0])
+        axis /= np.linalg.norm(axis)
+        dist = rng.uniform(3.0, 120.0)
+        n_birds = int(rng.integers(1, 30))
+        flat = np.array([1.0, 1.0, rng.choice([1.0, 1.0 / 3.0])]) * rng.uniform(0.5, 12.0)
+        centres = axis * dist + rng.normal(size=(n_birds, 3)) * flat
+        if trial % 10 == 3:
+            centres[0] = axis * rng.uniform(0.2, 1.5)             # a bird at the lidar: no box
+        # rays about the flock's direction, some of them not of length 1
+        d = axis + rng.normal(size=(n_rays, 3)) * rng.uniform(0.05, 0.6)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        if trial % 3 == 0:
+            d[::7] *= 1.0 + rng.choice([-1.0, 1.0], d[::7].shape[0])[:, None] * rng.uniform(1e-7, 1e-2)
+        status = (rng.random(n_rays) < 0.05).astype(np.uint8)
+        t_ray = np.sort(rng.uniform(2.0, 2.1, n_rays))
+        vel = rng.normal(size=(n_birds, 3)) * 8.0
+        cone = rng.uniform(0.3, 1.5, n_birds)
+        radius = cone * rng.uniform(0.3, 1.0, n_birds)
+        accel = np.where(rng.random(n_birds) < 0.3, -1.0, rng.uniform(0.0, 20.0, n_birds))
+        v_max = np.linalg.norm(vel, axis=1) + 1.0
+        args = (d, status, t_ray, 2.05, centres, vel, cone, radius, accel, v_max)
+        idx, member = K.flock_candidates_kernel(*args)
+        twin_idx, twin_member = flock_candidates_twin(*args)
+        assert np.array_equal(idx, twin_idx) and np.array_equal(member, twin_member), trial
