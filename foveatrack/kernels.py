@@ -70,6 +70,32 @@ def close_pairs_kernel(P, limit, out):
                 k += 1
     return k
 
+
+@njit(cache=True)
+def association_kernel(P, V, O, r_m2, gate_chi2, gate_max2, candidate, on_scenery, big, cost, allowed):
+    """The sky tracker's gated costs (:meth:`foveatrack.sky.tracks.SkyTracker._associate`): for track
+    ``i`` (predicted position ``P[i]``, its per-axis variances ``V[i]``) and object ``j`` (``O[j]``),
+    ``cost[i, j]`` the squared Mahalanobis distance ``sum_a d_a^2 / (V[i, a] + r_m2)`` (``d = O[j] -
+    P[i]``), ``allowed[i, j]`` whether it is at most ``gate_chi2``, the squared distance at most
+    ``gate_max2`` and not a candidate seen off the scenery (``candidate[i]``) against an object on it
+    (``on_scenery[j]``); a pair not allowed costs ``big``.  Returns how many pairs are allowed.  numpy's
+    broadcast forms element for element, sums x, y, z in order (twin: ``tests/sky/test_sky_tracks.py``)."""
+    n_allowed = 0
+    for i in range(P.shape[0]):
+        for j in range(O.shape[0]):
+            dx = O[j, 0] - P[i, 0]
+            dy = O[j, 1] - P[i, 1]
+            dz = O[j, 2] - P[i, 2]
+            dx2 = dx * dx
+            dy2 = dy * dy
+            dz2 = dz * dz
+            c = dx2 / (V[i, 0] + r_m2) + dy2 / (V[i, 1] + r_m2) + dz2 / (V[i, 2] + r_m2)
+            ok = (c <= gate_chi2) and (dx2 + dy2 + dz2 <= gate_max2) and not (candidate[i] and on_scenery[j])
+            allowed[i, j] = ok
+            cost[i, j] = c if ok else big
+            n_allowed += ok
+    return n_allowed
+
 @njit(cache=True)
 def box_members_kernel(xyz, cos_pan, sin_pan, cos_tilt, sin_tilt, offset, lo, hi, out_idx):
     """Indices of the points inside an axis-aligned box D after the head's turn; returns how many.

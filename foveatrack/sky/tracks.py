@@ -89,7 +89,7 @@ from foveatrack.detection import Detection, box_bounds, box_detection, frozen_ma
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
-from foveatrack.kernels import box_inside_kernel, close_pairs_kernel, valid_mask_kernel
+from foveatrack.kernels import association_kernel, box_inside_kernel, close_pairs_kernel, valid_mask_kernel
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
@@ -553,22 +553,17 @@ class SkyTracker:
         cfg = self.cfg
         if not self.tracks or not objs:
             return [], np.zeros((len(self.tracks), len(objs)), bool)
-        P = positions
         V = variances_many([tr.kf for tr in self.tracks], t_s)
-        O = np.array([ob.xyz_m for ob in objs])
-        d = O[None, :, :] - P[:, None, :]
-        d2 = d * d
-        e = d2 / (V[:, None, :] + cfg.r_m2)
-        cost = e[..., 0] + e[..., 1] + e[..., 2]
-        dist2 = d2[..., 0] + d2[..., 1] + d2[..., 2]
-        allowed = (cost <= cfg.gate_chi2) & (dist2 <= cfg.gate_max_m * cfg.gate_max_m)
+        O = np.array([ob.xyz_m for ob in objs], np.float64).reshape(len(objs), 3)
         # a candidate seen off the scenery takes no object on it (module docstring, step 4)
         candidate = np.array([not tr.confirmed and tr.clear_hits > 0 for tr in self.tracks])
         on_scenery = np.array([ob.on_scenery for ob in objs])
-        allowed &= ~(candidate[:, None] & on_scenery[None, :])
-        if not allowed.any():
+        c = np.empty((len(self.tracks), len(objs)))
+        allowed = np.empty(c.shape, np.bool_)
+        if not association_kernel(np.ascontiguousarray(positions, np.float64), V, O, float(cfg.r_m2),
+                                  float(cfg.gate_chi2), float(cfg.gate_max_m * cfg.gate_max_m), candidate, on_scenery,
+                                  _BIG, c, allowed):
             return [], allowed
-        c = np.where(allowed, cost, _BIG)
         rows, cols = linear_sum_assignment(c)
         return [(int(i), int(j)) for i, j in zip(rows, cols) if allowed[i, j]], allowed
 

@@ -513,3 +513,66 @@ def test_close_pairs_kernel_is_the_distance_matrix_and_argwhere():
             out = np.empty((n * (n - 1) // 2, 2), np.int64)
             k = close_pairs_kernel(P, limit, out)
             assert [tuple(p) for p in out[:k].tolist()] == twin(P, limit)
+
+
+def test_association_is_the_numpy_gate_and_scipy_s_assignment():
+    """The association's gated costs (association_kernel) against their numpy twin, element for
+    element, and its pairs against scipy's assignment on the twin's costs, where no two allowed pairs
+    share a track or an object and where they do; ties at the gates, candidates against objects on
+    the scenery, NaN, one track, one object."""
+    from scipy.optimize import linear_sum_assignment
+
+    from foveatrack.kernels import association_kernel
+    from foveatrack.sky.motion import ConstantVelocityFilter
+    from foveatrack.sky.tracks import _BIG, SkyObject, SkyTrack
+
+    def twin(P, V, O, cfg, candidate, on_scenery):
+        d = O[None, :, :] - P[:, None, :]
+        d2 = d * d
+        e = d2 / (V[:, None, :] + cfg.r_m2)
+        cost = e[..., 0] + e[..., 1] + e[..., 2]
+        dist2 = d2[..., 0] + d2[..., 1] + d2[..., 2]
+        allowed = (cost <= cfg.gate_chi2) & (dist2 <= cfg.gate_max_m * cfg.gate_max_m)
+        allowed &= ~(candidate[:, None] & on_scenery[None, :])
+        return np.where(allowed, cost, _BIG), allowed
+
+    rng = np.random.default_rng(41)
+    cfg = SkyTrackerConfig()
+    fast = slow = 0
+    for trial in range(400):
+        n, m = int(rng.integers(1, 12)), int(rng.integers(1, 8))
+        P = rng.normal(0.0, 2.0, (n, 3)) + [30.0, 0.0, 5.0]
+        V = rng.uniform(0.01, 2.0, (n, 3))
+        O = P[rng.integers(0, n, m)] + rng.normal(0.0, rng.choice([0.3, 1.0, 2.5]), (m, 3))
+        if trial % 9 == 0:
+            O[0] = P[0] + [cfg.gate_max_m, 0.0, 0.0]          # at the distance gate
+        if trial % 13 == 0:
+            O[-1, 1] = np.nan
+        candidate = rng.random(n) < 0.3
+        on_scenery = rng.random(m) < 0.3
+        cost = np.empty((n, m))
+        allowed = np.empty((n, m), np.bool_)
+        k = association_kernel(P, V, O, cfg.r_m2, cfg.gate_chi2, cfg.gate_max_m * cfg.gate_max_m, candidate,
+                               on_scenery, _BIG, cost, allowed)
+        want_cost, want_allowed = twin(P, V, O, cfg, candidate, on_scenery)
+        assert k == want_allowed.sum() and np.array_equal(allowed, want_allowed)
+        assert cost.tobytes() == want_cost.tobytes()
+        if not k:
+            continue
+        # the tracker's pairs on tracks at P (their filters' variances V, r_m2 added above) and objects O
+        tracker = SkyTracker(cfg)
+        for i in range(n):
+            kf = ConstantVelocityFilter(0.0, P[i], cfg.q_m2_s3, cfg.r_m2, cfg.v0_sigma_m_s)
+            kf.a = V[i].copy()
+            tr = SkyTrack(i, kf, 0.0, 0.0)
+            tr.clear_hits = int(candidate[i])
+            tracker.tracks.append(tr)
+        objs = [SkyObject(O[j], 0.0, 5, np.full(3, 0.3), bool(on_scenery[j])) for j in range(m)]
+        match, got_allowed = tracker._associate(objs, 0.0, P.copy())
+        rows, cols = linear_sum_assignment(want_cost)
+        assert match == [(int(i), int(j)) for i, j in zip(rows, cols) if want_allowed[i, j]]
+        assert np.array_equal(got_allowed, want_allowed)
+        conflict = (want_allowed.sum(axis=0) > 1).any() or (want_allowed.sum(axis=1) > 1).any()
+        slow += conflict
+        fast += not conflict
+    assert fast > 50 and slow > 50
