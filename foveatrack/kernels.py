@@ -96,6 +96,24 @@ def association_kernel(P, V, O, r_m2, gate_chi2, gate_max2, candidate, on_scener
             n_allowed += ok
     return n_allowed
 
+
+@njit(cache=True)
+def in_field_kernel(P, rows, offset, cos_field, out):
+    """``out[i]``: world point ``P[i]`` lies in the lidar's field, the cone of cosine ``cos_field``
+    about its axis, at the pose of rotation ``rows`` (9, row by row) and ``offset`` (3,): ``q = R.T p
+    - offset`` summed as :func:`foveatrack.fixed_order.mat3T_vec` sums it, ``|q| > 0`` and ``q_x >=
+    cos_field |q|`` (the sky tracker's field test of its tracks, twice a track a frame; twin: the
+    scalar form in ``tests/sky/test_sky_tracks.py``)."""
+    for i in range(P.shape[0]):
+        px = P[i, 0]
+        py = P[i, 1]
+        pz = P[i, 2]
+        x = (rows[0] * px + rows[3] * py + rows[6] * pz) - offset[0]
+        y = (rows[1] * px + rows[4] * py + rows[7] * pz) - offset[1]
+        z = (rows[2] * px + rows[5] * py + rows[8] * pz) - offset[2]
+        r = math.sqrt(x * x + y * y + z * z)
+        out[i] = (r > 0) and (x >= cos_field * r)
+
 @njit(cache=True)
 def box_members_kernel(xyz, cos_pan, sin_pan, cos_tilt, sin_tilt, offset, lo, hi, out_idx):
     """Indices of the points inside an axis-aligned box D after the head's turn; returns how many.

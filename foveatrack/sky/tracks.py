@@ -89,7 +89,8 @@ from foveatrack.detection import Detection, box_bounds, box_detection, frozen_ma
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
-from foveatrack.kernels import association_kernel, box_inside_kernel, close_pairs_kernel, valid_mask_kernel
+from foveatrack.kernels import (association_kernel, box_inside_kernel, close_pairs_kernel, in_field_kernel,
+                                valid_mask_kernel)
 from foveatrack.openloop.objects import cluster_labels, objects_from_labels
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
@@ -517,16 +518,12 @@ class SkyTracker:
         """Per world point of ``p_world`` (N, 3): is it inside the lidar's field at the frame's mid pose?"""
         if self._cos_field is None:
             return [True] * p_world.shape[0]
-        # R.T p - offset column by column (mat3T_vec's products and sums, in its order: the bits of
-        # the scalar form, one call for every track's two points of a frame)
-        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
-        px, py, pz = p_world[:, 0], p_world[:, 1], p_world[:, 2]
-        ox, oy, oz = offset.tolist()
-        x = (r00 * px + r10 * py + r20 * pz) - ox
-        y = (r01 * px + r11 * py + r21 * pz) - oy
-        z = (r02 * px + r12 * py + r22 * pz) - oz
-        r = np.sqrt(x * x + y * y + z * z)
-        return ((r > 0) & (x >= self._cos_field * r)).tolist()
+        # R.T p - offset (mat3T_vec's products and sums, in its order: the bits of the scalar form),
+        # one kernel call for every track's two points of a frame (a dozen numpy calls before)
+        out = np.empty(p_world.shape[0], np.bool_)
+        in_field_kernel(np.ascontiguousarray(p_world, np.float64), np.array(rows[0] + rows[1] + rows[2], np.float64),
+                        np.ascontiguousarray(offset, np.float64).reshape(3), self._cos_field, out)
+        return out.tolist()
 
     def _objects(self, world: np.ndarray, t_ns: np.ndarray, near: np.ndarray) -> tuple[list[SkyObject], np.ndarray]:
         """The frame's objects and, per foreground point, the index of its object (-1: none)."""

@@ -2,7 +2,7 @@
 
 Its kernels (the frame's validity and region tests, the direction cells and range background, the
 per-point turn into the world, the clustering, Algorithm 1 in a D, the classifier's features, the
-association's gate, the merge rule's close pairs) run
+the field test, the association's gate, the merge rule's close pairs) run
 first when the tracker's warm-up ends, ~10 frames into a run: on a fresh install that frame waited
 ~8 s for the compiler, in the daemon's live loop as in a simulated run.  :func:`compile_sky_kernels`
 steps a throwaway controller through frames past its warm-up with a small object moving through a
@@ -44,10 +44,11 @@ def compile_sky_kernels(make_controller, rate_hz: float) -> None:
         step(Frame(t0, t0 + period, xyz, t_ns, np.full(len(xyz), 30, np.uint8)), t0 + period)
     # the kernels that run once one track, or two, are confirmed: loaded here even if the synthetic
     # object was not confirmed in time
-    from foveatrack.kernels import association_kernel, close_pairs_kernel
+    from foveatrack.kernels import association_kernel, close_pairs_kernel, in_field_kernel
 
     two = np.ones((2, 3))
     close_pairs_kernel(two, 1.0, np.empty((1, 2), np.int64))
     yes = np.ones(2, np.bool_)
     association_kernel(two, two, two, 1.0, 1.0, 1.0, yes, yes, 1.0, np.empty((2, 2)), np.empty((2, 2), np.bool_))
+    in_field_kernel(two, np.ones(9), np.ones(3), 0.5, np.empty(2, np.bool_))
     _done = True
