@@ -494,8 +494,7 @@ def _meets_at_instant(d_world, j, dt, cx, cy, cz, vx, vy, vz, radius, accel, v_m
 def flock_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities, reach, radius, accel, v_max):
     """:func:`cone_candidates_kernel` then :func:`moving_cull_kernel` for the K birds of a flock in one
     pass over the rays: returns ``(idx, member)``, the rays of bird 0 in order, then bird 1's, ...;
-    ``member[i]`` the bird of ray ``idx[i]``.  (The sensor culls the bodies it casts one by one, a
-    swarm's drones, with it too: "bird" is any body here.)
+    ``member[i]`` the bird of ray ``idx[i]``.
 
     Bird k is at ``centres[k]`` and moves at ``velocities[k]`` at ``t_mid``; its cone's radius over
     the frame is ``reach[k]``; ``radius[k]``, ``accel[k]`` (< 0: no bound), ``v_max[k]`` size the test

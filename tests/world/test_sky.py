@@ -534,34 +534,6 @@ def test_single_target_scenes_write_no_object_truth(tmp_path):
     assert "truth_objects" not in RecordingReader(out / "run.mcap").channels()
 
 
-def test_lone_bodies_are_culled_in_one_pass_as_one_by_one():
-    """The targets and the others outside a flock (a swarm's drones, a tree line's drone and crowns,
-    a flock's drone) have their rays culled in one pass (SceneSensor._cull_lone: flock_candidates_kernel);
-    every frame each body gets the rays its own cone and per-ray cull give (SceneSensor._candidates)."""
-    from sim.study.sky_objects import sky_scene
-
-    frames = 0
-    for scene in (sky_scene("swarm-of-five", 2.0), sky_scene("drone-tree-line", 2.0),
-                  sky_scene("swarm-of-five", 1.0, None, None, "drone-and-flock")):
-        loop = ClosedLoop(scene)
-        sensor = loop.sensor
-        together = sensor._cull_lone
-
-        def checked(t0, t1, chunk, d_world):
-            nonlocal frames
-            got = together(t0, t1, chunk, d_world)
-            assert len(got) == len(sensor._lone) > 0
-            for (c, v, idx), (_, cull) in zip(got, sensor._lone):
-                alone = sensor._candidates(c, v, cull, t0, t1, chunk.t_ns, d_world, chunk.status)
-                assert np.array_equal(idx, alone)
-            frames += sum(idx.size > 0 for _, _, idx in got) > 0
-            return got
-
-        sensor._cull_lone = checked
-        loop.run()
-    assert frames > 20
-
-
 def test_flock_candidates_with_the_direction_box_are_the_twin_s_everywhere():
     """The flock kernel skips the rays outside its direction box (kernels._cone_box): over flocks
     flattened and round, near and far, in every direction (each axis the least along the mean: every
