@@ -202,6 +202,26 @@ class _AxisIntegrator:
             ang = wrap_deg(ang)
         return ang, v, math.sqrt(var)
 
+    def angle(self, t: float) -> float:
+        """``state(t)[0]`` (the same bits) without the speed's and the variance's work: the knot picked
+        and advanced as :meth:`state` does."""
+        times = self.times
+        if t >= times[-1]:
+            k = self.knots[-1]
+        else:
+            i = bisect.bisect_right(times, t) - 1
+            if i >= 0:
+                k = self.knots[i]
+            elif self.forgot_before > -math.inf:
+                return math.nan
+            else:
+                k = self.knots[0]
+                t = k.t
+        ang, _ = self._advance(k, t)
+        if self.wrap and not -180.0 < ang <= 180.0:
+            ang = wrap_deg(ang)
+        return ang
+
     def command(self, t_eff: float, direction: int, byte: int) -> None:
         last = self.knots[-1]
         if t_eff < last.t:
@@ -407,6 +427,18 @@ class Reconstructor(HeadPose):
             self._n_carried = 0
         ans = self._memo[t_s] = (p, t, sp, st)
         return ans
+
+    def pan_tilt_many(self, times) -> list[tuple[float, float]]:
+        """``angles_at(t)[:2]`` at each of ``times`` (the same bits), without the sigmas: a frame's
+        per-point turn asks eleven instants (:func:`foveatrack.sky.world_points.node_rotations`).  An
+        instant the memo holds is answered from it; the others are not put in it (a pure cache: the
+        answers do not depend on what it holds)."""
+        memo = self._memo
+        out = []
+        for t in times:
+            hit = memo.get(t)
+            out.append((hit[0], hit[1]) if hit is not None else (self.pan.angle(t), self.tilt.angle(t)))
+        return out
 
     def tilt_at(self, t_s: float) -> tuple[float, float]:
         """(tilt_deg, sigma_tilt_deg) at ``t_s``: ``angles_at(t_s)[1::2]`` without integrating pan."""

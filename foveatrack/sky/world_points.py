@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numba import njit
 
-from foveatrack.reconstruction import rotation_entries, rotation_rows
+from foveatrack.reconstruction import rotation_rows
 
 
 def node_rotations(pose, t0_s: float, t1_s: float, nodes: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -37,13 +37,42 @@ def node_rotations(pose, t0_s: float, t1_s: float, nodes: int) -> tuple[np.ndarr
         p, tl, _, _ = pose.angles_at(t0_s)
         return np.array([t0_s, t0_s + 1.0]), np.array([rotation_rows(p, tl)] * 2, np.float64), 1.0
     ts = [t0_s + (t1_s - t0_s) * i / (k - 1) for i in range(k)]
-    # every node's entries into one flat list made into the array at once: assigning each node's rows
-    # into an array took twice the time of the poses' trig
-    flat = []
-    for t in ts:
-        p, tl, _, _ = pose.angles_at(t)
-        flat += rotation_entries(p, tl)
-    return np.array(ts), np.array(flat).reshape(k, 3, 3), step
+    many = getattr(pose, "pan_tilt_many", None)      # the dead reckoning's, without the sigmas
+    angles = np.array(many(ts) if many is not None else [pose.angles_at(t)[:2] for t in ts], np.float64)
+    # every node's entries by one kernel call (rotation_entries' arithmetic), where eleven calls of it
+    # and the array made of their lists took more than the poses
+    R = np.empty((k, 3, 3))
+    rotation_entries_kernel(angles, R)
+    return np.array(ts), R, step
+
+
+@njit(cache=True)
+def rotation_entries_kernel(angles, out):
+    """``out[i]`` (3, 3): :func:`foveatrack.reconstruction.rotation_entries` of the pose ``angles[i]``
+    ``(pan_deg, tilt_deg)``, its arithmetic in its order (pan outside (-180, 180] wrapped as
+    ``wrap_deg`` wraps a float; libm's cos and sin, as CPython's math calls them; its twin in
+    ``tests/sky/test_world_points.py``)."""
+    for i in range(angles.shape[0]):
+        pan = angles[i, 0]
+        if not (-180.0 < pan <= 180.0):
+            w = np.fmod(pan + 180.0, 360.0)      # C fmod (math.fmod is not in numba)
+            w = (w + 360.0 if w < 0.0 else w) - 180.0
+            pan = 180.0 if w == -180.0 else w
+        p = math.radians(pan)
+        t = math.radians(angles[i, 1])
+        cp = math.cos(p)
+        sp = math.sin(p)
+        ct = math.cos(t)
+        st = math.sin(t)
+        out[i, 0, 0] = cp * ct
+        out[i, 0, 1] = -sp
+        out[i, 0, 2] = -cp * st
+        out[i, 1, 0] = sp * ct
+        out[i, 1, 1] = cp
+        out[i, 1, 2] = -sp * st
+        out[i, 2, 0] = st
+        out[i, 2, 1] = 0.0
+        out[i, 2, 2] = ct
 
 
 @njit(cache=True)

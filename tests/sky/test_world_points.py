@@ -66,3 +66,21 @@ def test_a_frame_of_no_length_turns_every_point_at_its_one_pose():
     p, tl, _, _ = pose.angles_at(1.6)
     want = (rotation_matrix(p, tl) @ (xyz + np.array(pose.lidar_offset_m)).T).T
     assert a.tobytes() == b.tobytes() and np.allclose(a, want, rtol=0, atol=1e-9)
+
+
+def test_the_node_rotations_are_rotation_entries_bit_for_bit():
+    """rotation_entries_kernel (every node's rotation in one call) against its twin, rotation_entries,
+    pose by pose: pans inside (-180, 180] and out of it (wrapped), at +-180, far round, huge and NaN."""
+    from foveatrack.reconstruction import rotation_entries
+    from foveatrack.sky.world_points import rotation_entries_kernel
+
+    rng = np.random.default_rng(8)
+    pans = np.concatenate([rng.uniform(-180.0, 180.0, 2000), rng.uniform(-2000.0, 2000.0, 2000),
+                           [180.0, -180.0, 0.0, -0.0, 540.0, -540.0, 179.99999999999997, -179.99999999999997,
+                            1e17, -1e17, np.nan]])
+    tilts = np.concatenate([rng.uniform(-90.0, 90.0, pans.size - 3), [np.nan, 0.0, -0.0]])
+    angles = np.column_stack([pans, tilts])
+    out = np.empty((angles.shape[0], 3, 3))
+    rotation_entries_kernel(angles, out)
+    want = np.array([rotation_entries(p, t) for p, t in angles.tolist()]).reshape(-1, 3, 3)
+    assert out.tobytes() == want.tobytes()

@@ -225,3 +225,34 @@ def test_to_world_turns_as_lidar_to_world_and_the_box_kernel_do():
         bound = 6 * 2.0**-53 * (np.abs(R) @ np.abs(q)) * (1 + 1e-15)
         assert np.all(np.abs(w - R @ q) <= bound)
         assert math.isfinite(sigma) and sigma > 0
+
+
+def test_pan_tilt_many_is_angles_at_bit_for_bit():
+    """pan_tilt_many (a frame's node poses, without the sigmas) gives angles_at's two angles to the bit:
+    commands with dead time and acceleration, the tilt's stops, pan wrapping round 180, instants before
+    the start, inside and after the kept history (NaN), memo hits and misses; and it leaves the memo
+    as it found it."""
+    table = SpeedTable.nominal()
+    for tilt0, limits in ((5.0, (-90.0, 90.0)), (80.0, (-10.0, 85.0))):
+        rec = Reconstructor(table, pan0_deg=175.0, tilt0_deg=tilt0, t0_s=1.0, latency_s=0.01, dead_time_s=0.05,
+                            accel_deg_s2=40.0, tilt_limits_deg=limits, history_s=2.0)
+        fresh = Reconstructor(table, pan0_deg=175.0, tilt0_deg=tilt0, t0_s=1.0, latency_s=0.01, dead_time_s=0.05,
+                              accel_deg_s2=40.0, tilt_limits_deg=limits, history_s=2.0)
+        rng = np.random.default_rng(21)
+        t = 1.0
+        for step in range(250):
+            d = rng.integers(-1, 2, 2)
+            cmd = HeadCommand(int(d[0]), int(rng.integers(0, 64)) if d[0] else 0,
+                              int(d[1]), int(rng.integers(0, 64)) if d[1] else 0)
+            for r in (rec, fresh):
+                r.on_command(t, cmd)
+            ts = [t + 0.1 * i / 10 for i in range(11)] + [0.5, 1.0, t - 1.9, t - 3.0, t + 5.0]
+            if step % 3 == 0:
+                rec.angles_at(ts[4])          # one of them in the memo
+            memo = dict(rec._memo)
+            got = rec.pan_tilt_many(ts)
+            assert rec._memo == memo
+            want = [fresh.angles_at(q)[:2] for q in ts]
+            assert np.array(got).tobytes() == np.array(want).tobytes()
+            assert all(type(a) is float and type(b) is float for a, b in got)
+            t += float(rng.uniform(0.02, 0.3))
