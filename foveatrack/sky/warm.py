@@ -2,8 +2,8 @@
 
 Its kernels (the frame's validity and region tests, the direction cells and range background, the
 per-point turn into the world, the clustering, Algorithm 1 in a D, the classifier's features, the
-tracks' field test, the association's gate, the merge rule's close pairs, the attention's per-track
-geometry) run first when the tracker's warm-up ends, ~10 frames into a run: on a fresh install that
+tracks' field test, the association's gate, the merge rule's close pairs) run first when the
+tracker's warm-up ends, ~10 frames into a run: on a fresh install that
 frame waited ~8 s for the compiler, in the daemon's live loop as in a simulated run.
 :func:`compile_sky_kernels` steps a throwaway controller through frames past its warm-up with a small
 object moving through a scattered background, once per process, nothing written anywhere; the
@@ -43,8 +43,8 @@ def compile_sky_kernels(make_controller, rate_hz: float) -> None:
         xyz = np.vstack([bg, obj])
         t_ns = np.sort(rng.integers(int(t0 * 1e9), int((t0 + period) * 1e9), len(xyz))).astype(np.int64)
         step(Frame(t0, t0 + period, xyz, t_ns, np.full(len(xyz), 30, np.uint8)), t0 + period)
-    # the kernels that need tracks (confirmed ones, two of them, for some): loaded here even if the synthetic
-    # object was not confirmed in time
+    # the kernels that need tracks (confirmed ones, two of them, for some): loaded here even if the
+    # synthetic object was not confirmed in time
     from foveatrack.kernels import association_kernel, close_pairs_kernel, in_field_kernel
 
     two = np.ones((2, 3))
