@@ -241,6 +241,16 @@ def test_flock_pose_kernels_match_their_numpy_twins_to_the_bit(n):
         assert np.array_equal(flock.wing_angles(m, t), flock_wing_angles_twin(flock, m, t))
 
 
+
+def _birds_motion(rng, n_birds, cone_lo, reach, radius_hi):
+    """Random birds for flock_candidates_kernel and its twin: velocities, cone half-widths (``cone_lo``
+    to 1.5 times ``reach``), body radii, accelerations (-1: none) and top speeds."""
+    vel = rng.normal(size=(n_birds, 3)) * 8.0
+    cone = rng.uniform(cone_lo, 1.5, n_birds) * reach
+    radius = cone * rng.uniform(0.3, radius_hi, n_birds)
+    accel = np.where(rng.random(n_birds) < 0.3, -1.0, rng.uniform(0.0, 20.0, n_birds))
+    return vel, cone, radius, accel, np.linalg.norm(vel, axis=1) + 1.0
+
 def test_flock_candidates_kernel_matches_its_twin_and_the_kernels_it_stands_for():
     rng = np.random.default_rng(12)
     d = rng.normal(size=(4000, 3)) + np.array([3.0, 0.0, 0.0])
@@ -250,11 +260,7 @@ def test_flock_candidates_kernel_matches_its_twin_and_the_kernels_it_stands_for(
     # wide cones overlap: more (ray, bird) pairs than the kernel's first guess (d.shape[0] // 8 = 500), which grows
     for n_birds, spread, reach, pairs in ((20, 8.0, 0.4, 20), (6, 3.0, 6.0, 500), (2, 1.0, 1.0, 10)):
         centres = np.array([30.0, 0.0, 0.0]) + rng.normal(size=(n_birds, 3)) * spread
-        vel = rng.normal(size=(n_birds, 3)) * 8.0
-        cone = rng.uniform(0.5, 1.5, n_birds) * reach
-        radius = cone * rng.uniform(0.3, 0.9, n_birds)
-        accel = np.where(rng.random(n_birds) < 0.3, -1.0, rng.uniform(0.0, 20.0, n_birds))
-        v_max = np.linalg.norm(vel, axis=1) + 1.0
+        vel, cone, radius, accel, v_max = _birds_motion(rng, n_birds, 0.5, reach, 0.9)
         args = (d, status, t_ray, 2.05, centres, vel, cone, radius, accel, v_max)
         idx, member = K.flock_candidates_kernel(*args)
         twin_idx, twin_member = flock_candidates_twin(*args)
@@ -559,12 +565,7 @@ def test_flock_candidates_with_the_direction_box_are_the_twin_s_everywhere():
             d[::7] *= 1.0 + rng.choice([-1.0, 1.0], d[::7].shape[0])[:, None] * rng.uniform(1e-7, 1e-2)
         status = (rng.random(n_rays) < 0.05).astype(np.uint8)
         t_ray = np.sort(rng.uniform(2.0, 2.1, n_rays))
-        vel = rng.normal(size=(n_birds, 3)) * 8.0
-        cone = rng.uniform(0.3, 1.5, n_birds)
-        radius = cone * rng.uniform(0.3, 1.0, n_birds)
-        accel = np.where(rng.random(n_birds) < 0.3, -1.0, rng.uniform(0.0, 20.0, n_birds))
-        v_max = np.linalg.norm(vel, axis=1) + 1.0
-        args = (d, status, t_ray, 2.05, centres, vel, cone, radius, accel, v_max)
+        args = (d, status, t_ray, 2.05, centres) + _birds_motion(rng, n_birds, 0.3, 1.0, 1.0)
         idx, member = K.flock_candidates_kernel(*args)
         twin_idx, twin_member = flock_candidates_twin(*args)
         assert np.array_equal(idx, twin_idx) and np.array_equal(member, twin_member), trial
