@@ -64,7 +64,7 @@ chosen on (over an hour of runs: median 4.0 -> 3.6 s; docs/sky-tracks-figures.md
 what it costs).  Only tracks labelled drone get it: a crown part that looks like a drone for a moment
 is revisited no sooner than before.
 
-With ``saccade_counts_motion`` (the default) each axis of a saccade time also counts the
+With ``saccade_counts_motion`` (an option, not the default) each axis of a saccade time also counts the
 track's own bearing rate there (from its velocity: one drawing away at ``w`` is closed at
 ``v_max - w``, and trails the proportional tail by ``w / k``) and the head's speed now (an axis
 turning away from the track first stops, at its calibrated acceleration, while the error grows), and
@@ -72,7 +72,12 @@ no saccade is planned for longer than ``saccade_timeout_s``, how long a revisit 
 without it (what recordings made before it ran) all three are left out.  Revisits reached the fovea
 a median 0.38 s later than planned without it on the crossing's tuning seeds +200..+214 (its drones
 draw apart at up to 5 deg/s, and the head is often turning away from the one revisited), 0.15 s
-with it; on the swarm's, 0.19 and 0.13 s.
+with it; on the swarm's, 0.19 and 0.13 s.  A measured trade-off: the revisits start sooner, so the
+priority drone's track leaves the fovea with fewer hits behind it, and one left 3.4 s at the sparse
+rim drifted past the association's bound and took a new id (the crossing's cold hour, with
+``keep_verdict``: id switches 10 -> 12 of 360 drone-runs, one of them on the eight report seeds,
+seed 33; median longest gap 3.6 -> 3.4 s; docs/sky-tracks-figures.md).  The must-show asks for no
+id switch on the crossing, so it stays off.
 """
 
 from __future__ import annotations
@@ -108,7 +113,7 @@ class AttentionConfig:
     verify_min_hits: float = 1.0
     saccade_latency_s: float = 0.3
     saccade_gain_1_s: float | None = None
-    saccade_counts_motion: bool = True
+    saccade_counts_motion: bool = False
     keep_verdict: bool = True
 
     @classmethod

@@ -196,10 +196,16 @@ def test_a_target_the_head_cannot_close_on_takes_the_saccade_timeout():
     assert axis_turn_s(25.0, 3.0, 2.0, 15.0, 16.0) == np.inf
     assert axis_turn_s(25.0, 3.0, 2.0, 15.0, 6.5) == np.inf          # lag 3.25 deg > 3 deg
     assert np.isfinite(axis_turn_s(25.0, 3.0, 2.0, 15.0, 5.5))
-    cfg = AttentionConfig(saccade_latency_s=0.3, saccade_timeout_s=2.0)
+    cfg = AttentionConfig(saccade_latency_s=0.3, saccade_timeout_s=2.0, saccade_counts_motion=True)
     assert saccade_time_s(25.0, 0.0, cfg, (2.0, 15.0, 2.0, 2.0), rates=(16.0, 0.0)) == 0.3 + 2.0
     # and a long turn (the 2 deg/s tilt) is planned for no longer than the attention waits for it
     assert saccade_time_s(0.0, 14.0, cfg, (2.0, 15.0, 2.0, 2.0)) == 0.3 + 2.0
+    # without the option (the default): the still model, no bound, the rates not read
+    still = dataclasses.replace(cfg, saccade_counts_motion=False)
+    assert AttentionConfig().saccade_counts_motion is False
+    assert saccade_time_s(0.0, 14.0, still, (2.0, 15.0, 2.0, 2.0)) == 0.3 + axis_turn_s(14.0, 3.0, 2.0, 2.0) > 2.3
+    assert saccade_time_s(25.0, 0.0, still, (2.0, 15.0, 2.0, 2.0), rates=(16.0, 0.0)) == \
+        saccade_time_s(25.0, 0.0, still, (2.0, 15.0, 2.0, 2.0))
 
 
 def _revisit_starts(turn_s, fovea_fn=None, duration_s=8.0, label=None):

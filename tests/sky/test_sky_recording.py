@@ -241,8 +241,9 @@ def test_a_replay_under_another_table_places_the_points_from_the_head_as_it_move
 # the run in which today's default acts differently (so the test can tell):
 # * classifier.drone_after_hits, tree line seed 258: a crown's part is labelled drone 3.2 s in after
 #   five hits and five frames of coasting (the count of hits keeps that label back);
-# * attention.saccade_counts_motion and keep_verdict, the crossing (its own seed): the drones draw
-#   apart after 5 s, and the revisits start sooner and go to a drone that looked unknown.
+# * attention.saccade_counts_motion and keep_verdict, the crossing (its own seed): out of the fovea a
+#   drone's track looks unknown, and keeps its label for the schedule (the first key's default is
+#   what ran before it; a table without it must still replay so).
 ADDED_KEYS = [("drone-tree-line", 258, "classifier", {"drone_after_hits": 0}),
               ("two-drones-crossing", 28, "attention", {"saccade_counts_motion": False, "keep_verdict": False})]
 
