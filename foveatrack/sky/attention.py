@@ -180,9 +180,13 @@ def saccade_time_s(e_pan_deg: float, e_tilt_deg: float, cfg: "AttentionConfig", 
     h = cfg.fovea_half_angle_deg
     if not cfg.saccade_counts_motion:
         return cfg.saccade_latency_s + max(axis_turn_s(e_pan_deg, h, kp, vp), axis_turn_s(e_tilt_deg, h, kt, vt))
-    turn = max(axis_turn_s(e_pan_deg, h, kp, vp, rates[0], speeds[0], accels[0]),
-               axis_turn_s(e_tilt_deg, h, kt, vt, rates[1], speeds[1], accels[1]))
-    return cfg.saccade_latency_s + min(turn, cfg.saccade_timeout_s)
+    pan = axis_turn_s(e_pan_deg, h, kp, vp, rates[0], speeds[0], accels[0])
+    tilt = axis_turn_s(e_tilt_deg, h, kt, vt, rates[1], speeds[1], accels[1])
+    cap = cfg.saccade_timeout_s
+    # an axis's time NaN (a bearing or its rate unknown) plans the longest saccade, as one the head
+    # cannot close on: a NaN lead is past no clock, and the track was never revisited again
+    turn = max(pan, tilt) if pan <= cap and tilt <= cap else cap
+    return cfg.saccade_latency_s + turn
 
 
 def threat_score(view, cfg: AttentionConfig, looks_like: str | None = None) -> float:

@@ -208,6 +208,20 @@ def test_a_target_the_head_cannot_close_on_takes_the_saccade_timeout():
         saccade_time_s(25.0, 0.0, still, (2.0, 15.0, 2.0, 2.0))
 
 
+def test_an_unknown_rate_plans_the_longest_saccade_not_none():
+    # a bearing rate (or bearing) that is NaN gave a NaN saccade time on the pan axis and was dropped
+    # on the tilt axis (Python's max keeps its first argument against a NaN); a NaN lead is never
+    # past any clock, so that drone was never revisited again.  Either axis: the longest planned
+    cfg = AttentionConfig(saccade_latency_s=0.3, saccade_timeout_s=2.0, saccade_counts_motion=True)
+    head = (2.0, 15.0, 2.0, 2.0)
+    for rates in ((np.nan, 0.0), (0.0, np.nan)):
+        assert saccade_time_s(20.0, 5.0, cfg, head, rates=rates) == 0.3 + 2.0, rates
+    assert saccade_time_s(np.nan, 5.0, cfg, head) == 0.3 + 2.0
+    # what a finite rate gives is unchanged: the longer axis, capped at the timeout
+    assert saccade_time_s(20.0, 5.0, cfg, head, rates=(1.0, 0.0)) == 0.3 + min(
+        max(axis_turn_s(20.0, 3.0, 2.0, 15.0, 1.0), axis_turn_s(5.0, 3.0, 2.0, 2.0, 0.0)), 2.0)
+
+
 def _revisit_starts(turn_s, fovea_fn=None, duration_s=8.0, label=None):
     """When revisits of track 1 start (the priority is track 0), with the head's saccade time to it;
     ``label``: track 1's label while it looks like a drone (default: labelled drone)."""
