@@ -169,6 +169,20 @@ class _AxisIntegrator:
             away, v = 0.5 * b * t_ramp * t_ramp + w * (s - t_ramp), w
         return stop - side * away, -side * v
 
+    def _knot_at(self, t: float) -> tuple[_Knot, float] | None:
+        """The knot in force at ``t`` and the instant to advance it to (:meth:`state` and
+        :meth:`angle`); None before the kept history."""
+        times = self.times
+        if t >= times[-1]:   # the usual: since the newest knot
+            return self.knots[-1], t
+        i = bisect.bisect_right(times, t) - 1
+        if i >= 0:
+            return self.knots[i], t
+        if self.forgot_before > -math.inf:   # the commands in force then are forgotten
+            return None
+        k = self.knots[0]   # before the start pose: the head rested there (homed) until then
+        return k, k.t
+
     def _knot_before(self, t: float) -> _Knot | None:
         i = bisect.bisect_right(self.times, t) - 1
         return self.knots[i] if i >= 0 else None
@@ -176,18 +190,10 @@ class _AxisIntegrator:
     def state(self, t: float) -> tuple[float, float, float]:
         """(angle, speed, sigma) at t; before the kept history (``history_s`` behind the newest
         command), unknown: NaN angle and speed with infinite sigma."""
-        times = self.times
-        if t >= times[-1]:   # the usual: since the newest knot
-            k = self.knots[-1]
-        else:
-            i = bisect.bisect_right(times, t) - 1
-            if i >= 0:
-                k = self.knots[i]
-            elif self.forgot_before > -math.inf:   # the commands in force then are forgotten
-                return math.nan, math.nan, math.inf
-            else:   # before the start pose: the head rested there (homed) until then
-                k = self.knots[0]
-                t = k.t
+        found = self._knot_at(t)
+        if found is None:
+            return math.nan, math.nan, math.inf
+        k, t = found
         ang, v = self._advance(k, t)
         var_b = k.var_bytes
         if k.idx >= 0:   # only the running byte's time has grown since the knot
@@ -205,19 +211,10 @@ class _AxisIntegrator:
     def angle(self, t: float) -> float:
         """``state(t)[0]`` (the same bits) without the speed's and the variance's work: the knot picked
         and advanced as :meth:`state` does."""
-        times = self.times
-        if t >= times[-1]:
-            k = self.knots[-1]
-        else:
-            i = bisect.bisect_right(times, t) - 1
-            if i >= 0:
-                k = self.knots[i]
-            elif self.forgot_before > -math.inf:
-                return math.nan
-            else:
-                k = self.knots[0]
-                t = k.t
-        ang, _ = self._advance(k, t)
+        found = self._knot_at(t)
+        if found is None:
+            return math.nan
+        ang, _ = self._advance(*found)
         if self.wrap and not -180.0 < ang <= 180.0:
             ang = wrap_deg(ang)
         return ang
