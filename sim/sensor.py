@@ -149,8 +149,8 @@ class SceneSensor:
                               getattr(obj.trajectory, "max_accel_m_s2", None)) for obj in scene.others]
         # A flock's birds are cast together (sim.world.sky.FlockPoses: the same values, a twentieth of
         # the Python calls); with a beam footprint each body's sub-rays are cast on their own.
-        self._group_flocks({} if self._has["beam_footprint"] else {
-            a: _FlockCast.of(scene.others[a:b], self._cull_others[a:b], b) for a, b in FlockPoses.groups(scene.others)})
+        self._flocks = {} if self._has["beam_footprint"] else {
+            a: _FlockCast.of(scene.others[a:b], self._cull_others[a:b], b) for a, b in FlockPoses.groups(scene.others)}
         # Multi-object scenes: the first primitive of each object (drones, then birds and crowns), for
         # the rays that hit each (``last_object_rays``) and the stray returns placed (``last_strays_m``).
         self._object_prim_start = np.cumsum([0] + [spec.body.prims.shape[0] for spec in scene.targets]
@@ -169,16 +169,6 @@ class SceneSensor:
         self.rays_total = 0
         self.rays_cast_targets = 0
         self.rays_cast_background = 0
-
-    def _group_flocks(self, flocks: dict) -> None:
-        """The flocks cast together (``flocks``: first index in the scene's ``others`` -> :class:`_FlockCast`)
-        and so the bodies cast one by one (:meth:`_cull_lone`): the targets, then the others outside a
-        flock, in cast order."""
-        scene = self.scene
-        self._flocks = flocks
-        in_flock = {k for a, f in flocks.items() for k in range(a, f.stop)}
-        self._lone = ([(spec, cull) for spec, cull in zip(scene.targets, self._cull)]
-                      + [(o, c) for k, (o, c) in enumerate(zip(scene.others, self._cull_others)) if k not in in_flock])
 
     def returns(self, chunk, d_world: np.ndarray, t0: float, t1: float):
         """Points for one scan chunk whose beams point along ``d_world`` (world frame).
@@ -203,9 +193,8 @@ class SceneSensor:
         mids, vels = [], []
         # each ray's instant, as the poses take it (the per-ray cull's)
         self._t_ray = chunk.t_ns * 1e-9 if self.target_motion == "per_point" else np.full(n, 0.5 * (t0 + t1))
-        lone = iter(self._cull_lone(t0, t1, chunk, d_world))
-        for spec in scene.targets:
-            c, v, idx = next(lone)
+        for spec, cull in zip(scene.targets, self._cull):
+            c, v, idx = self._cull_body(spec, cull, t0, t1, chunk, d_world)
             self._cast_on(spec, idx, d_world, rng_m, prim, offset)
             mids.append(c.tolist())
             vels.append(None if v is None else v.tolist())
@@ -221,7 +210,7 @@ class SceneSensor:
                 k = flock.stop
                 continue
             obj = scene.others[k]
-            c, v, idx = next(lone)
+            c, v, idx = self._cull_body(obj, self._cull_others[k], t0, t1, chunk, d_world)
             self._cast_on(obj, idx, d_world, rng_m, prim, offset)
             mids.append(c.tolist())
             vels.append(None if v is None else v.tolist())
@@ -359,24 +348,20 @@ class SceneSensor:
             self._share[rays] = 1.0
         self.last_strays_m = d_world[rays] * r[:, None]      # world frame, for the truth
 
-    def _cull_lone(self, t0, t1, chunk, d_world) -> list:
-        """Per body cast one by one (``self._lone``: the targets, then the others outside a flock), its
-        position and velocity at the chunk's mid time (the velocity None where the cull does not need
-        it) and the rays that can meet it (:meth:`_candidates`), ``(c, v, idx)``.  Body by body: one
-        pass over the rays for all of them (:func:`sim.world.kernels.flock_candidates_kernel`, which
-        pays off for a flock's many birds close together) saved ~8 us a frame on the swarm and cost
-        12 us on the crossing's two drones, 47 us on a tree line's crowns."""
+    def _cull_body(self, spec, cull, t0, t1, chunk, d_world):
+        """One body cast on its own (a target, or another object outside a flock): its position and
+        velocity at the chunk's mid time (the velocity None where the cull does not need it) and the
+        rays that can meet it (:meth:`_candidates`), ``(c, v, idx)``.  Body by body: one pass over the
+        rays for all of them (:func:`sim.world.kernels.flock_candidates_kernel`, which pays off for a
+        flock's many birds close together) saved ~8 us a frame on the swarm and cost 12 us on the
+        crossing's two drones, 47 us on a tree line's crowns."""
         t = np.array([0.5 * (t0 + t1)])
-        footprint = self._has["beam_footprint"]
-        out = []
-        for spec, cull in self._lone:
-            if cull[2] is None or footprint:
-                c, v = spec.trajectory.position(t)[0], None
-            else:       # in one evaluation where the path has one (a manual flight's clip, a circle's trig)
-                p, v = position_velocity(spec.trajectory, t)
-                c, v = p[0], v[0]
-            out.append((c, v, self._candidates(c, v, cull, t0, t1, chunk.t_ns, d_world, chunk.status)))
-        return out
+        if cull[2] is None or self._has["beam_footprint"]:
+            c, v = spec.trajectory.position(t)[0], None
+        else:       # in one evaluation where the path has one (a manual flight's clip, a circle's trig)
+            p, v = position_velocity(spec.trajectory, t)
+            c, v = p[0], v[0]
+        return c, v, self._candidates(c, v, cull, t0, t1, chunk.t_ns, d_world, chunk.status)
 
     def _candidates(self, c, v, cull, t0, t1, t_ns, d_world, status) -> np.ndarray:
         """The rays near one moving body at ``c`` (velocity ``v``, None: not needed) at the chunk's mid
@@ -417,7 +402,7 @@ class SceneSensor:
         return centres.tolist(), vel.tolist()
 
     def _cast_on(self, spec, idx, d_world, rng_m, prim, offset) -> None:
-        """Cast the rays ``idx`` (the body's candidates, :meth:`_cull_lone`) on one moving body, each at
+        """Cast the rays ``idx`` (the body's candidates, :meth:`_cull_body`) on one moving body, each at
         its own instant."""
         traj = spec.trajectory
         self.rays_cast_targets += idx.size

@@ -370,7 +370,7 @@ def test_a_flock_cast_together_gives_the_run_it_gives_bird_by_bird():
     scene = replace(load_scene(SCENES / "drone-and-flock.toml"), duration_s=2.5)
     together = ClosedLoop(scene)
     apart = ClosedLoop(scene)
-    apart.sensor._group_flocks({})
+    apart.sensor._flocks = {}
     assert together.sensor._flocks
     a, b = together.run(), apart.run()
     for k in a:
