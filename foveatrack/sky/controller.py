@@ -137,6 +137,14 @@ def sky_table(cfg: SkyTrackerConfig, attention_cfg: AttentionConfig) -> dict:
 _RATE_S = 0.1
 
 
+def _bearing_rates(p, u, pose, az: float, el: float) -> tuple[float, float]:
+    """The (azimuth, elevation) rates [deg/s] of a track at ``p`` moving at ``u`` (world, 3 floats
+    each) seen from ``pose`` (rows, offset), where its bearing is ``az``, ``el`` now: the bearing
+    ``_RATE_S`` later, less this one (azimuth wrapped), over ``_RATE_S``."""
+    az1, el1 = bearing_deg(*in_lidar([p[0] + _RATE_S * u[0], p[1] + _RATE_S * u[1], p[2] + _RATE_S * u[2]], *pose))
+    return wrap_deg(az1 - az) / _RATE_S, (el1 - el) / _RATE_S
+
+
 class SkyController:
     """Frames in, head commands out, every object tracked (module docstring)."""
 
@@ -218,11 +226,13 @@ class SkyController:
         mid_pose = self._pose_rows(t_mid)
         half = att.fovea_half_angle_deg
         end_pose = self._pose_rows(frame.t_end_s)      # one pose for every track's saccade time
-        speeds = recon.speeds_at(frame.t_end_s)
-        accels = recon.accels_deg_s2()
+        # the head's speed now and each track's bearing rate: asked only by the saccade time that
+        # counts the motion (an option; a flock's twenty tracks a frame need not pay for them)
+        motion = att.saccade_counts_motion
+        speeds, accels, rates = (recon.speeds_at(frame.t_end_s), recon.accels_deg_s2(), None) if motion \
+            else ((0.0, 0.0), (None, None), (0.0, 0.0))
         # per confirmed track, in one pass: in the fovea at the mid pose, its saccade time from the
-        # end pose (with its bearing's own rate there, and the head's speed now), its threat score
-        # (the attention's too)
+        # end pose, its threat score (the attention's too)
         in_fovea, turn, scores = set(), {}, {}
         for v in sky.tracks:
             if v.confirmed:
@@ -230,10 +240,8 @@ class SkyController:
                 if off_axis_deg(*in_lidar(p, *mid_pose)) <= half:
                     in_fovea.add(v.track_id)
                 az, el = bearing_deg(*in_lidar(p, *end_pose))
-                u = v.velocity_m_s.tolist()
-                az1, el1 = bearing_deg(*in_lidar([p[0] + _RATE_S * u[0], p[1] + _RATE_S * u[1],
-                                                   p[2] + _RATE_S * u[2]], *end_pose))
-                rates = (wrap_deg(az1 - az) / _RATE_S, (el1 - el) / _RATE_S)
+                if motion:
+                    rates = _bearing_rates(p, v.velocity_m_s.tolist(), end_pose, az, el)
                 turn[v.track_id] = saccade_time_s(az, el, att, self._head_speeds, rates, speeds, accels)
                 scores[v.track_id] = threat_score(v, att, self.attention.looks_like(v))
         # the candidate being verified counts too for the attention, which ends that look once the

@@ -237,9 +237,10 @@ def test_a_single_target_under_the_sky_tracker_has_its_rays_counted():
 
 
 def test_the_sky_schedule_runs_on_the_gyro_attitude_as_on_the_commands():
-    # the saccade time asks the head's attitude source for its speed and acceleration: through the
-    # interface both sources share (the gyro's answers from its command reckoning), so a crossing
-    # with attitude = "gyro" revisits its drones as one with the commands' attitude does
+    # the saccade time that counts the motion (the option) asks the head's attitude source for its
+    # speed and acceleration: through the interface both sources share (the gyro's answers from its
+    # command reckoning), so a crossing with attitude = "gyro" revisits its drones as one with the
+    # commands' attitude does
     import tomllib
 
     from sim.scene import scene_from_mapping
@@ -248,6 +249,7 @@ def test_the_sky_schedule_runs_on_the_gyro_attitude_as_on_the_commands():
     m = tomllib.loads((ROOT / "scenes" / "two-drones-crossing.toml").read_text())
     m["scene"]["duration_s"] = 8.0
     m["tracker"]["attitude"] = "gyro"
+    m["tracker"]["sky"] = {"attention": {"saccade_counts_motion": True}}     # the path that asks them
     m["imu"] = {"rotation_deg": [0.0, 0.0, 0.0], "translation_m": [0.0, 0.0, 0.0]}
     loop = ClosedLoop(scene_from_mapping(m, "crossing, gyro attitude"))
     recon = loop.sky.tracker.recon
