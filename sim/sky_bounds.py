@@ -16,7 +16,7 @@ from foveatrack.speed_table import TURBO
 
 
 def scan_allows_confirm_s(times_s, tracked, rays, min_points: int, confirm_hits: int,
-                          confirm_window: int, reported_from: int = 0) -> float | None:
+                          confirm_window: int, reported_from: int = 0, lone_returns: bool = False) -> float | None:
     """The earliest a track built from one drone's own returns could be confirmed, from the rays the
     scan put on it (:mod:`foveatrack.sky.tracks`' rule: ``confirm_hits`` frames, each with an object of
     ``min_points`` returns or more, within ``confirm_window`` frames of the first), counted from its
@@ -30,18 +30,28 @@ def scan_allows_confirm_s(times_s, tracked, rays, min_points: int, confirm_hits:
     ``tracked`` (T,) bool: the frames the tracker tracks (after its warm-up; all of them for the
     bound without it).  ``reported_from``: the first frame a confirmation can be
     reported at (a tracker that tracks its warm-up's frames at the warm-up's end counts their hits,
-    and says so at the first frame after it).  What part of a slow confirmation is the scan's (the
-    rosette's sparse periphery, paper Fig. 5) and what part the tracker's."""
+    and says so at the first frame after it).  ``lone_returns``: the tracker's rule with lone returns
+    (:class:`foveatrack.sky.tracks.SkyTrackerConfig`): the track starts at a frame of ``min_points``
+    rays or more, and from then on a frame with a single ray is a hit too.  What part of a slow
+    confirmation is the scan's (the rosette's sparse periphery, paper Fig. 5) and what part the
+    tracker's."""
     t = np.asarray(times_s, np.float64)
     n = np.asarray(rays, np.int64)
     seen = np.flatnonzero(n > 0)
     if seen.size == 0:
         return None
     first = int(seen[0])
-    hit = (n >= min_points) & np.asarray(tracked, bool)
+    tracked = np.asarray(tracked, bool)
+    start = (n >= min_points) & tracked                 # a frame that can start a track
+    hit = (n >= (1 if lone_returns else min_points)) & tracked
     for k in range(first, t.size):
-        if hit[k] and int(hit[max(first, k - confirm_window + 1):k + 1].sum()) >= confirm_hits:
-            return float(t[max(k, reported_from)] - t[first])
+        if not hit[k]:
+            continue
+        # a track started at s is confirmed at k if it has confirm_hits hits in its first
+        # confirm_window frames (s itself the first)
+        for s in range(max(first, k - confirm_window + 1), k + 1):
+            if start[s] and int(hit[s:k + 1].sum()) >= confirm_hits:
+                return float(t[max(k, reported_from)] - t[first])
     return None
 
 

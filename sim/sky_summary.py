@@ -106,10 +106,11 @@ def _scan_bounds(loop, log, drones: dict, m: dict) -> None:
     for d, a in drones.items():
         r = m["drones"][d]
         r["scan_allows_confirm_s"] = scan_allows_confirm_s(t, tracked, a["rays"], cfg.min_points,
-                                                           cfg.confirm_hits, cfg.confirm_window, reported_from)
+                                                           cfg.confirm_hits, cfg.confirm_window, reported_from,
+                                                           cfg.lone_returns)
         r["scan_allows_confirm_no_warmup_s"] = scan_allows_confirm_s(t, np.ones(t.size, bool), a["rays"],
                                                                      cfg.min_points, cfg.confirm_hits,
-                                                                     cfg.confirm_window)
+                                                                     cfg.confirm_window, lone_returns=cfg.lone_returns)
 
 
 def _head_bounds(loop, log, drones: dict, m: dict) -> None:

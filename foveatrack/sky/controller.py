@@ -38,6 +38,7 @@ from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_ax
                                       saccade_time_s, threat_score)
 from foveatrack.sky.classify import ADDED_SINCE_RECORDED as CLASSIFIER_ADDED
 from foveatrack.space_of_interest import Box
+from foveatrack.sky.tracks import ADDED_SINCE_RECORDED as TRACKER_ADDED
 from foveatrack.sky.tracks import SkyFrameOutput, SkyTracker, SkyTrackerConfig
 from foveatrack.tracker import Tracker, TrackOutput
 
@@ -113,10 +114,11 @@ def sky_configs_from_mapping(data: Mapping, where: str, field_half_angle_deg: fl
 
 def recorded_sky_table(table: Mapping) -> dict:
     """A recording's ``[tracker.sky]`` table as it ran: the keys the tracker has gained since the
-    recording was made (:data:`foveatrack.sky.classify.ADDED_SINCE_RECORDED`,
+    recording was made (:data:`foveatrack.sky.tracks.ADDED_SINCE_RECORDED`,
+    :data:`foveatrack.sky.classify.ADDED_SINCE_RECORDED`,
     :data:`foveatrack.sky.attention.ADDED_SINCE_RECORDED`) at the values that
     behave as before them (a table from :func:`sky_table` has every key, and keeps its own)."""
-    table = dict(table)
+    table = {**TRACKER_ADDED, **table}
     for sub, added in (("classifier", CLASSIFIER_ADDED), ("attention", ATTENTION_ADDED)):
         given = table.get(sub, {})
         if isinstance(given, Mapping):

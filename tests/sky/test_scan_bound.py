@@ -51,3 +51,19 @@ def test_a_tracked_warm_up_counts_its_hits_and_reports_at_its_end():
 
 def test_never_hit_is_none():
     assert _bound([]) is None
+
+
+def test_with_lone_returns_a_track_started_by_two_rays_takes_single_rays_as_hits():
+    # the tracker with lone_returns: frame 1 (two rays) starts it, frames 3 and 5 (one ray each) are
+    # hits: confirmable at t 0.6, where objects alone (two rays a frame) never confirm it
+    rays = [0, 2, 0, 1, 0, 1] + [0] * 34
+    assert _bound(rays) is None
+    assert scan_allows_confirm_s(T, np.ones(T.size, bool), np.asarray(rays), 2, 3, 15,
+                                 lone_returns=True) == pytest.approx(0.6 - 0.2)
+    # single rays before any frame of two rays start nothing: the window counts from the start
+    early = [1, 1, 1, 1] + [0] * 10 + [2] + [0] * 25
+    assert scan_allows_confirm_s(T, np.ones(T.size, bool), np.asarray(early), 2, 3, 15, lone_returns=True) is None
+    # and the window holds: a start 15 frames before the third hit is too old
+    far = [2] + [0] * 13 + [1, 1] + [0] * 24
+    assert scan_allows_confirm_s(T, np.ones(T.size, bool), np.asarray(far), 2, 3, 15, lone_returns=True) is None
+    assert scan_allows_confirm_s(T, np.ones(T.size, bool), np.asarray(far), 2, 3, 16, lone_returns=True) == pytest.approx(1.5)

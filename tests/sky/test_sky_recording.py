@@ -286,3 +286,15 @@ def test_a_recording_made_before_a_sky_key_existed_replays_as_it_ran(tmp_path, m
     sky[sub] = {k: v for k, v in sky[sub].items() if k not in before}
     res_now = replay_recording(out / "run.mcap", tracker_table={**table, "sky": sky}, config_name="today's default")
     assert not (res_now.comparison["commands_equal"] and res_now.comparison["tracks"]["identical_all"])
+
+
+def test_a_recorded_sky_table_without_the_trackers_own_later_keys_gets_them_as_they_ran():
+    # lone_returns (default off) came after recordings kept the sky table: a table without it ran
+    # without lone returns, and one that has it keeps its own, whatever the default becomes
+    from foveatrack.sky.controller import recorded_sky_table
+    from foveatrack.sky.tracks import ADDED_SINCE_RECORDED
+
+    assert ADDED_SINCE_RECORDED == {"lone_returns": False}
+    assert recorded_sky_table({"gate_max_m": 2.5})["lone_returns"] is False
+    assert recorded_sky_table({"lone_returns": True})["lone_returns"] is True
+    assert recorded_sky_table({})["classifier"] == {"drone_after_hits": 0}

@@ -372,14 +372,22 @@ def test_two_tracks_close_for_long_become_one_whatever_their_velocities(close_fr
     assert list(tracker.process(empty(4), pose).deleted_now) == gone
 
 
+@pytest.mark.parametrize("key", ["warmup_replay", "lone_returns"])
 @pytest.mark.parametrize("value, ok", [(True, True), (False, True), (1, False), ("yes", False)])
-def test_warmup_replay_is_true_or_false_in_a_table(value, ok):
+def test_the_sky_tables_switches_are_true_or_false(key, value, ok):
     from foveatrack.errors import UserError
     if ok:
-        assert SkyTrackerConfig.from_mapping({"warmup_replay": value}, "[tracker.sky]").warmup_replay is value
+        assert getattr(SkyTrackerConfig.from_mapping({key: value}, "[tracker.sky]"), key) is value
     else:
-        with pytest.raises(UserError, match=r"\[tracker.sky\]: warmup_replay must be true or false"):
-            SkyTrackerConfig.from_mapping({"warmup_replay": value}, "[tracker.sky]")
+        with pytest.raises(UserError, match=rf"\[tracker.sky\]: {key} must be true or false"):
+            SkyTrackerConfig.from_mapping({key: value}, "[tracker.sky]")
+
+
+@pytest.mark.parametrize("gate", [0.0, -1.0])
+def test_a_lone_return_gate_that_takes_nothing_is_refused(gate):
+    from foveatrack.errors import UserError
+    with pytest.raises(UserError, match=r"lone_gate_m must be > 0"):
+        SkyTrackerConfig.from_mapping({"lone_gate_m": gate}, "[tracker.sky]")
 
 
 def test_the_track_the_fovea_turns_to_is_not_given_up_while_the_head_gets_there():
@@ -576,3 +584,38 @@ def test_association_is_the_numpy_gate_and_scipy_s_assignment():
         slow += conflict
         fast += not conflict
     assert fast > 50 and slow > 50
+
+
+def _frames_of_points(points_per_frame):
+    """Frames at 10 Hz holding the given world points (lists of (3,)), each at its frame's mid time."""
+    from foveatrack.frames import Frame
+
+    out = []
+    for k, pts in enumerate(points_per_frame):
+        t0, t1 = k * 0.1, (k + 1) * 0.1
+        xyz = np.array(pts, float).reshape(-1, 3)
+        t_ns = np.full(len(xyz), int(round((t0 + 0.05) * 1e9)), np.int64)
+        out.append(Frame(t0, t1, xyz, t_ns))
+    return out
+
+
+@pytest.mark.parametrize("lone_returns, offset_m, confirmed_at", [(True, 0.0, 2), (False, 0.0, None),
+                                                                   (True, 1.5, None)])
+def test_a_far_drone_s_lone_returns_confirm_the_track_its_object_started(lone_returns, offset_m, confirmed_at):
+    # A small drone 40 m out at the rosette's sparse rim: one frame holds three of its returns (an
+    # object, which starts a track), the next frames one return each.  With lone_returns those are
+    # hits of the track (step 5b) and it is confirmed at the third frame; objects alone never
+    # confirm it; a lone return beyond lone_gate_m (1 m) of the prediction is not its.
+    cfg = SkyTrackerConfig(warmup_s=0.0, lone_returns=lone_returns)
+    p = lambda k: np.array([40.0, 2.0 - 0.1 * k, 5.0])            # 1 m/s sideways
+    cluster = [p(0) + d for d in ([0, 0, 0], [0, 0.1, 0], [0, 0, 0.1])]
+    frames = _frames_of_points([cluster] + [[p(k) + [0.0, 0.0, offset_m]] for k in range(1, 6)])
+    tracker = SkyTracker(cfg)
+    outs = [tracker.process(f, Pose()) for f in frames]
+    confirmed = [k for k, o in enumerate(outs) if any(v.confirmed for v in o.tracks)]
+    assert (confirmed[0] if confirmed else None) == confirmed_at, confirmed
+    # lone returns start no track, and the classifier's history holds the one object
+    assert [v.track_id for v in outs[-1].tracks] == [0]
+    assert len(tracker.tracks[0].history) == 1
+    if confirmed_at is not None:
+        assert np.linalg.norm(outs[-1].tracks[0].xyz_m - p(5.5)) < 0.3
