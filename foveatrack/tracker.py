@@ -380,11 +380,14 @@ class Tracker:
         return self.steer(frame, self._detect(frame), send_t_s)
 
     def steer(self, frame: Frame, det: Detection | None, send_t_s: float | None = None,
-              gains_1_s: tuple[float, float] | None = None) -> TrackOutput:
+              gains_1_s: tuple[float, float] | None = None, search: bool = True) -> TrackOutput:
         """Algorithm 2 (and the lost-target states) on a detection of ``frame`` made by the caller:
         :meth:`process`'s Algorithm 1, or the sky tracker's in the fixated track's D
         (:mod:`foveatrack.sky.controller`).  ``gains_1_s``: (pan, tilt) gains for this frame in
-        place of the configured ones (the sky tracker's saccades; the paper controller only)."""
+        place of the configured ones (the sky tracker's saccades; the paper controller only).
+        ``search``: without a detection past ``hold_s`` the configured lost-target search runs
+        (false: the head holds, as with ``search = "hold"``: the sky tracker's fovea with nothing to
+        serve)."""
         cfg = self.config
         t_now = frame.t_end_s
         send_t = t_now + cfg.send_delay_s if send_t_s is None else send_t_s
@@ -404,7 +407,7 @@ class Tracker:
             v_pan, v_tilt = self._control(det, err_pan, err_tilt, hp, ht, send_t, gains_1_s)
         else:
             hp, ht, sp, st = self.recon.angles_at(t_now)
-            v_pan, v_tilt = self._lost(t_now, send_t, ht)
+            v_pan, v_tilt = self._lost(t_now, send_t, ht, search)
         cmd, vp, vt, limited = self._to_command(v_pan, v_tilt, send_t)
         self.recon.on_command(send_t, cmd)
         self.last_command = cmd
@@ -470,7 +473,7 @@ class Tracker:
             v_tilt += deadband_p(th_t - ht_a, cfg.pred_deadband_deg, cfg.gain_tilt_1_s)
         return v_pan, v_tilt
 
-    def _lost(self, t_now: float, send_t: float, tilt_est: float) -> tuple[float, float]:
+    def _lost(self, t_now: float, send_t: float, tilt_est: float, search: bool = True) -> tuple[float, float]:
         cfg = self.config
         if self.last_detection_t_s is None:
             self.state = TrackState.WAITING
@@ -480,6 +483,9 @@ class Tracker:
             self.state = TrackState.HOLDING
             if cfg.controller == "predictive" and self.pan_filter.initialised:
                 return self._predictive_speeds(send_t, corrective=False)
+            return 0.0, 0.0
+        if not search:
+            self.state = TrackState.HOLDING
             return 0.0, 0.0
         if cfg.search == "hold" or (cfg.search_timeout_s is not None and since >= cfg.hold_s + cfg.search_timeout_s):
             self.state = TrackState.WAITING if cfg.search == "sweep" else TrackState.HOLDING

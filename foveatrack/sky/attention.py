@@ -41,6 +41,14 @@ Schedule (evaluated after each frame, for the next):
   fovea, or ``saccade_timeout_s`` after the turn began);
 * with no confirmed track, the fovea goes to the tentative track with the most hits off the scenery
   (at least ``verify_min_hits``): a saccade to verify what the field's sparse rim only hints at;
+* with nothing to serve (no confirmed track that scores, no candidate), the head holds where it
+  looks: the field keeps watching at its sparse density and a drone there is found again.  The
+  paper tracker's lost-target search (its ``search``, a sweep at 5 deg/s in the last direction)
+  is for a single target lost from a narrow D; run by the sky tracker it turned the head away from
+  the field it watched (tree line, seed 230: the drone's track was lost while the fovea served a
+  crown's part, the head swept 70 deg away and the drone was never in the fovea again; held, its
+  track was found again 2.5 s later).  ``idle_search`` (default false) brings the sweep back, as
+  recordings made before it ran;
 * a revisit fixation lasts until the track has been in the fovea for ``dwell_s``, or
   ``saccade_timeout_s`` after it started if the head never got there (a track the head cannot
   reach does not hold the fovea); then the fovea returns to the priority track.
@@ -100,7 +108,7 @@ _NO_OFFSET = np.zeros(3)
 CLASS_WEIGHT = {"drone": 1.0, "unknown": 0.5, "bird": 0.05, "clutter": 0.0}
 #: the keys the attention has gained since recordings were made, at the values that behave as before
 #: them: a recording's table without them replays as it ran (:func:`foveatrack.sky.controller.recorded_sky_table`)
-ADDED_SINCE_RECORDED = {"saccade_counts_motion": False, "keep_verdict": False}
+ADDED_SINCE_RECORDED = {"saccade_counts_motion": False, "keep_verdict": False, "idle_search": True}
 
 
 @dataclass(frozen=True)
@@ -118,6 +126,7 @@ class AttentionConfig:
     saccade_gain_1_s: float | None = None
     saccade_counts_motion: bool = False
     keep_verdict: bool = True
+    idle_search: bool = False
 
     @classmethod
     def from_mapping(cls, data: Mapping, where: str) -> "AttentionConfig":
@@ -126,7 +135,7 @@ class AttentionConfig:
         for k, v in data.items():
             if k == "protected_xyz_m":
                 kw[k] = as_vec(v, k, where, 3)
-            elif k in ("saccade_counts_motion", "keep_verdict"):
+            elif k in ("saccade_counts_motion", "keep_verdict", "idle_search"):
                 kw[k] = as_bool(v, k, where)
             elif k == "saccade_latency_s":
                 kw[k] = as_float(v, k, where, lo=0)

@@ -222,7 +222,9 @@ class SkyController:
         if ks is not None and view is not None and bearing_off_axis_deg(
                 view.xyz_m, *self._pose_rows(frame.t_end_s)) > self.attention.cfg.fovea_half_angle_deg:
             gains = (ks, ks)        # a saccade: the fixated track is off the fovea
-        out = self.tracker.steer(frame, det, send_t_s, gains)
+        # nothing to serve (no confirmed track, no candidate): the head holds where it looks, unless
+        # the attention asks for the paper tracker's lost-target sweep (idle_search)
+        out = self.tracker.steer(frame, det, send_t_s, gains, search=self.attention.cfg.idle_search)
         att = self.attention.cfg
         t_mid = 0.5 * (frame.t_start_s + frame.t_end_s)
         mid_pose = self._pose_rows(t_mid)

@@ -243,12 +243,16 @@ def test_a_replay_under_another_table_places_the_points_from_the_head_as_it_move
 #   five hits and five frames of coasting (the count of hits keeps that label back);
 # * attention.saccade_counts_motion and keep_verdict, the crossing (its own seed): out of the fovea a
 #   drone's track looks unknown, and keeps its label for the schedule (the first key's default is
-#   what ran before it; a table without it must still replay so).
+#   what ran before it; a table without it must still replay so);
+# * attention.idle_search, tree line seed 230: the drone's track is lost while the fovea serves a
+#   crown's part, nothing is left to serve, and the paper tracker's search swept the head away
+#   (today the head holds).
 ADDED_KEYS = [("drone-tree-line", 258, "classifier", {"drone_after_hits": 0}),
-              ("two-drones-crossing", 28, "attention", {"saccade_counts_motion": False, "keep_verdict": False})]
+              ("two-drones-crossing", 28, "attention", {"saccade_counts_motion": False, "keep_verdict": False}),
+              ("drone-tree-line", 230, "attention", {"idle_search": True})]
 
 
-@pytest.mark.parametrize("name,seed,sub,before", ADDED_KEYS, ids=[k[2] for k in ADDED_KEYS])
+@pytest.mark.parametrize("name,seed,sub,before", ADDED_KEYS, ids=[f"{k[2]}-{'-'.join(k[3])}" for k in ADDED_KEYS])
 def test_a_recording_made_before_a_sky_key_existed_replays_as_it_ran(tmp_path, monkeypatch, name, seed, sub, before):
     # a recording made before the keys ran without them, and a table without them must replay so,
     # not with today's defaults
