@@ -346,3 +346,32 @@ def test_the_verdicts_kept_are_those_of_live_tracks():
         att.looks_like(v)
         att.update(0.1 * (k + 1), [v], set(), 0.1)
     assert set(att._verdict) == {49}
+
+
+def _unseen_view(tid, xyz, hit):
+    return TrackView(tid, True, "drone", np.array(xyz, float), np.zeros(3), hit, True, {})
+
+
+@pytest.mark.parametrize("drop_s, pin", [(1.5, False), (0.0, False), (1.5, True)])
+def test_a_priority_the_head_turns_to_and_never_sees_is_set_aside_until_seen(drop_s, pin):
+    # Track 0 (nearest: the priority) coasts with no hit and the head never gets it into the fovea
+    # (a bird's track flown on faster than its prediction); track 1 is in the fovea whenever served.
+    # After drop_unseen_priority_s the priority goes to track 1; a hit on track 0 brings it back.
+    # 0: never; an operator's pin is never set aside.
+    att = Attention(AttentionConfig(drop_unseen_priority_s=drop_s, revisit_s=100.0))
+    if pin:
+        att.pin(0)
+    seen_again_s = 4.0
+
+    def views(t):
+        return [_unseen_view(0, [20, 0, 0], hit=t >= seen_again_s - 1e-9), _unseen_view(1, [60, 5, 0], hit=True)]
+
+    served = dict(_run(att, views, lambda target: {1} if target == 1 else set(), 6.0))
+    assert served[1.0] == 0
+    moved = [t for t, s in sorted(served.items()) if s == 1 and t < seen_again_s]
+    if drop_s > 0 and not pin:
+        assert moved and min(moved) == pytest.approx(1.7), moved   # given at 0.1 s, set aside at 1.6 s, served next
+        assert served[seen_again_s + 0.2] == 0                      # seen again: the priority once more
+        assert not att.set_aside
+    else:
+        assert not moved and not att.set_aside
