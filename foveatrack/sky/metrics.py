@@ -35,7 +35,11 @@ in a swarm was credited with another drone's track.)
                         foveatrack.sky.classify rule 5)
 ``continuity``          share of the frames from that first match on with a matched track
 ``id_switches``         times the matched track's id changes (gaps without a match do not count)
-``fovea_share``         share of its visible frames the drone spends in the fovea
+``fovea_share``         share of its visible frames the drone spends in the fovea, of those in the
+                        field where ``in_field`` is given (a drone that flew out of the space of
+                        interest, still hit by a ray now and then, is not the fovea's to serve: the
+                        tree line's drone, flown on past 70 m, was so for 90 s of an hour's run, and
+                        a head that held still where it had gone scored less than one that swept away)
 ``longest_revisit_gap_s``  the longest stretch (after its first confirmation) out of the fovea, up
                         to its last frame in the field (``in_field`` where given: the simulator's is
                         the head's reach, :func:`sim.sky_summary.drone_truth`; a drone that has
@@ -166,9 +170,10 @@ def drone_metrics(times_s, drones: dict, tracks_per_frame, match_m: float = 2.0)
         fov = drones[d].get("in_fovea")
         if fov is not None:
             fov = np.asarray(fov, bool)
-            r["fovea_share"] = float(fov[vis].mean()) if vis.any() else 0.0
-            gap, longest, since = 0, 0, None
             field = drones[d].get("in_field")
+            counted = vis if field is None else vis & np.asarray(field, bool)
+            r["fovea_share"] = float(fov[counted].mean()) if counted.any() else 0.0
+            gap, longest, since = 0, 0, None
             # up to its last frame in the field (a drone never in it: no gap to count)
             end = T if field is None else (int(np.flatnonzero(field)[-1]) + 1 if np.any(field) else 0)
             for k in range(first if first is not None else T, end):

@@ -105,6 +105,20 @@ def test_a_revisit_gap_ends_with_the_drones_last_frame_in_the_field():
         == pytest.approx(8.0)
 
 
+def test_the_fovea_share_counts_the_frames_in_the_field():
+    # in the fovea for its first 2 s, in the field (the space of interest) for 5 s, hit by rays for
+    # all 10: a share of its 50 frames in the field, not of the 100 it was hit
+    T = 100
+    t = 0.1 * np.arange(T)
+    xyz = np.stack([np.full(T, 30.0), np.linspace(-5, 5, T), np.full(T, 3.0)], 1)
+    d = {"xyz_m": xyz, "visible": np.ones(T, bool), "in_fovea": np.arange(T) < 20}
+    tracks = [[(1, "drone", xyz[k])] for k in range(T)]
+    assert drone_metrics(t, {"a": d}, tracks)["drones"]["a"]["fovea_share"] == pytest.approx(0.2)
+    field = np.arange(T) < 50
+    assert drone_metrics(t, {"a": {**d, "in_field": field}}, tracks)["drones"]["a"]["fovea_share"] == pytest.approx(0.4)
+    assert drone_metrics(t, {"a": {**d, "in_field": np.zeros(T, bool)}}, tracks)["drones"]["a"]["fovea_share"] == 0.0
+
+
 def test_a_track_passing_by_a_drone_does_not_take_its_match():
     # The drone's own track follows it 0.3 m off; a crown's track (labelled clutter) passes through
     # the drone's position.  CLEAR MOT keeps the drone's match while its track stays within match_m:
