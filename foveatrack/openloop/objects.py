@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from foveatrack.detection import frozen_maker
+
 
 @dataclass(frozen=True)
 class FrameObject:
@@ -21,6 +23,9 @@ class FrameObject:
     t_median_ns: float | None = None
 
 
+_make_frame_object = frozen_maker(FrameObject)   # FrameObject(...) without the frozen init's cost per field, per object
+
+
 def cluster_labels(xyz: np.ndarray, tol_m: float, tol_rad: float) -> tuple[np.ndarray, int]:
     """Cluster labels (0.. in order of first point) and the number of clusters."""
     from foveatrack.openloop.kernels import cluster_kernel
@@ -31,13 +36,13 @@ def cluster_labels(xyz: np.ndarray, tol_m: float, tol_rad: float) -> tuple[np.nd
     return labels, int(k)
 
 
-def objects_from_labels(xyz: np.ndarray, labels: np.ndarray, n: int, min_points: int = 1,
-                        max_extent_m: float = np.inf, t_ns: np.ndarray | None = None
-                        ) -> tuple[list[FrameObject], list[int]]:
-    """The clusters of at least ``min_points`` points and at most ``max_extent_m`` across (the
-    drone-like ones; a scene's scattered returns make thousands of small clusters not worth a
-    summary), and their labels; with ``t_ns`` (N,) each one's median time too.  The medians and
-    extents come from :func:`foveatrack.openloop.kernels.cluster_summary_kernel`."""
+def object_summaries(xyz: np.ndarray, labels: np.ndarray, n: int, min_points: int = 1,
+                     max_extent_m: float = np.inf, t_ns: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The summaries :func:`objects_from_labels` makes its objects of, as arrays: the kept clusters'
+    labels (k,), medians (k, 3), box sides (k, 3), point counts (k,) and median times [ns] (k,; with
+    ``t_ns``, else unset).  The sky tracker builds its own objects of them, without a
+    :class:`FrameObject` each."""
     from foveatrack.openloop.kernels import cluster_summary_kernel
 
     xyz = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 3)
@@ -52,10 +57,21 @@ def objects_from_labels(xyz: np.ndarray, labels: np.ndarray, n: int, min_points:
     # numpy calls one by one): each median and box its own row of a fresh array
     big = np.flatnonzero(count >= min_points)
     kept = big[sides[big].max(axis=1) <= max_extent_m]
-    meds, boxes = med[kept], sides[kept]
+    return kept, med[kept], sides[kept], count[kept], t_med[kept]
+
+
+def objects_from_labels(xyz: np.ndarray, labels: np.ndarray, n: int, min_points: int = 1,
+                        max_extent_m: float = np.inf, t_ns: np.ndarray | None = None
+                        ) -> tuple[list[FrameObject], list[int]]:
+    """The clusters of at least ``min_points`` points and at most ``max_extent_m`` across (the
+    drone-like ones; a scene's scattered returns make thousands of small clusters not worth a
+    summary), and their labels; with ``t_ns`` (N,) each one's median time too.  The medians and
+    extents come from :func:`foveatrack.openloop.kernels.cluster_summary_kernel`
+    (:func:`object_summaries`)."""
+    kept, meds, boxes, counts, t_med = object_summaries(xyz, labels, n, min_points, max_extent_m, t_ns)
     x, y, z = meds[:, 0], meds[:, 1], meds[:, 2]
     ranges = np.sqrt(x * x + y * y + z * z)          # norm3's sum, row by row
-    times = [None] * kept.size if t_ns is None else t_med[kept].tolist()
-    out = [FrameObject(m, n_pts, e, r, s, t) for m, n_pts, e, r, s, t in
-           zip(meds, count[kept].tolist(), boxes.max(axis=1).tolist(), ranges.tolist(), boxes, times)]
+    times = [None] * kept.size if t_ns is None else t_med.tolist()
+    out = [_make_frame_object(m, n_pts, e, r, s, t) for m, n_pts, e, r, s, t in
+           zip(meds, counts.tolist(), boxes.max(axis=1).tolist(), ranges.tolist(), boxes, times)]
     return out, kept.tolist()

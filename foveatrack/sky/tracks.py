@@ -107,7 +107,7 @@ from foveatrack.fixed_order import norm3
 from foveatrack.frames import Frame
 from foveatrack.kernels import (association_kernel, box_inside_kernel, close_pairs_kernel, in_field_kernel,
                                 valid_mask_kernel)
-from foveatrack.openloop.objects import cluster_labels, objects_from_labels
+from foveatrack.openloop.objects import cluster_labels, object_summaries
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
 from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, variances_many
@@ -249,6 +249,9 @@ class SkyObject:
     @property
     def extent_m(self) -> float:
         return float(self.sides_m.max())
+
+
+_make_object = frozen_maker(SkyObject)    # SkyObject(...) without the frozen init's cost per field, per object
 
 
 @dataclass
@@ -450,10 +453,9 @@ class SkyTracker:
         fov = next((i for i, tr in enumerate(self.tracks) if tr.track_id == fovea_track_id), None)
         if fov is not None:
             tr = self.tracks[fov]
-            keep = np.ones(fg_idx.size, bool)
-            for j, i in obj_track.items():
-                if i != fov:
-                    keep &= point_obj != j
+            others = np.zeros(len(objs) + 1, bool)      # by object index; the last, False, is -1: no object
+            others[[j for j, i in obj_track.items() if i != fov]] = True
+            keep = ~others[point_obj]
             sel = fg_idx[keep]
             c = pred_mid[fov]
             d_box = Box(tuple((c - cfg.d_half_m).tolist()), tuple((c + cfg.d_half_m).tolist()))
@@ -462,6 +464,9 @@ class SkyTracker:
                                       head_trig(pan, tilt), off, lo, hi)
         confirmed_now = []
         learn_pts = np.ones(fg_idx.size, bool)
+        # the objects whose points are kept out of the learning, applied to learn_pts at once after
+        # the loops (one pass over the foreground, not one per object); the last entry is -1: no object
+        unlearn = np.zeros(len(objs) + 1, bool)
         if fov is not None and self.tracks[fov].confirmed and self.tracks[fov].excursion_m >= cfg.protect_excursion_m:
             # the fixated track's D is the target's (Algorithm 1): a frame with a single return on a
             # hovering drone makes no object to protect, and a few such frames made it scenery
@@ -482,7 +487,7 @@ class SkyTracker:
             self._hit(tr, tz, z, ob)
             self._confirm_if_due(tr, t_mid, confirmed_now)
             if protect:
-                learn_pts &= point_obj != j
+                unlearn[j] = True
         if fov is not None and fovea_det is not None and not self.tracks[fov].hit_now:
             # seen by Algorithm 1 though no object matched (too few points for an object)
             tr = self.tracks[fov]
@@ -498,7 +503,7 @@ class SkyTracker:
                 # a part of an object a confirmed track has just taken (the sparse scan split a drone
                 # into two clusters): no new track, which would take the drone's hits in turn with
                 # the old one; kept out of the background as the part that was taken
-                learn_pts &= point_obj != j
+                unlearn[j] = True
                 continue
             if j not in obj_track:
                 tr = SkyTrack(self._next_id, ConstantVelocityFilter(ob.t_s, ob.xyz_m, cfg.q_m2_s3, cfg.r_m2,
@@ -514,8 +519,9 @@ class SkyTracker:
                     confirmed_now.append(tr.track_id)
                 self.tracks.append(tr)
                 if not ob.on_scenery:
-                    learn_pts &= point_obj != j
+                    unlearn[j] = True
         if learn:
+            learn_pts &= ~unlearn[point_obj]
             keep = np.ones(cells.size, bool)
             keep[fg_idx[~learn_pts]] = False
             self.background.learn(cells[keep], ranges[keep])
@@ -560,15 +566,16 @@ class SkyTracker:
         if world.shape[0] == 0:
             return [], np.full(0, -1, np.int64), None
         labels, n = cluster_labels(world, cfg.cluster_tol_m, cfg.cluster_tol_rad)
-        found, kept = objects_from_labels(world, labels, n, cfg.min_points, cfg.max_extent_m, t_ns)
+        # the kept clusters' summaries as arrays (objects_from_labels' objects, without a FrameObject each)
+        kept, meds, boxes, counts, t_med = object_summaries(world, labels, n, cfg.min_points, cfg.max_extent_m, t_ns)
         # each point's object through its cluster's label (kept clusters numbered in order), and each
         # object's points on scenery in the making, for all objects at once
         index = np.full(n, -1, np.int64)
-        index[kept] = np.arange(len(kept))
+        index[kept] = np.arange(kept.size)
         point_obj = index[labels]
-        near_n = np.bincount(point_obj[near & (point_obj >= 0)], minlength=len(kept)).tolist()
-        objs = [SkyObject(fo.xyz_m, fo.t_median_ns * 1e-9, fo.n_points, fo.sides_m, 2 * k >= fo.n_points)
-                for fo, k in zip(found, near_n)]
+        near_n = np.bincount(point_obj[near & (point_obj >= 0)], minlength=kept.size).tolist()
+        objs = [_make_object(m, t * 1e-9, n_pts, box, 2 * k >= n_pts)
+                for m, t, n_pts, box, k in zip(meds, t_med.tolist(), counts.tolist(), boxes, near_n)]
         lone = None
         if cfg.lone_returns:
             alone = np.bincount(labels, minlength=n)[labels] == 1
