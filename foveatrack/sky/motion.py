@@ -15,6 +15,10 @@ elementwise numpy operation on the three axes (no BLAS, :mod:`foveatrack.fixed_o
 :meth:`ConstantVelocityFilter.update` the same operations on each axis's Python floats (a few hits a
 frame, where a dozen numpy calls on three elements cost more than the arithmetic): the same bits on
 every CPU.
+
+A filter keeps its state in one (5, 3) array, rows ``p, v, a, b, c``, made afresh at every change
+(never written in place: a position or velocity handed out stays as it was): a frame's predictions
+of every track (:func:`positions_many`, :func:`variances_many`) gather one array per filter, not five.
 """
 
 from __future__ import annotations
@@ -27,17 +31,35 @@ import numpy as np
 class ConstantVelocityFilter:
     """Position, velocity and their per-axis covariance of one track (see module docstring)."""
 
-    __slots__ = ("t_s", "p", "v", "a", "b", "c", "q", "r")
+    __slots__ = ("t_s", "state", "q", "r")
 
     def __init__(self, t_s: float, xyz_m, q_m2_s3: float, r_m2: float, v0_sigma_m_s: float):
         self.t_s = float(t_s)
-        self.p = np.array(xyz_m, np.float64).reshape(3)
-        self.v = np.zeros(3)
-        self.a = np.full(3, float(r_m2))
-        self.b = np.zeros(3)
-        self.c = np.full(3, float(v0_sigma_m_s) ** 2)
+        state = np.zeros((5, 3))           # rows p, v, a, b, c (module docstring)
+        state[0] = np.array(xyz_m, np.float64).reshape(3)
+        state[2] = float(r_m2)
+        state[4] = float(v0_sigma_m_s) ** 2
+        self.state = state
         self.q = float(q_m2_s3)
         self.r = float(r_m2)
+
+    def _row(k: int, doc: str):
+        def get(self) -> np.ndarray:
+            return self.state[k]
+
+        def put(self, value) -> None:
+            # a fresh state with the row replaced: what was handed out before stays as it was
+            state = self.state.copy()
+            state[k] = value
+            self.state = state
+        return property(get, put, doc=doc)
+
+    p = _row(0, "position (3,) [m]")
+    v = _row(1, "velocity (3,) [m/s]")
+    a = _row(2, "per-axis variance of the position (3,)")
+    b = _row(3, "per-axis covariance of position and velocity (3,)")
+    c = _row(4, "per-axis variance of the velocity (3,)")
+    del _row
 
     def position_at(self, t_s: float) -> np.ndarray:
         """Position (3,) at ``t_s``, the filter unchanged (:meth:`predicted` without the variance)."""
@@ -54,10 +76,9 @@ class ConstantVelocityFilter:
         if dt == 0.0:
             return
         q = self.q
-        self.p = self.p + self.v * dt
-        self.a = self.a + 2.0 * dt * self.b + dt * dt * self.c + q * dt * dt * dt / 3.0
-        self.b = self.b + dt * self.c + q * dt * dt / 2.0
-        self.c = self.c + q * dt
+        p, v, a, b, c = self.state
+        self.state = np.array([p + v * dt, v, a + 2.0 * dt * b + dt * dt * c + q * dt * dt * dt / 3.0,
+                               b + dt * c + q * dt * dt / 2.0, c + q * dt])
         self.t_s = float(t_s)
 
     def update(self, t_s: float, z_m, r_m2: float | None = None) -> None:
@@ -67,8 +88,7 @@ class ConstantVelocityFilter:
         r = self.r if r_m2 is None else float(r_m2)
         q = self.q
         axes = []
-        for z, p, v, a, b, c in zip(np.asarray(z_m, np.float64).reshape(3).tolist(), self.p.tolist(),
-                                    self.v.tolist(), self.a.tolist(), self.b.tolist(), self.c.tolist()):
+        for z, p, v, a, b, c in zip(np.asarray(z_m, np.float64).reshape(3).tolist(), *self.state.tolist()):
             if dt != 0.0:
                 p = p + v * dt
                 a = a + 2.0 * dt * b + dt * dt * c + q * dt * dt * dt / 3.0
@@ -80,8 +100,7 @@ class ConstantVelocityFilter:
             axes.append((p + ka * y, v + kb * y, a * (r / s), b * (r / s), c - b * kb))
         if dt != 0.0:
             self.t_s = float(t_s)
-        p, v, a, b, c = zip(*axes)
-        self.p, self.v, self.a, self.b, self.c = np.array(p), np.array(v), np.array(a), np.array(b), np.array(c)
+        self.state = np.array(list(zip(*axes)))      # per axis (p, v, a, b, c) -> rows p, v, a, b, c
 
     def mahalanobis2(self, t_s: float, z_m) -> float:
         """Squared Mahalanobis distance of ``z_m`` from the prediction at ``t_s`` (sum x, y, z in order)."""
@@ -102,7 +121,8 @@ def positions_many(filters, t_s: float) -> np.ndarray:
     if not filters:
         return np.empty((0, 3))
     dt = t_s - np.array([f.t_s for f in filters])
-    return np.array([f.p for f in filters]) + np.array([f.v for f in filters]) * dt[:, None]
+    S = np.array([f.state for f in filters])
+    return S[:, 0] + S[:, 1] * dt[:, None]
 
 
 def variances_many(filters, t_s: float) -> np.ndarray:
@@ -113,7 +133,6 @@ def variances_many(filters, t_s: float) -> np.ndarray:
         return np.empty((0, 3))
     dt = t_s - np.array([f.t_s for f in filters])
     q = np.array([f.q for f in filters])
-    a = np.array([f.a for f in filters])
-    b = np.array([f.b for f in filters])
-    c = np.array([f.c for f in filters])
+    S = np.array([f.state for f in filters])
+    a, b, c = S[:, 2], S[:, 3], S[:, 4]
     return a + (2.0 * dt)[:, None] * b + (dt * dt)[:, None] * c + (q * dt * dt * dt / 3.0)[:, None]
