@@ -314,8 +314,9 @@ def window_features(track, period: tuple[float, float] | None) -> dict:
     if n < 2:
         return f
     out = np.empty(8)
-    features_kernel(np.array([x[0] for x in h], np.float64), np.array([x[1] for x in h], np.float64).reshape(n, 3),
-                    np.array([x[2] for x in h], np.float64).reshape(n, 3), np.array([x[3] for x in h], np.int64),
+    ts, ps, sides, counts = zip(*h)         # the hits' columns in one pass over the window
+    features_kernel(np.array(ts, np.float64), np.array(ps, np.float64).reshape(n, 3),
+                    np.array(sides, np.float64).reshape(n, 3), np.array(counts, np.int64),
                     period is not None, *(period or (0.0, 0.0)), out)
     median_points, size_m, net_speed, flap_cv, has_manoeuvre, manoeuvre, has_period, flap = out.tolist()
     f["median_points"] = median_points
