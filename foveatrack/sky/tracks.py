@@ -282,6 +282,7 @@ class SkyTrack:
     last_seen_in_view: bool = True
     unseen_in_view_s: float = 0.0   # time since its last hit during which where it was last seen lay in the field
     classified_on: tuple | None = None    # what the classifier last read (SkyTracker._classify)
+    history_in_order: bool = True   # each hit's time >= the one before: the prune cuts a prefix (SkyTracker._prune)
 
     @property
     def confirmed(self) -> bool:
@@ -670,6 +671,8 @@ class SkyTracker:
         tr.last_hit_t_s = t_s
         tr.hit_now = True
         z = np.asarray(z, float)
+        if tr.history and not t_s >= tr.history[-1][0]:
+            tr.history_in_order = False
         tr.history.append((t_s, z, ob.sides_m, ob.n_points))
         tr.last_xyz_m = z
         tr.excursion_m = max(tr.excursion_m, norm3(z - tr.origin_xyz_m))
@@ -682,8 +685,16 @@ class SkyTracker:
         keep, gone = [], []
         oldest = t_s - cfg.history_s
         for tr in self.tracks:
-            if tr.history:
-                tr.history = [h for h in tr.history if h[0] >= oldest]
+            h = tr.history
+            if h and tr.history_in_order:
+                # the hits older than the window are a prefix: cut if there is one (most frames none)
+                if not h[0][0] >= oldest:
+                    k = 1
+                    while k < len(h) and not h[k][0] >= oldest:
+                        k += 1
+                    tr.history = h[k:]
+            elif h:
+                tr.history = [x for x in h if x[0] >= oldest]
             unseen = t_s - max(tr.last_hit_t_s, tr.merged_t_s)
             if tr.hit_now or tr.merged_t_s == t_s:
                 tr.unseen_in_view_s = 0.0

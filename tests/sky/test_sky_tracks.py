@@ -619,3 +619,39 @@ def test_a_far_drone_s_lone_returns_confirm_the_track_its_object_started(lone_re
     assert len(tracker.tracks[0].history) == 1
     if confirmed_at is not None:
         assert np.linalg.norm(outs[-1].tracks[0].xyz_m - p(5.5)) < 0.3
+
+
+def test_the_prune_cuts_the_history_as_the_window_s_filter_does():
+    # _prune cuts a history in time order at its first hit inside the window (a prefix goes, and the
+    # list stays as it is when none does); one out of order (a hit appended earlier than the one
+    # before, a NaN) is filtered hit by hit: either way, the hits the window's filter keeps
+    from foveatrack.sky.motion import ConstantVelocityFilter
+    from foveatrack.sky.tracks import SkyObject, SkyTrack
+
+    cfg = SkyTrackerConfig(warmup_s=0.0)
+    rng = np.random.default_rng(11)
+    side = np.array([0.3, 0.3, 0.1])
+    for case in range(200):
+        tracker = SkyTracker(cfg)
+        t_s = 10.0
+        times = np.sort(rng.uniform(t_s - 2 * cfg.history_s, t_s, int(rng.integers(1, 20)))).tolist()
+        if case % 4 == 1:
+            rng.shuffle(times)
+        elif case % 4 == 2:
+            times[int(rng.integers(len(times)))] = math.nan
+        elif case % 4 == 3:
+            times = [t_s - cfg.history_s + 0.5] * len(times)     # none older than the window
+        tr = SkyTrack(0, ConstantVelocityFilter(0.0, np.zeros(3), cfg.q_m2_s3, cfg.r_m2, cfg.v0_sigma_m_s), 0.0, t_s,
+                      hit_now=True)
+        tr.origin_xyz_m = np.zeros(3)
+        for t in times:
+            tracker._hit(tr, t, np.ones(3), SkyObject(np.ones(3), t, 3, side))
+        tr.last_hit_t_s = t_s           # not lost
+        want = [h for h in tr.history if h[0] >= t_s - cfg.history_s]
+        assert tr.history_in_order == all(b >= a for a, b in zip(times, times[1:]))
+        tracker.tracks = [tr]
+        before = tr.history
+        tracker._prune(t_s, None, 0.1)
+        assert [h[0] for h in tr.history] == [h[0] for h in want] and all(a is b for a, b in zip(tr.history, want))
+        if len(want) == len(before) and tr.history_in_order:
+            assert tr.history is before
