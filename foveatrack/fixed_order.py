@@ -46,6 +46,15 @@ def norm3(v) -> float:
     return math.sqrt(x * x + y * y + z * z)
 
 
+def dist3(a, b) -> float:
+    """``norm3(a - b)`` of two 3-vectors without the array of their difference: the same subtractions,
+    products and sums, on floats (a track's few distances a frame, where the array cost the most)."""
+    ax, ay, az = floats3(a)
+    bx, by, bz = floats3(b)
+    x, y, z = ax - bx, ay - by, az - bz
+    return math.sqrt(x * x + y * y + z * z)
+
+
 def mat3_vec(R, v) -> np.ndarray:
     """``R @ v`` (3,) of a 3 x 3 matrix (an array, or its rows as floats) and a 3-vector."""
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist() if type(R) is np.ndarray else R

@@ -65,6 +65,15 @@ class ConstantVelocityFilter:
         """Position (3,) at ``t_s``, the filter unchanged (:meth:`predicted` without the variance)."""
         return self.p + self.v * (t_s - self.t_s)
 
+    def distance_at(self, t_s: float, z_m) -> float:
+        """``norm3(z_m - position_at(t_s))``: the same operations in their order, on floats (a
+        matched object's distance from its track's prediction, a few a frame: ~0.4 us, not ~1.6)."""
+        dt = t_s - self.t_s
+        (px, py, pz), (vx, vy, vz) = self.state[:2].tolist()
+        zx, zy, zz = np.asarray(z_m, np.float64).reshape(3).tolist()
+        x, y, z = zx - (px + vx * dt), zy - (py + vy * dt), zz - (pz + vz * dt)
+        return math.sqrt(x * x + y * y + z * z)
+
     def predicted(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Position (3,) and its per-axis variance (3,) at ``t_s``, the filter unchanged."""
         dt = t_s - self.t_s

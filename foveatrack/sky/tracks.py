@@ -103,7 +103,7 @@ from scipy.optimize import linear_sum_assignment
 from foveatrack.config_util import dataclass_from_mapping
 from foveatrack.detection import Detection, box_bounds, box_detection, frozen_maker
 from foveatrack.errors import UserError
-from foveatrack.fixed_order import norm3
+from foveatrack.fixed_order import dist3
 from foveatrack.frames import Frame
 from foveatrack.kernels import (association_kernel, box_inside_kernel, close_pairs_kernel, in_field_kernel,
                                 valid_mask_kernel)
@@ -478,12 +478,11 @@ class SkyTracker:
             if i == fov and fovea_det is not None:
                 z = np.array(self._to_world(fovea_det.xyz, fovea_det.t_s, pose))
                 tz = fovea_det.t_s
-            pred = tr.kf.position_at(ob.t_s)
             # what a track sees is kept out of the background while it is where the track predicted it,
             # as long as the track may be something flying: a tentative track off the scenery, or a
             # confirmed one that has gone somewhere.  A confirmed track that stays put (a crown's part
             # the background has not learned yet) protects nothing: its points are learned and it starves.
-            protect = norm3(ob.xyz_m - pred) <= cfg.protect_m and (
+            protect = tr.kf.distance_at(ob.t_s, ob.xyz_m) <= cfg.protect_m and (
                 (not tr.confirmed and not ob.on_scenery) or (tr.confirmed and tr.excursion_m >= cfg.protect_excursion_m))
             self._hit(tr, tz, z, ob)
             self._confirm_if_due(tr, t_mid, confirmed_now)
@@ -495,12 +494,12 @@ class SkyTracker:
             z = self._to_world(fovea_det.xyz, fovea_det.t_s, pose)
             tr.kf.update(fovea_det.t_s, z)
             tr.last_hit_t_s, tr.hit_now, tr.last_xyz_m = fovea_det.t_s, True, z
-            tr.excursion_m = max(tr.excursion_m, norm3(z - tr.origin_xyz_m))
+            tr.excursion_m = max(tr.excursion_m, dist3(z, tr.origin_xyz_m))
         if lone is not None and lone.size:
             self._lone_hits(fg_world, t_ns[fg_idx], lone, t_mid, pred_mid, learn_pts, confirmed_now)
         hit_xyz = [self.tracks[i].last_xyz_m for i, _ in match if self.tracks[i].confirmed]
         for j, ob in enumerate(objs):
-            if j not in obj_track and any(norm3(ob.xyz_m - p) < cfg.spawn_clear_m for p in hit_xyz):
+            if j not in obj_track and any(dist3(ob.xyz_m, p) < cfg.spawn_clear_m for p in hit_xyz):
                 # a part of an object a confirmed track has just taken (the sparse scan split a drone
                 # into two clusters): no new track, which would take the drone's hits in turn with
                 # the old one; kept out of the background as the part that was taken
@@ -619,13 +618,13 @@ class SkyTracker:
             tr = self.tracks[idle[a]]
             z = O[b].copy()
             t_s = int(fg_t_ns[lone[b]]) * 1e-9
-            protect = norm3(z - P[a]) <= cfg.protect_m and (
+            protect = dist3(z, P[a]) <= cfg.protect_m and (
                 not tr.confirmed or tr.excursion_m >= cfg.protect_excursion_m)
             tr.kf.update(t_s, z)
             tr.hits += 1
             tr.clear_hits += 1
             tr.last_hit_t_s, tr.hit_now, tr.lone_now, tr.last_xyz_m = t_s, True, True, z
-            tr.excursion_m = max(tr.excursion_m, norm3(z - tr.origin_xyz_m))
+            tr.excursion_m = max(tr.excursion_m, dist3(z, tr.origin_xyz_m))
             self._confirm_if_due(tr, t_mid, confirmed_now)
             if protect:
                 learn_pts[lone[b]] = False
@@ -675,7 +674,7 @@ class SkyTracker:
             tr.history_in_order = False
         tr.history.append((t_s, z, ob.sides_m, ob.n_points))
         tr.last_xyz_m = z
-        tr.excursion_m = max(tr.excursion_m, norm3(z - tr.origin_xyz_m))
+        tr.excursion_m = max(tr.excursion_m, dist3(z, tr.origin_xyz_m))
 
     def _prune(self, t_s: float, fovea_track_id: int | None, frame_s: float) -> tuple[list[int], np.ndarray]:
         """Drop failed candidates, tracks lost too long and static scenery; returns their ids, and the
@@ -752,7 +751,7 @@ class SkyTracker:
                 continue
             key = (ta.track_id, tb.track_id)
             close, same = self._together.get(key, (0, 0))
-            same = same + 1 if norm3(ta.kf.v - tb.kf.v) <= cfg.merge_v_m_s else 0
+            same = same + 1 if dist3(ta.kf.v, tb.kf.v) <= cfg.merge_v_m_s else 0
             together[key] = (close + 1, same)
             if 0 < cfg.merge_frames <= same or 0 < cfg.merge_close_frames <= close + 1:
                 weaker = tb if (len(tb.history), -tb.track_id) <= (len(ta.history), -ta.track_id) else ta

@@ -655,3 +655,20 @@ def test_the_prune_cuts_the_history_as_the_window_s_filter_does():
         assert [h[0] for h in tr.history] == [h[0] for h in want] and all(a is b for a, b in zip(tr.history, want))
         if len(want) == len(before) and tr.history_in_order:
             assert tr.history is before
+
+
+def test_the_distances_on_floats_are_norm3_s_of_the_arrays():
+    # ConstantVelocityFilter.distance_at and fixed_order.dist3 work on floats: the bits of norm3 of the
+    # arrays' difference (the prediction's position_at included), over many scales
+    from foveatrack.fixed_order import dist3, norm3
+    from foveatrack.sky.motion import ConstantVelocityFilter
+
+    rng = np.random.default_rng(5)
+    for _ in range(2000):
+        scale = 10.0 ** rng.uniform(-3, 3)
+        a, b = rng.normal(size=3) * scale, rng.normal(size=3) * scale
+        assert dist3(a, b) == norm3(a - b)
+        kf = ConstantVelocityFilter(rng.uniform(0, 5), a, 20.0, 0.04, 3.0)
+        kf.update(kf.t_s + rng.uniform(0.0, 0.3), a + rng.normal(size=3))
+        t = kf.t_s + rng.uniform(-0.1, 2.0)
+        assert kf.distance_at(t, b) == norm3(b - kf.position_at(t))
