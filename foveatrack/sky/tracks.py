@@ -471,7 +471,10 @@ class SkyTracker:
         if fov is not None and self.tracks[fov].confirmed and self.tracks[fov].excursion_m >= cfg.protect_excursion_m:
             # the fixated track's D is the target's (Algorithm 1): a frame with a single return on a
             # hovering drone makes no object to protect, and a few such frames made it scenery
-            learn_pts &= ~(keep & d_box.contains(fg_world))
+            # (D's test by the region's kernel, Box.contains' twin: one call, not a dozen numpy ones)
+            inside = np.empty(fg_idx.size, np.int64)
+            inside = inside[:box_inside_kernel(fg_world, lo, hi, inside)]
+            learn_pts[inside[keep[inside]]] = False
         for i, j in match:
             tr, ob = self.tracks[i], objs[j]
             z, tz = ob.xyz_m, ob.t_s
