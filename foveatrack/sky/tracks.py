@@ -652,7 +652,8 @@ class SkyTracker:
                                   _BIG, c, allowed):
             return [], allowed
         rows, cols = linear_sum_assignment(c)
-        return [(int(i), int(j)) for i, j in zip(rows, cols) if allowed[i, j]], allowed
+        # the assigned pairs' allowances read at once (a numpy scalar index per pair cost more)
+        return [(i, j) for i, j, ok in zip(rows.tolist(), cols.tolist(), allowed[rows, cols].tolist()) if ok], allowed
 
     def _classify(self, tr: SkyTrack) -> None:
         """Rules 1-4 of the classifier on the track, unless nothing they read has changed since the
