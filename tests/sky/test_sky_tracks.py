@@ -672,3 +672,23 @@ def test_the_distances_on_floats_are_norm3_s_of_the_arrays():
         kf.update(kf.t_s + rng.uniform(0.0, 0.3), a + rng.normal(size=3))
         t = kf.t_s + rng.uniform(-0.1, 2.0)
         assert kf.distance_at(t, b) == norm3(b - kf.position_at(t))
+
+
+def test_the_filters_update_kernel_is_its_twin_on_floats():
+    # ConstantVelocityFilter.update runs motion.update_kernel: every state the bits of update_floats,
+    # its plain-Python twin, with a zero step, a step back, a measurement variance of its own, and
+    # infinities and NaN passing through
+    from foveatrack.sky.motion import update_floats, update_kernel
+
+    rng = np.random.default_rng(9)
+    for k in range(3000):
+        state = rng.normal(size=(5, 3)) * 10.0 ** rng.uniform(-3, 3, (5, 1))
+        state[2:] = np.abs(state[2:])
+        dt = float(rng.choice([0.0, rng.uniform(-0.2, 0.5), rng.uniform(0.0, 5.0)]))
+        z = state[0] + rng.normal(size=3) * rng.uniform(0.01, 5)
+        if k % 50 == 0:
+            z[int(rng.integers(3))] = [np.inf, -np.inf, np.nan][k // 50 % 3]
+        r, q = float(rng.uniform(0.001, 1.0)), float(rng.uniform(0.1, 40.0))
+        out = np.empty((5, 3))
+        update_kernel(state, dt, z, r, q, out)
+        assert out.tobytes() == update_floats(state, dt, z, r, q).tobytes()
