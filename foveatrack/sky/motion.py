@@ -170,6 +170,19 @@ def positions_many(filters, t_s: float) -> np.ndarray:
     return S[:, 0] + S[:, 1] * dt[:, None]
 
 
+def predictions_many(filters, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`positions_many` and :func:`variances_many` (the same bits) of one gather of the
+    filters' states: the association reads both for every track."""
+    if not filters:
+        return np.empty((0, 3)), np.empty((0, 3))
+    dt = t_s - np.array([f.t_s for f in filters])
+    q = np.array([f.q for f in filters])
+    S = np.array([f.state for f in filters])
+    a, b, c = S[:, 2], S[:, 3], S[:, 4]
+    return (S[:, 0] + S[:, 1] * dt[:, None],
+            a + (2.0 * dt)[:, None] * b + (dt * dt)[:, None] * c + (q * dt * dt * dt / 3.0)[:, None])
+
+
 def variances_many(filters, t_s: float) -> np.ndarray:
     """The variances of :meth:`ConstantVelocityFilter.predicted` of many filters at ``t_s``: (N, 3),
     row ``i`` the same bits as ``filters[i].predicted(t_s)[1]`` (the same elementwise operations in

@@ -110,7 +110,7 @@ from foveatrack.kernels import (association_kernel, box_inside_kernel, close_pai
 from foveatrack.openloop.objects import cluster_labels, object_summaries
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
-from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, variances_many
+from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, predictions_many, variances_many
 from foveatrack.openloop.range_background import RangeBackground, check_cell_deg
 from foveatrack.sky.world_points import lidar_to_world_per_point
 from foveatrack.space_of_interest import Box
@@ -428,7 +428,9 @@ class SkyTracker:
         off = np.asarray(pose.lidar_offset_m, np.float64).reshape(3)
         # every track's prediction at mid-frame, once: the field test, the association and the
         # fixated track's D all read it
-        pred_mid = positions_many([tr.kf for tr in self.tracks], t_mid)
+        # (and their variances, with the positions from one gather, when there are objects to associate)
+        kfs = [tr.kf for tr in self.tracks]
+        pred_mid, var_mid = predictions_many(kfs, t_mid) if objs else (positions_many(kfs, t_mid), None)
         n = len(self.tracks)
         last = np.array([tr.last_xyz_m for tr in self.tracks]).reshape(n, 3)
         seen = self._in_view_many(np.concatenate((pred_mid, last)), rows, off)
@@ -439,7 +441,7 @@ class SkyTracker:
             # lost while in view: where it was last seen is in the field now (a track that coasts out
             # of the field on its own velocity is not "out of view": the head did not look away)
             tr.last_seen_in_view = last_in_view
-        match, allowed = self._associate(objs, t_mid, pred_mid)
+        match, allowed = self._associate(objs, t_mid, pred_mid, var_mid)
         obj_track = {j: i for i, j in match}
         # A confirmed track left without an object while an object matched to another track lies in
         # its gate has merged with it (two clusters became one): it coasts and is not lost meanwhile.
@@ -632,15 +634,16 @@ class SkyTracker:
             if protect:
                 learn_pts[lone[b]] = False
 
-    def _associate(self, objs: list[SkyObject], t_s: float, positions: np.ndarray
-                   ) -> tuple[list[tuple[int, int]], np.ndarray]:
+    def _associate(self, objs: list[SkyObject], t_s: float, positions: np.ndarray,
+                   variances: np.ndarray | None = None) -> tuple[list[tuple[int, int]], np.ndarray]:
         """Gated global nearest neighbour (module docstring): ``(track index, object index)`` pairs, and
         the allowed pairs (tracks x objects).  ``positions``: the tracks' predicted positions at
-        ``t_s`` (:func:`positions_many`, made once a frame by the caller)."""
+        ``t_s`` (:func:`positions_many`, made once a frame by the caller); ``variances``: theirs
+        (:func:`predictions_many` with the positions; None: made here)."""
         cfg = self.cfg
         if not self.tracks or not objs:
             return [], np.zeros((len(self.tracks), len(objs)), bool)
-        V = variances_many([tr.kf for tr in self.tracks], t_s)
+        V = variances_many([tr.kf for tr in self.tracks], t_s) if variances is None else variances
         O = np.array([ob.xyz_m for ob in objs], np.float64).reshape(len(objs), 3)
         # a candidate seen off the scenery takes no object on it (module docstring, step 4)
         candidate = np.array([not tr.confirmed and tr.clear_hits > 0 for tr in self.tracks])
@@ -653,7 +656,8 @@ class SkyTracker:
             return [], allowed
         rows, cols = linear_sum_assignment(c)
         # the assigned pairs' allowances read at once (a numpy scalar index per pair cost more)
-        return [(i, j) for i, j, ok in zip(rows.tolist(), cols.tolist(), allowed[rows, cols].tolist()) if ok], allowed
+        ok = allowed[rows, cols].tolist()
+        return [(i, j) for i, j, yes in zip(rows.tolist(), cols.tolist(), ok) if yes], allowed
 
     def _classify(self, tr: SkyTrack) -> None:
         """Rules 1-4 of the classifier on the track, unless nothing they read has changed since the

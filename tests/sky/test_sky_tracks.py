@@ -210,7 +210,7 @@ def test_the_many_filters_predictions_are_each_filters_own_bit_for_bit():
     # the association predicts every track at once (motion.positions_many, variances_many), the merge
     # rule their positions: row i must be the same bits as filter i's own, whatever each filter's
     # time, state and noise
-    from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, variances_many
+    from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, predictions_many, variances_many
 
     rng = np.random.default_rng(7)
     filters = []
@@ -222,11 +222,13 @@ def test_the_many_filters_predictions_are_each_filters_own_bit_for_bit():
     for t_s in (5.0, 7.3, 11.123456789):
         P, V = positions_many(filters, t_s), variances_many(filters, t_s)
         assert P.shape == V.shape == (40, 3)
+        assert [a.tobytes() for a in predictions_many(filters, t_s)] == [P.tobytes(), V.tobytes()]
         for i, kf in enumerate(filters):
             p, v = kf.predicted(t_s)
             assert P[i].tobytes() == p.tobytes() and V[i].tobytes() == v.tobytes()
         assert kf.position_at(t_s).tobytes() == p.tobytes()
     assert positions_many([], 1.0).shape == variances_many([], 1.0).shape == (0, 3)
+    assert [a.shape for a in predictions_many([], 1.0)] == [(0, 3), (0, 3)]
 
 
 def test_the_filters_update_on_floats_is_the_array_forms_bits():
