@@ -108,6 +108,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
 import numpy as np
+from numba import njit
 
 from foveatrack.config_util import as_bool, as_float, as_vec, check_keys
 from foveatrack.errors import UserError
@@ -211,6 +212,82 @@ def saccade_time_s(e_pan_deg: float, e_tilt_deg: float, cfg: "AttentionConfig", 
     # cannot close on: a NaN lead is past no clock, and the track was never revisited again
     turn = max(pan, tilt) if pan <= cap and tilt <= cap else cap
     return cfg.saccade_latency_s + turn
+
+
+@njit(cache=True)
+def _axis_turn_still_s(error_deg, within_deg, gain_1_s, vmax_deg_s):
+    """:func:`axis_turn_s` with no bearing rate, the axis at rest and no acceleration given: its
+    operations in their order (Python's ``min``/``max`` as written: the first unless the second is
+    smaller/larger, NaN too)."""
+    s = 1.0 if error_deg >= 0.0 else -1.0
+    e = abs(error_deg)
+    w = s * 0.0
+    stop = 0.0
+    if e <= within_deg:
+        return stop
+    close = vmax_deg_s - w
+    if close <= 0.0:
+        return math.inf
+    knee = vmax_deg_s / gain_1_s
+    if e > knee:
+        full = (e - (within_deg if within_deg > knee else knee)) / close
+    else:
+        full = 0.0
+    e1 = knee if knee < e else e
+    lag = w / gain_1_s
+    if e1 <= within_deg:
+        return stop + full
+    if within_deg <= lag:
+        return math.inf
+    return stop + full + math.log((e1 - lag) / (within_deg - lag)) / gain_1_s
+
+
+@njit(cache=True)
+def fovea_turns_kernel(P, mid, mid_off, end, end_off, within_deg, latency_s, kp, vp, kt, vt, q_mid, turn):
+    """Per confirmed track at the world point ``P[i]`` (N, 3): the point in the lidar frame at the mid
+    pose into ``q_mid[i]`` (:func:`in_lidar` of ``mid``, the rotation's rows flat (9,), and ``mid_off``
+    (3,)), and its saccade time from the end pose (``end``, ``end_off``) into ``turn[i]``:
+    :func:`saccade_time_s` of :func:`foveatrack.detection.bearing_deg` of :func:`in_lidar`, without
+    the motion (``saccade_counts_motion`` off), the head ``(kp, vp, kt, vt)``.  The same operations
+    in their order, libm's atan2, hypot and log as CPython's math and numpy call them (twins: those
+    functions; ``tests/sky/test_attention.py``)."""
+    for i in range(P.shape[0]):
+        x = P[i, 0]
+        y = P[i, 1]
+        z = P[i, 2]
+        q_mid[i, 0] = mid[0] * x + mid[3] * y + mid[6] * z - mid_off[0]
+        q_mid[i, 1] = mid[1] * x + mid[4] * y + mid[7] * z - mid_off[1]
+        q_mid[i, 2] = mid[2] * x + mid[5] * y + mid[8] * z - mid_off[2]
+        qx = end[0] * x + end[3] * y + end[6] * z - end_off[0]
+        qy = end[1] * x + end[4] * y + end[7] * z - end_off[1]
+        qz = end[2] * x + end[5] * y + end[8] * z - end_off[2]
+        az = math.degrees(math.atan2(qy, qx + 0.0))
+        if not (-180.0 < az <= 180.0):      # wrap_deg's scalar form (C fmod)
+            w = np.fmod(az + 180.0, 360.0)
+            w = (w + 360.0 if w < 0.0 else w) - 180.0
+            az = 180.0 if w == -180.0 else w
+        el = math.degrees(math.atan2(qz, math.hypot(qx, qy)))
+        pan = _axis_turn_still_s(az, within_deg, kp, vp)
+        tilt = _axis_turn_still_s(el, within_deg, kt, vt)
+        turn[i] = latency_s + (tilt if tilt > pan else pan)
+
+
+def fovea_turns(points, mid_pose, end_pose, cfg: "AttentionConfig", head) -> tuple[list, list[float]]:
+    """:func:`fovea_turns_kernel` of the world points ``points`` (N, 3): each one's lidar-frame point
+    at the mid pose (3 floats) and its saccade time from the end pose (poses as
+    :meth:`foveatrack.sky.controller.SkyController._pose_rows` gives them: rows and offset), without
+    the motion.  One call for a frame's confirmed tracks, not a dozen Python calls each."""
+    (m_rows, m_off), (e_rows, e_off) = mid_pose, end_pose
+    n = points.shape[0]
+    q_mid = np.empty((n, 3))
+    turn = np.empty(n)
+    kp, vp, kt, vt = head
+    fovea_turns_kernel(np.ascontiguousarray(points, np.float64).reshape(n, 3),
+                       np.array(m_rows[0] + m_rows[1] + m_rows[2], np.float64), np.array(m_off, np.float64),
+                       np.array(e_rows[0] + e_rows[1] + e_rows[2], np.float64), np.array(e_off, np.float64),
+                       float(cfg.fovea_half_angle_deg), float(cfg.saccade_latency_s), float(kp), float(vp), float(kt),
+                       float(vt), q_mid, turn)
+    return q_mid.tolist(), turn.tolist()
 
 
 def threat_score(view, cfg: AttentionConfig, looks_like: str | None = None) -> float:

@@ -34,8 +34,8 @@ from foveatrack.fixed_order import floats3, norm3
 from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_rows
 from foveatrack.sky.attention import ADDED_SINCE_RECORDED as ATTENTION_ADDED
-from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, in_lidar, off_axis_deg,
-                                      saccade_time_s, threat_score)
+from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, fovea_turns, in_lidar,
+                                      off_axis_deg, saccade_time_s, threat_score)
 from foveatrack.sky.classify import ADDED_SINCE_RECORDED as CLASSIFIER_ADDED
 from foveatrack.space_of_interest import Box
 from foveatrack.sky.tracks import ADDED_SINCE_RECORDED as TRACKER_ADDED
@@ -238,15 +238,25 @@ class SkyController:
         # per confirmed track, in one pass: in the fovea at the mid pose, its saccade time from the
         # end pose, its threat score (the attention's too)
         in_fovea, turn, scores = set(), {}, {}
-        for v in sky.tracks:
-            if v.confirmed:
+        confirmed = [v for v in sky.tracks if v.confirmed]
+        if motion:
+            for v in confirmed:
                 p = v.xyz_m.tolist()
                 if off_axis_deg(*in_lidar(p, *mid_pose)) <= half:
                     in_fovea.add(v.track_id)
                 az, el = bearing_deg(*in_lidar(p, *end_pose))
-                if motion:
-                    rates = _bearing_rates(p, v.velocity_m_s.tolist(), end_pose, az, el)
+                rates = _bearing_rates(p, v.velocity_m_s.tolist(), end_pose, az, el)
                 turn[v.track_id] = saccade_time_s(az, el, att, self._head_speeds, rates, speeds, accels)
+                scores[v.track_id] = threat_score(v, att, self.attention.looks_like(v))
+        elif confirmed:
+            # without the motion, the lidar-frame points and saccade times of every track in one
+            # kernel call (the same bits as the loop above without the rates)
+            q_mid, turns = fovea_turns(np.array([v.xyz_m for v in confirmed]), mid_pose, end_pose, att,
+                                       self._head_speeds)
+            for v, q, t in zip(confirmed, q_mid, turns):
+                if off_axis_deg(*q) <= half:
+                    in_fovea.add(v.track_id)
+                turn[v.track_id] = t
                 scores[v.track_id] = threat_score(v, att, self.attention.looks_like(v))
         # the candidate being verified counts too for the attention, which ends that look once the
         # candidate has been dwell_s in the fovea (without it every look ran saccade_timeout_s)

@@ -3,7 +3,7 @@
 Its kernels (the frame's validity and region tests, the direction cells and range background, the
 per-point turn into the world, the clustering, Algorithm 1 in a D and its box test, the filters'
 update, the classifier's features, the tracks' field test, the association's gate, the merge rule's
-close pairs) run first when the tracker's warm-up ends, ~10 frames into a run: on a fresh install that
+close pairs, the fovea's saccade times) run first when the tracker's warm-up ends, ~10 frames into a run: on a fresh install that
 frame waited ~8 s for the compiler, in the daemon's live loop as in a simulated run.
 :func:`compile_sky_kernels` steps a throwaway controller through frames past its warm-up with a small
 object moving through a scattered background, once per process, nothing written anywhere; the
@@ -55,6 +55,10 @@ def compile_sky_kernels(make_controller, rate_hz: float) -> None:
     from foveatrack.sky.motion import update_kernel
 
     update_kernel(np.ones((5, 3)), 0.1, np.ones(3), 1.0, 1.0, np.empty((5, 3)))     # a track's hit
+    from foveatrack.sky.attention import fovea_turns_kernel
+
+    fovea_turns_kernel(two, np.ones(9), np.ones(3), np.ones(9), np.ones(3), 1.0, 1.0, 1.0, 1.0, 1.0, 1.0,
+                       np.empty((2, 3)), np.empty(2))       # the confirmed tracks' saccade times
     close_pairs_kernel(two, 1.0, np.empty((1, 2), np.int64))
     yes = np.ones(2, np.bool_)
     association_kernel(two, two, two, 1.0, 1.0, 1.0, yes, yes, 1.0, np.empty((2, 2)), np.empty((2, 2), np.bool_))

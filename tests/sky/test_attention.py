@@ -375,3 +375,35 @@ def test_a_priority_the_head_turns_to_and_never_sees_is_set_aside_until_seen(dro
         assert not att.set_aside
     else:
         assert not moved and not att.set_aside
+
+
+def test_the_fovea_turns_kernel_is_the_per_track_functions_bits():
+    # the controller's frame, saccade_counts_motion off: every confirmed track's lidar-frame point at
+    # the mid pose and its saccade time by one kernel call (attention.fovea_turns); its twins are
+    # in_lidar, bearing_deg and saccade_time_s, bit for bit -- points all around the head, straight
+    # ahead, behind and overhead, errors inside the fovea and past the knee, NaN and inf
+    from foveatrack.detection import bearing_deg
+    from foveatrack.reconstruction import rotation_rows
+    from foveatrack.sky.attention import fovea_turns, in_lidar
+
+    rng = np.random.default_rng(17)
+    for k in range(400):
+        cfg = AttentionConfig(fovea_half_angle_deg=float(rng.uniform(0.5, 6.0)),
+                              saccade_latency_s=float(rng.uniform(0.0, 0.5)))
+        head = tuple(float(x) for x in rng.uniform([0.5, 5.0, 0.5, 1.0], [8.0, 120.0, 8.0, 30.0]))
+        if k % 10 == 0:
+            mid = end = (rotation_rows(0.0, 0.0), [0.0, 0.0, 0.0])
+        else:
+            mid = (rotation_rows(*rng.uniform([-180, -30], [180, 60])), rng.normal(size=3).tolist())
+            end = (rotation_rows(*rng.uniform([-180, -30], [180, 60])), rng.normal(size=3).tolist())
+        P = rng.normal(size=(int(rng.integers(1, 12)), 3)) * 10.0 ** rng.uniform(-1, 3)
+        P[0] = [[0.0, 0.0, 5.0], [-3.0, 0.0, 0.0], [4.0, 0.0, 0.0], [1e-3, -1e-3, 2.0]][k % 4]
+        if k % 25 == 1:
+            P[-1, int(rng.integers(3))] = [np.nan, np.inf, -np.inf][k % 3]
+        q_mid, turns = fovea_turns(P, mid, end, cfg, head)
+        for p, q, t in zip(P.tolist(), q_mid, turns):
+            want_q = in_lidar(p, *mid)
+            az, el = bearing_deg(*in_lidar(p, *end))
+            want_t = saccade_time_s(az, el, cfg, head)
+            assert np.array(q).tobytes() == np.array(want_q).tobytes()
+            assert np.float64(t).tobytes() == np.float64(want_t).tobytes(), (p, az, el)
