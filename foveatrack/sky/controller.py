@@ -28,7 +28,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from foveatrack.config_util import check_keys
-from foveatrack.detection import Detection, bearing_deg, wrap_deg
+from foveatrack.detection import Detection, bearing_deg, frozen_maker, wrap_deg
 from foveatrack.errors import UserError
 from foveatrack.fixed_order import floats3, norm3
 from foveatrack.frames import Frame
@@ -92,6 +92,9 @@ class SkyControlOutput:
         # the rest of a TrackOutput (errors, head estimate) as the paper tracker steered this frame
         # (toward the aim point during a saccade)
         return getattr(self.track, name)
+
+
+_make_output = frozen_maker(SkyControlOutput)      # once a frame: without the frozen init's cost per field
 
 
 def sky_configs_from_mapping(data: Mapping, where: str, field_half_angle_deg: float | None = None
@@ -265,7 +268,7 @@ class SkyController:
                              and bearing_off_axis_deg(cand.xyz_m, *mid_pose) <= half else set())
         nxt = self.attention.update(frame.t_end_s, sky.tracks, looked, frame.t_end_s - frame.t_start_s, turn,
                                     scores)
-        self.last_output = SkyControlOutput(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores, self.attention.pinned)
+        self.last_output = _make_output(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores, self.attention.pinned)
         return self.last_output
 
     def pin(self, track_id: int | None) -> None:

@@ -336,6 +336,9 @@ class SkyFrameOutput:
     deleted_now: tuple[int, ...]
 
 
+_make_output = frozen_maker(SkyFrameOutput)     # once a frame: without the frozen init's cost per field
+
+
 class SkyTracker:
     """Frames of the moving head in, tracks of every moving object out (module docstring)."""
 
@@ -392,7 +395,7 @@ class SkyTracker:
             self.background.warmup_frames = self.background.frame_no
             if cfg.warmup_replay:
                 self._warmup_kept.append((xyz, t_ns, world, cells, ranges, t0, t1))
-            return SkyFrameOutput(t1, (), None, frame.n_points, 0, 0, (), ())
+            return _make_output(t1, (), None, frame.n_points, 0, 0, (), ())
         early_confirmed, early_deleted = [], []
         if not self._warmup_over:
             self.background.end_warmup(cfg.warmup_stay_frames)
@@ -409,7 +412,7 @@ class SkyTracker:
         # a track is reported deleted only once a frame has shown it (one the warm-up's frames
         # started and ended was never shown: nothing was drawn of it)
         shown, self._shown = self._shown, {v.track_id for v in views}
-        return SkyFrameOutput(t1, views, fovea_det, frame.n_points, n_fg, n_obj,
+        return _make_output(t1, views, fovea_det, frame.n_points, n_fg, n_obj,
                               tuple(i for i in early_confirmed if i in self._shown) + confirmed_now,
                               tuple(i for i in early_deleted + list(deleted) if i in shown))
 

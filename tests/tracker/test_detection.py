@@ -103,12 +103,15 @@ def test_frozen_maker_builds_what_the_constructor_builds():
     from foveatrack.control import STOP
     from foveatrack.detection import Detection, frozen_maker
     from foveatrack.openloop.objects import FrameObject
-    from foveatrack.sky.tracks import SkyObject
+    from foveatrack.sky.controller import SkyControlOutput
+    from foveatrack.sky.tracks import SkyFrameOutput, SkyObject
     from foveatrack.tracker import TrackOutput, TrackState
 
     cases = [(Detection, (1.5, np.array([1.0, 2.0, 3.0]), 7, 63.4, 53.3, 3.74)),
              (FrameObject, (np.array([1.0, 2.0, 3.0]), 9, 0.4, 3.74, np.array([0.1, 0.2, 0.4]), 1.5e9)),
              (SkyObject, (np.array([1.0, 2.0, 3.0]), 1.5, 9, np.array([0.1, 0.2, 0.4]), True)),
+             (SkyFrameOutput, (1.5, (), None, 120, 7, 1, (3,), ())),
+             (SkyControlOutput, (None, None, 2, 3, (2,), {2: 0.5}, None)),
              (TrackOutput, (1.0, TrackState.TRACKING, None, STOP, 1.0, -2.0, 0.5, -1.0, 10.0, 2.0, 0.1, 0.2,
                             np.array([1.0, 2.0, 3.0]), 0.3, True))]
     for cls, args in cases:
