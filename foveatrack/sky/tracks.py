@@ -586,8 +586,9 @@ class SkyTracker:
                 for m, t, n_pts, box, k in zip(meds, t_med.tolist(), counts.tolist(), boxes, near_n)]
         lone = None
         if cfg.lone_returns:
+            # not an object's (min_points 1 makes one of a single return): a return is one track's hit
             alone = np.bincount(labels, minlength=n)[labels] == 1
-            lone = np.flatnonzero(alone & ~near)
+            lone = np.flatnonzero(alone & ~near & (point_obj < 0))
         return objs, point_obj, lone
 
     def _confirm_if_due(self, tr: SkyTrack, t_mid: float, confirmed_now: list) -> None:

@@ -694,3 +694,15 @@ def test_the_filters_update_kernel_is_its_twin_on_floats():
         out = np.empty((5, 3))
         update_kernel(state, dt, z, r, q, out)
         assert out.tobytes() == update_floats(state, dt, z, r, q).tobytes()
+
+
+def test_a_lone_return_that_is_an_object_is_not_a_second_tracks_hit():
+    # min_points 1 makes an object of a single return: it is the object's track's hit, and not also
+    # a lone return (step 5b) of the idle track next to it -- one return, one track
+    cfg = SkyTrackerConfig(warmup_s=0.0, lone_returns=True, min_points=1)
+    tracker = SkyTracker(cfg)
+    frames = _frames_of_points([[[30.0, 0.0, 5.0], [30.0, 0.8, 5.0]], [[30.0, 0.4, 5.0]]])
+    for f in frames:
+        out = tracker.process(f, Pose())
+    assert len(out.tracks) == 2
+    assert sum(v.hit for v in out.tracks) == 1, [(v.track_id, v.hit) for v in out.tracks]
