@@ -352,6 +352,20 @@ def _unseen_view(tid, xyz, hit):
     return TrackView(tid, True, "drone", np.array(xyz, float), np.zeros(3), hit, True, {})
 
 
+def test_a_priority_whose_hits_stop_is_set_aside_its_limit_after_the_last():
+    # track 0, the priority, is in the fovea and hit until 2.0 s, then its object is gone (its
+    # prediction still in the fovea: the head caught up with it); 1.5 s after its last hit the
+    # priority goes to track 1 (a reviewer's find: a rule that counted only the time to reach the
+    # track never set this one aside)
+    att = Attention(AttentionConfig(drop_unseen_priority_s=1.5, revisit_s=100.0))
+
+    def views(t):
+        return [_unseen_view(0, [20, 0, 0], hit=t <= 2.0 + 1e-9), _unseen_view(1, [60, 5, 0], hit=True)]
+
+    served = dict(_run(att, views, lambda target: {target} if target is not None else set(), 5.0))
+    assert served[3.5] == 0 and served[3.6] == 1 and 0 in att.set_aside
+
+
 @pytest.mark.parametrize("drop_s, pin", [(1.5, False), (0.0, False), (1.5, True)])
 def test_a_priority_the_head_turns_to_and_never_sees_is_set_aside_until_seen(drop_s, pin):
     # Track 0 (nearest: the priority) coasts with no hit and the head never gets it into the fovea
