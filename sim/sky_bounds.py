@@ -32,7 +32,9 @@ def scan_allows_confirm_s(times_s, tracked, rays, min_points: int, confirm_hits:
     reported at (a tracker that tracks its warm-up's frames at the warm-up's end counts their hits,
     and says so at the first frame after it).  ``lone_returns``: the tracker's rule with lone returns
     (:class:`foveatrack.sky.tracks.SkyTrackerConfig`): the track starts at a frame of ``min_points``
-    rays or more, and from then on a frame with a single ray is a hit too.  What part of a slow
+    rays or more, and from then on a frame with one ray or more is a hit (the tracker takes a cluster
+    of one return or an object: with ``min_points`` above 2 a frame of 2 rays counts here and not
+    there, which keeps the bound a bound).  What part of a slow
     confirmation is the scan's (the rosette's sparse periphery, paper Fig. 5) and what part the
     tracker's."""
     t = np.asarray(times_s, np.float64)

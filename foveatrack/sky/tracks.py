@@ -503,6 +503,14 @@ class SkyTracker:
             tr.kf.update(fovea_det.t_s, z)
             tr.last_hit_t_s, tr.hit_now, tr.last_xyz_m = fovea_det.t_s, True, z
             tr.excursion_m = max(tr.excursion_m, dist3(z, tr.origin_xyz_m))
+        if lone is not None and lone.size and fovea_det is not None:
+            # the returns Algorithm 1 took for the fixated track are its hit, not another track's
+            # (by the world test of its D the learning uses)
+            in_d = np.empty(fg_idx.size, np.int64)
+            in_d = in_d[:box_inside_kernel(fg_world, lo, hi, in_d)]
+            taken = np.zeros(fg_idx.size, bool)
+            taken[in_d[keep[in_d]]] = True
+            lone = lone[~taken[lone]]
         if lone is not None and lone.size:
             self._lone_hits(fg_world, t_ns[fg_idx], lone, t_mid, pred_mid, learn_pts, confirmed_now)
         hit_xyz = [self.tracks[i].last_xyz_m for i, _ in match if self.tracks[i].confirmed]
@@ -521,10 +529,7 @@ class SkyTracker:
                 tr.hit_now = True
                 tr.clear_hits = int(not ob.on_scenery)
                 self._next_id += 1
-                if cfg.confirm_hits == 1 and tr.clear_hits:
-                    tr.confirmed_t_s = t_mid
-                    self.confirmed_ever.append(tr.track_id)
-                    confirmed_now.append(tr.track_id)
+                self._confirm_if_due(tr, t_mid, confirmed_now)      # confirm_hits 1: at once
                 self.tracks.append(tr)
                 if not ob.on_scenery:
                     unlearn[j] = True
@@ -627,7 +632,7 @@ class SkyTracker:
             tr = self.tracks[idle[a]]
             z = O[b].copy()
             t_s = int(fg_t_ns[lone[b]]) * 1e-9
-            protect = dist3(z, P[a]) <= cfg.protect_m and (
+            protect = tr.kf.distance_at(t_s, z) <= cfg.protect_m and (     # as an object's: at its time
                 not tr.confirmed or tr.excursion_m >= cfg.protect_excursion_m)
             tr.kf.update(t_s, z)
             tr.hits += 1

@@ -706,3 +706,18 @@ def test_a_lone_return_that_is_an_object_is_not_a_second_tracks_hit():
         out = tracker.process(f, Pose())
     assert len(out.tracks) == 2
     assert sum(v.hit for v in out.tracks) == 1, [(v.track_id, v.hit) for v in out.tracks]
+
+
+def test_a_return_algorithm_1_took_for_the_fixated_track_is_no_lone_hit_of_another():
+    # two drones 1.2 m apart, each a 3-return object, both confirmed; then one return between them,
+    # inside the fixated track's D (1 m half-size) and within lone_gate_m of the other track: it is
+    # the fixated track's hit by Algorithm 1, and not also the other's lone hit (a reviewer's find)
+    cfg = SkyTrackerConfig(warmup_s=0.0, lone_returns=True)
+    a, b = np.array([40.0, 0.0, 5.0]), np.array([40.0, 1.2, 5.0])
+    cluster = lambda c: [c + d for d in ([0, 0, 0], [0, 0.1, 0], [0, 0, 0.1])]
+    frames = _frames_of_points([cluster(a) + cluster(b)] * 4 + [[a + [0.0, 0.6, 0.0]]])
+    tracker = SkyTracker(cfg)
+    outs = [tracker.process(f, Pose(), 0 if k == 4 else None) for k, f in enumerate(frames)]
+    last = {v.track_id: v for v in outs[-1].tracks}
+    assert set(last) == {0, 1} and last[0].confirmed and last[1].confirmed
+    assert last[0].hit and not last[1].hit, (last[0].hit, last[1].hit)
