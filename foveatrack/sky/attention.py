@@ -59,9 +59,10 @@ Schedule (evaluated after each frame, for the next):
   looks: the field keeps watching at its sparse density and a drone there is found again.  The
   paper tracker's lost-target search (its ``search``, a sweep at 5 deg/s in the last direction)
   is for a single target lost from a narrow D; run by the sky tracker it turned the head away from
-  the field it watched (tree line, seed 230: the drone's track was lost while the fovea served a
-  crown's part, the head swept 70 deg away and the drone was never in the fovea again; held, its
-  track was found again 2.5 s later).  ``idle_search`` (default false) brings the sweep back, as
+  the field it watched (tree line, seed 220: the drone's first track was lost at the sparse rim and
+  nothing was left to serve from 2.9 s; the head swept 81 deg by the run's end and the drone was
+  never in the fovea again; held, a track on it was found at 6.1 s and it was in the fovea from
+  9.1 s.  Seed 230 showed it first, before the priority's set-aside changed that run).  ``idle_search`` (default false) brings the sweep back, as
   recordings made before it ran;
 * a revisit fixation lasts until the track has been in the fovea for ``dwell_s``, or
   ``saccade_timeout_s`` after it started if the head never got there (a track the head cannot

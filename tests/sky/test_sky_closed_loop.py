@@ -287,17 +287,18 @@ def test_objects_truth_is_what_the_named_tuple_built_field_by_field_gives():
 
 @pytest.mark.parametrize("idle_search", [False, True])
 def test_with_nothing_to_serve_the_head_holds_unless_the_sweep_is_asked_for(idle_search):
-    # Tree line, seed 230: the drone's track is lost 4.1 s in while the fovea serves a crown's part,
-    # whose track goes too; nothing is left to serve.  The paper tracker's lost-target search swept
-    # the head left at 5 deg/s to the run's end and the drone was never in the fovea (the sweep is
-    # the single-target tracker's way to find its target again; the sky tracker watches the whole
-    # field).  Now the head holds; idle_search brings the sweep back.
+    # Tree line, seed 220: the drone's first track is lost at the sparse rim and nothing is left to
+    # serve from 2.9 s.  The paper tracker's lost-target search swept the head 81 deg by the run's
+    # end and the drone was never in the fovea (the sweep is the single-target tracker's way to find
+    # its target again; the sky tracker watches the whole field).  Now the head holds (it only
+    # slows from its last speed), and a track on the drone is found at 6.1 s; idle_search brings
+    # the sweep back.
     from foveatrack.tracker import TrackState
     from sim.scene import with_run_overrides
 
     base = load_scene(ROOT / "scenes" / "drone-tree-line.toml")
     table = {**base.tracker_table, "sky": {"attention": {"idle_search": idle_search}}}
-    loop = ClosedLoop(dataclasses.replace(with_run_overrides(base, None, 230), tracker_table=table))
+    loop = ClosedLoop(dataclasses.replace(with_run_overrides(base, None, 220), tracker_table=table))
     log = loop.run()
     pan = np.asarray(log["head_pan_deg"])
     idle = [k for k, o in enumerate(loop.sky_log) if o.fixated is None and k > 10]
@@ -308,5 +309,5 @@ def test_with_nothing_to_serve_the_head_holds_unless_the_sweep_is_asked_for(idle
         assert TrackState.SEARCHING in states and turned > 20.0, (states, turned)
     else:
         # held still, the field kept the drone: its track was found again and the fovea served it
-        assert TrackState.SEARCHING not in states and turned < 0.5, (states, turned)
+        assert TrackState.SEARCHING not in states and turned < 2.0, (states, turned)
         assert any(o.fixated is not None for o in loop.sky_log[idle[-1]:])
