@@ -160,14 +160,30 @@ def update_floats(state, dt: float, z, r: float, q: float) -> np.ndarray:
     return np.array(list(zip(*axes)))      # per axis (p, v, a, b, c) -> rows p, v, a, b, c
 
 
+def _gathered(filters, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The filters' states (N, 5, 3) and their times to ``t_s`` (N,), in one gather."""
+    return np.array([f.state for f in filters]), t_s - np.array([f.t_s for f in filters])
+
+
+def _positions(S: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """:meth:`ConstantVelocityFilter.position_at` of gathered states, row by row (the same bits)."""
+    return S[:, 0] + S[:, 1] * dt[:, None]
+
+
+def _variances(S: np.ndarray, dt: np.ndarray, filters) -> np.ndarray:
+    """The variances of :meth:`ConstantVelocityFilter.predicted` of gathered states, row by row (the
+    same elementwise operations in the same order)."""
+    q = np.array([f.q for f in filters])
+    a, b, c = S[:, 2], S[:, 3], S[:, 4]
+    return a + (2.0 * dt)[:, None] * b + (dt * dt)[:, None] * c + (q * dt * dt * dt / 3.0)[:, None]
+
+
 def positions_many(filters, t_s: float) -> np.ndarray:
     """:meth:`ConstantVelocityFilter.position_at` of many filters at ``t_s``: (N, 3), row ``i`` the
     same bits as ``filters[i].position_at(t_s)``."""
     if not filters:
         return np.empty((0, 3))
-    dt = t_s - np.array([f.t_s for f in filters])
-    S = np.array([f.state for f in filters])
-    return S[:, 0] + S[:, 1] * dt[:, None]
+    return _positions(*_gathered(filters, t_s))
 
 
 def predictions_many(filters, t_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -175,22 +191,15 @@ def predictions_many(filters, t_s: float) -> tuple[np.ndarray, np.ndarray]:
     filters' states: the association reads both for every track."""
     if not filters:
         return np.empty((0, 3)), np.empty((0, 3))
-    dt = t_s - np.array([f.t_s for f in filters])
-    q = np.array([f.q for f in filters])
-    S = np.array([f.state for f in filters])
-    a, b, c = S[:, 2], S[:, 3], S[:, 4]
-    return (S[:, 0] + S[:, 1] * dt[:, None],
-            a + (2.0 * dt)[:, None] * b + (dt * dt)[:, None] * c + (q * dt * dt * dt / 3.0)[:, None])
+    S, dt = _gathered(filters, t_s)
+    return _positions(S, dt), _variances(S, dt, filters)
 
 
 def variances_many(filters, t_s: float) -> np.ndarray:
     """The variances of :meth:`ConstantVelocityFilter.predicted` of many filters at ``t_s``: (N, 3),
-    row ``i`` the same bits as ``filters[i].predicted(t_s)[1]`` (the same elementwise operations in
-    the same order, on arrays: one call for a frame's tracks, not one per track)."""
+    row ``i`` the same bits as ``filters[i].predicted(t_s)[1]`` (one call for a frame's tracks, not
+    one per track)."""
     if not filters:
         return np.empty((0, 3))
-    dt = t_s - np.array([f.t_s for f in filters])
-    q = np.array([f.q for f in filters])
-    S = np.array([f.state for f in filters])
-    a, b, c = S[:, 2], S[:, 3], S[:, 4]
-    return a + (2.0 * dt)[:, None] * b + (dt * dt)[:, None] * c + (q * dt * dt * dt / 3.0)[:, None]
+    S, dt = _gathered(filters, t_s)
+    return _variances(S, dt, filters)
