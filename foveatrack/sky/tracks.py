@@ -469,6 +469,7 @@ class SkyTracker:
             fovea_det = box_detection(np.ascontiguousarray(xyz[sel]), np.ascontiguousarray(t_ns[sel]),
                                       head_trig(pan, tilt), off, lo, hi)
         confirmed_now = []
+        fixated_pts = None         # the foreground points in the fixated track's D, once asked for
         learn_pts = np.ones(fg_idx.size, bool)
         # the objects whose points are kept out of the learning, applied to learn_pts at once after
         # the loops (one pass over the foreground, not one per object); the last entry is -1: no object
@@ -476,10 +477,8 @@ class SkyTracker:
         if fov is not None and self.tracks[fov].confirmed and self.tracks[fov].excursion_m >= cfg.protect_excursion_m:
             # the fixated track's D is the target's (Algorithm 1): a frame with a single return on a
             # hovering drone makes no object to protect, and a few such frames made it scenery
-            # (D's test by the region's kernel, Box.contains' twin: one call, not a dozen numpy ones)
-            inside = np.empty(fg_idx.size, np.int64)
-            inside = inside[:box_inside_kernel(fg_world, lo, hi, inside)]
-            learn_pts[inside[keep[inside]]] = False
+            fixated_pts = self._in_fixated_d(fg_world, lo, hi, keep)
+            learn_pts[fixated_pts] = False
         for i, j in match:
             tr, ob = self.tracks[i], objs[j]
             z, tz = ob.xyz_m, ob.t_s
@@ -498,21 +497,17 @@ class SkyTracker:
                 unlearn[j] = True
         if fov is not None and fovea_det is not None and not self.tracks[fov].hit_now:
             # seen by Algorithm 1 though no object matched (too few points for an object)
-            tr = self.tracks[fov]
-            z = self._to_world(fovea_det.xyz, fovea_det.t_s, pose)
-            tr.kf.update(fovea_det.t_s, z)
-            tr.last_hit_t_s, tr.hit_now, tr.last_xyz_m = fovea_det.t_s, True, z
-            tr.excursion_m = max(tr.excursion_m, dist3(z, tr.origin_xyz_m))
+            self._measured(self.tracks[fov], fovea_det.t_s, self._to_world(fovea_det.xyz, fovea_det.t_s, pose))
         if lone is not None and lone.size and fovea_det is not None:
             # the returns Algorithm 1 took for the fixated track are its hit, not another track's
             # (by the world test of its D the learning uses)
-            in_d = np.empty(fg_idx.size, np.int64)
-            in_d = in_d[:box_inside_kernel(fg_world, lo, hi, in_d)]
+            if fixated_pts is None:
+                fixated_pts = self._in_fixated_d(fg_world, lo, hi, keep)
             taken = np.zeros(fg_idx.size, bool)
-            taken[in_d[keep[in_d]]] = True
+            taken[fixated_pts] = True
             lone = lone[~taken[lone]]
         if lone is not None and lone.size:
-            self._lone_hits(fg_world, t_ns[fg_idx], lone, t_mid, pred_mid, learn_pts, confirmed_now)
+            self._lone_hits(fg_world, t_ns[fg_idx], lone, t_mid, pred_mid, var_mid, learn_pts, confirmed_now)
         hit_xyz = [self.tracks[i].last_xyz_m for i, _ in match if self.tracks[i].confirmed]
         for j, ob in enumerate(objs):
             if j not in obj_track and any(dist3(ob.xyz_m, p) < cfg.spawn_clear_m for p in hit_xyz):
@@ -606,7 +601,8 @@ class SkyTracker:
             confirmed_now.append(tr.track_id)
 
     def _lone_hits(self, fg_world: np.ndarray, fg_t_ns: np.ndarray, lone: np.ndarray, t_mid: float,
-                   pred_mid: np.ndarray, learn_pts: np.ndarray, confirmed_now: list) -> None:
+                   pred_mid: np.ndarray, var_mid: np.ndarray | None, learn_pts: np.ndarray,
+                   confirmed_now: list) -> None:
         """Step 5b: the tracks no object measured this frame take the frame's lone returns off the
         scenery (``lone``: indices into the foreground), by the same gated global nearest neighbour
         as the objects: a return updates the track's filter and counts as a hit toward confirmation,
@@ -615,9 +611,9 @@ class SkyTracker:
         idle = [i for i, tr in enumerate(self.tracks) if not tr.hit_now]
         if not idle:
             return
-        kfs = [self.tracks[i].kf for i in idle]
         P = np.ascontiguousarray(pred_mid[idle], np.float64)
-        V = variances_many(kfs, t_mid)
+        # the frame's variances where the association made them (the same bits, row by row)
+        V = variances_many([self.tracks[i].kf for i in idle], t_mid) if var_mid is None else var_mid[idle]
         O = np.ascontiguousarray(fg_world[lone], np.float64)
         c = np.empty((len(idle), lone.size))
         allowed = np.empty(c.shape, np.bool_)
@@ -634,11 +630,10 @@ class SkyTracker:
             t_s = int(fg_t_ns[lone[b]]) * 1e-9
             protect = tr.kf.distance_at(t_s, z) <= cfg.protect_m and (     # as an object's: at its time
                 not tr.confirmed or tr.excursion_m >= cfg.protect_excursion_m)
-            tr.kf.update(t_s, z)
+            self._measured(tr, t_s, z)
             tr.hits += 1
             tr.clear_hits += 1
-            tr.last_hit_t_s, tr.hit_now, tr.lone_now, tr.last_xyz_m = t_s, True, True, z
-            tr.excursion_m = max(tr.excursion_m, dist3(z, tr.origin_xyz_m))
+            tr.lone_now = True
             self._confirm_if_due(tr, t_mid, confirmed_now)
             if protect:
                 learn_pts[lone[b]] = False
@@ -680,18 +675,33 @@ class SkyTracker:
             tr.seen_as, tr.features = classify(tr, self.cfg.classifier)
             tr.classified_on = on
 
-    def _hit(self, tr: SkyTrack, t_s: float, z: np.ndarray, ob: SkyObject) -> None:
+    @staticmethod
+    def _in_fixated_d(fg_world: np.ndarray, lo, hi, keep: np.ndarray) -> np.ndarray:
+        """Indices of the foreground points inside the fixated track's D (bounds ``lo``, ``hi``) that
+        are not other tracks' objects' (``keep``): D's world test by the region's kernel,
+        Box.contains' twin (one call, not a dozen numpy ones)."""
+        inside = np.empty(fg_world.shape[0], np.int64)
+        inside = inside[:box_inside_kernel(fg_world, lo, hi, inside)]
+        return inside[keep[inside]]
+
+    @staticmethod
+    def _measured(tr: SkyTrack, t_s: float, z) -> None:
+        """What every kind of hit does to a track: its filter takes ``z`` at ``t_s``, and its last hit,
+        last position and excursion follow (an object's :meth:`_hit`, Algorithm 1's in the fixated D
+        without one, a lone return's)."""
         tr.kf.update(t_s, z)
+        tr.last_hit_t_s, tr.hit_now, tr.last_xyz_m = t_s, True, z
+        tr.excursion_m = max(tr.excursion_m, dist3(z, tr.origin_xyz_m))
+
+    def _hit(self, tr: SkyTrack, t_s: float, z: np.ndarray, ob: SkyObject) -> None:
+        """An object's hit: :meth:`_measured`, counted, and its shape into the classifier's history."""
+        z = np.asarray(z, float)
+        self._measured(tr, t_s, z)
         tr.hits += 1
         tr.clear_hits += not ob.on_scenery
-        tr.last_hit_t_s = t_s
-        tr.hit_now = True
-        z = np.asarray(z, float)
         if tr.history and not t_s >= tr.history[-1][0]:
             tr.history_in_order = False
         tr.history.append((t_s, z, ob.sides_m, ob.n_points))
-        tr.last_xyz_m = z
-        tr.excursion_m = max(tr.excursion_m, dist3(z, tr.origin_xyz_m))
 
     def _prune(self, t_s: float, fovea_track_id: int | None, frame_s: float) -> tuple[list[int], np.ndarray]:
         """Drop failed candidates, tracks lost too long and static scenery; returns their ids, and the
