@@ -236,13 +236,12 @@ class SkyController:
         # the head's speed now and each track's bearing rate: asked only by the saccade time that
         # counts the motion (an option; a flock's twenty tracks a frame need not pay for them)
         motion = att.saccade_counts_motion
-        speeds, accels, rates = (recon.speeds_at(frame.t_end_s), recon.accels_deg_s2(), None) if motion \
-            else ((0.0, 0.0), (None, None), (0.0, 0.0))
         # per confirmed track, in one pass: in the fovea at the mid pose, its saccade time from the
         # end pose, its threat score (the attention's too)
         in_fovea, turn, scores = set(), {}, {}
         confirmed = [v for v in sky.tracks if v.confirmed]
         if motion:
+            speeds, accels = recon.speeds_at(frame.t_end_s), recon.accels_deg_s2()
             for v in confirmed:
                 p = v.xyz_m.tolist()
                 if off_axis_deg(*in_lidar(p, *mid_pose)) <= half:
