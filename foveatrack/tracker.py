@@ -484,12 +484,10 @@ class Tracker:
             if cfg.controller == "predictive" and self.pan_filter.initialised:
                 return self._predictive_speeds(send_t, corrective=False)
             return 0.0, 0.0
-        if not search:
-            self.state = TrackState.HOLDING
-            return 0.0, 0.0
-        if cfg.search == "hold" or (cfg.search_timeout_s is not None and since >= cfg.hold_s + cfg.search_timeout_s):
-            self.state = TrackState.WAITING if cfg.search == "sweep" else TrackState.HOLDING
-            if cfg.search == "sweep":
+        sweep = search and cfg.search == "sweep"      # the caller may hold the head whatever the config says
+        if not sweep or (cfg.search_timeout_s is not None and since >= cfg.hold_s + cfg.search_timeout_s):
+            self.state = TrackState.WAITING if sweep else TrackState.HOLDING
+            if sweep:
                 self.last_detection_t_s = None   # the search is over; wait for a new target
                 self.pan_filter.reset()
                 self.tilt_filter.reset()
