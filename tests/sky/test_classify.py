@@ -25,7 +25,7 @@ def _track(path, n_points=4, noise_m=0.05, seconds=3.0, seed=0):
     p0 = hist[0][1]
     exc = max(float(np.linalg.norm(h[1] - p0)) for h in hist)
     return SimpleNamespace(history=hist, kf=SimpleNamespace(speed_m_s=float(np.linalg.norm(v))), excursion_m=exc,
-                           first_t_s=hist[0][0], last_hit_t_s=hist[-1][0])
+                           first_t_s=hist[0][0], last_hit_t_s=hist[-1][0], hits=len(hist))
 
 
 def test_a_slow_straight_drone_is_a_drone():
@@ -46,6 +46,26 @@ def test_a_swaying_crown_part_is_clutter_and_a_short_track_unknown():
     sway = _track(lambda t: (35.0, 0.4 * math.sin(2 * math.pi * 0.3 * t), 5.0), noise_m=0.15)
     assert classify(sway, cfg)[0] == "clutter"
     assert classify(_track(lambda t: (33.0, 5.0 - 0.9 * t, 8.0), seconds=0.3), cfg)[0] == "unknown"
+
+
+@pytest.mark.parametrize("speed, hits, after, want", [
+    (9.0, 7, 5, "bird"),        # three objects and four lone returns: a bird's speed is a bird
+    (9.0, 4, 5, "unknown"),     # too few hits of any kind: the filter's speed is not yet read
+    (1.0, 7, 5, "unknown"),     # a drone's speed: no shape to tell it by, so unknown still
+    (9.0, 7, 0, "unknown"),     # 0: the rule before (recordings made before it)
+    (4.5, 5, 5, "bird"),        # at the thresholds
+])
+def test_a_track_of_few_objects_is_a_bird_by_its_filters_speed_once_it_has_hits_enough(speed, hits, after, want):
+    # rule 1's exception: with lone returns a bird's track is confirmed on single returns before its
+    # window holds min_hits objects; its filter's speed (rule 3's test, which reads no shape) is read
+    # once it has had bird_speed_after_hits hits of any kind
+    tr = _track(lambda t: (30.0, -8.0 + speed * t, 6.0), seconds=0.3)
+    assert len(tr.history) == 3
+    tr.hits = hits
+    tr.kf.speed_m_s = speed
+    assert classify(tr, ClassifierConfig(bird_speed_after_hits=after))[0] == want
+    # with three objects in the window the rules read them: the exception is for fewer than min_hits
+    assert classify(tr, ClassifierConfig(bird_speed_after_hits=after, min_hits=3))[0] != "unknown"
 
 
 def test_flapping_counts_only_where_the_object_is_resolved():
@@ -127,6 +147,10 @@ def test_a_classifier_built_in_code_is_checked_as_a_table_is():
         ClassifierConfig(min_hits=1)
     with pytest.raises(UserError, match="drone_after_frames"):
         ClassifierConfig(drone_after_frames=0)
+    with pytest.raises(UserError, match="bird_speed_after_hits must be an integer >= 0"):
+        ClassifierConfig.from_mapping({"bird_speed_after_hits": -1}, "[tracker.sky.classifier]")
+    with pytest.raises(UserError, match="bird_speed_after_hits"):
+        ClassifierConfig(bird_speed_after_hits=-2)
 
 
 def test_a_drone_label_can_be_held_for_a_few_frames_of_other_rule_output():
