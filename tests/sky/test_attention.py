@@ -391,6 +391,31 @@ def test_a_priority_the_head_turns_to_and_never_sees_is_set_aside_until_seen(dro
         assert not moved and not att.set_aside
 
 
+@pytest.mark.parametrize("over_fixations", [True, False])
+def test_a_priority_left_for_revisits_goes_on_counting_its_unseen_time(over_fixations):
+    # Track 0 (nearest: the priority) coasts with no hit and is never in the fovea; track 1, a drone
+    # farther off, is revisited once a second and seen at once.  The revisit takes the fovea from
+    # track 0 after 1.1 s unseen, so a clock that restarts at the turn back ran out only 1.5 s after
+    # it, and with revisits a little more often never did: the head chased two bird tracks given the
+    # fovea in turn for 3.1 s (the flock).  Summed over the fixations since its last hit, track 0 is
+    # set aside 0.4-0.5 s into the second one (the times are sums of tenths), and the priority goes to
+    # track 1.
+    att = Attention(AttentionConfig(drop_unseen_priority_s=1.5, revisit_s=1.0, dwell_s=0.3, saccade_timeout_s=1.0,
+                                    unseen_over_fixations=over_fixations))
+    priority = {}
+    for k in range(25):
+        t = round((k + 1) * 0.1, 1)
+        target = att.target
+        att.update(t, [_unseen_view(0, [20, 0, 0], hit=False), _unseen_view(1, [60, 5, 0], hit=True)],
+                   {1} if target == 1 else set(), 0.1)
+        priority[t] = att.priority
+    assert [priority[t] for t in (1.1, 1.2, 1.5, 1.8)] == [0, 0, 0, 0]      # the first fixation, the revisit
+    if over_fixations:
+        assert priority[2.0] == 1 and 0 in att.set_aside                    # 1.1 s + 0.4-0.5 s since 1.5 s
+    else:
+        assert priority[2.0] == 0 and priority[2.5] == 0 and not att.set_aside
+
+
 def test_the_fovea_turns_kernel_is_the_per_track_functions_bits():
     # the controller's frame, saccade_counts_motion off: every confirmed track's lidar-frame point at
     # the mid pose and its saccade time by one kernel call (attention.fovea_turns); its twins are
