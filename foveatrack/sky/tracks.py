@@ -49,7 +49,7 @@ Per frame:
    median of the foreground points inside its D, a box of ``d_half_m`` around its prediction (in the
    world, tested at the frame's mid pose as the tracker's world D is), without the points of objects
    matched to other tracks -- a bird flying through the drone's D does not pull its median.
-5b. Lone returns (``lone_returns``, an option, default off): the tracks no object or Algorithm 1
+5b. Lone returns (``lone_returns``, default on): the tracks no object or Algorithm 1
    measured this frame take the frame's single returns off the scenery (clusters of one return,
    not next to scenery in the making) by the same gated global nearest neighbour, within
    ``lone_gate_m`` (1 m) of the prediction: a lone return updates the filter and is a hit toward
@@ -59,12 +59,17 @@ Per frame:
    point a frame at the rosette's sparse rim (paper Fig. 5), and ``min_points`` makes no object of
    it: on the swarm it is confirmed late or never, and its track coasts between objects.  Gates of
    0.5, 0.75, 1 and 2.5 m were tried on seeds +200..+229 of the sky scenes; checked on +230..+259
-   with 1 m: drones confirmed within 2 s 157 -> 211 of 270 (swarm 67 -> 108, flock 19 -> 27).  Why
-   it is not the default: the birds' tracks are confirmed sooner too, and the flock's drone loses
-   the fovea to them (runs with every revisit within 3 s 20 -> 15; on the regression's eight seeds
-   three runs of the flock lost the drone's track for seconds).  The swarm's id switches rise
-   (30 -> 43) for drones tracked longer: a lost drone is found again, and the new id counts as a
-   switch (continuity 0.78 -> 0.93 on +200..+229).  Figures: docs/sky-tracks-figures.md.
+   with 1 m: drones confirmed within 2 s 157 -> 211 of 270 (swarm 67 -> 108, flock 19 -> 27).  The
+   birds' tracks are confirmed sooner too, and unknown (no shapes yet) they took the fovea from the
+   flock's drone (runs with every revisit within 3 s 20 -> 15), so it was an option until the
+   classifier read their speed from the filter (:mod:`foveatrack.sky.classify` rule 1,
+   ``bird_speed_after_hits``) and the attention summed a priority's unseen time over fixations.
+   With both, against objects only, on seeds +200..+229 / +230..+259 / the regression's +0..+7:
+   drones confirmed within 2 s swarm 81 -> 110 / 67 -> 107 / 20 -> 30, flock 26 -> 29 / 19 -> 27 /
+   7 -> 8, crossing and tree line within 4; the price is the flock's revisits (runs with every
+   gap within 3 s 26 -> 20 / 24 -> 20 / 5 -> 4) and more id switches where lost drones are found
+   again under a new id (flock 10 -> 20 / 18 -> 22, swarm 26 -> 35 / 30 -> 42; the crossing's
+   eight seeds none either way).  Figures: docs/sky-tracks-figures.md.
 6. Unmatched objects start tentative tracks, except one within ``spawn_clear_m`` of a confirmed
    track's hit of this frame: the sparse scan splits a drone into two clusters now and then, and a
    second track on it would take its hits in turn with the first (swarm-of-five, 24 runs: id
@@ -162,8 +167,8 @@ class SkyTrackerConfig:
                                  never; two tracks that take one object's hits in turn drag each
                                  other's velocity about)
     pose_nodes : int >= 2        head poses asked per frame for the per-point turn
-    lone_returns : bool          tracks take single returns as hits (step 5b; an option, default
-                                 false: objects only, as a recording without the key ran)
+    lone_returns : bool          tracks take single returns as hits (step 5b; default true; false:
+                                 objects only, as a recording without the key ran)
     lone_gate_m : > 0 [m]        largest distance of a lone return from a track's prediction
     """
 
@@ -203,7 +208,7 @@ class SkyTrackerConfig:
     merge_frames: int = 2
     merge_close_frames: int = 15
     pose_nodes: int = 11
-    lone_returns: bool = False
+    lone_returns: bool = True
     lone_gate_m: float = 1.0
     classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
 

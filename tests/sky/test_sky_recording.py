@@ -248,14 +248,21 @@ def test_a_replay_under_another_table_places_the_points_from_the_head_as_it_move
 #   nothing is left to serve, and the paper tracker's search swept the head away (today the head
 #   holds);
 # * attention.drop_unseen_priority_s, the flock seed 2: the head chased coasting tracks of birds
-#   20-40 m from any object for seconds (today they are set aside after 1.5 s unseen).
-ADDED_KEYS = [("drone-tree-line", 258, "classifier", {"drone_after_hits": 0}),
+#   20-40 m from any object for seconds (today they are set aside after 1.5 s unseen);
+# * classifier.bird_speed_after_hits and attention.unseen_over_fixations, the flock seed 230: bird
+#   tracks confirmed on lone returns stayed unknown and took the fovea, two of them in turn;
+# * the tracker's own lone_returns (sub-table None), the same run: objects only, the drone was
+#   confirmed later.
+ADDED_KEYS = [("drone-and-flock", 230, None, {"lone_returns": False}),
+              ("drone-and-flock", 230, "classifier", {"bird_speed_after_hits": 0}),
+              ("drone-and-flock", 230, "attention", {"unseen_over_fixations": False}),
+              ("drone-tree-line", 258, "classifier", {"drone_after_hits": 0}),
               ("two-drones-crossing", 28, "attention", {"saccade_counts_motion": False, "keep_verdict": False}),
               ("drone-tree-line", 220, "attention", {"idle_search": True}),
               ("drone-and-flock", 2, "attention", {"drop_unseen_priority_s": 0.0})]
 
 
-@pytest.mark.parametrize("name,seed,sub,before", ADDED_KEYS, ids=[f"{k[2]}-{'-'.join(k[3])}" for k in ADDED_KEYS])
+@pytest.mark.parametrize("name,seed,sub,before", ADDED_KEYS, ids=[f"{k[2] or 'sky'}-{'-'.join(k[3])}" for k in ADDED_KEYS])
 def test_a_recording_made_before_a_sky_key_existed_replays_as_it_ran(tmp_path, monkeypatch, name, seed, sub, before):
     # a recording made before the keys ran without them, and a table without them must replay so,
     # not with today's defaults
@@ -263,8 +270,13 @@ def test_a_recording_made_before_a_sky_key_existed_replays_as_it_ran(tmp_path, m
     from foveatrack.recording import run_meta
     from foveatrack.sky.controller import recorded_sky_table
 
+    def part(table):            # the sub-table the keys are in (None: the sky table itself)
+        return table if sub is None else table[sub]
+
     scene = tmp_path / f"{name}-before.toml"
-    scene.write_text((SCENES / f"{name}.toml").read_text() + f"\n[tracker.sky.{sub}]\n"
+    text = (SCENES / f"{name}.toml").read_text()
+    assert text.rstrip().endswith("[tracker.sky]")          # the scenes end with it: keys can follow
+    scene.write_text(text + ("\n" if sub is None else f"\n[tracker.sky.{sub}]\n")
                      + "".join(f"{k} = {json.dumps(v)}\n" for k, v in before.items()))
     out = tmp_path / "run"
     assert main(["simulate", str(scene), "--seed", str(seed), "--out", str(out),
@@ -274,34 +286,37 @@ def test_a_recording_made_before_a_sky_key_existed_replays_as_it_ran(tmp_path, m
     def as_made_before(meta, where="recording"):
         meta = json.loads(json.dumps(meta))
         for k in before:
-            del meta["sky"][sub][k]
+            del part(meta["sky"])[k]
         return from_dict(meta, where)
 
     monkeypatch.setattr(run_meta.RecordingMeta, "from_dict", staticmethod(as_made_before))
     res = replay_recording(out / "run.mcap")
     c = res.comparison
     recorded = run_meta.RecordingMeta.from_dict(RecordingReader(out / "run.mcap").meta).sky
-    assert not set(before) & set(recorded[sub])
-    assert {k: recorded_sky_table(recorded)[sub][k] for k in before} == before
+    assert not set(before) & set(part(recorded))
+    assert {k: part(recorded_sky_table(recorded))[k] for k in before} == before
     # a table that has the keys keeps its own
     own = {k: (not v if isinstance(v, bool) else v + 7) for k, v in before.items()}
-    assert {k: recorded_sky_table({sub: own})[sub][k] for k in before} == own
+    assert {k: part(recorded_sky_table(own if sub is None else {sub: own}))[k] for k in before} == own
     assert c["commands_equal"] and c["tracks"]["identical_all"], c["tracks"]
     # today's defaults on the same frames act differently: the test above can tell
     table = {k: v for k, v in RecordingReader(out / "run.mcap").meta["tracker"].items() if k != "sky"}
     sky = dict(RecordingReader(out / "run.mcap").meta["sky"])
-    sky[sub] = {k: v for k, v in sky[sub].items() if k not in before}
+    if sub is None:
+        sky = {k: v for k, v in sky.items() if k not in before}
+    else:
+        sky[sub] = {k: v for k, v in sky[sub].items() if k not in before}
     res_now = replay_recording(out / "run.mcap", tracker_table={**table, "sky": sky}, config_name="today's default")
     assert not (res_now.comparison["commands_equal"] and res_now.comparison["tracks"]["identical_all"])
 
 
 def test_a_recorded_sky_table_without_the_trackers_own_later_keys_gets_them_as_they_ran():
-    # lone_returns (default off) came after recordings kept the sky table: a table without it ran
-    # without lone returns, and one that has it keeps its own, whatever the default becomes
+    # lone_returns (default on since 2026-12-07) came after recordings kept the sky table: a table
+    # without it ran without lone returns, and one that has it keeps its own
     from foveatrack.sky.controller import recorded_sky_table
     from foveatrack.sky.tracks import ADDED_SINCE_RECORDED
 
     assert ADDED_SINCE_RECORDED == {"lone_returns": False}
     assert recorded_sky_table({"gate_max_m": 2.5})["lone_returns"] is False
     assert recorded_sky_table({"lone_returns": True})["lone_returns"] is True
-    assert recorded_sky_table({})["classifier"] == {"drone_after_hits": 0}
+    assert recorded_sky_table({})["classifier"] == {"drone_after_hits": 0, "bird_speed_after_hits": 0}
