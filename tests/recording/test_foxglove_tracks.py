@@ -43,13 +43,19 @@ def crossing(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def swarm(tmp_path_factory):
-    """6 s of swarm-of-five as ``simulate --out`` records it: tracks deleted at 2.6 and 5.1 s (5.1 s: a keyframe time)
-    (the crossing, whose warm-up is now tracked at its end, deletes none in its first 6 s)."""
+    """6 s of swarm-of-five as ``simulate --out`` records it, tracking objects only (``lone_returns =
+    false``): tracks deleted at 2.6 and 5.1 s (5.1 s: a keyframe time).  With single returns as hits
+    (the default since 2026-12-07) the swarm's tracks live through these 6 s, and the crossing, whose
+    warm-up is now tracked at its end, deletes none in its first 6 s either."""
     from foveatrack.cli import main
 
-    out = tmp_path_factory.mktemp("swarm") / "run"
-    assert main(["simulate", str(ROOT / "scenes" / "swarm-of-five.toml"), "--duration", "6",
-                 "--out", str(out), "--no-progress"]) == 0
+    base = tmp_path_factory.mktemp("swarm")
+    text = (ROOT / "scenes" / "swarm-of-five.toml").read_text()
+    assert text.rstrip().endswith("[tracker.sky]")
+    scene = base / "swarm-objects-only.toml"
+    scene.write_text(text + "\nlone_returns = false\n")
+    out = base / "run"
+    assert main(["simulate", str(scene), "--duration", "6", "--out", str(out), "--no-progress"]) == 0
     return read_view(out / "run.mcap")
 
 
