@@ -12,7 +12,8 @@ the linear blend of the two nodes' matrices around its time (matrix entries move
 fixed order x, y, z (no BLAS: :mod:`foveatrack.fixed_order`).
 
 The per-point loop is a numba kernel (:func:`world_points_kernel`: 48 k points of a 480 k points/s
-frame in well under a millisecond, where the numpy form took ~8 ms); its plain-numpy twin
+frame in well under a millisecond, where the numpy form took ~8 ms; the points' node coordinates in a
+loop of their own, vectorised); its plain-numpy twin
 :func:`lidar_to_world_per_point_numpy` is what ``tests/sky/test_world_points.py`` compares it with,
 bit for bit.
 """
@@ -80,18 +81,30 @@ def world_points_kernel(xyz, t_ns, R, t0_s, step_s, off, out):
     """The per-point turn (module docstring): ``R`` (K, 3, 3) the node rotations ``step_s`` apart from
     ``t0_s``, ``off`` (3,) the lidar's offset; written into ``out`` (N, 3)."""
     last = R.shape[0] - 1
-    for k in range(xyz.shape[0]):
+    n = xyz.shape[0]
+    # every point's place between the nodes first, in a loop of its own that the compiler vectorises:
+    # the division was half a point's cost one at a time (25 -> 13 us for a frame's 3 k points)
+    U = np.empty(n)
+    for k in range(n):
         u = (t_ns[k] * 1e-9 - t0_s) / step_s
-        u = min(max(u, 0.0), last * 1.0)
-        i = min(int(math.floor(u)), last - 1)
+        U[k] = min(max(u, 0.0), last * 1.0)
+    # each node interval's change of the entries once, not once a point (the same differences)
+    D = np.empty((last, 3, 3))
+    for i in range(last):
+        for r in range(3):
+            for c in range(3):
+                D[i, r, c] = R[i + 1, r, c] - R[i, r, c]
+    for k in range(n):
+        u = U[k]
+        i = min(int(u), last - 1)       # u >= 0: truncation is floor
         w = u - i
         qx = xyz[k, 0] + off[0]
         qy = xyz[k, 1] + off[1]
         qz = xyz[k, 2] + off[2]
         for r in range(3):
-            m0 = R[i, r, 0] + (R[i + 1, r, 0] - R[i, r, 0]) * w
-            m1 = R[i, r, 1] + (R[i + 1, r, 1] - R[i, r, 1]) * w
-            m2 = R[i, r, 2] + (R[i + 1, r, 2] - R[i, r, 2]) * w
+            m0 = R[i, r, 0] + D[i, r, 0] * w
+            m1 = R[i, r, 1] + D[i, r, 1] * w
+            m2 = R[i, r, 2] + D[i, r, 2] * w
             out[k, r] = m0 * qx + m1 * qy + m2 * qz
 
 
