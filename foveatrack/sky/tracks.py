@@ -287,7 +287,7 @@ class SkyTrack:
     last_xyz_m: np.ndarray | None = None
     last_seen_in_view: bool = True
     unseen_in_view_s: float = 0.0   # time since its last hit during which where it was last seen lay in the field
-    classified_on: tuple | None = None    # what the classifier last read (SkyTracker._classify)
+    reclassify: bool = True         # something rules 1-4 read has changed since they last ran (SkyTracker._classify)
     history_in_order: bool = True   # each hit's time >= the one before: the prune cuts a prefix (SkyTracker._prune)
 
     @property
@@ -542,8 +542,11 @@ class SkyTracker:
         deleted, positions = self._prune(t_mid, fovea_track_id, t1 - t0)
         for tr in self.tracks:
             self._classify(tr)
+            was_drone = tr.label == "drone"
             tr.label, tr.drone_frames, tr.drone_hits = held_label(tr.seen_as, tr.label, tr.drone_frames, tr.drone_hits,
                                                                    tr.hit_now and not tr.lone_now, cfg.classifier)
+            if (tr.label == "drone") != was_drone:
+                tr.reclassify = True        # rule 4 reads it
         if not learn:
             return (), None, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
         views = tuple(_make_view(tr.track_id, tr.confirmed_t_s is not None, tr.label, p, tr.kf.v.copy(),
@@ -670,16 +673,15 @@ class SkyTracker:
         return [(i, j) for i, j, yes in zip(rows.tolist(), cols.tolist(), ok) if yes], allowed
 
     def _classify(self, tr: SkyTrack) -> None:
-        """Rules 1-4 of the classifier on the track, unless nothing they read has changed since the
-        last frame (most tracks get no hit in a frame): its history (hits are appended, old ones
-        dropped from the front: its length and end times tell), its filter's velocity, its
-        excursion, its last hit's time and whether it is labelled drone (rule 4 keeps the label)."""
-        h = tr.history
-        on = (len(h), h[0][0] if h else None, h[-1][0] if h else None, tr.kf.v.tobytes(), tr.excursion_m,
-              tr.last_hit_t_s, tr.label == "drone")
-        if on != tr.classified_on:
+        """Rules 1-4 of the classifier on the track, unless nothing they read has changed since they
+        last ran (most tracks get no hit in a frame): what they read is its history, its filter's
+        velocity, its excursion, its last hit's time and whether it is labelled drone (rule 4 keeps
+        the label), and what changes one of them sets ``tr.reclassify`` (:meth:`_measured`, the
+        prune's cut of the history, the label's change to or from drone).  A flag, not a key of
+        what was read compared every frame: the key cost ~1 us a track, a flock's twenty a frame."""
+        if tr.reclassify:
             tr.seen_as, tr.features = classify(tr, self.cfg.classifier)
-            tr.classified_on = on
+            tr.reclassify = False
 
     @staticmethod
     def _in_fixated_d(fg_world: np.ndarray, lo, hi, keep: np.ndarray) -> np.ndarray:
@@ -698,6 +700,7 @@ class SkyTracker:
         tr.kf.update(t_s, z)
         tr.last_hit_t_s, tr.hit_now, tr.last_xyz_m = t_s, True, z
         tr.excursion_m = max(tr.excursion_m, dist3(z, tr.origin_xyz_m))
+        tr.reclassify = True        # (an object's hit adds to the history too)
 
     def _hit(self, tr: SkyTrack, t_s: float, z: np.ndarray, ob: SkyObject) -> None:
         """An object's hit: :meth:`_measured`, counted, and its shape into the classifier's history."""
@@ -725,8 +728,11 @@ class SkyTracker:
                     while k < len(h) and not h[k][0] >= oldest:
                         k += 1
                     tr.history = h[k:]
+                    tr.reclassify = True
             elif h:
                 tr.history = [x for x in h if x[0] >= oldest]
+                if len(tr.history) < len(h):
+                    tr.reclassify = True
             unseen = t_s - max(tr.last_hit_t_s, tr.merged_t_s)
             if tr.hit_now or tr.merged_t_s == t_s:
                 tr.unseen_in_view_s = 0.0
