@@ -116,7 +116,8 @@ from foveatrack.kernels import (association_kernel, box_inside_kernel, close_pai
 from foveatrack.openloop.objects import cluster_labels, object_summaries
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
-from foveatrack.sky.motion import ConstantVelocityFilter, positions_many, predictions_many, variances_many
+from foveatrack.sky.motion import (ConstantVelocityFilter, positions_many, positions_velocities_many, predictions_many,
+                                   variances_many)
 from foveatrack.openloop.range_background import RangeBackground, check_cell_deg
 from foveatrack.sky.world_points import lidar_to_world_per_point
 from foveatrack.space_of_interest import Box
@@ -539,7 +540,7 @@ class SkyTracker:
             keep = np.ones(cells.size, bool)
             keep[fg_idx[~learn_pts]] = False
             self.background.learn(cells[keep], ranges[keep])
-        deleted, positions = self._prune(t_mid, fovea_track_id, t1 - t0)
+        deleted, positions, velocities = self._prune(t_mid, fovea_track_id, t1 - t0)
         for tr in self.tracks:
             self._classify(tr)
             was_drone = tr.label == "drone"
@@ -549,9 +550,9 @@ class SkyTracker:
                 tr.reclassify = True        # rule 4 reads it
         if not learn:
             return (), None, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
-        views = tuple(_make_view(tr.track_id, tr.confirmed_t_s is not None, tr.label, p, tr.kf.v.copy(),
+        views = tuple(_make_view(tr.track_id, tr.confirmed_t_s is not None, tr.label, p, v,
                                  tr.hit_now, tr.in_view, dict(tr.features), tr.clear_hits, tr.seen_as)
-                      for tr, p in zip(self.tracks, positions))
+                      for tr, p, v in zip(self.tracks, positions, velocities))
         return views, fovea_det, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
 
     # ------------------------------------------------------------------------------------------
@@ -712,10 +713,12 @@ class SkyTracker:
             tr.history_in_order = False
         tr.history.append((t_s, z, ob.sides_m, ob.n_points))
 
-    def _prune(self, t_s: float, fovea_track_id: int | None, frame_s: float) -> tuple[list[int], np.ndarray]:
+    def _prune(self, t_s: float, fovea_track_id: int | None, frame_s: float
+               ) -> tuple[list[int], np.ndarray, np.ndarray]:
         """Drop failed candidates, tracks lost too long and static scenery; returns their ids, and the
-        positions (N, 3) of the tracks left at ``t_s`` (:func:`positions_many`).  ``frame_s``: the frame's
-        length, added to the unseen time in the field of each track not seen in it."""
+        positions (N, 3) at ``t_s`` and velocities (N, 3) of the tracks left (rows of fresh arrays,
+        :func:`positions_velocities_many`).  ``frame_s``: the frame's length, added to the unseen time
+        in the field of each track not seen in it."""
         cfg = self.cfg
         keep, gone = [], []
         oldest = t_s - cfg.history_s
@@ -754,15 +757,15 @@ class SkyTracker:
                 gone.append(tr.track_id)
             else:
                 keep.append(tr)
-        # the positions once, for the merge rule and the frame's views
-        positions = positions_many([tr.kf for tr in keep], t_s)
+        # the positions once, for the merge rule and the frame's views (and the views' velocities)
+        positions, velocities = positions_velocities_many([tr.kf for tr in keep], t_s)
         away = self._merged_away(keep, t_s, positions)
         gone += away
         if away:
             stay = [i for i, tr in enumerate(keep) if tr.track_id not in away]
-            keep, positions = [keep[i] for i in stay], positions[stay]
+            keep, positions, velocities = [keep[i] for i in stay], positions[stay], velocities[stay]
         self.tracks = keep
-        return gone, positions
+        return gone, positions, velocities
 
     def _merged_away(self, tracks: list[SkyTrack], t_s: float, positions: np.ndarray) -> list[int]:
         """Ids of confirmed tracks that have been one object with another for ``merge_frames``

@@ -231,6 +231,31 @@ def test_the_many_filters_predictions_are_each_filters_own_bit_for_bit():
     assert [a.shape for a in predictions_many([], 1.0)] == [(0, 3), (0, 3)]
 
 
+def test_the_predictions_kernel_is_its_numpy_twin():
+    # positions_many / predictions_many run motion.predictions_kernel: the bits of the numpy
+    # expressions _positions and _variances, for filters ahead of, at and behind the time asked
+    from foveatrack.sky.motion import ConstantVelocityFilter, _gathered, _positions, _variances, predictions_kernel
+
+    rng = np.random.default_rng(11)
+    filters = []
+    for i in range(25):
+        kf = ConstantVelocityFilter(rng.uniform(0, 10), rng.normal(size=3) * 50, 0.3 + 1.1 * i, 0.04, 5.0)
+        for _ in range(int(rng.integers(0, 5))):
+            kf.update(kf.t_s + rng.uniform(0.01, 0.4), kf.p + rng.normal(size=3))
+        filters.append(kf)
+    for t_s in (0.0, 4.7, filters[3].t_s, 12.987654321):
+        S, dt = _gathered(filters, t_s)
+        t = np.array([f.t_s for f in filters])
+        q = np.array([f.q for f in filters])
+        pos, var = np.empty((25, 3)), np.empty((25, 3))
+        predictions_kernel(S, t, q, t_s, pos, var)
+        assert pos.tobytes() == _positions(S, dt).tobytes()
+        assert var.tobytes() == _variances(S, dt, filters).tobytes()
+        only = np.empty((25, 3))
+        predictions_kernel(S, t, q, t_s, only, np.empty((0, 3)))      # positions alone
+        assert only.tobytes() == pos.tobytes()
+
+
 def test_the_filters_update_on_floats_is_the_array_forms_bits():
     # ConstantVelocityFilter.update runs predict's and the update's lines axis by axis on floats: every
     # state must be the bits of those lines on arrays, with a zero step and a measurement variance too
