@@ -471,8 +471,8 @@ class SkyTracker:
             keep = ~others[point_obj]
             sel = fg_idx[keep]
             c = pred_mid[fov]
-            d_box = Box(tuple((c - cfg.d_half_m).tolist()), tuple((c + cfg.d_half_m).tolist()))
-            lo, hi = box_bounds(d_box)
+            # D's bounds as box_bounds(Box(...)) has them (the same floats), without a Box a frame
+            lo, hi = c - cfg.d_half_m, c + cfg.d_half_m
             fovea_det = box_detection(np.ascontiguousarray(xyz[sel]), np.ascontiguousarray(t_ns[sel]),
                                       head_trig(pan, tilt), off, lo, hi)
         confirmed_now = []
