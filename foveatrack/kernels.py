@@ -241,3 +241,49 @@ def box_median_kernel(xyz, t_ns, cos_pan, sin_pan, cos_tilt, sin_tilt, offset, l
         col[j] = float(t_ns[idx[j]])
     t_med = _median_select(col, n)
     return (-n if zero else n), t_med, math.hypot(out_xyz[0], out_xyz[1])
+
+
+@njit(cache=True)
+def axis_angles_kernel(K, accel, has_accel, lo, hi, has_limits, wrap, ts, out, col, py):
+    """One axis of the head's dead reckoning at each instant of ``ts``: ``out[i, col]`` the angle
+    :meth:`foveatrack.reconstruction._AxisIntegrator.angle` gives (its twin; ``_advance``'s arithmetic
+    in its order, pan wrapped as ``wrap_deg`` wraps a float).  ``K`` (m, 4): the knots' ``(t, angle,
+    v, v_tgt)`` in time order, the first in force at the earliest of ``ts``; ``accel`` the speed's
+    ramp if ``has_accel``; ``lo``, ``hi`` the stops if ``has_limits``.  A knot that reverses toward a
+    stop is left to the twin (``py[i]`` set; its square is libm's ``pow``, as CPython's ``**``);
+    returns how many were."""
+    m = K.shape[0]
+    n_py = 0
+    for i in range(ts.shape[0]):
+        t = ts[i]
+        j = m - 1                   # the knot in force: the last at or before t (bisect_right - 1)
+        while j > 0 and K[j, 0] > t:
+            j -= 1
+        kt = K[j, 0]
+        kang = K[j, 1]
+        kv = K[j, 2]
+        kvt = K[j, 3]
+        tau = t - kt
+        dv = kvt - kv
+        if not has_accel or dv == 0.0:
+            ang = kang + kvt * tau
+        else:
+            a = math.copysign(accel, dv)
+            T = abs(dv) / accel
+            if tau <= T:
+                ang = kang + kv * tau + 0.5 * a * tau * tau
+            else:
+                ang = kang + kv * T + 0.5 * a * T * T + kvt * (tau - T)
+        if has_limits:
+            if has_accel and kv * kvt < 0.0:
+                py[i] = True
+                n_py += 1
+                continue
+            if ang > hi or ang < lo:
+                ang = min(max(ang, lo), hi)
+        if wrap and not (-180.0 < ang <= 180.0):
+            w = np.fmod(ang + 180.0, 360.0)      # C fmod, as math.fmod
+            w = (w + 360.0 if w < 0.0 else w) - 180.0
+            ang = 180.0 if w == -180.0 else w
+        out[i, col] = ang
+    return n_py

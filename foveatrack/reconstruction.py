@@ -96,6 +96,9 @@ class _Knot:
     s_run: float = 0.0      # S of the running byte at t [s]
 
 
+_axis_angles_kernel = None
+
+
 class _AxisIntegrator:
     def __init__(self, table: AxisTable, angle0: float, sigma0: float, t0: float, accel: float | None,
                  limits: tuple[float, float] | None, wrap: bool, timing_sigma_s: float, q: float,
@@ -218,6 +221,28 @@ class _AxisIntegrator:
         if self.wrap and not -180.0 < ang <= 180.0:
             ang = wrap_deg(ang)
         return ang
+
+    def angles_into(self, ts: np.ndarray, t_min: float, out: np.ndarray, col: int) -> None:
+        """``out[i, col] = angle(ts[i])`` (the same bits) for the instants ``ts`` (K,) float64, the
+        earliest ``t_min``: the knots in force from then passed to one kernel call
+        (:func:`foveatrack.kernels.axis_angles_kernel`), where eleven calls of :meth:`angle` were
+        most of a frame's node poses.  Instants before the kept knots, and a knot reversing toward a
+        stop, are :meth:`angle`'s own."""
+        global _axis_angles_kernel
+        if _axis_angles_kernel is None:     # numba loads on first use, not on import
+            from foveatrack.kernels import axis_angles_kernel as _axis_angles_kernel
+        times = self.times
+        if not t_min >= times[0]:
+            for i, t in enumerate(ts.tolist()):
+                out[i, col] = self.angle(t)
+            return
+        K = np.array([(k.t, k.angle, k.v, k.v_tgt) for k in self.knots[bisect.bisect_right(times, t_min) - 1:]])
+        py = np.zeros(ts.size, np.bool_)
+        lo, hi = self.limits if self.limits is not None else (0.0, 0.0)
+        if _axis_angles_kernel(K, 0.0 if self.accel is None else float(self.accel), self.accel is not None, float(lo),
+                               float(hi), self.limits is not None, self.wrap, ts, out, col, py):
+            for i in np.flatnonzero(py).tolist():
+                out[i, col] = self.angle(float(ts[i]))
 
     def command(self, t_eff: float, direction: int, byte: int) -> None:
         last = self.knots[-1]
@@ -426,15 +451,29 @@ class Reconstructor(HeadPose):
         return ans
 
     def pan_tilt_many(self, times) -> list[tuple[float, float]]:
-        """``angles_at(t)[:2]`` at each of ``times`` (the same bits), without the sigmas: a frame's
-        per-point turn asks eleven instants (:func:`foveatrack.sky.world_points.node_rotations`).  An
-        instant the memo holds is answered from it; the others are not put in it (a pure cache: the
-        answers do not depend on what it holds)."""
+        """``angles_at(t)[:2]`` at each of ``times`` (the same bits), without the sigmas: the twin of
+        :meth:`pan_tilt_array`, by which a frame's per-point turn asks eleven instants
+        (:func:`foveatrack.sky.world_points.node_rotations`).  An instant the memo holds is answered
+        from it; the others are not put in it (a pure cache: the answers do not depend on what it
+        holds)."""
         memo = self._memo
         out = []
         for t in times:
             hit = memo.get(t)
             out.append((hit[0], hit[1]) if hit is not None else (self.pan.angle(t), self.tilt.angle(t)))
+        return out
+
+    def pan_tilt_array(self, times) -> np.ndarray:
+        """:meth:`pan_tilt_many`'s angles as a (K, 2) float64 array (the same bits), each axis by one
+        kernel call (:meth:`_AxisIntegrator.angles_into`): the sky tracker's eleven node poses a
+        frame, ~12 us in pan_tilt_many's calls.  The memo is neither read nor written (its answers
+        are the same bits)."""
+        ts = np.ascontiguousarray(times, np.float64).reshape(-1)
+        out = np.empty((ts.size, 2))
+        if ts.size:
+            t_min = float(ts.min())
+            self.pan.angles_into(ts, t_min, out, 0)
+            self.tilt.angles_into(ts, t_min, out, 1)
         return out
 
     def tilt_at(self, t_s: float) -> tuple[float, float]:

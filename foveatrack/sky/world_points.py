@@ -38,13 +38,14 @@ def node_rotations(pose, t0_s: float, t1_s: float, nodes: int) -> tuple[np.ndarr
         p, tl, _, _ = pose.angles_at(t0_s)
         return np.array([t0_s, t0_s + 1.0]), np.array([rotation_rows(p, tl)] * 2, np.float64), 1.0
     ts = [t0_s + (t1_s - t0_s) * i / (k - 1) for i in range(k)]
-    many = getattr(pose, "pan_tilt_many", None)      # the dead reckoning's, without the sigmas
-    angles = np.array(many(ts) if many is not None else [pose.angles_at(t)[:2] for t in ts], np.float64)
+    times = np.array(ts)
+    many = getattr(pose, "pan_tilt_array", None)     # the dead reckoning's, without the sigmas, as an array
+    angles = many(times) if many is not None else np.array([pose.angles_at(t)[:2] for t in ts], np.float64)
     # every node's entries by one kernel call (rotation_entries' arithmetic), where eleven calls of it
     # and the array made of their lists took more than the poses
     R = np.empty((k, 3, 3))
     rotation_entries_kernel(angles, R)
-    return np.array(ts), R, step
+    return times, R, step
 
 
 @njit(cache=True)

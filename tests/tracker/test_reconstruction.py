@@ -255,4 +255,35 @@ def test_pan_tilt_many_is_angles_at_bit_for_bit():
             want = [fresh.angles_at(q)[:2] for q in ts]
             assert np.array(got).tobytes() == np.array(want).tobytes()
             assert all(type(a) is float and type(b) is float for a, b in got)
+            assert rec.pan_tilt_array(ts).tobytes() == np.array(want).tobytes()      # the kernel's
+            assert rec.pan_tilt_array(ts[:11]).tobytes() == np.array(want[:11]).tobytes()
+            assert rec._memo == memo
             t += float(rng.uniform(0.02, 0.3))
+
+
+@pytest.mark.parametrize("accel", [None, 40.0, 300.0])
+def test_pan_tilt_array_is_angle_s_twin_on_every_branch(accel):
+    """Reconstructor.pan_tilt_array (axis_angles_kernel) against _AxisIntegrator.angle, bit for bit:
+    the speed at once (no acceleration) or ramped, inside and past the ramp, the tilt into its stops
+    and reversing off them (the twin's path), pan wrapping round 180 both ways, the frame's eleven
+    nodes spanning a command's effect."""
+    table = SpeedTable.nominal()
+    rec = Reconstructor(table, pan0_deg=-178.0, tilt0_deg=60.5, t0_s=0.0, latency_s=0.01, dead_time_s=0.03,
+                        accel_deg_s2=accel or 40.0, tilt_limits_deg=(59.0, 62.0), history_s=3.0)
+    if accel is None:
+        rec.pan.accel = rec.tilt.accel = None
+    rng = np.random.default_rng(5)
+    t, branches = 0.0, set()
+    for step in range(400):
+        d = rng.integers(-1, 2, 2)
+        rec.on_command(t, HeadCommand(int(d[0]), int(rng.integers(0, 64)) if d[0] else 0,
+                                      int(d[1]), int(rng.integers(30, 64)) if d[1] else 0))
+        ts = [t + 0.1 * i / 10 for i in range(11)]
+        got = rec.pan_tilt_array(ts)
+        want = [(rec.pan.angle(q), rec.tilt.angle(q)) for q in ts]
+        assert got.tobytes() == np.array(want, np.float64).tobytes()
+        branches |= {("wrap", a > 0) for a, _ in want if abs(a) > 175.0}
+        branches |= {("stop", b) for _, b in want if b in (59.0, 62.0)}
+        branches |= {"reversal" for k in rec.tilt.knots[-2:] if k.v * k.v_tgt < 0.0 and rec.tilt.accel}
+        t += float(rng.uniform(0.02, 0.2))
+    assert {("stop", 59.0), ("stop", 62.0), ("wrap", True), ("wrap", False)} | ({"reversal"} if accel else set()) <= branches, branches
