@@ -5,7 +5,8 @@ Plain-numpy twins: the generic route of :mod:`foveatrack.detection` (``valid_poi
 ``tests/tracker/test_detection_kernels.py`` compares the two.  The sky tracker
 (:mod:`foveatrack.sky.tracks`) tests every point of a frame with the first two kernels: its frame of
 a few thousand points took a dozen numpy passes for each test (~30 us each, where one pass takes a
-few).
+few).  :func:`axis_angles_kernel` is the dead reckoning's (:mod:`foveatrack.reconstruction`) at a
+frame's node instants, its twin ``_AxisIntegrator.angle`` (``tests/tracker/test_reconstruction.py``).
 """
 
 from __future__ import annotations
