@@ -315,8 +315,10 @@ def window_features(track, period: tuple[float, float] | None) -> dict:
         return f
     out = np.empty(8)
     ts, ps, sides, counts = zip(*h)         # the hits' columns in one pass over the window
-    features_kernel(np.array(ts, np.float64), np.array(ps, np.float64).reshape(n, 3),
-                    np.array(sides, np.float64).reshape(n, 3), np.array(counts, np.int64),
+    # the positions and the box sides in one array, its first n rows and its last n (one
+    # concatenation of the 2n rows: ~1.6 us where an array of each took ~2.6)
+    PS = np.concatenate(ps + sides, dtype=np.float64).reshape(2 * n, 3)
+    features_kernel(np.array(ts, np.float64), PS[:n], PS[n:], np.array(counts, np.int64),
                     period is not None, *(period or (0.0, 0.0)), out)
     median_points, size_m, net_speed, flap_cv, has_manoeuvre, manoeuvre, has_period, flap = out.tolist()
     f["median_points"] = median_points
