@@ -471,8 +471,10 @@ class SkyTracker:
             keep = ~others[point_obj]
             sel = fg_idx[keep]
             c = pred_mid[fov]
-            # D's bounds as box_bounds(Box(...)) has them (the same floats), without a Box a frame
+            # D's bounds as box_bounds(Box(...)) has them (the same floats, read-only: the kernels'
+            # one compiled signature, which compile_sky_kernels loads), without a Box a frame
             lo, hi = c - cfg.d_half_m, c + cfg.d_half_m
+            lo.flags.writeable = hi.flags.writeable = False
             fovea_det = box_detection(np.ascontiguousarray(xyz[sel]), np.ascontiguousarray(t_ns[sel]),
                                       head_trig(pan, tilt), off, lo, hi)
         confirmed_now = []

@@ -1,8 +1,8 @@
 """The multi-object tracker's numba kernels compiled (or loaded from numba's cache) before data flows.
 
 Its kernels (the frame's validity and region tests, the direction cells and range background, the
-per-point turn into the world, the clustering, Algorithm 1 in a D and its box test, the filters'
-update, the classifier's features, the tracks' field test, the association's gate, the merge rule's
+per-point turn into the world and the dead reckoning's node angles, the clustering, Algorithm 1 in a D
+and its box test, the filters' update and predictions, the classifier's features, the tracks' field test, the association's gate, the merge rule's
 close pairs, the fovea's saccade times) run first when the tracker's warm-up ends, ~10 frames into a run: on a fresh install that
 frame waited ~8 s for the compiler, in the daemon's live loop as in a simulated run.
 :func:`compile_sky_kernels` steps a throwaway controller through frames past its warm-up with a small
@@ -52,9 +52,12 @@ def compile_sky_kernels(make_controller, rate_hz: float) -> None:
     bound = np.zeros(3)
     bound.flags.writeable = False
     box_inside_kernel(two, bound, bound, np.empty(2, np.int64))
-    from foveatrack.sky.motion import update_kernel
+    from foveatrack.sky.motion import predictions_kernel, update_kernel
 
     update_kernel(np.ones((5, 3)), 0.1, np.ones(3), 1.0, 1.0, np.empty((5, 3)))     # a track's hit
+    # the frame's predictions of every track, with the variances and without
+    predictions_kernel(np.ones((2, 5, 3)), np.ones(2), np.ones(2), 1.0, np.empty((2, 3)), np.empty((2, 3)))
+    predictions_kernel(np.ones((2, 5, 3)), np.ones(2), np.ones(2), 1.0, np.empty((2, 3)), np.empty((0, 3)))
     from foveatrack.sky.attention import fovea_turns_kernel
 
     fovea_turns_kernel(two, np.ones(9), np.ones(3), np.ones(9), np.ones(3), 1.0, 1.0, 1.0, 1.0, 1.0, 1.0,

@@ -311,3 +311,39 @@ def test_with_nothing_to_serve_the_head_holds_unless_the_sweep_is_asked_for(idle
         # held still, the field kept the drone: its track was found again and the fovea served it
         assert TrackState.SEARCHING not in states and turned < 2.0, (states, turned)
         assert any(o.fixated is not None for o in loop.sky_log[idle[-1]:])
+
+
+_SKY_AFTER_WARM = """
+import numpy as np
+import foveatrack.kernels, foveatrack.openloop.kernels, foveatrack.sky.attention, foveatrack.sky.features
+import foveatrack.sky.motion, foveatrack.sky.world_points
+from foveatrack.sky.controller import SkyController
+from foveatrack.sky.warm import compile_sky_kernels
+from sim.loop import ClosedLoop
+from sim.study.sky_objects import sky_scene
+
+MODULES = (foveatrack.kernels, foveatrack.openloop.kernels, foveatrack.sky.attention, foveatrack.sky.features,
+           foveatrack.sky.motion, foveatrack.sky.world_points)
+def signatures():
+    return {f"{m.__name__}.{k}": len(v.signatures) for m in MODULES for k, v in vars(m).items()
+            if hasattr(v, "signatures") and getattr(v, "py_func", None) is not None
+            and v.py_func.__module__ == m.__name__}
+loop = ClosedLoop(sky_scene("swarm-of-five", 4.0, None, None, "drone-and-flock"))
+compile_sky_kernels(lambda: SkyController(loop.tracker.rebased(0.0, 0.0, 0.0), loop.sky.sky.cfg, loop.sky.attention.cfg),
+                    loop.tracker.config.rate_hz)
+before = signatures()
+loop.run()
+after = signatures()
+print({k: (before.get(k, 0), n) for k, n in after.items() if n != before.get(k, 0)})
+"""
+
+
+def test_compile_sky_kernels_covers_what_a_sky_run_calls():
+    # the sky tracker's kernels after compile_sky_kernels: a run of the swarm with the flock (tracks
+    # confirmed, fixated, their D learned) adds no signature (numba compiles per argument types: a
+    # writable D bound where the warm-up loaded the read-only one stalled the first fixation)
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _SKY_AFTER_WARM], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "{}", f"kernels given new signatures (before, after): {out}"
