@@ -4,7 +4,7 @@ A :class:`SceneSource` turns a scene into the ``source(t0_ns, t1_ns)`` that
 :class:`sim.virtual_lidar.VirtualLivox` streams: for the slots of ``[t0_ns, t1_ns)`` it runs the
 scene's scan model (:class:`sim.scan.model.ScanModel` with ``scene.optics``), turns the beams into the
 world at the head pose of each point's own time (:func:`sim.world.kernels.rotate_pan_tilt_kernel`),
-casts them against the targets (culled by :func:`~sim.world.kernels.cone_candidates_kernel`, each
+casts them against the targets (culled by :func:`~sim.world.kernels.bodies_candidates_kernel`, each
 target at the point's own time, :func:`~sim.world.kernels.cast_moving_kernel`) and the background
 (:func:`~sim.world.kernels.cast_static_kernel`), and applies the effects the scene lists -- the
 same steps 2-5 as :meth:`sim.loop.ClosedLoop.step` (DESIGN.md "How data flows").  Stream time 0 is

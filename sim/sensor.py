@@ -147,6 +147,8 @@ class SceneSensor:
                        getattr(spec.trajectory, "max_accel_m_s2", None)) for spec in scene.targets]
         self._cull_others = [(obj.bounding_radius_m, obj.trajectory.max_speed_m_s,
                               getattr(obj.trajectory, "max_accel_m_s2", None)) for obj in scene.others]
+        self._singles_of = None       # the flocks _singles was made for (_single_bodies)
+        self._blocks = None           # the chunk's direction bounds (_ray_blocks), made once a chunk
         # A flock's birds are cast together (sim.world.sky.FlockPoses: the same values, a twentieth of
         # the Python calls); with a beam footprint each body's sub-rays are cast on their own.
         self._flocks = {} if self._has["beam_footprint"] else {
@@ -193,13 +195,15 @@ class SceneSensor:
         mids, vels = [], []
         # each ray's instant, as the poses take it (the per-ray cull's)
         self._t_ray = chunk.t_ns * 1e-9 if self.target_motion == "per_point" else np.full(n, 0.5 * (t0 + t1))
-        for spec, cull in zip(scene.targets, self._cull):
-            c, v, idx = self._cull_body(spec, cull, t0, t1, chunk, d_world)
+        self._blocks = None
+        culled = self._cull_bodies(t0, t1, chunk, d_world)
+        for spec, (c, v, idx) in zip(scene.targets, culled):
             self._cast_on(spec, idx, d_world, rng_m, prim, offset)
             mids.append(c.tolist())
             vels.append(None if v is None else v.tolist())
             offset += spec.body.prims.shape[0]
         k = 0
+        single = len(scene.targets)      # culled[single]: the next body cast on its own
         while k < len(scene.others):
             if k in self._flocks:
                 flock = self._flocks[k]
@@ -210,7 +214,8 @@ class SceneSensor:
                 k = flock.stop
                 continue
             obj = scene.others[k]
-            c, v, idx = self._cull_body(obj, self._cull_others[k], t0, t1, chunk, d_world)
+            c, v, idx = culled[single]
+            single += 1
             self._cast_on(obj, idx, d_world, rng_m, prim, offset)
             mids.append(c.tolist())
             vels.append(None if v is None else v.tolist())
@@ -348,38 +353,63 @@ class SceneSensor:
             self._share[rays] = 1.0
         self.last_strays_m = d_world[rays] * r[:, None]      # world frame, for the truth
 
-    def _cull_body(self, spec, cull, t0, t1, chunk, d_world):
-        """One body cast on its own (a target, or another object outside a flock): its position and
-        velocity at the chunk's mid time (the velocity None where the cull does not need it) and the
-        rays that can meet it (:meth:`_candidates`), ``(c, v, idx)``.  Body by body: one pass over the
-        rays for all of them (:func:`sim.world.kernels.flock_candidates_kernel`, which pays off for a
-        flock's many birds close together) saved ~8 us a frame on the swarm and cost 12 us on the
-        crossing's two drones, 47 us on a tree line's crowns."""
+    def _cull_bodies(self, t0, t1, chunk, d_world) -> list:
+        """The bodies cast on their own (the targets, then the others outside a flock, in order): each
+        one's position and velocity at the chunk's mid time (the velocity None where the cull does not
+        need it) and the rays that can meet it, ``(c, v, idx)``: those passing within its cone over the
+        chunk (its bounding radius and how far it can fly in half the chunk), then of those the rays
+        that can meet it at their own instant (not with a beam footprint, whose divergence widens the
+        cone instead).  Culled in one call (:func:`sim.world.kernels.bodies_candidates_kernel`), whose
+        direction bounds on blocks of rays (:meth:`_ray_blocks`) skip the rays far from a body: a
+        call per body and pass over every ray cost 7 us each, 36 us a frame on the swarm's drones."""
+        bodies, radius, speed, accel = self._single_bodies()
+        if not bodies:
+            return []
+        footprint = self._has["beam_footprint"]
         t = np.array([0.5 * (t0 + t1)])
-        if cull[2] is None or self._has["beam_footprint"]:
-            c, v = spec.trajectory.position(t)[0], None
-        else:       # in one evaluation where the path has one (a manual flight's clip, a circle's trig)
-            p, v = position_velocity(spec.trajectory, t)
-            c, v = p[0], v[0]
-        return c, v, self._candidates(c, v, cull, t0, t1, chunk.t_ns, d_world, chunk.status)
+        centres, vels, out = [], [], []
+        for spec, cull in bodies:
+            if cull[2] is None or footprint:
+                c, v = spec.trajectory.position(t)[0], None
+            else:   # in one evaluation where the path has one (a manual flight's clip, a circle's trig)
+                p, v = position_velocity(spec.trajectory, t)
+                c, v = p[0], v[0]
+            centres.append(c)
+            vels.append(_ZERO3 if v is None else v)
+            out.append((c, v))
+        reach = _reach(radius, speed, t0, t1)
+        if footprint:   # beam divergence can catch a body just outside the central ray's path
+            div = math.radians(max(self.scene.optics.beam_divergence_deg))
+            reach = np.array([r + norm3(c) * div / 2 for r, c in zip(reach.tolist(), centres)])
+        idx, start = wk.bodies_candidates_kernel(d_world, chunk.status, self._t_ray, 0.5 * (t0 + t1), np.array(centres),
+                                                 np.array(vels), reach, radius, accel, speed, not footprint,
+                                                 *self._ray_blocks(chunk, d_world))
+        return [(c, v, idx[a:b]) for (c, v), a, b in zip(out, start[:-1].tolist(), start[1:].tolist())]
 
-    def _candidates(self, c, v, cull, t0, t1, t_ns, d_world, status) -> np.ndarray:
-        """The rays near one moving body at ``c`` (velocity ``v``, None: not needed) at the chunk's mid
-        time that can meet it: its cone over the chunk, then each ray's own instant (not with a beam
-        footprint, whose divergence widens the cone instead)."""
-        radius_m, v_max, accel = cull
-        reach = _reach(radius_m, v_max, t0, t1)
-        # Beam divergence can catch a body just outside the central ray's path.
-        if self._has["beam_footprint"]:
-            reach += norm3(c) * math.radians(max(self.scene.optics.beam_divergence_deg)) / 2
-        idx = np.empty(t_ns.size, dtype=np.int64)
-        idx = idx[:wk.cone_candidates_kernel(d_world, status, c[0], c[1], c[2], reach, idx)]
-        if idx.size and not self._has["beam_footprint"]:
-            # ... of those, the rays that can meet it at their own instant (wk.moving_cull_kernel)
-            kept = np.empty(idx.size, dtype=np.int64)
-            idx = kept[:wk.moving_cull_kernel(idx, d_world, self._t_ray, 0.5 * (t0 + t1), c, _ZERO3 if v is None else v,
-                                              radius_m, -1.0 if accel is None else accel, v_max, kept)]
-        return idx
+    def _single_bodies(self):
+        """The bodies cast on their own, ``[(body, cull)]`` (the targets, then the others outside the
+        flocks of ``_flocks``), and their culls' bounding radii, top speeds and acceleration bounds
+        (-1: none) as arrays; made again if ``_flocks`` is replaced (a test casts a flock bird by bird)."""
+        if self._singles_of is not self._flocks:
+            flocked = {k for a, f in self._flocks.items() for k in range(a, f.stop)}
+            bodies = list(zip(self.scene.targets, self._cull)) + [
+                (obj, cull) for k, (obj, cull) in enumerate(zip(self.scene.others, self._cull_others))
+                if k not in flocked]
+            self._singles = (bodies, np.array([float(c[0]) for _, c in bodies]),
+                             np.array([float(c[1]) for _, c in bodies]),
+                             np.array([-1.0 if c[2] is None else float(c[2]) for _, c in bodies]))
+            self._singles_of = self._flocks
+        return self._singles
+
+    def _ray_blocks(self, chunk, d_world):
+        """This chunk's direction bounds on blocks of rays (:func:`sim.world.kernels.ray_blocks_kernel`),
+        made once for every cull of the chunk."""
+        if self._blocks is None:      # reset by returns() for each chunk
+            nb = -(-len(chunk) // wk.CULL_BLOCK)
+            axis, cos, sin = np.empty((nb, 3)), np.empty(nb), np.empty(nb)
+            wk.ray_blocks_kernel(d_world, chunk.status, axis, cos, sin)
+            self._blocks = (axis, cos, sin)
+        return self._blocks
 
     def _cast_flock(self, flock: _FlockCast, t0, t1, chunk, d_world, rng_m, prim, offset):
         """:meth:`_cast_on` for each bird of a flock in turn, in a few calls: the birds' poses
@@ -402,7 +432,7 @@ class SceneSensor:
         return centres.tolist(), vel.tolist()
 
     def _cast_on(self, spec, idx, d_world, rng_m, prim, offset) -> None:
-        """Cast the rays ``idx`` (the body's candidates, :meth:`_cull_body`) on one moving body, each at
+        """Cast the rays ``idx`` (the body's candidates, :meth:`_cull_bodies`) on one moving body, each at
         its own instant."""
         traj = spec.trajectory
         self.rays_cast_targets += idx.size

@@ -167,6 +167,44 @@ def moving_cull_twin(idx, d, t_ray, t_mid, c, v, radius, accel, v_max):
     q2 = q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1] + q[:, 2] * q[:, 2]
     return idx[(q2 - b * b <= reach * reach) & (b > -reach)]
 
+def ray_blocks_twin(d, status, block):
+    """``ray_blocks_kernel``: per block of ``block`` rays, the unit axis (its first, middle and last
+    rays summed) and the cosine and sine of the widest angle of a valid ray from it, 4e-6 off the
+    cosine; -2 (not bounded) for a ray off length 1 by over 1e-6 in |d|^2, a spread over 60 deg or a
+    non-finite axis, 2 for a block without a valid ray."""
+    n = d.shape[0]
+    nb = -(-n // block)
+    axis, cos, sin = np.zeros((nb, 3)), np.full(nb, -2.0), np.ones(nb)
+    for b in range(nb):
+        rows = d[b * block:(b + 1) * block]
+        ok = status[b * block:(b + 1) * block] == 0
+        a = rows[0] + rows[rows.shape[0] // 2] + rows[-1]
+        an = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+        if not (an > 0.5 and np.isfinite(an)):
+            continue
+        axis[b] = a / an
+        if not ok.any():
+            cos[b] = 2.0
+            continue
+        v = rows[ok]
+        unit = np.abs(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2] - 1.0) <= 1e-6
+        dots = v[:, 0] * axis[b, 0] + v[:, 1] * axis[b, 1] + v[:, 2] * axis[b, 2]
+        cb = np.min(np.where(unit, dots, -10.0)) - 4e-6
+        if cb > 0.5:
+            cos[b], sin[b] = cb, np.sqrt(1.0 - cb * cb)
+    return axis, cos, sin
+
+
+def bodies_candidates_twin(d, status, t_ray, t_mid, centres, velocities, reach, radius, accel, v_max, instant):
+    """``bodies_candidates_kernel`` as the sensor culled each body before it: its cone's rays, then
+    (``instant``) those that can meet it at their own instant; ``(idx, start)``, body by body."""
+    per = []
+    for c, v, r, rad, acc, vm in zip(centres, velocities, reach, radius, accel, v_max):
+        idx = cone_candidates_twin(d, status, c, r)
+        per.append(moving_cull_twin(idx, d, t_ray, t_mid, c, v, rad, acc, vm) if instant else idx)
+    return (np.concatenate(per) if per else np.zeros(0, np.int64)), np.cumsum([0] + [p.size for p in per])
+
+
 def bout_index_twin(t, member, starts_per_member):
     """Per time, the bout index (into the members' concatenated starts) numpy's searchsorted finds."""
     out = np.empty(t.size, np.int64)

@@ -660,6 +660,165 @@ def _flock_pairs(d_world, status, gx, gy, gz, outer, cx, cy, cz, c2, r2, reach, 
     return n_pairs
 
 
+# The cull's direction bounds (ray_blocks_kernel): rays per block.  A Mid-40 frame's 32 consecutive
+# rays span ~1.5 deg of its rosette, so a drone's cone at 40 m meets 1-3 % of the blocks: the rays of
+# the others are never tested against it (five drones' cones: 36 -> ~10 us a frame).
+CULL_BLOCK = 32
+_BLOCK_EMPTY = 2.0     # block_cos of a block without a valid ray: no ray of it passes a cone test
+_BLOCK_ANY = -2.0      # block_cos of a block not bounded (rays off length 1, or spread wide): all tested
+
+
+@njit(cache=True, nogil=True)
+def ray_blocks_kernel(d_world, status, out_axis, out_cos, out_sin):
+    """Bounds on the directions of the rays in blocks of ``CULL_BLOCK`` (block b: rays ``b CULL_BLOCK``
+    on), for the cone tests of :func:`bodies_candidates_kernel` and :func:`flock_candidates_kernel`:
+    every valid ray (``status == RAY_OK``) of block b lies within the angle ``theta_b`` of the unit
+    axis ``out_axis[b]``, ``out_cos[b] = cos theta_b``, ``out_sin[b] = sin theta_b``.
+
+    The axis is the block's first, middle and last rays summed and normalised (any axis is sound;
+    this one is near the middle of the block's arc); ``cos theta_b`` the least ``d . axis`` of its
+    valid rays less 4e-6, which covers a ray's length off 1 by up to 1e-6 in ``|d|^2`` and the
+    rounding.  A block with a valid ray whose ``|d|^2`` is further from 1, or spread wider than
+    60 deg (or with a non-finite axis) gets ``out_cos[b] = _BLOCK_ANY`` (its rays are all tested); one
+    without a valid ray ``_BLOCK_EMPTY`` (none can pass).  Numpy twin: ``ray_blocks_twin`` in
+    ``tests/world_twins.py``."""
+    n = d_world.shape[0]
+    flat = d_world.reshape(-1)      # rows end to end: the stride-3 loads vectorise (see _rows_to_xyz)
+    w = np.empty(CULL_BLOCK)
+    for b in range(out_cos.shape[0]):
+        j0 = b * CULL_BLOCK
+        m = min(CULL_BLOCK, n - j0)
+        jm = j0 + m // 2
+        jl = j0 + m - 1
+        ax = flat[3 * j0] + flat[3 * jm] + flat[3 * jl]
+        ay = flat[3 * j0 + 1] + flat[3 * jm + 1] + flat[3 * jl + 1]
+        az = flat[3 * j0 + 2] + flat[3 * jm + 2] + flat[3 * jl + 2]
+        an = math.sqrt(ax * ax + ay * ay + az * az)
+        out_cos[b] = _BLOCK_ANY
+        out_sin[b] = 1.0
+        if not (an > 0.5 and an < math.inf):
+            out_axis[b, 0] = 0.0
+            out_axis[b, 1] = 0.0
+            out_axis[b, 2] = 0.0
+            continue
+        ax /= an
+        ay /= an
+        az /= an
+        out_axis[b, 0] = ax
+        out_axis[b, 1] = ay
+        out_axis[b, 2] = az
+        blk = flat[3 * j0:3 * (j0 + m)]
+        st = status[j0:j0 + m]
+        for i in range(m):      # branch-free: selects only (a ray off length 1: -10, not valid: 10)
+            x = blk[3 * i]
+            y = blk[3 * i + 1]
+            z = blk[3 * i + 2]
+            c = x * ax + y * ay + z * az
+            c = c if abs(x * x + y * y + z * z - 1.0) <= 1e-6 else -10.0
+            w[i] = c if st[i] == RAY_OK else 10.0
+        # the least of them in four chains (one chain waits on each comparison)
+        lo0 = 10.0
+        lo1 = 10.0
+        lo2 = 10.0
+        lo3 = 10.0
+        i = 0
+        while i + 4 <= m:
+            lo0 = min(lo0, w[i])
+            lo1 = min(lo1, w[i + 1])
+            lo2 = min(lo2, w[i + 2])
+            lo3 = min(lo3, w[i + 3])
+            i += 4
+        while i < m:
+            lo0 = min(lo0, w[i])
+            i += 1
+        cb = min(min(lo0, lo1), min(lo2, lo3)) - 4e-6
+        if cb > 1.0:
+            out_cos[b] = _BLOCK_EMPTY
+        elif cb > 0.5:
+            out_cos[b] = cb
+            out_sin[b] = math.sqrt(1.0 - cb * cb)
+
+
+@njit(cache=True, inline="always")
+def _cone_bound(cx, cy, cz, reach):
+    """What a block test needs of a cone of radius ``reach`` about ``c`` (:func:`_block_may_pass`):
+    ``(bounded, ux, uy, uz, cos a, sin a)``, ``u = c / |c|`` and ``a`` the half-angle within which a
+    ray passing the cone's test points: ``sin^2 a = reach^2 / |c|^2 + 4e-6`` (a ray's |d|^2 off 1 by
+    up to 1e-6 and the rounding of the test).  Not bounded (every block tested): ``|c|`` not above
+    twice ``reach`` (then a ray behind the origin's side might pass), non-finite, or ``a`` over 30 deg."""
+    c2 = cx * cx + cy * cy + cz * cz
+    cn = math.sqrt(c2)
+    if not (cn > 2.0 * reach and cn < math.inf and reach >= 0.0):
+        return False, 0.0, 0.0, 0.0, 1.0, 0.0
+    s2 = (reach * reach) / c2 + 4e-6
+    if not s2 <= 0.25:
+        return False, 0.0, 0.0, 0.0, 1.0, 0.0
+    return True, cx / cn, cy / cn, cz / cn, math.sqrt(1.0 - s2), math.sqrt(s2)
+
+
+@njit(cache=True, inline="always")
+def _block_may_pass(block_axis, block_cos, block_sin, b, bound):
+    """Whether a valid ray of block b (:func:`ray_blocks_kernel`) may pass the cone test ``bound``
+    (:func:`_cone_bound`).  A ray within ``theta_b`` of the block's axis and within ``a`` of the cone's
+    direction has the two directions within ``theta_b + a`` (< 90 deg) of each other: a block whose
+    axis is further from it (1e-9 in the cosine to spare) has no such ray."""
+    bc = block_cos[b]
+    if bc == _BLOCK_EMPTY:
+        return False
+    bounded, ux, uy, uz, ca, sa = bound
+    if not bounded or bc == _BLOCK_ANY:
+        return True
+    dot = block_axis[b, 0] * ux + block_axis[b, 1] * uy + block_axis[b, 2] * uz
+    return dot >= bc * ca - block_sin[b] * sa - 1e-9
+
+
+@njit(cache=True, nogil=True)
+def bodies_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities, reach, radius, accel, v_max, instant,
+                             block_axis, block_cos, block_sin):
+    """:func:`cone_candidates_kernel` (body k at ``centres[k]``, its cone's radius ``reach[k]``) and,
+    with ``instant``, :func:`moving_cull_kernel` of its candidates (``velocities[k]``, ``radius[k]``,
+    ``accel[k]`` (< 0: no bound), ``v_max[k]``) for K bodies in one call: returns ``(idx, start)``, body
+    k's rays ``idx[start[k]:start[k + 1]]`` in order.  A body's rays are tested in the blocks whose
+    direction bounds (``block_*``, :func:`ray_blocks_kernel` of these rays) its cone may meet
+    (:func:`_block_may_pass`): the others hold no ray that passes.  Each test with the arithmetic of
+    the kernels it stands for, so the same rays (numpy twin: ``bodies_candidates_twin`` in
+    ``tests/world_twins.py``)."""
+    n = d_world.shape[0]
+    n_bodies = centres.shape[0]
+    nb = block_cos.shape[0]
+    near = np.zeros((n_bodies, nb), dtype=np.bool_)
+    total = 0
+    for k in range(n_bodies):
+        bound = _cone_bound(centres[k, 0], centres[k, 1], centres[k, 2], reach[k])
+        for b in range(nb):
+            if _block_may_pass(block_axis, block_cos, block_sin, b, bound):
+                near[k, b] = True
+                total += min(CULL_BLOCK, n - b * CULL_BLOCK)
+    idx = np.empty(total, dtype=np.int64)
+    start = np.zeros(n_bodies + 1, dtype=np.int64)
+    p = 0
+    for k in range(n_bodies):
+        cx = centres[k, 0]
+        cy = centres[k, 1]
+        cz = centres[k, 2]
+        rk = reach[k]
+        r2 = rk * rk
+        c2 = cx * cx + cy * cy + cz * cz
+        for b in range(nb):
+            if not near[k, b]:
+                continue
+            for j in range(b * CULL_BLOCK, min(n, (b + 1) * CULL_BLOCK)):
+                bj = d_world[j, 0] * cx + d_world[j, 1] * cy + d_world[j, 2] * cz
+                if (c2 - bj * bj <= r2) and (bj > -rk) and status[j] == RAY_OK:
+                    if not instant or _meets_at_instant(d_world, j, t_ray[j] - t_mid, cx, cy, cz, velocities[k, 0],
+                                                        velocities[k, 1], velocities[k, 2], radius[k], accel[k],
+                                                        v_max[k]):
+                        idx[p] = j
+                        p += 1
+        start[k + 1] = p
+    return idx[:p], start
+
+
 @njit(cache=True, nogil=True)
 def wander_arg_kernel(t_s, member, omega, phase, out):
     """``out[i] = t_s[i] * omega[member[i]] + phase[member[i]]`` (N, K, 3): the arguments of a flock's

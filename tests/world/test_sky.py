@@ -17,9 +17,9 @@ from sim.loop import ClosedLoop
 from sim.scene import load_scene, scene_from_mapping
 from sim.world import kernels as K
 from sim.world import sky
-from world_twins import (bout_index_twin, cast_flapping_twin, cast_flock_twin, cone_candidates_twin,
-                         flock_candidates_twin, flock_positions_twin, flock_velocities_twin,
-                         flock_wing_angles_twin, moving_cull_twin)
+from world_twins import (bodies_candidates_twin, bout_index_twin, cast_flapping_twin, cast_flock_twin,
+                         cone_candidates_twin, flock_candidates_twin, flock_positions_twin, flock_velocities_twin,
+                         flock_wing_angles_twin, moving_cull_twin, ray_blocks_twin)
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 NEW_SCENES = ("two-drones-crossing", "drone-and-flock", "drone-tree-line", "swarm-of-five")
@@ -335,18 +335,19 @@ def test_the_per_ray_cull_drops_only_rays_that_miss(monkeypatch):
     # rays where things fly fast (the flock's birds at 8 m/s: a cone over the frame reaches ~0.8 m
     # from a bird's centre, its instant ~0.4 m; the crossing's drones at 1.2-1.4 m/s gain less).
     flock_candidates = K.flock_candidates_kernel
+    bodies_candidates = K.bodies_candidates_kernel
 
     def run(scene, keep_all):
         if keep_all:
-            def everything(idx, d, t_ray, t_mid, c, v, radius, accel, v_max, out):
-                out[:idx.size] = idx
-                return idx.size
+            def everything(d, status, t_ray, t_mid, centres, vel, reach, radius, accel, v_max, instant, *blocks):
+                return bodies_candidates(d, status, t_ray, t_mid, centres, vel, reach, radius, accel, v_max, False,
+                                         *blocks)
 
             def cones_only(d, status, t_ray, t_mid, centres, vel, reach, radius, accel, v_max):
                 # an infinite body radius: every ray can meet its bird at its instant
                 return flock_candidates(d, status, t_ray, t_mid, centres, vel, reach, np.full_like(radius, np.inf),
                                         accel, v_max)
-            monkeypatch.setattr(K, "moving_cull_kernel", everything)
+            monkeypatch.setattr(K, "bodies_candidates_kernel", everything)
             monkeypatch.setattr(K, "flock_candidates_kernel", cones_only)
         points = []
         loop = ClosedLoop(scene, frame_hook=lambda frame, out, lp: points.append(frame.xyz.tobytes()))
@@ -569,3 +570,89 @@ def test_flock_candidates_with_the_direction_box_are_the_twin_s_everywhere():
         idx, member = K.flock_candidates_kernel(*args)
         twin_idx, twin_member = flock_candidates_twin(*args)
         assert np.array_equal(idx, twin_idx) and np.array_equal(member, twin_member), trial
+
+
+def _blocks(d, status):
+    nb = -(-d.shape[0] // K.CULL_BLOCK)
+    axis, cos, sin = np.empty((nb, 3)), np.empty(nb), np.empty(nb)
+    K.ray_blocks_kernel(d, status, axis, cos, sin)
+    return axis, cos, sin
+
+
+def _scan_like_rays(rng, n, axis, spread):
+    """Rays along a smooth random curve about ``axis`` (consecutive rays close, as a rosette scan's)."""
+    phase = np.cumsum(rng.uniform(0.0, 0.02, n))
+    e1 = np.cross(axis, [0.3, 0.5, 0.8])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    d = axis + spread * (np.sin(3.1 * phase)[:, None] * e1 + np.sin(5.3 * phase + 1.0)[:, None] * e2)
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def test_ray_blocks_kernel_matches_its_twin_and_bounds_every_valid_ray():
+    rng = np.random.default_rng(31)
+    for trial in range(30):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        n = int(rng.integers(1, 3000))
+        d = _scan_like_rays(rng, n, axis, rng.uniform(0.01, 2.0))
+        if trial % 3 == 0:          # some rays off length 1, some failed in the prisms (zeros)
+            d[::11] *= 1.0 + rng.uniform(-1e-3, 1e-3, d[::11].shape[0])[:, None]
+        status = (rng.random(n) < 0.05).astype(np.uint8)
+        if trial % 5 == 0:
+            status[:K.CULL_BLOCK] = 1
+            d[status != 0] = 0.0
+        axis_k, cos_k, sin_k = _blocks(d, status)
+        axis_t, cos_t, sin_t = ray_blocks_twin(d, status, K.CULL_BLOCK)
+        assert np.array_equal(cos_k, cos_t) and np.array_equal(sin_k, sin_t), trial
+        assert np.array_equal(axis_k[cos_k > -2.0], axis_t[cos_t > -2.0]), trial
+        for b in np.flatnonzero((cos_k > -2.0) & (cos_k < 2.0)):
+            rows = slice(b * K.CULL_BLOCK, (b + 1) * K.CULL_BLOCK)
+            v = d[rows][status[rows] == 0]
+            ang = np.arccos(np.clip(v @ axis_k[b] / np.linalg.norm(v, axis=1), -1, 1))
+            assert np.all(ang <= np.arccos(cos_k[b])), (trial, b)
+
+
+def test_bodies_candidates_kernel_is_each_body_s_cull_everywhere():
+    """The bodies' culls in one call with the blocks' direction bounds: the rays of each body's own
+    cone_candidates_kernel and moving_cull_kernel (and the twin's), over bodies near and far, behind
+    the lidar and at it, cones narrow and wide, rays along a scan's curve and scattered, some off
+    length 1 and some failed."""
+    rng = np.random.default_rng(29)
+    for trial in range(150):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        n = int(rng.integers(1, 4000))
+        if trial % 4 == 3:
+            d = rng.normal(size=(n, 3)) + axis * 2.0
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+        else:
+            d = _scan_like_rays(rng, n, axis, rng.uniform(0.05, 0.8))
+        if trial % 3 == 0:
+            d[::7] *= 1.0 + rng.choice([-1.0, 1.0], d[::7].shape[0])[:, None] * rng.uniform(1e-8, 1e-4)
+        status = (rng.random(n) < 0.05).astype(np.uint8)
+        t_ray = np.sort(rng.uniform(2.0, 2.1, n))
+        n_bodies = int(rng.integers(0, 8))
+        # bodies on rays (some candidates), anywhere about the axis, one at the lidar, one behind it
+        centres = d[rng.integers(0, n, n_bodies)] * rng.uniform(2.0, 150.0, (n_bodies, 1))
+        centres += rng.normal(size=(n_bodies, 3)) * rng.uniform(0.0, 2.0)
+        if n_bodies > 2 and trial % 5 == 0:
+            centres[1] = rng.normal(size=3) * 0.3
+            centres[2] = -axis * 20.0
+        vel, cone, radius, accel, v_max = _birds_motion(rng, n_bodies, 0.3, rng.uniform(0.1, 3.0), 1.0)
+        if n_bodies and trial % 7 == 0:
+            cone[0] = np.inf
+        for instant in (True, False):
+            args = (d, status, t_ray, 2.05, centres.reshape(-1, 3), vel.reshape(-1, 3), cone, radius, accel, v_max,
+                    instant)
+            idx, start = K.bodies_candidates_kernel(*args, *_blocks(d, status))
+            twin_idx, twin_start = bodies_candidates_twin(*args)
+            assert np.array_equal(idx, twin_idx) and np.array_equal(start, twin_start), trial
+            for k in range(n_bodies):
+                one = np.empty(n, np.int64)
+                one = one[:K.cone_candidates_kernel(d, status, *centres[k], cone[k], one)]
+                if instant:
+                    kept = np.empty(one.size, np.int64)
+                    one = kept[:K.moving_cull_kernel(one, d, t_ray, 2.05, centres[k], vel[k], radius[k], accel[k],
+                                                     v_max[k], kept)]
+                assert np.array_equal(idx[start[k]:start[k + 1]], one), (trial, k)
