@@ -87,6 +87,23 @@ def cast_moving_twin(d, pos, yaw, prims):
     return rng, np.where(np.isfinite(rng), best, -1)
 
 
+def cast_straight_twin(d, idx, start, bodies, t_ray, start_m, velocity, yaw, prims, prim_start, out_range, out_prim):
+    """``cast_straight_kernel``: :func:`cast_moving_twin` body by body, each at its straight pass's
+    positions at its rays' times, each ray's nearest hit kept (ids: rows of ``prims``)."""
+    out_range, out_prim = out_range.copy(), out_prim.copy()
+    for q, k in enumerate(bodies):
+        rays = idx[start[q]:start[q + 1]]
+        if rays.size == 0:
+            continue
+        pos = straight_position_twin(start_m[k], velocity[k], t_ray[rays])
+        lo, hi = prim_start[k], prim_start[k + 1]
+        r, p = cast_moving_twin(d[rays], pos, np.full(rays.size, yaw[k]), prims[lo:hi])
+        for j, rr, pp in zip(rays, r, p):
+            if rr < out_range[j]:
+                out_range[j], out_prim[j] = rr, lo + pp
+    return out_range, out_prim
+
+
 def straight_position_twin(start, velocity, t):
     """``Straight.position`` as numpy computes it: ``start + t[:, None] * velocity``."""
     return np.asarray(start) + np.asarray(t, float).reshape(-1, 1) * np.asarray(velocity)

@@ -378,6 +378,35 @@ def cast_moving_kernel(idx, d_world, pos, yaw, prims, prim_offset, out_range, ou
                 out_prim[j] = prim_offset + m
 
 
+@njit(cache=True, nogil=True)
+def cast_straight_kernel(idx, start, bodies, d_world, t_ray, start_m, velocity_m_s, yaw, prims, prim_start, out_range,
+                         out_prim):
+    """:func:`cast_moving_kernel` for bodies on straight passes (:class:`sim.world.trajectories.Straight`),
+    several in one call: body ``bodies[q]`` (k) takes the rays ``idx[start[q]:start[q + 1]]``, each at
+    its own time ``t_ray[j]``, where it is at ``start_m[k] + t velocity_m_s[k]`` (the straight
+    pass's own expression, :func:`straight_position_kernel`) with the yaw ``yaw[k]`` of its velocity,
+    and its primitives are the rows ``prim_start[k]:prim_start[k + 1]`` of ``prims``, recorded by
+    their row.  The bodies one after another in the order given, as the calls it replaces (one per
+    body, whose positions were an array of their own): the same ranges and ids (numpy twin:
+    ``cast_straight_twin`` in ``tests/world_twins.py``)."""
+    pos = np.empty((1, 3))
+    one_yaw = np.empty(1)
+    for q in range(bodies.shape[0]):
+        k = bodies[q]
+        one_yaw[0] = yaw[k]
+        for i in range(start[q], start[q + 1]):
+            j = idx[i]
+            t = t_ray[j]
+            for a in range(3):
+                pos[0, a] = start_m[k, a] + t * velocity_m_s[k, a]
+            ox, oy, oz, dx, dy, dz = _ray_in_body(d_world, j, pos, one_yaw, 0)
+            for m in range(prim_start[k], prim_start[k + 1]):
+                t_hit = _hit_prim(prims, m, ox, oy, oz, dx, dy, dz)
+                if t_hit < out_range[j]:
+                    out_range[j] = t_hit
+                    out_prim[j] = m
+
+
 @njit(cache=True, inline="always")
 def _cos_incidence(prims, m, px, py, pz, dx, dy, dz):
     """|cos| of the angle between the ray ``d`` (unit) and the outward normal of primitive ``m`` at

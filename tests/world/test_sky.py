@@ -656,3 +656,28 @@ def test_bodies_candidates_kernel_is_each_body_s_cull_everywhere():
                     one = kept[:K.moving_cull_kernel(one, d, t_ray, 2.05, centres[k], vel[k], radius[k], accel[k],
                                                      v_max[k], kept)]
                 assert np.array_equal(idx[start[k]:start[k + 1]], one), (trial, k)
+
+
+def test_targets_on_straight_passes_cast_together_give_the_run_each_cast_on_its_own(monkeypatch):
+    import sim.sensor as sensor_module
+
+    scene = replace(load_scene(SCENES / "swarm-of-five.toml"), duration_s=2.5)
+    together = ClosedLoop(scene)
+    a = together.run()
+    assert any(together.sensor._straight.cast_together)
+    of = sensor_module._StraightBodies.of
+
+    def apart(bodies, n_targets, has):
+        s = of(bodies, n_targets, has)
+        return s._replace(any=False, is_straight=[False] * len(s.is_straight),
+                          cast_together=[False] * len(s.cast_together))
+    monkeypatch.setattr(sensor_module._StraightBodies, "of", apart)
+    alone = ClosedLoop(scene)
+    b = alone.run()
+    assert not any(alone.sensor._straight.cast_together)
+    for k in a:
+        x, y = np.asarray(a[k]), np.asarray(b[k])
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
+    assert together.objects_log == alone.objects_log
+    assert together.sensor.rays_cast_targets == alone.sensor.rays_cast_targets
+    assert sum(o.rays_hit for fr in together.objects_log for o in fr if o.cls == "drone") > 50

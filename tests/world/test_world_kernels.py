@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from world_twins import cast_moving_twin, cast_static_twin, rotate_twin
+from world_twins import cast_moving_twin, cast_static_twin, cast_straight_twin, rotate_twin
 from sim.world import bodies
 from sim.world import kernels as K
 
@@ -210,6 +210,46 @@ def test_moving_body_cast_matches_twin():
     assert np.array_equal(p, pt)
     f = np.isfinite(r)
     np.testing.assert_allclose(r[f], rt[f], rtol=1e-12)
+
+
+def test_straight_passes_cast_together_are_each_cast_on_its_own():
+    """cast_straight_kernel: the ranges and ids of cast_moving_kernel body by body (each at its
+    Straight.position at its rays' times, the yaw of its velocity), bodies overlapping (a ray may
+    meet two: the first cast keeps a tie) and some rays already nearer; and its numpy twin's."""
+    from sim.world.trajectories import Straight, heading_rad
+
+    rng = np.random.default_rng(8)
+    quads = [bodies.quadrotor(s) for s in (0.35, 0.5, 0.3, 0.35)]
+    prims = np.concatenate([q.prims for q in quads])
+    prim_start = np.cumsum([0] + [q.prims.shape[0] for q in quads])
+    paths = [Straight(tuple(rng.uniform(-3, 3, 3) + [20.0, 0, 0]), tuple(rng.normal(size=3) * 5)) for _ in quads]
+    paths[2] = paths[0]             # two bodies on one pass: every ray that meets one meets both
+    start_m = np.array([p._start for p in paths])
+    velocity = np.array([p._velocity for p in paths])
+    yaw = heading_rad(velocity)
+    n = 8000
+    t_ray = np.sort(rng.uniform(1.0, 1.1, n))
+    aim = np.array([p.position(t_ray[i:i + 1])[0] for i, p in zip(range(n), [paths[k % 4] for k in range(n)])])
+    d = aim + rng.normal(0, 0.2, (n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    order = np.array([3, 0, 1, 2])
+    per = [np.sort(rng.choice(n, 3000, replace=False)) for _ in order]
+    idx = np.concatenate(per)
+    start = np.cumsum([0] + [p.size for p in per])
+    r, p = np.full(n, np.inf), np.full(n, -1, dtype=np.int64)
+    r[::5], p[::5] = 19.0, 99
+    r1, p1, r2, p2 = r.copy(), p.copy(), r.copy(), p.copy()
+    K.cast_straight_kernel(idx, start, order, d, t_ray, start_m, velocity, yaw, prims, prim_start, r1, p1)
+    for q, k in enumerate(order):
+        rays = idx[start[q]:start[q + 1]]
+        K.cast_moving_kernel(rays, d, paths[k].position(t_ray[rays]), np.full(rays.size, yaw[k]),
+                             quads[k].prims, prim_start[k], r2, p2)
+    assert np.array_equal(r1, r2) and np.array_equal(p1, p2)
+    assert len(set(p1[(p1 >= 0) & (p1 != 99)])) > 20
+    rt, pt = cast_straight_twin(d, idx, start, order, t_ray, start_m, velocity, yaw, prims, prim_start, r, p)
+    assert np.array_equal(p1, pt)
+    f = np.isfinite(r1)
+    np.testing.assert_allclose(r1[f], rt[f], rtol=1e-12)
 
 
 def test_cone_cull_keeps_every_ray_that_can_hit():
