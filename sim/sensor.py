@@ -472,15 +472,18 @@ class SceneSensor:
     def _cast_flock(self, flock: _FlockCast, t0, t1, chunk, d_world, rng_m, prim, offset):
         """:meth:`_cast_on` for each bird of a flock in turn, in a few calls: the birds' poses
         evaluated together (:class:`sim.world.sky.FlockPoses`), the rays culled for every bird in one
-        pass (:func:`sim.world.kernels.flock_candidates_kernel`: bird by bird, the rays in order) and
-        cast on them in one (:func:`sim.world.kernels.cast_flock_kernel`); returns their positions and
-        velocities at the chunk's mid time (two lists of [x, y, z] lists)."""
+        call (:func:`sim.world.kernels.bodies_candidates_kernel`: bird by bird, the rays in order, on
+        the chunk's direction bounds as the bodies cast on their own) and cast on them in one
+        (:func:`sim.world.kernels.cast_flock_kernel`); returns their positions and velocities at the
+        chunk's mid time (two lists of [x, y, z] lists)."""
         t_mid = 0.5 * (t0 + t1)
         poses = flock.poses
         centres, vel = poses.positions_velocities(flock.members, np.full(flock.members.size, t_mid))
-        idx, m = wk.flock_candidates_kernel(d_world, chunk.status, self._t_ray, t_mid, centres, vel,
-                                            _reach(flock.radius_m, flock.max_speed_m_s, t0, t1), flock.radius_m,
-                                            flock.max_accel_m_s2, flock.max_speed_m_s)
+        idx, start = wk.bodies_candidates_kernel(d_world, chunk.status, self._t_ray, t_mid, centres, vel,
+                                                 _reach(flock.radius_m, flock.max_speed_m_s, t0, t1), flock.radius_m,
+                                                 flock.max_accel_m_s2, flock.max_speed_m_s, True,
+                                                 *self._ray_blocks(chunk, d_world))
+        m = np.repeat(flock.members, np.diff(start))     # each ray's bird
         self.rays_cast_targets += idx.size
         if idx.size:
             t_pose = self._t_ray[idx]      # each ray's own instant (per_point), or the mid time (per_frame)

@@ -234,9 +234,9 @@ def bout_index_twin(t, member, starts_per_member):
 
 
 def flock_candidates_twin(d, status, t_ray, t_mid, centres, velocities, reach, radius, accel, v_max):
-    """``flock_candidates_kernel`` as the sensor culled a flock before it: the rays in the flock's
-    cone (numpy's mean, norms and max), then each bird's cone among them and of those the rays that
-    can meet it at their own instant, concatenated bird by bird."""
+    """A flock's cull as the sensor made it before ``bodies_candidates_kernel`` (which is tested
+    against this): the rays in the flock's cone (numpy's mean, norms and max), then each bird's cone
+    among them and of those the rays that can meet it at their own instant, concatenated bird by bird."""
     g = centres.mean(axis=0)
     off = centres - g
     outer = float(np.max(np.sqrt((off * off).sum(axis=1)) + reach)) * (1.0 + 1e-9) + 1e-6

@@ -466,7 +466,9 @@ def cos_incidence_moving_kernel(idx, d_world, pos, yaw, range_m, prim, prims, pr
 def cone_candidates_kernel(d_world, status, cx, cy, cz, radius, out_idx):
     """Indices of the valid rays (``status == RAY_OK``) passing within ``radius`` of the point c (and in
     front of the origin): the cheap cull that keeps a one-UAV scene from tracing the whole cloud.
-    Writes them in order to ``out_idx`` and returns how many there are."""
+    Writes them in order to ``out_idx`` and returns how many there are.  The sensor culls with
+    :func:`bodies_candidates_kernel` (this test for many bodies at once, on blocks of rays); this one
+    is the test's reference there (``tests/world``)."""
     n = 0
     r2 = radius * radius
     c2 = cx * cx + cy * cy + cz * cz
@@ -491,7 +493,8 @@ def moving_cull_kernel(idx, d_world, t_ray, t_mid, c, v, radius, accel, v_max, o
     The cone test covers the whole frame (``v_max`` times half its length); this one the ray's
     instant, so a bird at 8 m/s keeps a fifth of the rays (a flock of 20: 600 -> ~130 a frame) and the
     poses are evaluated for those only.  Conservative by construction (1 % and 1 mm added, as the cone's
-    reach): a ray it drops cannot meet the body, so the cast is the same bits."""
+    reach): a ray it drops cannot meet the body, so the cast is the same bits.  The sensor runs this
+    test inside :func:`bodies_candidates_kernel`; this one is its reference there (``tests/world``)."""
     n = 0
     for i in range(idx.shape[0]):
         j = idx[i]
@@ -519,176 +522,6 @@ def _meets_at_instant(d_world, j, dt, cx, cy, cz, vx, vy, vz, radius, accel, v_m
     return (qx * qx + qy * qy + qz * qz) - b * b <= reach * reach and b > -reach
 
 
-@njit(cache=True, nogil=True)
-def flock_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities, reach, radius, accel, v_max):
-    """:func:`cone_candidates_kernel` then :func:`moving_cull_kernel` for the K birds of a flock in one
-    pass over the rays: returns ``(idx, member)``, the rays of bird 0 in order, then bird 1's, ...;
-    ``member[i]`` the bird of ray ``idx[i]``.
-
-    Bird k is at ``centres[k]`` and moves at ``velocities[k]`` at ``t_mid``; its cone's radius over
-    the frame is ``reach[k]``; ``radius[k]``, ``accel[k]`` (< 0: no bound), ``v_max[k]`` size the test
-    at a ray's own instant ``t_ray[j]``.  A ray is tested against the birds only if it passes within
-    the flock's cone: about the birds' mean ``g`` (numpy's ``centres.mean(axis=0)``), of radius
-    ``max_k(|c_k - g| + reach[k])`` widened by 1e-9 and 1 um (a ray within ``reach[k]`` of bird k
-    passes within ``|c_k - g| + reach[k]`` of ``g``, so the rounding's margin drops none).  Each test
-    with the arithmetic of the kernels it stands for, so the same rays; the mean's sum from 0.0 in
-    order of k, as numpy's (numpy twin: ``flock_candidates_twin`` in ``tests/world_twins.py``)."""
-    n = centres.shape[0]
-    gx = 0.0
-    gy = 0.0
-    gz = 0.0
-    for k in range(n):
-        gx += centres[k, 0]
-        gy += centres[k, 1]
-        gz += centres[k, 2]
-    gx /= n
-    gy /= n
-    gz /= n
-    far = -math.inf
-    for k in range(n):
-        dx = centres[k, 0] - gx
-        dy = centres[k, 1] - gy
-        dz = centres[k, 2] - gz
-        v = math.sqrt(dx * dx + dy * dy + dz * dz) + reach[k]
-        if not v <= far and far == far:      # larger, or NaN: numpy's max keeps a NaN
-            far = v
-    outer = far * (1.0 + 1e-9) + 1e-6
-    # the birds' columns as arrays of their own: one ray's test against every bird vectorises
-    cx = np.ascontiguousarray(centres[:, 0])
-    cy = np.ascontiguousarray(centres[:, 1])
-    cz = np.ascontiguousarray(centres[:, 2])
-    c2 = np.empty(n)
-    r2 = np.empty(n)
-    for k in range(n):
-        c2[k] = cx[k] * cx[k] + cy[k] * cy[k] + cz[k] * cz[k]
-        r2[k] = reach[k] * reach[k]
-    # (ray, bird) pairs in ray order, then sorted by bird (stably: each bird's rays stay in order);
-    # room for them guessed, and made once more if short (the pass's arrays are not reassigned
-    # inside its loop: growing them there made numba count references on every ray, ~40x slower)
-    count = np.zeros(n + 1, dtype=np.int64)
-    room = max(64, d_world.shape[0] // 8)
-    box = _cone_box(gx, gy, gz, cx, cy, cz, reach)
-    while True:
-        pair_ray = np.empty(room, dtype=np.int64)
-        pair_bird = np.empty(room, dtype=np.int64)
-        count[:] = 0
-        n_pairs = _flock_pairs(d_world, status, gx, gy, gz, outer, cx, cy, cz, c2, r2, reach, t_ray, t_mid, velocities,
-                               radius, accel, v_max, pair_ray, pair_bird, count, box)
-        if n_pairs <= room:
-            break
-        room = n_pairs
-    for k in range(n):
-        count[k + 1] += count[k]       # now bird k's first place
-    idx = np.empty(n_pairs, dtype=np.int64)
-    member = np.empty(n_pairs, dtype=np.int64)
-    for p in range(n_pairs):
-        k = pair_bird[p]
-        idx[count[k]] = pair_ray[p]
-        member[count[k]] = k
-        count[k] += 1
-    return idx, member
-
-
-# The direction box's margin [rad] over a bird's cone half-angle (_cone_box): a ray whose |d|^2 is
-# within 1e-6 of 1 passes a bird's cone test up to ~1.3e-3 rad outside its half-angle, rounding
-# included; the box takes three times that.
-_BOX_MARGIN_RAD = 4e-3
-
-
-@njit(cache=True, nogil=True)
-def _cone_box(gx, gy, gz, cx, cy, cz, reach):
-    """Where the directions that can pass a bird's cone test lie, across the birds' mean direction
-    ``g``: ``(ok, e1 (3,), e2 (3,), lo_u, hi_u, lo_v, hi_v)``, a box in the coordinates ``(d . e1,
-    d . e2)`` (``e1``, ``e2`` unit, across ``g`` and each other).  A bird at ``|c|`` above twice its
-    cone's radius ``reach`` takes a unit ray only within ``a = asin(reach / |c|)`` of its direction
-    (one behind it fails ``d . c > -reach``), so each coordinate within ``a`` of the bird's; the box
-    holds every bird's ``a + _BOX_MARGIN_RAD`` about it.  ``ok`` False (a bird that near, a zero or
-    non-finite mean): no box, every ray that passes the flock's cone is tested against the birds."""
-    e1 = np.zeros(3)
-    e2 = np.zeros(3)
-    gn = math.sqrt(gx * gx + gy * gy + gz * gz)
-    if not (gn > 0.0 and gn < math.inf):
-        return False, e1, e2, 0.0, 0.0, 0.0, 0.0
-    ux = gx / gn
-    uy = gy / gn
-    uz = gz / gn
-    # e1: g crossed with the axis least along it
-    if abs(ux) <= abs(uy) and abs(ux) <= abs(uz):
-        px, py, pz = 0.0, uz, -uy
-    elif abs(uy) <= abs(uz):
-        px, py, pz = -uz, 0.0, ux
-    else:
-        px, py, pz = uy, -ux, 0.0
-    pn = math.sqrt(px * px + py * py + pz * pz)
-    e1[0] = px / pn
-    e1[1] = py / pn
-    e1[2] = pz / pn
-    e2[0] = uy * e1[2] - uz * e1[1]
-    e2[1] = uz * e1[0] - ux * e1[2]
-    e2[2] = ux * e1[1] - uy * e1[0]
-    lo_u = math.inf
-    hi_u = -math.inf
-    lo_v = math.inf
-    hi_v = -math.inf
-    for k in range(cx.shape[0]):
-        cn = math.sqrt(cx[k] * cx[k] + cy[k] * cy[k] + cz[k] * cz[k])
-        if not (cn > 2.0 * reach[k] and cn < math.inf and reach[k] >= 0.0):
-            return False, e1, e2, 0.0, 0.0, 0.0, 0.0
-        u = (cx[k] * e1[0] + cy[k] * e1[1] + cz[k] * e1[2]) / cn
-        v = (cx[k] * e2[0] + cy[k] * e2[1] + cz[k] * e2[2]) / cn
-        w = math.asin(reach[k] / cn) + _BOX_MARGIN_RAD
-        lo_u = min(lo_u, u - w)
-        hi_u = max(hi_u, u + w)
-        lo_v = min(lo_v, v - w)
-        hi_v = max(hi_v, v + w)
-    return True, e1, e2, lo_u, hi_u, lo_v, hi_v
-
-
-@njit(cache=True, nogil=True)
-def _flock_pairs(d_world, status, gx, gy, gz, outer, cx, cy, cz, c2, r2, reach, t_ray, t_mid, velocities, radius, accel,
-                 v_max, pair_ray, pair_bird, count, box):
-    """The (ray, bird) pairs of :func:`flock_candidates_kernel` in ray order, as many as fit in
-    ``pair_ray``/``pair_bird``; ``count[k + 1]``: bird k's.  Returns how many there are.  A ray in
-    the flock's cone but outside ``box`` (:func:`_cone_box`; a ray whose |d|^2 is within 1e-6 of 1)
-    can meet no bird: the birds are not tested (a flock flattened as the scenes make it fills a
-    third of its cone, toward which the head turns)."""
-    box_ok, e1, e2, lo_u, hi_u, lo_v, hi_v = box
-    outer2 = outer * outer
-    g2 = gx * gx + gy * gy + gz * gz
-    n = cx.shape[0]
-    hit = np.empty(n, dtype=np.uint8)
-    n_pairs = 0
-    for j in range(d_world.shape[0]):
-        dx = d_world[j, 0]
-        dy = d_world[j, 1]
-        dz = d_world[j, 2]
-        b = dx * gx + dy * gy + dz * gz
-        if not ((g2 - b * b <= outer2) and (b > -outer) and status[j] == RAY_OK):
-            continue
-        if box_ok and abs(dx * dx + dy * dy + dz * dz - 1.0) <= 1e-6:
-            pu = dx * e1[0] + dy * e1[1] + dz * e1[2]
-            pv = dx * e2[0] + dy * e2[1] + dz * e2[2]
-            if not (pu >= lo_u and pu <= hi_u and pv >= lo_v and pv <= hi_v):
-                continue
-        any_hit = 0
-        for k in range(n):      # no branch here: the loop vectorises
-            bk = dx * cx[k] + dy * cy[k] + dz * cz[k]
-            h = (c2[k] - bk * bk <= r2[k]) & (bk > -reach[k])
-            hit[k] = h
-            any_hit |= h
-        if any_hit:
-            dt = t_ray[j] - t_mid
-            for k in range(n):
-                if hit[k] and _meets_at_instant(d_world, j, dt, cx[k], cy[k], cz[k], velocities[k, 0],
-                                                velocities[k, 1], velocities[k, 2], radius[k], accel[k], v_max[k]):
-                    if n_pairs < pair_ray.shape[0]:
-                        pair_ray[n_pairs] = j
-                        pair_bird[n_pairs] = k
-                    n_pairs += 1
-                    count[k + 1] += 1
-    return n_pairs
-
-
 # The cull's direction bounds (ray_blocks_kernel): rays per block.  A Mid-40 frame's 32 consecutive
 # rays span ~1.5 deg of its rosette, so a drone's cone at 40 m meets 1-3 % of the blocks: the rays of
 # the others are never tested against it (five drones' cones: 36 -> ~10 us a frame).
@@ -700,7 +533,7 @@ _BLOCK_ANY = -2.0      # block_cos of a block not bounded (rays off length 1, or
 @njit(cache=True, nogil=True)
 def ray_blocks_kernel(d_world, status, out_axis, out_cos, out_sin):
     """Bounds on the directions of the rays in blocks of ``CULL_BLOCK`` (block b: rays ``b CULL_BLOCK``
-    on), for the cone tests of :func:`bodies_candidates_kernel` and :func:`flock_candidates_kernel`:
+    on), for the cone tests of :func:`bodies_candidates_kernel`:
     every valid ray (``status == RAY_OK``) of block b lies within the angle ``theta_b`` of the unit
     axis ``out_axis[b]``, ``out_cos[b] = cos theta_b``, ``out_sin[b] = sin theta_b``.
 

@@ -243,7 +243,7 @@ def test_flock_pose_kernels_match_their_numpy_twins_to_the_bit(n):
 
 
 def _birds_motion(rng, n_birds, cone_lo, reach, radius_hi):
-    """Random birds for flock_candidates_kernel and its twin: velocities, cone half-widths (``cone_lo``
+    """Random birds (or drones) for bodies_candidates_kernel and the twins: velocities, cone half-widths (``cone_lo``
     to 1.5 times ``reach``), body radii, accelerations (-1: none) and top speeds."""
     vel = rng.normal(size=(n_birds, 3)) * 8.0
     cone = rng.uniform(cone_lo, 1.5, n_birds) * reach
@@ -251,18 +251,26 @@ def _birds_motion(rng, n_birds, cone_lo, reach, radius_hi):
     accel = np.where(rng.random(n_birds) < 0.3, -1.0, rng.uniform(0.0, 20.0, n_birds))
     return vel, cone, radius, accel, np.linalg.norm(vel, axis=1) + 1.0
 
-def test_flock_candidates_kernel_matches_its_twin_and_the_kernels_it_stands_for():
+def _flock_cull(d, status, t_ray, t_mid, centres, vel, reach, radius, accel, v_max):
+    """The sensor's cull of a flock: bodies_candidates_kernel on the rays' direction bounds, as
+    ``(idx, member)``."""
+    idx, start = K.bodies_candidates_kernel(d, status, t_ray, t_mid, centres, vel, reach, radius, accel, v_max, True,
+                                            *_blocks(d, status))
+    return idx, np.repeat(np.arange(centres.shape[0]), np.diff(start))
+
+
+def test_a_flock_s_cull_is_its_twin_s_and_the_kernels_it_stands_for():
     rng = np.random.default_rng(12)
     d = rng.normal(size=(4000, 3)) + np.array([3.0, 0.0, 0.0])
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     status = (rng.random(d.shape[0]) < 0.05).astype(np.uint8)
     t_ray = np.sort(rng.uniform(2.0, 2.1, d.shape[0]))
-    # wide cones overlap: more (ray, bird) pairs than the kernel's first guess (d.shape[0] // 8 = 500), which grows
+    # wide cones overlap: many (ray, bird) pairs
     for n_birds, spread, reach, pairs in ((20, 8.0, 0.4, 20), (6, 3.0, 6.0, 500), (2, 1.0, 1.0, 10)):
         centres = np.array([30.0, 0.0, 0.0]) + rng.normal(size=(n_birds, 3)) * spread
         vel, cone, radius, accel, v_max = _birds_motion(rng, n_birds, 0.5, reach, 0.9)
         args = (d, status, t_ray, 2.05, centres, vel, cone, radius, accel, v_max)
-        idx, member = K.flock_candidates_kernel(*args)
+        idx, member = _flock_cull(*args)
         twin_idx, twin_member = flock_candidates_twin(*args)
         assert idx.size > pairs and np.array_equal(idx, twin_idx) and np.array_equal(member, twin_member)
         for k in range(n_birds):
@@ -272,7 +280,7 @@ def test_flock_candidates_kernel_matches_its_twin_and_the_kernels_it_stands_for(
             kept = kept[:K.moving_cull_kernel(one, d, t_ray, 2.05, centres[k], vel[k], radius[k], accel[k], v_max[k],
                                               kept)]
             assert np.array_equal(idx[member == k], kept)
-    assert K.flock_candidates_kernel(d, status, t_ray, 2.05, centres + 1e3, vel, cone, radius, accel, v_max)[0].size == 0
+    assert _flock_cull(d, status, t_ray, 2.05, centres + 1e3, vel, cone, radius, accel, v_max)[0].size == 0
 
 
 def test_a_flock_cast_in_one_call_is_its_birds_cast_one_by_one():
@@ -334,7 +342,6 @@ def test_the_per_ray_cull_drops_only_rays_that_miss(monkeypatch):
     # the truth (rays that hit each object) and the log are the same, and the cull cast far fewer
     # rays where things fly fast (the flock's birds at 8 m/s: a cone over the frame reaches ~0.8 m
     # from a bird's centre, its instant ~0.4 m; the crossing's drones at 1.2-1.4 m/s gain less).
-    flock_candidates = K.flock_candidates_kernel
     bodies_candidates = K.bodies_candidates_kernel
 
     def run(scene, keep_all):
@@ -343,12 +350,7 @@ def test_the_per_ray_cull_drops_only_rays_that_miss(monkeypatch):
                 return bodies_candidates(d, status, t_ray, t_mid, centres, vel, reach, radius, accel, v_max, False,
                                          *blocks)
 
-            def cones_only(d, status, t_ray, t_mid, centres, vel, reach, radius, accel, v_max):
-                # an infinite body radius: every ray can meet its bird at its instant
-                return flock_candidates(d, status, t_ray, t_mid, centres, vel, reach, np.full_like(radius, np.inf),
-                                        accel, v_max)
-            monkeypatch.setattr(K, "bodies_candidates_kernel", everything)
-            monkeypatch.setattr(K, "flock_candidates_kernel", cones_only)
+            monkeypatch.setattr(K, "bodies_candidates_kernel", everything)     # the drones' and the birds'
         points = []
         loop = ClosedLoop(scene, frame_hook=lambda frame, out, lp: points.append(frame.xyz.tobytes()))
         log = loop.run()
@@ -541,11 +543,13 @@ def test_single_target_scenes_write_no_object_truth(tmp_path):
     assert "truth_objects" not in RecordingReader(out / "run.mcap").channels()
 
 
-def test_flock_candidates_with_the_direction_box_are_the_twin_s_everywhere():
-    """The flock kernel skips the rays outside its direction box (kernels._cone_box): over flocks
-    flattened and round, near and far, in every direction (each axis the least along the mean: every
-    way the box's axes are made), a bird near the lidar (no box), and rays of a length off 1 (tested
-    without the box), the same rays as the twin."""
+def test_a_flock_s_cull_on_direction_bounds_is_the_twin_s_everywhere():
+    """A flock's cull skips the blocks of rays its birds' cones cannot meet (kernels.ray_blocks_kernel):
+    over flocks flattened and round, near and far, in every direction, a bird near the lidar (not
+    bounded), and rays of a length off 1 (their blocks tested ray by ray), the same rays as each
+    bird's own cull (bodies_candidates_twin) and, for rays of length 1 (the scan's, to the rounding),
+    as the flock's cull before the blocks (the flock's cone, then each bird's: flock_candidates_twin;
+    for rays a percent off length 1 that cone could drop a ray a bird's own test keeps)."""
     rng = np.random.default_rng(23)
     n_rays = 3000
     for trial in range(120):
@@ -567,9 +571,13 @@ def test_flock_candidates_with_the_direction_box_are_the_twin_s_everywhere():
         status = (rng.random(n_rays) < 0.05).astype(np.uint8)
         t_ray = np.sort(rng.uniform(2.0, 2.1, n_rays))
         args = (d, status, t_ray, 2.05, centres) + _birds_motion(rng, n_birds, 0.3, 1.0, 1.0)
-        idx, member = K.flock_candidates_kernel(*args)
-        twin_idx, twin_member = flock_candidates_twin(*args)
-        assert np.array_equal(idx, twin_idx) and np.array_equal(member, twin_member), trial
+        idx, member = _flock_cull(*args)
+        own_idx, own_start = bodies_candidates_twin(*args, True)
+        assert np.array_equal(idx, own_idx), trial
+        assert np.array_equal(member, np.repeat(np.arange(n_birds), np.diff(own_start))), trial
+        if trial % 3:
+            twin_idx, twin_member = flock_candidates_twin(*args)
+            assert np.array_equal(idx, twin_idx) and np.array_equal(member, twin_member), trial
 
 
 def _blocks(d, status):
