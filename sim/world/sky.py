@@ -365,7 +365,7 @@ class FlockPoses:
     ``position``/``velocity``/:func:`~sim.world.trajectories.body_yaw_rad`/``flap.angle_rad``
     gives, by the same element-wise operations in the same order (``tests/world/test_sky.py``
     compares them bit for bit): the sines and cosines and the centre's path by numpy as there, the
-    rest by kernels (:func:`sim.world.kernels.wander_sum_kernel` and its neighbours), where numpy's
+    rest by kernels (:func:`sim.world.kernels.wander_rows_kernel` and its neighbours), where numpy's
     gathers and small sums over (N, 3, 3) arrays took several times the time of the sines."""
 
     def __init__(self, objects: list[SkyObject]):
@@ -441,23 +441,33 @@ class FlockPoses:
 
     def positions_velocities(self, m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`positions` and :meth:`velocities`, the wander's arguments and the centre's path made
-        once for both."""
+        once for both, and both sums in one kernel call (:func:`sim.world.kernels.wander_rows_kernel`:
+        the sensor asks for both of twenty birds at the frame's mid time and of every ray's bird, and
+        the calls cost more than the sums)."""
+        from sim.world import kernels as wk
+
         arg = self._wander_arg(m, t)
         p, v = position_velocity(self.path, t)
-        return self.positions(m, t, arg, p), self.velocities(m, t, arg, v)
+        out_p = np.empty((t.size, 3))
+        out_v = np.empty((t.size, 3))
+        wk.wander_rows_kernel(np.ascontiguousarray(p), np.ascontiguousarray(v), self.slot, m, self.amp,
+                              self.amp_omega, np.sin(arg), np.cos(arg), out_p, out_v)
+        return out_p, out_v
 
     def poses(self, m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(positions (N, 3), yaws (N,))`` of members ``m`` at ``t`` (:meth:`positions`, :meth:`yaws`),
-        the wander's arguments and the centre's path made once for both."""
-        arg = self._wander_arg(m, t)
-        p, v = position_velocity(self.path, t)
-        return self.positions(m, t, arg, p), self.yaws(m, t, arg, v)
+        from :meth:`positions_velocities`."""
+        p, v = self.positions_velocities(m, t)
+        return p, self.yaws(m, t, velocities=v)
 
     def yaws(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None,
-             path_velocity: np.ndarray | None = None) -> np.ndarray:
-        """Body yaw (:func:`~sim.world.trajectories.body_yaw_rad`): along the velocity; a member
-        hovering at some of its times is asked on its own (its heading looked up on the grid)."""
-        yaw = heading_rad(self.velocities(m, t, arg, path_velocity), default=math.nan)
+             path_velocity: np.ndarray | None = None, velocities: np.ndarray | None = None) -> np.ndarray:
+        """Body yaw (:func:`~sim.world.trajectories.body_yaw_rad`): along the velocity (``velocities``:
+        :meth:`velocities` where already made); a member hovering at some of its times is asked on its
+        own (its heading looked up on the grid)."""
+        if velocities is None:
+            velocities = self.velocities(m, t, arg, path_velocity)
+        yaw = heading_rad(velocities, default=math.nan)
         bad = np.isnan(yaw)
         if bad.any():
             for k in np.unique(m[bad]).tolist():

@@ -186,9 +186,12 @@ def test_a_flock_s_poses_together_are_each_bird_s_own_to_the_bit():
     m, t = m[order], t[order]
     pos, yaw = flock.poses(m, t)
     wings = flock.wing_angles(m, t)
+    both = flock.positions_velocities(m, t)
     for k, b in enumerate(birds):
         rows = m == k
         assert np.array_equal(pos[rows], b.trajectory.position(t[rows]))
+        assert np.array_equal(both[0][rows], pos[rows])
+        assert np.array_equal(both[1][rows], b.trajectory.velocity(t[rows]))
         assert np.array_equal(flock.velocities(m[rows], t[rows]), b.trajectory.velocity(t[rows]))
         assert np.array_equal(yaw[rows], sky.body_yaw_rad(b.trajectory, t[rows]))
         assert np.array_equal(wings[rows], b.flap.angle_rad(t[rows]))
@@ -238,6 +241,9 @@ def test_flock_pose_kernels_match_their_numpy_twins_to_the_bit(n):
         t = rng.uniform(-0.5, 20.5, n)
         assert np.array_equal(flock.positions(m, t), flock_positions_twin(flock, m, t))
         assert np.array_equal(flock.velocities(m, t), flock_velocities_twin(flock, m, t))
+        p, v = flock.positions_velocities(m, t)
+        assert np.array_equal(p, flock_positions_twin(flock, m, t))
+        assert np.array_equal(v, flock_velocities_twin(flock, m, t))
         assert np.array_equal(flock.wing_angles(m, t), flock_wing_angles_twin(flock, m, t))
 
 
