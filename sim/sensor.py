@@ -71,6 +71,7 @@ class _StraightBodies(NamedTuple):
     any: bool
     is_straight: list          # per single body
     cast_together: list        # per target
+    run_at: dict               # the first target of each run of consecutive ones cast together: the run
     start_m: np.ndarray        # (K, 3) per single body (zeros where not straight)
     velocity_m_s: np.ndarray
     yaw: np.ndarray            # (K,) the heading of the velocity (heading_rad's: numpy's atan2)
@@ -91,8 +92,17 @@ class _StraightBodies(NamedTuple):
                     and getattr(spec, "fixed_yaw", None) is None for q, (spec, _) in enumerate(bodies[:n_targets])]
         targets = [spec for spec, _ in bodies[:n_targets]]
         prims = np.concatenate([t.body.prims for t in targets]) if targets else np.zeros((0, 13))
-        return cls(any(is_straight), is_straight, together, start, velocity, yaw, prims,
-                   np.cumsum([0] + [t.body.prims.shape[0] for t in targets]).astype(np.int64))
+        runs: dict = {}
+        first = None
+        for q, flag in enumerate(together):
+            if not flag:
+                first = None
+                continue
+            if first is None:
+                first = q
+            runs.setdefault(first, []).append(q)
+        return cls(any(is_straight), is_straight, together, {a: np.array(r, dtype=np.int64) for a, r in runs.items()},
+                   start, velocity, yaw, prims, np.cumsum([0] + [t.body.prims.shape[0] for t in targets]).astype(np.int64))
 
 
 def _reach(radius_m, max_speed_m_s, t0: float, t1: float):
@@ -181,6 +191,7 @@ class SceneSensor:
         self._cull_others = [(obj.bounding_radius_m, obj.trajectory.max_speed_m_s,
                               getattr(obj.trajectory, "max_accel_m_s2", None)) for obj in scene.others]
         self._singles_of = None       # the flocks _singles was made for (_single_bodies)
+        self._reaches: dict = {}      # the culls' reaches per group and chunk length (_reach_for)
         self._blocks = None           # the chunk's direction bounds (_ray_blocks), made once a chunk
         # A flock's birds are cast together (sim.world.sky.FlockPoses: the same values, a twentieth of
         # the Python calls); with a beam footprint each body's sub-rays are cast on their own.
@@ -230,17 +241,16 @@ class SceneSensor:
         self._t_ray = chunk.t_ns * 1e-9 if self.target_motion == "per_point" else np.full(n, 0.5 * (t0 + t1))
         self._blocks = None
         culled = self._cull_bodies(t0, t1, chunk, d_world)
-        run = []         # targets on straight passes, to be cast together (_cast_straight)
+        straight = self._straight
         for q, (spec, (c, v, idx)) in enumerate(zip(scene.targets, culled)):
-            if self._straight.cast_together[q]:
-                run.append(q)
-            else:
-                run = self._cast_straight(run, d_world, rng_m, prim)
+            run = straight.run_at.get(q)
+            if run is not None:      # targets q.. on straight passes, cast together
+                self._cast_straight(run, d_world, rng_m, prim)
+            elif not straight.cast_together[q]:
                 self._cast_on(spec, idx, d_world, rng_m, prim, offset)
             mids.append(c.tolist())
             vels.append(None if v is None else v.tolist())
             offset += spec.body.prims.shape[0]
-        self._cast_straight(run, d_world, rng_m, prim)
         k = 0
         single = len(scene.targets)      # culled[single]: the next body cast on its own
         while k < len(scene.others):
@@ -421,14 +431,28 @@ class SceneSensor:
             centres.append(c)
             vels.append(_ZERO3 if v is None else v)
             out.append((c, v))
-        reach = _reach(radius, speed, t0, t1)
+        reach = self._reach_for(None, radius, speed, t0, t1)
         if footprint:   # beam divergence can catch a body just outside the central ray's path
             div = math.radians(max(self.scene.optics.beam_divergence_deg))
             reach = np.array([r + norm3(c) * div / 2 for r, c in zip(reach.tolist(), centres)])
-        idx, start = self._cull_idx, self._cull_start = wk.bodies_candidates_kernel(d_world, chunk.status, self._t_ray, 0.5 * (t0 + t1), np.array(centres),
+        idx, start = wk.bodies_candidates_kernel(d_world, chunk.status, self._t_ray, 0.5 * (t0 + t1), np.array(centres),
                                                  np.array(vels), reach, radius, accel, speed, not footprint,
                                                  *self._ray_blocks(chunk, d_world))
-        return [(c, v, idx[a:b]) for (c, v), a, b in zip(out, start[:-1].tolist(), start[1:].tolist())]
+        self._cull_idx, self._cull_start = idx, start
+        bounds = start.tolist()
+        return [(c, v, idx[a:b]) for (c, v), a, b in zip(out, bounds, bounds[1:])]
+
+    def _reach_for(self, group, radius, speed, t0, t1) -> np.ndarray:
+        """:func:`_reach` of a group's bodies (``group``: None for the bodies cast on their own, a
+        flock's start for its birds), kept per chunk length: a run's frames have a dozen distinct
+        ``t1 - t0`` in their last bits, and the four array operations cost ~4 us a call."""
+        key = (group, t1 - t0)
+        reach = self._reaches.get(key)
+        if reach is None:
+            if len(self._reaches) > 64:
+                self._reaches.clear()
+            reach = self._reaches[key] = _reach(radius, speed, t0, t1)
+        return reach
 
     def _single_bodies(self):
         """The bodies cast on their own, ``[(body, cull)]`` (the targets, then the others outside the
@@ -443,6 +467,7 @@ class SceneSensor:
                              np.array([float(c[1]) for _, c in bodies]),
                              np.array([-1.0 if c[2] is None else float(c[2]) for _, c in bodies]))
             self._singles_of = self._flocks
+            self._reaches.clear()
             self._straight = _StraightBodies.of(bodies, len(self.scene.targets), self._has)
         return self._singles
 
@@ -456,18 +481,15 @@ class SceneSensor:
             self._blocks = (axis, cos, sin)
         return self._blocks
 
-    def _cast_straight(self, run: list, d_world, rng_m, prim) -> list:
-        """Cast the targets ``run`` (consecutive, on straight passes: ``_StraightBodies.cast_together``)
-        on their rays of this chunk's cull in one call (:func:`sim.world.kernels.cast_straight_kernel`:
-        what :meth:`_cast_on` does body by body, ~8 us of Python each); returns an empty run."""
-        if run:
-            a, b = self._cull_start[run[0]], self._cull_start[run[-1] + 1]
-            self.rays_cast_targets += int(b - a)
-            st = self._straight
-            wk.cast_straight_kernel(self._cull_idx[a:b], self._cull_start[run[0]:run[-1] + 2] - a,
-                                    np.array(run, dtype=np.int64), d_world, self._t_ray, st.start_m, st.velocity_m_s,
-                                    st.yaw, st.prims, st.prim_start, rng_m, prim)
-        return []
+    def _cast_straight(self, run: np.ndarray, d_world, rng_m, prim) -> None:
+        """Cast the targets ``run`` (consecutive, on straight passes: ``_StraightBodies.run_at``) on
+        their rays of this chunk's cull in one call (:func:`sim.world.kernels.cast_straight_kernel`:
+        what :meth:`_cast_on` does body by body, ~8 us of Python each)."""
+        start = self._cull_start
+        self.rays_cast_targets += int(start[run[-1] + 1] - start[run[0]])
+        st = self._straight
+        wk.cast_straight_kernel(self._cull_idx, start, run, d_world, self._t_ray, st.start_m, st.velocity_m_s, st.yaw,
+                                st.prims, st.prim_start, rng_m, prim)
 
     def _cast_flock(self, flock: _FlockCast, t0, t1, chunk, d_world, rng_m, prim, offset):
         """:meth:`_cast_on` for each bird of a flock in turn, in a few calls: the birds' poses
@@ -479,9 +501,9 @@ class SceneSensor:
         t_mid = 0.5 * (t0 + t1)
         poses = flock.poses
         centres, vel = poses.positions_velocities(flock.members, np.full(flock.members.size, t_mid))
-        idx, start = wk.bodies_candidates_kernel(d_world, chunk.status, self._t_ray, t_mid, centres, vel,
-                                                 _reach(flock.radius_m, flock.max_speed_m_s, t0, t1), flock.radius_m,
-                                                 flock.max_accel_m_s2, flock.max_speed_m_s, True,
+        reach = self._reach_for(flock.stop, flock.radius_m, flock.max_speed_m_s, t0, t1)
+        idx, start = wk.bodies_candidates_kernel(d_world, chunk.status, self._t_ray, t_mid, centres, vel, reach,
+                                                 flock.radius_m, flock.max_accel_m_s2, flock.max_speed_m_s, True,
                                                  *self._ray_blocks(chunk, d_world))
         m = np.repeat(flock.members, np.diff(start))     # each ray's bird
         self.rays_cast_targets += idx.size

@@ -91,8 +91,8 @@ def cast_straight_twin(d, idx, start, bodies, t_ray, start_m, velocity, yaw, pri
     """``cast_straight_kernel``: :func:`cast_moving_twin` body by body, each at its straight pass's
     positions at its rays' times, each ray's nearest hit kept (ids: rows of ``prims``)."""
     out_range, out_prim = out_range.copy(), out_prim.copy()
-    for q, k in enumerate(bodies):
-        rays = idx[start[q]:start[q + 1]]
+    for k in bodies:
+        rays = idx[start[k]:start[k + 1]]
         if rays.size == 0:
             continue
         pos = straight_position_twin(start_m[k], velocity[k], t_ray[rays])

@@ -382,7 +382,8 @@ def cast_moving_kernel(idx, d_world, pos, yaw, prims, prim_offset, out_range, ou
 def cast_straight_kernel(idx, start, bodies, d_world, t_ray, start_m, velocity_m_s, yaw, prims, prim_start, out_range,
                          out_prim):
     """:func:`cast_moving_kernel` for bodies on straight passes (:class:`sim.world.trajectories.Straight`),
-    several in one call: body ``bodies[q]`` (k) takes the rays ``idx[start[q]:start[q + 1]]``, each at
+    several in one call: body ``k = bodies[q]`` takes the rays ``idx[start[k]:start[k + 1]]`` (as
+    :func:`bodies_candidates_kernel` gives them), each at
     its own time ``t_ray[j]``, where it is at ``start_m[k] + t velocity_m_s[k]`` (the straight
     pass's own expression, :func:`straight_position_kernel`) with the yaw ``yaw[k]`` of its velocity,
     and its primitives are the rows ``prim_start[k]:prim_start[k + 1]`` of ``prims``, recorded by
@@ -394,7 +395,7 @@ def cast_straight_kernel(idx, start, bodies, d_world, t_ray, start_m, velocity_m
     for q in range(bodies.shape[0]):
         k = bodies[q]
         one_yaw[0] = yaw[k]
-        for i in range(start[q], start[q + 1]):
+        for i in range(start[k], start[k + 1]):
             j = idx[i]
             t = t_ray[j]
             for a in range(3):
@@ -603,11 +604,17 @@ def ray_blocks_kernel(d_world, status, out_axis, out_cos, out_sin):
 
 @njit(cache=True, inline="always")
 def _cone_bound(cx, cy, cz, reach):
-    """What a block test needs of a cone of radius ``reach`` about ``c`` (:func:`_block_may_pass`):
-    ``(bounded, ux, uy, uz, cos a, sin a)``, ``u = c / |c|`` and ``a`` the half-angle within which a
-    ray passing the cone's test points: ``sin^2 a = reach^2 / |c|^2 + 4e-6`` (a ray's |d|^2 off 1 by
-    up to 1e-6 and the rounding of the test).  Not bounded (every block tested): ``|c|`` not above
-    twice ``reach`` (then a ray behind the origin's side might pass), non-finite, or ``a`` over 30 deg."""
+    """What the block test of :func:`bodies_candidates_kernel` needs of a cone of radius ``reach``
+    about ``c``: ``(bounded, ux, uy, uz, cos a, sin a)``, ``u = c / |c|`` and ``a`` the half-angle
+    within which a ray passing the cone's test points: ``sin^2 a = reach^2 / |c|^2 + 4e-6`` (a ray's
+    |d|^2 off 1 by up to 1e-6 and the rounding of the test).  Not bounded (every block tested):
+    ``|c|`` not above twice ``reach`` (then a ray behind the origin's side might pass), non-finite,
+    or ``a`` over 30 deg.
+
+    The block test: a ray within ``theta_b`` of block b's axis (:func:`ray_blocks_kernel`) and within
+    ``a`` of ``u`` has the two directions within ``theta_b + a`` (< 90 deg) of each other, so a block
+    whose axis is further from ``u`` -- ``axis . u < cos theta_b cos a - sin theta_b sin a``, with
+    1e-9 in the cosine to spare -- has no ray that passes."""
     c2 = cx * cx + cy * cy + cz * cz
     cn = math.sqrt(c2)
     if not (cn > 2.0 * reach and cn < math.inf and reach >= 0.0):
@@ -618,22 +625,6 @@ def _cone_bound(cx, cy, cz, reach):
     return True, cx / cn, cy / cn, cz / cn, math.sqrt(1.0 - s2), math.sqrt(s2)
 
 
-@njit(cache=True, inline="always")
-def _block_may_pass(block_axis, block_cos, block_sin, b, bound):
-    """Whether a valid ray of block b (:func:`ray_blocks_kernel`) may pass the cone test ``bound``
-    (:func:`_cone_bound`).  A ray within ``theta_b`` of the block's axis and within ``a`` of the cone's
-    direction has the two directions within ``theta_b + a`` (< 90 deg) of each other: a block whose
-    axis is further from it (1e-9 in the cosine to spare) has no such ray."""
-    bc = block_cos[b]
-    if bc == _BLOCK_EMPTY:
-        return False
-    bounded, ux, uy, uz, ca, sa = bound
-    if not bounded or bc == _BLOCK_ANY:
-        return True
-    dot = block_axis[b, 0] * ux + block_axis[b, 1] * uy + block_axis[b, 2] * uz
-    return dot >= bc * ca - block_sin[b] * sa - 1e-9
-
-
 @njit(cache=True, nogil=True)
 def bodies_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities, reach, radius, accel, v_max, instant,
                              block_axis, block_cos, block_sin):
@@ -642,20 +633,45 @@ def bodies_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities,
     ``accel[k]`` (< 0: no bound), ``v_max[k]``) for K bodies in one call: returns ``(idx, start)``, body
     k's rays ``idx[start[k]:start[k + 1]]`` in order.  A body's rays are tested in the blocks whose
     direction bounds (``block_*``, :func:`ray_blocks_kernel` of these rays) its cone may meet
-    (:func:`_block_may_pass`): the others hold no ray that passes.  Each test with the arithmetic of
+    (:func:`_cone_bound`): the others hold no ray that passes.  Each test with the arithmetic of
     the kernels it stands for, so the same rays (numpy twin: ``bodies_candidates_twin`` in
     ``tests/world_twins.py``)."""
     n = d_world.shape[0]
     n_bodies = centres.shape[0]
     nb = block_cos.shape[0]
-    near = np.zeros((n_bodies, nb), dtype=np.bool_)
+    # The blocks' bounds as columns, a block not bounded made to pass every body's test (axis 0,
+    # cosine -2) and one without a valid ray to fail it (axis 0, cosine 2; a cone's cos a >= 0.86):
+    # the block test of _cone_bound without branches, so that the loop over the blocks vectorises.
+    bx = np.empty(nb)
+    by = np.empty(nb)
+    bz = np.empty(nb)
+    bc = np.empty(nb)
+    bs = np.empty(nb)
+    for b in range(nb):
+        c = block_cos[b]
+        plain = c != _BLOCK_EMPTY and c != _BLOCK_ANY
+        bx[b] = block_axis[b, 0] if plain else 0.0
+        by[b] = block_axis[b, 1] if plain else 0.0
+        bz[b] = block_axis[b, 2] if plain else 0.0
+        bc[b] = c
+        bs[b] = block_sin[b] if plain else 0.0
+    near = np.empty((n_bodies, nb), dtype=np.uint8)
     total = 0
     for k in range(n_bodies):
-        bound = _cone_bound(centres[k, 0], centres[k, 1], centres[k, 2], reach[k])
-        for b in range(nb):
-            if _block_may_pass(block_axis, block_cos, block_sin, b, bound):
-                near[k, b] = True
-                total += min(CULL_BLOCK, n - b * CULL_BLOCK)
+        bounded, ux, uy, uz, ca, sa = _cone_bound(centres[k, 0], centres[k, 1], centres[k, 2], reach[k])
+        row = near[k]
+        count = 0
+        if bounded:
+            for b in range(nb):
+                v = np.uint8(bx[b] * ux + by[b] * uy + bz[b] * uz >= bc[b] * ca - bs[b] * sa - 1e-9)
+                row[b] = v
+                count += v
+        else:
+            for b in range(nb):
+                v = np.uint8(bc[b] != _BLOCK_EMPTY)
+                row[b] = v
+                count += v
+        total += count * CULL_BLOCK
     idx = np.empty(total, dtype=np.int64)
     start = np.zeros(n_bodies + 1, dtype=np.int64)
     p = 0

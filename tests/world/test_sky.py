@@ -684,7 +684,7 @@ def test_targets_on_straight_passes_cast_together_give_the_run_each_cast_on_its_
     def apart(bodies, n_targets, has):
         s = of(bodies, n_targets, has)
         return s._replace(any=False, is_straight=[False] * len(s.is_straight),
-                          cast_together=[False] * len(s.cast_together))
+                          cast_together=[False] * len(s.cast_together), run_at={})
     monkeypatch.setattr(sensor_module._StraightBodies, "of", apart)
     alone = ClosedLoop(scene)
     b = alone.run()
