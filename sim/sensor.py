@@ -237,8 +237,10 @@ class SceneSensor:
             self._share = np.ones(n)
         offset = 0
         mids, vels = [], []
-        # each ray's instant, as the poses take it (the per-ray cull's)
-        self._t_ray = chunk.t_ns * 1e-9 if self.target_motion == "per_point" else np.full(n, 0.5 * (t0 + t1))
+        # each ray's instant, as the poses take it (the per-ray cull's): its time [ns], which the kernels
+        # and _ray_times turn into seconds for the rays they need (t_ns * 1e-9, the same bits as an
+        # array of all of them), or the mid time
+        self._t_ray = chunk.t_ns if self.target_motion == "per_point" else np.full(n, 0.5 * (t0 + t1))
         self._blocks = None
         culled = self._cull_bodies(t0, t1, chunk, d_world)
         straight = self._straight
@@ -508,11 +510,16 @@ class SceneSensor:
         m = np.repeat(flock.members, np.diff(start))     # each ray's bird
         self.rays_cast_targets += idx.size
         if idx.size:
-            t_pose = self._t_ray[idx]      # each ray's own instant (per_point), or the mid time (per_frame)
+            t_pose = self._ray_times(idx)
             pos, yaw = poses.poses(m, t_pose)
             wk.cast_flock_kernel(idx, m, d_world, pos, yaw, poses.wing_angles(m, t_pose), flock.prims, flock.hinge,
                                  flock.prim_start, offset, rng_m, prim)
         return centres.tolist(), vel.tolist()
+
+    def _ray_times(self, idx) -> np.ndarray:
+        """The instants [s] of the rays ``idx``: their own (per_point), or the mid time (per_frame)."""
+        t = self._t_ray[idx]
+        return t * 1e-9 if t.dtype.kind == "i" else t
 
     def _cast_on(self, spec, idx, d_world, rng_m, prim, offset) -> None:
         """Cast the rays ``idx`` (the body's candidates, :meth:`_cull_bodies`) on one moving body, each at
@@ -521,7 +528,7 @@ class SceneSensor:
         self.rays_cast_targets += idx.size
         if idx.size == 0:
             return
-        t_pose = self._t_ray[idx]      # each ray's own instant (per_point), or the mid time (per_frame)
+        t_pose = self._ray_times(idx)
         fixed_yaw = getattr(spec, "fixed_yaw", None)      # a tree's crown keeps its yaw
         if fixed_yaw is None:     # along its velocity: position and velocity in one evaluation where the path has one
             pos, vel = position_velocity(traj, t_pose)

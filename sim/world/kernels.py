@@ -389,7 +389,8 @@ def cast_straight_kernel(idx, start, bodies, d_world, t_ray, start_m, velocity_m
     and its primitives are the rows ``prim_start[k]:prim_start[k + 1]`` of ``prims``, recorded by
     their row.  The bodies one after another in the order given, as the calls it replaces (one per
     body, whose positions were an array of their own): the same ranges and ids (numpy twin:
-    ``cast_straight_twin`` in ``tests/world_twins.py``)."""
+    ``cast_straight_twin`` in ``tests/world_twins.py``).  ``t_ray`` [s], or int64 [ns] as for
+    :func:`bodies_candidates_kernel`."""
     pos = np.empty((1, 3))
     one_yaw = np.empty(1)
     for q in range(bodies.shape[0]):
@@ -397,7 +398,7 @@ def cast_straight_kernel(idx, start, bodies, d_world, t_ray, start_m, velocity_m
         one_yaw[0] = yaw[k]
         for i in range(start[k], start[k + 1]):
             j = idx[i]
-            t = t_ray[j]
+            t = _seconds(t_ray[j])
             for a in range(3):
                 pos[0, a] = start_m[k, a] + t * velocity_m_s[k, a]
             ox, oy, oz, dx, dy, dz = _ray_in_body(d_world, j, pos, one_yaw, 0)
@@ -635,7 +636,8 @@ def bodies_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities,
     direction bounds (``block_*``, :func:`ray_blocks_kernel` of these rays) its cone may meet
     (:func:`_cone_bound`): the others hold no ray that passes.  Each test with the arithmetic of
     the kernels it stands for, so the same rays (numpy twin: ``bodies_candidates_twin`` in
-    ``tests/world_twins.py``)."""
+    ``tests/world_twins.py``).  ``t_ray``: the rays' times [s], or their int64 times [ns] (then a
+    ray's time is ``t_ns * 1e-9``, formed here for the rays tested: the bits of an array of it)."""
     n = d_world.shape[0]
     n_bodies = centres.shape[0]
     nb = block_cos.shape[0]
@@ -688,9 +690,9 @@ def bodies_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities,
             for j in range(b * CULL_BLOCK, min(n, (b + 1) * CULL_BLOCK)):
                 bj = d_world[j, 0] * cx + d_world[j, 1] * cy + d_world[j, 2] * cz
                 if (c2 - bj * bj <= r2) and (bj > -rk) and status[j] == RAY_OK:
-                    if not instant or _meets_at_instant(d_world, j, t_ray[j] - t_mid, cx, cy, cz, velocities[k, 0],
-                                                        velocities[k, 1], velocities[k, 2], radius[k], accel[k],
-                                                        v_max[k]):
+                    if not instant or _meets_at_instant(d_world, j, _seconds(t_ray[j]) - t_mid, cx, cy, cz,
+                                                        velocities[k, 0], velocities[k, 1], velocities[k, 2],
+                                                        radius[k], accel[k], v_max[k]):
                         idx[p] = j
                         p += 1
         start[k + 1] = p

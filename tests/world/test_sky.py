@@ -662,6 +662,13 @@ def test_bodies_candidates_kernel_is_each_body_s_cull_everywhere():
             idx, start = K.bodies_candidates_kernel(*args, *_blocks(d, status))
             twin_idx, twin_start = bodies_candidates_twin(*args)
             assert np.array_equal(idx, twin_idx) and np.array_equal(start, twin_start), trial
+            # the rays' times given in ns: each formed as t_ns * 1e-9, the same rays
+            t_ns = np.sort(rng.integers(2_000_000_000, 2_100_000_000, n))
+            args_ns = (d, status, t_ns) + args[3:]
+            args_s = (d, status, t_ns * 1e-9) + args[3:]
+            for a, b in zip(K.bodies_candidates_kernel(*args_ns, *_blocks(d, status)),
+                            K.bodies_candidates_kernel(*args_s, *_blocks(d, status))):
+                assert np.array_equal(a, b), trial
             for k in range(n_bodies):
                 one = np.empty(n, np.int64)
                 one = one[:K.cone_candidates_kernel(d, status, *centres[k], cone[k], one)]

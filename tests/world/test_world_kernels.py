@@ -246,6 +246,11 @@ def test_straight_passes_cast_together_are_each_cast_on_its_own():
                              quads[k].prims, prim_start[k], r2, p2)
     assert np.array_equal(r1, r2) and np.array_equal(p1, p2)
     assert len(set(p1[(p1 >= 0) & (p1 != 99)])) > 20
+    t_ns = np.sort(rng.integers(1_000_000_000, 1_100_000_000, n))    # times in ns: t_ns * 1e-9 formed inside
+    r3, p3, r4, p4 = r.copy(), p.copy(), r.copy(), p.copy()
+    K.cast_straight_kernel(idx, start, order, d, t_ns, start_m, velocity, yaw, prims, prim_start, r3, p3)
+    K.cast_straight_kernel(idx, start, order, d, t_ns * 1e-9, start_m, velocity, yaw, prims, prim_start, r4, p4)
+    assert np.array_equal(r3, r4) and np.array_equal(p3, p4)
     rt, pt = cast_straight_twin(d, idx, start, order, t_ray, start_m, velocity, yaw, prims, prim_start, r, p)
     assert np.array_equal(p1, pt)
     f = np.isfinite(r1)
