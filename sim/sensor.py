@@ -418,27 +418,31 @@ class SceneSensor:
             return []
         footprint = self._has["beam_footprint"]
         t = np.array([0.5 * (t0 + t1)])
-        centres, vels, out = [], [], []
         straight = self._straight
-        # the straight passes' positions in one expression: Straight.position's, element for element
-        mid_straight = straight.start_m + t[0] * straight.velocity_m_s if straight.any else None
+        # the straight passes' positions in one expression (Straight.position's, element for element)
+        # and their velocities; the other bodies' rows filled in below (velocity 0 where the cull takes
+        # none: without an acceleration bound, or with a beam footprint, it is not read)
+        centres = straight.start_m + t[0] * straight.velocity_m_s
+        vels = straight.velocity_m_s.copy()
+        out = []
         for q, (spec, cull) in enumerate(bodies):
             if straight.is_straight[q]:
-                c, v = mid_straight[q], (None if cull[2] is None or footprint else straight.velocity_m_s[q].copy())
-            elif cull[2] is None or footprint:
-                c, v = spec.trajectory.position(t)[0], None
-            else:   # in one evaluation where the path has one (a manual flight's clip, a circle's trig)
-                p, v = position_velocity(spec.trajectory, t)
-                c, v = p[0], v[0]
-            centres.append(c)
-            vels.append(_ZERO3 if v is None else v)
+                c, v = centres[q], (None if cull[2] is None or footprint else vels[q])
+            else:
+                if cull[2] is None or footprint:
+                    c, v = spec.trajectory.position(t)[0], None
+                else:   # in one evaluation where the path has one (a manual flight's clip, a circle's trig)
+                    p, v = position_velocity(spec.trajectory, t)
+                    c, v = p[0], v[0]
+                centres[q] = c
+                vels[q] = _ZERO3 if v is None else v
             out.append((c, v))
         reach = self._reach_for(None, radius, speed, t0, t1)
         if footprint:   # beam divergence can catch a body just outside the central ray's path
             div = math.radians(max(self.scene.optics.beam_divergence_deg))
             reach = np.array([r + norm3(c) * div / 2 for r, c in zip(reach.tolist(), centres)])
-        idx, start = wk.bodies_candidates_kernel(d_world, chunk.status, self._t_ray, 0.5 * (t0 + t1), np.array(centres),
-                                                 np.array(vels), reach, radius, accel, speed, not footprint,
+        idx, start = wk.bodies_candidates_kernel(d_world, chunk.status, self._t_ray, 0.5 * (t0 + t1), centres, vels,
+                                                 reach, radius, accel, speed, not footprint,
                                                  *self._ray_blocks(chunk, d_world))
         self._cull_idx, self._cull_start = idx, start
         bounds = start.tolist()
