@@ -81,10 +81,11 @@ class _StraightBodies(NamedTuple):
     @classmethod
     def of(cls, bodies, n_targets: int, has: dict) -> _StraightBodies:
         is_straight = [type(spec.trajectory) is Straight for spec, _ in bodies]
-        start = np.array([spec.trajectory._start if s else np.zeros(3) for (spec, _), s in zip(bodies, is_straight)]
-                         ).reshape(-1, 3)
-        velocity = np.array([spec.trajectory._velocity if s else np.zeros(3)
-                             for (spec, _), s in zip(bodies, is_straight)]).reshape(-1, 3)
+        # the float64 values Straight keeps of its start and velocity (Straight.__post_init__)
+        start = np.array([spec.trajectory.start_m if s else (0.0, 0.0, 0.0)
+                          for (spec, _), s in zip(bodies, is_straight)], dtype=np.float64).reshape(-1, 3)
+        velocity = np.array([spec.trajectory.velocity_m_s if s else (0.0, 0.0, 0.0)
+                             for (spec, _), s in zip(bodies, is_straight)], dtype=np.float64).reshape(-1, 3)
         # the yaw of a straight pass is its velocity's at every time (body_yaw_rad; NaN: it hovers)
         yaw = heading_rad(velocity, default=math.nan) if len(bodies) else np.zeros(0)
         plain = not (has["beam_footprint"] or has["incidence"])
@@ -101,8 +102,9 @@ class _StraightBodies(NamedTuple):
             if first is None:
                 first = q
             runs.setdefault(first, []).append(q)
+        prim_start = np.cumsum([0] + [t.body.prims.shape[0] for t in targets]).astype(np.int64)
         return cls(any(is_straight), is_straight, together, {a: np.array(r, dtype=np.int64) for a, r in runs.items()},
-                   start, velocity, yaw, prims, np.cumsum([0] + [t.body.prims.shape[0] for t in targets]).astype(np.int64))
+                   start, velocity, yaw, prims, prim_start)
 
 
 def _reach(radius_m, max_speed_m_s, t0: float, t1: float):
