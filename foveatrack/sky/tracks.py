@@ -678,8 +678,8 @@ class SkyTracker:
     def _classify(self, tr: SkyTrack) -> None:
         """Rules 1-4 of the classifier on the track, unless nothing they read has changed since they
         last ran (most tracks get no hit in a frame): what they read is its history, its filter's
-        velocity, its excursion, its last hit's time and whether it is labelled drone (rule 4 keeps
-        the label), and what changes one of them sets ``tr.reclassify`` (:meth:`_measured`, the
+        velocity, its excursion, its last hit's time, its count of hits (rule 1's early bird) and
+        whether it is labelled drone (rule 4 keeps the label), and what changes one of them sets ``tr.reclassify`` (:meth:`_measured`, the
         prune's cut of the history, the label's change to or from drone).  A flag, not a key of
         what was read compared every frame: the key cost ~1 us a track, a flock's twenty a frame."""
         if tr.reclassify:
