@@ -24,8 +24,9 @@ same bits everywhere):
 Rules, in order (thresholds in :class:`ClassifierConfig`; documented in docs/sky-tracks.md):
 
 1. fewer than ``min_hits`` hits: ``unknown`` -- unless the track has had ``bird_speed_after_hits``
-   (3, the hits that confirm a track) hits of any kind since it began (lone returns too,
-   :mod:`foveatrack.sky.tracks` step 5b) and its filter's speed is at least ``bird_speed_m_s``:
+   (3, as many as confirm a track) hits since it began (``track.hits``: its objects and its lone
+   returns, :mod:`foveatrack.sky.tracks` step 5b; not Algorithm 1's in the fixated D, which are not
+   counted) and its filter's speed is at least ``bird_speed_m_s``:
    ``bird`` (rule 3's speed test, which reads no shape).  With lone returns a bird's track is
    confirmed on single returns before its window holds five objects; unknown, it weighed ten times a
    bird in the fovea's schedule, and the flock's drone lost the fovea to such tracks, coasting ones
