@@ -347,3 +347,39 @@ def test_compile_sky_kernels_covers_what_a_sky_run_calls():
 
     out = subprocess.run([sys.executable, "-c", _SKY_AFTER_WARM], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "{}", f"kernels given new signatures (before, after): {out}"
+
+
+def _labels_run(monkeypatch, always: bool, name: str, flock: str | None, seed: int):
+    from foveatrack.sky.tracks import SkyTracker
+    from sim.study.sky_objects import sky_scene
+
+    if always:
+        classify_flagged = SkyTracker._classify
+
+        def every_frame(self, tr):
+            tr.reclassify = True            # rules 1-4 run on every track every frame
+            classify_flagged(self, tr)
+        monkeypatch.setattr(SkyTracker, "_classify", every_frame)
+    loop = ClosedLoop(sky_scene(name, 12.0, seed, None, flock))
+    loop.run()
+    monkeypatch.undo()
+    return [[(v.track_id, v.label, v.seen_as, repr(sorted(v.features.items()))) for v in o.sky.tracks]
+            for o in loop.sky_log], [o.command for o in loop.sky_log]
+
+
+@pytest.mark.parametrize("name,flock,seed", [("swarm-of-five", "drone-and-flock", 200),
+                                             ("swarm-of-five", "drone-and-flock", 203),
+                                             ("drone-tree-line", None, 200), ("drone-tree-line", None, 201)])
+def test_the_classifier_run_on_its_flag_is_the_classifier_run_every_frame(monkeypatch, name, flock, seed):
+    # SkyTracker._classify reruns rules 1-4 on a track only when tr.reclassify is set, where what they
+    # read changes (a hit of any kind, the history's prune, the label to or from drone): every such
+    # path must set it, or a label goes stale in the runs that take the missed path.  The swarm with
+    # the flock (lone returns, merges, prunes, drone labels won and lost) and the tree line (rule 4,
+    # which reads the label): every frame's labels, rules' outputs and features, and the head's
+    # commands, as when the rules run on every track every frame.
+    flagged = _labels_run(monkeypatch, False, name, flock, seed)
+    every = _labels_run(monkeypatch, True, name, flock, seed)
+    assert flagged[0] == every[0]
+    assert flagged[1] == every[1]
+    assert any(lab == "drone" for fr in flagged[0] for _, lab, _, _ in fr)
+    assert any(lab != "drone" and lab != "unknown" for fr in flagged[0] for _, lab, _, _ in fr)
