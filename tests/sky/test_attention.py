@@ -416,6 +416,25 @@ def test_a_priority_left_for_revisits_goes_on_counting_its_unseen_time(over_fixa
         assert priority[2.0] == 0 and priority[2.5] == 0 and not att.set_aside
 
 
+def test_a_hit_between_fixations_clears_the_unseen_time_summed_before_it():
+    # as above, but track 0 is hit once by the field at 1.5 s, while the fovea is on track 1: the
+    # 1.1 s of its first fixation are forgotten (the sum runs since its last hit), so the second
+    # fixation (from 1.5 s) and the third (after the revisit at 2.6-2.9 s) count alone: set aside
+    # 1.1 + 0.4 s into them, not 0.4 s into the second as without the hit
+    att = Attention(AttentionConfig(drop_unseen_priority_s=1.5, revisit_s=1.0, dwell_s=0.3, saccade_timeout_s=1.0))
+    priority = {}
+    for k in range(35):
+        t = round((k + 1) * 0.1, 1)
+        target = att.target
+        att.update(t, [_unseen_view(0, [20, 0, 0], hit=t == 1.5), _unseen_view(1, [60, 5, 0], hit=True)],
+                   {1} if target == 1 else set(), 0.1)
+        priority[t] = att.priority
+        if t == 1.6:
+            assert 0 not in att._unseen_before_s
+    assert [priority[t] for t in (1.2, 1.5, 2.0, 2.5, 3.0, 3.2)] == [0] * 6
+    assert priority[3.3] == 1 and 0 in att.set_aside
+
+
 def test_the_fovea_turns_kernel_is_the_per_track_functions_bits():
     # the controller's frame, saccade_counts_motion off: every confirmed track's lidar-frame point at
     # the mid pose and its saccade time by one kernel call (attention.fovea_turns); its twins are
