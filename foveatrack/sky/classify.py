@@ -38,7 +38,11 @@ Rules, in order (thresholds in :class:`ClassifierConfig`; documented in docs/sky
    crossing and the swarm within 2 drones confirmed or runs.  Filter speeds from three hits are
    rough, but the scenes' drones fly at 0.5-2.6 m/s: of the tracks on the flock's drones, 5 and 9
    ended labelled bird on the two blocks (second tracks on a drone; each drone kept a drone track).
-   0: never (recordings made before it);
+   The hits are the track's life's, not its window's, so an old track whose window has thinned is
+   read so too: a track that drifted off its drone (a reviewer's runs: five in four 20 s runs of the
+   swarm with the flock, 1.4-5.7 m from the nearest drone, their filters at 4.8-8.1 m/s) is called a
+   bird, where unknown the schedule would have kept its last label, drone.  0: never (recordings
+   made before it);
 2. ``net_speed_m_s < clutter_net_speed_m_s``, or older than ``clutter_age_s`` and never farther than
    ``clutter_excursion_m`` from where it started: ``clutter`` (a swaying crown goes back and forth
    around its place; a drone hovering that still is called clutter too -- a hover is found by the
