@@ -732,21 +732,11 @@ def wander_sum_kernel(base, slot, member, amp, trig, out):
 @njit(cache=True, nogil=True)
 def wander_rows_kernel(base_p, base_v, slot, member, amp, amp_omega, sin_arg, cos_arg, out_p, out_v):
     """:func:`wander_sum_kernel` for a flock's positions (``base_p``, ``slot``, ``amp``, the sines) and
-    velocities (``base_v``, ``amp_omega``, the cosines) in one call: ``out_p[i] = base_p[i] +
-    slot[m] + sum_k amp[m, k] * sin_arg[i, k]``, ``out_v[i] = base_v[i] + sum_k amp_omega[m, k] *
-    cos_arg[i, k]`` (``m = member[i]``), each with that kernel's arithmetic (numpy twins as there:
-    ``flock_positions_twin``, ``flock_velocities_twin`` in ``tests/world_twins.py``)."""
-    for i in range(base_p.shape[0]):
-        m = member[i]
-        for a in range(3):
-            s = 0.0
-            for k in range(amp.shape[1]):
-                s += amp[m, k, a] * sin_arg[i, k, a]
-            out_p[i, a] = (base_p[i, a] + slot[m, a]) + s
-            s = 0.0
-            for k in range(amp_omega.shape[1]):
-                s += amp_omega[m, k, a] * cos_arg[i, k, a]
-            out_v[i, a] = base_v[i, a] + s
+    velocities (``base_v``, no slot, ``amp_omega``, the cosines) in one call from Python (the calls
+    cost more than the sums): that kernel twice, so each element's arithmetic is its own (numpy
+    twins as there: ``flock_positions_twin``, ``flock_velocities_twin`` in ``tests/world_twins.py``)."""
+    wander_sum_kernel(base_p, slot, member, amp, sin_arg, out_p)
+    wander_sum_kernel(base_v, slot[:0], member, amp_omega, cos_arg, out_v)
 
 
 @njit(cache=True, nogil=True)
