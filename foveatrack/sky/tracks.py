@@ -483,7 +483,7 @@ class SkyTracker:
         # the objects whose points are kept out of the learning, applied to learn_pts at once after
         # the loops (one pass over the foreground, not one per object); the last entry is -1: no object
         unlearn = np.zeros(len(objs) + 1, bool)
-        if fov is not None and self.tracks[fov].confirmed and self.tracks[fov].excursion_m >= cfg.protect_excursion_m:
+        if fov is not None and self._gone_somewhere(self.tracks[fov]):
             # the fixated track's D is the target's (Algorithm 1): a frame with a single return on a
             # hovering drone makes no object to protect, and a few such frames made it scenery
             fixated_pts = self._in_fixated_d(fg_world, lo, hi, keep)
@@ -494,12 +494,7 @@ class SkyTracker:
             if i == fov and fovea_det is not None:
                 z = np.array(self._to_world(fovea_det.xyz, fovea_det.t_s, pose))
                 tz = fovea_det.t_s
-            # what a track sees is kept out of the background while it is where the track predicted it,
-            # as long as the track may be something flying: a tentative track off the scenery, or a
-            # confirmed one that has gone somewhere.  A confirmed track that stays put (a crown's part
-            # the background has not learned yet) protects nothing: its points are learned and it starves.
-            protect = tr.kf.distance_at(ob.t_s, ob.xyz_m) <= cfg.protect_m and (
-                (not tr.confirmed and not ob.on_scenery) or (tr.confirmed and tr.excursion_m >= cfg.protect_excursion_m))
+            protect = self._protects(tr, ob.t_s, ob.xyz_m, ob.on_scenery)
             self._hit(tr, tz, z, ob)
             self._confirm_if_due(tr, t_mid, confirmed_now)
             if protect:
@@ -640,8 +635,7 @@ class SkyTracker:
             tr = self.tracks[idle[a]]
             z = O[b].copy()
             t_s = int(fg_t_ns[lone[b]]) * 1e-9
-            protect = tr.kf.distance_at(t_s, z) <= cfg.protect_m and (     # as an object's: at its time
-                not tr.confirmed or tr.excursion_m >= cfg.protect_excursion_m)
+            protect = self._protects(tr, t_s, z, False)       # as an object's, at its time (off the scenery)
             self._measured(tr, t_s, z)
             tr.hits += 1
             tr.clear_hits += 1
@@ -685,6 +679,20 @@ class SkyTracker:
         if tr.reclassify:
             tr.seen_as, tr.features = classify(tr, self.cfg.classifier)
             tr.reclassify = False
+
+    def _protects(self, tr: SkyTrack, t_s: float, z, on_scenery: bool) -> bool:
+        """Whether a hit at ``z`` (at ``t_s``; ``on_scenery``: on scenery in the making) is kept out of
+        the background: while it is where the track predicted it (``protect_m``) and the track may be
+        something flying -- a tentative track off the scenery, or :meth:`_gone_somewhere`.  A confirmed
+        track that stays put (a crown's part the background has not learned yet) protects nothing:
+        its points are learned and it starves."""
+        return tr.kf.distance_at(t_s, z) <= self.cfg.protect_m and (
+            (not tr.confirmed and not on_scenery) or self._gone_somewhere(tr))
+
+    def _gone_somewhere(self, tr: SkyTrack) -> bool:
+        """A confirmed track that has gone ``protect_excursion_m`` or more from where it began: its
+        hits, and the fixated D's points when the fovea serves it, stay out of the background."""
+        return tr.confirmed and tr.excursion_m >= self.cfg.protect_excursion_m
 
     @staticmethod
     def _in_fixated_d(fg_world: np.ndarray, lo, hi, keep: np.ndarray) -> np.ndarray:
