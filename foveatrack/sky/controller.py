@@ -240,26 +240,25 @@ class SkyController:
         # end pose, its threat score (the attention's too)
         in_fovea, turn, scores = set(), {}, {}
         confirmed = [v for v in sky.tracks if v.confirmed]
+        q_mid, turns = [], []       # per confirmed track: its point in the lidar frame at mid-frame, its saccade time
         if motion:
             speeds, accels = recon.speeds_at(frame.t_end_s), recon.accels_deg_s2()
             for v in confirmed:
                 p = v.xyz_m.tolist()
-                if off_axis_deg(*in_lidar(p, *mid_pose)) <= half:
-                    in_fovea.add(v.track_id)
+                q_mid.append(in_lidar(p, *mid_pose))
                 az, el = bearing_deg(*in_lidar(p, *end_pose))
                 rates = _bearing_rates(p, v.velocity_m_s.tolist(), end_pose, az, el)
-                turn[v.track_id] = saccade_time_s(az, el, att, self._head_speeds, rates, speeds, accels)
-                scores[v.track_id] = threat_score(v, att, self.attention.looks_like(v))
+                turns.append(saccade_time_s(az, el, att, self._head_speeds, rates, speeds, accels))
         elif confirmed:
-            # without the motion, the lidar-frame points and saccade times of every track in one
-            # kernel call (the same bits as the loop above without the rates)
+            # without the motion, every track's in one kernel call (the same bits as the loop above
+            # without the rates)
             q_mid, turns = fovea_turns(np.array([v.xyz_m for v in confirmed]), mid_pose, end_pose, att,
                                        self._head_speeds)
-            for v, q, t in zip(confirmed, q_mid, turns):
-                if off_axis_deg(*q) <= half:
-                    in_fovea.add(v.track_id)
-                turn[v.track_id] = t
-                scores[v.track_id] = threat_score(v, att, self.attention.looks_like(v))
+        for v, q, t in zip(confirmed, q_mid, turns):
+            if off_axis_deg(*q) <= half:
+                in_fovea.add(v.track_id)
+            turn[v.track_id] = t
+            scores[v.track_id] = threat_score(v, att, self.attention.looks_like(v))
         # the candidate being verified counts too for the attention, which ends that look once the
         # candidate has been dwell_s in the fovea (without it every look ran saccade_timeout_s)
         cand = next((v for v in sky.tracks if v.track_id == self.attention.verifying and not v.confirmed), None)
