@@ -229,29 +229,26 @@ def saccade_time_s(e_pan_deg: float, e_tilt_deg: float, cfg: "AttentionConfig", 
 @njit(cache=True)
 def _axis_turn_still_s(error_deg, within_deg, gain_1_s, vmax_deg_s):
     """:func:`axis_turn_s` with no bearing rate, the axis at rest and no acceleration given: its
-    operations in their order (Python's ``min``/``max`` as written: the first unless the second is
-    smaller/larger, NaN too)."""
-    s = 1.0 if error_deg >= 0.0 else -1.0
+    operations in their order, less those of the zero terms, which change no bit (its stop time 0.0
+    added to a time that is >= 0 or NaN, its rate +-0 taken from the top speed, its lag +-0 from the
+    errors; a gain > 0, as the configuration has it); Python's ``min``/``max`` as written: the first
+    unless the second is smaller/larger, NaN too."""
     e = abs(error_deg)
-    w = s * 0.0
-    stop = 0.0
     if e <= within_deg:
-        return stop
-    close = vmax_deg_s - w
-    if close <= 0.0:
+        return 0.0
+    if vmax_deg_s <= 0.0:
         return math.inf
     knee = vmax_deg_s / gain_1_s
     if e > knee:
-        full = (e - (within_deg if within_deg > knee else knee)) / close
+        full = (e - (within_deg if within_deg > knee else knee)) / vmax_deg_s
     else:
         full = 0.0
     e1 = knee if knee < e else e
-    lag = w / gain_1_s
     if e1 <= within_deg:
-        return stop + full
-    if within_deg <= lag:
+        return full
+    if within_deg <= 0.0:
         return math.inf
-    return stop + full + math.log((e1 - lag) / (within_deg - lag)) / gain_1_s
+    return full + math.log(e1 / within_deg) / gain_1_s
 
 
 @njit(cache=True)
@@ -440,8 +437,7 @@ class Attention:
         self.set_aside = {tid for tid in self.set_aside if tid in live and tid not in hit}
         self._unseen_before_s = {tid: s for tid, s in self._unseen_before_s.items() if tid in live and tid not in hit}
         if (self.target is not None and self.target == self.priority and self.target != self.pinned
-                and self._unseen_before_s.get(self.target, 0.0) + (t_s - max(self._target_since_s, self._target_seen_s))
-                >= limit):
+                and self._unseen_before_s.get(self.target, 0.0) + self._unseen_now_s(t_s) >= limit):
             self.set_aside.add(self.target)
 
     def _leave_target(self, t_s: float, live: Mapping) -> None:
@@ -451,8 +447,12 @@ class Attention:
         if not (self.cfg.unseen_over_fixations and self.cfg.drop_unseen_priority_s > 0.0):
             return
         if self.target is not None and self.target in live:
-            self._unseen_before_s[self.target] = (self._unseen_before_s.get(self.target, 0.0)
-                                                  + (t_s - max(self._target_since_s, self._target_seen_s)))
+            self._unseen_before_s[self.target] = self._unseen_before_s.get(self.target, 0.0) + self._unseen_now_s(t_s)
+
+    def _unseen_now_s(self, t_s: float) -> float:
+        """How long the fovea's present track has gone unseen in this fixation: since the fovea was
+        given to it, or since its last hit."""
+        return t_s - max(self._target_since_s, self._target_seen_s)
 
     def _fixation_over(self, t_s: float, start_s: float, dwell_s: float) -> bool:
         """A fixation (a revisit, or a look at a candidate) ends once its track has been ``dwell_s`` in
