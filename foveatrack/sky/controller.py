@@ -35,7 +35,7 @@ from foveatrack.frames import Frame
 from foveatrack.reconstruction import rotation_rows
 from foveatrack.sky.attention import ADDED_SINCE_RECORDED as ATTENTION_ADDED
 from foveatrack.sky.attention import (Attention, AttentionConfig, bearing_off_axis_deg, fovea_turns, in_lidar,
-                                      off_axis_deg, saccade_time_s, threat_score)
+                                      off_axis_deg, saccade_time_s, threat_scores)
 from foveatrack.sky.classify import ADDED_SINCE_RECORDED as CLASSIFIER_ADDED
 from foveatrack.space_of_interest import Box
 from foveatrack.sky.tracks import ADDED_SINCE_RECORDED as TRACKER_ADDED
@@ -238,7 +238,7 @@ class SkyController:
         motion = att.saccade_counts_motion
         # per confirmed track, in one pass: in the fovea at the mid pose, its saccade time from the
         # end pose, its threat score (the attention's too)
-        in_fovea, turn, scores = set(), {}, {}
+        in_fovea, turn, scores, looks = set(), {}, {}, {}
         confirmed = [v for v in sky.tracks if v.confirmed]
         q_mid, turns = [], []       # per confirmed track: its point in the lidar frame at mid-frame, its saccade time
         if motion:
@@ -254,18 +254,23 @@ class SkyController:
             # without the rates)
             q_mid, turns = fovea_turns(np.array([v.xyz_m for v in confirmed]), mid_pose, end_pose, att,
                                        self._head_speeds)
-        for v, q, t in zip(confirmed, q_mid, turns):
-            if off_axis_deg(*q) <= half:
-                in_fovea.add(v.track_id)
-            turn[v.track_id] = t
-            scores[v.track_id] = threat_score(v, att, self.attention.looks_like(v))
+        if confirmed:
+            # the threat scores in one kernel call (threat_score's bits), each by the class the attention
+            # goes by
+            classes = [self.attention.looks_like(v) for v in confirmed]
+            for v, q, t, s, c in zip(confirmed, q_mid, turns, threat_scores(confirmed, classes, att), classes):
+                if off_axis_deg(*q) <= half:
+                    in_fovea.add(v.track_id)
+                turn[v.track_id] = t
+                scores[v.track_id] = s
+                looks[v.track_id] = c
         # the candidate being verified counts too for the attention, which ends that look once the
         # candidate has been dwell_s in the fovea (without it every look ran saccade_timeout_s)
         cand = next((v for v in sky.tracks if v.track_id == self.attention.verifying and not v.confirmed), None)
         looked = in_fovea | ({cand.track_id} if cand is not None
                              and bearing_off_axis_deg(cand.xyz_m, *mid_pose) <= half else set())
         nxt = self.attention.update(frame.t_end_s, sky.tracks, looked, frame.t_end_s - frame.t_start_s, turn,
-                                    scores)
+                                    scores, looks)
         self.last_output = _make_output(out, sky, fix, nxt, tuple(sorted(in_fovea)), scores, self.attention.pinned)
         return self.last_output
 

@@ -62,6 +62,9 @@ def compile_sky_kernels(make_controller, rate_hz: float) -> None:
 
     fovea_turns_kernel(two, np.ones(9), np.ones(3), np.ones(9), np.ones(3), 1.0, 1.0, 1.0, 1.0, 1.0, 1.0,
                        np.empty((2, 3)), np.empty(2))       # the confirmed tracks' saccade times
+    from foveatrack.sky.attention import threat_scores_kernel
+
+    threat_scores_kernel(two, two, np.ones(2), np.zeros(3), 1.0, 1.0, np.empty(2))     # ... and threat scores
     close_pairs_kernel(two, 1.0, np.empty((1, 2), np.int64))
     yes = np.ones(2, np.bool_)
     association_kernel(two, two, two, 1.0, 1.0, 1.0, yes, yes, 1.0, np.empty((2, 2)), np.empty((2, 2), np.bool_))

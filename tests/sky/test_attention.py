@@ -465,3 +465,30 @@ def test_the_fovea_turns_kernel_is_the_per_track_functions_bits():
             want_t = saccade_time_s(az, el, cfg, head)
             assert np.array(q).tobytes() == np.array(want_q).tobytes()
             assert np.float64(t).tobytes() == np.float64(want_t).tobytes(), (p, az, el)
+
+
+def test_the_threat_scores_kernel_is_threat_scores_bits():
+    # the controller's frame: every confirmed track's threat score by one kernel call
+    # (attention.threat_scores); its twin is threat_score, bit for bit -- tracks at the protected point
+    # (d = 0), closing, leaving, still, far and near, every class and one it does not know, NaN and inf
+    from foveatrack.sky.attention import threat_scores
+
+    rng = np.random.default_rng(29)
+    classes = ["drone", "unknown", "bird", "clutter", "kite"]
+    for k in range(300):
+        cfg = AttentionConfig(protected_xyz_m=tuple(float(x) for x in rng.normal(0, 20, 3)),
+                              distance_ref_m=float(rng.uniform(1, 200)), closing_ref_m_s=float(rng.uniform(0.5, 30)))
+        n = int(rng.integers(1, 10))
+        P = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-1, 3)
+        V = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-2, 1.5)
+        if k % 7 == 0:
+            P[0] = cfg.protected_xyz_m
+        if k % 11 == 0:
+            V[-1] = 0.0
+        if k % 13 == 1:
+            (P if k % 2 else V)[-1, int(rng.integers(3))] = [np.nan, np.inf, -np.inf][k % 3]
+        vs = [view(i, P[i], vel=V[i]) for i in range(n)]
+        looks = [classes[int(c)] for c in rng.integers(len(classes), size=n)]
+        got = threat_scores(vs, looks, cfg)
+        want = [threat_score(v, cfg, c) for v, c in zip(vs, looks)]
+        assert np.array(got).tobytes() == np.array(want).tobytes(), k
