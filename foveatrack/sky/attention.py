@@ -335,13 +335,15 @@ def threat_scores_kernel(P, V, W, centre, closing_ref_m_s, distance_ref_m, out):
         out[i] = W[i] * (1.0 + closing / closing_ref_m_s) * distance_ref_m / (distance_ref_m + d)
 
 
-def threat_scores(views, looks_like, cfg: AttentionConfig) -> list[float]:
+def threat_scores(views, looks_like, cfg: AttentionConfig, points: np.ndarray | None = None) -> list[float]:
     """:func:`threat_score` of each of the confirmed ``views`` with its class ``looks_like[i]`` (the
     same bits), by one :func:`threat_scores_kernel` call: per track a Python call of ~0.9 us cost
-    ~25 us a frame of the swarm with the flock's ~28 confirmed tracks."""
+    ~25 us a frame of the swarm with the flock's ~28 confirmed tracks.  ``points``: the views'
+    positions (N, 3) where the caller has gathered them."""
     n = len(views)
     out = np.empty(n)
-    threat_scores_kernel(np.array([v.xyz_m for v in views], np.float64).reshape(n, 3),
+    P = np.array([v.xyz_m for v in views], np.float64) if points is None else points
+    threat_scores_kernel(np.ascontiguousarray(P, np.float64).reshape(n, 3),
                          np.array([v.velocity_m_s for v in views], np.float64).reshape(n, 3),
                          np.array([CLASS_WEIGHT.get(c, 0.0) for c in looks_like], np.float64),
                          np.array(cfg.protected_xyz_m, np.float64).reshape(3), float(cfg.closing_ref_m_s),

@@ -95,6 +95,7 @@ class SkyControlOutput:
 
 
 _make_output = frozen_maker(SkyControlOutput)      # once a frame: without the frozen init's cost per field
+_make_aim = frozen_maker(Detection)     # a saccade's aim point each frame (equal to Detection(...): tests/tracker/test_detection.py)
 
 
 def sky_configs_from_mapping(data: Mapping, where: str, field_half_angle_deg: float | None = None
@@ -241,6 +242,7 @@ class SkyController:
         in_fovea, turn, scores, looks = set(), {}, {}, {}
         confirmed = [v for v in sky.tracks if v.confirmed]
         q_mid, turns = [], []       # per confirmed track: its point in the lidar frame at mid-frame, its saccade time
+        P = np.array([v.xyz_m for v in confirmed]) if confirmed else None    # their positions, gathered once
         if motion:
             speeds, accels = recon.speeds_at(frame.t_end_s), recon.accels_deg_s2()
             for v in confirmed:
@@ -252,13 +254,12 @@ class SkyController:
         elif confirmed:
             # without the motion, every track's in one kernel call (the same bits as the loop above
             # without the rates)
-            q_mid, turns = fovea_turns(np.array([v.xyz_m for v in confirmed]), mid_pose, end_pose, att,
-                                       self._head_speeds)
+            q_mid, turns = fovea_turns(P, mid_pose, end_pose, att, self._head_speeds)
         if confirmed:
             # the threat scores in one kernel call (threat_score's bits), each by the class the attention
             # goes by
             classes = [self.attention.looks_like(v) for v in confirmed]
-            for v, q, t, s, c in zip(confirmed, q_mid, turns, threat_scores(confirmed, classes, att), classes):
+            for v, q, t, s, c in zip(confirmed, q_mid, turns, threat_scores(confirmed, classes, att, P), classes):
                 if off_axis_deg(*q) <= half:
                     in_fovea.add(v.track_id)
                 turn[v.track_id] = t
@@ -313,4 +314,4 @@ class SkyController:
         xyz = in_lidar(floats3(p_world), *self._pose_rows(t_s))
         q = np.array(xyz)
         az, el = bearing_deg(*xyz)
-        return Detection(t_s, q, 0, az, el, norm3(q))
+        return _make_aim(t_s, q, 0, az, el, norm3(q))
