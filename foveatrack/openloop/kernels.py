@@ -54,7 +54,8 @@ def cluster_kernel(xyz, tol_m, tol_rad, labels):
     x, y, z.
 
     Only pairs in neighbouring cubes of side ``max(tol_m, tol_rad * max|p|)`` (no link is longer) are
-    tested: points sorted by cube, the 27 cubes around each point found by binary search.  Where the
+    tested: points sorted by cube, the 27 cubes around each point found by binary search (nine
+    searches: a column's three cubes are consecutive keys).  Where the
     cube numbers would not fit an int64 (points ~1e18 cubes apart), every pair is tested.  The
     result does not depend on the order links are found: a cluster's root is its smallest index.
     """
@@ -100,14 +101,17 @@ def cluster_kernel(xyz, tol_m, tol_rad, labels):
         for i in range(n):
             for ax in range(-1, 2):
                 for ay in range(-1, 2):
-                    for az in range(-1, 2):
-                        k = ((cx[i] + ax) * sy + (cy[i] + ay)) * sz + (cz[i] + az)
-                        a = np.searchsorted(skey, k)
-                        while a < n and skey[a] == k:
-                            j = order[a]
-                            if j > i:
-                                _link(xyz, r, i, j, tol_m, tol_rad, parent)
-                            a += 1
+                    # the three cubes cz - 1 .. cz + 1 of a column are three consecutive keys (cz is
+                    # 1 .. sz - 2: no wrap into the next column): one search for the first, then the
+                    # sorted keys up to the last -- the same pairs in the same order as a search per
+                    # cube, a third of the searches (a frame's 200 foreground points: 5 k -> 1.8 k)
+                    k = ((cx[i] + ax) * sy + (cy[i] + ay)) * sz + (cz[i] - 1)
+                    a = np.searchsorted(skey, k)
+                    while a < n and skey[a] <= k + 2:
+                        j = order[a]
+                        if j > i:
+                            _link(xyz, r, i, j, tol_m, tol_rad, parent)
+                        a += 1
     else:
         for i in range(n):
             for j in range(i + 1, n):
@@ -172,3 +176,50 @@ def cluster_summary_kernel(xyz, t_ns, labels, n, min_points, med, sides, count, 
             for j in range(k):
                 tbuf[j] = float(t_ns[idx[start[c] + j]])
             t_med[c] = _median_sorted(np.sort(tbuf[:k]), k)
+
+
+@njit(cache=True)
+def frame_objects_kernel(xyz, t_ns, tol_m, tol_rad, min_points, max_extent_m, flag, want_lone, med, sides, count,
+                         t_med, point_obj, flagged, lone):
+    """A frame's objects in one call (the sky tracker's, :meth:`foveatrack.sky.tracks.SkyTracker._objects`):
+    :func:`cluster_kernel` on ``xyz`` (N, 3), :func:`cluster_summary_kernel`, and the clusters kept (at
+    least ``min_points`` points, no side of the box over ``max_extent_m``) numbered in label order,
+    their summaries moved to the first rows of ``med``, ``sides`` (N, 3), ``count``, ``t_med`` (N,).
+    Per point ``point_obj[i]`` (N,) its object (-1: none); per object ``flagged`` (N,) how many of its
+    points have ``flag`` (N,) set; with ``want_lone``, into ``lone`` (N,) the points alone in their
+    cluster, without ``flag`` and in no object.  Returns (objects, lone points).  Numpy twin:
+    :func:`foveatrack.openloop.objects.frame_objects_numpy` (one call where a dozen numpy calls and
+    three kernels took ~35 us for a frame's few dozen points)."""
+    n_pts = xyz.shape[0]
+    labels = np.empty(n_pts, np.int64)
+    n = cluster_kernel(xyz, tol_m, tol_rad, labels)
+    cluster_summary_kernel(xyz, t_ns, labels, n, min_points, med, sides, count, t_med)
+    index = np.empty(n, np.int64)
+    size = count[:n].copy()         # each cluster's points, before the kept ones move up
+    k = 0
+    for c in range(n):
+        index[c] = -1
+        # (no side over: numpy's max of the three is NaN with a NaN, and NaN <= x is false, as here)
+        if size[c] >= min_points and sides[c, 0] <= max_extent_m and sides[c, 1] <= max_extent_m \
+                and sides[c, 2] <= max_extent_m:
+            index[c] = k
+            if k < c:               # rows move up only: row k is a dropped cluster's, or its own
+                for a in range(3):
+                    med[k, a] = med[c, a]
+                    sides[k, a] = sides[c, a]
+                count[k] = count[c]
+                t_med[k] = t_med[c]
+            k += 1
+    for j in range(k):
+        flagged[j] = 0
+    m = 0
+    for i in range(n_pts):
+        o = index[labels[i]]
+        point_obj[i] = o
+        if o >= 0:
+            if flag[i]:
+                flagged[o] += 1
+        elif want_lone and size[labels[i]] == 1 and not flag[i]:
+            lone[m] = i
+            m += 1
+    return k, m

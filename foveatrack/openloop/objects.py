@@ -60,6 +60,44 @@ def object_summaries(xyz: np.ndarray, labels: np.ndarray, n: int, min_points: in
     return kept, med[kept], sides[kept], count[kept], t_med[kept]
 
 
+def frame_objects(xyz: np.ndarray, t_ns: np.ndarray, tol_m: float, tol_rad: float, min_points: int,
+                  max_extent_m: float, flag: np.ndarray, want_lone: bool
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """A frame's points clustered and summarised at once (the sky tracker's objects): the kept
+    objects' medians (k, 3), box sides (k, 3), point counts (k,) and median times [ns] (k,) as
+    :func:`object_summaries` gives them, per point its object (-1: none), per object how many of its
+    points have ``flag`` (N,) set, and with ``want_lone`` the indices of the points alone in their
+    cluster, without ``flag`` and in no object (else None).  One kernel
+    (:func:`foveatrack.openloop.kernels.frame_objects_kernel`); twin :func:`frame_objects_numpy`."""
+    from foveatrack.openloop.kernels import frame_objects_kernel
+
+    n = xyz.shape[0]
+    med, sides = np.empty((n, 3)), np.empty((n, 3))
+    count, t_med = np.empty(n, np.int64), np.empty(n)
+    point_obj, flagged, lone = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64)
+    k, m = frame_objects_kernel(np.ascontiguousarray(xyz, np.float64), np.ascontiguousarray(t_ns, np.int64),
+                                float(tol_m), float(tol_rad), int(min_points), float(max_extent_m),
+                                np.ascontiguousarray(flag, np.bool_), bool(want_lone), med, sides, count, t_med,
+                                point_obj, flagged, lone)
+    return med[:k], sides[:k], count[:k], t_med[:k], point_obj, flagged[:k], (lone[:m] if want_lone else None)
+
+
+def frame_objects_numpy(xyz: np.ndarray, t_ns: np.ndarray, tol_m: float, tol_rad: float, min_points: int,
+                        max_extent_m: float, flag: np.ndarray, want_lone: bool):
+    """Twin of :func:`frame_objects`: :func:`cluster_labels`, :func:`object_summaries` and numpy."""
+    labels, n = cluster_labels(xyz, tol_m, tol_rad)
+    kept, meds, boxes, counts, t_med = object_summaries(xyz, labels, n, min_points, max_extent_m, t_ns)
+    index = np.full(n, -1, np.int64)
+    index[kept] = np.arange(kept.size)
+    point_obj = index[labels]
+    flagged = np.bincount(point_obj[flag & (point_obj >= 0)], minlength=kept.size)
+    lone = None
+    if want_lone:
+        alone = np.bincount(labels, minlength=n)[labels] == 1
+        lone = np.flatnonzero(alone & ~flag & (point_obj < 0))
+    return meds, boxes, counts, t_med, point_obj, flagged, lone
+
+
 def objects_from_labels(xyz: np.ndarray, labels: np.ndarray, n: int, min_points: int = 1,
                         max_extent_m: float = np.inf, t_ns: np.ndarray | None = None
                         ) -> tuple[list[FrameObject], list[int]]:

@@ -113,13 +113,13 @@ from foveatrack.fixed_order import dist3
 from foveatrack.frames import Frame
 from foveatrack.kernels import (association_kernel, box_inside_kernel, close_pairs_kernel, in_field_kernel,
                                 valid_mask_kernel)
-from foveatrack.openloop.objects import cluster_labels, object_summaries
+from foveatrack.openloop.objects import frame_objects
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify, held_label
 from foveatrack.sky.motion import (ConstantVelocityFilter, positions_many, positions_velocities_many, predictions_many,
                                    variances_many)
 from foveatrack.openloop.range_background import RangeBackground, check_cell_deg
-from foveatrack.sky.world_points import lidar_to_world_per_point
+from foveatrack.sky.world_points import lidar_to_world_in_box, lidar_to_world_per_point
 from foveatrack.space_of_interest import Box
 
 _BIG = 1e12
@@ -380,18 +380,19 @@ class SkyTracker:
         cfg = self.cfg
         t0, t1 = frame.t_start_s, frame.t_end_s
         xyz, t_ns = frame.xyz, frame.t_ns      # (N, 3) float64, C-contiguous (Frame)
-        valid = np.empty(xyz.shape[0], np.bool_)
-        if valid_mask_kernel(xyz, valid) < valid.size:
-            xyz, t_ns = xyz[valid], t_ns[valid]
-        world = lidar_to_world_per_point(xyz, t_ns, pose, t0, t1, cfg.pose_nodes)
-        if self.region is not None and world.shape[0]:
-            # by index: the scenes' D keeps a tenth of the points, three arrays are cut
-            if type(self.region) is Box:
-                inside = np.empty(world.shape[0], np.int64)
-                inside = inside[:box_inside_kernel(world, *box_bounds(self.region), inside)]
-            else:
+        if type(self.region) is Box:
+            # the valid points turned and cut to the region in one pass: the scenes' D keeps a tenth
+            # of the points
+            xyz, t_ns, world = lidar_to_world_in_box(xyz, t_ns, pose, t0, t1, cfg.pose_nodes,
+                                                     *box_bounds(self.region))
+        else:
+            valid = np.empty(xyz.shape[0], np.bool_)
+            if valid_mask_kernel(xyz, valid) < valid.size:
+                xyz, t_ns = xyz[valid], t_ns[valid]
+            world = lidar_to_world_per_point(xyz, t_ns, pose, t0, t1, cfg.pose_nodes)
+            if self.region is not None and world.shape[0]:
                 inside = np.flatnonzero(np.asarray(self.region.contains(world), bool))
-            xyz, t_ns, world = xyz[inside], t_ns[inside], world[inside]
+                xyz, t_ns, world = xyz[inside], t_ns[inside], world[inside]
         cells, ranges = self.background.cells(world)
         if self._t0_s is None:
             self._t0_s = t0
@@ -580,22 +581,15 @@ class SkyTracker:
         cfg = self.cfg
         if world.shape[0] == 0:
             return [], np.full(0, -1, np.int64), None
-        labels, n = cluster_labels(world, cfg.cluster_tol_m, cfg.cluster_tol_rad)
-        # the kept clusters' summaries as arrays (objects_from_labels' objects, without a FrameObject each)
-        kept, meds, boxes, counts, t_med = object_summaries(world, labels, n, cfg.min_points, cfg.max_extent_m, t_ns)
-        # each point's object through its cluster's label (kept clusters numbered in order), and each
-        # object's points on scenery in the making, for all objects at once
-        index = np.full(n, -1, np.int64)
-        index[kept] = np.arange(kept.size)
-        point_obj = index[labels]
-        near_n = np.bincount(point_obj[near & (point_obj >= 0)], minlength=kept.size).tolist()
+        # the kept clusters' summaries as arrays (objects_from_labels' objects, without a FrameObject
+        # each), each point's object, each object's points on scenery in the making, and the lone
+        # returns (not an object's -- min_points 1 makes one of a single return: a return is one
+        # track's hit), in one kernel call
+        meds, boxes, counts, t_med, point_obj, near_n, lone = frame_objects(
+            world, t_ns, cfg.cluster_tol_m, cfg.cluster_tol_rad, cfg.min_points, cfg.max_extent_m, near,
+            cfg.lone_returns)
         objs = [_make_object(m, t * 1e-9, n_pts, box, 2 * k >= n_pts)
-                for m, t, n_pts, box, k in zip(meds, t_med.tolist(), counts.tolist(), boxes, near_n)]
-        lone = None
-        if cfg.lone_returns:
-            # not an object's (min_points 1 makes one of a single return): a return is one track's hit
-            alone = np.bincount(labels, minlength=n)[labels] == 1
-            lone = np.flatnonzero(alone & ~near & (point_obj < 0))
+                for m, t, n_pts, box, k in zip(meds, t_med.tolist(), counts.tolist(), boxes, near_n.tolist())]
         return objs, point_obj, lone
 
     def _confirm_if_due(self, tr: SkyTrack, t_mid: float, confirmed_now: list) -> None:

@@ -78,35 +78,99 @@ def rotation_entries_kernel(angles, out):
 
 
 @njit(cache=True)
-def world_points_kernel(xyz, t_ns, R, t0_s, step_s, off, out):
-    """The per-point turn (module docstring): ``R`` (K, 3, 3) the node rotations ``step_s`` apart from
-    ``t0_s``, ``off`` (3,) the lidar's offset; written into ``out`` (N, 3)."""
-    last = R.shape[0] - 1
-    n = xyz.shape[0]
-    # every point's place between the nodes first, in a loop of its own that the compiler vectorises:
-    # the division was half a point's cost one at a time (25 -> 13 us for a frame's 3 k points)
+def _node_places(t_ns, t0_s, step_s, last):
+    """Every point's place between the nodes, in a loop of its own that the compiler vectorises (the
+    division was half a point's cost one at a time: 25 -> 13 us for a frame's 3 k points)."""
+    n = t_ns.shape[0]
     U = np.empty(n)
     for k in range(n):
         u = (t_ns[k] * 1e-9 - t0_s) / step_s
         U[k] = min(max(u, 0.0), last * 1.0)
-    # each node interval's change of the entries once, not once a point (the same differences)
+    return U
+
+
+@njit(cache=True)
+def _node_changes(R):
+    """Each node interval's change of the entries (K - 1, 3, 3), once, not once a point."""
+    last = R.shape[0] - 1
     D = np.empty((last, 3, 3))
     for i in range(last):
         for r in range(3):
             for c in range(3):
                 D[i, r, c] = R[i + 1, r, c] - R[i, r, c]
+    return D
+
+
+@njit(cache=True)
+def _turn(xyz, k, R, D, u, off, out, row):
+    """Point ``k`` of ``xyz`` turned at its place ``u`` between the nodes, into ``out[row]``."""
+    last = R.shape[0] - 1
+    i = min(int(u), last - 1)       # u >= 0: truncation is floor
+    w = u - i
+    qx = xyz[k, 0] + off[0]
+    qy = xyz[k, 1] + off[1]
+    qz = xyz[k, 2] + off[2]
+    for r in range(3):
+        m0 = R[i, r, 0] + D[i, r, 0] * w
+        m1 = R[i, r, 1] + D[i, r, 1] * w
+        m2 = R[i, r, 2] + D[i, r, 2] * w
+        out[row, r] = m0 * qx + m1 * qy + m2 * qz
+
+
+@njit(cache=True)
+def world_points_kernel(xyz, t_ns, R, t0_s, step_s, off, out):
+    """The per-point turn (module docstring): ``R`` (K, 3, 3) the node rotations ``step_s`` apart from
+    ``t0_s``, ``off`` (3,) the lidar's offset; written into ``out`` (N, 3)."""
+    U = _node_places(t_ns, t0_s, step_s, R.shape[0] - 1)
+    D = _node_changes(R)
+    for k in range(xyz.shape[0]):
+        _turn(xyz, k, R, D, U[k], off, out, k)
+
+
+@njit(cache=True)
+def first_valid_kernel(xyz):
+    """The index of the first point of ``xyz`` (N, 3) that is finite and not exactly (0, 0, 0) (the
+    test of :func:`foveatrack.kernels.valid_mask_kernel`), -1 for none."""
+    for j in range(xyz.shape[0]):
+        x = xyz[j, 0]
+        y = xyz[j, 1]
+        z = xyz[j, 2]
+        if math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and (x != 0.0 or y != 0.0 or z != 0.0):
+            return j
+    return -1
+
+
+@njit(cache=True)
+def world_in_box_kernel(xyz, t_ns, R, t0_s, step_s, off, lo, hi, xyz_out, t_out, world_out):
+    """The valid points of ``xyz`` (N, 3) (:func:`first_valid_kernel`'s test), each turned as
+    :func:`world_points_kernel` turns it, and of those the ones inside the world box ``lo <= p < hi``
+    (:func:`foveatrack.kernels.box_inside_kernel`'s test): their lidar points, times and world points
+    into the first rows of ``xyz_out``, ``t_out``, ``world_out``, in point order; returns how many.
+    One pass where the validity test, the turn, the box test and the cuts of three arrays were five
+    (a frame's 3 k points, a tenth of them kept)."""
+    n = xyz.shape[0]
+    U = _node_places(t_ns, t0_s, step_s, R.shape[0] - 1)
+    D = _node_changes(R)
+    lo0, lo1, lo2 = lo[0], lo[1], lo[2]
+    hi0, hi1, hi2 = hi[0], hi[1], hi[2]
+    m = 0
     for k in range(n):
-        u = U[k]
-        i = min(int(u), last - 1)       # u >= 0: truncation is floor
-        w = u - i
-        qx = xyz[k, 0] + off[0]
-        qy = xyz[k, 1] + off[1]
-        qz = xyz[k, 2] + off[2]
-        for r in range(3):
-            m0 = R[i, r, 0] + D[i, r, 0] * w
-            m1 = R[i, r, 1] + D[i, r, 1] * w
-            m2 = R[i, r, 2] + D[i, r, 2] * w
-            out[k, r] = m0 * qx + m1 * qy + m2 * qz
+        x = xyz[k, 0]
+        y = xyz[k, 1]
+        z = xyz[k, 2]
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and (x != 0.0 or y != 0.0 or z != 0.0)):
+            continue
+        _turn(xyz, k, R, D, U[k], off, world_out, m)
+        wx = world_out[m, 0]
+        wy = world_out[m, 1]
+        wz = world_out[m, 2]
+        if (wx >= lo0) & (wx < hi0) & (wy >= lo1) & (wy < hi1) & (wz >= lo2) & (wz < hi2):
+            xyz_out[m, 0] = x
+            xyz_out[m, 1] = y
+            xyz_out[m, 2] = z
+            t_out[m] = t_ns[k]
+            m += 1
+    return m
 
 
 def lidar_to_world_per_point(xyz: np.ndarray, t_ns: np.ndarray, pose, t0_s: float, t1_s: float,
@@ -121,6 +185,38 @@ def lidar_to_world_per_point(xyz: np.ndarray, t_ns: np.ndarray, pose, t0_s: floa
     out = np.empty((n, 3))
     world_points_kernel(xyz, np.ascontiguousarray(t_ns, np.int64), R, float(t0_s), step, off, out)
     return out
+
+
+def lidar_to_world_in_box(xyz: np.ndarray, t_ns: np.ndarray, pose, t0_s: float, t1_s: float, nodes: int,
+                          lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The valid points of a frame (finite, not (0, 0, 0)) turned into the world as
+    :func:`lidar_to_world_per_point` turns them, and of those the ones inside the world box ``[lo,
+    hi)``: ``(xyz, t_ns, world)`` of those, in point order (:func:`world_in_box_kernel`).  The pose
+    is asked only for a frame with a valid point, as the turn of the valid points asks it."""
+    xyz = np.ascontiguousarray(xyz, np.float64).reshape(-1, 3)
+    t_ns = np.ascontiguousarray(t_ns, np.int64)
+    if first_valid_kernel(xyz) < 0:
+        return np.empty((0, 3)), np.empty(0, np.int64), np.empty((0, 3))
+    _, R, step = node_rotations(pose, t0_s, t1_s, nodes)
+    off = np.ascontiguousarray(np.asarray(pose.lidar_offset_m, np.float64).reshape(3))
+    n = xyz.shape[0]
+    xyz_out, t_out, world = np.empty((n, 3)), np.empty(n, np.int64), np.empty((n, 3))
+    m = world_in_box_kernel(xyz, t_ns, R, float(t0_s), step, off, lo, hi, xyz_out, t_out, world)
+    return xyz_out[:m], t_out[:m], world[:m]
+
+
+def lidar_to_world_in_box_numpy(xyz: np.ndarray, t_ns: np.ndarray, pose, t0_s: float, t1_s: float, nodes: int,
+                                lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Twin of :func:`lidar_to_world_in_box`: the validity mask, :func:`lidar_to_world_per_point_numpy`
+    and the box's numpy test, as the sky tracker made them before."""
+    from foveatrack.detection import valid_points
+
+    ok = valid_points(xyz)
+    xyz, t_ns = np.asarray(xyz, np.float64)[ok], np.asarray(t_ns, np.int64)[ok]
+    world = lidar_to_world_per_point_numpy(xyz, t_ns, pose, t0_s, t1_s, nodes)
+    x, y, z = world[:, 0], world[:, 1], world[:, 2]
+    inside = np.flatnonzero((x >= lo[0]) & (x < hi[0]) & (y >= lo[1]) & (y < hi[1]) & (z >= lo[2]) & (z < hi[2]))
+    return xyz[inside], t_ns[inside], world[inside]
 
 
 def lidar_to_world_per_point_numpy(xyz: np.ndarray, t_ns: np.ndarray, pose, t0_s: float, t1_s: float,
