@@ -114,7 +114,7 @@ class ConstantVelocityFilter:
 
     @property
     def speed_m_s(self) -> float:
-        x, y, z = self.v.tolist()
+        x, y, z = self.state[1].tolist()            # (v, without the property's call)
         return math.sqrt(x * x + y * y + z * z)     # IEEE's correctly rounded root: np.sqrt's bits
 
 

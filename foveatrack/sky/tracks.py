@@ -306,8 +306,9 @@ class SkyTrack:
 
 @dataclass(frozen=True)
 class TrackView:
-    """A track as a frame leaves it (a copy: the output does not change with later frames); its
-    position is the filter's at the frame's mid time."""
+    """A track as a frame leaves it (a copy: the output does not change with later frames; its
+    ``features`` are the track's dict of that frame, which the classifier replaces and nothing
+    writes); its position is the filter's at the frame's mid time."""
     track_id: int
     confirmed: bool
     label: str
@@ -458,9 +459,11 @@ class SkyTracker:
         # its gate has merged with it (two clusters became one): it coasts and is not lost meanwhile.
         if obj_track:
             matched = {i for i, _ in match}
-            gated = allowed[:, list(obj_track)].any(axis=1).tolist()
-            for i, tr in enumerate(self.tracks):
-                if tr.confirmed and i not in matched and gated[i]:
+            # the tracks with an allowed pair among the matched objects' columns (a few), not a test
+            # of every track
+            for i in set(np.nonzero(allowed[:, list(obj_track)])[0].tolist()):
+                tr = self.tracks[i]
+                if i not in matched and tr.confirmed_t_s is not None:
                     tr.merged_t_s = t_mid
         # Algorithm 1 for the fixated track: its D, without the points of other tracks' objects
         fovea_det = None
@@ -548,8 +551,11 @@ class SkyTracker:
                 tr.reclassify = True        # rule 4 reads it
         if not learn:
             return (), None, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
+        # each view takes its track's features dict itself, not a copy: the classifier makes a new
+        # one whenever it runs and nothing writes one after (a flock's twenty copies a frame, kept
+        # in a run's log, were a fifth of the containers the collector walked)
         views = tuple(_make_view(tr.track_id, tr.confirmed_t_s is not None, tr.label, p, v,
-                                 tr.hit_now, tr.in_view, dict(tr.features), tr.clear_hits, tr.seen_as)
+                                 tr.hit_now, tr.in_view, tr.features, tr.clear_hits, tr.seen_as)
                       for tr, p, v in zip(self.tracks, positions, velocities))
         return views, fovea_det, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
 
@@ -650,7 +656,7 @@ class SkyTracker:
         V = variances_many([tr.kf for tr in self.tracks], t_s) if variances is None else variances
         O = np.array([ob.xyz_m for ob in objs], np.float64).reshape(len(objs), 3)
         # a candidate seen off the scenery takes no object on it (module docstring, step 4)
-        candidate = np.array([not tr.confirmed and tr.clear_hits > 0 for tr in self.tracks])
+        candidate = np.array([tr.confirmed_t_s is None and tr.clear_hits > 0 for tr in self.tracks])
         on_scenery = np.array([ob.on_scenery for ob in objs])
         c = np.empty((len(self.tracks), len(objs)))
         allowed = np.empty(c.shape, np.bool_)
@@ -671,6 +677,7 @@ class SkyTracker:
         prune's cut of the history, the label's change to or from drone).  A flag, not a key of
         what was read compared every frame: the key cost ~1 us a track, a flock's twenty a frame."""
         if tr.reclassify:
+            # a new features dict each time (the frame's views hold the ones before: never written)
             tr.seen_as, tr.features = classify(tr, self.cfg.classifier)
             tr.reclassify = False
 
@@ -750,10 +757,11 @@ class SkyTracker:
             # sparse rim may have gone unseen for lost_after_s
             in_view = tr.last_seen_in_view and tr.track_id != fovea_track_id
             lost = (in_view and tr.unseen_in_view_s > cfg.lost_after_s) or unseen > cfg.lost_out_of_view_s
-            failed = not tr.confirmed and tr.frames_seen >= cfg.confirm_window and tr.clear_hits < cfg.confirm_hits
+            confirmed = tr.confirmed_t_s is not None        # (SkyTrack.confirmed, read once here)
+            failed = not confirmed and tr.frames_seen >= cfg.confirm_window and tr.clear_hits < cfg.confirm_hits
             if lost or failed:
                 gone.append(tr.track_id)
-            elif tr.confirmed and tr.history and self._static(tr, t_s):
+            elif confirmed and tr.history and self._static(tr, t_s):
                 # (a track without a hit in its history window is not seen standing anywhere: the
                 # lost rule decides; its D would be the median of nothing)
                 c = np.median(np.array([h[1] for h in tr.history]), axis=0)
@@ -781,7 +789,7 @@ class SkyTracker:
         cfg = self.cfg
         if cfg.merge_frames <= 0 and cfg.merge_close_frames <= 0:
             return []
-        idx = [i for i, tr in enumerate(tracks) if tr.confirmed]
+        idx = [i for i, tr in enumerate(tracks) if tr.confirmed_t_s is not None]     # (SkyTrack.confirmed)
         conf = [tracks[i] for i in idx]
         together, away = {}, []
         if len(conf) < 2:
