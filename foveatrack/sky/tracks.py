@@ -20,8 +20,9 @@ Per frame:
    return a frame makes no object; flock seed +240: it became scenery and its track took a bird).  Objects
    mostly on *scenery in the making* (next to cells seen long ago, not yet background) give hits that
    do not count toward confirmation.
-3. The remaining points are clustered into objects (:func:`foveatrack.openloop.objects.cluster_labels`,
-   single linkage with a gap growing with range, the numba kernel with its numpy twin); an object
+3. The remaining points are clustered into objects (:func:`foveatrack.openloop.objects.frame_objects`:
+   single linkage with a gap growing with range, the clusters summarised, each point's object and the
+   lone returns in one numba kernel, with its numpy twin); an object
    has at least ``min_points`` returns and at most ``max_extent_m`` across.  Each object: median
    position and time of its points, point count, bounding-box sides.
 4. Association: global nearest neighbour.  The cost of track ``i`` and object ``j`` is the squared
@@ -459,8 +460,7 @@ class SkyTracker:
         # its gate has merged with it (two clusters became one): it coasts and is not lost meanwhile.
         if obj_track:
             matched = {i for i, _ in match}
-            # the tracks with an allowed pair among the matched objects' columns (a few), not a test
-            # of every track
+            # the few tracks with an allowed pair among the matched objects, not a test of each track
             for i in set(np.nonzero(allowed[:, list(obj_track)])[0].tolist()):
                 tr = self.tracks[i]
                 if i not in matched and tr.confirmed_t_s is not None:
@@ -551,9 +551,8 @@ class SkyTracker:
                 tr.reclassify = True        # rule 4 reads it
         if not learn:
             return (), None, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
-        # each view takes its track's features dict itself, not a copy: the classifier makes a new
-        # one whenever it runs and nothing writes one after (a flock's twenty copies a frame, kept
-        # in a run's log, were a fifth of the containers the collector walked)
+        # each view takes its track's features dict, not a copy (the classifier makes a new one each
+        # time, nothing writes one): swarm + flock 0.23 -> 0.21 collections of the collector a frame
         views = tuple(_make_view(tr.track_id, tr.confirmed_t_s is not None, tr.label, p, v,
                                  tr.hit_now, tr.in_view, tr.features, tr.clear_hits, tr.seen_as)
                       for tr, p, v in zip(self.tracks, positions, velocities))
@@ -655,7 +654,7 @@ class SkyTracker:
             return [], np.zeros((len(self.tracks), len(objs)), bool)
         V = variances_many([tr.kf for tr in self.tracks], t_s) if variances is None else variances
         O = np.array([ob.xyz_m for ob in objs], np.float64).reshape(len(objs), 3)
-        # a candidate seen off the scenery takes no object on it (module docstring, step 4)
+        # a candidate (not confirmed) seen off the scenery takes no object on it (module docstring, step 4)
         candidate = np.array([tr.confirmed_t_s is None and tr.clear_hits > 0 for tr in self.tracks])
         on_scenery = np.array([ob.on_scenery for ob in objs])
         c = np.empty((len(self.tracks), len(objs)))
