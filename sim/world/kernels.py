@@ -1119,3 +1119,88 @@ def _cast_flapping_ray(j, d_world, pos, yaw, flap_rad, i, prims, hinge, m_lo, m_
         if t < out_range[j]:
             out_range[j] = t
             out_prim[j] = prim_offset + m
+
+
+@njit(cache=True, inline="always")
+def _ppoly_interval(x, xval):
+    """scipy's ``find_interval_ascending`` (``scipy/interpolate/_ppoly.pyx``) with extrapolation, on
+    strictly increasing breakpoints ``x``: the piece of ``xval`` (the last one at ``x[-1]``), the
+    first or last piece outside, -1 for NaN.  scipy's search starts from the previous point's piece;
+    on distinct breakpoints every search finds the one piece whose ``[x[i], x[i + 1])`` holds ``xval``."""
+    nx = x.shape[0]
+    a = x[0]
+    b = x[nx - 1]
+    if not (a <= xval <= b):
+        if xval < a:
+            return 0
+        if xval > b:
+            return nx - 2
+        return -1
+    if xval == b:
+        return nx - 2
+    lo = 0
+    hi = nx - 2
+    while lo < hi:        # the last piece whose start is <= xval
+        mid = (lo + hi + 1) // 2
+        if x[mid] <= xval:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+@njit(cache=True, inline="always")
+def _ppoly_value(c, k, j, s, dx):
+    """scipy's ``evaluate_poly1`` (``_ppoly.pyx``): the ``dx``-th derivative (0 or more) of local
+    polynomial ``c[:, k, j]`` (highest power first) at ``s``, the same products and sums in the same
+    order (``res + c z prefactor``, ``z`` the power of ``s``)."""
+    kc = c.shape[0]
+    res = 0.0
+    z = 1.0
+    for kp in range(kc):
+        prefactor = 1.0
+        if dx > 0:
+            if kp < dx:
+                continue
+            for q in range(kp, kp - dx, -1):
+                prefactor *= q
+        res = res + c[kc - kp - 1, k, j] * z * prefactor
+        if kp < kc - 1 and kp >= dx:
+            z *= s
+    return res
+
+
+@njit(cache=True, nogil=True)
+def spline_rows_kernel(c, x, t_s, t_end, out_position, out_velocity):
+    """A cubic path's positions and velocities (:class:`sim.world.trajectories.Manual`,
+    ``Waypoints``, :class:`sim.world.sky.SplinePath`): each time clipped to ``[0, t_end]`` as
+    ``np.clip`` does (NaN kept), the spline (scipy's ``PPoly`` coefficients ``c`` (K, m, 3), breakpoints
+    ``x`` (m + 1,)) and its first derivative there as ``PPoly._evaluate`` computes them, the velocity
+    0 where ``t < 0`` or ``t > t_end``.  Rows into ``out_position`` / ``out_velocity`` (N, 3), either
+    (0, 3): not asked.  Twin: the paths' numpy and scipy calls under ``numpy_paths``
+    (``tests/world/test_spline_rows_kernel.py``)."""
+    n = t_s.shape[0]
+    want_p = out_position.shape[0] > 0
+    want_v = out_velocity.shape[0] > 0
+    for i in range(n):
+        t = t_s[i]
+        h = t
+        if not np.isnan(h):     # numpy's clip: min(max(t, lo), hi), a NaN kept
+            h = h if h > 0.0 else 0.0
+            h = h if h < t_end else t_end
+        k = _ppoly_interval(x, h)
+        if k < 0:
+            for j in range(3):
+                if want_p:
+                    out_position[i, j] = np.nan
+                if want_v:
+                    out_velocity[i, j] = np.nan
+            continue
+        s = h - x[k]
+        if want_p:
+            for j in range(3):
+                out_position[i, j] = _ppoly_value(c, k, j, s, 0)
+        if want_v:
+            outside = t < 0 or t > t_end
+            for j in range(3):
+                out_velocity[i, j] = 0.0 if outside else _ppoly_value(c, k, j, s, 1)

@@ -50,7 +50,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from sim.world import bodies
-from sim.world.trajectories import body_yaw_rad, heading_rad, position_velocity, spline_at
+from sim.world.trajectories import body_yaw_rad, heading_rad, position_velocity, spline_rows
 
 G_M_S2 = 9.81
 RHO_AIR_KG_M3 = 1.225
@@ -272,13 +272,14 @@ class SplinePath:
     duration_s: float
 
     def position(self, t_s):
-        return spline_at(self._spline, np.clip(np.asarray(t_s, dtype=np.float64).reshape(-1), 0.0, self.duration_s))
+        return spline_rows(self._spline, self.duration_s, t_s, True, False)[0]
 
     def velocity(self, t_s):
-        t = np.asarray(t_s, dtype=np.float64).reshape(-1)
-        v = spline_at(self._spline, np.clip(t, 0.0, self.duration_s), 1)
-        v[(t < 0) | (t > self.duration_s)] = 0.0
-        return v
+        return spline_rows(self._spline, self.duration_s, t_s, False, True)[1]
+
+    def position_velocity(self, t_s):
+        """``(position(t_s), velocity(t_s))`` in one evaluation."""
+        return spline_rows(self._spline, self.duration_s, t_s, True, True)
 
     @property
     def max_speed_m_s(self) -> float:

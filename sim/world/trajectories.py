@@ -21,6 +21,7 @@ from foveatrack.fixed_order import norm3
 _straight_position_kernel = None
 _circle_rows_kernel = None
 _hover_heading_kernel = None
+_spline_rows_kernel = None
 _NO_ROWS = np.empty((0, 3))     # circle_rows_kernel: rows not asked for
 _plain = threading.local()     # numpy_paths(): paths in numpy on this thread, no kernel
 
@@ -60,6 +61,35 @@ def spline_at(spline: CubicSpline, t: np.ndarray, nu: int = 0) -> np.ndarray:
     spline._ensure_c_contiguous()
     spline._evaluate(t, nu, spline.extrapolate, out)
     return out
+
+
+def spline_rows(spline: CubicSpline, t_end: float, t_s, position: bool, velocity: bool):
+    """``(position, velocity)`` (N, 3) of a path on ``spline`` held at its ends: the spline at the
+    times clipped to ``[0, t_end]``, its derivative there with 0 where ``t < 0`` or ``t > t_end``
+    (either ``_NO_ROWS`` where not asked).  One kernel call (:func:`sim.world.kernels.spline_rows_kernel`:
+    scipy's piece search and sums, the same bits) where :func:`spline_at` and its clip and mask took
+    ~10 us for a manual flight's position and velocity at one time (the sensor asks for both at a
+    frame's mid time and at its rays' times); under :func:`numpy_paths`, or for a spline that does
+    not extrapolate, the clip, scipy's evaluation and the mask (the kernel's twin)."""
+    global _spline_rows_kernel
+    t = np.asarray(t_s, dtype=np.float64).reshape(-1)
+    spline._ensure_c_contiguous()
+    c = spline._c       # what PPoly._evaluate reads (spline.c, a property, costs ~2.5 us)
+    if getattr(_plain, "on", False) or spline.extrapolate is not True or c.ndim != 3 or c.shape[2] != 3:
+        held = np.clip(t, 0.0, t_end)
+        p = spline_at(spline, held) if position else _NO_ROWS
+        if velocity:
+            v = spline_at(spline, held, 1)
+            v[(t < 0) | (t > t_end)] = 0.0
+        else:
+            v = _NO_ROWS
+        return p, v
+    if _spline_rows_kernel is None:   # numba loads on first use, not on import
+        from sim.world.kernels import spline_rows_kernel as _spline_rows_kernel
+    p = np.empty((t.shape[0], 3)) if position else _NO_ROWS
+    v = np.empty((t.shape[0], 3)) if velocity else _NO_ROWS
+    _spline_rows_kernel(c, spline._x, np.ascontiguousarray(t), float(t_end), p, v)
+    return p, v
 
 
 @dataclass(frozen=True)
@@ -209,13 +239,10 @@ class Waypoints:
         object.__setattr__(self, "_t_end", float(t[-1]))
 
     def position(self, t_s):
-        return spline_at(self._spline, np.clip(_col(t_s)[:, 0], 0.0, self._t_end))
+        return spline_rows(self._spline, self._t_end, t_s, True, False)[0]
 
     def velocity(self, t_s):
-        t = _col(t_s)[:, 0]
-        v = spline_at(self._spline, np.clip(t, 0.0, self._t_end), 1)
-        v[(t < 0) | (t > self._t_end)] = 0.0
-        return v
+        return spline_rows(self._spline, self._t_end, t_s, False, True)[1]
 
     @property
     def max_speed_m_s(self) -> float:
@@ -273,22 +300,15 @@ class Manual:
 
     def position(self, t_s):
         # Hover where the flight ends (never extrapolate the spline past the flown path).
-        return spline_at(self._spline, np.clip(_col(t_s)[:, 0], 0.0, self.duration_s))
+        return spline_rows(self._spline, self.duration_s, t_s, True, False)[0]
 
     def velocity(self, t_s):
-        t = _col(t_s)[:, 0]
-        v = spline_at(self._spline, np.clip(t, 0.0, self.duration_s), 1)
-        v[(t < 0) | (t > self.duration_s)] = 0.0
-        return v
+        return spline_rows(self._spline, self.duration_s, t_s, False, True)[1]
 
     def position_velocity(self, t_s):
-        """``(position(t_s), velocity(t_s))``, the times clipped once for both (the sensor asks for
-        both at the frame's mid time and at the rays' times)."""
-        t = _col(t_s)[:, 0]
-        held = np.clip(t, 0.0, self.duration_s)
-        v = spline_at(self._spline, held, 1)
-        v[(t < 0) | (t > self.duration_s)] = 0.0
-        return spline_at(self._spline, held), v
+        """``(position(t_s), velocity(t_s))`` in one evaluation (the sensor asks for both at the
+        frame's mid time and at the rays' times)."""
+        return spline_rows(self._spline, self.duration_s, t_s, True, True)
 
 
 def position_velocity(traj, t_s) -> tuple[np.ndarray, np.ndarray]:
