@@ -447,13 +447,13 @@ _NS_PER_S = 1_000_000_000
 
 @njit(cache=True, fastmath=False)
 def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
-                      noise_eps, noise_seg0, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb):
+                      noise_eps, noise_seg0, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb):
     """Phases (with speed noise), times and channels of the ``m <= 256`` points ``k .. k + m - 1``.
 
     Explicitly not fastmath (``arcp`` would turn the divisions below into multiplications by a
     reciprocal, ``reassoc`` would regroup the double-double phase; an unset flag would be inherited
     from the fastmath caller).  Writes ``revs[:, :m]`` and ``t_ns`` / ``channel`` at ``j0 ..``;
-    ``tb`` and ``sb`` are scratch blocks.
+    ``tb`` is a scratch block.
 
     Phase: the exact double-double phase :math:`\\phi_p(k)` (as in :func:`phase_revs_kernel`) at the
     block's anchor ``k`` (the multiple of 256 at or before the first point, so that chunking never
@@ -503,19 +503,29 @@ def _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, seg
     anchor = k - off
     if noise_on:
         for i in range(m):
-            t = (k_f + _RAMP[i]) / rate_f
-            tb[i] = t
-            sb[i] = np.floor(t / segment_s)
+            tb[i] = (k_f + _RAMP[i]) / rate_f
     i = 0
     while i < m:
         e = m
         seg_f = 0.0
         si = 0
         if noise_on:
-            seg_f = sb[i]
-            e = i + 1
-            while e < m and sb[e] == seg_f:
-                e += 1
+            # A point's segment floor(t / T) does not decrease along the block (its t increases, and a
+            # correctly rounded division by T > 0 and floor are monotone), so the run of the segment of
+            # point i ends at the first later point in a later segment: found from the block's last
+            # point and a bisection, the segments asked of a few points, not of each (a block of 2.56 ms
+            # usually lies in one 10 ms segment)
+            seg_f = np.floor(tb[i] / segment_s)
+            if np.floor(tb[m - 1] / segment_s) != seg_f:
+                lo = i + 1
+                hi = m - 1
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if np.floor(tb[mid] / segment_s) == seg_f:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                e = lo
             si = int(seg_f) - noise_seg0
         for p in range(p_count):
             # exact at the block's absolute anchor (a multiple of 256 at or before k), so that the
@@ -575,7 +585,7 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
     t_ns : (N,) int64 [ns]; channel : (N,) uint8; out_dir : (N, 3) float64; status : (N,) uint8  outputs
     """
     n = out_dir.shape[0]
-    revs, tb, sb, bx, by, bz, bs, first, pre, channel_pattern = _scan_scratch(r_h1.shape[0], channel_count,
+    revs, tb, bx, by, bz, bs, first, pre, channel_pattern = _scan_scratch(r_h1.shape[0], channel_count,
                                                                                  incident, index, exit_tilted)
     # Blocks start at absolute multiples of 256 points, so a point's phase (exact at its block's
     # start, + i r inside) does not depend on how the caller chunks the scan: the same bits for the
@@ -587,7 +597,7 @@ def scan_exact_kernel(k0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segme
         m = min(_BLOCK - (k0 + j0) % _BLOCK, n - j0)
         _scan_block(k0 + j0, m, j0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
                     noise_eps, noise_seg0, rev_per_s, channel_count, sin_wedge, cos_wedge, index, exit_tilted,
-                    channel_pattern, first, pre, revs, tb, sb, t_ns, channel, bx, by, bz, bs)
+                    channel_pattern, first, pre, revs, tb, t_ns, channel, bx, by, bz, bs)
         _store_block(out_dir, status, j0, m, bx, by, bz, bs)
         j0 += m
 
@@ -599,7 +609,6 @@ def _scan_scratch(p_count, channel_count, incident, index, exit_tilted):
     comes first) and the channel pattern ``j mod C``."""
     revs = np.empty((p_count, _BLOCK))
     tb = np.empty(_BLOCK)
-    sb = np.empty(_BLOCK)
     bx = np.empty(_BLOCK)
     by = np.empty(_BLOCK)
     bz = np.empty(_BLOCK)
@@ -620,19 +629,19 @@ def _scan_scratch(p_count, channel_count, incident, index, exit_tilted):
     channel_pattern = np.empty(_BLOCK + channel_count, dtype=np.uint8)
     for j in range(_BLOCK + channel_count):
         channel_pattern[j] = np.uint8(j % channel_count)
-    return revs, tb, sb, bx, by, bz, bs, first, pre, channel_pattern
+    return revs, tb, bx, by, bz, bs, first, pre, channel_pattern
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")   # not inlined: numba's inliner refuses 30+ arguments
 def _scan_block(k, m, j0, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum, noise_eps,
                 noise_seg0, rev_per_s, channel_count, sin_wedge, cos_wedge, index, exit_tilted, channel_pattern,
                 first, pre,
-                revs, tb, sb, t_ns, channel, bx, by, bz, bs):
+                revs, tb, t_ns, channel, bx, by, bz, bs):
     """One block of :func:`scan_exact_kernel` (``m`` points from ``k``, within one 256-point cell):
     times and channels at ``j0 ..``, and the traced rays left in ``bx, by, bz`` (optics frame) with
     their status in ``bs``."""
     _scan_block_setup(k, m, rate_hz, r_h1, r_h2, r_lo, phase0_rev, noise_on, segment_s, noise_cum,
-                      noise_eps, noise_seg0, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb, sb)
+                      noise_eps, noise_seg0, rev_per_s, channel_count, channel_pattern, revs, t_ns, channel, j0, tb)
     ch_blk = channel[j0:j0 + m]
     for i in range(m):
         c = ch_blk[i]
