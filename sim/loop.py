@@ -406,7 +406,7 @@ class ClosedLoop:
             self.last_command = rec.command
         c5 = clock() - self.link.spent_s      # the link's time is its own stage
         c6 = clock()
-        self._log(t0, t1, frame, int(on_target.sum()), out, mid_pose_deg)
+        self._log(t0, t1, frame, int(np.count_nonzero(on_target)), out, mid_pose_deg)
         if self.sky is not None:
             self.sky_log.append(out)
         if self.frame_hook is not None:

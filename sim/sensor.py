@@ -302,7 +302,7 @@ class SceneSensor:
         clutter = _NONE
         if has["weather"]:
             clutter = self._droplets(chunk)
-        n_out = n_hit + int(np.isfinite(clutter).sum())
+        n_out = n_hit + (int(np.count_nonzero(np.isfinite(clutter))) if clutter.size else 0)
         xyz = np.empty((n_out, 3))
         pt_ns = np.empty(n_out, dtype=np.int64)
         refl_byte = np.empty(n_out, dtype=np.uint8)
@@ -513,7 +513,7 @@ class SceneSensor:
         idx, start = wk.bodies_candidates_kernel(d_world, chunk.status, self._t_ray, t_mid, centres, vel, reach,
                                                  flock.radius_m, flock.max_accel_m_s2, flock.max_speed_m_s, True,
                                                  *self._ray_blocks(chunk, d_world))
-        m = np.repeat(flock.members, np.diff(start))     # each ray's bird
+        m = np.repeat(flock.members, start[1:] - start[:-1])     # each ray's bird (np.diff's subtraction)
         self.rays_cast_targets += idx.size
         if idx.size:
             t_pose = self._ray_times(idx)
