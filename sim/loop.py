@@ -453,8 +453,10 @@ class ClosedLoop:
             L.true_el_deg.append(math.degrees(math.atan2(q[2], math.hypot(q[0], q[1]))))
             L.target_range_m.append(norm3(p))
             L.target_lateral_m.append(float(p[1]))
-            t_det = out.detection.t_s if out.detection is not None else t_mid
-            L.target_xyz.append(traj.position(np.array([t_det]))[0])
+            if out.detection is None:   # at t_mid: the position the cull evaluated (the path's own call's bits)
+                L.target_xyz.append(np.array(p))
+            else:
+                L.target_xyz.append(traj.position(np.array([out.detection.t_s]))[0])
         else:
             for lst in (L.true_error_deg, L.true_az_deg, L.true_el_deg, L.target_range_m, L.target_lateral_m):
                 lst.append(math.nan)

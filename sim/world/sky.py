@@ -356,6 +356,17 @@ class SkyObject:
 
 
 _NO_SLOT = np.zeros((0, 3))      # FlockPoses.velocities: no slot added (wander_sum_kernel)
+_wk = None                       # sim.world.kernels, loaded on first use (numba: not on import)
+
+
+def _world_kernels():
+    """sim.world.kernels, imported once: an import statement in a function costs ~1 us a call, and
+    FlockPoses' methods ran five a frame."""
+    global _wk
+    from sim.world import kernels
+
+    _wk = kernels
+    return kernels
 
 
 class FlockPoses:
@@ -412,8 +423,7 @@ class FlockPoses:
         return out
 
     def _wander_arg(self, m, t):
-        from sim.world import kernels as wk
-
+        wk = _wk or _world_kernels()
         arg = np.empty((t.size,) + self.omega.shape[1:])
         wk.wander_arg_kernel(t, m, self.omega, self.phase, arg)
         return arg
@@ -422,8 +432,7 @@ class FlockPoses:
                   path_position: np.ndarray | None = None) -> np.ndarray:
         """(N, 3): member ``m[i]``'s position at ``t[i]`` (``path_position``: the centre's at ``t``
         where already known)."""
-        from sim.world import kernels as wk
-
+        wk = _wk or _world_kernels()
         arg = self._wander_arg(m, t) if arg is None else arg
         base = self.path.position(t) if path_position is None else path_position
         out = np.empty((t.size, 3))
@@ -432,8 +441,7 @@ class FlockPoses:
 
     def velocities(self, m: np.ndarray, t: np.ndarray, arg: np.ndarray | None = None,
                    path_velocity: np.ndarray | None = None) -> np.ndarray:
-        from sim.world import kernels as wk
-
+        wk = _wk or _world_kernels()
         arg = self._wander_arg(m, t) if arg is None else arg
         base = self.path.velocity(t) if path_velocity is None else path_velocity
         out = np.empty((t.size, 3))
@@ -445,8 +453,7 @@ class FlockPoses:
         once for both, and both sums in one kernel call (:func:`sim.world.kernels.wander_rows_kernel`:
         the sensor asks for both of twenty birds at the frame's mid time and of every ray's bird, and
         the calls cost more than the sums)."""
-        from sim.world import kernels as wk
-
+        wk = _wk or _world_kernels()
         arg = self._wander_arg(m, t)
         p, v = position_velocity(self.path, t)
         out_p = np.empty((t.size, 3))
@@ -478,8 +485,7 @@ class FlockPoses:
 
     def wing_angles(self, m: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Each ray's wing angle (``FlapSchedule.angle_rad`` of member ``m[i]`` at ``t[i]``)."""
-        from sim.world import kernels as wk
-
+        wk = _wk or _world_kernels()
         bout = np.empty(t.size, np.int64)
         phase = np.empty(t.size)
         wk.wing_phase_kernel(t, m, self.seg_lo, self.seg_hi, self.bout_start, self.two_pi_f, bout, phase)
