@@ -133,6 +133,9 @@ class _UartSink:
         return True
 
 
+_NO_STRAYS = np.zeros((0, 3))      # a frame's stray returns where the scene lists none
+_NO_STRAYS.flags.writeable = False
+
 STAGES = ("head model: commands arrive", "scan", "beams into the world (head pose)", "ray casting + effects",
           "tracker", "link (Pelco-D, UART)", "log and recording")
 
@@ -238,11 +241,13 @@ class ClosedLoop:
         self.last_limited: list[str] = []  # why the gate changed it (empty: unchanged)
         self._pending: list[tuple[float, bytes]] = []
         self.log = FrameLog()
-        # Multi-object scenes (Scene.multi_object): every object's truth per frame (sim.objects_truth);
-        # kept apart from the log, whose arrays the regression and determinism digests cover.
-        self.objects_log: list[list] = []
-        self.last_objects: list | None = None
-        self._objects_truth = None
+        # Multi-object scenes (Scene.multi_object): every object's truth per frame (sim.objects_truth), a
+        # list of ObjectTruth per frame built when read (TruthLog); kept apart from the log, whose
+        # arrays the regression and determinism digests cover.
+        from sim.objects_truth import TruthLog
+
+        self.objects_log = TruthLog(scene)
+        self._last_objects: tuple[int, list] | None = None   # (frame count, its truth) of the last read
         self._strays_seen = 0
         self.bytes_sent = 0
         self.echo_bytes = 0
@@ -262,6 +267,17 @@ class ClosedLoop:
     @controller.setter
     def controller(self, c) -> None:
         self.frame_step.controller = c
+
+    @property
+    def last_objects(self) -> list | None:
+        """The last frame's truth of every object (multi-object scenes; None before a frame): the last
+        entry of :attr:`objects_log`, built once a frame when read (a recording reads it)."""
+        n = len(self.objects_log)
+        if n == 0:
+            return None
+        if self._last_objects is None or self._last_objects[0] != n:
+            self._last_objects = (n, self.objects_log[n - 1])
+        return self._last_objects[1]
 
     # Effect streams and work counters live in the sensor; these keep the loop's own view of them.
     @property
@@ -370,16 +386,11 @@ class ClosedLoop:
             frame = Frame(lidar_clock.sensor_s(t0), lidar_clock.sensor_s(t1), xyz, lidar_clock.sensor_ns(pt_ns),
                           refl_byte)
             lidar_clock.observe(t1, lidar_clock.sensor_s(t1))
-        if scene.multi_object:
-            if self._objects_truth is None:
-                from sim.objects_truth import ObjectsTruth
-
-                self._objects_truth = ObjectsTruth(scene)
-            strays = self.sensor.last_strays_m if scene.has("stray_returns") else np.zeros((0, 3))
-            self.last_objects = self._objects_truth.at(t_mid, self.sensor.last_object_rays, strays, self._strays_seen,
-                                                       self.sensor.last_mid_xyz_m, self.sensor.last_mid_velocity)
+        if scene.multi_object:     # kept for the truth, built when read (sim.objects_truth.TruthLog)
+            strays = self.sensor.last_strays_m if scene.has("stray_returns") else _NO_STRAYS
+            self.objects_log.append(t_mid, self.sensor.last_object_rays, strays, self._strays_seen,
+                                    self.sensor.last_mid_xyz_m, self.sensor.last_mid_velocity)
             self._strays_seen += len(strays)
-            self.objects_log.append(self.last_objects)
         c4 = clock()
         # 6. the one step (foveatrack.frame_step): the gyro's samples, the controller, the gate, the link.
         self.imu_fed = None

@@ -9,6 +9,7 @@ crown (:mod:`sim.world.sky`), and each stray near return of the frame (class "cl
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import partial
 from typing import NamedTuple
 
@@ -75,3 +76,60 @@ class ObjectsTruth:
             out.append(ObjectTruth(f"stray-{stray_count + k}", "clutter", tuple(float(x) for x in p), (0.0, 0.0, 0.0),
                                    0.0, 1))
         return out
+
+
+class TruthLog(Sequence):
+    """``ClosedLoop.objects_log``: per frame, the list of :class:`ObjectTruth` of
+    :meth:`ObjectsTruth.at`, built when read from what the frame kept (:meth:`append`).
+
+    A frame keeps its mid time, the rays per object and the stray returns (arrays), and the positions
+    and velocities the sensor's cull evaluated as tuples of floats in one tuple: all of it the cyclic
+    collector stops tracking at its first pass.  Kept as ~25 named tuples a frame (a tuple subclass
+    is tracked for good), the truth of the swarm with the flock was two thirds of the objects the
+    collector walked over a run, and most of its ~0.1 ms a frame.  Reading a frame calls
+    :meth:`ObjectsTruth.at` on what it kept: the same objects, each read building them anew (a
+    recording reads each frame's once, ``ClosedLoop.last_objects``; a study's summary, every frame
+    once at the end).  Equal to any sequence of the same frames' lists."""
+
+    def __init__(self, scene):
+        self._scene = scene
+        self._truth: ObjectsTruth | None = None
+        self._frames: list[tuple] = []
+
+    def append(self, t_mid_s: float, object_rays, strays_m: np.ndarray, stray_count: int, mid_xyz_m=None,
+               mid_velocity=None) -> None:
+        """Keep a frame's truth: :meth:`ObjectsTruth.at`'s arguments (its lists of floats as tuples)."""
+        if self._truth is None:
+            self._truth = ObjectsTruth(self._scene)
+        xyz = None if mid_xyz_m is None else tuple(map(tuple, mid_xyz_m))
+        if mid_velocity is None:
+            vel = None
+        elif None in mid_velocity:
+            vel = tuple(None if v is None else tuple(v) for v in mid_velocity)
+        else:
+            vel = tuple(map(tuple, mid_velocity))
+        self._frames.append((float(t_mid_s), object_rays, strays_m, int(stray_count), xyz, vel))
+
+    def _frame(self, record: tuple) -> list[ObjectTruth]:
+        return self._truth.at(*record)
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self._frame(r) for r in self._frames[k]]
+        return self._frame(self._frames[k])
+
+    def __iter__(self):
+        return map(self._frame, self._frames)
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, Sequence) or isinstance(other, (str, bytes)):
+            return NotImplemented
+        return len(other) == len(self) and all(a == b for a, b in zip(self, other))
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        return f"TruthLog({len(self)} frames)"
