@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from daemon_procs import (ROOT, device_config, env, first_line, free_udp_port, start, start_head_and_lidar, terminate,
+from daemon_procs import (ROOT, device_config, dies_with_this_process, env, first_line, free_udp_port, start, start_head_and_lidar, terminate,
                           wait_for)
 from foveatrack.calibration import CalibrationPlan
 from foveatrack.calibration.live import plan_within_limits
@@ -40,8 +40,9 @@ def _config(tmp_path, link, bport, **head):
 
 
 def _calibrate(cfg, out, *extra) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "foveatrack", "calibrate", "--config", str(cfg), "--corner", *CORNER,
-                             "--out", str(out), "--json", "--max-s", "90", *extra], cwd=ROOT, env=env(),
+    return subprocess.Popen(dies_with_this_process([sys.executable, "-m", "foveatrack", "calibrate", "--config", str(cfg),
+                                                    "--corner", *CORNER, "--out", str(out), "--json", "--max-s", "90",
+                                                    *extra]), cwd=ROOT, env=env(),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 

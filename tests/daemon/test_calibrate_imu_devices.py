@@ -29,7 +29,7 @@ import time
 import numpy as np
 import pytest
 
-from daemon_procs import (ROOT, device_config, env, first_line, free_udp_port, start, start_head_and_lidar, terminate,
+from daemon_procs import (ROOT, device_config, dies_with_this_process, env, first_line, free_udp_port, start, start_head_and_lidar, terminate,
                           wait_for)
 from foveatrack.cli import main
 from foveatrack.imu_calib.se3 import so3_log
@@ -95,8 +95,9 @@ def _stopped(truth) -> bool:
 
 
 def _calibrate_imu(cfg, out, *extra, **kw) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "foveatrack", "calibrate-imu", "--config", cfg, "--out", str(out),
-                             "--json", "--max-s", "300", *extra], cwd=ROOT, env=env(), stdout=subprocess.PIPE,
+    return subprocess.Popen(dies_with_this_process([sys.executable, "-m", "foveatrack", "calibrate-imu", "--config", cfg,
+                                                    "--out", str(out), "--json", "--max-s", "300", *extra]),
+                            cwd=ROOT, env=env(), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, **kw)
 
 

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from daemon_procs import ROOT, env
+from daemon_procs import ROOT, dies_with_this_process, env
 from foveatrack.daemon import Daemon, load_config
 from foveatrack.errors import UserError
 
@@ -184,8 +184,8 @@ def test_a_ctrl_c_before_the_lidar_could_announce_itself_is_no_lidar_fault(tmp_p
 
     p = _write(tmp_path)
     log = tmp_path / "d.jsonl"
-    proc = subprocess.Popen([sys.executable, "-m", "foveatrack", "daemon", "--config", str(p), "--no-status",
-                             "--log", str(log)],
+    proc = subprocess.Popen(dies_with_this_process([sys.executable, "-m", "foveatrack", "daemon", "--config", str(p),
+                                                    "--no-status", "--log", str(log)]),
                             cwd=ROOT, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and proc.poll() is None:

@@ -14,7 +14,8 @@ import sys
 import numpy as np
 import pytest
 
-from daemon_procs import HERE, SCENE, env, event, free_udp_port, log_events, stop_all, terminate, wait_for, write_config
+from daemon_procs import (HERE, SCENE, dies_with_this_process, env, event, free_udp_port, log_events, stop_all,
+                          terminate, wait_for, write_config)
 from foveatrack.recording import RecordingReader
 from gimbal.pts303h import PTS303H
 from sim.loop import truth_speed_table
@@ -47,13 +48,15 @@ def _run(tmp_path, fault):
     procs = {"head": _head(tmp_path, link, truth)}
     try:
         procs["daemon"] = subprocess.Popen(
-            [sys.executable, "-m", "foveatrack", "daemon", "--config", str(cfg), "--log", str(log)],
+            dies_with_this_process([sys.executable, "-m", "foveatrack", "daemon", "--config", str(cfg), "--log",
+                                    str(log)]),
             env=env(), stdout=open(tmp_path / "d.out", "w"), stderr=open(tmp_path / "d.err", "w"),
             start_new_session=True)
         wait_for(lambda: event(log, "start"), 60, "the daemon to start", [procs["daemon"]])
         data_port = event(log, "start")["host_ports"]["data"]
         procs["lidar"] = subprocess.Popen(
-            [sys.executable, str(HERE / "faulty_lidar.py"), str(SCENE), str(bport), str(truth), fault, str(state)],
+            dies_with_this_process([sys.executable, str(HERE / "faulty_lidar.py"), str(SCENE), str(bport), str(truth),
+                                    fault, str(state)]),
             env=env(), stdout=open(tmp_path / "l.out", "w"), stderr=open(tmp_path / "l.err", "w"),
             start_new_session=True)
         wait_for(lambda: state.exists(), 120, "the fault to be over", list(procs.values()))
