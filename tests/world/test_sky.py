@@ -343,6 +343,15 @@ def test_the_per_ray_cull_keeps_what_its_twin_keeps():
         assert set(kept.tolist()) <= set(idx.tolist())
 
 
+def _assert_same_run(loop_a, log_a, loop_b, log_b):
+    """Two closed-loop runs gave the same run: every log array (NaN where NaN) and every frame's truth
+    of the objects."""
+    for k in log_a:
+        x, y = np.asarray(log_a[k]), np.asarray(log_b[k])
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
+    assert loop_a.objects_log == loop_b.objects_log
+
+
 def test_the_per_ray_cull_drops_only_rays_that_miss(monkeypatch):
     # The same runs with the per-ray cull passing every cone candidate through: every frame's points,
     # the truth (rays that hit each object) and the log are the same, and the cull cast far fewer
@@ -366,10 +375,8 @@ def test_the_per_ray_cull_drops_only_rays_that_miss(monkeypatch):
     for name, share in (("drone-and-flock", 0.4), ("two-drones-crossing", 0.9)):
         scene = replace(load_scene(SCENES / f"{name}.toml"), duration_s=3.0)
         (culled, log_c, pts_c), (full, log_f, pts_f) = run(scene, False), run(scene, True)
-        assert pts_c == pts_f and culled.objects_log == full.objects_log
-        for k in log_c:
-            x, y = np.asarray(log_c[k]), np.asarray(log_f[k])
-            assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
+        assert pts_c == pts_f
+        _assert_same_run(culled, log_c, full, log_f)
         assert sum(o.rays_hit for fr in culled.objects_log for o in fr) > 50
         print(name, culled.sensor.rays_cast_targets, full.sensor.rays_cast_targets)
         assert culled.sensor.rays_cast_targets < share * full.sensor.rays_cast_targets
@@ -382,10 +389,7 @@ def test_a_flock_cast_together_gives_the_run_it_gives_bird_by_bird():
     apart.sensor._flocks = {}
     assert together.sensor._flocks
     a, b = together.run(), apart.run()
-    for k in a:
-        x, y = np.asarray(a[k]), np.asarray(b[k])
-        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
-    assert together.objects_log == apart.objects_log
+    _assert_same_run(together, a, apart, b)
     assert together.sensor.rays_cast_targets == apart.sensor.rays_cast_targets
     assert sum(o.rays_hit for fr in together.objects_log for o in fr if o.cls == "bird") > 50
 
@@ -696,9 +700,6 @@ def test_targets_on_straight_passes_cast_together_give_the_run_each_cast_on_its_
     alone = ClosedLoop(scene)
     b = alone.run()
     assert not any(alone.sensor._straight.cast_together)
-    for k in a:
-        x, y = np.asarray(a[k]), np.asarray(b[k])
-        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
-    assert together.objects_log == alone.objects_log
+    _assert_same_run(together, a, alone, b)
     assert together.sensor.rays_cast_targets == alone.sensor.rays_cast_targets
     assert sum(o.rays_hit for fr in together.objects_log for o in fr if o.cls == "drone") > 50
