@@ -11,6 +11,8 @@ import sys
 import time
 from pathlib import Path
 
+from child_procs import dies_with_this_process
+
 ROOT = Path(__file__).resolve().parents[2]
 HERE = Path(__file__).resolve().parent
 SCENE = HERE / "scene_track.toml"
@@ -58,30 +60,6 @@ def env() -> dict:
     e["PYTHONPATH"] = str(ROOT) + os.pathsep + e.get("PYTHONPATH", "")
     e["PYTHONUNBUFFERED"] = "1"
     return e
-
-
-# The children run in sessions of their own (a Ctrl-C at the terminal is the test's to send), so a
-# pytest killed before a test's ``finally`` (SIGTERM or SIGKILL: a CI time limit, a developer's kill)
-# left its daemon, lidar and head running, ray-casting a quarter of a core each, for as long as the
-# machine ran (seen: three such for an hour under every benchmark of a session).  Each child asks
-# Linux for SIGTERM when the process that started it dies (PR_SET_PDEATHSIG, kept across exec; the
-# pid check covers a parent gone before the call), then becomes the command itself: Popen's pid is
-# the command's.  The signal follows the thread that started the child, and the tests start them on
-# their main thread.  Elsewhere than Linux the command runs as it is.
-_DIE_WITH_PARENT = (
-    "import ctypes, os, signal, sys\n"
-    "if sys.platform.startswith('linux'):\n"
-    "    ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM), 0, 0, 0)\n"   # 1: PR_SET_PDEATHSIG
-    "    if os.getppid() != int(sys.argv[1]):\n"
-    "        sys.exit(0)\n"
-    "os.execv(sys.executable, [sys.executable, *sys.argv[2:]])\n")
-
-
-def dies_with_this_process(argv: list[str]) -> list[str]:
-    """``argv`` (a Python command: ``[sys.executable, ...]``) run so that it gets SIGTERM when this
-    process dies (module comment above)."""
-    assert argv[0] == sys.executable, argv
-    return [sys.executable, "-c", _DIE_WITH_PARENT, str(os.getpid()), *argv[1:]]
 
 
 def start(args: list[str], out: Path, err: Path) -> subprocess.Popen:

@@ -15,7 +15,8 @@ import time
 
 import pytest
 
-from daemon_procs import (ROOT, device_config, dies_with_this_process, env, first_line, free_udp_port, start, start_head_and_lidar, terminate,
+from child_procs import dies_with_this_process
+from daemon_procs import (ROOT, device_config, env, first_line, free_udp_port, start, start_head_and_lidar, terminate,
                           wait_for)
 from foveatrack.calibration import CalibrationPlan
 from foveatrack.calibration.live import plan_within_limits

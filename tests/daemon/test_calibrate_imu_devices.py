@@ -29,7 +29,8 @@ import time
 import numpy as np
 import pytest
 
-from daemon_procs import (ROOT, device_config, dies_with_this_process, env, first_line, free_udp_port, start, start_head_and_lidar, terminate,
+from child_procs import dies_with_this_process
+from daemon_procs import (ROOT, device_config, env, first_line, free_udp_port, start, start_head_and_lidar, terminate,
                           wait_for)
 from foveatrack.cli import main
 from foveatrack.imu_calib.se3 import so3_log

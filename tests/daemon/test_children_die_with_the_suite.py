@@ -1,4 +1,5 @@
-"""The daemon tests' processes die with the pytest that started them (daemon_procs.dies_with_this_process).
+"""The tests' long-running children die with the pytest that started them (child_procs.dies_with_this_process,
+used by the daemon, gimbal, livox and recording tests).
 
 A pytest killed in the middle of a test (a CI time limit, a developer's kill: SIGTERM or SIGKILL, no
 ``finally`` runs) left the test's daemon, lidar and head running in their own sessions for as long as
@@ -12,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -20,7 +22,7 @@ from daemon_procs import HERE, ROOT, env, wait_for
 PARENT = """
 import sys
 from pathlib import Path
-sys.path.insert(0, {here!r})
+sys.path[:0] = [{here!r}, {tests!r}]
 from daemon_procs import start
 d = Path(sys.argv[1])
 p = start(["gimbal", "serve", "--link", str(d / "head")], d / "head.out", d / "head.err")
@@ -44,7 +46,7 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the parent-death signal is Linux's")
 def test_a_daemon_tests_child_dies_when_pytest_is_killed(tmp_path):
-    parent = subprocess.Popen([sys.executable, "-c", PARENT.format(here=str(HERE)), str(tmp_path)], cwd=ROOT, env=env(),
+    parent = subprocess.Popen([sys.executable, "-c", PARENT.format(here=str(HERE), tests=str(HERE.parent)), str(tmp_path)], cwd=ROOT, env=env(),
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         child = int(parent.stdout.readline())
@@ -67,3 +69,21 @@ def test_a_daemon_tests_child_dies_when_pytest_is_killed(tmp_path):
             os.kill(child, signal.SIGKILL)
         except (ProcessLookupError, NameError, UnboundLocalError):
             pass
+
+
+def test_every_child_the_tests_start_goes_through_the_wrapper():
+    # A child started with a bare Popen outlives a killed pytest; the stand-in above is the one
+    # exception (it is the process killed, and its stdin's end stops it).
+    import ast
+
+    bare = []
+    for path in sorted((ROOT / "tests").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "Popen"
+                    and not (node.args and isinstance(node.args[0], ast.Call)
+                             and getattr(node.args[0].func, "id", None) == "dies_with_this_process")):
+                bare.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    me = Path(__file__)
+    stand_in = next(i for i, ln in enumerate(me.read_text().splitlines(), 1)
+                    if ln.startswith("    parent = subprocess.Popen("))
+    assert bare == [f"tests/daemon/{me.name}:{stand_in}"], bare

@@ -9,7 +9,8 @@ import sys
 
 import pytest
 
-from daemon_procs import ROOT, dies_with_this_process, env
+from child_procs import dies_with_this_process
+from daemon_procs import ROOT, env
 from foveatrack.daemon import Daemon, load_config
 from foveatrack.errors import UserError
 

@@ -14,7 +14,8 @@ import sys
 import numpy as np
 import pytest
 
-from daemon_procs import (HERE, SCENE, dies_with_this_process, env, event, free_udp_port, log_events, stop_all,
+from child_procs import dies_with_this_process
+from daemon_procs import (HERE, SCENE, env, event, free_udp_port, log_events, stop_all,
                           terminate, wait_for, write_config)
 from foveatrack.recording import RecordingReader
 from gimbal.pts303h import PTS303H

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from child_procs import dies_with_this_process
 from gimbal.client import HeadClient
 from gimbal.pts303h import PTS303H, HeadParams
 from sim.virtual_head import VirtualHeadServer, read_truth
@@ -48,8 +49,8 @@ def served(tmp_path):
     truth = tmp_path / "truth.jsonl"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     proc = subprocess.Popen(
-        _serve_cmd() + ["--unit-seed", str(SEED), "--feedback", "at-rest", "--truth", str(truth),
-                        "--truth-period-s", "0.01", "--tilt0-deg", str(TILT0)],
+        dies_with_this_process(_serve_cmd() + ["--unit-seed", str(SEED), "--feedback", "at-rest", "--truth",
+                                               str(truth), "--truth-period-s", "0.01", "--tilt0-deg", str(TILT0)]),
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
     )
     try:
@@ -197,7 +198,7 @@ def test_missing_port_and_loopback_never_raise():
 
 def _serve_link(link, *extra):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    return subprocess.Popen(_serve_cmd() + ["--link", str(link), *extra], stdout=subprocess.PIPE,
+    return subprocess.Popen(dies_with_this_process(_serve_cmd() + ["--link", str(link), *extra]), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)
 
 
@@ -278,7 +279,7 @@ def test_a_server_removes_the_link_on_exit_only_while_it_points_to_its_own_pty(t
 def test_sigint_stops_the_server_cleanly(tmp_path):
     truth = tmp_path / "t.jsonl"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    proc = subprocess.Popen(_serve_cmd() + ["--truth", str(truth), "--link", str(tmp_path / "tty")],
+    proc = subprocess.Popen(dies_with_this_process(_serve_cmd() + ["--truth", str(truth), "--link", str(tmp_path / "tty")]),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         path = _readline(proc.stdout)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from child_procs import dies_with_this_process
 from foveatrack.errors import UserError
 from foveatrack.livox import protocol as P
 from foveatrack.livox.client import CONNECTED, LivoxClient
@@ -174,8 +175,8 @@ def test_subprocess_entry_point_serves_and_stops_on_sigterm():
     client = LivoxClient("127.0.0.1", cmd_port=0, data_port=0, broadcast_port=0, point_rate_hz=240_000.0)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     proc = subprocess.Popen(
-        [sys.executable, "-m", "sim.virtual_lidar", "--cmd-port", "0", "--broadcast-port",
-         str(client.broadcast_port), "--wall-m", "20"],
+        dies_with_this_process([sys.executable, "-m", "sim.virtual_lidar", "--cmd-port", "0", "--broadcast-port",
+                                str(client.broadcast_port), "--wall-m", "20"]),
         stdout=subprocess.PIPE, text=True, env=env, cwd=ROOT,
     )
     try:

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from child_procs import dies_with_this_process
 from failing_writes import FailingFlush, metadata_write_fails
 
 from foveatrack.errors import UserError
@@ -159,7 +160,8 @@ WRITER_SCRIPT = textwrap.dedent(
 def test_readable_after_kill_9(tmp_path):
     p = tmp_path / "killed.mcap"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-c", WRITER_SCRIPT, str(p)], stdout=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen(dies_with_this_process([sys.executable, "-c", WRITER_SCRIPT, str(p)]), stdout=subprocess.PIPE,
+                            text=True, env=env)
     try:
         done = -1
         while done < 8:

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from child_procs import dies_with_this_process
 from foveatrack.errors import UserError
 from foveatrack.recording import RecordingExistsError, RecordingReader, RecordingWriter
 from foveatrack.recording.writer_process import RecordingProcess
@@ -252,7 +253,7 @@ def test_kill_9_of_the_caller_loses_nothing_the_child_got(tmp_path):
     # the child reads to the end of the pipe and completes the file (the loop's-thread writer would
     # leave it readable only up to its last chunk)
     p = tmp_path / "killed.mcap"
-    caller = subprocess.Popen([sys.executable, "-c", CALLER.format(root=str(ROOT)), str(p)],
+    caller = subprocess.Popen(dies_with_this_process([sys.executable, "-c", CALLER.format(root=str(ROOT)), str(p)]),
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     child_pid = int(caller.stdout.readline())
     caller.send_signal(signal.SIGKILL)
@@ -325,8 +326,9 @@ def test_simulate_stopped_by_a_signal_leaves_a_complete_recording(tmp_path, sig)
     # after the loop's thread took a concurrent.futures Future's lock left it taken, and the worker
     # and the exit waited on it for ever; sim/ahead.py's Job, tests/world/test_ahead.py.)
     out = tmp_path / "run"
-    p = subprocess.Popen([sys.executable, "-m", "foveatrack", "simulate", str(ROOT / "scenes" / "fig12-tracking.toml"),
-                          "--duration", "3000", "--out", str(out), "--second-core", "--no-progress"],
+    p = subprocess.Popen(dies_with_this_process([sys.executable, "-m", "foveatrack", "simulate",
+                                                 str(ROOT / "scenes" / "fig12-tracking.toml"), "--duration", "3000",
+                                                 "--out", str(out), "--second-core", "--no-progress"]),
                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
