@@ -75,6 +75,13 @@ Rules, in order (thresholds in :class:`ClassifierConfig`; documented in docs/sky
    on crowns were labelled that way in the first seconds after power-on: on the tree line's seeds
    +200..+259, the eleven crown parts first labelled drone had 0.37-1.79 s of hits, seven under
    0.9 s; the 59 drones 0.9 s or more.  docs/sky-tracks-figures.md gives what the count changed.
+   The label is given in a frame that measured the track (``drone_label_on_hit``, default true;
+   false: the rule before 2026-12-07 evening): a run that becomes ready while the track coasts
+   unseen repeats the verdict of its last hit, and waits for the next.  Traced on the tree line's
+   cold hour, seed 39 (+9): a crown part's track, its first hit 1.6 m below the others (so a net
+   speed of 0.9-1.4 m/s), was labelled drone at 3.9 s, 0.4 s after its last hit, and never seen
+   again.  Over the cold hours (+0..+179) of the four scenes it removed that track and changed
+   little else; on +200..+289 it changed no figure of three scenes (docs/sky-tracks-figures.md).
    Leaving
    the label is at once unless ``drone_leave_frames`` > 1 (it then waits that many frames of other
    output in a row): a measured trade-off, not the default.  At 5 the daemon's status
@@ -107,7 +114,7 @@ LABELS = ("unknown", "clutter", "bird", "drone")
 #: keys added to :class:`ClassifierConfig` since recordings began to keep the sky table, each with the
 #: value that behaves as before it: a recording's table without one ran that way, and replays so
 #: (:func:`foveatrack.sky.controller.recorded_sky_table`)
-ADDED_SINCE_RECORDED = {"drone_after_hits": 0, "bird_speed_after_hits": 0}
+ADDED_SINCE_RECORDED = {"drone_after_hits": 0, "bird_speed_after_hits": 0, "drone_label_on_hit": False}
 
 
 @dataclass(frozen=True)
@@ -129,6 +136,7 @@ class ClassifierConfig:
     drone_after_hits: int = 5
     drone_leave_frames: int = 1
     bird_speed_after_hits: int = 3
+    drone_label_on_hit: bool = True
 
     def __post_init__(self) -> None:
         # rules 2-4 read a net speed and a velocity, which take two hits (a table's types are checked
@@ -153,6 +161,10 @@ class ClassifierConfig:
                 least = {"min_hits": 2, "drone_after_hits": 0, "bird_speed_after_hits": 0}.get(k, 1)
                 if isinstance(v, bool) or not isinstance(v, int) or v < least:
                     raise UserError(f"{where}: {k} must be an integer >= {least}, got {v!r}")
+                kw[k] = v
+            elif k == "drone_label_on_hit":
+                if not isinstance(v, bool):
+                    raise UserError(f"{where}: {k} must be true or false, got {v!r}")
                 kw[k] = v
             else:
                 kw[k] = as_float(v, k, where, lo=0)
@@ -189,11 +201,13 @@ def held_label(rules_label: str, previous: str, drone_frames: int, drone_hits: i
     in a row before this one they had said ``drone`` (> 0), or, for a track labelled drone, in how many
     they had said otherwise (< 0; it keeps the label until ``drone_leave_frames`` have), and
     ``drone_hits``: how many of those drone frames measured the track (``hit``: this one did; an
-    object matched to it, or Algorithm 1 in its D while fixated)."""
+    object matched to it, or Algorithm 1 in its D while fixated).  With ``drone_label_on_hit`` the
+    label is given only in a frame with ``hit``; leaving it needs none."""
     if rules_label == "drone":
         drone_frames = max(drone_frames, 0) + 1
         drone_hits += hit
-        ready = drone_frames >= cfg.drone_after_frames and drone_hits >= cfg.drone_after_hits
+        ready = (drone_frames >= cfg.drone_after_frames and drone_hits >= cfg.drone_after_hits
+                 and (hit or not cfg.drone_label_on_hit))
         return ("drone" if ready else previous), drone_frames, drone_hits
     if previous == "drone":
         away = 1 - min(drone_frames, 0)
