@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from functools import partial
+from itertools import chain
 from typing import NamedTuple
 
 import numpy as np
@@ -78,15 +79,23 @@ class ObjectsTruth:
         return out
 
 
+def _rows(flat: tuple) -> list[tuple]:
+    """``(x0, y0, z0, x1, ...)`` as ``[(x0, y0, z0), (x1, ...), ...]`` (the same floats)."""
+    it = iter(flat)
+    return list(zip(it, it, it))
+
+
 class TruthLog(Sequence):
     """``ClosedLoop.objects_log``: per frame, the list of :class:`ObjectTruth` of
     :meth:`ObjectsTruth.at`, built when read from what the frame kept (:meth:`append`).
 
     A frame keeps its mid time, the rays per object and the stray returns (arrays), and the positions
-    and velocities the sensor's cull evaluated as tuples of floats in one tuple: all of it the cyclic
-    collector stops tracking at its first pass.  Kept as ~25 named tuples a frame (a tuple subclass
-    is tracked for good), the truth of the swarm with the flock was two thirds of the objects the
-    collector walked over a run, and most of its ~0.1 ms a frame.  Reading a frame calls
+    and velocities the sensor's cull evaluated as one flat tuple of floats each (x0, y0, z0, x1, ...;
+    rows where a velocity is None): all of it the cyclic collector stops tracking at its first pass.
+    Kept as ~25 named tuples a frame (a tuple subclass is tracked for good), the truth of the swarm
+    with the flock was two thirds of the objects the collector walked over a run, and most of its
+    ~0.1 ms a frame; as a tuple per object, ~55 of the ~125 containers a frame allocated (what
+    triggers the collector's young passes).  Reading a frame calls
     :meth:`ObjectsTruth.at` on what it kept: the same objects, each read building them anew (a
     recording reads each frame's once, ``ClosedLoop.last_objects``; a study's summary, every frame
     once at the end).  Equal to any sequence of the same frames' lists."""
@@ -101,17 +110,19 @@ class TruthLog(Sequence):
         """Keep a frame's truth: :meth:`ObjectsTruth.at`'s arguments (its lists of floats as tuples)."""
         if self._truth is None:
             self._truth = ObjectsTruth(self._scene)
-        xyz = None if mid_xyz_m is None else tuple(map(tuple, mid_xyz_m))
+        xyz = None if mid_xyz_m is None else tuple(chain.from_iterable(mid_xyz_m))
         if mid_velocity is None:
-            vel = None
-        elif None in mid_velocity:
-            vel = tuple(None if v is None else tuple(v) for v in mid_velocity)
+            vel, flat = None, False
+        elif None in mid_velocity:     # rows kept as rows: a missing velocity stays None
+            vel, flat = tuple(None if v is None else tuple(v) for v in mid_velocity), False
         else:
-            vel = tuple(map(tuple, mid_velocity))
-        self._frames.append((float(t_mid_s), object_rays, strays_m, int(stray_count), xyz, vel))
+            vel, flat = tuple(chain.from_iterable(mid_velocity)), True
+        self._frames.append((float(t_mid_s), object_rays, strays_m, int(stray_count), xyz, vel, flat))
 
     def _frame(self, record: tuple) -> list[ObjectTruth]:
-        return self._truth.at(*record)
+        t, rays, strays, count, xyz, vel, flat = record
+        return self._truth.at(t, rays, strays, count, None if xyz is None else _rows(xyz),
+                              _rows(vel) if flat else vel)
 
     def __len__(self) -> int:
         return len(self._frames)
