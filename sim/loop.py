@@ -28,11 +28,10 @@ import numpy as np
 
 from foveatrack.control import STOP
 from foveatrack.errors import UserError
-from foveatrack.fixed_order import mat3T_vec, norm3
 from foveatrack.frame_step import FrameStep, NoHead
 from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate, Limits
-from foveatrack.reconstruction import rotation_matrix
+from foveatrack.reconstruction import rotation_rows
 from foveatrack.speed_table import TURBO, AxisTable, SpeedEntry, SpeedTable
 from foveatrack.startup_heap import freeze_startup_heap
 from foveatrack.tracker import Tracker
@@ -135,6 +134,8 @@ class _UartSink:
 
 _NO_STRAYS = np.zeros((0, 3))      # a frame's stray returns where the scene lists none
 _NO_STRAYS.flags.writeable = False
+_NAN3 = np.full(3, np.nan)          # copied into the log where a frame has no position
+_NAN3.flags.writeable = False
 
 STAGES = ("head model: commands arrive", "scan", "beams into the world (head pose)", "ray casting + effects",
           "tracker", "link (Pelco-D, UART)", "log and recording")
@@ -457,13 +458,18 @@ class ClosedLoop:
         if self.scene.targets:
             traj = self.scene.targets[0].trajectory
             p = self.sensor.last_mid_xyz_m[0]   # its position at t_mid, as this frame's cull evaluated it
-            R = rotation_matrix(pan, tilt)
-            q = mat3T_vec(R, p)   # R.T @ p in a fixed order (BLAS's differs per CPU)
-            L.true_error_deg.append(math.degrees(math.atan2(math.hypot(q[1], q[2]), q[0])))
-            L.true_az_deg.append(math.degrees(math.atan2(q[1], q[0])))
-            L.true_el_deg.append(math.degrees(math.atan2(q[2], math.hypot(q[0], q[1]))))
-            L.target_range_m.append(norm3(p))
-            L.target_lateral_m.append(float(p[1]))
+            x, y, z = p
+            # R.T @ p in a fixed order (BLAS's differs per CPU): fixed_order.mat3T_vec's products and
+            # sums on the rotation's rows as floats (reconstruction.rotation_rows), without its arrays
+            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_rows(pan, tilt)
+            q0 = r00 * x + r10 * y + r20 * z
+            q1 = r01 * x + r11 * y + r21 * z
+            q2 = r02 * x + r12 * y + r22 * z
+            L.true_error_deg.append(math.degrees(math.atan2(math.hypot(q1, q2), q0)))
+            L.true_az_deg.append(math.degrees(math.atan2(q1, q0)))
+            L.true_el_deg.append(math.degrees(math.atan2(q2, math.hypot(q0, q1))))
+            L.target_range_m.append(math.sqrt(x * x + y * y + z * z))    # fixed_order.norm3
+            L.target_lateral_m.append(float(y))
             if out.detection is None:   # at t_mid: the position the cull evaluated (the path's own call's bits)
                 L.target_xyz.append(np.array(p))
             else:
@@ -471,12 +477,12 @@ class ClosedLoop:
         else:
             for lst in (L.true_error_deg, L.true_az_deg, L.true_el_deg, L.target_range_m, L.target_lateral_m):
                 lst.append(math.nan)
-            L.target_xyz.append(np.full(3, np.nan))
+            L.target_xyz.append(_NAN3.copy())
         if out.world_xyz is not None:
             L.estimate_xyz.append(np.asarray(out.world_xyz, float))
             L.estimate_sigma_m.append(float(out.world_sigma_m))
         else:
-            L.estimate_xyz.append(np.full(3, np.nan))
+            L.estimate_xyz.append(_NAN3.copy())
             L.estimate_sigma_m.append(math.nan)
 
 
