@@ -284,12 +284,13 @@ class SceneSensor:
                 wk.cos_incidence_static_kernel(d_world, rng_m, prim, self._bg, offset, self._cos)
         if has["stray_returns"]:
             self._strays(chunk, d_world, t0, t1, rng_m, prim)
-        if scene.multi_object:
-            self.last_object_rays = np.zeros(self._object_prim_start.size - 1, dtype=np.int64)
-            sk.object_rays_kernel(prim, chunk.status, self._object_of_prim, self.last_object_rays)
         # 5. effects, each only if listed (draws in a fixed order, one call per effect and frame),
         # applied to the hits and gathered in scan order in one pass.
-        n_hit = sk.count_hits_kernel(prim, chunk.status)
+        if scene.multi_object:     # the hits per object, and all of them, in one pass
+            self.last_object_rays = np.zeros(self._object_prim_start.size - 1, dtype=np.int64)
+            n_hit = sk.object_rays_kernel(prim, chunk.status, self._object_of_prim, self.last_object_rays)
+        else:
+            n_hit = sk.count_hits_kernel(prim, chunk.status)
         u_return = u_dropout = range_normals = angular_normals = _NONE
         if has["return_probability"]:
             u_return = fx.return_draws(self._stream("return_probability"), n_hit)

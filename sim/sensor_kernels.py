@@ -72,12 +72,17 @@ def object_rays_kernel(prim, status, object_of_prim, out_count):
     objects' primitives (``object_of_prim``: the object of each, drones then others; the background
     and a stray return after them count for none).  One pass instead of numpy's mask, searchsorted
     and bincount over the whole frame (~20 us of the ~10 000 rays of a Mid-40 frame); integers, so
-    the same counts (numpy twin: ``object_rays_twin`` in ``tests/sensor_twins.py``)."""
+    the same counts (numpy twin: ``object_rays_twin`` in ``tests/sensor_twins.py``).  Returns
+    :func:`count_hits_kernel`'s count, from the same pass."""
     n_prims = object_of_prim.shape[0]
+    n_hit = 0
     for j in range(prim.shape[0]):
         p = prim[j]
-        if p >= 0 and p < n_prims and status[j] == RAY_OK:
-            out_count[object_of_prim[p]] += 1
+        if p >= 0 and status[j] == RAY_OK:
+            n_hit += 1
+            if p < n_prims:
+                out_count[object_of_prim[p]] += 1
+    return n_hit
 
 
 @njit(cache=True, inline="always")

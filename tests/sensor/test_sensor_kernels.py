@@ -167,6 +167,7 @@ def test_object_rays_kernel_matches_twin(seed):
     prim = rng.integers(-1, int(start[-1]) + 3, n)           # past the objects: background, strays
     status = rng.choice([RAY_OK, RAY_OK, RAY_TIR, RAY_GRAZING], n).astype(np.uint8)
     got = np.zeros(sizes.size, dtype=np.int64)
-    sk.object_rays_kernel(prim, status, np.repeat(np.arange(sizes.size), sizes), got)
+    n_hit = sk.object_rays_kernel(prim, status, np.repeat(np.arange(sizes.size), sizes), got)
     want = object_rays_twin(prim, status, start)
     assert got.dtype == want.dtype and np.array_equal(got, want)
+    assert n_hit == sk.count_hits_kernel(prim, status) == int(np.count_nonzero((prim >= 0) & (status == RAY_OK)))
