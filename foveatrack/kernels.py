@@ -251,8 +251,10 @@ def axis_angles_kernel(K, accel, has_accel, lo, hi, has_limits, wrap, ts, out, c
     in its order, pan wrapped as ``wrap_deg`` wraps a float).  ``K`` (m, 4): the knots' ``(t, angle,
     v, v_tgt)`` in time order, the first in force at the earliest of ``ts``; ``accel`` the speed's
     ramp if ``has_accel``; ``lo``, ``hi`` the stops if ``has_limits``.  A knot that reverses toward a
-    stop is left to the twin (``py[i]`` set; its square is libm's ``pow``, as CPython's ``**``);
-    returns how many were."""
+    stop is the kernel's where its deceleration clearly stops short of the stop (``_reversal_at_stop``'s
+    test, ``reach <= g``, with ``m * m`` for its ``m ** 2`` and a margin of 1e-12 of the terms, far
+    above the few ulps between libm's ``pow``, as CPython's ``**``, and the product); one that may
+    reach the stop is left to the twin (``py[i]`` set).  Returns how many were."""
     m = K.shape[0]
     n_py = 0
     for i in range(ts.shape[0]):
@@ -277,9 +279,20 @@ def axis_angles_kernel(K, accel, has_accel, lo, hi, has_limits, wrap, ts, out, c
                 ang = kang + kv * T + 0.5 * a * T * T + kvt * (tau - T)
         if has_limits:
             if has_accel and kv * kvt < 0.0:
-                py[i] = True
-                n_py += 1
-                continue
+                # _reversal_at_stop's "reach <= g" (its min and max as Python's: the first unless the
+                # second is strictly less / greater); then its None: the motion above, clamped below
+                stop = hi if kv > 0.0 else lo
+                g = (1.0 if kv > 0.0 else -1.0) * (stop - kang)
+                g = 0.0 if 0.0 > g else g
+                u = abs(kv)
+                t_turn = u / accel
+                mt = t_turn if t_turn < tau else tau
+                near = u * mt
+                far = 0.5 * accel * (mt * mt)
+                if not near - far + 1e-12 * (near + far) + 1e-300 <= g:
+                    py[i] = True
+                    n_py += 1
+                    continue
             if ang > hi or ang < lo:
                 ang = min(max(ang, lo), hi)
         if wrap and not (-180.0 < ang <= 180.0):

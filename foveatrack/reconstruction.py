@@ -226,8 +226,8 @@ class _AxisIntegrator:
         """``out[i, col] = angle(ts[i])`` (the same bits) for the instants ``ts`` (K,) float64, the
         earliest ``t_min``: the knots in force from then passed to one kernel call
         (:func:`foveatrack.kernels.axis_angles_kernel`), where eleven calls of :meth:`angle` were
-        most of a frame's node poses.  Instants before the kept knots, and a knot reversing toward a
-        stop, are :meth:`angle`'s own."""
+        most of a frame's node poses.  Instants before the kept knots, and a knot whose reversal may
+        carry the head into a stop, are :meth:`angle`'s own."""
         global _axis_angles_kernel
         if _axis_angles_kernel is None:     # numba loads on first use, not on import
             from foveatrack.kernels import axis_angles_kernel as _axis_angles_kernel

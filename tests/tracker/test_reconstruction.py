@@ -261,6 +261,41 @@ def test_pan_tilt_many_is_angles_at_bit_for_bit():
             t += float(rng.uniform(0.02, 0.3))
 
 
+def test_a_reversal_short_of_its_stop_is_the_kernel_s_and_one_that_may_reach_it_the_twin_s():
+    """axis_angles_kernel on a tilt knot reversing toward a stop: where the deceleration clearly stops
+    short of the stop (most reversals), the kernel's angle, the same bits as _AxisIntegrator.angle's;
+    where it may reach the stop (its test with ``m ** 2``), left to the twin (``py`` set)."""
+    from foveatrack.kernels import axis_angles_kernel
+    from foveatrack.reconstruction import _Knot
+
+    rec = Reconstructor(SpeedTable.nominal(), pan0_deg=0.0, tilt0_deg=0.0, t0_s=0.0, latency_s=0.01,
+                        dead_time_s=0.03, accel_deg_s2=40.0, tilt_limits_deg=(-30.0, 60.0), history_s=3.0)
+    ax = rec.tilt
+    rng = np.random.default_rng(11)
+    kernel_s = twin_s = 0
+    for _ in range(3000):
+        lo, hi = ax.limits
+        accel = float(rng.choice([20.0, 40.0, 300.0, rng.uniform(5.0, 500.0)]))
+        v = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 120.0))
+        vt = float(-math.copysign(rng.uniform(0.5, 120.0), v))
+        # near a stop (often within the deceleration's reach), or anywhere
+        ang0 = float(rng.choice([rng.uniform(lo, hi), hi - rng.uniform(0.0, 3.0), lo + rng.uniform(0.0, 3.0)]))
+        ax.accel = accel
+        ax.knots = [_Knot(1.0, ang0, v, vt, 5, 1, np.zeros(65), 0.0)]
+        ax.times = [1.0]
+        ts = 1.0 + np.sort(rng.uniform(0.0, 3.0 * abs(v) / accel + 0.1, 11))
+        out = np.zeros((11, 1))
+        py = np.zeros(11, np.bool_)
+        n = axis_angles_kernel(np.array([[1.0, ang0, v, vt]]), accel, True, lo, hi, True, False, ts, out, 0, py)
+        assert n == int(py.sum())
+        for i, t in enumerate(ts.tolist()):
+            if not py[i]:
+                assert out[i, 0].tobytes() == np.float64(ax.angle(t)).tobytes()
+        kernel_s += int((~py).sum())
+        twin_s += n
+    assert kernel_s > 10_000 and twin_s > 1_000, (kernel_s, twin_s)
+
+
 @pytest.mark.parametrize("accel", [None, 40.0, 300.0])
 def test_pan_tilt_array_is_angle_s_twin_on_every_branch(accel):
     """Reconstructor.pan_tilt_array (axis_angles_kernel) against _AxisIntegrator.angle, bit for bit:
