@@ -141,16 +141,29 @@ def first_valid_kernel(xyz):
 
 
 @njit(cache=True)
+def _entry_row(R, D, i, w, r, qx, qy, qz):
+    """Row ``r`` of :func:`_turn`'s product: the same operations in its order (the same bits)."""
+    m0 = R[i, r, 0] + D[i, r, 0] * w
+    m1 = R[i, r, 1] + D[i, r, 1] * w
+    m2 = R[i, r, 2] + D[i, r, 2] * w
+    return m0 * qx + m1 * qy + m2 * qz
+
+
+@njit(cache=True)
 def world_in_box_kernel(xyz, t_ns, R, t0_s, step_s, off, lo, hi, xyz_out, t_out, world_out):
     """The valid points of ``xyz`` (N, 3) (:func:`first_valid_kernel`'s test), each turned as
     :func:`world_points_kernel` turns it, and of those the ones inside the world box ``lo <= p < hi``
     (:func:`foveatrack.kernels.box_inside_kernel`'s test): their lidar points, times and world points
     into the first rows of ``xyz_out``, ``t_out``, ``world_out``, in point order; returns how many.
     One pass where the validity test, the turn, the box test and the cuts of three arrays were five
-    (a frame's 3 k points, a tenth of them kept)."""
+    (a frame's 3 k points, a tenth of them kept).  The world z first, each row by :func:`_turn`'s
+    operations: the scenes' D has its floor just under the head, and on swarm + flock 12 of 2.4 k
+    points a frame pass it; the others skip x and y (the kernel 25 -> 14 us a frame)."""
     n = xyz.shape[0]
     U = _node_places(t_ns, t0_s, step_s, R.shape[0] - 1)
     D = _node_changes(R)
+    last = R.shape[0] - 1
+    off0, off1, off2 = off[0], off[1], off[2]
     lo0, lo1, lo2 = lo[0], lo[1], lo[2]
     hi0, hi1, hi2 = hi[0], hi[1], hi[2]
     m = 0
@@ -160,11 +173,21 @@ def world_in_box_kernel(xyz, t_ns, R, t0_s, step_s, off, lo, hi, xyz_out, t_out,
         z = xyz[k, 2]
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and (x != 0.0 or y != 0.0 or z != 0.0)):
             continue
-        _turn(xyz, k, R, D, U[k], off, world_out, m)
-        wx = world_out[m, 0]
-        wy = world_out[m, 1]
-        wz = world_out[m, 2]
-        if (wx >= lo0) & (wx < hi0) & (wy >= lo1) & (wy < hi1) & (wz >= lo2) & (wz < hi2):
+        u = U[k]
+        i = min(int(u), last - 1)       # u >= 0: truncation is floor
+        w = u - i
+        qx = x + off0
+        qy = y + off1
+        qz = z + off2
+        wz = _entry_row(R, D, i, w, 2, qx, qy, qz)
+        if not ((wz >= lo2) & (wz < hi2)):
+            continue
+        wx = _entry_row(R, D, i, w, 0, qx, qy, qz)
+        wy = _entry_row(R, D, i, w, 1, qx, qy, qz)
+        if (wx >= lo0) & (wx < hi0) & (wy >= lo1) & (wy < hi1):
+            world_out[m, 0] = wx
+            world_out[m, 1] = wy
+            world_out[m, 2] = wz
             xyz_out[m, 0] = x
             xyz_out[m, 1] = y
             xyz_out[m, 2] = z
