@@ -107,7 +107,7 @@ from collections.abc import Mapping
 
 from foveatrack.config_util import as_float, check_keys
 from foveatrack.errors import UserError
-from foveatrack.sky.features import window_features
+from foveatrack.sky.features import window_features, window_features_many
 
 LABELS = ("unknown", "clutter", "bird", "drone")
 
@@ -174,7 +174,20 @@ class ClassifierConfig:
 def classify(track, cfg: ClassifierConfig) -> tuple[str, dict]:
     """``(label, features)`` of a track (module docstring)."""
     enough = len(track.history) >= cfg.min_hits
-    f = window_features(track, (cfg.min_flap_period_s, cfg.flap_autocorr) if enough else None)
+    return _rules(track, window_features(track, (cfg.min_flap_period_s, cfg.flap_autocorr) if enough else None),
+                  enough, cfg)
+
+
+def classify_many(tracks, cfg: ClassifierConfig) -> list[tuple[str, dict]]:
+    """:func:`classify` of each of ``tracks`` (the same labels and features), their windows'
+    features in one kernel call (:func:`foveatrack.sky.features.window_features_many`)."""
+    enough = [len(tr.history) >= cfg.min_hits for tr in tracks]
+    fs = window_features_many(tracks, enough, (cfg.min_flap_period_s, cfg.flap_autocorr))
+    return [_rules(tr, f, e, cfg) for tr, f, e in zip(tracks, fs, enough)]
+
+
+def _rules(track, f: dict, enough: bool, cfg: ClassifierConfig) -> tuple[str, dict]:
+    """Rules 1-4 on the track's features ``f`` (``enough``: its window holds ``min_hits``)."""
     if not enough:
         n = cfg.bird_speed_after_hits
         if n and track.hits >= n and f["speed_m_s"] >= cfg.bird_speed_m_s:

@@ -8,6 +8,8 @@ classifies a few tracks a frame, and the same arithmetic in Python lists took ~2
 14 hits, the largest share of the sky tracker's frame after the per-point work.  Its plain-Python
 twin (:func:`features_python`, :func:`flap_period_s` and ``math.fsum``) is what
 ``tests/sky/test_classify.py`` compares it with, bit for bit.
+A frame's reclassified tracks go in one call (:func:`features_many_kernel`, from
+:func:`foveatrack.sky.classify.classify_many`), every sum's partials and temporaries in one workspace.
 """
 
 from __future__ import annotations
@@ -110,11 +112,17 @@ def fsum_kernel(xs):
     from the top until inexact, and the correction that makes the rounding half-even across them.
     Exactly rounded, so the bits of ``math.fsum`` whatever the order (its errors too: an intermediate
     overflow of finite values, -inf + inf)."""
-    p = np.empty(xs.shape[0] + 1)
+    return _fsum_into(xs, xs.shape[0], np.empty(xs.shape[0] + 1))
+
+
+@njit(cache=True)
+def _fsum_into(xs, m, p):
+    """:func:`fsum_kernel` of ``xs[:m]``, its partials in ``p`` (at least ``m + 1`` long; the
+    features' one workspace, not an array a sum)."""
     n = 0
     special_sum = 0.0
     inf_sum = 0.0
-    for k in range(xs.shape[0]):
+    for k in range(m):
         x = xs[k]
         xsave = x
         i = 0
@@ -172,16 +180,16 @@ def fsum_kernel(xs):
 
 
 @njit(cache=True)
-def _mean_kernel(xs):
-    return fsum_kernel(xs) / xs.shape[0]
+def _mean_kernel(xs, m, p):
+    return _fsum_into(xs, m, p) / m
 
 
 @njit(cache=True)
 def _sorted_middle(xs):
     """``sorted(xs)[len(xs) // 2]`` (a stable insertion sort: the element Python's sort puts there),
     for values with no NaN among them (a NaN compares false both ways and the two sorts part): the
-    tracker's box sides and point counts come from finite points."""
-    a = xs.copy()
+    tracker's box sides and point counts come from finite points.  Sorts ``xs`` in place."""
+    a = xs
     for i in range(1, a.shape[0]):
         v = a[i]
         j = i - 1
@@ -193,42 +201,53 @@ def _sorted_middle(xs):
 
 
 @njit(cache=True)
-def _velocity_kernel(ts, P, out):
-    """:func:`_velocity` of the times ``ts`` (n,) and positions ``P`` (n, 3), into ``out`` (3,)."""
+def _velocity_kernel(ts, P, out, W):
+    """:func:`_velocity` of the times ``ts`` (n,) and positions ``P`` (n, 3), into ``out`` (3,);
+    ``W`` (4, >= n + 1) a workspace."""
     n = ts.shape[0]
-    tm = _mean_kernel(ts)
-    dts = np.empty(n)
+    p = W[0]
+    dts = W[1]
+    tmp = W[2]
+    xs = W[3]
+    tm = _mean_kernel(ts, n, p)
     for i in range(n):
         dts[i] = ts[i] - tm
-    den = fsum_kernel(dts * dts)
+    for i in range(n):
+        tmp[i] = dts[i] * dts[i]
+    den = _fsum_into(tmp, n, p)
     if den == 0.0:
         out[:] = 0.0
         return
-    xs = np.empty(n)
     for a in range(3):
         for i in range(n):
             xs[i] = P[i, a]
-        xm = _mean_kernel(xs)
-        prod = np.empty(n)
+        xm = _mean_kernel(xs, n, p)
         for i in range(n):
-            prod[i] = dts[i] * (xs[i] - xm)
-        out[a] = fsum_kernel(prod) / den
+            tmp[i] = dts[i] * (xs[i] - xm)
+        out[a] = _fsum_into(tmp, n, p) / den
 
 
 @njit(cache=True)
-def _flap_period_kernel(ts, zs, min_period_s, threshold):
+def _flap_period_kernel(ts, zs, min_period_s, threshold, W):
     """:func:`flap_period_s`; NaN for None.  Each lag's autocorrelation is summed when the search
-    first reads it, as there (a lag read by none is never summed)."""
+    first reads it, as there (a lag read by none is never summed).  ``W`` (4, >= n + 1) a workspace
+    (``zs`` not in it)."""
     n = zs.shape[0]
     if n < 6:
         return np.nan
+    p = W[0]
+    d = W[1]
+    tmp = W[2]
+    ac = W[3]               # each lag's autocorrelation, NaN until summed
     dt = (ts[n - 1] - ts[0]) / (n - 1)
-    m = _mean_kernel(zs)
-    d = zs - m
-    var = fsum_kernel(d * d)
+    m = _mean_kernel(zs, n, p)
+    for i in range(n):
+        d[i] = zs[i] - m
+    for i in range(n):
+        tmp[i] = d[i] * d[i]
+    var = _fsum_into(tmp, n, p)
     if var <= 0.0 or dt <= 0.0:
         return np.nan
-    ac = np.empty(n // 2 + 1)
     done = np.zeros(n // 2 + 1, np.bool_)
     for k in range(1, n // 2):
         if not k * dt >= min_period_s:
@@ -236,7 +255,9 @@ def _flap_period_kernel(ts, zs, min_period_s, threshold):
         peak = True
         for q in (k, k - 1, k + 1):         # at(k), at(k - 1), at(k + 1) as the test reads them
             if not done[q]:
-                ac[q] = fsum_kernel(d[:n - q] * d[q:]) / var
+                for i in range(n - q):
+                    tmp[i] = d[i] * d[i + q]
+                ac[q] = _fsum_into(tmp, n - q, p) / var
                 done[q] = True
             if not (ac[k] >= threshold if q == k else ac[k] >= ac[q]):
                 peak = False
@@ -255,14 +276,24 @@ def features_kernel(TC, PS, want_period, min_period_s, threshold, out):
     ``want_period``) and its value.  (Two arrays, not four: each array an argument cost ~0.3 us a
     call in the dispatch.)"""
     n = TC.shape[0] // 2
+    _features(TC, PS, want_period, min_period_s, threshold, out, np.empty((7, n + 1)))
+
+
+@njit(cache=True)
+def _features(TC, PS, want_period, min_period_s, threshold, out, W):
+    """:func:`features_kernel` with ``W`` (7, >= n + 1) its workspace: its sums' partials and
+    temporaries (one array a window where they were a couple of dozen)."""
+    n = TC.shape[0] // 2
     ts = TC[:n]
-    n_points = TC[n:]
     P = PS[:n]
     S = PS[n:]
-    out[0] = _sorted_middle(n_points)
+    p = W[0]
+    zs = W[1]
+    tmp = W[2]
+    for i in range(n):
+        tmp[i] = TC[n + i]
+    out[0] = _sorted_middle(tmp[:n])
     span = ts[n - 1] - ts[0]
-    zs = np.empty(n)
-    big = np.empty(n)
     for i in range(n):
         zs[i] = S[i, 2]
         m = S[i, 0]                  # max(s): the first of the largest, as Python's max
@@ -270,8 +301,8 @@ def features_kernel(TC, PS, want_period, min_period_s, threshold, out):
             m = S[i, 1]
         if S[i, 2] > m:
             m = S[i, 2]
-        big[i] = m
-    out[1] = _sorted_middle(big)
+        tmp[i] = m
+    out[1] = _sorted_middle(tmp[:n])
     if span > 0:
         dx = P[n - 1, 0] - P[0, 0]
         dy = P[n - 1, 1] - P[0, 1]
@@ -279,23 +310,23 @@ def features_kernel(TC, PS, want_period, min_period_s, threshold, out):
         out[2] = math.sqrt(dx * dx + dy * dy + dz * dz) / span
     else:
         out[2] = 0.0
-    zm = _mean_kernel(zs)
+    zm = _mean_kernel(zs, n, p)
     if zm > 0:
-        dz2 = np.empty(n)
         for i in range(n):
-            dz2[i] = (zs[i] - zm) * (zs[i] - zm)
-        out[3] = math.sqrt(_mean_kernel(dz2)) / zm
+            tmp[i] = (zs[i] - zm) * (zs[i] - zm)
+        out[3] = math.sqrt(_mean_kernel(tmp, n, p)) / zm
     else:
         out[3] = 0.0
     half = n // 2
     out[4] = 0.0
     out[5] = 0.0
+    V = W[3:7]
     if half >= 3:
         va = np.empty(3)
         vb = np.empty(3)
-        _velocity_kernel(ts[:half], P[:half], va)
-        _velocity_kernel(ts[half:], P[half:], vb)
-        dt = _mean_kernel(ts[half:]) - _mean_kernel(ts[:half])
+        _velocity_kernel(ts[:half], P[:half], va, V)
+        _velocity_kernel(ts[half:], P[half:], vb, V)
+        dt = _mean_kernel(ts[half:], n - half, p) - _mean_kernel(ts[:half], half, p)
         out[4] = 1.0
         if dt > 0:
             ex = vb[0] - va[0]
@@ -305,7 +336,7 @@ def features_kernel(TC, PS, want_period, min_period_s, threshold, out):
     out[6] = 0.0
     out[7] = 0.0
     if want_period:
-        period = _flap_period_kernel(ts, zs, min_period_s, threshold)
+        period = _flap_period_kernel(ts, zs[:n], min_period_s, threshold, V)
         if not math.isnan(period):
             out[6] = 1.0
             out[7] = period
@@ -336,3 +367,54 @@ def window_features(track, period: tuple[float, float] | None) -> dict:
         f["manoeuvre_m_s2"] = manoeuvre
     f["flap_period_s"] = flap if has_period else None
     return f
+
+
+@njit(cache=True)
+def features_many_kernel(TC, PS, starts, want_period, min_period_s, threshold, out):
+    """:func:`features_kernel` of many windows: window ``j`` is the hits ``starts[j]`` to
+    ``starts[j + 1]`` of the concatenated ones, its ``TC`` rows ``2 starts[j]`` to ``2 starts[j + 1]``
+    (its times, then its returns), its ``PS`` rows so (positions, then box sides); its features into
+    ``out[j]``, its flap period looked for if ``want_period[j]``."""
+    longest = 0
+    for j in range(starts.shape[0] - 1):
+        longest = max(longest, starts[j + 1] - starts[j])
+    W = np.empty((7, longest + 1))          # one workspace for every window
+    for j in range(starts.shape[0] - 1):
+        a = 2 * starts[j]
+        b = 2 * starts[j + 1]
+        _features(TC[a:b], PS[a:b], want_period[j], min_period_s, threshold, out[j], W)
+
+
+def window_features_many(tracks, want_period, period: tuple[float, float]) -> list[dict]:
+    """:func:`window_features` of each of ``tracks``, ``period`` looked for where ``want_period[i]``
+    (a sequence of bools), the windows in one :func:`features_many_kernel` call: a frame's few
+    reclassified tracks paid the arrays' making and the kernel's dispatch each, ~4 us a track."""
+    fs = [_base_features(tr) for tr in tracks]
+    tc, ps_sides, starts, want, due = [], [], [0], [], []
+    for f, tr, w in zip(fs, tracks, want_period):
+        h = tr.history
+        if len(h) < 2:
+            continue
+        ts, ps, sides, counts = zip(*h)      # the hits' columns in one pass over the window
+        tc += ts
+        tc += counts                         # (a count of returns is a whole number: the same as a float)
+        ps_sides += ps
+        ps_sides += sides
+        starts.append(starts[-1] + len(h))
+        want.append(w)
+        due.append(f)
+    if not due:
+        return fs
+    out = np.empty((len(due), 8))
+    features_many_kernel(np.array(tc, np.float64), np.concatenate(ps_sides, dtype=np.float64).reshape(-1, 3),
+                         np.array(starts, np.int64), np.array(want, np.bool_), *period, out)
+    for f, (median_points, size_m, net_speed, flap_cv, has_manoeuvre, manoeuvre, has_period, flap) in zip(
+            due, out.tolist()):
+        f["median_points"] = median_points
+        f["size_m"] = size_m
+        f["net_speed_m_s"] = net_speed
+        f["flap_cv"] = flap_cv
+        if has_manoeuvre:
+            f["manoeuvre_m_s2"] = manoeuvre
+        f["flap_period_s"] = flap if has_period else None
+    return fs

@@ -116,7 +116,7 @@ from foveatrack.kernels import (association_kernel, box_inside_kernel, close_pai
                                 valid_mask_kernel)
 from foveatrack.openloop.objects import frame_objects
 from foveatrack.reconstruction import head_trig, rotation_rows
-from foveatrack.sky.classify import ClassifierConfig, classify, held_label
+from foveatrack.sky.classify import ClassifierConfig, classify_many, held_label
 from foveatrack.sky.motion import (ConstantVelocityFilter, positions_many, positions_velocities_many, predictions_many,
                                    variances_many)
 from foveatrack.openloop.range_background import RangeBackground, check_cell_deg
@@ -542,8 +542,8 @@ class SkyTracker:
             keep[fg_idx[~learn_pts]] = False
             self.background.learn(cells[keep], ranges[keep])
         deleted, positions, velocities = self._prune(t_mid, fovea_track_id, t1 - t0)
+        self._classify()
         for tr in self.tracks:
-            self._classify(tr)
             was_drone = tr.label == "drone"
             tr.label, tr.drone_frames, tr.drone_hits = held_label(tr.seen_as, tr.label, tr.drone_frames, tr.drone_hits,
                                                                    tr.hit_now and not tr.lone_now, cfg.classifier)
@@ -668,17 +668,20 @@ class SkyTracker:
         ok = allowed[rows, cols].tolist()
         return [(i, j) for i, j, yes in zip(rows.tolist(), cols.tolist(), ok) if yes], allowed
 
-    def _classify(self, tr: SkyTrack) -> None:
-        """Rules 1-4 of the classifier on the track, unless nothing they read has changed since they
-        last ran (most tracks get no hit in a frame): what they read is its history, its filter's
+    def _classify(self) -> None:
+        """Rules 1-4 of the classifier on the tracks, except those where nothing they read has changed
+        since they last ran (most tracks get no hit in a frame): what they read is its history, its filter's
         velocity, its excursion, its last hit's time, its count of hits (rule 1's early bird) and
         whether it is labelled drone (rule 4 keeps the label), and what changes one of them sets ``tr.reclassify`` (:meth:`_measured`, the
         prune's cut of the history, the label's change to or from drone).  A flag, not a key of
-        what was read compared every frame: the key cost ~1 us a track, a flock's twenty a frame."""
-        if tr.reclassify:
+        what was read compared every frame: the key cost ~1 us a track, a flock's twenty a frame.
+        The due tracks' windows in one kernel call (:func:`classify_many`)."""
+        due = [tr for tr in self.tracks if tr.reclassify]
+        if due:
             # a new features dict each time (the frame's views hold the ones before: never written)
-            tr.seen_as, tr.features = classify(tr, self.cfg.classifier)
-            tr.reclassify = False
+            for tr, (seen, f) in zip(due, classify_many(due, self.cfg.classifier)):
+                tr.seen_as, tr.features = seen, f
+                tr.reclassify = False
 
     def _protects(self, tr: SkyTrack, t_s: float, z, on_scenery: bool) -> bool:
         """Whether a hit at ``z`` (at ``t_s``; ``on_scenery``: on scenery in the making) is kept out of

@@ -268,6 +268,45 @@ def test_the_features_kernel_is_its_python_twin_bit_for_bit():
     assert periods > 300 and manoeuvres > 2000
 
 
+
+def test_the_many_windows_kernel_is_each_windows_python_twin_bit_for_bit():
+    # window_features_many (what the tracker runs: a frame's due tracks in one kernel call) against
+    # features_python window by window: batches of 0-8 windows of 0-25 hits (windows of fewer than
+    # two hits among them, which the kernel does not see), the flap period asked for or not per window;
+    # classify_many's labels and features against classify's
+    from foveatrack.sky.classify import classify_many
+    from foveatrack.sky.features import features_python, window_features_many
+
+    rng = np.random.default_rng(3)
+    windows = periods = 0
+    for _ in range(800):
+        tracks, want = [], []
+        for _ in range(int(rng.integers(0, 9))):
+            n = int(rng.integers(0, 26))
+            ts = np.cumsum(rng.uniform(0.08, 0.12, n)) if rng.random() < 0.8 else np.full(n, 1.5)
+            P = rng.normal(size=(n, 3)) * rng.choice([0.01, 1.0, 30.0]) + rng.normal(size=3) * 50
+            S = np.abs(rng.normal(0.3, 0.1, (n, 3)))
+            if rng.random() < 0.5:
+                S[:, 2] = 0.2 + 0.1 * np.sin(2 * np.pi * ts / rng.uniform(0.15, 0.8))
+            hist = [(float(ts[i]), P[i].copy(), S[i].copy(), int(k)) for i, k in enumerate(rng.integers(1, 60, n))]
+            tracks.append(SimpleNamespace(history=hist, kf=SimpleNamespace(speed_m_s=float(rng.uniform(0, 9))),
+                                          excursion_m=float(rng.uniform(0, 3)), first_t_s=0.0, last_hit_t_s=3.0,
+                                          hits=n, label=str(rng.choice(["unknown", "drone"]))))
+            want.append(bool(rng.random() < 0.7))
+        period = (float(rng.choice([0.0, 0.2])), float(rng.choice([0.2, 0.5])))
+        got = window_features_many(tracks, want, period)
+        assert len(got) == len(tracks)
+        for tr, w, f in zip(tracks, want, got):
+            expect = features_python(tr, period if w else None)
+            assert _bits(f) == _bits(expect)
+            windows += len(tr.history) >= 2
+            periods += expect.get("flap_period_s") is not None
+        cfg = ClassifierConfig(min_hits=int(rng.integers(2, 8)))
+        assert [(lab, _bits(f)) for lab, f in classify_many(tracks, cfg)] == [
+            (lab, _bits(f)) for lab, f in (classify(tr, cfg) for tr in tracks)]
+    assert windows > 2000 and periods > 100
+
+
 def test_the_kernels_exact_sum_is_math_fsums():
     # fsum_kernel is CPython's math_fsum line for line: the same bits (and the same errors) on sums
     # that cancel, mix huge and tiny values, sit exactly halfway between two doubles (the final

@@ -356,9 +356,10 @@ def _labels_run(monkeypatch, always: bool, name: str, flock: str | None, seed: i
     if always:
         classify_flagged = SkyTracker._classify
 
-        def every_frame(self, tr):
-            tr.reclassify = True            # rules 1-4 run on every track every frame
-            classify_flagged(self, tr)
+        def every_frame(self):
+            for tr in self.tracks:
+                tr.reclassify = True        # rules 1-4 run on every track every frame
+            classify_flagged(self)
         monkeypatch.setattr(SkyTracker, "_classify", every_frame)
     loop = ClosedLoop(sky_scene(name, 12.0, seed, None, flock))
     loop.run()
