@@ -203,7 +203,7 @@ def _sorted_middle(xs):
 @njit(cache=True)
 def _velocity_kernel(ts, P, out, W):
     """:func:`_velocity` of the times ``ts`` (n,) and positions ``P`` (n, 3), into ``out`` (3,);
-    ``W`` (4, >= n + 1) a workspace."""
+    ``W`` (4, >= n + 1) a workspace.  Returns the times' mean (the manoeuvre's dt reads it)."""
     n = ts.shape[0]
     p = W[0]
     dts = W[1]
@@ -217,7 +217,7 @@ def _velocity_kernel(ts, P, out, W):
     den = _fsum_into(tmp, n, p)
     if den == 0.0:
         out[:] = 0.0
-        return
+        return tm
     for a in range(3):
         for i in range(n):
             xs[i] = P[i, a]
@@ -225,13 +225,15 @@ def _velocity_kernel(ts, P, out, W):
         for i in range(n):
             tmp[i] = dts[i] * (xs[i] - xm)
         out[a] = _fsum_into(tmp, n, p) / den
+    return tm
 
 
 @njit(cache=True)
-def _flap_period_kernel(ts, zs, min_period_s, threshold, W):
+def _flap_period_kernel(ts, zs, m, var, min_period_s, threshold, W):
     """:func:`flap_period_s`; NaN for None.  Each lag's autocorrelation is summed when the search
-    first reads it, as there (a lag read by none is never summed).  ``W`` (4, >= n + 1) a workspace
-    (``zs`` not in it)."""
+    first reads it, as there (a lag read by none is never summed).  ``m``: the mean of ``zs``,
+    ``var`` the sum of their squared deviations from it if known (NaN: summed here; the flap cv's
+    sums, the same bits).  ``W`` (4, >= n + 1) a workspace (``zs`` not in it)."""
     n = zs.shape[0]
     if n < 6:
         return np.nan
@@ -240,12 +242,12 @@ def _flap_period_kernel(ts, zs, min_period_s, threshold, W):
     tmp = W[2]
     ac = W[3]               # each lag's autocorrelation, NaN until summed
     dt = (ts[n - 1] - ts[0]) / (n - 1)
-    m = _mean_kernel(zs, n, p)
     for i in range(n):
         d[i] = zs[i] - m
-    for i in range(n):
-        tmp[i] = d[i] * d[i]
-    var = _fsum_into(tmp, n, p)
+    if math.isnan(var):
+        for i in range(n):
+            tmp[i] = d[i] * d[i]
+        var = _fsum_into(tmp, n, p)
     if var <= 0.0 or dt <= 0.0:
         return np.nan
     done = np.zeros(n // 2 + 1, np.bool_)
@@ -311,10 +313,12 @@ def _features(TC, PS, want_period, min_period_s, threshold, out, W):
     else:
         out[2] = 0.0
     zm = _mean_kernel(zs, n, p)
+    sq = np.nan                 # the squared deviations' sum, once (the flap period's too)
     if zm > 0:
         for i in range(n):
             tmp[i] = (zs[i] - zm) * (zs[i] - zm)
-        out[3] = math.sqrt(_mean_kernel(tmp, n, p)) / zm
+        sq = _fsum_into(tmp, n, p)
+        out[3] = math.sqrt(sq / n) / zm
     else:
         out[3] = 0.0
     half = n // 2
@@ -324,9 +328,8 @@ def _features(TC, PS, want_period, min_period_s, threshold, out, W):
     if half >= 3:
         va = np.empty(3)
         vb = np.empty(3)
-        _velocity_kernel(ts[:half], P[:half], va, V)
-        _velocity_kernel(ts[half:], P[half:], vb, V)
-        dt = _mean_kernel(ts[half:], n - half, p) - _mean_kernel(ts[:half], half, p)
+        ta = _velocity_kernel(ts[:half], P[:half], va, V)
+        dt = _velocity_kernel(ts[half:], P[half:], vb, V) - ta      # the halves' mean times
         out[4] = 1.0
         if dt > 0:
             ex = vb[0] - va[0]
@@ -336,7 +339,7 @@ def _features(TC, PS, want_period, min_period_s, threshold, out, W):
     out[6] = 0.0
     out[7] = 0.0
     if want_period:
-        period = _flap_period_kernel(ts, zs[:n], min_period_s, threshold, V)
+        period = _flap_period_kernel(ts, zs[:n], zm, sq, min_period_s, threshold, V)
         if not math.isnan(period):
             out[6] = 1.0
             out[7] = period
