@@ -543,19 +543,24 @@ class SkyTracker:
             self.background.learn(cells[keep], ranges[keep])
         deleted, positions, velocities = self._prune(t_mid, fovea_track_id, t1 - t0)
         self._classify()
-        for tr in self.tracks:
-            was_drone = tr.label == "drone"
-            tr.label, tr.drone_frames, tr.drone_hits = held_label(tr.seen_as, tr.label, tr.drone_frames, tr.drone_hits,
-                                                                   tr.hit_now and not tr.lone_now, cfg.classifier)
-            if (tr.label == "drone") != was_drone:
+        # rule 5 and (after the warm-up's frames) the views in one pass over the tracks; each view
+        # takes its track's features dict, not a copy (the classifier makes a new one each time,
+        # nothing writes one): swarm + flock 0.23 -> 0.21 collections of the collector a frame
+        views = []
+        ccfg = cfg.classifier
+        for tr, p, v in zip(self.tracks, positions, velocities):
+            was = tr.label
+            label, frames, hits = held_label(tr.seen_as, was, tr.drone_frames, tr.drone_hits,
+                                             tr.hit_now and not tr.lone_now, ccfg)
+            tr.label, tr.drone_frames, tr.drone_hits = label, frames, hits
+            if (label == "drone") != (was == "drone"):
                 tr.reclassify = True        # rule 4 reads it
+            if learn:
+                views.append(_make_view(tr.track_id, tr.confirmed_t_s is not None, label, p, v,
+                                        tr.hit_now, tr.in_view, tr.features, tr.clear_hits, tr.seen_as))
         if not learn:
             return (), None, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
-        # each view takes its track's features dict, not a copy (the classifier makes a new one each
-        # time, nothing writes one): swarm + flock 0.23 -> 0.21 collections of the collector a frame
-        views = tuple(_make_view(tr.track_id, tr.confirmed_t_s is not None, tr.label, p, v,
-                                 tr.hit_now, tr.in_view, tr.features, tr.clear_hits, tr.seen_as)
-                      for tr, p, v in zip(self.tracks, positions, velocities))
+        views = tuple(views)
         return views, fovea_det, tuple(confirmed_now), tuple(deleted), int(fg_idx.size), len(objs)
 
     # ------------------------------------------------------------------------------------------
@@ -735,6 +740,9 @@ class SkyTracker:
         cfg = self.cfg
         keep, gone = [], []
         oldest = t_s - cfg.history_s
+        # (the settings read once, not once a track)
+        lost_after, lost_out, window, need = cfg.lost_after_s, cfg.lost_out_of_view_s, cfg.confirm_window, cfg.confirm_hits
+        static_s, static_m = cfg.static_window_s, cfg.static_radius_m
         for tr in self.tracks:
             h = tr.history
             if h and tr.history_in_order:
@@ -749,8 +757,9 @@ class SkyTracker:
                 tr.history = [x for x in h if x[0] >= oldest]
                 if len(tr.history) < len(h):
                     tr.reclassify = True
-            unseen = t_s - max(tr.last_hit_t_s, tr.merged_t_s)
-            if tr.hit_now or tr.merged_t_s == t_s:
+            last, merged = tr.last_hit_t_s, tr.merged_t_s
+            unseen = t_s - (merged if merged > last else last)      # (max(last, merged), as max picks)
+            if tr.hit_now or merged == t_s:
                 tr.unseen_in_view_s = 0.0
             elif tr.last_seen_in_view:
                 tr.unseen_in_view_s += frame_s
@@ -758,14 +767,16 @@ class SkyTracker:
             # attention gives the turn saccade_timeout_s, and a revisit comes when a track at the
             # sparse rim may have gone unseen for lost_after_s
             in_view = tr.last_seen_in_view and tr.track_id != fovea_track_id
-            lost = (in_view and tr.unseen_in_view_s > cfg.lost_after_s) or unseen > cfg.lost_out_of_view_s
+            lost = (in_view and tr.unseen_in_view_s > lost_after) or unseen > lost_out
             confirmed = tr.confirmed_t_s is not None        # (SkyTrack.confirmed, read once here)
-            failed = not confirmed and tr.frames_seen >= cfg.confirm_window and tr.clear_hits < cfg.confirm_hits
+            failed = not confirmed and tr.frames_seen >= window and tr.clear_hits < need
             if lost or failed:
                 gone.append(tr.track_id)
-            elif confirmed and tr.history and self._static(tr, t_s):
-                # (a track without a hit in its history window is not seen standing anywhere: the
-                # lost rule decides; its D would be the median of nothing)
+            elif confirmed and tr.history and t_s - tr.first_t_s >= static_s and tr.excursion_m < static_m:
+                # scenery: in static_window_s of life it never got static_radius_m from where it was
+                # first seen (a crown sways around its place; a drone on its way leaves it).  (A
+                # track without a hit in its history window is not seen standing anywhere: the lost
+                # rule decides; its D would be the median of nothing)
                 c = np.median(np.array([h[1] for h in tr.history]), axis=0)
                 self.background.mark_box(c - cfg.d_half_m, c + cfg.d_half_m)
                 gone.append(tr.track_id)
@@ -814,9 +825,3 @@ class SkyTracker:
                 away.append(weaker.track_id)
         self._together = {k: n for k, n in together.items() if k[0] not in away and k[1] not in away}
         return away
-
-    def _static(self, tr: SkyTrack, t_s: float) -> bool:
-        """Scenery: in ``static_window_s`` of life it never got ``static_radius_m`` from where it
-        was first seen (a crown sways around its place; a drone on its way leaves it)."""
-        cfg = self.cfg
-        return t_s - tr.first_t_s >= cfg.static_window_s and tr.excursion_m < cfg.static_radius_m
