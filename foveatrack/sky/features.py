@@ -8,8 +8,9 @@ classifies a few tracks a frame, and the same arithmetic in Python lists took ~2
 14 hits, the largest share of the sky tracker's frame after the per-point work.  Its plain-Python
 twin (:func:`features_python`, :func:`flap_period_s` and ``math.fsum``) is what
 ``tests/sky/test_classify.py`` compares it with, bit for bit.
-A frame's reclassified tracks go in one call (:func:`features_many_kernel`, from
-:func:`foveatrack.sky.classify.classify_many`), every sum's partials and temporaries in one workspace.
+A frame's reclassified tracks go in one call (:func:`features_rows_kernel`, from
+:func:`foveatrack.sky.classify.classify_many`, on the rows the tracker keeps of each hit), every sum's
+partials and temporaries in one workspace.
 """
 
 from __future__ import annotations
@@ -278,22 +279,20 @@ def features_kernel(TC, PS, want_period, min_period_s, threshold, out):
     ``want_period``) and its value.  (Two arrays, not four: each array an argument cost ~0.3 us a
     call in the dispatch.)"""
     n = TC.shape[0] // 2
-    _features(TC, PS, want_period, min_period_s, threshold, out, np.empty((7, n + 1)))
+    _features(TC[:n], TC[n:], PS[:n], PS[n:], want_period, min_period_s, threshold, out, np.empty((7, n + 1)))
 
 
 @njit(cache=True)
-def _features(TC, PS, want_period, min_period_s, threshold, out, W):
-    """:func:`features_kernel` with ``W`` (7, >= n + 1) its workspace: its sums' partials and
-    temporaries (one array a window where they were a couple of dozen)."""
-    n = TC.shape[0] // 2
-    ts = TC[:n]
-    P = PS[:n]
-    S = PS[n:]
+def _features(ts, counts, P, S, want_period, min_period_s, threshold, out, W):
+    """:func:`features_kernel` of the window's times ``ts`` (n,), returns ``counts`` (n,), positions
+    ``P`` (n, 3) and box sides ``S`` (n, 3), with ``W`` (7, >= n + 1) its workspace: its sums'
+    partials and temporaries (one array a window where they were a couple of dozen)."""
+    n = ts.shape[0]
     p = W[0]
     zs = W[1]
     tmp = W[2]
     for i in range(n):
-        tmp[i] = TC[n + i]
+        tmp[i] = counts[i]
     out[0] = _sorted_middle(tmp[:n])
     span = ts[n - 1] - ts[0]
     for i in range(n):
@@ -373,44 +372,64 @@ def window_features(track, period: tuple[float, float] | None) -> dict:
 
 
 @njit(cache=True)
-def features_many_kernel(TC, PS, starts, want_period, min_period_s, threshold, out):
-    """:func:`features_kernel` of many windows: window ``j`` is the hits ``starts[j]`` to
-    ``starts[j + 1]`` of the concatenated ones, its ``TC`` rows ``2 starts[j]`` to ``2 starts[j + 1]``
-    (its times, then its returns), its ``PS`` rows so (positions, then box sides); its features into
-    ``out[j]``, its flap period looked for if ``want_period[j]``."""
+def features_rows_kernel(H, starts, want_period, min_period_s, threshold, out):
+    """:func:`features_kernel` of many windows given as rows: ``H`` (m, 8) the hits, each ``(t_s,
+    n_points, xyz_m, sides_m)``, window ``j`` its rows ``starts[j]`` to ``starts[j + 1]``; its features
+    into ``out[j]``, its flap period looked for if ``want_period[j]``."""
     longest = 0
     for j in range(starts.shape[0] - 1):
         longest = max(longest, starts[j + 1] - starts[j])
     W = np.empty((7, longest + 1))          # one workspace for every window
     for j in range(starts.shape[0] - 1):
-        a = 2 * starts[j]
-        b = 2 * starts[j + 1]
-        _features(TC[a:b], PS[a:b], want_period[j], min_period_s, threshold, out[j], W)
+        a = starts[j]
+        b = starts[j + 1]
+        _features(H[a:b, 0], H[a:b, 1], H[a:b, 2:5], H[a:b, 5:8], want_period[j], min_period_s, threshold, out[j], W)
+
+
+def history_rows(history) -> np.ndarray:
+    """A history's hits ``(t_s, xyz_m, sides_m, n_points)`` as rows (n, 8) ``(t_s, n_points, xyz_m,
+    sides_m)`` (:func:`features_rows_kernel`'s; a count of returns is a whole number: the same as a
+    float)."""
+    R = np.empty((len(history), 8))
+    if history:
+        ts, ps, sides, counts = zip(*history)
+        R[:, 0] = ts
+        R[:, 1] = counts
+        R[:, 2:5] = ps
+        R[:, 5:8] = sides
+    return R
+
+
+def kept_rows(track):
+    """The track's history as rows (n, 8) where it keeps them in step with its history
+    (:class:`foveatrack.sky.tracks.SkyTrack`'s ``rows``, each hit's row written as it came), else
+    None."""
+    h = track.history
+    if getattr(track, "rows_of", None) is h and track.rows_end - track.rows_lo == len(h):
+        return track.rows[track.rows_lo:track.rows_end]
+    return None
 
 
 def window_features_many(tracks, want_period, period: tuple[float, float]) -> list[dict]:
     """:func:`window_features` of each of ``tracks``, ``period`` looked for where ``want_period[i]``
-    (a sequence of bools), the windows in one :func:`features_many_kernel` call: a frame's few
-    reclassified tracks paid the arrays' making and the kernel's dispatch each, ~4 us a track."""
+    (a sequence of bools), the windows in one :func:`features_rows_kernel` call: a frame's few
+    reclassified tracks paid the arrays' making and the kernel's dispatch each, ~4 us a track.  A
+    track's rows are its own where it keeps them (:func:`kept_rows`), else made of its history."""
     fs = [_base_features(tr) for tr in tracks]
-    tc, ps_sides, starts, want, due = [], [], [0], [], []
+    blocks, starts, want, due = [], [0], [], []
     for f, tr, w in zip(fs, tracks, want_period):
-        h = tr.history
-        if len(h) < 2:
+        n = len(tr.history)
+        if n < 2:
             continue
-        ts, ps, sides, counts = zip(*h)      # the hits' columns in one pass over the window
-        tc += ts
-        tc += counts                         # (a count of returns is a whole number: the same as a float)
-        ps_sides += ps
-        ps_sides += sides
-        starts.append(starts[-1] + len(h))
+        R = kept_rows(tr)
+        blocks.append(history_rows(tr.history) if R is None else R)
+        starts.append(starts[-1] + n)
         want.append(w)
         due.append(f)
     if not due:
         return fs
     out = np.empty((len(due), 8))
-    features_many_kernel(np.array(tc, np.float64), np.concatenate(ps_sides, dtype=np.float64).reshape(-1, 3),
-                         np.array(starts, np.int64), np.array(want, np.bool_), *period, out)
+    features_rows_kernel(np.concatenate(blocks), np.array(starts, np.int64), np.array(want, np.bool_), *period, out)
     for f, (median_points, size_m, net_speed, flap_cv, has_manoeuvre, manoeuvre, has_period, flap) in zip(
             due, out.tolist()):
         f["median_points"] = median_points

@@ -117,6 +117,7 @@ from foveatrack.kernels import (association_kernel, box_inside_kernel, close_pai
 from foveatrack.openloop.objects import frame_objects
 from foveatrack.reconstruction import head_trig, rotation_rows
 from foveatrack.sky.classify import ClassifierConfig, classify_many, held_label
+from foveatrack.sky.features import history_rows
 from foveatrack.sky.motion import (ConstantVelocityFilter, positions_many, positions_velocities_many, predictions_many,
                                    variances_many)
 from foveatrack.openloop.range_background import RangeBackground, check_cell_deg
@@ -262,6 +263,26 @@ class SkyObject:
 _make_object = frozen_maker(SkyObject)    # SkyObject(...) without the frozen init's cost per field, per object
 
 
+def _add_row(tr: "SkyTrack", t_s: float, z, sides, n_points: int) -> None:
+    """A hit's row after the track's rows (:class:`SkyTrack`'s ``rows``), as its history takes the
+    hit; a full buffer's live rows move to a fresh one twice their number (32 at least)."""
+    buf, end = tr.rows, tr.rows_end
+    if buf is None or end == buf.shape[0]:
+        lo = tr.rows_lo
+        live = 0 if buf is None else end - lo
+        new = np.empty((max(32, 2 * live), 8))
+        if live:
+            new[:live] = buf[lo:end]
+        buf, end = new, live
+        tr.rows, tr.rows_lo = new, 0
+    row = buf[end]
+    row[0] = t_s
+    row[1] = n_points
+    row[2:5] = z
+    row[5:8] = sides
+    tr.rows_end = end + 1
+
+
 @dataclass
 class SkyTrack:
     """A tentative or confirmed track.  ``history``: (t_s, xyz_m, sides_m, n_points) of its hits in
@@ -291,6 +312,13 @@ class SkyTrack:
     unseen_in_view_s: float = 0.0   # time since its last hit during which where it was last seen lay in the field
     reclassify: bool = True         # something rules 1-4 read has changed since they last ran (SkyTracker._classify)
     history_in_order: bool = True   # each hit's time >= the one before: the prune cuts a prefix (SkyTracker._prune)
+    # the history's hits as rows (t_s, n_points, xyz_m, sides_m), rows[rows_lo:rows_end], each written
+    # as its hit came (_add_row): the classifier's input without a list made into arrays each time it
+    # runs (foveatrack.sky.features.kept_rows); rows_of: the history list they are of (another: not read)
+    rows: np.ndarray | None = None
+    rows_lo: int = 0
+    rows_end: int = 0
+    rows_of: list | None = None
 
     @property
     def confirmed(self) -> bool:
@@ -528,6 +556,8 @@ class SkyTracker:
                 tr = SkyTrack(self._next_id, ConstantVelocityFilter(ob.t_s, ob.xyz_m, cfg.q_m2_s3, cfg.r_m2,
                                                                     cfg.v0_sigma_m_s), ob.t_s, ob.t_s)
                 tr.history.append((ob.t_s, ob.xyz_m, ob.sides_m, ob.n_points))
+                tr.rows_of = tr.history
+                _add_row(tr, ob.t_s, ob.xyz_m, ob.sides_m, ob.n_points)
                 tr.origin_xyz_m = tr.last_xyz_m = np.asarray(ob.xyz_m, float)
                 tr.hit_now = True
                 tr.clear_hits = int(not ob.on_scenery)
@@ -727,9 +757,12 @@ class SkyTracker:
         self._measured(tr, t_s, z)
         tr.hits += 1
         tr.clear_hits += not ob.on_scenery
-        if tr.history and not t_s >= tr.history[-1][0]:
+        h = tr.history
+        if h and not t_s >= h[-1][0]:
             tr.history_in_order = False
-        tr.history.append((t_s, z, ob.sides_m, ob.n_points))
+        if tr.rows_of is h:
+            _add_row(tr, t_s, z, ob.sides_m, ob.n_points)
+        h.append((t_s, z, ob.sides_m, ob.n_points))
 
     def _prune(self, t_s: float, fovea_track_id: int | None, frame_s: float
                ) -> tuple[list[int], np.ndarray, np.ndarray]:
@@ -753,10 +786,18 @@ class SkyTracker:
                         k += 1
                     tr.history = h[k:]
                     tr.reclassify = True
+                    if tr.rows_of is h:         # the rows' prefix so
+                        tr.rows_lo += k
+                        tr.rows_of = tr.history
             elif h:
                 tr.history = [x for x in h if x[0] >= oldest]
                 if len(tr.history) < len(h):
                     tr.reclassify = True
+                    if tr.rows_of is h:         # (rare: a hit older than the one before) made afresh
+                        R = history_rows(tr.history)
+                        tr.rows, tr.rows_lo, tr.rows_end = R, 0, R.shape[0]
+                if tr.rows_of is h:
+                    tr.rows_of = tr.history
             last, merged = tr.last_hit_t_s, tr.merged_t_s
             unseen = t_s - (merged if merged > last else last)      # (max(last, merged), as max picks)
             if tr.hit_now or merged == t_s:

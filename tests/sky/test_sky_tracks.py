@@ -655,6 +655,7 @@ def test_the_prune_cuts_the_history_as_the_window_s_filter_does():
     # _prune cuts a history in time order at its first hit inside the window (a prefix goes, and the
     # list stays as it is when none does); one out of order (a hit appended earlier than the one
     # before, a NaN) is filtered hit by hit: either way, the hits the window's filter keeps
+    from foveatrack.sky.features import history_rows, kept_rows
     from foveatrack.sky.motion import ConstantVelocityFilter
     from foveatrack.sky.tracks import SkyObject, SkyTrack
 
@@ -674,8 +675,9 @@ def test_the_prune_cuts_the_history_as_the_window_s_filter_does():
         tr = SkyTrack(0, ConstantVelocityFilter(0.0, np.zeros(3), cfg.q_m2_s3, cfg.r_m2, cfg.v0_sigma_m_s), 0.0, t_s,
                       hit_now=True)
         tr.origin_xyz_m = np.zeros(3)
+        tr.rows_of = tr.history         # the classifier's rows kept in step, as a new track's are
         for t in times:
-            tracker._hit(tr, t, np.ones(3), SkyObject(np.ones(3), t, 3, side))
+            tracker._hit(tr, t, np.ones(3) * t, SkyObject(np.ones(3), t, 3, side))
         tr.last_hit_t_s = t_s           # not lost
         want = [h for h in tr.history if h[0] >= t_s - cfg.history_s]
         assert tr.history_in_order == all(b >= a for a, b in zip(times, times[1:]))
@@ -685,6 +687,14 @@ def test_the_prune_cuts_the_history_as_the_window_s_filter_does():
         assert [h[0] for h in tr.history] == [h[0] for h in want] and all(a is b for a, b in zip(tr.history, want))
         if len(want) == len(before) and tr.history_in_order:
             assert tr.history is before
+        # the rows the classifier reads are the history's, bit for bit, cut or filtered, and after a
+        # hit more and the next frame's prune
+        rows = kept_rows(tr)
+        assert rows is not None and rows.tobytes() == history_rows(tr.history).tobytes()
+        tracker._hit(tr, t_s + 0.5, np.full(3, 2.0), SkyObject(np.ones(3), t_s + 0.5, 4, side))
+        tracker._prune(t_s + 1.0, None, 0.1)
+        rows = kept_rows(tr)
+        assert rows is not None and rows.tobytes() == history_rows(tr.history).tobytes()
 
 
 def test_the_distances_on_floats_are_norm3_s_of_the_arrays():
