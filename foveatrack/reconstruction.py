@@ -463,15 +463,16 @@ class Reconstructor(HeadPose):
             out.append((hit[0], hit[1]) if hit is not None else (self.pan.angle(t), self.tilt.angle(t)))
         return out
 
-    def pan_tilt_array(self, times) -> np.ndarray:
+    def pan_tilt_array(self, times, increasing: bool = False) -> np.ndarray:
         """:meth:`pan_tilt_many`'s angles as a (K, 2) float64 array (the same bits), each axis by one
         kernel call (:meth:`_AxisIntegrator.angles_into`): the sky tracker's eleven node poses a
         frame, ~12 us in pan_tilt_many's calls.  The memo is neither read nor written (its answers
-        are the same bits)."""
+        are the same bits).  ``increasing``: the caller's word that ``times`` never decrease (the
+        first is the earliest; a frame's nodes), which spares their minimum's search."""
         ts = np.ascontiguousarray(times, np.float64).reshape(-1)
         out = np.empty((ts.size, 2))
         if ts.size:
-            t_min = float(ts.min())
+            t_min = float(ts[0]) if increasing else float(ts.min())
             self.pan.angles_into(ts, t_min, out, 0)
             self.tilt.angles_into(ts, t_min, out, 1)
         return out

@@ -40,7 +40,7 @@ def node_rotations(pose, t0_s: float, t1_s: float, nodes: int) -> tuple[np.ndarr
     ts = [t0_s + (t1_s - t0_s) * i / (k - 1) for i in range(k)]
     times = np.array(ts)
     many = getattr(pose, "pan_tilt_array", None)     # the dead reckoning's, without the sigmas, as an array
-    angles = many(times) if many is not None else np.array([pose.angles_at(t)[:2] for t in ts], np.float64)
+    angles = many(times, True) if many is not None else np.array([pose.angles_at(t)[:2] for t in ts], np.float64)
     # every node's entries by one kernel call (rotation_entries' arithmetic), where eleven calls of it
     # and the array made of their lists took more than the poses
     R = np.empty((k, 3, 3))

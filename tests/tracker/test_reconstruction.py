@@ -317,6 +317,7 @@ def test_pan_tilt_array_is_angle_s_twin_on_every_branch(accel):
         got = rec.pan_tilt_array(ts)
         want = [(rec.pan.angle(q), rec.tilt.angle(q)) for q in ts]
         assert got.tobytes() == np.array(want, np.float64).tobytes()
+        assert rec.pan_tilt_array(ts, True).tobytes() == got.tobytes()     # (the nodes' times increase)
         branches |= {("wrap", a > 0) for a, _ in want if abs(a) > 175.0}
         branches |= {("stop", b) for _, b in want if b in (59.0, 62.0)}
         branches |= {"reversal" for k in rec.tilt.knots[-2:] if k.v * k.v_tgt < 0.0 and rec.tilt.accel}
