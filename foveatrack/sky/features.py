@@ -360,7 +360,13 @@ def window_features(track, period: tuple[float, float] | None) -> dict:
     PS = np.concatenate(ps + sides, dtype=np.float64).reshape(2 * n, 3)
     features_kernel(np.array(ts + counts, np.float64), PS, period is not None,
                     *(period or (0.0, 0.0)), out)
-    median_points, size_m, net_speed, flap_cv, has_manoeuvre, manoeuvre, has_period, flap = out.tolist()
+    _put_features(f, out.tolist())
+    return f
+
+
+def _put_features(f: dict, row) -> None:
+    """The kernel's eight outputs (:func:`features_kernel`'s ``out``, as floats) into the dict ``f``."""
+    median_points, size_m, net_speed, flap_cv, has_manoeuvre, manoeuvre, has_period, flap = row
     f["median_points"] = median_points
     f["size_m"] = size_m
     f["net_speed_m_s"] = net_speed
@@ -368,7 +374,6 @@ def window_features(track, period: tuple[float, float] | None) -> dict:
     if has_manoeuvre:
         f["manoeuvre_m_s2"] = manoeuvre
     f["flap_period_s"] = flap if has_period else None
-    return f
 
 
 @njit(cache=True)
@@ -430,13 +435,6 @@ def window_features_many(tracks, want_period, period: tuple[float, float]) -> li
         return fs
     out = np.empty((len(due), 8))
     features_rows_kernel(np.concatenate(blocks), np.array(starts, np.int64), np.array(want, np.bool_), *period, out)
-    for f, (median_points, size_m, net_speed, flap_cv, has_manoeuvre, manoeuvre, has_period, flap) in zip(
-            due, out.tolist()):
-        f["median_points"] = median_points
-        f["size_m"] = size_m
-        f["net_speed_m_s"] = net_speed
-        f["flap_cv"] = flap_cv
-        if has_manoeuvre:
-            f["manoeuvre_m_s2"] = manoeuvre
-        f["flap_period_s"] = flap if has_period else None
+    for f, row in zip(due, out.tolist()):
+        _put_features(f, row)
     return fs
