@@ -15,11 +15,19 @@ until the process ends (a review found the first loop of a process kept so: ~34 
 Frozen objects are still freed by reference counting when dropped; what was alive at the call and
 sits on a cycle stays.  The numbers a run computes do not depend on when the collector runs.  (What
 the allocator gives back to the system is :mod:`foveatrack.daemon.heap`'s.)
+
+Numba fills its CPU typing and target contexts (~48 000 objects, ~0.18 s) when the first kernel is
+called, which came after the freeze: every full collection walked them (~15-24 ms each, one in a
+60 s sky run alone in its process).  They are filled before the freeze now, once per process as
+before.  (The first full collection comes later then: Python waits for a quarter of what its last
+one kept, the frozen heap included; in a process that runs loop after loop it frees more dropped
+loops at once: 35-47 ms, once in three 60 s runs, where it was 14-25 ms in the first.)
 """
 
 from __future__ import annotations
 
 import gc
+import sys
 
 _frozen = False
 
@@ -30,5 +38,9 @@ def freeze_startup_heap() -> None:
     if _frozen:
         return
     _frozen = True
+    if "numba" in sys.modules:     # its contexts as its first kernel call fills them (module docstring)
+        from numba.core.registry import cpu_target
+        cpu_target.typing_context.refresh()
+        cpu_target.target_context.refresh()
     gc.collect()
     gc.freeze()
