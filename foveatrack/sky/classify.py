@@ -107,7 +107,7 @@ from collections.abc import Mapping
 
 from foveatrack.config_util import as_float, check_keys
 from foveatrack.errors import UserError
-from foveatrack.sky.features import window_features, window_features_many
+from foveatrack.sky.features import window_features_many
 
 LABELS = ("unknown", "clutter", "bird", "drone")
 
@@ -172,10 +172,8 @@ class ClassifierConfig:
 
 
 def classify(track, cfg: ClassifierConfig) -> tuple[str, dict]:
-    """``(label, features)`` of a track (module docstring)."""
-    enough = len(track.history) >= cfg.min_hits
-    return _rules(track, window_features(track, (cfg.min_flap_period_s, cfg.flap_autocorr) if enough else None),
-                  enough, cfg)
+    """``(label, features)`` of a track (module docstring): :func:`classify_many` of the one track."""
+    return classify_many([track], cfg)[0]
 
 
 def classify_many(tracks, cfg: ClassifierConfig) -> list[tuple[str, dict]]:

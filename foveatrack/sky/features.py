@@ -1,16 +1,16 @@
 """The features the classifier (:mod:`foveatrack.sky.classify`, whose docstring defines them) reads
 of a track's window of hits.
 
-They are one numba kernel (:func:`features_kernel`; its sums :func:`fsum_kernel`, CPython's
+They are one numba kernel (:func:`features_rows_kernel`; its sums :func:`fsum_kernel`, CPython's
 ``math.fsum`` -- Shewchuk's partials and the final half-even correction of ``Modules/mathmodule.c``
 -- line for line, so exactly rounded: the same bits everywhere, whatever the order): the tracker
 classifies a few tracks a frame, and the same arithmetic in Python lists took ~20 us for a window of
 14 hits, the largest share of the sky tracker's frame after the per-point work.  Its plain-Python
 twin (:func:`features_python`, :func:`flap_period_s` and ``math.fsum``) is what
 ``tests/sky/test_classify.py`` compares it with, bit for bit.
-A frame's reclassified tracks go in one call (:func:`features_rows_kernel`, from
-:func:`foveatrack.sky.classify.classify_many`, on the rows the tracker keeps of each hit), every sum's
-partials and temporaries in one workspace.
+A frame's reclassified tracks go in one call (from :func:`foveatrack.sky.classify.classify_many`, on
+the rows the tracker keeps of each hit), every sum's partials and temporaries in one workspace; one
+track's (:func:`window_features`) is the same call on one window.
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ def _base_features(track) -> dict:
 
 
 def features_python(track, period: tuple[float, float] | None = None) -> dict:
-    """:func:`window_features` in Python lists and ``math.fsum``: the twin of :func:`features_kernel`.
+    """:func:`window_features` in Python lists and ``math.fsum``: the twin of :func:`features_rows_kernel`.
     ``period``: ``(min_period_s, threshold)`` to look for ``flap_period_s`` (:func:`flap_period_s`;
     None: it stays None)."""
     h = track.history
@@ -271,22 +271,13 @@ def _flap_period_kernel(ts, zs, m, var, min_period_s, threshold, W):
 
 
 @njit(cache=True)
-def features_kernel(TC, PS, want_period, min_period_s, threshold, out):
-    """The window's features of :func:`features_python` (n >= 2 hits): ``TC`` (2n,) the hits' times,
-    then their returns (whole numbers, as floats), ``PS`` (2n, 3) their positions, then their box
-    sides; into ``out`` (8,): median points, size, net speed, flap cv, whether the manoeuvre is
-    defined (1.0) and its value, whether a flap period was found (1.0, looked for only if
-    ``want_period``) and its value.  (Two arrays, not four: each array an argument cost ~0.3 us a
-    call in the dispatch.)"""
-    n = TC.shape[0] // 2
-    _features(TC[:n], TC[n:], PS[:n], PS[n:], want_period, min_period_s, threshold, out, np.empty((7, n + 1)))
-
-
-@njit(cache=True)
 def _features(ts, counts, P, S, want_period, min_period_s, threshold, out, W):
-    """:func:`features_kernel` of the window's times ``ts`` (n,), returns ``counts`` (n,), positions
-    ``P`` (n, 3) and box sides ``S`` (n, 3), with ``W`` (7, >= n + 1) its workspace: its sums'
-    partials and temporaries (one array a window where they were a couple of dozen)."""
+    """The window's features of :func:`features_python` (n >= 2 hits) from its times ``ts`` (n,),
+    returns ``counts`` (n,), positions ``P`` (n, 3) and box sides ``S`` (n, 3), into ``out`` (8,):
+    median points, size, net speed, flap cv, whether the manoeuvre is defined (1.0) and its value,
+    whether a flap period was found (1.0, looked for only if ``want_period``) and its value.  ``W``
+    (7, >= n + 1) its workspace: its sums' partials and temporaries (one array a window where they
+    were a couple of dozen)."""
     n = ts.shape[0]
     p = W[0]
     zs = W[1]
@@ -345,27 +336,13 @@ def _features(ts, counts, P, S, want_period, min_period_s, threshold, out, W):
 
 
 def window_features(track, period: tuple[float, float] | None) -> dict:
-    """The features of a track (:mod:`foveatrack.sky.classify`) from its ``history`` and filter, by
-    :func:`features_kernel`; ``period`` as in :func:`features_python`."""
-    h = track.history
-    f = _base_features(track)
-    n = len(h)
-    if n < 2:
-        return f
-    out = np.empty(8)
-    ts, ps, sides, counts = zip(*h)         # the hits' columns in one pass over the window
-    # the positions and the box sides in one array, its first n rows and its last n (one
-    # concatenation of the 2n rows: ~1.6 us where an array of each took ~2.6); the times and the
-    # counts of returns so too (a count of returns is a whole number: the same as a float)
-    PS = np.concatenate(ps + sides, dtype=np.float64).reshape(2 * n, 3)
-    features_kernel(np.array(ts + counts, np.float64), PS, period is not None,
-                    *(period or (0.0, 0.0)), out)
-    _put_features(f, out.tolist())
-    return f
+    """The features of a track (:mod:`foveatrack.sky.classify`) from its ``history`` and filter;
+    ``period`` as in :func:`features_python`: :func:`window_features_many` of the one track."""
+    return window_features_many([track], [period is not None], period or (0.0, 0.0))[0]
 
 
 def _put_features(f: dict, row) -> None:
-    """The kernel's eight outputs (:func:`features_kernel`'s ``out``, as floats) into the dict ``f``."""
+    """A window's eight outputs (:func:`_features`' ``out``, as floats) into the dict ``f``."""
     median_points, size_m, net_speed, flap_cv, has_manoeuvre, manoeuvre, has_period, flap = row
     f["median_points"] = median_points
     f["size_m"] = size_m
@@ -378,7 +355,7 @@ def _put_features(f: dict, row) -> None:
 
 @njit(cache=True)
 def features_rows_kernel(H, starts, want_period, min_period_s, threshold, out):
-    """:func:`features_kernel` of many windows given as rows: ``H`` (m, 8) the hits, each ``(t_s,
+    """:func:`_features` of many windows given as rows: ``H`` (m, 8) the hits, each ``(t_s,
     n_points, xyz_m, sides_m)``, window ``j`` its rows ``starts[j]`` to ``starts[j + 1]``; its features
     into ``out[j]``, its flap period looked for if ``want_period[j]``."""
     longest = 0

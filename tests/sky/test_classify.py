@@ -232,7 +232,8 @@ def _bits(f: dict) -> list:
 
 
 def test_the_features_kernel_is_its_python_twin_bit_for_bit():
-    # features_kernel (what classify runs) against features_python, the same sums by math.fsum in
+    # window_features (one window through features_rows_kernel, what the tracker runs) against
+    # features_python, the same sums by math.fsum in
     # Python lists: every key, its order and the bits of every value, on windows of 0-39 hits, with
     # equal times (no span, no spread), a standing object, flat and flapping vertical sides, zero
     # sides, and the flap period asked for or not
