@@ -17,16 +17,20 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def valid_point(x, y, z):
+    """A point is finite and not exactly (0, 0, 0), Livox "no return" (the test of every kernel that
+    drops invalid points; twin :func:`foveatrack.detection.valid_points`)."""
+    return math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and (x != 0.0 or y != 0.0 or z != 0.0)
+
+
 @njit(cache=True)
 def valid_mask_kernel(xyz, ok):
-    """``ok[j]``: point ``j`` of ``xyz`` (N, 3) is finite and not exactly (0, 0, 0), Livox "no
-    return" (:func:`foveatrack.detection.valid_points`, its twin); returns how many are."""
+    """``ok[j]``: point ``j`` of ``xyz`` (N, 3) is valid (:func:`valid_point`; twin
+    :func:`foveatrack.detection.valid_points`); returns how many are."""
     n = 0
     for j in range(xyz.shape[0]):
-        x = xyz[j, 0]
-        y = xyz[j, 1]
-        z = xyz[j, 2]
-        v = math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and (x != 0.0 or y != 0.0 or z != 0.0)
+        v = valid_point(xyz[j, 0], xyz[j, 1], xyz[j, 2])
         ok[j] = v
         n += v
     return n

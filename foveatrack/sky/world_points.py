@@ -25,6 +25,7 @@ import math
 import numpy as np
 from numba import njit
 
+from foveatrack.kernels import valid_point
 from foveatrack.reconstruction import rotation_rows
 
 
@@ -102,19 +103,32 @@ def _node_changes(R):
 
 
 @njit(cache=True)
+def _interval(u, last):
+    """The node interval ``i`` of a point at place ``u`` (>= 0) between ``last + 1`` nodes, and its
+    weight ``w`` in it."""
+    i = min(int(u), last - 1)       # u >= 0: truncation is floor
+    return i, u - i
+
+
+@njit(cache=True)
+def _entry_row(R, D, i, w, r, qx, qy, qz):
+    """Row ``r`` of a point ``q`` turned in node interval ``i`` at weight ``w``: the entries blended,
+    then their products with ``q`` summed in a fixed order."""
+    m0 = R[i, r, 0] + D[i, r, 0] * w
+    m1 = R[i, r, 1] + D[i, r, 1] * w
+    m2 = R[i, r, 2] + D[i, r, 2] * w
+    return m0 * qx + m1 * qy + m2 * qz
+
+
+@njit(cache=True)
 def _turn(xyz, k, R, D, u, off, out, row):
     """Point ``k`` of ``xyz`` turned at its place ``u`` between the nodes, into ``out[row]``."""
-    last = R.shape[0] - 1
-    i = min(int(u), last - 1)       # u >= 0: truncation is floor
-    w = u - i
+    i, w = _interval(u, R.shape[0] - 1)
     qx = xyz[k, 0] + off[0]
     qy = xyz[k, 1] + off[1]
     qz = xyz[k, 2] + off[2]
     for r in range(3):
-        m0 = R[i, r, 0] + D[i, r, 0] * w
-        m1 = R[i, r, 1] + D[i, r, 1] * w
-        m2 = R[i, r, 2] + D[i, r, 2] * w
-        out[row, r] = m0 * qx + m1 * qy + m2 * qz
+        out[row, r] = _entry_row(R, D, i, w, r, qx, qy, qz)
 
 
 @njit(cache=True)
@@ -129,29 +143,17 @@ def world_points_kernel(xyz, t_ns, R, t0_s, step_s, off, out):
 
 @njit(cache=True)
 def first_valid_kernel(xyz):
-    """The index of the first point of ``xyz`` (N, 3) that is finite and not exactly (0, 0, 0) (the
-    test of :func:`foveatrack.kernels.valid_mask_kernel`), -1 for none."""
+    """The index of the first point of ``xyz`` (N, 3) that is valid (:func:`foveatrack.kernels.valid_point`),
+    -1 for none."""
     for j in range(xyz.shape[0]):
-        x = xyz[j, 0]
-        y = xyz[j, 1]
-        z = xyz[j, 2]
-        if math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and (x != 0.0 or y != 0.0 or z != 0.0):
+        if valid_point(xyz[j, 0], xyz[j, 1], xyz[j, 2]):
             return j
     return -1
 
 
 @njit(cache=True)
-def _entry_row(R, D, i, w, r, qx, qy, qz):
-    """Row ``r`` of :func:`_turn`'s product: the same operations in its order (the same bits)."""
-    m0 = R[i, r, 0] + D[i, r, 0] * w
-    m1 = R[i, r, 1] + D[i, r, 1] * w
-    m2 = R[i, r, 2] + D[i, r, 2] * w
-    return m0 * qx + m1 * qy + m2 * qz
-
-
-@njit(cache=True)
 def world_in_box_kernel(xyz, t_ns, R, t0_s, step_s, off, lo, hi, xyz_out, t_out, world_out):
-    """The valid points of ``xyz`` (N, 3) (:func:`first_valid_kernel`'s test), each turned as
+    """The valid points of ``xyz`` (N, 3) (:func:`foveatrack.kernels.valid_point`), each turned as
     :func:`world_points_kernel` turns it, and of those the ones inside the world box ``lo <= p < hi``
     (:func:`foveatrack.kernels.box_inside_kernel`'s test): their lidar points, times and world points
     into the first rows of ``xyz_out``, ``t_out``, ``world_out``, in point order; returns how many.
@@ -171,11 +173,9 @@ def world_in_box_kernel(xyz, t_ns, R, t0_s, step_s, off, lo, hi, xyz_out, t_out,
         x = xyz[k, 0]
         y = xyz[k, 1]
         z = xyz[k, 2]
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and (x != 0.0 or y != 0.0 or z != 0.0)):
+        if not valid_point(x, y, z):
             continue
-        u = U[k]
-        i = min(int(u), last - 1)       # u >= 0: truncation is floor
-        w = u - i
+        i, w = _interval(U[k], last)
         qx = x + off0
         qy = y + off1
         qz = z + off2
