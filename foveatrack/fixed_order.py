@@ -66,11 +66,16 @@ def mat3_vec(R, v) -> np.ndarray:
 
 def mat3T_vec(R: np.ndarray, v) -> np.ndarray:
     """``R.T @ v`` (3,): a vector turned back by the rotation ``R`` (world -> body for body -> world)."""
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
-    x, y, z = floats3(v)
-    return np.array([r00 * x + r10 * y + r20 * z,
-                     r01 * x + r11 * y + r21 * z,
-                     r02 * x + r12 * y + r22 * z])
+    return np.array(rows_T_times(R.tolist(), *floats3(v)))
+
+
+def rows_T_times(rows, x: float, y: float, z: float) -> tuple[float, float, float]:
+    """``R.T @ (x, y, z)`` on ``R``'s rows as floats (three tuples of 3), in floats: the products and
+    sums of :func:`mat3T_vec`, without its arrays (callers once a frame or a track)."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
+    return (r00 * x + r10 * y + r20 * z,
+            r01 * x + r11 * y + r21 * z,
+            r02 * x + r12 * y + r22 * z)
 
 
 def rows_times_mat3T(X: np.ndarray, R: np.ndarray) -> np.ndarray:

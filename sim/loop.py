@@ -28,6 +28,7 @@ import numpy as np
 
 from foveatrack.control import STOP
 from foveatrack.errors import UserError
+from foveatrack.fixed_order import rows_T_times
 from foveatrack.frame_step import FrameStep, NoHead
 from foveatrack.frames import Frame
 from foveatrack.gate import CommandGate, Limits
@@ -459,12 +460,8 @@ class ClosedLoop:
             traj = self.scene.targets[0].trajectory
             p = self.sensor.last_mid_xyz_m[0]   # its position at t_mid, as this frame's cull evaluated it
             x, y, z = p
-            # R.T @ p in a fixed order (BLAS's differs per CPU): fixed_order.mat3T_vec's products and
-            # sums on the rotation's rows as floats (reconstruction.rotation_rows), without its arrays
-            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_rows(pan, tilt)
-            q0 = r00 * x + r10 * y + r20 * z
-            q1 = r01 * x + r11 * y + r21 * z
-            q2 = r02 * x + r12 * y + r22 * z
+            # R.T @ p in a fixed order (BLAS's differs per CPU), on the rotation's rows as floats
+            q0, q1, q2 = rows_T_times(rotation_rows(pan, tilt), x, y, z)
             L.true_error_deg.append(math.degrees(math.atan2(math.hypot(q1, q2), q0)))
             L.true_az_deg.append(math.degrees(math.atan2(q1, q0)))
             L.true_el_deg.append(math.degrees(math.atan2(q2, math.hypot(q0, q1))))

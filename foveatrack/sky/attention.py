@@ -123,7 +123,7 @@ from numba import njit
 
 from foveatrack.config_util import as_bool, as_float, as_vec, check_keys
 from foveatrack.errors import UserError
-from foveatrack.fixed_order import floats3
+from foveatrack.fixed_order import floats3, rows_T_times
 from foveatrack.reconstruction import rotation_matrix
 
 _NO_OFFSET = np.zeros(3)
@@ -528,12 +528,10 @@ def bearing_off_axis_deg(p_world, rows, offset) -> float:
 def in_lidar(p_world, rows, offset) -> tuple[float, float, float]:
     """A world point (3 floats) in the lidar frame of the pose ``rows`` (the head's rotation,
     :func:`foveatrack.reconstruction.rotation_rows`) and ``offset`` (the lidar's, 3 floats):
-    ``R.T p - offset`` in floats, :func:`foveatrack.fixed_order.mat3T_vec`'s products and sums."""
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
-    x, y, z = p_world
+    ``R.T p - offset`` in floats (:func:`foveatrack.fixed_order.rows_T_times`, then the offset)."""
+    qx, qy, qz = rows_T_times(rows, *p_world)
     ox, oy, oz = offset
-    return (r00 * x + r10 * y + r20 * z - ox, r01 * x + r11 * y + r21 * z - oy,
-            r02 * x + r12 * y + r22 * z - oz)
+    return qx - ox, qy - oy, qz - oz
 
 
 def off_axis_deg(qx: float, qy: float, qz: float) -> float:
