@@ -37,7 +37,7 @@ class Compiles(event.Listener):
 event.register("numba:compile", Compiles())
 from foveatrack.cli import main
 
-code = main(["demo", "--out", sys.argv[1]])
+code = main(["demo", "--out", sys.argv[1]] if len(sys.argv) == 2 else sys.argv[2:])
 print("COMPILED", sorted(set(compiled)))
 sys.exit(code)
 """
@@ -83,6 +83,37 @@ def test_a_first_demo_compiles_in_two_processes_and_its_first_frame_compiles_not
     warm = subprocess.run([sys.executable, "-c", "from foveatrack.cli import kernel_compile as k; print(k.cache_is_cold())"],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert warm.stdout.strip() == "False", warm.stderr
+
+
+@pytest.mark.slow
+def test_a_first_sky_run_compiles_in_two_processes_and_its_run_compiles_nothing(tmp_path):
+    # A sky scene's run calls the sky tracker's kernels from its first frame, and at its warm-up's end
+    # (compile_sky_kernels): both compile processes once failed on a fresh install (a kernel of no group
+    # called foveatrack.kernels' inline helper, run as Python in the other group's process; a kernel run
+    # as Python summed uint8s and wrapped), and the run compiled everything again in its first frames
+    cache = tmp_path / "numba-cache"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    run = subprocess.run([sys.executable, "-c", DEMO_COUNTING_COMPILES, "-", "simulate",
+                          "scenes/swarm-of-five.toml", "--out", str(tmp_path / "swarm"), "--duration", "2"],
+                         cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert "2 groups in 2 processes" in run.stderr
+    assert "failed" not in run.stderr, run.stderr[-3000:]
+    compiled = [line for line in run.stdout.splitlines() if line.startswith("COMPILED")]
+    assert compiled == ["COMPILED []"], compiled
+    assert not [e for e in _index_entries(cache) if e[1] != e[2]]
+
+
+def test_every_kernel_module_is_in_one_group():
+    """A module with numba kernels outside the groups is compiled by both processes at once, and its
+    kernels that call another module's inline helpers fail in the process that runs those as Python."""
+    grouped = {m for g in kernel_compile.GROUPS for m in g.modules}
+    with_kernels = set()
+    for top in ("foveatrack", "sim", "gimbal"):
+        for path in (ROOT / top).rglob("*.py"):
+            if "@njit" in path.read_text():
+                with_kernels.add(".".join(path.relative_to(ROOT).with_suffix("").parts))
+    assert with_kernels and with_kernels <= grouped, sorted(with_kernels - grouped)
 
 
 def test_a_compile_process_runs_the_other_groups_kernels_as_python(tmp_path):

@@ -42,7 +42,13 @@ class KernelGroup:
 # imports and the two frames whose other kernels run as Python (docs/first-run.md).
 GROUPS = (
     KernelGroup("scan, tracker and recording kernels",
-                ("sim.scan.kernels", "sim.random_kernels", "foveatrack.kernels", "foveatrack.recording.pack_kernels"),
+                ("sim.scan.kernels", "sim.random_kernels", "foveatrack.kernels", "foveatrack.recording.pack_kernels",
+                 # the sky tracker's (a sky scene's run calls them from its first frame, and its warm-up's
+                 # end in compile_sky_kernels): in one group, or both processes compile them, and a
+                 # kernel of one calling an inline helper of foveatrack.kernels fails where that runs as Python
+                 "foveatrack.openloop.kernels", "foveatrack.openloop.range_background", "foveatrack.sky.world_points",
+                 "foveatrack.sky.features", "foveatrack.sky.motion", "foveatrack.sky.attention",
+                 "foveatrack.pose_check"),
                 ("sim.scan.kernels:scan_exact_kernel", "foveatrack.kernels:box_median_kernel",
                  "foveatrack.recording.pack_kernels:pack_grid_kernel")),
     KernelGroup("world and sensor kernels",

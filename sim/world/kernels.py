@@ -667,12 +667,12 @@ def bodies_candidates_kernel(d_world, status, t_ray, t_mid, centres, velocities,
             for b in range(nb):
                 v = np.uint8(bx[b] * ux + by[b] * uy + bz[b] * uz >= bc[b] * ca - bs[b] * sa - 1e-9)
                 row[b] = v
-                count += v
+                count += int(v)     # (int: run as Python, an int plus a uint8 stays a uint8 and wraps at 256)
         else:
             for b in range(nb):
                 v = np.uint8(bc[b] != _BLOCK_EMPTY)
                 row[b] = v
-                count += v
+                count += int(v)
         total += count * CULL_BLOCK
     idx = np.empty(total, dtype=np.int64)
     start = np.zeros(n_bodies + 1, dtype=np.int64)
