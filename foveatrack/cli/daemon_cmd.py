@@ -43,7 +43,7 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_daemon)
     ops = p.add_subparsers(dest="operator", metavar="{pin,unpin,tracks}", required=False,
                            title="to a running daemon ([tracker.sky])")
-    pin = ops.add_parser("pin", help="make a live confirmed track the fovea's priority while it lives")
+    pin = ops.add_parser("pin", help="hold the fovea on a live confirmed track while it lives (attention.pin_holds_fovea)")
     pin.add_argument("track_id", type=_track_id, metavar="ID", help="the track's id")
     unpin = ops.add_parser("unpin", help="drop the pin: the highest threat is the priority again")
     tracks = ops.add_parser("tracks", help="list the live confirmed tracks (the ids 'pin' takes)")

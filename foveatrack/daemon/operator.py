@@ -240,8 +240,10 @@ class Operator:
             return self._reply(False, f"track {tid} is not a live confirmed track; nothing pinned "
                                f"(live confirmed tracks: {names})")
         self._pin(tid)
-        return self._reply(True, f"pinned track {describe_track(v)}: the fovea's priority from the next frame "
-                           "while it lives")
+        held = self.tracker.attention.cfg.pin_holds_fovea
+        return self._reply(True, f"pinned track {describe_track(v)}: "
+                           + ("the fovea holds on it from the next frame while it lives (no revisits of the others)"
+                              if held else "the fovea's priority from the next frame while it lives"))
 
     def _pin(self, track_id: int | None) -> None:
         """Apply the pin and record it before the next frame (replay applies it at the same place)."""

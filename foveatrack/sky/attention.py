@@ -70,6 +70,13 @@ Schedule (evaluated after each frame, for the next):
   never in the fovea again; held, a track on it was found at 6.1 s and it was in the fovea from
   9.1 s.  Seed 230 showed it first, before the priority's set-aside changed that run).  ``idle_search`` (default false) brings the sweep back, as
   recordings made before it ran;
+* an operator's pin (:meth:`Attention.pin`) holds the fovea on the pinned track while it lives
+  (``pin_holds_fovea``, default true): no revisit starts, and one in progress ends, its track's
+  clock running on.  A pin is an operator locking on; the revisits, each followed at once by the next
+  one due, took the fovea from a pinned track for 5-7 s at a time on the swarm (the daemon, a user's
+  audit: in the fovea 97 of 256 pinned frames).  The other drones keep their tracks in the wide
+  field.  False: the pinned track is the priority and the revisits go on (as recordings made
+  before the key ran);
 * a revisit fixation lasts until the track has been in the fovea for ``dwell_s``, or
   ``saccade_timeout_s`` after it started if the head never got there (a track the head cannot
   reach does not hold the fovea); then the fovea returns to the priority track.
@@ -131,7 +138,7 @@ CLASS_WEIGHT = {"drone": 1.0, "unknown": 0.5, "bird": 0.05, "clutter": 0.0}
 #: the keys the attention has gained since recordings were made, at the values that behave as before
 #: them: a recording's table without them replays as it ran (:func:`foveatrack.sky.controller.recorded_sky_table`)
 ADDED_SINCE_RECORDED = {"saccade_counts_motion": False, "keep_verdict": False, "idle_search": True,
-                        "drop_unseen_priority_s": 0.0, "unseen_over_fixations": False}
+                        "drop_unseen_priority_s": 0.0, "unseen_over_fixations": False, "pin_holds_fovea": False}
 
 
 @dataclass(frozen=True)
@@ -152,6 +159,7 @@ class AttentionConfig:
     idle_search: bool = False
     drop_unseen_priority_s: float = 1.5
     unseen_over_fixations: bool = True
+    pin_holds_fovea: bool = True
 
     @classmethod
     def from_mapping(cls, data: Mapping, where: str) -> "AttentionConfig":
@@ -160,7 +168,8 @@ class AttentionConfig:
         for k, v in data.items():
             if k == "protected_xyz_m":
                 kw[k] = as_vec(v, k, where, 3)
-            elif k in ("saccade_counts_motion", "keep_verdict", "idle_search", "unseen_over_fixations"):
+            elif k in ("saccade_counts_motion", "keep_verdict", "idle_search", "unseen_over_fixations",
+                       "pin_holds_fovea"):
                 kw[k] = as_bool(v, k, where)
             elif k in ("saccade_latency_s", "drop_unseen_priority_s"):
                 kw[k] = as_float(v, k, where, lo=0)
@@ -420,6 +429,11 @@ class Attention:
         ranked = sorted((-scores[tid], tid) for tid in live if tid not in self.set_aside)
         best = ranked[0][1] if ranked and ranked[0][0] < 0.0 else None
         self.priority = self.pinned if self.pinned is not None else best
+        # an operator's pin holds the fovea (pin_holds_fovea): no revisit, and one in progress ends
+        # unserved (its clock runs on)
+        held = self.pinned is not None and cfg.pin_holds_fovea
+        if held:
+            self.revisit = None
         # the revisit in progress: count its time in the fovea, end it when served or timed out
         if self.revisit is not None:
             if self.revisit not in live:
@@ -437,7 +451,7 @@ class Attention:
         # the fovea to a crown part while the drone it was turning to waited another 5 s
         in_transit = (self.target is not None and self.target == self.priority and not self._target_reached
                       and t_s - self._target_since_s < cfg.saccade_timeout_s)
-        if self.revisit is None and self.priority is not None and not in_transit:
+        if self.revisit is None and self.priority is not None and not in_transit and not held:
             first = {}
             for tid, v in live.items():
                 if tid != self.priority and (self.looks_like(v) if looks is None else looks[tid]) == "drone":

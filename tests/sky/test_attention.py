@@ -100,6 +100,26 @@ def test_pin_overrides_the_score_while_the_track_lives():
     assert att.target == 0 and att.pinned is None
 
 
+@pytest.mark.parametrize("holds", [True, False])
+def test_a_pin_holds_the_fovea_unless_told_to_let_revisits_go_on(holds):
+    # two drones, 0 the priority and 1 revisited from it; then 1 is pinned: with the key the fovea
+    # stays on 1 (no revisit of 0, however overdue); without, 1 is the priority and 0 is revisited
+    att = Attention(AttentionConfig(revisit_s=1.0, dwell_s=0.2, pin_holds_fovea=holds))
+    views = [view(0, [20, 0, 0]), view(1, [60, 10, 0])]
+    targets = []
+    for k in range(120):
+        t = 0.1 * (k + 1)
+        if k == 20:
+            att.pin(1)
+        targets.append(att.target)
+        att.update(t, views, {att.target} if att.target is not None else set(), 0.1)
+    assert targets[:20].count(0) > 10 and 1 in targets[:20]      # 1 revisited from the priority 0
+    if holds:
+        assert targets[21:] == [1] * 99
+    else:
+        assert 0 in targets[21:] and targets[21:].count(1) > targets[21:].count(0)
+
+
 def _cand(tid, hits):
     return TrackView(tid, False, "unknown", np.zeros(3), np.zeros(3), True, True, {}, clear_hits=hits)
 
