@@ -89,6 +89,18 @@ def test_scene_tilt0_beyond_the_heads_stops_is_refused(tmp_path, capsys):
     assert f"{path} [gimbal]: tilt0_deg 95 is beyond the pts-303 head's tilt stops [-30, 60] deg" in err
 
 
+def test_a_bad_sky_table_is_refused_before_the_output_directory_is_made(tmp_path, capsys):
+    # before: the [tracker.sky] tables were checked when the loop was built, after --out was made
+    from pathlib import Path
+
+    path = tmp_path / "sky.toml"
+    path.write_text(Path(SCENE).read_text() + "\n[tracker.sky]\nconfirm_hitz = 3\n")
+    out = tmp_path / "out"
+    code, err = _run(["simulate", str(path), "--out", str(out)], capsys)
+    assert code == 2 and "confirm_hitz" in err
+    assert not out.exists()
+
+
 def test_space_of_interest_errors_name_the_file_and_table(tmp_path, capsys):
     # before: "box: min_xyz ... must be below max_xyz ..." with no file or table
     path = _scene_with(tmp_path, "max_xyz = [60.0, 60.0, 40.0]", "max_xyz = [0.0, 60.0, 40.0]")

@@ -197,6 +197,8 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
         # an earlier run's recording is not replaced unasked (before the run, not after it)
         raise UserError(f"--out {out_dir}: it holds a recording (run.mcap) of an earlier run; give another --out, "
                         "move it away, or add --overwrite to replace it")
+    t0 = time.perf_counter()
+    loop = ClosedLoop(scene)        # checks the scene's [tracker.sky] tables: before anything is made
     if out_dir is not None:
         try:
             out_dir.mkdir(parents=True, exist_ok=True)
@@ -209,8 +211,6 @@ def _run_and_report(scene_path, out, want_json, plot, seed, duration, progress, 
 
         live_port = check_port(live_port)
         pacer = Pacer(speed)
-    t0 = time.perf_counter()
-    loop = ClosedLoop(scene)
     if out_dir is not None or live_port is not None:
         # In a child process or on the loop's own thread, never a thread of its own: the SDK holds the
         # interpreter lock while it encodes and compresses (docs/recordings.md)
