@@ -13,13 +13,18 @@ import sys
 
 
 def register(sub) -> None:
-    p = sub.add_parser("replay", help="re-run detection and control over a recording (.mcap) or a .lvx file")
+    p = sub.add_parser("replay", help="re-run detection and control over a recording (.mcap) or a .lvx file",
+                       description="Re-run the recorded tracker (or --tracker-config's) over a recording's frames and "
+                                   "say whether its detections and head commands came out identical to the recorded "
+                                   "ones; a recording of the multi-object tracker ([tracker.sky]) has every frame's "
+                                   "tracks compared too, and the first frame where they differ named.")
     p.add_argument("recording", metavar="RECORDING", help="a foveatrack .mcap recording or a Livox Viewer .lvx")
     p.add_argument("--tracker-config", metavar="FILE.toml",
                    help="use this [tracker] table (a scene, a daemon config or a bare table) instead of the recorded one; "
                         "it must set a space of interest ([tracker.space]); an .lvx needs one")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
-    p.add_argument("--plot", metavar="DIR", help="write Fig. 14a/b/c equivalents as PNG into DIR")
+    p.add_argument("--plot", metavar="DIR", help="write Fig. 14a/b/c equivalents as PNG into DIR (a multi-object recording: "
+                                                      "head.png and tracks.png)")
     p.add_argument("--export-points", metavar="F.csv|F.npz", help="export every recorded point")
     p.add_argument("--export-trajectory", metavar="F.csv|F.npz",
                    help="export the replay's per-frame detections, commands, head and world estimates (and truth)")
