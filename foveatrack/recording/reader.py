@@ -169,12 +169,12 @@ class RecordingReader:
         for _ in self._records(stop_after_meta=True):
             break      # our writer puts its metadata before any message: a message first is not ours
         if not self.info:
-            raise UserError(f"{self.path} is not a foveatrack recording: {self._why_no_meta()}")
+            raise UserError(self._why_no_meta())
 
     def _why_no_meta(self) -> str:
-        """Why a file that starts with the MCAP magic has no metadata record of ours, in words: a
-        valid MCAP from another program (its Header names the writer), one of ours cut short before
-        its metadata, or damage."""
+        """The error for a file that starts with the MCAP magic and has no metadata record of ours, in
+        words: a valid MCAP from another program (its Header names the writer), one of ours cut short
+        or damaged before its metadata (its Header's profile says ours), or damage."""
         with open(self.path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
             profile = library = None
             try:
@@ -186,18 +186,23 @@ class RecordingReader:
                 pass
             closed = self._data_end_pos(mm) is not None
         no_meta = f"no '{META_NAME}' metadata record"
+        not_ours = f"{self.path} is not a foveatrack recording"
+        ours = f"{self.path} is a foveatrack recording (its Header's profile) without its metadata"
+        if profile == "foveatrack" and self.damage:
+            # ours, cut or damaged before its metadata: a recording that holds nothing replayable
+            return f"{ours}: damaged or cut short before it ({self.problem})"
         if self.damage:
-            return f"{no_meta} ({self.problem})"
+            return f"{not_ours}: {no_meta} ({self.problem})"
         if profile is None:
-            return f"{no_meta} and no MCAP Header record after the magic"
+            return f"{not_ours}: {no_meta} and no MCAP Header record after the magic"
         if profile != "foveatrack":
             by = f"written by {library!r}" if library else "whose Header names no writer"
-            return (f"{'a valid' if closed else 'an unfinished'} MCAP file {by} (profile {profile!r}) with {no_meta}: "
-                    f"foveatrack replays and exports only what 'simulate --out' and 'daemon' record "
+            return (f"{not_ours}: {'a valid' if closed else 'an unfinished'} MCAP file {by} (profile {profile!r}) "
+                    f"with {no_meta}: foveatrack replays and exports only what 'simulate --out' and 'daemon' record "
                     f"(Foxglove opens any MCAP)")
         if closed:
-            return f"{no_meta} in a closed file of profile 'foveatrack' (its metadata was never written)"
-        return (f"{no_meta}: the file ends at byte {self.size} before it, its writer not closed (cut short "
+            return f"{ours}: {no_meta} in a closed file (its metadata was never written)"
+        return (f"{ours}: the file ends at byte {self.size} before it, its writer not closed (cut short "
                 f"right after it started, e.g. kill -9 or power loss)")
 
     # ------------------------------------------------------------------ reporting

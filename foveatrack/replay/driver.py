@@ -184,7 +184,9 @@ def replay_recording(path: str | os.PathLike, tracker_table: dict | None = None,
 
         if tracker_table is None:       # the recorded table, with what the tracker gained since at its old values
             sky_table = recorded_sky_table(sky_table)
-        controller = SkyController.from_table(controller, sky_table, where + ".sky", meta.half_fov_deg)
+        # named as simulate and the daemon name it ("F [tracker.sky].attention", not "[tracker].sky")
+        controller = SkyController.from_table(controller, sky_table, f"{where[:-len('[tracker]')]}[tracker.sky]",
+                                              meta.half_fov_deg)
     tracks_cmp = _TracksComparison()
     step = FrameStep(controller, CommandGate(meta.limits), sink)
     period = rec_cfg.period_s

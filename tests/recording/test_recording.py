@@ -235,8 +235,14 @@ def test_an_mcap_of_another_program_is_named_so_not_cut_short(tmp_path):
         meta_at += 9 + int.from_bytes(data[meta_at + 1:meta_at + 9], "little")
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(data[:meta_at])
-    with pytest.raises(UserError, match=r"cut\.mcap is not a foveatrack recording: no 'foveatrack' metadata "
-                                        r"record: the file ends at byte \d+ before it, its writer not closed"):
+    with pytest.raises(UserError, match=r"cut\.mcap is a foveatrack recording \(its Header's profile\) without its "
+                                        r"metadata: the file ends at byte \d+ before it, its writer not closed"):
+        RecordingReader(cut)
+    # cut inside the metadata record (a length that runs past the end): ours too, damaged before it
+    # (before: "is not a foveatrack recording", a user's audit on a recording cut at 4 KB)
+    cut.write_bytes(data[:meta_at + 20])
+    with pytest.raises(UserError, match=r"cut\.mcap is a foveatrack recording \(its Header's profile\) without its "
+                                        r"metadata: damaged or cut short before it \(skipped bytes"):
         RecordingReader(cut)
 
 
