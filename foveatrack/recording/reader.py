@@ -59,14 +59,18 @@ class Damage:
             what += "; the messages in it are lost" if self.cut_short else \
                 "; what it held is unknown (no index of it survived)"
         elif not self.lost:
-            what += "; no messages lost (index bytes only)" if self.lost_exact else \
-                "; no lost messages are known (no index of a damaged chunk survived)"
+            what += ("; no message in it (index bytes only)" if self.lost_exact else
+                     "; no lost messages are known (no index of a damaged chunk survived)")
         else:
             n_f = self.lost.get(POINTS, 0)
             n_o = sum(self.lost.values()) - n_f
             exact = "" if self.lost_exact else "at least "
             what += (f"; {exact}{n_f} frame{'' if n_f == 1 else 's'} and {n_o} other record{'' if n_o == 1 else 's'}"
                      f" lost ({', '.join(f'{k} {v}' for k, v in sorted(self.lost.items()))})")
+        if self.cut_short and self.lost is not None:
+            # what the writer would have written after the cut is not in the file: say so (a stretch
+            # with no message in it read as "nothing lost" of a run cut in half, a user's audit)
+            what += "; whatever was written after it is not in the file"
         if self.lost_t_ns is not None:
             t0, t1 = self.lost_t_ns
             what += f", log time {_log_time_text(t0)}" if t0 == t1 else \

@@ -136,6 +136,19 @@ def test_a_cut_short_tail_reads_every_whole_chunk_before_it(run, tmp_path):
     assert "cut short" in r.problem and f"byte {start}" in r.problem
 
 
+def test_a_tail_cut_in_an_index_says_what_follows_is_not_in_the_file(run, tmp_path):
+    # cut 3 bytes into the records after chunk 40 (its message index): no message is in the cut
+    # stretch, and the line said only "no messages lost" of a run cut in half (a user's audit)
+    p, data, full, cks = run
+    end = cks[40][1]
+    r, got = read_all(damaged(tmp_path, data[:end + 3]))
+    assert got == in_chunks(full, cks[:41])
+    (d,) = r.damage
+    assert d.cut_short and d.lost == {} and d.lost_exact
+    assert "no message in it (index bytes only); whatever was written after it is not in the file" in d.describe()
+    assert "no messages lost" not in r.problem
+
+
 def test_damage_in_the_middle_and_a_cut_short_tail(run, tmp_path):
     p, data, full, cks = run
     data = bytearray(data[: cks[30][0] + 50])
