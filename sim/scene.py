@@ -200,6 +200,7 @@ class Scene:
         ``[gimbal] speed_table`` file steers wrong by (:meth:`foveatrack.speed_table.SpeedTable.problems`,
         as a daemon config's table is judged); the CLIs that fly a scene print them at load.  Derived,
         so a scene changed by ``dataclasses.replace`` is judged as it is."""
+        from foveatrack.sky.tracks import SkyTrackerConfig
         from foveatrack.speed_table import SpeedTable
 
         out = list(self.placement[1])
@@ -210,6 +211,13 @@ class Scene:
             except UserError:
                 problems = []      # the run's own load names an unreadable table
             out += [f"{self.path} [gimbal] speed_table {table!r}: {p}" for p in problems]
+        sky = (self.tracker_table or {}).get("sky")
+        if isinstance(sky, dict):
+            # the warm-up learns the background alone: as long as the run, and nothing is tracked
+            warmup = sky.get("warmup_s", SkyTrackerConfig.warmup_s)
+            if isinstance(warmup, (int, float)) and not isinstance(warmup, bool) and warmup >= self.duration_s:
+                out.append(f"{self.path} [tracker.sky] warmup_s {warmup:g} is not shorter than the run "
+                           f"({self.duration_s:g} s): the background learns alone the whole run, and nothing is tracked")
         return out
 
     def has(self, effect: str) -> bool:

@@ -86,3 +86,16 @@ def test_no_shipped_scene_has_a_drone_or_bird_under_the_ground_or_at_the_head():
     assert len(scenes) > 10
     for p in scenes:
         assert load_scene(p).warnings() == [], p
+
+
+def test_a_sky_warm_up_as_long_as_the_run_is_a_warning():
+    # before: accepted silently, and the run tracked nothing (a user-level audit, warmup_s = 100 in
+    # the 12 s crossing)
+    from dataclasses import replace
+    from pathlib import Path
+
+    scene = load_scene(Path(__file__).resolve().parents[2] / "scenes" / "two-drones-crossing.toml")
+    assert scene.warnings() == []
+    table = dict(scene.tracker_table, sky=dict(scene.tracker_table["sky"], warmup_s=12))
+    (w,) = replace(scene, tracker_table=table).warnings()
+    assert "[tracker.sky] warmup_s 12 is not shorter than the run (12 s)" in w and "nothing is tracked" in w
