@@ -307,7 +307,7 @@ def sky_lines(s: dict) -> list[str]:
 
 def sky_plot_data(loop, log) -> dict:
     """What ``tracks.png`` draws (:func:`foveatrack.cli.sim_plots.plot_sky_tracks`): ``t_s`` (T,);
-    ``truth``: id -> (class, (T, 3) positions, NaN where absent); ``tracks``: id -> (last label,
+    ``truth``: id -> (class, (T, 3) positions, NaN where absent); ``tracks``: id -> ((T,) labels, "" where not confirmed,
     (T, 3) positions while confirmed, NaN elsewhere, (T,) measured that frame:
     :func:`foveatrack.sky.track_paths.confirmed_paths`); ``in_fovea``: drone id -> (T,) bool."""
     truth = truth_frames(loop, log)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from foveatrack.cli.scan_plots import _plt, _save
+from foveatrack.sky.track_paths import last_label
 
 TRUTH_C = "0.2"          # truth: a dark grey line
 EST_C = "tab:orange"     # the tracker's estimates and detections
@@ -295,9 +296,9 @@ MAX_TRACK_LINES = 20
 
 def plot_sky_tracks(data: dict, title: str, path) -> Path:
     """Every object and every confirmed track of a multi-object run (``sim.sky_summary.sky_plot_data``):
-    the top view (truth paths: drones dark, birds and crowns pale; confirmed tracks coloured by their
-    last label, dots where a frame measured them, a faint line through the frames the filter coasted,
-    each ending in its id), and per drone the time line of the fovea (dark where the drone was within
+    the top view (truth paths: drones dark, birds and crowns pale; confirmed tracks: a dot where a frame
+    measured them, in the colour of their label in that frame, a faint line in their last label's
+    colour through the frames the filter coasted, each ending in its id), and per drone the time line of the fovea (dark where the drone was within
     the fovea's half-angle of the lidar axis) and of a confirmed track near it (within 2 m).  Without
     truth (a daemon's recording) the time lines are the confirmed tracks' own: confirmed, and measured.
     """
@@ -312,13 +313,16 @@ def plot_sky_tracks(data: dict, title: str, path) -> Path:
         a1.plot(xyz[:, 0], xyz[:, 1], "-", color=TRUTH_C if c == "drone" else "0.8", lw=2.0 if c == "drone" else 0.6,
                 label=None if key in shown else key, zorder=1)
         shown.add(key)
-    for tid, (label, xyz, hit) in sorted(data["tracks"].items()):
-        key = f"track last labelled {label} (dots: measured)"
-        colour = LABEL_C.get(label, "k")
-        a1.plot(xyz[:, 0], xyz[:, 1], "-", lw=0.6, alpha=0.35, color=colour, zorder=2)    # coasting too
-        a1.plot(np.where(hit, xyz[:, 0], np.nan), np.where(hit, xyz[:, 1], np.nan), ".", ms=2.5, color=colour,
-                label=None if key in shown else key, zorder=2)
-        shown.add(key)
+    for tid, (labels, xyz, hit) in sorted(data["tracks"].items()):
+        a1.plot(xyz[:, 0], xyz[:, 1], "-", lw=0.6, alpha=0.35, color=LABEL_C.get(last_label(labels), "k"),
+                zorder=2)    # coasting too, in its last label's colour
+        for label in sorted(set(labels[hit].tolist())):     # each measured frame in that frame's label
+            key = f"track labelled {label} then (dots: measured)"
+            on = hit & (labels == label)
+            a1.plot(np.where(on, xyz[:, 0], np.nan), np.where(on, xyz[:, 1], np.nan), ".", ms=2.5,
+                    color=LABEL_C.get(label, "k"), label=None if key in shown else key,
+                    zorder=3 if label == "drone" else 2)     # a drone's dots over a flock's
+            shown.add(key)
         ok = np.all(np.isfinite(xyz), axis=1)
         if ok.any():
             last = xyz[ok][-1]
@@ -349,13 +353,14 @@ def plot_sky_tracks(data: dict, title: str, path) -> Path:
         # no truth (a daemon's recording): what each confirmed track did, not what it followed
         life = sorted(data["tracks"].items(), key=lambda kv: -int(np.isfinite(kv[1][1][:, 0]).sum()))
         shown_tracks = sorted(life[:MAX_TRACK_LINES])
-        rows = [f"{tid} ({label})" for tid, (label, _, _) in shown_tracks]
-        for row, (tid, (label, xyz, hit)) in enumerate(shown_tracks):
+        rows = [f"{tid} ({last_label(labels)})" for tid, (labels, _, _) in shown_tracks]
+        for row, (tid, (labels, xyz, hit)) in enumerate(shown_tracks):
             bars(row, np.isfinite(xyz[:, 0]), -0.35, "0.75")
-            bars(row, hit, 0.02, LABEL_C.get(label, "k"))
+            for label in sorted(set(labels[hit].tolist())):
+                bars(row, hit & (labels == label), 0.02, LABEL_C.get(label, "k"))
         more = f"; {len(life) - MAX_TRACK_LINES} shorter ones left out" if len(life) > MAX_TRACK_LINES else ""
-        a2.set_title(f"no truth in this recording: per confirmed track, confirmed (grey), measured (its label's "
-                     f"colour){more}", fontsize="medium", wrap=True)
+        a2.set_title(f"no truth in this recording: per confirmed track, confirmed (grey), measured (in the colour "
+                     f"of its label then){more}", fontsize="medium", wrap=True)
     a2.set_yticks(range(len(rows)), rows)
     a2.set_ylim(-0.6, max(len(rows), 1) - 0.4)
     a2.invert_yaxis()

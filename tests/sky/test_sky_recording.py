@@ -158,6 +158,12 @@ def test_replay_plots_the_tracks_as_simulate_does(crossing_run, tmp_path):
     # coasted straight line for measured positions)
     assert all(np.isfinite(x[h, 0]).all() for _, x, h in data["tracks"].values())
     assert any((np.isfinite(x[:, 0]) & ~h).any() for _, x, h in data["tracks"].values())
+    # each frame's label, as recorded (a track drawn in its last label hid the frames it was a drone)
+    assert all(((labels != "") == np.isfinite(x[:, 0])).all() for labels, x, _ in data["tracks"].values())
+    for k, rec in enumerate(res.tracks):
+        for v in rec.tracks:
+            if v.confirmed:
+                assert data["tracks"][v.id][0][k] == v.label
     # the fovea masks are the ones the run's own figures count (sim.sky_summary.drone_truth)
     from sim.loop import ClosedLoop
     from sim.scene import load_scene
