@@ -48,6 +48,21 @@ def test_a_swaying_crown_part_is_clutter_and_a_short_track_unknown():
     assert classify(_track(lambda t: (33.0, 5.0 - 0.9 * t, 8.0), seconds=0.3), cfg)[0] == "unknown"
 
 
+@pytest.mark.parametrize("labelled, keep, want", [
+    ("drone", True, "drone"),       # a drone that stopped and hovers stays a drone
+    ("drone", False, "clutter"),    # the rule before (recordings made before it)
+    ("unknown", True, "clutter"),   # never a drone: still is clutter, as a crown's part is
+])
+def test_a_track_labelled_drone_that_stands_still_stays_a_drone(labelled, keep, want):
+    # rule 2 (still: clutter) took the label from a drone that flew in and then hovered: clutter scores
+    # 0 and the fovea left it (a user-level audit, 193 of 240 frames)
+    hover = _track(lambda t: (30.0, 0.0, 4.0), noise_m=0.05)
+    hover.label = labelled
+    label, f = classify(hover, ClassifierConfig(drone_stays_when_still=keep))
+    assert f["net_speed_m_s"] < ClassifierConfig().clutter_net_speed_m_s
+    assert label == want, f
+
+
 @pytest.mark.parametrize("speed, hits, after, want", [
     (9.0, 7, 5, "bird"),        # three objects and four lone returns: a bird's speed is a bird
     (9.0, 4, 5, "unknown"),     # too few hits of any kind: the filter's speed is not yet read
