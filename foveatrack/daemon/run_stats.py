@@ -14,6 +14,8 @@ def rate_known(d) -> bool:
 #: how long a Livox may take to be heard after the daemon starts (it broadcasts once a second, and the
 #: handshake follows): a stop within it, with nothing heard, is not a lidar fault
 ANNOUNCE_WAIT_S = 3.0
+#: lidar points lost on the way [%] from which the end of a run says so on stderr (the log has every figure)
+LOST_PCT_SAID = 1.0
 
 
 class RunStats:
@@ -65,6 +67,12 @@ class RunStats:
             total = failed + self.counters.get("commands_written", 0)
             out.append(f"{failed} of {total} head commands were not written to [head] port {self.cfg.head.port!r} "
                        "(see head_* counters in the log)")
+        lost = self.lost_pct()
+        if lost is not None and lost >= LOST_PCT_SAID:
+            # said in the log's counters alone, a lossy network went unnoticed (a user's audit, 30 %)
+            out.append(f"{lost:.1f} % of the lidar's points were lost on the way (missing from its packets' "
+                       f"sequence; lidar_lost_pct in the log): the network between the lidar and this host drops "
+                       f"datagrams (a direct cable, or a larger receive buffer: net.core.rmem_max)")
         out.extend(text for _, text in self.output_faults())     # a recording, journal or log not written
         return out
 

@@ -164,6 +164,8 @@ def test_faults_head_killed_and_restarted_lossy_lidar_garbage(tmp_path):
     assert abs(stats["lidar_lost_slots"] - 100 * lidar_counters["packets_lost"]) <= 0.03 * stats["lidar_lost_slots"], \
         (stats["lidar_lost_slots"], lidar_counters["packets_lost"])
     assert 5.0 < stats["lidar_lost_pct"] < 15.0, stats["lidar_lost_pct"]
+    # and the end of the run says so on stderr, not in the log's counters alone
+    assert "of the lidar's points were lost on the way" in (tmp_path / "d.err").read_text()
     # Recovered: after the restart the daemon's commands reach the head again and it turns right,
     # after the UAV (which drifted ~10 deg right of the axis while the head was gone), and the UAV is
     # detected again.  How fast the error closes is the tracker's business (the paper's controller
