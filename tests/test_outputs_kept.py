@@ -45,6 +45,19 @@ def test_simulate_does_not_replace_an_earlier_runs_recording_unasked(recording, 
     assert _md5(other / "run.mcap") == before          # the same 1 s run, written anew
 
 
+def test_demo_replaces_its_own_directory_only(recording, capsys):
+    # before: demo --out replaced any directory's recording (a user's audit: a simulate run's)
+    before = _md5(recording / "run.mcap")
+    code, err = _run(["demo", "--out", str(recording), "--no-progress"], capsys)
+    assert code == 2 and "earlier run" in err and "--overwrite" in err
+    assert _md5(recording / "run.mcap") == before
+    # its own default directory is replaced without asking (the quick start run again)
+    from foveatrack.cli.demo_cmd import DEFAULT_OUT, replaces
+
+    assert replaces(DEFAULT_OUT, False) and replaces("out/demo/", False) and not replaces(recording, False)
+    assert replaces(recording, True)
+
+
 def test_export_keeps_existing_files_and_one_name_per_output(recording, tmp_path, capsys):
     rec = str(recording / "run.mcap")
     mine = tmp_path / "mine.lvx"

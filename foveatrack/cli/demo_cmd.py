@@ -12,12 +12,23 @@ from pathlib import Path
 
 from foveatrack.cli.demo_work import DEFAULT_SCENE, scan_analyses, shipped_scene
 
+DEFAULT_OUT = "out/demo"      # the demo's own directory: a second demo replaces the first's files
+
 def register(sub) -> None:
     p = sub.add_parser("demo", help="the quick-start demo: a closed-loop tracking run, metrics and plots")
-    p.add_argument("--out", default="out/demo", help="directory for the recording, plots and summary")
+    p.add_argument("--out", default=DEFAULT_OUT, help="directory for the recording, plots and summary (default "
+                                                    f"{DEFAULT_OUT}, which a demo replaces; another directory's "
+                                                    "recording is replaced only with --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace the recording an --out directory holds")
     p.add_argument("--scene", default=None, help=f"scene file (default: scenes/{DEFAULT_SCENE})")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_demo)
+
+
+def replaces(out, asked: bool) -> bool:
+    """Whether the demo replaces the recording ``out`` holds: its own directory's (the quick start is
+    run again), another's only when asked (simulate's rule; it replaced another run's recording)."""
+    return asked or Path(out) == Path(DEFAULT_OUT)
 
 
 def cmd_demo(args) -> int:
@@ -28,8 +39,8 @@ def cmd_demo(args) -> int:
 
     out = Path(args.out)
     scene_path = args.scene or shipped_scene(DEFAULT_SCENE)
-    # the demo's directory is its own: a second demo replaces the first's files (the quick start is run again)
-    run_and_report(scene_path, out, plot=True, progress=not args.no_progress, overwrite=True)
+    run_and_report(scene_path, out, plot=True, progress=not args.no_progress,
+                   overwrite=replaces(args.out, args.overwrite))
 
     optics = load_scene(scene_path).optics
     scan_dir = out / "scan"
