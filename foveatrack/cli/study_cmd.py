@@ -33,6 +33,8 @@ def register(sub) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (tcp://host:port)")
     p.add_argument("--from-json", metavar="FILE", help="rewrite the report and plots from saved results (no runs)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the study DIR holds (a whole study or --from-json; --axis updates its section anyway)")
     p.add_argument("--axis", choices=("all", "effects", "objects"), default="all",
                    help="'effects': run only the effects axis (each effect a scene can list, on fig12), "
                         "'objects': only the sky axis (the multi-object tracker's frame against objects and "
@@ -65,6 +67,7 @@ def cmd_accuracy_vs_time(args) -> int:
         if args.from_json:
             raise UserError(f"--from-json rewrites the whole report; give it without --axis {args.axis}")
         return _one_axis(args, out)
+    _keep_existing(out, args)
     if args.from_json:
         try:
             saved = json.loads(Path(args.from_json).read_text())
@@ -89,6 +92,23 @@ def cmd_accuracy_vs_time(args) -> int:
                 "load_1min_start": load_start, "load_1min_end": _load()}
         (out / RESULTS).write_text(json.dumps({"meta": meta, "results": results}, indent=1))
     return _write(results, meta, out)
+
+
+def _keep_existing(out: Path, args) -> None:
+    """A whole study, or --from-json of other results, does not replace the study ``out`` holds unasked
+    (a quick study into docs/ replaced the shipped 20-minute report; simulate's rule): --overwrite
+    asks.  The report rewritten from its own results (--from-json DIR's JSON) replaces nothing."""
+    existing = out / RESULTS
+    if not existing.exists() or args.overwrite:
+        return
+    if args.from_json and Path(args.from_json).resolve() == existing.resolve():
+        return
+    try:
+        held = json.loads(existing.read_text())["meta"]["command"]
+    except (OSError, ValueError, KeyError, TypeError):
+        held = "unreadable"
+    raise UserError(f"--out {out}: it holds a study ({existing.name}, made by `{held}`); give another --out, or add "
+                    "--overwrite to replace it (--axis effects|objects updates one section of it)")
 
 
 def _write(results: dict, meta: dict, out: Path) -> int:

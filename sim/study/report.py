@@ -10,7 +10,7 @@ from sim.study.sensing import target_scene
 from sim.study.runner import TARGETS
 from sim.study.stats import LEVEL, excludes_zero, fmt as _ci, interval
 
-COMMAND = "foveatrack study accuracy-vs-time --out docs --workers 2"
+COMMAND = "foveatrack study accuracy-vs-time --out docs --workers 2 --overwrite"
 
 
 def _f(v, fmt="{:.3g}", none="-") -> str:
@@ -130,7 +130,8 @@ def write_report(res: dict, images: dict[str, str], meta: dict) -> str:
           f"{' at ' + meta['scheduler'] if meta.get('scheduler') else ''}, {_f(res['task_cpu_s'], '{:.0f}')} s of "
           f"measured CPU; CPU: {meta.get('cpu', 'not recorded')}, load {_f(meta.get('load_1min_start'), '{:.1f}')} at the "
           f"start and {_f(meta.get('load_1min_end'), '{:.1f}')} at the end).  Regenerate with `{COMMAND}`; `--quick` runs "
-          "a small version in about a minute.", "",
+          "a small version in about a minute (into another `--out`: a study's directory keeps its report unless "
+          "`--overwrite`).", "",
           f"Every closed-loop figure is a mean over seeds with its {int(LEVEL * 100)} % Student-t interval (`mean ± "
           "half-width`); the per-seed values are in the JSON.  Changes against a reference are paired by seed, and "
           "**bold** marks a change whose interval excludes zero: only those are measured effects.  Costs are also "

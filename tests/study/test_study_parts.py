@@ -137,3 +137,17 @@ def test_user_errors(tmp_path, capsys):
     (tmp_path / "x.json").write_text("[1, 2]")
     assert main(["study", "accuracy-vs-time", "--out", str(tmp_path), "--from-json", str(tmp_path / "x.json")]) == 2
     assert "not a study result" in capsys.readouterr().err
+
+
+def test_a_study_does_not_replace_the_study_its_out_holds_unasked(tmp_path, capsys):
+    # before: a quick study into docs/ replaced the shipped 20-minute report without a word (a user's
+    # audit); the report rewritten from its own JSON, and --axis (one section), still go ahead
+    held = tmp_path / "accuracy-vs-time.json"
+    held.write_text('{"meta": {"command": "foveatrack study accuracy-vs-time --out docs"}, "results": {}}')
+    before = held.read_bytes()
+    for argv in (["--quick"], ["--from-json", str(tmp_path / "other.json")]):
+        assert main(["study", "accuracy-vs-time", "--out", str(tmp_path), *argv, "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert "holds a study" in err and "made by `foveatrack study accuracy-vs-time --out docs`" in err
+        assert "--overwrite" in err
+    assert held.read_bytes() == before
