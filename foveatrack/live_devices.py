@@ -30,6 +30,7 @@ from pathlib import Path
 from foveatrack.control import HeadCommand
 from foveatrack.errors import UserError
 from foveatrack.first_failure import StopsAtFirstFailure, close_quietly
+from foveatrack.mcap_names import JOURNAL_SUFFIX
 
 
 def counters_text(counters: dict) -> str:
@@ -146,9 +147,6 @@ def open_devices(config) -> tuple["HeadLink", object]:
         head.close()
         raise
     return HeadLink(head, config.head.address, config.head.protocol), lidar
-
-
-JOURNAL_SUFFIX = ".commands.jsonl"
 
 
 def journal_path(recording) -> Path:

@@ -13,6 +13,7 @@ from typing import Iterable, Iterator
 
 from foveatrack.errors import UserError
 from foveatrack.file_lock import lock_holder
+from foveatrack.mcap_names import JOURNAL_SUFFIX
 from foveatrack.recording import mcap_walk as mw
 from foveatrack.recording.format import (CHANNELS_META_NAME, DETECTIONS, FORMAT, IMU, MCAP_MAGIC, META_CRC_KEY,
                                          META_NAME, POINTS, READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message,
@@ -280,10 +281,19 @@ class RecordingReader:
             return "\n".join(([f"WARNING: damaged recording {self.path}, {'; '.join(damaged)}"] if damaged else [])
                              + [f"note: {held}"])
         if self.damage or self.unattributed:
-            return f"WARNING: damaged recording {self.path}, {problem}"
+            return f"WARNING: damaged recording {self.path}, {problem}{self._recover_hint()}"
         if self.capped is not None:
             return f"WARNING: recording {self.path} read in part: {problem}"
         return f"note: {self.path}: {problem}"
+
+    def _recover_hint(self) -> str:
+        """A daemon's recording cut short (kill -9, power loss) with its command journal beside it:
+        what completes it (replay and export said only what was damaged, a user's audit)."""
+        journal = Path(self.path).with_name(Path(self.path).name + JOURNAL_SUFFIX)
+        if self.complete or not journal.exists():
+            return ""
+        return (f"; its command journal {journal.name} is beside it: `foveatrack recover {self.path}` completes "
+                f"it (the commands after its last record, and a closed file)")
 
     # ------------------------------------------------------------------ walking the file
 

@@ -75,6 +75,10 @@ def test_a_cut_short_recording_gets_every_journaled_command_back(tmp_path):
     cut, n_journal = _cut_short(tmp_path)
     before = RecordingReader(cut)
     assert not before.closed() and len(before.records("commands")) == 5
+    # what replay and export print of it names the journal beside it and the command that completes it
+    # (they said only what was damaged: a user's audit)
+    if before.damage:
+        assert f"`foveatrack recover {cut}` completes it" in before.warning(), before.warning()
     log_times = [lt for lt, _m in before.logged_messages("points")]
     res = recover(cut)
     assert res.recovered and res.frames == 5 and res.commands_added == 3 and res.journal_only_added == 1
