@@ -75,10 +75,6 @@ def test_a_cut_short_recording_gets_every_journaled_command_back(tmp_path):
     cut, n_journal = _cut_short(tmp_path)
     before = RecordingReader(cut)
     assert not before.closed() and len(before.records("commands")) == 5
-    # what replay and export print of it names the journal beside it and the command that completes it
-    # (they said only what was damaged: a user's audit)
-    if before.damage:
-        assert f"`foveatrack recover {cut}` completes it" in before.warning(), before.warning()
     log_times = [lt for lt, _m in before.logged_messages("points")]
     res = recover(cut)
     assert res.recovered and res.frames == 5 and res.commands_added == 3 and res.journal_only_added == 1
@@ -99,6 +95,23 @@ def test_a_cut_short_recording_gets_every_journaled_command_back(tmp_path):
     assert r.records("daemon")[-1]["event"] == "recovered"
     # log times kept: the copied messages' are the original's
     assert [lt for lt, _m in r.logged_messages("points")] == log_times
+
+
+def test_a_killed_daemons_recording_names_the_command_that_completes_it(tmp_path):
+    # kill -9 inside a record being written (its length field not yet filled in: 2^64 - 1, as a user's
+    # audit found it): replay and export said only what was damaged, not the journal beside the file
+    cut, _ = _cut_short(tmp_path)
+    with open(cut, "ab") as fh:
+        fh.write(b"\x06" + (2 ** 64 - 1).to_bytes(8, "little") + b"\x00" * 40)
+    r = RecordingReader(cut)
+    assert len(list(r.points())) == 5                    # what replay and export read, then warn about
+    assert r.damage and not r.complete
+    assert f"`foveatrack recover {cut}` completes it" in r.warning(), r.warning()
+    journal = cut.with_name(cut.name + ".commands.jsonl")
+    journal.rename(tmp_path / "elsewhere.jsonl")          # no journal beside it: no such hint
+    r = RecordingReader(cut)
+    list(r.points())
+    assert "damaged recording" in r.warning() and "foveatrack recover" not in r.warning()
 
 
 def test_recover_of_a_complete_recording_is_a_no_op_that_says_so(tmp_path, capsys):
