@@ -666,7 +666,9 @@ class Calibrator:
             return (f"too few steady frames (< {p.min_samples}) after the ramp: the longest leg stopped at "
                     f"the {p.max_excursion_deg:g} deg excursion {g.t_stop_s - g.t_cmd_s:.2f} s after its "
                     f"command{ramp}; give the corner a larger max_excursion_deg if the FoV allows")
-        return f"feature lost or too few steady frames (< {p.min_samples}); try a longer dwell or excursion"
+        steady = p.dwell_s - p.settle_s
+        return (f"feature lost or too few steady frames (< {p.min_samples}) in a leg's {steady:g} s after its "
+                f"{p.settle_s:g} s settle (dwell {p.dwell_s:g} s); try a longer dwell or excursion")
 
     def _leg_scatter(self, axis: str, min_arc_rms_m: float = 0.0) -> tuple[np.ndarray, int]:
         """Scatter matrix of the ``axis`` legs' steady corner positions about each leg's mean, and the
@@ -809,7 +811,11 @@ class Calibrator:
         t = self._table
         if all(not math.isfinite(t.axis(a).max_speed_deg_s(True)) or t.axis(a).max_speed_deg_s(True) <= 0
                for a in ("pan", "tilt")):
-            raise UserError("calibration measured no usable speed: the corner was lost in every leg")
+            # why, as the legs say it (it said "the corner was lost in every leg" of legs too short for
+            # a steady stretch after the settle: a user's audit, --dwell-s 0.6)
+            why = sorted({r for u in self.report.unmeasured.values() for r in u.values() if "plan" not in r})
+            raise UserError("calibration measured no usable speed: " + ("; ".join(why) if why else
+                                                                         "the corner was lost in every leg"))
         return t
 
 

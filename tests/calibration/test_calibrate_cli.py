@@ -160,3 +160,17 @@ def test_the_reports_warnings_are_shown_in_text_and_json(tmp_path, capsys, monke
         assert said == [f"calibrate: warning: {w}" for w in warnings], err
         if json_out:
             assert json.loads(out)["warnings"] == list(warnings)
+
+
+def test_too_short_legs_are_named_as_such_and_the_accelerations_per_axis(tmp_path, capsys):
+    # before: "the corner was lost in every leg" of legs whose 0.6 s held 0.1 s after the settle, and
+    # one acceleration printed, pan's, where the table holds both (a user's audit)
+    argv = ["calibrate", "--scene", SCENE, "--pan-bytes", "40", "--tilt-bytes", "63"]
+    assert main(argv + ["--dwell-s", "0.6", "--out", str(tmp_path / "a.json")]) == 2
+    err = capsys.readouterr().err
+    assert "0.1 s after its 0.5 s settle (dwell 0.6 s)" in err and "longer dwell" in err, err
+    assert main(argv + ["--dwell-s", "1.5", "--out", str(tmp_path / "b.json")]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if "dead time" in ln)
+    t = json.loads((tmp_path / "b.json").read_text())
+    assert f"acceleration pan {t['axes']['pan']['accel_deg_s2']:.1f}, tilt {t['axes']['tilt']['accel_deg_s2']:.1f}" \
+        in line, line
