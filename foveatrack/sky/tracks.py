@@ -581,7 +581,7 @@ class SkyTracker:
         for tr, p, v in zip(self.tracks, positions, velocities):
             was = tr.label
             label, frames, hits = held_label(tr.seen_as, was, tr.drone_frames, tr.drone_hits,
-                                             tr.hit_now and not tr.lone_now, ccfg)
+                                             tr.hit_now and not tr.lone_now, ccfg, t_mid - tr.last_hit_t_s)
             tr.label, tr.drone_frames, tr.drone_hits = label, frames, hits
             if (label == "drone") != (was == "drone"):
                 tr.reclassify = True        # rule 4 reads it

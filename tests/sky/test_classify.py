@@ -191,16 +191,19 @@ def test_a_classifier_built_in_code_is_checked_as_a_table_is():
         ClassifierConfig(bird_speed_after_hits=-2)
 
 
-@pytest.mark.parametrize("through, want", [(True, ["drone"] * 4 + ["bird"]), (False, ["drone", "unknown",
-                                                                                    "unknown", "unknown", "bird"])])
-def test_a_drone_label_is_not_left_for_too_few_hits_in_the_window(through, want):
+@pytest.mark.parametrize("hold_s, unseen_s, want", [
+    (1.0, 0.1, ["drone"] * 4 + ["bird"]),                  # still hit (lone returns count): it stays
+    (1.0, 1.5, ["drone"] + ["unknown"] * 3 + ["bird"]),   # coasting unseen longer: a ghost loses it
+    (0.0, 0.0, ["drone"] + ["unknown"] * 3 + ["bird"]),   # 0: the rule before (recordings made before it)
+])
+def test_a_drone_label_is_not_left_for_too_few_hits_in_the_window_while_the_track_is_hit(hold_s, unseen_s, want):
     # unknown (fewer than min_hits in the window: out of the fovea, at the sparse rim) is no news, not a
-    # verdict: the label stays (the daemon's status line flipped drone / unknown, and over the crossing's
-    # tuning seeds 29 of its 60 drones' tracks ended labelled unknown); another verdict leaves it
-    cfg = ClassifierConfig(drone_through_unknown=through)
+    # verdict: the daemon's status line flipped drone / unknown, and over the crossing's tuning seeds 29
+    # of its 60 drones' tracks ended labelled unknown; another verdict leaves it
+    cfg = ClassifierConfig(drone_through_unknown_s=hold_s)
     label, run, hits, shown = "drone", 12, 7, []
     for said in ["drone", "unknown", "unknown", "unknown", "bird"]:
-        label, run, hits = held_label(said, label, run, hits, True, cfg)
+        label, run, hits = held_label(said, label, run, hits, True, cfg, unseen_s)
         shown.append(label)
     assert shown == want
 

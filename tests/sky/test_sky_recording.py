@@ -333,6 +333,6 @@ def test_a_recorded_sky_table_without_the_trackers_own_later_keys_gets_them_as_t
     assert recorded_sky_table({"lone_returns": True})["lone_returns"] is True
     assert recorded_sky_table({})["classifier"] == {"drone_after_hits": 0, "bird_speed_after_hits": 0,
                                                     "drone_label_on_hit": False, "drone_stays_when_still": False,
-                                                    "drone_through_unknown": False}
+                                                    "drone_through_unknown_s": 0.0}
     # and the attention's: a pin held the fovea only since pin_holds_fovea
     assert recorded_sky_table({})["attention"]["pin_holds_fovea"] is False
