@@ -71,8 +71,8 @@ def register(sub) -> None:
     live.add_argument("--max-s", type=float, metavar="S", help="give up after S seconds (default: no limit)")
     p.add_argument("--accumulate", default="0.1,0.2,0.5,1,2,5,10", metavar="S,S,...",
                    help="accumulation times per pose [s] (default: %(default)s)")
-    p.add_argument("--lidar", metavar="NAME,...", help="lidars to compare (Risley presets mid40, horizon, "
-                   "prototype; spinning vlp16); default: the scene's [lidar] preset")
+    p.add_argument("--lidar", metavar="NAME,...", help="lidars to compare (Risley presets prototype, mid40, horizon, "
+                   "mid70, avia, tele15, mid100; spinning vlp16); default: the scene's [lidar] preset")
     p.add_argument("--out", metavar="X.json", help="write the extrinsic (first lidar, longest accumulation)")
     p.add_argument("--overwrite", action="store_true", help="replace an --out file that exists (else refused)")
     p.add_argument("--plot", metavar="F.png", help="plot error vs accumulation time beside coverage")
