@@ -158,7 +158,7 @@ class RecordingMeta:
                 return from_legacy_dict(meta, where)
             src = meta.get("source")
             if src not in (SimulatorOrigin.source, DaemonOrigin.source):
-                raise UserError(f"{where}: recording source {src!r} is not 'simulator' or 'daemon'")
+                raise UserError(f"{where}: {_not_replayable(src)}")
             for k in ("tracker", "head_values"):
                 if not isinstance(meta.get(k), Mapping):
                     raise UserError(f"{where}: the recording's metadata has no {k!r} table")
@@ -233,7 +233,18 @@ def _legacy_head_values(meta: Mapping) -> dict:
         return {"pan0_deg": g["pan0_deg"], "tilt0_deg": tilt0,
                 "tilt_limits_deg": (params.tilt_min_deg, params.tilt_max_deg),
                 "latency_s": frame_time_s("D", g["baud"]), "send_delay_s": g["send_delay_s"]}
-    raise UserError(f"recording source {meta.get('source')!r} is not 'simulator' or 'daemon'")
+    raise UserError(_not_replayable(meta.get("source")))
+
+
+def _not_replayable(source) -> str:
+    """Why a recording of another ``source`` has no closed loop to re-run, and what to do with it."""
+    if source == "openloop":
+        # (the track command's own recording: replay said only "source 'openloop' is not ...", a
+        # user's audit, where track pointed to replay)
+        return ("a recording `foveatrack track --record` made (source 'openloop'): its tracks are that run's "
+                "output, with no head loop to re-run; run `foveatrack track` on its source again (another "
+                "--config), open it in Foxglove, or `foveatrack export` its points")
+    return f"recording source {source!r} is not 'simulator' or 'daemon' (what replay re-runs)"
 
 
 def from_legacy_dict(meta: Mapping, where: str = "recording") -> RecordingMeta:

@@ -279,9 +279,10 @@ def _unreadable(path: Path, exc: Exception) -> UserError:
     except OSError as e:
         return UserError(f"{path}: cannot read it ({e.strerror or e})")
     if head.startswith(MCAP_MAGIC) and _is_foveatrack_recording(path):
-        return UserError(f"{path}: a foveatrack recording (its MCAP metadata names it; `simulate --out` and the "
-                         f"daemon write these), not a ROS bag: `foveatrack replay {path}` re-runs the tracker over "
-                         f"it, `foveatrack export {path}` writes its points as .lvx, CSV or NPZ")
+        return UserError(f"{path}: a foveatrack recording (its MCAP metadata names it; `simulate --out`, the "
+                         f"daemon and `track --record` write these), not a ROS bag: `foveatrack replay {path}` re-runs "
+                         f"the tracker over a simulator's or a daemon's, `foveatrack export {path}` writes its points "
+                         f"as .lvx, CSV or NPZ")
     kinds = {ROS1_MAGIC: ("a ROS 1 bag", ".bag"), MCAP_MAGIC: ("an MCAP file (a ROS 2 bag's storage)", ".mcap"),
              SQLITE_MAGIC: ("an SQLite file (a ROS 2 bag's storage)", ".db3")}
     magic = next((m for m in kinds if head.startswith(m)), None)

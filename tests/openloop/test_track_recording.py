@@ -46,6 +46,11 @@ def test_record_holds_the_cloud_the_track_and_d(tmp_path, capsys):
             np.testing.assert_allclose(centre, (out.d_min_m + out.d_max_m) / 2, rtol=0, atol=1e-12)
             assert c.size.x == out.d_max_m[0] - out.d_min_m[0]
     assert sum(len(m.entities[0].cubes) for m in d_msgs) >= 9
+    # replay has no head loop to re-run in it, and says what to do instead (it said only "source
+    # 'openloop' is not 'simulator' or 'daemon'", where track pointed to replay: a user's audit)
+    assert main(["replay", str(rec)]) == 2
+    err = capsys.readouterr().err
+    assert "a recording `foveatrack track --record` made" in err and "run `foveatrack track` on its source" in err
 
 
 def test_record_refuses_frames_longer_than_a_recorded_frame_holds(tmp_path, capsys):
