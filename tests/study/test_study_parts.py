@@ -151,3 +151,35 @@ def test_a_study_does_not_replace_the_study_its_out_holds_unasked(tmp_path, caps
         assert "holds a study" in err and "made by `foveatrack study accuracy-vs-time --out docs`" in err
         assert "--overwrite" in err
     assert held.read_bytes() == before
+
+
+def test_a_run_that_compiled_a_kernel_is_timed_again(monkeypatch):
+    # a fresh install's first quick study timed numba's compiler inside its runs (a user's audit:
+    # 'all-cheap' at 16 +- 199 times all-exact's CPU): a run that compiled is run again, and timed so
+    from sim.study import common
+
+    seen = []
+    counts = iter([0, 1, 1, 1])            # the first run compiled; the second did not
+
+    monkeypatch.setattr(common, "compiles_so_far", lambda: next(counts))
+    monkeypatch.setattr(common, "_run_loop_once", lambda *a: seen.append(a) or {"cpu_s": float(len(seen))})
+    assert common.run_loop("scene")["cpu_s"] == 2.0 and len(seen) == 2
+    seen.clear()
+    counts = iter([1, 1])
+    monkeypatch.setattr(common, "compiles_so_far", lambda: next(counts))
+    assert common.run_loop("scene")["cpu_s"] == 1.0 and len(seen) == 1      # nothing compiled: once
+
+
+def test_the_compile_count_sees_a_numba_compile():
+    from numba import njit
+
+    from sim.study.common import compiles_so_far
+
+    before = compiles_so_far()
+
+    @njit
+    def fresh(x):            # not cached: compiled here, at its first call
+        return x + 1
+
+    assert fresh(1) == 2 and compiles_so_far() == before + 1
+    assert fresh(2) == 3 and compiles_so_far() == before + 1      # the same types: no compile
