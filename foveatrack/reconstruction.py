@@ -382,11 +382,10 @@ class Reconstructor(HeadPose):
         self.table = speed_table
         self.latency_s = latency_s
         self.dead_time_s = speed_table.dead_time_s if dead_time_s is None else dead_time_s
-        accel = speed_table.accel_deg_s2 if accel_deg_s2 is None else accel_deg_s2
         self.lidar_offset_m = np.asarray(lidar_offset_m, float)
-        # A per-axis acceleration in the table wins over the table-wide one (unless overridden here).
-        acc_pan = accel if accel_deg_s2 is not None else (speed_table.pan.accel_deg_s2 or accel)
-        acc_tilt = accel if accel_deg_s2 is not None else (speed_table.tilt.accel_deg_s2 or accel)
+        # the table's per-axis accelerations, unless one is given here for both
+        acc_pan = speed_table.axis_accel_deg_s2("pan") if accel_deg_s2 is None else accel_deg_s2
+        acc_tilt = speed_table.axis_accel_deg_s2("tilt") if accel_deg_s2 is None else accel_deg_s2
         self.pan = _AxisIntegrator(speed_table.pan, wrap_deg(pan0_deg), sigma0_deg, t0_s, acc_pan, None, True,
                                    timing_sigma_s, random_walk_deg2_s, history_s)
         self.tilt = _AxisIntegrator(speed_table.tilt, tilt0_deg, sigma0_deg, t0_s, acc_tilt,

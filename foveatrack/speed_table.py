@@ -332,6 +332,11 @@ class SpeedTable:
             return self.tilt
         raise ValueError(f"axis must be 'pan' or 'tilt', got {name!r}")
 
+    def axis_accel_deg_s2(self, name: str) -> float | None:
+        """The acceleration of axis ``name``: its own where the table has one, else the table-wide one
+        (heads accelerate their two axes differently)."""
+        return self.axis(name).accel_deg_s2 or self.accel_deg_s2
+
     @property
     def unmeasured(self) -> dict[str, tuple[int, ...]]:
         return {a: self.axis(a).unmeasured_bytes for a in AXES}

@@ -136,8 +136,7 @@ def cmd_calibrate(args) -> int:
     _print_unmeasured(summary["unmeasured"])
     # per axis (heads accelerate their two axes differently; the table-wide value alone was pan's)
     acc = ", ".join(f"{a} {'-' if v is None else f'{v:.1f}'}" for a, v in
-                    (("pan", table.axis("pan").accel_deg_s2 or table.accel_deg_s2),
-                     ("tilt", table.axis("tilt").accel_deg_s2 or table.accel_deg_s2)))
+                    ((a, table.axis_accel_deg_s2(a)) for a in ("pan", "tilt")))
     print(f"  dead time {table.dead_time_s * 1e3:.0f} ms, acceleration {acc} deg/s^2; head back at pan "
           f"{run.head_end_deg[0]:.2f}, tilt {run.head_end_deg[1]:.2f} deg (started {run.head_start_deg[0]:.2f}, "
           f"{run.head_start_deg[1]:.2f})")
