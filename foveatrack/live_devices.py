@@ -30,7 +30,7 @@ from pathlib import Path
 from foveatrack.control import HeadCommand
 from foveatrack.errors import UserError
 from foveatrack.first_failure import StopsAtFirstFailure, close_quietly
-from foveatrack.mcap_names import JOURNAL_SUFFIX
+from foveatrack.mcap_names import JOURNAL_SUFFIX, journal_path  # noqa: F401 (its callers import them here)
 
 
 def counters_text(counters: dict) -> str:
@@ -147,12 +147,6 @@ def open_devices(config) -> tuple["HeadLink", object]:
         head.close()
         raise
     return HeadLink(head, config.head.address, config.head.protocol), lidar
-
-
-def journal_path(recording) -> Path:
-    """The command journal of a recording: ``<recording>.commands.jsonl`` beside it."""
-    recording = Path(recording)
-    return recording.with_name(recording.name + JOURNAL_SUFFIX)
 
 
 class CommandJournal(StopsAtFirstFailure):

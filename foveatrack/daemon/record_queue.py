@@ -86,10 +86,10 @@ class DaemonRecording:
         # the recording is written behind a queue: a journal of every frame for the head, written
         # before the frame is, says what a killed daemon's head got (CommandJournal); opened before the
         # writer's thread starts, so a journal that cannot be written leaves nothing running
-        from foveatrack.live_devices import CommandJournal
+        from foveatrack.live_devices import CommandJournal, journal_path
 
         try:
-            journal = CommandJournal(path.with_name(path.name + ".commands.jsonl"))
+            journal = CommandJournal(journal_path(path))
         except UserError:
             writer.close()
             path.unlink(missing_ok=True)
@@ -163,7 +163,9 @@ class DaemonRecording:
         come later, in :meth:`run`), and an empty ``daemon-*.mcap`` per failed start only misleads."""
         if self.recording_path is None:
             return
-        for p in (self.recording_path, self.recording_path.with_name(self.recording_path.name + ".commands.jsonl")):
+        from foveatrack.live_devices import journal_path
+
+        for p in (self.recording_path, journal_path(self.recording_path)):
             p.unlink(missing_ok=True)
         self.recording_path = None
 

@@ -13,7 +13,7 @@ from typing import Iterable, Iterator
 
 from foveatrack.errors import UserError
 from foveatrack.file_lock import lock_holder
-from foveatrack.mcap_names import JOURNAL_SUFFIX
+from foveatrack.mcap_names import journal_path
 from foveatrack.recording import mcap_walk as mw
 from foveatrack.recording.format import (CHANNELS_META_NAME, DETECTIONS, FORMAT, IMU, MCAP_MAGIC, META_CRC_KEY,
                                          META_NAME, POINTS, READABLE_VERSIONS, VIEW_CHANNELS, ImuSamples, Message,
@@ -289,7 +289,7 @@ class RecordingReader:
     def _recover_hint(self) -> str:
         """A daemon's recording cut short (kill -9, power loss) with its command journal beside it:
         what completes it (replay and export said only what was damaged, a user's audit)."""
-        journal = Path(self.path).with_name(Path(self.path).name + JOURNAL_SUFFIX)
+        journal = journal_path(self.path)
         if self.complete or not journal.exists():
             return ""
         return (f"; its command journal {journal.name} is beside it: `foveatrack recover {self.path}` completes "
