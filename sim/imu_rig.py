@@ -190,7 +190,8 @@ def score(data: RigData, result: procedure.CalibrationResult, lidar: str) -> Sco
     B_true = [inv_T(X_true) @ a @ X_true for a in A_true]
     imu_floor = _x_error(handeye.solve_handeye(A_true, result.B).X, X_true)
     used = result.handeye.used       # the pairs the extrinsic kept (a slid registration is not the lidar's floor)
-    lidar_floor = _x_error(handeye.solve_handeye([result.A[i] for i in used], [B_true[i] for i in used]).X, X_true)
+    lidar_floor = _x_error(handeye.solve_handeye([result.A[i] for i in used], [B_true[i] for i in used],
+                                                 free=[result.registrations[i].free_directions for i in used]).X, X_true)
     return Score(
         lidar, result.accumulate_s, X,
         float(np.degrees(np.linalg.norm(so3_log(X[:3, :3] @ data.X_true[:3, :3].T)))),

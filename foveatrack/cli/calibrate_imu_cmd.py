@@ -121,6 +121,10 @@ def extrinsic_record(res, lidar: str, accumulate_s: float) -> dict:
         "accumulate_s": accumulate_s,
         "pairs": res.handeye.pairs_used,
         "pairs_removed": [r.index + 1 for r in res.removed],
+        # pairs whose registration fixed no translation along these directions (lidar frame of the
+        # pair's first pose: the planes in view did not face them): their translation along them is unused
+        "pairs_translation_free": [{"pair": i + 1, "directions": np.round(r.free_directions, 4).tolist()}
+                                   for i, r in enumerate(res.registrations) if len(r.free_directions)],
         "axis_spread_deg": round(res.handeye.axis_spread_deg, 3),
         "consistency_eq8_mean": float(np.mean(res.consistency())),
         "warnings": list(res.warnings),
@@ -318,6 +322,9 @@ def calibrate_live_rig(args, live_flags: list[str]) -> int:
     print(f"  {res.handeye.pairs_used} pairs, rotation axes spread {res.handeye.axis_spread_deg:.1f} deg; translation "
           f"pinned by singular values {e['translation_singular_values']} (weakest along "
           f"{e['weakest_translation_direction']})")
+    for f in e["pairs_translation_free"]:
+        print(f"  pair {f['pair']}: the planes in view fixed no translation along "
+              f"{' and '.join(str(d) for d in f['directions'])} (lidar frame); its translation there is not used")
     print(f"  consistency eq. (8) without truth: mean {e['consistency_eq8_mean']:.2e}")
     print(f"  written to {out}")
     return 0

@@ -71,13 +71,29 @@ def axis_spread_deg(axes: np.ndarray, weights: np.ndarray | None = None) -> floa
     return float(np.degrees(2 * np.arctan(np.sqrt(max(lam[1], 0.0) / lam[0]))))
 
 
-def pair_residuals(A: np.ndarray, B: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def measured_part(free: np.ndarray | None) -> np.ndarray:
+    """3 x 3 projector onto the translation directions a pair's lidar motion measured: ``I`` less
+    its ``free`` directions ((k, 3) unit rows, :attr:`...registration.Registration.free_directions`:
+    the registration kept the seed's translation along them, so they carry no evidence)."""
+    if free is None or not len(free):
+        return np.eye(3)
+    free = np.asarray(free, float).reshape(-1, 3)
+    return np.eye(3) - free.T @ free
+
+
+def _projectors(free, n: int) -> np.ndarray:
+    return np.array([measured_part(None if free is None else free[i]) for i in range(n)]).reshape(n, 3, 3)
+
+
+def pair_residuals(A: np.ndarray, B: np.ndarray, X: np.ndarray, free: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """One pair's residuals of ``A X = X B``: rotation ``alpha - R_X beta`` [rad] and translation
-    ``(R_A - I) t_X - R_X t_B + t_A`` [m] (3-vectors, lidar frame)."""
+    ``(R_A - I) t_X - R_X t_B + t_A`` [m] (3-vectors, lidar frame), the translation's only along the
+    directions the lidar measured (``free``: those it did not, see :func:`measured_part`)."""
     R, t = X[:3, :3], X[:3, 3]
     r_rot = so3_log(A[:3, :3]) - R @ so3_log(B[:3, :3])
     r_tr = (A[:3, :3] - np.eye(3)) @ t - R @ B[:3, 3] + A[:3, 3]
-    return r_rot, r_tr
+    return r_rot, measured_part(free) @ r_tr
 
 
 def _logs(T) -> np.ndarray:
@@ -110,13 +126,14 @@ def _rotation_pairs(A, B, min_rotation_deg: float, min_axis_spread_deg: float):
     return alpha[keep], beta[keep], used, spread
 
 
-def park_martin(A, B, min_rotation_deg: float = 2.0, min_axis_spread_deg: float = 10.0) -> HandEyeResult:
+def park_martin(A, B, min_rotation_deg: float = 2.0, min_axis_spread_deg: float = 10.0, free=None) -> HandEyeResult:
     """Closed-form least-squares ``X`` of ``A_i X = X B_i`` (Park & Martin 1994): the rotation from
     the rotation vectors alone, then the translation with the rotation held."""
-    return _park_martin(A, B, *_rotation_pairs(A, B, min_rotation_deg, min_axis_spread_deg))
+    alpha, beta, used, spread = _rotation_pairs(A, B, min_rotation_deg, min_axis_spread_deg)
+    return _park_martin(A, B, alpha, beta, used, spread, _projectors(free, len(A))[used])
 
 
-def _park_martin(A, B, alpha, beta, used, spread) -> HandEyeResult:
+def _park_martin(A, B, alpha, beta, used, spread, P) -> HandEyeResult:
     A = [A[i] for i in used]
     B = [B[i] for i in used]
     # Rotation: min sum |alpha_i - R beta_i|^2 (Park-Martin's least squares, solved by SVD).
@@ -125,8 +142,9 @@ def _park_martin(A, B, alpha, beta, used, spread) -> HandEyeResult:
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
     R_X = Vt.T @ D @ U.T
     # Translation: (R_A - I) t_X = R_X t_B - t_A, stacked.
-    C = np.vstack([a[:3, :3] - np.eye(3) for a in A])
-    d = np.concatenate([R_X @ b[:3, 3] - a[:3, 3] for a, b in zip(A, B)])
+    # (each pair's rows only along the directions its lidar motion measured: P, measured_part)
+    C = np.vstack([p @ (a[:3, :3] - np.eye(3)) for a, p in zip(A, P)])
+    d = np.concatenate([p @ (R_X @ b[:3, 3] - a[:3, 3]) for a, b, p in zip(A, B, P)])
     t_X, *_ = np.linalg.lstsq(C, d, rcond=None)
     rot_res = np.degrees(np.linalg.norm(alpha - beta @ R_X.T, axis=1))
     tr_res = np.linalg.norm((C @ t_X - d).reshape(-1, 3), axis=1)
@@ -138,10 +156,11 @@ _SIGMA_FLOOR_RAD = 1e-9
 _SIGMA_FLOOR_M = 1e-10
 
 
-def _joint_system(alpha, beta, RA, tA, tB, X):
+def _joint_system(alpha, beta, RA, tA, tB, X, P):
     """Stacked residuals (rotation block, translation block) and their Jacobians with respect to
     ``(delta, dt)``, ``R_X <- Exp(delta) R_X``, ``t_X <- t_X + dt`` (per pair: ``alpha, beta`` the
-    rotation vectors, ``RA`` the lidar's rotation, ``tA, tB`` the translations; arrays over pairs)."""
+    rotation vectors, ``RA`` the lidar's rotation, ``tA, tB`` the translations, ``P`` the projector
+    onto the translation it measured; arrays over pairs)."""
     n = len(alpha)
     R, t = X[:3, :3], X[:3, 3]
     Rb = beta @ R.T
@@ -154,6 +173,8 @@ def _joint_system(alpha, beta, RA, tA, tB, X):
     J_rot[:, :, :3] = _skews(Rb)            # d(-Exp(delta) R beta)/d delta = [R beta]_x
     J_tr[:, :, :3] = _skews(Rtb)
     J_tr[:, :, 3:] = RA - I
+    r_tr = np.einsum("nij,nj->ni", P, r_tr)
+    J_tr = np.einsum("nij,njk->nik", P, J_tr)
     return r_rot, r_tr, J_rot.reshape(-1, 6), J_tr.reshape(-1, 6)
 
 
@@ -165,7 +186,8 @@ def _skews(v: np.ndarray) -> np.ndarray:
 
 
 def solve_handeye(A: list[np.ndarray], B: list[np.ndarray], min_rotation_deg: float = 2.0,
-                  min_axis_spread_deg: float = 10.0, joint: bool = True, iterations: int = 4) -> HandEyeResult:
+                  min_axis_spread_deg: float = 10.0, joint: bool = True, iterations: int = 4,
+                  free=None) -> HandEyeResult:
     """Least-squares ``X`` of ``A_i X = X B_i``.
 
     The closed form of Park & Martin (1994) finds the rotation from the pairs' rotation vectors
@@ -188,9 +210,14 @@ def solve_handeye(A: list[np.ndarray], B: list[np.ndarray], min_rotation_deg: fl
         Pairs whose IMU rotation is smaller are dropped (see the module docstring).
     min_axis_spread_deg : float > 0 [deg]
         Below this spread of the rotation axes the motion is degenerate: error.
+    free : optional, per pair the (k, 3) translation directions its lidar motion did not measure
+        (:attr:`...registration.Registration.free_directions`): its translation equations are used
+        only across them (a scene of walls alone leaves the vertical free, and ICP's value along it
+        is the seed's, not evidence).
     """
     alpha, beta, used, spread = _rotation_pairs(A, B, min_rotation_deg, min_axis_spread_deg)
-    pm = _park_martin(A, B, alpha, beta, used, spread)
+    P = _projectors(free, len(A))[used]
+    pm = _park_martin(A, B, alpha, beta, used, spread, P)
     if not joint:
         return pm
     n = pm.pairs_used
@@ -198,25 +225,27 @@ def solve_handeye(A: list[np.ndarray], B: list[np.ndarray], min_rotation_deg: fl
     tA = np.array([A[i][:3, 3] for i in pm.used])
     tB = np.array([B[i][:3, 3] for i in pm.used])
     X = pm.X.copy()
-    dof_k = max(3 * n - 3, 1)      # per block: 3n residuals, about 3 parameters each
+    n_tr = int(round(np.trace(P, axis1=1, axis2=2).sum()))   # translation rows that carry evidence
+    dof_k = max(3 * n - 3, 1)      # per block: its residuals less about 3 parameters
+    dof_t = max(n_tr - 3, 1)
     s_rot = max(np.sqrt(np.sum(np.radians(pm.rotation_residual_deg) ** 2) / dof_k), _SIGMA_FLOOR_RAD)
-    s_tr = max(np.sqrt(np.sum(pm.translation_residual_m ** 2) / dof_k), _SIGMA_FLOOR_M)
+    s_tr = max(np.sqrt(np.sum(pm.translation_residual_m ** 2) / dof_t), _SIGMA_FLOOR_M)
     for _outer in range(iterations):
         for _gn in range(10):
-            r_rot, r_tr, J_rot, J_tr = _joint_system(alpha, beta, RA, tA, tB, X)
+            r_rot, r_tr, J_rot, J_tr = _joint_system(alpha, beta, RA, tA, tB, X, P)
             J = np.vstack([J_rot / s_rot, J_tr / s_tr])
             r = np.concatenate([r_rot.ravel() / s_rot, r_tr.ravel() / s_tr])
             step = -np.linalg.lstsq(J, r, rcond=None)[0]
             X = make_T(so3_exp(step[:3]) @ X[:3, :3], X[:3, 3] + step[3:])
             if np.linalg.norm(step[:3]) < 1e-10 and np.linalg.norm(step[3:]) < 1e-10:
                 break
-        r_rot, r_tr, J_rot, J_tr = _joint_system(alpha, beta, RA, tA, tB, X)
+        r_rot, r_tr, J_rot, J_tr = _joint_system(alpha, beta, RA, tA, tB, X, P)
         s_rot = max(np.sqrt(np.sum(r_rot ** 2) / dof_k), _SIGMA_FLOOR_RAD)
-        s_tr = max(np.sqrt(np.sum(r_tr ** 2) / dof_k), _SIGMA_FLOOR_M)
+        s_tr = max(np.sqrt(np.sum(r_tr ** 2) / dof_t), _SIGMA_FLOOR_M)
     J = np.vstack([J_rot / s_rot, J_tr / s_tr])
     cov = np.linalg.pinv(J.T @ J)
     return HandEyeResult(X, n, pm.axis_spread_deg, np.degrees(np.linalg.norm(r_rot, axis=1)),
-                         np.linalg.norm(r_tr, axis=1), pm.used, float(s_rot), float(s_tr), cov, 6 * n - 6)
+                         np.linalg.norm(r_tr, axis=1), pm.used, float(s_rot), float(s_tr), cov, 3 * n + n_tr - 6)
 
 
 def random_rotation(rng: np.random.Generator, angle_deg: float) -> np.ndarray:

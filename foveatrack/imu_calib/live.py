@@ -170,11 +170,13 @@ class LiveImuCalibration:
         return [i for i, (t, p) in enumerate(zip(self.turned_deg, self.planned_deg)) if t < 0.5 * p]
 
 
-def translation_observability(A: list) -> tuple[np.ndarray, np.ndarray]:
+def translation_observability(A: list, free=None) -> tuple[np.ndarray, np.ndarray]:
     """Singular values (descending) of the stacked ``R_Ai - I`` of the hand-eye translation step and
     the direction of the smallest: ``t_X`` along it is pinned by ``sigma_min`` (about the rotation
-    angle [rad] about a perpendicular axis; 0 = unobservable)."""
-    C = np.vstack([a[:3, :3] - np.eye(3) for a in A])
+    angle [rad] about a perpendicular axis; 0 = unobservable).  ``free``: per pair the directions its
+    registration did not measure (their rows do not count, :func:`.handeye.measured_part`)."""
+    C = np.vstack([handeye.measured_part(None if free is None else free[i]) @ (a[:3, :3] - np.eye(3))
+                   for i, a in enumerate(A)])
     _, s, vt = np.linalg.svd(C)
     return s, vt[-1]
 
@@ -536,6 +538,6 @@ def calibrate_rig(config, plan: RigPlan, *, by_hand: bool = False, answers=None,
                               seed=seed)
     planned = [float(np.hypot(b[0] - a[0], b[1] - a[1])) for a, b in zip(offsets, offsets[1:])]
     turned = [float(np.degrees(np.linalg.norm(so3_log(a[:3, :3])))) for a in res.A]
-    s, weak = translation_observability(res.A)
+    s, weak = translation_observability(res.A, [r.free_directions for r in res.registrations])
     return LiveImuCalibration(res, win, [len(c[0]) for c in clouds], spreads, len(t_ns), time.monotonic() - t_wall0,
                               by_hand, s, weak, counters, turned, [] if by_hand else planned)

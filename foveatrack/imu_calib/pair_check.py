@@ -49,18 +49,23 @@ class RemovedPair:
                 f"{self.typical_translation_m * 100:.2f} cm): a registration that slid, or a pose that moved")
 
 
-def leave_one_out_scores(A, B, idx: list[int], **solve_kw) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+def leave_one_out_scores(A, B, idx: list[int], free=None,
+                         **solve_kw) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
     """Per pair of ``idx``: score, rotation residual [rad], translation residual [m] of the pair
-    under the X of the others; and the scales (rotation [rad], translation [m])."""
+    under the X of the others; and the scales (rotation [rad], translation [m]).  ``free``: per pair
+    the translation directions its lidar motion did not measure (:func:`~.handeye.solve_handeye`)."""
+    def sub(js):
+        return None if free is None else [free[j] for j in js]
+
     r_rot = np.full(len(idx), np.inf)
     r_tr = np.full(len(idx), np.inf)
     for k, i in enumerate(idx):
         others = [j for j in idx if j != i]
         try:
-            X = solve_handeye([A[j] for j in others], [B[j] for j in others], **solve_kw).X
+            X = solve_handeye([A[j] for j in others], [B[j] for j in others], free=sub(others), **solve_kw).X
         except DegenerateMotion:
             continue     # the others alone cannot solve: this pair is needed, not judged
-        rr, rt = pair_residuals(A[i], B[i], X)
+        rr, rt = pair_residuals(A[i], B[i], X, None if free is None else free[i])
         r_rot[k], r_tr[k] = np.linalg.norm(rr), np.linalg.norm(rt)
     finite = np.isfinite(r_rot)
     s_rot = max(float(np.median(r_rot[finite])) / _MEDIAN_CHI3, ROTATION_FLOOR_RAD) if finite.any() else np.inf
@@ -69,13 +74,13 @@ def leave_one_out_scores(A, B, idx: list[int], **solve_kw) -> tuple[np.ndarray, 
     return score, r_rot, r_tr, s_rot, s_tr
 
 
-def screen_pairs(A, B, **solve_kw) -> tuple[list[int], list[RemovedPair]]:
+def screen_pairs(A, B, free=None, **solve_kw) -> tuple[list[int], list[RemovedPair]]:
     """The indices of the pairs kept and the pairs removed (module docstring)."""
     idx = list(range(len(A)))
     removed: list[RemovedPair] = []
     max_removed = int(len(A) * MAX_REMOVED_FRACTION)
     while len(idx) >= MIN_PAIRS_TO_CHECK and len(removed) < max_removed:
-        score, r_rot, r_tr, s_rot, s_tr = leave_one_out_scores(A, B, idx, **solve_kw)
+        score, r_rot, r_tr, s_rot, s_tr = leave_one_out_scores(A, B, idx, free, **solve_kw)
         k = int(np.argmax(score))
         if not score[k] > MAX_SCORE:
             break

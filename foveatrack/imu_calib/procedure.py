@@ -4,6 +4,9 @@
 2. The lidar's ``A_i``: each pose's cloud accumulated for ``accumulate_s`` from the start of its
    static window, registered to the previous pose's (:mod:`.registration`), seeded with the IMU's
    motion mapped through the nominal mount ``X0`` (the drawing's; ICP only refines within its basin).
+   A translation direction the planes in view do not face (a level Horizon in a room sees walls but
+   neither floor nor ceiling: the vertical) is not measured: ICP keeps the seed's value along it and
+   the pair's translation equations are used only across it (``Registration.free_directions``).
 3. The pairs checked against each other (:mod:`.pair_check`): a pair that disagrees with the
    others' extrinsic is registered again, seeded through that extrinsic instead of the nominal mount
    (a wrong nominal mount is the usual reason a registration slides), and removed if it still
@@ -77,14 +80,19 @@ def lidar_motions(clouds: list[PoseCloud], B: list, X0: np.ndarray, accumulate_s
     return out
 
 
-def solve_pairs(A: list, B: list, bootstrap_samples: int = 200, seed: int = 0, **handeye_kw):
+def solve_pairs(A: list, B: list, bootstrap_samples: int = 200, seed: int = 0, free=None, **handeye_kw):
     """Screened pairs -> ``(HandEyeResult, Uncertainty, removed, warnings)``; ``HandEyeResult.used``
-    indexes ``A``."""
-    kept, removed = pair_check.screen_pairs(A, B, **handeye_kw)
-    he = handeye.solve_handeye([A[i] for i in kept], [B[i] for i in kept], **handeye_kw)
+    indexes ``A``.  ``free``: per pair the translation directions its lidar motion did not measure
+    (:attr:`.registration.Registration.free_directions`; None: all measured)."""
+    def sub(idx):
+        return None if free is None else [free[i] for i in idx]
+
+    kept, removed = pair_check.screen_pairs(A, B, free, **handeye_kw)
+    he = handeye.solve_handeye([A[i] for i in kept], [B[i] for i in kept], free=sub(kept), **handeye_kw)
     he = replace(he, used=np.asarray(kept, dtype=np.int64)[he.used])
     unc, warnings = uncertainty.extrinsic_uncertainty([A[i] for i in he.used], [B[i] for i in he.used], he,
-                                                      samples=bootstrap_samples, seed=seed, **handeye_kw)
+                                                      samples=bootstrap_samples, seed=seed, free=sub(he.used),
+                                                      **handeye_kw)
     warnings = [r.describe() for r in removed] + warnings
     if len(A) < pair_check.MIN_PAIRS_TO_CHECK:
         warnings.append(f"{len(A)} pose pairs cannot be checked against each other (a slid registration would go "
@@ -107,19 +115,21 @@ def calibrate(clouds: list[PoseCloud], imu: ImuSamples, windows: list[tuple[floa
     motion = imu_motion or relative_motions(imu, windows)
     regs = lidar_motions(clouds, motion.B, X0, accumulate_s, progress=progress)
     A = [r.T for r in regs]
-    kept, removed = pair_check.screen_pairs(A, motion.B, **handeye_kw)
+    free = [r.free_directions for r in regs]
+    kept, removed = pair_check.screen_pairs(A, motion.B, free, **handeye_kw)
     again = []
     if removed:
         # Seed the disagreeing pairs through the others' extrinsic and register them again.
-        X_kept = handeye.solve_handeye([A[i] for i in kept], [motion.B[i] for i in kept], **handeye_kw).X
+        X_kept = handeye.solve_handeye([A[i] for i in kept], [motion.B[i] for i in kept],
+                                       free=[free[i] for i in kept], **handeye_kw).X
         Xi = inv_T(X_kept)
         for r in removed:
             i = r.index
             pts = [accumulated(clouds[k], accumulate_s) for k in (i, i + 1)]
             regs[i] = registration.register(pts[1], pts[0], X_kept @ motion.B[i] @ Xi)
-            A[i] = regs[i].T
+            A[i], free[i] = regs[i].T, regs[i].free_directions
             again.append(i)
-    he, unc, removed, warnings = solve_pairs(A, motion.B, bootstrap_samples, seed, **handeye_kw)
+    he, unc, removed, warnings = solve_pairs(A, motion.B, bootstrap_samples, seed, free, **handeye_kw)
     gone = {r.index for r in removed}
     kept_again = [i for i in again if i not in gone]
     if kept_again:

@@ -18,12 +18,20 @@ cells' normal distributions; Biber & Strasser 2003).  Why this and not plain NDT
 * no well-kept pure-Python registration library is among our dependencies (Open3D is a large binary
   dependency for two functions); scipy's cKDTree does the nearest-neighbour work.
 
+A direction the planes in view do not face is not measured, and ICP must not walk along it: a
+Horizon level in a room (25 deg of vertical view) sees the walls and the boxes' sides but neither
+floor nor ceiling, and from a seed 0.7 cm off it drifted 53 cm down, each step nudged by the few
+points on edges.  Where the normal matrix's translation block gives a direction less than
+:data:`FREE_TRANSLATION_SHARE` of the best-fixed one's information, the steps leave it alone (the
+seed's value stays) and :attr:`Registration.free_directions` names it, so that the hand-eye solve
+does not take the seed's value there for evidence (:func:`~foveatrack.imu_calib.handeye.solve_handeye`).
+
 Every step is deterministic (source subsampling is a fixed stride).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -38,6 +46,13 @@ MAX_NORMAL_ANGLE_DEG = 15.0   # source and target planes of a correspondence mus
 _COS_NORMAL = float(np.cos(np.radians(MAX_NORMAL_ANGLE_DEG)))
 MAX_PLANE_POINTS = 1_000_000  # per cloud for the plane fits (a fixed stride beyond): compute time
 _SELF_AND_FACES = ((0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
+#: A translation direction whose information (eigenvalue of the normal matrix's translation block) is
+#: below this share of the best-fixed direction's is not measured: the planes in view barely face it.
+#: A Horizon level in a room (25 deg of vertical view) sees walls and boxes' sides but no floor or
+#: ceiling: the share of the vertical fell to 3e-4, and ICP drifted 54 cm along it from a seed 1 cm
+#: off (the live rig's 2 s clouds, scenes/imu-calibration-head.toml); 3 of 80 such pairs were below
+#: 1e-2, the median 0.26.
+FREE_TRANSLATION_SHARE = 1e-2
 
 
 def _cell_keys(points: np.ndarray, cell_m: float):
@@ -200,6 +215,9 @@ class Registration:
     inliers: int
     information: np.ndarray     # 6 x 6 J^T J of the last stage (order: rotation, translation)
     iterations: int
+    # (k, 3) unit directions (target frame) along which the scene does not fix the translation
+    # (:func:`free_translation_directions`): ``T``'s translation along them is the seed's
+    free_directions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def weakest_direction(self) -> tuple[float, np.ndarray]:
@@ -207,6 +225,30 @@ class Registration:
         pins the translation: a 16-line lidar that sees only walls leaves z loose)."""
         lam, vec = np.linalg.eigh(self.information[3:, 3:])
         return float(lam[0]), vec[:, 0]
+
+
+def free_translation_directions(H: np.ndarray) -> np.ndarray:
+    """(k, 3) unit directions of the translation block of the 6 x 6 normal matrix ``H`` whose
+    information is below :data:`FREE_TRANSLATION_SHARE` of the largest (k = 0 for a scene of planes
+    facing every way)."""
+    lam, vec = np.linalg.eigh(H[3:, 3:])
+    if not lam[-1] > 0:
+        return np.eye(3)
+    return vec[:, lam < FREE_TRANSLATION_SHARE * lam[-1]].T.copy()
+
+
+def _step(H: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """The Gauss-Newton step ``-H^-1 g``, none along a free translation direction: point-to-plane ICP
+    otherwise walks along it, each step nudged by the few points that touch it."""
+    free = free_translation_directions(H)
+    if not len(free):
+        return -np.linalg.lstsq(H, g, rcond=1e-12)[0]
+    # basis of the steps that leave the free directions alone: rotation, and the translation's rest
+    keep = np.linalg.svd(np.eye(3) - free.T @ free)[0][:, :3 - len(free)]
+    Q = np.zeros((6, 6 - len(free)))
+    Q[:3, :3] = np.eye(3)
+    Q[3:, 3:] = keep
+    return -Q @ np.linalg.lstsq(Q.T @ H @ Q, Q.T @ g, rcond=1e-12)[0]
 
 
 def _icp_stage(src: np.ndarray, src_normal: np.ndarray, cells: PlaneCells, anchor_cell: np.ndarray, tree: cKDTree,
@@ -239,7 +281,7 @@ def _icp_stage(src: np.ndarray, src_normal: np.ndarray, cells: PlaneCells, ancho
         Jw = J * w[:, None]
         H = Jw.T @ J
         g = Jw.T @ r
-        delta = -np.linalg.lstsq(H, g, rcond=1e-12)[0]
+        delta = _step(H, g)
         step = np.eye(4)
         step[:3, :3] = so3_exp(delta[:3])
         step[:3, 3] = delta[3:]
@@ -294,4 +336,4 @@ def register(source, target, T0: np.ndarray | None = None, stages=DEFAULT_STAGES
             break
         T, rms, used, H, it = _icp_stage(src_pts, src_nrm, cells, anchor_cell, tree, T, max_dist_m, iters)
         total += it
-    return Registration(T, rms, used, H, total)
+    return Registration(T, rms, used, H, total, free_translation_directions(H) if used else np.zeros((0, 3)))

@@ -60,7 +60,7 @@ def _none(samples: int, why: str) -> Uncertainty:
     return Uncertainty(nan, nan, samples, why)
 
 
-def bootstrap_sigma(A, B, X: np.ndarray, samples: int = 200, seed: int = 0, **solve_kw):
+def bootstrap_sigma(A, B, X: np.ndarray, samples: int = 200, seed: int = 0, free=None, **solve_kw):
     """Per-axis 1-sigma of ``X`` by resampling the pose pairs with replacement (Efron's bootstrap);
     resamples whose motion is degenerate are skipped.  Returns (rotation [deg], translation [m],
     resamples solved); NaN with fewer than two."""
@@ -70,7 +70,8 @@ def bootstrap_sigma(A, B, X: np.ndarray, samples: int = 200, seed: int = 0, **so
     for _ in range(samples):
         idx = rng.integers(0, n, n)
         try:
-            r = solve_handeye([A[i] for i in idx], [B[i] for i in idx], **solve_kw)
+            r = solve_handeye([A[i] for i in idx], [B[i] for i in idx],
+                              free=None if free is None else [free[i] for i in idx], **solve_kw)
         except DegenerateMotion:
             continue
         rot.append(np.degrees(so3_log(r.X[:3, :3] @ X[:3, :3].T)))
@@ -90,11 +91,12 @@ def linearised_sigma(he: HandEyeResult) -> tuple[np.ndarray, np.ndarray]:
     return np.degrees(np.sqrt(var[:3])), np.sqrt(var[3:])
 
 
-def extrinsic_uncertainty(A, B, he: HandEyeResult, samples: int = 200, seed: int = 0,
+def extrinsic_uncertainty(A, B, he: HandEyeResult, samples: int = 200, seed: int = 0, free=None,
                           **solve_kw) -> tuple[Uncertainty, list[str]]:
     """The reported 1-sigma of ``he.X`` from the pairs ``A, B`` it was solved from, and warnings.
 
-    ``A, B``: the pairs the solver used (``he.used`` already applied).
+    ``A, B`` (and ``free``, their unmeasured translation directions): the pairs the solver used
+    (``he.used`` already applied).
     """
     n = he.pairs_used
     if n < MIN_PAIRS_FOR_SIGMA:
@@ -103,7 +105,7 @@ def extrinsic_uncertainty(A, B, he: HandEyeResult, samples: int = 200, seed: int
         return _none(0, why), [why]
     lin_rot, lin_tr = linearised_sigma(he)
     if samples > 0:
-        b_rot, b_tr, solved = bootstrap_sigma(A, B, he.X, samples, seed, **solve_kw)
+        b_rot, b_tr, solved = bootstrap_sigma(A, B, he.X, samples, seed, free, **solve_kw)
     else:
         b_rot, b_tr, solved = np.full(3, np.nan), np.full(3, np.nan), 0
     rot = np.fmax(lin_rot, b_rot)

@@ -109,6 +109,27 @@ def test_a_slipped_pair_is_removed_and_named(seed):
 
 
 @pytest.mark.parametrize("seed", range(4))
+def test_a_translation_the_lidar_did_not_measure_is_not_used_and_not_blamed(seed):
+    # Pair 8's registration saw walls only: the vertical was free and its translation there is the
+    # seed's, here 50 cm off (the registration names the direction, Registration.free_directions).
+    # The pair's rotation and its horizontal translation still count; its vertical does not, so it
+    # is neither removed as slid nor pulls X.
+    X = _truth()
+    A, B = _motions(np.random.default_rng(500 + seed), X, 24)
+    A[7] = make_T(A[7][:3, :3], A[7][:3, 3] + [0.0, 0.0, 0.50])
+    free = [np.zeros((0, 3))] * 24
+    free[7] = np.array([[0.0, 0.0, 1.0]])
+    he, unc, removed, warnings = procedure.solve_pairs(A, B, bootstrap_samples=50, free=free)
+    assert not removed and not warnings and he.pairs_used == 24
+    assert he.dof == 6 * 24 - 1 - 6
+    err_deg, err_m = _errors(he.X, X)
+    assert err_deg < 0.2 and err_m < 0.01, (err_deg, err_m)
+    assert unc.given and _covered(unc, err_deg, err_m), (err_deg, err_m, unc)
+    # the same pairs with the vertical taken as measured: the pair is blamed and removed
+    assert [r.index for r in procedure.solve_pairs(A, B, bootstrap_samples=0)[2]] == [7]
+
+
+@pytest.mark.parametrize("seed", range(4))
 def test_good_pairs_are_all_kept_and_the_sigma_covers_the_error(seed):
     X = _truth()
     A, B = _motions(np.random.default_rng(400 + seed), X, 24)
