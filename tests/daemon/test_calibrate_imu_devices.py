@@ -131,12 +131,15 @@ def test_the_head_steps_the_rig_and_the_extrinsic_is_recovered(rig):
     assert all(s > 0 for s in ext["sigma_rotation_deg"] + ext["sigma_translation_m"])
     # the unit's own speed table: every move turned as planned (10 deg, or 14 for pan and tilt together)
     assert min(ext["pair_rotations_deg"]) > 9.0
-    # nothing to warn of but, at most once, a pair the pair check removed as slid: with the 2 s of scan a
-    # pose gets here, one registration slid ~30 cm in about one run in seven (CI's run of 2026-12-06 and
-    # one of six reruns); the check naming and removing it is the product's answer, and the extrinsic is
-    # still within the bounds above
-    slid = [w for w in ext["warnings"] if "a registration that slid" in w]
-    assert len(slid) <= 1 and [w for w in ext["warnings"] if w not in slid] == [], ext["warnings"]
+    # nothing to warn of but, at most once, a pair the pair check removed.  The removals CI saw (31.7 cm on
+    # 2026-12-06; 10.9 cm and a second pair on 2026-12-08, about one run in ten) were ICP walking along the
+    # vertical, which the walls in a level Horizon's view do not fix: now left free and listed, not
+    # removed (tests/imu_calib/test_registration.py).  One removal stays allowed for the check's own
+    # chance: over 20 runs here its largest score of the 8 pairs reached 5.04 against its limit of 6.
+    removed = [w for w in ext["warnings"] if " removed: " in w]
+    assert len(removed) <= 1 and [w for w in ext["warnings"] if w not in removed] == [], "\n".join(ext["warnings"])
+    for f in ext["pairs_translation_free"]:
+        assert 1 <= f["pair"] <= 8 and all(abs(np.linalg.norm(u) - 1) < 1e-3 for u in f["directions"]), f
     wait_for(lambda: _stopped(truth), 3.0, "the head at rest after the calibration", [])
 
 
