@@ -38,12 +38,13 @@ def register(sub) -> None:
                    help="with --live: also let a web page at ORIGIN (scheme://host[:port]; * for any) read the live "
                         "view; by default only clients without an Origin (the Foxglove app, scripts) and Foxglove's "
                         "web app (https://app.foxglove.dev) are served, so another page in a local browser cannot read it")
-    p.add_argument("--speed", type=float, default=1.0, metavar="FACTOR",
+    # the --live options default to None so that one given without --live is told, not ignored
+    p.add_argument("--speed", type=float, default=None, metavar="FACTOR",
                    help="with --live: recorded seconds per wall second (default 1 = as recorded)")
-    p.add_argument("--wait-s", type=float, default=3.0, metavar="S",
+    p.add_argument("--wait-s", type=float, default=None, metavar="S",
                    help="with --live: wait until a viewer connects, at most S seconds, then stream "
                         "(default 3; 0: stream at once)")
-    p.add_argument("--linger-s", type=float, default=30.0, metavar="S",
+    p.add_argument("--linger-s", type=float, default=None, metavar="S",
                    help="with --live: after the last message, keep serving a connected viewer until it "
                         "disconnects, at most S seconds (default 30; 0: close at once)")
     p.set_defaults(func=cmd_replay)
@@ -64,15 +65,21 @@ def cmd_replay(args) -> int:
     check_outputs([("--export-points", args.export_points, (".csv", ".npz")),
                    ("--export-trajectory", args.export_trajectory, (".csv", ".npz"))],
                   inputs=[args.recording], overwrite=args.overwrite)
+    live_only = [flag for flag, v in (("--live-origin", args.live_origin), ("--speed", args.speed),
+                                      ("--wait-s", args.wait_s), ("--linger-s", args.linger_s)) if v not in (None, [])]
+    if args.live is None and live_only:
+        raise UserError(f"{', '.join(live_only)}: for the live view only (replay itself runs as fast as it can): "
+                        "add --live")
     if args.live is not None and not args.recording.lower().endswith(".lvx"):
         from foveatrack.recording.live import check_port, stream_recording
 
-        n = stream_recording(args.recording, check_port(args.live), args.speed, max(args.wait_s, 0.0),
-                             say=lambda t: print(t, file=sys.stderr, flush=True), linger_s=max(args.linger_s, 0.0),
+        speed = 1.0 if args.speed is None else args.speed
+        wait_s = 3.0 if args.wait_s is None else max(args.wait_s, 0.0)
+        linger_s = 30.0 if args.linger_s is None else max(args.linger_s, 0.0)
+        n = stream_recording(args.recording, check_port(args.live), speed, wait_s,
+                             say=lambda t: print(t, file=sys.stderr, flush=True), linger_s=linger_s,
                              allowed_origins=args.live_origin)
         print(f"live view: served {n} messages", file=sys.stderr)
-    elif args.live_origin and args.live is None:
-        raise UserError("--live-origin is for the live view: add --live")
     elif args.live is not None:
         raise UserError("--live serves foveatrack recordings (.mcap); a .lvx file has no records to show")
     if args.max_frames is not None and args.max_frames < 1:

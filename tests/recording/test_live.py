@@ -111,6 +111,17 @@ def test_live_flags_are_checked(args, msg, capsys):
     assert code != 0 and msg in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("args", [["--speed", "4"], ["--wait-s", "0"], ["--linger-s", "5"],
+                                  ["--live-origin", "https://example.org"]])
+def test_replay_refuses_a_live_view_option_without_live(args, capsys):
+    # before: `replay run.mcap --speed 4` replayed as fast as it could and said nothing of the --speed
+    from foveatrack.cli import main
+
+    code = main(["replay", str(FIXTURE), *args])
+    err = capsys.readouterr().err
+    assert code != 0 and f"{args[0]}: for the live view only" in err and "add --live" in err, err
+
+
 def test_replay_live_waits_for_a_viewer_and_serves_it_until_it_leaves(tmp_path):
     # before: --wait-s was a fixed sleep, and the server closed with the last message, under a viewer
     import threading
