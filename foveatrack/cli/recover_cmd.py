@@ -15,7 +15,7 @@ def register(sub) -> None:
 def cmd_recover(args) -> int:
     import sys
 
-    from foveatrack.daemon.recover import recover
+    from foveatrack.daemon.recover import head_after_a_kill, recover
 
     for path in args.recording:
         res = recover(path, progress=lambda n: print(f"  {n} frames copied", file=sys.stderr, flush=True))
@@ -24,4 +24,7 @@ def cmd_recover(args) -> int:
         if res.reader_problem:
             print(f"note: what the cut-short file lost: {res.reader_problem}", file=sys.stderr)
         print(res.describe())
+        if res.recovered:
+            # the daemon says this at its next start only when it completes the recording itself
+            print(f"WARNING: the run that wrote {path} was killed: {head_after_a_kill()}", file=sys.stderr)
     return 0

@@ -109,10 +109,10 @@ class Lifecycle:
             self._pose_unknown(now, "start", policy="home")
             self._reconnected(now)
         elif killed and self.head.connected:
+            from foveatrack.daemon.recover import head_after_a_kill
+
             self.status.note(f"foveatrack daemon: WARNING: the run before this one was killed (its recording was "
-                             f"completed above): the head is where that run left it, and this run assumes it at "
-                             f"pan {h.pan0_deg:g} / tilt {h.tilt0_deg:g} deg; [head] on_start = \"home\" drives it "
-                             f"home first (home_pan_deg / home_tilt_deg, by default there)")
+                             f"completed above): {head_after_a_kill(h.pan0_deg, h.tilt0_deg, 'this run')}")
 
     def _shutdown(self) -> None:
         self.stop_ev.set()

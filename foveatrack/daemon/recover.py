@@ -82,6 +82,17 @@ class Recovery:
         return s
 
 
+def head_after_a_kill(pan0_deg: float | None = None, tilt0_deg: float | None = None,
+                      next_run: str = "the daemon's next run") -> str:
+    """What a killed run leaves of the head (it reports no pose), said wherever its recording is
+    completed: by the daemon's own start (with the config's start pose) and by ``foveatrack recover``
+    (which has no config), so that a manual recover warns as the daemon's does."""
+    where = (f"pan {pan0_deg:g} / tilt {tilt0_deg:g} deg" if pan0_deg is not None and tilt0_deg is not None
+             else "its config's [head] pan0_deg / tilt0_deg")
+    return (f"the head is where that run left it, and {next_run} assumes it at {where}; "
+            "[head] on_start = \"home\" drives it home first (home_pan_deg / home_tilt_deg, by default there)")
+
+
 class _LogTimes:
     """The rewritten file's log times: each message's own (set before it is written)."""
 

@@ -441,6 +441,7 @@ def test_fault6_a_killed_daemons_recording_is_completed_from_its_journal(tmp_pat
         out = subprocess.run([sys.executable, "-m", "foveatrack", "recover", str(manual / "rec.mcap")], cwd=ROOT,
                              env=env(), capture_output=True, text=True, timeout=300)
         assert out.returncode == 0 and "recovered:" in out.stdout, out
+        assert "was killed: the head is where that run left it" in out.stderr, out.stderr   # as the daemon says
         cmds = _official_mcap_commands(manual / "rec.mcap")
         assert len(cmds) == len(lines), (len(cmds), len(lines))
         assert [c["raw_hex"] for c in cmds if not c.get("journal_only")] == \
@@ -473,7 +474,10 @@ def test_fault6_a_killed_daemons_recording_is_completed_from_its_journal(tmp_pat
         stop_all(procs)
     ev = event(log2, "recording_recovered")
     assert ev["recording"] == str(rec) and ev["commands_added"] == len(added), ev
-    assert "recovered:" in (tmp_path / "d2.err").read_text()
+    d2_err = (tmp_path / "d2.err").read_text()
+    assert "recovered:" in d2_err
+    assert ("the run before this one was killed (its recording was completed above): the head is where that run "
+            "left it, and this run assumes it at pan 0 / tilt 0 deg") in d2_err, d2_err
     assert len(_official_mcap_commands(rec)) == len(lines)
     assert RecordingReader(rec2 := tmp_path / "rec2.mcap").closed(), rec2
     assert oct(rec.stat().st_mode & 0o777) == "0o600"
