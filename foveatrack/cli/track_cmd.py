@@ -16,7 +16,7 @@ def register(sub) -> None:
     p = sub.add_parser("track", help="track a drone in a ROS bag, PCD or numpy frame folder from a fixed lidar")
     p.add_argument("source", metavar="SOURCE",
                    help="a .bag, a ROS 2 bag folder or .mcap/.db3, a folder of <unix time>.npy or .pcd frames")
-    p.add_argument("--topic", help="the bag's point-cloud topic (without it, the bag's topics are listed)")
+    p.add_argument("--topic", help="the bag's point-cloud topic (default: its only one; with several, they are listed)")
     p.add_argument("--fixed-frame", metavar="FRAME",
                    help="a bag's clouds turned into this frame with its /tf (a sensor that moved while recording)")
     p.add_argument("--rate-hz", type=float, default=10.0, metavar="HZ",

@@ -97,8 +97,12 @@ class BagSource:
         self.warn = warn or warn_stderr
         topics = self._topics()
         if topic is None:
-            raise UserError(f"{self.path}: give the cloud topic with --topic; the bag has "
-                            + describe_topics(topics))
+            clouds = [name for name, (t, _) in topics.items() if t in CLOUD_TYPES]
+            if len(clouds) != 1:
+                raise UserError(f"{self.path}: give the cloud topic with --topic; the bag has "
+                                + describe_topics(topics))
+            topic = clouds[0]     # the bag's only point cloud: what --topic would name
+            self.warn(f"{self.path}: reading {topic}, the bag's only point-cloud topic (--topic names another)")
         if topic not in topics:
             raise UserError(f"{self.path}: no topic {topic!r}; the bag has " + describe_topics(topics))
         msgtype, n = topics[topic]

@@ -76,8 +76,10 @@ def custom_msg(store, ns, xyz, ros1):
                rsvd=np.zeros(3, np.uint8), points=pts)
 
 
-def write_bag(path, frames, kind: str, *, ros1: bool, topic="/livox/lidar", extra_topics=(), **kw) -> Path:
-    """``kind``: "pointcloud2" or "custom".  ROS 2: an MCAP bag folder; ROS 1: a .bag file."""
+def write_bag(path, frames, kind: str, *, ros1: bool, topic="/livox/lidar", extra_topics=(), extra_clouds=(),
+              **kw) -> Path:
+    """``kind``: "pointcloud2" or "custom".  ROS 2: an MCAP bag folder; ROS 1: a .bag file.
+    ``extra_topics``: String topics beside; ``extra_clouds``: topics with the same clouds again."""
     store = _stores(ros1)
     if kind == "pointcloud2":
         msgtype = "sensor_msgs/msg/PointCloud2"
@@ -97,10 +99,11 @@ def write_bag(path, frames, kind: str, *, ros1: bool, topic="/livox/lidar", extr
         w = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
         ser = store.serialize_cdr
     with w:
-        conn = w.add_connection(topic, msgtype, typestore=store)
+        conns = [w.add_connection(t, msgtype, typestore=store) for t in (topic, *extra_clouds)]
         extra = [(w.add_connection(t, "std_msgs/msg/String", typestore=store), t) for t in extra_topics]
         for ns, xyz in frames:
-            w.write(conn, ns + PERIOD_NS, ser(make(ns, xyz), msgtype))
+            for conn in conns:
+                w.write(conn, ns + PERIOD_NS, ser(make(ns, xyz), msgtype))
             for c, t in extra:
                 w.write(c, ns, ser(store.types["std_msgs/msg/String"](data="x"), "std_msgs/msg/String"))
     return path

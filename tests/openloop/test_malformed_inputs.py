@@ -37,9 +37,21 @@ def test_wrong_topic_names_it_and_lists_the_bags_topics(tmp_path, frames, capsys
            "livox_ros_driver2/msg/CustomMsg", "/status")
 
 
-def test_no_topic_lists_the_topics(tmp_path, frames, capsys):
-    bag = bw.write_bag(tmp_path / "b.bag", frames, "pointcloud2", ros1=True)
-    _fails([bag], capsys, "--topic", "/livox/lidar (sensor_msgs/msg/PointCloud2, 4 messages)")
+def test_no_topic_with_two_clouds_lists_the_topics(tmp_path, frames, capsys):
+    bag = bw.write_bag(tmp_path / "b.bag", frames, "pointcloud2", ros1=True, extra_clouds=("/velodyne_points",),
+                       extra_topics=("/status",))
+    _fails([bag], capsys, "--topic", "/livox/lidar (sensor_msgs/msg/PointCloud2, 4 messages)", "/velodyne_points")
+
+
+@pytest.mark.parametrize("ros1", [True, False], ids=["ros1-bag", "ros2-mcap"])
+def test_no_topic_with_one_cloud_reads_it_and_says_so(tmp_path, frames, capsys, ros1):
+    # before: refused, naming --topic and the one topic there was to give (an audit's finding)
+    bag = bw.write_bag(tmp_path / ("b.bag" if ros1 else "b"), frames, "pointcloud2", ros1=ros1,
+                       extra_topics=("/status",))
+    assert main(["track", str(bag)]) == 0
+    out = capsys.readouterr()
+    assert "reading /livox/lidar, the bag's only point-cloud topic" in out.err, out.err
+    assert "frames 4, tracked" in out.out, out.out
 
 
 def test_topic_that_is_not_a_cloud_names_its_type(tmp_path, frames, capsys):
