@@ -117,6 +117,12 @@ def test_points_an_lvx_export_leaves_out_are_a_warning_of_their_own(tmp_path, ca
     assert main(["export", str(rec), "--lvx", str(tmp_path / "t.lvx")]) == 0
     err = capsys.readouterr().err
     assert "WARNING" in err and "were left out" in err and "share a scan slot" in err, err
+    # the recording names no lidar: the file's device type is a guess, and said to be one (an audit found
+    # an Avia's recording written as a Mid-40 without a word)
+    assert "the recording names no lidar, so the file calls it a mid40 (device type 1)" in err, err
+    assert "--device names the real one" in err
+    assert main(["export", str(rec), "--lvx", str(tmp_path / "a.lvx"), "--device", "avia"]) == 0
+    assert "names no lidar" not in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("argv", [["calibrate", "--scene", str(ROOT / "scenes" / "calibration-room.toml")],

@@ -110,6 +110,8 @@ def cmd_export(args) -> int:
             warn(f"WARNING: {args.lvx}: {r.slot_collisions} of the recording's {r.points + r.slot_collisions} points "
                  f"were left out: they share a scan slot (the same time) with another point, and a Livox packet "
                  f"holds one return a slot")
+        if r.guessed:
+            warn(f"note: {args.lvx}: {r.guessed}")
         warn(r.problem)
 
     for flag, path in (("--csv", args.csv), ("--npz", args.npz)):

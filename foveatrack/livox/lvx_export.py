@@ -58,6 +58,7 @@ class LvxExport:
     slot_collisions: int
     problem: str | None = None        # the reader's warning: what a damaged recording lost (None: nothing)
     time_gaps: int = 0                # gaps in the points' times over MAX_FILLED_GAP_S, not filled with frames
+    guessed: str | None = None        # the device was guessed (the recording names no lidar): how, in words
 
 
 def _preset_of(meta: dict) -> str | None:
@@ -94,8 +95,13 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
     meta = reader.meta or {}
     name = device or _preset_of(meta)
     rate = meta.get("point_rate_hz")
+    guessed = None
     if name is None:
         name = "mid40" if rate in (None, 100_000) else "horizon"
+        # a recording of someone else's lidar (track --record) names none: said, not written as a fact
+        guessed = (f"the recording names no lidar, so the file calls it a {name} (device type "
+                   f"{PRESET_DEVICE_TYPE[name]}), guessed from {'no recorded point rate' if rate is None else f'its point rate {rate:g}/s'}; "
+                   "--device names the real one (mid40, horizon, tele15, mid70, avia, mid100)")
     if name not in PRESET_DEVICE_TYPE:
         raise UserError(f"device {name!r}: LVX device types are known for {sorted(PRESET_DEVICE_TYPE)}")
     dev_type = PRESET_DEVICE_TYPE[name]
@@ -121,7 +127,7 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
     if not len(t):
         with written_whole(out_path) as tmp:
             write_lvx(tmp, [], devices, frame_duration_ms)
-        return LvxExport(Path(out_path), dev_type, dt, n_heads, 0, 0, 0, 0, problem=problem)
+        return LvxExport(Path(out_path), dev_type, dt, n_heads, 0, 0, 0, 0, problem=problem, guessed=guessed)
     t_origin = int(t.min())
     slot = np.round((t - t_origin) * (rate / 1e9)).astype(np.int64)
     order = np.lexsort((np.arange(len(slot)), slot))
@@ -177,4 +183,4 @@ def export_lvx(recording: str | os.PathLike, out_path: str | os.PathLike, data_t
     with written_whole(out_path) as tmp:          # under its name only when whole (an export cut by Ctrl-C)
         write_lvx(tmp, lvx_frames, devices, frame_duration_ms)
     return LvxExport(Path(out_path), dev_type, dt, n_heads, int(len(slot)), n_packets, len(lvx_frames), collisions,
-                     problem=problem, time_gaps=gaps)
+                     problem=problem, time_gaps=gaps, guessed=guessed)
