@@ -124,6 +124,10 @@ def test_export_of_many_frames_ends_at_the_cap_with_one_warning(many_frames, tmp
     assert main(["export", str(path), flag, str(tmp_path / out), "--max-frames", "2000"]) == 0
     cap_out = capsys.readouterr()
     err = cap_out.err.strip().splitlines()
+    if flag == "--lvx":    # this hand-made recording names no lidar: the .lvx's device type is said to be a guess
+        guess = [ln for ln in err if "the recording names no lidar" in ln]
+        assert len(guess) == 1 and guess[0].startswith("note: "), err
+        err.remove(guess[0])
     assert len(err) == 1 and err[0].startswith(f"WARNING: recording {path} read in part"), err
     assert "after 2000 frames" in err[0] and "cap on frames per file" in err[0]
 
