@@ -20,7 +20,7 @@ cells' normal distributions; Biber & Strasser 2003).  Why this and not plain NDT
 
 A direction the planes in view do not face is not measured, and ICP must not walk along it: a
 Horizon level in a room (25 deg of vertical view) sees the walls and the boxes' sides but neither
-floor nor ceiling, and from a seed 0.7 cm off it drifted 53 cm down, each step nudged by the few
+floor nor ceiling, and from a seed 0.7 cm off along it ICP drifted 53 cm down, each step nudged by the few
 points on edges.  Where the normal matrix's translation block gives a direction less than
 :data:`FREE_TRANSLATION_SHARE` of the best-fixed one's information, the steps leave it alone (the
 seed's value stays) and :attr:`Registration.free_directions` names it, so that the hand-eye solve
